@@ -1,0 +1,17 @@
+# Two commands: `make run` (the main job on the default experiment) and `make test`.
+# Both set everything up first and are safe to repeat.
+EXPERIMENT ?= experiments/default.toml
+OUT ?= out/default
+
+.PHONY: setup run test bench
+setup:
+	@bash scripts/setup.sh
+
+run: setup
+	.venv/bin/study calibrate $(EXPERIMENT) --out $(OUT)
+
+test: setup
+	.venv/bin/python -m pytest -q
+
+bench: setup
+	.venv/bin/python benchmarks/bench_reference.py

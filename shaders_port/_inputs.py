@@ -1,0 +1,276 @@
+"""Plain inputs of the water shaders: textures, matrices, uniforms and tunable constants.
+
+Everything here is NumPy (float32) so that the Dr.Jit port and the GLSL run on
+exactly the same data. Conventions (shared by both):
+
+* World space is right-handed, ``+y`` up; the water plane is ``y = 0``.
+* Texture arrays are stored in OpenGL upload order: row index ``r`` is the
+  texture coordinate ``t = (r + 0.5) / H`` of its texel centre, column ``c`` is
+  ``s = (c + 0.5) / W``. Colours are linear RGB.
+* Matrices are 4x4 float32 and act on column vectors: ``M @ [x, y, z, 1]``.
+* Output images are ``(height, width, C)`` with row 0 at the *top* (image order);
+  the GL framebuffer (row 0 at the bottom) is flipped when read back.
+"""
+from __future__ import annotations
+
+import dataclasses
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+IOR_WATER = 1.333
+
+
+@dataclass
+class ShaderInputs:
+    """Everything the application hands the water shaders, for one frame.
+
+    Attributes (all float32 unless noted):
+        refraction_texture: (H0, W0, 3) linear RGB of the ground seen from above
+            (orthographic); GLSL ``refractionTexture``; bilinear, clamp to edge.
+        world_y: (H0, W0) world-space y of the ground seen from above, world units;
+            GLSL ``worldYComponent``; nearest, clamp to edge.
+        tex_matrix0: (4, 4) world -> (s, t) of the two textures above
+            (``gl_TextureMatrix[0]``).
+        normal_map: (Hn, Wn, 3) world-space normals encoded ``0.5 * n + 0.5``
+            (r = x, g = y, b = z); GLSL ``normalMap``; bilinear, repeat.
+        cubemap: (6, F, F, 3) linear RGB sky faces in GL order +X, -X, +Y, -Y, +Z, -Z,
+            each face in GL cube-map (s, t) convention; bilinear, clamp to edge.
+        fresnel_lut: (N, 2) indexed by cos(theta) in [0, 1] at texel centres
+            (i + 0.5) / N; column 0 transmission, column 1 reflection; nearest.
+        refl_world_y: (H1, W1) world y of geometry above the water seen from below
+            (``worldYComponentReflection``); nearest, clamp to edge. Empty
+            geometry is marked with a value below the water plane (e.g. -1e3).
+        refl_texture: (H1, W1, 3) linear RGB of that geometry seen from below
+            (``reflectionBottom``); bilinear, clamp to edge.
+        tex_matrix1: (4, 4) world -> (s, t) of the two reflection textures
+            (``gl_TextureMatrix[1]``).
+        water_rect: (x0, z0, x1, z1) extent of the water quad on y = 0, world units.
+        normal_tile: world units per repeat of the normal map; the quad's texture
+            coordinate is ``(x, z) / normal_tile``.
+        waves: (4, 2) offsets added to that coordinate for the 4 normal-map layers.
+        view_proj: (4, 4) world -> clip space of the camera (OpenGL convention,
+            NDC in [-1, 1]^3).
+        viewpos: (3,) camera position, world units.
+        lightpos: (3,) light position, world units.
+        lightcolor: (3,) linear RGB of the specular highlight.
+        width, height: output resolution in pixels (int).
+    """
+
+    refraction_texture: np.ndarray
+    world_y: np.ndarray
+    tex_matrix0: np.ndarray
+    normal_map: np.ndarray
+    cubemap: np.ndarray
+    fresnel_lut: np.ndarray
+    refl_world_y: np.ndarray
+    refl_texture: np.ndarray
+    tex_matrix1: np.ndarray
+    water_rect: tuple[float, float, float, float]
+    normal_tile: float
+    waves: np.ndarray
+    view_proj: np.ndarray
+    viewpos: np.ndarray
+    lightpos: np.ndarray
+    lightcolor: np.ndarray
+    width: int
+    height: int
+
+    def __post_init__(self) -> None:
+        shapes = {
+            "refraction_texture": (3, 3), "world_y": (2, None), "tex_matrix0": (2, None),
+            "normal_map": (3, 3), "cubemap": (4, 3), "fresnel_lut": (2, 2),
+            "refl_world_y": (2, None), "refl_texture": (3, 3), "tex_matrix1": (2, None),
+            "waves": (2, 2), "view_proj": (2, None), "viewpos": (1, None),
+            "lightpos": (1, None), "lightcolor": (1, None),
+        }
+        for name, (ndim, last) in shapes.items():
+            a = np.ascontiguousarray(getattr(self, name), dtype=np.float32)
+            if a.ndim != ndim or (last is not None and a.shape[-1] != last):
+                raise ValueError(f"ShaderInputs.{name}: expected {ndim}-d array"
+                                 + (f" with last axis {last}" if last else "")
+                                 + f", got shape {a.shape}")
+            if not np.all(np.isfinite(a)):
+                raise ValueError(f"ShaderInputs.{name} contains non-finite values; "
+                                 "rebuild the inputs from the scene")
+            setattr(self, name, a)
+        for name in ("tex_matrix0", "tex_matrix1", "view_proj"):
+            if getattr(self, name).shape != (4, 4):
+                raise ValueError(f"ShaderInputs.{name}: expected (4, 4)")
+        if self.cubemap.shape[0] != 6 or self.cubemap.shape[1] != self.cubemap.shape[2]:
+            raise ValueError(f"ShaderInputs.cubemap: expected (6, F, F, 3), got {self.cubemap.shape}")
+        if self.waves.shape != (4, 2):
+            raise ValueError(f"ShaderInputs.waves: expected (4, 2), got {self.waves.shape}")
+        self.water_rect = tuple(float(v) for v in self.water_rect)
+        self.normal_tile = float(self.normal_tile)
+        self.width, self.height = int(self.width), int(self.height)
+        if self.width < 1 or self.height < 1:
+            raise ValueError("ShaderInputs: width and height must be positive")
+
+    def with_resolution(self, width: int, height: int) -> "ShaderInputs":
+        """Same scene at another output resolution (the projection is unchanged)."""
+        return dataclasses.replace(self, width=width, height=height)
+
+    def save(self, path) -> None:
+        """Write all fields to one ``.npz`` file (atomic: temp file then rename)."""
+        import os
+        import tempfile
+        path = os.fspath(path)
+        d = os.path.dirname(os.path.abspath(path))
+        fd, tmp = tempfile.mkstemp(dir=d, suffix=".npz.tmp")
+        os.close(fd)
+        try:
+            with open(tmp, "wb") as f:
+                np.savez_compressed(f, **{k: np.asarray(v) for k, v in dataclasses.asdict(self).items()})
+            os.replace(tmp, path)
+        finally:
+            if os.path.exists(tmp):
+                os.unlink(tmp)
+
+    @classmethod
+    def load(cls, path) -> "ShaderInputs":
+        with np.load(path) as z:
+            kw = {k: z[k] for k in z.files}
+        kw["water_rect"] = tuple(kw["water_rect"].tolist())
+        kw["normal_tile"] = float(kw["normal_tile"])
+        kw["width"], kw["height"] = int(kw["width"]), int(kw["height"])
+        return cls(**kw)
+
+
+# name in Python -> (GLSL name, kind, default, (lower, upper) valid range)
+# kind: "const float", "const int", "uniform float", "uniform vec4"
+CONSTANT_SPECS: dict[str, tuple[str, str, object, tuple[float, float]]] = {
+    "attenuation_distance": ("ATTENUATION_DISTANCE", "const float", 7.5, (1e-3, 1e4)),
+    "steps_grazing": ("STEPS_GRAZING", "const float", 10.0, (0.5, 1e3)),
+    "steps_steep": ("STEPS_STEEP", "const float", 3.0, (0.5, 1e3)),
+    "loop_cap": ("LOOP_CAP", "const int", 40, (1, 10000)),
+    "refl_steps_steep": ("REFL_STEPS_STEEP", "const float", 0.5, (0.05, 1e3)),
+    "refl_steps_grazing": ("REFL_STEPS_GRAZING", "const float", 4.0, (0.05, 1e3)),
+    "refl_loop_cap": ("REFL_LOOP_CAP", "const int", 60, (1, 10000)),
+    "refl_height_cut": ("REFL_HEIGHT_CUT", "const float", 0.8, (0.0, 1e4)),
+    "specular_strength": ("SPECULAR_STRENGTH", "const float", 2.0, (0.0, 1e4)),
+    "specular_exponent": ("SPECULAR_EXPONENT", "const float", 256.0, (1.0, 1e5)),
+    "bumptex_mult": ("BumptexMult", "uniform float", 1.0, (1e-3, 1e3)),
+    "refr_coeff": ("refrCoeff", "uniform float", 1.0 / IOR_WATER, (0.1, 1.0)),
+    "water_color": ("waterColor", "uniform vec4", (0.05, 0.25, 0.3, 1.0), (0.0, 100.0)),
+    "reflect_color": ("reflectColor", "uniform vec4", (1.0, 1.0, 1.0, 1.0), (0.0, 100.0)),
+}
+
+
+def _default(name):
+    v = CONSTANT_SPECS[name][2]
+    return field(default_factory=lambda: tuple(v)) if isinstance(v, tuple) else field(default=v)
+
+
+@dataclass
+class Constants:
+    """The shader's tunable numbers (see ``CONSTANT_SPECS`` for GLSL names and ranges).
+
+    Scalars are Python numbers, or 0-d / size-1 Dr.Jit arrays when a derivative
+    is wanted; colours are 4-tuples of linear RGBA.
+    """
+
+    attenuation_distance: float = _default("attenuation_distance")
+    steps_grazing: float = _default("steps_grazing")
+    steps_steep: float = _default("steps_steep")
+    loop_cap: int = _default("loop_cap")
+    refl_steps_steep: float = _default("refl_steps_steep")
+    refl_steps_grazing: float = _default("refl_steps_grazing")
+    refl_loop_cap: int = _default("refl_loop_cap")
+    refl_height_cut: float = _default("refl_height_cut")
+    specular_strength: float = _default("specular_strength")
+    specular_exponent: float = _default("specular_exponent")
+    bumptex_mult: float = _default("bumptex_mult")
+    refr_coeff: float = _default("refr_coeff")
+    water_color: tuple = _default("water_color")
+    reflect_color: tuple = _default("reflect_color")
+
+    def validate(self) -> "Constants":
+        """Raise ValueError naming the constant if a plain value is non-finite or out of range."""
+        for name, (glsl, kind, _, (lo, hi)) in CONSTANT_SPECS.items():
+            v = getattr(self, name)
+            vals = v if isinstance(v, (tuple, list)) else (v,)
+            if kind.endswith("vec4") and len(vals) != 4:
+                raise ValueError(f"constant {name} ({glsl}) needs 4 components, got {len(vals)}")
+            for x in vals:
+                if not isinstance(x, (int, float, np.floating, np.integer)):
+                    continue  # a Dr.Jit array being differentiated
+                if isinstance(x, bool) or not math.isfinite(float(x)):
+                    raise ValueError(f"constant {name} ({glsl}) = {x!r} is not a finite number")
+                if kind.endswith("int") and float(x) != int(x):
+                    raise ValueError(f"constant {name} ({glsl}) = {x!r} must be an integer")
+                if not lo <= float(x) <= hi:
+                    raise ValueError(f"constant {name} ({glsl}) = {x!r} is outside [{lo}, {hi}]")
+        return self
+
+    def replace(self, **changes) -> "Constants":
+        unknown = set(changes) - set(CONSTANT_SPECS)
+        if unknown:
+            raise ValueError(f"unknown constant(s) {sorted(unknown)}; known: {sorted(CONSTANT_SPECS)}")
+        return dataclasses.replace(self, **changes)
+
+    def to_dict(self) -> dict:
+        out = {}
+        for name in CONSTANT_SPECS:
+            v = getattr(self, name)
+            out[name] = [float(x) for x in v] if isinstance(v, (tuple, list)) else (
+                int(v) if CONSTANT_SPECS[name][1].endswith("int") else float(v))
+        return out
+
+    @classmethod
+    def from_dict(cls, d: dict) -> "Constants":
+        unknown = set(d) - set(CONSTANT_SPECS)
+        if unknown:
+            raise ValueError(f"unknown constant(s) {sorted(unknown)}; known: {sorted(CONSTANT_SPECS)}")
+        kw = {k: tuple(v) if isinstance(v, list) else v for k, v in d.items()}
+        return cls(**kw).validate()
+
+
+def perspective_view_proj(eye, target, up=(0.0, 1.0, 0.0), fov_y_deg=45.0, aspect=1.0,
+                          near=0.05, far=100.0) -> np.ndarray:
+    """OpenGL ``gluPerspective(fov_y) * gluLookAt(eye, target, up)`` as a (4, 4) float32."""
+    eye, target, up = (np.asarray(v, dtype=np.float64) for v in (eye, target, up))
+    f = target - eye
+    f /= np.linalg.norm(f)
+    s = np.cross(f, up)
+    if np.linalg.norm(s) < 1e-9:
+        raise ValueError("camera: 'up' is parallel to the viewing direction; choose another up vector")
+    s /= np.linalg.norm(s)
+    u = np.cross(s, f)
+    view = np.eye(4)
+    view[0, :3], view[1, :3], view[2, :3] = s, u, -f
+    view[:3, 3] = -view[:3, :3] @ eye
+    g = 1.0 / math.tan(math.radians(fov_y_deg) / 2.0)
+    proj = np.zeros((4, 4))
+    proj[0, 0], proj[1, 1] = g / aspect, g
+    proj[2, 2], proj[2, 3] = (far + near) / (near - far), 2 * far * near / (near - far)
+    proj[3, 2] = -1.0
+    return (proj @ view).astype(np.float32)
+
+
+def ortho_tex_matrix(x0: float, z0: float, x1: float, z1: float) -> np.ndarray:
+    """(4, 4) world -> texture matrix of an orthographic top/bottom view of [x0,x1] x [z0,z1]:
+    s = (x - x0) / (x1 - x0), t = (z - z0) / (z1 - z0)."""
+    m = np.zeros((4, 4), dtype=np.float32)
+    m[0, 0], m[0, 3] = 1.0 / (x1 - x0), -x0 / (x1 - x0)
+    m[1, 2], m[1, 3] = 1.0 / (z1 - z0), -z0 / (z1 - z0)
+    m[3, 3] = 1.0
+    return m
+
+
+def fresnel_unpolarized(cos_i, ior: float = IOR_WATER) -> np.ndarray:
+    """Fresnel reflectance of a smooth dielectric seen from the outside (eta = ior)."""
+    cos_i = np.clip(np.asarray(cos_i, dtype=np.float64), 0.0, 1.0)
+    sin_t2 = (1.0 - cos_i ** 2) / ior ** 2
+    cos_t = np.sqrt(np.maximum(0.0, 1.0 - sin_t2))
+    rs = (cos_i - ior * cos_t) / (cos_i + ior * cos_t)
+    rp = (ior * cos_i - cos_t) / (ior * cos_i + cos_t)
+    return 0.5 * (rs ** 2 + rp ** 2)
+
+
+def fresnel_lut(ior: float = IOR_WATER, n: int = 256) -> np.ndarray:
+    """(n, 2) float32 LUT indexed by cos(theta) at texel centres: [transmission, reflection]."""
+    c = (np.arange(n) + 0.5) / n
+    r = fresnel_unpolarized(c, ior)
+    return np.stack([1.0 - r, r], axis=1).astype(np.float32)
