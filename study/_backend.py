@@ -1,0 +1,100 @@
+"""The one place that chooses the compute backend.
+
+* Finds a libLLVM that Dr.Jit 1.5's LLVM backend can use (LLVM 15 makes the process
+  abort with "Cannot select ... fmaximum"; LLVM 19 is tested) and stops with a message
+  naming the fix *before* Dr.Jit can abort.
+* Sets the Mitsuba variant (``llvm_ad_rgb`` by default, a CUDA variant on request).
+
+Nothing here runs at import time: call :func:`init_backend` from the entry point.
+"""
+from __future__ import annotations
+
+import glob
+import os
+import re
+
+MIN_LLVM_MAJOR = 16
+TESTED_LLVM_MAJOR = 19
+DEFAULT_VARIANT = "llvm_ad_rgb"
+VARIANTS = ("llvm_ad_rgb", "cuda_ad_rgb")
+_LIB_DIRS = ("/usr/lib/x86_64-linux-gnu", "/usr/lib/aarch64-linux-gnu", "/usr/lib64",
+             "/usr/lib", "/usr/local/lib", "/opt/homebrew/opt/llvm/lib", "/usr/local/opt/llvm/lib")
+
+FIX = ("install a newer libLLVM (Debian/Ubuntu: `apt-get install libllvm19`, or run "
+       "`bash scripts/setup.sh`), or point DRJIT_LIBLLVM_PATH at a libLLVM.so of version "
+       f">= {MIN_LLVM_MAJOR}")
+
+
+class BackendError(RuntimeError):
+    """The requested backend cannot run on this machine; the message says how to fix it."""
+
+
+def _major_from_name(path: str) -> int | None:
+    m = re.search(r"libLLVM[-.]?(\d+)", os.path.basename(path))
+    return int(m.group(1)) if m else None
+
+
+def find_libllvm() -> list[tuple[int, str]]:
+    """Candidate libLLVM shared libraries on this machine as (major version, path), newest first."""
+    found: dict[str, int] = {}
+    for d in _LIB_DIRS:
+        for p in glob.glob(os.path.join(d, "libLLVM*.so*")) + glob.glob(os.path.join(d, "libLLVM*.dylib")):
+            major = _major_from_name(p)
+            if major is not None and os.path.isfile(p):
+                found.setdefault(os.path.realpath(p), major)
+    return sorted(((v, p) for p, v in found.items()), reverse=True)
+
+
+_checked: tuple[int, int, int] | None = None
+
+
+def ensure_llvm() -> tuple[int, int, int]:
+    """Make sure Dr.Jit's LLVM backend will load a usable libLLVM; return its version.
+
+    If ``DRJIT_LIBLLVM_PATH`` is unset, the newest libLLVM >= MIN_LLVM_MAJOR found in the
+    usual library folders is selected through it. Raises :class:`BackendError` when none
+    is usable. Must run before the first Dr.Jit LLVM computation of the process.
+    """
+    global _checked
+    if _checked is not None:
+        return _checked
+    if not os.environ.get("DRJIT_LIBLLVM_PATH"):
+        good = [(v, p) for v, p in find_libllvm() if v >= MIN_LLVM_MAJOR]
+        if good:
+            os.environ["DRJIT_LIBLLVM_PATH"] = good[0][1]
+    import drjit as dr
+    version = tuple(dr.detail.llvm_version())
+    if version[0] < 0:
+        where = os.environ.get("DRJIT_LIBLLVM_PATH", "the default search path")
+        raise BackendError(f"Dr.Jit could not load libLLVM (tried {where}); {FIX}.")
+    if version[0] < MIN_LLVM_MAJOR:
+        raise BackendError(
+            f"Dr.Jit found libLLVM {'.'.join(map(str, version))}, which makes Dr.Jit 1.5 abort "
+            f"(instruction selection fails on fmaximum); {FIX}.")
+    _checked = version
+    return version
+
+
+def init_backend(variant: str | None = None) -> str:
+    """Check the backend and set the Mitsuba variant; return the variant in use.
+
+    Args:
+        variant: ``"llvm_ad_rgb"`` (default, CPU) or ``"cuda_ad_rgb"`` (NVIDIA GPU).
+    """
+    variant = variant or os.environ.get("STUDY_VARIANT") or DEFAULT_VARIANT
+    if variant not in VARIANTS:
+        raise BackendError(f"unknown variant {variant!r}; choose one of {', '.join(VARIANTS)}")
+    if variant.startswith("llvm"):
+        ensure_llvm()
+    import mitsuba as mi
+    try:
+        mi.set_variant(variant)
+    except Exception as exc:  # e.g. no CUDA driver
+        raise BackendError(f"cannot use Mitsuba variant {variant!r}: {exc}. "
+                           f"Use {DEFAULT_VARIANT} (CPU) instead.") from exc
+    return variant
+
+
+def drjit_backend(variant: str) -> str:
+    """The shader port's backend name ("llvm" or "cuda") for a Mitsuba variant."""
+    return "cuda" if variant.startswith("cuda") else "llvm"

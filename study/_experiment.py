@@ -1,0 +1,271 @@
+"""Experiment files (TOML): schema, validation, ``--set`` overrides.
+
+An experiment describes one scene (pool floor, water, waves, sky and sun, camera,
+resolution), how its reference is rendered, and what is fitted. ``SCHEMA`` is the single
+source of truth: validation, defaults and the key table of ``experiments/README.md``
+(:func:`schema_markdown`) all come from it.
+"""
+from __future__ import annotations
+
+import copy
+import hashlib
+import json
+import math
+import tomllib
+from dataclasses import dataclass
+from pathlib import Path
+
+from shaders_port import CONSTANT_SPECS
+
+
+class ExperimentError(ValueError):
+    """An experiment file or override is invalid; the message names the key and the fix."""
+
+
+@dataclass(frozen=True)
+class Field:
+    kind: str            # float, int, str, bool, vec2, vec3, vec2x4, int_or_auto, list_str
+    default: object
+    doc: str
+    units: str = ""
+    lo: float | None = None
+    hi: float | None = None
+    choices: tuple | None = None
+
+
+FLOOR_SHAPES = ("flat", "slope", "steps", "terrain")
+SHADERS = ("water_refraction", "water_reflection")
+SOLVERS = ("levenberg_marquardt", "gauss_newton", "dogleg", "bfgs", "nelder_mead", "adam")
+FIT_PARAMETERS = ("attenuation_distance", "bumptex_mult", "steps_grazing", "steps_steep",
+                  "water_color", "reflect_color", "specular_strength", "specular_exponent")
+
+SCHEMA: dict[str, Field] = {
+    "name": Field("str", "unnamed", "Name of the experiment (used in reports)."),
+    "description": Field("str", "", "Free text."),
+    "resolution": Field("vec2", [256, 256], "Image width and height.", "pixels", 8, 4096),
+    "variant": Field("str", "llvm_ad_rgb", "Mitsuba variant; `cuda_ad_rgb` needs an NVIDIA GPU.",
+                     choices=("llvm_ad_rgb", "cuda_ad_rgb")),
+    "camera.position": Field("vec3", [0.0, 3.2, 6.5], "Camera position.", "world units"),
+    "camera.target": Field("vec3", [0.0, -1.0, 0.0], "Point the camera looks at.", "world units"),
+    "camera.fov_y": Field("float", 45.0, "Vertical field of view.", "degrees", 1.0, 170.0),
+    "pool.half_extent": Field("vec2", [4.0, 4.0], "Half size of the water surface in x and z.",
+                              "world units", 0.1, 1000.0),
+    "pool.wall_height": Field("float", 0.3, "Height of the pool walls above the water plane "
+                              "(geometry the reflection shader can reflect).", "world units", 0.01, 100.0),
+    "pool.wall_width": Field("float", 0.6, "Thickness of the walls around the pool.", "world units", 0.01, 100.0),
+    "pool.wall_albedo": Field("vec3", [0.7, 0.68, 0.62], "Diffuse albedo of the walls.", "linear RGB", 0.0, 1.0),
+    "floor.shape": Field("str", "slope", "Height function of the pool floor.", choices=FLOOR_SHAPES),
+    "floor.depth": Field("float", 1.5, "Mean depth of the floor below the water plane.", "world units", 0.01, 100.0),
+    "floor.relief": Field("float", 0.8, "Height variation of the floor shape (slope: total rise "
+                          "across x; steps: total rise over the steps; terrain: peak-to-peak scale).",
+                          "world units", 0.0, 100.0),
+    "floor.steps": Field("int", 4, "Number of steps for shape `steps`.", "", 1, 64),
+    "floor.seed": Field("int", 0, "Random seed of shape `terrain`.", "", 0, 2**31 - 1),
+    "floor.tile_size": Field("float", 0.5, "Edge length of the floor tiles.", "world units", 0.01, 100.0),
+    "floor.tile_albedo": Field("vec3", [0.75, 0.72, 0.62], "Albedo of the light tiles.", "linear RGB", 0.0, 1.0),
+    "floor.tile_albedo2": Field("vec3", [0.18, 0.32, 0.45], "Albedo of the dark tiles.", "linear RGB", 0.0, 1.0),
+    "water.ior": Field("float", 1.333, "Index of refraction of the water.", "", 1.0, 3.0),
+    "water.sigma_t": Field("vec3", [0.25, 0.06, 0.04], "Extinction coefficient of the water.",
+                           "1 / world unit, linear RGB", 0.0, 1000.0),
+    "water.albedo": Field("vec3", [0.0, 0.0, 0.0], "Single-scattering albedo of the water "
+                          "(0 = purely absorbing).", "linear RGB", 0.0, 1.0),
+    "waves.amplitude": Field("float", 0.05, "Peak height scale of the wave surface "
+                             "(0 = calm, flat water).", "world units", 0.0, 10.0),
+    "waves.normal_tile": Field("float", 2.0, "Size of one repeat of the normal map on the water.",
+                               "world units", 0.01, 1000.0),
+    "waves.components": Field("int", 5, "Sine components of the tiling height field.", "", 1, 64),
+    "waves.seed": Field("int", 1, "Random seed of the wave components.", "", 0, 2**31 - 1),
+    "waves.offsets": Field("vec2x4", [[0.0, 0.0], [0.31, 0.17], [0.53, 0.71], [0.13, 0.47]],
+                           "Texture offsets wave1..wave4 of the four normal-map layers.", "texture units"),
+    "waves.slope_scale": Field("float", 1.0, "Slope scale the normal map was authored with "
+                               "relative to the true waves (the ideal BumptexMult).", "", 0.01, 100.0),
+    "waves.normal_map_size": Field("int", 256, "Normal-map resolution.", "texels", 8, 4096),
+    "sky.zenith": Field("vec3", [0.25, 0.45, 0.9], "Sky radiance at the zenith.", "linear RGB", 0.0, 1e4),
+    "sky.horizon": Field("vec3", [0.8, 0.85, 0.95], "Sky radiance at the horizon.", "linear RGB", 0.0, 1e4),
+    "sky.ground": Field("vec3", [0.3, 0.28, 0.25], "Radiance below the horizon.", "linear RGB", 0.0, 1e4),
+    "sun.elevation": Field("float", 50.0, "Sun elevation above the horizon.", "degrees", 0.0, 90.0),
+    "sun.azimuth": Field("float", 200.0, "Sun azimuth, from +x towards +z.", "degrees", -360.0, 360.0),
+    "sun.radius": Field("float", 5.0, "Angular radius of the sun disc.", "degrees", 0.1, 20.0),
+    "sun.radiance": Field("vec3", [8.0, 7.5, 6.0], "Radiance of the sun disc (0 = no sun).",
+                          "linear RGB", 0.0, 1e6),
+    "reference.spp": Field("int_or_auto", "auto", "Samples per pixel, or `auto` to reach "
+                           "`reference.target_noise`.", "", 1, 65536),
+    "reference.target_noise": Field("float", 0.01, "Target RMS standard error on water pixels "
+                                    "for `spp = \"auto\"`.", "linear RGB", 1e-5, 1.0),
+    "reference.max_spp": Field("int", 1024, "Upper bound of the automatic spp.", "", 4, 65536),
+    "reference.seed": Field("int", 0, "Base sampler seed.", "", 0, 2**31 - 1),
+    "reference.max_depth": Field("int", 12, "Maximum path length.", "", 2, 256),
+    "reference.texture_size": Field("int", 256, "Resolution of the top-down shader textures.",
+                                    "texels", 16, 4096),
+    "reference.texture_spp": Field("int", 64, "Samples per pixel of the top-down colour texture.",
+                                   "", 1, 65536),
+    "reference.water_mesh": Field("int", 384, "Grid resolution of the displaced water surface mesh.",
+                                  "vertices per side", 8, 4096),
+    "fit.shader": Field("str", "water_refraction", "Shader variant to fit.", choices=SHADERS),
+    "fit.parameters": Field("list_str", ["attenuation_distance", "bumptex_mult", "water_color",
+                                         "specular_strength"],
+                            "Constants to fit (frozen automatically when the scene does not "
+                            "identify them).", choices=FIT_PARAMETERS),
+    "fit.solver": Field("str", "levenberg_marquardt", "Solver.", choices=SOLVERS),
+    "fit.max_steps": Field("int", 60, "Solver iteration cap.", "", 1, 100000),
+    "fit.resolution": Field("vec2", [128, 128], "Image size the fit runs at (the reference is "
+                            "rendered at `resolution`, then box-downsampled when smaller).", "pixels", 8, 4096),
+}
+for _name, (_glsl, _kind, _default, (_lo, _hi)) in CONSTANT_SPECS.items():
+    if _kind.endswith("vec4"):
+        SCHEMA[f"constants.{_name}"] = Field("vec4", list(_default), f"Start value of `{_glsl}`.",
+                                             "linear RGBA", _lo, _hi)
+    else:
+        SCHEMA[f"constants.{_name}"] = Field("int" if _kind.endswith("int") else "float", _default,
+                                             f"Start value of `{_glsl}`.", "", _lo, _hi)
+
+_VEC_LEN = {"vec2": 2, "vec3": 3, "vec4": 4}
+
+
+def _check(key: str, f: Field, v):
+    def bad(msg):
+        allowed = f" Allowed: {', '.join(map(str, f.choices))}." if f.choices else ""
+        rng = f" Range: [{f.lo}, {f.hi}]." if f.lo is not None else ""
+        raise ExperimentError(f"{key}: {msg}.{allowed}{rng} ({f.doc})")
+
+    def num(x, integer=False):
+        if isinstance(x, bool) or not isinstance(x, (int, float)):
+            bad(f"expected a number, got {x!r}")
+        if not math.isfinite(x):
+            bad(f"{x!r} is not finite")
+        if integer and float(x) != int(x):
+            bad(f"expected an integer, got {x!r}")
+        if f.lo is not None and not (f.lo <= x <= f.hi):
+            bad(f"{x!r} is out of range")
+        return int(x) if integer else float(x)
+
+    k = f.kind
+    if k == "str":
+        if not isinstance(v, str):
+            bad(f"expected a string, got {v!r}")
+        if f.choices and v not in f.choices:
+            bad(f"unknown value {v!r}")
+        return v
+    if k == "bool":
+        if not isinstance(v, bool):
+            bad(f"expected true or false, got {v!r}")
+        return v
+    if k in ("float", "int"):
+        return num(v, integer=(k == "int"))
+    if k == "int_or_auto":
+        return v if v == "auto" else num(v, integer=True)
+    if k in _VEC_LEN:
+        if not isinstance(v, list) or len(v) != _VEC_LEN[k]:
+            bad(f"expected a list of {_VEC_LEN[k]} numbers, got {v!r}")
+        return [num(x, integer=(key.endswith("resolution"))) for x in v]
+    if k == "vec2x4":
+        if not isinstance(v, list) or len(v) != 4 or not all(isinstance(r, list) and len(r) == 2 for r in v):
+            bad(f"expected 4 pairs of numbers, got {v!r}")
+        return [[num(x) for x in r] for r in v]
+    if k == "list_str":
+        if not isinstance(v, list) or not all(isinstance(x, str) for x in v):
+            bad(f"expected a list of strings, got {v!r}")
+        for x in v:
+            if f.choices and x not in f.choices:
+                bad(f"unknown entry {x!r}")
+        if len(set(v)) != len(v):
+            bad("entries must be unique")
+        return list(v)
+    raise AssertionError(k)
+
+
+def _flatten(d: dict, prefix: str = "") -> dict:
+    out = {}
+    for k, v in d.items():
+        key = f"{prefix}{k}"
+        if isinstance(v, dict):
+            out.update(_flatten(v, key + "."))
+        else:
+            out[key] = v
+    return out
+
+
+def _parse_value(text: str):
+    try:
+        return tomllib.loads(f"v = {text}")["v"]
+    except tomllib.TOMLDecodeError:
+        return text  # a bare word such as `steps` is a string
+
+
+@dataclass
+class Experiment:
+    """A validated experiment: ``values`` maps every dotted key of SCHEMA to its value."""
+
+    values: dict
+    path: Path | None = None
+
+    def __getitem__(self, key: str):
+        return self.values[key]
+
+    def section(self, name: str) -> dict:
+        p = name + "."
+        return {k[len(p):]: v for k, v in self.values.items() if k.startswith(p)}
+
+    def scene_hash(self, keys_prefixes=("resolution", "camera.", "pool.", "floor.", "water.",
+                                        "waves.", "sky.", "sun.", "reference.")) -> str:
+        """SHA-256 over every value that affects the scene and its reference image."""
+        data = {k: v for k, v in sorted(self.values.items()) if k.startswith(keys_prefixes)}
+        return hashlib.sha256(json.dumps(data, sort_keys=True).encode()).hexdigest()
+
+    def to_toml_dict(self) -> dict:
+        return copy.deepcopy(self.values)
+
+
+def validate(raw: dict, overrides: list[str] | None = None, path: Path | None = None) -> Experiment:
+    """Validate a parsed TOML dictionary (plus ``key=value`` overrides) against SCHEMA."""
+    flat = _flatten(raw)
+    for item in overrides or []:
+        if "=" not in item:
+            raise ExperimentError(f"--set {item!r}: expected KEY=VALUE, e.g. --set water.ior=1.33")
+        key, text = item.split("=", 1)
+        flat[key.strip()] = _parse_value(text.strip())
+    unknown = sorted(set(flat) - set(SCHEMA))
+    if unknown:
+        import difflib
+        hints = []
+        for u in unknown:
+            close = difflib.get_close_matches(u, SCHEMA, n=1)
+            hints.append(f"{u!r}" + (f" (did you mean {close[0]!r}?)" if close else ""))
+        raise ExperimentError(f"unknown key(s): {', '.join(hints)}. Every key is listed in "
+                              "experiments/README.md")
+    values = {}
+    for key, f in SCHEMA.items():
+        values[key] = _check(key, f, flat[key]) if key in flat else copy.deepcopy(f.default)
+    fmt = values["fit.resolution"]
+    res = values["resolution"]
+    if fmt[0] > res[0] or fmt[1] > res[1] or res[0] % fmt[0] or res[1] % fmt[1]:
+        raise ExperimentError(f"fit.resolution {fmt} must divide resolution {res} "
+                              "(the reference is box-downsampled to it)")
+    if values["camera.position"] == values["camera.target"]:
+        raise ExperimentError("camera.position equals camera.target; move one of them")
+    if values["camera.position"][1] <= 0.0:
+        raise ExperimentError("camera.position: the camera must be above the water plane (y > 0)")
+    return Experiment(values, path)
+
+
+def load_experiment(path, overrides: list[str] | None = None) -> Experiment:
+    """Read and validate an experiment TOML file; raise ExperimentError with the key at fault."""
+    path = Path(path)
+    if not path.is_file():
+        raise ExperimentError(f"experiment file {path} does not exist")
+    try:
+        raw = tomllib.loads(path.read_text())
+    except tomllib.TOMLDecodeError as exc:
+        raise ExperimentError(f"{path}: not valid TOML ({exc})") from exc
+    return validate(raw, overrides, path)
+
+
+def schema_markdown() -> str:
+    """The key table of experiments/README.md, generated from SCHEMA."""
+    lines = ["| key | type | default | units | allowed | meaning |", "|---|---|---|---|---|---|"]
+    for key, f in SCHEMA.items():
+        allowed = ", ".join(f"`{c}`" for c in f.choices) if f.choices else (
+            f"[{f.lo:g}, {f.hi:g}]" if f.lo is not None else "")
+        default = json.dumps(f.default)
+        lines.append(f"| `{key}` | {f.kind} | `{default}` | {f.units} | {allowed} | {f.doc} |")
+    return "\n".join(lines) + "\n"

@@ -1,0 +1,78 @@
+"""HDR images as OpenEXR files (via the ``OpenEXR`` package), with provenance in the header.
+
+Images are float32 ``(height, width, 3)`` linear RGB, row 0 at the top. Extra single
+channels (e.g. per-pixel variance) are ``(height, width)`` float32. Provenance is a JSON
+dictionary stored as the string attribute ``study_provenance``. Writes are atomic: the file
+is written under a temporary name in the same folder and renamed, so a killed process
+never leaves a truncated file under the final name.
+"""
+from __future__ import annotations
+
+import json
+import os
+import tempfile
+from pathlib import Path
+
+import numpy as np
+import OpenEXR
+
+PROVENANCE_KEY = "study_provenance"
+
+
+def write_exr(path, rgb: np.ndarray, provenance: dict | None = None,
+              extra: dict[str, np.ndarray] | None = None) -> Path:
+    """Write ``rgb`` (H, W, 3) and optional extra (H, W) channels atomically; return the path."""
+    path = Path(path)
+    rgb = np.ascontiguousarray(rgb, dtype=np.float32)
+    if rgb.ndim != 3 or rgb.shape[2] != 3:
+        raise ValueError(f"write_exr: expected an (H, W, 3) image, got shape {rgb.shape}")
+    channels = {"RGB": rgb}
+    for name, arr in (extra or {}).items():
+        arr = np.ascontiguousarray(arr, dtype=np.float32)
+        if arr.shape != rgb.shape[:2]:
+            raise ValueError(f"write_exr: channel {name!r} has shape {arr.shape}, expected {rgb.shape[:2]}")
+        channels[name] = arr
+    header = {"compression": OpenEXR.ZIP_COMPRESSION, "type": OpenEXR.scanlineimage}
+    if provenance is not None:
+        header[PROVENANCE_KEY] = json.dumps(provenance, sort_keys=True)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.stem}.", suffix=".exr.tmp")
+    os.close(fd)
+    try:
+        OpenEXR.File(header, channels).write(tmp)
+        os.replace(tmp, path)
+    finally:
+        if os.path.exists(tmp):
+            os.unlink(tmp)
+    return path
+
+
+def read_exr(path) -> tuple[np.ndarray, dict, dict[str, np.ndarray]]:
+    """Read an EXR written by :func:`write_exr`: (rgb (H, W, 3) float32, provenance, extra channels)."""
+    path = Path(path)
+    if not path.is_file():
+        raise FileNotFoundError(f"no EXR file at {path}")
+    try:
+        with OpenEXR.File(str(path)) as f:
+            header = f.header()
+            channels = {k: np.array(v.pixels, dtype=np.float32) for k, v in f.channels().items()}
+    except Exception as exc:  # OpenEXR raises plain exceptions on corrupt files
+        raise ValueError(f"{path} is not a readable EXR file ({exc}); delete it and re-render") from exc
+    if "RGB" not in channels:
+        raise ValueError(f"{path} has no RGB channel (channels: {sorted(channels)})")
+    rgb = channels.pop("RGB")
+    raw = header.get(PROVENANCE_KEY)
+    provenance = json.loads(raw) if raw else {}
+    return rgb, provenance, channels
+
+
+def write_png(path, rgb: np.ndarray, exposure: float = 1.0) -> Path:
+    """Write a linear-RGB image as an sRGB-encoded 8-bit PNG preview (clipped)."""
+    import matplotlib.image
+
+    x = np.clip(np.nan_to_num(np.asarray(rgb, dtype=np.float64) * exposure, nan=0.0), 0.0, 1.0)
+    srgb = np.where(x <= 0.0031308, 12.92 * x, 1.055 * np.power(x, 1 / 2.4) - 0.055)
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    matplotlib.image.imsave(path, (srgb * 255 + 0.5).astype(np.uint8))
+    return path

@@ -1,0 +1,136 @@
+"""Analytic scene content in NumPy, shared by the Mitsuba reference and the shader inputs.
+
+World units throughout, ``+y`` up, water plane at ``y = 0``. Colours are linear RGB.
+
+* the pool floor height ``y = floor_height(x, z)``;
+* the waves: one tiling height field ``h0(u, v)`` (a sum of sines with integer wave
+  vectors on the unit torus) sampled at four offsets ``wave1..wave4``, exactly as the
+  shader samples its normal map four times. The physical surface is
+  ``H(x, z) = amplitude / 4 * sum_k h0((x, z) / normal_tile + wave_k)``; the normal map
+  stores the normal of ``slope_scale * amplitude * h0``, so the shader's averaged normal
+  approximates the normal of ``slope_scale * H`` and the ideal ``BumptexMult`` is
+  ``slope_scale`` (the approximation is that four normalised normals are averaged
+  instead of four slopes);
+* the sky: a zenith-to-horizon gradient, a constant ground below the horizon, and a sun
+  disc of given angular radius and radiance.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+
+class Waves:
+    """The wave height field of an experiment (see module docstring)."""
+
+    def __init__(self, amplitude: float, normal_tile: float, components: int, seed: int,
+                 offsets, slope_scale: float = 1.0):
+        rng = np.random.default_rng(seed)
+        self.amplitude, self.tile, self.slope_scale = float(amplitude), float(normal_tile), float(slope_scale)
+        self.offsets = np.asarray(offsets, dtype=np.float64).reshape(4, 2)
+        k = []
+        while len(k) < components:
+            kv = rng.integers(-4, 5, size=2)
+            if kv.any() and not any((kv == q).all() or (kv == -q).all() for q in k):
+                k.append(kv)
+        self.k = np.array(k, dtype=np.float64)                      # (M, 2) integer wave vectors
+        self.phase = rng.uniform(0, 2 * np.pi, size=components)
+        a = 1.0 / np.linalg.norm(self.k, axis=1)
+        self.a = a / a.sum()                                        # |h0| <= 1
+
+    def _h0(self, u, v):
+        arg = 2 * np.pi * (u[..., None] * self.k[:, 0] + v[..., None] * self.k[:, 1]) + self.phase
+        h = (self.a * np.sin(arg)).sum(-1)
+        dh = 2 * np.pi * self.a * np.cos(arg)
+        return h, (dh * self.k[:, 0]).sum(-1), (dh * self.k[:, 1]).sum(-1)
+
+    def height_and_gradient(self, x, z):
+        """Surface height H and its gradient (dH/dx, dH/dz) at world (x, z); arrays of x's shape."""
+        x, z = np.asarray(x, np.float64), np.asarray(z, np.float64)
+        h = np.zeros_like(x); gx = np.zeros_like(x); gz = np.zeros_like(x)
+        for ou, ov in self.offsets:
+            hk, hu, hv = self._h0(x / self.tile + ou, z / self.tile + ov)
+            h += hk; gx += hu / self.tile; gz += hv / self.tile
+        s = self.amplitude / 4.0
+        return s * h, s * gx, s * gz
+
+    def normal_map(self, size: int) -> np.ndarray:
+        """(size, size, 3) float32 encoded normals (0.5 n + 0.5) of slope_scale * amplitude * h0,
+        rows indexed by v (GL order), columns by u."""
+        c = (np.arange(size) + 0.5) / size
+        u, v = np.meshgrid(c, c)
+        _, hu, hv = self._h0(u, v)
+        s = self.slope_scale * self.amplitude / self.tile
+        n = np.stack([-s * hu, np.ones_like(hu), -s * hv], -1)
+        n /= np.linalg.norm(n, axis=-1, keepdims=True)
+        return (0.5 * n + 0.5).astype(np.float32)
+
+
+def floor_height(shape: str, depth: float, relief: float, steps: int, seed: int,
+                 half_extent, x, z) -> np.ndarray:
+    """World y of the pool floor at (x, z); mean depth ``depth`` below the water plane."""
+    x, z = np.asarray(x, np.float64), np.asarray(z, np.float64)
+    hx, hz = half_extent
+    if shape == "flat":
+        return np.full_like(x, -depth)
+    if shape == "slope":
+        return -depth + 0.5 * relief * np.clip(x / hx, -1, 1)
+    if shape == "steps":
+        t = np.clip((x + hx) / (2 * hx), 0, 1 - 1e-9)
+        k = np.floor(t * steps)
+        return -depth + relief * (k / max(steps - 1, 1) - 0.5)
+    if shape == "terrain":
+        rng = np.random.default_rng(seed)
+        y = np.zeros_like(x)
+        for _ in range(6):
+            kx, kz = rng.uniform(0.3, 1.2, 2) * rng.choice([-1, 1], 2)
+            y += np.sin(kx * x + kz * z + rng.uniform(0, 2 * np.pi)) / 6
+        return -depth + 0.5 * relief * y
+    raise ValueError(f"unknown floor shape {shape!r}")
+
+
+def sun_direction(elevation_deg: float, azimuth_deg: float) -> np.ndarray:
+    """Unit vector towards the sun."""
+    e, a = math.radians(elevation_deg), math.radians(azimuth_deg)
+    return np.array([math.cos(e) * math.cos(a), math.sin(e), math.cos(e) * math.sin(a)])
+
+
+def sky_radiance(d: np.ndarray, zenith, horizon, ground, sun_dir=None, sun_radius_deg=0.0,
+                 sun_radiance=(0.0, 0.0, 0.0)) -> np.ndarray:
+    """Sky radiance (..., 3) in unit directions d (..., 3); the sun disc is included when sun_dir is given."""
+    d = np.asarray(d, np.float64)
+    y = d[..., 1:2]
+    t = np.sqrt(np.clip(y, 0, 1))
+    sky = np.where(y >= 0, (1 - t) * np.asarray(horizon) + t * np.asarray(zenith), np.asarray(ground))
+    if sun_dir is not None:
+        inside = (d @ np.asarray(sun_dir)) >= math.cos(math.radians(sun_radius_deg))
+        sky = sky + inside[..., None] * np.asarray(sun_radiance)
+    return sky
+
+
+def envmap_image(height: int, **sky) -> np.ndarray:
+    """(height, 2 * height, 3) float32 lat-long image in Mitsuba's envmap convention:
+    u = atan2(x, -z) / 2pi, v = acos(y) / pi, row 0 at the zenith."""
+    v = (np.arange(height) + 0.5) / height
+    u = (np.arange(2 * height) + 0.5) / (2 * height)
+    th, ph = np.meshgrid(v * np.pi, u * 2 * np.pi, indexing="ij")
+    d = np.stack([np.sin(th) * np.sin(ph), np.cos(th), -np.sin(th) * np.cos(ph)], -1)
+    return sky_radiance(d, **sky).astype(np.float32)
+
+
+# GL cube-map faces +X, -X, +Y, -Y, +Z, -Z: direction for face coordinates (sc, tc) in [-1, 1]
+_CUBE_FACES = (
+    lambda s, t: (np.ones_like(s), -t, -s), lambda s, t: (-np.ones_like(s), -t, s),
+    lambda s, t: (s, np.ones_like(s), t), lambda s, t: (s, -np.ones_like(s), -t),
+    lambda s, t: (s, -t, np.ones_like(s)), lambda s, t: (-s, -t, -np.ones_like(s)),
+)
+
+
+def cubemap_directions(size: int) -> np.ndarray:
+    """(6, size, size, 3) unit directions of the texel centres of a GL cube map
+    (row index = t, column index = s)."""
+    c = 2 * (np.arange(size) + 0.5) / size - 1
+    s, t = np.meshgrid(c, c)
+    out = np.stack([np.stack(f(s, t), -1) for f in _CUBE_FACES])
+    return out / np.linalg.norm(out, axis=-1, keepdims=True)

@@ -1,0 +1,191 @@
+"""Path-traced reference images: rendering, measured noise, automatic spp, and the cache.
+
+Noise is measured, never assumed: a reference is the mean of ``K`` renders with
+independent sampler seeds, and the per-pixel standard error of that mean is estimated
+from their spread (unbiased sample variance / K). The scalar noise figure is the RMS of the
+standard error over the water pixels, in linear RGB.
+
+Automatic spp renders a pilot (``K`` x ``PILOT_SPP``), estimates the per-sample variance on
+the water pixels and picks the smallest power of two whose predicted noise is below
+``reference.target_noise`` (capped at ``reference.max_spp``; the cap is reported).
+
+Cache: ``<cache>/references/<key>.exr`` where the key hashes every experiment value that
+affects the image, the spp policy, the variant, the versions of Mitsuba and Dr.Jit and
+``SCENE_VERSION`` (bumped whenever the scene construction changes). The EXR header carries
+the full provenance and the key is re-checked on load, so a stale or foreign file is never
+reused. Files are written atomically.
+"""
+from __future__ import annotations
+
+import hashlib
+import json
+import math
+import os
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from ._exr import read_exr, write_exr
+from ._experiment import Experiment
+
+SCENE_VERSION = 1
+N_SEEDS = 4
+PILOT_SPP = 8
+
+
+@dataclass
+class Reference:
+    """A reference image with its provenance.
+
+    Attributes:
+        image: (H, W, 3) float32 linear RGB, row 0 at the top.
+        stderr: (H, W, 3) float32 per-pixel standard error of ``image``.
+        provenance: dict (hash, spp, seeds, variant, versions, seconds, noise, ...).
+        path: the cached EXR, if any.
+    """
+
+    image: np.ndarray
+    stderr: np.ndarray
+    provenance: dict
+    path: Path | None = None
+
+    @property
+    def noise(self) -> float:
+        return float(self.provenance["noise"])
+
+    @property
+    def spp(self) -> int:
+        return int(self.provenance["spp"])
+
+
+def cache_dir() -> Path:
+    """``$STUDY_CACHE`` or ``./.cache`` (relative to the working directory)."""
+    return Path(os.environ.get("STUDY_CACHE", ".cache")).resolve()
+
+
+def _versions() -> dict:
+    import drjit
+    import mitsuba
+    return {"mitsuba": mitsuba.__version__, "drjit": drjit.__version__}
+
+
+def reference_key(exp: Experiment, variant: str) -> str:
+    data = {"scene": exp.scene_hash(), "variant": variant, "scene_version": SCENE_VERSION,
+            "versions": _versions(), "n_seeds": N_SEEDS}
+    return hashlib.sha256(json.dumps(data, sort_keys=True).encode()).hexdigest()[:32]
+
+
+def render_passes(exp: Experiment, spp_per_pass: int, n_passes: int, seed0: int,
+                  progress=None) -> np.ndarray:
+    """(n_passes, H, W, 3) float32 renders with independent seeds ``seed0 + i``."""
+    import mitsuba as mi
+
+    from ._scene import build_scene
+
+    scene = build_scene(exp)
+    out = []
+    for i in range(n_passes):
+        img = mi.render(scene, spp=spp_per_pass, seed=seed0 + i)
+        out.append(np.array(img, dtype=np.float32))
+        if progress:
+            progress(i + 1, n_passes)
+    return np.stack(out)
+
+
+def water_mask(exp: Experiment, width: int, height: int) -> np.ndarray:
+    """(H, W) bool: pixels whose centre sees the water quad (row 0 at the top)."""
+    from ._scene import camera_view_proj
+
+    vp = camera_view_proj(exp, width, height).astype(np.float64)
+    inv = np.linalg.inv(vp)
+    j, i = np.meshgrid(np.arange(height), np.arange(width), indexing="ij")
+    ndc_x = 2 * (i + 0.5) / width - 1
+    ndc_y = 1 - 2 * (j + 0.5) / height
+    near = np.stack([ndc_x, ndc_y, -np.ones_like(ndc_x), np.ones_like(ndc_x)], -1) @ inv.T
+    far = np.stack([ndc_x, ndc_y, np.ones_like(ndc_x), np.ones_like(ndc_x)], -1) @ inv.T
+    p0, p1 = near[..., :3] / near[..., 3:], far[..., :3] / far[..., 3:]
+    d = p1 - p0
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t = -p0[..., 1] / d[..., 1]
+    hit = p0 + t[..., None] * d
+    hx, hz = exp["pool.half_extent"]
+    return (t > 0) & (np.abs(hit[..., 0]) < hx) & (np.abs(hit[..., 2]) < hz)
+
+
+def noise_of(passes: np.ndarray, mask: np.ndarray) -> tuple[np.ndarray, float]:
+    """Per-pixel standard error of the mean of ``passes`` and its RMS over ``mask``."""
+    k = passes.shape[0]
+    if k < 2:
+        raise ValueError("noise estimation needs at least two independent passes")
+    se = np.sqrt(passes.var(axis=0, ddof=1) / k).astype(np.float32)
+    return se, float(np.sqrt(np.mean(se[mask] ** 2)))
+
+
+def choose_spp(exp: Experiment, progress=None) -> tuple[int, dict]:
+    """Pick spp for ``reference.target_noise`` from a measured pilot; return (spp, info)."""
+    w, h = exp["resolution"]
+    t0 = time.perf_counter()
+    pilot = render_passes(exp, PILOT_SPP, N_SEEDS, seed0=10_000 + exp["reference.seed"])
+    _, pilot_noise = noise_of(pilot, water_mask(exp, w, h))
+    total_pilot = PILOT_SPP * N_SEEDS
+    per_sample_var = pilot_noise ** 2 * total_pilot          # noise^2 = var / spp_total
+    target = exp["reference.target_noise"]
+    need = per_sample_var / target ** 2
+    spp = 2 ** max(2, math.ceil(math.log2(max(need, 1.0))))
+    spp = max(N_SEEDS, min(spp, exp["reference.max_spp"]))
+    info = {"pilot_spp": total_pilot, "pilot_noise": pilot_noise, "predicted_spp": need,
+            "capped": bool(need > exp["reference.max_spp"]), "pilot_seconds": time.perf_counter() - t0}
+    return spp, info
+
+
+def render_reference(exp: Experiment, variant: str, spp: int | None = None, progress=None) -> Reference:
+    """Render the reference (no cache): ``N_SEEDS`` independent passes, mean and noise."""
+    info = {}
+    if spp is None:
+        spp, info = (choose_spp(exp) if exp["reference.spp"] == "auto"
+                     else (int(exp["reference.spp"]), {}))
+    per_pass = max(1, math.ceil(spp / N_SEEDS))
+    t0 = time.perf_counter()
+    passes = render_passes(exp, per_pass, N_SEEDS, seed0=exp["reference.seed"] * N_SEEDS,
+                           progress=progress)
+    seconds = time.perf_counter() - t0
+    w, h = exp["resolution"]
+    mask = water_mask(exp, w, h)
+    stderr, noise = noise_of(passes, mask)
+    image = passes.mean(0)
+    if not np.all(np.isfinite(image)):
+        raise RuntimeError(f"the reference render of {exp['name']!r} has non-finite pixels; "
+                           "check the scene (e.g. degenerate geometry)")
+    prov = {"key": reference_key(exp, variant), "scene_hash": exp.scene_hash(), "experiment": exp["name"],
+            "spp": per_pass * N_SEEDS, "n_seeds": N_SEEDS, "seed": exp["reference.seed"],
+            "variant": variant, "versions": _versions(), "scene_version": SCENE_VERSION,
+            "render_seconds": seconds, "noise": noise, "auto_spp": info,
+            "integrator": "volpath" if any(v > 0 for v in exp["water.sigma_t"]) else "path"}
+    return Reference(image.astype(np.float32), stderr, prov)
+
+
+def load_or_render(exp: Experiment, variant: str, cache: Path | None = None, progress=None,
+                   log=print) -> Reference:
+    """The cached reference of ``exp`` if its key matches, else a fresh render written to the cache."""
+    cache = (cache or cache_dir()) / "references"
+    key = reference_key(exp, variant)
+    path = cache / f"{key}.exr"
+    if path.exists():
+        try:
+            rgb, prov, extra = read_exr(path)
+            if prov.get("key") == key and rgb.shape[:2] == tuple(exp["resolution"][::-1]) and "stderr.R" in extra:
+                se = np.stack([extra["stderr.R"], extra["stderr.G"], extra["stderr.B"]], -1)
+                log(f"reference: cached {path} (spp {prov['spp']}, noise {prov['noise']:.2e})")
+                return Reference(rgb, se, prov, path)
+            log(f"reference: {path} does not match this experiment; re-rendering")
+        except ValueError as exc:
+            log(f"reference: unreadable cache file ({exc}); re-rendering")
+    ref = render_reference(exp, variant, progress=progress)
+    write_exr(path, ref.image, ref.provenance,
+              extra={f"stderr.{c}": ref.stderr[..., i] for i, c in enumerate("RGB")})
+    ref.path = path
+    log(f"reference: rendered {ref.spp} spp in {ref.provenance['render_seconds']:.1f} s, "
+        f"noise {ref.noise:.2e}; cached at {path}")
+    return ref

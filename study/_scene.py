@@ -1,0 +1,218 @@
+"""The Mitsuba 3 scene of an experiment: physically modelled water in a tiled pool.
+
+* Pool floor: a triangle mesh of ``floor_height`` with a diffuse tile texture.
+* Walls: four diffuse boxes around the pool rising ``pool.wall_height`` above the water.
+* Water: one closed triangle mesh (a smooth dielectric, ``water.ior`` inside, 1.0
+  outside) bounding a homogeneous medium (``water.sigma_t``, ``water.albedo``). Its top is
+  the wave surface ``H(x, z)`` displaced for real, with analytic vertex normals; its
+  sides and bottom close the volume just inside the walls and below the floor, so the floor
+  lies inside the medium. The waves are geometry, not a normal-mapped flat BSDF, because
+  a normal map on a dielectric bounding a medium breaks reciprocity and does not move
+  the interface; the displaced mesh refracts exactly where the real surface is.
+* Sky and sun: one lat-long ``envmap`` (gradient sky, ground, sun disc). The sun is an
+  area of the environment, not a delta light: a delta light never reaches the floor
+  through a smooth dielectric. Its caustics are sampled by BSDF sampling only; the
+  reference noise is measured, not assumed (see ``_reference``).
+* Integrator: ``volpath`` when the water absorbs or scatters, else ``path``.
+
+Nothing here sets the Mitsuba variant; call ``study._backend.init_backend`` first.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from shaders_port import perspective_view_proj
+
+from ._experiment import Experiment
+from ._geometry import Waves, envmap_image, floor_height, sun_direction
+
+WATER_INSET = 1e-3   # the water volume stays this far inside the walls (no coincident faces)
+
+
+def waves_of(exp: Experiment) -> Waves:
+    w = exp.section("waves")
+    return Waves(w["amplitude"], w["normal_tile"], w["components"], w["seed"], w["offsets"],
+                 w["slope_scale"])
+
+
+def floor_of(exp: Experiment, x, z) -> np.ndarray:
+    f = exp.section("floor")
+    return floor_height(f["shape"], f["depth"], f["relief"], f["steps"], f["seed"],
+                        exp["pool.half_extent"], x, z)
+
+
+def sky_params(exp: Experiment, with_sun: bool = True) -> dict:
+    p = dict(zenith=exp["sky.zenith"], horizon=exp["sky.horizon"], ground=exp["sky.ground"])
+    if with_sun:
+        p.update(sun_dir=sun_direction(exp["sun.elevation"], exp["sun.azimuth"]),
+                 sun_radius_deg=exp["sun.radius"], sun_radiance=exp["sun.radiance"])
+    return p
+
+
+def camera_view_proj(exp: Experiment, width: int, height: int) -> np.ndarray:
+    c = exp.section("camera")
+    return perspective_view_proj(c["position"], c["target"], fov_y_deg=c["fov_y"], aspect=width / height)
+
+
+def floor_bottom(exp: Experiment) -> float:
+    hx, hz = exp["pool.half_extent"]
+    x, z = np.meshgrid(np.linspace(-hx, hx, 129), np.linspace(-hz, hz, 129))
+    return float(floor_of(exp, x, z).min()) - 0.1
+
+
+def _mesh(mi, name, positions, faces, normals=None, uv=None, outward=None, **props_in):
+    """A Mitsuba mesh from (V, 3) positions and (F, 3) faces; faces whose geometric normal
+    points against ``outward`` (a (F, 3) array or a callable of centroids) are flipped."""
+    positions = np.asarray(positions, np.float32)
+    faces = np.asarray(faces, np.uint32).copy()
+    if outward is not None:
+        p = positions[faces]
+        n = np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0])
+        want = outward(p.mean(1)) if callable(outward) else outward
+        flip = (n * want).sum(-1) < 0
+        faces[flip] = faces[flip][:, [0, 2, 1]]
+    props = mi.Properties()
+    for k, v in props_in.items():
+        props[k] = v
+    m = mi.Mesh(name, len(positions), len(faces), props=props,
+                has_vertex_normals=normals is not None, has_vertex_texcoords=uv is not None)
+    params = mi.traverse(m)
+    params["vertex_positions"] = positions.ravel()
+    params["faces"] = faces.ravel()
+    if normals is not None:
+        params["vertex_normals"] = np.asarray(normals, np.float32).ravel()
+    if uv is not None:
+        params["vertex_texcoords"] = np.asarray(uv, np.float32).ravel()
+    params.update()
+    return m
+
+
+def _grid_faces(nx: int, nz: int) -> np.ndarray:
+    i, j = np.meshgrid(np.arange(nx - 1), np.arange(nz - 1), indexing="ij")
+    v00 = (j * nx + i).ravel()
+    v10, v01, v11 = v00 + 1, v00 + nx, v00 + nx + 1
+    return np.concatenate([np.stack([v00, v01, v10], 1), np.stack([v10, v01, v11], 1)])
+
+
+def tile_texture(exp: Experiment, px_per_tile: int = 32) -> np.ndarray:
+    """(N, N, 3) float32 albedo of the floor over [-hx, hx] x [-hz, hz] (row = z, column = x)."""
+    f = exp.section("floor")
+    hx, hz = exp["pool.half_extent"]
+    nx = max(8, int(round(2 * hx / f["tile_size"] * px_per_tile)))
+    nz = max(8, int(round(2 * hz / f["tile_size"] * px_per_tile)))
+    nx, nz = min(nx, 2048), min(nz, 2048)
+    x = -hx + (np.arange(nx) + 0.5) / nx * 2 * hx
+    z = -hz + (np.arange(nz) + 0.5) / nz * 2 * hz
+    X, Z = np.meshgrid(x, z)
+    ix, iz = np.floor(X / f["tile_size"]), np.floor(Z / f["tile_size"])
+    dark = ((ix + iz) % 2 == 1)[..., None]
+    col = np.where(dark, np.asarray(f["tile_albedo2"]), np.asarray(f["tile_albedo"]))
+    fx, fz = X / f["tile_size"] - ix, Z / f["tile_size"] - iz
+    grout = ((np.minimum(fx, 1 - fx) < 0.04) | (np.minimum(fz, 1 - fz) < 0.04))[..., None]
+    return np.where(grout, 0.5 * col, col).astype(np.float32)
+
+
+def build_geometry(mi, exp: Experiment, water: bool = True) -> dict:
+    """Shapes of the scene as a dict for ``mi.load_dict`` (no sensor, emitter or integrator)."""
+    hx, hz = exp["pool.half_extent"]
+    res = exp["reference.water_mesh"]
+    yb = floor_bottom(exp)
+    out = {}
+    # ---- floor
+    nfx, nfz = res, res
+    x, z = np.meshgrid(np.linspace(-hx, hx, nfx), np.linspace(-hz, hz, nfz))
+    y = floor_of(exp, x, z)
+    pos = np.stack([x, y, z], -1).reshape(-1, 3)
+    uv = np.stack([(x + hx) / (2 * hx), (z + hz) / (2 * hz)], -1).reshape(-1, 2)
+    tex = mi.load_dict({"type": "bitmap", "bitmap": mi.Bitmap(tile_texture(exp)), "raw": True,
+                        "filter_type": "bilinear", "wrap_mode": "clamp"})
+    out["floor"] = _mesh(mi, "floor", pos, _grid_faces(nfx, nfz), uv=uv, outward=np.array([0, 1, 0]),
+                         bsdf=mi.load_dict({"type": "diffuse", "reflectance": tex}))
+    # ---- walls
+    w, top = exp["pool.wall_width"], exp["pool.wall_height"]
+    wall_bsdf = {"type": "diffuse", "reflectance": {"type": "rgb", "value": exp["pool.wall_albedo"]}}
+    boxes = {"wall_px": ((hx, hx + w), (-hz - w, hz + w)), "wall_nx": ((-hx - w, -hx), (-hz - w, hz + w)),
+             "wall_pz": ((-hx, hx), (hz, hz + w)), "wall_nz": ((-hx, hx), (-hz - w, -hz))}
+    T = mi.ScalarTransform4f
+    for name, ((x0, x1), (z0, z1)) in boxes.items():
+        out[name] = {"type": "cube", "bsdf": wall_bsdf,
+                     "to_world": T().translate([(x0 + x1) / 2, (yb + top) / 2, (z0 + z1) / 2])
+                     @ T().scale([(x1 - x0) / 2, (top - yb) / 2, (z1 - z0) / 2])}
+    if water:
+        out["water"] = water_mesh(mi, exp, yb)
+    return out
+
+
+def water_mesh(mi, exp: Experiment, y_bottom: float):
+    """The closed water volume: displaced top, vertical sides, flat bottom."""
+    hx, hz = exp["pool.half_extent"]
+    hx, hz = hx - WATER_INSET, hz - WATER_INSET
+    n = exp["reference.water_mesh"]
+    waves = waves_of(exp)
+    x, z = np.meshgrid(np.linspace(-hx, hx, n), np.linspace(-hz, hz, n))
+    h, gx, gz = waves.height_and_gradient(x, z)
+    nrm = np.stack([-gx, np.ones_like(gx), -gz], -1)
+    nrm /= np.linalg.norm(nrm, axis=-1, keepdims=True)
+    pos = [np.stack([x, h, z], -1).reshape(-1, 3)]
+    nor = [nrm.reshape(-1, 3)]
+    faces = [_grid_faces(n, n)]
+    base = n * n
+    # boundary loop of the top grid (vertex indices, counter-clockwise seen from above)
+    idx = np.arange(n * n).reshape(n, n)
+    ring = np.concatenate([idx[0, :-1], idx[:-1, -1], idx[-1, :0:-1], idx[:0:-1, 0]])
+    p0 = pos[0][ring]
+    p1 = np.roll(p0, -1, axis=0)
+    m = len(ring)
+    mid = 0.5 * (p0 + p1)
+    on_x = np.abs(mid[:, 0]) >= hx - 1e-6
+    side_n = np.stack([np.where(on_x, np.sign(mid[:, 0]), 0.0), np.zeros(m),
+                       np.where(on_x, 0.0, np.sign(mid[:, 2]))], -1)
+    # each side quad has its own 4 vertices (flat shading): p0, p1 on top, then at the bottom
+    q = np.stack([p0, p1, p1, p0], 1)
+    q[:, 2:, 1] = y_bottom
+    pos.append(q.reshape(-1, 3))
+    nor.append(np.repeat(side_n, 4, axis=0))
+    v = base + 4 * np.arange(m)
+    faces.append(np.concatenate([np.stack([v, v + 1, v + 2], 1), np.stack([v, v + 2, v + 3], 1)]))
+    # bottom: a fan around the centre
+    ring_b = np.stack([p0[:, 0], np.full(m, y_bottom), p0[:, 2]], -1)
+    b0 = base + 4 * m
+    pos += [ring_b, np.array([[0.0, y_bottom, 0.0]])]
+    nor += [np.tile([0.0, -1.0, 0.0], (m + 1, 1))]
+    k = np.arange(m)
+    faces.append(np.stack([b0 + k, b0 + (k + 1) % m, np.full(m, b0 + m)], 1))
+    pos, nor, faces = np.concatenate(pos), np.concatenate(nor), np.concatenate(faces)
+    nt = (n - 1) * (n - 1) * 2
+    outward = np.concatenate([np.tile([0.0, 1.0, 0.0], (nt, 1)), side_n, side_n,
+                              np.tile([0.0, -1.0, 0.0], (m, 1))])
+
+    props = {"bsdf": mi.load_dict({"type": "dielectric", "int_ior": exp["water.ior"], "ext_ior": 1.0})}
+    if has_medium(exp):
+        props["interior"] = mi.load_dict({
+            "type": "homogeneous", "sigma_t": {"type": "rgb", "value": exp["water.sigma_t"]},
+            "albedo": {"type": "rgb", "value": exp["water.albedo"]}})
+    return _mesh(mi, "water", pos, faces, normals=nor, outward=outward, **props)
+
+
+def has_medium(exp: Experiment) -> bool:
+    return any(v > 0 for v in exp["water.sigma_t"])
+
+
+def build_scene(exp: Experiment, width: int | None = None, height: int | None = None, seed: int = 0):
+    """The reference scene (perspective camera, box pixel filter) as a loaded ``mi.Scene``."""
+    import mitsuba as mi
+    width = width or exp["resolution"][0]
+    height = height or exp["resolution"][1]
+    c = exp.section("camera")
+    d = {"type": "scene", **build_geometry(mi, exp, water=True)}
+    d["sky"] = {"type": "envmap", "bitmap": mi.Bitmap(envmap_image(512, **sky_params(exp)))}
+    d["sensor"] = {
+        "type": "perspective", "fov": c["fov_y"], "fov_axis": "y",
+        "to_world": mi.ScalarTransform4f().look_at(origin=c["position"], target=c["target"], up=[0, 1, 0]),
+        "sampler": {"type": "independent", "seed": seed},
+        "film": {"type": "hdrfilm", "width": width, "height": height, "pixel_format": "rgb",
+                 "rfilter": {"type": "box"}},
+    }
+    d["integrator"] = {"type": "volpath" if has_medium(exp) else "path",
+                       "max_depth": exp["reference.max_depth"]}
+    return mi.load_dict(d)

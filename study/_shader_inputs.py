@@ -1,0 +1,166 @@
+"""The shader's inputs, derived from the same Mitsuba scene as the reference.
+
+As the seed's application prepares them, but from the scene:
+
+* ``refraction_texture``: the ground (floor and walls, *no water*) path-traced from above
+  with an orthographic camera under the same sky and sun, like the seed's
+  ``WaterDrawTextureRefractionTop``. The floor is diffuse, so its radiance does not depend
+  on the view. Light lost to the water on the way down is deliberately not in it: that is
+  what the shader's water colour and attenuation distance stand for;
+* ``world_y``: world y of the first surface hit from above at each texel centre (ray cast,
+  exact, no filtering), like ``WaterDrawTextureDepthRefractionTop``;
+* the bottom-up textures of the reflection shader: the geometry above the water is the
+  pool walls, whose bottom-up view (clipped at the water plane, looking up) shows their
+  top at ``wall_height``; so ``refl_world_y`` is the top-down ``world_y`` where it is above
+  the water and a sentinel -1e3 elsewhere, and ``refl_texture`` is the top-down colour there;
+* the normal map of the waves (``_geometry.Waves``) with its four offsets;
+* the sky cube map from the same sky function without the sun disc (the sun is the
+  shader's light and specular highlight). The shader looks the cube map up with ``y``
+  flipped (the seed's "probably a bug in my code"); the quirk is kept in the shader and the
+  application side compensates, as the seed's application evidently did: texel of
+  direction ``d`` stores the sky in direction ``d * (1, -1, 1)``;
+* the Fresnel LUT for the experiment's IOR; the light at the sun's direction, 1000 world
+  units away, coloured as the normalised sun radiance; the camera of the experiment.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from shaders_port import ShaderInputs, fresnel_lut, ortho_tex_matrix
+
+from ._experiment import Experiment
+from ._geometry import cubemap_directions, sky_radiance
+from ._scene import build_geometry, camera_view_proj, sky_params, waves_of
+
+NO_GEOMETRY = -1e3
+CUBEMAP_SIZE = 64
+FRESNEL_SIZE = 256
+LIGHT_DISTANCE = 1000.0
+
+
+def texture_extent(exp: Experiment) -> tuple[float, float, float, float]:
+    """World rectangle (x0, z0, x1, z1) covered by the top-down textures: the pool and its walls."""
+    hx, hz = exp["pool.half_extent"]
+    b = exp["pool.wall_width"]
+    return (-hx - b, -hz - b, hx + b, hz + b)
+
+
+def _ortho_sensor(mi, extent, size: int, spp: int, seed: int):
+    x0, z0, x1, z1 = extent
+    cx, cz = (x0 + x1) / 2, (z0 + z1) / 2
+    T = mi.ScalarTransform4f
+    return mi.load_dict({
+        "type": "orthographic",
+        "to_world": T().look_at(origin=[cx, 100.0, cz], target=[cx, 0.0, cz], up=[0, 0, 1])
+        @ T().scale([(x1 - x0) / 2, (z1 - z0) / 2, 1.0]),
+        "sampler": {"type": "independent", "seed": seed},
+        "film": {"type": "hdrfilm", "width": size, "height": size, "pixel_format": "rgb",
+                 "rfilter": {"type": "box"}},
+    })
+
+
+def _to_gl_order(mi, sensor, img: np.ndarray, extent) -> np.ndarray:
+    """Reorder an orthographic render so that row = t (z increasing), column = s (x increasing),
+    checking the sensor's own pixel-to-world map instead of assuming it."""
+    h, w = img.shape[:2]
+    probe = [(0.5 / w, 0.5 / h), ((w - 0.5) / w, 0.5 / h), (0.5 / w, (h - 0.5) / h)]
+    o = []
+    for u, v in probe:
+        ray, _ = sensor.sample_ray(0.0, 0.0, mi.Point2f(u, v), mi.Point2f(0.5, 0.5))
+        o.append(np.array(ray.o).ravel())
+    dcol, drow = o[1] - o[0], o[2] - o[0]
+    if abs(dcol[1]) > 1e-6 or abs(drow[1]) > 1e-6:
+        raise RuntimeError("orthographic sensor is not looking straight down")
+    if abs(dcol[0]) > abs(dcol[2]):          # columns run along x
+        if dcol[0] < 0:
+            img = img[:, ::-1]
+        if drow[2] < 0:
+            img = img[::-1]
+    else:                                     # columns run along z: transpose
+        img = np.swapaxes(img, 0, 1)
+        if dcol[2] < 0:
+            img = img[::-1]
+        if drow[0] < 0:
+            img = img[:, ::-1]
+    return np.ascontiguousarray(img)
+
+
+def top_down_world_y(exp: Experiment, extent, size: int) -> np.ndarray:
+    """(size, size) float32 world y of the first hit from above at texel centres (GL order)."""
+    import mitsuba as mi
+
+    scene = mi.load_dict({"type": "scene", **build_geometry(mi, exp, water=False)})
+    x0, z0, x1, z1 = extent
+    c = (np.arange(size) + 0.5) / size
+    X, Z = np.meshgrid(x0 + c * (x1 - x0), z0 + c * (z1 - z0))
+    n = X.size
+
+    def cast(dx: float, dz: float):
+        o = mi.Point3f(mi.Float((X.ravel() + dx).astype(np.float32)), mi.Float(np.full(n, 100.0, np.float32)),
+                       mi.Float((Z.ravel() + dz).astype(np.float32)))
+        si = scene.ray_intersect(mi.Ray3f(o, mi.Vector3f(0.0, -1.0, 0.0)))
+        return np.array(si.is_valid()), np.array(si.p.y, dtype=np.float32)
+
+    # A ray exactly on a shared triangle edge can slip through (the intersector is not
+    # watertight in float32): such texels are cast again a hair (1e-4 units) off-centre.
+    valid, y = cast(0.0, 0.0)
+    valid2, y2 = cast(1e-4, 0.7e-4)
+    y = np.where(valid, y, np.where(valid2, y2, NO_GEOMETRY))
+    return y.astype(np.float32).reshape(size, size)
+
+
+def top_down_colour(exp: Experiment, extent, size: int, spp: int, seed: int = 0) -> np.ndarray:
+    """(size, size, 3) float32 linear RGB of the ground seen from above, no water (GL order)."""
+    import mitsuba as mi
+
+    from ._geometry import envmap_image
+    d = {"type": "scene", **build_geometry(mi, exp, water=False),
+         "sky": {"type": "envmap", "bitmap": mi.Bitmap(envmap_image(512, **sky_params(exp)))},
+         "integrator": {"type": "path", "max_depth": exp["reference.max_depth"]}}
+    scene = mi.load_dict(d)
+    sensor = _ortho_sensor(mi, extent, size, spp, seed)
+    img = np.array(mi.render(scene, sensor=sensor, spp=spp, seed=seed), dtype=np.float32)
+    return _to_gl_order(mi, sensor, img, extent)
+
+
+def sky_cubemap(exp: Experiment, size: int = CUBEMAP_SIZE) -> np.ndarray:
+    """(6, size, size, 3) float32 cube map of the sky without the sun, stored y-flipped
+    to compensate the shader's ``* vec3(1, -1, 1)`` lookup."""
+    d = cubemap_directions(size) * np.array([1.0, -1.0, 1.0])
+    return sky_radiance(d, **sky_params(exp, with_sun=False)).astype(np.float32)
+
+
+def light_of(exp: Experiment) -> tuple[np.ndarray, np.ndarray]:
+    """(lightpos (3,), lightcolor (3,)): the sun far away, colour = sun radiance / its max."""
+    p = sky_params(exp)
+    rad = np.asarray(p["sun_radiance"], np.float64)
+    colour = rad / rad.max() if rad.max() > 0 else np.zeros(3)
+    return LIGHT_DISTANCE * p["sun_dir"], colour
+
+
+def build_shader_inputs(exp: Experiment, width: int | None = None, height: int | None = None,
+                        progress=None) -> ShaderInputs:
+    """All shader inputs of ``exp`` at output resolution (width, height) (default: the experiment's)."""
+    width = width or exp["resolution"][0]
+    height = height or exp["resolution"][1]
+    extent = texture_extent(exp)
+    size = exp["reference.texture_size"]
+    world_y = top_down_world_y(exp, extent, size)
+    colour = top_down_colour(exp, extent, size, exp["reference.texture_spp"], exp["reference.seed"])
+    above = world_y > 0.0
+    refl_y = np.where(above, world_y, NO_GEOMETRY).astype(np.float32)
+    refl_col = np.where(above[..., None], colour, 0.0).astype(np.float32)
+    tm = ortho_tex_matrix(*extent)
+    hx, hz = exp["pool.half_extent"]
+    waves = waves_of(exp)
+    lightpos, lightcolor = light_of(exp)
+    c = exp.section("camera")
+    return ShaderInputs(
+        refraction_texture=colour, world_y=world_y, tex_matrix0=tm,
+        normal_map=waves.normal_map(exp["waves.normal_map_size"]), cubemap=sky_cubemap(exp),
+        fresnel_lut=fresnel_lut(exp["water.ior"], FRESNEL_SIZE),
+        refl_world_y=refl_y, refl_texture=refl_col, tex_matrix1=tm,
+        water_rect=(-hx, -hz, hx, hz), normal_tile=exp["waves.normal_tile"],
+        waves=np.asarray(exp["waves.offsets"]), view_proj=camera_view_proj(exp, width, height),
+        viewpos=np.asarray(c["position"]), lightpos=lightpos, lightcolor=lightcolor,
+        width=width, height=height)

@@ -1,0 +1,57 @@
+"""Command line: ``study <command> ...``. Argument parsing only; the work is in ``study._jobs``."""
+from __future__ import annotations
+
+import argparse
+import sys
+
+
+def _common(p: argparse.ArgumentParser) -> None:
+    p.add_argument("experiment", help="experiment TOML file (see experiments/README.md)")
+    p.add_argument("--out", required=True, help="output folder (created if missing)")
+    p.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE",
+                   help="override an experiment key, e.g. --set water.ior=1.33 (repeatable)")
+    p.add_argument("--variant", choices=["llvm_ad_rgb", "cuda_ad_rgb"], default=None,
+                   help="Mitsuba variant (default: the experiment's, normally llvm_ad_rgb)")
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog="study", description="Calibrate a real-time GLSL water shader against Mitsuba 3 references.")
+    sub = parser.add_subparsers(dest="command", required=True)
+    p = sub.add_parser("render", help="render (or reuse the cached) reference and the shader inputs")
+    _common(p)
+    p = sub.add_parser("preview", help="the port with default constants next to the reference")
+    _common(p)
+    p = sub.add_parser("calibrate", help="reference, fit, export and report (the main job)")
+    _common(p)
+    p.add_argument("--solver", default=None, help="override fit.solver")
+    p = sub.add_parser("export", help="write the shaders with constants from a JSON file")
+    p.add_argument("constants", help="constants.json written by `study calibrate`, or a flat JSON "
+                   "object of constant name -> value")
+    p.add_argument("--out", required=True, help="output folder")
+    return parser
+
+
+def main(argv=None) -> int:
+    args = build_parser().parse_args(argv)
+    from . import _jobs
+    from ._backend import BackendError
+    from ._experiment import ExperimentError
+
+    try:
+        if args.command == "render":
+            _jobs.run_render(args.experiment, args.out, args.overrides, args.variant)
+        elif args.command == "preview":
+            _jobs.run_preview(args.experiment, args.out, args.overrides, args.variant)
+        elif args.command == "calibrate":
+            _jobs.run_calibrate(args.experiment, args.out, args.overrides, args.variant, solver=args.solver)
+        elif args.command == "export":
+            _jobs.run_export(args.constants, args.out)
+    except (ExperimentError, BackendError, FileNotFoundError, ValueError) as exc:
+        print(f"study {args.command}: error: {exc}", file=sys.stderr)
+        return 2
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
