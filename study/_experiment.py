@@ -269,3 +269,7 @@ def schema_markdown() -> str:
         default = json.dumps(f.default)
         lines.append(f"| `{key}` | {f.kind} | `{default}` | {f.units} | {allowed} | {f.doc} |")
     return "\n".join(lines) + "\n"
+
+
+if __name__ == "__main__":  # python -m study._experiment > table (for experiments/README.md)
+    print(schema_markdown(), end="")

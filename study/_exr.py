@@ -54,14 +54,13 @@ def read_exr(path) -> tuple[np.ndarray, dict, dict[str, np.ndarray]]:
         raise FileNotFoundError(f"no EXR file at {path}")
     try:
         with OpenEXR.File(str(path)) as f:
-            header = f.header()
+            raw = f.header().get(PROVENANCE_KEY)   # read before the file closes
             channels = {k: np.array(v.pixels, dtype=np.float32) for k, v in f.channels().items()}
     except Exception as exc:  # OpenEXR raises plain exceptions on corrupt files
         raise ValueError(f"{path} is not a readable EXR file ({exc}); delete it and re-render") from exc
     if "RGB" not in channels:
         raise ValueError(f"{path} has no RGB channel (channels: {sorted(channels)})")
     rgb = channels.pop("RGB")
-    raw = header.get(PROVENANCE_KEY)
     provenance = json.loads(raw) if raw else {}
     return rgb, provenance, channels
 

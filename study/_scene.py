@@ -188,8 +188,12 @@ def water_mesh(mi, exp: Experiment, y_bottom: float):
 
     props = {"bsdf": mi.load_dict({"type": "dielectric", "int_ior": exp["water.ior"], "ext_ior": 1.0})}
     if has_medium(exp):
+        # sigma_t enters as an RGB in [0, 1] times a scalar scale (Mitsuba's RGB volume
+        # values are reflectance-like and must lie in [0, 1])
+        scale = max(exp["water.sigma_t"])
         props["interior"] = mi.load_dict({
-            "type": "homogeneous", "sigma_t": {"type": "rgb", "value": exp["water.sigma_t"]},
+            "type": "homogeneous", "scale": scale,
+            "sigma_t": {"type": "rgb", "value": [v / scale for v in exp["water.sigma_t"]]},
             "albedo": {"type": "rgb", "value": exp["water.albedo"]}})
     return _mesh(mi, "water", pos, faces, normals=nor, outward=outward, **props)
 

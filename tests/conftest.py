@@ -1,4 +1,44 @@
+import os
 import sys
 from pathlib import Path
 
+import pytest
+
 sys.path.insert(0, str(Path(__file__).parent))
+
+REPO = Path(__file__).resolve().parent.parent
+FAILURES = Path(__file__).parent / "_failures"
+
+
+@pytest.fixture(scope="session")
+def mi():
+    """Mitsuba with the default LLVM variant (after the libLLVM check)."""
+    from study import init_backend
+    init_backend("llvm_ad_rgb")
+    import mitsuba
+    return mitsuba
+
+
+@pytest.fixture(autouse=True)
+def _private_cache(tmp_path_factory, monkeypatch):
+    """Every test uses a fresh reference cache, never the user's."""
+    monkeypatch.setenv("STUDY_CACHE", str(tmp_path_factory.mktemp("cache")))
+
+
+def small_experiment(**overrides):
+    """The default experiment, shrunk for tests: 32x32, few spp, coarse meshes and textures."""
+    from study import load_experiment
+    base = {"resolution": "[32, 32]", "fit.resolution": "[32, 32]", "reference.spp": "16",
+            "reference.water_mesh": "96", "reference.texture_size": "64", "reference.texture_spp": "8",
+            "waves.normal_map_size": "64"}
+    base.update({k: str(v) for k, v in overrides.items()})
+    return load_experiment(REPO / "experiments" / "default.toml", [f"{k}={v}" for k, v in base.items()])
+
+
+def save_failure(name: str, **images) -> Path:
+    """Write actual / expected / error images of a failed comparison to tests/_failures/."""
+    from study import write_exr
+    FAILURES.mkdir(exist_ok=True)
+    for key, img in images.items():
+        write_exr(FAILURES / f"{name}.{key}.exr", img)
+    return FAILURES

@@ -1,0 +1,78 @@
+"""Experiment schema: every bad input names the key and what is allowed."""
+import re
+from pathlib import Path
+
+import pytest
+
+from study import ExperimentError, load_experiment, validate
+from study._experiment import SCHEMA, schema_markdown
+
+REPO = Path(__file__).resolve().parent.parent
+
+
+@pytest.mark.parametrize("path", sorted((REPO / "experiments").glob("*.toml")), ids=lambda p: p.stem)
+def test_shipped_experiments_are_valid(path):
+    exp = load_experiment(path)
+    assert exp["name"] == path.stem
+
+
+BAD = [
+    ({"colour": 1}, r"unknown key.*'colour'"),
+    ({"water": {"iorr": 1.3}}, r"'water.iorr' \(did you mean 'water.ior'\?\)"),
+    ({"water": {"ior": "high"}}, r"water.ior: expected a number, got 'high'.*Range: \[1.0, 3.0\]"),
+    ({"water": {"ior": 0.5}}, r"water.ior: 0.5 is out of range"),
+    ({"water": {"ior": float("nan")}}, r"water.ior: nan is not finite"),
+    ({"water": {"sigma_t": [0.1, 0.2]}}, r"water.sigma_t: expected a list of 3 numbers"),
+    ({"water": {"sigma_t": [0.1, -0.2, 0.0]}}, r"water.sigma_t: -0.2 is out of range"),
+    ({"floor": {"shape": "bowl"}}, r"floor.shape: unknown value 'bowl'.*Allowed: flat, slope, steps, terrain"),
+    ({"floor": {"steps": 2.5}}, r"floor.steps: expected an integer"),
+    ({"floor": {"depth": True}}, r"floor.depth: expected a number, got True"),
+    ({"resolution": [256, 0]}, r"resolution: 0 is out of range"),
+    ({"waves": {"offsets": [[0, 0]]}}, r"waves.offsets: expected 4 pairs"),
+    ({"fit": {"solver": "newton"}}, r"fit.solver: unknown value 'newton'.*levenberg_marquardt"),
+    ({"fit": {"parameters": ["attenuation_distance", "fresnel"]}}, r"fit.parameters: unknown entry 'fresnel'"),
+    ({"fit": {"resolution": [100, 100]}}, r"fit.resolution \[100, 100\] must divide resolution"),
+    ({"camera": {"position": [0, -1, 3]}}, r"camera must be above the water plane"),
+    ({"reference": {"spp": "lots"}}, r"reference.spp: expected a number, got 'lots'"),
+    ({"constants": {"loop_cap": 0}}, r"constants.loop_cap: 0 is out of range"),
+    ({"variant": "metal"}, r"variant: unknown value 'metal'.*cuda_ad_rgb"),
+]
+
+
+@pytest.mark.parametrize("raw,message", BAD, ids=[m[:30] for _, m in BAD])
+def test_bad_values_name_the_key(raw, message):
+    with pytest.raises(ExperimentError, match=message):
+        validate(raw)
+
+
+def test_bad_files(tmp_path):
+    with pytest.raises(ExperimentError, match="does not exist"):
+        load_experiment(tmp_path / "missing.toml")
+    broken = tmp_path / "broken.toml"
+    broken.write_text("name = \n")
+    with pytest.raises(ExperimentError, match="not valid TOML"):
+        load_experiment(broken)
+
+
+def test_overrides():
+    exp = validate({}, ["water.ior=1.5", "floor.shape=steps", "resolution=[64, 32]",
+                        "fit.resolution=[32, 16]", "reference.spp=auto"])
+    assert exp["water.ior"] == 1.5 and exp["floor.shape"] == "steps"
+    assert exp["resolution"] == [64, 32] and exp["reference.spp"] == "auto"
+    with pytest.raises(ExperimentError, match="expected KEY=VALUE"):
+        validate({}, ["water.ior"])
+    with pytest.raises(ExperimentError, match="unknown key"):
+        validate({}, ["water.density=3"])
+
+
+def test_scene_hash_tracks_scene_keys_only():
+    a = validate({})
+    assert validate({"water": {"ior": 1.34}}).scene_hash() != a.scene_hash()
+    assert validate({"fit": {"solver": "bfgs"}}).scene_hash() == a.scene_hash()
+
+
+def test_readme_documents_every_key():
+    readme = (REPO / "experiments" / "README.md").read_text()
+    assert schema_markdown() in readme, "regenerate the table: python -m study._experiment"
+    for key in SCHEMA:
+        assert re.search(rf"`{re.escape(key)}`", readme)

@@ -1,0 +1,90 @@
+"""Reference cache: keyed on everything that affects the image, atomic, provenance in the EXR;
+noise measured from independent passes."""
+import numpy as np
+import pytest
+from conftest import small_experiment
+
+from study import read_exr
+from study._reference import load_or_render, noise_of, reference_key
+
+
+def test_cache_hit_miss_and_provenance(mi, tmp_path):
+    exp = small_experiment()
+    logs = []
+    a = load_or_render(exp, "llvm_ad_rgb", cache=tmp_path, log=logs.append)
+    assert "rendered" in logs[-1]
+    rgb, prov, extra = read_exr(a.path)
+    assert prov["key"] == reference_key(exp, "llvm_ad_rgb") and prov["spp"] == 16
+    assert {"versions", "render_seconds", "noise", "scene_hash", "variant", "seed"} <= set(prov)
+    assert prov["noise"] > 0 and np.isfinite(rgb).all()
+    b = load_or_render(exp, "llvm_ad_rgb", cache=tmp_path, log=logs.append)
+    assert "cached" in logs[-1]
+    np.testing.assert_array_equal(a.image, b.image)
+    # any scene change is a different key, never the stale file
+    changed = small_experiment(**{"water.sigma_t": "[0.3, 0.06, 0.04]"})
+    assert reference_key(changed, "llvm_ad_rgb") != reference_key(exp, "llvm_ad_rgb")
+    c = load_or_render(changed, "llvm_ad_rgb", cache=tmp_path, log=logs.append)
+    assert "rendered" in logs[-1] and c.path != a.path
+    assert not np.array_equal(c.image, a.image)
+    # a fit-only change keeps the key
+    same = small_experiment(**{"fit.solver": "bfgs"})
+    assert reference_key(same, "llvm_ad_rgb") == reference_key(exp, "llvm_ad_rgb")
+
+
+def test_foreign_or_corrupt_cache_file_is_not_reused(mi, tmp_path):
+    exp = small_experiment()
+    a = load_or_render(exp, "llvm_ad_rgb", cache=tmp_path, log=lambda m: None)
+    a.path.write_bytes(b"truncated")
+    logs = []
+    b = load_or_render(exp, "llvm_ad_rgb", cache=tmp_path, log=logs.append)
+    assert any("unreadable" in m for m in logs) and np.isfinite(b.image).all()
+    # a valid EXR whose recorded key differs (e.g. copied from elsewhere) is not trusted
+    from study import write_exr
+    write_exr(b.path, b.image, dict(b.provenance, key="someone-else"),
+              extra={f"stderr.{c}": b.stderr[..., i] for i, c in enumerate("RGB")})
+    logs = []
+    load_or_render(exp, "llvm_ad_rgb", cache=tmp_path, log=logs.append)
+    assert any("does not match" in m for m in logs)
+
+
+def test_killed_render_leaves_no_cache_file(mi, tmp_path, monkeypatch):
+    import study._reference as R
+    exp = small_experiment()
+
+    def killed(*a, **k):
+        raise KeyboardInterrupt("killed")
+
+    monkeypatch.setattr(R, "render_passes", killed)
+    with pytest.raises(KeyboardInterrupt):
+        load_or_render(exp, "llvm_ad_rgb", cache=tmp_path, log=lambda m: None)
+    assert not list(tmp_path.rglob("*.exr"))
+
+
+def test_noise_estimate_scales_with_spp(mi):
+    """Measured noise follows 1/sqrt(spp) (independent seeds), within sampling error."""
+    from study._reference import render_passes, water_mask
+    exp = small_experiment()
+    mask = water_mask(exp, 32, 32)
+    _, n4 = noise_of(render_passes(exp, 4, 6, seed0=100), mask)
+    _, n64 = noise_of(render_passes(exp, 64, 6, seed0=200), mask)
+    ratio = n4 / n64
+    assert 2.0 < ratio < 8.0, ratio        # ideal 4.0; heavy-tailed paths widen the spread
+
+
+def test_noise_of_known_gaussian():
+    rng = np.random.default_rng(1)
+    passes = rng.normal(0.5, 0.2, size=(8, 64, 64, 3))
+    se, rms = noise_of(passes, np.ones((64, 64), bool))
+    assert rms == pytest.approx(0.2 / np.sqrt(8), rel=0.03)
+    with pytest.raises(ValueError, match="at least two"):
+        noise_of(passes[:1], np.ones((64, 64), bool))
+
+
+def test_auto_spp_reaches_target(mi):
+    from study._reference import choose_spp
+    exp = small_experiment(**{"reference.spp": '"auto"', "reference.target_noise": "0.02",
+                              "reference.max_spp": "4096"})
+    spp, info = choose_spp(exp)
+    assert spp >= info["predicted_spp"] and spp < 2 * info["predicted_spp"] + 8
+    loose = small_experiment(**{"reference.spp": '"auto"', "reference.target_noise": "0.2"})
+    assert choose_spp(loose)[0] < spp
