@@ -1,0 +1,266 @@
+"""Run the water shaders on a real OpenGL implementation (headless EGL, e.g. Mesa llvmpipe).
+
+``GLRenderer`` draws the water quad of a ``ShaderInputs`` with the core-profile shaders
+into a float32 RGBA framebuffer and reads it back in image order (row 0 = top).
+A compatibility (GLSL 1.20) source is run through ``compat_to_core``, the documented
+substitution table that maps the shipped compat files onto the shipped core files.
+
+Texture set-up (one texture unit each, no mipmaps, float32 storage):
+refractionTexture RGB32F linear clamp; worldYComponent R32F nearest clamp; normalMap RGB32F
+linear repeat; reflectionTexture cube RGB32F linear clamp, seamless cube filtering off;
+fresnelLookup (N x 1) RG32F nearest clamp; worldYComponentReflection R32F nearest clamp;
+reflectionBottom RGB32F linear clamp.
+"""
+from __future__ import annotations
+
+import time
+
+import numpy as np
+
+from ._glsl import compat_to_core, read_source, with_define, write_constants
+from ._inputs import CONSTANT_SPECS, Constants, ShaderInputs
+
+_GL_TEXTURE_CUBE_MAP_SEAMLESS = 0x884F
+_FRAG_NAMES = ("water_refraction", "water_reflection")
+_UNIFORM_CONSTANTS = {py: spec[0] for py, spec in CONSTANT_SPECS.items() if spec[1].startswith("uniform")}
+_MASK_FRAG = "#version 330 core\nout vec4 fragColor;\nvoid main(void) { fragColor = vec4(1.0); }\n"
+# sampler name -> (texture unit, filter 'linear'|'nearest', repeat)
+_SAMPLERS = {
+    "refractionTexture": (0, "linear", False),
+    "worldYComponent": (1, "nearest", False),
+    "normalMap": (2, "linear", True),
+    "reflectionTexture": (3, "linear", False),
+    "fresnelLookup": (4, "nearest", False),
+    "worldYComponentReflection": (5, "nearest", False),
+    "reflectionBottom": (6, "linear", False),
+}
+
+
+def create_egl_context():
+    """A standalone moderngl context (OpenGL >= 3.3 core) through EGL; clear error if unavailable."""
+    try:
+        import moderngl
+    except ImportError as exc:  # pragma: no cover - moderngl is a pinned dependency
+        raise RuntimeError("moderngl is not installed; `pip install moderngl==5.13.0`") from exc
+    try:
+        ctx = moderngl.create_context(standalone=True, backend="egl", require=330)
+    except Exception as exc:
+        raise RuntimeError(
+            "could not create a headless OpenGL 3.3 context through EGL "
+            f"({type(exc).__name__}: {exc}). Install Mesa's EGL and drivers, e.g. on Debian/Ubuntu "
+            "`apt-get install libegl1 libegl-mesa0 libgl1-mesa-dri` (llvmpipe needs no GPU)") from exc
+    return ctx
+
+
+def _mat_bytes(m: np.ndarray) -> bytes:
+    """Row-major (4, 4) matrix acting on column vectors -> GL column-major bytes."""
+    return np.ascontiguousarray(np.asarray(m, dtype=np.float32).T).tobytes()
+
+
+class GLRenderer:
+    """Draw one water shader for one ``ShaderInputs`` on OpenGL, for many constant sets.
+
+    Args:
+        name: 'water_refraction' or 'water_reflection'.
+        inputs: textures, matrices, uniforms and output resolution.
+        dialect: dialect of ``source`` (and of the shipped file when ``source`` is None):
+            'core' runs as is; 'compat' (GLSL 1.20) runs through ``compat_to_core``.
+        reflection: False compiles with ``#define NOREFLECTION`` (water_refraction only).
+        source: fragment shader text to run instead of the shipped file (e.g. an export).
+    """
+
+    def __init__(self, name: str, inputs: ShaderInputs, *, dialect: str = "core",
+                 reflection: bool = True, source: str | None = None):
+        if name not in _FRAG_NAMES:
+            raise ValueError(f"unknown water shader {name!r}; known: {_FRAG_NAMES}")
+        if dialect not in ("core", "compat"):
+            raise ValueError(f"dialect must be 'core' or 'compat', got {dialect!r}")
+        if not reflection and name != "water_refraction":
+            raise ValueError("reflection=False (NOREFLECTION) is a variant of water_refraction only")
+        if not isinstance(inputs, ShaderInputs):
+            raise TypeError(f"inputs must be a ShaderInputs, got {type(inputs).__name__}")
+        import moderngl
+        self._mgl = moderngl
+        self.name, self.inputs, self.dialect, self.reflection = name, inputs, dialect, reflection
+        self._source = source if source is not None else read_source(name, "frag", dialect)
+        self._vert = read_source("water", "vert", "core")
+        self._programs: dict[str, object] = {}
+        self.ctx = create_egl_context()
+        try:
+            self.ctx.disable_direct(_GL_TEXTURE_CUBE_MAP_SEAMLESS)
+            self._setup_geometry()
+            self._setup_textures()
+            w, h = inputs.width, inputs.height
+            self._color = self.ctx.renderbuffer((w, h), 4, dtype="f4")
+            self.fbo = self.ctx.framebuffer(color_attachments=[self._color])
+            self._mask = self._render_mask()
+        except Exception:
+            self.release()
+            raise
+
+    # -- set-up -------------------------------------------------------------------------------
+    def _setup_geometry(self) -> None:
+        x0, z0, x1, z1 = self.inputs.water_rect
+        tile = self.inputs.normal_tile
+        corners = [(x0, z0), (x1, z0), (x0, z1), (x1, z1)]
+        data = np.array([[x, 0.0, z, x / tile, z / tile] for x, z in corners], dtype=np.float32)
+        self._vbo = self.ctx.buffer(data.tobytes())
+
+    def _texture2d(self, arr: np.ndarray):
+        """(H, W[, C]) float32 array -> 2-D float texture, row 0 at t = 0.5 / H."""
+        arr = np.ascontiguousarray(arr, dtype=np.float32)
+        comps = 1 if arr.ndim == 2 else arr.shape[2]
+        h, w = arr.shape[:2]
+        return self.ctx.texture((w, h), comps, arr.tobytes(), dtype="f4", alignment=4)
+
+    def _setup_textures(self) -> None:
+        i = self.inputs
+        lut = i.fresnel_lut[None, :, :]  # (1, N, 2): N x 1 texture, s = cos(theta)
+        cube = np.ascontiguousarray(i.cubemap, dtype=np.float32)
+        self._textures = {
+            "refractionTexture": self._texture2d(i.refraction_texture),
+            "worldYComponent": self._texture2d(i.world_y),
+            "normalMap": self._texture2d(i.normal_map),
+            "reflectionTexture": self.ctx.texture_cube((cube.shape[1], cube.shape[1]), 3,
+                                                       cube.tobytes(), dtype="f4", alignment=4),
+            "fresnelLookup": self._texture2d(lut),
+            "worldYComponentReflection": self._texture2d(i.refl_world_y),
+            "reflectionBottom": self._texture2d(i.refl_texture),
+        }
+        mgl = self._mgl
+        self._samplers = {}
+        for sname, (unit, filt, repeat) in _SAMPLERS.items():
+            f = mgl.LINEAR if filt == "linear" else mgl.NEAREST
+            self._samplers[sname] = self.ctx.sampler(repeat_x=repeat, repeat_y=repeat,
+                                                     repeat_z=repeat, filter=(f, f))
+
+    def _bind_textures(self) -> None:
+        for sname, (unit, _, _) in _SAMPLERS.items():
+            self._textures[sname].use(location=unit)
+            self._samplers[sname].use(location=unit)
+
+    def _program(self, frag_source: str):
+        prog = self._programs.get(frag_source)
+        if prog is None:
+            try:
+                prog = self.ctx.program(vertex_shader=self._vert, fragment_shader=frag_source)
+            except self._mgl.Error as exc:
+                raise RuntimeError(f"OpenGL rejected the {self.name} shader:\n{exc}") from exc
+            vao = self.ctx.vertex_array(prog, [(self._vbo, "3f 2f", "aVertex", "aMultiTexCoord0")])
+            self._set_static_uniforms(prog)
+            prog = (prog, vao)
+            self._programs[frag_source] = prog
+        return prog
+
+    def _set_static_uniforms(self, prog) -> None:
+        i = self.inputs
+        vals = {
+            "WaterTransformationMatrix": _mat_bytes(np.eye(4)),
+            "uModelViewProjectionMatrix": _mat_bytes(i.view_proj),
+            "uTextureMatrix0": _mat_bytes(i.tex_matrix0),
+            "uTextureMatrix1": _mat_bytes(i.tex_matrix1),
+            "viewpos": i.viewpos.astype(np.float32).tobytes(),
+            "lightpos": i.lightpos.astype(np.float32).tobytes(),
+            "lightcolor": i.lightcolor.astype(np.float32).tobytes(),
+        }
+        for k in range(4):
+            vals[f"wave{k + 1}"] = i.waves[k].astype(np.float32).tobytes()
+        for uname, data in vals.items():
+            if uname in prog:
+                prog[uname].write(data)
+        for sname, (unit, _, _) in _SAMPLERS.items():
+            if sname in prog:
+                prog[sname].value = unit
+
+    def _frag_source(self, constants: Constants | None) -> str:
+        src = self._source if constants is None else write_constants(self._source, constants)
+        if not self.reflection:
+            src = with_define(src, "NOREFLECTION")
+        return compat_to_core(src, "frag") if self.dialect == "compat" else src
+
+    def _render_mask(self) -> np.ndarray:
+        prog = self.ctx.program(vertex_shader=self._vert, fragment_shader=_MASK_FRAG)
+        self._set_static_uniforms(prog)
+        vao = self.ctx.vertex_array(prog, [(self._vbo, "3f 8x", "aVertex")])
+        self.fbo.use()
+        self.fbo.clear(0.0, 0.0, 0.0, 0.0)
+        vao.render(self._mgl.TRIANGLE_STRIP)
+        mask = self._read()[..., 0] > 0.5
+        vao.release()
+        prog.release()
+        return mask
+
+    def _read(self) -> np.ndarray:
+        w, h = self.inputs.width, self.inputs.height
+        raw = self.fbo.read(components=4, dtype="f4", alignment=4)
+        return np.frombuffer(raw, dtype=np.float32).reshape(h, w, 4)[::-1].copy()
+
+    # -- drawing ------------------------------------------------------------------------------
+    def draw(self, constants: Constants | None = None) -> None:
+        """Draw one frame into the framebuffer (no read-back, no synchronisation)."""
+        prog, vao = self._program(self._frag_source(constants))
+        if constants is not None:
+            for py, uname in _UNIFORM_CONSTANTS.items():
+                if uname in prog:
+                    v = getattr(constants, py)
+                    prog[uname].value = tuple(float(x) for x in v) if isinstance(v, (tuple, list)) else float(v)
+        self._bind_textures()
+        self.fbo.use()
+        self.fbo.clear(0.0, 0.0, 0.0, 0.0)
+        vao.render(self._mgl.TRIANGLE_STRIP)
+
+    def render(self, constants: Constants | None = None) -> tuple[np.ndarray, np.ndarray]:
+        """Render one frame.
+
+        ``constants``: written into the shader's constants block (and set as uniforms);
+        None runs the source's own block as is, its uniforms left at their initializers.
+        Returns (rgba, mask): rgba (height, width, 4) float32 linear RGB + alpha as the
+        shader wrote it, 0 outside the quad; mask (height, width) bool, quad coverage.
+        Row 0 is the top of the image.
+        """
+        self.draw(constants)
+        return self._read(), self._mask.copy()
+
+    def time_frames(self, constants: Constants | None = None, n: int = 20,
+                    warmup: int = 3) -> list[float]:
+        """Seconds per frame (draw + glFinish, no read-back) for ``n`` frames after ``warmup``."""
+        for _ in range(warmup):
+            self.draw(constants)
+            self.ctx.finish()
+        out = []
+        for _ in range(n):
+            t0 = time.perf_counter()
+            self.draw(constants)
+            self.ctx.finish()
+            out.append(time.perf_counter() - t0)
+        return out
+
+    def release(self) -> None:
+        """Free all GL objects and the context (idempotent)."""
+        ctx = getattr(self, "ctx", None)
+        if ctx is not None:
+            ctx.release()
+            self.ctx = None
+        self._programs = {}
+
+    def __enter__(self) -> "GLRenderer":
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.release()
+
+
+def run_glsl(name: str, inputs: ShaderInputs, constants: Constants | None = None, *,
+             reflection: bool = True, source: str | None = None,
+             dialect: str = "core") -> tuple[np.ndarray, np.ndarray]:
+    """One-shot ``GLRenderer(name, inputs, ...).render(constants)``; see GLRenderer.render."""
+    with GLRenderer(name, inputs, dialect=dialect, reflection=reflection, source=source) as r:
+        return r.render(constants)
+
+
+def time_glsl(inputs: ShaderInputs, constants: Constants | None = None, n: int = 20, *,
+              name: str = "water_refraction", reflection: bool = True) -> list[float]:
+    """Seconds per frame of the core shader on this GL implementation, glFinish-synchronised,
+    ``n`` frames after 3 warm-up frames (shader compilation excluded)."""
+    with GLRenderer(name, inputs, reflection=reflection) as r:
+        return r.time_frames(constants, n=n)

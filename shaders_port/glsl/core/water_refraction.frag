@@ -1,0 +1,177 @@
+#version 330 core
+// core-profile names replacing GLSL 1.20 built-ins (see shaders_port/README.md)
+uniform mat4 uTextureMatrix0;
+in vec4 vTexCoord0;
+in vec4 vTexCoord1;
+in vec4 vTexCoord2;
+in vec4 vTexCoord3;
+out vec4 fragColor;
+// Refraction pixel shader of Lipp, "Physically correct perturbed planar
+// refractions & reflections in real time" (seed 000, section 2).
+// Compile with NOREFLECTION defined for the refraction-only variant.
+// Fixes against the documented text are listed in shaders_port/README.md.
+
+// ---- BEGIN TUNABLE CONSTANTS (written by `study export`) ----
+//travelLength==ATTENUATION_DISTANCE => fully attenuated to waterColor
+const float ATTENUATION_DISTANCE = 7.5;
+//raycast steps per unit of depth at a grazing (R.y=0) and a steep (R.y=-1) refraction ray
+const float STEPS_GRAZING = 10.0;
+const float STEPS_STEEP = 3.0;
+//maximum number of raycast steps
+const int LOOP_CAP = 40;
+//specular strength and Phong exponent
+const float SPECULAR_STRENGTH = 2.0;
+const float SPECULAR_EXPONENT = 256.0;
+//multiplier to enhance normal-perturbation. 0=max perturbation 1=normal perturbation
+uniform float BumptexMult = 1.0;
+//refractioncoefficient = c_air/c_water
+uniform float refrCoeff = 0.750187547;
+//watercolor, for modulation of refracted color
+uniform vec4 waterColor = vec4(0.05, 0.25, 0.3, 1.0);
+//color for modulation of reflected light
+uniform vec4 reflectColor = vec4(1.0, 1.0, 1.0, 1.0);
+// ---- END TUNABLE CONSTANTS ----
+
+//Refraction Texture, Rendered from Top
+uniform sampler2D refractionTexture;
+//Reflection Texture, Cubemap containing skybox
+uniform samplerCube reflectionTexture;
+//Normal pertubation map, defined in water-plane
+uniform sampler2D normalMap;
+//Y-components of geometry under the water, rendered from top
+uniform sampler2D worldYComponent;
+//Fresnel Lookup Texture, lookup from cos(theta) -> Transm. Coeff, Refr. Coeff
+uniform sampler2D fresnelLookup;
+
+//color of specular highlight
+uniform vec3 lightcolor;
+
+//vectors set up by the vertex shader
+//World space position of point on the water-plane
+in vec3 varyingVecWorldPosition;
+//vector from varyingVecWorldPosition to worldspace Camera Position
+in vec3 varyingVecEye;
+//vector from varyingVecWorldPosition to worldspace Light Position
+in vec3 varyingVecLight;
+
+void main (void)
+{
+    // ---- [1] Eye and light vectors ----
+    //Get vectors to eye&light
+    //Renormalize interpolated varying vectors
+    vec3 vEye=normalize(varyingVecEye);
+    vec3 vLight = normalize(varyingVecLight);
+
+    // ---- [2] Normal map: average four layers, bump scaling ----
+    //Sample normalmap at different locations
+    vec3 vBumpTexA = vec3(texture(normalMap, vTexCoord0.xy));
+    vec3 vBumpTexB = vec3(texture(normalMap, vTexCoord1.xy));
+    vec3 vBumpTexC = vec3(texture(normalMap, vTexCoord2.xy));
+    vec3 vBumpTexD = vec3(texture(normalMap, vTexCoord3.xy));
+
+    //Average Bump Layers, transform from [0,1] to [-1,1]
+    vec3 vBumpTex = normalize( 2.0 *
+        (vBumpTexA+vBumpTexB+vBumpTexC+vBumpTexD) - 4.0);
+
+    //Increase bumps: decrease y-component, then renormalize
+    //This results in larger xz-components
+    vec3 vBumpTexMore = normalize( vBumpTex*vec3(1.0,BumptexMult,1.0));
+
+    // ---- [3] Refraction vector and step schedule ----
+    //Calc correct refraction vector
+    vec3 R = normalize(refract(-vEye, vBumpTexMore, refrCoeff));
+
+    //Calculate ideal stepsize: If R.y = 0 the reflection ray is at an grazing angle => use maximum steps=10
+    //at R.y=1: use minimum steps=3
+    float numsteps = mix(STEPS_GRAZING,STEPS_STEEP,-R.y); //Linear Interpolate based on -R.y
+
+    float stepsize= 1.0 / numsteps;
+    //Scale Refraction vector with stepsize
+    R*=stepsize;
+
+    // ---- [4] Raycast the ground ----
+    float depth, olddepth;
+
+    //Start with approximation at vertex-world-position
+    vec3 current_position = vec3(varyingVecWorldPosition);
+    vec3 current_position_old=current_position;
+    olddepth=0;
+
+    //Fetch the depth of the water at the starting-position
+    vec4 depthtex = texture(worldYComponent, ( uTextureMatrix0*vec4(current_position,1)).xy);
+    depth = depthtex.r;
+
+    for (int i=0; i<LOOP_CAP;i++)
+    {
+        //Save old position on ray
+        current_position_old=current_position;
+        //step further on ray
+        current_position +=R;
+        //save old depth
+        olddepth=depth;
+
+        //Fetch ground-depth for current position on ray
+        depthtex = texture(worldYComponent, ( uTextureMatrix0*vec4(current_position,1)).xy);
+        depth = depthtex.r;
+
+        //Assume water plane is parallel to xz-plane
+        //-> a comparison of world-space y can be used for water depth comp.
+        if (depth> current_position.y )
+        {
+            break;
+        }
+    }
+
+    // ---- [5] Interpolate the crossing ----
+    float cpoy=current_position_old.y;
+    float cpy = current_position.y;
+
+    current_position=mix(current_position_old,current_position,(cpoy-olddepth) / (cpoy-cpy+depth-olddepth));
+
+    //Fetch Interpolated Refracted Position
+    vec4 vRefraction = texture(refractionTexture, ( uTextureMatrix0*vec4(current_position,1)).xy);
+
+    // ---- [6] Attenuation ----
+    //Calculate distance Ray traveled through water
+    float travelLength = length(current_position-varyingVecWorldPosition);
+    //travelLength==7.5 => 1, travelLength=0 => 0
+    travelLength = clamp( travelLength/ATTENUATION_DISTANCE, 0,1);
+    //Calc new attenuated vRefraction
+    vRefraction=mix(vRefraction, waterColor, travelLength);
+
+#ifndef NOREFLECTION
+
+    // ---- [7] Reflection ----
+    //Calculate reflection Vector
+    R = normalize(reflect(-vEye, vBumpTexMore));
+    //clamp y to 0.0001, else reflection vector would go into water
+    R.y = max(R.y,0.001);
+    //Fetch from cubemap, modulate with reflectColor
+    //Somehow y-component is inverted, so it is rescaled with -1.
+    //probably a bug in my code.
+    vec4 vReflection = texture(reflectionTexture, normalize(R)*vec3(1,-1,1) )*reflectColor;
+
+    // ---- [8] Specular highlight ----
+    //Calculate specular reflection
+
+    //Calculate specular Reflection vector
+    vec3 rLight = dot(2*vBumpTex,vLight)*vBumpTex-vLight;
+    //evaluate phong specular reflection model, modulate with lightcolor
+    vec4 specular = vec4(pow(clamp(dot(rLight, vEye),0,1),SPECULAR_EXPONENT)*lightcolor,1);
+    //multiply with specular strength (2)
+    vReflection+=specular*SPECULAR_STRENGTH;
+
+    // ---- [9] Fresnel combine ----
+    //Fresnel
+    float NdotV = clamp( dot(vEye, vBumpTex),0,1);
+
+    //Lookup exact Fresnel Coefficients.
+    vec4 FresnelCoeffs = texture(fresnelLookup, vec2(NdotV, 0.5)) ;
+
+    fragColor = vReflection*FresnelCoeffs.g+vRefraction*FresnelCoeffs.r;
+
+#else
+    //No Reflection
+    fragColor=vRefraction;
+#endif
+}
