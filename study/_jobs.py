@@ -82,3 +82,51 @@ def save_shader_inputs(inputs, folder: Path) -> None:
 
 def finite_or_none(x):
     return float(x) if x is not None and math.isfinite(x) else None
+
+
+def load_scene_data(exp, variant, cache=None):
+    """Reference (cached) and shader inputs at the experiment's resolution."""
+    from ._reference import load_or_render
+    from ._shader_inputs import build_shader_inputs
+
+    t0 = time.perf_counter()
+    ref = load_or_render(exp, variant, cache=cache, progress=_progress("reference passes"), log=_log)
+    t1 = time.perf_counter()
+    inputs = build_shader_inputs(exp)
+    t2 = time.perf_counter()
+    return ref, inputs, {"reference_s": t1 - t0, "inputs_s": t2 - t1}
+
+
+def run_preview(experiment, out, overrides=None, variant=None, cache=None) -> dict:
+    """``study preview``: the port with the experiment's start constants next to the reference,
+    error map, diagnostics (PNG) and error figures on water pixels (preview.json)."""
+    from ._backend import drjit_backend
+    from ._figures import comparison_figure, diagnostics_figure
+    from ._metrics import errors
+    from ._model import ShaderModel, constants_from_experiment
+
+    exp, variant, out = prepare(experiment, out, overrides, variant)
+    ref, inputs, timings = load_scene_data(exp, variant, cache)
+    w, h = exp["resolution"]
+    model = ShaderModel.from_experiment(exp, inputs, ref.image, backend=drjit_backend(variant),
+                                        resolution=(w, h))
+    constants = constants_from_experiment(exp)
+    t0 = time.perf_counter()
+    img, diag = model.render(constants)
+    timings["port_s"] = time.perf_counter() - t0
+    err = errors(ref.image, img, model.mask)
+    write_exr(out / "reference.exr", ref.image, ref.provenance)
+    write_exr(out / "port.exr", img, {"shader": model.shader, "constants": constants.to_dict()})
+    write_png(out / "reference.png", ref.image)
+    write_png(out / "port.png", img)
+    comparison_figure(out / "preview.png", {"reference": ref.image, "port (start constants)": img},
+                      {"port (start constants)": err}, model.mask, title=f"{exp['name']}: {model.shader}")
+    diagnostics_figure(out / "diagnostics.png", diag.maps, model.mask, title="port diagnostics")
+    summary = {"experiment": exp["name"], "shader": model.shader, "variant": variant,
+               "constants": constants.to_dict(), "error": err, "water_pixels": int(model.mask.sum()),
+               "reference": {"spp": ref.spp, "noise": ref.noise, "path": str(ref.path)},
+               "diagnostics": diag.summary(model.mask), "timings": timings}
+    write_json(out / "preview.json", summary)
+    _log(f"preview: RMSE {err['rmse']:.4f}, FLIP {err['flip']:.4f} on {summary['water_pixels']} water "
+         f"pixels; wrote {out}")
+    return summary

@@ -30,7 +30,7 @@ import numpy as np
 from ._exr import read_exr, write_exr
 from ._experiment import Experiment
 
-SCENE_VERSION = 1
+SCENE_VERSION = 2
 N_SEEDS = 4
 PILOT_SPP = 8
 
@@ -95,23 +95,22 @@ def render_passes(exp: Experiment, spp_per_pass: int, n_passes: int, seed0: int,
 
 
 def water_mask(exp: Experiment, width: int, height: int) -> np.ndarray:
-    """(H, W) bool: pixels whose centre sees the water quad (row 0 at the top)."""
-    from ._scene import camera_view_proj
+    """(H, W) bool, row 0 at the top: pixels whose centre's camera ray first hits the water
+    surface in the reference scene (not a wall in front of it, not the sky)."""
+    import drjit as dr
+    import mitsuba as mi
 
-    vp = camera_view_proj(exp, width, height).astype(np.float64)
-    inv = np.linalg.inv(vp)
+    from ._scene import build_scene
+
+    scene = build_scene(exp, width, height)
+    sensor = scene.sensors()[0]
     j, i = np.meshgrid(np.arange(height), np.arange(width), indexing="ij")
-    ndc_x = 2 * (i + 0.5) / width - 1
-    ndc_y = 1 - 2 * (j + 0.5) / height
-    near = np.stack([ndc_x, ndc_y, -np.ones_like(ndc_x), np.ones_like(ndc_x)], -1) @ inv.T
-    far = np.stack([ndc_x, ndc_y, np.ones_like(ndc_x), np.ones_like(ndc_x)], -1) @ inv.T
-    p0, p1 = near[..., :3] / near[..., 3:], far[..., :3] / far[..., 3:]
-    d = p1 - p0
-    with np.errstate(divide="ignore", invalid="ignore"):
-        t = -p0[..., 1] / d[..., 1]
-    hit = p0 + t[..., None] * d
-    hx, hz = exp["pool.half_extent"]
-    return (t > 0) & (np.abs(hit[..., 0]) < hx) & (np.abs(hit[..., 2]) < hz)
+    uv = mi.Point2f(mi.Float(((i.ravel() + 0.5) / width).astype(np.float32)),
+                    mi.Float(((j.ravel() + 0.5) / height).astype(np.float32)))
+    ray, _ = sensor.sample_ray(0.0, 0.0, uv, mi.Point2f(0.5, 0.5))
+    si = scene.ray_intersect(ray)
+    is_water = si.is_valid() & mi.has_flag(si.bsdf().flags(), mi.BSDFFlags.DeltaTransmission)
+    return np.array(dr.select(is_water, 1, 0), dtype=bool).reshape(height, width)
 
 
 def noise_of(passes: np.ndarray, mask: np.ndarray) -> tuple[np.ndarray, float]:

@@ -1,0 +1,78 @@
+"""Error metrics on water pixels, and the pieces every comparison needs.
+
+* RMSE in linear RGB over the water pixels (all three channels).
+* FLIP (``flip-evaluator``), LDR variant: both images are linear RGB clipped to [0, 1] (what
+  a display shows without tone mapping) and passed with ``inputsRGB=False``; the mean of
+  the FLIP map over the water pixels is reported. Default viewing conditions (67 ppd).
+* The water mask: pixels whose centre sees the water quad, eroded by one pixel so that no
+  pixel whose footprint also covers the pool wall is scored (the reference integrates the
+  pixel footprint with a box filter, the shader shades the centre only).
+"""
+from __future__ import annotations
+
+import numpy as np
+
+
+def erode(mask: np.ndarray, r: int = 1) -> np.ndarray:
+    """Binary erosion with a (2r+1)^2 square; pixels outside the image count as False."""
+    m = np.asarray(mask, bool)
+    out = m.copy()
+    h, w = m.shape
+    p = np.pad(m, r, constant_values=False)
+    for dy in range(-r, r + 1):
+        for dx in range(-r, r + 1):
+            out &= p[r + dy:r + dy + h, r + dx:r + dx + w]
+    return out
+
+
+def downsample(img: np.ndarray, factor_y: int, factor_x: int) -> np.ndarray:
+    """Box-filter an (H, W, ...) image by integer factors (a larger pixel's footprint)."""
+    h, w = img.shape[:2]
+    if h % factor_y or w % factor_x:
+        raise ValueError(f"cannot box-downsample {w}x{h} by {factor_x}x{factor_y}")
+    s = img.reshape(h // factor_y, factor_y, w // factor_x, factor_x, *img.shape[2:])
+    return s.mean(axis=(1, 3))
+
+
+def check_finite(name: str, img: np.ndarray, mask: np.ndarray | None = None) -> None:
+    """Raise ValueError when ``img`` has non-finite values (inside ``mask`` if given)."""
+    bad = ~np.isfinite(img)
+    if bad.ndim == 3:
+        bad = bad.any(-1)
+    if mask is not None:
+        bad &= mask
+    if bad.any():
+        raise ValueError(f"{name}: {int(bad.sum())} pixels are not finite; refusing to score them")
+
+
+def rmse(a: np.ndarray, b: np.ndarray, mask: np.ndarray) -> float:
+    """RMSE over the masked pixels of two (H, W, 3) linear RGB images."""
+    check_finite("rmse input", a, mask)
+    check_finite("rmse input", b, mask)
+    if not mask.any():
+        raise ValueError("rmse: the water mask is empty; does the camera see the water?")
+    d = (np.asarray(a, np.float64) - np.asarray(b, np.float64))[mask]
+    return float(np.sqrt(np.mean(d ** 2)))
+
+
+def flip_map(reference: np.ndarray, test: np.ndarray) -> np.ndarray:
+    """(H, W) LDR-FLIP error map of two linear RGB images (clipped to [0, 1])."""
+    import flip_evaluator
+
+    ref = np.ascontiguousarray(np.clip(reference, 0, 1), dtype=np.float32)
+    tst = np.ascontiguousarray(np.clip(test, 0, 1), dtype=np.float32)
+    fmap, _, _ = flip_evaluator.evaluate(ref, tst, "LDR", inputsRGB=False, applyMagma=False,
+                                         computeMeanError=False)
+    fmap = np.asarray(fmap, np.float32)
+    return fmap[..., 0] if fmap.ndim == 3 else fmap
+
+
+def flip(reference: np.ndarray, test: np.ndarray, mask: np.ndarray) -> float:
+    """Mean LDR-FLIP over the masked pixels."""
+    check_finite("flip input", reference, mask)
+    check_finite("flip input", test, mask)
+    return float(flip_map(reference, test)[mask].mean())
+
+
+def errors(reference: np.ndarray, test: np.ndarray, mask: np.ndarray) -> dict:
+    return {"rmse": rmse(reference, test, mask), "flip": flip(reference, test, mask)}

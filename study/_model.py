@@ -1,0 +1,124 @@
+"""The shader port set up against one experiment's reference: what the fit and the preview call.
+
+A :class:`ShaderModel` holds the shader inputs at the fit resolution, the reference
+box-downsampled to it, and the scored water mask: pixels covered by the shader's water quad
+*and* whose centre sees the water surface in the reference scene (not a wall in front of
+it), eroded by one pixel. ``render`` returns the port's image; ``residual`` the masked, flattened
+difference port - reference in linear RGB (unweighted: every water pixel and channel
+counts the same); ``residual_and_jacobian`` adds the forward-mode Jacobian of the
+residual with respect to named constants.
+"""
+from __future__ import annotations
+
+import warnings
+from dataclasses import dataclass
+
+import numpy as np
+
+from shaders_port import CONSTANT_SPECS, Constants, ShaderInputs
+
+from ._experiment import Experiment
+from ._metrics import downsample, erode
+
+
+def constants_from_experiment(exp: Experiment) -> Constants:
+    """The shader's start constants: the ``[constants]`` table of the experiment (defaults:
+    the seed's numbers)."""
+    c = exp.section("constants")
+    kw = {k: tuple(v) if isinstance(v, list) else v for k, v in c.items() if k in CONSTANT_SPECS}
+    return Constants(**kw).validate()
+
+
+def port_module(shader: str):
+    if shader == "water_refraction":
+        from shaders_port import water_refraction as mod
+    elif shader == "water_reflection":
+        from shaders_port import water_reflection as mod
+    else:
+        raise ValueError(f"unknown shader {shader!r}; choose water_refraction or water_reflection")
+    return mod
+
+
+@dataclass
+class Diagnostics:
+    """Per-pixel diagnostics of one port render, as (H, W) float32 arrays."""
+
+    maps: dict
+
+    def summary(self, mask: np.ndarray) -> dict:
+        out = {}
+        for k, v in self.maps.items():
+            vals = v[mask]
+            out[k] = {"mean": float(vals.mean()), "max": float(vals.max()), "min": float(vals.min())}
+        if "crossed" in self.maps:
+            out["not_crossed_fraction"] = float(1.0 - self.maps["crossed"][mask].mean())
+        if "nonfinite" in self.maps:
+            out["nonfinite_pixels"] = int(self.maps["nonfinite"][mask].sum())
+        return out
+
+
+class ShaderModel:
+    """The port of ``shader`` on ``inputs`` compared against ``reference`` (same size)."""
+
+    def __init__(self, shader: str, inputs: ShaderInputs, reference: np.ndarray, backend: str = "llvm",
+                 reference_mask: np.ndarray | None = None):
+        self.shader, self.inputs, self.backend = shader, inputs, backend
+        self.mod = port_module(shader)
+        if reference.shape != (inputs.height, inputs.width, 3):
+            raise ValueError(f"reference is {reference.shape}, inputs are {inputs.height}x{inputs.width}")
+        self.reference = np.asarray(reference, np.float32)
+        out = self.mod.render(inputs, Constants(), backend=backend).numpy()
+        mask = out["mask"] > 0.5
+        if reference_mask is not None:
+            mask &= reference_mask
+        self.mask = erode(mask, 1)
+        if not self.mask.any():
+            raise ValueError("no water pixel in view: check the camera and pool.half_extent")
+        self.n_renders = 0
+        self.n_jacobians = 0
+
+    @classmethod
+    def from_experiment(cls, exp: Experiment, inputs_full: ShaderInputs, reference_full: np.ndarray,
+                        shader: str | None = None, backend: str = "llvm",
+                        resolution: tuple[int, int] | None = None) -> "ShaderModel":
+        from ._reference import water_mask
+
+        w, h = resolution or exp["fit.resolution"]
+        fy, fx = reference_full.shape[0] // h, reference_full.shape[1] // w
+        ref = downsample(reference_full, fy, fx) if (fy, fx) != (1, 1) else reference_full
+        return cls(shader or exp["fit.shader"], inputs_full.with_resolution(w, h), ref, backend,
+                   reference_mask=water_mask(exp, w, h))
+
+    def render(self, constants: Constants) -> tuple[np.ndarray, Diagnostics]:
+        """Port image (H, W, 3) float32 linear RGB and its diagnostics."""
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", RuntimeWarning)   # non-finite pixels are in the diagnostics
+            out = self.mod.render(self.inputs, constants, backend=self.backend).numpy()
+        self.n_renders += 1
+        return out["color"], Diagnostics({k: v for k, v in out.items() if k not in ("color", "mask")})
+
+    def residual(self, constants: Constants) -> np.ndarray:
+        """(M,) float64 port - reference over water pixels and RGB channels."""
+        img, diag = self.render(constants)
+        self._check(diag)
+        return (img[self.mask] - self.reference[self.mask]).astype(np.float64).ravel()
+
+    def residual_and_jacobian(self, constants: Constants, names: list[str]) -> tuple[np.ndarray, np.ndarray]:
+        """(residual (M,), J (M, k)) with J the derivative w.r.t. the named scalar constants."""
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", RuntimeWarning)
+            out, jac = self.mod.render_with_jacobian(self.inputs, constants, names, backend=self.backend)
+        o = out.numpy()
+        self.n_jacobians += 1
+        self._check(Diagnostics({k: v for k, v in o.items() if k not in ("color", "mask")}))
+        r = (o["color"][self.mask] - self.reference[self.mask]).astype(np.float64).ravel()
+        J = np.asarray(jac)[self.mask].reshape(-1, len(names)).astype(np.float64)
+        if not np.all(np.isfinite(J)):
+            raise FloatingPointError(f"non-finite Jacobian entries for {names}")
+        return r, J
+
+    def _check(self, diag: Diagnostics) -> None:
+        bad = diag.maps.get("nonfinite")
+        if bad is not None and bad[self.mask].any():
+            raise FloatingPointError(f"the port produced {int(bad[self.mask].sum())} non-finite water "
+                                     "pixels; see the 'nonfinite' diagnostic")
