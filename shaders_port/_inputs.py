@@ -194,8 +194,10 @@ class Constants:
             if kind.endswith("vec4") and len(vals) != 4:
                 raise ValueError(f"constant {name} ({glsl}) needs 4 components, got {len(vals)}")
             for x in vals:
+                if type(x).__module__.startswith("drjit"):
+                    continue  # a Dr.Jit array being differentiated (checked by the port)
                 if not isinstance(x, (int, float, np.floating, np.integer)):
-                    continue  # a Dr.Jit array being differentiated
+                    raise ValueError(f"constant {name} ({glsl}) = {x!r} is not a number")
                 if isinstance(x, bool) or not math.isfinite(float(x)):
                     raise ValueError(f"constant {name} ({glsl}) = {x!r} is not a finite number")
                 if kind.endswith("int") and float(x) != int(x):

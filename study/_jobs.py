@@ -130,3 +130,14 @@ def run_preview(experiment, out, overrides=None, variant=None, cache=None) -> di
     _log(f"preview: RMSE {err['rmse']:.4f}, FLIP {err['flip']:.4f} on {summary['water_pixels']} water "
          f"pixels; wrote {out}")
     return summary
+
+
+def run_export(constants_json, out) -> list:
+    """``study export``: the shipped shaders with the constants of a JSON file, in ``out/shaders``."""
+    from ._export import export_shaders, load_constants_json
+
+    constants = load_constants_json(constants_json)
+    out = Path(out)
+    paths = export_shaders(constants, out / "shaders")
+    _log(f"export: wrote {len(paths)} shaders (compiled with glslangValidator) to {out / 'shaders'}")
+    return paths

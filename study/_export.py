@@ -1,0 +1,75 @@
+"""Export fitted constants into the shipped GLSL (both dialects), compile-checked.
+
+Only the tunable-constants block of each fragment shader changes
+(``shaders_port.write_constants``); the vertex shader is copied as shipped. Every written
+shader is compiled with ``glslangValidator`` before anything reaches the output folder, and
+the folder is replaced atomically (written beside it, then renamed), so a failed export
+leaves no half-written shaders.
+"""
+from __future__ import annotations
+
+import json
+import os
+import shutil
+import tempfile
+from pathlib import Path
+
+from shaders_port import CONSTANT_SPECS, Constants
+from shaders_port._glsl import compile_check, read_source, write_constants
+
+FRAGMENT_SHADERS = ("water_refraction", "water_reflection")
+
+
+def load_constants_json(path) -> Constants:
+    """Constants from ``constants.json`` of ``study calibrate`` (its ``constants`` table) or from a
+    flat JSON object ``{name: value}`` with names of ``CONSTANT_SPECS``."""
+    path = Path(path)
+    if not path.is_file():
+        raise FileNotFoundError(f"constants file {path} does not exist")
+    try:
+        data = json.loads(path.read_text())
+    except json.JSONDecodeError as exc:
+        raise ValueError(f"{path} is not valid JSON ({exc})") from exc
+    if not isinstance(data, dict):
+        raise ValueError(f"{path}: expected a JSON object of constants, got {type(data).__name__}")
+    table = data.get("constants", data)
+    if not isinstance(table, dict):
+        raise ValueError(f"{path}: 'constants' must be an object of name -> value")
+    unknown = sorted(set(table) - set(CONSTANT_SPECS))
+    if unknown:
+        raise ValueError(f"{path}: unknown constant(s) {unknown}; known: {sorted(CONSTANT_SPECS)}")
+    try:
+        return Constants.from_dict(table)
+    except (TypeError, ValueError) as exc:
+        raise ValueError(f"{path}: {exc}") from exc
+
+
+def export_shaders(constants: Constants, out_dir) -> list[Path]:
+    """Write ``out_dir/{compat,core}/{water.vert, water_refraction.frag, water_reflection.frag}``
+    with ``constants``; return the written paths. Raises ValueError on bad constants and
+    RuntimeError if a shader does not compile (nothing is written then)."""
+    constants.validate()
+    out_dir = Path(out_dir)
+    out_dir.parent.mkdir(parents=True, exist_ok=True)
+    tmp = Path(tempfile.mkdtemp(dir=out_dir.parent, prefix=f".{out_dir.name}."))
+    try:
+        for dialect in ("compat", "core"):
+            (tmp / dialect).mkdir()
+            files = {"water.vert": (read_source("water", "vert", dialect), "vert")}
+            for name in FRAGMENT_SHADERS:
+                files[f"{name}.frag"] = (write_constants(read_source(name, "frag", dialect), constants), "frag")
+            for fname, (text, stage) in files.items():
+                compile_check(text, stage)
+                (tmp / dialect / fname).write_text(text, encoding="utf-8")
+        old = None
+        if out_dir.exists():
+            old = out_dir.with_name(f".{out_dir.name}.old")
+            shutil.rmtree(old, ignore_errors=True)
+            os.replace(out_dir, old)
+        os.replace(tmp, out_dir)
+        if old is not None:
+            shutil.rmtree(old, ignore_errors=True)
+    finally:
+        if tmp.exists():
+            shutil.rmtree(tmp, ignore_errors=True)
+    return sorted(out_dir.rglob("*.*"))
