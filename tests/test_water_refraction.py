@@ -124,6 +124,34 @@ def test_jacobian_matches_central_differences(jacobian, name):
                           J[..., _FD_NAMES.index(name)], FD_CONSTANTS, name, ("iterations",))
 
 
+@pytest.mark.parametrize("reflection", [True, False], ids=["reflection", "noreflection"])
+def test_replay_jacobian_equals_evaluated_loop_ad(jacobian, reflection):
+    # loop_ad='replay' (symbolic loops, derivatives attached after the loop) against AD through
+    # the unrolled loop in evaluated mode (the mode checked against finite differences)
+    inputs, base, J = jacobian
+    out_e, J_e = water_refraction.render_with_jacobian(inputs, FD_CONSTANTS, _FD_NAMES,
+                                                       reflection=reflection, loop_ad="evaluated")
+    out_r, J_r = water_refraction.render_with_jacobian(inputs, FD_CONSTANTS, _FD_NAMES,
+                                                       reflection=reflection)
+    assert np.array_equal(out_e.numpy()["color"], out_r.numpy()["color"])
+    scale = np.abs(J_e).max(axis=(0, 1, 2)) + 1e-6
+    assert (np.abs(J_e - J_r).max(axis=(0, 1, 2)) <= 1e-5 * scale + 1e-6).all()
+
+
+def test_frozen_replay_equals_traced_render(monkeypatch):
+    # plain renders replay recorded kernels (dr.freeze); a change of constants, of the loop cap
+    # and of the inputs must give exactly what a freshly traced render gives
+    inputs, other = _small(), synthetic_inputs(width=40, height=30, seed=1)
+    cases = [(inputs, Constants()), (inputs, CUSTOM), (inputs, Constants(steps_grazing=6.5)),
+             (other, Constants(loop_cap=12)), (inputs, Constants())]
+    frozen = [water_refraction.render(i, c).numpy() for i, c in cases]
+    monkeypatch.setattr(water_refraction, "USE_FROZEN", False)
+    for (i, c), f in zip(cases, frozen):
+        t = water_refraction.render(i, c).numpy()
+        for k in t:
+            assert np.array_equal(t[k], f[k]), k
+
+
 def test_jacobian_rejects_unknown_and_integer_names():
     with pytest.raises(ValueError, match="loop_cap"):
         water_refraction.render_with_jacobian(_small(), None, ["loop_cap"])

@@ -1,0 +1,156 @@
+"""Dr.Jit port of the seed's reflection-and-refraction water shader (``water_reflection``).
+
+Seed 000, section 3: blocks [1]-[6], [8] and [9] are those of ``water_refraction`` (the
+same functions, imported from it); block [7] raycasts the reflection ray against the
+bottom-up textures ``worldYComponentReflection`` / ``reflectionBottom`` (texture matrix
+``gl_TextureMatrix[1]``) and falls back to the cube map when nothing is hit. Fixes as in
+``water_refraction`` plus ``reflectionTop`` -> ``reflectionBottom`` (the declared sampler)
+and the duplicated ``cpy`` -> ``cpoy``. Kept quirks: the bounds test on ``texcoord`` breaks
+*before* the depth fetch, ``olddepth`` is updated after that test, the height cut
+``current_position.y > REFL_HEIGHT_CUT`` ends the loop without a hit, ``noHit`` selects the
+cube map (looked up with the step-scaled ``R``, renormalised, ``y`` flipped).
+
+Discontinuities of the derivatives (forward mode gives the a.e. derivative): everything
+listed in ``water_refraction``; in addition the reflection step schedule
+``REFL_STEPS_STEEP`` / ``REFL_STEPS_GRAZING`` decides the hit step, and hit / no-hit
+(``diagnostics['refl_hit']``) switches between ``reflectionBottom`` and the cube map with
+a jump in colour; ``REFL_HEIGHT_CUT`` and the texture bounds end rays discontinuously.
+"""
+from __future__ import annotations
+
+import drjit as dr
+
+from ._inputs import Constants, ShaderInputs
+from ._raster import prepare
+from ._texture import backend_types, mix, texmat_xy
+from . import water_refraction
+from .water_refraction import (ShaderOutput, attenuation, cubemap_reflection, evaluated_loops_if,
+                               eye_and_light, finish_output, fresnel_combine, interpolate_crossing,
+                               jacobian_passes, loop_R, tangents, loop_positions, normal_map_block, raycast_ground, reflect,
+                               nonfinite_any, refraction_vector, resolve_constants,
+                               specular_highlight)
+
+__all__ = ["render", "render_with_jacobian", "ShaderOutput"]
+
+
+@dr.syntax
+def raycast_reflection(m, P, R, C):
+    """Block [7]'s loop. Returns the loop state after the last iteration."""
+    current_position = m.Array3f(P.varyingVecWorldPosition)
+    current_position_old = m.Array3f(current_position)
+    olddepth = m.Float(0.0)
+    s, t = texmat_xy(P.tex_matrix1, current_position)
+    depthtex = P.worldYComponentReflection.sample(m, s, t)
+    depth = m.Float(depthtex[0])
+    noHit = dr.full(m.Bool, True, dr.width(depth))
+    done = dr.zeros(m.Bool, dr.width(depth))
+    i = m.UInt32(0)
+    loop_fetches = m.UInt32(0)
+    # plain locals: loop-condition variables become loop state (keep constants' AD out of it)
+    REFL_LOOP_CAP = C.refl_loop_cap
+    REFL_HEIGHT_CUT = dr.detach(C.refl_height_cut)  # only compared: no derivative
+    while (i < REFL_LOOP_CAP) & ~done:
+        current_position_old = m.Array3f(current_position)
+        current_position += R
+        texcoord_x, texcoord_y = texmat_xy(P.tex_matrix1, current_position)
+        outside = (texcoord_x < 0) | (texcoord_x > 1) | (texcoord_y < 0) | (texcoord_y > 1)
+        inside = ~outside
+        depthtex = P.worldYComponentReflection.sample(m, texcoord_x, texcoord_y, inside)
+        olddepth = dr.select(inside, depth, olddepth)
+        depth = dr.select(inside, depthtex[0], depth)
+        loop_fetches += dr.select(inside, m.UInt32(1), m.UInt32(0))
+        hit = inside & (depth > current_position.y)
+        noHit &= ~hit
+        too_high = inside & ~hit & (current_position.y > REFL_HEIGHT_CUT)
+        done = outside | hit | too_high
+        i += 1
+    return current_position, current_position_old, depth, olddepth, noHit, i, loop_fetches
+
+
+def _shade(m, P, C):
+    vEye, vLight = eye_and_light(m, P)
+    vBumpTex, vBumpTexMore = normal_map_block(m, P, C.bumptex_mult)
+    R = refraction_vector(m, vEye, vBumpTexMore, C)
+    current_position, current_position_old, depth, olddepth, iterations, crossed = \
+        raycast_ground(m, P, loop_R(C, R), C.loop_cap)
+    current_position, current_position_old = loop_positions(
+        m, C, R, current_position, current_position_old, iterations)
+    current_position, vRefraction, denominator = interpolate_crossing(
+        m, P, current_position, current_position_old, depth, olddepth)
+    vRefraction = attenuation(m, P, current_position, vRefraction, C)
+    refraction_R, refracted_position = R, current_position
+
+    # ---- [7] Reflection ----
+    R = dr.normalize(reflect(m, -vEye, vBumpTexMore))
+    R.y = dr.maximum(R.y, 0.001)
+    R = dr.normalize(R)
+    numsteps = mix(C.refl_steps_steep, C.refl_steps_grazing, 1.0 - R.y)
+    stepsize = 1.0 / numsteps
+    R *= stepsize
+    current_position, current_position_old, depth, olddepth, noHit, refl_iterations, refl_fetches = \
+        raycast_reflection(m, P, loop_R(C, R), C)
+    current_position, current_position_old = loop_positions(
+        m, C, R, current_position, current_position_old, refl_iterations)
+    # if (!noHit): interpolate, one step of zero-approximation
+    cpoy = current_position_old.y
+    cpy = current_position.y
+    current_position = mix(current_position_old, current_position,
+                           (cpoy - olddepth) / (cpoy - cpy + depth - olddepth))
+    s, t = texmat_xy(P.tex_matrix1, current_position)
+    hit_active = ~noHit
+    vReflection_hit = m.Array4f(*P.reflectionBottom.sample(m, s, t, hit_active), 1.0) * C.reflectColor
+    # else: no hit with reflection surface -> fetch colour from the cube map
+    vReflection_sky = cubemap_reflection(m, P, R) * C.reflectColor
+    vReflection = dr.select(noHit, vReflection_sky, vReflection_hit)
+
+    vReflection = specular_highlight(m, P, vReflection, vBumpTex, vEye, vLight, C)
+    gl_FragColor = fresnel_combine(m, P, vReflection, vRefraction, vEye, vBumpTex)
+    fetches = 4 + 1 + iterations + 1 + 1 + refl_fetches + 1 + 1
+    bad = nonfinite_any(vEye, vLight, vBumpTex, vBumpTexMore, refraction_R, refracted_position, R,
+                        dr.select(noHit, refracted_position, current_position))
+    diagnostics = {"iterations": m.Float(iterations), "fetches": m.Float(fetches),
+                   "crossed": dr.select(crossed, 1.0, 0.0), "denominator": dr.abs(denominator),
+                   "refl_iterations": m.Float(refl_iterations),
+                   "refl_hit": dr.select(noHit, 0.0, 1.0),
+                   "nonfinite": dr.select(bad, 1.0, 0.0)}
+    return gl_FragColor, diagnostics
+
+
+_frozen_shade = dr.freeze(lambda m, P, C: _shade(m, P, C))
+
+
+def render(inputs: ShaderInputs, constants: Constants | None = None, *,
+           backend: str = "llvm", loop_ad: str = "replay") -> ShaderOutput:
+    """Render ``water_reflection``.
+
+    Returns a :class:`ShaderOutput` as ``water_refraction.render`` does, with two more
+    diagnostics: ``refl_iterations`` (reflection loop iterations) and ``refl_hit`` (1 where
+    the reflection ray hit the geometry above the water, 0 where the cube map was used).
+    ``fetches`` counts every texture2D/textureCube call: 4 normal map, 1 + ``iterations``
+    depth, 1 refraction colour, 1 + (in-bounds reflection iterations) reflection depth, 1
+    reflection colour (bottom texture or cube map), 1 Fresnel LUT.
+    """
+    m = backend_types(backend)
+    P = prepare(inputs, m)
+    C = resolve_constants(m, constants if constants is not None else Constants(), loop_ad)
+    with evaluated_loops_if(C.differentiable and loop_ad == "evaluated"):
+        if water_refraction.USE_FROZEN and not C.differentiable:
+            color, diag = _frozen_shade(m, P.shading_state(), C)
+        else:
+            color, diag = _shade(m, P, C)
+        return finish_output(m, P, color, diag, "water_reflection")
+
+
+_frozen_tangents = dr.freeze(lambda m, P, C, params: tangents(m, *_shade(m, P, C), params))
+
+
+def render_with_jacobian(inputs: ShaderInputs, constants: Constants | None, names: list[str], *,
+                         backend: str = "llvm", loop_ad: str = "replay"):
+    """``(ShaderOutput, J)`` with ``J`` float32 (H, W, 3, len(names)): forward-mode derivatives
+    of the linear-RGB colour w.r.t. the named scalars (see ``water_refraction``)."""
+    def shade_tangents(m, P, C, params, frozen):
+        if frozen:
+            return _frozen_tangents(m, P, C, params)
+        return tangents(m, *_shade(m, P, C), params)
+    return jacobian_passes(shade_tangents, "water_reflection", inputs,
+                           constants if constants is not None else Constants(), names, backend, loop_ad)
