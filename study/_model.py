@@ -117,6 +117,23 @@ class ShaderModel:
             raise FloatingPointError(f"non-finite Jacobian entries for {names}")
         return r, J
 
+    def loss_ad(self, constants: Constants):
+        """Dr.Jit loss ``0.5 * sum over water pixels and channels of (port - reference)^2`` with
+        the AD graph of any gradient-enabled constant attached (for reverse mode)."""
+        import drjit as dr
+
+        from shaders_port._texture import backend_types
+        m = backend_types(self.backend)
+        if not hasattr(self, "_ref_t"):
+            self._ref_t = m.TensorXf(self.reference)
+            self._mask_t = m.TensorXf(np.repeat(self.mask[..., None], 3, -1).astype(np.float32))
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", RuntimeWarning)
+            out = self.mod.render(self.inputs, constants, backend=self.backend)
+        self.n_renders += 1
+        d = (out.color - self._ref_t) * self._mask_t
+        return 0.5 * dr.sum(d * d, axis=None)
+
     def _check(self, diag: Diagnostics) -> None:
         bad = diag.maps.get("nonfinite")
         if bad is not None and bad[self.mask].any():
