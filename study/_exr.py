@@ -1,7 +1,7 @@
 """HDR images as OpenEXR files (via the ``OpenEXR`` package), with provenance in the header.
 
-Images are float32 ``(height, width, 3)`` linear RGB, row 0 at the top. Extra single
-channels (e.g. per-pixel variance) are ``(height, width)`` float32. Provenance is a JSON
+Images are float32 ``(height, width, 3)`` linear RGB, row 0 at the top. Extra layers
+(e.g. the per-pixel standard error) are ``(height, width)`` or ``(height, width, 3)`` float32. Provenance is a JSON
 dictionary stored as the string attribute ``study_provenance``. Writes are atomic: the file
 is written under a temporary name in the same folder and renamed, so a killed process
 never leaves a truncated file under the final name.
@@ -21,7 +21,7 @@ PROVENANCE_KEY = "study_provenance"
 
 def write_exr(path, rgb: np.ndarray, provenance: dict | None = None,
               extra: dict[str, np.ndarray] | None = None) -> Path:
-    """Write ``rgb`` (H, W, 3) and optional extra (H, W) channels atomically; return the path."""
+    """Write ``rgb`` (H, W, 3) and optional extra (H, W) or (H, W, 3) layers atomically; return the path."""
     path = Path(path)
     rgb = np.ascontiguousarray(rgb, dtype=np.float32)
     if rgb.ndim != 3 or rgb.shape[2] != 3:
@@ -29,8 +29,9 @@ def write_exr(path, rgb: np.ndarray, provenance: dict | None = None,
     channels = {"RGB": rgb}
     for name, arr in (extra or {}).items():
         arr = np.ascontiguousarray(arr, dtype=np.float32)
-        if arr.shape != rgb.shape[:2]:
-            raise ValueError(f"write_exr: channel {name!r} has shape {arr.shape}, expected {rgb.shape[:2]}")
+        if arr.shape not in (rgb.shape[:2], rgb.shape):
+            raise ValueError(f"write_exr: channel {name!r} has shape {arr.shape}, expected "
+                             f"{rgb.shape[:2]} or {rgb.shape}")
         channels[name] = arr
     header = {"compression": OpenEXR.ZIP_COMPRESSION, "type": OpenEXR.scanlineimage}
     if provenance is not None:

@@ -141,3 +141,101 @@ def run_export(constants_json, out) -> list:
     paths = export_shaders(constants, out / "shaders")
     _log(f"export: wrote {len(paths)} shaders (compiled with glslangValidator) to {out / 'shaders'}")
     return paths
+
+
+def run_calibrate(experiment, out, overrides=None, variant=None, solver=None, cache=None) -> dict:
+    """``study calibrate``: reference (cached), fit, export, GL check, figures, report.md and
+    constants.json in ``out``."""
+    from ._backend import drjit_backend
+    from ._calibrate import calibrate_model, timed
+    from ._export import export_shaders
+    from ._figures import comparison_figure, diagnostics_figure, loss_figure
+    from ._metrics import errors
+    from ._model import ShaderModel, constants_from_experiment
+    from ._report import write_report
+
+    exp, variant, out = prepare(experiment, out, overrides, variant)
+    solver = solver or exp["fit.solver"]
+    from ._fit import SOLVERS
+    if solver not in SOLVERS:
+        raise ValueError(f"unknown solver {solver!r}; choose one of {', '.join(SOLVERS)}")
+    ref, inputs, timings = load_scene_data(exp, variant, cache)
+    backend = drjit_backend(variant)
+    start = constants_from_experiment(exp)
+    with timed(timings, "model_s"):
+        model = ShaderModel.from_experiment(exp, inputs, ref.image, backend=backend)
+    _log(f"calibrate: fitting {exp['fit.parameters']} of {model.shader} with {solver} on "
+         f"{int(model.mask.sum())} water pixels at {exp['fit.resolution'][0]}x{exp['fit.resolution'][1]}")
+    with timed(timings, "fit_s"):
+        cal = calibrate_model(model, start, exp["fit.parameters"], solver, exp["fit.max_steps"])
+    with timed(timings, "evaluate_s"):
+        w, h = exp["resolution"]
+        full = ShaderModel.from_experiment(exp, inputs, ref.image, backend=backend, resolution=(w, h))
+        img0, _ = full.render(start)
+        img1, diag1 = full.render(cal.fitted)
+        e0, e1 = errors(ref.image, img0, full.mask), errors(ref.image, img1, full.mask)
+    with timed(timings, "export_s"):
+        export_shaders(cal.fitted, out / "shaders")
+        gl = gl_check(model.shader, inputs, cal.fitted, out / "shaders")
+    figs = {"comparison": "comparison.png", "diagnostics": "diagnostics.png", "loss": "loss.png"}
+    comparison_figure(out / figs["comparison"], {"reference": ref.image, "default": img0, "fitted": img1},
+                      {"default": e0, "fitted": e1}, full.mask, title=f"{exp['name']}: {model.shader}")
+    diagnostics_figure(out / figs["diagnostics"], diag1.maps, full.mask, title="diagnostics, fitted constants")
+    loss_figure(out / figs["loss"], {solver: cal.losses}, title="loss at each evaluation")
+    write_exr(out / "fitted.exr", img1, {"constants": cal.fitted.to_dict()})
+    write_exr(out / "default.exr", img0, {"constants": start.to_dict()})
+    write_exr(out / "reference.exr", ref.image, ref.provenance)
+    fs = cal.fit_summary
+    summary = {
+        "experiment": exp["name"], "shader": model.shader, "variant": variant,
+        "fit_resolution": exp["fit.resolution"], "resolution": exp["resolution"],
+        "parameters": cal.parameters, "constants": cal.fitted.to_dict(),
+        "error": {"rmse": {"default": e0["rmse"], "fitted": e1["rmse"]},
+                  "flip": {"default": e0["flip"], "fitted": e1["flip"]}},
+        "solver": solver, "iterations": fs.get("iterations", 0), "converged": fs.get("converged", False),
+        "message": fs.get("message", ""), "fit": fs, "identifiability": cal.identifiability,
+        "step_sweep": cal.sweep, "timings": timings,
+        "reference": {"spp": ref.spp, "noise": ref.noise, "path": str(ref.path), "key": ref.provenance["key"]},
+        "diagnostics": diag1.summary(full.mask), "gl_check": gl,
+    }
+    write_json(out / "constants.json", _jsonable(summary))
+    write_report(out, _jsonable(summary), figs)
+    _log(f"calibrate: RMSE {e0['rmse']:.4f} -> {e1['rmse']:.4f}, FLIP {e0['flip']:.4f} -> {e1['flip']:.4f}; "
+         f"wrote {out}")
+    return summary
+
+
+def gl_check(shader: str, inputs, constants, shaders_dir: Path) -> dict:
+    """Run the exported core shader (its own constants block) on llvmpipe and compare it with the
+    port with ``constants`` on the water pixels."""
+    from shaders_port._compare import compare_port_gl
+    from shaders_port._gl import GLRenderer
+
+    source = (shaders_dir / "core" / f"{shader}.frag").read_text()
+    with GLRenderer(shader, inputs, source=source) as r:
+        res = compare_port_gl(inputs, constants, shader, renderer=_OwnBlock(r))
+    return {k: res[k] for k in ("mean_abs", "p999", "max_abs", "n_water", "n_outliers", "unexplained")}
+
+
+class _OwnBlock:
+    """A GLRenderer view whose render() ignores the constants (uses the exported block)."""
+
+    def __init__(self, r):
+        self.r = r
+
+    def render(self, constants):
+        return self.r.render(None)
+
+
+def _jsonable(x):
+    if isinstance(x, dict):
+        return {str(k): _jsonable(v) for k, v in x.items()}
+    if isinstance(x, (list, tuple)):
+        return [_jsonable(v) for v in x]
+    if isinstance(x, (np.floating, float)):
+        return float(x) if math.isfinite(float(x)) else None
+    if isinstance(x, np.integer):
+        return int(x)
+    if isinstance(x, np.ndarray):
+        return _jsonable(x.tolist())
+    return x

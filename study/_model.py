@@ -57,6 +57,24 @@ class Diagnostics:
         return out
 
 
+def _thread_handoff(fn):
+    """Methods may run on a solver's callback thread (``jax.pure_callback``) and touch Dr.Jit
+    arrays created on another thread: open a new Dr.Jit scope before and after, as Dr.Jit
+    requires for arrays shared between threads."""
+    import functools
+
+    @functools.wraps(fn)
+    def wrapper(self, *a, **k):
+        import drjit as dr
+        be = dr.JitBackend.CUDA if self.backend == "cuda" else dr.JitBackend.LLVM
+        dr.detail.new_scope(be)
+        try:
+            return fn(self, *a, **k)
+        finally:
+            dr.detail.new_scope(be)
+    return wrapper
+
+
 class ShaderModel:
     """The port of ``shader`` on ``inputs`` compared against ``reference`` (same size)."""
 
@@ -89,6 +107,7 @@ class ShaderModel:
         return cls(shader or exp["fit.shader"], inputs_full.with_resolution(w, h), ref, backend,
                    reference_mask=water_mask(exp, w, h))
 
+    @_thread_handoff
     def render(self, constants: Constants) -> tuple[np.ndarray, Diagnostics]:
         """Port image (H, W, 3) float32 linear RGB and its diagnostics."""
         with warnings.catch_warnings():
@@ -97,12 +116,14 @@ class ShaderModel:
         self.n_renders += 1
         return out["color"], Diagnostics({k: v for k, v in out.items() if k not in ("color", "mask")})
 
+    @_thread_handoff
     def residual(self, constants: Constants) -> np.ndarray:
         """(M,) float64 port - reference over water pixels and RGB channels."""
         img, diag = self.render(constants)
         self._check(diag)
         return (img[self.mask] - self.reference[self.mask]).astype(np.float64).ravel()
 
+    @_thread_handoff
     def residual_and_jacobian(self, constants: Constants, names: list[str]) -> tuple[np.ndarray, np.ndarray]:
         """(residual (M,), J (M, k)) with J the derivative w.r.t. the named scalar constants."""
         with warnings.catch_warnings():
@@ -117,6 +138,7 @@ class ShaderModel:
             raise FloatingPointError(f"non-finite Jacobian entries for {names}")
         return r, J
 
+    @_thread_handoff
     def loss_ad(self, constants: Constants):
         """Dr.Jit loss ``0.5 * sum over water pixels and channels of (port - reference)^2`` with
         the AD graph of any gradient-enabled constant attached (for reverse mode)."""

@@ -174,16 +174,16 @@ def load_or_render(exp: Experiment, variant: str, cache: Path | None = None, pro
     if path.exists():
         try:
             rgb, prov, extra = read_exr(path)
-            if prov.get("key") == key and rgb.shape[:2] == tuple(exp["resolution"][::-1]) and "stderr.R" in extra:
-                se = np.stack([extra["stderr.R"], extra["stderr.G"], extra["stderr.B"]], -1)
+            se = extra.get("stderr")
+            if (prov.get("key") == key and rgb.shape[:2] == tuple(exp["resolution"][::-1])
+                    and se is not None and se.shape == rgb.shape):
                 log(f"reference: cached {path} (spp {prov['spp']}, noise {prov['noise']:.2e})")
                 return Reference(rgb, se, prov, path)
             log(f"reference: {path} does not match this experiment; re-rendering")
         except ValueError as exc:
             log(f"reference: unreadable cache file ({exc}); re-rendering")
     ref = render_reference(exp, variant, progress=progress)
-    write_exr(path, ref.image, ref.provenance,
-              extra={f"stderr.{c}": ref.stderr[..., i] for i, c in enumerate("RGB")})
+    write_exr(path, ref.image, ref.provenance, extra={"stderr": ref.stderr})
     ref.path = path
     log(f"reference: rendered {ref.spp} spp in {ref.provenance['render_seconds']:.1f} s, "
         f"noise {ref.noise:.2e}; cached at {path}")

@@ -12,10 +12,12 @@ def test_round_trip_with_provenance(tmp_path):
     rgb = rng.random((7, 11, 3), dtype=np.float32) * 100
     var = rng.random((7, 11), dtype=np.float32)
     prov = {"key": "abc", "spp": 64, "noise": 0.0123456789, "versions": {"mitsuba": "3.9.1"}}
-    p = write_exr(tmp_path / "a.exr", rgb, prov, extra={"var": var})
+    se = rng.random((7, 11, 3), dtype=np.float32)
+    p = write_exr(tmp_path / "a.exr", rgb, prov, extra={"var": var, "stderr": se})
     got, prov2, extra = read_exr(p)
     np.testing.assert_array_equal(got, rgb)
     np.testing.assert_array_equal(extra["var"], var)
+    np.testing.assert_array_equal(extra["stderr"], se)
     assert prov2 == prov                       # floats survive exactly (JSON text)
     assert [f for f in os.listdir(tmp_path)] == ["a.exr"]   # no temporary file left
 

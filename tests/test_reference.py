@@ -20,6 +20,7 @@ def test_cache_hit_miss_and_provenance(mi, tmp_path):
     b = load_or_render(exp, "llvm_ad_rgb", cache=tmp_path, log=logs.append)
     assert "cached" in logs[-1]
     np.testing.assert_array_equal(a.image, b.image)
+    np.testing.assert_array_equal(a.stderr, b.stderr)
     # any scene change is a different key, never the stale file
     changed = small_experiment(**{"water.sigma_t": "[0.3, 0.06, 0.04]"})
     assert reference_key(changed, "llvm_ad_rgb") != reference_key(exp, "llvm_ad_rgb")
@@ -40,8 +41,7 @@ def test_foreign_or_corrupt_cache_file_is_not_reused(mi, tmp_path):
     assert any("unreadable" in m for m in logs) and np.isfinite(b.image).all()
     # a valid EXR whose recorded key differs (e.g. copied from elsewhere) is not trusted
     from study import write_exr
-    write_exr(b.path, b.image, dict(b.provenance, key="someone-else"),
-              extra={f"stderr.{c}": b.stderr[..., i] for i, c in enumerate("RGB")})
+    write_exr(b.path, b.image, dict(b.provenance, key="someone-else"), extra={"stderr": b.stderr})
     logs = []
     load_or_render(exp, "llvm_ad_rgb", cache=tmp_path, log=logs.append)
     assert any("does not match" in m for m in logs)

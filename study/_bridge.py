@@ -1,0 +1,204 @@
+"""A residual computed by Dr.Jit, seen by JAX (and so by optimistix) as a differentiable function.
+
+:func:`make_jax_residual` wraps two NumPy-level callables that run Dr.Jit:
+
+* ``fn_value(x)``: ``x`` (k,) float64 -> residual ``r`` (m,) float64;
+* ``fn_value_and_jac(x)``: ``x`` (k,) float64 -> ``(r (m,), J (m, k))`` float64, the Jacobian
+  ``J[i, j] = d r_i / d x_j`` (in practice from Dr.Jit forward-mode AD, one pass per column).
+
+The returned :class:`DrJitResidual` is a JAX function ``x -> r`` that works under ``jax.jit``,
+``jax.jvp``, ``jax.linearize``, ``jax.grad`` / ``jax.vjp`` and inside optimistix's least-squares
+solvers and minimisers. It is a ``jax.custom_jvp`` function: the primal calls ``fn_value``
+through one ``jax.pure_callback``; the JVP rule calls ``fn_value_and_jac`` through *one*
+``jax.pure_callback`` and returns ``J @ t`` computed in JAX. ``J @ t`` is linear in the tangent
+``t`` and transposable, so reverse mode (``J.T @ ct``) works too, with no further Dr.Jit call.
+
+Precision: building a residual switches JAX to 64-bit floats for the whole process
+(``jax.config.update("jax_enable_x64", True)``), because the solvers' convergence tests need
+more than float32 once the residual is small. Code that imports this module is not affected
+until it builds a residual; after that, JAX arrays created from Python floats default to
+float64 in that process. Dr.Jit itself may compute in float32; values are cast to float64.
+
+Non-finite values: if ``fn_value`` or ``fn_value_and_jac`` returns a NaN or an infinity, the
+callback raises :class:`NonFiniteResidualError` (naming the parameter vector and how many
+entries were bad); JAX re-raises it from the jitted computation (wrapped in its runtime error).
+The residual object also keeps it in ``last_error`` so that a caller that catches JAX's error
+(as :func:`study._fit.fit` does) can report the original cause. Nothing continues with NaN.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Callable
+
+import numpy as np
+
+
+class NonFiniteResidualError(FloatingPointError):
+    """The Dr.Jit residual or Jacobian contained NaN or infinity at some parameter vector."""
+
+
+class ResidualShapeError(ValueError):
+    """A Dr.Jit callable returned an array of the wrong shape."""
+
+
+def enable_x64() -> None:
+    """Switch JAX to 64-bit floats for this process (see the module docstring)."""
+    import jax
+
+    if not jax.config.jax_enable_x64:
+        jax.config.update("jax_enable_x64", True)
+
+
+@dataclass
+class CallStats:
+    """Bookkeeping of the Dr.Jit calls made through a :class:`DrJitResidual`.
+
+    ``losses`` holds ``0.5 * ||r||^2`` at every evaluated point, in call order, including trial
+    points a solver later rejects; ``kinds`` says for each whether it was a value ('v') or a
+    value-and-Jacobian ('j') call. ``best_x`` / ``best_loss`` is the lowest-loss point seen.
+    """
+
+    n_value_calls: int = 0
+    n_jac_calls: int = 0
+    seconds_in_drjit: float = 0.0
+    losses: list = field(default_factory=list)
+    kinds: list = field(default_factory=list)
+    best_x: np.ndarray | None = None
+    best_loss: float = float("inf")
+
+
+class DrJitResidual:
+    """JAX-callable residual ``x (k,) float64 -> r (m,) float64`` backed by Dr.Jit callables.
+
+    Attributes: ``k``, ``m``, ``stats`` (:class:`CallStats`), ``last_error`` (the last
+    :class:`NonFiniteResidualError` / :class:`ResidualShapeError` raised inside a callback, or
+    None). Call :meth:`value` / :meth:`value_and_jac` for the same computation from NumPy
+    (counted the same way).
+    """
+
+    def __init__(self, fn_value: Callable, fn_value_and_jac: Callable, k: int, m: int,
+                 name: str = "residual"):
+        if int(k) < 1 or int(m) < 1:
+            raise ValueError(f"{name}: need k >= 1 parameters and m >= 1 residuals, got k={k}, m={m}")
+        enable_x64()
+        self.fn_value, self.fn_value_and_jac = fn_value, fn_value_and_jac
+        self.k, self.m, self.name = int(k), int(m), name
+        self.stats = CallStats()
+        self.last_error: Exception | None = None
+        self._jax_fn = self._build()
+
+    # -- NumPy side (runs Dr.Jit) ------------------------------------------------------------
+    def _fail(self, exc: Exception):
+        self.last_error = exc
+        raise exc
+
+    def _check_x(self, x) -> np.ndarray:
+        x = np.asarray(x, dtype=np.float64).reshape(-1)
+        if x.shape != (self.k,):
+            self._fail(ResidualShapeError(f"{self.name}: parameter vector has shape {x.shape}, "
+                                          f"expected ({self.k},)"))
+        return x
+
+    def _check_r(self, r, x) -> np.ndarray:
+        r = np.asarray(r, dtype=np.float64)
+        if r.shape != (self.m,):
+            self._fail(ResidualShapeError(f"{self.name}: residual has shape {r.shape}, expected "
+                                          f"({self.m},); the residual length must not change "
+                                          "between calls (fix the pixel mask once)"))
+        bad = ~np.isfinite(r)
+        if bad.any():
+            self._fail(NonFiniteResidualError(
+                f"{self.name}: {int(bad.sum())} of {self.m} residual entries are non-finite at "
+                f"x={np.array2string(x, precision=6)}; the model produced NaN/inf there (check the "
+                "parameter bounds or the model's 'nonfinite' diagnostics)"))
+        return r
+
+    def _record(self, x, r, kind: str):
+        loss = 0.5 * float(r @ r)
+        s = self.stats
+        s.losses.append(loss)
+        s.kinds.append(kind)
+        if loss < s.best_loss:
+            s.best_loss, s.best_x = loss, x.copy()
+
+    def value(self, x) -> np.ndarray:
+        """Residual (m,) float64 at ``x`` (k,)."""
+        import time
+
+        x = self._check_x(x)
+        t0 = time.perf_counter()
+        r = self.fn_value(x)
+        self.stats.seconds_in_drjit += time.perf_counter() - t0
+        self.stats.n_value_calls += 1
+        r = self._check_r(r, x)
+        self._record(x, r, "v")
+        return r
+
+    def value_and_jac(self, x) -> tuple[np.ndarray, np.ndarray]:
+        """(residual (m,), Jacobian (m, k)) float64 at ``x`` (k,)."""
+        import time
+
+        x = self._check_x(x)
+        t0 = time.perf_counter()
+        r, J = self.fn_value_and_jac(x)
+        self.stats.seconds_in_drjit += time.perf_counter() - t0
+        self.stats.n_jac_calls += 1
+        r = self._check_r(r, x)
+        J = np.asarray(J, dtype=np.float64)
+        if J.shape != (self.m, self.k):
+            self._fail(ResidualShapeError(f"{self.name}: Jacobian has shape {J.shape}, expected "
+                                          f"({self.m}, {self.k})"))
+        bad = ~np.isfinite(J)
+        if bad.any():
+            cols = sorted(set(np.nonzero(bad)[1].tolist()))
+            self._fail(NonFiniteResidualError(
+                f"{self.name}: {int(bad.sum())} Jacobian entries are non-finite (columns {cols}) at "
+                f"x={np.array2string(x, precision=6)}; a derivative of the model is undefined there"))
+        self._record(x, r, "j")
+        return r, J
+
+    # -- JAX side ------------------------------------------------------------------------------
+    def _build(self):
+        import jax
+        import jax.numpy as jnp
+
+        r_spec = jax.ShapeDtypeStruct((self.m,), jnp.float64)
+        j_spec = jax.ShapeDtypeStruct((self.m, self.k), jnp.float64)
+
+        def cb_value(x):
+            return self.value(x)
+
+        def cb_value_and_jac(x):
+            return self.value_and_jac(x)
+
+        @jax.custom_jvp
+        def residual(x):
+            return jax.pure_callback(cb_value, r_spec, x, vmap_method="sequential")
+
+        @residual.defjvp
+        def residual_jvp(primals, tangents):
+            (x,), (t,) = primals, tangents
+            r, J = jax.pure_callback(cb_value_and_jac, (r_spec, j_spec), x, vmap_method="sequential")
+            return r, J @ t
+
+        return residual
+
+    def __call__(self, x):
+        """JAX: ``x`` (k,) float64 array -> ``r`` (m,) float64 array (differentiable)."""
+        import jax.numpy as jnp
+
+        x = jnp.asarray(x, dtype=jnp.float64)
+        if x.shape != (self.k,):
+            raise ResidualShapeError(f"{self.name}: parameter vector has shape {x.shape}, "
+                                     f"expected ({self.k},)")
+        return self._jax_fn(x)
+
+
+def make_jax_residual(fn_value: Callable, fn_value_and_jac: Callable, k: int, m: int,
+                      name: str = "residual") -> DrJitResidual:
+    """Wrap Dr.Jit callables as a JAX-differentiable residual (see the module docstring).
+
+    ``fn_value(x (k,) float64) -> r (m,)``; ``fn_value_and_jac(x) -> (r (m,), J (m, k))``.
+    Switches JAX to float64 for the process. Returns a :class:`DrJitResidual`.
+    """
+    return DrJitResidual(fn_value, fn_value_and_jac, k, m, name=name)
