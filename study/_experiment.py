@@ -99,6 +99,10 @@ SCHEMA: dict[str, Field] = {
                                     "texels", 16, 4096),
     "reference.texture_spp": Field("int", 64, "Samples per pixel of the top-down colour texture.",
                                    "", 1, 65536),
+    "reference.refraction_lighting": Field("str", "underwater", "How the top-down refraction "
+                                           "texture is lit: `underwater` (the floor as lit through the "
+                                           "water) or `dry` (no water, as the seed's application does).",
+                                           choices=("underwater", "dry")),
     "reference.water_mesh": Field("int", 384, "Grid resolution of the displaced water surface mesh.",
                                   "vertices per side", 8, 4096),
     "fit.shader": Field("str", "water_refraction", "Shader variant to fit.", choices=SHADERS),

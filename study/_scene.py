@@ -112,8 +112,9 @@ def tile_texture(exp: Experiment, px_per_tile: int = 32) -> np.ndarray:
     return np.where(grout, 0.5 * col, col).astype(np.float32)
 
 
-def build_geometry(mi, exp: Experiment, water: bool = True) -> dict:
-    """Shapes of the scene as a dict for ``mi.load_dict`` (no sensor, emitter or integrator)."""
+def build_geometry(mi, exp: Experiment, water: bool = True, medium=None) -> dict:
+    """Shapes of the scene as a dict for ``mi.load_dict`` (no sensor, emitter or integrator).
+    ``medium``: the water's medium object (default: a new one from :func:`water_medium`)."""
     hx, hz = exp["pool.half_extent"]
     res = exp["reference.water_mesh"]
     yb = floor_bottom(exp)
@@ -139,11 +140,24 @@ def build_geometry(mi, exp: Experiment, water: bool = True) -> dict:
                      "to_world": T().translate([(x0 + x1) / 2, (yb + top) / 2, (z0 + z1) / 2])
                      @ T().scale([(x1 - x0) / 2, (top - yb) / 2, (z1 - z0) / 2])}
     if water:
-        out["water"] = water_mesh(mi, exp, yb)
+        out["water"] = water_mesh(mi, exp, yb, medium if medium is not None else water_medium(mi, exp))
     return out
 
 
-def water_mesh(mi, exp: Experiment, y_bottom: float):
+def water_medium(mi, exp: Experiment):
+    """The homogeneous medium inside the water, or None for clear water."""
+    if not has_medium(exp):
+        return None
+    # sigma_t enters as an RGB in [0, 1] times a scalar scale (Mitsuba's RGB volume
+    # values are reflectance-like and must lie in [0, 1])
+    scale = max(exp["water.sigma_t"])
+    return mi.load_dict({
+        "type": "homogeneous", "scale": scale,
+        "sigma_t": {"type": "rgb", "value": [v / scale for v in exp["water.sigma_t"]]},
+        "albedo": {"type": "rgb", "value": exp["water.albedo"]}})
+
+
+def water_mesh(mi, exp: Experiment, y_bottom: float, medium=None):
     """The closed water volume: displaced top, vertical sides, flat bottom."""
     hx, hz = exp["pool.half_extent"]
     hx, hz = hx - WATER_INSET, hz - WATER_INSET
@@ -187,14 +201,8 @@ def water_mesh(mi, exp: Experiment, y_bottom: float):
                               np.tile([0.0, -1.0, 0.0], (m, 1))])
 
     props = {"bsdf": mi.load_dict({"type": "dielectric", "int_ior": exp["water.ior"], "ext_ior": 1.0})}
-    if has_medium(exp):
-        # sigma_t enters as an RGB in [0, 1] times a scalar scale (Mitsuba's RGB volume
-        # values are reflectance-like and must lie in [0, 1])
-        scale = max(exp["water.sigma_t"])
-        props["interior"] = mi.load_dict({
-            "type": "homogeneous", "scale": scale,
-            "sigma_t": {"type": "rgb", "value": [v / scale for v in exp["water.sigma_t"]]},
-            "albedo": {"type": "rgb", "value": exp["water.albedo"]}})
+    if medium is not None:
+        props["interior"] = medium
     return _mesh(mi, "water", pos, faces, normals=nor, outward=outward, **props)
 
 

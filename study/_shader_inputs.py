@@ -2,11 +2,11 @@
 
 As the seed's application prepares them, but from the scene:
 
-* ``refraction_texture``: the ground (floor and walls, *no water*) path-traced from above
-  with an orthographic camera under the same sky and sun, like the seed's
-  ``WaterDrawTextureRefractionTop``. The floor is diffuse, so its radiance does not depend
-  on the view. Light lost to the water on the way down is deliberately not in it: that is
-  what the shader's water colour and attenuation distance stand for;
+* ``refraction_texture``: the ground path-traced from above with an orthographic camera
+  under the same sky and sun, like the seed's ``WaterDrawTextureRefractionTop``; the floor
+  is diffuse, so its radiance does not depend on the view. By default the floor is lit
+  *through the water* (see :func:`top_down_colour`); ``reference.refraction_lighting =
+  "dry"`` renders it without water as the seed's application does;
 * ``world_y``: world y of the first surface hit from above at each texel centre (ray cast,
   exact, no filtering), like ``WaterDrawTextureDepthRefractionTop``;
 * the bottom-up textures of the reflection shader: the geometry above the water is the
@@ -45,18 +45,21 @@ def texture_extent(exp: Experiment) -> tuple[float, float, float, float]:
     return (-hx - b, -hz - b, hx + b, hz + b)
 
 
-def _ortho_sensor(mi, extent, size: int, spp: int, seed: int):
+def _ortho_sensor(mi, extent, size: int, spp: int, seed: int, y_cam: float = 100.0, medium=None):
     x0, z0, x1, z1 = extent
     cx, cz = (x0 + x1) / 2, (z0 + z1) / 2
     T = mi.ScalarTransform4f
-    return mi.load_dict({
+    d = {
         "type": "orthographic",
-        "to_world": T().look_at(origin=[cx, 100.0, cz], target=[cx, 0.0, cz], up=[0, 0, 1])
+        "to_world": T().look_at(origin=[cx, y_cam, cz], target=[cx, y_cam - 1.0, cz], up=[0, 0, 1])
         @ T().scale([(x1 - x0) / 2, (z1 - z0) / 2, 1.0]),
         "sampler": {"type": "independent", "seed": seed},
         "film": {"type": "hdrfilm", "width": size, "height": size, "pixel_format": "rgb",
                  "rfilter": {"type": "box"}},
-    })
+    }
+    if medium is not None:
+        d["medium"] = medium
+    return mi.load_dict(d)
 
 
 def _to_gl_order(mi, sensor, img: np.ndarray, extent) -> np.ndarray:
@@ -109,18 +112,67 @@ def top_down_world_y(exp: Experiment, extent, size: int) -> np.ndarray:
     return y.astype(np.float32).reshape(size, size)
 
 
-def top_down_colour(exp: Experiment, extent, size: int, spp: int, seed: int = 0) -> np.ndarray:
-    """(size, size, 3) float32 linear RGB of the ground seen from above, no water (GL order)."""
-    import mitsuba as mi
-
+def _render_top_down(mi, exp: Experiment, extent, size: int, spp: int, seed: int, *, water: bool,
+                     y_cam: float = 100.0) -> np.ndarray:
     from ._geometry import envmap_image
-    d = {"type": "scene", **build_geometry(mi, exp, water=False),
+    from ._scene import has_medium, water_medium
+
+    medium = water_medium(mi, exp) if water else None
+    d = {"type": "scene", **build_geometry(mi, exp, water=water, medium=medium),
          "sky": {"type": "envmap", "bitmap": mi.Bitmap(envmap_image(512, **sky_params(exp)))},
-         "integrator": {"type": "path", "max_depth": exp["reference.max_depth"]}}
+         "integrator": {"type": "volpath" if water and has_medium(exp) else "path",
+                        "max_depth": exp["reference.max_depth"]}}
     scene = mi.load_dict(d)
-    sensor = _ortho_sensor(mi, extent, size, spp, seed)
+    sensor = _ortho_sensor(mi, extent, size, spp, seed, y_cam=y_cam, medium=medium)
     img = np.array(mi.render(scene, sensor=sensor, spp=spp, seed=seed), dtype=np.float32)
     return _to_gl_order(mi, sensor, img, extent)
+
+
+def underwater_camera_height(exp: Experiment) -> float:
+    """Height of the under-water orthographic camera: below the lowest wave trough, above the floor."""
+    from ._scene import floor_of
+    y_cam = -exp["waves.amplitude"] - 0.02
+    hx, hz = exp["pool.half_extent"]
+    x, z = np.meshgrid(np.linspace(-hx, hx, 129), np.linspace(-hz, hz, 129))
+    top = float(floor_of(exp, x, z).max())
+    if top >= y_cam - 0.01:
+        raise ValueError(f"the floor rises to y = {top:.3f}, above the wave troughs (y = {y_cam + 0.02:.3f}): "
+                         "make floor.depth larger or floor.relief / waves.amplitude smaller, or set "
+                         "reference.refraction_lighting = \"dry\"")
+    return y_cam
+
+
+def top_down_colour(exp: Experiment, extent, size: int, spp: int, seed: int = 0, world_y=None) -> np.ndarray:
+    """(size, size, 3) float32 linear RGB of the ground seen from above (GL order).
+
+    ``reference.refraction_lighting``:
+
+    * ``"dry"``: the scene without water, as the seed's application renders it;
+    * ``"underwater"`` (default): inside the pool, the floor's own radiance as lit *through
+      the water* (sky and sun refracted by the wave surface, light absorbed on its way down),
+      seen by an orthographic camera placed inside the water just below the wave troughs;
+      the absorption of the camera's own vertical ray, ``exp(-sigma_t (y_cam - world_y))``,
+      is divided out (exact for purely absorbing water, ``water.albedo = 0``). Outside the
+      pool (the walls) the dry render is used. With it the shader's attenuation stands for
+      absorption along the view path only.
+    """
+    import mitsuba as mi
+
+    dry = _render_top_down(mi, exp, extent, size, spp, seed, water=False)
+    if exp["reference.refraction_lighting"] == "dry":
+        return dry
+    y_cam = underwater_camera_height(exp)
+    wet = _render_top_down(mi, exp, extent, size, spp, seed, water=True, y_cam=y_cam)
+    if world_y is None:
+        world_y = top_down_world_y(exp, extent, size)
+    sigma = np.asarray(exp["water.sigma_t"], np.float64)
+    wet = wet * np.exp(sigma * np.maximum(y_cam - world_y, 0.0)[..., None])
+    x0, z0, x1, z1 = extent
+    c = (np.arange(size) + 0.5) / size
+    X, Z = np.meshgrid(x0 + c * (x1 - x0), z0 + c * (z1 - z0))
+    hx, hz = exp["pool.half_extent"]
+    inside = (np.abs(X) < hx) & (np.abs(Z) < hz) & (world_y < y_cam)
+    return np.where(inside[..., None], wet, dry).astype(np.float32)
 
 
 def sky_cubemap(exp: Experiment, size: int = CUBEMAP_SIZE) -> np.ndarray:
@@ -146,7 +198,8 @@ def build_shader_inputs(exp: Experiment, width: int | None = None, height: int |
     extent = texture_extent(exp)
     size = exp["reference.texture_size"]
     world_y = top_down_world_y(exp, extent, size)
-    colour = top_down_colour(exp, extent, size, exp["reference.texture_spp"], exp["reference.seed"])
+    colour = top_down_colour(exp, extent, size, exp["reference.texture_spp"], exp["reference.seed"],
+                             world_y=world_y)
     above = world_y > 0.0
     refl_y = np.where(above, world_y, NO_GEOMETRY).astype(np.float32)
     refl_col = np.where(above[..., None], colour, 0.0).astype(np.float32)
