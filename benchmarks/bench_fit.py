@@ -1,0 +1,100 @@
+"""Solvers side by side on one experiment (default: experiments/default.toml at 256x256).
+
+For each solver: seconds to converge, iterations, Dr.Jit value/Jacobian calls, final loss
+and FLIP (full resolution, water pixels). Then Adam (Mitsuba's tutorial loop, the baseline)
+is run until it reaches the best optimistix loss (x (1 + 1e-3)) or its iteration cap, and
+the speed ratio is printed. The reference must be rendered first (it is cached):
+
+    .venv/bin/study render experiments/default.toml --out out/default-render
+    .venv/bin/python benchmarks/bench_fit.py [EXPERIMENT.toml] [--set KEY=VALUE ...]
+
+Also measures what happens when a gradient solver is pointed at a step count
+(``steps_grazing``, piecewise constant in its effect): its AD derivative, a central finite
+difference, and how far Levenberg-Marquardt moves it.
+"""
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+from pathlib import Path
+
+REPO = Path(__file__).resolve().parent.parent
+sys.path.insert(0, str(REPO))
+
+SOLVERS = ["levenberg_marquardt", "gauss_newton", "dogleg", "bfgs", "nelder_mead"]
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("experiment", nargs="?", default=str(REPO / "experiments" / "default.toml"))
+    ap.add_argument("--set", dest="overrides", action="append", default=[])
+    ap.add_argument("--adam-steps", type=int, default=600)
+    ap.add_argument("--adam-lr", type=float, default=0.05)
+    ap.add_argument("--max-steps", type=int, default=200)
+    args = ap.parse_args()
+
+    import numpy as np
+
+    from study import init_backend, load_experiment
+    from study._calibrate import make_problem
+    from study._fit import fit
+    from study._identify import probe_gradient_solver
+    from study._metrics import flip
+    from study._model import ShaderModel, constants_from_experiment
+    from study._names import expand_parameters, with_values
+    from study._reference import load_or_render
+    from study._shader_inputs import build_shader_inputs
+
+    init_backend("llvm_ad_rgb")
+    exp = load_experiment(args.experiment, ["fit.resolution=[256, 256]"] + args.overrides)
+    ref = load_or_render(exp, "llvm_ad_rgb", log=lambda m: print(m, file=sys.stderr))
+    inputs = build_shader_inputs(exp)
+    model = ShaderModel.from_experiment(exp, inputs, ref.image)
+    start = constants_from_experiment(exp)
+    names = [n for n in expand_parameters(exp["fit.parameters"]) if not n.startswith("steps_")]
+    # drop what the scene does not identify, exactly as `study calibrate` does
+    from study._identify import identify
+    problem = make_problem(model, start, names, progress=False)
+    _, J = model.residual_and_jacobian(start, names)
+    rep = identify(J, names, scales=[problem.params[n].typical for n in names])
+    names = [n for n in names if not rep.freeze[n]]
+    problem = make_problem(model, start, names, progress=False)
+    w, h = exp["resolution"]
+    print(f"experiment {exp['name']}, fit at {w}x{h}, {int(model.mask.sum())} water pixels, "
+          f"parameters {names}, reference {ref.spp} spp (noise {ref.noise:.3g})")
+
+    def flip_of(values: dict) -> float:
+        img, _ = model.render(with_values(start, values))
+        return flip(model.reference, img, model.mask)
+
+    rows = []
+    for solver in SOLVERS:
+        res = fit(problem, solver=solver, max_steps=args.max_steps if solver != "nelder_mead" else 2000)
+        rows.append((solver, res))
+        print(f"{solver:>20}: {res.seconds:7.2f} s  it {res.iterations:4d}  values {res.n_value_calls:4d}  "
+              f"jacobians {res.n_jac_calls:4d}  loss {res.loss_start:.5g} -> {res.loss:.6g}  "
+              f"FLIP {flip_of({n: res.constants[n] for n in names}):.4f}  {res.message}", flush=True)
+    best_solver, best = min(((s, r) for s, r in rows if r.converged), key=lambda sr: sr[1].seconds,
+                            default=min(rows, key=lambda sr: sr[1].loss))
+    target = min(r.loss for _, r in rows) * (1 + 1e-3)
+    t0 = time.perf_counter()
+    adam = fit(problem, solver="adam", max_steps=args.adam_steps, lr=args.adam_lr, patience=None)
+    reached = next((i for i, l in enumerate(adam.losses) if l <= target), None)
+    adam_s = adam.seconds if reached is None else adam.seconds * (reached + 1) / max(len(adam.losses), 1)
+    print(f"{'adam':>20}: {adam.seconds:7.2f} s for {adam.iterations} iterations, loss {adam.loss:.6g}; "
+          + (f"reached the best loss {target:.6g} after {reached + 1} iterations (~{adam_s:.2f} s)"
+             if reached is not None else f"did NOT reach the best loss {target:.6g} within {adam.iterations} iterations"))
+    ratio = adam_s / best.seconds
+    print(f"\nfastest converged optimistix solver: {best_solver} {best.seconds:.2f} s; Adam / {best_solver} = "
+          f"{ratio:.1f}x" + ("" if reached is not None else " (lower bound: Adam never reached the loss)"))
+
+    # a gradient solver pointed at a step count anyway
+    sp = make_problem(model, start, ["steps_grazing"], progress=False)
+    probe = probe_gradient_solver(sp, "steps_grazing", solver="levenberg_marquardt")
+    print("\nLevenberg-Marquardt on steps_grazing alone:",
+          {k: (round(v, 6) if isinstance(v, float) else v) for k, v in probe.items() if k != "fit"}, "| LM message:", probe["fit"].message)
+
+
+if __name__ == "__main__":
+    main()
