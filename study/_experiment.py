@@ -103,6 +103,11 @@ SCHEMA: dict[str, Field] = {
                                            "texture is lit: `underwater` (the floor as lit through the "
                                            "water) or `dry` (no water, as the seed's application does).",
                                            choices=("underwater", "dry")),
+    "reference.fresnel_transmission": Field("str", "energy", "Transmission channel of the shader's "
+                                            "Fresnel LUT: `energy` (1 - R, as usual) or `radiance` "
+                                            "((1 - R) / ior^2: radiance leaving the water is compressed "
+                                            "into Snell's window, which the shader otherwise omits).",
+                                            choices=("energy", "radiance")),
     "reference.water_mesh": Field("int", 384, "Grid resolution of the displaced water surface mesh.",
                                   "vertices per side", 8, 4096),
     "fit.shader": Field("str", "water_refraction", "Shader variant to fit.", choices=SHADERS),
@@ -122,6 +127,11 @@ for _name, (_glsl, _kind, _default, (_lo, _hi)) in CONSTANT_SPECS.items():
     else:
         SCHEMA[f"constants.{_name}"] = Field("int" if _kind.endswith("int") else "float", _default,
                                              f"Start value of `{_glsl}`.", "", _lo, _hi)
+
+# keys that change only the shader's inputs, never the reference image
+SHADER_INPUT_KEYS = frozenset({"reference.texture_size", "reference.texture_spp",
+                               "reference.refraction_lighting", "reference.fresnel_transmission",
+                               "waves.normal_map_size", "waves.slope_scale"})
 
 _VEC_LEN = {"vec2": 2, "vec3": 3, "vec4": 4}
 
@@ -210,10 +220,13 @@ class Experiment:
         p = name + "."
         return {k[len(p):]: v for k, v in self.values.items() if k.startswith(p)}
 
-    def scene_hash(self, keys_prefixes=("resolution", "camera.", "pool.", "floor.", "water.",
-                                        "waves.", "sky.", "sun.", "reference.")) -> str:
-        """SHA-256 over every value that affects the scene and its reference image."""
-        data = {k: v for k, v in sorted(self.values.items()) if k.startswith(keys_prefixes)}
+    def scene_hash(self) -> str:
+        """SHA-256 over every value that affects the reference image (not the keys that only
+        shape the shader's inputs, ``SHADER_INPUT_KEYS``, nor the fit)."""
+        prefixes = ("resolution", "camera.", "pool.", "floor.", "water.", "waves.", "sky.", "sun.",
+                    "reference.")
+        data = {k: v for k, v in sorted(self.values.items())
+                if k.startswith(prefixes) and k not in SHADER_INPUT_KEYS}
         return hashlib.sha256(json.dumps(data, sort_keys=True).encode()).hexdigest()
 
     def to_toml_dict(self) -> dict:

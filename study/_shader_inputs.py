@@ -19,7 +19,7 @@ As the seed's application prepares them, but from the scene:
   flipped (the seed's "probably a bug in my code"); the quirk is kept in the shader and the
   application side compensates, as the seed's application evidently did: texel of
   direction ``d`` stores the sky in direction ``d * (1, -1, 1)``;
-* the Fresnel LUT for the experiment's IOR; the light at the sun's direction, 1000 world
+* the Fresnel LUT for the experiment's IOR (see :func:`shader_fresnel_lut`); the light at the sun's direction, 1000 world
   units away, coloured as the normalised sun radiance; the camera of the experiment.
 """
 from __future__ import annotations
@@ -182,6 +182,17 @@ def sky_cubemap(exp: Experiment, size: int = CUBEMAP_SIZE) -> np.ndarray:
     return sky_radiance(d, **sky_params(exp, with_sun=False)).astype(np.float32)
 
 
+def shader_fresnel_lut(exp: Experiment) -> np.ndarray:
+    """(N, 2) Fresnel LUT [transmission, reflection] for the experiment's IOR. With
+    ``reference.fresnel_transmission = "radiance"`` the transmission is divided by ior^2:
+    radiance crossing from water (n) into air (1) scales by T / n^2 (the n^2 law of radiance),
+    which the shader's ``vRefraction * FresnelCoeffs.r`` otherwise leaves out."""
+    lut = fresnel_lut(exp["water.ior"], FRESNEL_SIZE)
+    if exp["reference.fresnel_transmission"] == "radiance":
+        lut[:, 0] /= exp["water.ior"] ** 2
+    return lut
+
+
 def light_of(exp: Experiment) -> tuple[np.ndarray, np.ndarray]:
     """(lightpos (3,), lightcolor (3,)): the sun far away, colour = sun radiance / its max."""
     p = sky_params(exp)
@@ -211,7 +222,7 @@ def build_shader_inputs(exp: Experiment, width: int | None = None, height: int |
     return ShaderInputs(
         refraction_texture=colour, world_y=world_y, tex_matrix0=tm,
         normal_map=waves.normal_map(exp["waves.normal_map_size"]), cubemap=sky_cubemap(exp),
-        fresnel_lut=fresnel_lut(exp["water.ior"], FRESNEL_SIZE),
+        fresnel_lut=shader_fresnel_lut(exp),
         refl_world_y=refl_y, refl_texture=refl_col, tex_matrix1=tm,
         water_rect=(-hx, -hz, hx, hz), normal_tile=exp["waves.normal_tile"],
         waves=np.asarray(exp["waves.offsets"]), view_proj=camera_view_proj(exp, width, height),

@@ -69,6 +69,10 @@ def test_scene_hash_tracks_scene_keys_only():
     a = validate({})
     assert validate({"water": {"ior": 1.34}}).scene_hash() != a.scene_hash()
     assert validate({"fit": {"solver": "bfgs"}}).scene_hash() == a.scene_hash()
+    # shader-input keys do not change the reference image
+    assert validate({"reference": {"texture_size": 128, "fresnel_transmission": "radiance"},
+                     "waves": {"normal_map_size": 64}}).scene_hash() == a.scene_hash()
+    assert validate({"waves": {"amplitude": 0.02}}).scene_hash() != a.scene_hash()
 
 
 def test_readme_documents_every_key():
