@@ -191,6 +191,8 @@ class Constants:
         for name, (glsl, kind, _, (lo, hi)) in CONSTANT_SPECS.items():
             v = getattr(self, name)
             vals = v if isinstance(v, (tuple, list)) else (v,)
+            if not kind.endswith("vec4") and isinstance(v, (tuple, list)):
+                raise ValueError(f"constant {name} ({glsl}) = {v!r} must be a single number")
             if kind.endswith("vec4") and len(vals) != 4:
                 raise ValueError(f"constant {name} ({glsl}) needs 4 components, got {len(vals)}")
             for x in vals:

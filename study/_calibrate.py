@@ -7,10 +7,12 @@
    (half its start value), goes through ``_identify.identify``; what the scene does not
    identify is frozen at its start value, with the reason.
 3. Fit of the identified constants with the chosen solver (``fit.solver``).
-4. Identifiability again at the solution; a constant that lost its identifiability there
-   (e.g. an attenuation distance pushed to where it no longer changes the image) is frozen
-   at its start value and the rest is fitted again, once. Relative standard errors at the
-   solution come from the Gauss-Newton covariance.
+4. Identifiability again at the solution. A constant that lost its identifiability there
+   (e.g. an attenuation distance pushed to where the attenuation clamp saturates, or to
+   where it no longer attenuates at all) has status ``bound``: the data fix only one side
+   of it, the exported value is the solver's, and the report says so instead of claiming
+   a fitted value. Relative standard errors at the solution come from the Gauss-Newton
+   covariance.
 5. Step counts (``steps_grazing``, ``steps_steep``) are piecewise constant in their effect
    (the crossing step jumps), so no gradient solver sees them: when requested they are
    chosen by a 2-D sweep of the loss over a grid at the fitted continuous constants.
@@ -119,27 +121,23 @@ def calibrate_model(model: ShaderModel, start: Constants, requested: list[str], 
     free = [n for n in continuous if n not in frozen]
     for n, why in frozen.items():
         _log(f"calibrate: freezing {n} at {get_value(start, n):.4g}: {why}")
-    losses, result = [], None
+    losses, result, bound = [], None, {}
     fitted = start
-    for round_ in range(2):
-        if not free:
-            break
+    if free:
         result = fit(problem, solver=solver, free=free, max_steps=max_steps)
         print(file=sys.stderr)
         losses += list(result.losses)
         fitted = with_values(start, {n: result.constants[n] for n in free})
-        _log(f"calibrate: {solver} round {round_ + 1}: loss {result.loss_start:.6g} -> {result.loss:.6g} "
+        _log(f"calibrate: {solver}: loss {result.loss_start:.6g} -> {result.loss:.6g} "
              f"in {result.iterations} iterations ({result.message})")
-        r1, J1 = model.residual_and_jacobian(fitted, free)
+        _, J1 = model.residual_and_jacobian(fitted, free)
         id1 = identify(J1, free, scales=[problem.params[n].typical for n in free])
-        lost = [n for n in free if id1.freeze[n]]
-        if not lost or round_ == 1:
-            break
-        for n in lost:
-            frozen[n] = "not identified at the solution: " + id1.reasons[n]
-            _log(f"calibrate: freezing {n} at its start value and refitting: {id1.reasons[n]}")
-        free = [n for n in free if n not in lost]
-        fitted = with_values(start, {})
+        for n in free:
+            if id1.freeze[n]:
+                bound[n] = (f"one-sided: at the solution ({get_value(fitted, n):.4g}) the image no longer "
+                            f"depends on it ({id1.reasons[n]}); any value beyond it in the same direction "
+                            "gives the same image, so only a bound is identified")
+                _log(f"calibrate: {n} is only bounded by the data: {bound[n]}")
     ident = {"start": _ident_dict(id0, continuous)}
     if free:
         r1, J1 = model.residual_and_jacobian(fitted, free)
@@ -153,8 +151,11 @@ def calibrate_model(model: ShaderModel, start: Constants, requested: list[str], 
         fitted = with_values(fitted, sweep["best"])
     params = {}
     for n in names:
+        status = "frozen" if n in frozen else "bound" if n in bound else "swept" if n in discrete else "fitted"
         params[n] = {"default": get_value(start, n), "fitted": None if n in frozen else get_value(fitted, n),
-                     "frozen": n in frozen, "reason": frozen.get(n, "sweep" if n in discrete else "fitted")}
+                     "frozen": n in frozen, "status": status,
+                     "reason": frozen.get(n) or bound.get(n) or ("chosen by the step sweep" if n in discrete
+                                                                  else "identified and fitted")}
         if n in continuous:
             i = continuous.index(n)
             params[n]["sensitivity_start"] = id0.sensitivity[n]

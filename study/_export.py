@@ -49,18 +49,20 @@ def export_shaders(constants: Constants, out_dir) -> list[Path]:
     with ``constants``; return the written paths. Raises ValueError on bad constants and
     RuntimeError if a shader does not compile (nothing is written then)."""
     constants.validate()
+    texts = {}
+    for dialect in ("compat", "core"):
+        texts[(dialect, "water.vert")] = read_source("water", "vert", dialect)
+        for name in FRAGMENT_SHADERS:
+            texts[(dialect, f"{name}.frag")] = write_constants(read_source(name, "frag", dialect), constants)
+    for (dialect, fname), text in texts.items():
+        compile_check(text, fname.rsplit(".", 1)[1])
     out_dir = Path(out_dir)
     out_dir.parent.mkdir(parents=True, exist_ok=True)
     tmp = Path(tempfile.mkdtemp(dir=out_dir.parent, prefix=f".{out_dir.name}."))
     try:
-        for dialect in ("compat", "core"):
-            (tmp / dialect).mkdir()
-            files = {"water.vert": (read_source("water", "vert", dialect), "vert")}
-            for name in FRAGMENT_SHADERS:
-                files[f"{name}.frag"] = (write_constants(read_source(name, "frag", dialect), constants), "frag")
-            for fname, (text, stage) in files.items():
-                compile_check(text, stage)
-                (tmp / dialect / fname).write_text(text, encoding="utf-8")
+        for (dialect, fname), text in texts.items():
+            (tmp / dialect).mkdir(exist_ok=True)
+            (tmp / dialect / fname).write_text(text, encoding="utf-8")
         old = None
         if out_dir.exists():
             old = out_dir.with_name(f".{out_dir.name}.old")

@@ -154,11 +154,11 @@ def run_calibrate(experiment, out, overrides=None, variant=None, solver=None, ca
     from ._model import ShaderModel, constants_from_experiment
     from ._report import write_report
 
+    from ._fit import SOLVERS
+    if solver is not None and solver not in SOLVERS:
+        raise ValueError(f"unknown solver {solver!r}; choose one of {', '.join(SOLVERS)}")
     exp, variant, out = prepare(experiment, out, overrides, variant)
     solver = solver or exp["fit.solver"]
-    from ._fit import SOLVERS
-    if solver not in SOLVERS:
-        raise ValueError(f"unknown solver {solver!r}; choose one of {', '.join(SOLVERS)}")
     ref, inputs, timings = load_scene_data(exp, variant, cache)
     backend = drjit_backend(variant)
     start = constants_from_experiment(exp)

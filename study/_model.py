@@ -154,7 +154,7 @@ class ShaderModel:
             out = self.mod.render(self.inputs, constants, backend=self.backend)
         self.n_renders += 1
         d = (out.color - self._ref_t) * self._mask_t
-        return 0.5 * dr.sum(d * d, axis=None)
+        return (0.5 * dr.sum(d * d, axis=None)).array      # a size-1 Float
 
     def _check(self, diag: Diagnostics) -> None:
         bad = diag.maps.get("nonfinite")

@@ -17,9 +17,10 @@ def _fmt(x, digits: int = 4) -> str:
 
 
 def constants_table(parameters: dict) -> list[str]:
-    lines = ["| constant | default | fitted | frozen | why |", "|---|---|---|---|---|"]
+    lines = ["| constant | default | exported | status | why |", "|---|---|---|---|---|"]
     for name, p in parameters.items():
-        lines.append(f"| `{name}` | {_fmt(p['default'])} | {_fmt(p['fitted'])} | {_fmt(p['frozen'])} | "
+        shown = p["fitted"] if p["fitted"] is not None else p["default"]
+        lines.append(f"| `{name}` | {_fmt(p['default'])} | {_fmt(shown)} | {p.get('status', '')} | "
                      f"{p.get('reason', '')} |")
     return lines
 

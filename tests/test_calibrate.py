@@ -115,7 +115,9 @@ def test_bridge_jvp_on_port_matches_central_differences(model, jit):
     r, jt = jax.jvp(f, (jax.numpy.asarray(X0),), (jax.numpy.asarray(t),))
     h = 1e-2
     fd = (res.value(X0 + h * t) - res.value(X0 - h * t)) / (2 * h)
-    np.testing.assert_array_equal(np.asarray(r), res.value(X0))
+    # the primal of the Jacobian render may differ from a plain render by an ulp (measured:
+    # 1.2e-7 on ~10% of entries when attenuation_distance is differentiated)
+    np.testing.assert_allclose(np.asarray(r), res.value(X0), rtol=0, atol=1e-6)
     assert np.linalg.norm(fd) > 1.0                                   # a real derivative
     assert np.linalg.norm(np.asarray(jt) - fd) < 2e-3 * np.linalg.norm(fd)
 
@@ -171,7 +173,7 @@ def _calibrate(inputs, truth):
 def _check_fitted(cal, truth, names):
     for n in names:
         p = cal.parameters[n]
-        assert not p["frozen"] and p["reason"] == "fitted", (n, p)
+        assert not p["frozen"] and p["status"] == "fitted", (n, p)
         assert abs(p["fitted"] - get_value(truth, n)) < 1e-3 * abs(get_value(truth, n)), (n, p)
 
 
@@ -192,7 +194,7 @@ def test_calm_water_freezes_bumptex_mult():
     flat = np.tile(np.array(FLAT_NORMAL, np.float32), (8, 8, 1))
     cal = _calibrate(_inputs(normal_map=flat), TRUTH_SPEC)
     p = cal.parameters["bumptex_mult"]
-    assert p["frozen"] and p["fitted"] is None and "sensitivity" in p["reason"], p
+    assert p["frozen"] and p["status"] == "frozen" and p["fitted"] is None and "sensitivity" in p["reason"], p
     assert p["sensitivity_start"] < 1e-3
     assert cal.fitted.bumptex_mult == Constants().bumptex_mult
     _check_fitted(cal, TRUTH_SPEC, ["attenuation_distance", "water_color[0]", "water_color[1]",

@@ -1,0 +1,188 @@
+"""The command line: ``study --help``, errors with exit code 2 and a message naming the problem,
+and render / preview / calibrate / export on a tiny experiment (24x24, 8 spp), in-process
+through ``study.cli.main``."""
+from __future__ import annotations
+
+import json
+import math
+import subprocess
+
+import numpy as np
+import pytest
+
+from conftest import REPO
+from study.cli import main
+
+EXPERIMENT = str(REPO / "experiments" / "default.toml")
+TINY = ["resolution=[24,24]", "fit.resolution=[24,24]", "reference.spp=8", "reference.water_mesh=48",
+        "reference.texture_size=32", "reference.texture_spp=4", "waves.normal_map_size=32"]
+MAX_STEPS = 5
+
+
+def _sets(items):
+    return [a for kv in items for a in ("--set", kv)]
+
+
+def test_help_lists_commands():
+    res = subprocess.run([str(REPO / ".venv" / "bin" / "study"), "--help"], capture_output=True,
+                         text=True, timeout=120)
+    assert res.returncode == 0, res.stderr
+    for cmd in ("render", "preview", "calibrate", "export"):
+        assert cmd in res.stdout, res.stdout
+
+
+# ---- errors --------------------------------------------------------------------------------
+
+BAD = {
+    "missing_experiment": (["render", "{tmp}/nope.toml"], r"study render: error: .*nope\.toml does not exist"),
+    "unknown_key": (["render", EXPERIMENT, "--set", "water.iorr=1.3"], r"unknown key.*'water\.iorr'"),
+    "set_syntax": (["preview", EXPERIMENT, "--set", "resolution"], r"--set 'resolution': expected KEY=VALUE"),
+    "bad_value": (["render", EXPERIMENT, "--set", "resolution=[24"], r"resolution: expected a list of 2"),
+    "unknown_solver": (["calibrate", EXPERIMENT, "--solver", "newton"],
+                       r"study calibrate: error: unknown solver 'newton'.*levenberg_marquardt"),
+    "bad_constants": (["export", "{tmp}/bad.json"], r"study export: error: .*bumptex_mult.*outside"),
+    "missing_constants": (["export", "{tmp}/none.json"], r"study export: error: .*none\.json does not exist"),
+}
+
+
+@pytest.mark.parametrize("case", sorted(BAD))
+def test_bad_input_exits_2_with_message(tmp_path, capsys, case):
+    argv, pattern = BAD[case]
+    (tmp_path / "bad.json").write_text('{"bumptex_mult": 1e6}')
+    argv = [a.format(tmp=tmp_path) for a in argv] + ["--out", str(tmp_path / "out")]
+    assert main(argv) == 2
+    err = capsys.readouterr().err
+    assert len(err.strip().splitlines()) == 1, err          # one message, no traceback
+    import re
+    assert re.search(pattern, err), err
+
+
+def test_unknown_variant_is_an_argparse_error(tmp_path, capsys):
+    with pytest.raises(SystemExit) as exc:
+        main(["render", EXPERIMENT, "--out", str(tmp_path / "out"), "--variant", "metal"])
+    assert exc.value.code == 2
+    err = capsys.readouterr().err
+    assert "--variant" in err and "invalid choice: 'metal'" in err and "llvm_ad_rgb" in err
+    assert not (tmp_path / "out").exists()
+
+
+# ---- the commands on a tiny experiment --------------------------------------------------------
+
+@pytest.fixture(scope="module")
+def runs(tmp_path_factory):
+    """render, preview, calibrate (LM, at most 5 steps) and export of calibrate's constants.json,
+    sharing one private reference cache."""
+    root = tmp_path_factory.mktemp("cli")
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setenv("STUDY_CACHE", str(root / "cache"))
+        rc = {
+            "render": main(["render", EXPERIMENT, "--out", str(root / "render")] + _sets(TINY)),
+            "preview": main(["preview", EXPERIMENT, "--out", str(root / "preview")] + _sets(TINY)),
+            "calibrate": main(["calibrate", EXPERIMENT, "--out", str(root / "calibrate")]
+                              + _sets(TINY + [f"fit.max_steps={MAX_STEPS}"])),
+        }
+        rc["export"] = main(["export", str(root / "calibrate" / "constants.json"),
+                             "--out", str(root / "export")])
+    return root, rc
+
+
+def _finite(x) -> bool:
+    return isinstance(x, (int, float)) and not isinstance(x, bool) and math.isfinite(x)
+
+
+def test_render_writes_reference_inputs_and_summary(runs):
+    from shaders_port import ShaderInputs
+    from study import read_exr
+
+    root, rc = runs
+    assert rc["render"] == 0
+    out = root / "render"
+    for f in ("reference.exr", "reference.png", "summary.json", "inputs/shader_inputs.npz"):
+        assert (out / f).is_file(), f
+    img, prov, _ = read_exr(out / "reference.exr")
+    assert img.shape == (24, 24, 3) and np.all(np.isfinite(img)) and img.max() > 0
+    assert prov["spp"] == 8
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["reference"]["spp"] == 8 and "inputs/shader_inputs.npz" in summary["outputs"]
+    inputs = ShaderInputs.load(out / "inputs" / "shader_inputs.npz")
+    assert (inputs.width, inputs.height) == (24, 24)
+    assert inputs.normal_map.shape[:2] == (32, 32)
+    # one reference in the private cache, reused by preview and calibrate
+    cached = list((root / "cache").rglob("*.exr"))
+    assert len(cached) == 1, cached
+
+
+def test_preview_writes_finite_errors(runs):
+    root, rc = runs
+    assert rc["preview"] == 0
+    p = json.loads((root / "preview" / "preview.json").read_text())
+    assert _finite(p["error"]["rmse"]) and _finite(p["error"]["flip"])
+    assert 0 < p["error"]["rmse"] and 0 < p["error"]["flip"] < 1
+    assert p["water_pixels"] > 100 and p["reference"]["spp"] == 8
+    assert (root / "preview" / "preview.png").is_file()
+
+
+def test_calibrate_writes_constants_json(runs):
+    from shaders_port import CONSTANT_SPECS
+
+    root, rc = runs
+    assert rc["calibrate"] == 0
+    c = json.loads((root / "calibrate" / "constants.json").read_text())
+    params = c["parameters"]
+    from study import load_experiment
+    from study._names import expand_parameters
+    requested = load_experiment(REPO / "experiments" / "default.toml")["fit.parameters"]
+    assert set(params) == set(expand_parameters(requested))
+    for name, p in params.items():
+        assert {"default", "fitted", "frozen", "sensitivity"} <= set(p), (name, p)
+        assert isinstance(p["frozen"], bool) and _finite(p["default"]) and _finite(p["sensitivity"])
+        assert (p["fitted"] is None) == p["frozen"], (name, p)
+        if not p["frozen"]:
+            base = name.split("[")[0]
+            lo, hi = CONSTANT_SPECS[base][3]
+            assert _finite(p["fitted"]) and lo <= p["fitted"] <= hi
+    assert any(not p["frozen"] for p in params.values())
+    for metric in ("rmse", "flip"):
+        e = c["error"][metric]
+        assert _finite(e["default"]) and _finite(e["fitted"]), e
+    # fit and evaluation at the same resolution: LM accepts only steps that lower the loss
+    assert c["error"]["rmse"]["fitted"] <= c["error"]["rmse"]["default"]
+    assert c["solver"] == "levenberg_marquardt"
+    assert isinstance(c["iterations"], int) and 1 <= c["iterations"] <= MAX_STEPS
+    assert all(_finite(v) and v >= 0 for v in c["timings"].values())
+    assert {"reference_s", "fit_s", "export_s"} <= set(c["timings"])
+    assert c["reference"]["spp"] == 8 and _finite(c["reference"]["noise"]) and c["reference"]["noise"] > 0
+    gl = c["gl_check"]
+    assert gl["mean_abs"] <= 1e-3 and gl["p999"] <= 1e-2 and gl["unexplained"] == 0
+
+
+def test_calibrate_writes_shaders_with_fitted_constants_and_report(runs):
+    from shaders_port import read_constants
+
+    root, _ = runs
+    out = root / "calibrate"
+    c = json.loads((out / "constants.json").read_text())
+    for dialect in ("compat", "core"):
+        names = sorted(p.name for p in (out / "shaders" / dialect).iterdir())
+        assert names == ["water.vert", "water_reflection.frag", "water_refraction.frag"]
+        got = read_constants((out / "shaders" / dialect / "water_refraction.frag").read_text())
+        for name, p in c["parameters"].items():
+            if p["frozen"]:
+                continue
+            base, _, idx = name.partition("[")
+            v = getattr(got, base)
+            v = v[int(idx[:-1])] if idx else v
+            assert np.float32(v) == np.float32(p["fitted"]), name
+    report = (out / "report.md").read_text()
+    assert "levenberg_marquardt" in report and "attenuation_distance" in report
+    for fig in ("comparison.png", "diagnostics.png", "loss.png"):
+        assert (out / fig).is_file() and fig in report
+
+
+def test_export_of_calibrate_output_reproduces_its_shaders(runs):
+    root, rc = runs
+    assert rc["export"] == 0
+    for dialect in ("compat", "core"):
+        for f in ("water.vert", "water_refraction.frag", "water_reflection.frag"):
+            assert (root / "export" / "shaders" / dialect / f).read_bytes() == \
+                (root / "calibrate" / "shaders" / dialect / f).read_bytes(), (dialect, f)
