@@ -42,7 +42,7 @@ def main() -> None:
     from study._identify import probe_gradient_solver
     from study._metrics import flip
     from study._model import ShaderModel, constants_from_experiment
-    from study._names import expand_parameters, with_values
+    from study._model import expand_parameters, with_values
     from study._reference import load_or_render
     from study._shader_inputs import build_shader_inputs
 

@@ -2,10 +2,31 @@
 the fit of the shader's constants, export and reports.
 
 No Mitsuba variant is set on import; the entry points call ``init_backend``.
+
+Jobs (what the CLI runs): ``run_render``, ``run_preview``, ``run_calibrate``, ``run_export``.
+Building blocks: experiments (``load_experiment``), references (``load_or_render``), shader
+inputs (``build_shader_inputs``), the port against a reference (``ShaderModel``), the fit
+(``FitProblem``, ``Param``, ``fit``, ``identify``, ``make_jax_residual``), export
+(``export_shaders``, ``load_constants_json``), metrics (``rmse``, ``flip``).
 """
 from ._backend import BackendError, init_backend
+from ._bridge import DrJitResidual, NonFiniteResidualError, make_jax_residual
 from ._experiment import Experiment, ExperimentError, load_experiment, validate
+from ._export import export_shaders, load_constants_json
 from ._exr import read_exr, write_exr, write_png
+from ._fit import SOLVERS, FitProblem, FitResult, Param, fit
+from ._identify import IdentifyReport, identify, probe_gradient_solver, sweep_1d, sweep_2d
+from ._jobs import run_calibrate, run_export, run_preview, run_render
+from ._metrics import flip, rmse
+from ._model import ShaderModel, constants_from_experiment
+from ._reference import Reference, load_or_render
+from ._shader_inputs import build_shader_inputs
 
-__all__ = ["BackendError", "init_backend", "Experiment", "ExperimentError", "load_experiment",
-           "validate", "read_exr", "write_exr", "write_png"]
+__all__ = [
+    "BackendError", "init_backend", "DrJitResidual", "NonFiniteResidualError", "make_jax_residual",
+    "Experiment", "ExperimentError", "load_experiment", "validate", "export_shaders",
+    "load_constants_json", "read_exr", "write_exr", "write_png", "SOLVERS", "FitProblem", "FitResult",
+    "Param", "fit", "IdentifyReport", "identify", "probe_gradient_solver", "sweep_1d", "sweep_2d",
+    "run_calibrate", "run_export", "run_preview", "run_render", "flip", "rmse", "ShaderModel",
+    "constants_from_experiment", "Reference", "load_or_render", "build_shader_inputs",
+]

@@ -29,10 +29,9 @@ import numpy as np
 
 from shaders_port import Constants
 
-from ._fit import Param, FitProblem, fit
-from ._identify import identify, sweep_2d
-from ._model import ShaderModel
-from ._names import bounds, expand_parameters, get_value, with_values
+from ._fit import FitProblem, Param, fit
+from ._identify import identify, sweep_1d, sweep_2d
+from ._model import ShaderModel, bounds, expand_parameters, get_value, with_values
 
 DISCRETE = ("steps_grazing", "steps_steep")
 STEP_GRID = {"steps_grazing": [4.0, 6.0, 8.0, 10.0, 14.0, 20.0], "steps_steep": [1.0, 2.0, 3.0, 4.0, 6.0]}
@@ -179,7 +178,6 @@ def step_sweep(problem: FitProblem, at: Constants, names: list[str]) -> dict:
         i, j = np.unravel_index(np.nanargmin(grid), grid.shape)
         best = {a: STEP_GRID[a][i], b: STEP_GRID[b][j]}
         return {"names": [a, b], "grid": {a: STEP_GRID[a], b: STEP_GRID[b]}, "loss": grid.tolist(), "best": best}
-    from ._identify import sweep_1d
     n = names[0]
     losses = sweep_1d(problem, n, STEP_GRID[n], x=base)
     return {"names": [n], "grid": {n: STEP_GRID[n]}, "loss": losses.tolist(),

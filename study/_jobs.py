@@ -101,7 +101,7 @@ def run_preview(experiment, out, overrides=None, variant=None, cache=None) -> di
     """``study preview``: the port with the experiment's start constants next to the reference,
     error map, diagnostics (PNG) and error figures on water pixels (preview.json)."""
     from ._backend import drjit_backend
-    from ._figures import comparison_figure, diagnostics_figure
+    from ._report import comparison_figure, diagnostics_figure
     from ._metrics import errors
     from ._model import ShaderModel, constants_from_experiment
 
@@ -149,7 +149,7 @@ def run_calibrate(experiment, out, overrides=None, variant=None, solver=None, ca
     from ._backend import drjit_backend
     from ._calibrate import calibrate_model, timed
     from ._export import export_shaders
-    from ._figures import comparison_figure, diagnostics_figure, loss_figure
+    from ._report import comparison_figure, diagnostics_figure, loss_figure
     from ._metrics import errors
     from ._model import ShaderModel, constants_from_experiment
     from ._report import write_report

@@ -21,7 +21,7 @@ from study._calibrate import STEP_GRID, calibrate_model, make_problem, step_swee
 from study._fit import fit
 from study._identify import probe_gradient_solver
 from study._model import ShaderModel
-from study._names import get_value, with_values
+from study._model import get_value, with_values
 
 TRUTH = Constants(attenuation_distance=5.0, bumptex_mult=0.7, water_color=(0.1, 0.3, 0.2, 1.0))
 NAMES = ["attenuation_distance", "bumptex_mult", "water_color[0]", "water_color[1]", "water_color[2]"]
