@@ -72,22 +72,36 @@ def main() -> None:
     for solver in SOLVERS:
         res = fit(problem, solver=solver, max_steps=args.max_steps if solver != "nelder_mead" else 2000)
         rows.append((solver, res))
-        print(f"{solver:>20}: {res.seconds:7.2f} s  it {res.iterations:4d}  values {res.n_value_calls:4d}  "
-              f"jacobians {res.n_jac_calls:4d}  loss {res.loss_start:.5g} -> {res.loss:.6g}  "
-              f"FLIP {flip_of({n: res.constants[n] for n in names}):.4f}  {res.message}", flush=True)
-    best_solver, best = min(((s, r) for s, r in rows if r.converged), key=lambda sr: sr[1].seconds,
-                            default=min(rows, key=lambda sr: sr[1].loss))
-    target = min(r.loss for _, r in rows) * (1 + 1e-3)
-    t0 = time.perf_counter()
-    adam = fit(problem, solver="adam", max_steps=args.adam_steps, lr=args.adam_lr, patience=None)
-    reached = next((i for i, l in enumerate(adam.losses) if l <= target), None)
-    adam_s = adam.seconds if reached is None else adam.seconds * (reached + 1) / max(len(adam.losses), 1)
-    print(f"{'adam':>20}: {adam.seconds:7.2f} s for {adam.iterations} iterations, loss {adam.loss:.6g}; "
-          + (f"reached the best loss {target:.6g} after {reached + 1} iterations (~{adam_s:.2f} s)"
-             if reached is not None else f"did NOT reach the best loss {target:.6g} within {adam.iterations} iterations"))
-    ratio = adam_s / best.seconds
-    print(f"\nfastest converged optimistix solver: {best_solver} {best.seconds:.2f} s; Adam / {best_solver} = "
-          f"{ratio:.1f}x" + ("" if reached is not None else " (lower bound: Adam never reached the loss)"))
+    res = fit(problem, solver="adam", max_steps=args.adam_steps, lr=args.adam_lr, patience=None)
+    rows.append(("adam", res))
+    best_loss = min(r.loss for _, r in rows)
+    target = best_loss * (1 + 1e-3)
+
+    def time_to(res) -> float | None:
+        """Seconds until the first evaluation within 0.1 % of the best loss of any solver
+        (evaluations are assumed to cost the same: the time is prorated)."""
+        hit = next((i for i, v in enumerate(res.losses) if v <= target), None)
+        return None if hit is None else res.seconds * (hit + 1) / len(res.losses)
+
+    print(f"target loss: best of all solvers x 1.001 = {target:.6g}")
+    print(f"{'solver':>20} {'total s':>8} {'to target s':>11} {'iters':>6} {'values':>7} {'jacobians':>9} "
+          f"{'final loss':>11} {'FLIP':>7}  converged / message")
+    times = {}
+    for solver, res in rows:
+        tt = time_to(res)
+        times[solver] = tt
+        print(f"{solver:>20} {res.seconds:8.2f} {('%.2f' % tt) if tt is not None else 'never':>11} "
+              f"{res.iterations:6d} {res.n_value_calls:7d} {res.n_jac_calls:9d} {res.loss:11.6g} "
+              f"{flip_of({n: res.constants[n] for n in names}):7.4f}  {res.converged} / {res.message[:60]}",
+              flush=True)
+    reached = {s: t for s, t in times.items() if t is not None and s != "adam"}
+    if reached:
+        best = min(reached, key=reached.get)
+        adam_t = times["adam"]
+        print(f"\nfastest optimistix solver to the target: {best} {reached[best]:.2f} s; Adam "
+              + (f"{adam_t:.2f} s, ratio Adam / {best} = {adam_t / reached[best]:.2f}x" if adam_t is not None
+                 else f"never reached it in {args.adam_steps} iterations (ratio > "
+                      f"{rows[-1][1].seconds / reached[best]:.1f}x)"))
 
     # a gradient solver pointed at a step count anyway
     sp = make_problem(model, start, ["steps_grazing"], progress=False)

@@ -282,10 +282,17 @@ class FitResult:
 
 
 def _optx_solver(name: str, rtol: float, atol: float):
+    """The optimistix solver. Gauss-Newton and Dogleg get a rank-revealing least-squares
+    linear solver (``AutoLinearSolver(well_posed=False)``): a Jacobian column can vanish at a
+    trial point (e.g. the attenuation clamp saturating), and the default solver, which
+    assumes a well-posed operator, then returns NaN and stops the fit."""
+    import lineax as lx
     import optimistix as optx
-    return {"levenberg_marquardt": optx.LevenbergMarquardt, "gauss_newton": optx.GaussNewton,
-            "dogleg": optx.Dogleg, "bfgs": optx.BFGS, "nelder_mead_optimistix": optx.NelderMead}[name](
-                rtol=rtol, atol=atol)
+    if name in ("gauss_newton", "dogleg"):
+        cls = optx.GaussNewton if name == "gauss_newton" else optx.Dogleg
+        return cls(rtol=rtol, atol=atol, linear_solver=lx.AutoLinearSolver(well_posed=False))
+    return {"levenberg_marquardt": optx.LevenbergMarquardt, "bfgs": optx.BFGS,
+            "nelder_mead_optimistix": optx.NelderMead}[name](rtol=rtol, atol=atol)
 
 
 def _free_names(problem: FitProblem, solver: str, free, treat_as_continuous) -> list[str]:

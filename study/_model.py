@@ -10,6 +10,7 @@ residual with respect to named constants.
 """
 from __future__ import annotations
 
+import threading
 import warnings
 from dataclasses import dataclass
 
@@ -108,21 +109,26 @@ class Diagnostics:
         return out
 
 
+_DRJIT_LOCK = threading.RLock()
+
+
 def _thread_handoff(fn):
-    """Methods may run on a solver's callback thread (``jax.pure_callback``) and touch Dr.Jit
-    arrays created on another thread: open a new Dr.Jit scope before and after, as Dr.Jit
-    requires for arrays shared between threads."""
+    """Model methods run on whatever thread calls them, including a solver's callback threads
+    (``jax.pure_callback``), which XLA may run concurrently. Dr.Jit must not be entered by
+    two threads at once (measured: a segmentation fault inside the Jacobian pass), and arrays
+    shared between threads need a new Dr.Jit scope before and after: both are done here."""
     import functools
 
     @functools.wraps(fn)
     def wrapper(self, *a, **k):
         import drjit as dr
         be = dr.JitBackend.CUDA if self.backend == "cuda" else dr.JitBackend.LLVM
-        dr.detail.new_scope(be)
-        try:
-            return fn(self, *a, **k)
-        finally:
+        with _DRJIT_LOCK:
             dr.detail.new_scope(be)
+            try:
+                return fn(self, *a, **k)
+            finally:
+                dr.detail.new_scope(be)
     return wrapper
 
 
