@@ -44,12 +44,12 @@ def main() -> None:
     from study._model import ShaderModel, constants_from_experiment
     from study._model import expand_parameters, with_values
     from study._reference import load_or_render
-    from study._shader_inputs import build_shader_inputs
+    from study._shader_inputs import load_or_build_shader_inputs
 
     init_backend("llvm_ad_rgb")
     exp = load_experiment(args.experiment, ["fit.resolution=[256, 256]"] + args.overrides)
     ref = load_or_render(exp, "llvm_ad_rgb", log=lambda m: print(m, file=sys.stderr))
-    inputs = build_shader_inputs(exp)
+    inputs = load_or_build_shader_inputs(exp, "llvm_ad_rgb", log=lambda m: print(m, file=sys.stderr))
     model = ShaderModel.from_experiment(exp, inputs, ref.image)
     start = constants_from_experiment(exp)
     names = [n for n in expand_parameters(exp["fit.parameters"]) if not n.startswith("steps_")]

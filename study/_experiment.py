@@ -97,7 +97,7 @@ SCHEMA: dict[str, Field] = {
     "reference.max_depth": Field("int", 12, "Maximum path length.", "", 2, 256),
     "reference.texture_size": Field("int", 256, "Resolution of the top-down shader textures.",
                                     "texels", 16, 4096),
-    "reference.texture_spp": Field("int", 64, "Samples per pixel of the top-down colour texture.",
+    "reference.texture_spp": Field("int", 256, "Samples per pixel of the top-down colour texture.",
                                    "", 1, 65536),
     "reference.refraction_lighting": Field("str", "underwater", "How the top-down refraction "
                                            "texture is lit: `underwater` (the floor as lit through the "
@@ -227,6 +227,14 @@ class Experiment:
                     "reference.")
         data = {k: v for k, v in sorted(self.values.items())
                 if k.startswith(prefixes) and k not in SHADER_INPUT_KEYS}
+        return hashlib.sha256(json.dumps(data, sort_keys=True).encode()).hexdigest()
+
+    def inputs_hash(self) -> str:
+        """SHA-256 over every value that affects the shader inputs (the scene and
+        ``SHADER_INPUT_KEYS``; not the fit, the start constants or the names)."""
+        prefixes = ("resolution", "camera.", "pool.", "floor.", "water.", "waves.", "sky.", "sun.",
+                    "reference.", "variant")
+        data = {k: v for k, v in sorted(self.values.items()) if k.startswith(prefixes)}
         return hashlib.sha256(json.dumps(data, sort_keys=True).encode()).hexdigest()
 
     def to_toml_dict(self) -> dict:

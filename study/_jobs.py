@@ -44,17 +44,11 @@ def prepare(experiment, out, overrides=None, variant=None):
 def run_render(experiment, out, overrides=None, variant=None, cache=None) -> dict:
     """``study render``: reference.exr (+ PNG), shader inputs (.npz and EXRs), summary.json."""
     from ._reference import load_or_render
-    from ._shader_inputs import build_shader_inputs
-
     exp, variant, out = prepare(experiment, out, overrides, variant)
-    t0 = time.perf_counter()
-    ref = load_or_render(exp, variant, cache=cache, progress=_progress("reference passes"), log=_log)
-    t_ref = time.perf_counter() - t0
+    ref, inputs, timings = load_scene_data(exp, variant, cache)
+    t_ref, t_inp = timings["reference_s"], timings["inputs_s"]
     write_exr(out / "reference.exr", ref.image, ref.provenance)
     write_png(out / "reference.png", ref.image)
-    t0 = time.perf_counter()
-    inputs = build_shader_inputs(exp)
-    t_inp = time.perf_counter() - t0
     save_shader_inputs(inputs, out / "inputs")
     summary = {"experiment": exp["name"], "variant": variant, "reference": ref.provenance,
                "timings": {"reference_s": t_ref, "inputs_s": t_inp},
@@ -87,12 +81,12 @@ def finite_or_none(x):
 def load_scene_data(exp, variant, cache=None):
     """Reference (cached) and shader inputs at the experiment's resolution."""
     from ._reference import load_or_render
-    from ._shader_inputs import build_shader_inputs
+    from ._shader_inputs import load_or_build_shader_inputs
 
     t0 = time.perf_counter()
     ref = load_or_render(exp, variant, cache=cache, progress=_progress("reference passes"), log=_log)
     t1 = time.perf_counter()
-    inputs = build_shader_inputs(exp)
+    inputs = load_or_build_shader_inputs(exp, variant, cache=cache, log=_log)
     t2 = time.perf_counter()
     return ref, inputs, {"reference_s": t1 - t0, "inputs_s": t2 - t1}
 

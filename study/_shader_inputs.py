@@ -228,3 +228,30 @@ def build_shader_inputs(exp: Experiment, width: int | None = None, height: int |
         waves=np.asarray(exp["waves.offsets"]), view_proj=camera_view_proj(exp, width, height),
         viewpos=np.asarray(c["position"]), lightpos=lightpos, lightcolor=lightcolor,
         width=width, height=height)
+
+
+def load_or_build_shader_inputs(exp: Experiment, variant: str, cache=None, log=print) -> ShaderInputs:
+    """The shader inputs of ``exp`` from ``<cache>/inputs/<key>.npz`` if present, else built
+    and written there atomically. The key hashes every experiment value that affects them
+    (``Experiment.inputs_hash``), the variant, ``SCENE_VERSION`` and the package versions."""
+    import hashlib
+    import json
+
+    from ._reference import SCENE_VERSION, _versions, cache_dir
+
+    key = hashlib.sha256(json.dumps({"inputs": exp.inputs_hash(), "variant": variant,
+                                     "scene_version": SCENE_VERSION, "versions": _versions()},
+                                    sort_keys=True).encode()).hexdigest()[:32]
+    path = (cache or cache_dir()) / "inputs" / f"{key}.npz"
+    if path.exists():
+        try:
+            inputs = ShaderInputs.load(path)
+            log(f"shader inputs: cached {path}")
+            return inputs
+        except (OSError, ValueError, KeyError) as exc:
+            log(f"shader inputs: unreadable cache file {path} ({exc}); rebuilding")
+    inputs = build_shader_inputs(exp)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    inputs.save(path)
+    log(f"shader inputs: built and cached at {path}")
+    return inputs

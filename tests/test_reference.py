@@ -88,3 +88,26 @@ def test_auto_spp_reaches_target(mi):
     assert spp >= info["predicted_spp"] and spp < 2 * info["predicted_spp"] + 8
     loose = small_experiment(**{"reference.spp": '"auto"', "reference.target_noise": "0.2"})
     assert choose_spp(loose)[0] < spp
+
+
+def test_shader_inputs_cache(mi, tmp_path):
+    from study._shader_inputs import load_or_build_shader_inputs
+    exp = small_experiment()
+    logs = []
+    a = load_or_build_shader_inputs(exp, "llvm_ad_rgb", cache=tmp_path, log=logs.append)
+    assert "built" in logs[-1]
+    b = load_or_build_shader_inputs(exp, "llvm_ad_rgb", cache=tmp_path, log=logs.append)
+    assert "cached" in logs[-1]
+    np.testing.assert_array_equal(a.refraction_texture, b.refraction_texture)
+    np.testing.assert_array_equal(a.view_proj, b.view_proj)
+    # a key that changes only the inputs (not the reference) is a different entry
+    assert exp["reference.fresnel_transmission"] == "radiance"
+    c = load_or_build_shader_inputs(small_experiment(**{"reference.fresnel_transmission": '"energy"'}),
+                                    "llvm_ad_rgb", cache=tmp_path, log=logs.append)
+    assert "built" in logs[-1]
+    np.testing.assert_allclose(c.fresnel_lut[:, 0], a.fresnel_lut[:, 0] * 1.333 ** 2, rtol=1e-6)
+    # a corrupt file is rebuilt, not trusted
+    for p in (tmp_path / "inputs").glob("*.npz"):
+        p.write_bytes(b"garbage")
+    load_or_build_shader_inputs(exp, "llvm_ad_rgb", cache=tmp_path, log=logs.append)
+    assert any("unreadable" in m for m in logs) and "built" in logs[-1]
