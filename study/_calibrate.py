@@ -34,6 +34,9 @@ from ._identify import identify, sweep_1d, sweep_2d
 from ._model import ShaderModel, bounds, expand_parameters, get_value, with_values
 
 DISCRETE = ("steps_grazing", "steps_steep")
+# solver stopping tolerances (on u = transformed parameters, where one unit is about a 50 %
+# change, and on the loss): 1e-6 is far below the parameters' standard errors
+FIT_RTOL, FIT_ATOL = 1e-6, 1e-9
 STEP_GRID = {"steps_grazing": [4.0, 6.0, 8.0, 10.0, 14.0, 20.0], "steps_steep": [1.0, 2.0, 3.0, 4.0, 6.0]}
 
 
@@ -123,7 +126,7 @@ def calibrate_model(model: ShaderModel, start: Constants, requested: list[str], 
     losses, result, bound = [], None, {}
     fitted = start
     if free:
-        result = fit(problem, solver=solver, free=free, max_steps=max_steps)
+        result = fit(problem, solver=solver, free=free, max_steps=max_steps, rtol=FIT_RTOL, atol=FIT_ATOL)
         print(file=sys.stderr)
         losses += list(result.losses)
         fitted = with_values(start, {n: result.constants[n] for n in free})

@@ -116,7 +116,7 @@ SCHEMA: dict[str, Field] = {
                             "Constants to fit (frozen automatically when the scene does not "
                             "identify them).", choices=FIT_PARAMETERS),
     "fit.solver": Field("str", "levenberg_marquardt", "Solver.", choices=SOLVERS),
-    "fit.max_steps": Field("int", 60, "Solver iteration cap.", "", 1, 100000),
+    "fit.max_steps": Field("int", 100, "Solver iteration cap.", "", 1, 100000),
     "fit.resolution": Field("vec2", [128, 128], "Image size the fit runs at (the reference is "
                             "rendered at `resolution`, then box-downsampled when smaller).", "pixels", 8, 4096),
 }
