@@ -109,17 +109,31 @@ class Calibration:
     sweep: dict | None
 
 
+def scene_frozen(exp) -> dict:
+    """Constants the scene's physics cannot identify whatever the Jacobian says: clear water
+    (``water.sigma_t = 0``) has no attenuation, so the shader's attenuation there could only be
+    a blend towards a mean colour that happens to lower the error, not a distance."""
+    from ._scene import has_medium
+    if has_medium(exp):
+        return {}
+    return {"attenuation_distance": "the scene's water does not absorb (water.sigma_t = 0), so it "
+                                    "cannot identify an attenuation distance; kept at the start value"}
+
+
 def calibrate_model(model: ShaderModel, start: Constants, requested: list[str], solver: str,
-                    max_steps: int) -> Calibration:
-    """Steps 2-5 of the module docstring on a prepared model."""
+                    max_steps: int, frozen_by_scene: dict | None = None) -> Calibration:
+    """Steps 2-5 of the module docstring on a prepared model. ``frozen_by_scene``: name ->
+    reason for constants frozen before looking at the Jacobian (:func:`scene_frozen`)."""
     names = expand_parameters(requested)
-    continuous = [n for n in names if n not in DISCRETE]
+    pre = {n: why for n, why in (frozen_by_scene or {}).items() if n in names}
+    continuous = [n for n in names if n not in DISCRETE and n not in pre]
     discrete = [n for n in names if n in DISCRETE]
     problem = make_problem(model, start, continuous)
     scales = [problem.params[n].typical for n in continuous]
     _, J0 = model.residual_and_jacobian(start, continuous)
     id0 = identify(J0, continuous, scales=scales)
-    frozen = {n: id0.reasons[n] for n in continuous if id0.freeze[n]}
+    frozen = dict(pre)
+    frozen.update({n: id0.reasons[n] for n in continuous if id0.freeze[n]})
     free = [n for n in continuous if n not in frozen]
     for n, why in frozen.items():
         _log(f"calibrate: freezing {n} at {get_value(start, n):.4g}: {why}")
@@ -159,14 +173,13 @@ def calibrate_model(model: ShaderModel, start: Constants, requested: list[str], 
                      "reason": frozen.get(n) or bound.get(n) or ("chosen by the step sweep" if n in discrete
                                                                   else "identified and fitted")}
         if n in continuous:
-            i = continuous.index(n)
             params[n]["sensitivity_start"] = id0.sensitivity[n]
             if "solution" in ident and n in ident["solution"]["names"]:
                 j = ident["solution"]["names"].index(n)
                 params[n]["sensitivity"] = ident["solution"]["sensitivity"][j]
                 params[n]["rel_std_error"] = ident["solution"].get("rel_std_error", [None] * len(free))[j]
             else:
-                params[n]["sensitivity"] = id0.sensitivity[continuous[i]]
+                params[n]["sensitivity"] = id0.sensitivity[n]
     summary = result.summary() if result is not None else {"solver": solver, "iterations": 0,
                                                            "converged": True, "message": "nothing to fit"}
     return Calibration(start, fitted, params, ident, summary, losses, sweep)

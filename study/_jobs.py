@@ -141,7 +141,7 @@ def run_calibrate(experiment, out, overrides=None, variant=None, solver=None, ca
     """``study calibrate``: reference (cached), fit, export, GL check, figures, report.md and
     constants.json in ``out``."""
     from ._backend import drjit_backend
-    from ._calibrate import calibrate_model, timed
+    from ._calibrate import calibrate_model, scene_frozen, timed
     from ._export import export_shaders
     from ._report import comparison_figure, diagnostics_figure, loss_figure
     from ._metrics import errors
@@ -161,7 +161,8 @@ def run_calibrate(experiment, out, overrides=None, variant=None, solver=None, ca
     _log(f"calibrate: fitting {exp['fit.parameters']} of {model.shader} with {solver} on "
          f"{int(model.mask.sum())} water pixels at {exp['fit.resolution'][0]}x{exp['fit.resolution'][1]}")
     with timed(timings, "fit_s"):
-        cal = calibrate_model(model, start, exp["fit.parameters"], solver, exp["fit.max_steps"])
+        cal = calibrate_model(model, start, exp["fit.parameters"], solver, exp["fit.max_steps"],
+                              frozen_by_scene=scene_frozen(exp))
     with timed(timings, "evaluate_s"):
         w, h = exp["resolution"]
         full = ShaderModel.from_experiment(exp, inputs, ref.image, backend=backend, resolution=(w, h))

@@ -283,3 +283,20 @@ def test_step_sweep_returns_grid_minimum(step_problem):
     sw1 = step_sweep(step_problem, TRUTH.replace(steps_steep=2.0), ["steps_grazing"])
     assert sw1["best"] == {"steps_grazing": 6.0}
     assert min(sw1["loss"]) == sw1["loss"][STEP_GRID["steps_grazing"].index(6.0)]
+
+
+def test_clear_water_freezes_attenuation_distance():
+    """Clear water (sigma_t = 0) cannot identify an attenuation distance, whatever the Jacobian
+    says: it is frozen before the fit, with the scene's reason, and never claimed as fitted."""
+    from conftest import small_experiment
+
+    from study._calibrate import scene_frozen
+    assert scene_frozen(small_experiment()) == {}
+    why = scene_frozen(small_experiment(**{"water.sigma_t": "[0, 0, 0]"}))
+    assert set(why) == {"attenuation_distance"} and "sigma_t = 0" in why["attenuation_distance"]
+    cal = calibrate_model(_model(_inputs(), TRUTH_SPEC), Constants(), ["attenuation_distance", "bumptex_mult"],
+                          "levenberg_marquardt", 100, frozen_by_scene=why)
+    p = cal.parameters["attenuation_distance"]
+    assert p["status"] == "frozen" and p["fitted"] is None and "sigma_t = 0" in p["reason"]
+    assert cal.fitted.attenuation_distance == Constants().attenuation_distance
+    assert cal.parameters["bumptex_mult"]["status"] == "fitted"
