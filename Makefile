@@ -15,3 +15,5 @@ test: setup
 
 bench: setup
 	.venv/bin/python benchmarks/bench_reference.py
+	.venv/bin/python benchmarks/bench_port.py
+	.venv/bin/python benchmarks/bench_fit.py

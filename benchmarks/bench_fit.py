@@ -52,9 +52,11 @@ def main() -> None:
     inputs = load_or_build_shader_inputs(exp, "llvm_ad_rgb", log=lambda m: print(m, file=sys.stderr))
     model = ShaderModel.from_experiment(exp, inputs, ref.image)
     start = constants_from_experiment(exp)
-    names = [n for n in expand_parameters(exp["fit.parameters"]) if not n.startswith("steps_")]
-    # drop what the scene does not identify, exactly as `study calibrate` does
+    # drop what the scene does not identify, as `study calibrate` does
+    from study._calibrate import scene_frozen
     from study._identify import identify
+    names = [n for n in expand_parameters(exp["fit.parameters"])
+             if not n.startswith("steps_") and n not in scene_frozen(exp)]
     problem = make_problem(model, start, names, progress=False)
     _, J = model.residual_and_jacobian(start, names)
     rep = identify(J, names, scales=[problem.params[n].typical for n in names])

@@ -86,7 +86,7 @@ def compare_port_gl(inputs: ShaderInputs, constants: Constants | None, shader: s
     d = diff[both]
     if d.size == 0:
         raise ValueError("the port and GL share no water pixel; check the camera and water_rect")
-    outlier = both & (diff > OUTLIER)
+    outlier = both & ~(diff <= OUTLIER)        # NaN on either side counts as an outlier
     reasons = {"tiny_denominator": out["denominator"] < 1e-3,
                "crossing_step_edge": _neighbour_differs(out["iterations"], port_mask)}
     if shader == "water_reflection":
@@ -100,6 +100,7 @@ def compare_port_gl(inputs: ShaderInputs, constants: Constants | None, shader: s
         "mean_abs": float(d.mean()), "p999": float(np.percentile(d, 99.9)),
         "max_abs": float(d.max()), "n_water": int(both.sum()),
         "mask_mismatch": int((port_mask ^ gl_mask).sum()), "n_outliers": int(outlier.sum()),
+        "n_nonfinite": int((both & ~np.isfinite(diff)).sum()),
         "explained": explained, "unexplained": int(left.sum()), "diff": diff,
         "port": out["color"], "gl": rgba[..., :3],
     }

@@ -81,7 +81,7 @@ def init_backend(variant: str | None = None) -> str:
     Args:
         variant: ``"llvm_ad_rgb"`` (default, CPU) or ``"cuda_ad_rgb"`` (NVIDIA GPU).
     """
-    variant = variant or os.environ.get("STUDY_VARIANT") or DEFAULT_VARIANT
+    variant = variant or DEFAULT_VARIANT
     if variant not in VARIANTS:
         raise BackendError(f"unknown variant {variant!r}; choose one of {', '.join(VARIANTS)}")
     if variant.startswith("llvm"):

@@ -127,7 +127,10 @@ class DrJitResidual:
 
         x = self._check_x(x)
         t0 = time.perf_counter()
-        r = self.fn_value(x)
+        try:
+            r = self.fn_value(x)
+        except Exception as exc:        # kept: JAX re-raises callback errors wrapped
+            self._fail(exc)
         self.stats.seconds_in_drjit += time.perf_counter() - t0
         self.stats.n_value_calls += 1
         r = self._check_r(r, x)
@@ -140,7 +143,10 @@ class DrJitResidual:
 
         x = self._check_x(x)
         t0 = time.perf_counter()
-        r, J = self.fn_value_and_jac(x)
+        try:
+            r, J = self.fn_value_and_jac(x)
+        except Exception as exc:
+            self._fail(exc)
         self.stats.seconds_in_drjit += time.perf_counter() - t0
         self.stats.n_jac_calls += 1
         r = self._check_r(r, x)

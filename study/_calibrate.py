@@ -128,12 +128,15 @@ def calibrate_model(model: ShaderModel, start: Constants, requested: list[str], 
     pre = {n: why for n, why in (frozen_by_scene or {}).items() if n in names}
     continuous = [n for n in names if n not in DISCRETE and n not in pre]
     discrete = [n for n in names if n in DISCRETE]
-    problem = make_problem(model, start, continuous)
-    scales = [problem.params[n].typical for n in continuous]
-    _, J0 = model.residual_and_jacobian(start, continuous)
-    id0 = identify(J0, continuous, scales=scales)
+    if not continuous and not discrete:
+        raise ValueError(f"nothing left to fit: {sorted(pre)} frozen by the scene ({list(pre.values())})")
+    problem = make_problem(model, start, continuous + discrete)
     frozen = dict(pre)
-    frozen.update({n: id0.reasons[n] for n in continuous if id0.freeze[n]})
+    id0 = None
+    if continuous:
+        _, J0 = model.residual_and_jacobian(start, continuous)
+        id0 = identify(J0, continuous, scales=[problem.params[n].typical for n in continuous])
+        frozen.update({n: id0.reasons[n] for n in continuous if id0.freeze[n]})
     free = [n for n in continuous if n not in frozen]
     for n, why in frozen.items():
         _log(f"calibrate: freezing {n} at {get_value(start, n):.4g}: {why}")
@@ -146,7 +149,7 @@ def calibrate_model(model: ShaderModel, start: Constants, requested: list[str], 
         fitted = with_values(start, {n: result.constants[n] for n in free})
         _log(f"calibrate: {solver}: loss {result.loss_start:.6g} -> {result.loss:.6g} "
              f"in {result.iterations} iterations ({result.message})")
-        _, J1 = model.residual_and_jacobian(fitted, free)
+        r1, J1 = model.residual_and_jacobian(fitted, free)
         id1 = identify(J1, free, scales=[problem.params[n].typical for n in free])
         for n in free:
             if id1.freeze[n]:
@@ -154,11 +157,8 @@ def calibrate_model(model: ShaderModel, start: Constants, requested: list[str], 
                             f"depends on it ({id1.reasons[n]}); any value beyond it in the same direction "
                             "gives the same image, so only a bound is identified")
                 _log(f"calibrate: {n} is only bounded by the data: {bound[n]}")
-    ident = {"start": _ident_dict(id0, continuous)}
+    ident = {"start": _ident_dict(id0, continuous)} if id0 is not None else {}
     if free:
-        r1, J1 = model.residual_and_jacobian(fitted, free)
-        scale = np.array([problem.params[n].typical for n in free])
-        id1 = identify(J1, free, scales=scale)
         vals = np.array([get_value(fitted, n) for n in free])
         ident["solution"] = _ident_dict(id1, free, J1, r1, vals)
     sweep = None
@@ -173,13 +173,13 @@ def calibrate_model(model: ShaderModel, start: Constants, requested: list[str], 
                      "reason": frozen.get(n) or bound.get(n) or ("chosen by the step sweep" if n in discrete
                                                                   else "identified and fitted")}
         if n in continuous:
-            params[n]["sensitivity_start"] = id0.sensitivity[n]
+            params[n]["sensitivity_start"] = id0.sensitivity[n] if id0 is not None else None
             if "solution" in ident and n in ident["solution"]["names"]:
                 j = ident["solution"]["names"].index(n)
                 params[n]["sensitivity"] = ident["solution"]["sensitivity"][j]
                 params[n]["rel_std_error"] = ident["solution"].get("rel_std_error", [None] * len(free))[j]
             else:
-                params[n]["sensitivity"] = id0.sensitivity[n]
+                params[n]["sensitivity"] = id0.sensitivity[n] if id0 is not None else None
     summary = result.summary() if result is not None else {"solver": solver, "iterations": 0,
                                                            "converged": True, "message": "nothing to fit"}
     return Calibration(start, fitted, params, ident, summary, losses, sweep)
@@ -191,11 +191,17 @@ def step_sweep(problem: FitProblem, at: Constants, names: list[str]) -> dict:
     if len(names) == 2:
         a, b = "steps_grazing", "steps_steep"
         grid = sweep_2d(problem, a, STEP_GRID[a], b, STEP_GRID[b], x=base)
+        if not np.isfinite(grid).any():
+            return {"names": [a, b], "grid": {a: STEP_GRID[a], b: STEP_GRID[b]}, "loss": grid.tolist(),
+                    "best": {a: base[a], b: base[b]}, "note": "every grid point was non-finite; kept the start"}
         i, j = np.unravel_index(np.nanargmin(grid), grid.shape)
         best = {a: STEP_GRID[a][i], b: STEP_GRID[b][j]}
         return {"names": [a, b], "grid": {a: STEP_GRID[a], b: STEP_GRID[b]}, "loss": grid.tolist(), "best": best}
     n = names[0]
     losses = sweep_1d(problem, n, STEP_GRID[n], x=base)
+    if not np.isfinite(losses).any():
+        return {"names": [n], "grid": {n: STEP_GRID[n]}, "loss": losses.tolist(), "best": {n: base[n]},
+                "note": "every grid point was non-finite; kept the start"}
     return {"names": [n], "grid": {n: STEP_GRID[n]}, "loss": losses.tolist(),
             "best": {n: STEP_GRID[n][int(np.nanargmin(losses))]}}
 

@@ -85,7 +85,8 @@ SCHEMA: dict[str, Field] = {
     "sky.ground": Field("vec3", [0.3, 0.28, 0.25], "Radiance below the horizon.", "linear RGB", 0.0, 1e4),
     "sun.elevation": Field("float", 50.0, "Sun elevation above the horizon.", "degrees", 0.0, 90.0),
     "sun.azimuth": Field("float", 200.0, "Sun azimuth, from +x towards +z.", "degrees", -360.0, 360.0),
-    "sun.radius": Field("float", 5.0, "Angular radius of the sun disc.", "degrees", 0.1, 20.0),
+    "sun.radius": Field("float", 5.0, "Angular radius of the sun disc (at least 0.5: the sky map "
+                        "has 0.35 degree texels).", "degrees", 0.5, 20.0),
     "sun.radiance": Field("vec3", [8.0, 7.5, 6.0], "Radiance of the sun disc (0 = no sun).",
                           "linear RGB", 0.0, 1e6),
     "reference.spp": Field("int_or_auto", "auto", "Samples per pixel, or `auto` to reach "

@@ -3,8 +3,8 @@
 Only the tunable-constants block of each fragment shader changes
 (``shaders_port.write_constants``); the vertex shader is copied as shipped. Every written
 shader is compiled with ``glslangValidator`` before anything reaches the output folder, and
-the folder is replaced atomically (written beside it, then renamed), so a failed export
-leaves no half-written shaders.
+the new folder is written beside the old one and swapped in by two renames, so a failed
+export leaves no half-written shaders and the previous export in place.
 """
 from __future__ import annotations
 
@@ -65,9 +65,8 @@ def export_shaders(constants: Constants, out_dir) -> list[Path]:
             (tmp / dialect / fname).write_text(text, encoding="utf-8")
         old = None
         if out_dir.exists():
-            old = out_dir.with_name(f".{out_dir.name}.old")
-            shutil.rmtree(old, ignore_errors=True)
-            os.replace(out_dir, old)
+            old = Path(tempfile.mkdtemp(dir=out_dir.parent, prefix=f".{out_dir.name}.old."))
+            os.replace(out_dir, old / out_dir.name)
         os.replace(tmp, out_dir)
         if old is not None:
             shutil.rmtree(old, ignore_errors=True)

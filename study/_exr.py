@@ -66,12 +66,17 @@ def read_exr(path) -> tuple[np.ndarray, dict, dict[str, np.ndarray]]:
     return rgb, provenance, channels
 
 
+def to_srgb(img: np.ndarray) -> np.ndarray:
+    """Linear RGB -> sRGB-encoded values in [0, 1] (NaN shown as 0, clipped)."""
+    x = np.clip(np.nan_to_num(np.asarray(img, np.float64), nan=0.0), 0.0, 1.0)
+    return np.where(x <= 0.0031308, 12.92 * x, 1.055 * np.power(x, 1 / 2.4) - 0.055)
+
+
 def write_png(path, rgb: np.ndarray, exposure: float = 1.0) -> Path:
     """Write a linear-RGB image as an sRGB-encoded 8-bit PNG preview (clipped)."""
     import matplotlib.image
 
-    x = np.clip(np.nan_to_num(np.asarray(rgb, dtype=np.float64) * exposure, nan=0.0), 0.0, 1.0)
-    srgb = np.where(x <= 0.0031308, 12.92 * x, 1.055 * np.power(x, 1 / 2.4) - 0.055)
+    srgb = to_srgb(np.asarray(rgb, dtype=np.float64) * exposure)
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     matplotlib.image.imsave(path, (srgb * 255 + 0.5).astype(np.uint8))

@@ -407,11 +407,11 @@ def _optimistix(res: DrJitResidual, solver: str, u0, max_steps, rtol, atol, nm_s
     try:
         value, result, steps = run(jnp.asarray(y0, jnp.float64))
     except Exception as e:
-        # A Dr.Jit callback raised inside the jitted solve (JAX wraps it in its runtime error);
-        # anything else is a programming error and propagates.
-        if res.last_error is None and not isinstance(e, jax.errors.JaxRuntimeError):
-            raise
-        cause = res.last_error if res.last_error is not None else e
+        # A non-finite model value inside the jitted solve (JAX wraps the callback's error):
+        # report it and return the best point. Any other error is a bug and propagates.
+        if not isinstance(res.last_error, FloatingPointError):
+            raise (res.last_error or e) from e
+        cause = res.last_error
         best = res.stats.best_x if res.stats.best_x is not None else np.asarray(u0)
         first = str(cause).strip().splitlines()[0] if str(cause).strip() else repr(cause)
         return np.asarray(best), 0, False, f"solver aborted ({type(cause).__name__}): {first}; " \
@@ -449,7 +449,10 @@ def _adam(problem: FitProblem, res: DrJitResidual, base: dict, names, u0, max_st
         if problem.loss_drjit is not None:
             vals = dict(base)
             vals.update({p.name: p.from_u(opt[p.name], xp=dr) for p in ps})
-            loss = problem.loss_drjit(vals)
+            try:
+                loss = problem.loss_drjit(vals)
+            except FloatingPointError as e:
+                return best_u, it, False, f"stopped: {e}", n_grad, losses
             dr.backward(loss)
             value = float(dr.detach(loss)[0] if dr.width(loss) else loss)
             n_grad += 1
@@ -459,14 +462,13 @@ def _adam(problem: FitProblem, res: DrJitResidual, base: dict, names, u0, max_st
             try:
                 r, J = res.value_and_jac(u)
             except FloatingPointError as e:
-                return u, it, False, f"stopped: {e}", n_grad, losses
+                return best_u, it, False, f"stopped: {e}", n_grad, losses
             value, g = 0.5 * float(r @ r), J.T @ r
             for p, gi in zip(ps, g):
                 dr.set_grad(opt[p.name], Float(float(gi)))
             grads = g
         if not (math.isfinite(value) and np.all(np.isfinite(grads))):
-            u = np.array([float(opt[p.name][0]) for p in ps])
-            return u, it, False, f"stopped at iteration {it}: non-finite loss or gradient", n_grad, losses
+            return best_u, it, False, f"stopped at iteration {it}: non-finite loss or gradient", n_grad, losses
         losses.append(value)
         if value <= min(losses):
             best_u = np.array([float(opt[p.name][0]) for p in ps])

@@ -210,6 +210,10 @@ class ShaderModel:
             warnings.simplefilter("ignore", RuntimeWarning)
             out = self.mod.render(self.inputs, constants, backend=self.backend)
         self.n_renders += 1
+        bad = out.diagnostics.get("nonfinite")
+        if bad is not None and float(dr.sum(bad * self._mask_t[..., 0], axis=None).array[0]) > 0:
+            raise FloatingPointError("the port produced non-finite water pixels; see the 'nonfinite' "
+                                     "diagnostic")
         d = (out.color - self._ref_t) * self._mask_t
         return (0.5 * dr.sum(d * d, axis=None)).array      # a size-1 Float
 

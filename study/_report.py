@@ -8,17 +8,14 @@ from pathlib import Path
 
 import numpy as np
 
+from ._exr import to_srgb
+
 
 def _plt():
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
     return plt
-
-
-def to_srgb(img: np.ndarray) -> np.ndarray:
-    x = np.clip(np.nan_to_num(np.asarray(img, np.float64)), 0, 1)
-    return np.where(x <= 0.0031308, 12.92 * x, 1.055 * np.power(x, 1 / 2.4) - 0.055)
 
 
 def comparison_figure(path: Path, images: dict, errors: dict, mask: np.ndarray, title: str = "") -> Path:
@@ -152,6 +149,23 @@ def write_report(out: Path, summary: dict, figures: dict) -> Path:
               "divided by the largest column norm. Standard error from the Gauss-Newton covariance "
               "s^2 (J^T J)^-1 at the solution, s^2 = ||r||^2 / (m - k), as a relative error of the value.", ""]
     lines += identifiability_table(summary["identifiability"]) + [""]
+    sw = summary.get("step_sweep")
+    if sw:
+        lines += ["## Step schedule (sweep)", "",
+                  "Step counts change which step crosses the floor, so their effect is piecewise "
+                  "constant: they are chosen from a grid of the loss at the fitted continuous "
+                  f"constants, not by a gradient. Best: {sw['best']}.", ""]
+        if len(sw["names"]) == 2:
+            a, b = sw["names"]
+            lines += [f"| {a} \\ {b} | " + " | ".join(_fmt(v) for v in sw["grid"][b]) + " |",
+                      "|---|" + "---|" * len(sw["grid"][b])]
+            for va, row in zip(sw["grid"][a], sw["loss"]):
+                lines.append(f"| {_fmt(va)} | " + " | ".join(_fmt(v) for v in row) + " |")
+        else:
+            (a,) = sw["names"]
+            lines += [f"| {a} | loss |", "|---|---|"]
+            lines += [f"| {_fmt(v)} | {_fmt(l)} |" for v, l in zip(sw["grid"][a], sw["loss"])]
+        lines.append("")
     if "loss" in figures:
         lines += ["## Convergence", "", f"![loss per iteration]({figures['loss']})", ""]
     if "diagnostics" in figures:
@@ -169,7 +183,10 @@ def write_report(out: Path, summary: dict, figures: dict) -> Path:
               "(GLSL 330 core); every file compiled with glslangValidator"
               + (f"; the exported core shader on llvmpipe vs the port with the fitted constants: "
                  f"mean |diff| {_fmt(summary['gl_check']['mean_abs'], 3)}, 99.9th percentile "
-                 f"{_fmt(summary['gl_check']['p999'], 3)}." if summary.get("gl_check") else "."), ""]
+                 f"{_fmt(summary['gl_check']['p999'], 3)}"
+                 + ("." if summary['gl_check'].get('passed') else " -- **MISMATCH: do not ship these "
+                    "shaders; see constants.json gl_check**.") if summary.get("gl_check") else "."), ""]
+    from ._jobs import write_text_atomic
     path = out / "report.md"
-    path.write_text("\n".join(lines))
+    write_text_atomic(path, "\n".join(lines))
     return path

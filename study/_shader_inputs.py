@@ -32,6 +32,7 @@ from ._experiment import Experiment
 from ._geometry import cubemap_directions, sky_radiance
 from ._scene import build_geometry, camera_view_proj, sky_params, waves_of
 
+INPUTS_VERSION = 1        # bump whenever the construction of the inputs below changes
 NO_GEOMETRY = -1e3
 CUBEMAP_SIZE = 64
 FRESNEL_SIZE = 256
@@ -233,14 +234,18 @@ def build_shader_inputs(exp: Experiment, width: int | None = None, height: int |
 def load_or_build_shader_inputs(exp: Experiment, variant: str, cache=None, log=print) -> ShaderInputs:
     """The shader inputs of ``exp`` from ``<cache>/inputs/<key>.npz`` if present, else built
     and written there atomically. The key hashes every experiment value that affects them
-    (``Experiment.inputs_hash``), the variant, ``SCENE_VERSION`` and the package versions."""
+    (``Experiment.inputs_hash``), the variant, ``SCENE_VERSION``, ``INPUTS_VERSION``, this
+    module's sizes and the package versions. The file name is the key, and files are written
+    atomically, so a file under a key holds exactly what was built for it."""
     import hashlib
     import json
 
     from ._reference import SCENE_VERSION, _versions, cache_dir
 
     key = hashlib.sha256(json.dumps({"inputs": exp.inputs_hash(), "variant": variant,
-                                     "scene_version": SCENE_VERSION, "versions": _versions()},
+                                     "scene_version": SCENE_VERSION, "inputs_version": INPUTS_VERSION,
+                                     "sizes": [CUBEMAP_SIZE, FRESNEL_SIZE, LIGHT_DISTANCE, NO_GEOMETRY],
+                                     "versions": _versions()},
                                     sort_keys=True).encode()).hexdigest()[:32]
     path = (cache or cache_dir()) / "inputs" / f"{key}.npz"
     if path.exists():

@@ -300,3 +300,18 @@ def test_clear_water_freezes_attenuation_distance():
     assert p["status"] == "frozen" and p["fitted"] is None and "sigma_t = 0" in p["reason"]
     assert cal.fitted.attenuation_distance == Constants().attenuation_distance
     assert cal.parameters["bumptex_mult"]["status"] == "fitted"
+
+
+def test_calibrate_model_with_step_counts():
+    """Requesting the step counts: continuous constants by the solver, step counts by the sweep
+    (status 'swept'), the sweep table in the result; and step counts alone work too."""
+    truth = Constants(attenuation_distance=5.0, steps_grazing=6.0, steps_steep=2.0)
+    model = _model(_inputs(), truth)
+    cal = calibrate_model(model, Constants(), ["attenuation_distance", "steps_grazing", "steps_steep"],
+                          "levenberg_marquardt", 60)
+    assert cal.parameters["steps_grazing"]["status"] == "swept"
+    assert (cal.fitted.steps_grazing, cal.fitted.steps_steep) == (6.0, 2.0)
+    assert cal.sweep["best"] == {"steps_grazing": 6.0, "steps_steep": 2.0}
+    assert np.array(cal.sweep["loss"]).shape == (len(STEP_GRID["steps_grazing"]), len(STEP_GRID["steps_steep"]))
+    only = calibrate_model(model, Constants(), ["steps_grazing"], "levenberg_marquardt", 60)
+    assert only.parameters["steps_grazing"]["status"] == "swept" and only.sweep["names"] == ["steps_grazing"]

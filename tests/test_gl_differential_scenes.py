@@ -41,4 +41,7 @@ def test_port_matches_gl_on_scene_inputs(scene_inputs, name, which, shader):
     assert r["mask_mismatch"] <= 0.002 * r["n_water"], r["mask_mismatch"]
     assert r["mean_abs"] <= 1e-3, r["mean_abs"]
     assert r["p999"] <= 1e-2, r["p999"]
-    assert r["unexplained"] == 0, (r["n_outliers"], r["explained"])
+    assert r["unexplained"] == 0 and r["n_nonfinite"] == 0, (r["n_outliers"], r["explained"])
+    # the measured level (float32 rounding only, see shaders_port/_compare.py) is far below the
+    # contract bounds above; a systematic difference 30x larger than measured must not pass
+    assert r["mean_abs"] <= 1e-4 and r["p999"] <= 1e-3, (r["mean_abs"], r["p999"])
