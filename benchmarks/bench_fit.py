@@ -16,7 +16,6 @@ from __future__ import annotations
 
 import argparse
 import sys
-import time
 from pathlib import Path
 
 REPO = Path(__file__).resolve().parent.parent
@@ -34,7 +33,6 @@ def main() -> None:
     ap.add_argument("--max-steps", type=int, default=200)
     args = ap.parse_args()
 
-    import numpy as np
 
     from study import init_backend, load_experiment
     from study._calibrate import make_problem

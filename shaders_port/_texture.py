@@ -143,7 +143,6 @@ def cube_face_coords(m, rx, ry, rz):
     ax, ay, az = dr.abs(rx), dr.abs(ry), dr.abs(rz)
     use_x = (ax >= ay) & (ax >= az)
     use_y = ~use_x & (ay >= az)
-    use_z = ~use_x & ~use_y
     face = dr.select(use_x, dr.select(rx >= 0, m.UInt32(0), m.UInt32(1)),
                      dr.select(use_y, dr.select(ry >= 0, m.UInt32(2), m.UInt32(3)),
                                dr.select(rz >= 0, m.UInt32(4), m.UInt32(5))))

@@ -56,7 +56,6 @@ def prepare(experiment, out, overrides=None, variant=None):
 
 def run_render(experiment, out, overrides=None, variant=None, cache=None) -> dict:
     """``study render``: reference.exr (+ PNG), shader inputs (.npz and EXRs), summary.json."""
-    from ._reference import load_or_render
     exp, variant, out = prepare(experiment, out, overrides, variant)
     ref, inputs, timings = load_scene_data(exp, variant, cache)
     t_ref, t_inp = timings["reference_s"], timings["inputs_s"]
@@ -86,9 +85,6 @@ def save_shader_inputs(inputs, folder: Path) -> None:
     lut[0, :, :2] = inputs.fresnel_lut
     write_exr(folder / "fresnel_lut.exr", lut)
 
-
-def finite_or_none(x):
-    return float(x) if x is not None and math.isfinite(x) else None
 
 
 def load_scene_data(exp, variant, cache=None):
