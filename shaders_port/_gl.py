@@ -69,6 +69,8 @@ class GLRenderer:
         source: fragment shader text to run instead of the shipped file (e.g. an export).
     """
 
+    MAX_PROGRAMS = 8   # compiled programs kept (one per distinct constants text), oldest dropped
+
     def __init__(self, name: str, inputs: ShaderInputs, *, dialect: str = "core",
                  reflection: bool = True, source: str | None = None):
         if name not in _FRAG_NAMES:
@@ -150,6 +152,10 @@ class GLRenderer:
             self._set_static_uniforms(prog)
             prog = (prog, vao)
             self._programs[frag_source] = prog
+            while len(self._programs) > self.MAX_PROGRAMS:   # oldest first (dicts keep order)
+                old_prog, old_vao = self._programs.pop(next(iter(self._programs)))
+                old_vao.release()
+                old_prog.release()
         return prog
 
     def _set_static_uniforms(self, prog) -> None:

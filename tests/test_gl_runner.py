@@ -211,3 +211,20 @@ def test_missing_egl_names_the_packages(monkeypatch):
     monkeypatch.setattr(moderngl, "create_context", fail)
     with pytest.raises(RuntimeError, match="libegl1 libegl-mesa0 libgl1-mesa-dri"):
         create_egl_context()
+
+
+def test_renderer_keeps_a_bounded_number_of_programs():
+    """Many constant sets through one renderer: compiled programs are released beyond the cap,
+    and a constant set seen before still renders the same after its program was dropped."""
+    from shaders_port import Constants
+    from shaders_port._gl import GLRenderer
+    from synthetic import synthetic_inputs
+
+    inputs = synthetic_inputs(24, 16)
+    with GLRenderer("water_refraction", inputs) as r:
+        first, _ = r.render(Constants(attenuation_distance=2.0))
+        for k in range(r.MAX_PROGRAMS + 4):
+            r.render(Constants(attenuation_distance=3.0 + k))
+        assert len(r._programs) == r.MAX_PROGRAMS
+        again, _ = r.render(Constants(attenuation_distance=2.0))
+    assert np.array_equal(first, again)
