@@ -3,7 +3,9 @@ from __future__ import annotations
 
 import json
 import math
+import os
 import sys
+import tempfile
 import time
 from pathlib import Path
 
@@ -32,8 +34,6 @@ def write_json(path: Path, data: dict) -> None:
 
 def write_text_atomic(path: Path, text: str) -> None:
     """Write text under a unique temporary name beside ``path``, then rename it into place."""
-    import os
-    import tempfile
     path = Path(path)
     fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
     try:
@@ -58,12 +58,11 @@ def run_render(experiment, out, overrides=None, variant=None, cache=None) -> dic
     """``study render``: reference.exr (+ PNG), shader inputs (.npz and EXRs), summary.json."""
     exp, variant, out = prepare(experiment, out, overrides, variant)
     ref, inputs, timings = load_scene_data(exp, variant, cache)
-    t_ref, t_inp = timings["reference_s"], timings["inputs_s"]
     write_exr(out / "reference.exr", ref.image, ref.provenance)
     write_png(out / "reference.png", ref.image)
     save_shader_inputs(inputs, out / "inputs")
     summary = {"experiment": exp["name"], "variant": variant, "reference": ref.provenance,
-               "timings": {"reference_s": t_ref, "inputs_s": t_inp},
+               "timings": timings,
                "outputs": sorted(str(p.relative_to(out)) for p in out.rglob("*") if p.is_file())}
     write_json(out / "summary.json", summary)
     _log(f"render: wrote {out}")
