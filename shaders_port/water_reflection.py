@@ -24,11 +24,10 @@ from ._inputs import Constants, ShaderInputs
 from ._raster import prepare
 from ._texture import backend_types, mix, texmat_xy
 from . import water_refraction
-from .water_refraction import (ShaderOutput, attenuation, cubemap_reflection, evaluated_loops_if,
-                               eye_and_light, finish_output, fresnel_combine, interpolate_crossing,
-                               jacobian_passes, loop_R, tangents, loop_positions, normal_map_block, raycast_ground, reflect,
-                               nonfinite_any, refraction_vector, resolve_constants,
-                               specular_highlight)
+from .water_refraction import (ShaderOutput, cubemap_reflection, evaluated_loops_if, finish_output,
+                               fresnel_combine, jacobian_passes, loop_positions, loop_R, nonfinite_any,
+                               reflect, refraction_blocks, resolve_constants, specular_highlight,
+                               tangents)
 
 __all__ = ["render", "render_with_jacobian", "ShaderOutput"]
 
@@ -68,17 +67,11 @@ def raycast_reflection(m, P, R, C):
 
 
 def _shade(m, P, C):
-    vEye, vLight = eye_and_light(m, P)
-    vBumpTex, vBumpTexMore = normal_map_block(m, P, C.bumptex_mult)
-    R = refraction_vector(m, vEye, vBumpTexMore, C)
-    current_position, current_position_old, depth, olddepth, iterations, crossed = \
-        raycast_ground(m, P, loop_R(C, R), C.loop_cap)
-    current_position, current_position_old = loop_positions(
-        m, C, R, current_position, current_position_old, iterations)
-    current_position, vRefraction, denominator = interpolate_crossing(
-        m, P, current_position, current_position_old, depth, olddepth)
-    vRefraction = attenuation(m, P, current_position, vRefraction, C)
-    refraction_R, refracted_position = R, current_position
+    # ---- [1]-[6]: as in water_refraction ----
+    f = refraction_blocks(m, P, C)
+    vEye, vLight, vBumpTex, vBumpTexMore = f.vEye, f.vLight, f.vBumpTex, f.vBumpTexMore
+    vRefraction, iterations, crossed, denominator = f.vRefraction, f.iterations, f.crossed, f.denominator
+    refraction_R, refracted_position = f.R, f.current_position
 
     # ---- [7] Reflection ----
     R = dr.normalize(reflect(m, -vEye, vBumpTexMore))

@@ -397,7 +397,25 @@ def nonfinite_any(*vectors):
 
 # ---- the shader ---------------------------------------------------------------------------
 
-def _shade(m, P, C, reflection: bool):
+@dataclass
+class Refracted:
+    """What blocks [1]-[6] hand to the rest of either shader (names as in the GLSL)."""
+
+    vEye: object
+    vLight: object
+    vBumpTex: object
+    vBumpTexMore: object
+    R: object                  # the scaled refraction step vector
+    current_position: object   # the interpolated crossing
+    vRefraction: object        # attenuated refraction colour (vec4)
+    iterations: object
+    crossed: object
+    denominator: object
+
+
+def refraction_blocks(m, P, C) -> Refracted:
+    """Blocks [1]-[6], shared by ``water_refraction`` and ``water_reflection`` (the seed's
+    section 3: "very similar to the previous one")."""
     vEye, vLight = eye_and_light(m, P)
     vBumpTex, vBumpTexMore = normal_map_block(m, P, C.bumptex_mult)
     R = refraction_vector(m, vEye, vBumpTexMore, C)
@@ -408,6 +426,15 @@ def _shade(m, P, C, reflection: bool):
     current_position, vRefraction, denominator = interpolate_crossing(
         m, P, current_position, current_position_old, depth, olddepth)
     vRefraction = attenuation(m, P, current_position, vRefraction, C)
+    return Refracted(vEye, vLight, vBumpTex, vBumpTexMore, R, current_position, vRefraction,
+                     iterations, crossed, denominator)
+
+
+def _shade(m, P, C, reflection: bool):
+    f = refraction_blocks(m, P, C)
+    vEye, vLight, vBumpTex, vBumpTexMore = f.vEye, f.vLight, f.vBumpTex, f.vBumpTexMore
+    R, current_position, vRefraction = f.R, f.current_position, f.vRefraction
+    iterations, crossed, denominator = f.iterations, f.crossed, f.denominator
     fetches = 4 + 1 + iterations + 1
     bad = nonfinite_any(vEye, vBumpTex, vBumpTexMore, R, current_position)
     if reflection:
