@@ -35,14 +35,14 @@ def main() -> None:
 
 
     from study import init_backend, load_experiment
-    from study._calibrate import make_problem
-    from study._fit import fit
-    from study._identify import probe_gradient_solver
+    from study.fit.calibrate import make_problem
+    from study.fit.solvers import fit
+    from study.fit.identify import probe_gradient_solver
     from study._metrics import flip
-    from study._model import ShaderModel, constants_from_experiment
-    from study._model import expand_parameters, with_values
-    from study._reference import load_or_render
-    from study._shader_inputs import load_or_build_shader_inputs
+    from study.fit.model import ShaderModel, constants_from_experiment
+    from study.fit.model import expand_parameters, with_values
+    from study.scene.reference import load_or_render
+    from study.scene.shader_inputs import load_or_build_shader_inputs
 
     init_backend("llvm_ad_rgb")
     exp = load_experiment(args.experiment, ["fit.resolution=[256, 256]"] + args.overrides)
@@ -51,8 +51,8 @@ def main() -> None:
     model = ShaderModel.from_experiment(exp, inputs, ref.image)
     start = constants_from_experiment(exp)
     # drop what the scene does not identify, as `study calibrate` does
-    from study._calibrate import scene_frozen
-    from study._identify import identify
+    from study.fit.calibrate import scene_frozen
+    from study.fit.identify import identify
     names = [n for n in expand_parameters(exp["fit.parameters"])
              if not n.startswith("steps_") and n not in scene_frozen(exp)]
     problem = make_problem(model, start, names, progress=False)

@@ -26,7 +26,7 @@ def main() -> None:
     args = ap.parse_args()
 
     from study import init_backend, load_experiment
-    from study._reference import N_SEEDS, choose_spp, noise_of, render_passes, water_mask
+    from study.scene.reference import N_SEEDS, choose_spp, noise_of, render_passes, water_mask
 
     init_backend("llvm_ad_rgb")
     exp = load_experiment(args.experiment, args.overrides)

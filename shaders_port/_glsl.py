@@ -170,7 +170,9 @@ def _declarations(lines: list[str]) -> dict[str, tuple[int, re.Match]]:
 
 
 def _float_literal(x: float) -> str:
-    s = format(float(x), ".9g")
+    # The shortest text that reads back as the same float32 (GLSL's float). Nine digits of the
+    # float64 value can round to the neighbouring float32 (double rounding).
+    s = np.format_float_positional(np.float32(x), unique=True, trim="0")
     if not any(c in s for c in ".eE"):
         s += ".0"
     return s

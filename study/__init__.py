@@ -10,17 +10,17 @@ inputs (``build_shader_inputs``), the port against a reference (``ShaderModel``)
 (``export_shaders``, ``load_constants_json``), metrics (``rmse``, ``flip``).
 """
 from ._backend import BackendError, init_backend
-from ._bridge import DrJitResidual, NonFiniteResidualError, make_jax_residual
-from ._experiment import Experiment, ExperimentError, load_experiment, validate
-from ._export import export_shaders, load_constants_json
-from ._exr import read_exr, write_exr, write_png
-from ._fit import SOLVERS, FitProblem, FitResult, Param, fit
-from ._identify import IdentifyReport, identify, probe_gradient_solver, sweep_1d, sweep_2d
+from .fit.bridge import DrJitResidual, NonFiniteResidualError, make_jax_residual
+from .scene.experiment import Experiment, ExperimentError, load_experiment, validate
+from .report.export import export_shaders, load_constants_json
+from ._io import read_exr, write_exr, write_png
+from .fit.solvers import SOLVERS, FitProblem, FitResult, Param, fit
+from .fit.identify import IdentifyReport, identify, probe_gradient_solver, sweep_1d, sweep_2d
 from ._jobs import run_calibrate, run_export, run_preview, run_render
 from ._metrics import flip, rmse
-from ._model import ShaderModel, constants_from_experiment
-from ._reference import Reference, load_or_render
-from ._shader_inputs import build_shader_inputs
+from .fit.model import ShaderModel, constants_from_experiment
+from .scene.reference import Reference, load_or_render
+from .scene.shader_inputs import build_shader_inputs
 
 __all__ = [
     "BackendError", "init_backend", "DrJitResidual", "NonFiniteResidualError", "make_jax_residual",

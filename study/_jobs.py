@@ -3,17 +3,16 @@ from __future__ import annotations
 
 import json
 import math
-import os
 import sys
-import tempfile
 import time
 from pathlib import Path
 
 import numpy as np
 
 from ._backend import init_backend
-from ._experiment import load_experiment
-from ._exr import write_exr, write_png
+from .scene.experiment import load_experiment
+from ._io import write_exr, write_json, write_png
+from .report.gl_check import gl_check
 
 
 def _progress(label: str):
@@ -24,25 +23,6 @@ def _progress(label: str):
 
 def _log(msg: str) -> None:
     print(msg, file=sys.stderr, flush=True)
-
-
-def write_json(path: Path, data: dict) -> None:
-    """Write JSON atomically; refuses NaN/inf (they are not JSON)."""
-    path = Path(path)
-    write_text_atomic(path, json.dumps(data, indent=2, sort_keys=True, allow_nan=False) + "\n")
-
-
-def write_text_atomic(path: Path, text: str) -> None:
-    """Write text under a unique temporary name beside ``path``, then rename it into place."""
-    path = Path(path)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
-    try:
-        with os.fdopen(fd, "w") as f:
-            f.write(text)
-        os.replace(tmp, path)
-    finally:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
 
 
 def prepare(experiment, out, overrides=None, variant=None):
@@ -88,8 +68,8 @@ def save_shader_inputs(inputs, folder: Path) -> None:
 
 def load_scene_data(exp, variant, cache=None):
     """Reference (cached) and shader inputs at the experiment's resolution."""
-    from ._reference import load_or_render
-    from ._shader_inputs import load_or_build_shader_inputs
+    from .scene.reference import load_or_render
+    from .scene.shader_inputs import load_or_build_shader_inputs
 
     t0 = time.perf_counter()
     ref = load_or_render(exp, variant, cache=cache, progress=_progress("reference passes"), log=_log)
@@ -103,9 +83,9 @@ def run_preview(experiment, out, overrides=None, variant=None, cache=None) -> di
     """``study preview``: the port with the experiment's start constants next to the reference,
     error map, diagnostics (PNG) and error figures on water pixels (preview.json)."""
     from ._backend import drjit_backend
-    from ._report import comparison_figure, diagnostics_figure
+    from .report.calibration import comparison_figure, diagnostics_figure
     from ._metrics import errors
-    from ._model import ShaderModel, constants_from_experiment
+    from .fit.model import ShaderModel, constants_from_experiment
 
     exp, variant, out = prepare(experiment, out, overrides, variant)
     ref, inputs, timings = load_scene_data(exp, variant, cache)
@@ -136,7 +116,7 @@ def run_preview(experiment, out, overrides=None, variant=None, cache=None) -> di
 
 def run_export(constants_json, out) -> list:
     """``study export``: the shipped shaders with the constants of a JSON file, in ``out/shaders``."""
-    from ._export import export_shaders, load_constants_json
+    from .report.export import export_shaders, load_constants_json
 
     constants = load_constants_json(constants_json)
     out = Path(out)
@@ -149,14 +129,14 @@ def run_calibrate(experiment, out, overrides=None, variant=None, solver=None, ca
     """``study calibrate``: reference (cached), fit, export, GL check, figures, report.md and
     constants.json in ``out``."""
     from ._backend import drjit_backend
-    from ._calibrate import calibrate_model, scene_frozen, timed
-    from ._export import export_shaders
-    from ._report import comparison_figure, diagnostics_figure, loss_figure
+    from .fit.calibrate import calibrate_model, scene_frozen, timed
+    from .report.export import export_shaders
+    from .report.calibration import comparison_figure, diagnostics_figure, loss_figure
     from ._metrics import errors
-    from ._model import ShaderModel, constants_from_experiment
-    from ._report import write_report
+    from .fit.model import ShaderModel, constants_from_experiment
+    from .report.calibration import write_report
 
-    from ._fit import SOLVERS
+    from .fit.solvers import SOLVERS
     if solver is not None and solver not in SOLVERS:
         raise ValueError(f"unknown solver {solver!r}; choose one of {', '.join(SOLVERS)}")
     exp, variant, out = prepare(experiment, out, overrides, variant)
@@ -206,34 +186,6 @@ def run_calibrate(experiment, out, overrides=None, variant=None, solver=None, ca
     _log(f"calibrate: RMSE {e0['rmse']:.4f} -> {e1['rmse']:.4f}, FLIP {e0['flip']:.4f} -> {e1['flip']:.4f}; "
          f"wrote {out}")
     return summary
-
-
-def gl_check(shader: str, inputs, constants, shaders_dir: Path) -> dict:
-    """Run the exported core shader (its own constants block) on llvmpipe and compare it with the
-    port with ``constants`` on the water pixels."""
-    from shaders_port._compare import compare_port_gl
-    from shaders_port._gl import GLRenderer
-
-    source = (shaders_dir / "core" / f"{shader}.frag").read_text()
-    with GLRenderer(shader, inputs, source=source) as r:
-        res = compare_port_gl(inputs, constants, shader, renderer=_OwnBlock(r))
-    out = {k: res[k] for k in ("mean_abs", "p999", "max_abs", "n_water", "n_outliers", "n_nonfinite",
-                               "unexplained")}
-    out["passed"] = bool(np.isfinite(res["mean_abs"]) and res["mean_abs"] <= 1e-3 and res["p999"] <= 1e-2
-                         and res["unexplained"] == 0 and res["n_nonfinite"] == 0)
-    if not out["passed"]:
-        _log(f"calibrate: WARNING: the exported shader on llvmpipe does not match the port: {out}")
-    return out
-
-
-class _OwnBlock:
-    """A GLRenderer view whose render() ignores the constants (uses the exported block)."""
-
-    def __init__(self, r):
-        self.r = r
-
-    def render(self, constants):
-        return self.r.render(None)
 
 
 def _jsonable(x):

@@ -36,7 +36,7 @@ def main(argv=None) -> int:
     args = build_parser().parse_args(argv)
     from . import _jobs
     from ._backend import BackendError
-    from ._experiment import ExperimentError
+    from .scene.experiment import ExperimentError
 
     try:
         if args.command == "render":

@@ -16,7 +16,7 @@ import drjit as dr
 import drjit.llvm.ad as m
 import numpy as np
 
-from study._fit import FitProblem, Param
+from study.fit.solvers import FitProblem, Param
 
 TRUTH = {"amp": 0.8, "rate": 1.3, "shift": 0.15, "gain": 1.0, "dead": 0.5, "levels": 3.0}
 

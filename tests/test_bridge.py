@@ -7,7 +7,7 @@ jax = pytest.importorskip("jax")
 import jax.numpy as jnp  # noqa: E402
 
 from drjit_toy import TRUTH, ToyModel  # noqa: E402
-from study._bridge import NonFiniteResidualError, make_jax_residual  # noqa: E402
+from study.fit.bridge import NonFiniteResidualError, make_jax_residual  # noqa: E402
 
 NAMES = ["amp", "rate", "shift"]
 X = np.array([0.9, 1.1, 0.12])

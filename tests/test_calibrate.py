@@ -17,11 +17,11 @@ import pytest
 from synthetic import synthetic_inputs
 from shaders_port import Constants
 from shaders_port import water_refraction
-from study._calibrate import STEP_GRID, calibrate_model, make_problem, step_sweep
-from study._fit import fit
-from study._identify import probe_gradient_solver
-from study._model import ShaderModel
-from study._model import get_value, with_values
+from study.fit.calibrate import STEP_GRID, calibrate_model, make_problem, step_sweep
+from study.fit.solvers import fit
+from study.fit.identify import probe_gradient_solver
+from study.fit.model import ShaderModel
+from study.fit.model import get_value, with_values
 
 TRUTH = Constants(attenuation_distance=5.0, bumptex_mult=0.7, water_color=(0.1, 0.3, 0.2, 1.0))
 NAMES = ["attenuation_distance", "bumptex_mult", "water_color[0]", "water_color[1]", "water_color[2]"]
@@ -92,7 +92,7 @@ BASE = Constants(bumptex_mult=0.9)
 
 
 def _jax_residual(model, names):
-    from study._bridge import make_jax_residual
+    from study.fit.bridge import make_jax_residual
 
     def vals(x):
         return with_values(BASE, dict(zip(names, map(float, x))))
@@ -214,7 +214,7 @@ def test_calm_experiment_freezes_bumptex_mult(mi):
     """The same through the scene: ``waves.amplitude = 0`` gives a flat normal map from
     ``build_shader_inputs``, and the calibration freezes BumptexMult."""
     from conftest import small_experiment
-    from study._shader_inputs import build_shader_inputs
+    from study.scene.shader_inputs import build_shader_inputs
 
     inputs = build_shader_inputs(small_experiment(**{"waves.amplitude": 0})).with_resolution(32, 32)
     assert np.all(inputs.normal_map == np.array(FLAT_NORMAL, np.float32))
@@ -290,7 +290,7 @@ def test_clear_water_freezes_attenuation_distance():
     says: it is frozen before the fit, with the scene's reason, and never claimed as fitted."""
     from conftest import small_experiment
 
-    from study._calibrate import scene_frozen
+    from study.fit.calibrate import scene_frozen
     assert scene_frozen(small_experiment()) == {}
     why = scene_frozen(small_experiment(**{"water.sigma_t": "[0, 0, 0]"}))
     assert set(why) == {"attenuation_distance"} and "sigma_t = 0" in why["attenuation_distance"]

@@ -130,7 +130,7 @@ def test_calibrate_writes_constants_json(runs):
     c = json.loads((root / "calibrate" / "constants.json").read_text())
     params = c["parameters"]
     from study import load_experiment
-    from study._model import expand_parameters
+    from study.fit.model import expand_parameters
     requested = load_experiment(REPO / "experiments" / "default.toml")["fit.parameters"]
     assert set(params) == set(expand_parameters(requested))
     for name, p in params.items():

@@ -5,7 +5,7 @@ from pathlib import Path
 import pytest
 
 from study import ExperimentError, load_experiment, validate
-from study._experiment import SCHEMA, schema_markdown
+from study.scene.experiment import SCHEMA, schema_markdown
 
 REPO = Path(__file__).resolve().parent.parent
 
@@ -77,6 +77,6 @@ def test_scene_hash_tracks_scene_keys_only():
 
 def test_readme_documents_every_key():
     readme = (REPO / "experiments" / "README.md").read_text()
-    assert schema_markdown() in readme, "regenerate the table: python -m study._experiment"
+    assert schema_markdown() in readme, "regenerate the table: python -m study.scene.experiment"
     for key in SCHEMA:
         assert re.search(rf"`{re.escape(key)}`", readme)

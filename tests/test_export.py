@@ -12,8 +12,9 @@ import pytest
 from synthetic import synthetic_inputs
 from shaders_port import CONSTANT_SPECS, Constants, compile_check, read_constants, read_source
 from shaders_port._glsl import BEGIN_MARKER, END_MARKER, declared_constants
-from study._export import export_shaders, load_constants_json
-from study._jobs import gl_check, run_export
+from study.report.export import export_shaders, load_constants_json
+from study._jobs import run_export
+from study.report.gl_check import gl_check
 
 # every constant away from its default; 0.1, 0.3, 0.7, 0.76 and the fitted-looking
 # attenuation are not exact in float32
@@ -227,7 +228,7 @@ def test_failed_export_keeps_existing_export(tmp_path, monkeypatch):
         run_export(_write(tmp_path, '{"attenuation_distance": [1.0, 2.0]}', "bad2.json"), out)
     assert _snapshot(out) == before
     # a shader that does not compile, the fifth of six
-    import study._export as ex
+    import study.report.export as ex
     calls = {"n": 0}
     real = ex.compile_check
 

@@ -7,8 +7,8 @@ import numpy as np
 import pytest
 
 from drjit_toy import TRUTH, ToyModel
-from study._fit import SOLVERS, Param, fit
-from study._identify import identify, identify_problem, probe_gradient_solver, sweep_1d
+from study.fit.solvers import SOLVERS, Param, fit
+from study.fit.identify import identify, identify_problem, probe_gradient_solver, sweep_1d
 
 FREE = ["amp", "rate", "shift"]
 START = {"amp": 1.1, "rate": 0.9, "shift": 0.1, "gain": 1.0, "dead": 0.5, "levels": 3.0}

@@ -20,7 +20,7 @@ NON_DEFAULT = Constants(attenuation_distance=3.1, steps_grazing=6.5, steps_steep
 @pytest.fixture(scope="module")
 def scene_inputs(mi):
     from study import load_experiment
-    from study._shader_inputs import build_shader_inputs
+    from study.scene.shader_inputs import build_shader_inputs
     small = ["resolution=[96, 72]", "fit.resolution=[96, 72]", "reference.texture_size=128",
              "reference.texture_spp=4", "waves.normal_map_size=128", "reference.water_mesh=64"]
     return {name: build_shader_inputs(load_experiment(REPO / "experiments" / f"{name}.toml", small))

@@ -8,7 +8,7 @@ import pytest
 from conftest import small_experiment
 
 from shaders_port import fresnel_unpolarized
-from study._scene import build_scene, camera_view_proj
+from study.scene.mitsuba_scene import build_scene, camera_view_proj
 
 IOR = 1.333
 

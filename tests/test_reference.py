@@ -5,7 +5,7 @@ import pytest
 from conftest import small_experiment
 
 from study import read_exr
-from study._reference import load_or_render, noise_of, reference_key
+from study.scene.reference import load_or_render, noise_of, reference_key
 
 
 def test_cache_hit_miss_and_provenance(mi, tmp_path):
@@ -48,7 +48,7 @@ def test_foreign_or_corrupt_cache_file_is_not_reused(mi, tmp_path):
 
 
 def test_killed_render_leaves_no_cache_file(mi, tmp_path, monkeypatch):
-    import study._reference as R
+    import study.scene.reference as R
     exp = small_experiment()
 
     def killed(*a, **k):
@@ -62,7 +62,7 @@ def test_killed_render_leaves_no_cache_file(mi, tmp_path, monkeypatch):
 
 def test_noise_estimate_scales_with_spp(mi):
     """Measured noise follows 1/sqrt(spp) (independent seeds), within sampling error."""
-    from study._reference import render_passes, water_mask
+    from study.scene.reference import render_passes, water_mask
     exp = small_experiment()
     mask = water_mask(exp, 32, 32)
     _, n4 = noise_of(render_passes(exp, 4, 6, seed0=100), mask)
@@ -81,7 +81,7 @@ def test_noise_of_known_gaussian():
 
 
 def test_auto_spp_reaches_target(mi):
-    from study._reference import choose_spp
+    from study.scene.reference import choose_spp
     exp = small_experiment(**{"reference.spp": '"auto"', "reference.target_noise": "0.02",
                               "reference.max_spp": "4096"})
     spp, info = choose_spp(exp)
@@ -91,7 +91,7 @@ def test_auto_spp_reaches_target(mi):
 
 
 def test_shader_inputs_cache(mi, tmp_path):
-    from study._shader_inputs import load_or_build_shader_inputs
+    from study.scene.shader_inputs import load_or_build_shader_inputs
     exp = small_experiment()
     logs = []
     a = load_or_build_shader_inputs(exp, "llvm_ad_rgb", cache=tmp_path, log=logs.append)

@@ -3,8 +3,8 @@ import numpy as np
 import pytest
 from conftest import small_experiment
 
-from study._geometry import cubemap_directions, envmap_image, sky_radiance
-from study._scene import build_scene, camera_view_proj, sky_params
+from study.scene.geometry import cubemap_directions, envmap_image, sky_radiance
+from study.scene.mitsuba_scene import build_scene, camera_view_proj, sky_params
 
 
 def test_mitsuba_camera_matches_gl_projection(mi):

@@ -25,7 +25,7 @@ const float SPECULAR_EXPONENT = 256.0;
 //multiplier to enhance normal-perturbation. 0=max perturbation 1=normal perturbation
 uniform float BumptexMult = 1.0;
 //refractioncoefficient = c_air/c_water
-uniform float refrCoeff = 0.750187547;
+uniform float refrCoeff = 0.7501876;
 //watercolor, for modulation of refracted color
 uniform vec4 waterColor = vec4(0.05, 0.25, 0.3, 1.0);
 //color for modulation of reflected light

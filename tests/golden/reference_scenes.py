@@ -41,7 +41,7 @@ def golden_path(name: str) -> Path:
 
 
 def render(name: str):
-    from study._reference import render_reference
+    from study.scene.reference import render_reference
     return render_reference(experiment(name), "llvm_ad_rgb")
 
 

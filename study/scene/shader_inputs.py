@@ -28,9 +28,9 @@ import numpy as np
 
 from shaders_port import ShaderInputs, fresnel_lut, ortho_tex_matrix
 
-from ._experiment import Experiment
-from ._geometry import cubemap_directions, sky_radiance
-from ._scene import build_geometry, camera_view_proj, sky_params, waves_of
+from .experiment import Experiment
+from .geometry import cubemap_directions, sky_radiance
+from .mitsuba_scene import build_geometry, camera_view_proj, sky_params, waves_of
 
 INPUTS_VERSION = 1        # bump whenever the construction of the inputs below changes
 NO_GEOMETRY = -1e3
@@ -115,8 +115,8 @@ def top_down_world_y(exp: Experiment, extent, size: int) -> np.ndarray:
 
 def _render_top_down(mi, exp: Experiment, extent, size: int, spp: int, seed: int, *, water: bool,
                      y_cam: float = 100.0) -> np.ndarray:
-    from ._geometry import envmap_image
-    from ._scene import has_medium, water_medium
+    from .geometry import envmap_image
+    from .mitsuba_scene import has_medium, water_medium
 
     medium = water_medium(mi, exp) if water else None
     d = {"type": "scene", **build_geometry(mi, exp, water=water, medium=medium),
@@ -131,7 +131,7 @@ def _render_top_down(mi, exp: Experiment, extent, size: int, spp: int, seed: int
 
 def underwater_camera_height(exp: Experiment) -> float:
     """Height of the under-water orthographic camera: below the lowest wave trough, above the floor."""
-    from ._scene import floor_of
+    from .mitsuba_scene import floor_of
     y_cam = -exp["waves.amplitude"] - 0.02
     hx, hz = exp["pool.half_extent"]
     x, z = np.meshgrid(np.linspace(-hx, hx, 129), np.linspace(-hz, hz, 129))
@@ -240,7 +240,7 @@ def load_or_build_shader_inputs(exp: Experiment, variant: str, cache=None, log=p
     import hashlib
     import json
 
-    from ._reference import SCENE_VERSION, _versions, cache_dir
+    from .reference import SCENE_VERSION, _versions, cache_dir
 
     key = hashlib.sha256(json.dumps({"inputs": exp.inputs_hash(), "variant": variant,
                                      "scene_version": SCENE_VERSION, "inputs_version": INPUTS_VERSION,

@@ -50,7 +50,7 @@ from typing import Callable
 
 import numpy as np
 
-from ._bridge import DrJitResidual, make_jax_residual
+from .bridge import DrJitResidual, make_jax_residual
 
 LEAST_SQUARES = ("levenberg_marquardt", "gauss_newton", "dogleg")
 MINIMISERS = ("bfgs", "nelder_mead", "nelder_mead_optimistix")

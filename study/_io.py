@@ -1,4 +1,5 @@
-"""HDR images as OpenEXR files (via the ``OpenEXR`` package), with provenance in the header.
+"""Images and text on disk: OpenEXR files with provenance in the header, PNG previews, and atomic
+JSON/text writers (a killed process never leaves a truncated file under the final name).
 
 Images are float32 ``(height, width, 3)`` linear RGB, row 0 at the top. Extra layers
 (e.g. the per-pixel standard error) are ``(height, width)`` or ``(height, width, 3)`` float32. Provenance is a JSON
@@ -81,3 +82,22 @@ def write_png(path, rgb: np.ndarray, exposure: float = 1.0) -> Path:
     path.parent.mkdir(parents=True, exist_ok=True)
     matplotlib.image.imsave(path, (srgb * 255 + 0.5).astype(np.uint8))
     return path
+
+
+def write_json(path: Path, data: dict) -> None:
+    """Write JSON atomically; refuses NaN/inf (they are not JSON)."""
+    path = Path(path)
+    write_text_atomic(path, json.dumps(data, indent=2, sort_keys=True, allow_nan=False) + "\n")
+
+
+def write_text_atomic(path: Path, text: str) -> None:
+    """Write text under a unique temporary name beside ``path``, then rename it into place."""
+    path = Path(path)
+    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
+    try:
+        with os.fdopen(fd, "w") as f:
+            f.write(text)
+        os.replace(tmp, path)
+    finally:
+        if os.path.exists(tmp):
+            os.unlink(tmp)

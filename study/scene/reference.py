@@ -27,8 +27,8 @@ from pathlib import Path
 
 import numpy as np
 
-from ._exr import read_exr, write_exr
-from ._experiment import Experiment
+from .._io import read_exr, write_exr
+from .experiment import Experiment
 
 SCENE_VERSION = 2
 N_SEEDS = 4
@@ -82,7 +82,7 @@ def render_passes(exp: Experiment, spp_per_pass: int, n_passes: int, seed0: int,
     """(n_passes, H, W, 3) float32 renders with independent seeds ``seed0 + i``."""
     import mitsuba as mi
 
-    from ._scene import build_scene
+    from .mitsuba_scene import build_scene
 
     scene = build_scene(exp)
     out = []
@@ -100,7 +100,7 @@ def water_mask(exp: Experiment, width: int, height: int) -> np.ndarray:
     import drjit as dr
     import mitsuba as mi
 
-    from ._scene import build_scene
+    from .mitsuba_scene import build_scene
 
     scene = build_scene(exp, width, height)
     sensor = scene.sensors()[0]

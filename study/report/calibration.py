@@ -8,7 +8,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ._exr import to_srgb
+from .._io import to_srgb
 
 
 def _plt():
@@ -186,7 +186,7 @@ def write_report(out: Path, summary: dict, figures: dict) -> Path:
                  f"{_fmt(summary['gl_check']['p999'], 3)}"
                  + ("." if summary['gl_check'].get('passed') else " -- **MISMATCH: do not ship these "
                     "shaders; see constants.json gl_check**.") if summary.get("gl_check") else "."), ""]
-    from ._jobs import write_text_atomic
+    from .._io import write_text_atomic
     path = out / "report.md"
     write_text_atomic(path, "\n".join(lines))
     return path

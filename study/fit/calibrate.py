@@ -29,9 +29,9 @@ import numpy as np
 
 from shaders_port import Constants
 
-from ._fit import FitProblem, Param, fit
-from ._identify import identify, sweep_1d, sweep_2d
-from ._model import ShaderModel, bounds, expand_parameters, get_value, with_values
+from .solvers import FitProblem, Param, fit
+from .identify import identify, sweep_1d, sweep_2d
+from .model import ShaderModel, bounds, expand_parameters, get_value, with_values
 
 DISCRETE = ("steps_grazing", "steps_steep")
 # solver stopping tolerances (on u = transformed parameters, where one unit is about a 50 %
@@ -113,7 +113,7 @@ def scene_frozen(exp) -> dict:
     """Constants the scene's physics cannot identify whatever the Jacobian says: clear water
     (``water.sigma_t = 0``) has no attenuation, so the shader's attenuation there could only be
     a blend towards a mean colour that happens to lower the error, not a distance."""
-    from ._scene import has_medium
+    from ..scene.mitsuba_scene import has_medium
     if has_medium(exp):
         return {}
     return {"attenuation_distance": "the scene's water does not absorb (water.sigma_t = 0), so it "

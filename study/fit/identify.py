@@ -28,7 +28,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ._fit import FitProblem, FitResult, fit
+from .solvers import FitProblem, FitResult, fit
 
 NULL_COMPONENT = 0.3
 

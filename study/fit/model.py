@@ -18,8 +18,8 @@ import numpy as np
 
 from shaders_port import CONSTANT_SPECS, Constants, ShaderInputs
 
-from ._experiment import Experiment
-from ._metrics import downsample, erode
+from ..scene.experiment import Experiment
+from .._metrics import downsample, erode
 
 
 # ---- scalar names of constants: 'bumptex_mult', 'water_color[2]' (colours expand to RGB;
@@ -156,7 +156,7 @@ class ShaderModel:
     def from_experiment(cls, exp: Experiment, inputs_full: ShaderInputs, reference_full: np.ndarray,
                         shader: str | None = None, backend: str = "llvm",
                         resolution: tuple[int, int] | None = None) -> "ShaderModel":
-        from ._reference import water_mask
+        from ..scene.reference import water_mask
 
         w, h = resolution or exp["fit.resolution"]
         fy, fx = reference_full.shape[0] // h, reference_full.shape[1] // w

@@ -23,8 +23,8 @@ import numpy as np
 
 from shaders_port import perspective_view_proj
 
-from ._experiment import Experiment
-from ._geometry import Waves, envmap_image, floor_height, sun_direction
+from .experiment import Experiment
+from .geometry import Waves, envmap_image, floor_height, sun_direction
 
 WATER_INSET = 1e-3   # the water volume stays this far inside the walls (no coincident faces)
 
