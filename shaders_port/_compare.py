@@ -27,7 +27,6 @@ import numpy as np
 from ._inputs import Constants, ShaderInputs
 
 OUTLIER = 1e-2
-_SHADERS = ("water_refraction", "water_reflection")
 
 
 def _neighbour_differs(a: np.ndarray, valid: np.ndarray) -> np.ndarray:
@@ -52,8 +51,9 @@ def compare_port_gl(inputs: ShaderInputs, constants: Constants | None, shader: s
 
     Args:
         inputs, constants: the frame (constants None = defaults).
-        shader: 'water_refraction' or 'water_reflection'.
-        reflection: False for the NOREFLECTION variant of water_refraction.
+        shader: a shader variant name (``shaders_port._variants.VARIANTS``).
+        reflection: False for the NOREFLECTION variant of water_refraction (same as the
+            variant ``water_refraction_noreflection``).
         renderer: an open ``GLRenderer`` for these inputs to reuse (else one is made).
 
     Returns a dict: ``mean_abs`` and ``p999`` (99.9th percentile) and ``max_abs`` of the
@@ -62,19 +62,18 @@ def compare_port_gl(inputs: ShaderInputs, constants: Constants | None, shader: s
     (pixels over 1e-2); ``explained`` dict reason -> count; ``unexplained`` count;
     ``diff`` (H, W) float32 map (0 off the common water pixels); ``port`` / ``gl`` colours.
     """
-    from ._gl import GLRenderer
-    from . import water_reflection, water_refraction
+    from ._variants import get_variant
 
-    if shader not in _SHADERS:
-        raise ValueError(f"unknown shader {shader!r}; known: {_SHADERS}")
+    variant = get_variant(shader)
+    if not reflection:
+        if shader != "water_refraction":
+            raise ValueError("reflection=False (NOREFLECTION) is a variant of water_refraction only")
+        variant = get_variant("water_refraction_noreflection")
     constants = constants if constants is not None else Constants()
-    if shader == "water_refraction":
-        out = water_refraction.render(inputs, constants, reflection=reflection).numpy()
-    else:
-        out = water_reflection.render(inputs, constants).numpy()
+    out = variant.render(inputs, constants).numpy()
     own = renderer is None
     if own:
-        renderer = GLRenderer(shader, inputs, reflection=reflection)
+        renderer = variant.gl_renderer(inputs)
     try:
         rgba, gl_mask = renderer.render(constants)
     finally:
@@ -89,7 +88,7 @@ def compare_port_gl(inputs: ShaderInputs, constants: Constants | None, shader: s
     outlier = both & ~(diff <= OUTLIER)        # NaN on either side counts as an outlier
     reasons = {"tiny_denominator": out["denominator"] < 1e-3,
                "crossing_step_edge": _neighbour_differs(out["iterations"], port_mask)}
-    if shader == "water_reflection":
+    if "refl_hit" in out:
         reasons["reflection_decision"] = (_neighbour_differs(out["refl_hit"], port_mask)
                                           | _neighbour_differs(out["refl_iterations"], port_mask))
     explained, left = {}, outlier.copy()

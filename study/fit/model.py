@@ -17,6 +17,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from shaders_port import CONSTANT_SPECS, Constants, ShaderInputs
+from shaders_port._variants import get_variant
 
 from ..scene.experiment import Experiment
 from .._metrics import downsample, erode
@@ -81,16 +82,6 @@ def constants_from_experiment(exp: Experiment) -> Constants:
     return Constants(**kw).validate()
 
 
-def port_module(shader: str):
-    if shader == "water_refraction":
-        from shaders_port import water_refraction as mod
-    elif shader == "water_reflection":
-        from shaders_port import water_reflection as mod
-    else:
-        raise ValueError(f"unknown shader {shader!r}; choose water_refraction or water_reflection")
-    return mod
-
-
 @dataclass
 class Diagnostics:
     """Per-pixel diagnostics of one port render, as (H, W) float32 arrays."""
@@ -133,16 +124,17 @@ def _thread_handoff(fn):
 
 
 class ShaderModel:
-    """The port of ``shader`` on ``inputs`` compared against ``reference`` (same size)."""
+    """The port of the shader variant ``shader`` (a name in ``shaders_port._variants.VARIANTS``)
+    on ``inputs`` compared against ``reference`` (same size)."""
 
     def __init__(self, shader: str, inputs: ShaderInputs, reference: np.ndarray, backend: str = "llvm",
                  reference_mask: np.ndarray | None = None):
         self.shader, self.inputs, self.backend = shader, inputs, backend
-        self.mod = port_module(shader)
+        self.variant = get_variant(shader)
         if reference.shape != (inputs.height, inputs.width, 3):
             raise ValueError(f"reference is {reference.shape}, inputs are {inputs.height}x{inputs.width}")
         self.reference = np.asarray(reference, np.float32)
-        out = self.mod.render(inputs, Constants(), backend=backend).numpy()
+        out = self.variant.render(inputs, Constants(), backend=backend).numpy()
         mask = out["mask"] > 0.5
         if reference_mask is not None:
             mask &= reference_mask
@@ -169,7 +161,7 @@ class ShaderModel:
         """Port image (H, W, 3) float32 linear RGB and its diagnostics."""
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", RuntimeWarning)   # non-finite pixels are in the diagnostics
-            out = self.mod.render(self.inputs, constants, backend=self.backend).numpy()
+            out = self.variant.render(self.inputs, constants, backend=self.backend).numpy()
         self.n_renders += 1
         return out["color"], Diagnostics({k: v for k, v in out.items() if k not in ("color", "mask")})
 
@@ -185,7 +177,7 @@ class ShaderModel:
         """(residual (M,), J (M, k)) with J the derivative w.r.t. the named scalar constants."""
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", RuntimeWarning)
-            out, jac = self.mod.render_with_jacobian(self.inputs, constants, names, backend=self.backend)
+            out, jac = self.variant.render_with_jacobian(self.inputs, constants, names, backend=self.backend)
         o = out.numpy()
         self.n_jacobians += 1
         self._check(Diagnostics({k: v for k, v in o.items() if k not in ("color", "mask")}))
@@ -208,7 +200,7 @@ class ShaderModel:
             self._mask_t = m.TensorXf(np.repeat(self.mask[..., None], 3, -1).astype(np.float32))
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", RuntimeWarning)
-            out = self.mod.render(self.inputs, constants, backend=self.backend)
+            out = self.variant.render(self.inputs, constants, backend=self.backend)
         self.n_renders += 1
         bad = out.diagnostics.get("nonfinite")
         if bad is not None and float(dr.sum(bad * self._mask_t[..., 0], axis=None).array[0]) > 0:

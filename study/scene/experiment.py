@@ -16,6 +16,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from shaders_port import CONSTANT_SPECS
+from shaders_port._variants import VARIANTS
 
 
 class ExperimentError(ValueError):
@@ -34,7 +35,7 @@ class Field:
 
 
 FLOOR_SHAPES = ("flat", "slope", "steps", "terrain")
-SHADERS = ("water_refraction", "water_reflection")
+SHADERS = tuple(VARIANTS)
 SOLVERS = ("levenberg_marquardt", "gauss_newton", "dogleg", "bfgs", "nelder_mead", "adam")
 FIT_PARAMETERS = ("attenuation_distance", "bumptex_mult", "steps_grazing", "steps_steep",
                   "water_color", "reflect_color", "specular_strength", "specular_exponent")

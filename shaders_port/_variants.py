@@ -1,0 +1,100 @@
+"""The registry of shader variants: one entry per shader the study can fit, time and chart.
+
+A *variant* is one GLSL fragment shader (a file in ``glsl/`` and its Dr.Jit port module of the
+same name) compiled with a set of preprocessor names, and the port called with the matching
+options. Everything above this layer (the fit, the sweeps, the tradeoff chart, export and the
+GL check) names a shader by its variant name only, so a new shader joins the study with one
+file pair and one :func:`register` call here.
+
+``VARIANTS`` maps names to :class:`Variant`, in registration order (the order of charts and
+tables). Shipped: ``water_refraction`` (seed 000, section 2), ``water_refraction_noreflection``
+(the same file with ``#define NOREFLECTION``: refraction and specular, no sky reflection) and
+``water_reflection`` (seed 000, section 3: reflections raycast too).
+"""
+from __future__ import annotations
+
+import importlib
+from dataclasses import dataclass, field
+
+from ._glsl import read_source, with_define
+
+
+@dataclass(frozen=True)
+class Variant:
+    """One shader variant.
+
+    Attributes:
+        name: registry key; also the file stem of an exported variant.
+        shader: GLSL file stem under ``glsl/`` and port module under ``shaders_port``.
+        defines: preprocessor names inserted after ``#version`` (GL and export).
+        port_options: keyword arguments of the port's ``render`` / ``render_with_jacobian`` and
+            of ``GLRenderer`` that select the same variant there.
+        schedule: names of the integer-valued step-schedule constants the variant reads (swept by
+            the tradeoff study, never fitted by a gradient).
+        description: one line for reports.
+    """
+
+    name: str
+    shader: str
+    defines: tuple[str, ...] = ()
+    port_options: dict = field(default_factory=dict)
+    schedule: tuple[str, ...] = ()
+    description: str = ""
+
+    def port(self):
+        """The port module (imports Dr.Jit)."""
+        return importlib.import_module(f"shaders_port.{self.shader}")
+
+    def render(self, inputs, constants=None, **kw):
+        """``port.render`` with this variant's options: a ``ShaderOutput``."""
+        return self.port().render(inputs, constants, **self.port_options, **kw)
+
+    def render_with_jacobian(self, inputs, constants, names, **kw):
+        """``port.render_with_jacobian`` with this variant's options: ``(ShaderOutput, J)``."""
+        return self.port().render_with_jacobian(inputs, constants, names, **self.port_options, **kw)
+
+    def source(self, dialect: str = "core", text: str | None = None) -> str:
+        """Fragment shader text of the variant: ``text`` (e.g. an export) or the shipped file,
+        with the variant's defines inserted."""
+        src = text if text is not None else read_source(self.shader, "frag", dialect)
+        for d in self.defines:
+            src = with_define(src, d)
+        return src
+
+    def gl_renderer(self, inputs, source: str | None = None, dialect: str = "core"):
+        """A ``GLRenderer`` drawing this variant (``source``: the shader file's text without the
+        variant's defines, e.g. an export; the renderer adds them)."""
+        from ._gl import GLRenderer
+        return GLRenderer(self.shader, inputs, dialect=dialect, source=source, **self.port_options)
+
+
+VARIANTS: dict[str, Variant] = {}
+
+
+def register(variant: Variant) -> Variant:
+    """Add a variant; its name must be new and its shader a shipped file."""
+    if variant.name in VARIANTS:
+        raise ValueError(f"shader variant {variant.name!r} is already registered")
+    read_source(variant.shader, "frag", "core")   # raises naming the missing file
+    VARIANTS[variant.name] = variant
+    return variant
+
+
+def get_variant(name: str) -> Variant:
+    """The registered variant ``name``; a ValueError lists the known names otherwise."""
+    try:
+        return VARIANTS[name]
+    except KeyError:
+        raise ValueError(f"unknown shader variant {name!r}; known: {', '.join(VARIANTS)}") from None
+
+
+_RAYCAST = ("steps_grazing", "steps_steep", "loop_cap")
+
+register(Variant("water_refraction", "water_refraction", schedule=_RAYCAST,
+                 description="seed 000 section 2: raycast refraction, cube-map sky reflection, Phong highlight"))
+register(Variant("water_refraction_noreflection", "water_refraction", defines=("NOREFLECTION",),
+                 port_options={"reflection": False}, schedule=_RAYCAST,
+                 description="seed 000 section 2 with NOREFLECTION: raycast refraction and highlight, no sky"))
+register(Variant("water_reflection", "water_reflection",
+                 schedule=_RAYCAST + ("refl_steps_steep", "refl_steps_grazing", "refl_loop_cap"),
+                 description="seed 000 section 3: refraction and reflection both raycast"))
