@@ -23,11 +23,11 @@ import drjit as dr
 from ._inputs import Constants, ShaderInputs
 from ._raster import prepare
 from ._texture import backend_types, mix, texmat_xy
-from . import water_refraction
-from .water_refraction import (ShaderOutput, cubemap_reflection, evaluated_loops_if, finish_output,
-                               fresnel_combine, jacobian_passes, loop_positions, loop_R, nonfinite_any,
-                               reflect, refraction_blocks, resolve_constants, specular_highlight,
-                               tangents)
+from . import _frame
+from ._frame import (ShaderOutput, evaluated_loops_if, finish_output, jacobian_passes, nonfinite_any,
+                     resolve_constants, tangents)
+from .water_refraction import (cubemap_reflection, fresnel_combine, loop_positions, loop_R, reflect,
+                               refraction_blocks, specular_highlight)
 
 __all__ = ["render", "render_with_jacobian", "ShaderOutput"]
 
@@ -127,7 +127,7 @@ def render(inputs: ShaderInputs, constants: Constants | None = None, *,
     P = prepare(inputs, m)
     C = resolve_constants(m, constants if constants is not None else Constants(), loop_ad)
     with evaluated_loops_if(C.differentiable and loop_ad == "evaluated"):
-        if water_refraction.USE_FROZEN and not C.differentiable:
+        if _frame.USE_FROZEN and not C.differentiable:
             color, diag = _frozen_shade(m, P.shading_state(), C)
         else:
             color, diag = _shade(m, P, C)

@@ -41,19 +41,19 @@ Loops and derivatives. The raycast loops are ``@dr.syntax`` while loops with a p
   not trusted. Slower (one kernel per iteration).
 
 Plain renders (no gradient) and ``'replay'`` Jacobians replay recorded kernels
-(``dr.freeze``; set ``USE_FROZEN = False`` to trace every call). Constants enter the
+(``dr.freeze``; set ``shaders_port._frame.USE_FROZEN = False`` to trace every call). Constants enter the
 kernels as opaque float32 values, so traced and replayed renders are bit-identical.
 """
 from __future__ import annotations
 
-import dataclasses
-import warnings
 from dataclasses import dataclass
 
 import drjit as dr
-import numpy as np
 
-from ._inputs import CONSTANT_SPECS, Constants, ShaderInputs
+from . import _frame
+from ._frame import (ShaderOutput, evaluated_loops_if, finish_output, jacobian_passes,
+                     nonfinite_any, resolve_constants, tangents)
+from ._inputs import Constants, ShaderInputs
 from ._raster import prepare
 from ._texture import backend_types, clamp, gl_pow, mix, texmat_xy
 
@@ -184,217 +184,6 @@ def fresnel_combine(m, P, vReflection, vRefraction, vEye, vBumpTex):
     return vReflection * FresnelCoeffs[1] + vRefraction * FresnelCoeffs[0]
 
 
-# ---- output, constants, loop mode, Jacobian ----------------------------------------------
-
-@dataclass
-class ShaderOutput:
-    """One rendered frame.
-
-    Attributes:
-        color: TensorXf (H, W, 3) linear RGB (float32); 0 off the water and where the shader
-            produced a non-finite value (see ``diagnostics['nonfinite']``).
-        mask: TensorXf (H, W), 1.0 on water pixels else 0.0.
-        diagnostics: dict name -> TensorXf (H, W), 0 off the water.
-    """
-
-    color: object
-    mask: object
-    diagnostics: dict
-    lanes: object = dataclasses.field(default=None, repr=False)  # Array3f colour of the water
-    # pixels in raster order (differentiable; used by render_with_jacobian)
-
-    def numpy(self) -> dict:
-        """``{'color': (H, W, 3), 'mask': (H, W), <diagnostic>: (H, W)}`` float32 NumPy arrays."""
-        out = {"color": np.asarray(self.color.numpy(), dtype=np.float32),
-               "mask": np.asarray(self.mask.numpy(), dtype=np.float32)}
-        out.update({k: np.asarray(v.numpy(), dtype=np.float32) for k, v in self.diagnostics.items()})
-        return out
-
-
-@dataclass
-class _Resolved:
-    differentiable: bool
-    values: dict
-
-    def __getattr__(self, name):
-        try:
-            return self.__dict__["values"][name]
-        except KeyError:
-            raise AttributeError(name) from None
-
-
-def resolve_constants(m, constants: Constants, loop_ad: str = "replay") -> _Resolved:
-    """Validate ``constants`` and return them as Python floats / size-1 ``m.Float`` (names as in
-    ``Constants`` plus ``waterColor`` / ``reflectColor`` as ``m.Array4f``)."""
-    if not isinstance(constants, Constants):
-        raise TypeError(f"expected Constants, got {type(constants).__name__}")
-    constants.validate()
-    vals, diff = {}, False
-
-    def conv(name, x):
-        nonlocal diff
-        if isinstance(x, dr.ArrayBase):
-            if dr.width(x) != 1:
-                raise ValueError(f"constant {name}: a Dr.Jit value must have size 1, got {dr.width(x)}")
-            v = float(np.asarray(dr.detach(x).numpy()).ravel()[0])
-            lo, hi = CONSTANT_SPECS[name][3]
-            if not (np.isfinite(v) and lo <= v <= hi):
-                raise ValueError(f"constant {name} = {v!r} is not finite or outside [{lo}, {hi}]")
-            diff = diff or dr.grad_enabled(x)
-            return x if type(x) is m.Float else m.Float(x)
-        # float32 arithmetic, as a GLSL uniform / const; opaque so that a traced and a frozen
-        # render compute the same (no literal folding) and new values reuse compiled kernels
-        return dr.opaque(m.Float, float(np.float32(x)))
-
-    for name, (glsl, kind, _, _) in CONSTANT_SPECS.items():
-        v = getattr(constants, name)
-        if kind.endswith("int"):
-            if isinstance(v, dr.ArrayBase):
-                raise TypeError(f"constant {name} ({glsl}) is an integer loop cap; pass a Python int")
-            vals[name] = int(v)
-        elif kind.endswith("vec4"):
-            vals[name] = tuple(conv(name, x) for x in v)
-        else:
-            vals[name] = conv(name, v)
-    if loop_ad not in ("replay", "evaluated"):
-        raise ValueError(f"loop_ad must be 'replay' or 'evaluated', got {loop_ad!r}")
-    vals["loop_ad"] = loop_ad
-    vals["waterColor"] = m.Array4f(*vals["water_color"])
-    vals["reflectColor"] = m.Array4f(*vals["reflect_color"])
-    return _Resolved(diff, vals)
-
-
-class evaluated_loops_if:
-    """Context manager: turn ``JitFlag.SymbolicLoops`` off while active if ``cond`` (restored after)."""
-
-    def __init__(self, cond: bool):
-        self.cond = cond
-
-    def __enter__(self):
-        self.old = dr.flag(dr.JitFlag.SymbolicLoops)
-        if self.cond:
-            dr.set_flag(dr.JitFlag.SymbolicLoops, False)
-        return self
-
-    def __exit__(self, *exc):
-        dr.set_flag(dr.JitFlag.SymbolicLoops, self.old)
-        return False
-
-
-def finish_output(m, P, color, diag: dict, shader: str) -> ShaderOutput:
-    """Flag non-finite lanes, scatter lanes into (H, W) images, warn if any pixel was non-finite."""
-    r = P.raster
-    n = r.width * r.height
-    nonfinite = ~(dr.isfinite(color.x) & dr.isfinite(color.y) & dr.isfinite(color.z))
-    if "nonfinite" in diag:  # intermediate vectors whose NaN a clamp or a lookup can hide
-        nonfinite |= diag["nonfinite"] > 0
-    dr.eval(color, nonfinite, {k: v for k, v in diag.items() if k != "nonfinite"})  # one kernel
-    idx = m.UInt32(r.index.astype(np.uint32))
-    flat = dr.zeros(m.Float, 3 * n)
-    lanes = m.Array3f(*(dr.select(nonfinite, 0.0, color[c]) for c in range(3)))
-    for c in range(3):
-        dr.scatter(flat, lanes[c], 3 * idx + c)
-    diag = dict(diag)
-    diag["nonfinite"] = dr.select(nonfinite, 1.0, 0.0)
-    images = {}
-    for k, v in diag.items():
-        img = dr.zeros(m.Float, n)
-        dr.scatter(img, m.Float(dr.detach(v)), idx)
-        images[k] = m.TensorXf(img, shape=(r.height, r.width))
-    count = int(dr.sum(diag["nonfinite"])[0]) if dr.width(diag["nonfinite"]) else 0
-    if count:
-        warnings.warn(f"{shader}: {count} water pixel(s) were non-finite (NaN/inf) and set to 0; "
-                      "see diagnostics['nonfinite'] (e.g. a degenerate normal from bumptex_mult "
-                      "or a zero-length vector)", RuntimeWarning, stacklevel=3)
-    mask = m.TensorXf(m.Float(r.mask.ravel().astype(np.float32)), shape=(r.height, r.width))
-    return ShaderOutput(m.TensorXf(flat, shape=(r.height, r.width, 3)), mask, images, lanes)
-
-
-def _parse_name(name: str):
-    if name.endswith("]") and "[" in name:
-        base, idx = name[:-1].split("[", 1)
-        if base in ("water_color", "reflect_color") and idx in ("0", "1", "2", "3"):
-            return base, int(idx)
-    elif name in CONSTANT_SPECS and not CONSTANT_SPECS[name][1].endswith(("int", "vec4")):
-        return name, None
-    raise ValueError(f"cannot differentiate with respect to {name!r}: use a float key of "
-                     "CONSTANT_SPECS or 'water_color[i]' / 'reflect_color[i]' (i = 0..3)")
-
-
-def tangents(m, color, diag: dict, params: list):
-    """Forward-mode passes of one shaded frame: ``(colour lanes Array3f, diag, grads)``, where
-    ``grads[j]`` is the Array3f derivative of the colour lanes w.r.t. ``params[j]``. The graph is
-    kept between passes and the gradients cleared; non-finite lanes get colour and derivative 0."""
-    bad = ~(dr.isfinite(color.x) & dr.isfinite(color.y) & dr.isfinite(color.z))
-    bad |= diag["nonfinite"] > 0
-    lanes = m.Array3f(*(dr.select(bad, 0.0, color[c]) for c in range(3)))
-    keep = dr.ADFlag.ClearInterior | dr.ADFlag.ClearInput
-    grads = []
-    for p in params:
-        for q in params:
-            dr.clear_grad(q)
-        dr.clear_grad(lanes)
-        dr.set_grad(p, 1.0)
-        grads.append(m.Array3f(dr.forward_to(lanes, flags=keep)))
-    return color, {k: dr.detach(v) for k, v in diag.items()}, grads
-
-
-def jacobian_passes(shade_tangents, shader: str, inputs: ShaderInputs, constants: Constants,
-                    names: list[str], backend: str, loop_ad: str):
-    """Shared driver of ``render_with_jacobian``: every named scalar becomes a gradient-enabled
-    size-1 Float; ``shade_tangents(m, P, C, params, frozen)`` shades once and runs one
-    forward-mode pass per name (see :func:`tangents`), replayed from recorded kernels
-    (``dr.freeze``) in ``loop_ad='replay'`` mode. Returns ``(ShaderOutput, J (H, W, 3, k))``."""
-    m = backend_types(backend)
-    if not names:
-        raise ValueError("names is empty: give at least one constant to differentiate")
-    changes, params = {}, []
-    for name in names:
-        base, idx = _parse_name(name)
-        cur = changes.get(base, getattr(constants, base))
-        if idx is None:
-            p = m.Float(float(dr.detach(cur)[0]) if isinstance(cur, dr.ArrayBase) else float(cur))
-            changes[base] = p
-        else:
-            comps = list(cur)
-            x = comps[idx]
-            p = m.Float(float(dr.detach(x)[0]) if isinstance(x, dr.ArrayBase) else float(x))
-            comps[idx] = p
-            changes[base] = tuple(comps)
-        dr.enable_grad(p)
-        params.append(p)
-    P = prepare(inputs, m)
-    C = resolve_constants(m, constants.replace(**changes), loop_ad)
-    try:
-        with evaluated_loops_if(loop_ad == "evaluated"):
-            frozen = USE_FROZEN and loop_ad == "replay"
-            color, diag, grads = shade_tangents(m, P.shading_state() if frozen else P, C, params, frozen)
-            dr.eval(color, diag, grads)  # primal and all tangents together
-    finally:
-        for p in params:
-            dr.disable_grad(p)
-    out = finish_output(m, P, dr.detach(color), diag, shader)
-    r = P.raster
-    J = np.zeros((r.width * r.height, 3, len(names)), dtype=np.float32)
-    for j, g in enumerate(grads):
-        J[r.index, :, j] = np.asarray(g.numpy(), dtype=np.float32).T
-    return out, J.reshape(r.height, r.width, 3, len(names))
-
-
-def _raster_index(out: ShaderOutput) -> np.ndarray:
-    """Flat pixel indices of the lanes of ``out`` (water pixels in raster order)."""
-    return np.flatnonzero(np.asarray(out.mask.numpy()).ravel() > 0.5)
-
-
-def nonfinite_any(*vectors):
-    """Bool per lane: some component of some Array3f in ``vectors`` is NaN or infinite."""
-    bad = None
-    for v in vectors:
-        b = ~(dr.isfinite(v.x) & dr.isfinite(v.y) & dr.isfinite(v.z))
-        bad = b if bad is None else bad | b
-    return bad
-
-
 # ---- the shader ---------------------------------------------------------------------------
 
 @dataclass
@@ -454,9 +243,6 @@ def _shade(m, P, C, reflection: bool):
     return gl_FragColor, diagnostics
 
 
-# Plain (non-differentiable) renders replay recorded kernels instead of re-tracing the shader
-# (``dr.freeze``); a change of loop caps, shader variant or input sizes records anew.
-USE_FROZEN = True
 _frozen_shade = dr.freeze(lambda m, P, C, reflection: _shade(m, P, C, reflection))
 
 
@@ -477,7 +263,7 @@ def render(inputs: ShaderInputs, constants: Constants | None = None, *, reflecti
     P = prepare(inputs, m)
     C = resolve_constants(m, constants if constants is not None else Constants(), loop_ad)
     with evaluated_loops_if(C.differentiable and loop_ad == "evaluated"):
-        if USE_FROZEN and not C.differentiable:
+        if _frame.USE_FROZEN and not C.differentiable:
             color, diag = _frozen_shade(m, P.shading_state(), C, reflection)
         else:
             color, diag = _shade(m, P, C, reflection)

@@ -1,7 +1,6 @@
 """The study's jobs, one function per CLI command; each writes its artifacts into one folder."""
 from __future__ import annotations
 
-import json
 import math
 import sys
 import time

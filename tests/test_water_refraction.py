@@ -145,7 +145,8 @@ def test_frozen_replay_equals_traced_render(monkeypatch):
     cases = [(inputs, Constants()), (inputs, CUSTOM), (inputs, Constants(steps_grazing=6.5)),
              (other, Constants(loop_cap=12)), (inputs, Constants())]
     frozen = [water_refraction.render(i, c).numpy() for i, c in cases]
-    monkeypatch.setattr(water_refraction, "USE_FROZEN", False)
+    from shaders_port import _frame
+    monkeypatch.setattr(_frame, "USE_FROZEN", False)
     for (i, c), f in zip(cases, frozen):
         t = water_refraction.render(i, c).numpy()
         for k in t:
