@@ -16,8 +16,10 @@ from pathlib import Path
 
 from shaders_port import CONSTANT_SPECS, Constants
 from shaders_port._glsl import compile_check, read_source, write_constants
+from shaders_port._variants import VARIANTS
 
-FRAGMENT_SHADERS = ("water_refraction", "water_reflection")
+# every fragment shader file a registered variant uses, in registration order
+FRAGMENT_SHADERS = tuple(dict.fromkeys(v.shader for v in VARIANTS.values()))
 
 
 def load_constants_json(path) -> Constants:
@@ -45,8 +47,8 @@ def load_constants_json(path) -> Constants:
 
 
 def export_shaders(constants: Constants, out_dir) -> list[Path]:
-    """Write ``out_dir/{compat,core}/{water.vert, water_refraction.frag, water_reflection.frag}``
-    with ``constants``; return the written paths. Raises ValueError on bad constants and
+    """Write ``out_dir/{compat,core}/water.vert`` and every fragment shader of the registered
+    variants (``water_refraction.frag``, ``water_reflection.frag``, ...) with ``constants``; return the written paths. Raises ValueError on bad constants and
     RuntimeError if a shader does not compile (nothing is written then)."""
     constants.validate()
     texts = {}
