@@ -155,6 +155,13 @@ CONSTANT_SPECS: dict[str, tuple[str, str, object, tuple[float, float]]] = {
     "refr_coeff": ("refrCoeff", "uniform float", 1.0 / IOR_WATER, (0.1, 1.0)),
     "water_color": ("waterColor", "uniform vec4", (0.05, 0.25, 0.3, 1.0), (0.0, 100.0)),
     "reflect_color": ("reflectColor", "uniform vec4", (1.0, 1.0, 1.0, 1.0), (0.0, 100.0)),
+    # read only by the variants of shaders_port._variants (their defaults leave the seed unchanged:
+    # the seed's code path never reads them)
+    "absorption_r": ("ABSORPTION_R", "const float", 1.0 / 7.5, (1e-4, 100.0)),
+    "absorption_g": ("ABSORPTION_G", "const float", 1.0 / 7.5, (1e-4, 100.0)),
+    "absorption_b": ("ABSORPTION_B", "const float", 1.0 / 7.5, (1e-4, 100.0)),
+    "specular_roughness": ("SPECULAR_ROUGHNESS", "const float", 0.2, (1e-3, 1.0)),
+    "refine_steps": ("REFINE_STEPS", "const int", 3, (0, 64)),
 }
 
 
@@ -185,6 +192,11 @@ class Constants:
     refr_coeff: float = _default("refr_coeff")
     water_color: tuple = _default("water_color")
     reflect_color: tuple = _default("reflect_color")
+    absorption_r: float = _default("absorption_r")
+    absorption_g: float = _default("absorption_g")
+    absorption_b: float = _default("absorption_b")
+    specular_roughness: float = _default("specular_roughness")
+    refine_steps: int = _default("refine_steps")
 
     def validate(self) -> "Constants":
         """Raise ValueError naming the constant if a plain value is non-finite or out of range."""
