@@ -38,7 +38,10 @@ FLOOR_SHAPES = ("flat", "slope", "steps", "terrain")
 SHADERS = tuple(VARIANTS)
 SOLVERS = ("levenberg_marquardt", "gauss_newton", "dogleg", "bfgs", "nelder_mead", "adam")
 FIT_PARAMETERS = ("attenuation_distance", "bumptex_mult", "steps_grazing", "steps_steep",
-                  "water_color", "reflect_color", "specular_strength", "specular_exponent")
+                  "water_color", "reflect_color", "specular_strength", "specular_exponent",
+                  # read by shader variants only (a variant fits them in place of the seed's
+                  # constants it replaces, see shaders_port._variants.Variant.replaces)
+                  "absorption_r", "absorption_g", "absorption_b", "specular_roughness")
 
 SCHEMA: dict[str, Field] = {
     "name": Field("str", "unnamed", "Name of the experiment (used in reports)."),
