@@ -165,3 +165,23 @@ def test_fit_names_substitute_the_variants_constants():
             assert c in ("bumptex_mult", "water_color", "specular_strength", "attenuation_distance",
                          "specular_exponent", "absorption_r", "absorption_g", "absorption_b",
                          "specular_roughness"), (n, c)
+
+
+# ---- parsimony: information criteria of a fit ---------------------------------------------
+
+def test_information_criteria():
+    from study._metrics import information_criteria
+    rng = np.random.default_rng(1)
+    r = rng.normal(0.0, 0.1, 3000)
+    ic = information_criteria(r, 4)
+    n = r.size
+    assert ic["n"] == n and ic["k"] == 4 and ic["rss"] == pytest.approx(float(r @ r))
+    assert ic["aic"] == pytest.approx(n * np.log(ic["rss"] / n) + 8)
+    assert ic["bic"] == pytest.approx(n * np.log(ic["rss"] / n) + 4 * np.log(n))
+    # same residual, more constants: worse; a residual smaller by 1 % pays for 3 more constants
+    assert information_criteria(r, 7)["bic"] > ic["bic"]
+    assert information_criteria(0.99 * r, 7)["aic"] < ic["aic"]
+    with pytest.raises(ValueError, match="finite residual"):
+        information_criteria(r[:3], 4)
+    with pytest.raises(ValueError, match="finite residual"):
+        information_criteria(np.array([np.nan] * 10), 1)
