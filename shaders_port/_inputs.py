@@ -290,3 +290,54 @@ def fresnel_lut(ior: float = IOR_WATER, n: int = 256) -> np.ndarray:
     c = (np.arange(n) + 0.5) / n
     r = fresnel_unpolarized(c, ior)
     return np.stack([1.0 - r, r], axis=1).astype(np.float32)
+
+
+# ---- texture precision as a game would ship it (the application-side variant) ---------------
+
+def _srgb8(x: np.ndarray) -> np.ndarray:
+    """Linear values stored in an 8-bit sRGB texture and read back (decoded to linear)."""
+    x = np.clip(np.asarray(x, np.float64), 0.0, 1.0)
+    s = np.where(x <= 0.0031308, 12.92 * x, 1.055 * np.power(x, 1.0 / 2.4) - 0.055)
+    q = np.round(s * 255.0) / 255.0
+    return np.where(q <= 0.04045, q / 12.92, np.power((q + 0.055) / 1.055, 2.4)).astype(np.float32)
+
+
+def _unorm8(x: np.ndarray) -> np.ndarray:
+    """Values in [0, 1] stored in an 8-bit UNORM texture and read back."""
+    return (np.round(np.clip(np.asarray(x, np.float64), 0.0, 1.0) * 255.0) / 255.0).astype(np.float32)
+
+
+def _half(x: np.ndarray) -> np.ndarray:
+    """Values stored in a half-float (16-bit) texture and read back."""
+    return np.asarray(x, np.float32).astype(np.float16).astype(np.float32)
+
+
+_GAME_CACHE: dict = {}
+
+
+def game_precision(inputs: ShaderInputs) -> ShaderInputs:
+    """``inputs`` with every texture at the precision a game would ship it, as float32 arrays
+    holding exactly the values the GPU would read (so the port and GL upload the same data):
+
+    * colour (``refraction_texture``, ``refl_texture``): 8-bit sRGB (``GL_SRGB8``), values
+      clipped to [0, 1];
+    * ``normal_map``: 8-bit UNORM (``GL_RGB8``, the usual ``0.5 n + 0.5`` encoding);
+    * ``fresnel_lut``: 8-bit UNORM;
+    * depths (``world_y``, ``refl_world_y``) and the HDR sky ``cubemap``: half float (``GL_R16F``,
+      ``GL_RGB16F``).
+
+    Filtering still runs in float on the dequantised texels on both sides (GL hardware
+    filters 8-bit texels at 8-bit sub-texel precision; this is not modelled). One result is
+    kept per inputs object (the port's texture cache then hits on repeated renders)."""
+    key = id(inputs)
+    arrays = tuple(id(v) for v in vars(inputs).values())
+    hit = _GAME_CACHE.get(key)
+    if hit is not None and hit[0] == arrays and hit[1] is inputs:
+        return hit[2]
+    out = dataclasses.replace(
+        inputs, refraction_texture=_srgb8(inputs.refraction_texture), refl_texture=_srgb8(inputs.refl_texture),
+        normal_map=_unorm8(inputs.normal_map), fresnel_lut=_unorm8(inputs.fresnel_lut),
+        world_y=_half(inputs.world_y), refl_world_y=_half(inputs.refl_world_y), cubemap=_half(inputs.cubemap))
+    _GAME_CACHE.clear()
+    _GAME_CACHE[key] = (arrays, inputs, out)
+    return out

@@ -35,6 +35,9 @@ class Variant:
         replaces: seed constant -> the variant's constants that take its role in a fit (e.g. the
             Beer-Lambert variant fits ``absorption_r/g/b`` where the seed fits
             ``attenuation_distance``; ``()``: the variant does not read it). See :meth:`fit_names`.
+        textures: 'float' (float32 textures, the study's default) or 'game' (the application
+            uploads 8-bit colour and half-float depth, ``shaders_port._inputs.game_precision``;
+            the port and GL both get the quantised arrays, the GLSL is unchanged).
     """
 
     name: str
@@ -44,6 +47,14 @@ class Variant:
     schedule: tuple[str, ...] = ()
     description: str = ""
     replaces: dict = field(default_factory=dict)
+    textures: str = "float"
+
+    def prepare_inputs(self, inputs):
+        """The inputs as this variant's application uploads them (see ``textures``)."""
+        if self.textures == "game":
+            from ._inputs import game_precision
+            return game_precision(inputs)
+        return inputs
 
     def fit_names(self, requested) -> list[str]:
         """The constants to fit for the experiment's ``fit.parameters`` ``requested``: each name
@@ -61,11 +72,12 @@ class Variant:
 
     def render(self, inputs, constants=None, **kw):
         """``port.render`` with this variant's options: a ``ShaderOutput``."""
-        return self.port().render(inputs, constants, **self.port_options, **kw)
+        return self.port().render(self.prepare_inputs(inputs), constants, **self.port_options, **kw)
 
     def render_with_jacobian(self, inputs, constants, names, **kw):
         """``port.render_with_jacobian`` with this variant's options: ``(ShaderOutput, J)``."""
-        return self.port().render_with_jacobian(inputs, constants, names, **self.port_options, **kw)
+        return self.port().render_with_jacobian(self.prepare_inputs(inputs), constants, names,
+                                                **self.port_options, **kw)
 
     def source(self, dialect: str = "core", text: str | None = None) -> str:
         """Fragment shader text of the variant: ``text`` (e.g. an export) or the shipped file,
@@ -79,7 +91,8 @@ class Variant:
         """A ``GLRenderer`` drawing this variant (``source``: the shader file's text without the
         variant's defines, e.g. an export; the renderer adds them)."""
         from ._gl import GLRenderer
-        return GLRenderer(self.shader, inputs, dialect=dialect, source=source, defines=self.defines)
+        return GLRenderer(self.shader, self.prepare_inputs(inputs), dialect=dialect, source=source,
+                          defines=self.defines)
 
 
 VARIANTS: dict[str, Variant] = {}
@@ -87,6 +100,8 @@ VARIANTS: dict[str, Variant] = {}
 
 def register(variant: Variant) -> Variant:
     """Add a variant; its name must be new and its shader a shipped file."""
+    if variant.textures not in ("float", "game"):
+        raise ValueError(f"variant {variant.name!r}: textures must be 'float' or 'game', got {variant.textures!r}")
     if variant.name in VARIANTS:
         raise ValueError(f"shader variant {variant.name!r} is already registered")
     read_source(variant.shader, "frag", "core")   # raises naming the missing file
@@ -121,9 +136,9 @@ _NOSPEC = {"specular_strength": (), "specular_exponent": ()}
 _REFINE = _RAYCAST + ("refine_steps",)
 
 
-def _seed_variant(name, defines, options, description, schedule=_RAYCAST, replaces=None):
+def _seed_variant(name, defines, options, description, schedule=_RAYCAST, replaces=None, textures="float"):
     register(Variant(name, "water_refraction", defines=defines, port_options=options, schedule=schedule,
-                     description=description, replaces=replaces or {}))
+                     description=description, replaces=replaces or {}, textures=textures))
 
 
 _seed_variant("water_refraction_beer", ("BEER_ATTENUATION",), {"attenuation": "beer"},
@@ -145,3 +160,6 @@ _seed_variant("water_refraction_1layer", ("ONE_NORMAL_LAYER",), {"normal_layers"
               "seed with one normal-map layer instead of four")
 _seed_variant("water_refraction_nospecular", ("NO_SPECULAR",), {"specular": "none"},
               "seed without the specular highlight", replaces=_NOSPEC)
+_seed_variant("water_refraction_game_textures", (), {},
+              "seed with 8-bit sRGB colour, 8-bit normal map and Fresnel LUT, half-float depth and sky",
+              textures="game")

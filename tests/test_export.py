@@ -28,7 +28,7 @@ EXPORTED = Constants(attenuation_distance=4.999999836762939, steps_grazing=8.0, 
 # the shader files, then one file per variant compiled with preprocessor names
 FILES = [(d, n, s) for d in ("compat", "core")
          for n, s in (("water", "vert"), ("water_refraction", "frag"), ("water_reflection", "frag"))]
-VARIANT_FILES = [(d, v.name, "frag") for d in ("compat", "core") for v in VARIANTS.values() if v.defines]
+VARIANT_FILES = [(d, v.name, "frag") for d in ("compat", "core") for v in VARIANTS.values() if v.name != v.shader]
 
 
 def _split_block(text: str) -> tuple[str, list[str], str]:

@@ -35,8 +35,8 @@ def test_registered_variants():
             "water_refraction_1layer", "water_refraction_nospecular"} <= set(NEW)
     for n in NEW:
         v = get_variant(n)
-        assert v.defines and v.port_options and v.description
-        assert v.source().split("\n")[1].startswith("#define ")
+        assert (v.defines and v.port_options or v.textures == "game") and v.description
+        assert v.source().split("\n")[1].startswith("#define ") or not v.defines
 
 
 @pytest.mark.parametrize("name", NEW)
@@ -67,7 +67,7 @@ def test_diagnostics_count_what_each_variant_does(inputs, seed_out):
         if v.port_options.get("refine"):
             np.testing.assert_array_equal(out["iterations"][water],
                                           seed_out["iterations"][water] + CUSTOM.refine_steps)
-        elif layers == 4:
+        elif layers == 4 and v.textures == "float":   # same normals, same depths: same search
             np.testing.assert_array_equal(out["iterations"][water], seed_out["iterations"][water])
 
 

@@ -18,7 +18,7 @@ def gl_check(shader: str, inputs, constants, shaders_dir: Path) -> dict:
 
     variant = get_variant(shader)
     source = (shaders_dir / "core" / f"{variant.name}.frag").read_text()
-    with GLRenderer(variant.shader, inputs, source=source) as r:
+    with GLRenderer(variant.shader, variant.prepare_inputs(inputs), source=source) as r:
         res = compare_port_gl(inputs, constants, shader, renderer=_OwnBlock(r))
     out = {k: res[k] for k in ("mean_abs", "p999", "max_abs", "n_water", "n_outliers", "n_nonfinite",
                                "unexplained")}
