@@ -163,3 +163,8 @@ _seed_variant("water_refraction_nospecular", ("NO_SPECULAR",), {"specular": "non
 _seed_variant("water_refraction_game_textures", (), {},
               "seed with 8-bit sRGB colour, 8-bit normal map and Fresnel LUT, half-float depth and sky",
               textures="game")
+register(Variant("water_reflection_beer_ggx", "water_reflection", defines=("BEER_ATTENUATION", "GGX_SPECULAR"),
+                 port_options={"attenuation": "beer", "specular": "ggx"},
+                 schedule=_RAYCAST + ("refl_steps_steep", "refl_steps_grazing", "refl_loop_cap"),
+                 description="seed 000 section 3 + Beer-Lambert attenuation + GGX highlight",
+                 replaces={**_BEER, **_GGX}))

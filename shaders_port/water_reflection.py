@@ -26,8 +26,8 @@ from ._texture import backend_types, mix, texmat_xy
 from . import _frame
 from ._frame import (ShaderOutput, evaluated_loops_if, finish_output, jacobian_passes, nonfinite_any,
                      resolve_constants, tangents)
-from .water_refraction import (cubemap_reflection, fresnel_combine, loop_positions, loop_R, reflect,
-                               refraction_blocks, specular_highlight)
+from .water_refraction import (Options, cubemap_reflection, fresnel_combine, loop_positions, loop_R,
+                               options_of, reflect, refraction_blocks, specular_highlight)
 
 __all__ = ["render", "render_with_jacobian", "ShaderOutput"]
 
@@ -66,9 +66,9 @@ def raycast_reflection(m, P, R, C):
     return current_position, current_position_old, depth, olddepth, noHit, i, loop_fetches
 
 
-def _shade(m, P, C):
+def _shade(m, P, C, opts: Options = Options()):
     # ---- [1]-[6]: as in water_refraction ----
-    f = refraction_blocks(m, P, C)
+    f = refraction_blocks(m, P, C, opts)
     vEye, vLight, vBumpTex, vBumpTexMore = f.vEye, f.vLight, f.vBumpTex, f.vBumpTexMore
     vRefraction, iterations, crossed, denominator = f.vRefraction, f.iterations, f.crossed, f.denominator
     refraction_R, refracted_position = f.R, f.current_position
@@ -96,9 +96,9 @@ def _shade(m, P, C):
     vReflection_sky = cubemap_reflection(m, P, R) * C.reflectColor
     vReflection = dr.select(noHit, vReflection_sky, vReflection_hit)
 
-    vReflection = specular_highlight(m, P, vReflection, vBumpTex, vEye, vLight, C)
+    vReflection = specular_highlight(m, P, vReflection, vBumpTex, vEye, vLight, C, opts.specular)
     gl_FragColor = fresnel_combine(m, P, vReflection, vRefraction, vEye, vBumpTex)
-    fetches = 4 + 1 + iterations + 1 + 1 + refl_fetches + 1 + 1
+    fetches = opts.normal_layers + 1 + iterations + 1 + 1 + refl_fetches + 1 + 1
     bad = nonfinite_any(vEye, vLight, vBumpTex, vBumpTexMore, refraction_R, refracted_position, R,
                         dr.select(noHit, refracted_position, current_position))
     diagnostics = {"iterations": m.Float(iterations), "fetches": m.Float(fetches),
@@ -109,12 +109,13 @@ def _shade(m, P, C):
     return gl_FragColor, diagnostics
 
 
-_frozen_shade = dr.freeze(lambda m, P, C: _shade(m, P, C))
+_frozen_shade = dr.freeze(lambda m, P, C, opts: _shade(m, P, C, opts))
 
 
 def render(inputs: ShaderInputs, constants: Constants | None = None, *,
-           backend: str = "llvm", loop_ad: str = "replay") -> ShaderOutput:
-    """Render ``water_reflection``.
+           backend: str = "llvm", loop_ad: str = "replay", **options) -> ShaderOutput:
+    """Render ``water_reflection`` (``**options``: the variant switches of blocks [2], [5], [6]
+    and [8], see ``water_refraction.Options``).
 
     Returns a :class:`ShaderOutput` as ``water_refraction.render`` does, with two more
     diagnostics: ``refl_iterations`` (reflection loop iterations) and ``refl_hit`` (1 where
@@ -123,27 +124,30 @@ def render(inputs: ShaderInputs, constants: Constants | None = None, *,
     depth, 1 refraction colour, 1 + (in-bounds reflection iterations) reflection depth, 1
     reflection colour (bottom texture or cube map), 1 Fresnel LUT.
     """
+    opts = options_of(options)
     m = backend_types(backend)
     P = prepare(inputs, m)
     C = resolve_constants(m, constants if constants is not None else Constants(), loop_ad)
     with evaluated_loops_if(C.differentiable and loop_ad == "evaluated"):
         if _frame.USE_FROZEN and not C.differentiable:
-            color, diag = _frozen_shade(m, P.shading_state(), C)
+            color, diag = _frozen_shade(m, P.shading_state(), C, opts)
         else:
-            color, diag = _shade(m, P, C)
+            color, diag = _shade(m, P, C, opts)
         return finish_output(m, P, color, diag, "water_reflection")
 
 
-_frozen_tangents = dr.freeze(lambda m, P, C, params: tangents(m, *_shade(m, P, C), params))
+_frozen_tangents = dr.freeze(lambda m, P, C, params, opts: tangents(m, *_shade(m, P, C, opts), params))
 
 
 def render_with_jacobian(inputs: ShaderInputs, constants: Constants | None, names: list[str], *,
-                         backend: str = "llvm", loop_ad: str = "replay"):
+                         backend: str = "llvm", loop_ad: str = "replay", **options):
     """``(ShaderOutput, J)`` with ``J`` float32 (H, W, 3, len(names)): forward-mode derivatives
     of the linear-RGB colour w.r.t. the named scalars (see ``water_refraction``)."""
+    opts = options_of(options)
+
     def shade_tangents(m, P, C, params, frozen):
         if frozen:
-            return _frozen_tangents(m, P, C, params)
-        return tangents(m, *_shade(m, P, C), params)
+            return _frozen_tangents(m, P, C, params, opts)
+        return tangents(m, *_shade(m, P, C, opts), params)
     return jacobian_passes(shade_tangents, "water_reflection", inputs,
                            constants if constants is not None else Constants(), names, backend, loop_ad)

@@ -185,3 +185,31 @@ def test_information_criteria():
         information_criteria(r[:3], 4)
     with pytest.raises(ValueError, match="finite residual"):
         information_criteria(np.array([np.nan] * 10), 1)
+
+
+# ---- the reflection shader (seed section 3) shares blocks [2], [5], [6], [8] and their switches ----
+
+def test_reflection_variant_registered_matches_gl(inputs):
+    from test_gl_differential import _check
+    from shaders_port._compare import compare_port_gl
+    res = compare_port_gl(inputs, CUSTOM, "water_reflection_beer_ggx")
+    _check(res, "gl_water_reflection_beer_ggx_custom")
+
+
+@pytest.mark.parametrize("defines,options", [
+    (("TWO_NORMAL_LAYERS", "SECANT_REFINE", "NO_SPECULAR"), {"normal_layers": 2, "refine": "secant", "specular": "none"}),
+    (("ONE_NORMAL_LAYER", "BINARY_REFINE"), {"normal_layers": 1, "refine": "binary"})], ids=["2layers-secant-nospec", "1layer-binary"])
+def test_reflection_shader_switches_match_gl(inputs, defines, options):
+    """The other switches in water_reflection.frag against the reflection port's options (the
+    registry ships only the Beer + GGX reflection variant)."""
+    from shaders_port import water_reflection
+    from shaders_port._gl import GLRenderer
+    out = water_reflection.render(inputs, CUSTOM, **options).numpy()
+    with GLRenderer("water_reflection", inputs, defines=defines) as r:
+        rgba, gl_mask = r.render(CUSTOM)
+    both = (out["mask"] > 0) & gl_mask
+    diff = np.abs(out["color"] - rgba[..., :3]).max(-1)[both]
+    assert both.sum() > 500
+    assert diff.mean() <= 1e-3 and np.percentile(diff, 99.9) <= 1e-2, (diff.mean(), diff.max())
+    seed = water_reflection.render(inputs, CUSTOM).numpy()
+    assert np.abs(out["color"] - seed["color"]).max(-1)[both].mean() > 1e-3   # the switches act
