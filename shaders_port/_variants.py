@@ -168,3 +168,7 @@ register(Variant("water_reflection_beer_ggx", "water_reflection", defines=("BEER
                  schedule=_RAYCAST + ("refl_steps_steep", "refl_steps_grazing", "refl_loop_cap"),
                  description="seed 000 section 3 + Beer-Lambert attenuation + GGX highlight",
                  replaces={**_BEER, **_GGX}))
+register(Variant("water_reflection_beer", "water_reflection", defines=("BEER_ATTENUATION",),
+                 port_options={"attenuation": "beer"},
+                 schedule=_RAYCAST + ("refl_steps_steep", "refl_steps_grazing", "refl_loop_cap"),
+                 description="seed 000 section 3 + Beer-Lambert attenuation", replaces=_BEER))
