@@ -101,6 +101,16 @@ SCHEMA: dict[str, Field] = {
                                     "texels", 16, 4096),
     "reference.texture_spp": Field("int", 256, "Samples per pixel of the top-down colour texture.",
                                    "", 1, 65536),
+    "reference.texture_method": Field("str", "lighting", "How the top-down refraction texture "
+                                      "is rendered: `lighting` (the floor's lighting path traced at "
+                                      "`reference.lighting_size` texels over the pool, times its known "
+                                      "albedo at `reference.texture_size`; walls from a colour render "
+                                      "at `reference.wall_spp`) or `colour` (the colour path traced "
+                                      "at `reference.texture_size`).", choices=("lighting", "colour")),
+    "reference.lighting_size": Field("int", 128, "Texels per side of the lighting render over the "
+                                     "pool (`texture_method = \"lighting\"`).", "texels", 8, 4096),
+    "reference.wall_spp": Field("int", 64, "Samples per pixel of the dry colour render used "
+                                "outside the pool (`texture_method = \"lighting\"`).", "", 1, 65536),
     "reference.refraction_lighting": Field("str", "underwater", "How the top-down refraction "
                                            "texture is lit: `underwater` (the floor as lit through the "
                                            "water) or `dry` (no water, as the seed's application does).",
@@ -132,6 +142,7 @@ for _name, (_glsl, _kind, _default, (_lo, _hi)) in CONSTANT_SPECS.items():
 
 # keys that change only the shader's inputs, never the reference image
 SHADER_INPUT_KEYS = frozenset({"reference.texture_size", "reference.texture_spp",
+                               "reference.texture_method", "reference.lighting_size", "reference.wall_spp",
                                "reference.refraction_lighting", "reference.fresnel_transmission",
                                "waves.normal_map_size", "waves.slope_scale"})
 
