@@ -240,6 +240,10 @@ def _print(name: str, runs: dict, cross: dict) -> None:
             f"{cross[p]['flip']:.4f} / {cross[p]['rmse']:.4f}" for p in paths) + " |")
     print("| kernels (disk-cache hits) | " + " | ".join(f"{last[p]['kernels']} ({last[p]['kernel_cache_hits']})"
                                                     for p in paths) + " |")
+    if len(paths) == 1:
+        print("\n| constant | fitted (rel. SE) [status] |\n|---|---|")
+        for n, pa in last[paths[0]]["params"].items():
+            print(f"| {n} | {_v(pa['fitted'])} ({_v(pa['rel_se'])}) [{pa['status']}] |")
     if len(paths) == 2:
         a, b = last["today"]["params"], last["new"]["params"]
         print("\n| constant | today (rel. SE) | new | (new - today) / SE |")

@@ -174,15 +174,20 @@ def main() -> None:
         n, k = map(int, item.split(":"))
         rows.append(fit(f"lighting {n} {64 * k}", lighting_texture(wet[:k].mean(0), albedo, gain, inside, dry, n),
                         full_ref))
+    refs = _load(args.passes, "ref")        # again: more passes may have been rendered meanwhile
     for j in args.ref:
-        rows.append(fit(f"ref {64 * j} tex {64 * len(wet)}", best_tex, refs[:j].mean(0)))
+        if j <= len(refs):
+            rows.append(fit(f"ref {64 * j} tex {64 * len(wet)}", best_tex, refs[:j].mean(0)))
+    if not rows:
+        return
     # errors-in-variables extrapolation over the colour fits with the full reference
     col = [r for r in rows if r["label"].startswith("colour")]
     spp = np.array([float(r["label"].split()[1]) for r in col])
-    print("\n| texture / reference | FLIP | " + " | ".join(col[0]["params"]) + " |")
-    print("|---|---|" + "---|" * len(col[0]["params"]))
+    names = list(rows[0]["params"])
+    print("\n| texture / reference | FLIP | " + " | ".join(names) + " |")
+    print("|---|---|" + "---|" * len(names))
     inf = {}
-    for n in col[0]["params"]:
+    for n in (names if len(col) >= 2 else []):
         v = np.array([r["params"][n][0] if r["params"][n][0] is not None else np.nan for r in col])
         if np.all(np.isfinite(v)) and len(v) >= 2:
             A = np.stack([np.ones_like(spp), 1.0 / spp], 1)
@@ -193,7 +198,7 @@ def main() -> None:
             z = (v - inf[n]) / (se * abs(v)) if n in inf and v is not None and se else None
             cells.append(f"{_g(v)} ({_g(z, 2)} SE)" if z is not None else _g(v))
         print(f"| {r['label']} | {r['flip']:.4f} | " + " | ".join(cells) + " |")
-    print("| extrapolated c_inf | | " + " | ".join(_g(inf.get(n)) for n in col[0]["params"]) + " |")
+    print("| extrapolated c_inf | | " + " | ".join(_g(inf.get(n)) for n in names) + " |")
 
 
 def _g(x, p=4):

@@ -90,8 +90,10 @@ SCHEMA: dict[str, Field] = {
                         "has 0.35 degree texels).", "degrees", 0.5, 20.0),
     "sun.radiance": Field("vec3", [8.0, 7.5, 6.0], "Radiance of the sun disc (0 = no sun).",
                           "linear RGB", 0.0, 1e6),
-    "reference.spp": Field("int_or_auto", "auto", "Samples per pixel, or `auto` to reach "
-                           "`reference.target_noise`.", "", 1, 65536),
+    "reference.spp": Field("int_or_auto", 256, "Samples per pixel, or `auto` to reach "
+                           "`reference.target_noise`. 256: the fitted constants of the default "
+                           "scene lie within about one standard error of a 4x-spp reference "
+                           "(benchmarks/bench_texture_bias.py).", "", 1, 65536),
     "reference.target_noise": Field("float", 0.01, "Target RMS standard error on water pixels "
                                     "for `spp = \"auto\"`.", "linear RGB", 1e-5, 1.0),
     "reference.max_spp": Field("int", 1024, "Upper bound of the automatic spp.", "", 4, 65536),
@@ -108,7 +110,7 @@ SCHEMA: dict[str, Field] = {
                                       "at `reference.wall_spp`) or `colour` (the colour path traced "
                                       "at `reference.texture_size`).", choices=("lighting", "colour")),
     "reference.lighting_size": Field("int", 128, "Texels per side of the lighting render over the "
-                                     "pool (`texture_method = \"lighting\"`).", "texels", 8, 4096),
+                                     "pool (`texture_method = \"lighting\"`; at most `reference.texture_size`).", "texels", 8, 4096),
     "reference.wall_spp": Field("int", 64, "Samples per pixel of the dry colour render used "
                                 "outside the pool (`texture_method = \"lighting\"`).", "", 1, 65536),
     "reference.refraction_lighting": Field("str", "underwater", "How the top-down refraction "

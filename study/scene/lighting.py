@@ -142,7 +142,7 @@ def lighting_colour(exp: Experiment, extent, size: int, seed: int = 0, world_y=N
 
     wet = exp["reference.refraction_lighting"] == "underwater"
     y_cam = underwater_camera_height(exp) if wet else 100.0
-    n_light = exp["reference.lighting_size"]
+    n_light = min(exp["reference.lighting_size"], size)     # never finer than the texture
     lighting, lighting_se = render_lighting(exp, n_light, exp["reference.texture_spp"], seed,
                                             water=wet, y_cam=y_cam)
     albedo = render_albedo(exp, extent, size, seed)
