@@ -111,7 +111,7 @@ def worker(experiment: str, path: str, out: Path, overrides: list[str]) -> dict:
     t.wrap(reference, "noise_of", "noise estimation")
     for fn in ("top_down_world_y", "_render_top_down", "top_down_colour"):
         t.wrap(shader_inputs, fn, "texture renders")
-    for fn in ("render_lighting", "render_albedo"):
+    for fn in ("render_lighting", "render_dry"):
         t.wrap(lighting, fn, "texture renders")
     t.wrap(calibrate, "calibrate_model", "fit")
     t.wrap(export, "export_shaders", "export")

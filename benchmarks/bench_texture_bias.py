@@ -126,7 +126,7 @@ def main() -> None:
     extent = si.texture_extent(exp)
     alb_path = args.passes / "albedo.npy"
     if not alb_path.exists():
-        np.save(alb_path, lighting.render_albedo(exp, extent, size, 0))
+        np.save(alb_path, lighting.render_dry(exp, extent, size, lighting.ALBEDO_SPP, 0)[1])
     albedo = np.load(alb_path).astype(np.float64)
     world_y = si.top_down_world_y(exp, extent, size)
     y_cam = si.underwater_camera_height(exp)

@@ -19,8 +19,9 @@ between lighting texel centres); the benchmark measures what that does to the fi
 constants (``benchmarks/bench_new_scene.py``).
 
 Outside the pool (the walls' tops, used where the shader's rays leave the pool) the dry scene
-is rendered in colour at ``reference.wall_spp``: the walls are lit directly by the sky and the
-sun, with light sampling, and have little noise.
+is rendered in colour at ``reference.wall_spp`` (at least ``ALBEDO_SPP``; the same render gives
+the albedo): the walls are lit directly by the sky and the sun, with light sampling, and have
+little noise.
 
 Noise is measured, not assumed: the lighting is the mean of ``N_SEEDS`` renders with
 independent seeds, and the RMS standard error of the resulting colour over the pool texels
@@ -36,7 +37,7 @@ import numpy as np
 from .experiment import Experiment
 
 N_SEEDS = 4          # independent lighting renders (noise estimate from their spread)
-ALBEDO_SPP = 64      # samples per texel of the albedo render (primary hits only: cheap)
+ALBEDO_SPP = 64      # least samples per texel of the dry render that also gives the albedo
 
 
 def pool_extent(exp: Experiment) -> tuple[float, float, float, float]:
@@ -119,16 +120,21 @@ def render_lighting(exp: Experiment, size: int, spp: int, seed: int, *, water: b
     return lighting.astype(np.float32), stderr.astype(np.float32)
 
 
-def render_albedo(exp: Experiment, extent, size: int, seed: int) -> np.ndarray:
-    """(size, size, 3) texel-mean albedo of the first surface seen from above (GL order)."""
+def render_dry(exp: Experiment, extent, size: int, spp: int, seed: int) -> tuple[np.ndarray, np.ndarray]:
+    """(colour, albedo), each (size, size, 3) GL order: the dry scene (no water) seen from above,
+    path traced at ``max(spp, ALBEDO_SPP)`` spp, and the texel-mean albedo of the first surface
+    hit, from the same samples (one scene, one render)."""
     import mitsuba as mi
 
     from .shader_inputs import _ortho_sensor, _to_gl_order
 
-    scene, _ = _top_down_scene(mi, exp, water=False, integrator={"type": "aov", "aovs": "alb:albedo"})
-    sensor = _ortho_sensor(mi, extent, size, ALBEDO_SPP, seed)
-    img = np.array(mi.render(scene, sensor=sensor, spp=ALBEDO_SPP, seed=seed), np.float32)
-    return _to_gl_order(mi, sensor, img, extent)[..., -3:]
+    spp = max(spp, ALBEDO_SPP)
+    scene, _ = _top_down_scene(mi, exp, water=False, integrator={
+        "type": "aov", "aovs": "alb:albedo", "transport": _transport(exp, False)})
+    sensor = _ortho_sensor(mi, extent, size, spp, seed)
+    img = _to_gl_order(mi, sensor, np.array(mi.render(scene, sensor=sensor, spp=spp, seed=seed), np.float32),
+                       extent)
+    return img[..., :3], img[..., 3:6]
 
 
 def lighting_colour(exp: Experiment, extent, size: int, seed: int = 0, world_y=None) -> tuple[np.ndarray, dict]:
@@ -136,17 +142,14 @@ def lighting_colour(exp: Experiment, extent, size: int, seed: int = 0, world_y=N
     lighting x albedo inside the pool and the dry colour render outside; and a dict with the
     measured noise (``noise``: RMS standard error of the colour over the pool texels) and the
     settings used."""
-    import mitsuba as mi
-
-    from .shader_inputs import _render_top_down, top_down_world_y, underwater_camera_height
+    from .shader_inputs import top_down_world_y, underwater_camera_height
 
     wet = exp["reference.refraction_lighting"] == "underwater"
     y_cam = underwater_camera_height(exp) if wet else 100.0
     n_light = min(exp["reference.lighting_size"], size)     # never finer than the texture
     lighting, lighting_se = render_lighting(exp, n_light, exp["reference.texture_spp"], seed,
                                             water=wet, y_cam=y_cam)
-    albedo = render_albedo(exp, extent, size, seed)
-    dry = _render_top_down(mi, exp, extent, size, exp["reference.wall_spp"], seed, water=False)
+    dry, albedo = render_dry(exp, extent, size, exp["reference.wall_spp"], seed)
     if world_y is None:
         world_y = top_down_world_y(exp, extent, size)
     X, Z = texel_centres(extent, size)
@@ -157,5 +160,5 @@ def lighting_colour(exp: Experiment, extent, size: int, seed: int = 0, world_y=N
     se = interpolate(lighting_se, pool, X, Z) * albedo
     noise = float(np.sqrt(np.mean(se[inside] ** 2))) if inside.any() else 0.0
     info = {"method": "lighting", "lighting_size": n_light, "spp": exp["reference.texture_spp"],
-            "wall_spp": exp["reference.wall_spp"], "noise": noise, "n_seeds": N_SEEDS}
+            "wall_spp": max(exp["reference.wall_spp"], ALBEDO_SPP), "noise": noise, "n_seeds": N_SEEDS}
     return colour.astype(np.float32), info
