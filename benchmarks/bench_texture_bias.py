@@ -108,6 +108,8 @@ def main() -> None:
     ap.add_argument("--colour", type=int, nargs="*", default=[1, 4, 8])
     ap.add_argument("--lighting", nargs="*", default=["128:1", "128:2", "128:8", "64:1", "64:8"])
     ap.add_argument("--ref", type=int, nargs="*", default=[1, 2, 4], help="reference passes (64 spp each)")
+    ap.add_argument("--ref-sets", nargs="*", default=[], help="disjoint reference pass ranges START:STOP "
+                    "(the spread of their fitted constants measures the reference noise's effect)")
     args = ap.parse_args()
 
     from study import init_backend, load_experiment
@@ -178,6 +180,10 @@ def main() -> None:
     for j in args.ref:
         if j <= len(refs):
             rows.append(fit(f"ref {64 * j} tex {64 * len(wet)}", best_tex, refs[:j].mean(0)))
+    for item in args.ref_sets:
+        a, b = map(int, item.split(":"))
+        if b <= len(refs):
+            rows.append(fit(f"ref passes {a}-{b - 1} ({64 * (b - a)} spp)", best_tex, refs[a:b].mean(0)))
     if not rows:
         return
     # errors-in-variables extrapolation over the colour fits with the full reference

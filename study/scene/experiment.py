@@ -91,9 +91,10 @@ SCHEMA: dict[str, Field] = {
     "sun.radiance": Field("vec3", [8.0, 7.5, 6.0], "Radiance of the sun disc (0 = no sun).",
                           "linear RGB", 0.0, 1e6),
     "reference.spp": Field("int_or_auto", 256, "Samples per pixel, or `auto` to reach "
-                           "`reference.target_noise`. 256: the fitted constants of the default "
-                           "scene lie within about one standard error of a 4x-spp reference "
-                           "(benchmarks/bench_texture_bias.py).", "", 1, 65536),
+                           "`reference.target_noise`. At 256 the fitted attenuation, bump scaling and "
+                           "water colour of the default scene move by under 0.5 standard errors with "
+                           "the reference's noise; the specular strength, set by a few noisy sun "
+                           "glints, by about 1.3 (0.9 at 512): see the README.", "", 1, 65536),
     "reference.target_noise": Field("float", 0.01, "Target RMS standard error on water pixels "
                                     "for `spp = \"auto\"`.", "linear RGB", 1e-5, 1.0),
     "reference.max_spp": Field("int", 1024, "Upper bound of the automatic spp.", "", 4, 65536),
