@@ -108,6 +108,8 @@ def main() -> None:
     ap.add_argument("--colour", type=int, nargs="*", default=[1, 4, 8])
     ap.add_argument("--lighting", nargs="*", default=["128:1", "128:2", "128:8", "64:1", "64:8"])
     ap.add_argument("--ref", type=int, nargs="*", default=[1, 2, 4], help="reference passes (64 spp each)")
+    ap.add_argument("--ref-passes", type=int, default=None, help="passes of the reference the texture "
+                    "fits use (default: all)")
     ap.add_argument("--ref-sets", nargs="*", default=[], help="disjoint reference pass ranges START:STOP "
                     "(the spread of their fitted constants measures the reference noise's effect)")
     args = ap.parse_args()
@@ -144,7 +146,7 @@ def main() -> None:
     si.top_down_colour = lambda *a, **k: np.zeros((size, size, 3), np.float32)
     base = si.build_shader_inputs(exp)
     si.top_down_colour = orig
-    full_ref = refs.mean(0)
+    full_ref = refs[:args.ref_passes].mean(0)
 
     def with_colour(colour):
         above = world_y > 0.0
