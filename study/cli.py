@@ -25,6 +25,17 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("calibrate", help="reference, fit, export and report (the main job)")
     _common(p)
     p.add_argument("--solver", default=None, help="override fit.solver")
+    p = sub.add_parser("failures", help="classify every water pixel by where the shader's method "
+                       "fails; class maps beside FLIP maps, a table per class")
+    p.add_argument("experiments", nargs="+", metavar="EXPERIMENT", help="experiment TOML files")
+    p.add_argument("--out", required=True, help="output folder (created if missing)")
+    p.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE",
+                   help="override an experiment key in every experiment (repeatable)")
+    p.add_argument("--variant", choices=["llvm_ad_rgb", "cuda_ad_rgb"], default=None,
+                   help="Mitsuba variant (default: each experiment's)")
+    p.add_argument("--shader", default=None, help="shader variant (default: each experiment's fit.shader)")
+    p.add_argument("--constants", default=None, help="constants JSON (e.g. a calibrate's "
+                   "constants.json); default: each experiment's start constants")
     p = sub.add_parser("export", help="write the shaders with constants from a JSON file")
     p.add_argument("constants", help="constants.json written by `study calibrate`, or a flat JSON "
                    "object of constant name -> value")
@@ -45,6 +56,9 @@ def main(argv=None) -> int:
             _jobs.run_preview(args.experiment, args.out, args.overrides, args.variant)
         elif args.command == "calibrate":
             _jobs.run_calibrate(args.experiment, args.out, args.overrides, args.variant, solver=args.solver)
+        elif args.command == "failures":
+            _jobs.run_failures(args.experiments, args.out, args.overrides, args.variant,
+                               shader=args.shader, constants_json=args.constants)
         elif args.command == "export":
             _jobs.run_export(args.constants, args.out)
     except (ExperimentError, BackendError, FileNotFoundError, ValueError) as exc:

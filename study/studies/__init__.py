@@ -1,0 +1,1 @@
+"""Studies built on the fit and the scenes: failure catalogue (``failures``)."""
