@@ -134,8 +134,10 @@ def _shade(m, P, C, diagnose: bool = False):
     return gl_FragColor, diagnostics
 
 
-_frozen_shade = dr.freeze(lambda m, P, C: _shade(m, P, C))
-_frozen_shade_diagnosed = dr.freeze(lambda m, P, C: _shade(m, P, C, True))  # see water_refraction
+def _frozen_shade(m, P, C, diagnose):
+    f = _frame.frozen(("water_reflection", diagnose) + _frame.python_config(C),
+                      lambda m, P, C: _shade(m, P, C, diagnose))
+    return f(m, P, C)
 
 
 def render(inputs: ShaderInputs, constants: Constants | None = None, *,
@@ -156,14 +158,16 @@ def render(inputs: ShaderInputs, constants: Constants | None = None, *,
     C = resolve_constants(m, constants if constants is not None else Constants(), loop_ad)
     with evaluated_loops_if(C.differentiable and loop_ad == "evaluated"):
         if _frame.USE_FROZEN and not C.differentiable:
-            frozen = _frozen_shade_diagnosed if diagnose else _frozen_shade
-            color, diag = frozen(m, P.shading_state(), C)
+            color, diag = _frozen_shade(m, P.shading_state(), C, diagnose)
         else:
             color, diag = _shade(m, P, C, diagnose)
         return finish_output(m, P, color, diag, "water_reflection")
 
 
-_frozen_tangents = dr.freeze(lambda m, P, C, params: tangents(m, *_shade(m, P, C), params))
+def _frozen_tangents(m, P, C, params):
+    f = _frame.frozen(("water_reflection.tangents",) + _frame.python_config(C),
+                      lambda m, P, C, params: tangents(m, *_shade(m, P, C), params))
+    return f(m, P, C, params)
 
 
 def render_with_jacobian(inputs: ShaderInputs, constants: Constants | None, names: list[str], *,

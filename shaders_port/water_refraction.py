@@ -291,10 +291,10 @@ def _shade(m, P, C, reflection: bool, diagnose: bool = False):
     return gl_FragColor, diagnostics
 
 
-_frozen_shade = dr.freeze(lambda m, P, C, reflection: _shade(m, P, C, reflection))
-# one recording per diagnostics setting (a Python bool argument alone did not re-record in
-# Dr.Jit 1.5.0: the diagnostics of one call were missing when replayed for the other)
-_frozen_shade_diagnosed = dr.freeze(lambda m, P, C, reflection: _shade(m, P, C, reflection, True))
+def _frozen_shade(m, P, C, reflection, diagnose):
+    f = _frame.frozen(("water_refraction", reflection, diagnose) + _frame.python_config(C),
+                      lambda m, P, C: _shade(m, P, C, reflection, diagnose))
+    return f(m, P, C)
 
 
 def render(inputs: ShaderInputs, constants: Constants | None = None, *, reflection: bool = True,
@@ -317,15 +317,16 @@ def render(inputs: ShaderInputs, constants: Constants | None = None, *, reflecti
     C = resolve_constants(m, constants if constants is not None else Constants(), loop_ad)
     with evaluated_loops_if(C.differentiable and loop_ad == "evaluated"):
         if _frame.USE_FROZEN and not C.differentiable:
-            frozen = _frozen_shade_diagnosed if diagnose else _frozen_shade
-            color, diag = frozen(m, P.shading_state(), C, reflection)
+            color, diag = _frozen_shade(m, P.shading_state(), C, reflection, diagnose)
         else:
             color, diag = _shade(m, P, C, reflection, diagnose)
         return finish_output(m, P, color, diag, "water_refraction")
 
 
-_frozen_tangents = dr.freeze(lambda m, P, C, params, reflection:
-                             tangents(m, *_shade(m, P, C, reflection), params))
+def _frozen_tangents(m, P, C, params, reflection):
+    f = _frame.frozen(("water_refraction.tangents", reflection) + _frame.python_config(C),
+                      lambda m, P, C, params: tangents(m, *_shade(m, P, C, reflection), params))
+    return f(m, P, C, params)
 
 
 def render_with_jacobian(inputs: ShaderInputs, constants: Constants | None, names: list[str], *,
