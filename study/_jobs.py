@@ -211,62 +211,13 @@ def _jsonable(x):
 
 
 def run_failures(experiments, out, overrides=None, variant=None, shader=None, constants_json=None,
-                 cache=None) -> list:
-    """``study failures``: per experiment the failure catalogue of the port (start constants of
-    the experiment, or those of ``constants_json``): ``<out>/<name>/failures.png``; all tables
-    in ``<out>/failures.parquet``; ``<out>/report.md``. One experiment after the other."""
+                 scheduler=None, workers=None) -> list:
+    """``study failures``: the failure catalogue of each experiment, one sweep job per experiment
+    (``study.studies.failures``): ``<out>/<name>/failures.png``, ``failures.parquet``,
+    ``report.md``."""
     from .report.export import load_constants_json
-    from .report.failures import failures_figure, write_failures_report
-    from .studies.failures import CLASS_KEYS, CLASSES, catalogue_scene
-    from .fit.model import constants_from_experiment
-    from ._backend import drjit_backend
+    from .studies.failures import run_failures as run
 
-    if not experiments:
-        raise ValueError("give at least one experiment file")
-    out = Path(out)
-    out.mkdir(parents=True, exist_ok=True)
-    fixed = load_constants_json(constants_json) if constants_json else None
-    scenes, records, names = [], [], set()
-    for path in experiments:
-        exp, var, _ = prepare(path, out, overrides, variant)
-        if exp["name"] in names:
-            raise ValueError(f"two experiments are named {exp['name']!r}; give them distinct `name`s")
-        names.add(exp["name"])
-        ref, inputs, _ = load_scene_data(exp, var, cache)
-        constants = fixed if fixed is not None else constants_from_experiment(exp)
-        cat = catalogue_scene(exp, ref.image, inputs, constants, shader=shader, backend=drjit_backend(var))
-        folder = out / exp["name"]
-        folder.mkdir(parents=True, exist_ok=True)
-        failures_figure(folder / "failures.png", cat.reference, cat.port, cat.label, cat.flip, cat.scored,
-                        list(CLASS_KEYS), title=f"{exp['name']}: {cat.shader}")
-        records += cat.records()
-        scenes.append({"experiment": exp["name"], "shader": cat.shader,
-                       "figure": f"{exp['name']}/failures.png", "rows": cat.rows,
-                       "flip": float(cat.flip[cat.scored].mean()), "water_pixels": int(cat.scored.sum())})
-        _log(f"failures: {exp['name']}: " + ", ".join(
-            f"{r['class']} {100 * r['pixel_share']:.1f} %" for r in cat.rows if r["pixels"]))
-    write_table(out / "failures.parquet", records)
-    command = "study failures " + " ".join(str(p) for p in experiments) + f" --out {out}"
-    write_failures_report(out, scenes, list(CLASSES), command)
-    _log(f"failures: wrote {out}")
-    return records
-
-
-def write_table(path: Path, records: list[dict]) -> Path:
-    """Tidy rows as a Parquet file (pyarrow), written atomically."""
-    import os
-    import tempfile
-
-    import pyarrow as pa
-    import pyarrow.parquet as pq
-
-    table = pa.Table.from_pylist(records)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, suffix=".parquet.tmp")
-    os.close(fd)
-    try:
-        pq.write_table(table, tmp)
-        os.replace(tmp, path)
-    finally:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-    return path
+    constants = load_constants_json(constants_json) if constants_json else None
+    return run(list(experiments), out, overrides, variant=variant or "llvm_ad_rgb", shader=shader,
+               constants=constants, scheduler=scheduler, workers=workers, log=_log)

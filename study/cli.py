@@ -52,6 +52,10 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--shader", default=None, help="shader variant (default: each experiment's fit.shader)")
     p.add_argument("--constants", default=None, help="constants JSON (e.g. a calibrate's "
                    "constants.json); default: each experiment's start constants")
+    p.add_argument("--scheduler", default=None, metavar="ADDRESS",
+                   help="Dask scheduler address (default: $STUDY_SCHEDULER, else a local cluster)")
+    p.add_argument("--workers", type=int, default=None,
+                   help="local cluster worker processes (default: one per core)")
     p = sub.add_parser("export", help="write the shaders with constants from a JSON file")
     p.add_argument("constants", help="constants.json written by `study calibrate`, or a flat JSON "
                    "object of constant name -> value")
@@ -77,7 +81,8 @@ def main(argv=None) -> int:
                                tolerance=args.tolerance, scheduler=args.scheduler, workers=args.workers)
         elif args.command == "failures":
             _jobs.run_failures(args.experiments, args.out, args.overrides, args.variant,
-                               shader=args.shader, constants_json=args.constants)
+                               shader=args.shader, constants_json=args.constants,
+                               scheduler=args.scheduler, workers=args.workers)
         elif args.command == "export":
             _jobs.run_export(args.constants, args.out)
     except (ExperimentError, BackendError, FileNotFoundError, ValueError) as exc:

@@ -256,3 +256,30 @@ def test_frozen_renders_follow_the_loop_cap(shader, kw, cap):
         assert set(f) == set(t)
         assert np.array_equal(f[key], t[key]) and np.array_equal(f["color"], t["color"])
     assert frozen_runs[1][key].max() == 3 and frozen_runs[2][key].max() == 4
+
+
+# ---- the study through the CLI (sweep engine, one worker) ----------------------------------
+
+def test_failures_cli_tiny(tmp_path):
+    """Two tiny scenes through ``study failures``: per-scene figure, tidy table, report; the
+    ledge scene shows depth complexity, the capped-loop scene no-crossing rays."""
+    from conftest import REPO
+    from study.cli import main
+    from study.sweep import read_table
+    small = ["resolution=[24,24]", "fit.resolution=[24,24]", "reference.spp=4", "reference.water_mesh=32",
+             "reference.texture_size=32", "reference.texture_spp=2", "waves.normal_map_size=32"]
+    args = ["failures", str(REPO / "experiments" / "failures_ledge.toml"),
+            str(REPO / "experiments" / "failures_steps.toml"), "--out", str(tmp_path), "--workers", "1"]
+    args += [a for s in small for a in ("--set", s)]
+    assert main(args) == 0
+    rows = read_table(tmp_path / "failures.parquet")
+    by = {(r["experiment"], r["class"]): r for r in rows}
+    assert by[("failures_ledge", "depth_complexity")]["pixels"] > 0
+    assert by[("failures_steps", "no_crossing")]["pixels"] > 0
+    assert ("failures_steps", "refl_left_textures") in by and ("failures_ledge", "refl_no_hit") not in by
+    for name in ("failures_ledge", "failures_steps"):
+        shares = [r["pixel_share"] for r in rows if r["experiment"] == name and r["class"] != "none"]
+        assert all(0 <= s <= 1 for s in shares)
+        assert (tmp_path / name / "failures.png").stat().st_size > 5_000
+    report = (tmp_path / "report.md").read_text()
+    assert "## failures_ledge (water_refraction)" in report and "`depth_complexity`" in report

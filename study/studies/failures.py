@@ -254,3 +254,106 @@ def catalogue_scene(exp, reference: np.ndarray, inputs, constants, *, shader: st
     rows = failure_table(classes, fmap, model.mask)
     return SceneCatalogue(exp["name"], model.shader, model.reference, out["color"], classes,
                           primary_class(classes, water), fmap, model.mask, rows)
+
+
+# ---- the study on the sweep engine: one job per experiment ---------------------------------
+
+def failures_job(job: dict) -> dict:
+    """Sweep job (``study.sweep.run_sweep``): the catalogue of one scene. ``job``: ``scene`` (a
+    scene spec), ``variant`` (Mitsuba), ``shader`` (or None: ``fit.shader``), ``constants`` (a
+    ``Constants.to_dict()`` or None: the experiment's start constants), ``out`` (folder). Writes
+    ``<out>/<name>/failures.png``; returns the scene's figures and per class its table row."""
+    from pathlib import Path
+
+    from shaders_port import Constants
+
+    from .._backend import drjit_backend
+    from ..fit.model import constants_from_experiment
+    from ..report.failures import failures_figure
+    from ..sweep import load_scene
+
+    exp, ref, inputs = load_scene(job["scene"], job["variant"])
+    constants = (Constants.from_dict(job["constants"]) if job.get("constants")
+                 else constants_from_experiment(exp))
+    cat = catalogue_scene(exp, ref.image, inputs, constants, shader=job.get("shader"),
+                          backend=drjit_backend(job["variant"]))
+    folder = Path(job["out"]) / exp["name"]
+    folder.mkdir(parents=True, exist_ok=True)
+    failures_figure(folder / "failures.png", cat.reference, cat.port, cat.label, cat.flip, cat.scored,
+                    list(CLASS_KEYS), title=f"{exp['name']}: {cat.shader}")
+    fields = ("pixels", "pixel_share", "flip_share", "flip_inside", "flip_outside")
+    return {"experiment": exp["name"], "shader": cat.shader, "figure": f"{exp['name']}/failures.png",
+            "flip": float(cat.flip[cat.scored].mean()), "water_pixels": int(cat.scored.sum()),
+            "classes": {r["class"]: {k: r[k] for k in fields} for r in cat.rows}}
+
+
+def tidy_rows(sweep_rows: list[dict]) -> list[dict]:
+    """One row per (experiment, class) from the sweep's rows (status ok only)."""
+    out = []
+    for row in sweep_rows:
+        if row.get("status") != "ok":
+            continue
+        for k in CLASS_KEYS + ("none",):
+            if f"classes.{k}.pixels" not in row or row[f"classes.{k}.pixels"] is None:
+                continue
+            out.append({"experiment": row["experiment"], "shader": row["shader"], "class": k,
+                        **{f: row[f"classes.{k}.{f}"] for f in
+                           ("pixels", "pixel_share", "flip_share", "flip_inside", "flip_outside")}})
+    return out
+
+
+def run_failures(experiments: list, out, overrides=None, *, variant: str = "llvm_ad_rgb",
+                 shader: str | None = None, constants=None, scheduler=None, workers=None,
+                 log=None) -> list[dict]:
+    """``study failures``: one sweep job per experiment (:func:`failures_job`), then
+    ``failures.parquet`` (one row per experiment and class), ``report.md`` and the sweep's own
+    resumable table ``sweep.parquet`` in ``out``. ``constants``: a ``Constants`` for every scene
+    (None: each experiment's start constants). Returns the tidy rows."""
+    import sys
+    from pathlib import Path
+
+    from ..report.failures import write_failures_report
+    from ..scene.experiment import ExperimentError, load_experiment
+    from ..sweep import run_sweep, scene_spec, write_table
+
+    log = log or (lambda m: print(m, file=sys.stderr, flush=True))
+    if not experiments:
+        raise ExperimentError("give at least one experiment file")
+    exps = [load_experiment(p, overrides) for p in experiments]
+    names = [e["name"] for e in exps]
+    if len(set(names)) != len(names):
+        raise ExperimentError(f"experiment names must be distinct (they name the outputs): {names}")
+    if shader is not None:
+        from shaders_port._variants import get_variant
+        get_variant(shader)
+    out = Path(out).resolve()
+    out.mkdir(parents=True, exist_ok=True)
+    jobs = [{"scene": scene_spec(p, overrides or []), "variant": variant, "shader": shader,
+             "constants": constants.to_dict() if constants is not None else None, "out": str(out)}
+            for p in experiments]
+    rows = run_sweep(failures_job, jobs, out / "sweep.parquet", scheduler=scheduler, workers=workers,
+                     variant=variant, label="failures", log=log)
+    rows = rows[:len(jobs)]
+    bad = [(n, r.get("error")) for n, r in zip(names, rows) if r.get("status") != "ok"]
+    for n, err in bad:
+        log(f"failures: {n} failed: {err}")
+    if len(bad) == len(rows):
+        raise RuntimeError(f"every experiment failed; first error: {bad[0][1]}")
+    tidy = tidy_rows(rows)
+    write_table(out / "failures.parquet", tidy)
+    scenes = []
+    for r in rows:
+        if r.get("status") != "ok":
+            continue
+        scene_rows = [t for t in tidy if t["experiment"] == r["experiment"]]
+        scenes.append({"experiment": r["experiment"], "shader": r["shader"], "figure": r["figure"],
+                       "rows": [{**t, "class": t["class"]} for t in scene_rows], "flip": r["flip"],
+                       "water_pixels": r["water_pixels"]})
+    command = ("study failures " + " ".join(str(p) for p in experiments)
+               + "".join(f" --set {o}" for o in overrides or []) + f" --out {out}")
+    write_failures_report(out, scenes, list(CLASSES), command)
+    for s in scenes:
+        log(f"failures: {s['experiment']}: " + ", ".join(
+            f"{t['class']} {100 * t['pixel_share']:.1f} %" for t in s["rows"] if t["pixels"]))
+    log(f"failures: wrote {out}")
+    return tidy
