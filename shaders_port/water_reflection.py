@@ -98,6 +98,7 @@ def _shade(m, P, C, diagnose: bool = False):
     R = dr.normalize(reflect(m, -vEye, vBumpTexMore))
     R.y = dr.maximum(R.y, 0.001)
     R = dr.normalize(R)
+    refl_dir = R   # kept for the diagnostics
     numsteps = mix(C.refl_steps_steep, C.refl_steps_grazing, 1.0 - R.y)
     stepsize = 1.0 / numsteps
     R *= stepsize
@@ -131,6 +132,9 @@ def _shade(m, P, C, diagnose: bool = False):
     if diagnose:
         diagnostics.update(refraction_failure_diagnostics(m, P, C, f))
         diagnostics["refl_exit"] = reflection_exit(m, P, C, refl_loop_position, noHit)
+        d = dr.detach(refl_dir)
+        diagnostics.update({"refl_dir_x": m.Float(d.x), "refl_dir_y": m.Float(d.y),
+                            "refl_dir_z": m.Float(d.z)})
     return gl_FragColor, diagnostics
 
 
@@ -150,8 +154,9 @@ def render(inputs: ShaderInputs, constants: Constants | None = None, *,
     ``fetches`` counts every texture2D/textureCube call: 4 normal map, 1 + ``iterations``
     depth, 1 refraction colour, 1 + (in-bounds reflection iterations) reflection depth, 1
     reflection colour (bottom texture or cube map), 1 Fresnel LUT. ``diagnose=True`` adds the
-    failure diagnostics of ``water_refraction.refraction_failure_diagnostics`` and ``refl_exit``
-    (:func:`reflection_exit`); extra outputs only, the colour is bit-identical.
+    failure diagnostics of ``water_refraction.refraction_failure_diagnostics``, ``refl_exit``
+    (:func:`reflection_exit`) and ``refl_dir_x/y/z`` (the unit reflection direction after the
+    clamp of ``R.y``, before the step scaling); extra outputs only, the colour is bit-identical.
     """
     m = backend_types(backend)
     P = prepare(inputs, m)

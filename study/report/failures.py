@@ -81,7 +81,9 @@ def write_failures_report(out: Path, scenes: list[dict], classes: list, command:
     lines.append("")
     for s in scenes:
         lines += [f"## {s['experiment']} ({s['shader']})", "",
-                  f"{s['water_pixels']} scored water pixels, mean FLIP {s['flip']:.4f}.", "",
+                  f"{s['water_pixels']} scored water pixels, mean FLIP {s['flip']:.4f} (reference: "
+                  f"{s.get('spp')} spp, noise {s.get('noise') or float('nan'):.3g} RMS linear RGB; the "
+                  "noise raises FLIP in every class alike).", "",
                   f"![failure classes of {s['experiment']}]({s['figure']})", "",
                   table_markdown(s["rows"]), ""]
     path = out / "report.md"

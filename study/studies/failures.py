@@ -42,10 +42,13 @@ shown in the class map):
 ``refl_left_textures`` (``water_reflection``): the reflection ray left the reflection textures'
     [0, 1]^2 before hitting anything (``refl_exit == 1``); the cube map is used, right only if
     nothing lies beyond the textures. Exact.
-``refl_no_hit`` (``water_reflection``): the cube map was used although the ray was stopped
-    short: by ``REFL_LOOP_CAP`` (``refl_exit == 3``), or by the height cut while geometry above
-    the water rises above ``REFL_HEIGHT_CUT`` (``refl_exit == 2`` and ``max(refl_world_y) >
-    REFL_HEIGHT_CUT``). A ray cut above all geometry is the method working, not failing.
+``refl_no_hit`` (``water_reflection``): the cube map was used although the reflection ray hits
+    the geometry of the reflection textures: the loop stopped it short (``REFL_LOOP_CAP``, or the
+    height cut below the geometry's top) or stepped over a thin feature. Found by continuing the
+    ray in NumPy (:func:`reflection_would_hit`) in steps of ``REFL_FINE_STEP`` (1/4) texel, the
+    shader's own hit test (``refl_world_y > y``, nearest texel) from the water plane until it
+    leaves the textures or rises above their highest texel. A ray that leaves the textures or
+    passes above all geometry is the method working, not failing.
 
 The table (:func:`failure_table`) gives per class its share of the water pixels, its share of
 the total FLIP error, and the mean FLIP inside and outside the class (classes overlap; the
@@ -60,6 +63,7 @@ import numpy as np
 GRAZING_RY = 0.25
 DENOMINATOR_EPS = 1e-3
 HIDDEN_OFFSET = 1e-3
+REFL_FINE_STEP = 0.25      # texels per step of the fine march of reflection rays
 
 
 @dataclass(frozen=True)
@@ -83,8 +87,8 @@ CLASSES: tuple[FailureClass, ...] = (
     FailureClass("grazing", "grazing (or upward) refraction", f"normalize(R).y > -{GRAZING_RY:g}"),
     FailureClass("refl_left_textures", "reflection ray left the reflection textures",
                  "refl_exit == outside", reflection_only=True),
-    FailureClass("refl_no_hit", "reflection ray stopped short, cube map used",
-                 "refl_exit == loop cap, or height cut below the geometry", reflection_only=True),
+    FailureClass("refl_no_hit", "reflection ray missed geometry it hits, cube map used",
+                 "no hit, but a 1/4-texel march hits the reflection textures", reflection_only=True),
 )
 CLASS_KEYS = tuple(c.key for c in CLASSES)
 REQUIRED = ("crossed", "denominator", "nonfinite", "refract_k", "cos_eye_normal", "refr_dir_y",
@@ -96,7 +100,7 @@ def classes_for(shader_has_reflection_loop: bool) -> tuple[FailureClass, ...]:
 
 
 def classify(maps: dict, water: np.ndarray, *, hidden: np.ndarray | None = None,
-             refl_height_cut: float | None = None, refl_geometry_top: float | None = None) -> dict:
+             refl_missed: np.ndarray | None = None) -> dict:
     """Boolean (H, W) membership of every class for the port's diagnostics ``maps``.
 
     Args:
@@ -105,8 +109,8 @@ def classify(maps: dict, water: np.ndarray, *, hidden: np.ndarray | None = None,
         water: (H, W) bool, the pixels to classify (others are False in every class).
         hidden: (H, W) bool from :func:`hidden_from_top_down` (None: the class is not
             evaluated and reported as absent, e.g. for synthetic inputs with no scene).
-        refl_height_cut, refl_geometry_top: ``REFL_HEIGHT_CUT`` and ``max(refl_world_y)``
-            (both needed when ``refl_exit`` is present).
+        refl_missed: (H, W) bool from :func:`reflection_would_hit` (needed when ``refl_exit``
+            is present): the fine march hits the reflection textures' geometry.
     Returns: dict class key -> (H, W) bool, in the order of :data:`CLASSES` (reflection classes
     only when ``maps`` has ``refl_exit``).
     """
@@ -124,12 +128,12 @@ def classify(maps: dict, water: np.ndarray, *, hidden: np.ndarray | None = None,
         "grazing": ~(maps["refr_dir_y"] <= -GRAZING_RY),
     }
     if "refl_exit" in maps:
-        if refl_height_cut is None or refl_geometry_top is None:
-            raise ValueError("refl_height_cut and refl_geometry_top are needed to classify "
+        if refl_missed is None:
+            raise ValueError("refl_missed (reflection_would_hit) is needed to classify "
                              "water_reflection's reflection rays")
         e = maps["refl_exit"]
         out["refl_left_textures"] = e == 1
-        out["refl_no_hit"] = (e == 3) | ((e == 2) & (refl_geometry_top > refl_height_cut))
+        out["refl_no_hit"] = (e != 0) & np.asarray(refl_missed, bool)
     return {k: v & w for k, v in out.items()}
 
 
@@ -165,6 +169,50 @@ def failure_table(classes: dict, flip: np.ndarray, scored: np.ndarray) -> list[d
                      "flip_inside": float(f[inside].mean()) if inside.any() else float("nan"),
                      "flip_outside": float(f[outside].mean()) if outside.any() else float("nan")})
     return rows
+
+
+def reflection_would_hit(inputs, origins: np.ndarray, directions: np.ndarray,
+                         chunk: int = 4096) -> np.ndarray:
+    """(N,) bool: the ray ``origins + t directions`` (N, 3), marched in steps of
+    ``REFL_FINE_STEP`` texels of ``refl_world_y``, meets a texel whose world y is above it (the
+    shader's hit test, nearest texel, ``tex_matrix1``) before it leaves the textures' [0, 1]^2
+    or rises above their highest texel. Rays pointing down never hit (False)."""
+    ry = np.asarray(inputs.refl_world_y, np.float64)
+    H, W = ry.shape
+    top = float(ry.max())
+    M = np.asarray(inputs.tex_matrix1, np.float64)
+    o = np.asarray(origins, np.float64)
+    d = np.asarray(directions, np.float64)
+    out = np.zeros(len(o), bool)
+    if top <= 0.0 or not len(o):
+        return out
+    # world length of a texel along the ray's horizontal direction: the smaller of the two axes
+    texel = min(1.0 / (W * max(np.linalg.norm(M[0, :3]), 1e-12)),
+                1.0 / (H * max(np.linalg.norm(M[1, :3]), 1e-12)))
+    step = REFL_FINE_STEP * texel
+    ok = np.isfinite(d).all(1) & (d[:, 1] > 0)
+    for a in range(0, len(o), chunk):
+        sl = slice(a, a + chunk)
+        oo, dd, good = o[sl], d[sl], ok[sl]
+        t_top = np.where(good, top / np.where(good, dd[:, 1], 1.0), 0.0)
+        n = int(np.ceil(min(t_top.max(), 1e4 * texel) / step)) + 1 if good.any() else 0
+        hit = np.zeros(len(oo), bool)
+        alive = good.copy()
+        for k in range(1, n + 1):
+            if not alive.any():
+                break
+            p = oo + (k * step) * dd
+            s = p @ M[0, :3] + M[0, 3]
+            t = p @ M[1, :3] + M[1, 3]
+            inside = (s >= 0) & (s <= 1) & (t >= 0) & (t <= 1) & (p[:, 1] <= top)
+            alive &= inside
+            i = np.clip((t * H).astype(np.int64), 0, H - 1)
+            j = np.clip((s * W).astype(np.int64), 0, W - 1)
+            h = alive & (ry[i, j] > p[:, 1])
+            hit |= h
+            alive &= ~h
+        out[sl] = hit
+    return out
 
 
 def hidden_from_top_down(exp, origins: np.ndarray, directions: np.ndarray) -> np.ndarray:
@@ -248,8 +296,14 @@ def catalogue_scene(exp, reference: np.ndarray, inputs, constants, *, shader: st
         hidden = np.zeros(h * w, bool)
         hidden[r.index] = hid
         hidden = hidden.reshape(h, w)
-    classes = classify(out, water, hidden=hidden, refl_height_cut=float(constants.refl_height_cut),
-                       refl_geometry_top=float(np.max(model.inputs.refl_world_y)))
+    refl_missed = None
+    if "refl_exit" in out:
+        r = rasterize_water(model.inputs)
+        dirs = np.stack([out[f"refl_dir_{c}"].ravel()[r.index] for c in "xyz"], 1)
+        refl_missed = np.zeros(h * w, bool)
+        refl_missed[r.index] = reflection_would_hit(model.inputs, r.world, dirs)
+        refl_missed = refl_missed.reshape(h, w)
+    classes = classify(out, water, hidden=hidden, refl_missed=refl_missed)
     fmap = flip_map(model.reference, out["color"])
     rows = failure_table(classes, fmap, model.mask)
     return SceneCatalogue(exp["name"], model.shader, model.reference, out["color"], classes,
@@ -284,6 +338,7 @@ def failures_job(job: dict) -> dict:
     fields = ("pixels", "pixel_share", "flip_share", "flip_inside", "flip_outside")
     return {"experiment": exp["name"], "shader": cat.shader, "figure": f"{exp['name']}/failures.png",
             "flip": float(cat.flip[cat.scored].mean()), "water_pixels": int(cat.scored.sum()),
+            "reference_spp": ref.spp, "reference_noise": ref.noise,
             "classes": {r["class"]: {k: r[k] for k in fields} for r in cat.rows}}
 
 
@@ -326,7 +381,7 @@ def run_failures(experiments: list, out, overrides=None, *, variant: str = "llvm
     if shader is not None:
         from shaders_port._variants import get_variant
         get_variant(shader)
-    out = Path(out).resolve()
+    out_arg, out = str(out), Path(out).resolve()
     out.mkdir(parents=True, exist_ok=True)
     jobs = [{"scene": scene_spec(p, overrides or []), "variant": variant, "shader": shader,
              "constants": constants.to_dict() if constants is not None else None, "out": str(out)}
@@ -347,10 +402,11 @@ def run_failures(experiments: list, out, overrides=None, *, variant: str = "llvm
             continue
         scene_rows = [t for t in tidy if t["experiment"] == r["experiment"]]
         scenes.append({"experiment": r["experiment"], "shader": r["shader"], "figure": r["figure"],
-                       "rows": [{**t, "class": t["class"]} for t in scene_rows], "flip": r["flip"],
+                       "rows": scene_rows, "flip": r["flip"], "spp": r.get("reference_spp"),
+                       "noise": r.get("reference_noise"),
                        "water_pixels": r["water_pixels"]})
     command = ("study failures " + " ".join(str(p) for p in experiments)
-               + "".join(f" --set {o}" for o in overrides or []) + f" --out {out}")
+               + "".join(f" --set {o}" for o in overrides or []) + f" --out {out_arg}")
     write_failures_report(out, scenes, list(CLASSES), command)
     for s in scenes:
         log(f"failures: {s['experiment']}: " + ", ".join(
