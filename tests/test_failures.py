@@ -236,6 +236,20 @@ def test_depth_complexity_found_under_the_ledge(mi):
     assert not hidden_from_top_down(flat, o, d).any()
 
 
+def test_ledge_is_in_the_top_down_textures_and_the_scene_key(mi):
+    from study.scene.shader_inputs import texture_extent, top_down_world_y
+    exp, flat = ledge_experiment("[-1.4, 0.2, -0.35, 0.15]"), ledge_experiment("[0.0, 0.0, 0.0, 0.0]")
+    ext = texture_extent(exp)
+    y = top_down_world_y(exp, ext, 32)
+    x = ext[0] + (np.arange(32) + 0.5) / 32 * (ext[2] - ext[0])
+    z = ext[1] + (np.arange(32) + 0.5) / 32 * (ext[3] - ext[1])
+    over = (x > -1.35) & (x < 0.15)                    # columns over the ledge
+    rows = np.abs(z) < 2.4                             # rows inside the pool (the ledge spans z)
+    np.testing.assert_allclose(y[np.ix_(rows, over)], -0.35, atol=1e-4)     # its top, not the floor
+    np.testing.assert_allclose(top_down_world_y(flat, ext, 32)[np.ix_(rows, over)], -1.6, atol=1e-4)
+    assert exp.scene_hash() != flat.scene_hash() and exp.inputs_hash() != flat.inputs_hash()
+
+
 def test_ledge_is_validated():
     from study import ExperimentError
     with pytest.raises(ExperimentError, match="floor.ledge"):

@@ -221,7 +221,6 @@ def hidden_from_top_down(exp, origins: np.ndarray, directions: np.ndarray) -> np
     module doc). ``origins``/``directions``: (N, 3) float world units, unit directions; rays
     pointing up or non-finite give False. Needs the Mitsuba variant set
     (``study._backend.init_backend``)."""
-    import drjit as dr
     import mitsuba as mi
 
     from ..scene.mitsuba_scene import build_geometry
@@ -246,7 +245,6 @@ def hidden_from_top_down(exp, origins: np.ndarray, directions: np.ndarray) -> np
     up = mi.Ray3f(vec(q, mi.Point3f), mi.Vector3f(0.0, 1.0, 0.0))
     up.maxt = mi.Float(np.asarray(-q[:, 1], np.float32))
     blocked = np.array(scene.ray_test(up), bool)
-    dr.eval()
     return valid & blocked & (p[:, 1] < 0)
 
 
