@@ -105,7 +105,6 @@ def test_analysis_of_a_table():
     assert all("label" in r for r in recs)
 
 
-@pytest.mark.slow
 def test_tradeoff_cli_tiny(tmp_path):
     """A few points at 32x32 through the CLI: table, chart, report, recommended shaders, resume."""
     from study.cli import main
