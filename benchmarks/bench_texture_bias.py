@@ -18,6 +18,12 @@ the texture-noise-free constants is the errors-in-variables extrapolation ``c(s)
 over the colour fits (noise in the texture biases the fit in proportion to its variance, 1 / s).
 
     .venv/bin/python benchmarks/bench_texture_bias.py [--passes DIR] [--render-wet N] [--render-ref N]
+        [--colour K ...] [--lighting N:K ...] [--ref J ...] [--ref-sets A:B ...] [--ref-passes J]
+        [--set KEY=VALUE ...]
+
+The figures in the README came from 8 under-water passes and 8 reference passes:
+``--render-wet 8 --render-ref 8``, then ``--colour 1 4 8 --lighting 128:1 128:4 128:8 64:8
+--ref-passes 3`` and ``--colour --lighting --ref 2 8 --ref-sets 0:2 2:4 4:6 6:8 0:4 4:8``.
 """
 from __future__ import annotations
 
@@ -103,6 +109,8 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("experiment", nargs="?", default=str(REPO / "experiments" / "default.toml"))
     ap.add_argument("--passes", type=Path, default=REPO / ".bench_cache")
+    ap.add_argument("--set", dest="overrides", action="append", default=[], help="experiment override "
+                    "KEY=VALUE (e.g. fit.max_steps=400)")
     ap.add_argument("--render-wet", type=int, default=0)
     ap.add_argument("--render-ref", type=int, default=0)
     ap.add_argument("--colour", type=int, nargs="*", default=[1, 4, 8])
@@ -121,7 +129,7 @@ def main() -> None:
     from study.scene import lighting, shader_inputs as si
 
     variant = init_backend("llvm_ad_rgb")
-    exp = load_experiment(args.experiment, ["reference.texture_method=\"colour\""])
+    exp = load_experiment(args.experiment, ["reference.texture_method=\"colour\""] + args.overrides)
     args.passes.mkdir(parents=True, exist_ok=True)
     _render(exp, "wet", args.passes, args.render_wet)
     _render(exp, "ref", args.passes, args.render_ref)
