@@ -146,9 +146,9 @@ SCHEMA: dict[str, Field] = {
     "tradeoff.variants": Field("list_str", ["water_refraction_noreflection", "water_refraction",
                                             "water_reflection"],
                                "Shader variants `study tradeoff` compares.", choices=SHADERS),
-    "tradeoff.steps_grazing": Field("list_float", [5.0, 10.0, 20.0], "`STEPS_GRAZING` values of the "
+    "tradeoff.steps_grazing": Field("list_float", [5.0, 20.0], "`STEPS_GRAZING` values of the "
                                     "schedule grid (full grid with the next two keys).", "steps", 0.5, 1000.0),
-    "tradeoff.steps_steep": Field("list_float", [1.5, 3.0, 6.0], "`STEPS_STEEP` values of the grid.",
+    "tradeoff.steps_steep": Field("list_float", [1.5, 6.0], "`STEPS_STEEP` values of the grid.",
                                   "steps", 0.5, 1000.0),
     "tradeoff.loop_cap": Field("list_float", [20, 40], "`LOOP_CAP` values of the grid (integers).",
                                "iterations", 1, 10000),
@@ -160,7 +160,7 @@ SCHEMA: dict[str, Field] = {
                                       "raymarch that measures each variant's error floor.", "", 1.0, 1000.0),
     "tradeoff.tolerance": Field("float", 0.02, "Recommend the cheapest configuration whose FLIP is "
                                 "within this fraction of the best FLIP.", "", 0.0, 10.0),
-    "tradeoff.gl_repeats": Field("int", 15, "Frames timed per GL measurement (median reported).",
+    "tradeoff.gl_repeats": Field("int", 5, "Frames timed per GL measurement (median reported).",
                                  "", 3, 1000),
 }
 for _name, (_glsl, _kind, _default, (_lo, _hi)) in CONSTANT_SPECS.items():
