@@ -5,8 +5,11 @@ import argparse
 import sys
 
 
-def _common(p: argparse.ArgumentParser) -> None:
-    p.add_argument("experiment", help="experiment TOML file (see experiments/README.md)")
+def _common(p: argparse.ArgumentParser, many: bool = False) -> None:
+    if many:
+        p.add_argument("experiment", nargs="+", help="experiment TOML file(s) (see experiments/README.md)")
+    else:
+        p.add_argument("experiment", help="experiment TOML file (see experiments/README.md)")
     p.add_argument("--out", required=True, help="output folder (created if missing)")
     p.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE",
                    help="override an experiment key, e.g. --set water.ior=1.33 (repeatable)")
@@ -22,8 +25,13 @@ def build_parser() -> argparse.ArgumentParser:
     _common(p)
     p = sub.add_parser("preview", help="the port with default constants next to the reference")
     _common(p)
-    p = sub.add_parser("calibrate", help="reference, fit, export and report (the main job)")
-    _common(p)
+    p = sub.add_parser("calibrate", help="reference, fit, export and report (the main job); several "
+                       "experiments: one constants block fitted on all of them (joint fit)")
+    _common(p, many=True)
+    p.add_argument("--solver", default=None, help="override fit.solver")
+    p = sub.add_parser("generalise", help="joint fit over several experiments and leave-one-scene-out "
+                       "validation (generalise.md)")
+    _common(p, many=True)
     p.add_argument("--solver", default=None, help="override fit.solver")
     p = sub.add_parser("export", help="write the shaders with constants from a JSON file")
     p.add_argument("constants", help="constants.json written by `study calibrate`, or a flat JSON "
@@ -43,8 +51,12 @@ def main(argv=None) -> int:
             _jobs.run_render(args.experiment, args.out, args.overrides, args.variant)
         elif args.command == "preview":
             _jobs.run_preview(args.experiment, args.out, args.overrides, args.variant)
+        elif args.command == "calibrate" and len(args.experiment) == 1:
+            _jobs.run_calibrate(args.experiment[0], args.out, args.overrides, args.variant, solver=args.solver)
         elif args.command == "calibrate":
-            _jobs.run_calibrate(args.experiment, args.out, args.overrides, args.variant, solver=args.solver)
+            _jobs.run_calibrate_joint(args.experiment, args.out, args.overrides, args.variant, solver=args.solver)
+        elif args.command == "generalise":
+            _jobs.run_generalise(args.experiment, args.out, args.overrides, args.variant, solver=args.solver)
         elif args.command == "export":
             _jobs.run_export(args.constants, args.out)
     except (ExperimentError, BackendError, FileNotFoundError, ValueError) as exc:
