@@ -122,6 +122,15 @@ def run_tradeoff(experiments, out, overrides=None, variant=None, tolerance=None,
                tolerance=tolerance, variant=variant or "llvm_ad_rgb", log=_log)
 
 
+def run_stability(experiments, out, overrides=None, variant=None, scheduler=None, workers=None,
+                  **options) -> dict:
+    """``study stability``: solvers from many starts, which residual, reference noise
+    (``study.studies.stability``); tables, charts and ``stability.md`` in ``out``."""
+    from .studies.stability import run_stability as run
+    return run(list(experiments), out, overrides, scheduler=scheduler, workers=workers,
+               variant=variant or "llvm_ad_rgb", log=_log, **options)
+
+
 def run_export(constants_json, out) -> list:
     """``study export``: the shipped shaders with the constants of a JSON file, in ``out/shaders``."""
     from .report.export import export_shaders, load_constants_json

@@ -49,6 +49,26 @@ def build_parser() -> argparse.ArgumentParser:
                    help="Dask scheduler address (default: $STUDY_SCHEDULER, else a local cluster)")
     p.add_argument("--workers", type=int, default=None,
                    help="local cluster worker processes (default: one per core)")
+    p = sub.add_parser("stability", help="where the fit fails: solvers from many starts, which residual, "
+                       "reference and texture noise (Dask sweeps; stability.md)")
+    p.add_argument("experiments", nargs="+", metavar="EXPERIMENT", help="experiment TOML file(s)")
+    p.add_argument("--out", required=True, help="output folder (created if missing; a re-run resumes)")
+    p.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE",
+                   help="override a key of every experiment (repeatable)")
+    p.add_argument("--variant", choices=["llvm_ad_rgb", "cuda_ad_rgb"], default="llvm_ad_rgb")
+    p.add_argument("--phases", nargs="+", default=["multistart", "loss", "noise"],
+                   help="multistart, loss, noise (default: all)")
+    p.add_argument("--starts", type=int, default=16, help="Latin-hypercube starts per scene and solver")
+    p.add_argument("--solvers", nargs="+", default=None, help="default: all six")
+    p.add_argument("--adam-lrs", nargs="+", type=float, default=[0.02, 0.05, 0.1])
+    p.add_argument("--max-steps", type=int, default=100, help="step cap (Nelder-Mead: 4x)")
+    p.add_argument("--noise-spp", nargs="+", type=int, default=[64, 256, 1024, 4096])
+    p.add_argument("--noise-fixed-spp", type=int, default=1024)
+    p.add_argument("--noise-seeds", type=int, default=3)
+    p.add_argument("--noise-resolution", type=int, default=96)
+    p.add_argument("--scheduler", default=None, metavar="ADDRESS",
+                   help="Dask scheduler address (default: $STUDY_SCHEDULER, else a local cluster)")
+    p.add_argument("--workers", type=int, default=None, help="local cluster worker processes")
     p = sub.add_parser("export", help="write the shaders with constants from a JSON file")
     p.add_argument("constants", help="constants.json written by `study calibrate`, or a flat JSON "
                    "object of constant name -> value")
@@ -76,6 +96,14 @@ def main(argv=None) -> int:
         elif args.command == "tradeoff":
             _jobs.run_tradeoff(args.experiments, args.out, args.overrides, args.variant,
                                tolerance=args.tolerance, scheduler=args.scheduler, workers=args.workers)
+        elif args.command == "stability":
+            from .studies.stability import SOLVERS
+            _jobs.run_stability(args.experiments, args.out, args.overrides, args.variant,
+                                scheduler=args.scheduler, workers=args.workers, phases=args.phases,
+                                starts=args.starts, solvers=args.solvers or SOLVERS, adam_lrs=args.adam_lrs,
+                                max_steps=args.max_steps, nm_steps=4 * args.max_steps,
+                                noise_spp=args.noise_spp, noise_fixed_spp=args.noise_fixed_spp,
+                                noise_seeds=args.noise_seeds, noise_resolution=args.noise_resolution)
         elif args.command == "export":
             _jobs.run_export(args.constants, args.out)
     except (ExperimentError, BackendError, FileNotFoundError, ValueError) as exc:

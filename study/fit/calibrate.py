@@ -10,8 +10,9 @@
    Constants whose range starts at 0 (colour channels, the specular strength) use the
    ``clip`` parametrisation (``study.fit.solvers``): linear inside the box, so a channel whose
    best value is 0 lands *on* 0 in one step instead of crawling towards it in a log scale;
-   the solver stops when the loss stops improving (relative decrease below ``FTOL = 1e-6``
-   over ``FTOL_WINDOW = 3`` steps), not at the step cap.
+   the solver stops when the loss stops improving (relative decrease over ``FTOL_WINDOW = 3``
+   steps below ``max(1e-6, 1 / (m - k))``, an improvement worth less than one standard
+   error of one parameter; ``study.fit.solvers.FTOL_SE``), not at the step cap.
 4. Judged at the solution:
 
    * a constant left on a bound with the loss still falling outwards (the KKT sign, checked by
@@ -45,7 +46,7 @@ import numpy as np
 
 from shaders_port import Constants
 
-from .solvers import FTOL, FTOL_WINDOW, FitProblem, Param, fit
+from .solvers import FTOL, FTOL_SE, FTOL_WINDOW, FitProblem, Param, fit
 from .identify import identify, sweep_1d, sweep_2d
 from .model import ShaderModel, bounds, expand_parameters, get_value, with_values
 
@@ -180,7 +181,7 @@ def calibrate_model(model: ShaderModel, start: Constants, requested: list[str], 
             break
         id1 = None
         result = fit(problem, x0, solver=solver, free=free, max_steps=max_steps, rtol=FIT_RTOL,
-                     atol=FIT_ATOL, ftol=FTOL, ftol_window=FTOL_WINDOW)
+                     atol=FIT_ATOL, ftol=FTOL, ftol_window=FTOL_WINDOW, ftol_se=FTOL_SE)
         print(file=sys.stderr)
         fits.append(result)
         losses += list(result.losses)
@@ -250,7 +251,7 @@ def calibrate_model(model: ShaderModel, start: Constants, requested: list[str], 
                         "step_losses": trace,
                         "steps_to_0.1pct_per_round": [steps_to_within(f.extra.get("step_losses", []))
                                                       for f in fits],
-                        "ftol": FTOL, "ftol_window": FTOL_WINDOW, "rel_se_max": REL_SE_MAX,
+                        "ftol": FTOL, "ftol_se": FTOL_SE, "ftol_window": FTOL_WINDOW, "rel_se_max": REL_SE_MAX,
                         "converged": all(f.converged for f in fits)})
     else:
         summary = {"solver": solver, "iterations": 0, "converged": True, "message": "nothing to fit"}

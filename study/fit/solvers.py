@@ -66,7 +66,11 @@ DERIVATIVE_FREE = ("nelder_mead", "nelder_mead_optimistix")
 TRANSFORMS = ("auto", "linear", "log", "neglog", "logit", "log_logit", "clip")
 # default stopping rule of the gradient solvers (see :func:`fit`): the fit has stopped improving
 # when the lowest loss seen fell by less than FTOL (relative) over the last FTOL_WINDOW steps
-FTOL, FTOL_WINDOW = 1e-6, 3
+# when the lowest loss seen fell by less than max(FTOL, FTOL_SE / (m - k)) (relative) over the
+# last FTOL_WINDOW steps. FTOL_SE / (m - k): with m residuals and k parameters, moving one
+# parameter by d standard errors from the optimum raises the loss by about d^2 * loss / (m - k),
+# so an improvement below 1.0 * loss / (m - k) is worth less than one standard error
+FTOL, FTOL_SE, FTOL_WINDOW = 1e-6, 1.0, 3
 
 
 def _sigmoid(z, xp):
@@ -355,7 +359,7 @@ def fit(problem: FitProblem, x0: dict | None = None, *, solver: str, max_steps: 
         rtol: float = 1e-8, atol: float = 1e-12, free: list[str] | None = None,
         treat_as_continuous: list[str] = (), lr: float = 0.05, patience: int | None = None,
         nm_step: float = 0.5, ftol: float | None = None, ftol_window: int = FTOL_WINDOW,
-        kkt_restarts: int = 3) -> FitResult:
+        ftol_se: float | None = None, kkt_restarts: int = 3) -> FitResult:
     """Fit ``problem`` from ``x0`` (dict name -> physical value; missing: defaults).
 
     ``solver``: one of :data:`SOLVERS`. ``free``: names to fit (default: every parameter the
@@ -365,8 +369,10 @@ def fit(problem: FitProblem, x0: dict | None = None, *, solver: str, max_steps: 
     solvers and Adam: stop (converged) when the lowest loss seen fell by less than
     ``ftol * loss`` over the last ``ftol_window`` steps - the fit has stopped improving, whatever
     the parameters still do (a parameter crawling towards an unreachable bound would otherwise
-    run the solver to its cap). The calibration uses ``ftol = FTOL = 1e-6`` over
-    ``FTOL_WINDOW = 3`` steps. For Adam (the tutorial loop runs to the cap), with ``patience``
+    run the solver to its cap). ``ftol_se`` (None: off) raises the tolerance to
+    ``ftol_se / (m - k)`` when that is larger (an improvement worth less than
+    ``sqrt(ftol_se)`` standard errors of one parameter, see :data:`FTOL_SE`). The calibration
+    uses ``ftol = FTOL = 1e-6``, ``ftol_se = FTOL_SE = 1`` over ``FTOL_WINDOW = 3`` steps. For Adam (the tutorial loop runs to the cap), with ``patience``
     set, the run also stops (converged) when the best loss improved by less than
     ``rtol*loss + atol`` over the last ``patience`` iterations; Adam returns the lowest-loss
     iterate. ``lr``: Adam's learning rate in ``u`` units (one unit is about one ``scale``).
@@ -399,6 +405,8 @@ def fit(problem: FitProblem, x0: dict | None = None, *, solver: str, max_steps: 
         return _result(problem, solver, names, base, u0, math.nan, [], 0, res, 0, t0, False,
                        f"start point rejected: {e}")
     trace = _Trace(t0, loss0)
+    if ftol is not None and ftol_se:
+        ftol = max(ftol, ftol_se / max(res.m - len(names), 1))
     u, iters, restarts, adam_losses = u0, 0, 0, []
     while True:
         left = max_steps - iters
@@ -418,7 +426,7 @@ def fit(problem: FitProblem, x0: dict | None = None, *, solver: str, max_steps: 
         iters += it
         if not ok or restarts >= kkt_restarts or iters >= max_steps:
             break
-        inward = _kkt_violations(problem, base, ps, u, res)
+        inward = _kkt_violations(problem, base, ps, u, res, ftol)
         if not inward:
             break
         restarts += 1
@@ -467,10 +475,13 @@ class _Trace:
         return self.losses[-window - 1] - self.losses[-1] <= ftol * self.losses[-1]
 
 
-def _kkt_violations(problem: FitProblem, base: dict, ps: list, u, res: DrJitResidual) -> dict:
+def _kkt_violations(problem: FitProblem, base: dict, ps: list, u, res: DrJitResidual,
+                    ftol: float | None = None) -> dict:
     """Index -> side for the ``clip`` parameters on a bound where the loss decreases inwards
-    (``dL/dp < 0`` at a lower bound, ``> 0`` at an upper one, by more than 1e-9 of the loss
-    per scale): the solver left them there by overshooting, not because the data want it."""
+    (``dL/dp < 0`` at a lower bound, ``> 0`` at an upper one) by a worthwhile amount: the
+    Gauss-Newton gain of moving that parameter alone inwards, ``g^2 / (2 ||J_j||^2)``, exceeds
+    ``ftol * loss`` (the stopping tolerance; 1e-9 without one). The solver left them there by
+    overshooting, not because the data want it."""
     at = {j: p.at_bound(ui) for j, (p, ui) in enumerate(zip(ps, u)) if p.at_bound(ui)}
     if not at:
         return {}
@@ -485,9 +496,11 @@ def _kkt_violations(problem: FitProblem, base: dict, ps: list, u, res: DrJitResi
     g = J.T @ r                                           # dL/dp, physical units
     loss = 0.5 * float(r @ r)
     out = {}
-    for (j, side), gj in zip(at.items(), g):
+    tol = (ftol if ftol is not None else 1e-9) * max(loss, 1e-300)
+    for q, ((j, side), gj) in enumerate(zip(at.items(), g)):
         inward = gj if side == "lower" else -gj             # dL per unit step inwards
-        if inward * ps[j].typical < -1e-9 * max(loss, 1e-300):
+        h = float(J[:, q] @ J[:, q])
+        if inward < 0 and h > 0 and gj * gj / (2 * h) > tol:
             out[j] = side
     return out
 
