@@ -37,6 +37,9 @@ BOX = {
     "water_color[2]": (0.0, 0.6, False),
     "specular_strength": (0.0, 8.0, False),
     "specular_exponent": (16.0, 2048.0, True),
+    "reflect_color[0]": (0.0, 2.0, False),
+    "reflect_color[1]": (0.0, 2.0, False),
+    "reflect_color[2]": (0.0, 2.0, False),
 }
 
 
