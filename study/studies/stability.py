@@ -230,6 +230,11 @@ def run_stability(experiments: list, out, overrides=None, *, phases=PHASES, star
     specs = [scene_spec(p, overrides) for p in experiments]
     summary = {"experiments": [str(p) for p in experiments], "overrides": overrides, "phases": list(phases)}
     with open_client(scheduler, workers, variant, log=log) as client:
+        if "loss" in phases:
+            jobs = plan_loss(specs, exps)
+            rows = run_sweep(loss_job, jobs, out / "loss.parquet", client=client, label="stability: loss",
+                             log=log)
+            summary["loss"] = analyse_loss(rows[:len(jobs)])
         if "multistart" in phases:
             jobs = plan_multistart(specs, exps, starts, solvers, adam_lrs, max_steps, nm_steps)
             rows = run_sweep(multistart_job, jobs, out / "multistart.parquet", client=client,
@@ -239,11 +244,6 @@ def run_stability(experiments: list, out, overrides=None, *, phases=PHASES, star
                                      "adam_lrs": list(adam_lrs)}
             solver_figure(out / "solvers.png", ms)
             spread_figure(out / "spread.png", ms)
-        if "loss" in phases:
-            jobs = plan_loss(specs, exps)
-            rows = run_sweep(loss_job, jobs, out / "loss.parquet", client=client, label="stability: loss",
-                             log=log)
-            summary["loss"] = analyse_loss(rows[:len(jobs)])
         if "noise" in phases:
             jobs = plan_noise(str(experiments[0]), overrides, list(noise_spp), noise_fixed_spp, noise_seeds,
                               noise_resolution)
