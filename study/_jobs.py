@@ -219,7 +219,6 @@ def _jsonable(x):
     return x
 
 
-<<<<<<< HEAD
 # ---- several scenes: the joint fit and leave-one-scene-out -----------------------------------
 
 def _scenes(experiments, overrides, variant, cache):
@@ -339,7 +338,7 @@ def run_generalise(experiments, out, overrides=None, variant=None, solver=None, 
     write_generalise_report(out, _jsonable(summary))
     _log(f"generalise: wrote {out / 'generalise.md'}")
     return summary
-=======
+
 def run_failures(experiments, out, overrides=None, variant=None, shader=None, constants_json=None,
                  scheduler=None, workers=None) -> list:
     """``study failures``: the failure catalogue of each experiment, one sweep job per experiment
@@ -351,4 +350,3 @@ def run_failures(experiments, out, overrides=None, variant=None, shader=None, co
     constants = load_constants_json(constants_json) if constants_json else None
     return run(list(experiments), out, overrides, variant=variant or "llvm_ad_rgb", shader=shader,
                constants=constants, scheduler=scheduler, workers=workers, log=_log)
->>>>>>> main
