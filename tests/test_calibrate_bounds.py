@@ -129,3 +129,13 @@ def test_steps_to_within():
     assert steps_to_within([10.0, 2.0, 1.0005, 1.0001, 1.0]) == 3
     assert steps_to_within([1.0]) == 1 and steps_to_within([]) is None
     assert math.isfinite(steps_to_within([5.0, 4.0]))
+
+
+def test_saturated_log_logit_stays_inside_its_range():
+    """A saturated log_logit parameter maps onto its bound exactly, never past it by rounding
+    (measured: specular_exponent = 100000.00000000001 > 1e5 from one multi-start)."""
+    p = Param("specular_exponent", 256.0, 1.0, 1e5)
+    assert p.kind == "log_logit"
+    for u in (40.0, 400.0, 4000.0):
+        assert float(p.from_u(u)) <= 1e5
+    assert float(p.from_u(-4000.0)) >= 1.0

@@ -156,9 +156,12 @@ class Param:
             return lo + xp.exp(z)
         if k == "neglog":
             return hi - xp.exp(-z)
+        # clipped: at saturation the float rounding of lo*exp(log(hi/lo)) can exceed hi
         if k == "logit":
-            return lo + (hi - lo) * _sigmoid(z, xp)
-        return lo * xp.exp(math.log(hi / lo) * _sigmoid(z, xp))
+            p = lo + (hi - lo) * _sigmoid(z, xp)
+        else:
+            p = lo * xp.exp(math.log(hi / lo) * _sigmoid(z, xp))
+        return np.clip(p, lo, hi) if xp is np else xp.clip(p, float(lo), float(hi))
 
     def _gprime(self, p):
         lo, hi, k = self.lo, self.hi, self.kind
