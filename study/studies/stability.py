@@ -90,9 +90,8 @@ def analyse_multistart(rows: list[dict]) -> dict:
         b = best.get(r.get("experiment"))
         r["success"] = bool(r.get("status") == "ok" and r.get("loss") is not None and b is not None
                             and r["loss"] <= b * (1 + SUCCESS))
-        r["class"] = ("sweep_error" if r.get("status") != "ok" else
-                      r["failure"] if r["failure"] != "converged" else
-                      "success" if r["success"] else "another_basin")
+        r["class"] = ("sweep_error" if r.get("status") != "ok" else "success" if r["success"] else
+                      r["failure"] if r["failure"] != "converged" else "another_basin")
         r["time_to_target"] = _time_to(r.get("trace_loss"), r.get("trace_seconds"),
                                        b * (1 + SUCCESS)) if r["success"] else None
     groups = {}
