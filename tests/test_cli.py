@@ -148,7 +148,11 @@ def test_calibrate_writes_constants_json(runs):
     # fit and evaluation at the same resolution: LM accepts only steps that lower the loss
     assert c["error"]["rmse"]["fitted"] <= c["error"]["rmse"]["default"]
     assert c["solver"] == "levenberg_marquardt"
-    assert isinstance(c["iterations"], int) and 1 <= c["iterations"] <= MAX_STEPS
+    # iterations: over all fit rounds (a constant frozen for its standard error starts another),
+    # each capped at MAX_STEPS
+    rounds = c["fit"]["iterations_per_round"]
+    assert isinstance(c["iterations"], int) and c["iterations"] == sum(rounds) >= 1
+    assert all(1 <= n <= MAX_STEPS for n in rounds) and len(rounds) == c["fit"]["rounds"]
     assert all(_finite(v) and v >= 0 for v in c["timings"].values())
     assert {"reference_s", "fit_s", "export_s"} <= set(c["timings"])
     assert c["reference"]["spp"] == 8 and _finite(c["reference"]["noise"]) and c["reference"]["noise"] > 0

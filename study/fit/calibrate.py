@@ -7,12 +7,29 @@
    (half its start value), goes through ``_identify.identify``; what the scene does not
    identify is frozen at its start value, with the reason.
 3. Fit of the identified constants with the chosen solver (``fit.solver``).
-4. Identifiability again at the solution. A constant that lost its identifiability there
-   (e.g. an attenuation distance pushed to where the attenuation clamp saturates, or to
-   where it no longer attenuates at all) has status ``bound``: the data fix only one side
-   of it, the exported value is the solver's, and the report says so instead of claiming
-   a fitted value. Relative standard errors at the solution come from the Gauss-Newton
-   covariance.
+   Constants whose range starts at 0 (colour channels, the specular strength) use the
+   ``clip`` parametrisation (``study.fit.solvers``): linear inside the box, so a channel whose
+   best value is 0 lands *on* 0 in one step instead of crawling towards it in a log scale;
+   the solver stops when the loss stops improving (relative decrease over ``FTOL_WINDOW = 3``
+   steps below ``max(1e-6, 1 / (m - k))``, an improvement worth less than one standard
+   error of one parameter; ``study.fit.solvers.FTOL_SE``), not at the step cap.
+4. Judged at the solution:
+
+   * a constant left on a bound with the loss still falling outwards (the KKT sign, checked by
+     the solver) has status ``bound``, its value the bound;
+   * a constant that lost its sensitivity there (e.g. an attenuation distance pushed to where
+     the attenuation clamp saturates, or to where it no longer attenuates at all) has status
+     ``bound`` too: the data fix only one side of it, the exported value is the solver's;
+   * a constant whose relative standard error at the solution exceeds ``REL_SE_MAX = 0.5``
+     (its one-sigma interval spans more than half its value) is *not identified*: it is
+     **frozen** at its start value and the rest refitted from the solution (the worst one
+     per round, up to ``SE_ROUNDS`` rounds). Frozen rather than flagged because the exported
+     shader needs one value, a value the data cannot pin is set by noise and model error, and
+     a free unidentified constant drags the identified ones along its valley (on a stepped
+     floor under a high sun no glint is in view and the specular pair absorbed model error
+     with relative standard errors of 6 and 12). Standard errors come from the Gauss-Newton
+     covariance ``s^2 (J^T J)^-1`` with ``s^2 = ||r||^2 / (m - k)``, which treats residuals
+     as independent: model error is correlated across pixels, so these are lower bounds.
 5. Step counts (``steps_grazing``, ``steps_steep``) are piecewise constant in their effect
    (the crossing step jumps), so no gradient solver sees them: when requested they are
    chosen by a 2-D sweep of the loss over a grid at the fitted continuous constants.
@@ -29,7 +46,7 @@ import numpy as np
 
 from shaders_port import Constants
 
-from .solvers import FitProblem, Param, fit
+from .solvers import FTOL, FTOL_SE, FTOL_WINDOW, FitProblem, Param, fit
 from .identify import identify, sweep_1d, sweep_2d
 from .model import ShaderModel, bounds, expand_parameters, get_value, with_values
 
@@ -37,6 +54,9 @@ DISCRETE = ("steps_grazing", "steps_steep")
 # solver stopping tolerances (on u = transformed parameters, where one unit is about a 50 %
 # change, and on the loss): 1e-6 is far below the parameters' standard errors
 FIT_RTOL, FIT_ATOL = 1e-6, 1e-9
+# a constant whose standard error at the solution exceeds this fraction of its value is not
+# identified (frozen at its start value, the rest refitted); at most SE_ROUNDS such rounds
+REL_SE_MAX, SE_ROUNDS = 0.5, 4
 STEP_GRID = {"steps_grazing": [4.0, 6.0, 8.0, 10.0, 14.0, 20.0], "steps_steep": [1.0, 2.0, 3.0, 4.0, 6.0]}
 
 
@@ -50,8 +70,9 @@ def make_problem(model: ShaderModel, start: Constants, names: list[str], progres
     for n in names:
         lo, hi = bounds(n)
         v = get_value(start, n)
-        params.append(Param(n, v, lo, hi, scale=0.5 * abs(v) if v else None,
-                            derivative_free=n in DISCRETE))
+        clip = lo == 0.0 and n not in DISCRETE       # a best value of 0 must be reachable
+        params.append(Param(n, v, lo, hi, scale=(0.5 * abs(v) if v else (0.1 if clip else None)),
+                            transform="clip" if clip else "auto", derivative_free=n in DISCRETE))
     count = {"n": 0}
 
     def note(r):
@@ -121,6 +142,17 @@ def scene_frozen(exp) -> dict:
     return {n: why for n in ("attenuation_distance", "absorption_r", "absorption_g", "absorption_b")}
 
 
+def steps_to_within(step_losses: list, frac: float = 1e-3) -> int | None:
+    """First step (1-based) whose lowest loss so far is within ``frac`` of the final one."""
+    if not step_losses:
+        return None
+    final = step_losses[-1]
+    for i, v in enumerate(step_losses):
+        if v <= final * (1 + frac):
+            return i + 1
+    return len(step_losses)
+
+
 def calibrate_model(model: ShaderModel, start: Constants, requested: list[str], solver: str,
                     max_steps: int, frozen_by_scene: dict | None = None) -> Calibration:
     """Steps 2-5 of the module docstring on a prepared model. ``frozen_by_scene``: name ->
@@ -143,27 +175,58 @@ def calibrate_model(model: ShaderModel, start: Constants, requested: list[str], 
     free = [n for n in continuous if n not in frozen]
     for n, why in frozen.items():
         _log(f"calibrate: freezing {n} at {get_value(start, n):.4g}: {why}")
-    losses, result, bound = [], None, {}
-    fitted = start
-    if free:
-        result = fit(problem, solver=solver, free=free, max_steps=max_steps, rtol=FIT_RTOL, atol=FIT_ATOL)
+    losses, result, bound, fits = [], None, {}, []
+    fitted, x0 = start, None
+    id1 = r1 = J1 = None
+    se = {}
+    for rnd in range(SE_ROUNDS + 1):
+        if not free:
+            break
+        id1 = None
+        result = fit(problem, x0, solver=solver, free=free, max_steps=max_steps, rtol=FIT_RTOL,
+                     atol=FIT_ATOL, ftol=FTOL, ftol_window=FTOL_WINDOW, ftol_se=FTOL_SE)
         print(file=sys.stderr)
+        fits.append(result)
         losses += list(result.losses)
         fitted = with_values(start, {n: result.constants[n] for n in free})
         _log(f"calibrate: {solver}: loss {result.loss_start:.6g} -> {result.loss:.6g} "
              f"in {result.iterations} iterations ({result.message})")
-        r1, J1 = model.residual_and_jacobian(fitted, free)
-        id1 = identify(J1, free, scales=[problem.params[n].typical for n in free])
-        for n in free:
+        at_bound = result.extra.get("at_bound", {})
+        bound = {n: (f"on its {side} bound {get_value(fitted, n):.4g}: the loss still falls beyond "
+                     "it, so the data want a value outside the constant's range; exported at the bound")
+                 for n, side in at_bound.items()}
+        inner = [n for n in free if n not in bound]
+        if not inner:
+            break
+        r1, J1 = model.residual_and_jacobian(fitted, inner)
+        id1 = identify(J1, inner, scales=[problem.params[n].typical for n in inner])
+        for n in inner:
             if id1.freeze[n]:
                 bound[n] = (f"one-sided: at the solution ({get_value(fitted, n):.4g}) the image no longer "
                             f"depends on it ({id1.reasons[n]}); any value beyond it in the same direction "
                             "gives the same image, so only a bound is identified")
                 _log(f"calibrate: {n} is only bounded by the data: {bound[n]}")
+        live = [i for i, n in enumerate(inner) if n not in bound]    # columns with a free direction
+        vals = np.array([get_value(fitted, inner[i]) for i in live])
+        se = dict(zip([inner[i] for i in live], std_errors(J1[:, live], r1, vals))) if live else {}
+        judged = {n: v for n, v in se.items() if v is not None}
+        worst = max(judged, key=judged.get) if judged else None
+        if worst is None or judged[worst] <= REL_SE_MAX or rnd == SE_ROUNDS:
+            break
+        frozen[worst] = (f"not identified at the solution: relative standard error {judged[worst]:.3g} "
+                         f"> {REL_SE_MAX:g} (at {get_value(fitted, worst):.4g}); frozen at the start "
+                         "value, the rest refitted")
+        _log(f"calibrate: freezing {worst} at {get_value(start, worst):.4g}: {frozen[worst]}")
+        free = [n for n in free if n != worst]
+        x0 = {n: result.constants[n] for n in problem.names if n != worst}
+        x0[worst] = get_value(start, worst)
+    if not free:
+        fitted = start
     ident = {"start": _ident_dict(id0, continuous)} if id0 is not None else {}
-    if free:
-        vals = np.array([get_value(fitted, n) for n in free])
-        ident["solution"] = _ident_dict(id1, free, J1, r1, vals)
+    if id1 is not None:
+        inner = list(id1.names)
+        ident["solution"] = _ident_dict(id1, inner)
+        ident["solution"]["rel_std_error"] = [se.get(n) for n in inner]
     sweep = None
     if discrete:
         sweep = step_sweep(problem, fitted, discrete)
@@ -180,11 +243,21 @@ def calibrate_model(model: ShaderModel, start: Constants, requested: list[str], 
             if "solution" in ident and n in ident["solution"]["names"]:
                 j = ident["solution"]["names"].index(n)
                 params[n]["sensitivity"] = ident["solution"]["sensitivity"][j]
-                params[n]["rel_std_error"] = ident["solution"].get("rel_std_error", [None] * len(free))[j]
+                params[n]["rel_std_error"] = ident["solution"]["rel_std_error"][j]
             else:
                 params[n]["sensitivity"] = id0.sensitivity[n] if id0 is not None else None
-    summary = result.summary() if result is not None else {"solver": solver, "iterations": 0,
-                                                           "converged": True, "message": "nothing to fit"}
+    if result is not None:
+        summary = result.summary()
+        steps = [f.iterations for f in fits]
+        trace = [v for f in fits for v in f.extra.get("step_losses", [])]
+        summary.update({"iterations": int(sum(steps)), "rounds": len(fits), "iterations_per_round": steps,
+                        "step_losses": trace,
+                        "steps_to_0.1pct_per_round": [steps_to_within(f.extra.get("step_losses", []))
+                                                      for f in fits],
+                        "ftol": FTOL, "ftol_se": FTOL_SE, "ftol_window": FTOL_WINDOW, "rel_se_max": REL_SE_MAX,
+                        "converged": all(f.converged for f in fits)})
+    else:
+        summary = {"solver": solver, "iterations": 0, "converged": True, "message": "nothing to fit"}
     return Calibration(start, fitted, params, ident, summary, losses, sweep)
 
 

@@ -11,9 +11,16 @@ one ``scale`` near the default, whatever the parameter's units. ``g`` (``transfo
 * ``neglog`` (only ``hi`` finite): ``g(p) = -log(hi - p)``;
 * ``logit`` (both finite): ``g(p) = logit((p - lo) / (hi - lo))``;
 * ``log_logit`` (both finite, ``lo > 0``): ``logit(log(p / lo) / log(hi / lo))`` - the
-  default when ``hi / lo >= 1e3``, where a linear logit would squash the useful range.
+  default when ``hi / lo >= 1e3``, where a linear logit would squash the useful range;
+* ``clip`` (never chosen by ``auto``): ``p = clip(default + scale*u, lo, hi)``, linear inside
+  the box and flat outside it, so a bound is *reached* in finite ``u`` (one solver step can
+  land on it) instead of approached forever: for a parameter whose best value may be its bound
+  (a colour channel at 0, no highlight). ``dp/du`` is 0 outside the box; :func:`fit` then
+  checks the sign of the loss gradient at the bound (the Karush-Kuhn-Tucker condition) and
+  restarts the solver from just inside when the loss falls inwards, so a parameter clipped by
+  an early, overshooting step is not left stranded there.
 
-so every ``u`` maps inside the bounds. The chain rule is applied on the NumPy side, before
+so every ``u`` maps inside (``clip``: onto) the bounds. The chain rule is applied on the NumPy side, before
 JAX sees the Jacobian: ``dr/du = dr/dp * dp/du`` (a column scaling).
 
 Problem. A :class:`FitProblem` wraps two NumPy-level callables that run Dr.Jit:
@@ -56,7 +63,14 @@ LEAST_SQUARES = ("levenberg_marquardt", "gauss_newton", "dogleg")
 MINIMISERS = ("bfgs", "nelder_mead", "nelder_mead_optimistix")
 SOLVERS = LEAST_SQUARES + MINIMISERS + ("adam",)
 DERIVATIVE_FREE = ("nelder_mead", "nelder_mead_optimistix")
-TRANSFORMS = ("auto", "linear", "log", "neglog", "logit", "log_logit")
+TRANSFORMS = ("auto", "linear", "log", "neglog", "logit", "log_logit", "clip")
+# default stopping rule of the gradient solvers (see :func:`fit`): the fit has stopped improving
+# when the lowest loss seen fell by less than FTOL (relative) over the last FTOL_WINDOW steps
+# when the lowest loss seen fell by less than max(FTOL, FTOL_SE / (m - k)) (relative) over the
+# last FTOL_WINDOW steps. FTOL_SE / (m - k): with m residuals and k parameters, moving one
+# parameter by d standard errors from the optimum raises the loss by about d^2 * loss / (m - k),
+# so an improvement below 1.0 * loss / (m - k) is worth less than one standard error
+FTOL, FTOL_SE, FTOL_WINDOW = 1e-6, 1.0, 3
 
 
 def _sigmoid(z, xp):
@@ -85,7 +99,9 @@ class Param:
             raise ValueError(f"parameter {self.name}: need a finite default and lo < hi, "
                              f"got default={d}, lo={lo}, hi={hi}")
         kind = self.kind
-        if kind != "linear" and not lo < d < hi:
+        if kind == "clip" and not lo <= d <= hi:
+            raise ValueError(f"parameter {self.name}: default {d} must lie inside [{lo}, {hi}]")
+        if kind not in ("linear", "clip") and not lo < d < hi:
             raise ValueError(f"parameter {self.name}: default {d} must lie strictly inside "
                              f"({lo}, {hi}) for the {kind} transform; move it or widen the bounds")
         if kind in ("logit", "log_logit") and not (math.isfinite(lo) and math.isfinite(hi)):
@@ -121,7 +137,7 @@ class Param:
     # g, g^-1, g' -------------------------------------------------------------------------
     def _g(self, p):
         lo, hi, k = self.lo, self.hi, self.kind
-        if k == "linear":
+        if k in ("linear", "clip"):
             return p
         if k == "log":
             return np.log(p - lo)
@@ -134,17 +150,22 @@ class Param:
         lo, hi, k = self.lo, self.hi, self.kind
         if k == "linear":
             return z
+        if k == "clip":
+            return xp.clip(z, lo, hi) if xp is np else xp.clip(z, float(lo), float(hi))
         if k == "log":
             return lo + xp.exp(z)
         if k == "neglog":
             return hi - xp.exp(-z)
+        # clipped: at saturation the float rounding of lo*exp(log(hi/lo)) can exceed hi
         if k == "logit":
-            return lo + (hi - lo) * _sigmoid(z, xp)
-        return lo * xp.exp(math.log(hi / lo) * _sigmoid(z, xp))
+            p = lo + (hi - lo) * _sigmoid(z, xp)
+        else:
+            p = lo * xp.exp(math.log(hi / lo) * _sigmoid(z, xp))
+        return np.clip(p, lo, hi) if xp is np else xp.clip(p, float(lo), float(hi))
 
     def _gprime(self, p):
         lo, hi, k = self.lo, self.hi, self.kind
-        if k == "linear":
+        if k in ("linear", "clip"):
             return np.ones_like(p)
         if k == "log":
             return 1.0 / (p - lo)
@@ -164,7 +185,9 @@ class Param:
     def to_u(self, p) -> np.ndarray:
         """Physical value(s) -> unconstrained ``u`` (float64)."""
         p = np.asarray(p, np.float64)
-        if self.kind != "linear" and np.any((p <= self.lo) | (p >= self.hi)):
+        if self.kind == "clip" and np.any((p < self.lo) | (p > self.hi)):
+            raise ValueError(f"parameter {self.name}: value {p} is outside [{self.lo}, {self.hi}]")
+        if self.kind not in ("linear", "clip") and np.any((p <= self.lo) | (p >= self.hi)):
             raise ValueError(f"parameter {self.name}: value {p} is not strictly inside "
                              f"({self.lo}, {self.hi})")
         return (self._g(p) - self._g(np.float64(self.default))) / self._s
@@ -173,6 +196,14 @@ class Param:
         """Unconstrained ``u`` -> physical value; ``xp`` = ``numpy`` or ``drjit`` (differentiable)."""
         return self._ginv(float(self._g(np.float64(self.default))) + self._s * u, xp)
 
+    def at_bound(self, u) -> str | None:
+        """``'lower'`` / ``'upper'`` when ``u`` maps onto (or beyond) a bound of a ``clip``
+        parameter, else None (the other transforms never reach their bounds)."""
+        if self.kind != "clip":
+            return None
+        z = float(self.default) + self._s * float(u)
+        return "lower" if z <= self.lo else "upper" if z >= self.hi else None
+
     def dp_du(self, u) -> np.ndarray:
         """Derivative of the physical value with respect to ``u`` (float64); computed from
         ``z = g(default) + s*u`` so that it tends to 0, not NaN, where ``p`` saturates at a bound."""
@@ -180,6 +211,8 @@ class Param:
         k, lo, hi = self.kind, self.lo, self.hi
         if k == "linear":
             d = np.ones_like(z)
+        elif k == "clip":      # one-sided at the bound itself (the inward derivative)
+            d = ((z >= lo) & (z <= hi)).astype(np.float64)
         elif k == "log":
             d = np.exp(z)
         elif k == "neglog":
@@ -319,7 +352,7 @@ def _free_names(problem: FitProblem, solver: str, free, treat_as_continuous) -> 
 def _inside(p: Param, v: float) -> float:
     """A start on a bound of a bounded transform (where ``u`` would be infinite) is moved
     inside by 1e-3 of the parameter's scale (at most a tenth of the interval)."""
-    if p.kind == "linear":
+    if p.kind in ("linear", "clip"):
         return v
     eps = min(1e-3 * p.typical, 0.1 * (p.hi - p.lo))
     return min(max(v, p.lo + eps), p.hi - eps)
@@ -328,22 +361,40 @@ def _inside(p: Param, v: float) -> float:
 def fit(problem: FitProblem, x0: dict | None = None, *, solver: str, max_steps: int = 200,
         rtol: float = 1e-8, atol: float = 1e-12, free: list[str] | None = None,
         treat_as_continuous: list[str] = (), lr: float = 0.05, patience: int | None = None,
-        nm_step: float = 0.5) -> FitResult:
+        nm_step: float = 0.5, ftol: float | None = None, ftol_window: int = FTOL_WINDOW,
+        ftol_se: float | None = None, kkt_restarts: int = 3) -> FitResult:
     """Fit ``problem`` from ``x0`` (dict name -> physical value; missing: defaults).
 
     ``solver``: one of :data:`SOLVERS`. ``free``: names to fit (default: every parameter the
-    solver can fit; the rest stay at ``x0``). ``rtol``/``atol``: optimistix's tolerances; for
-    Adam (the tutorial loop runs to the cap), with ``patience`` set, the run stops (converged)
-    when the best loss improved by less than ``rtol*loss + atol`` over the last ``patience``
-    iterations; Adam returns the lowest-loss iterate. ``lr``: Adam's learning rate in ``u`` units (one unit is
-    about one ``scale``). ``max_steps``: step cap (Adam: iterations). ``nm_step``: edge of
-    Nelder-Mead's start simplex in ``u`` units (vertices ``u0`` and ``u0 + nm_step*e_i``;
-    optimistix's own default is 2.5e-4 at ``u = 0``, which stalled far from the minimum).
+    solver can fit; the rest stay at ``x0``). ``rtol``/``atol``: optimistix's tolerances (its
+    Cauchy test: the step in ``u`` *and* the change of the loss both below ``atol + rtol*|.|``).
+    ``ftol`` (None: off): the loss-stall rule, checked after every step of the optimistix
+    solvers and Adam: stop (converged) when the lowest loss seen fell by less than
+    ``ftol * loss`` over the last ``ftol_window`` steps - the fit has stopped improving, whatever
+    the parameters still do (a parameter crawling towards an unreachable bound would otherwise
+    run the solver to its cap). ``ftol_se`` (None: off) raises the tolerance to
+    ``ftol_se / (m - k)`` when that is larger (an improvement worth less than
+    ``sqrt(ftol_se)`` standard errors of one parameter, see :data:`FTOL_SE`). The calibration
+    uses ``ftol = FTOL = 1e-6``, ``ftol_se = FTOL_SE = 1`` over ``FTOL_WINDOW = 3`` steps. For Adam (the tutorial loop runs to the cap), with ``patience``
+    set, the run also stops (converged) when the best loss improved by less than
+    ``rtol*loss + atol`` over the last ``patience`` iterations; Adam returns the lowest-loss
+    iterate. ``lr``: Adam's learning rate in ``u`` units (one unit is about one ``scale``).
+    ``max_steps``: step cap (Adam: iterations; with restarts, over all of them).
+    ``nm_step``: edge of Nelder-Mead's start simplex in ``u`` units (vertices ``u0`` and
+    ``u0 + nm_step*e_i``; optimistix's own default is 2.5e-4 at ``u = 0``, which stalled far
+    from the minimum). ``kkt_restarts``: how many times a ``clip`` parameter the solver left on
+    a bound may be moved back inside when the loss gradient there points inwards.
+
+    ``FitResult.extra``: ``step_losses`` / ``step_seconds`` (lowest loss seen and seconds since
+    the start, after each step), ``at_bound`` (name -> ``'lower'``/``'upper'`` for ``clip``
+    parameters on a bound at the end), ``restarts`` (how many KKT restarts ran).
     """
     if solver not in SOLVERS:
         raise ValueError(f"unknown solver {solver!r}; valid solvers: {', '.join(SOLVERS)}")
     if max_steps < 1:
         raise ValueError(f"max_steps must be >= 1, got {max_steps}")
+    if ftol is not None and not (ftol >= 0 and ftol_window >= 1):
+        raise ValueError(f"need ftol >= 0 and ftol_window >= 1, got {ftol}, {ftol_window}")
     base = problem.start_values(x0)
     names = _free_names(problem, solver, free, treat_as_continuous)
     ps = [problem.params[n] for n in names]
@@ -356,20 +407,105 @@ def fit(problem: FitProblem, x0: dict | None = None, *, solver: str, max_steps: 
     except FloatingPointError as e:
         return _result(problem, solver, names, base, u0, math.nan, [], 0, res, 0, t0, False,
                        f"start point rejected: {e}")
-    losses = res.stats.losses
-    if solver == "nelder_mead":
-        u, iters, ok, msg = _nelder_mead(res, u0, max_steps, rtol, atol, nm_step)
-    elif solver == "adam":
-        u, iters, ok, msg, n_grad, losses = _adam(problem, res, base, names, u0, max_steps, lr,
-                                                  rtol, atol, patience)
-    else:
-        u, iters, ok, msg = _optimistix(res, solver, u0, max_steps, rtol, atol, nm_step)
+    trace = _Trace(t0, loss0)
+    if ftol is not None and ftol_se:
+        ftol = max(ftol, ftol_se / max(res.m - len(names), 1))
+    u, iters, restarts, adam_losses = u0, 0, 0, []
+    while True:
+        left = max_steps - iters
+        if solver == "nelder_mead":
+            u, it, ok, msg = _nelder_mead(res, u, left, rtol, atol, nm_step, trace)
+        elif solver == "adam":
+            u, it, ok, msg, ng, ls = _adam(problem, res, base, names, u, left, lr, rtol, atol,
+                                           patience, trace, ftol, ftol_window)
+            n_grad += ng
+            adam_losses += ls
+        elif solver == "nelder_mead_optimistix":
+            u, it, ok, msg = _optimistix(res, solver, u, left, rtol, atol, nm_step)
+            trace.note(res.stats.best_loss)
+        else:
+            u, it, ok, msg = _optimistix_steps(res, solver, u, left, rtol, atol, ftol, ftol_window,
+                                               trace)
+        iters += it
+        if not ok or restarts >= kkt_restarts or iters >= max_steps:
+            break
+        inward = _kkt_violations(problem, base, ps, u, res, ftol)
+        if not inward:
+            break
+        restarts += 1
+        u = np.array(u, np.float64)
+        for j, side in inward.items():      # just inside the bound the loss falls inwards
+            p = ps[j]
+            step = 0.05 * p.typical
+            u[j] = float(p.to_u(min(max(p.lo + step, p.lo), p.hi) if side == "lower"
+                                else max(min(p.hi - step, p.hi), p.lo)))
+        msg += f"; restarted from inside the bound for {[ps[j].name for j in inward]}"
+    if restarts:
+        msg += f" ({iters} steps in all)"
     try:
         loss = 0.5 * float(np.sum(res.value(u) ** 2))
     except FloatingPointError as e:
         loss, ok, msg = math.nan, False, f"{msg}; final point non-finite: {e}"
-    return _result(problem, solver, names, base, u, loss0, list(losses), iters, res, n_grad, t0, ok,
-                   msg, loss)
+    if res.stats.best_x is not None and res.stats.best_loss < loss and solver != "adam":
+        u, loss = np.asarray(res.stats.best_x, np.float64), float(res.stats.best_loss)
+    out = _result(problem, solver, names, base, u, loss0,
+                  adam_losses if solver == "adam" else list(res.stats.losses), iters, res, n_grad,
+                  t0, ok, msg, loss)
+    out.extra.update({"step_losses": trace.losses, "step_seconds": trace.seconds,
+                      "at_bound": {p.name: p.at_bound(ui) for p, ui in zip(ps, out.u)
+                                   if p.at_bound(ui)},
+                      "restarts": restarts})
+    return out
+
+
+class _Trace:
+    """Lowest loss seen and seconds since the start, after each solver step."""
+
+    def __init__(self, t0: float, loss0: float):
+        self.t0, self.best = t0, loss0
+        self.losses, self.seconds = [], []
+
+    def note(self, loss: float) -> None:
+        if math.isfinite(loss):
+            self.best = min(self.best, float(loss))
+        self.losses.append(self.best)
+        self.seconds.append(time.perf_counter() - self.t0)
+
+    def stalled(self, ftol: float | None, window: int) -> bool:
+        """The lowest loss fell by less than ``ftol * loss`` over the last ``window`` steps."""
+        if ftol is None or len(self.losses) <= window:
+            return False
+        return self.losses[-window - 1] - self.losses[-1] <= ftol * self.losses[-1]
+
+
+def _kkt_violations(problem: FitProblem, base: dict, ps: list, u, res: DrJitResidual,
+                    ftol: float | None = None) -> dict:
+    """Index -> side for the ``clip`` parameters on a bound where the loss decreases inwards
+    (``dL/dp < 0`` at a lower bound, ``> 0`` at an upper one) by a worthwhile amount: the
+    Gauss-Newton gain of moving that parameter alone inwards, ``g^2 / (2 ||J_j||^2)``, exceeds
+    ``ftol * loss`` (the stopping tolerance; 1e-9 without one). The solver left them there by
+    overshooting, not because the data want it."""
+    at = {j: p.at_bound(ui) for j, (p, ui) in enumerate(zip(ps, u)) if p.at_bound(ui)}
+    if not at:
+        return {}
+    vals = dict(base)
+    vals.update({p.name: float(p.from_u(ui)) for p, ui in zip(ps, u)})
+    names = [ps[j].name for j in at]
+    try:
+        r, J = problem.residual_and_jacobian(vals, names)
+    except FloatingPointError:
+        return {}
+    r, J = np.asarray(r, np.float64), np.asarray(J, np.float64)
+    g = J.T @ r                                           # dL/dp, physical units
+    loss = 0.5 * float(r @ r)
+    out = {}
+    tol = (ftol if ftol is not None else 1e-9) * max(loss, 1e-300)
+    for q, ((j, side), gj) in enumerate(zip(at.items(), g)):
+        inward = gj if side == "lower" else -gj             # dL per unit step inwards
+        h = float(J[:, q] @ J[:, q])
+        if inward < 0 and h > 0 and gj * gj / (2 * h) > tol:
+            out[j] = side
+    return out
 
 
 def _result(problem, solver, names, base, u, loss0, losses, iters, res, n_grad, t0, ok, msg,
@@ -427,8 +563,78 @@ def _optimistix(res: DrJitResidual, solver: str, u0, max_steps, rtol, atol, nm_s
     return u, steps, ok, f"{msg} after {steps} steps"
 
 
+def _optimistix_steps(res: DrJitResidual, solver: str, u0, max_steps, rtol, atol, ftol, window,
+                      trace: _Trace):
+    """The optimistix solver driven one step at a time from Python (its ``init``/``step``/
+    ``terminate`` interface, each step jitted), so that the loss-stall rule (:meth:`_Trace.stalled`)
+    can stop it; otherwise the same iteration as ``optx.least_squares`` / ``optx.minimise``.
+    Returns (u, steps, ok, msg)."""
+    import equinox as eqx
+    import jax
+    import jax.numpy as jnp
+    import optimistix as optx
+
+    s = _optx_solver(solver, rtol, atol)
+    if solver in LEAST_SQUARES:
+        def fn(y, args):
+            return res(y), None
+        f_struct = jax.ShapeDtypeStruct((res.m,), jnp.float64)
+    else:
+        def fn(y, args):
+            return 0.5 * jnp.sum(res(y) ** 2), None
+        f_struct = jax.ShapeDtypeStruct((), jnp.float64)
+    tags = frozenset()
+
+    @eqx.filter_jit
+    def init(y):
+        return s.init(fn, y, None, {}, f_struct, None, tags)
+
+    @eqx.filter_jit
+    def step(y, state):
+        y1, state1, _ = s.step(fn, y, None, {}, state, tags)
+        done, result = s.terminate(fn, y1, None, {}, state1, tags)
+        return y1, state1, done, result
+
+    y = jnp.asarray(np.asarray(u0, np.float64), jnp.float64)
+    steps, ok, msg = 0, False, f"maximum number of steps reached (max_steps={max_steps})"
+    try:
+        state = init(y)
+        while steps < max_steps:
+            y, state, done, result = step(y, state)
+            steps += 1
+            trace.note(res.stats.best_loss)
+            if not bool(jnp.all(jnp.isfinite(y))):
+                ok, msg = False, "solver returned non-finite parameters"
+                break
+            if bool(done):
+                ok = bool(result == optx.RESULTS.successful)
+                msg = (f"converged (optimistix's step and loss tolerances) after {steps} steps" if ok
+                       else f"{optx.RESULTS[result]} after {steps} steps")
+                break
+            if trace.stalled(ftol, window):
+                ok, msg = True, (f"converged: the loss fell by less than {ftol:g} (relative) over "
+                                 f"the last {window} steps, after {steps} steps")
+                break
+    except Exception as e:
+        # a non-finite model value inside a jitted step (JAX wraps the callback's error): report
+        # it and return the best point. Any other error is a bug and propagates.
+        if not isinstance(res.last_error, FloatingPointError):
+            raise (res.last_error or e) from e
+        cause = res.last_error
+        best = res.stats.best_x if res.stats.best_x is not None else np.asarray(u0)
+        first = str(cause).strip().splitlines()[0] if str(cause).strip() else repr(cause)
+        return np.asarray(best), steps, False, f"solver aborted ({type(cause).__name__}): {first}; " \
+                                               "returning the best point evaluated"
+    u = np.asarray(y, np.float64)
+    if not np.all(np.isfinite(u)):
+        best = res.stats.best_x if res.stats.best_x is not None else np.asarray(u0)
+        return np.asarray(best), steps, False, "solver returned non-finite parameters; " \
+                                               "returning the best point evaluated"
+    return u, steps, ok, msg
+
+
 def _adam(problem: FitProblem, res: DrJitResidual, base: dict, names, u0, max_steps, lr, rtol, atol,
-          patience):
+          patience, trace: _Trace | None = None, ftol: float | None = None, window: int = FTOL_WINDOW):
     """The tutorial loop: Dr.Jit Adam on ``u``; gradient from ``dr.backward`` of ``loss_drjit``
     or, without it, ``J^T r`` (forward-mode Jacobian). Returns (u, iters, ok, msg, n_grad, losses)."""
     import drjit as dr
@@ -472,7 +678,13 @@ def _adam(problem: FitProblem, res: DrJitResidual, base: dict, names, u0, max_st
         losses.append(value)
         if value <= min(losses):
             best_u = np.array([float(opt[p.name][0]) for p in ps])
+        if trace is not None:
+            trace.note(value)
         opt.step()
+        if trace is not None and trace.stalled(ftol, window * 10):
+            ok, msg = True, (f"converged: the best loss fell by less than {ftol:g} (relative) over "
+                             f"the last {window * 10} iterations (iteration {it})")
+            break
         if patience is not None and len(losses) > patience and \
                 min(losses[:-patience]) - min(losses[-patience:]) <= rtol * value + atol:
             ok, msg = True, (f"best loss improved by less than rtol*loss+atol over the last "
@@ -481,7 +693,7 @@ def _adam(problem: FitProblem, res: DrJitResidual, base: dict, names, u0, max_st
     return best_u, it, ok, msg, n_grad, losses
 
 
-def _nelder_mead(res: DrJitResidual, u0, max_steps, rtol, atol, nm_step):
+def _nelder_mead(res: DrJitResidual, u0, max_steps, rtol, atol, nm_step, trace: _Trace | None = None):
     """Nelder-Mead on ``0.5*||r(u)||^2`` (NumPy; values only). Converged when every vertex is
     within ``atol + rtol*|u_best|`` of the best (max norm) and every value within
     ``atol + rtol*|f_best|`` of the best one (optimistix's criterion). Returns (u, steps, ok, msg)."""
@@ -498,6 +710,8 @@ def _nelder_mead(res: DrJitResidual, u0, max_steps, rtol, atol, nm_step):
         for step in range(1, max_steps + 1):
             order = np.argsort(F)
             X, F = X[order], F[order]
+            if trace is not None and step > 1:
+                trace.note(float(F[0]))
             if np.max(np.abs(X - X[0])) <= atol + rtol * np.max(np.abs(X[0])) and \
                     np.max(np.abs(F - F[0])) <= atol + rtol * abs(F[0]):
                 return X[0], step - 1, True, f"converged after {step - 1} steps"

@@ -1,0 +1,155 @@
+"""Worker side of the stability study: one fit from one start, one fit against one noise level,
+one fit with one loss, as jobs of the sweep engine (``study.studies.stability`` plans them and
+analyses the table).
+
+* :func:`multistart_job`: one solver from one start on one scene. The start is a point of a
+  Latin hypercube over each parameter's :data:`BOX` (log-uniform where the box is marked
+  ``log``); the fit is ``study.fit.solvers.fit`` with the calibration's stopping rule (loss
+  stall ``FTOL`` over ``FTOL_WINDOW`` steps, the step cap ``max_steps``). Returns the final
+  loss, iterations, seconds, whether it converged and why, the fitted constants, and the trace
+  (lowest loss so far and seconds after each step) from which the analysis reads the time to
+  the target loss.
+* :func:`noise_job`: the calibration (``calibrate_model``: identifiability, bounds, standard
+  errors) against a reference rendered at one spp / texture spp / seed; returns each constant,
+  its status and relative standard error.
+* :func:`loss_job`: the calibration with one residual (``linear`` RGB or ``log``), scored by
+  FLIP and RMSE at the experiment's full resolution.
+
+Failure classes (:func:`failure_class`): ``nonfinite`` (the model returned NaN/inf at a trial
+point or the solver returned non-finite parameters), ``step_cap`` (stopped at ``max_steps``),
+``error`` (anything else not converged), else ``converged``; ``another_basin`` is decided by
+the analysis (converged, but the loss is not within 0.1 % of the best of all runs).
+"""
+from __future__ import annotations
+
+import math
+import time
+
+import numpy as np
+
+# Start box per constant (physical units) and whether to sample it log-uniformly. Wide enough
+# to hold every value fitted on the shipped scenes, narrow enough to stay physically plausible.
+BOX = {
+    "attenuation_distance": (0.5, 30.0, True),
+    "bumptex_mult": (0.25, 4.0, True),
+    "water_color[0]": (0.0, 0.6, False),
+    "water_color[1]": (0.0, 0.6, False),
+    "water_color[2]": (0.0, 0.6, False),
+    "specular_strength": (0.0, 8.0, False),
+    "specular_exponent": (16.0, 2048.0, True),
+    "reflect_color[0]": (0.0, 2.0, False),
+    "reflect_color[1]": (0.0, 2.0, False),
+    "reflect_color[2]": (0.0, 2.0, False),
+}
+
+
+def latin_hypercube(names: list[str], n: int, seed: int = 0) -> list[dict]:
+    """``n`` starts (dicts name -> value): one point per stratum of each parameter's box, strata
+    paired at random (scipy's ``qmc.LatinHypercube``), log-uniform where the box says so."""
+    from scipy.stats import qmc
+
+    unknown = [k for k in names if k not in BOX]
+    if unknown:
+        raise ValueError(f"no start box for {unknown}; known: {sorted(BOX)}")
+    u = qmc.LatinHypercube(d=len(names), seed=seed).random(n)
+    out = []
+    for row in u:
+        d = {}
+        for k, q in zip(names, row):
+            lo, hi, log = BOX[k]
+            d[k] = float(math.exp(math.log(lo) + q * (math.log(hi) - math.log(lo)))) if log else \
+                float(lo + q * (hi - lo))
+        out.append(d)
+    return out
+
+
+def failure_class(converged: bool, message: str, iterations: int, max_steps: int) -> str:
+    m = message.lower()
+    if "non-finite" in m or "nonfinite" in m or "aborted" in m:
+        return "nonfinite"
+    if converged:
+        return "converged"
+    if iterations >= max_steps or "maximum number of steps" in m or "cap" in m:
+        return "step_cap"
+    return "error"
+
+
+def _model(job, resolution=None, loss: str = "linear"):
+    from .._backend import drjit_backend
+    from ..fit.losses import transformed
+    from ..fit.model import ShaderModel
+    from ..sweep import load_scene
+
+    mv = job.get("mitsuba_variant", "llvm_ad_rgb")
+    exp, ref, inputs = load_scene(job["scene"], mv)
+    model = ShaderModel.from_experiment(exp, inputs, ref.image, backend=drjit_backend(mv),
+                                        resolution=resolution)
+    return exp, ref, inputs, transformed(model, loss)
+
+
+def multistart_job(job: dict) -> dict:
+    """One fit: ``job = {"scene", "solver", "start": {name: value}, "names", "max_steps",
+    "lr" (Adam), "start_index"}``."""
+    from ..fit.calibrate import make_problem
+    from ..fit.model import constants_from_experiment
+    from ..fit.solvers import FTOL, FTOL_SE, FTOL_WINDOW, fit
+
+    exp, _, _, model = _model(job)
+    start = constants_from_experiment(exp)
+    problem = make_problem(model, start, job["names"], progress=False)
+    kw = {"lr": job["lr"]} if job["solver"] == "adam" else {}
+    t0 = time.perf_counter()
+    res = fit(problem, job["start"], solver=job["solver"], free=job["names"], max_steps=job["max_steps"],
+              rtol=1e-6, atol=1e-9, ftol=FTOL, ftol_window=FTOL_WINDOW, ftol_se=FTOL_SE, **kw)
+    seconds = time.perf_counter() - t0
+    loss = res.loss if math.isfinite(res.loss) else None
+    return {"loss": loss, "loss_start": res.loss_start if math.isfinite(res.loss_start) else None,
+            "iterations": res.iterations, "fit_seconds": seconds, "converged": res.converged,
+            "message": res.message[:300],
+            "failure": failure_class(res.converged, res.message, res.iterations, job["max_steps"]),
+            "fitted": {n: float(res.constants[n]) for n in job["names"]},
+            "trace_loss": [float(v) for v in res.extra.get("step_losses", [])],
+            "trace_seconds": [float(v) for v in res.extra.get("step_seconds", [])]}
+
+
+def noise_job(job: dict) -> dict:
+    """The calibration against the job's scene (its spp, texture spp and seed are in the scene's
+    overrides): constants, statuses and relative standard errors."""
+    from ..fit.calibrate import calibrate_model, scene_frozen
+    from ..fit.model import constants_from_experiment, expand_parameters, get_value
+
+    exp, ref, _, model = _model(job)
+    t0 = time.perf_counter()
+    cal = calibrate_model(model, constants_from_experiment(exp), exp["fit.parameters"], exp["fit.solver"],
+                          exp["fit.max_steps"], frozen_by_scene=scene_frozen(exp))
+    names = expand_parameters(exp["fit.parameters"])
+    return {"fit_seconds": time.perf_counter() - t0, "reference_noise": float(ref.noise or float("nan")),
+            "value": {n: get_value(cal.fitted, n) for n in names},
+            "status": {n: cal.parameters[n]["status"] for n in names},
+            "rel_se": {n: cal.parameters[n].get("rel_std_error") for n in names}}
+
+
+def loss_job(job: dict) -> dict:
+    """The calibration with residual ``job["loss"]``, scored at full resolution."""
+    from .._metrics import errors
+    from ..fit.calibrate import calibrate_model, scene_frozen
+    from ..fit.model import constants_from_experiment, expand_parameters, get_value
+
+    exp, ref, inputs, model = _model(job, loss=job["loss"])
+    start = constants_from_experiment(exp)
+    t0 = time.perf_counter()
+    cal = calibrate_model(model, start, exp["fit.parameters"], exp["fit.solver"], exp["fit.max_steps"],
+                          frozen_by_scene=scene_frozen(exp))
+    fit_s = time.perf_counter() - t0
+    _, _, _, full = _model(job, resolution=tuple(exp["resolution"]))
+    img, _ = full.render(cal.fitted)
+    err = errors(ref.image, img, full.base.mask)
+    names = expand_parameters(exp["fit.parameters"])
+    return {"flip": float(err["flip"]), "rmse": float(err["rmse"]), "fit_seconds": fit_s,
+            "iterations": cal.fit_summary.get("iterations", 0),
+            "value": {n: get_value(cal.fitted, n) for n in names}}
+
+
+def quantile(values, q: float):
+    v = [x for x in values if x is not None and math.isfinite(x)]
+    return float(np.quantile(v, q)) if v else None
