@@ -26,7 +26,7 @@ import numpy as np
 from ._inputs import CONSTANT_SPECS, Constants
 
 GLSL_DIR = Path(__file__).parent / "glsl"
-SHADER_NAMES = ("water", "water_refraction", "water_reflection")
+SHADER_NAMES = ("water", "water_refraction", "water_reflection", "water_baseline")
 DIALECTS = ("compat", "core")
 BEGIN_MARKER = "// ---- BEGIN TUNABLE CONSTANTS (written by `study export`) ----"
 END_MARKER = "// ---- END TUNABLE CONSTANTS ----"
@@ -49,6 +49,9 @@ CORE_SUBSTITUTIONS: tuple[tuple[str, dict[str, str], str], ...] = (
      "texture coordinate varyings become vec4 in/out"),
     (r"\bgl_ModelViewProjectionMatrix\b", {"vert": "uModelViewProjectionMatrix",
                                             "frag": "uModelViewProjectionMatrix"}, "uniform"),
+    (r"\bgl_ModelViewProjectionMatrixInverse\b", {"vert": "uModelViewProjectionMatrixInverse",
+                                                   "frag": "uModelViewProjectionMatrixInverse"}, "uniform"),
+    (r"\bgl_NormalMatrix\b", {"vert": "uNormalMatrix", "frag": "uNormalMatrix"}, "uniform"),
     (r"\bgl_Vertex\b", {"vert": "aVertex", "frag": "aVertex"}, "vertex attribute"),
     (r"\bgl_MultiTexCoord0\b", {"vert": "aMultiTexCoord0", "frag": "aMultiTexCoord0"},
      "vertex attribute"),
@@ -94,6 +97,10 @@ def _core_declarations(source: str, stage: str) -> list[str]:
         decls.append("in vec4 aMultiTexCoord0;")
     if re.search(r"\bgl_ModelViewProjectionMatrix\b", source):
         decls.append("uniform mat4 uModelViewProjectionMatrix;")
+    if re.search(r"\bgl_ModelViewProjectionMatrixInverse\b", source):
+        decls.append("uniform mat4 uModelViewProjectionMatrixInverse;")
+    if re.search(r"\bgl_NormalMatrix\b", source):
+        decls.append("uniform mat3 uNormalMatrix;")
     for k in sorted(set(re.findall(r"\bgl_TextureMatrix\[(\d)\]", source))):
         decls.append(f"uniform mat4 uTextureMatrix{k};")
     for k in sorted(set(re.findall(r"\bgl_TexCoord\[(\d)\]", source))):

@@ -32,6 +32,8 @@ class Variant:
         schedule: names of the integer-valued step-schedule constants the variant reads (swept by
             the tradeoff study, never fitted by a gradient).
         description: one line for reports.
+        inputs: optional ``ShaderInputs`` fields the variant reads (built on demand by the
+            study, e.g. the baseline's screen-space buffers).
     """
 
     name: str
@@ -40,6 +42,13 @@ class Variant:
     port_options: dict = field(default_factory=dict)
     schedule: tuple[str, ...] = ()
     description: str = ""
+    inputs: tuple[str, ...] = ()
+
+    def reads(self) -> tuple[str, ...]:
+        """``CONSTANT_SPECS`` names the variant's GLSL declares in its constants block (the only
+        constants it reads)."""
+        from ._glsl import declared_constants
+        return tuple(declared_constants(self.source()))
 
     def port(self):
         """The port module (imports Dr.Jit)."""
@@ -98,3 +107,19 @@ register(Variant("water_refraction_noreflection", "water_refraction", defines=("
 register(Variant("water_reflection", "water_reflection",
                  schedule=_RAYCAST + ("refl_steps_steep", "refl_steps_grazing", "refl_loop_cap"),
                  description="seed 000 section 3: refraction and reflection both raycast"))
+
+# seeds 001-004: the baseline game water shader (no raycast, so no step schedule)
+_BASELINE_INPUTS = ("scene_color", "scene_depth", "reflection_color", "reflection_view_proj")
+register(Variant("water_baseline", "water_baseline",
+                 inputs=_BASELINE_INPUTS,
+                 description="seeds 001-004: planar refraction + normal-map distortion with dispersion "
+                             "of the screen-space scene, planar reflection distorted by the wave normal"))
+register(Variant("water_baseline_flat", "water_baseline", defines=("FLAT_WATER",), inputs=_BASELINE_INPUTS,
+                 port_options={"defines": ("FLAT_WATER",)},
+                 description="seeds 001 + 004 (FLAT_WATER): planar refraction and planar reflection "
+                             "of flat water, no waves"))
+register(Variant("water_baseline_noplanar", "water_baseline", defines=("NO_PLANAR_REFRACTION",),
+                 inputs=_BASELINE_INPUTS,
+                 port_options={"defines": ("NO_PLANAR_REFRACTION",)},
+                 description="seeds 002-004 (NO_PLANAR_REFRACTION): the classic distorted "
+                             "screen-space refraction and planar reflection, no 001"))

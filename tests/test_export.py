@@ -24,7 +24,8 @@ EXPORTED = Constants(attenuation_distance=4.999999836762939, steps_grazing=8.0, 
                      bumptex_mult=0.7, refr_coeff=0.76, water_color=(0.1, 0.3, 0.2, 1.0),
                      reflect_color=(0.9, 0.95, 1.0, 1.0))
 FILES = [(d, n, s) for d in ("compat", "core")
-         for n, s in (("water", "vert"), ("water_refraction", "frag"), ("water_reflection", "frag"))]
+         for n, s in (("water", "vert"), ("water_refraction", "frag"), ("water_reflection", "frag"),
+                      ("water_baseline", "frag"))]
 
 
 def _split_block(text: str) -> tuple[str, list[str], str]:
@@ -89,7 +90,7 @@ def test_vertex_shaders_copied_as_shipped(exported):
 
 def test_default_constants_reproduce_the_shipped_files(tmp_path):
     paths = export_shaders(Constants(), tmp_path / "shaders")
-    assert len(paths) == 6
+    assert len(paths) == len(FILES)
     for d, n, s in FILES:
         assert (tmp_path / "shaders" / d / f"{n}.{s}").read_text(encoding="utf-8") == read_source(n, s, d)
 
@@ -218,7 +219,7 @@ def test_failed_export_keeps_existing_export(tmp_path, monkeypatch):
     out = tmp_path / "out"
     run_export(good, out)
     before = _snapshot(out)
-    assert len(before) == 6
+    assert len(before) == len(FILES)
     # refused at load
     with pytest.raises(ValueError):
         run_export(_write(tmp_path, '{"attenuation_distance": NaN}', "bad.json"), out)
