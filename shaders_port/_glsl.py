@@ -285,3 +285,35 @@ def compile_check(path_or_source, stage: str | None = None) -> None:
     if res.returncode != 0:
         raise RuntimeError(f"glslangValidator rejected {label} ({stage}):\n"
                            f"{res.stdout}{res.stderr}")
+
+
+def active_code(source: str) -> str:
+    """The source as the preprocessor leaves it: lines inside ``#ifdef``/``#ifndef``/``#else``/
+    ``#endif`` branches not taken are dropped, given the ``#define NAME`` lines of the source
+    (the only conditional directives these shaders use; ``#if`` expressions are refused)."""
+    defined, keep, out = set(), [True], []
+    for line in source.split("\n"):
+        s = line.strip()
+        if s.startswith("#define ") and all(keep):
+            defined.add(s.split()[1])
+        elif s.startswith(("#ifdef ", "#ifndef ")):
+            name = s.split()[1]
+            keep.append((name in defined) == s.startswith("#ifdef "))
+        elif s.startswith("#else"):
+            keep[-1] = not keep[-1]
+        elif s.startswith("#endif"):
+            keep.pop()
+        elif s.startswith(("#if ", "#elif")):
+            raise ValueError(f"active_code: unsupported directive {s!r}")
+        elif all(keep):
+            out.append(line)
+    return "\n".join(out)
+
+
+def constants_read(source: str) -> list[str]:
+    """``CONSTANT_SPECS`` names declared in the constants block *and* used by the code the
+    preprocessor keeps (comments removed; a use is any occurrence beyond the declaration):
+    what the shader really reads."""
+    code = active_code("\n".join(ln.split("//")[0] for ln in source.split("\n")))
+    return [py for py in declared_constants(source)
+            if len(re.findall(rf"\b{CONSTANT_SPECS[py][0]}\b", code)) >= 2]

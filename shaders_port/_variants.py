@@ -45,10 +45,10 @@ class Variant:
     inputs: tuple[str, ...] = ()
 
     def reads(self) -> tuple[str, ...]:
-        """``CONSTANT_SPECS`` names the variant's GLSL declares in its constants block (the only
-        constants it reads)."""
-        from ._glsl import declared_constants
-        return tuple(declared_constants(self.source()))
+        """``CONSTANT_SPECS`` names the variant's GLSL declares and uses with its defines (the only
+        constants a fit of it may name)."""
+        from ._glsl import constants_read
+        return tuple(constants_read(self.source()))
 
     def port(self):
         """The port module (imports Dr.Jit)."""

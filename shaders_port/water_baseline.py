@@ -51,7 +51,8 @@ DEFINES = ("FLAT_WATER", "NO_PLANAR_REFRACTION")
 # texture read per pixel of the reflection render); the scene colour/depth pass is the frame
 # the game renders anyway and is not counted
 PASS_FETCHES = 1
-# the constants the GLSL declares (and so the only ones a fit of this shader may name)
+# the constants the GLSL declares; FLAT_WATER reads neither REFLECT_DISTORTION nor the 003 pair
+# (see reads_with)
 READS = ("attenuation_distance", "specular_strength", "specular_exponent", "reflect_distortion",
          "refraction_index", "refraction_strength", "chromatic_dispersion", "water_color",
          "reflect_color")
@@ -235,6 +236,15 @@ def _shade(m, P, S, C, flat: bool, planar: bool):
     return gl_FragColor, diagnostics
 
 
+def reads_with(defines=()) -> tuple[str, ...]:
+    """The constants the GLSL reads when compiled with ``defines`` (see ``_glsl.constants_read``)."""
+    from ._glsl import constants_read, read_source, with_define
+    src = read_source("water_baseline", "frag", "core")
+    for d in defines:
+        src = with_define(src, d)
+    return tuple(constants_read(src))
+
+
 def _options(defines) -> tuple[bool, bool]:
     defines = tuple(defines)
     unknown = set(defines) - set(DEFINES)
@@ -276,10 +286,11 @@ def render_with_jacobian(inputs: ShaderInputs, constants: Constants | None, name
     forward-mode derivative of the linear-RGB colour with respect to each named scalar
     constant (``"water_color[i]"`` for colour components); zero off the water."""
     flat, planar = _options(defines)
-    unread = [n for n in names if n.split("[")[0] not in READS]
+    reads = reads_with(defines)
+    unread = [n for n in names if n.split("[")[0] not in reads]
     if unread:
-        raise ValueError(f"water_baseline does not read {unread}: it has no derivative with respect "
-                         f"to them; differentiable constants of this shader: {', '.join(READS)}")
+        raise ValueError(f"water_baseline{''.join(' ' + d for d in defines)} does not read {unread}: "
+                         f"no derivative with respect to them; it reads: {', '.join(reads)}")
 
     def shade_tangents(m, P, C, params, frozen):
         S = screen_state(m, prepare(inputs, m), inputs)

@@ -151,11 +151,20 @@ def test_variants_differ_where_they_should(small):
     assert np.abs(a - b).max() < 1e-3
 
 
-def test_reads_are_the_declared_constants():
-    for name in BASELINES:
-        assert set(VARIANTS[name].reads()) == set(water_baseline.READS)
+def test_reads_are_the_constants_the_active_code_uses():
+    assert set(VARIANTS["water_baseline"].reads()) == set(water_baseline.READS)
+    assert set(VARIANTS["water_baseline_noplanar"].reads()) == set(water_baseline.READS) - {"refraction_index"}
+    assert set(VARIANTS["water_baseline_flat"].reads()) == set(water_baseline.READS) - {
+        "reflect_distortion", "refraction_strength", "chromatic_dispersion"}
     assert "bumptex_mult" not in VARIANTS["water_baseline"].reads()
     assert "reflect_distortion" not in VARIANTS["water_refraction"].reads()
+    # NOREFLECTION drops the reflection, its colour and the highlight
+    assert not {"reflect_color", "specular_strength", "specular_exponent"} & set(
+        VARIANTS["water_refraction_noreflection"].reads())
+    assert {"reflect_color", "specular_strength"} <= set(VARIANTS["water_refraction"].reads())
+    with pytest.raises(ValueError, match="does not read"):
+        water_baseline.render_with_jacobian(synthetic_baseline_inputs(16, 12), Constants(),
+                                            ["refraction_strength"], defines=("FLAT_WATER",))
 
 
 def test_missing_screen_buffers_are_a_clear_error():

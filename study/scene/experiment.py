@@ -38,7 +38,9 @@ FLOOR_SHAPES = ("flat", "slope", "steps", "terrain")
 SHADERS = tuple(VARIANTS)
 SOLVERS = ("levenberg_marquardt", "gauss_newton", "dogleg", "bfgs", "nelder_mead", "adam")
 FIT_PARAMETERS = ("attenuation_distance", "bumptex_mult", "steps_grazing", "steps_steep",
-                  "water_color", "reflect_color", "specular_strength", "specular_exponent")
+                  "water_color", "reflect_color", "specular_strength", "specular_exponent",
+                  # the baseline shader's (seeds 001-004)
+                  "refraction_index", "refraction_strength", "chromatic_dispersion", "reflect_distortion")
 
 SCHEMA: dict[str, Field] = {
     "name": Field("str", "unnamed", "Name of the experiment (used in reports)."),
@@ -268,6 +270,13 @@ def validate(raw: dict, overrides: list[str] | None = None, path: Path | None = 
     if fmt[0] > res[0] or fmt[1] > res[1] or res[0] % fmt[0] or res[1] % fmt[1]:
         raise ExperimentError(f"fit.resolution {fmt} must divide resolution {res} "
                               "(the reference is box-downsampled to it)")
+    reads = VARIANTS[values["fit.shader"]].reads()
+    unread = [p for p in values["fit.parameters"] if p not in reads]
+    if unread:
+        raise ExperimentError(
+            f"fit.parameters {unread} are not read by fit.shader = {values['fit.shader']!r} (its "
+            f"GLSL declares no such constant, so the fit could not move them); fit only constants "
+            f"it reads: {', '.join(p for p in FIT_PARAMETERS if p in reads)}")
     if values["camera.position"] == values["camera.target"]:
         raise ExperimentError("camera.position equals camera.target; move one of them")
     if values["camera.position"][1] <= 0.0:

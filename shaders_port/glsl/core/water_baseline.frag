@@ -69,6 +69,7 @@ in vec3 varyingVecEye;
 //vector from varyingVecWorldPosition to worldspace Light Position
 in vec3 varyingVecLight;
 
+#ifndef NO_PLANAR_REFRACTION
 //seed 001: the perceived position of a world position seen through the plane `surface`
 vec3 Refract(vec3 position, vec4 surface, float refractionIndex)
 {
@@ -100,6 +101,7 @@ vec3 Refract(vec3 position, vec4 surface, float refractionIndex)
     //starting from the camera, move along the perceived position vector by the original ray length
     return viewerPosition + normalize(originToIntersection) * length(worldRay);
 }
+#endif
 
 void main (void)
 {
