@@ -229,9 +229,11 @@ def _shade(m, P, S, C, flat: bool, planar: bool):
         bad |= ~(dr.isfinite(vTextureReflection[0]) & dr.isfinite(vTextureReflection[1]))
     if planar:
         bad |= ~(dr.isfinite(refractedUV[0]) & dr.isfinite(refractedUV[1]))
-    n = dr.width(vEye.x)
-    diagnostics = {"iterations": dr.zeros(m.Float, n),
-                   "fetches": dr.full(m.Float, float(fetches + PASS_FETCHES), n),
+    # per-lane constants built from a lane array (a width given as a Python int would be baked
+    # into a frozen recording and replayed at the wrong size); the water plane's y is exactly 0
+    zero = P.varyingVecWorldPosition.y * 0.0
+    diagnostics = {"iterations": zero,
+                   "fetches": zero + float(fetches + PASS_FETCHES),
                    "nonfinite": dr.select(bad, 1.0, 0.0)}
     return gl_FragColor, diagnostics
 

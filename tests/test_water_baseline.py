@@ -139,6 +139,19 @@ def test_diagnostics_count_fetches_and_no_iterations(small):
         assert np.isfinite(out["color"]).all() and out["color"][water].min() >= 0
 
 
+def test_frozen_replay_at_another_resolution(small, monkeypatch):
+    # a recorded kernel replayed for another lane count must not reuse the old sizes
+    from shaders_port import _frame
+    for w, h in ((48, 36), (40, 30), (48, 36)):
+        inp = small.with_resolution(w, h)
+        out = water_baseline.render(inp, CUSTOM).numpy()
+        monkeypatch.setattr(_frame, "USE_FROZEN", False)
+        traced = water_baseline.render(inp, CUSTOM).numpy()
+        monkeypatch.setattr(_frame, "USE_FROZEN", True)
+        for k in ("color", "fetches", "iterations", "nonfinite"):
+            assert np.array_equal(out[k], traced[k]), (w, h, k)
+
+
 def test_variants_differ_where_they_should(small):
     full = get_variant("water_baseline").render(small, CUSTOM).numpy()["color"]
     flat = get_variant("water_baseline_flat").render(small, CUSTOM).numpy()["color"]
