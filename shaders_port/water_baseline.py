@@ -229,13 +229,24 @@ def _shade(m, P, S, C, flat: bool, planar: bool):
         bad |= ~(dr.isfinite(vTextureReflection[0]) & dr.isfinite(vTextureReflection[1]))
     if planar:
         bad |= ~(dr.isfinite(refractedUV[0]) & dr.isfinite(refractedUV[1]))
-    # per-lane constants built from a lane array (a width given as a Python int would be baked
-    # into a frozen recording and replayed at the wrong size); the water plane's y is exactly 0
-    zero = P.varyingVecWorldPosition.y * 0.0
-    diagnostics = {"iterations": zero,
-                   "fetches": zero + float(fetches + PASS_FETCHES),
-                   "nonfinite": dr.select(bad, 1.0, 0.0)}
+    assert fetches + PASS_FETCHES == fetch_count(flat)   # the count below matches the code above
+    diagnostics = {"nonfinite": dr.select(bad, 1.0, 0.0)}
     return gl_FragColor, diagnostics
+
+
+def fetch_count(flat: bool) -> int:
+    """Texture reads per pixel of the variant: [2] 4 normal-map layers (none if flat), [3] 1 depth,
+    [4] 3 scene reads (1 if flat), [6] 1 reflection, [8] 1 Fresnel LUT, plus ``PASS_FETCHES``."""
+    return (0 if flat else 4) + 1 + (1 if flat else 3) + 1 + 1 + PASS_FETCHES
+
+
+def with_static_diagnostics(m, diag: dict, flat: bool) -> dict:
+    """``diag`` plus ``fetches`` and ``iterations`` (0): the same on every lane, so they are made
+    here, outside the recorded kernels (a width baked into a frozen recording would be replayed
+    at the wrong size)."""
+    n = dr.width(diag["nonfinite"])
+    return {"iterations": dr.zeros(m.Float, n), "fetches": dr.full(m.Float, float(fetch_count(flat)), n),
+            **diag}
 
 
 def reads_with(defines=()) -> tuple[str, ...]:
@@ -275,7 +286,7 @@ def render(inputs: ShaderInputs, constants: Constants | None = None, *, defines:
         color, diag = _frozen_shade(m, P.shading_state(), S, C, flat, planar)
     else:
         color, diag = _shade(m, P, S, C, flat, planar)
-    return finish_output(m, P, color, diag, "water_baseline")
+    return finish_output(m, P, color, with_static_diagnostics(m, diag, flat), "water_baseline")
 
 
 _frozen_tangents = dr.freeze(lambda m, P, S, C, params, flat, planar:
@@ -297,7 +308,9 @@ def render_with_jacobian(inputs: ShaderInputs, constants: Constants | None, name
     def shade_tangents(m, P, C, params, frozen):
         S = screen_state(m, prepare(inputs, m), inputs)
         if frozen:
-            return _frozen_tangents(m, P, S, C, params, flat, planar)
-        return tangents(m, *_shade(m, P, S, C, flat, planar), params)
+            color, diag, grads = _frozen_tangents(m, P, S, C, params, flat, planar)
+        else:
+            color, diag, grads = tangents(m, *_shade(m, P, S, C, flat, planar), params)
+        return color, with_static_diagnostics(m, diag, flat), grads
     return jacobian_passes(shade_tangents, "water_baseline", inputs,
                            constants if constants is not None else Constants(), names, backend, loop_ad)
