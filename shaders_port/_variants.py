@@ -34,6 +34,8 @@ class Variant:
         description: one line for reports.
         inputs: optional ``ShaderInputs`` fields the variant reads (built on demand by the
             study, e.g. the baseline's screen-space buffers).
+        fit_parameters: constants of its own that studies fitting several variants (``study
+            tradeoff``) fit besides the experiment's ``fit.parameters`` (those it reads).
     """
 
     name: str
@@ -43,6 +45,14 @@ class Variant:
     schedule: tuple[str, ...] = ()
     description: str = ""
     inputs: tuple[str, ...] = ()
+    fit_parameters: tuple[str, ...] = ()
+
+    def fit_names(self, parameters) -> list[str]:
+        """``parameters`` (e.g. an experiment's ``fit.parameters``) that the variant reads, minus
+        its step schedule, plus its own ``fit_parameters`` it reads."""
+        reads = set(self.reads())
+        out = [n for n in parameters if n in reads and n not in self.schedule]
+        return out + [n for n in self.fit_parameters if n in reads and n not in out]
 
     def reads(self) -> tuple[str, ...]:
         """``CONSTANT_SPECS`` names the variant's GLSL declares and uses with its defines (the only
@@ -110,16 +120,17 @@ register(Variant("water_reflection", "water_reflection",
 
 # seeds 001-004: the baseline game water shader (no raycast, so no step schedule)
 _BASELINE_INPUTS = ("scene_color", "scene_depth", "reflection_color", "reflection_view_proj")
+_BASELINE_FIT = ("refraction_index", "refraction_strength", "chromatic_dispersion", "reflect_distortion")
 register(Variant("water_baseline", "water_baseline",
-                 inputs=_BASELINE_INPUTS,
+                 inputs=_BASELINE_INPUTS, fit_parameters=_BASELINE_FIT,
                  description="seeds 001-004: planar refraction + normal-map distortion with dispersion "
                              "of the screen-space scene, planar reflection distorted by the wave normal"))
-register(Variant("water_baseline_flat", "water_baseline", defines=("FLAT_WATER",), inputs=_BASELINE_INPUTS,
+register(Variant("water_baseline_flat", "water_baseline", defines=("FLAT_WATER",), inputs=_BASELINE_INPUTS, fit_parameters=_BASELINE_FIT,
                  port_options={"defines": ("FLAT_WATER",)},
                  description="seeds 001 + 004 (FLAT_WATER): planar refraction and planar reflection "
                              "of flat water, no waves"))
 register(Variant("water_baseline_noplanar", "water_baseline", defines=("NO_PLANAR_REFRACTION",),
-                 inputs=_BASELINE_INPUTS,
+                 inputs=_BASELINE_INPUTS, fit_parameters=_BASELINE_FIT,
                  port_options={"defines": ("NO_PLANAR_REFRACTION",)},
                  description="seeds 002-004 (NO_PLANAR_REFRACTION): the classic distorted "
                              "screen-space refraction and planar reflection, no 001"))

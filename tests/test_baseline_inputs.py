@@ -87,3 +87,35 @@ def test_port_matches_gl_on_scene_buffers(scene, variant):
     assert r["n_water"] > 100
     assert r["mean_abs"] <= 1e-3 and r["p999"] <= 1e-2
     assert r["unexplained"] == 0 and r["n_nonfinite"] == 0
+
+
+@pytest.mark.slow
+def test_tradeoff_tiny_with_baselines(tmp_path):
+    """The baselines as variants of `study tradeoff`: one fixed point each beside raycast points,
+    with fetches from their diagnostics, llvmpipe frame times and their own constants fitted
+    (about 6 min on 2 loaded cores)."""
+    from conftest import REPO
+    from study.cli import main
+    from study.sweep import read_table
+    small = ["resolution=[32,32]", "fit.resolution=[32,32]", "reference.spp=16", "reference.water_mesh=96",
+             "reference.texture_size=64", "reference.texture_spp=8", "waves.normal_map_size=64",
+             "tradeoff.variants=[\"water_refraction\",\"water_baseline\",\"water_baseline_flat\"]",
+             "tradeoff.steps_grazing=[5.0]", "tradeoff.steps_steep=[3.0]", "tradeoff.loop_cap=[20]",
+             "tradeoff.scales=[1.0]", "tradeoff.converged_scale=2.0", "tradeoff.gl_repeats=3",
+             "fit.max_steps=5"]
+    args = ["tradeoff", str(REPO / "experiments" / "default.toml"), "--out", str(tmp_path),
+            "--workers", "1"] + [a for s in small for a in ("--set", s)]
+    assert main(args) == 0
+    rows = read_table(tmp_path / "tradeoff.parquet")
+    assert all(r["status"] == "ok" for r in rows), [r.get("error") for r in rows]
+    by = {}
+    for r in rows:
+        by.setdefault(r["job.variant"], []).append(r)
+    assert len(by["water_baseline"]) == 1 and len(by["water_baseline_flat"]) == 1
+    assert by["water_baseline"][0]["fetches_mean"] == 11 and by["water_baseline_flat"][0]["fetches_mean"] == 5
+    assert by["water_baseline"][0]["iterations_mean"] == 0
+    assert all(r["gl_ms_512"] > 0 and 0 < r["flip"] < 1 for r in rows)
+    b = by["water_baseline"][0]
+    # its own constants were fitted (moved from the start), the raycast's bump scale was not
+    assert b["fitted.refraction_strength"] != b["job.start.refraction_strength"]
+    assert b["fitted.bumptex_mult"] == b["job.start.bumptex_mult"]

@@ -195,3 +195,13 @@ def with_baseline_inputs(exp: Experiment, inputs: ShaderInputs, variant: str, ca
                 os.unlink(tmp)
         log(f"baseline inputs: built and cached at {path}")
     return dataclasses.replace(inputs, **fields)
+
+
+def inputs_for_shader(exp: Experiment, inputs: ShaderInputs, shader: str, variant: str, cache=None,
+                      log=print) -> ShaderInputs:
+    """``inputs`` with whatever optional fields the shader variant ``shader`` reads (its
+    ``Variant.inputs``; today only the baseline's buffers), else ``inputs`` unchanged."""
+    from shaders_port._variants import get_variant
+    if get_variant(shader).inputs:
+        return with_baseline_inputs(exp, inputs, variant, cache=cache, log=log)
+    return inputs
