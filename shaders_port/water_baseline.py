@@ -9,8 +9,8 @@ defines, ``defines=`` here): ``FLAT_WATER`` (no normal map and no distortion: 00
 flat-water limit) and ``NO_PLANAR_REFRACTION`` (no 001).
 
 GLSL semantics as in ``water_refraction``: ``refract`` returns 0 on total internal reflection,
-``normalize(0)`` is NaN (seed 002's ``normalize(eyeNormal.xy)`` where the wave normal is the
-mirror normal), ``mix``/``clamp``/``pow`` as specified. ``gl_FragCoord`` is the pixel centre
+``normalize(0)`` is NaN (seed 002's ``normalize(eyeNormal.xy)`` is guarded: no offset where the
+projected flattened normal is 0, as on calm water), ``mix``/``clamp``/``pow`` as specified. ``gl_FragCoord`` is the pixel centre
 ``(c + 0.5, H - r - 0.5)``. Non-finite pixels are set to 0, flagged in
 ``diagnostics['nonfinite']`` and warned about.
 
@@ -23,8 +23,8 @@ Inputs: :class:`ShaderInputs` with the optional fields ``scene_color``, ``scene_
 Derivatives: no loop; forward-mode AD through every block. Discontinuous where: the
 nearest-filtered depth (constant per texel, no derivative), the depth-tint clamp at 1, the
 clamps of ``NdotV`` and of the specular cosine, the nearest-filtered Fresnel LUT, texel
-edges of the clamped bilinear lookups (kinks only), and ``normalize(eyeNormal.xy)`` near a
-flat normal.
+edges of the clamped bilinear lookups (kinks only), and the direction ``normalize(eyeNormal.xy)``
+near a flat normal (its offset goes to 0 there, continuously, but its direction jumps).
 
 Diagnostics: ``fetches`` (texture reads per pixel: this shader's, plus :data:`PASS_FETCHES`
 for the mirrored camera's extra pass), ``iterations`` (0: no loop), ``nonfinite``.
@@ -206,7 +206,10 @@ def _shade(m, P, S, C, flat: bool, planar: bool):
         eyeNormal = m.Array3f(*(N[i][0] * flatNormal.x + N[i][1] * flatNormal.y + N[i][2] * flatNormal.z
                                 for i in range(3)))
         exy = m.Array2f(eyeNormal.x, eyeNormal.y)
-        reflectOffset = dr.normalize(exy) * dr.norm(flatNormal) * C.reflect_distortion
+        #a flat normal must not deform the image: no offset where eyeNormal.xy is 0
+        reflectOffset = dr.select(dr.norm(exy) > 0.0,
+                                  dr.normalize(exy) * dr.norm(flatNormal) * C.reflect_distortion,
+                                  m.Array2f(0.0, 0.0))
         vTextureReflection = (vTextureReflection[0] + reflectOffset.x, vTextureReflection[1] + reflectOffset.y)
     reflectionTextureColor = S.reflection_sampler.sample(m, vTextureReflection[0], vTextureReflection[1])
     fetches += 1

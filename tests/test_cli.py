@@ -164,7 +164,7 @@ def test_calibrate_writes_shaders_with_fitted_constants_and_report(runs):
     c = json.loads((out / "constants.json").read_text())
     for dialect in ("compat", "core"):
         names = sorted(p.name for p in (out / "shaders" / dialect).iterdir())
-        assert names == ["water.vert", "water_reflection.frag", "water_refraction.frag"]
+        assert names == ["water.vert", "water_baseline.frag", "water_reflection.frag", "water_refraction.frag"]
         got = read_constants((out / "shaders" / dialect / "water_refraction.frag").read_text())
         for name, p in c["parameters"].items():
             if p["frozen"]:

@@ -152,6 +152,17 @@ def test_frozen_replay_at_another_resolution(small, monkeypatch):
             assert np.array_equal(out[k], traced[k]), (w, h, k)
 
 
+def test_flat_normal_map_is_finite_and_undistorted(small):
+    # calm water: every wave normal is the mirror normal; seed 002's offset must vanish (fix 15)
+    import dataclasses
+    calm = dataclasses.replace(small, normal_map=np.tile(np.float32([0.5, 1.0, 0.5]), (8, 8, 1)))
+    c = CUSTOM.replace(chromatic_dispersion=0.0)   # FLAT_WATER has no dispersion either
+    with_waves = get_variant("water_baseline").render(calm, c).numpy()
+    flat = get_variant("water_baseline_flat").render(calm, c).numpy()
+    assert (with_waves["nonfinite"] == 0).all()
+    assert np.abs(with_waves["color"] - flat["color"]).max() < 1e-5
+
+
 def test_variants_differ_where_they_should(small):
     full = get_variant("water_baseline").render(small, CUSTOM).numpy()["color"]
     flat = get_variant("water_baseline_flat").render(small, CUSTOM).numpy()["color"]
@@ -229,7 +240,7 @@ def test_seed_code_kept():
                  # 002
                  "vec3 flatNormal = vBumpTex - dot (vBumpTex, mirrorNormal) * mirrorNormal;",
                  "vec3 eyeNormal = gl_NormalMatrix * flatNormal;",
-                 "vec2 reflectOffset = normalize (eyeNormal.xy) * length (flatNormal) * REFLECT_DISTORTION;",
+                 "normalize (eyeNormal.xy) * length (flatNormal) * REFLECT_DISTORTION : vec2(0.0, 0.0);",
                  # 003 (the red and blue channels shifted alike: kept)
                  "vec2 newUV = refractedUV + bump * refractionStrength;",
                  "texture2D(sceneColor, newUV - chromaticDispersion).r,",

@@ -169,7 +169,9 @@ void main (void)
 #ifndef FLAT_WATER
     vec3 flatNormal = vBumpTex - dot (vBumpTex, mirrorNormal) * mirrorNormal;
     vec3 eyeNormal = uNormalMatrix * flatNormal;
-    vec2 reflectOffset = normalize (eyeNormal.xy) * length (flatNormal) * REFLECT_DISTORTION;
+    //a flat normal must not deform the image: no offset where eyeNormal.xy is 0 (normalize(0) is NaN)
+    vec2 reflectOffset = length(eyeNormal.xy) > 0.0 ?
+        normalize (eyeNormal.xy) * length (flatNormal) * REFLECT_DISTORTION : vec2(0.0, 0.0);
     vTextureReflection += reflectOffset;
 #endif
     vec4 reflectionTextureColor = texture(reflection_sampler, vTextureReflection);
