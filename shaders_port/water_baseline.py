@@ -269,17 +269,25 @@ def _options(defines) -> tuple[bool, bool]:
     return "FLAT_WATER" in defines, "NO_PLANAR_REFRACTION" not in defines
 
 
-_frozen_shade = dr.freeze(lambda m, P, S, C, flat, planar: _shade(m, P, S, C, flat, planar))
+def _frozen_shade(m, P, S, C, flat, planar):
+    # one frozen function per Python-level configuration (see _frame.frozen)
+    f = _frame.frozen(("water_baseline", flat, planar) + _frame.python_config(C),
+                      lambda m, P, S, C: _shade(m, P, S, C, flat, planar))
+    return f(m, P, S, C)
 
 
 def render(inputs: ShaderInputs, constants: Constants | None = None, *, defines: tuple = (),
-           backend: str = "llvm", loop_ad: str = "replay") -> ShaderOutput:
+           backend: str = "llvm", loop_ad: str = "replay", diagnose: bool = False) -> ShaderOutput:
     """Render ``water_baseline`` compiled with ``defines`` (a subset of :data:`DEFINES`).
 
     Returns a :class:`ShaderOutput`: ``color`` TensorXf (H, W, 3) linear RGB, 0 off the water;
     ``mask``; ``diagnostics`` (H, W): ``fetches``, ``iterations`` (0), ``nonfinite``.
     ``loop_ad`` is accepted for the common port interface (this shader has no loop).
+    ``diagnose=True`` (the raycast ports' failure diagnostics) is refused: this shader has none.
     """
+    if diagnose:
+        raise ValueError("water_baseline has no failure diagnostics (they classify raycast failures); "
+                         "study failures applies to the raycast variants only")
     flat, planar = _options(defines)
     m = backend_types(backend)
     P = prepare(inputs, m)
@@ -292,8 +300,10 @@ def render(inputs: ShaderInputs, constants: Constants | None = None, *, defines:
     return finish_output(m, P, color, with_static_diagnostics(m, diag, flat), "water_baseline")
 
 
-_frozen_tangents = dr.freeze(lambda m, P, S, C, params, flat, planar:
-                             tangents(m, *_shade(m, P, S, C, flat, planar), params))
+def _frozen_tangents(m, P, S, C, params, flat, planar):
+    f = _frame.frozen(("water_baseline.tangents", flat, planar) + _frame.python_config(C),
+                      lambda m, P, S, C, params: tangents(m, *_shade(m, P, S, C, flat, planar), params))
+    return f(m, P, S, C, params)
 
 
 def render_with_jacobian(inputs: ShaderInputs, constants: Constants | None, names: list[str], *,

@@ -142,11 +142,12 @@ def test_diagnostics_count_fetches_and_no_iterations(small):
 def test_frozen_replay_at_another_resolution(small, monkeypatch):
     # a recorded kernel replayed for another lane count must not reuse the old sizes
     from shaders_port import _frame
-    for w, h in ((48, 36), (40, 30), (48, 36)):
+    for (w, h), d in (((48, 36), ()), ((40, 30), ()), ((48, 36), ("FLAT_WATER",)),
+                      ((48, 36), ()), ((48, 36), ("NO_PLANAR_REFRACTION",))):
         inp = small.with_resolution(w, h)
-        out = water_baseline.render(inp, CUSTOM).numpy()
+        out = water_baseline.render(inp, CUSTOM, defines=d).numpy()
         monkeypatch.setattr(_frame, "USE_FROZEN", False)
-        traced = water_baseline.render(inp, CUSTOM).numpy()
+        traced = water_baseline.render(inp, CUSTOM, defines=d).numpy()
         monkeypatch.setattr(_frame, "USE_FROZEN", True)
         for k in ("color", "fetches", "iterations", "nonfinite"):
             assert np.array_equal(out[k], traced[k]), (w, h, k)

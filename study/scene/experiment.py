@@ -15,6 +15,8 @@ import tomllib
 from dataclasses import dataclass
 from pathlib import Path
 
+import numpy as np
+
 from shaders_port import CONSTANT_SPECS
 from shaders_port._variants import VARIANTS
 
@@ -64,6 +66,10 @@ SCHEMA: dict[str, Field] = {
                           "world units", 0.0, 100.0),
     "floor.steps": Field("int", 4, "Number of steps for shape `steps`.", "", 1, 64),
     "floor.seed": Field("int", 0, "Random seed of shape `terrain`.", "", 0, 2**31 - 1),
+    "floor.ledge": Field("vec4", [0.0, 0.0, 0.0, 0.0], "Under-water slab (a ledge or bridge "
+                         "across the pool in z, its ends 0.02 from the walls) as [x_min, x_max, top y, "
+                         "thickness]; thickness 0 = none. The floor under it is hidden from the "
+                         "top-down textures (depth complexity 2).", "world units", -1000.0, 1000.0),
     "floor.tile_size": Field("float", 0.5, "Edge length of the floor tiles.", "world units", 0.01, 100.0),
     "floor.tile_albedo": Field("vec3", [0.75, 0.72, 0.62], "Albedo of the light tiles.", "linear RGB", 0.0, 1.0),
     "floor.tile_albedo2": Field("vec3", [0.18, 0.32, 0.45], "Albedo of the dark tiles.", "linear RGB", 0.0, 1.0),
@@ -157,6 +163,42 @@ SHADER_INPUT_KEYS = frozenset({"reference.texture_size", "reference.texture_spp"
                                "waves.normal_map_size", "waves.slope_scale"})
 
 _VEC_LEN = {"vec2": 2, "vec3": 3, "vec4": 4}
+
+
+# keys added after references were cached: hashed only when set, so that the cached
+# references and inputs of experiments that do not use them stay valid
+_LATER_KEYS = ("floor.ledge",)
+
+
+def _unset_later_key(key: str, value) -> bool:
+    return key in _LATER_KEYS and value == SCHEMA[key].default
+
+
+def _check_ledge(values: dict) -> None:
+    """The ledge must lie inside the pool, below the wave troughs and clear of the floor."""
+    x_min, x_max, top, thick = values["floor.ledge"]
+    if thick == 0.0:
+        return
+    from .geometry import floor_height
+    hx, hz = values["pool.half_extent"]
+    key = "floor.ledge = [x_min, x_max, top, thickness]"
+    if thick < 0.0:
+        raise ExperimentError(f"{key}: thickness {thick} is negative (0 = no ledge)")
+    if not -hx < x_min < x_max < hx:
+        raise ExperimentError(f"{key}: need -{hx} < x_min < x_max < {hx} (inside the pool), got "
+                              f"x_min={x_min}, x_max={x_max}")
+    trough = -values["waves.amplitude"] - 0.05
+    if top > trough:
+        raise ExperimentError(f"{key}: top {top} must be at least 0.05 below the wave troughs "
+                              f"(y <= {trough:.3f})")
+    x, z = np.meshgrid(np.linspace(x_min, x_max, 65), np.linspace(-hz, hz, 65))
+    f = {k[len("floor."):]: values[k] for k in values if k.startswith("floor.")}
+    floor_top = float(floor_height(f["shape"], f["depth"], f["relief"], f["steps"], f["seed"],
+                                   (hx, hz), x, z).max())
+    if top - thick <= floor_top + 0.05:
+        raise ExperimentError(f"{key}: the underside (y = {top - thick:.3f}) must be at least 0.05 "
+                              f"above the floor under it (highest at y = {floor_top:.3f}); "
+                              "make the ledge thinner or higher, or the floor deeper")
 
 
 def _check(key: str, f: Field, v):
@@ -256,7 +298,7 @@ class Experiment:
         prefixes = ("resolution", "camera.", "pool.", "floor.", "water.", "waves.", "sky.", "sun.",
                     "reference.")
         data = {k: v for k, v in sorted(self.values.items())
-                if k.startswith(prefixes) and k not in SHADER_INPUT_KEYS}
+                if k.startswith(prefixes) and k not in SHADER_INPUT_KEYS and not _unset_later_key(k, v)}
         return hashlib.sha256(json.dumps(data, sort_keys=True).encode()).hexdigest()
 
     def inputs_hash(self) -> str:
@@ -264,7 +306,8 @@ class Experiment:
         ``SHADER_INPUT_KEYS``; not the fit, the start constants or the names)."""
         prefixes = ("resolution", "camera.", "pool.", "floor.", "water.", "waves.", "sky.", "sun.",
                     "reference.", "variant")
-        data = {k: v for k, v in sorted(self.values.items()) if k.startswith(prefixes)}
+        data = {k: v for k, v in sorted(self.values.items())
+                if k.startswith(prefixes) and not _unset_later_key(k, v)}
         return hashlib.sha256(json.dumps(data, sort_keys=True).encode()).hexdigest()
 
     def to_toml_dict(self) -> dict:
@@ -307,6 +350,7 @@ def validate(raw: dict, overrides: list[str] | None = None, path: Path | None = 
         raise ExperimentError("camera.position equals camera.target; move one of them")
     if values["camera.position"][1] <= 0.0:
         raise ExperimentError("camera.position: the camera must be above the water plane (y > 0)")
+    _check_ledge(values)
     return Experiment(values, path)
 
 
