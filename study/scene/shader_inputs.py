@@ -32,7 +32,7 @@ from .experiment import Experiment
 from .geometry import cubemap_directions, sky_radiance
 from .mitsuba_scene import build_geometry, camera_view_proj, sky_params, waves_of
 
-INPUTS_VERSION = 1        # bump whenever the construction of the inputs below changes
+INPUTS_VERSION = 2        # bump whenever the construction of the inputs below changes
 NO_GEOMETRY = -1e3
 CUBEMAP_SIZE = 64
 FRESNEL_SIZE = 256
@@ -203,15 +203,24 @@ def light_of(exp: Experiment) -> tuple[np.ndarray, np.ndarray]:
 
 
 def build_shader_inputs(exp: Experiment, width: int | None = None, height: int | None = None,
-                        progress=None) -> ShaderInputs:
-    """All shader inputs of ``exp`` at output resolution (width, height) (default: the experiment's)."""
+                        progress=None, info: dict | None = None) -> ShaderInputs:
+    """All shader inputs of ``exp`` at output resolution (width, height) (default: the experiment's).
+    ``info``, if given, receives how the refraction texture was made (``texture``: method,
+    settings and, for ``lighting``, its measured noise)."""
     width = width or exp["resolution"][0]
     height = height or exp["resolution"][1]
     extent = texture_extent(exp)
     size = exp["reference.texture_size"]
     world_y = top_down_world_y(exp, extent, size)
-    colour = top_down_colour(exp, extent, size, exp["reference.texture_spp"], exp["reference.seed"],
-                             world_y=world_y)
+    if exp["reference.texture_method"] == "lighting":
+        from .lighting import lighting_colour
+        colour, tex_info = lighting_colour(exp, extent, size, exp["reference.seed"], world_y=world_y)
+    else:
+        colour = top_down_colour(exp, extent, size, exp["reference.texture_spp"], exp["reference.seed"],
+                                 world_y=world_y)
+        tex_info = {"method": "colour", "spp": exp["reference.texture_spp"], "noise": None}
+    if info is not None:
+        info["texture"] = tex_info
     above = world_y > 0.0
     refl_y = np.where(above, world_y, NO_GEOMETRY).astype(np.float32)
     refl_col = np.where(above[..., None], colour, 0.0).astype(np.float32)
@@ -256,10 +265,13 @@ def load_or_build_shader_inputs(exp: Experiment, variant: str, cache=None, log=p
         inputs = _cached_inputs(path, log)   # another process may have built them meanwhile
         if inputs is not None:
             return inputs
-        inputs = build_shader_inputs(exp)
+        info: dict = {}
+        inputs = build_shader_inputs(exp, info=info)
         path.parent.mkdir(parents=True, exist_ok=True)
         inputs.save(path)
-    log(f"shader inputs: built and cached at {path}")
+    tex = info["texture"]
+    noise = f", texture noise {tex['noise']:.2e} (RMS standard error on the pool)" if tex.get("noise") else ""
+    log(f"shader inputs: built ({tex['method']} texture, {tex['spp']} spp{noise}) and cached at {path}")
     return inputs
 
 
