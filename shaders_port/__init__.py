@@ -1,7 +1,8 @@
 """The seed's real-time water shaders: GLSL sources and their Dr.Jit ports.
 
 This layer takes plain inputs (textures, camera, constants) and knows nothing of
-experiments, Mitsuba scenes or solvers. Ports: ``water_refraction``, ``water_reflection``
+experiments, Mitsuba scenes or solvers. Ports: ``water_refraction``, ``water_reflection``,
+``water_baseline`` (seeds 001-004)
 (import the modules; they need Dr.Jit). GLSL: ``glsl_path``, ``read_source``,
 ``write_constants``, ``read_constants``, ``compile_check``. Running the GLSL headless on
 OpenGL: ``shaders_port._gl.GLRenderer`` (imported lazily: it needs EGL).

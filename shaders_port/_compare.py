@@ -86,8 +86,9 @@ def compare_port_gl(inputs: ShaderInputs, constants: Constants | None, shader: s
     if d.size == 0:
         raise ValueError("the port and GL share no water pixel; check the camera and water_rect")
     outlier = both & ~(diff <= OUTLIER)        # NaN on either side counts as an outlier
-    reasons = {"tiny_denominator": out["denominator"] < 1e-3,
-               "crossing_step_edge": _neighbour_differs(out["iterations"], port_mask)}
+    reasons = {"crossing_step_edge": _neighbour_differs(out["iterations"], port_mask)}
+    if "denominator" in out:      # the raycast shaders' crossing interpolation
+        reasons["tiny_denominator"] = out["denominator"] < 1e-3
     if "refl_hit" in out:
         reasons["reflection_decision"] = (_neighbour_differs(out["refl_hit"], port_mask)
                                           | _neighbour_differs(out["refl_iterations"], port_mask))

@@ -18,10 +18,10 @@ import time
 import numpy as np
 
 from ._glsl import compat_to_core, read_source, with_define, write_constants
-from ._inputs import CONSTANT_SPECS, Constants, ShaderInputs
+from ._inputs import CONSTANT_SPECS, Constants, ShaderInputs, normal_matrix
 
 _GL_TEXTURE_CUBE_MAP_SEAMLESS = 0x884F
-_FRAG_NAMES = ("water_refraction", "water_reflection")
+_FRAG_NAMES = ("water_refraction", "water_reflection", "water_baseline")
 _UNIFORM_CONSTANTS = {py: spec[0] for py, spec in CONSTANT_SPECS.items() if spec[1].startswith("uniform")}
 _MASK_FRAG = "#version 330 core\nout vec4 fragColor;\nvoid main(void) { fragColor = vec4(1.0); }\n"
 # sampler name -> (texture unit, filter 'linear'|'nearest', repeat)
@@ -33,7 +33,14 @@ _SAMPLERS = {
     "fresnelLookup": (4, "nearest", False),
     "worldYComponentReflection": (5, "nearest", False),
     "reflectionBottom": (6, "linear", False),
+    # the baseline shader's screen-space buffers (optional ShaderInputs fields)
+    "sceneColor": (7, "linear", False),
+    "sceneDepth": (8, "nearest", False),
+    "reflection_sampler": (9, "linear", False),
 }
+# sampler -> the optional ShaderInputs field it is made from
+_OPTIONAL_SAMPLERS = {"sceneColor": "scene_color", "sceneDepth": "scene_depth",
+                      "reflection_sampler": "reflection_color"}
 
 
 def create_egl_context():
@@ -135,15 +142,23 @@ class GLRenderer:
             "worldYComponentReflection": self._texture2d(i.refl_world_y),
             "reflectionBottom": self._texture2d(i.refl_texture),
         }
+        for sname, field in _OPTIONAL_SAMPLERS.items():
+            arr = getattr(i, field)
+            if arr is not None:
+                self._textures[sname] = self._texture2d(arr)
         mgl = self._mgl
         self._samplers = {}
         for sname, (unit, filt, repeat) in _SAMPLERS.items():
+            if sname not in self._textures:
+                continue
             f = mgl.LINEAR if filt == "linear" else mgl.NEAREST
             self._samplers[sname] = self.ctx.sampler(repeat_x=repeat, repeat_y=repeat,
                                                      repeat_z=repeat, filter=(f, f))
 
     def _bind_textures(self) -> None:
         for sname, (unit, _, _) in _SAMPLERS.items():
+            if sname not in self._textures:
+                continue
             self._textures[sname].use(location=unit)
             self._samplers[sname].use(location=unit)
 
@@ -154,7 +169,10 @@ class GLRenderer:
                 prog = self.ctx.program(vertex_shader=self._vert, fragment_shader=frag_source)
             except self._mgl.Error as exc:
                 raise RuntimeError(f"OpenGL rejected the {self.name} shader:\n{exc}") from exc
-            vao = self.ctx.vertex_array(prog, [(self._vbo, "3f 2f", "aVertex", "aMultiTexCoord0")])
+            if "aMultiTexCoord0" in prog:
+                vao = self.ctx.vertex_array(prog, [(self._vbo, "3f 2f", "aVertex", "aMultiTexCoord0")])
+            else:   # a variant that reads no normal map (the linker dropped the texcoords)
+                vao = self.ctx.vertex_array(prog, [(self._vbo, "3f 8x", "aVertex")])
             self._set_static_uniforms(prog)
             prog = (prog, vao)
             self._programs[frag_source] = prog
@@ -175,6 +193,19 @@ class GLRenderer:
             "lightpos": i.lightpos.astype(np.float32).tobytes(),
             "lightcolor": i.lightcolor.astype(np.float32).tobytes(),
         }
+        if "uModelViewProjectionMatrixInverse" in prog:
+            vals["uModelViewProjectionMatrixInverse"] = _mat_bytes(
+                np.linalg.inv(i.view_proj.astype(np.float64)).astype(np.float32))
+        if "uNormalMatrix" in prog:
+            vals["uNormalMatrix"] = np.ascontiguousarray(normal_matrix(i.view_proj).T).tobytes()
+        if "screenSize" in prog:
+            vals["screenSize"] = np.array([i.width, i.height], np.float32).tobytes()
+        if "o2v_projection_reflection" in prog:
+            if i.reflection_view_proj is None:
+                raise ValueError(f"{self.name} reads o2v_projection_reflection but "
+                                 "ShaderInputs.reflection_view_proj is None; build the inputs with "
+                                 "study.scene.baseline_inputs.with_baseline_inputs")
+            vals["o2v_projection_reflection"] = _mat_bytes(i.reflection_view_proj)
         for k in range(4):
             vals[f"wave{k + 1}"] = i.waves[k].astype(np.float32).tobytes()
         for uname, data in vals.items():
@@ -182,6 +213,10 @@ class GLRenderer:
                 prog[uname].write(data)
         for sname, (unit, _, _) in _SAMPLERS.items():
             if sname in prog:
+                if sname not in self._textures:
+                    raise ValueError(f"{self.name} reads the sampler {sname} but ShaderInputs."
+                                     f"{_OPTIONAL_SAMPLERS[sname]} is None; build the inputs with "
+                                     "study.scene.baseline_inputs.with_baseline_inputs")
                 prog[sname].value = unit
 
     def _frag_source(self, constants: Constants | None) -> str:

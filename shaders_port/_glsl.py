@@ -26,7 +26,7 @@ import numpy as np
 from ._inputs import CONSTANT_SPECS, Constants
 
 GLSL_DIR = Path(__file__).parent / "glsl"
-SHADER_NAMES = ("water", "water_refraction", "water_reflection")
+SHADER_NAMES = ("water", "water_refraction", "water_reflection", "water_baseline")
 DIALECTS = ("compat", "core")
 BEGIN_MARKER = "// ---- BEGIN TUNABLE CONSTANTS (written by `study export`) ----"
 END_MARKER = "// ---- END TUNABLE CONSTANTS ----"
@@ -49,6 +49,9 @@ CORE_SUBSTITUTIONS: tuple[tuple[str, dict[str, str], str], ...] = (
      "texture coordinate varyings become vec4 in/out"),
     (r"\bgl_ModelViewProjectionMatrix\b", {"vert": "uModelViewProjectionMatrix",
                                             "frag": "uModelViewProjectionMatrix"}, "uniform"),
+    (r"\bgl_ModelViewProjectionMatrixInverse\b", {"vert": "uModelViewProjectionMatrixInverse",
+                                                   "frag": "uModelViewProjectionMatrixInverse"}, "uniform"),
+    (r"\bgl_NormalMatrix\b", {"vert": "uNormalMatrix", "frag": "uNormalMatrix"}, "uniform"),
     (r"\bgl_Vertex\b", {"vert": "aVertex", "frag": "aVertex"}, "vertex attribute"),
     (r"\bgl_MultiTexCoord0\b", {"vert": "aMultiTexCoord0", "frag": "aMultiTexCoord0"},
      "vertex attribute"),
@@ -94,6 +97,10 @@ def _core_declarations(source: str, stage: str) -> list[str]:
         decls.append("in vec4 aMultiTexCoord0;")
     if re.search(r"\bgl_ModelViewProjectionMatrix\b", source):
         decls.append("uniform mat4 uModelViewProjectionMatrix;")
+    if re.search(r"\bgl_ModelViewProjectionMatrixInverse\b", source):
+        decls.append("uniform mat4 uModelViewProjectionMatrixInverse;")
+    if re.search(r"\bgl_NormalMatrix\b", source):
+        decls.append("uniform mat3 uNormalMatrix;")
     for k in sorted(set(re.findall(r"\bgl_TextureMatrix\[(\d)\]", source))):
         decls.append(f"uniform mat4 uTextureMatrix{k};")
     for k in sorted(set(re.findall(r"\bgl_TexCoord\[(\d)\]", source))):
@@ -278,3 +285,57 @@ def compile_check(path_or_source, stage: str | None = None) -> None:
     if res.returncode != 0:
         raise RuntimeError(f"glslangValidator rejected {label} ({stage}):\n"
                            f"{res.stdout}{res.stderr}")
+
+
+def _pp_condition(expr: str, defined: set) -> bool:
+    """Value of a ``#if``/``#elif`` expression made of ``defined(NAME)``, ``!``, ``&&``, ``||`` and
+    parentheses (the forms these shaders use); anything else is refused."""
+    text = re.sub(r"defined\s*\(\s*([A-Za-z_]\w*)\s*\)",
+                  lambda m: " True " if m.group(1) in defined else " False ", expr)
+    text = text.replace("&&", " and ").replace("||", " or ").replace("!", " not ")
+    if not re.fullmatch(r"[\s()]*((True|False|not|and|or)[\s()]*)+", text):
+        raise ValueError(f"active_code: unsupported #if expression {expr!r}")
+    return bool(eval(text, {"__builtins__": {}}, {}))
+
+
+def active_code(source: str) -> str:
+    """The source as the preprocessor leaves it: lines inside conditional branches not taken are
+    dropped, given the ``#define NAME`` lines of the source. Directives: ``#ifdef``, ``#ifndef``,
+    ``#if``/``#elif`` over ``defined(NAME)`` with ``!``, ``&&``, ``||``, ``#else``, ``#endif``
+    (the only ones these shaders use; other ``#if`` expressions are refused)."""
+    defined, out = set(), []
+    stack = [(True, True)]          # (this branch is taken, some branch of this #if was taken)
+
+    def live():
+        return all(t for t, _ in stack)
+    for line in source.split("\n"):
+        s = line.strip()
+        if s.startswith("#define ") and live():
+            defined.add(s.split()[1])
+        elif s.startswith(("#ifdef ", "#ifndef ")):
+            take = (s.split()[1] in defined) == s.startswith("#ifdef ")
+            stack.append((take, take))
+        elif s.startswith("#if "):
+            take = _pp_condition(s[4:], defined)
+            stack.append((take, take))
+        elif s.startswith("#elif"):
+            _, taken = stack[-1]
+            take = not taken and _pp_condition(s[5:], defined)
+            stack[-1] = (take, taken or take)
+        elif s.startswith("#else"):
+            _, taken = stack[-1]
+            stack[-1] = (not taken, True)
+        elif s.startswith("#endif"):
+            stack.pop()
+        elif live():
+            out.append(line)
+    return "\n".join(out)
+
+
+def constants_read(source: str) -> list[str]:
+    """``CONSTANT_SPECS`` names declared in the constants block *and* used by the code the
+    preprocessor keeps (comments removed; a use is any occurrence beyond the declaration):
+    what the shader really reads."""
+    code = active_code("\n".join(ln.split("//")[0] for ln in source.split("\n")))
+    return [py for py in declared_constants(source)
+            if len(re.findall(rf"\b{CONSTANT_SPECS[py][0]}\b", code)) >= 2]

@@ -20,6 +20,8 @@ from dataclasses import dataclass, field
 import numpy as np
 
 IOR_WATER = 1.333
+# ShaderInputs fields that only some shaders read (None when not built)
+OPTIONAL_INPUTS = ("scene_color", "scene_depth", "reflection_color", "reflection_view_proj")
 
 
 @dataclass
@@ -56,6 +58,18 @@ class ShaderInputs:
         lightpos: (3,) light position, world units.
         lightcolor: (3,) linear RGB of the specular highlight.
         width, height: output resolution in pixels (int).
+
+    Optional (``None`` unless built; read by the baseline shader ``water_baseline`` only):
+        scene_color: (Hs, Ws, 3) linear RGB of the scene *without the water* seen by this
+            camera (a screen-space buffer, row 0 = bottom of the screen, GL order);
+            GLSL ``sceneColor``; bilinear, clamp to edge.
+        scene_depth: (Hs, Ws) window-space depth in [0, 1] of that view (GL depth buffer of
+            ``view_proj``, 1 where nothing was hit); GLSL ``sceneDepth``; nearest, clamp.
+        reflection_color: (Hr, Wr, 3) linear RGB of the scene above the water seen by the
+            mirrored camera (clip plane y = 0), rows in GL order of ``reflection_view_proj``'s
+            window y; GLSL ``reflection_sampler``; bilinear, clamp to edge.
+        reflection_view_proj: (4, 4) world -> clip space of the mirrored camera
+            (``o2v_projection_reflection`` of seed 004; :func:`mirrored_view_proj`).
     """
 
     refraction_texture: np.ndarray
@@ -76,6 +90,10 @@ class ShaderInputs:
     lightcolor: np.ndarray
     width: int
     height: int
+    scene_color: np.ndarray | None = None
+    scene_depth: np.ndarray | None = None
+    reflection_color: np.ndarray | None = None
+    reflection_view_proj: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         shapes = {
@@ -84,8 +102,12 @@ class ShaderInputs:
             "refl_world_y": (2, None), "refl_texture": (3, 3), "tex_matrix1": (2, None),
             "waves": (2, 2), "view_proj": (2, None), "viewpos": (1, None),
             "lightpos": (1, None), "lightcolor": (1, None),
+            "scene_color": (3, 3), "scene_depth": (2, None), "reflection_color": (3, 3),
+            "reflection_view_proj": (2, None),
         }
         for name, (ndim, last) in shapes.items():
+            if name in OPTIONAL_INPUTS and getattr(self, name) is None:
+                continue
             a = np.ascontiguousarray(getattr(self, name), dtype=np.float32)
             if a.ndim != ndim or (last is not None and a.shape[-1] != last):
                 raise ValueError(f"ShaderInputs.{name}: expected {ndim}-d array"
@@ -95,8 +117,8 @@ class ShaderInputs:
                 raise ValueError(f"ShaderInputs.{name} contains non-finite values; "
                                  "rebuild the inputs from the scene")
             setattr(self, name, a)
-        for name in ("tex_matrix0", "tex_matrix1", "view_proj"):
-            if getattr(self, name).shape != (4, 4):
+        for name in ("tex_matrix0", "tex_matrix1", "view_proj", "reflection_view_proj"):
+            if getattr(self, name) is not None and getattr(self, name).shape != (4, 4):
                 raise ValueError(f"ShaderInputs.{name}: expected (4, 4)")
         if self.cubemap.shape[0] != 6 or self.cubemap.shape[1] != self.cubemap.shape[2]:
             raise ValueError(f"ShaderInputs.cubemap: expected (6, F, F, 3), got {self.cubemap.shape}")
@@ -122,7 +144,8 @@ class ShaderInputs:
         os.close(fd)
         try:
             with open(tmp, "wb") as f:
-                np.savez_compressed(f, **{k: np.asarray(v) for k, v in dataclasses.asdict(self).items()})
+                np.savez_compressed(f, **{k: np.asarray(v) for k, v in dataclasses.asdict(self).items()
+                                          if v is not None})
             os.replace(tmp, path)
         finally:
             if os.path.exists(tmp):
@@ -162,6 +185,11 @@ CONSTANT_SPECS: dict[str, tuple[str, str, object, tuple[float, float]]] = {
     "absorption_b": ("ABSORPTION_B", "const float", 1.0 / 7.5, (1e-4, 100.0)),
     "specular_roughness": ("SPECULAR_ROUGHNESS", "const float", 0.2, (1e-3, 1.0)),
     "refine_steps": ("REFINE_STEPS", "const int", 3, (0, 64)),
+    # the baseline shader (water_baseline: seeds 001-004); defaults are the seeds' where given
+    "reflect_distortion": ("REFLECT_DISTORTION", "const float", 0.1, (0.0, 10.0)),       # 002: 0.1
+    "refraction_index": ("refractionIndex", "uniform float", 1.0 / IOR_WATER, (0.1, 1.0)),  # 001
+    "refraction_strength": ("refractionStrength", "uniform float", 0.02, (-1.0, 1.0)),   # 003: none given
+    "chromatic_dispersion": ("chromaticDispersion", "uniform float", 0.002, (-0.1, 0.1)),  # 003: none given
 }
 
 
@@ -197,6 +225,10 @@ class Constants:
     absorption_b: float = _default("absorption_b")
     specular_roughness: float = _default("specular_roughness")
     refine_steps: int = _default("refine_steps")
+    reflect_distortion: float = _default("reflect_distortion")
+    refraction_index: float = _default("refraction_index")
+    refraction_strength: float = _default("refraction_strength")
+    chromatic_dispersion: float = _default("chromatic_dispersion")
 
     def validate(self) -> "Constants":
         """Raise ValueError naming the constant if a plain value is non-finite or out of range."""
@@ -263,6 +295,27 @@ def perspective_view_proj(eye, target, up=(0.0, 1.0, 0.0), fov_y_deg=45.0, aspec
     proj[2, 2], proj[2, 3] = (far + near) / (near - far), 2 * far * near / (near - far)
     proj[3, 2] = -1.0
     return (proj @ view).astype(np.float32)
+
+
+def normal_matrix(view_proj: np.ndarray) -> np.ndarray:
+    """(3, 3) float32 ``gl_NormalMatrix`` of the camera (model = identity): the rotation of its
+    view matrix, recovered from a ``perspective_view_proj`` product (rows 0 and 1 of the
+    projection scale the view's x and y rows, row 3 is minus its z row)."""
+    vp = np.asarray(view_proj, np.float64)
+    rows = [vp[0, :3], vp[1, :3], -vp[3, :3]]
+    R = np.stack([r / np.linalg.norm(r) for r in rows])
+    if not np.allclose(R @ R.T, np.eye(3), atol=1e-5):
+        raise ValueError("normal_matrix: view_proj is not a symmetric perspective times a rigid view")
+    return R.astype(np.float32)
+
+
+def mirrored_view_proj(view_proj: np.ndarray) -> np.ndarray:
+    """(4, 4) float32 view-projection of the camera mirrored in the water plane y = 0, seed 004's
+    ``Mprojection * (Mreflection * Mcamera * Mflip)^-1``: ``Mflip`` (y -> -y in camera space)
+    commutes with a symmetric perspective, so this is ``diag(1,-1,1,1) @ view_proj @ Mreflection``
+    with ``Mreflection = diag(1,-1,1,1)`` (the plane's reflection matrix for N = (0,1,0), D = 0)."""
+    F = np.diag([1.0, -1.0, 1.0, 1.0])
+    return (F @ np.asarray(view_proj, np.float64) @ F).astype(np.float32)
 
 
 def ortho_tex_matrix(x0: float, z0: float, x1: float, z1: float) -> np.ndarray:

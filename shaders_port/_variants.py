@@ -38,6 +38,10 @@ class Variant:
         textures: 'float' (float32 textures, the study's default) or 'game' (the application
             uploads 8-bit colour and half-float depth, ``shaders_port._inputs.game_precision``;
             the port and GL both get the quantised arrays, the GLSL is unchanged).
+        inputs: optional ``ShaderInputs`` fields the variant reads (built on demand by the
+            study, e.g. the baseline's screen-space buffers).
+        fit_parameters: constants of its own that studies fitting several variants (``study
+            tradeoff``) fit besides the experiment's ``fit.parameters`` (those it reads).
     """
 
     name: str
@@ -48,6 +52,8 @@ class Variant:
     description: str = ""
     replaces: dict = field(default_factory=dict)
     textures: str = "float"
+    inputs: tuple[str, ...] = ()
+    fit_parameters: tuple[str, ...] = ()
 
     def prepare_inputs(self, inputs):
         """The inputs as this variant's application uploads them (see ``textures``)."""
@@ -58,13 +64,21 @@ class Variant:
 
     def fit_names(self, requested) -> list[str]:
         """The constants to fit for the experiment's ``fit.parameters`` ``requested``: each name
-        the variant replaces becomes its replacements (order kept, no duplicates)."""
+        the variant replaces becomes its replacements (order kept, no duplicates); names the
+        variant's GLSL does not read are dropped (the schema refuses them for ``fit.shader``)."""
         out = []
         for n in requested:
             for r in self.replaces.get(n, (n,)):
                 if r not in out:
                     out.append(r)
-        return out
+        reads = set(self.reads())
+        return [n for n in out if n in reads]
+
+    def reads(self) -> tuple[str, ...]:
+        """``CONSTANT_SPECS`` names the variant's GLSL declares and uses with its defines (the only
+        constants a fit of it may name)."""
+        from ._glsl import constants_read
+        return tuple(constants_read(self.source()))
 
     def port(self):
         """The port module (imports Dr.Jit)."""
@@ -172,3 +186,20 @@ register(Variant("water_reflection_beer", "water_reflection", defines=("BEER_ATT
                  port_options={"attenuation": "beer"},
                  schedule=_RAYCAST + ("refl_steps_steep", "refl_steps_grazing", "refl_loop_cap"),
                  description="seed 000 section 3 + Beer-Lambert attenuation", replaces=_BEER))
+
+# seeds 001-004: the baseline game water shader (no raycast, so no step schedule)
+_BASELINE_INPUTS = ("scene_color", "scene_depth", "reflection_color", "reflection_view_proj")
+_BASELINE_FIT = ("refraction_index", "refraction_strength", "chromatic_dispersion", "reflect_distortion")
+register(Variant("water_baseline", "water_baseline",
+                 inputs=_BASELINE_INPUTS, fit_parameters=_BASELINE_FIT,
+                 description="seeds 001-004: planar refraction + normal-map distortion with dispersion "
+                             "of the screen-space scene, planar reflection distorted by the wave normal"))
+register(Variant("water_baseline_flat", "water_baseline", defines=("FLAT_WATER",), inputs=_BASELINE_INPUTS, fit_parameters=_BASELINE_FIT,
+                 port_options={"defines": ("FLAT_WATER",)},
+                 description="seeds 001 + 004 (FLAT_WATER): planar refraction and planar reflection "
+                             "of flat water, no waves"))
+register(Variant("water_baseline_noplanar", "water_baseline", defines=("NO_PLANAR_REFRACTION",),
+                 inputs=_BASELINE_INPUTS, fit_parameters=_BASELINE_FIT,
+                 port_options={"defines": ("NO_PLANAR_REFRACTION",)},
+                 description="seeds 002-004 (NO_PLANAR_REFRACTION): the classic distorted "
+                             "screen-space refraction and planar reflection, no 001"))

@@ -74,6 +74,8 @@ def load_scene_data(exp, variant, cache=None):
     ref = load_or_render(exp, variant, cache=cache, progress=_progress("reference passes"), log=_log)
     t1 = time.perf_counter()
     inputs = load_or_build_shader_inputs(exp, variant, cache=cache, log=_log)
+    from .scene.baseline_inputs import inputs_for_shader   # e.g. the baseline's screen buffers
+    inputs = inputs_for_shader(exp, inputs, exp["fit.shader"], variant, cache=cache, log=_log)
     t2 = time.perf_counter()
     return ref, inputs, {"reference_s": t1 - t0, "inputs_s": t2 - t1}
 

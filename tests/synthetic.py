@@ -44,3 +44,70 @@ def synthetic_inputs(width: int = 64, height: int = 48, tex: int = 128, seed: in
         view_proj=perspective_view_proj(eye, (0.0, -0.8, 0.0), fov_y_deg=50.0, aspect=width / height),
         viewpos=np.array(eye), lightpos=np.array([-3.0, 6.0, -8.0]), lightcolor=np.array([1.0, 0.95, 0.8]),
         width=width, height=height)
+
+
+def _synthetic_floor(x, z):
+    return -1.0 + 0.3 * x / 2.5 + 0.1 * np.sin(2.0 * z)
+
+
+def _synthetic_floor_colour(x, z):
+    checker = ((np.floor(x * 2) + np.floor(z * 2)) % 2)[..., None]
+    return 0.2 + 0.6 * checker * np.array([0.9, 0.8, 0.6]) + 0.05 * np.sin(3 * x + z)[..., None]
+
+
+def _pixel_rays(vp: np.ndarray, w: int, h: int):
+    """Rays through the pixel centres of clip matrix ``vp``, rows in GL order (row 0 = bottom)."""
+    inv = np.linalg.inv(vp.astype(np.float64))
+    s = (np.arange(w) + 0.5) / w
+    t = (np.arange(h) + 0.5) / h
+    S, T = np.meshgrid(s, t)
+
+    def unproject(zn):
+        q = np.stack([2 * S - 1, 2 * T - 1, np.full_like(S, zn), np.ones_like(S)], -1) @ inv.T
+        return q[..., :3] / q[..., 3:4]
+    a, b = unproject(-1.0), unproject(1.0)
+    return a, b - a
+
+
+def synthetic_baseline_inputs(width: int = 64, height: int = 48, seed: int = 0) -> ShaderInputs:
+    """``synthetic_inputs`` plus the baseline's buffers: the scene without water seen by the
+    camera (analytic floor and checker, ray-marched at pixel centres, window depth) and the
+    mirrored camera's view above y = 0 (a wall at x < -1.7 up to y = 0.6, gradient sky)."""
+    import dataclasses
+
+    from shaders_port._inputs import mirrored_view_proj
+
+    base = synthetic_inputs(width, height, seed=seed)
+    vp = base.view_proj.astype(np.float64)
+    o, d = _pixel_rays(vp, width, height)              # o on the near plane, o + d on the far plane
+    t = np.linspace(0.0, 1.0, 801)[:, None, None]
+    p = o[None] + t[..., None] * d[None]
+    above = p[..., 1] > _synthetic_floor(p[..., 0], p[..., 2])
+    first = np.argmax(~above, axis=0)
+    hit = (~above).any(axis=0)
+    lo = np.where(hit, t[np.maximum(first - 1, 0), 0, 0], 0.0)
+    hi = np.where(hit, t[first, 0, 0], 1.0)
+    for _ in range(40):                                  # bisection to the floor
+        mid = 0.5 * (lo + hi)
+        q = o + mid[..., None] * d
+        up = q[..., 1] > _synthetic_floor(q[..., 0], q[..., 2])
+        lo, hi = np.where(up, mid, lo), np.where(up, hi, mid)
+    q = o + hi[..., None] * d
+    clip = np.concatenate([q, np.ones_like(q[..., :1])], -1) @ vp.T
+    depth = np.where(hit, 0.5 * clip[..., 2] / clip[..., 3] + 0.5, 1.0)
+    sky = lambda dy: np.array([0.5, 0.7, 1.0]) * (0.4 + 0.5 * np.clip(dy, 0, 1))[..., None]
+    dn = d / np.linalg.norm(d, axis=-1, keepdims=True)
+    colour = np.where(hit[..., None], _synthetic_floor_colour(q[..., 0], q[..., 2]), sky(dn[..., 1]))
+    # mirrored camera: rays from the mirrored eye, clipped at y = 0 (what is above the water)
+    rvp = mirrored_view_proj(base.view_proj)
+    ro, rd = _pixel_rays(rvp.astype(np.float64), width, height)
+    rdn = rd / np.linalg.norm(rd, axis=-1, keepdims=True)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        tw = (-1.7 - ro[..., 0]) / rd[..., 0]
+    yw = ro[..., 1] + tw * rd[..., 1]
+    wall = (rd[..., 0] < 0) & (tw > 0) & (yw > 0.0) & (yw < 0.6)
+    wall_col = np.array([0.8, 0.3, 0.2]) * (0.7 + 0.3 * yw / 0.6)[..., None]
+    refl = np.where(wall[..., None], wall_col, sky(rdn[..., 1]))
+    return dataclasses.replace(base, scene_color=colour.astype(np.float32),
+                               scene_depth=depth.astype(np.float32),
+                               reflection_color=refl.astype(np.float32), reflection_view_proj=rvp)

@@ -27,7 +27,8 @@ EXPORTED = Constants(attenuation_distance=4.999999836762939, steps_grazing=8.0, 
                      absorption_b=0.05, specular_roughness=0.15, refine_steps=2)
 # the shader files, then one file per variant compiled with preprocessor names
 FILES = [(d, n, s) for d in ("compat", "core")
-         for n, s in (("water", "vert"), ("water_refraction", "frag"), ("water_reflection", "frag"))]
+         for n, s in (("water", "vert"), ("water_refraction", "frag"), ("water_reflection", "frag"),
+                      ("water_baseline", "frag"))]
 VARIANT_FILES = [(d, v.name, "frag") for d in ("compat", "core") for v in VARIANTS.values() if v.name != v.shader]
 
 

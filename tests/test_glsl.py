@@ -14,12 +14,15 @@ from shaders_port._glsl import (BEGIN_MARKER, END_MARKER, compat_to_core, compil
                                 declared_constants, glsl_path, read_constants, read_source,
                                 with_define, write_constants)
 
-SHADERS = [("water", "vert"), ("water_refraction", "frag"), ("water_reflection", "frag")]
+SHADERS = [("water", "vert"), ("water_refraction", "frag"), ("water_reflection", "frag"),
+           ("water_baseline", "frag")]
 FRAGS = ["water_refraction", "water_reflection"]
 BANNERS = ["Eye and light vectors", "Normal map: average four layers, bump scaling",
            "Refraction vector and step schedule", "Raycast the ground", "Interpolate the crossing",
            "Attenuation", "Reflection", "Specular highlight", "Fresnel combine"]
 REFL_ONLY = {"refl_steps_steep", "refl_steps_grazing", "refl_loop_cap", "refl_height_cut"}
+# constants only the baseline shader (seeds 001-004, tests/test_water_baseline.py) declares
+BASELINE_ONLY = {"reflect_distortion", "refraction_index", "refraction_strength", "chromatic_dispersion"}
 
 CUSTOM = Constants(attenuation_distance=3.25, steps_grazing=17.0, steps_steep=2.5, loop_cap=77,
                    refl_steps_steep=0.75, refl_steps_grazing=6.5, refl_loop_cap=90,
@@ -58,7 +61,7 @@ def test_core_is_compat_through_substitution_table(name, stage):
     assert compat_to_core(compat, stage) == core
     # no compatibility built-in survives in the core file
     assert not re.search(r"\bgl_(TexCoord|TextureMatrix|FragColor|Vertex|MultiTexCoord0|"
-                         r"ModelViewProjectionMatrix)\b|texture2D|textureCube|^varying", core, re.M)
+                         r"ModelViewProjectionMatrix|ModelViewProjectionMatrixInverse|NormalMatrix)\b|texture2D|textureCube|^varying", core, re.M)
 
 
 @pytest.mark.parametrize("name", FRAGS)
@@ -100,7 +103,7 @@ def test_shipped_block_holds_the_defaults(name, dialect):
     assert f32(read_constants(src)) == f32(Constants())
     assert write_constants(src, Constants()) == src  # shipped files use the writer's format
     declared = set(declared_constants(src))
-    expected = set(CONSTANT_SPECS) - (REFL_ONLY if name == "water_refraction" else set())
+    expected = set(CONSTANT_SPECS) - BASELINE_ONLY - (REFL_ONLY if name == "water_refraction" else set())
     assert declared == expected
 
 

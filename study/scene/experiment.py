@@ -43,7 +43,9 @@ FIT_PARAMETERS = ("attenuation_distance", "bumptex_mult", "steps_grazing", "step
                   "water_color", "reflect_color", "specular_strength", "specular_exponent",
                   # read by shader variants only (a variant fits them in place of the seed's
                   # constants it replaces, see shaders_port._variants.Variant.replaces)
-                  "absorption_r", "absorption_g", "absorption_b", "specular_roughness")
+                  "absorption_r", "absorption_g", "absorption_b", "specular_roughness",
+                  # the baseline shader's (seeds 001-004)
+                  "refraction_index", "refraction_strength", "chromatic_dispersion", "reflect_distortion")
 
 SCHEMA: dict[str, Field] = {
     "name": Field("str", "unnamed", "Name of the experiment (used in reports)."),
@@ -354,6 +356,16 @@ def validate(raw: dict, overrides: list[str] | None = None, path: Path | None = 
     if fmt[0] > res[0] or fmt[1] > res[1] or res[0] % fmt[0] or res[1] % fmt[1]:
         raise ExperimentError(f"fit.resolution {fmt} must divide resolution {res} "
                               "(the reference is box-downsampled to it)")
+    shader = VARIANTS[values["fit.shader"]]
+    reads = shader.reads()
+    # a constant the variant replaces (e.g. the Beer-Lambert absorptions for the attenuation
+    # distance) is accepted: the fit takes its replacements
+    unread = [p for p in values["fit.parameters"] if p not in reads and p not in shader.replaces]
+    if unread:
+        raise ExperimentError(
+            f"fit.parameters {unread} are not read by fit.shader = {values['fit.shader']!r} (its "
+            f"GLSL declares no such constant, so the fit could not move them); fit only constants "
+            f"it reads: {', '.join(p for p in FIT_PARAMETERS if p in reads)}")
     if values["camera.position"] == values["camera.target"]:
         raise ExperimentError("camera.position equals camera.target; move one of them")
     if values["camera.position"][1] <= 0.0:

@@ -230,7 +230,9 @@ def export_recommended(exps, specs, summary: dict, out: Path, variant: str, log)
         constants = Constants.from_dict(_constants_of(row))
         folder = out / "shaders" if len(exps) == 1 else out / "shaders" / exp["name"]
         export_shaders(constants, folder)
-        _, _, inputs = load_scene(spec, variant)
+        from ..scene.baseline_inputs import inputs_for_shader
+        exp_s, _, inputs = load_scene(spec, variant)
+        inputs = inputs_for_shader(exp_s, inputs, rec["variant"], variant, log=log)
         gl = gl_check(rec["variant"], inputs, constants, folder)
         result[exp["name"]] = {"folder": str(folder), "variant": rec["variant"], "label": rec["label"],
                                "constants": constants.to_dict(), "gl_check": gl}

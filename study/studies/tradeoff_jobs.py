@@ -75,10 +75,13 @@ def schedules(exp, variant_name: str) -> list[dict]:
 # ---- worker side ------------------------------------------------------------------------------
 
 def _fit_names(exp, variant_name: str) -> list[str]:
-    """``fit.parameters`` without the variant's schedule constants (the sweep sets those)."""
+    """``fit.parameters`` the variant reads, without its schedule constants (the sweep sets
+    those), plus the variant's own ``fit_parameters`` (e.g. the baseline's distortions)."""
     from shaders_port._variants import get_variant
-    sched = set(get_variant(variant_name).schedule)
-    return [n for n in exp["fit.parameters"] if n not in sched]
+    v = get_variant(variant_name)
+    names = [n for n in v.fit_names(exp["fit.parameters"]) if n not in v.schedule]
+    reads = set(v.reads())
+    return names + [n for n in v.fit_parameters if n in reads and n not in names]
 
 
 def _model(job, resolution=None):
@@ -86,7 +89,11 @@ def _model(job, resolution=None):
     from ..fit.model import ShaderModel
     from ..sweep import load_scene
 
-    exp, ref, inputs = load_scene(job["scene"], job.get("mitsuba_variant", "llvm_ad_rgb"))
+    from ..scene.baseline_inputs import inputs_for_shader
+
+    mv = job.get("mitsuba_variant", "llvm_ad_rgb")
+    exp, ref, inputs = load_scene(job["scene"], mv)
+    inputs = inputs_for_shader(exp, inputs, job["variant"], mv, log=lambda m: None)
     model = ShaderModel.from_experiment(exp, inputs, ref.image, shader=job["variant"],
                                         backend=drjit_backend(job.get("mitsuba_variant", "llvm_ad_rgb")),
                                         resolution=resolution)
