@@ -46,6 +46,7 @@ class JointModel:
         self.models = list(models)
         self.names = list(names) if names else [f"scene{i}" for i in range(len(models))]
         self.shader = models[0].shader
+        self.variant = models[0].variant
         sizes = np.array([3 * int(m.mask.sum()) for m in models], np.float64)
         self.sizes = sizes.astype(int).tolist()
         self.weights = np.sqrt(sizes.mean() / sizes)
