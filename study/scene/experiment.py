@@ -74,7 +74,8 @@ SCHEMA: dict[str, Field] = {
                              "(0 = calm, flat water).", "world units", 0.0, 10.0),
     "waves.normal_tile": Field("float", 2.0, "Size of one repeat of the normal map on the water.",
                                "world units", 0.01, 1000.0),
-    "waves.components": Field("int", 5, "Sine components of the tiling height field.", "", 1, 64),
+    "waves.components": Field("int", 5, "Sine components of the tiling height field (distinct integer "
+                              "wave vectors from [-4, 4]^2; above 40, from the smallest grid [-K, K]^2 holding them).", "", 1, 64),
     "waves.seed": Field("int", 1, "Random seed of the wave components.", "", 0, 2**31 - 1),
     "waves.offsets": Field("vec2x4", [[0.0, 0.0], [0.31, 0.17], [0.53, 0.71], [0.13, 0.47]],
                            "Texture offsets wave1..wave4 of the four normal-map layers.", "texture units"),
