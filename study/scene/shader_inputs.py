@@ -10,7 +10,7 @@ As the seed's application prepares them, but from the scene:
 * ``world_y``: world y of the first surface hit from above at each texel centre (ray cast,
   exact, no filtering), like ``WaterDrawTextureDepthRefractionTop``;
 * the bottom-up textures of the reflection shader: the geometry above the water is the
-  pool walls, whose bottom-up view (clipped at the water plane, looking up) shows their
+  pool walls (and the user's mesh, ``user_scene.mesh_reflection_textures``), whose bottom-up view (clipped at the water plane, looking up) shows their
   top at ``wall_height``; so ``refl_world_y`` is the top-down ``world_y`` where it is above
   the water and a sentinel -1e3 elsewhere, and ``refl_texture`` is the top-down colour there;
 * the normal map of the waves (``_geometry.Waves``) with its four offsets;
@@ -29,8 +29,7 @@ import numpy as np
 from shaders_port import ShaderInputs, fresnel_lut, ortho_tex_matrix
 
 from .experiment import Experiment
-from .geometry import cubemap_directions, sky_radiance
-from .mitsuba_scene import build_geometry, camera_view_proj, sky_params, waves_of
+from .mitsuba_scene import build_geometry, camera_view_proj, waves_of
 
 INPUTS_VERSION = 1        # bump whenever the construction of the inputs below changes
 NO_GEOMETRY = -1e3
@@ -89,11 +88,12 @@ def _to_gl_order(mi, sensor, img: np.ndarray, extent) -> np.ndarray:
     return np.ascontiguousarray(img)
 
 
-def top_down_world_y(exp: Experiment, extent, size: int) -> np.ndarray:
-    """(size, size) float32 world y of the first hit from above at texel centres (GL order)."""
+def top_down_world_y(exp: Experiment, extent, size: int, mesh: bool = False) -> np.ndarray:
+    """(size, size) float32 world y of the first hit from above at texel centres (GL order);
+    the user's mesh above the water is left out unless ``mesh``."""
     import mitsuba as mi
 
-    scene = mi.load_dict({"type": "scene", **build_geometry(mi, exp, water=False)})
+    scene = mi.load_dict({"type": "scene", **build_geometry(mi, exp, water=False, mesh=mesh)})
     x0, z0, x1, z1 = extent
     c = (np.arange(size) + 0.5) / size
     X, Z = np.meshgrid(x0 + c * (x1 - x0), z0 + c * (z1 - z0))
@@ -115,12 +115,12 @@ def top_down_world_y(exp: Experiment, extent, size: int) -> np.ndarray:
 
 def _render_top_down(mi, exp: Experiment, extent, size: int, spp: int, seed: int, *, water: bool,
                      y_cam: float = 100.0) -> np.ndarray:
-    from .geometry import envmap_image
     from .mitsuba_scene import has_medium, water_medium
+    from .user_scene import reference_sky
 
     medium = water_medium(mi, exp) if water else None
     d = {"type": "scene", **build_geometry(mi, exp, water=water, medium=medium),
-         "sky": {"type": "envmap", "bitmap": mi.Bitmap(envmap_image(512, **sky_params(exp)))},
+         "sky": {"type": "envmap", "bitmap": mi.Bitmap(reference_sky(exp))},
          "integrator": {"type": "volpath" if water and has_medium(exp) else "path",
                         "max_depth": exp["reference.max_depth"]}}
     scene = mi.load_dict(d)
@@ -159,7 +159,9 @@ def top_down_colour(exp: Experiment, extent, size: int, spp: int, seed: int = 0,
     """
     import mitsuba as mi
 
-    dry = _render_top_down(mi, exp, extent, size, spp, seed, water=False)
+    from .user_scene import dry_camera_height
+    dry = _render_top_down(mi, exp, extent, size, spp, seed, water=False,
+                           y_cam=dry_camera_height(mi, exp, extent))
     if exp["reference.refraction_lighting"] == "dry":
         return dry
     y_cam = underwater_camera_height(exp)
@@ -179,8 +181,8 @@ def top_down_colour(exp: Experiment, extent, size: int, spp: int, seed: int = 0,
 def sky_cubemap(exp: Experiment, size: int = CUBEMAP_SIZE) -> np.ndarray:
     """(6, size, size, 3) float32 cube map of the sky without the sun, stored y-flipped
     to compensate the shader's ``* vec3(1, -1, 1)`` lookup."""
-    d = cubemap_directions(size) * np.array([1.0, -1.0, 1.0])
-    return sky_radiance(d, **sky_params(exp, with_sun=False)).astype(np.float32)
+    from .user_scene import shader_cubemap
+    return shader_cubemap(exp, size)
 
 
 def shader_fresnel_lut(exp: Experiment) -> np.ndarray:
@@ -196,10 +198,10 @@ def shader_fresnel_lut(exp: Experiment) -> np.ndarray:
 
 def light_of(exp: Experiment) -> tuple[np.ndarray, np.ndarray]:
     """(lightpos (3,), lightcolor (3,)): the sun far away, colour = sun radiance / its max."""
-    p = sky_params(exp)
-    rad = np.asarray(p["sun_radiance"], np.float64)
+    from .user_scene import sun_of
+    sun_dir, rad = sun_of(exp)
     colour = rad / rad.max() if rad.max() > 0 else np.zeros(3)
-    return LIGHT_DISTANCE * p["sun_dir"], colour
+    return LIGHT_DISTANCE * sun_dir, colour
 
 
 def build_shader_inputs(exp: Experiment, width: int | None = None, height: int | None = None,
@@ -212,10 +214,16 @@ def build_shader_inputs(exp: Experiment, width: int | None = None, height: int |
     world_y = top_down_world_y(exp, extent, size)
     colour = top_down_colour(exp, extent, size, exp["reference.texture_spp"], exp["reference.seed"],
                              world_y=world_y)
-    above = world_y > 0.0
-    refl_y = np.where(above, world_y, NO_GEOMETRY).astype(np.float32)
-    refl_col = np.where(above[..., None], colour, 0.0).astype(np.float32)
     tm = ortho_tex_matrix(*extent)
+    if exp["mesh.file"]:
+        from .user_scene import mesh_reflection_textures
+        refl_y, refl_col, refl_extent = mesh_reflection_textures(exp, extent, size)
+        tm1 = ortho_tex_matrix(*refl_extent)
+    else:
+        above = world_y > 0.0
+        refl_y = np.where(above, world_y, NO_GEOMETRY).astype(np.float32)
+        refl_col = np.where(above[..., None], colour, 0.0).astype(np.float32)
+        tm1 = tm
     hx, hz = exp["pool.half_extent"]
     waves = waves_of(exp)
     lightpos, lightcolor = light_of(exp)
@@ -224,7 +232,7 @@ def build_shader_inputs(exp: Experiment, width: int | None = None, height: int |
         refraction_texture=colour, world_y=world_y, tex_matrix0=tm,
         normal_map=waves.normal_map(exp["waves.normal_map_size"]), cubemap=sky_cubemap(exp),
         fresnel_lut=shader_fresnel_lut(exp),
-        refl_world_y=refl_y, refl_texture=refl_col, tex_matrix1=tm,
+        refl_world_y=refl_y, refl_texture=refl_col, tex_matrix1=tm1,
         water_rect=(-hx, -hz, hx, hz), normal_tile=exp["waves.normal_tile"],
         waves=np.asarray(exp["waves.offsets"]), view_proj=camera_view_proj(exp, width, height),
         viewpos=np.asarray(c["position"]), lightpos=lightpos, lightcolor=lightcolor,
