@@ -331,12 +331,13 @@ def check_files(values: dict) -> dict:
         raise ExperimentError("floor.shape = \"heightmap\" needs floor.heightmap (a single-channel "
                               "EXR or 16-bit PNG)")
     if has["floor.heightmap"] and values["floor.shape"] != "heightmap":
-        raise ExperimentError(f"floor.heightmap is given but floor.shape is {values['floor.shape']!r}; "
-                              "set floor.shape = \"heightmap\" (or remove floor.heightmap)")
+        raise ExperimentError(f"floor.heightmap is given ({values['floor.heightmap']}) but floor.shape is "
+                              f"{values['floor.shape']!r}; set floor.shape = \"heightmap\" (or remove "
+                              "floor.heightmap)")
     if values["sun.source"] == "envmap" and not has["sky.envmap"]:
         raise ExperimentError("sun.source = \"envmap\" needs sky.envmap (the sun is taken from the map)")
     if has["mesh.texture"] and not has["mesh.file"]:
-        raise ExperimentError("mesh.texture is given without mesh.file")
+        raise ExperimentError(f"mesh.texture is given ({values['mesh.texture']}) without mesh.file")
     e = values["floor.extent"]
     if e != "pool" and not (e[2] > e[0] and e[3] > e[1]):
         raise ExperimentError(f"floor.extent {e}: expected [x0, z0, x1, z1] with x1 > x0 and z1 > z0")
