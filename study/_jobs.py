@@ -14,20 +14,17 @@ from ._io import write_exr, write_json, write_png
 from .report.gl_check import gl_check
 
 
-def _progress(label: str):
-    def report(done: int, total: int) -> None:
-        print(f"\r{label}: {done}/{total}", end="" if done < total else "\n", file=sys.stderr, flush=True)
-    return report
-
-
 def _log(msg: str) -> None:
     print(msg, file=sys.stderr, flush=True)
 
 
 def prepare(experiment, out, overrides=None, variant=None):
-    """Load the experiment, initialise the backend, create the output folder."""
+    """Load the experiment (its files validated), initialise the backend, check what needs it
+    (the mesh), create the output folder."""
+    from .scene.user_scene import check_scene
     exp = load_experiment(experiment, overrides)
     variant = init_backend(variant or exp["variant"])
+    check_scene(exp)
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     return exp, variant, out
@@ -35,8 +32,11 @@ def prepare(experiment, out, overrides=None, variant=None):
 
 def run_render(experiment, out, overrides=None, variant=None, cache=None) -> dict:
     """``study render``: reference.exr (+ PNG), shader inputs (.npz and EXRs), summary.json."""
+    t0 = time.perf_counter()
     exp, variant, out = prepare(experiment, out, overrides, variant)
+    setup_s = time.perf_counter() - t0
     ref, inputs, timings = load_scene_data(exp, variant, cache)
+    timings = {"setup_s": setup_s, **timings}
     write_exr(out / "reference.exr", ref.image, ref.provenance)
     write_png(out / "reference.png", ref.image)
     save_shader_inputs(inputs, out / "inputs")
@@ -70,12 +70,16 @@ def load_scene_data(exp, variant, cache=None):
     from .scene.reference import load_or_render
     from .scene.shader_inputs import load_or_build_shader_inputs
 
-    t0 = time.perf_counter()
-    ref = load_or_render(exp, variant, cache=cache, progress=_progress("reference passes"), log=_log)
-    t1 = time.perf_counter()
-    inputs = load_or_build_shader_inputs(exp, variant, cache=cache, log=_log)
-    t2 = time.perf_counter()
-    return ref, inputs, {"reference_s": t1 - t0, "inputs_s": t2 - t1}
+    from ._progress import Stages
+
+    st = Stages(log=_log)
+    spp = exp["reference.spp"]
+    with st.stage("reference_s", f"reference: {exp['resolution'][0]}x{exp['resolution'][1]}, "
+                  + ("automatic spp (pilot, then final passes)" if spp == "auto" else f"{spp} spp")):
+        ref = load_or_render(exp, variant, cache=cache, progress=st.counter("  reference passes"), log=_log)
+    with st.stage("inputs_s", "shader inputs"):
+        inputs = load_or_build_shader_inputs(exp, variant, cache=cache, log=_log, progress=st)
+    return ref, inputs, st.timings
 
 
 def run_preview(experiment, out, overrides=None, variant=None, cache=None) -> dict:
@@ -86,16 +90,22 @@ def run_preview(experiment, out, overrides=None, variant=None, cache=None) -> di
     from ._metrics import errors
     from .fit.model import ShaderModel, constants_from_experiment
 
+    t_start = time.perf_counter()
     exp, variant, out = prepare(experiment, out, overrides, variant)
+    setup_s = time.perf_counter() - t_start
     ref, inputs, timings = load_scene_data(exp, variant, cache)
+    timings = {"setup_s": setup_s, **timings}
     w, h = exp["resolution"]
+    t0 = time.perf_counter()
     model = ShaderModel.from_experiment(exp, inputs, ref.image, backend=drjit_backend(variant),
                                         resolution=(w, h))
     constants = constants_from_experiment(exp)
+    timings["model_s"] = time.perf_counter() - t0
     t0 = time.perf_counter()
     img, diag = model.render(constants)
     timings["port_s"] = time.perf_counter() - t0
     err = errors(ref.image, img, model.mask)
+    t0 = time.perf_counter()
     write_exr(out / "reference.exr", ref.image, ref.provenance)
     write_exr(out / "port.exr", img, {"shader": model.shader, "constants": constants.to_dict()})
     write_png(out / "reference.png", ref.image)
@@ -103,6 +113,8 @@ def run_preview(experiment, out, overrides=None, variant=None, cache=None) -> di
     comparison_figure(out / "preview.png", {"reference": ref.image, "port (start constants)": img},
                       {"port (start constants)": err}, model.mask, title=f"{exp['name']}: {model.shader}")
     diagnostics_figure(out / "diagnostics.png", diag.maps, model.mask, title="port diagnostics")
+    timings["figures_s"] = time.perf_counter() - t0
+    timings["total_s"] = time.perf_counter() - t_start
     summary = {"experiment": exp["name"], "shader": model.shader, "variant": variant,
                "constants": constants.to_dict(), "error": err, "water_pixels": int(model.mask.sum()),
                "reference": {"spp": ref.spp, "noise": ref.noise, "path": str(ref.path)},
@@ -138,9 +150,12 @@ def run_calibrate(experiment, out, overrides=None, variant=None, solver=None, ca
     from .fit.solvers import SOLVERS
     if solver is not None and solver not in SOLVERS:
         raise ValueError(f"unknown solver {solver!r}; choose one of {', '.join(SOLVERS)}")
+    t_start = time.perf_counter()
     exp, variant, out = prepare(experiment, out, overrides, variant)
+    setup_s = time.perf_counter() - t_start
     solver = solver or exp["fit.solver"]
     ref, inputs, timings = load_scene_data(exp, variant, cache)
+    timings = {"setup_s": setup_s, **timings}
     backend = drjit_backend(variant)
     start = constants_from_experiment(exp)
     with timed(timings, "model_s"):
@@ -157,8 +172,12 @@ def run_calibrate(experiment, out, overrides=None, variant=None, solver=None, ca
         img1, diag1 = full.render(cal.fitted)
         e0, e1 = errors(ref.image, img0, full.mask), errors(ref.image, img1, full.mask)
     with timed(timings, "export_s"):
+        _log("calibrate: exporting and compiling the shaders")
         export_shaders(cal.fitted, out / "shaders")
+    with timed(timings, "gl_check_s"):
+        _log("calibrate: running the exported shader on OpenGL (llvmpipe)")
         gl = gl_check(model.shader, inputs, cal.fitted, out / "shaders")
+    t_figures = time.perf_counter()
     figs = {"comparison": "comparison.png", "diagnostics": "diagnostics.png", "loss": "loss.png"}
     comparison_figure(out / figs["comparison"], {"reference": ref.image, "default": img0, "fitted": img1},
                       {"default": e0, "fitted": e1}, full.mask, title=f"{exp['name']}: {model.shader}")
@@ -167,6 +186,8 @@ def run_calibrate(experiment, out, overrides=None, variant=None, solver=None, ca
     write_exr(out / "fitted.exr", img1, {"constants": cal.fitted.to_dict()})
     write_exr(out / "default.exr", img0, {"constants": start.to_dict()})
     write_exr(out / "reference.exr", ref.image, ref.provenance)
+    timings["figures_s"] = time.perf_counter() - t_figures
+    timings["total_s"] = time.perf_counter() - t_start   # up to the report (written last)
     fs = cal.fit_summary
     summary = {
         "experiment": exp["name"], "shader": model.shader, "variant": variant,

@@ -126,7 +126,7 @@ def choose_spp(exp: Experiment, progress=None) -> tuple[int, dict]:
     """Pick spp for ``reference.target_noise`` from a measured pilot; return (spp, info)."""
     w, h = exp["resolution"]
     t0 = time.perf_counter()
-    pilot = render_passes(exp, PILOT_SPP, N_SEEDS, seed0=10_000 + exp["reference.seed"])
+    pilot = render_passes(exp, PILOT_SPP, N_SEEDS, seed0=10_000 + exp["reference.seed"], progress=progress)
     _, pilot_noise = noise_of(pilot, water_mask(exp, w, h))
     total_pilot = PILOT_SPP * N_SEEDS
     per_sample_var = pilot_noise ** 2 * total_pilot          # noise^2 = var / spp_total
@@ -143,7 +143,7 @@ def render_reference(exp: Experiment, variant: str, spp: int | None = None, prog
     """Render the reference (no cache): ``N_SEEDS`` independent passes, mean and noise."""
     info = {}
     if spp is None:
-        spp, info = (choose_spp(exp) if exp["reference.spp"] == "auto"
+        spp, info = (choose_spp(exp, progress) if exp["reference.spp"] == "auto"
                      else (int(exp["reference.spp"]), {}))
     per_pass = max(1, math.ceil(spp / N_SEEDS))
     t0 = time.perf_counter()

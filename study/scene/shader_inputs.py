@@ -31,7 +31,7 @@ from shaders_port import ShaderInputs, fresnel_lut, ortho_tex_matrix
 from .experiment import Experiment
 from .mitsuba_scene import build_geometry, camera_view_proj, waves_of
 
-INPUTS_VERSION = 1        # bump whenever the construction of the inputs below changes
+INPUTS_VERSION = 2        # bump whenever the construction of the inputs below changes
 NO_GEOMETRY = -1e3
 CUBEMAP_SIZE = 64
 FRESNEL_SIZE = 256
@@ -114,7 +114,7 @@ def top_down_world_y(exp: Experiment, extent, size: int, mesh: bool = False) -> 
 
 
 def _render_top_down(mi, exp: Experiment, extent, size: int, spp: int, seed: int, *, water: bool,
-                     y_cam: float = 100.0) -> np.ndarray:
+                     y_cam: float = 100.0, progress=None) -> np.ndarray:
     from .mitsuba_scene import has_medium, water_medium
     from .user_scene import reference_sky
 
@@ -125,7 +125,8 @@ def _render_top_down(mi, exp: Experiment, extent, size: int, spp: int, seed: int
                         "max_depth": exp["reference.max_depth"]}}
     scene = mi.load_dict(d)
     sensor = _ortho_sensor(mi, extent, size, spp, seed, y_cam=y_cam, medium=medium)
-    img = np.array(mi.render(scene, sensor=sensor, spp=spp, seed=seed), dtype=np.float32)
+    from .._progress import render_in_passes
+    img = render_in_passes(mi, scene, sensor, spp, seed, progress)
     return _to_gl_order(mi, sensor, img, extent)
 
 
@@ -143,7 +144,8 @@ def underwater_camera_height(exp: Experiment) -> float:
     return y_cam
 
 
-def top_down_colour(exp: Experiment, extent, size: int, spp: int, seed: int = 0, world_y=None) -> np.ndarray:
+def top_down_colour(exp: Experiment, extent, size: int, spp: int, seed: int = 0, world_y=None,
+                    stages=None) -> np.ndarray:
     """(size, size, 3) float32 linear RGB of the ground seen from above (GL order).
 
     ``reference.refraction_lighting``:
@@ -159,13 +161,20 @@ def top_down_colour(exp: Experiment, extent, size: int, spp: int, seed: int = 0,
     """
     import mitsuba as mi
 
+    from .._progress import Stages
     from .user_scene import dry_camera_height
-    dry = _render_top_down(mi, exp, extent, size, spp, seed, water=False,
-                           y_cam=dry_camera_height(mi, exp, extent))
+    st = stages or Stages(quiet=True)
+    label = f"shader inputs: top-down render without water ({size}x{size}, {spp} spp)"
+    with st.stage("inputs.dry_render_s", label):
+        dry = _render_top_down(mi, exp, extent, size, spp, seed, water=False,
+                               y_cam=dry_camera_height(mi, exp, extent), progress=st.counter("  passes"))
     if exp["reference.refraction_lighting"] == "dry":
         return dry
     y_cam = underwater_camera_height(exp)
-    wet = _render_top_down(mi, exp, extent, size, spp, seed, water=True, y_cam=y_cam)
+    label = f"shader inputs: top-down render through the water ({size}x{size}, {spp} spp)"
+    with st.stage("inputs.wet_render_s", label):
+        wet = _render_top_down(mi, exp, extent, size, spp, seed, water=True, y_cam=y_cam,
+                               progress=st.counter("  passes"))
     if world_y is None:
         world_y = top_down_world_y(exp, extent, size)
     sigma = np.asarray(exp["water.sigma_t"], np.float64)
@@ -206,18 +215,24 @@ def light_of(exp: Experiment) -> tuple[np.ndarray, np.ndarray]:
 
 def build_shader_inputs(exp: Experiment, width: int | None = None, height: int | None = None,
                         progress=None) -> ShaderInputs:
-    """All shader inputs of ``exp`` at output resolution (width, height) (default: the experiment's)."""
+    """All shader inputs of ``exp`` at output resolution (width, height) (default: the experiment's).
+    ``progress``: a ``study._progress.Stages`` that times and reports each stage (default: quiet)."""
+    from .._progress import Stages
+    st = progress or Stages(quiet=True)
     width = width or exp["resolution"][0]
     height = height or exp["resolution"][1]
     extent = texture_extent(exp)
     size = exp["reference.texture_size"]
-    world_y = top_down_world_y(exp, extent, size)
+    with st.stage("inputs.world_y_s", f"shader inputs: world-y ray cast ({size}x{size})"):
+        world_y = top_down_world_y(exp, extent, size)
     colour = top_down_colour(exp, extent, size, exp["reference.texture_spp"], exp["reference.seed"],
-                             world_y=world_y)
+                             world_y=world_y, stages=st)
     tm = ortho_tex_matrix(*extent)
     if exp["mesh.file"]:
         from .user_scene import mesh_reflection_textures
-        refl_y, refl_col, refl_extent = mesh_reflection_textures(exp, extent, size)
+        with st.stage("inputs.mesh_reflection_s", "shader inputs: reflection textures with the mesh"):
+            refl_y, refl_col, refl_extent = mesh_reflection_textures(exp, extent, size,
+                                                                     progress=st.counter("  passes"))
         tm1 = ortho_tex_matrix(*refl_extent)
     else:
         above = world_y > 0.0
@@ -228,10 +243,13 @@ def build_shader_inputs(exp: Experiment, width: int | None = None, height: int |
     waves = waves_of(exp)
     lightpos, lightcolor = light_of(exp)
     c = exp.section("camera")
+    with st.stage("inputs.maps_s", "shader inputs: normal map, sky cube map, Fresnel LUT"):
+        normal_map, cubemap, lut = (waves.normal_map(exp["waves.normal_map_size"]), sky_cubemap(exp),
+                                    shader_fresnel_lut(exp))
     return ShaderInputs(
         refraction_texture=colour, world_y=world_y, tex_matrix0=tm,
-        normal_map=waves.normal_map(exp["waves.normal_map_size"]), cubemap=sky_cubemap(exp),
-        fresnel_lut=shader_fresnel_lut(exp),
+        normal_map=normal_map, cubemap=cubemap,
+        fresnel_lut=lut,
         refl_world_y=refl_y, refl_texture=refl_col, tex_matrix1=tm1,
         water_rect=(-hx, -hz, hx, hz), normal_tile=exp["waves.normal_tile"],
         waves=np.asarray(exp["waves.offsets"]), view_proj=camera_view_proj(exp, width, height),
@@ -239,7 +257,8 @@ def build_shader_inputs(exp: Experiment, width: int | None = None, height: int |
         width=width, height=height)
 
 
-def load_or_build_shader_inputs(exp: Experiment, variant: str, cache=None, log=print) -> ShaderInputs:
+def load_or_build_shader_inputs(exp: Experiment, variant: str, cache=None, log=print,
+                                progress=None) -> ShaderInputs:
     """The shader inputs of ``exp`` from ``<cache>/inputs/<key>.npz`` if present, else built
     and written there atomically. The key hashes every experiment value that affects them
     (``Experiment.inputs_hash``), the variant, ``SCENE_VERSION``, ``INPUTS_VERSION``, this
@@ -263,7 +282,7 @@ def load_or_build_shader_inputs(exp: Experiment, variant: str, cache=None, log=p
             return inputs
         except (OSError, ValueError, KeyError) as exc:
             log(f"shader inputs: unreadable cache file {path} ({exc}); rebuilding")
-    inputs = build_shader_inputs(exp)
+    inputs = build_shader_inputs(exp, progress=progress)
     path.parent.mkdir(parents=True, exist_ok=True)
     inputs.save(path)
     log(f"shader inputs: built and cached at {path}")

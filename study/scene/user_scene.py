@@ -213,7 +213,7 @@ def check_scene(exp: Experiment) -> None:
         mesh_bounds(mi, exp)
 
 
-def mesh_reflection_textures(exp: Experiment, extent, size: int):
+def mesh_reflection_textures(exp: Experiment, extent, size: int, progress=None):
     """The reflection textures with the user's mesh: ``(refl_world_y (size, size) float32,
     refl_texture (size, size, 3) float32, extent)`` over :func:`reflection_extent`. As for
     the walls, the geometry above the water is taken as a height field: world y of the first
@@ -226,7 +226,7 @@ def mesh_reflection_textures(exp: Experiment, extent, size: int):
     ext = reflection_extent(mi, exp, extent)
     world_y = top_down_world_y(exp, ext, size, mesh=True)
     colour = _render_top_down(mi, exp, ext, size, exp["reference.texture_spp"], exp["reference.seed"],
-                              water=False)
+                              water=False, progress=progress)
     above = world_y > 0.0
     refl_y = np.where(above, world_y, NO_GEOMETRY).astype(np.float32)
     refl_col = np.where(above[..., None], colour, 0.0).astype(np.float32)
