@@ -182,7 +182,11 @@ def _check(key: str, f: Field, v):
     def num(x, integer=False):
         if isinstance(x, bool) or not isinstance(x, (int, float)):
             bad(f"expected a number, got {_clip(x)}")
-        if not math.isfinite(x):
+        try:
+            finite = math.isfinite(x)
+        except OverflowError:                # an integer beyond any float
+            finite = False
+        if not finite:
             bad(f"{_clip(x)} is not finite")
         if integer and float(x) != int(x):
             bad(f"expected an integer, got {_clip(x)}")
@@ -319,7 +323,7 @@ def validate(raw: dict, overrides: list[str] | None = None, path: Path | None = 
         import difflib
         hints = []
         for u in unknown[:5]:
-            close = difflib.get_close_matches(u, SCHEMA, n=1)
+            close = difflib.get_close_matches(u, SCHEMA, n=1) if len(u) <= 100 else []
             hints.append(_clip(u) + (f" (did you mean {close[0]!r}?)" if close else ""))
         more = f" and {len(unknown) - 5} more" if len(unknown) > 5 else ""
         raise ExperimentError(f"unknown key(s): {', '.join(hints)}{more}. Every key is listed in "
