@@ -22,7 +22,9 @@ def prepare(experiment, out, overrides=None, variant=None):
     """Load the experiment (its files validated), initialise the backend, check what needs it
     (the mesh), create the output folder."""
     from .scene.user_scene import check_scene
+    from .scene.view import check_water_in_view
     exp = load_experiment(experiment, overrides)
+    check_water_in_view(exp)
     variant = init_backend(variant or exp["variant"])
     check_scene(exp)
     out = Path(out)

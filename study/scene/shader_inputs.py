@@ -36,6 +36,7 @@ NO_GEOMETRY = -1e3
 CUBEMAP_SIZE = 64
 FRESNEL_SIZE = 256
 LIGHT_DISTANCE = 1000.0
+MAX_OPTICAL_DEPTH = 40.0  # exp(40) = 2e17: beyond it the under-water render holds no floor light
 
 
 def texture_extent(exp: Experiment) -> tuple[float, float, float, float]:
@@ -155,7 +156,9 @@ def top_down_colour(exp: Experiment, extent, size: int, spp: int, seed: int = 0,
       the water* (sky and sun refracted by the wave surface, light absorbed on its way down),
       seen by an orthographic camera placed inside the water just below the wave troughs;
       the absorption of the camera's own vertical ray, ``exp(-sigma_t (y_cam - world_y))``,
-      is divided out (exact for purely absorbing water, ``water.albedo = 0``). Outside the
+      is divided out (exact for purely absorbing water, ``water.albedo = 0``; where its optical
+      depth exceeds ``MAX_OPTICAL_DEPTH`` nothing is left to recover and the dry render is
+      used). Outside the
       pool (the walls) the dry render is used. With it the shader's attenuation stands for
       absorption along the view path only.
     """
@@ -178,7 +181,11 @@ def top_down_colour(exp: Experiment, extent, size: int, spp: int, seed: int = 0,
     if world_y is None:
         world_y = top_down_world_y(exp, extent, size)
     sigma = np.asarray(exp["water.sigma_t"], np.float64)
-    wet = wet * np.exp(sigma * np.maximum(y_cam - world_y, 0.0)[..., None])
+    optical = sigma * np.maximum(y_cam - world_y, 0.0)[..., None]
+    # beyond an optical depth of MAX_OPTICAL_DEPTH the floor's light through the water is lost
+    # in float precision (very murky water): the dry render stands in for those texels
+    lost = optical > MAX_OPTICAL_DEPTH
+    wet = np.where(lost, dry, wet.astype(np.float64) * np.exp(np.minimum(optical, MAX_OPTICAL_DEPTH)))
     x0, z0, x1, z1 = extent
     c = (np.arange(size) + 0.5) / size
     X, Z = np.meshgrid(x0 + c * (x1 - x0), z0 + c * (z1 - z0))
