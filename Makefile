@@ -3,12 +3,15 @@
 EXPERIMENT ?= experiments/default.toml
 OUT ?= out/default
 
-.PHONY: setup run test bench
+.PHONY: setup run test bench tradeoff
 setup:
 	@bash scripts/setup.sh
 
 run: setup
 	.venv/bin/study calibrate $(EXPERIMENT) --out $(OUT)
+
+tradeoff: setup
+	.venv/bin/study tradeoff experiments/default.toml experiments/deep_steps.toml --out out/tradeoff
 
 test: setup
 	.venv/bin/python -m pytest -q
@@ -17,3 +20,4 @@ bench: setup
 	.venv/bin/python benchmarks/bench_reference.py
 	.venv/bin/python benchmarks/bench_port.py
 	.venv/bin/python benchmarks/bench_fit.py
+	.venv/bin/python benchmarks/bench_sweep.py

@@ -9,9 +9,13 @@ never leaves a truncated file under the final name.
 """
 from __future__ import annotations
 
+import contextlib
+import fcntl
 import json
 import os
+import socket
 import tempfile
+import time
 from pathlib import Path
 
 import numpy as np
@@ -101,3 +105,41 @@ def write_text_atomic(path: Path, text: str) -> None:
     finally:
         if os.path.exists(tmp):
             os.unlink(tmp)
+
+
+@contextlib.contextmanager
+def file_lock(path, what: str = "", log=None, timeout: float | None = None):
+    """Hold an exclusive lock on ``path`` (created if missing) while the block runs.
+
+    Processes that need the same cache entry (a sweep's workers, two shells) serialise on it:
+    the first renders and writes, the others wait and then find the entry in the cache. The
+    lock is an OS advisory lock (``fcntl.flock``) held by an open file descriptor, so the
+    kernel releases it when its holder exits or is killed: a crashed holder never leaves a
+    stale lock behind, and the lock file itself carries no state (its text, the holder's host
+    and pid, is for people). ``timeout`` (seconds, None = wait as long as it takes) raises
+    TimeoutError naming the lock file. ``log`` is told once if we have to wait.
+    """
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd = os.open(path, os.O_RDWR | os.O_CREAT, 0o644)
+    try:
+        t0 = time.monotonic()
+        told = False
+        while True:
+            try:
+                fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+                break
+            except BlockingIOError:
+                if log is not None and not told:
+                    holder = path.read_text(errors="replace").strip() or "another process"
+                    log(f"{what or path.name}: waiting for {holder} (lock {path})")
+                    told = True
+                if timeout is not None and time.monotonic() - t0 > timeout:
+                    raise TimeoutError(f"{path} stayed locked for more than {timeout:.0f} s; "
+                                       "the holder is still running (see the file's text)") from None
+                time.sleep(0.2)
+        os.ftruncate(fd, 0)
+        os.write(fd, f"host {socket.gethostname()} pid {os.getpid()}\n".encode())
+        yield
+    finally:
+        os.close(fd)      # releases the lock

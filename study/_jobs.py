@@ -127,6 +127,15 @@ def run_preview(experiment, out, overrides=None, variant=None, cache=None) -> di
     return summary
 
 
+def run_tradeoff(experiments, out, overrides=None, variant=None, tolerance=None, scheduler=None,
+                 workers=None) -> dict:
+    """``study tradeoff``: the speed-versus-accuracy study over ``experiments`` on the sweep engine
+    (``study.studies.tradeoff``); tables, ``pareto.png``, ``report.md`` and shaders in ``out``."""
+    from .studies.tradeoff import run_tradeoff as run
+    return run(list(experiments), out, overrides, scheduler=scheduler, workers=workers,
+               tolerance=tolerance, variant=variant or "llvm_ad_rgb", log=_log)
+
+
 def run_export(constants_json, out) -> list:
     """``study export``: the shipped shaders with the constants of a JSON file, in ``out/shaders``."""
     from .report.export import export_shaders, load_constants_json

@@ -25,6 +25,22 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("calibrate", help="reference, fit, export and report (the main job)")
     _common(p)
     p.add_argument("--solver", default=None, help="override fit.solver")
+    p = sub.add_parser("tradeoff", help="speed against accuracy: variants x step schedules, refitted, "
+                       "costed and charted with Pareto fronts (a Dask sweep)")
+    p.add_argument("experiments", nargs="+", metavar="EXPERIMENT", help="experiment TOML file(s); "
+                   "the [tradeoff] table of the first sets the variants and grid of each")
+    p.add_argument("--out", required=True, help="output folder (created if missing; a re-run resumes)")
+    p.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE",
+                   help="override a key of every experiment (repeatable)")
+    p.add_argument("--variant", choices=["llvm_ad_rgb", "cuda_ad_rgb"], default="llvm_ad_rgb",
+                   help="Mitsuba variant of the workers")
+    p.add_argument("--tolerance", type=float, default=None,
+                   help="recommend the cheapest point within this fraction of the best FLIP "
+                   "(default: tradeoff.tolerance, 0.02)")
+    p.add_argument("--scheduler", default=None, metavar="ADDRESS",
+                   help="Dask scheduler address (default: $STUDY_SCHEDULER, else a local cluster)")
+    p.add_argument("--workers", type=int, default=None,
+                   help="local cluster worker processes (default: one per core)")
     p = sub.add_parser("export", help="write the shaders with constants from a JSON file")
     p.add_argument("constants", help="constants.json written by `study calibrate`, or a flat JSON "
                    "object of constant name -> value")
@@ -45,6 +61,9 @@ def main(argv=None) -> int:
             _jobs.run_preview(args.experiment, args.out, args.overrides, args.variant)
         elif args.command == "calibrate":
             _jobs.run_calibrate(args.experiment, args.out, args.overrides, args.variant, solver=args.solver)
+        elif args.command == "tradeoff":
+            _jobs.run_tradeoff(args.experiments, args.out, args.overrides, args.variant,
+                               tolerance=args.tolerance, scheduler=args.scheduler, workers=args.workers)
         elif args.command == "export":
             _jobs.run_export(args.constants, args.out)
     except (ExperimentError, BackendError, FileNotFoundError, ValueError) as exc:

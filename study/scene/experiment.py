@@ -25,7 +25,8 @@ class ExperimentError(ValueError):
 
 @dataclass(frozen=True)
 class Field:
-    kind: str            # float, int, str, bool, vec2, vec3, vec2x4, int_or_auto, list_str, path, extent
+    kind: str            # float, int, str, bool, vec2, vec3, vec2x4, int_or_auto, list_str, list_float,
+                         # path, extent
     default: object
     doc: str
     units: str = ""
@@ -150,6 +151,25 @@ SCHEMA: dict[str, Field] = {
     "fit.max_steps": Field("int", 100, "Solver iteration cap.", "", 1, 100000),
     "fit.resolution": Field("vec2", [128, 128], "Image size the fit runs at (the reference is "
                             "rendered at `resolution`, then box-downsampled when smaller).", "pixels", 8, 4096),
+    "tradeoff.variants": Field("list_str", ["water_refraction_noreflection", "water_refraction",
+                                            "water_reflection"],
+                               "Shader variants `study tradeoff` compares.", choices=SHADERS),
+    "tradeoff.steps_grazing": Field("list_float", [5.0, 10.0, 20.0], "`STEPS_GRAZING` values of the "
+                                    "schedule grid (full grid with the next two keys).", "steps", 0.5, 1000.0),
+    "tradeoff.steps_steep": Field("list_float", [1.5, 3.0, 6.0], "`STEPS_STEEP` values of the grid.",
+                                  "steps", 0.5, 1000.0),
+    "tradeoff.loop_cap": Field("list_float", [20, 40], "`LOOP_CAP` values of the grid (integers).",
+                               "iterations", 1, 10000),
+    "tradeoff.scales": Field("list_float", [0.25, 0.5, 1.0, 2.0, 4.0], "Schedules added to the grid: the "
+                             "seed's (10, 3, 40) (and for `water_reflection` its reflection schedule) "
+                             "times each factor, so every halving of the step count is measured.",
+                             "", 0.01, 100.0),
+    "tradeoff.converged_scale": Field("float", 16.0, "Factor on the seed's schedule of the converged "
+                                      "raymarch that measures each variant's error floor.", "", 1.0, 1000.0),
+    "tradeoff.tolerance": Field("float", 0.02, "Recommend the cheapest configuration whose FLIP is "
+                                "within this fraction of the best FLIP.", "", 0.0, 10.0),
+    "tradeoff.gl_repeats": Field("int", 15, "Frames timed per GL measurement (median reported).",
+                                 "", 3, 1000),
 }
 for _name, (_glsl, _kind, _default, (_lo, _hi)) in CONSTANT_SPECS.items():
     if _kind.endswith("vec4"):
@@ -238,6 +258,13 @@ def _check(key: str, f: Field, v):
         if len(set(v)) != len(v):
             bad("entries must be unique")
         return list(v)
+    if k == "list_float":
+        if not isinstance(v, list) or not v:
+            bad(f"expected a non-empty list of numbers, got {v!r}")
+        out = [num(x) for x in v]
+        if len(set(out)) != len(out):
+            bad("entries must be unique")
+        return out
     raise AssertionError(k)
 
 

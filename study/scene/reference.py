@@ -27,7 +27,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .._io import read_exr, write_exr
+from .._io import file_lock, read_exr, write_exr
 from .experiment import Experiment
 
 SCENE_VERSION = 2
@@ -167,24 +167,41 @@ def render_reference(exp: Experiment, variant: str, spp: int | None = None, prog
 
 def load_or_render(exp: Experiment, variant: str, cache: Path | None = None, progress=None,
                    log=print) -> Reference:
-    """The cached reference of ``exp`` if its key matches, else a fresh render written to the cache."""
+    """The cached reference of ``exp`` if its key matches, else a fresh render written to the cache.
+
+    Safe with concurrent callers (a sweep's workers): a miss takes the entry's lock, looks again
+    (another process may have rendered it meanwhile) and only then renders, so one key is
+    rendered once."""
     cache = (cache or cache_dir()) / "references"
     key = reference_key(exp, variant)
     path = cache / f"{key}.exr"
-    if path.exists():
-        try:
-            rgb, prov, extra = read_exr(path)
-            se = extra.get("stderr")
-            if (prov.get("key") == key and rgb.shape[:2] == tuple(exp["resolution"][::-1])
-                    and se is not None and se.shape == rgb.shape):
-                log(f"reference: cached {path} (spp {prov['spp']}, noise {prov['noise']:.2e})")
-                return Reference(rgb, se, prov, path)
-            log(f"reference: {path} does not match this experiment; re-rendering")
-        except ValueError as exc:
-            log(f"reference: unreadable cache file ({exc}); re-rendering")
-    ref = render_reference(exp, variant, progress=progress)
-    write_exr(path, ref.image, ref.provenance, extra={"stderr": ref.stderr})
+    ref = _cached_reference(exp, key, path, log)
+    if ref is not None:
+        return ref
+    with file_lock(path.with_suffix(".lock"), "reference", log):
+        ref = _cached_reference(exp, key, path, log)
+        if ref is not None:
+            return ref
+        ref = render_reference(exp, variant, progress=progress)
+        write_exr(path, ref.image, ref.provenance, extra={"stderr": ref.stderr})
     ref.path = path
     log(f"reference: rendered {ref.spp} spp in {ref.provenance['render_seconds']:.1f} s, "
         f"noise {ref.noise:.2e}; cached at {path}")
     return ref
+
+
+def _cached_reference(exp: Experiment, key: str, path: Path, log) -> Reference | None:
+    """The reference stored at ``path`` if it is readable and is the one of ``key``, else None."""
+    if not path.exists():
+        return None
+    try:
+        rgb, prov, extra = read_exr(path)
+        se = extra.get("stderr")
+        if (prov.get("key") == key and rgb.shape[:2] == tuple(exp["resolution"][::-1])
+                and se is not None and se.shape == rgb.shape):
+            log(f"reference: cached {path} (spp {prov['spp']}, noise {prov['noise']:.2e})")
+            return Reference(rgb, se, prov, path)
+        log(f"reference: {path} does not match this experiment; re-rendering")
+    except ValueError as exc:
+        log(f"reference: unreadable cache file ({exc}); re-rendering")
+    return None

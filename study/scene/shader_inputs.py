@@ -282,15 +282,28 @@ def load_or_build_shader_inputs(exp: Experiment, variant: str, cache=None, log=p
                                      "versions": _versions()},
                                     sort_keys=True).encode()).hexdigest()[:32]
     path = (cache or cache_dir()) / "inputs" / f"{key}.npz"
-    if path.exists():
-        try:
-            inputs = ShaderInputs.load(path)
-            log(f"shader inputs: cached {path}")
+    inputs = _cached_inputs(path, log)
+    if inputs is not None:
+        return inputs
+    from .._io import file_lock
+    with file_lock(path.with_suffix(".lock"), "shader inputs", log):
+        inputs = _cached_inputs(path, log)   # another process may have built them meanwhile
+        if inputs is not None:
             return inputs
-        except (OSError, ValueError, KeyError) as exc:
-            log(f"shader inputs: unreadable cache file {path} ({exc}); rebuilding")
-    inputs = build_shader_inputs(exp, progress=progress)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    inputs.save(path)
+        inputs = build_shader_inputs(exp, progress=progress)
+        path.parent.mkdir(parents=True, exist_ok=True)
+        inputs.save(path)
     log(f"shader inputs: built and cached at {path}")
     return inputs
+
+
+def _cached_inputs(path, log) -> ShaderInputs | None:
+    if not path.exists():
+        return None
+    try:
+        inputs = ShaderInputs.load(path)
+        log(f"shader inputs: cached {path}")
+        return inputs
+    except (OSError, ValueError, KeyError) as exc:
+        log(f"shader inputs: unreadable cache file {path} ({exc}); rebuilding")
+    return None

@@ -1,0 +1,1 @@
+"""Studies built on the sweep engine: ``tradeoff`` (speed against accuracy, Pareto fronts)."""

@@ -1,0 +1,173 @@
+"""Worker side of the speed-versus-accuracy study: the schedules of a variant and the jobs that fit,
+score and time one (scene, variant, schedule) point, as jobs of the sweep engine
+(``study.studies.tradeoff`` plans and runs them).
+
+Per experiment and variant (``[tradeoff]`` table of the experiment, ``experiments/README.md``):
+
+* the *anchor*: the continuous constants fitted at the seed's schedule (10, 3, 40) from the
+  experiment's start constants (phase 1, one job per scene and variant);
+* the *points*: every schedule of the grid ``steps_grazing x steps_steep x loop_cap`` plus the
+  seed's schedule times each of ``scales`` (for ``water_reflection`` its reflection schedule is
+  scaled too), each refitted warm from the anchor (phase 2); and one *converged* raymarch (the
+  seed's schedule times ``converged_scale``), the variant's own error floor, which separates what
+  the schedule costs from what the model cannot do.
+
+Each point is measured by :func:`point_job` in a worker: FLIP and RMSE on the water pixels at the
+experiment's full resolution; texture fetches and loop iterations per water pixel (mean, p99)
+from the port's diagnostics; frame time of the fitted shader on llvmpipe at 512x512 and
+1920x1080 (draw + glFinish, median of ``gl_repeats`` frames) measured between two runs of a fixed
+reference shader (the seed's ``water_refraction`` with its own constants) in the same job, so the
+ratio to it compares fairly on a loaded machine; and the port's frame time (Dr.Jit LLVM, 512x512,
+median of 5).
+"""
+from __future__ import annotations
+
+import itertools
+import statistics
+import time
+
+import numpy as np
+
+SEED_SCHEDULE = {"steps_grazing": 10.0, "steps_steep": 3.0, "loop_cap": 40}
+SEED_REFL_SCHEDULE = {"refl_steps_steep": 0.5, "refl_steps_grazing": 4.0, "refl_loop_cap": 60}
+GL_SIZES = {"512": (512, 512), "1080p": (1920, 1080)}
+REFERENCE_SHADER = "water_refraction"
+
+
+def _scaled(variant, factor: float) -> dict:
+    s = {"steps_grazing": SEED_SCHEDULE["steps_grazing"] * factor,
+         "steps_steep": max(0.5, SEED_SCHEDULE["steps_steep"] * factor),
+         "loop_cap": max(1, int(round(SEED_SCHEDULE["loop_cap"] * factor)))}
+    if "refl_loop_cap" in variant.schedule:
+        s.update({"refl_steps_steep": SEED_REFL_SCHEDULE["refl_steps_steep"] * factor,
+                  "refl_steps_grazing": SEED_REFL_SCHEDULE["refl_steps_grazing"] * factor,
+                  "refl_loop_cap": max(1, int(round(SEED_REFL_SCHEDULE["refl_loop_cap"] * factor)))})
+    return s
+
+
+def schedules(exp, variant_name: str) -> list[dict]:
+    """The schedules of one variant: ``{"kind": grid|scale|converged, "scale": f|None,
+    "schedule": {constant: value}}``, distinct, in a stable order (the seed's one is ``scale 1``)."""
+    from shaders_port._variants import get_variant
+
+    variant = get_variant(variant_name)
+    if not {"steps_grazing", "steps_steep", "loop_cap"} <= set(variant.schedule):
+        return [{"kind": "fixed", "scale": None, "schedule": {}}]
+    out, seen = [], set()
+
+    def add(kind, scale, sched):
+        k = tuple(sorted(sched.items()))
+        if k not in seen:
+            seen.add(k)
+            out.append({"kind": kind, "scale": scale, "schedule": sched})
+    for f in sorted(exp["tradeoff.scales"]):
+        add("scale", f, _scaled(variant, f))
+    for g, s, c in itertools.product(exp["tradeoff.steps_grazing"], exp["tradeoff.steps_steep"],
+                                     exp["tradeoff.loop_cap"]):
+        sched = {"steps_grazing": float(g), "steps_steep": float(s), "loop_cap": int(round(c))}
+        if "refl_loop_cap" in variant.schedule:
+            sched.update(SEED_REFL_SCHEDULE)
+        add("grid", None, sched)
+    add("converged", exp["tradeoff.converged_scale"], _scaled(variant, exp["tradeoff.converged_scale"]))
+    return out
+
+
+# ---- worker side ------------------------------------------------------------------------------
+
+def _fit_names(exp, variant_name: str) -> list[str]:
+    """``fit.parameters`` without the variant's schedule constants (the sweep sets those)."""
+    from shaders_port._variants import get_variant
+    sched = set(get_variant(variant_name).schedule)
+    return [n for n in exp["fit.parameters"] if n not in sched]
+
+
+def _model(job, resolution=None):
+    from .._backend import drjit_backend
+    from ..fit.model import ShaderModel
+    from ..sweep import load_scene
+
+    exp, ref, inputs = load_scene(job["scene"], job.get("mitsuba_variant", "llvm_ad_rgb"))
+    model = ShaderModel.from_experiment(exp, inputs, ref.image, shader=job["variant"],
+                                        backend=drjit_backend(job.get("mitsuba_variant", "llvm_ad_rgb")),
+                                        resolution=resolution)
+    return exp, ref, inputs, model
+
+
+def anchor_job(job: dict) -> dict:
+    """Phase 1: fit the continuous constants at the seed's schedule; returns them and the fit."""
+    from shaders_port import Constants
+
+    from ..fit.calibrate import calibrate_model, scene_frozen
+
+    exp, _, _, model = _model(job)
+    start = Constants.from_dict(job["start"])
+    t0 = time.perf_counter()
+    cal = calibrate_model(model, start, _fit_names(exp, job["variant"]), exp["fit.solver"],
+                          exp["fit.max_steps"], frozen_by_scene=scene_frozen(exp))
+    return {"fitted": cal.fitted.to_dict(), "fit_seconds": time.perf_counter() - t0,
+            "iterations": cal.fit_summary.get("iterations", 0),
+            "status_of": {n: p["status"] for n, p in cal.parameters.items()}}
+
+
+def point_job(job: dict) -> dict:
+    """Phase 2: one (scene, variant, schedule) point, refitted warm from the anchor and measured
+    (see the module doc). Returns flat figures plus the fitted constants."""
+    from shaders_port import Constants
+
+    from .._metrics import errors
+    from ..fit.calibrate import calibrate_model, scene_frozen
+
+    exp, ref, inputs, model = _model(job)
+    start = Constants.from_dict(job["start"]).replace(**job["schedule"])
+    t0 = time.perf_counter()
+    cal = calibrate_model(model, start, _fit_names(exp, job["variant"]), exp["fit.solver"],
+                          exp["fit.max_steps"], frozen_by_scene=scene_frozen(exp))
+    fit_s = time.perf_counter() - t0
+    _, _, _, full = _model(job, resolution=tuple(exp["resolution"]))
+    img, diag = full.render(cal.fitted)
+    err = errors(ref.image, img, full.mask)
+    m = full.mask
+    out = {"flip": err["flip"], "rmse": err["rmse"], "fit_seconds": fit_s,
+           "fit_iterations": cal.fit_summary.get("iterations", 0), "water_pixels": int(m.sum())}
+    for k in ("fetches", "iterations", "refl_iterations"):
+        if k in diag.maps:
+            v = diag.maps[k][m]
+            out[f"{k}_mean"], out[f"{k}_p99"] = float(v.mean()), float(np.percentile(v, 99))
+    if "crossed" in diag.maps:
+        out["not_crossed"] = float(1.0 - diag.maps["crossed"][m].mean())
+    out["nonfinite_pixels"] = int(diag.maps["nonfinite"][m].sum()) if "nonfinite" in diag.maps else 0
+    out.update(frame_times(job["variant"], inputs, cal.fitted, exp["tradeoff.gl_repeats"]))
+    out["fitted"] = cal.fitted.to_dict()
+    return out
+
+
+def frame_times(variant_name: str, inputs, constants, repeats: int) -> dict:
+    """GL frame times (ms) of the variant at each ``GL_SIZES`` beside the fixed reference shader
+    (run before and after it), their ratio, and the port's frame time at 512x512."""
+    from shaders_port import Constants
+    from shaders_port._variants import get_variant
+
+    variant, refv = get_variant(variant_name), get_variant(REFERENCE_SHADER)
+    out = {}
+    for label, (w, h) in GL_SIZES.items():
+        frame = inputs.with_resolution(w, h)
+        ref_ms = []
+        for block in ("ref", "variant", "ref"):
+            v, c = (refv, Constants()) if block == "ref" else (variant, constants)
+            with v.gl_renderer(frame) as r:
+                ms = 1e3 * statistics.median(r.time_frames(c, n=repeats, warmup=2))
+            if block == "ref":
+                ref_ms.append(ms)
+            else:
+                out[f"gl_ms_{label}"] = ms
+        out[f"gl_ref_ms_{label}"] = statistics.mean(ref_ms)
+        out[f"gl_ratio_{label}"] = out[f"gl_ms_{label}"] / out[f"gl_ref_ms_{label}"]
+    frame = inputs.with_resolution(512, 512)
+    variant.render(frame, constants)           # compile / record the kernels
+    times = []
+    for _ in range(5):
+        t0 = time.perf_counter()
+        variant.render(frame, constants).numpy()
+        times.append(time.perf_counter() - t0)
+    out["port_ms_512"] = 1e3 * statistics.median(times)
+    return out

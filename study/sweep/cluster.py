@@ -1,0 +1,110 @@
+"""Dask clusters for sweeps: an embedded ``LocalCluster`` by default, an existing scheduler by
+address, and the Dr.Jit/Mitsuba backend set up once in every worker process.
+
+Dr.Jit is not fork-safe (its LLVM backend owns thread pools and a JIT; its maintainer's word on
+forking is that it "is not going to work"), so workers are *spawned* processes
+(``distributed.worker.multiprocessing-method = spawn``, Dask's default, set explicitly here and
+checked by a test). The parent never needs the backend to run a sweep. Each worker:
+
+* gets ``XLA_FLAGS`` / thread variables through ``distributed.nanny.pre-spawn-environ`` (they
+  must be in the environment before the interpreter starts);
+* runs :class:`BackendPlugin` once on start: ``init_backend(variant)`` (the libLLVM check of
+  ``study._backend``) and ``dr.set_thread_count(threads)`` before any scene is built (Embree
+  sizes its pool on the first scene).
+
+The address comes from ``scheduler=`` or the ``STUDY_SCHEDULER`` environment variable; with
+neither, a LocalCluster with ``workers`` processes (default: one per core) and one Dask thread
+each is started and closed with the sweep. The kernel cache (``~/.drjit`` or
+``DRJIT_CACHE_DIR``) is shared by the processes; the render cache (``STUDY_CACHE``) must be on a
+file system all workers see when the cluster spans machines.
+"""
+from __future__ import annotations
+
+import contextlib
+import os
+
+from distributed.diagnostics.plugin import WorkerPlugin
+
+SCHEDULER_ENV = "STUDY_SCHEDULER"
+
+
+def cpu_count() -> int:
+    """Cores this process may use (the affinity mask, not the machine's count)."""
+    try:
+        return max(1, len(os.sched_getaffinity(0)))
+    except AttributeError:      # not Linux
+        return max(1, os.cpu_count() or 1)
+
+
+class BackendPlugin(WorkerPlugin):
+    """Dask worker plugin: initialise the Mitsuba variant and Dr.Jit's thread count once per
+    worker process, before any job runs there."""
+
+    name = "study-backend"
+
+    def __init__(self, variant: str = "llvm_ad_rgb", threads: int = 1):
+        self.variant, self.threads = variant, int(threads)
+
+    def setup(self, worker=None):
+        from .._backend import init_backend
+        init_backend(self.variant)
+        import drjit as dr
+        dr.set_thread_count(self.threads)
+
+
+
+def scheduler_address(scheduler: str | None = None) -> str | None:
+    """``scheduler`` or ``$STUDY_SCHEDULER`` (empty = None)."""
+    return scheduler or os.environ.get(SCHEDULER_ENV) or None
+
+
+@contextlib.contextmanager
+def open_client(scheduler: str | None = None, workers: int | None = None,
+                variant: str = "llvm_ad_rgb", log=None):
+    """A ``distributed.Client`` with :class:`BackendPlugin` registered on every worker.
+
+    Args:
+        scheduler: address of a running Dask scheduler (``tcp://host:8786``); None: the
+            ``STUDY_SCHEDULER`` variable, else an embedded LocalCluster.
+        workers: LocalCluster worker processes (default: one per core); ignored with a scheduler.
+        variant: Mitsuba variant the workers initialise.
+    """
+    import dask
+    from distributed import Client, LocalCluster
+
+    address = scheduler_address(scheduler)
+    n = workers or cpu_count()
+    if n < 1:
+        raise ValueError(f"workers must be at least 1, got {workers}")
+    threads = max(1, cpu_count() // n)
+    # XLA's CPU client (the JAX bridge of the fits) starts its own thread pools: keep them to the
+    # worker's share of the cores unless the user set XLA_FLAGS
+    xla = "--xla_cpu_multi_thread_eigen=false intra_op_parallelism_threads=1" if threads == 1 else ""
+    env = {"XLA_FLAGS": os.environ.get("XLA_FLAGS", xla), "OMP_NUM_THREADS": str(threads),
+           "LP_NUM_THREADS": os.environ.get("LP_NUM_THREADS", str(threads))}   # llvmpipe's rasteriser
+    for k in ("STUDY_CACHE", "DRJIT_LIBLLVM_PATH", "DRJIT_CACHE_DIR", "PYTHONPATH"):
+        if k in os.environ:
+            env[k] = os.environ[k]
+    config = {"distributed.worker.multiprocessing-method": "spawn",
+              "distributed.nanny.pre-spawn-environ": env,
+              "distributed.worker.daemon": False,
+              "distributed.scheduler.worker-ttl": None,
+              "distributed.admin.tick.limit": "3h",
+              "logging.distributed": "error"}
+    with dask.config.set(config):
+        if address:
+            if log:
+                log(f"sweep: connecting to the Dask scheduler at {address}")
+            cluster = None
+            client = Client(address, timeout="30s")
+        else:
+            cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True,
+                                   dashboard_address=None, silence_logs=40)
+            client = Client(cluster)
+        try:
+            client.register_plugin(BackendPlugin(variant, threads), name=BackendPlugin.name)
+            yield client
+        finally:
+            client.close()
+            if cluster is not None:
+                cluster.close()

@@ -1,0 +1,156 @@
+"""Run a sweep: many independent jobs as Dask tasks, one tidy Parquet row per job, resumable.
+
+:func:`run_sweep` takes a module-level job function and a list of JSON-able job dicts:
+
+1. every job gets a key (:func:`study.sweep.table.job_key`); rows of the table that already hold
+   that key with ``status == "ok"`` are kept and the job is skipped (a re-run resumes; failed
+   jobs run again);
+2. each distinct ``job["scene"]`` is prepared once (:func:`study.sweep.scenes.prepare_scene`:
+   reference and shader inputs rendered under the cache lock) as a task the scene's jobs
+   depend on;
+3. the jobs run on the workers (``job_fn(job) -> dict``); an exception becomes a row with
+   ``status = "error"`` and the message, and the sweep goes on; a worker that dies takes only
+   its job with it (Dask reschedules or reports it; either way the row says so);
+4. rows are written to the table after each completion (atomic Parquet writes), so a sweep
+   stopped at any point keeps every finished row; a progress line counts done/failed/total.
+
+The job function runs in a worker process whose backend was set up by ``BackendPlugin``; it must
+be importable by name (a module-level function of an installed package). Jobs that need no
+scene leave out the ``scene`` entry.
+"""
+from __future__ import annotations
+
+import contextlib
+import io
+import socket
+import sys
+import time
+from pathlib import Path
+
+from .scenes import prepare_scene, spec_text
+from .table import clip_error, flatten, job_key, read_table, write_table
+
+
+def _qualname(fn) -> str:
+    return f"{fn.__module__}.{fn.__qualname__}"
+
+
+def _run_job(fn, job: dict, key: str, scene_ready=None) -> dict:
+    """Worker side: run one job; never raises (the error is the row). What the job prints is
+    captured; the last lines are kept in the row (``log_tail``) when it fails."""
+    t0 = time.perf_counter()
+    row = {"key": key, "status": "ok", "error": None}
+    captured = io.StringIO()
+    try:
+        with contextlib.redirect_stdout(captured), contextlib.redirect_stderr(captured):
+            if isinstance(scene_ready, dict) and scene_ready.get("error"):
+                raise RuntimeError(f"scene preparation failed: {scene_ready['error']}")
+            out = fn(job)
+        if not isinstance(out, dict):
+            raise TypeError(f"{_qualname(fn)} returned {type(out).__name__}, expected a dict of results")
+        row.update(flatten(out))
+    except Exception as exc:       # recorded, not raised: one failing job never stops a sweep
+        row["status"], row["error"] = "error", clip_error(exc)
+        row["log_tail"] = "\n".join(captured.getvalue().replace("\r", "\n").splitlines()[-20:])
+    row["seconds"] = time.perf_counter() - t0
+    row["worker"] = socket.gethostname()
+    return row
+
+
+def _prepare(spec: dict, variant: str) -> dict:
+    try:
+        with contextlib.redirect_stdout(io.StringIO()):
+            return prepare_scene(spec, variant)
+    except Exception as exc:
+        return {"error": clip_error(exc)}
+
+
+class Progress:
+    """One status line on stderr: ``label [#####.....] done/total (n failed) elapsed``."""
+
+    def __init__(self, label: str, total: int, stream=sys.stderr, width: int = 30):
+        self.label, self.total, self.stream, self.width = label, total, stream, width
+        self.done = self.failed = 0
+        self.t0 = time.perf_counter()
+
+    def update(self, ok: bool) -> None:
+        self.done += 1
+        self.failed += 0 if ok else 1
+        self.show()
+
+    def show(self) -> None:
+        frac = self.done / self.total if self.total else 1.0
+        bar = "#" * round(frac * self.width) + "." * (self.width - round(frac * self.width))
+        fail = f", {self.failed} failed" if self.failed else ""
+        end = "\n" if self.done >= self.total else ""
+        print(f"\r{self.label} [{bar}] {self.done}/{self.total}{fail} {time.perf_counter() - self.t0:.0f} s",
+              end=end, file=self.stream, flush=True)
+
+
+def run_sweep(job_fn, jobs: list[dict], table, *, scheduler: str | None = None,
+              workers: int | None = None, variant: str = "llvm_ad_rgb", label: str = "sweep",
+              client=None, log=None) -> list[dict]:
+    """Run ``job_fn`` on every job (see the module doc) and return all rows of the table, in the
+    order of ``jobs`` (rows of other jobs already in the table follow them).
+
+    Args:
+        job_fn: module-level function ``job -> dict`` of results.
+        jobs: JSON-able dicts, each with an optional ``"scene"`` spec.
+        table: Parquet path of the sweep's table (read to resume, rewritten as rows finish).
+        scheduler: Dask scheduler address (else ``$STUDY_SCHEDULER``, else a LocalCluster).
+        workers: LocalCluster worker processes (default one per core).
+        client: an open ``distributed.Client`` to use instead of opening one.
+    """
+    from .cluster import open_client
+
+    log = log or (lambda m: print(m, file=sys.stderr, flush=True))
+    table = Path(table)
+    name = _qualname(job_fn)
+    keys = [job_key(name, j) for j in jobs]
+    if len(set(keys)) != len(keys):
+        raise ValueError("the sweep holds the same job twice; make every job dict distinct")
+    old = {r["key"]: r for r in read_table(table)}
+    rows = {k: old[k] for k in keys if k in old and old[k].get("status") == "ok"}
+    todo = [(k, j) for k, j in zip(keys, jobs) if k not in rows]
+    if rows:
+        log(f"{label}: {len(rows)} of {len(jobs)} jobs already in {table}; running {len(todo)}")
+    if todo:
+        if client is None:
+            with open_client(scheduler, workers, variant, log=log) as c:
+                _submit_all(c, job_fn, todo, rows, old, table, variant, label)
+        else:
+            _submit_all(client, job_fn, todo, rows, old, table, variant, label)
+    ordered = [rows[k] for k in keys] + [r for k, r in old.items() if k not in rows]
+    write_table(table, ordered)
+    return ordered
+
+
+def _submit_all(client, job_fn, todo, rows, old, table, variant, label) -> None:
+    from distributed import as_completed
+
+    scenes = {}
+    for _, job in todo:
+        spec = job.get("scene")
+        if spec is not None and spec_text(spec) not in scenes:
+            scenes[spec_text(spec)] = client.submit(_prepare, spec, variant, pure=False,
+                                                    key=f"scene-{len(scenes)}-{time.time_ns()}")
+    futures = {}
+    for key, job in todo:
+        spec = job.get("scene")
+        dep = scenes[spec_text(spec)] if spec is not None else None
+        f = client.submit(_run_job, job_fn, job, key, dep, pure=False, key=f"job-{key}-{time.time_ns()}")
+        futures[f] = (key, job)
+    progress = Progress(label, len(futures))
+    progress.show()
+    last_write = 0.0
+    for f in as_completed(list(futures)):
+        key, job = futures[f]
+        try:
+            row = f.result()
+        except Exception as exc:        # the worker died (e.g. a crash in native code)
+            row = {"key": key, "status": "error", "error": clip_error(exc), "seconds": None}
+        rows[key] = {**flatten({"job": job}), **row}
+        progress.update(row["status"] == "ok")
+        if time.perf_counter() - last_write > 2.0:    # keep finished rows on disk
+            write_table(table, list(rows.values()) + [r for k, r in old.items() if k not in rows])
+            last_write = time.perf_counter()

@@ -1,0 +1,106 @@
+"""Tidy result tables of sweeps: one row per job, every input and every measured figure a column,
+stored as Parquet (pyarrow), written atomically.
+
+Rows are flat dicts. Nested job inputs and results are flattened with dotted names
+(``{"scene": {"experiment": "a.toml"}}`` -> ``scene.experiment``); lists of numbers or of strings
+stay lists (Parquet list columns); anything else that is not a scalar is stored as its JSON
+text. Every row carries ``key`` (the job's identity, :func:`job_key`), ``status`` (``ok`` or
+``error``), ``error`` (the exception's type and message, clipped), ``seconds`` (wall time of the
+job in its worker) and ``worker``.
+"""
+from __future__ import annotations
+
+import hashlib
+import json
+import math
+import os
+import tempfile
+from pathlib import Path
+
+SCHEMA_VERSION = 1
+ERROR_CHARS = 2000
+
+
+def job_key(fn_name: str, job: dict) -> str:
+    """Identity of a job: a hash of the job function's qualified name and the canonical JSON of
+    its inputs. Equal keys mean the same computation (the render cache keys the scene data)."""
+    text = json.dumps({"fn": fn_name, "job": job, "v": SCHEMA_VERSION}, sort_keys=True,
+                      default=str, allow_nan=False)
+    return hashlib.sha256(text.encode()).hexdigest()[:24]
+
+
+def flatten(d: dict, prefix: str = "") -> dict:
+    """``{"a": {"b": 1}, "c": [1, 2]}`` -> ``{"a.b": 1, "c": [1, 2]}`` with column-friendly values."""
+    out = {}
+    for k, v in d.items():
+        name = f"{prefix}{k}"
+        if isinstance(v, dict):
+            out.update(flatten(v, name + "."))
+        else:
+            out[name] = _cell(v)
+    return out
+
+
+def _cell(v):
+    if v is None or isinstance(v, (bool, str)):
+        return v
+    if isinstance(v, int):
+        return int(v)
+    if isinstance(v, float) or type(v).__module__ == "numpy" and hasattr(v, "item"):
+        x = v.item() if hasattr(v, "item") else v
+        if isinstance(x, bool):
+            return x
+        if isinstance(x, int):
+            return x
+        return float(x) if math.isfinite(float(x)) else None
+    if isinstance(v, (list, tuple)):
+        items = [_cell(x) for x in v]
+        if all(isinstance(x, (int, float)) and not isinstance(x, bool) for x in items) and items:
+            return [float(x) for x in items]
+        if all(isinstance(x, str) for x in items):
+            return list(items)
+    return json.dumps(v, sort_keys=True, default=str)
+
+
+def clip_error(exc: BaseException) -> str:
+    """``Type: message`` clipped to a readable length."""
+    text = f"{type(exc).__name__}: {exc}"
+    return text if len(text) <= ERROR_CHARS else text[:ERROR_CHARS] + " ... (clipped)"
+
+
+def write_table(path: Path, rows: list[dict]) -> Path:
+    """Write ``rows`` as Parquet at ``path`` atomically (temporary file, then rename)."""
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    columns: dict[str, None] = {}
+    for r in rows:
+        columns.update(dict.fromkeys(r))
+    table = pa.Table.from_pylist([{c: r.get(c) for c in columns} for r in rows])
+    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
+    os.close(fd)
+    try:
+        pq.write_table(table, tmp)
+        os.replace(tmp, path)
+    finally:
+        if os.path.exists(tmp):
+            os.unlink(tmp)
+    return path
+
+
+def read_table(path: Path) -> list[dict]:
+    """Rows of a table written by :func:`write_table`; [] if the file does not exist. A file that
+    is not a readable Parquet table raises ValueError naming it (it is never silently replaced:
+    move it away to start the sweep afresh)."""
+    import pyarrow.parquet as pq
+
+    path = Path(path)
+    if not path.exists():
+        return []
+    try:
+        return pq.read_table(path).to_pylist()
+    except Exception as exc:     # pyarrow raises several types for a damaged file
+        raise ValueError(f"{path} is not a readable Parquet table ({exc}); move it away to start "
+                         "this sweep afresh") from exc

@@ -1,0 +1,132 @@
+"""The speed-versus-accuracy study: Pareto fronts and the recommendation, the schedule plan, the
+analysis of a table, and a tiny `study tradeoff` end to end through the CLI."""
+import json
+
+import numpy as np
+import pytest
+
+from conftest import REPO
+from study.studies.pareto import pareto_front, recommend
+
+
+def _pts(pairs):
+    return [{"name": n, "cost": c, "err": e} for n, c, e in pairs]
+
+
+def test_pareto_front_hand_checked():
+    pts = _pts([("a", 10, 0.30), ("b", 12, 0.25), ("c", 12, 0.27), ("d", 15, 0.25), ("e", 20, 0.20),
+                ("f", 25, 0.22), ("g", 8, 0.40), ("h", 30, 0.19), ("nan", 5, float("nan")), ("none", 4, None)])
+    front = [p["name"] for p in pareto_front(pts, "cost", "err")]
+    # c is dominated by b (same cost, more error); d by b (costlier, same error); f by e
+    assert front == ["g", "a", "b", "e", "h"]
+
+
+def test_recommendation_hand_checked():
+    pts = _pts([("a", 10, 0.30), ("b", 12, 0.2029), ("e", 20, 0.20), ("h", 30, 0.199)])
+    assert recommend(pts, "cost", "err", 0.02)["name"] == "b"      # 0.2029 <= 1.02 * 0.199 = 0.20298
+    assert recommend(pts, "cost", "err", 0.0)["name"] == "h"
+    assert recommend(pts, "cost", "err", 1.0)["name"] == "a"
+    assert recommend([], "cost", "err", 0.02) is None
+    with pytest.raises(ValueError, match="tolerance"):
+        recommend(pts, "cost", "err", -0.1)
+
+
+@pytest.mark.parametrize("seed", range(40))
+def test_recommended_point_is_on_the_front_and_within_tolerance(seed):
+    rng = np.random.default_rng(seed)
+    n = int(rng.integers(1, 40))
+    # coarse values make ties in cost and in error common
+    pts = _pts([(str(i), float(rng.integers(1, 8)), float(rng.integers(1, 6)) / 10) for i in range(n)])
+    tol = float(rng.choice([0.0, 0.02, 0.3, 2.0]))
+    front = pareto_front(pts, "cost", "err")
+    rec = recommend(pts, "cost", "err", tol)
+    best = min(p["err"] for p in pts)
+    assert rec["err"] <= best * (1 + tol)
+    assert (rec["cost"], rec["err"]) in {(p["cost"], p["err"]) for p in front}
+    for p in front:     # no point dominates a front point
+        assert not any(q["cost"] <= p["cost"] and q["err"] <= p["err"]
+                       and (q["cost"], q["err"]) != (p["cost"], p["err"]) for q in pts)
+    for p in pts:       # every point off the front is dominated or ties a front point
+        if p not in front:
+            assert any(q["cost"] <= p["cost"] and q["err"] <= p["err"] for q in front)
+
+
+def test_schedules_hold_the_seed_halvings_and_the_grid():
+    from study import load_experiment
+    from study.studies.tradeoff_jobs import schedules
+    exp = load_experiment(REPO / "experiments" / "default.toml")
+    s = schedules(exp, "water_refraction")
+    scales = {x["scale"]: x["schedule"] for x in s if x["kind"] == "scale"}
+    assert scales[1.0] == {"steps_grazing": 10.0, "steps_steep": 3.0, "loop_cap": 40}
+    assert scales[0.5] == {"steps_grazing": 5.0, "steps_steep": 1.5, "loop_cap": 20}
+    grid = [x for x in s if x["kind"] == "grid"]
+    assert len(s) == len({json.dumps(x["schedule"], sort_keys=True) for x in s})    # distinct
+    # the grid's points that equal a scaled schedule are kept once, as the scaled one
+    assert len(grid) == 3 * 3 * 2 - 2
+    conv = [x for x in s if x["kind"] == "converged"]
+    assert conv[0]["schedule"]["loop_cap"] == 640
+    r = schedules(exp, "water_reflection")
+    assert {x["scale"]: x["schedule"] for x in r if x["kind"] == "scale"}[2.0]["refl_loop_cap"] == 120
+
+
+def _row(exp, variant, kind, scale, g, s, c, flip, fetches, ratio=1.0, crossed=0.0):
+    return {"job.experiment": exp, "job.variant": variant, "job.kind": kind, "job.scale": scale,
+            "job.schedule.steps_grazing": g, "job.schedule.steps_steep": s, "job.schedule.loop_cap": c,
+            "status": "ok", "error": None, "flip": flip, "rmse": flip / 2, "fetches_mean": fetches,
+            "fetches_p99": fetches + 2, "gl_ratio_1080p": ratio, "gl_ref_ms_1080p": 40.0,
+            "port_ms_512": fetches / 4, "not_crossed": crossed}
+
+
+def test_analysis_of_a_table():
+    from study.studies.tradeoff import analyse
+    rows = [_row("A", "water_refraction", "scale", 0.5, 5, 1.5, 20, 0.170, 12.0, crossed=0.02),
+            _row("A", "water_refraction", "scale", 1.0, 10, 3, 40, 0.166, 17.0),
+            _row("A", "water_refraction", "scale", 2.0, 20, 6, 80, 0.165, 25.0),
+            _row("A", "water_refraction", "converged", 16.0, 160, 48, 640, 0.1649, 150.0),
+            _row("A", "water_refraction_noreflection", "scale", 1.0, 10, 3, 40, 0.30, 15.0),
+            _row("B", "water_refraction", "scale", 0.5, 5, 1.5, 20, 0.120, 12.0),
+            _row("B", "water_refraction", "scale", 1.0, 10, 3, 40, 0.110, 17.0),
+            {**_row("B", "water_refraction", "scale", 2.0, 20, 6, 80, 0.0, 0.0), "status": "error",
+             "error": "RuntimeError: boom", "flip": None}]
+    summary, recs = analyse(rows, ["A", "B"], 0.02)
+    a = summary["scenes"]["A"]
+    assert a["recommended"]["label"] == "water_refraction (10, 3, 40)"     # 0.166 <= 1.02 * 0.165
+    assert a["seed"]["flip"] == 0.166
+    assert a["simplest_variant_within_tolerance"] == "water_refraction"
+    assert a["error_floor_by_variant"]["water_refraction"] == 0.1649
+    assert a["smallest_crossing_loop_cap"]["water_refraction"] == 40      # cap 20 misses 2 %
+    assert [r["label"] for r in a["front"]] == ["water_refraction (5, 1.5, 20)", "water_refraction (10, 3, 40)",
+                                                "water_refraction (20, 6, 80)"]
+    assert summary["n_failed"] == 1 and summary["failures"][0]["error_message"] == "RuntimeError: boom"
+    # the joint front holds only configurations measured on both scenes
+    assert {r["label"] for r in summary["joint"]["front"]} <= {"water_refraction (5, 1.5, 20)",
+                                                               "water_refraction (10, 3, 40)"}
+    assert summary["joint"]["recommended"]["flip"] == pytest.approx((0.166 + 0.110) / 2)
+    assert all("label" in r for r in recs)
+
+
+def test_tradeoff_cli_tiny(tmp_path):
+    """A few points at 32x32 through the CLI: table, chart, report, recommended shaders, resume."""
+    from study.cli import main
+    from study.sweep import read_table
+    small = ["resolution=[32,32]", "fit.resolution=[32,32]", "reference.spp=16", "reference.water_mesh=96",
+             "reference.texture_size=64", "reference.texture_spp=8", "waves.normal_map_size=64",
+             "tradeoff.variants=[\"water_refraction\"]", "tradeoff.steps_grazing=[5.0]",
+             "tradeoff.steps_steep=[3.0]", "tradeoff.loop_cap=[20]", "tradeoff.scales=[0.5,1.0]",
+             "tradeoff.converged_scale=4.0", "tradeoff.gl_repeats=3", "fit.max_steps=5"]
+    args = ["tradeoff", str(REPO / "experiments" / "default.toml"), "--out", str(tmp_path),
+            "--workers", "1"] + [a for s in small for a in ("--set", s)]
+    assert main(args) == 0
+    rows = read_table(tmp_path / "tradeoff.parquet")
+    assert len(rows) == 4 and all(r["status"] == "ok" for r in rows), [r.get("error") for r in rows]
+    assert all(r["fetches_mean"] > 0 and 0 < r["flip"] < 1 and r["gl_ms_512"] > 0 for r in rows)
+    summary = json.loads((tmp_path / "summary.json").read_text())
+    rec = summary["scenes"]["default"]["recommended"]
+    assert rec["label"] in {r["label"] for r in summary["scenes"]["default"]["front"]}
+    assert summary["exports"]["default"]["gl_check"]["passed"]
+    assert (tmp_path / "shaders" / "core" / "water_refraction.frag").is_file()
+    assert (tmp_path / "pareto.png").stat().st_size > 10_000
+    assert "Recommended" in (tmp_path / "report.md").read_text()
+    before = {r["key"]: r["seconds"] for r in rows}
+    assert main(args) == 0                                       # resumes: nothing re-run
+    assert {r["key"]: r["seconds"] for r in read_table(tmp_path / "tradeoff.parquet")} == before
