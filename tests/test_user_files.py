@@ -247,3 +247,19 @@ def test_example_files_script_reproduces_the_shipped_files(tmp_path):
             assert np.array_equal(a, b), p.name
         else:
             assert (tmp_path / p.name).read_bytes() == p.read_bytes(), p.name
+
+
+@pytest.mark.slow
+def test_user_files_experiment_calibrates_end_to_end(tmp_path):
+    """`study calibrate experiments/user_files.toml` at tiny sizes: reference, inputs with the
+    mesh, fit of water_reflection, export and GL check, report."""
+    from study.cli import main
+    sets = [a for k, v in {**TINY, "fit.max_steps": "3"}.items() for a in ("--set", f"{k}={v}")]
+    assert main(["calibrate", str(USER), "--out", str(tmp_path), *sets]) == 0
+    summary = __import__("json").loads((tmp_path / "constants.json").read_text())
+    assert summary["shader"] == "water_reflection"
+    assert summary["gl_check"]["passed"] and (tmp_path / "shaders" / "core" / "water_reflection.frag").is_file()
+    assert {"inputs.mesh_reflection_s", "inputs.wet_render_s", "fit_s", "gl_check_s", "figures_s",
+            "total_s"} <= set(summary["timings"])
+    report = (tmp_path / "report.md").read_text()
+    assert "inputs.mesh_reflection_s" in report and "gl_check_s" in report
