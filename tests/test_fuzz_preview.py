@@ -89,6 +89,7 @@ QUICK = [
     ("dense water", ["water.ior=3", "water.sigma_t=[1000, 1000, 1000]", "water.albedo=[1, 1, 1]"]),
     ("floor at the surface", ["floor.depth=0.01"]),
     ("wide fov, tiny pool", ["camera.fov_y=170", "pool.half_extent=[0.1, 0.1]"]),
+    ("largest reference seed", ["reference.seed=268435455"]),       # once beyond Mitsuba's 32-bit seeds
 ]
 
 

@@ -125,7 +125,8 @@ SCHEMA: dict[str, Field] = {
     "reference.target_noise": Field("float", 0.01, "Target RMS standard error on water pixels "
                                     "for `spp = \"auto\"`.", "linear RGB", 1e-5, 1.0),
     "reference.max_spp": Field("int", 1024, "Upper bound of the automatic spp.", "", 4, 65536),
-    "reference.seed": Field("int", 0, "Base sampler seed.", "", 0, 2**31 - 1),
+    "reference.seed": Field("int", 0, "Base sampler seed (the per-pass seeds derived from it stay "
+                            "within Mitsuba's 32-bit seeds).", "", 0, 2**28 - 1),
     "reference.max_depth": Field("int", 12, "Maximum path length.", "", 2, 256),
     "reference.texture_size": Field("int", 256, "Resolution of the top-down shader textures.",
                                     "texels", 16, 4096),
