@@ -120,7 +120,7 @@ def run_preview(experiment, out, overrides=None, variant=None, cache=None) -> di
     summary = {"experiment": exp["name"], "shader": model.shader, "variant": variant,
                "constants": constants.to_dict(), "error": err, "water_pixels": int(model.mask.sum()),
                "reference": {"spp": ref.spp, "noise": ref.noise, "path": str(ref.path)},
-               "diagnostics": diag.summary(model.mask), "timings": timings}
+               "diagnostics": diag.summary(model.mask), "timings": timings, "sun": _sun(exp)}
     write_json(out / "preview.json", summary)
     _log(f"preview: RMSE {err['rmse']:.4f}, FLIP {err['flip']:.4f} on {summary['water_pixels']} water "
          f"pixels; wrote {out}")
@@ -210,13 +210,19 @@ def run_calibrate(experiment, out, overrides=None, variant=None, solver=None, ca
         "message": fs.get("message", ""), "fit": fs, "identifiability": cal.identifiability,
         "step_sweep": cal.sweep, "timings": timings,
         "reference": {"spp": ref.spp, "noise": ref.noise, "path": str(ref.path), "key": ref.provenance["key"]},
-        "diagnostics": diag1.summary(full.mask), "gl_check": gl,
+        "diagnostics": diag1.summary(full.mask), "gl_check": gl, "sun": _sun(exp),
     }
     write_json(out / "constants.json", _jsonable(summary))
     write_report(out, _jsonable(summary), figs)
     _log(f"calibrate: RMSE {e0['rmse']:.4f} -> {e1['rmse']:.4f}, FLIP {e0['flip']:.4f} -> {e1['flip']:.4f}; "
          f"wrote {out}")
     return summary
+
+
+def _sun(exp) -> dict:
+    """The shader's sun (explicit, or found in the sky file: direction, solid angle, radiance)."""
+    from .scene.user_scene import sun_summary
+    return sun_summary(exp)
 
 
 def _jsonable(x):
