@@ -25,6 +25,28 @@ from ._texture import backend_types
 # (``dr.freeze``); a change of loop caps, shader variant or input sizes records anew.
 USE_FROZEN = True
 
+_FROZEN: dict = {}
+
+
+def frozen(key: tuple, fn):
+    """``dr.freeze(fn)``, one frozen function per ``key``: the Python-level configuration of a
+    call (shader, variant options, the integer loop caps, diagnostics on/off). Dr.Jit 1.5.0's
+    freeze was measured to replay a recording made with other Python int / bool arguments
+    (``loop_cap=3`` after ``loop_cap=2`` replayed the 2-step loop; ``diagnose=True`` after
+    ``False`` lost the extra outputs), so that configuration goes into the choice of the frozen
+    function, never into its arguments. Scene values (texture matrices, sizes) are keyed
+    correctly by freeze itself (checked against traced renders in tests)."""
+    f = _FROZEN.get(key)
+    if f is None:
+        f = _FROZEN[key] = dr.freeze(fn)
+    return f
+
+
+def python_config(C) -> tuple:
+    """The plain Python values of resolved constants ``C`` (integer loop caps, ``loop_ad``), as
+    a hashable tuple for :func:`frozen`."""
+    return tuple(sorted((k, v) for k, v in C.values.items() if isinstance(v, (bool, int, str))))
+
 
 @dataclass
 class ShaderOutput:

@@ -26,8 +26,9 @@ from ._texture import backend_types, mix, texmat_xy
 from . import _frame
 from ._frame import (ShaderOutput, evaluated_loops_if, finish_output, jacobian_passes, nonfinite_any,
                      resolve_constants, tangents)
-from .water_refraction import (cubemap_reflection, fresnel_combine, loop_positions, loop_R, reflect,
-                               refraction_blocks, specular_highlight)
+from .water_refraction import (cubemap_reflection, fresnel_combine, loop_positions, loop_R, outside_unit_square,
+                               reflect, refraction_blocks, refraction_failure_diagnostics,
+                               specular_highlight)
 
 __all__ = ["render", "render_with_jacobian", "ShaderOutput"]
 
@@ -66,7 +67,27 @@ def raycast_reflection(m, P, R, C):
     return current_position, current_position_old, depth, olddepth, noHit, i, loop_fetches
 
 
-def _shade(m, P, C):
+# ---- failure diagnostics (not in the GLSL: extra outputs, the colour is unchanged) --------
+
+REFL_EXIT_HIT, REFL_EXIT_OUTSIDE, REFL_EXIT_HEIGHT_CUT, REFL_EXIT_LOOP_CAP = 0.0, 1.0, 2.0, 3.0
+
+
+def reflection_exit(m, P, C, loop_position, noHit):
+    """How block [7]'s loop ended, per lane (``m.Float``): ``REFL_EXIT_HIT`` (0, a hit),
+    ``REFL_EXIT_OUTSIDE`` (1, the ray left the reflection textures' [0, 1]^2: cube map),
+    ``REFL_EXIT_HEIGHT_CUT`` (2, above ``REFL_HEIGHT_CUT``: cube map) or ``REFL_EXIT_LOOP_CAP``
+    (3, ``REFL_LOOP_CAP`` steps without any of these: cube map). ``loop_position`` is the
+    loop's last ``current_position`` (where the breaking test was made)."""
+    p = dr.detach(loop_position)
+    s, t = texmat_xy(P.tex_matrix1, p)
+    outside = outside_unit_square(s, t)
+    too_high = p.y > dr.detach(C.refl_height_cut)
+    code = dr.select(outside, REFL_EXIT_OUTSIDE,
+                     dr.select(too_high, REFL_EXIT_HEIGHT_CUT, REFL_EXIT_LOOP_CAP))
+    return m.Float(dr.select(noHit, code, REFL_EXIT_HIT))
+
+
+def _shade(m, P, C, diagnose: bool = False):
     # ---- [1]-[6]: as in water_refraction ----
     f = refraction_blocks(m, P, C)
     vEye, vLight, vBumpTex, vBumpTexMore = f.vEye, f.vLight, f.vBumpTex, f.vBumpTexMore
@@ -77,11 +98,13 @@ def _shade(m, P, C):
     R = dr.normalize(reflect(m, -vEye, vBumpTexMore))
     R.y = dr.maximum(R.y, 0.001)
     R = dr.normalize(R)
+    refl_dir = R   # kept for the diagnostics
     numsteps = mix(C.refl_steps_steep, C.refl_steps_grazing, 1.0 - R.y)
     stepsize = 1.0 / numsteps
     R *= stepsize
     current_position, current_position_old, depth, olddepth, noHit, refl_iterations, refl_fetches = \
         raycast_reflection(m, P, loop_R(C, R), C)
+    refl_loop_position = current_position   # kept for the diagnostics
     current_position, current_position_old = loop_positions(
         m, C, R, current_position, current_position_old, refl_iterations)
     # if (!noHit): interpolate, one step of zero-approximation
@@ -106,14 +129,23 @@ def _shade(m, P, C):
                    "refl_iterations": m.Float(refl_iterations),
                    "refl_hit": dr.select(noHit, 0.0, 1.0),
                    "nonfinite": dr.select(bad, 1.0, 0.0)}
+    if diagnose:
+        diagnostics.update(refraction_failure_diagnostics(m, P, C, f))
+        diagnostics["refl_exit"] = reflection_exit(m, P, C, refl_loop_position, noHit)
+        d = dr.detach(refl_dir)
+        diagnostics.update({"refl_dir_x": m.Float(d.x), "refl_dir_y": m.Float(d.y),
+                            "refl_dir_z": m.Float(d.z)})
     return gl_FragColor, diagnostics
 
 
-_frozen_shade = dr.freeze(lambda m, P, C: _shade(m, P, C))
+def _frozen_shade(m, P, C, diagnose):
+    f = _frame.frozen(("water_reflection", diagnose) + _frame.python_config(C),
+                      lambda m, P, C: _shade(m, P, C, diagnose))
+    return f(m, P, C)
 
 
 def render(inputs: ShaderInputs, constants: Constants | None = None, *,
-           backend: str = "llvm", loop_ad: str = "replay") -> ShaderOutput:
+           backend: str = "llvm", loop_ad: str = "replay", diagnose: bool = False) -> ShaderOutput:
     """Render ``water_reflection``.
 
     Returns a :class:`ShaderOutput` as ``water_refraction.render`` does, with two more
@@ -121,20 +153,26 @@ def render(inputs: ShaderInputs, constants: Constants | None = None, *,
     the reflection ray hit the geometry above the water, 0 where the cube map was used).
     ``fetches`` counts every texture2D/textureCube call: 4 normal map, 1 + ``iterations``
     depth, 1 refraction colour, 1 + (in-bounds reflection iterations) reflection depth, 1
-    reflection colour (bottom texture or cube map), 1 Fresnel LUT.
+    reflection colour (bottom texture or cube map), 1 Fresnel LUT. ``diagnose=True`` adds the
+    failure diagnostics of ``water_refraction.refraction_failure_diagnostics``, ``refl_exit``
+    (:func:`reflection_exit`) and ``refl_dir_x/y/z`` (the unit reflection direction after the
+    clamp of ``R.y``, before the step scaling); extra outputs only, the colour is bit-identical.
     """
     m = backend_types(backend)
     P = prepare(inputs, m)
     C = resolve_constants(m, constants if constants is not None else Constants(), loop_ad)
     with evaluated_loops_if(C.differentiable and loop_ad == "evaluated"):
         if _frame.USE_FROZEN and not C.differentiable:
-            color, diag = _frozen_shade(m, P.shading_state(), C)
+            color, diag = _frozen_shade(m, P.shading_state(), C, diagnose)
         else:
-            color, diag = _shade(m, P, C)
+            color, diag = _shade(m, P, C, diagnose)
         return finish_output(m, P, color, diag, "water_reflection")
 
 
-_frozen_tangents = dr.freeze(lambda m, P, C, params: tangents(m, *_shade(m, P, C), params))
+def _frozen_tangents(m, P, C, params):
+    f = _frame.frozen(("water_reflection.tangents",) + _frame.python_config(C),
+                      lambda m, P, C, params: tangents(m, *_shade(m, P, C), params))
+    return f(m, P, C, params)
 
 
 def render_with_jacobian(inputs: ShaderInputs, constants: Constants | None, names: list[str], *,

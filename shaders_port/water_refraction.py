@@ -184,6 +184,46 @@ def fresnel_combine(m, P, vReflection, vRefraction, vEye, vBumpTex):
     return vReflection * FresnelCoeffs[1] + vRefraction * FresnelCoeffs[0]
 
 
+# ---- failure diagnostics (not in the GLSL: extra outputs, the colour is unchanged) --------
+
+def outside_unit_square(s, t):
+    """Bool per lane: texture coordinate (s, t) outside [0, 1]^2 (clamp-to-edge substitutes
+    the border texel there)."""
+    return (s < 0.0) | (s > 1.0) | (t < 0.0) | (t > 1.0)
+
+
+def refraction_failure_diagnostics(m, P, C, f: "Refracted") -> dict:
+    """Per-lane quantities that say where the method of blocks [3]-[5] leaves its domain
+    (read by ``study.studies.failures``); every value is a detached ``m.Float``:
+
+    * ``refract_k``: GLSL refract's ``k = 1 - eta^2 (1 - dot(N, I)^2)`` (< 0: total internal
+      reflection, ``R = 0``; cannot happen for ``refrCoeff <= 1``, kept as a check);
+    * ``cos_eye_normal``: ``dot(vEye, vBumpTexMore)`` (<= 0: the bumped normal faces away from
+      the eye, refract is applied from the back of the facet);
+    * ``refr_dir_x/y/z``: the unit refraction direction ``normalize(R)`` (before the step scaling);
+    * ``interp_weight``: ``(cpoy - olddepth) / denominator`` of block [5] (in [0, 1] when the
+      floor was crossed; anything when the loop ran out and the crossing is extrapolated);
+    * ``lookup_outside``: 1 where a ``worldYComponent`` fetch (the start, every step: the
+      points lie on one segment, so checking its ends suffices, the texture square being
+      convex) or the ``refractionTexture`` fetch at the interpolated point falls outside the
+      top-down textures' [0, 1]^2.
+    """
+    vEye, N = dr.detach(f.vEye), dr.detach(f.vBumpTexMore)
+    d = dr.dot(N, -vEye)
+    eta = dr.detach(C.refr_coeff)
+    k = 1.0 - eta * eta * (1.0 - d * d)
+    Rn = dr.normalize(dr.detach(f.R))
+    cpoy = dr.detach(f.loop_position_old.y)
+    weight = (cpoy - dr.detach(f.olddepth)) / dr.detach(f.denominator)
+    outside = dr.zeros(m.Bool, dr.width(k))
+    for p in (P.varyingVecWorldPosition, f.loop_position, f.current_position):
+        s, t = texmat_xy(P.tex_matrix0, dr.detach(p))
+        outside |= outside_unit_square(s, t)
+    return {"refract_k": m.Float(k), "cos_eye_normal": m.Float(-d),
+            "refr_dir_x": m.Float(Rn.x), "refr_dir_y": m.Float(Rn.y), "refr_dir_z": m.Float(Rn.z),
+            "interp_weight": m.Float(weight), "lookup_outside": dr.select(outside, 1.0, 0.0)}
+
+
 # ---- the shader ---------------------------------------------------------------------------
 
 @dataclass
@@ -200,6 +240,10 @@ class Refracted:
     iterations: object
     crossed: object
     denominator: object
+    # the loop's last state (before the interpolation), for the failure diagnostics only
+    loop_position: object = None       # current_position after the last step
+    loop_position_old: object = None   # current_position_old
+    olddepth: object = None
 
 
 def refraction_blocks(m, P, C) -> Refracted:
@@ -212,14 +256,16 @@ def refraction_blocks(m, P, C) -> Refracted:
         raycast_ground(m, P, loop_R(C, R), C.loop_cap)
     current_position, current_position_old = loop_positions(
         m, C, R, current_position, current_position_old, iterations)
+    loop_end = (current_position, current_position_old)   # kept for the diagnostics
     current_position, vRefraction, denominator = interpolate_crossing(
         m, P, current_position, current_position_old, depth, olddepth)
+    loop_position, loop_position_old = loop_end
     vRefraction = attenuation(m, P, current_position, vRefraction, C)
     return Refracted(vEye, vLight, vBumpTex, vBumpTexMore, R, current_position, vRefraction,
-                     iterations, crossed, denominator)
+                     iterations, crossed, denominator, loop_position, loop_position_old, olddepth)
 
 
-def _shade(m, P, C, reflection: bool):
+def _shade(m, P, C, reflection: bool, diagnose: bool = False):
     f = refraction_blocks(m, P, C)
     vEye, vLight, vBumpTex, vBumpTexMore = f.vEye, f.vLight, f.vBumpTex, f.vBumpTexMore
     R, current_position, vRefraction = f.R, f.current_position, f.vRefraction
@@ -240,14 +286,19 @@ def _shade(m, P, C, reflection: bool):
     diagnostics = {"iterations": m.Float(iterations), "fetches": m.Float(fetches),
                    "crossed": dr.select(crossed, 1.0, 0.0), "denominator": dr.abs(denominator),
                    "nonfinite": dr.select(bad, 1.0, 0.0)}
+    if diagnose:
+        diagnostics.update(refraction_failure_diagnostics(m, P, C, f))
     return gl_FragColor, diagnostics
 
 
-_frozen_shade = dr.freeze(lambda m, P, C, reflection: _shade(m, P, C, reflection))
+def _frozen_shade(m, P, C, reflection, diagnose):
+    f = _frame.frozen(("water_refraction", reflection, diagnose) + _frame.python_config(C),
+                      lambda m, P, C: _shade(m, P, C, reflection, diagnose))
+    return f(m, P, C)
 
 
 def render(inputs: ShaderInputs, constants: Constants | None = None, *, reflection: bool = True,
-           backend: str = "llvm", loop_ad: str = "replay") -> ShaderOutput:
+           backend: str = "llvm", loop_ad: str = "replay", diagnose: bool = False) -> ShaderOutput:
     """Render ``water_refraction`` (``reflection=False``: the ``NOREFLECTION`` variant).
 
     Returns a :class:`ShaderOutput`: ``color`` TensorXf (H, W, 3) linear RGB, 0 off the
@@ -258,20 +309,24 @@ def render(inputs: ShaderInputs, constants: Constants | None = None, *, reflecti
     vector -- vEye, vBumpTex, vBumpTexMore, R, the interpolated position, and with reflection
     vLight -- was non-finite: GLSL's clamp and texture lookups can turn a NaN into a finite
     colour). ``loop_ad`` matters only for gradient-enabled constants (see the module doc).
+    ``diagnose=True`` adds the failure diagnostics of :func:`refraction_failure_diagnostics`
+    (extra outputs only: the colour is bit-identical).
     """
     m = backend_types(backend)
     P = prepare(inputs, m)
     C = resolve_constants(m, constants if constants is not None else Constants(), loop_ad)
     with evaluated_loops_if(C.differentiable and loop_ad == "evaluated"):
         if _frame.USE_FROZEN and not C.differentiable:
-            color, diag = _frozen_shade(m, P.shading_state(), C, reflection)
+            color, diag = _frozen_shade(m, P.shading_state(), C, reflection, diagnose)
         else:
-            color, diag = _shade(m, P, C, reflection)
+            color, diag = _shade(m, P, C, reflection, diagnose)
         return finish_output(m, P, color, diag, "water_refraction")
 
 
-_frozen_tangents = dr.freeze(lambda m, P, C, params, reflection:
-                             tangents(m, *_shade(m, P, C, reflection), params))
+def _frozen_tangents(m, P, C, params, reflection):
+    f = _frame.frozen(("water_refraction.tangents", reflection) + _frame.python_config(C),
+                      lambda m, P, C, params: tangents(m, *_shade(m, P, C, reflection), params))
+    return f(m, P, C, params)
 
 
 def render_with_jacobian(inputs: ShaderInputs, constants: Constants | None, names: list[str], *,

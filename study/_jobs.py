@@ -237,3 +237,16 @@ def _jsonable(x):
     if isinstance(x, np.ndarray):
         return _jsonable(x.tolist())
     return x
+
+
+def run_failures(experiments, out, overrides=None, variant=None, shader=None, constants_json=None,
+                 scheduler=None, workers=None) -> list:
+    """``study failures``: the failure catalogue of each experiment, one sweep job per experiment
+    (``study.studies.failures``): ``<out>/<name>/failures.png``, ``failures.parquet``,
+    ``report.md``."""
+    from .report.export import load_constants_json
+    from .studies.failures import run_failures as run
+
+    constants = load_constants_json(constants_json) if constants_json else None
+    return run(list(experiments), out, overrides, variant=variant or "llvm_ad_rgb", shader=shader,
+               constants=constants, scheduler=scheduler, workers=workers, log=_log)

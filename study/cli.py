@@ -41,6 +41,21 @@ def build_parser() -> argparse.ArgumentParser:
                    help="Dask scheduler address (default: $STUDY_SCHEDULER, else a local cluster)")
     p.add_argument("--workers", type=int, default=None,
                    help="local cluster worker processes (default: one per core)")
+    p = sub.add_parser("failures", help="classify every water pixel by where the shader's method "
+                       "fails; class maps beside FLIP maps, a table per class")
+    p.add_argument("experiments", nargs="+", metavar="EXPERIMENT", help="experiment TOML files")
+    p.add_argument("--out", required=True, help="output folder (created if missing)")
+    p.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE",
+                   help="override an experiment key in every experiment (repeatable)")
+    p.add_argument("--variant", choices=["llvm_ad_rgb", "cuda_ad_rgb"], default=None,
+                   help="Mitsuba variant (default: each experiment's)")
+    p.add_argument("--shader", default=None, help="shader variant (default: each experiment's fit.shader)")
+    p.add_argument("--constants", default=None, help="constants JSON (e.g. a calibrate's "
+                   "constants.json); default: each experiment's start constants")
+    p.add_argument("--scheduler", default=None, metavar="ADDRESS",
+                   help="Dask scheduler address (default: $STUDY_SCHEDULER, else a local cluster)")
+    p.add_argument("--workers", type=int, default=None,
+                   help="local cluster worker processes (default: one per core)")
     p = sub.add_parser("export", help="write the shaders with constants from a JSON file")
     p.add_argument("constants", help="constants.json written by `study calibrate`, or a flat JSON "
                    "object of constant name -> value")
@@ -64,6 +79,10 @@ def main(argv=None) -> int:
         elif args.command == "tradeoff":
             _jobs.run_tradeoff(args.experiments, args.out, args.overrides, args.variant,
                                tolerance=args.tolerance, scheduler=args.scheduler, workers=args.workers)
+        elif args.command == "failures":
+            _jobs.run_failures(args.experiments, args.out, args.overrides, args.variant,
+                               shader=args.shader, constants_json=args.constants,
+                               scheduler=args.scheduler, workers=args.workers)
         elif args.command == "export":
             _jobs.run_export(args.constants, args.out)
     except (ExperimentError, BackendError, FileNotFoundError, ValueError) as exc:

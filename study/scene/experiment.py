@@ -15,6 +15,8 @@ import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
 
+import numpy as np
+
 from shaders_port import CONSTANT_SPECS
 from shaders_port._variants import VARIANTS
 
@@ -63,6 +65,10 @@ SCHEMA: dict[str, Field] = {
                           "world units", 0.0, 100.0),
     "floor.steps": Field("int", 4, "Number of steps for shape `steps`.", "", 1, 64),
     "floor.seed": Field("int", 0, "Random seed of shape `terrain`.", "", 0, 2**31 - 1),
+    "floor.ledge": Field("vec4", [0.0, 0.0, 0.0, 0.0], "Under-water slab (a ledge or bridge "
+                         "across the pool in z, its ends 0.02 from the walls) as [x_min, x_max, top y, "
+                         "thickness]; thickness 0 = none. The floor under it is hidden from the "
+                         "top-down textures (depth complexity 2).", "world units", -1000.0, 1000.0),
     "floor.tile_size": Field("float", 0.5, "Edge length of the floor tiles.", "world units", 0.01, 100.0),
     "floor.tile_albedo": Field("vec3", [0.75, 0.72, 0.62], "Albedo of the light tiles.", "linear RGB", 0.0, 1.0),
     "floor.tile_albedo2": Field("vec3", [0.18, 0.32, 0.45], "Albedo of the dark tiles.", "linear RGB", 0.0, 1.0),
@@ -180,13 +186,6 @@ for _name, (_glsl, _kind, _default, (_lo, _hi)) in CONSTANT_SPECS.items():
         SCHEMA[f"constants.{_name}"] = Field("int" if _kind.endswith("int") else "float", _default,
                                              f"Start value of `{_glsl}`.", "", _lo, _hi)
 
-# keys added after references were cached and goldens made: at their defaults they are left
-# out of the hashes, so the scenes that do not use them keep their keys (and cached files)
-HASH_OMIT_AT_DEFAULT = frozenset({
-    "floor.heightmap", "floor.height_scale", "floor.albedo_image", "floor.extent", "sky.envmap",
-    "sky.rotation", "sky.scale", "sun.source", "mesh.file", "mesh.position", "mesh.scale",
-    "mesh.rotation", "mesh.albedo", "mesh.texture"})
-
 # keys that change only the shader's inputs, never the reference image
 SHADER_INPUT_KEYS = frozenset({"reference.texture_size", "reference.texture_spp",
                                "reference.refraction_lighting", "reference.fresnel_transmission",
@@ -199,6 +198,48 @@ def _clip(v, limit: int = 80) -> str:
     """``repr(v)`` cut to a readable length (an echoed bad value must not flood the message)."""
     from .user_files import clip_text
     return clip_text(repr(v), limit)
+
+
+# keys added after references were cached: hashed only when set, so that the cached
+# references and inputs of experiments that do not use them stay valid
+_LATER_KEYS = ("floor.ledge", "floor.heightmap", "floor.height_scale", "floor.albedo_image",
+               "floor.extent", "sky.envmap", "sky.rotation", "sky.scale", "sun.source", "mesh.file",
+               "mesh.position", "mesh.scale", "mesh.rotation", "mesh.albedo", "mesh.texture")
+
+
+def _unset_later_key(key: str, value) -> bool:
+    return key in _LATER_KEYS and value == SCHEMA[key].default
+
+
+def _check_ledge(values: dict) -> None:
+    """The ledge must lie inside the pool, below the wave troughs and clear of the floor."""
+    x_min, x_max, top, thick = values["floor.ledge"]
+    if thick == 0.0:
+        return
+    from .geometry import floor_height
+    hx, hz = values["pool.half_extent"]
+    key = "floor.ledge = [x_min, x_max, top, thickness]"
+    if thick < 0.0:
+        raise ExperimentError(f"{key}: thickness {thick} is negative (0 = no ledge)")
+    if not -hx < x_min < x_max < hx:
+        raise ExperimentError(f"{key}: need -{hx} < x_min < x_max < {hx} (inside the pool), got "
+                              f"x_min={x_min}, x_max={x_max}")
+    trough = -values["waves.amplitude"] - 0.05
+    if top > trough:
+        raise ExperimentError(f"{key}: top {top} must be at least 0.05 below the wave troughs "
+                              f"(y <= {trough:.3f})")
+    x, z = np.meshgrid(np.linspace(x_min, x_max, 65), np.linspace(-hz, hz, 65))
+    f = {k[len("floor."):]: values[k] for k in values if k.startswith("floor.")}
+    if f["shape"] == "heightmap":
+        from .user_files import heightmap_floor
+        floor_top = float(heightmap_floor(values, x, z).max())
+    else:
+        floor_top = float(floor_height(f["shape"], f["depth"], f["relief"], f["steps"], f["seed"],
+                                       (hx, hz), x, z).max())
+    if top - thick <= floor_top + 0.05:
+        raise ExperimentError(f"{key}: the underside (y = {top - thick:.3f}) must be at least 0.05 "
+                              f"above the floor under it (highest at y = {floor_top:.3f}); "
+                              "make the ledge thinner or higher, or the floor deeper")
 
 
 def _check(key: str, f: Field, v):
@@ -314,8 +355,8 @@ class Experiment:
         shape the shader's inputs, ``SHADER_INPUT_KEYS``, nor the fit)."""
         prefixes = ("resolution", "camera.", "pool.", "floor.", "water.", "waves.", "sky.", "sun.",
                     "mesh.", "reference.")
-        data = {k: v for k, v in sorted(self._hashed().items())
-                if k.startswith(prefixes) and k not in SHADER_INPUT_KEYS}
+        data = {k: v for k, v in sorted(self.values.items())
+                if k.startswith(prefixes) and k not in SHADER_INPUT_KEYS and not _unset_later_key(k, v)}
         data.update(self._file_contents())
         return hashlib.sha256(json.dumps(data, sort_keys=True).encode()).hexdigest()
 
@@ -324,13 +365,10 @@ class Experiment:
         ``SHADER_INPUT_KEYS``; not the fit, the start constants or the names)."""
         prefixes = ("resolution", "camera.", "pool.", "floor.", "water.", "waves.", "sky.", "sun.",
                     "mesh.", "reference.", "variant")
-        data = {k: v for k, v in sorted(self._hashed().items()) if k.startswith(prefixes)}
+        data = {k: v for k, v in sorted(self.values.items())
+                if k.startswith(prefixes) and not _unset_later_key(k, v)}
         data.update(self._file_contents())
         return hashlib.sha256(json.dumps(data, sort_keys=True).encode()).hexdigest()
-
-    def _hashed(self) -> dict:
-        return {k: v for k, v in self.values.items()
-                if not (k in HASH_OMIT_AT_DEFAULT and v == SCHEMA[k].default)}
 
     def _file_contents(self) -> dict:
         """The file keys' paths replaced by their contents' digests (a moved file is the same
@@ -383,6 +421,7 @@ def validate(raw: dict, overrides: list[str] | None = None, path: Path | None = 
     for key in user_files.FILE_KEYS:
         values[key] = user_files.resolve(key, values[key], base.get(key))
     digests = user_files.check_files(values)
+    _check_ledge(values)
     return Experiment(values, path, digests)
 
 

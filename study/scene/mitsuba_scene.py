@@ -2,6 +2,8 @@
 
 * Pool floor: a triangle mesh of ``floor_height`` with a diffuse tile texture.
 * Walls: four diffuse boxes around the pool rising ``pool.wall_height`` above the water.
+* Ledge (``floor.ledge``, optional): a diffuse box under water spanning the pool in z; the floor
+  under it is hidden from the top-down textures the shader raycasts (depth complexity 2).
 * Water: one closed triangle mesh (a smooth dielectric, ``water.ior`` inside, 1.0
   outside) bounding a homogeneous medium (``water.sigma_t``, ``water.albedo``). Its top is
   the wave surface ``H(x, z)`` displaced for real, with analytic vertex normals; its
@@ -30,6 +32,8 @@ from .experiment import Experiment
 from .geometry import Waves, floor_height, sun_direction
 
 WATER_INSET = 1e-3   # the water volume stays this far inside the walls (no coincident faces)
+LEDGE_GAP = 0.02     # the ends of an under-water ledge stay this far from the walls (and the
+                     # water volume's sides), so no faces intersect
 
 
 def waves_of(exp: Experiment) -> Waves:
@@ -150,6 +154,12 @@ def build_geometry(mi, exp: Experiment, water: bool = True, medium=None, mesh: b
         out[name] = {"type": "cube", "bsdf": wall_bsdf,
                      "to_world": T().translate([(x0 + x1) / 2, (yb + top) / 2, (z0 + z1) / 2])
                      @ T().scale([(x1 - x0) / 2, (top - yb) / 2, (z1 - z0) / 2])}
+    x_min, x_max, top, thick = exp["floor.ledge"]
+    if thick > 0.0:   # an under-water slab across the pool in z (see floor.ledge)
+        zl = hz - LEDGE_GAP
+        out["ledge"] = {"type": "cube", "bsdf": wall_bsdf,
+                        "to_world": T().translate([(x_min + x_max) / 2, top - thick / 2, 0.0])
+                        @ T().scale([(x_max - x_min) / 2, thick / 2, zl])}
     if mesh and exp["mesh.file"]:
         from .user_scene import mesh_bounds, mesh_shape
         mesh_bounds(mi, exp)                      # loadable and above the water
