@@ -29,7 +29,7 @@ def small_experiment(**overrides):
     from study import load_experiment
     base = {"resolution": "[32, 32]", "fit.resolution": "[32, 32]", "reference.spp": "16",
             "reference.water_mesh": "96", "reference.texture_size": "64", "reference.texture_spp": "8",
-            "waves.normal_map_size": "64"}
+            "reference.lighting_size": "32", "reference.wall_spp": "8", "waves.normal_map_size": "64"}
     base.update({k: str(v) for k, v in overrides.items()})
     return load_experiment(REPO / "experiments" / "default.toml", [f"{k}={v}" for k, v in base.items()])
 

@@ -73,6 +73,10 @@ def test_scene_hash_tracks_scene_keys_only():
     assert validate({"reference": {"texture_size": 128, "fresnel_transmission": "radiance"},
                      "waves": {"normal_map_size": 64}}).scene_hash() == a.scene_hash()
     assert validate({"waves": {"amplitude": 0.02}}).scene_hash() != a.scene_hash()
+    # how the refraction texture is made changes the shader inputs' key, never the reference's
+    for ref in ({"texture_method": "colour"}, {"lighting_size": 64}, {"wall_spp": 16}, {"texture_spp": 64}):
+        b = validate({"reference": ref})
+        assert b.scene_hash() == a.scene_hash() and b.inputs_hash() != a.inputs_hash(), ref
 
 
 def test_readme_documents_every_key():

@@ -106,6 +106,10 @@ def test_shader_inputs_cache(mi, tmp_path):
                                     "llvm_ad_rgb", cache=tmp_path, log=logs.append)
     assert "built" in logs[-1]
     np.testing.assert_allclose(c.fresnel_lut[:, 0], a.fresnel_lut[:, 0] * 1.333 ** 2, rtol=1e-6)
+    # so is a changed lighting resolution of the refraction texture: a new render, never a stale one
+    load_or_build_shader_inputs(small_experiment(**{"reference.lighting_size": "16"}), "llvm_ad_rgb",
+                                cache=tmp_path, log=logs.append)
+    assert "built" in logs[-1] and "lighting texture" in logs[-1]
     # a corrupt file is rebuilt, not trusted
     for p in (tmp_path / "inputs").glob("*.npz"):
         p.write_bytes(b"garbage")

@@ -78,13 +78,14 @@ def reference_key(exp: Experiment, variant: str) -> str:
 
 
 def render_passes(exp: Experiment, spp_per_pass: int, n_passes: int, seed0: int,
-                  progress=None) -> np.ndarray:
-    """(n_passes, H, W, 3) float32 renders with independent seeds ``seed0 + i``."""
+                  progress=None, scene=None) -> np.ndarray:
+    """(n_passes, H, W, 3) float32 renders with independent seeds ``seed0 + i``
+    (of ``scene``, default: ``build_scene(exp)``)."""
     import mitsuba as mi
 
     from .mitsuba_scene import build_scene
 
-    scene = build_scene(exp)
+    scene = scene if scene is not None else build_scene(exp)
     out = []
     for i in range(n_passes):
         img = mi.render(scene, spp=spp_per_pass, seed=seed0 + i)
@@ -94,15 +95,24 @@ def render_passes(exp: Experiment, spp_per_pass: int, n_passes: int, seed0: int,
     return np.stack(out)
 
 
-def water_mask(exp: Experiment, width: int, height: int) -> np.ndarray:
+_MASKS: dict = {}      # (scene hash, width, height) -> water mask, per process
+
+
+def water_mask(exp: Experiment, width: int, height: int, scene=None) -> np.ndarray:
     """(H, W) bool, row 0 at the top: pixels whose centre's camera ray first hits the water
-    surface in the reference scene (not a wall in front of it, not the sky)."""
+    surface in the reference scene (not a wall in front of it, not the sky). ``scene``: the
+    reference scene at (width, height) if already built. Remembered per process (keyed on
+    the scene hash and the size, so a changed scene is cast again)."""
     import drjit as dr
     import mitsuba as mi
 
     from .mitsuba_scene import build_scene
 
-    scene = build_scene(exp, width, height)
+    memo = (exp.scene_hash(), SCENE_VERSION, width, height)
+    if memo in _MASKS:
+        return _MASKS[memo].copy()
+    if scene is None or tuple(scene.sensors()[0].film().crop_size()) != (width, height):
+        scene = build_scene(exp, width, height)
     sensor = scene.sensors()[0]
     j, i = np.meshgrid(np.arange(height), np.arange(width), indexing="ij")
     uv = mi.Point2f(mi.Float(((i.ravel() + 0.5) / width).astype(np.float32)),
@@ -110,7 +120,9 @@ def water_mask(exp: Experiment, width: int, height: int) -> np.ndarray:
     ray, _ = sensor.sample_ray(0.0, 0.0, uv, mi.Point2f(0.5, 0.5))
     si = scene.ray_intersect(ray)
     is_water = si.is_valid() & mi.has_flag(si.bsdf().flags(), mi.BSDFFlags.DeltaTransmission)
-    return np.array(dr.select(is_water, 1, 0), dtype=bool).reshape(height, width)
+    mask = np.array(dr.select(is_water, 1, 0), dtype=bool).reshape(height, width)
+    _MASKS[memo] = mask
+    return mask.copy()
 
 
 def noise_of(passes: np.ndarray, mask: np.ndarray) -> tuple[np.ndarray, float]:
@@ -126,8 +138,11 @@ def choose_spp(exp: Experiment, progress=None) -> tuple[int, dict]:
     """Pick spp for ``reference.target_noise`` from a measured pilot; return (spp, info)."""
     w, h = exp["resolution"]
     t0 = time.perf_counter()
-    pilot = render_passes(exp, PILOT_SPP, N_SEEDS, seed0=10_000 + exp["reference.seed"], progress=progress)
-    _, pilot_noise = noise_of(pilot, water_mask(exp, w, h))
+    from .mitsuba_scene import build_scene
+    scene = build_scene(exp)
+    pilot = render_passes(exp, PILOT_SPP, N_SEEDS, seed0=10_000 + exp["reference.seed"], scene=scene,
+                          progress=progress)
+    _, pilot_noise = noise_of(pilot, water_mask(exp, w, h, scene=scene))
     total_pilot = PILOT_SPP * N_SEEDS
     per_sample_var = pilot_noise ** 2 * total_pilot          # noise^2 = var / spp_total
     target = exp["reference.target_noise"]
@@ -146,12 +161,14 @@ def render_reference(exp: Experiment, variant: str, spp: int | None = None, prog
         spp, info = (choose_spp(exp, progress) if exp["reference.spp"] == "auto"
                      else (int(exp["reference.spp"]), {}))
     per_pass = max(1, math.ceil(spp / N_SEEDS))
+    from .mitsuba_scene import build_scene
+    scene = build_scene(exp)
     t0 = time.perf_counter()
     passes = render_passes(exp, per_pass, N_SEEDS, seed0=exp["reference.seed"] * N_SEEDS,
-                           progress=progress)
+                           progress=progress, scene=scene)
     seconds = time.perf_counter() - t0
     w, h = exp["resolution"]
-    mask = water_mask(exp, w, h)
+    mask = water_mask(exp, w, h, scene=scene)
     stderr, noise = noise_of(passes, mask)
     image = passes.mean(0)
     if not np.all(np.isfinite(image)):

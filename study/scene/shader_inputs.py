@@ -31,7 +31,7 @@ from shaders_port import ShaderInputs, fresnel_lut, ortho_tex_matrix
 from .experiment import Experiment
 from .mitsuba_scene import build_geometry, camera_view_proj, waves_of
 
-INPUTS_VERSION = 2        # bump whenever the construction of the inputs below changes
+INPUTS_VERSION = 3        # bump whenever the construction of the inputs below changes
 NO_GEOMETRY = -1e3
 CUBEMAP_SIZE = 64
 FRESNEL_SIZE = 256
@@ -221,9 +221,11 @@ def light_of(exp: Experiment) -> tuple[np.ndarray, np.ndarray]:
 
 
 def build_shader_inputs(exp: Experiment, width: int | None = None, height: int | None = None,
-                        progress=None) -> ShaderInputs:
+                        progress=None, info: dict | None = None) -> ShaderInputs:
     """All shader inputs of ``exp`` at output resolution (width, height) (default: the experiment's).
-    ``progress``: a ``study._progress.Stages`` that times and reports each stage (default: quiet)."""
+    ``progress``: a ``study._progress.Stages`` that times and reports each stage (default: quiet).
+    ``info``, if given, receives how the refraction texture was made (``texture``: method,
+    settings and, for ``lighting``, its measured noise)."""
     from .._progress import Stages
     st = progress or Stages(quiet=True)
     width = width or exp["resolution"][0]
@@ -232,8 +234,17 @@ def build_shader_inputs(exp: Experiment, width: int | None = None, height: int |
     size = exp["reference.texture_size"]
     with st.stage("inputs.world_y_s", f"shader inputs: world-y ray cast ({size}x{size})"):
         world_y = top_down_world_y(exp, extent, size)
-    colour = top_down_colour(exp, extent, size, exp["reference.texture_spp"], exp["reference.seed"],
-                             world_y=world_y, stages=st)
+    if exp["reference.texture_method"] == "lighting":
+        from .lighting import lighting_colour
+        with st.stage("inputs.lighting_s", f"shader inputs: lighting x albedo texture ({size}x{size})"):
+            colour, tex_info = lighting_colour(exp, extent, size, exp["reference.seed"], world_y=world_y,
+                                               progress=st.counter("  passes"))
+    else:
+        colour = top_down_colour(exp, extent, size, exp["reference.texture_spp"], exp["reference.seed"],
+                                 world_y=world_y, stages=st)
+        tex_info = {"method": "colour", "spp": exp["reference.texture_spp"], "noise": None}
+    if info is not None:
+        info["texture"] = tex_info
     tm = ortho_tex_matrix(*extent)
     if exp["mesh.file"]:
         from .user_scene import mesh_reflection_textures
@@ -290,10 +301,13 @@ def load_or_build_shader_inputs(exp: Experiment, variant: str, cache=None, log=p
         inputs = _cached_inputs(path, log)   # another process may have built them meanwhile
         if inputs is not None:
             return inputs
-        inputs = build_shader_inputs(exp, progress=progress)
+        info: dict = {}
+        inputs = build_shader_inputs(exp, progress=progress, info=info)
         path.parent.mkdir(parents=True, exist_ok=True)
         inputs.save(path)
-    log(f"shader inputs: built and cached at {path}")
+    tex = info["texture"]
+    noise = f", texture noise {tex['noise']:.2e} (RMS standard error on the pool)" if tex.get("noise") else ""
+    log(f"shader inputs: built ({tex['method']} texture, {tex['spp']} spp{noise}) and cached at {path}")
     return inputs
 
 

@@ -1,0 +1,179 @@
+"""The top-down refraction texture as *lighting x known floor albedo* (``reference.texture_method
+= "lighting"``).
+
+The floor is diffuse and its albedo is known exactly (the tile bitmap), so its radiance seen
+from above is ``albedo(x) * E(x) / pi``: the albedo carries the sharp detail (tile edges, grout)
+and the lighting ``E / pi`` is smooth except for the sun's caustics, which the sun's disc
+(``sun.radius``) already blurs on the floor. So the lighting is path traced at
+``reference.lighting_size`` texels over the pool (fewer texels than the texture: each gets
+``(texture_size / lighting_size)^2`` times the samples for the same cost), and multiplied
+back by the albedo at the texture's full resolution.
+
+Same physics as ``reference.texture_method = "colour"``: the same scene, integrator
+(``path``/``volpath``, ``reference.max_depth``), orthographic camera and absorption
+correction; Mitsuba's ``aov`` integrator returns, from the very same samples, the radiance and
+the albedo of the first surface hit, and the lighting of a texel is their ratio (the
+albedo-weighted mean of ``E / pi`` over the texel). What changes is the *resolution* of the
+lighting: caustic detail finer than one lighting texel is averaged (bilinear interpolation
+between lighting texel centres); the benchmark measures what that does to the fitted
+constants (``benchmarks/bench_new_scene.py``).
+
+Outside the pool (the walls' tops, used where the shader's rays leave the pool) the dry scene
+is rendered in colour at ``reference.wall_spp`` (at least ``ALBEDO_SPP``; the same render gives
+the albedo): the walls are lit directly by the sky and the sun, with light sampling, and have
+little noise.
+
+Noise is measured, not assumed: the lighting is the mean of ``N_SEEDS`` renders with
+independent seeds, and the RMS standard error of the resulting colour over the pool texels
+(linear RGB) is returned with the texture.
+
+Texture arrays are in GL order (row = t, z increasing; column = s, x increasing), float32,
+linear RGB.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from .experiment import Experiment
+
+N_SEEDS = 4          # independent lighting renders (noise estimate from their spread)
+ALBEDO_SPP = 64      # least samples per texel of the dry render that also gives the albedo
+
+
+def pool_extent(exp: Experiment) -> tuple[float, float, float, float]:
+    """World rectangle (x0, z0, x1, z1) of the pool floor (the lighting render's extent)."""
+    hx, hz = exp["pool.half_extent"]
+    return (-hx, -hz, hx, hz)
+
+
+def _top_down_scene(mi, exp: Experiment, *, water: bool, integrator: dict):
+    from .mitsuba_scene import build_geometry, water_medium
+    from .user_scene import reference_sky
+
+    medium = water_medium(mi, exp) if water else None
+    d = {"type": "scene", **build_geometry(mi, exp, water=water, medium=medium),
+         "sky": {"type": "envmap", "bitmap": mi.Bitmap(reference_sky(exp))},
+         "integrator": integrator}
+    return mi.load_dict(d), medium
+
+
+def _transport(exp: Experiment, water: bool) -> dict:
+    from .mitsuba_scene import has_medium
+    return {"type": "volpath" if water and has_medium(exp) else "path",
+            "max_depth": exp["reference.max_depth"]}
+
+
+def texel_centres(extent, size: int) -> tuple[np.ndarray, np.ndarray]:
+    """(X, Z) world coordinates (size, size) of the texel centres of ``extent`` in GL order."""
+    x0, z0, x1, z1 = extent
+    c = (np.arange(size) + 0.5) / size
+    return np.meshgrid(x0 + c * (x1 - x0), z0 + c * (z1 - z0))
+
+
+def interpolate(lighting: np.ndarray, extent, X: np.ndarray, Z: np.ndarray) -> np.ndarray:
+    """Bilinear interpolation of a GL-order (n, n, C) grid over ``extent`` at world points
+    (X, Z) (any shape), clamped to the outermost texel centres."""
+    x0, z0, x1, z1 = extent
+    n_z, n_x = lighting.shape[:2]
+    u = np.clip((X - x0) / (x1 - x0) * n_x - 0.5, 0.0, n_x - 1.0)
+    v = np.clip((Z - z0) / (z1 - z0) * n_z - 0.5, 0.0, n_z - 1.0)
+    i0, j0 = np.minimum(np.floor(u).astype(int), n_x - 2), np.minimum(np.floor(v).astype(int), n_z - 2)
+    fu, fv = (u - i0)[..., None], (v - j0)[..., None]
+    a, b = lighting[j0, i0], lighting[j0, i0 + 1]
+    c, d = lighting[j0 + 1, i0], lighting[j0 + 1, i0 + 1]
+    return ((1 - fv) * ((1 - fu) * a + fu * b) + fv * ((1 - fu) * c + fu * d)).astype(np.float32)
+
+
+def render_lighting(exp: Experiment, size: int, spp: int, seed: int, *, water: bool,
+                    y_cam: float, progress=None) -> tuple[np.ndarray, np.ndarray]:
+    """Lighting ``radiance / albedo`` (size, size, 3) over the pool (GL order), corrected for the
+    absorption of the camera's own vertical ray as ``top_down_colour`` does, and its per-texel
+    standard error, from ``N_SEEDS`` renders of ``ceil(spp / N_SEEDS)`` spp each."""
+    import mitsuba as mi
+
+    from .shader_inputs import _ortho_sensor, _to_gl_order, top_down_world_y
+
+    extent = pool_extent(exp)
+    scene, medium = _top_down_scene(mi, exp, water=water, integrator={
+        "type": "aov", "aovs": "alb:albedo", "transport": _transport(exp, water)})
+    per_pass = max(1, -(-spp // N_SEEDS))
+    sensor = _ortho_sensor(mi, extent, size, per_pass, seed, y_cam=y_cam, medium=medium)
+    passes = []
+    for k in range(N_SEEDS):
+        img = np.array(mi.render(scene, sensor=sensor, spp=per_pass, seed=seed * N_SEEDS + k), np.float32)
+        img = _to_gl_order(mi, sensor, img, extent)
+        radiance, albedo = img[..., :3], img[..., 3:6]
+        if np.any(albedo <= 0.0):
+            from .experiment import ExperimentError
+            raise ExperimentError("the lighting render found texels of zero floor albedo (floor.tile_albedo, "
+                                  "floor.albedo_image); use reference.texture_method = \"colour\" for such "
+                                  "a floor")
+        passes.append(radiance / albedo)
+        if progress:
+            progress(k + 1, N_SEEDS)
+    passes = np.stack(passes)
+    lighting = passes.mean(0)
+    stderr = np.sqrt(passes.var(0, ddof=1) / N_SEEDS)
+    if water:
+        world_y = top_down_world_y(exp, extent, size)
+        sigma = np.asarray(exp["water.sigma_t"], np.float64)
+        optical = sigma * np.maximum(y_cam - world_y, 0.0)[..., None]
+        from .shader_inputs import MAX_OPTICAL_DEPTH
+        if optical.max() > MAX_OPTICAL_DEPTH:
+            from .experiment import ExperimentError
+            raise ExperimentError(f"water.sigma_t: the floor's light through the water is lost (optical depth "
+                                  f"{optical.max():.3g} above the floor, more than {MAX_OPTICAL_DEPTH:g}); the "
+                                  "lighting texture cannot recover it: use reference.texture_method = "
+                                  "\"colour\" (the dry floor stands in there) or less absorption")
+        gain = np.exp(optical)
+        lighting, stderr = lighting * gain, stderr * gain
+    if not np.all(np.isfinite(lighting)):
+        raise RuntimeError(f"the lighting render of {exp['name']!r} has non-finite texels")
+    return lighting.astype(np.float32), stderr.astype(np.float32)
+
+
+def render_dry(exp: Experiment, extent, size: int, spp: int, seed: int) -> tuple[np.ndarray, np.ndarray]:
+    """(colour, albedo), each (size, size, 3) GL order: the dry scene (no water) seen from above,
+    path traced at ``max(spp, ALBEDO_SPP)`` spp, and the texel-mean albedo of the first surface
+    hit, from the same samples (one scene, one render)."""
+    import mitsuba as mi
+
+    from .shader_inputs import _ortho_sensor, _to_gl_order
+
+    from .user_scene import dry_camera_height
+
+    spp = max(spp, ALBEDO_SPP)
+    scene, _ = _top_down_scene(mi, exp, water=False, integrator={
+        "type": "aov", "aovs": "alb:albedo", "transport": _transport(exp, False)})
+    sensor = _ortho_sensor(mi, extent, size, spp, seed, y_cam=dry_camera_height(mi, exp, extent))
+    img = _to_gl_order(mi, sensor, np.array(mi.render(scene, sensor=sensor, spp=spp, seed=seed), np.float32),
+                       extent)
+    return img[..., :3], img[..., 3:6]
+
+
+def lighting_colour(exp: Experiment, extent, size: int, seed: int = 0, world_y=None,
+                    progress=None) -> tuple[np.ndarray, dict]:
+    """(size, size, 3) float32 linear RGB top-down colour over ``extent`` (GL order) by
+    lighting x albedo inside the pool and the dry colour render outside; and a dict with the
+    measured noise (``noise``: RMS standard error of the colour over the pool texels) and the
+    settings used."""
+    from .shader_inputs import top_down_world_y, underwater_camera_height
+
+    wet = exp["reference.refraction_lighting"] == "underwater"
+    y_cam = underwater_camera_height(exp) if wet else 100.0
+    n_light = min(exp["reference.lighting_size"], size)     # never finer than the texture
+    lighting, lighting_se = render_lighting(exp, n_light, exp["reference.texture_spp"], seed,
+                                            water=wet, y_cam=y_cam, progress=progress)
+    dry, albedo = render_dry(exp, extent, size, exp["reference.wall_spp"], seed)
+    if world_y is None:
+        world_y = top_down_world_y(exp, extent, size)
+    X, Z = texel_centres(extent, size)
+    hx, hz = exp["pool.half_extent"]
+    inside = (np.abs(X) < hx) & (np.abs(Z) < hz) & (world_y < y_cam)
+    pool = pool_extent(exp)
+    colour = np.where(inside[..., None], interpolate(lighting, pool, X, Z) * albedo, dry)
+    se = interpolate(lighting_se, pool, X, Z) * albedo
+    noise = float(np.sqrt(np.mean(se[inside] ** 2))) if inside.any() else 0.0
+    info = {"method": "lighting", "lighting_size": n_light, "spp": exp["reference.texture_spp"],
+            "wall_spp": max(exp["reference.wall_spp"], ALBEDO_SPP), "noise": noise, "n_seeds": N_SEEDS}
+    return colour.astype(np.float32), info

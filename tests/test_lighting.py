@@ -1,0 +1,64 @@
+"""The refraction texture as lighting x albedo (study.scene.lighting) against the colour render."""
+import numpy as np
+import pytest
+from conftest import save_failure, small_experiment
+
+from study.scene import lighting
+from study.scene.shader_inputs import texture_extent, top_down_colour, top_down_world_y
+
+
+def test_interpolate_reproduces_linear_functions_and_clamps():
+    extent = (-2.0, -1.0, 2.0, 3.0)
+    n = 8
+    X, Z = lighting.texel_centres(extent, n)
+    grid = np.stack([X, Z, 2 * X - Z + 1], -1)
+    x = np.linspace(X.min(), X.max(), 13)
+    z = np.linspace(Z.min(), Z.max(), 11)
+    xx, zz = np.meshgrid(x, z)
+    got = lighting.interpolate(grid, extent, xx, zz)
+    np.testing.assert_allclose(got[..., 0], xx, atol=1e-5)
+    np.testing.assert_allclose(got[..., 2], 2 * xx - zz + 1, atol=1e-5)
+    # outside the outermost texel centres the value is that of the edge texels
+    edge = lighting.interpolate(grid, extent, np.array([-2.0, 2.0]), np.array([-1.0, 3.0]))
+    np.testing.assert_allclose(edge[:, 0], [X.min(), X.max()], atol=1e-5)
+    np.testing.assert_allclose(edge[:, 1], [Z.min(), Z.max()], atol=1e-5)
+
+
+def test_lighting_texture_matches_colour_render_within_noise(mi):
+    """Same scene, same integrator: over the pool, lighting x albedo and the colour render agree
+    in the mean of every tile-sized block within the measured noise (the lighting is coarser, so
+    texel by texel they differ by the caustics finer than a lighting texel)."""
+    exp = small_experiment(**{"reference.texture_size": "32", "reference.lighting_size": "16",
+                              "reference.texture_spp": "64", "reference.wall_spp": "16"})
+    extent = texture_extent(exp)
+    size = 32
+    world_y = top_down_world_y(exp, extent, size)
+    got, info = lighting.lighting_colour(exp, extent, size, seed=3, world_y=world_y)
+    assert info["method"] == "lighting" and info["noise"] > 0
+    passes = np.stack([top_down_colour(exp, extent, size, 64, seed=11 + s, world_y=world_y) for s in range(4)])
+    want = passes.mean(0)
+    se_want = np.sqrt(passes.var(0, ddof=1) / 4)
+    X, Z = lighting.texel_centres(extent, size)
+    hx, hz = exp["pool.half_extent"]
+    inside = (np.abs(X) < hx - 0.5) & (np.abs(Z) < hz - 0.5)
+    # 4 x 4 blocks of texels wholly inside the pool
+    blocks = inside.reshape(8, 4, 8, 4).all((1, 3))
+    g = got.reshape(8, 4, 8, 4, 3).mean((1, 3))[blocks]
+    w = want.reshape(8, 4, 8, 4, 3).mean((1, 3))[blocks]
+    se = np.sqrt((se_want ** 2).reshape(8, 4, 8, 4, 3).mean((1, 3))[blocks] / 16
+                 + (info["noise"] ** 2) / 16)
+    z = (g - w) / se
+    if np.abs(z).max() > 5.0 or abs(z.mean()) > 1.0:
+        save_failure("lighting_vs_colour", actual=got, expected=want, error=np.abs(got - want))
+    assert np.abs(z).max() < 5.0, f"block mean differs by {np.abs(z).max():.1f} standard errors"
+    assert abs(z.mean()) < 1.0, f"mean bias {z.mean():.2f} standard errors"
+    # outside the pool (the walls) the colour render is used, as before
+    outside = (np.abs(X) > hx + 0.1) | (np.abs(Z) > hz + 0.1)
+    assert abs(got[outside].mean() - want[outside].mean()) < 0.05 * want[outside].mean()
+
+
+def test_zero_floor_albedo_is_a_clear_error(mi):
+    exp = small_experiment(**{"floor.tile_albedo2": "[0.0, 0.0, 0.0]", "reference.texture_size": "16",
+                              "reference.lighting_size": "8", "reference.texture_spp": "4"})
+    with pytest.raises(RuntimeError, match="zero floor albedo"):
+        lighting.lighting_colour(exp, texture_extent(exp), 16, seed=0)
