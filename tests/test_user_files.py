@@ -259,7 +259,7 @@ def test_user_files_experiment_calibrates_end_to_end(tmp_path):
     summary = __import__("json").loads((tmp_path / "constants.json").read_text())
     assert summary["shader"] == "water_reflection"
     assert summary["gl_check"]["passed"] and (tmp_path / "shaders" / "core" / "water_reflection.frag").is_file()
-    assert {"inputs.mesh_reflection_s", "inputs.wet_render_s", "fit_s", "gl_check_s", "figures_s",
+    assert {"inputs.mesh_reflection_s", "inputs.lighting_s", "fit_s", "gl_check_s", "figures_s",
             "total_s"} <= set(summary["timings"])
     report = (tmp_path / "report.md").read_text()
     assert "inputs.mesh_reflection_s" in report and "gl_check_s" in report
