@@ -67,12 +67,15 @@ class GLRenderer:
             'core' runs as is; 'compat' (GLSL 1.20) runs through ``compat_to_core``.
         reflection: False compiles with ``#define NOREFLECTION`` (water_refraction only).
         source: fragment shader text to run instead of the shipped file (e.g. an export).
+        defines: preprocessor names to define (a shader variant, ``shaders_port._variants``),
+            each inserted after ``#version`` unless the source already has that ``#define``
+            line (an exported variant file carries its own).
     """
 
     MAX_PROGRAMS = 8   # compiled programs kept (one per distinct constants text), oldest dropped
 
     def __init__(self, name: str, inputs: ShaderInputs, *, dialect: str = "core",
-                 reflection: bool = True, source: str | None = None):
+                 reflection: bool = True, source: str | None = None, defines: tuple[str, ...] = ()):
         if name not in _FRAG_NAMES:
             raise ValueError(f"unknown water shader {name!r}; known: {_FRAG_NAMES}")
         if dialect not in ("core", "compat"):
@@ -84,6 +87,9 @@ class GLRenderer:
         import moderngl
         self._mgl = moderngl
         self.name, self.inputs, self.dialect, self.reflection = name, inputs, dialect, reflection
+        self.defines = tuple(defines) + (() if reflection else ("NOREFLECTION",))
+        for d in self.defines:
+            with_define("#version 120\n", d)   # raises on a name that is not a preprocessor name
         self._source = source if source is not None else read_source(name, "frag", dialect)
         self._vert = read_source("water", "vert", "core")
         self._programs: dict[str, object] = {}
@@ -180,8 +186,9 @@ class GLRenderer:
 
     def _frag_source(self, constants: Constants | None) -> str:
         src = self._source if constants is None else write_constants(self._source, constants)
-        if not self.reflection:
-            src = with_define(src, "NOREFLECTION")
+        for d in self.defines:
+            if f"\n#define {d}\n" not in src:
+                src = with_define(src, d)
         return compat_to_core(src, "frag") if self.dialect == "compat" else src
 
     def _render_mask(self) -> np.ndarray:

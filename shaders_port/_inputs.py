@@ -161,6 +161,13 @@ CONSTANT_SPECS: dict[str, tuple[str, str, object, tuple[float, float]]] = {
     "refr_coeff": ("refrCoeff", "uniform float", 1.0 / IOR_WATER, (0.1, 1.0)),
     "water_color": ("waterColor", "uniform vec4", (0.05, 0.25, 0.3, 1.0), (0.0, 100.0)),
     "reflect_color": ("reflectColor", "uniform vec4", (1.0, 1.0, 1.0, 1.0), (0.0, 100.0)),
+    # read only by the variants of shaders_port._variants (their defaults leave the seed unchanged:
+    # the seed's code path never reads them)
+    "absorption_r": ("ABSORPTION_R", "const float", 1.0 / 7.5, (1e-4, 100.0)),
+    "absorption_g": ("ABSORPTION_G", "const float", 1.0 / 7.5, (1e-4, 100.0)),
+    "absorption_b": ("ABSORPTION_B", "const float", 1.0 / 7.5, (1e-4, 100.0)),
+    "specular_roughness": ("SPECULAR_ROUGHNESS", "const float", 0.2, (1e-3, 1.0)),
+    "refine_steps": ("REFINE_STEPS", "const int", 3, (0, 64)),
 }
 
 
@@ -191,6 +198,11 @@ class Constants:
     refr_coeff: float = _default("refr_coeff")
     water_color: tuple = _default("water_color")
     reflect_color: tuple = _default("reflect_color")
+    absorption_r: float = _default("absorption_r")
+    absorption_g: float = _default("absorption_g")
+    absorption_b: float = _default("absorption_b")
+    specular_roughness: float = _default("specular_roughness")
+    refine_steps: int = _default("refine_steps")
 
     def validate(self) -> "Constants":
         """Raise ValueError naming the constant if a plain value is non-finite or out of range."""
@@ -292,3 +304,54 @@ def fresnel_lut(ior: float = IOR_WATER, n: int = 256) -> np.ndarray:
     c = (np.arange(n) + 0.5) / n
     r = fresnel_unpolarized(c, ior)
     return np.stack([1.0 - r, r], axis=1).astype(np.float32)
+
+
+# ---- texture precision as a game would ship it (the application-side variant) ---------------
+
+def _srgb8(x: np.ndarray) -> np.ndarray:
+    """Linear values stored in an 8-bit sRGB texture and read back (decoded to linear)."""
+    x = np.clip(np.asarray(x, np.float64), 0.0, 1.0)
+    s = np.where(x <= 0.0031308, 12.92 * x, 1.055 * np.power(x, 1.0 / 2.4) - 0.055)
+    q = np.round(s * 255.0) / 255.0
+    return np.where(q <= 0.04045, q / 12.92, np.power((q + 0.055) / 1.055, 2.4)).astype(np.float32)
+
+
+def _unorm8(x: np.ndarray) -> np.ndarray:
+    """Values in [0, 1] stored in an 8-bit UNORM texture and read back."""
+    return (np.round(np.clip(np.asarray(x, np.float64), 0.0, 1.0) * 255.0) / 255.0).astype(np.float32)
+
+
+def _half(x: np.ndarray) -> np.ndarray:
+    """Values stored in a half-float (16-bit) texture and read back."""
+    return np.asarray(x, np.float32).astype(np.float16).astype(np.float32)
+
+
+_GAME_CACHE: dict = {}
+
+
+def game_precision(inputs: ShaderInputs) -> ShaderInputs:
+    """``inputs`` with every texture at the precision a game would ship it, as float32 arrays
+    holding exactly the values the GPU would read (so the port and GL upload the same data):
+
+    * colour (``refraction_texture``, ``refl_texture``): 8-bit sRGB (``GL_SRGB8``), values
+      clipped to [0, 1];
+    * ``normal_map``: 8-bit UNORM (``GL_RGB8``, the usual ``0.5 n + 0.5`` encoding);
+    * ``fresnel_lut``: 8-bit UNORM;
+    * depths (``world_y``, ``refl_world_y``) and the HDR sky ``cubemap``: half float (``GL_R16F``,
+      ``GL_RGB16F``).
+
+    Filtering still runs in float on the dequantised texels on both sides (GL hardware
+    filters 8-bit texels at 8-bit sub-texel precision; this is not modelled). One result is
+    kept per inputs object (the port's texture cache then hits on repeated renders)."""
+    key = id(inputs)
+    arrays = tuple(id(v) for v in vars(inputs).values())
+    hit = _GAME_CACHE.get(key)
+    if hit is not None and hit[0] == arrays and hit[1] is inputs:
+        return hit[2]
+    out = dataclasses.replace(
+        inputs, refraction_texture=_srgb8(inputs.refraction_texture), refl_texture=_srgb8(inputs.refl_texture),
+        normal_map=_unorm8(inputs.normal_map), fresnel_lut=_unorm8(inputs.fresnel_lut),
+        world_y=_half(inputs.world_y), refl_world_y=_half(inputs.refl_world_y), cubemap=_half(inputs.cubemap))
+    _GAME_CACHE.clear()
+    _GAME_CACHE[key] = (arrays, inputs, out)
+    return out

@@ -32,6 +32,12 @@ class Variant:
         schedule: names of the integer-valued step-schedule constants the variant reads (swept by
             the tradeoff study, never fitted by a gradient).
         description: one line for reports.
+        replaces: seed constant -> the variant's constants that take its role in a fit (e.g. the
+            Beer-Lambert variant fits ``absorption_r/g/b`` where the seed fits
+            ``attenuation_distance``; ``()``: the variant does not read it). See :meth:`fit_names`.
+        textures: 'float' (float32 textures, the study's default) or 'game' (the application
+            uploads 8-bit colour and half-float depth, ``shaders_port._inputs.game_precision``;
+            the port and GL both get the quantised arrays, the GLSL is unchanged).
     """
 
     name: str
@@ -40,6 +46,25 @@ class Variant:
     port_options: dict = field(default_factory=dict)
     schedule: tuple[str, ...] = ()
     description: str = ""
+    replaces: dict = field(default_factory=dict)
+    textures: str = "float"
+
+    def prepare_inputs(self, inputs):
+        """The inputs as this variant's application uploads them (see ``textures``)."""
+        if self.textures == "game":
+            from ._inputs import game_precision
+            return game_precision(inputs)
+        return inputs
+
+    def fit_names(self, requested) -> list[str]:
+        """The constants to fit for the experiment's ``fit.parameters`` ``requested``: each name
+        the variant replaces becomes its replacements (order kept, no duplicates)."""
+        out = []
+        for n in requested:
+            for r in self.replaces.get(n, (n,)):
+                if r not in out:
+                    out.append(r)
+        return out
 
     def port(self):
         """The port module (imports Dr.Jit)."""
@@ -47,11 +72,12 @@ class Variant:
 
     def render(self, inputs, constants=None, **kw):
         """``port.render`` with this variant's options: a ``ShaderOutput``."""
-        return self.port().render(inputs, constants, **self.port_options, **kw)
+        return self.port().render(self.prepare_inputs(inputs), constants, **self.port_options, **kw)
 
     def render_with_jacobian(self, inputs, constants, names, **kw):
         """``port.render_with_jacobian`` with this variant's options: ``(ShaderOutput, J)``."""
-        return self.port().render_with_jacobian(inputs, constants, names, **self.port_options, **kw)
+        return self.port().render_with_jacobian(self.prepare_inputs(inputs), constants, names,
+                                                **self.port_options, **kw)
 
     def source(self, dialect: str = "core", text: str | None = None) -> str:
         """Fragment shader text of the variant: ``text`` (e.g. an export) or the shipped file,
@@ -65,7 +91,8 @@ class Variant:
         """A ``GLRenderer`` drawing this variant (``source``: the shader file's text without the
         variant's defines, e.g. an export; the renderer adds them)."""
         from ._gl import GLRenderer
-        return GLRenderer(self.shader, inputs, dialect=dialect, source=source, **self.port_options)
+        return GLRenderer(self.shader, self.prepare_inputs(inputs), dialect=dialect, source=source,
+                          defines=self.defines)
 
 
 VARIANTS: dict[str, Variant] = {}
@@ -73,6 +100,8 @@ VARIANTS: dict[str, Variant] = {}
 
 def register(variant: Variant) -> Variant:
     """Add a variant; its name must be new and its shader a shipped file."""
+    if variant.textures not in ("float", "game"):
+        raise ValueError(f"variant {variant.name!r}: textures must be 'float' or 'game', got {variant.textures!r}")
     if variant.name in VARIANTS:
         raise ValueError(f"shader variant {variant.name!r} is already registered")
     read_source(variant.shader, "frag", "core")   # raises naming the missing file
@@ -98,3 +127,48 @@ register(Variant("water_refraction_noreflection", "water_refraction", defines=("
 register(Variant("water_reflection", "water_reflection",
                  schedule=_RAYCAST + ("refl_steps_steep", "refl_steps_grazing", "refl_loop_cap"),
                  description="seed 000 section 3: refraction and reflection both raycast"))
+
+# ---- variants of the seed's refraction shader (one GLSL switch each, or a combination) -------
+# Each answers one limitation of the seed (see shaders_port/README.md, "Variants").
+_BEER = {"attenuation_distance": ("absorption_r", "absorption_g", "absorption_b")}
+_GGX = {"specular_exponent": ("specular_roughness",)}
+_NOSPEC = {"specular_strength": (), "specular_exponent": ()}
+_REFINE = _RAYCAST + ("refine_steps",)
+
+
+def _seed_variant(name, defines, options, description, schedule=_RAYCAST, replaces=None, textures="float"):
+    register(Variant(name, "water_refraction", defines=defines, port_options=options, schedule=schedule,
+                     description=description, replaces=replaces or {}, textures=textures))
+
+
+_seed_variant("water_refraction_beer", ("BEER_ATTENUATION",), {"attenuation": "beer"},
+              "seed + Beer-Lambert attenuation per colour channel towards waterColor", replaces=_BEER)
+_seed_variant("water_refraction_ggx", ("GGX_SPECULAR",), {"specular": "ggx"},
+              "seed + GGX microfacet highlight (Smith masking) in place of Phong", replaces=_GGX)
+_seed_variant("water_refraction_beer_ggx", ("BEER_ATTENUATION", "GGX_SPECULAR"),
+              {"attenuation": "beer", "specular": "ggx"},
+              "seed + Beer-Lambert attenuation + GGX highlight", replaces={**_BEER, **_GGX})
+_seed_variant("water_refraction_binary", ("BINARY_REFINE",), {"refine": "binary"},
+              "seed + REFINE_STEPS binary-search steps after the linear search (relief mapping)",
+              schedule=_REFINE)
+_seed_variant("water_refraction_secant", ("SECANT_REFINE",), {"refine": "secant"},
+              "seed + REFINE_STEPS secant steps after the linear search (parallax occlusion mapping)",
+              schedule=_REFINE)
+_seed_variant("water_refraction_2layers", ("TWO_NORMAL_LAYERS",), {"normal_layers": 2},
+              "seed with two normal-map layers instead of four")
+_seed_variant("water_refraction_1layer", ("ONE_NORMAL_LAYER",), {"normal_layers": 1},
+              "seed with one normal-map layer instead of four")
+_seed_variant("water_refraction_nospecular", ("NO_SPECULAR",), {"specular": "none"},
+              "seed without the specular highlight", replaces=_NOSPEC)
+_seed_variant("water_refraction_game_textures", (), {},
+              "seed with 8-bit sRGB colour, 8-bit normal map and Fresnel LUT, half-float depth and sky",
+              textures="game")
+register(Variant("water_reflection_beer_ggx", "water_reflection", defines=("BEER_ATTENUATION", "GGX_SPECULAR"),
+                 port_options={"attenuation": "beer", "specular": "ggx"},
+                 schedule=_RAYCAST + ("refl_steps_steep", "refl_steps_grazing", "refl_loop_cap"),
+                 description="seed 000 section 3 + Beer-Lambert attenuation + GGX highlight",
+                 replaces={**_BEER, **_GGX}))
+register(Variant("water_reflection_beer", "water_reflection", defines=("BEER_ATTENUATION",),
+                 port_options={"attenuation": "beer"},
+                 schedule=_RAYCAST + ("refl_steps_steep", "refl_steps_grazing", "refl_loop_cap"),
+                 description="seed 000 section 3 + Beer-Lambert attenuation", replaces=_BEER))

@@ -26,9 +26,9 @@ from ._texture import backend_types, mix, texmat_xy
 from . import _frame
 from ._frame import (ShaderOutput, evaluated_loops_if, finish_output, jacobian_passes, nonfinite_any,
                      resolve_constants, tangents)
-from .water_refraction import (cubemap_reflection, fresnel_combine, loop_positions, loop_R, outside_unit_square,
-                               reflect, refraction_blocks, refraction_failure_diagnostics,
-                               specular_highlight)
+from .water_refraction import (Options, cubemap_reflection, fresnel_combine, loop_positions, loop_R,
+                               options_of, outside_unit_square, reflect, refraction_blocks,
+                               refraction_failure_diagnostics, specular_highlight)
 
 __all__ = ["render", "render_with_jacobian", "ShaderOutput"]
 
@@ -87,9 +87,9 @@ def reflection_exit(m, P, C, loop_position, noHit):
     return m.Float(dr.select(noHit, code, REFL_EXIT_HIT))
 
 
-def _shade(m, P, C, diagnose: bool = False):
+def _shade(m, P, C, diagnose: bool = False, opts: Options = Options()):
     # ---- [1]-[6]: as in water_refraction ----
-    f = refraction_blocks(m, P, C)
+    f = refraction_blocks(m, P, C, opts)
     vEye, vLight, vBumpTex, vBumpTexMore = f.vEye, f.vLight, f.vBumpTex, f.vBumpTexMore
     vRefraction, iterations, crossed, denominator = f.vRefraction, f.iterations, f.crossed, f.denominator
     refraction_R, refracted_position = f.R, f.current_position
@@ -119,9 +119,9 @@ def _shade(m, P, C, diagnose: bool = False):
     vReflection_sky = cubemap_reflection(m, P, R) * C.reflectColor
     vReflection = dr.select(noHit, vReflection_sky, vReflection_hit)
 
-    vReflection = specular_highlight(m, P, vReflection, vBumpTex, vEye, vLight, C)
+    vReflection = specular_highlight(m, P, vReflection, vBumpTex, vEye, vLight, C, opts.specular)
     gl_FragColor = fresnel_combine(m, P, vReflection, vRefraction, vEye, vBumpTex)
-    fetches = 4 + 1 + iterations + 1 + 1 + refl_fetches + 1 + 1
+    fetches = opts.normal_layers + 1 + iterations + 1 + 1 + refl_fetches + 1 + 1
     bad = nonfinite_any(vEye, vLight, vBumpTex, vBumpTexMore, refraction_R, refracted_position, R,
                         dr.select(noHit, refracted_position, current_position))
     diagnostics = {"iterations": m.Float(iterations), "fetches": m.Float(fetches),
@@ -138,15 +138,17 @@ def _shade(m, P, C, diagnose: bool = False):
     return gl_FragColor, diagnostics
 
 
-def _frozen_shade(m, P, C, diagnose):
-    f = _frame.frozen(("water_reflection", diagnose) + _frame.python_config(C),
-                      lambda m, P, C: _shade(m, P, C, diagnose))
+def _frozen_shade(m, P, C, diagnose, opts):
+    f = _frame.frozen(("water_reflection", diagnose, opts) + _frame.python_config(C),
+                      lambda m, P, C: _shade(m, P, C, diagnose, opts))
     return f(m, P, C)
 
 
 def render(inputs: ShaderInputs, constants: Constants | None = None, *,
-           backend: str = "llvm", loop_ad: str = "replay", diagnose: bool = False) -> ShaderOutput:
-    """Render ``water_reflection``.
+           backend: str = "llvm", loop_ad: str = "replay", diagnose: bool = False,
+           **options) -> ShaderOutput:
+    """Render ``water_reflection`` (``**options``: the variant switches of blocks [2], [5], [6]
+    and [8], see ``water_refraction.Options``).
 
     Returns a :class:`ShaderOutput` as ``water_refraction.render`` does, with two more
     diagnostics: ``refl_iterations`` (reflection loop iterations) and ``refl_hit`` (1 where
@@ -158,30 +160,33 @@ def render(inputs: ShaderInputs, constants: Constants | None = None, *,
     (:func:`reflection_exit`) and ``refl_dir_x/y/z`` (the unit reflection direction after the
     clamp of ``R.y``, before the step scaling); extra outputs only, the colour is bit-identical.
     """
+    opts = options_of(options)
     m = backend_types(backend)
     P = prepare(inputs, m)
     C = resolve_constants(m, constants if constants is not None else Constants(), loop_ad)
     with evaluated_loops_if(C.differentiable and loop_ad == "evaluated"):
         if _frame.USE_FROZEN and not C.differentiable:
-            color, diag = _frozen_shade(m, P.shading_state(), C, diagnose)
+            color, diag = _frozen_shade(m, P.shading_state(), C, diagnose, opts)
         else:
-            color, diag = _shade(m, P, C, diagnose)
+            color, diag = _shade(m, P, C, diagnose, opts)
         return finish_output(m, P, color, diag, "water_reflection")
 
 
-def _frozen_tangents(m, P, C, params):
-    f = _frame.frozen(("water_reflection.tangents",) + _frame.python_config(C),
-                      lambda m, P, C, params: tangents(m, *_shade(m, P, C), params))
+def _frozen_tangents(m, P, C, params, opts):
+    f = _frame.frozen(("water_reflection.tangents", opts) + _frame.python_config(C),
+                      lambda m, P, C, params: tangents(m, *_shade(m, P, C, False, opts), params))
     return f(m, P, C, params)
 
 
 def render_with_jacobian(inputs: ShaderInputs, constants: Constants | None, names: list[str], *,
-                         backend: str = "llvm", loop_ad: str = "replay"):
+                         backend: str = "llvm", loop_ad: str = "replay", **options):
     """``(ShaderOutput, J)`` with ``J`` float32 (H, W, 3, len(names)): forward-mode derivatives
     of the linear-RGB colour w.r.t. the named scalars (see ``water_refraction``)."""
+    opts = options_of(options)
+
     def shade_tangents(m, P, C, params, frozen):
         if frozen:
-            return _frozen_tangents(m, P, C, params)
-        return tangents(m, *_shade(m, P, C), params)
+            return _frozen_tangents(m, P, C, params, opts)
+        return tangents(m, *_shade(m, P, C, False, opts), params)
     return jacobian_passes(shade_tangents, "water_reflection", inputs,
                            constants if constants is not None else Constants(), names, backend, loop_ad)

@@ -47,6 +47,7 @@ kernels as opaque float32 values, so traced and replayed renders are bit-identic
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import drjit as dr
 
@@ -57,7 +58,40 @@ from ._inputs import Constants, ShaderInputs
 from ._raster import prepare
 from ._texture import backend_types, clamp, gl_pow, mix, texmat_xy
 
-__all__ = ["render", "render_with_jacobian", "ShaderOutput"]
+__all__ = ["render", "render_with_jacobian", "ShaderOutput", "Options"]
+
+
+class Options(NamedTuple):
+    """The port's side of the GLSL variant switches (``shaders_port._variants``); the defaults
+    are the seed's code path.
+
+    normal_layers: 4 (seed), 2 (``TWO_NORMAL_LAYERS``) or 1 (``ONE_NORMAL_LAYER``).
+    refine: None (seed), 'binary' (``BINARY_REFINE``) or 'secant' (``SECANT_REFINE``): that
+        many (``REFINE_STEPS``) bracket refinements after the linear search.
+    attenuation: 'linear' (seed: clamped mix over ``ATTENUATION_DISTANCE``) or 'beer'
+        (``BEER_ATTENUATION``: ``exp(-ABSORPTION_RGB * travelLength)`` towards ``waterColor``).
+    specular: 'phong' (seed), 'ggx' (``GGX_SPECULAR``) or 'none' (``NO_SPECULAR``).
+    """
+
+    normal_layers: int = 4
+    refine: str | None = None
+    attenuation: str = "linear"
+    specular: str = "phong"
+
+    def checked(self) -> "Options":
+        for name, allowed in (("normal_layers", (1, 2, 4)), ("refine", (None, "binary", "secant")),
+                              ("attenuation", ("linear", "beer")), ("specular", ("phong", "ggx", "none"))):
+            if getattr(self, name) not in allowed:
+                raise ValueError(f"shader option {name}={getattr(self, name)!r}; allowed: {allowed}")
+        return self
+
+
+def options_of(kw: dict) -> Options:
+    """``Options`` from a port's keyword options (``normal_layers=``, ``refine=``, ...)."""
+    unknown = set(kw) - set(Options._fields)
+    if unknown:
+        raise TypeError(f"unknown shader option(s) {sorted(unknown)}; known: {list(Options._fields)}")
+    return Options(**kw).checked()
 
 
 # ---- blocks shared with water_reflection -----------------------------------------------
@@ -69,13 +103,21 @@ def eye_and_light(m, P):
     return vEye, vLight
 
 
-def normal_map_block(m, P, BumptexMult):
+def normal_map_block(m, P, BumptexMult, layers: int = 4):
     # ---- [2] Normal map: average four layers, bump scaling ----
-    vBumpTexA = m.Array3f(P.normalMap.sample(m, P.texcoord[0][0], P.texcoord[0][1]))
-    vBumpTexB = m.Array3f(P.normalMap.sample(m, P.texcoord[1][0], P.texcoord[1][1]))
-    vBumpTexC = m.Array3f(P.normalMap.sample(m, P.texcoord[2][0], P.texcoord[2][1]))
-    vBumpTexD = m.Array3f(P.normalMap.sample(m, P.texcoord[3][0], P.texcoord[3][1]))
-    vBumpTex = dr.normalize(2.0 * (vBumpTexA + vBumpTexB + vBumpTexC + vBumpTexD) - 4.0)
+    if layers == 1:    # ONE_NORMAL_LAYER
+        vBumpTexA = m.Array3f(P.normalMap.sample(m, P.texcoord[0][0], P.texcoord[0][1]))
+        vBumpTex = dr.normalize(2.0 * vBumpTexA - 1.0)
+    elif layers == 2:  # TWO_NORMAL_LAYERS
+        vBumpTexA = m.Array3f(P.normalMap.sample(m, P.texcoord[0][0], P.texcoord[0][1]))
+        vBumpTexB = m.Array3f(P.normalMap.sample(m, P.texcoord[1][0], P.texcoord[1][1]))
+        vBumpTex = dr.normalize(2.0 * (vBumpTexA + vBumpTexB) - 2.0)
+    else:
+        vBumpTexA = m.Array3f(P.normalMap.sample(m, P.texcoord[0][0], P.texcoord[0][1]))
+        vBumpTexB = m.Array3f(P.normalMap.sample(m, P.texcoord[1][0], P.texcoord[1][1]))
+        vBumpTexC = m.Array3f(P.normalMap.sample(m, P.texcoord[2][0], P.texcoord[2][1]))
+        vBumpTexD = m.Array3f(P.normalMap.sample(m, P.texcoord[3][0], P.texcoord[3][1]))
+        vBumpTex = dr.normalize(2.0 * (vBumpTexA + vBumpTexB + vBumpTexC + vBumpTexD) - 4.0)
     vBumpTexMore = dr.normalize(vBumpTex * m.Array3f(1.0, BumptexMult, 1.0))
     return vBumpTex, vBumpTexMore
 
@@ -143,6 +185,28 @@ def loop_R(C, R):
     return dr.detach(R) if C.loop_ad == "replay" else R
 
 
+def refine_crossing(m, P, current_position, current_position_old, depth, olddepth, C, refine):
+    """Variants ``BINARY_REFINE`` (``refine='binary'``, relief mapping) and ``SECANT_REFINE``
+    (``'secant'``, parallax occlusion mapping): shrink the bracket ``REFINE_STEPS`` times at its
+    middle or at its secant crossing (one depth fetch each). Unrolled (``REFINE_STEPS`` is a
+    compile-time integer), so derivatives flow through the secant fractions directly."""
+    for j in range(C.refine_steps):
+        if refine == "binary":
+            middle_position = 0.5 * (current_position_old + current_position)
+        else:
+            middle_position = mix(current_position_old, current_position,
+                                  (current_position_old.y - olddepth)
+                                  / (current_position_old.y - current_position.y + depth - olddepth))
+        s, t = texmat_xy(P.tex_matrix0, middle_position)
+        middle_depth = m.Float(P.worldYComponent.sample(m, s, t)[0])
+        below = middle_depth > middle_position.y
+        current_position = dr.select(below, middle_position, current_position)
+        depth = dr.select(below, middle_depth, depth)
+        current_position_old = dr.select(below, current_position_old, middle_position)
+        olddepth = dr.select(below, olddepth, middle_depth)
+    return current_position, current_position_old, depth, olddepth
+
+
 def interpolate_crossing(m, P, current_position, current_position_old, depth, olddepth):
     # ---- [5] Interpolate the crossing ----
     cpoy = current_position_old.y
@@ -154,11 +218,15 @@ def interpolate_crossing(m, P, current_position, current_position_old, depth, ol
     return current_position, vRefraction, denominator
 
 
-def attenuation(m, P, current_position, vRefraction, C):
+def attenuation(m, P, current_position, vRefraction, C, model: str = "linear"):
     # ---- [6] Attenuation ----
     travelLength = dr.norm(current_position - P.varyingVecWorldPosition)
-    travelLength = clamp(travelLength / C.attenuation_distance, 0.0, 1.0)
-    vRefraction = mix(vRefraction, C.waterColor, travelLength)
+    if model == "beer":  # BEER_ATTENUATION
+        transmittance = dr.exp(-m.Array3f(C.absorption_r, C.absorption_g, C.absorption_b) * travelLength)
+        vRefraction = mix(C.waterColor, vRefraction, m.Array4f(*transmittance, 1.0))
+    else:
+        travelLength = clamp(travelLength / C.attenuation_distance, 0.0, 1.0)
+        vRefraction = mix(vRefraction, C.waterColor, travelLength)
     return vRefraction
 
 
@@ -168,8 +236,24 @@ def cubemap_reflection(m, P, R):
     return m.Array4f(*P.reflectionTexture.sample(m, d.x, d.y, d.z), 1.0)
 
 
-def specular_highlight(m, P, vReflection, vBumpTex, vEye, vLight, C):
+def specular_highlight(m, P, vReflection, vBumpTex, vEye, vLight, C, lobe: str = "phong"):
     # ---- [8] Specular highlight ----
+    if lobe == "none":   # NO_SPECULAR
+        return vReflection
+    if lobe == "ggx":    # GGX_SPECULAR
+        vHalf = dr.normalize(vLight + vEye)
+        NdotH = clamp(dr.dot(vBumpTex, vHalf), 0.0, 1.0)
+        NdotL = clamp(dr.dot(vBumpTex, vLight), 0.0, 1.0)
+        NdotE = clamp(dr.dot(vBumpTex, vEye), 0.0, 1.0)
+        alpha2 = C.specular_roughness * C.specular_roughness
+        ggxDenominator = NdotH * NdotH * (alpha2 - 1.0) + 1.0
+        ggxD = alpha2 / (3.14159265 * ggxDenominator * ggxDenominator)
+        smithVis = 1.0 / ((NdotL + dr.sqrt(alpha2 + (1.0 - alpha2) * NdotL * NdotL))
+                          * (NdotE + dr.sqrt(alpha2 + (1.0 - alpha2) * NdotE * NdotE)))
+        spec = ggxD * smithVis * NdotL
+        specular = m.Array4f(spec * P.lightcolor[0], spec * P.lightcolor[1], spec * P.lightcolor[2], 1.0)
+        vReflection += specular * C.specular_strength
+        return vReflection
     rLight = dr.dot(2.0 * vBumpTex, vLight) * vBumpTex - vLight
     spec = gl_pow(clamp(dr.dot(rLight, vEye), 0.0, 1.0), C.specular_exponent)
     specular = m.Array4f(spec * P.lightcolor[0], spec * P.lightcolor[1], spec * P.lightcolor[2], 1.0)
@@ -246,38 +330,42 @@ class Refracted:
     olddepth: object = None
 
 
-def refraction_blocks(m, P, C) -> Refracted:
+def refraction_blocks(m, P, C, opts: Options = Options()) -> Refracted:
     """Blocks [1]-[6], shared by ``water_refraction`` and ``water_reflection`` (the seed's
     section 3: "very similar to the previous one")."""
     vEye, vLight = eye_and_light(m, P)
-    vBumpTex, vBumpTexMore = normal_map_block(m, P, C.bumptex_mult)
+    vBumpTex, vBumpTexMore = normal_map_block(m, P, C.bumptex_mult, opts.normal_layers)
     R = refraction_vector(m, vEye, vBumpTexMore, C)
     current_position, current_position_old, depth, olddepth, iterations, crossed = \
         raycast_ground(m, P, loop_R(C, R), C.loop_cap)
     current_position, current_position_old = loop_positions(
         m, C, R, current_position, current_position_old, iterations)
+    if opts.refine is not None:
+        current_position, current_position_old, depth, olddepth = refine_crossing(
+            m, P, current_position, current_position_old, depth, olddepth, C, opts.refine)
+        iterations = iterations + C.refine_steps
     loop_end = (current_position, current_position_old)   # kept for the diagnostics
     current_position, vRefraction, denominator = interpolate_crossing(
         m, P, current_position, current_position_old, depth, olddepth)
     loop_position, loop_position_old = loop_end
-    vRefraction = attenuation(m, P, current_position, vRefraction, C)
+    vRefraction = attenuation(m, P, current_position, vRefraction, C, opts.attenuation)
     return Refracted(vEye, vLight, vBumpTex, vBumpTexMore, R, current_position, vRefraction,
                      iterations, crossed, denominator, loop_position, loop_position_old, olddepth)
 
 
-def _shade(m, P, C, reflection: bool, diagnose: bool = False):
-    f = refraction_blocks(m, P, C)
+def _shade(m, P, C, reflection: bool, diagnose: bool = False, opts: Options = Options()):
+    f = refraction_blocks(m, P, C, opts)
     vEye, vLight, vBumpTex, vBumpTexMore = f.vEye, f.vLight, f.vBumpTex, f.vBumpTexMore
     R, current_position, vRefraction = f.R, f.current_position, f.vRefraction
     iterations, crossed, denominator = f.iterations, f.crossed, f.denominator
-    fetches = 4 + 1 + iterations + 1
+    fetches = opts.normal_layers + 1 + iterations + 1   # iterations include the refinement steps
     bad = nonfinite_any(vEye, vBumpTex, vBumpTexMore, R, current_position)
     if reflection:
         # ---- [7] Reflection ----
         R = dr.normalize(reflect(m, -vEye, vBumpTexMore))
         R.y = dr.maximum(R.y, 0.001)
         vReflection = cubemap_reflection(m, P, R) * C.reflectColor
-        vReflection = specular_highlight(m, P, vReflection, vBumpTex, vEye, vLight, C)
+        vReflection = specular_highlight(m, P, vReflection, vBumpTex, vEye, vLight, C, opts.specular)
         gl_FragColor = fresnel_combine(m, P, vReflection, vRefraction, vEye, vBumpTex)
         fetches = fetches + 2
         bad |= nonfinite_any(R, vLight)
@@ -291,15 +379,17 @@ def _shade(m, P, C, reflection: bool, diagnose: bool = False):
     return gl_FragColor, diagnostics
 
 
-def _frozen_shade(m, P, C, reflection, diagnose):
-    f = _frame.frozen(("water_refraction", reflection, diagnose) + _frame.python_config(C),
-                      lambda m, P, C: _shade(m, P, C, reflection, diagnose))
+def _frozen_shade(m, P, C, reflection, diagnose, opts):
+    f = _frame.frozen(("water_refraction", reflection, diagnose, opts) + _frame.python_config(C),
+                      lambda m, P, C: _shade(m, P, C, reflection, diagnose, opts))
     return f(m, P, C)
 
 
 def render(inputs: ShaderInputs, constants: Constants | None = None, *, reflection: bool = True,
-           backend: str = "llvm", loop_ad: str = "replay", diagnose: bool = False) -> ShaderOutput:
-    """Render ``water_refraction`` (``reflection=False``: the ``NOREFLECTION`` variant).
+           backend: str = "llvm", loop_ad: str = "replay", diagnose: bool = False,
+           **options) -> ShaderOutput:
+    """Render ``water_refraction`` (``reflection=False``: the ``NOREFLECTION`` variant;
+    ``**options``: the other variant switches, see :class:`Options`).
 
     Returns a :class:`ShaderOutput`: ``color`` TensorXf (H, W, 3) linear RGB, 0 off the
     water; ``mask`` TensorXf (H, W); ``diagnostics`` TensorXf (H, W) each: ``iterations``
@@ -312,25 +402,27 @@ def render(inputs: ShaderInputs, constants: Constants | None = None, *, reflecti
     ``diagnose=True`` adds the failure diagnostics of :func:`refraction_failure_diagnostics`
     (extra outputs only: the colour is bit-identical).
     """
+    opts = options_of(options)
     m = backend_types(backend)
     P = prepare(inputs, m)
     C = resolve_constants(m, constants if constants is not None else Constants(), loop_ad)
     with evaluated_loops_if(C.differentiable and loop_ad == "evaluated"):
         if _frame.USE_FROZEN and not C.differentiable:
-            color, diag = _frozen_shade(m, P.shading_state(), C, reflection, diagnose)
+            color, diag = _frozen_shade(m, P.shading_state(), C, reflection, diagnose, opts)
         else:
-            color, diag = _shade(m, P, C, reflection, diagnose)
+            color, diag = _shade(m, P, C, reflection, diagnose, opts)
         return finish_output(m, P, color, diag, "water_refraction")
 
 
-def _frozen_tangents(m, P, C, params, reflection):
-    f = _frame.frozen(("water_refraction.tangents", reflection) + _frame.python_config(C),
-                      lambda m, P, C, params: tangents(m, *_shade(m, P, C, reflection), params))
+def _frozen_tangents(m, P, C, params, reflection, opts):
+    f = _frame.frozen(("water_refraction.tangents", reflection, opts) + _frame.python_config(C),
+                      lambda m, P, C, params: tangents(m, *_shade(m, P, C, reflection, False, opts), params))
     return f(m, P, C, params)
 
 
 def render_with_jacobian(inputs: ShaderInputs, constants: Constants | None, names: list[str], *,
-                         reflection: bool = True, backend: str = "llvm", loop_ad: str = "replay"):
+                         reflection: bool = True, backend: str = "llvm", loop_ad: str = "replay",
+                         **options):
     """Render and return ``(ShaderOutput, J)``, ``J`` float32 (H, W, 3, len(names)).
 
     ``J[..., j]`` is the forward-mode derivative of the linear-RGB colour with respect to
@@ -339,9 +431,11 @@ def render_with_jacobian(inputs: ShaderInputs, constants: Constants | None, name
     pixels. ``loop_ad``: 'replay' (default; symbolic loops, loop positions differentiated as
     ``start + i R``) or 'evaluated' (AD through the unrolled loop in evaluated mode).
     """
+    opts = options_of(options)
+
     def shade_tangents(m, P, C, params, frozen):
         if frozen:
-            return _frozen_tangents(m, P, C, params, reflection)
-        return tangents(m, *_shade(m, P, C, reflection), params)
+            return _frozen_tangents(m, P, C, params, reflection, opts)
+        return tangents(m, *_shade(m, P, C, reflection, False, opts), params)
     return jacobian_passes(shade_tangents, "water_refraction", inputs,
                            constants if constants is not None else Constants(), names, backend, loop_ad)

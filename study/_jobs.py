@@ -154,7 +154,7 @@ def run_calibrate(experiment, out, overrides=None, variant=None, solver=None, ca
     from .fit.calibrate import calibrate_model, scene_frozen, timed
     from .report.export import export_shaders
     from .report.calibration import comparison_figure, diagnostics_figure, loss_figure
-    from ._metrics import errors
+    from ._metrics import errors, information_criteria
     from .fit.model import ShaderModel, constants_from_experiment
     from .report.calibration import write_report
 
@@ -182,6 +182,9 @@ def run_calibrate(experiment, out, overrides=None, variant=None, solver=None, ca
         img0, _ = full.render(start)
         img1, diag1 = full.render(cal.fitted)
         e0, e1 = errors(ref.image, img0, full.mask), errors(ref.image, img1, full.mask)
+        fitted_names = [n for n, p in cal.parameters.items() if p["status"] in ("fitted", "bound")]
+        parsimony = {**information_criteria(model.residual(cal.fitted), len(fitted_names)),
+                     "fitted": fitted_names, "defines": list(model.variant.defines)}
     with timed(timings, "export_s"):
         _log("calibrate: exporting and compiling the shaders")
         export_shaders(cal.fitted, out / "shaders")
@@ -211,6 +214,8 @@ def run_calibrate(experiment, out, overrides=None, variant=None, solver=None, ca
         "step_sweep": cal.sweep, "timings": timings,
         "reference": {"spp": ref.spp, "noise": ref.noise, "path": str(ref.path), "key": ref.provenance["key"]},
         "diagnostics": diag1.summary(full.mask), "gl_check": gl, "sun": _sun(exp),
+        # constant count and information criteria at the fit resolution (study._metrics)
+        "parsimony": parsimony,
     }
     write_json(out / "constants.json", _jsonable(summary))
     write_report(out, _jsonable(summary), figs)

@@ -76,3 +76,27 @@ def flip(reference: np.ndarray, test: np.ndarray, mask: np.ndarray) -> float:
 
 def errors(reference: np.ndarray, test: np.ndarray, mask: np.ndarray) -> dict:
     return {"rmse": rmse(reference, test, mask), "flip": flip(reference, test, mask)}
+
+
+def information_criteria(residual: np.ndarray, k: int) -> dict:
+    """AIC and BIC of a least-squares fit with ``k`` fitted constants from its residual
+    (``residual``: (n,) port - reference over the scored water pixels and RGB channels).
+
+    With i.i.d. Gaussian errors of unknown variance the maximised log-likelihood is
+    ``-n/2 ln(RSS/n)`` up to a constant, so ``AIC = n ln(RSS/n) + 2k`` and
+    ``BIC = n ln(RSS/n) + k ln n``. Only differences between shaders fitted on the same
+    reference, mask and resolution mean anything (lower is better; a BIC difference above
+    10 is conventionally "very strong" evidence). Caveat: neighbouring residuals are
+    correlated (shader model error is spatially smooth), so the effective n is smaller than
+    the count of residuals and the penalty per constant is understated: a richer shader that
+    wins by a few units has not earned its constants.
+
+    Returns ``{"n": n, "k": k, "rss": RSS, "aic": AIC, "bic": BIC}``.
+    """
+    r = np.asarray(residual, dtype=np.float64).ravel()
+    n = r.size
+    if n <= k or not np.all(np.isfinite(r)):
+        raise ValueError(f"information criteria need a finite residual longer than k = {k} (got n = {n})")
+    rss = float(r @ r)
+    ll = n * np.log(max(rss, 1e-300) / n)
+    return {"n": int(n), "k": int(k), "rss": rss, "aic": float(ll + 2 * k), "bic": float(ll + k * np.log(n))}

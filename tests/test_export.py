@@ -15,6 +15,7 @@ from shaders_port._glsl import BEGIN_MARKER, END_MARKER, declared_constants
 from study.report.export import export_shaders, load_constants_json
 from study._jobs import run_export
 from study.report.gl_check import gl_check
+from shaders_port._variants import VARIANTS, get_variant
 
 # every constant away from its default; 0.1, 0.3, 0.7, 0.76 and the fitted-looking
 # attenuation are not exact in float32
@@ -22,9 +23,12 @@ EXPORTED = Constants(attenuation_distance=4.999999836762939, steps_grazing=8.0, 
                      loop_cap=50, refl_steps_steep=0.75, refl_steps_grazing=3.5, refl_loop_cap=48,
                      refl_height_cut=0.7, specular_strength=1.5, specular_exponent=128.0,
                      bumptex_mult=0.7, refr_coeff=0.76, water_color=(0.1, 0.3, 0.2, 1.0),
-                     reflect_color=(0.9, 0.95, 1.0, 1.0))
+                     reflect_color=(0.9, 0.95, 1.0, 1.0), absorption_r=0.3, absorption_g=0.07,
+                     absorption_b=0.05, specular_roughness=0.15, refine_steps=2)
+# the shader files, then one file per variant compiled with preprocessor names
 FILES = [(d, n, s) for d in ("compat", "core")
          for n, s in (("water", "vert"), ("water_refraction", "frag"), ("water_reflection", "frag"))]
+VARIANT_FILES = [(d, v.name, "frag") for d in ("compat", "core") for v in VARIANTS.values() if v.name != v.shader]
 
 
 def _split_block(text: str) -> tuple[str, list[str], str]:
@@ -49,7 +53,7 @@ def exported(tmp_path_factory):
 
 def test_writes_both_dialects_and_they_compile(exported):
     out, paths = exported
-    assert sorted(paths) == sorted(out / d / f"{n}.{s}" for d, n, s in FILES)
+    assert sorted(paths) == sorted(out / d / f"{n}.{s}" for d, n, s in FILES + VARIANT_FILES)
     for p in paths:
         compile_check(p)   # raises RuntimeError with the compiler log
 
@@ -89,9 +93,32 @@ def test_vertex_shaders_copied_as_shipped(exported):
 
 def test_default_constants_reproduce_the_shipped_files(tmp_path):
     paths = export_shaders(Constants(), tmp_path / "shaders")
-    assert len(paths) == 6
+    assert len(paths) == len(FILES) + len(VARIANT_FILES)
     for d, n, s in FILES:
         assert (tmp_path / "shaders" / d / f"{n}.{s}").read_text(encoding="utf-8") == read_source(n, s, d)
+    for d, n, s in VARIANT_FILES:   # the shader file with the variant's #define lines
+        v = get_variant(n)
+        text = (tmp_path / "shaders" / d / f"{n}.{s}").read_text(encoding="utf-8")
+        assert text == v.source(d)
+        assert text.split("\n")[1:1 + len(v.defines)] == [f"#define {x}" for x in reversed(v.defines)]
+
+
+@pytest.mark.parametrize("name", ["water_refraction_beer_ggx", "water_refraction_secant"])
+def test_exported_variant_file_runs_like_the_variant(exported, name):
+    """``gl_check`` runs ``core/<variant>.frag`` exactly as exported: its #define lines select the
+    variant; with them removed the same file no longer matches the variant's port."""
+    out, _ = exported
+    inputs = synthetic_inputs(width=48, height=36)
+    res = gl_check(name, inputs, EXPORTED, out)
+    assert res["passed"] and res["n_water"] > 500, res
+    bare = out.parent / "bare"
+    (bare / "core").mkdir(parents=True, exist_ok=True)
+    text = (out / "core" / f"{name}.frag").read_text()
+    for d in get_variant(name).defines:
+        text = text.replace(f"#define {d}\n", "")
+    (bare / "core" / f"{name}.frag").write_text(text)
+    res = gl_check(name, inputs, EXPORTED, bare)
+    assert not res["passed"] and res["mean_abs"] > 1e-3, res
 
 
 # ---- the exported shader on llvmpipe against the port -------------------------------------
@@ -218,7 +245,7 @@ def test_failed_export_keeps_existing_export(tmp_path, monkeypatch):
     out = tmp_path / "out"
     run_export(good, out)
     before = _snapshot(out)
-    assert len(before) == 6
+    assert len(before) == len(FILES) + len(VARIANT_FILES)
     # refused at load
     with pytest.raises(ValueError):
         run_export(_write(tmp_path, '{"attenuation_distance": NaN}', "bad.json"), out)

@@ -62,7 +62,7 @@ def test_schedules_hold_the_seed_halvings_and_the_grid():
     grid = [x for x in s if x["kind"] == "grid"]
     assert len(s) == len({json.dumps(x["schedule"], sort_keys=True) for x in s})    # distinct
     # the grid's points that equal a scaled schedule are kept once, as the scaled one
-    assert len(grid) == 3 * 3 * 2 - 2
+    assert len(grid) == 2 * 2 * 2 - 1
     conv = [x for x in s if x["kind"] == "converged"]
     assert conv[0]["schedule"]["loop_cap"] == 640
     r = schedules(exp, "water_reflection")
@@ -119,7 +119,8 @@ def test_tradeoff_cli_tiny(tmp_path):
     assert main(args) == 0
     rows = read_table(tmp_path / "tradeoff.parquet")
     assert len(rows) == 4 and all(r["status"] == "ok" for r in rows), [r.get("error") for r in rows]
-    assert all(r["fetches_mean"] > 0 and 0 < r["flip"] < 1 and r["gl_ms_512"] > 0 for r in rows)
+    assert all(r["fetches_mean"] > 0 and 0 < r["flip"] < 1 for r in rows)
+    assert all(r["gl_ms_512"] > 0 and r["gl_ratio_1080p"] > 0 for r in rows if r["job.kind"] != "converged")
     summary = json.loads((tmp_path / "summary.json").read_text())
     rec = summary["scenes"]["default"]["recommended"]
     assert rec["label"] in {r["label"] for r in summary["scenes"]["default"]["front"]}

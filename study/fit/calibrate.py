@@ -116,15 +116,18 @@ def scene_frozen(exp) -> dict:
     from ..scene.mitsuba_scene import has_medium
     if has_medium(exp):
         return {}
-    return {"attenuation_distance": "the scene's water does not absorb (water.sigma_t = 0), so it "
-                                    "cannot identify an attenuation distance; kept at the start value"}
+    why = ("the scene's water does not absorb (water.sigma_t = 0), so it cannot identify an "
+           "attenuation distance; kept at the start value")
+    return {n: why for n in ("attenuation_distance", "absorption_r", "absorption_g", "absorption_b")}
 
 
 def calibrate_model(model: ShaderModel, start: Constants, requested: list[str], solver: str,
                     max_steps: int, frozen_by_scene: dict | None = None) -> Calibration:
     """Steps 2-5 of the module docstring on a prepared model. ``frozen_by_scene``: name ->
-    reason for constants frozen before looking at the Jacobian (:func:`scene_frozen`)."""
-    names = expand_parameters(requested)
+    reason for constants frozen before looking at the Jacobian (:func:`scene_frozen`).
+    ``requested`` names the seed's constants; a variant fits its own in their place
+    (``Variant.fit_names``, e.g. the Beer-Lambert absorptions for ``attenuation_distance``)."""
+    names = expand_parameters(model.variant.fit_names(requested))
     pre = {n: why for n, why in (frozen_by_scene or {}).items() if n in names}
     continuous = [n for n in names if n not in DISCRETE and n not in pre]
     discrete = [n for n in names if n in DISCRETE]

@@ -5,6 +5,12 @@ Only the tunable-constants block of each fragment shader changes
 shader is compiled with ``glslangValidator`` before anything reaches the output folder, and
 the new folder is written beside the old one and swapped in by two renames, so a failed
 export leaves no half-written shaders and the previous export in place.
+
+Every variant named otherwise than its shader file (e.g. ``water_refraction_beer``, compiled
+with ``#define BEER_ATTENUATION``) also gets a file of its own name, ``<variant>.frag``: the
+shader file with the constants and the variant's ``#define`` lines right after ``#version``, so
+that file alone reproduces the variant (``study.report.gl_check`` runs exactly it; a variant
+with ``textures = 'game'`` needs the application to upload its textures at that precision).
 """
 from __future__ import annotations
 
@@ -58,6 +64,9 @@ def export_shaders(constants: Constants, out_dir) -> list[Path]:
         texts[(dialect, "water.vert")] = read_source("water", "vert", dialect)
         for name in FRAGMENT_SHADERS:
             texts[(dialect, f"{name}.frag")] = write_constants(read_source(name, "frag", dialect), constants)
+        for v in VARIANTS.values():
+            if v.name != v.shader:
+                texts[(dialect, f"{v.name}.frag")] = v.source(dialect, text=texts[(dialect, f"{v.shader}.frag")])
     for (dialect, fname), text in texts.items():
         compile_check(text, fname.rsplit(".", 1)[1])
     out_dir = Path(out_dir)

@@ -8,15 +8,17 @@ import numpy as np
 
 
 def gl_check(shader: str, inputs, constants, shaders_dir: Path) -> dict:
-    """Run the exported core shader of variant ``shader`` (its own constants block, the variant's
-    defines added) on llvmpipe and compare it with the port with ``constants`` on the water
-    pixels. Returns the figures of ``compare_port_gl`` and ``passed``."""
+    """Run the exported core file of variant ``shader``, ``core/<shader>.frag``, exactly as
+    written (its own constants block and ``#define`` lines, nothing added) on llvmpipe and
+    compare it with the port of the variant with ``constants`` on the water pixels. Returns the
+    figures of ``compare_port_gl`` and ``passed``."""
     from shaders_port._compare import compare_port_gl
+    from shaders_port._gl import GLRenderer
     from shaders_port._variants import get_variant
 
     variant = get_variant(shader)
-    source = (shaders_dir / "core" / f"{variant.shader}.frag").read_text()
-    with variant.gl_renderer(inputs, source=source) as r:
+    source = (shaders_dir / "core" / f"{variant.name}.frag").read_text()
+    with GLRenderer(variant.shader, variant.prepare_inputs(inputs), source=source) as r:
         res = compare_port_gl(inputs, constants, shader, renderer=_OwnBlock(r))
     out = {k: res[k] for k in ("mean_abs", "p999", "max_abs", "n_water", "n_outliers", "n_nonfinite",
                                "unexplained")}

@@ -41,7 +41,10 @@ FLOOR_SHAPES = ("flat", "slope", "steps", "terrain", "heightmap")
 SHADERS = tuple(VARIANTS)
 SOLVERS = ("levenberg_marquardt", "gauss_newton", "dogleg", "bfgs", "nelder_mead", "adam")
 FIT_PARAMETERS = ("attenuation_distance", "bumptex_mult", "steps_grazing", "steps_steep",
-                  "water_color", "reflect_color", "specular_strength", "specular_exponent")
+                  "water_color", "reflect_color", "specular_strength", "specular_exponent",
+                  # read by shader variants only (a variant fits them in place of the seed's
+                  # constants it replaces, see shaders_port._variants.Variant.replaces)
+                  "absorption_r", "absorption_g", "absorption_b", "specular_roughness")
 
 SCHEMA: dict[str, Field] = {
     "name": Field("str", "unnamed", "Name of the experiment (used in reports)."),
@@ -174,9 +177,9 @@ SCHEMA: dict[str, Field] = {
     "tradeoff.variants": Field("list_str", ["water_refraction_noreflection", "water_refraction",
                                             "water_reflection"],
                                "Shader variants `study tradeoff` compares.", choices=SHADERS),
-    "tradeoff.steps_grazing": Field("list_float", [5.0, 10.0, 20.0], "`STEPS_GRAZING` values of the "
+    "tradeoff.steps_grazing": Field("list_float", [5.0, 20.0], "`STEPS_GRAZING` values of the "
                                     "schedule grid (full grid with the next two keys).", "steps", 0.5, 1000.0),
-    "tradeoff.steps_steep": Field("list_float", [1.5, 3.0, 6.0], "`STEPS_STEEP` values of the grid.",
+    "tradeoff.steps_steep": Field("list_float", [1.5, 6.0], "`STEPS_STEEP` values of the grid.",
                                   "steps", 0.5, 1000.0),
     "tradeoff.loop_cap": Field("list_float", [20, 40], "`LOOP_CAP` values of the grid (integers).",
                                "iterations", 1, 10000),
@@ -188,7 +191,7 @@ SCHEMA: dict[str, Field] = {
                                       "raymarch that measures each variant's error floor.", "", 1.0, 1000.0),
     "tradeoff.tolerance": Field("float", 0.02, "Recommend the cheapest configuration whose FLIP is "
                                 "within this fraction of the best FLIP.", "", 0.0, 10.0),
-    "tradeoff.gl_repeats": Field("int", 15, "Frames timed per GL measurement (median reported).",
+    "tradeoff.gl_repeats": Field("int", 5, "Frames timed per GL measurement (median reported).",
                                  "", 3, 1000),
 }
 for _name, (_glsl, _kind, _default, (_lo, _hi)) in CONSTANT_SPECS.items():

@@ -15,10 +15,10 @@ Per experiment and variant (``[tradeoff]`` table of the experiment, ``experiment
 Each point is measured by :func:`point_job` in a worker: FLIP and RMSE on the water pixels at the
 experiment's full resolution; texture fetches and loop iterations per water pixel (mean, p99)
 from the port's diagnostics; frame time of the fitted shader on llvmpipe at 512x512 and
-1920x1080 (draw + glFinish, median of ``gl_repeats`` frames) measured between two runs of a fixed
+1920x1080 (draw + glFinish, median of ``gl_repeats`` frames after one warm-up) measured between two runs of a fixed
 reference shader (the seed's ``water_refraction`` with its own constants) in the same job, so the
 ratio to it compares fairly on a loaded machine; and the port's frame time (Dr.Jit LLVM, 512x512,
-median of 5).
+median of 5). The converged raymarch gets no frame times (it is the error floor, not a candidate).
 """
 from __future__ import annotations
 
@@ -136,7 +136,8 @@ def point_job(job: dict) -> dict:
     if "crossed" in diag.maps:
         out["not_crossed"] = float(1.0 - diag.maps["crossed"][m].mean())
     out["nonfinite_pixels"] = int(diag.maps["nonfinite"][m].sum()) if "nonfinite" in diag.maps else 0
-    out.update(frame_times(job["variant"], inputs, cal.fitted, exp["tradeoff.gl_repeats"]))
+    if job["kind"] != "converged":      # the error floor is not a candidate: its frame time is moot
+        out.update(frame_times(job["variant"], inputs, cal.fitted, exp["tradeoff.gl_repeats"]))
     out["fitted"] = cal.fitted.to_dict()
     return out
 
@@ -155,7 +156,7 @@ def frame_times(variant_name: str, inputs, constants, repeats: int) -> dict:
         for block in ("ref", "variant", "ref"):
             v, c = (refv, Constants()) if block == "ref" else (variant, constants)
             with v.gl_renderer(frame) as r:
-                ms = 1e3 * statistics.median(r.time_frames(c, n=repeats, warmup=2))
+                ms = 1e3 * statistics.median(r.time_frames(c, n=repeats, warmup=1))
             if block == "ref":
                 ref_ms.append(ms)
             else:

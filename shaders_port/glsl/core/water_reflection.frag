@@ -30,6 +30,14 @@ const float REFL_HEIGHT_CUT = 0.8;
 //specular strength and Phong exponent
 const float SPECULAR_STRENGTH = 2.0;
 const float SPECULAR_EXPONENT = 256.0;
+//variant BEER_ATTENUATION: absorption coefficients per unit of travelLength (red, green, blue)
+const float ABSORPTION_R = 0.13333334;
+const float ABSORPTION_G = 0.13333334;
+const float ABSORPTION_B = 0.13333334;
+//variant GGX_SPECULAR: GGX roughness (alpha) of the specular lobe
+const float SPECULAR_ROUGHNESS = 0.2;
+//variants BINARY_REFINE / SECANT_REFINE: refinement steps after the linear search
+const int REFINE_STEPS = 3;
 //multiplier to enhance normal-perturbation. 0=max perturbation 1=normal perturbation
 uniform float BumptexMult = 1.0;
 //refractioncoefficient = c_air/c_water
@@ -75,6 +83,16 @@ void main (void)
     vec3 vLight = normalize(varyingVecLight);
 
     // ---- [2] Normal map: average four layers, bump scaling ----
+#if defined(ONE_NORMAL_LAYER)
+    //variant: one layer only, transform from [0,1] to [-1,1]
+    vec3 vBumpTexA = vec3(texture(normalMap, vTexCoord0.xy));
+    vec3 vBumpTex = normalize( 2.0 * vBumpTexA - 1.0);
+#elif defined(TWO_NORMAL_LAYERS)
+    //variant: average the first two layers, transform from [0,1] to [-1,1]
+    vec3 vBumpTexA = vec3(texture(normalMap, vTexCoord0.xy));
+    vec3 vBumpTexB = vec3(texture(normalMap, vTexCoord1.xy));
+    vec3 vBumpTex = normalize( 2.0 * (vBumpTexA+vBumpTexB) - 2.0);
+#else
     //Sample normalmap at different locations
     vec3 vBumpTexA = vec3(texture(normalMap, vTexCoord0.xy));
     vec3 vBumpTexB = vec3(texture(normalMap, vTexCoord1.xy));
@@ -84,6 +102,7 @@ void main (void)
     //Average Bump Layers, transform from [0,1] to [-1,1]
     vec3 vBumpTex = normalize( 2.0 *
         (vBumpTexA+vBumpTexB+vBumpTexC+vBumpTexD) - 4.0);
+#endif
 
     //Increase bumps: decrease y-component, then renormalize
     //This results in larger xz-components
@@ -135,6 +154,30 @@ void main (void)
     }
 
     // ---- [5] Interpolate the crossing ----
+#if defined(BINARY_REFINE) || defined(SECANT_REFINE)
+    //variants: shrink the bracket [current_position_old, current_position] REFINE_STEPS times,
+    //at its middle (relief mapping) or at its secant crossing (parallax occlusion mapping)
+    for (int j=0; j<REFINE_STEPS; j++)
+    {
+#if defined(BINARY_REFINE)
+        vec3 middle_position = 0.5*(current_position_old+current_position);
+#else
+        vec3 middle_position = mix(current_position_old,current_position,
+            (current_position_old.y-olddepth) / (current_position_old.y-current_position.y+depth-olddepth));
+#endif
+        float middle_depth = texture(worldYComponent, ( uTextureMatrix0*vec4(middle_position,1)).xy).r;
+        if (middle_depth> middle_position.y)
+        {
+            current_position=middle_position;
+            depth=middle_depth;
+        }
+        else
+        {
+            current_position_old=middle_position;
+            olddepth=middle_depth;
+        }
+    }
+#endif
     float cpoy=current_position_old.y;
     float cpy = current_position.y;
 
@@ -146,10 +189,16 @@ void main (void)
     // ---- [6] Attenuation ----
     //Calculate distance Ray traveled through water
     float travelLength = length(current_position-varyingVecWorldPosition);
+#ifdef BEER_ATTENUATION
+    //variant: Beer-Lambert transmittance per colour channel, towards waterColor
+    vec3 transmittance = exp(-vec3(ABSORPTION_R,ABSORPTION_G,ABSORPTION_B)*travelLength);
+    vRefraction=mix(waterColor, vRefraction, vec4(transmittance,1.0));
+#else
     //travelLength==7.5 => 1, travelLength=0 => 0
     travelLength = clamp( travelLength/ATTENUATION_DISTANCE, 0,1);
     //Calc new attenuated vRefraction
     vRefraction=mix(vRefraction, waterColor, travelLength);
+#endif
 
     // ---- [7] Reflection ----
 #ifndef NOREFLECTION
@@ -232,12 +281,27 @@ void main (void)
     // ---- [8] Specular highlight ----
     //Calculate specular reflection
 
+#if defined(GGX_SPECULAR)
+    //variant: GGX microfacet lobe with Smith masking (Fresnel: the combine below)
+    vec3 vHalf = normalize(vLight+vEye);
+    float NdotH = clamp(dot(vBumpTex, vHalf),0,1);
+    float NdotL = clamp(dot(vBumpTex, vLight),0,1);
+    float NdotE = clamp(dot(vBumpTex, vEye),0,1);
+    float alpha2 = SPECULAR_ROUGHNESS*SPECULAR_ROUGHNESS;
+    float ggxDenominator = NdotH*NdotH*(alpha2-1.0)+1.0;
+    float ggxD = alpha2 / (3.14159265*ggxDenominator*ggxDenominator);
+    float smithVis = 1.0 / ((NdotL+sqrt(alpha2+(1.0-alpha2)*NdotL*NdotL))
+                          * (NdotE+sqrt(alpha2+(1.0-alpha2)*NdotE*NdotE)));
+    vec4 specular = vec4(ggxD*smithVis*NdotL*lightcolor,1);
+    vReflection+=specular*SPECULAR_STRENGTH;
+#elif !defined(NO_SPECULAR)
     //Calculate specular Reflection vector
     vec3 rLight = dot(2*vBumpTex,vLight)*vBumpTex-vLight;
     //evaluate phong specular reflection model, modulate with lightcolor
     vec4 specular = vec4(pow(clamp(dot(rLight, vEye),0,1),SPECULAR_EXPONENT)*lightcolor,1);
     //multiply with specular strength (2)
     vReflection+=specular*SPECULAR_STRENGTH;
+#endif
 
     // ---- [9] Fresnel combine ----
     //Fresnel
