@@ -24,6 +24,12 @@ IOR_WATER = 1.333
 OPTIONAL_INPUTS = ("scene_color", "scene_depth", "reflection_color", "reflection_view_proj")
 
 
+def _clip(v, limit: int = 80) -> str:
+    """``repr(v)`` cut to a readable length for an error message."""
+    r = repr(v)
+    return r if len(r) <= limit else f"{r[:limit]}... ({len(r) - limit} more characters)"
+
+
 @dataclass
 class ShaderInputs:
     """Everything the application hands the water shaders, for one frame.
@@ -236,26 +242,32 @@ class Constants:
             v = getattr(self, name)
             vals = v if isinstance(v, (tuple, list)) else (v,)
             if not kind.endswith("vec4") and isinstance(v, (tuple, list)):
-                raise ValueError(f"constant {name} ({glsl}) = {v!r} must be a single number")
+                raise ValueError(f"constant {name} ({glsl}) = {_clip(v)} must be a single number")
             if kind.endswith("vec4") and len(vals) != 4:
                 raise ValueError(f"constant {name} ({glsl}) needs 4 components, got {len(vals)}")
             for x in vals:
                 if type(x).__module__.startswith("drjit"):
                     continue  # a Dr.Jit array being differentiated (checked by the port)
                 if not isinstance(x, (int, float, np.floating, np.integer)):
-                    raise ValueError(f"constant {name} ({glsl}) = {x!r} is not a number")
-                if isinstance(x, bool) or not math.isfinite(float(x)):
-                    raise ValueError(f"constant {name} ({glsl}) = {x!r} is not a finite number")
+                    raise ValueError(f"constant {name} ({glsl}) = {_clip(x)} is not a number")
+                try:
+                    finite = not isinstance(x, bool) and math.isfinite(float(x))
+                except OverflowError:            # an integer too large for a float
+                    finite = False
+                if not finite:
+                    raise ValueError(f"constant {name} ({glsl}) = {_clip(x)} is not a finite number")
                 if kind.endswith("int") and float(x) != int(x):
-                    raise ValueError(f"constant {name} ({glsl}) = {x!r} must be an integer")
+                    raise ValueError(f"constant {name} ({glsl}) = {_clip(x)} must be an integer")
                 if not lo <= float(x) <= hi:
-                    raise ValueError(f"constant {name} ({glsl}) = {x!r} is outside [{lo}, {hi}]")
+                    raise ValueError(f"constant {name} ({glsl}) = {_clip(x)} is outside [{lo}, {hi}]")
         return self
 
     def replace(self, **changes) -> "Constants":
         unknown = set(changes) - set(CONSTANT_SPECS)
         if unknown:
-            raise ValueError(f"unknown constant(s) {sorted(unknown)}; known: {sorted(CONSTANT_SPECS)}")
+            names = ", ".join(_clip(u) for u in sorted(map(str, unknown))[:5])
+            more = f" and {len(unknown) - 5} more" if len(unknown) > 5 else ""
+            raise ValueError(f"unknown constant(s) {names}{more}; known: {sorted(CONSTANT_SPECS)}")
         return dataclasses.replace(self, **changes)
 
     def to_dict(self) -> dict:
@@ -270,7 +282,9 @@ class Constants:
     def from_dict(cls, d: dict) -> "Constants":
         unknown = set(d) - set(CONSTANT_SPECS)
         if unknown:
-            raise ValueError(f"unknown constant(s) {sorted(unknown)}; known: {sorted(CONSTANT_SPECS)}")
+            names = ", ".join(_clip(u) for u in sorted(map(str, unknown))[:5])
+            more = f" and {len(unknown) - 5} more" if len(unknown) > 5 else ""
+            raise ValueError(f"unknown constant(s) {names}{more}; known: {sorted(CONSTANT_SPECS)}")
         kw = {k: tuple(v) if isinstance(v, list) else v for k, v in d.items()}
         return cls(**kw).validate()
 

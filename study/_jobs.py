@@ -14,20 +14,19 @@ from ._io import write_exr, write_json, write_png
 from .report.gl_check import gl_check
 
 
-def _progress(label: str):
-    def report(done: int, total: int) -> None:
-        print(f"\r{label}: {done}/{total}", end="" if done < total else "\n", file=sys.stderr, flush=True)
-    return report
-
-
 def _log(msg: str) -> None:
     print(msg, file=sys.stderr, flush=True)
 
 
 def prepare(experiment, out, overrides=None, variant=None):
-    """Load the experiment, initialise the backend, create the output folder."""
+    """Load the experiment (its files validated), initialise the backend, check what needs it
+    (the mesh), create the output folder."""
+    from .scene.user_scene import check_scene
+    from .scene.view import check_water_in_view
     exp = load_experiment(experiment, overrides)
+    check_water_in_view(exp)
     variant = init_backend(variant or exp["variant"])
+    check_scene(exp)
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     return exp, variant, out
@@ -35,8 +34,11 @@ def prepare(experiment, out, overrides=None, variant=None):
 
 def run_render(experiment, out, overrides=None, variant=None, cache=None) -> dict:
     """``study render``: reference.exr (+ PNG), shader inputs (.npz and EXRs), summary.json."""
+    t0 = time.perf_counter()
     exp, variant, out = prepare(experiment, out, overrides, variant)
+    setup_s = time.perf_counter() - t0
     ref, inputs, timings = load_scene_data(exp, variant, cache)
+    timings = {"setup_s": setup_s, **timings}
     write_exr(out / "reference.exr", ref.image, ref.provenance)
     write_png(out / "reference.png", ref.image)
     save_shader_inputs(inputs, out / "inputs")
@@ -70,14 +72,18 @@ def load_scene_data(exp, variant, cache=None):
     from .scene.reference import load_or_render
     from .scene.shader_inputs import load_or_build_shader_inputs
 
-    t0 = time.perf_counter()
-    ref = load_or_render(exp, variant, cache=cache, progress=_progress("reference passes"), log=_log)
-    t1 = time.perf_counter()
-    inputs = load_or_build_shader_inputs(exp, variant, cache=cache, log=_log)
+    from ._progress import Stages
     from .scene.baseline_inputs import inputs_for_shader   # e.g. the baseline's screen buffers
-    inputs = inputs_for_shader(exp, inputs, exp["fit.shader"], variant, cache=cache, log=_log)
-    t2 = time.perf_counter()
-    return ref, inputs, {"reference_s": t1 - t0, "inputs_s": t2 - t1}
+
+    st = Stages(log=_log)
+    spp = exp["reference.spp"]
+    with st.stage("reference_s", f"reference: {exp['resolution'][0]}x{exp['resolution'][1]}, "
+                  + ("automatic spp (pilot, then final passes)" if spp == "auto" else f"{spp} spp")):
+        ref = load_or_render(exp, variant, cache=cache, progress=st.counter("  reference passes"), log=_log)
+    with st.stage("inputs_s", "shader inputs"):
+        inputs = load_or_build_shader_inputs(exp, variant, cache=cache, log=_log, progress=st)
+        inputs = inputs_for_shader(exp, inputs, exp["fit.shader"], variant, cache=cache, log=_log)
+    return ref, inputs, st.timings
 
 
 def run_preview(experiment, out, overrides=None, variant=None, cache=None) -> dict:
@@ -88,16 +94,22 @@ def run_preview(experiment, out, overrides=None, variant=None, cache=None) -> di
     from ._metrics import errors
     from .fit.model import ShaderModel, constants_from_experiment
 
+    t_start = time.perf_counter()
     exp, variant, out = prepare(experiment, out, overrides, variant)
+    setup_s = time.perf_counter() - t_start
     ref, inputs, timings = load_scene_data(exp, variant, cache)
+    timings = {"setup_s": setup_s, **timings}
     w, h = exp["resolution"]
+    t0 = time.perf_counter()
     model = ShaderModel.from_experiment(exp, inputs, ref.image, backend=drjit_backend(variant),
                                         resolution=(w, h))
     constants = constants_from_experiment(exp)
+    timings["model_s"] = time.perf_counter() - t0
     t0 = time.perf_counter()
     img, diag = model.render(constants)
     timings["port_s"] = time.perf_counter() - t0
     err = errors(ref.image, img, model.mask)
+    t0 = time.perf_counter()
     write_exr(out / "reference.exr", ref.image, ref.provenance)
     write_exr(out / "port.exr", img, {"shader": model.shader, "constants": constants.to_dict()})
     write_png(out / "reference.png", ref.image)
@@ -105,10 +117,12 @@ def run_preview(experiment, out, overrides=None, variant=None, cache=None) -> di
     comparison_figure(out / "preview.png", {"reference": ref.image, "port (start constants)": img},
                       {"port (start constants)": err}, model.mask, title=f"{exp['name']}: {model.shader}")
     diagnostics_figure(out / "diagnostics.png", diag.maps, model.mask, title="port diagnostics")
+    timings["figures_s"] = time.perf_counter() - t0
+    timings["total_s"] = time.perf_counter() - t_start
     summary = {"experiment": exp["name"], "shader": model.shader, "variant": variant,
                "constants": constants.to_dict(), "error": err, "water_pixels": int(model.mask.sum()),
                "reference": {"spp": ref.spp, "noise": ref.noise, "path": str(ref.path)},
-               "diagnostics": diag.summary(model.mask), "timings": timings}
+               "diagnostics": diag.summary(model.mask), "timings": timings, "sun": _sun(exp)}
     write_json(out / "preview.json", summary)
     _log(f"preview: RMSE {err['rmse']:.4f}, FLIP {err['flip']:.4f} on {summary['water_pixels']} water "
          f"pixels; wrote {out}")
@@ -158,9 +172,12 @@ def run_calibrate(experiment, out, overrides=None, variant=None, solver=None, ca
     from .fit.solvers import SOLVERS
     if solver is not None and solver not in SOLVERS:
         raise ValueError(f"unknown solver {solver!r}; choose one of {', '.join(SOLVERS)}")
+    t_start = time.perf_counter()
     exp, variant, out = prepare(experiment, out, overrides, variant)
+    setup_s = time.perf_counter() - t_start
     solver = solver or exp["fit.solver"]
     ref, inputs, timings = load_scene_data(exp, variant, cache)
+    timings = {"setup_s": setup_s, **timings}
     backend = drjit_backend(variant)
     start = constants_from_experiment(exp)
     with timed(timings, "model_s"):
@@ -180,8 +197,12 @@ def run_calibrate(experiment, out, overrides=None, variant=None, solver=None, ca
         parsimony = {**information_criteria(model.residual(cal.fitted), len(fitted_names)),
                      "fitted": fitted_names, "defines": list(model.variant.defines)}
     with timed(timings, "export_s"):
+        _log("calibrate: exporting and compiling the shaders")
         export_shaders(cal.fitted, out / "shaders")
+    with timed(timings, "gl_check_s"):
+        _log("calibrate: running the exported shader on OpenGL (llvmpipe)")
         gl = gl_check(model.shader, inputs, cal.fitted, out / "shaders")
+    t_figures = time.perf_counter()
     figs = {"comparison": "comparison.png", "diagnostics": "diagnostics.png", "loss": "loss.png"}
     comparison_figure(out / figs["comparison"], {"reference": ref.image, "default": img0, "fitted": img1},
                       {"default": e0, "fitted": e1}, full.mask, title=f"{exp['name']}: {model.shader}")
@@ -190,6 +211,8 @@ def run_calibrate(experiment, out, overrides=None, variant=None, solver=None, ca
     write_exr(out / "fitted.exr", img1, {"constants": cal.fitted.to_dict()})
     write_exr(out / "default.exr", img0, {"constants": start.to_dict()})
     write_exr(out / "reference.exr", ref.image, ref.provenance)
+    timings["figures_s"] = time.perf_counter() - t_figures
+    timings["total_s"] = time.perf_counter() - t_start   # up to the report (written last)
     fs = cal.fit_summary
     summary = {
         "experiment": exp["name"], "shader": model.shader, "variant": variant,
@@ -201,7 +224,7 @@ def run_calibrate(experiment, out, overrides=None, variant=None, solver=None, ca
         "message": fs.get("message", ""), "fit": fs, "identifiability": cal.identifiability,
         "step_sweep": cal.sweep, "timings": timings,
         "reference": {"spp": ref.spp, "noise": ref.noise, "path": str(ref.path), "key": ref.provenance["key"]},
-        "diagnostics": diag1.summary(full.mask), "gl_check": gl,
+        "diagnostics": diag1.summary(full.mask), "gl_check": gl, "sun": _sun(exp),
         # constant count and information criteria at the fit resolution (study._metrics)
         "parsimony": parsimony,
     }
@@ -210,6 +233,12 @@ def run_calibrate(experiment, out, overrides=None, variant=None, solver=None, ca
     _log(f"calibrate: RMSE {e0['rmse']:.4f} -> {e1['rmse']:.4f}, FLIP {e0['flip']:.4f} -> {e1['flip']:.4f}; "
          f"wrote {out}")
     return summary
+
+
+def _sun(exp) -> dict:
+    """The shader's sun (explicit, or found in the sky file: direction, solid angle, radiance)."""
+    from .scene.user_scene import sun_summary
+    return sun_summary(exp)
 
 
 def _jsonable(x):

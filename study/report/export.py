@@ -45,7 +45,9 @@ def load_constants_json(path) -> Constants:
         raise ValueError(f"{path}: 'constants' must be an object of name -> value")
     unknown = sorted(set(table) - set(CONSTANT_SPECS))
     if unknown:
-        raise ValueError(f"{path}: unknown constant(s) {unknown}; known: {sorted(CONSTANT_SPECS)}")
+        names = ", ".join(repr(u) if len(u) <= 80 else repr(u[:80]) + "..." for u in unknown[:5])
+        more = f" and {len(unknown) - 5} more" if len(unknown) > 5 else ""
+        raise ValueError(f"{path}: unknown constant(s) {names}{more}; known: {sorted(CONSTANT_SPECS)}")
     try:
         return Constants.from_dict(table)
     except (TypeError, ValueError) as exc:

@@ -12,7 +12,7 @@ import hashlib
 import json
 import math
 import tomllib
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -27,7 +27,8 @@ class ExperimentError(ValueError):
 
 @dataclass(frozen=True)
 class Field:
-    kind: str            # float, int, str, bool, vec2, vec3, vec2x4, int_or_auto, list_str, list_float
+    kind: str            # float, int, str, bool, vec2, vec3, vec2x4, int_or_auto, list_str, list_float,
+                         # path, extent
     default: object
     doc: str
     units: str = ""
@@ -36,7 +37,7 @@ class Field:
     choices: tuple | None = None
 
 
-FLOOR_SHAPES = ("flat", "slope", "steps", "terrain")
+FLOOR_SHAPES = ("flat", "slope", "steps", "terrain", "heightmap")
 SHADERS = tuple(VARIANTS)
 SOLVERS = ("levenberg_marquardt", "gauss_newton", "dogleg", "bfgs", "nelder_mead", "adam")
 FIT_PARAMETERS = ("attenuation_distance", "bumptex_mult", "steps_grazing", "steps_steep",
@@ -76,6 +77,16 @@ SCHEMA: dict[str, Field] = {
     "floor.tile_size": Field("float", 0.5, "Edge length of the floor tiles.", "world units", 0.01, 100.0),
     "floor.tile_albedo": Field("vec3", [0.75, 0.72, 0.62], "Albedo of the light tiles.", "linear RGB", 0.0, 1.0),
     "floor.tile_albedo2": Field("vec3", [0.18, 0.32, 0.45], "Albedo of the dark tiles.", "linear RGB", 0.0, 1.0),
+    "floor.heightmap": Field("path", "", "Heightmap file for shape `heightmap`: a single-channel EXR or "
+                             "16-bit PNG over `floor.extent` (columns along x, row 0 at the low z); the "
+                             "floor is at y = -floor.depth + floor.height_scale * texel.", "file"),
+    "floor.height_scale": Field("float", 1.0, "World height of one heightmap unit (a 16-bit PNG's "
+                                "texels are 0..1).", "world units", 0.0, 100.0),
+    "floor.albedo_image": Field("path", "", "Floor albedo image over `floor.extent` instead of the "
+                                "tiles: sRGB PNG/JPEG or linear EXR, values in [0, 1].", "file"),
+    "floor.extent": Field("extent", "pool", "World rectangle [x0, z0, x1, z1] the heightmap and "
+                          "albedo image cover (`\"pool\"`: the water's rectangle); must cover the water.",
+                          "world units"),
     "water.ior": Field("float", 1.333, "Index of refraction of the water.", "", 1.0, 3.0),
     "water.sigma_t": Field("vec3", [0.25, 0.06, 0.04], "Extinction coefficient of the water.",
                            "1 / world unit, linear RGB", 0.0, 1000.0),
@@ -85,7 +96,8 @@ SCHEMA: dict[str, Field] = {
                              "(0 = calm, flat water).", "world units", 0.0, 10.0),
     "waves.normal_tile": Field("float", 2.0, "Size of one repeat of the normal map on the water.",
                                "world units", 0.01, 1000.0),
-    "waves.components": Field("int", 5, "Sine components of the tiling height field.", "", 1, 64),
+    "waves.components": Field("int", 5, "Sine components of the tiling height field (distinct integer "
+                              "wave vectors from [-4, 4]^2; above 40, from the smallest grid [-K, K]^2 holding them).", "", 1, 64),
     "waves.seed": Field("int", 1, "Random seed of the wave components.", "", 0, 2**31 - 1),
     "waves.offsets": Field("vec2x4", [[0.0, 0.0], [0.31, 0.17], [0.53, 0.71], [0.13, 0.47]],
                            "Texture offsets wave1..wave4 of the four normal-map layers.", "texture units"),
@@ -95,12 +107,30 @@ SCHEMA: dict[str, Field] = {
     "sky.zenith": Field("vec3", [0.25, 0.45, 0.9], "Sky radiance at the zenith.", "linear RGB", 0.0, 1e4),
     "sky.horizon": Field("vec3", [0.8, 0.85, 0.95], "Sky radiance at the horizon.", "linear RGB", 0.0, 1e4),
     "sky.ground": Field("vec3", [0.3, 0.28, 0.25], "Radiance below the horizon.", "linear RGB", 0.0, 1e4),
+    "sky.envmap": Field("path", "", "HDR lat-long sky (RGB EXR, width = 2 x height, Mitsuba's envmap "
+                        "convention) instead of the gradient sky.", "file"),
+    "sky.rotation": Field("float", 0.0, "Turn of `sky.envmap` about +y (from +x towards +z).",
+                          "degrees", -360.0, 360.0),
+    "sky.scale": Field("float", 1.0, "Radiance scale of `sky.envmap`.", "", 0.0, 1e6),
+    "sun.source": Field("str", "explicit", "Where the sun comes from: `explicit` (the `sun.*` keys; "
+                        "added to `sky.envmap` if given) or `envmap` (the map's brightest region: "
+                        "direction, solid angle, radiance).", choices=("explicit", "envmap")),
     "sun.elevation": Field("float", 50.0, "Sun elevation above the horizon.", "degrees", 0.0, 90.0),
     "sun.azimuth": Field("float", 200.0, "Sun azimuth, from +x towards +z.", "degrees", -360.0, 360.0),
     "sun.radius": Field("float", 5.0, "Angular radius of the sun disc (at least 0.5: the sky map "
                         "has 0.35 degree texels).", "degrees", 0.5, 20.0),
     "sun.radiance": Field("vec3", [8.0, 7.5, 6.0], "Radiance of the sun disc (0 = no sun).",
                           "linear RGB", 0.0, 1e6),
+    "mesh.file": Field("path", "", "Mesh above the water (OBJ or PLY, loaded by Mitsuba): walls, shore, "
+                       "rocks; in the reference and in the reflection textures.", "file"),
+    "mesh.position": Field("vec3", [0.0, 0.0, 0.0], "Translation of the mesh (applied last).", "world units",
+                           -1e4, 1e4),
+    "mesh.scale": Field("float", 1.0, "Uniform scale of the mesh (applied first).", "", 1e-3, 1e3),
+    "mesh.rotation": Field("float", 0.0, "Turn of the mesh about +y (from +x towards +z).", "degrees",
+                           -360.0, 360.0),
+    "mesh.albedo": Field("vec3", [0.5, 0.5, 0.5], "Diffuse albedo of the mesh.", "linear RGB", 0.0, 1.0),
+    "mesh.texture": Field("path", "", "Albedo image of the mesh (needs texture coordinates; sRGB PNG/JPEG "
+                          "or linear EXR) instead of `mesh.albedo`.", "file"),
     "reference.spp": Field("int_or_auto", 256, "Samples per pixel, or `auto` to reach "
                            "`reference.target_noise`. At 256 the fitted attenuation, bump scaling and "
                            "water colour of the default scene move by under 0.5 standard errors with "
@@ -109,7 +139,8 @@ SCHEMA: dict[str, Field] = {
     "reference.target_noise": Field("float", 0.01, "Target RMS standard error on water pixels "
                                     "for `spp = \"auto\"`.", "linear RGB", 1e-5, 1.0),
     "reference.max_spp": Field("int", 1024, "Upper bound of the automatic spp.", "", 4, 65536),
-    "reference.seed": Field("int", 0, "Base sampler seed.", "", 0, 2**31 - 1),
+    "reference.seed": Field("int", 0, "Base sampler seed (the per-pass seeds derived from it stay "
+                            "within Mitsuba's 32-bit seeds).", "", 0, 2**28 - 1),
     "reference.max_depth": Field("int", 12, "Maximum path length.", "", 2, 256),
     "reference.texture_size": Field("int", 256, "Resolution of the top-down shader textures.",
                                     "texels", 16, 4096),
@@ -182,9 +213,17 @@ SHADER_INPUT_KEYS = frozenset({"reference.texture_size", "reference.texture_spp"
 _VEC_LEN = {"vec2": 2, "vec3": 3, "vec4": 4}
 
 
+def _clip(v, limit: int = 80) -> str:
+    """``repr(v)`` cut to a readable length (an echoed bad value must not flood the message)."""
+    from .user_files import clip_text
+    return clip_text(repr(v), limit)
+
+
 # keys added after references were cached: hashed only when set, so that the cached
 # references and inputs of experiments that do not use them stay valid
-_LATER_KEYS = ("floor.ledge",)
+_LATER_KEYS = ("floor.ledge", "floor.heightmap", "floor.height_scale", "floor.albedo_image",
+               "floor.extent", "sky.envmap", "sky.rotation", "sky.scale", "sun.source", "mesh.file",
+               "mesh.position", "mesh.scale", "mesh.rotation", "mesh.albedo", "mesh.texture")
 
 
 def _unset_later_key(key: str, value) -> bool:
@@ -210,8 +249,12 @@ def _check_ledge(values: dict) -> None:
                               f"(y <= {trough:.3f})")
     x, z = np.meshgrid(np.linspace(x_min, x_max, 65), np.linspace(-hz, hz, 65))
     f = {k[len("floor."):]: values[k] for k in values if k.startswith("floor.")}
-    floor_top = float(floor_height(f["shape"], f["depth"], f["relief"], f["steps"], f["seed"],
-                                   (hx, hz), x, z).max())
+    if f["shape"] == "heightmap":
+        from .user_files import heightmap_floor
+        floor_top = float(heightmap_floor(values, x, z).max())
+    else:
+        floor_top = float(floor_height(f["shape"], f["depth"], f["relief"], f["steps"], f["seed"],
+                                       (hx, hz), x, z).max())
     if top - thick <= floor_top + 0.05:
         raise ExperimentError(f"{key}: the underside (y = {top - thick:.3f}) must be at least 0.05 "
                               f"above the floor under it (highest at y = {floor_top:.3f}); "
@@ -226,44 +269,60 @@ def _check(key: str, f: Field, v):
 
     def num(x, integer=False):
         if isinstance(x, bool) or not isinstance(x, (int, float)):
-            bad(f"expected a number, got {x!r}")
-        if not math.isfinite(x):
-            bad(f"{x!r} is not finite")
+            bad(f"expected a number, got {_clip(x)}")
+        try:
+            finite = math.isfinite(x)
+        except OverflowError:                # an integer beyond any float
+            finite = False
+        if not finite:
+            bad(f"{_clip(x)} is not finite")
         if integer and float(x) != int(x):
-            bad(f"expected an integer, got {x!r}")
+            bad(f"expected an integer, got {_clip(x)}")
         if f.lo is not None and not (f.lo <= x <= f.hi):
-            bad(f"{x!r} is out of range")
+            bad(f"{_clip(x)} is out of range")
         return int(x) if integer else float(x)
 
     k = f.kind
     if k == "str":
         if not isinstance(v, str):
-            bad(f"expected a string, got {v!r}")
+            bad(f"expected a string, got {_clip(v)}")
         if f.choices and v not in f.choices:
-            bad(f"unknown value {v!r}")
+            bad(f"unknown value {_clip(v)}")
         return v
     if k == "bool":
         if not isinstance(v, bool):
-            bad(f"expected true or false, got {v!r}")
+            bad(f"expected true or false, got {_clip(v)}")
         return v
     if k in ("float", "int"):
         return num(v, integer=(k == "int"))
+    if k == "path":
+        if not isinstance(v, str):
+            bad(f"expected a file name (a string), got {_clip(v)}")
+        if "\x00" in v or len(v) > 4096:
+            bad(f"not a usable file name: {_clip(v)}")
+        return v
+    if k == "extent":
+        if v == "pool":
+            return v
+        if not isinstance(v, list) or len(v) != 4:
+            bad(f"expected \"pool\" or [x0, z0, x1, z1], got {_clip(v)}")
+        return [num(x) for x in v]
     if k == "int_or_auto":
         return v if v == "auto" else num(v, integer=True)
     if k in _VEC_LEN:
         if not isinstance(v, list) or len(v) != _VEC_LEN[k]:
-            bad(f"expected a list of {_VEC_LEN[k]} numbers, got {v!r}")
+            bad(f"expected a list of {_VEC_LEN[k]} numbers, got {_clip(v)}")
         return [num(x, integer=(key.endswith("resolution"))) for x in v]
     if k == "vec2x4":
         if not isinstance(v, list) or len(v) != 4 or not all(isinstance(r, list) and len(r) == 2 for r in v):
-            bad(f"expected 4 pairs of numbers, got {v!r}")
+            bad(f"expected 4 pairs of numbers, got {_clip(v)}")
         return [[num(x) for x in r] for r in v]
     if k == "list_str":
         if not isinstance(v, list) or not all(isinstance(x, str) for x in v):
-            bad(f"expected a list of strings, got {v!r}")
+            bad(f"expected a list of strings, got {_clip(v)}")
         for x in v:
             if f.choices and x not in f.choices:
-                bad(f"unknown entry {x!r}")
+                bad(f"unknown entry {_clip(x)}")
         if len(set(v)) != len(v):
             bad("entries must be unique")
         return list(v)
@@ -301,6 +360,7 @@ class Experiment:
 
     values: dict
     path: Path | None = None
+    digests: dict = field(default_factory=dict)   # file key -> SHA-256 of the file's contents
 
     def __getitem__(self, key: str):
         return self.values[key]
@@ -313,19 +373,30 @@ class Experiment:
         """SHA-256 over every value that affects the reference image (not the keys that only
         shape the shader's inputs, ``SHADER_INPUT_KEYS``, nor the fit)."""
         prefixes = ("resolution", "camera.", "pool.", "floor.", "water.", "waves.", "sky.", "sun.",
-                    "reference.")
+                    "mesh.", "reference.")
         data = {k: v for k, v in sorted(self.values.items())
                 if k.startswith(prefixes) and k not in SHADER_INPUT_KEYS and not _unset_later_key(k, v)}
+        data.update(self._file_contents())
         return hashlib.sha256(json.dumps(data, sort_keys=True).encode()).hexdigest()
 
     def inputs_hash(self) -> str:
         """SHA-256 over every value that affects the shader inputs (the scene and
         ``SHADER_INPUT_KEYS``; not the fit, the start constants or the names)."""
         prefixes = ("resolution", "camera.", "pool.", "floor.", "water.", "waves.", "sky.", "sun.",
-                    "reference.", "variant")
+                    "mesh.", "reference.", "variant")
         data = {k: v for k, v in sorted(self.values.items())
                 if k.startswith(prefixes) and not _unset_later_key(k, v)}
+        data.update(self._file_contents())
         return hashlib.sha256(json.dumps(data, sort_keys=True).encode()).hexdigest()
+
+    def _file_contents(self) -> dict:
+        """The file keys' paths replaced by their contents' digests (a moved file is the same
+        scene; a changed file is a new one)."""
+        out = {}
+        for k, sha in self.digests.items():
+            out[k] = ""                      # the path itself does not matter
+            out[f"{k}#sha256"] = sha
+        return out
 
     def to_toml_dict(self) -> dict:
         return copy.deepcopy(self.values)
@@ -333,20 +404,25 @@ class Experiment:
 
 def validate(raw: dict, overrides: list[str] | None = None, path: Path | None = None) -> Experiment:
     """Validate a parsed TOML dictionary (plus ``key=value`` overrides) against SCHEMA."""
+    if not isinstance(raw, dict):
+        raise ExperimentError(f"expected a table of keys, got {_clip(raw)}")
     flat = _flatten(raw)
+    base = {k: (path.parent if path is not None else None) for k in flat}
     for item in overrides or []:
         if "=" not in item:
-            raise ExperimentError(f"--set {item!r}: expected KEY=VALUE, e.g. --set water.ior=1.33")
+            raise ExperimentError(f"--set {_clip(item)}: expected KEY=VALUE, e.g. --set water.ior=1.33")
         key, text = item.split("=", 1)
         flat[key.strip()] = _parse_value(text.strip())
+        base[key.strip()] = None             # relative to the working directory
     unknown = sorted(set(flat) - set(SCHEMA))
     if unknown:
         import difflib
         hints = []
-        for u in unknown:
-            close = difflib.get_close_matches(u, SCHEMA, n=1)
-            hints.append(f"{u!r}" + (f" (did you mean {close[0]!r}?)" if close else ""))
-        raise ExperimentError(f"unknown key(s): {', '.join(hints)}. Every key is listed in "
+        for u in unknown[:5]:
+            close = difflib.get_close_matches(u, SCHEMA, n=1) if len(u) <= 100 else []
+            hints.append(_clip(u) + (f" (did you mean {close[0]!r}?)" if close else ""))
+        more = f" and {len(unknown) - 5} more" if len(unknown) > 5 else ""
+        raise ExperimentError(f"unknown key(s): {', '.join(hints)}{more}. Every key is listed in "
                               "experiments/README.md")
     values = {}
     for key, f in SCHEMA.items():
@@ -370,8 +446,12 @@ def validate(raw: dict, overrides: list[str] | None = None, path: Path | None = 
         raise ExperimentError("camera.position equals camera.target; move one of them")
     if values["camera.position"][1] <= 0.0:
         raise ExperimentError("camera.position: the camera must be above the water plane (y > 0)")
+    from . import user_files
+    for key in user_files.FILE_KEYS:
+        values[key] = user_files.resolve(key, values[key], base.get(key))
+    digests = user_files.check_files(values)
     _check_ledge(values)
-    return Experiment(values, path)
+    return Experiment(values, path, digests)
 
 
 def load_experiment(path, overrides: list[str] | None = None) -> Experiment:

@@ -3,8 +3,9 @@
 World units throughout, ``+y`` up, water plane at ``y = 0``. Colours are linear RGB.
 
 * the pool floor height ``y = floor_height(x, z)``;
-* the waves: one tiling height field ``h0(u, v)`` (a sum of sines with integer wave
-  vectors on the unit torus) sampled at four offsets ``wave1..wave4``, exactly as the
+* the waves: one tiling height field ``h0(u, v)`` (a sum of sines with distinct integer
+  wave vectors on the unit torus, drawn from [-4, 4]^2, or a larger grid beyond its 40
+  directions: :func:`wave_vector_bound`) sampled at four offsets ``wave1..wave4``, exactly as the
   shader samples its normal map four times. The physical surface is
   ``H(x, z) = amplitude / 4 * sum_k h0((x, z) / normal_tile + wave_k)``; the normal map
   stores the normal of ``slope_scale * amplitude * h0``, so the shader's averaged normal
@@ -21,6 +22,19 @@ import math
 import numpy as np
 
 
+MAX_COMPONENTS = 64
+
+
+def wave_vector_bound(components: int) -> int:
+    """Bound K of the integer wave-vector grid [-K, K]^2 the components are drawn from: 4 (as
+    always) while its 40 directions up to sign suffice, else the smallest K whose
+    ((2K + 1)^2 - 1) / 2 directions hold ``components`` distinct ones (5 for 41..60, 6 for 61..84)."""
+    k = 4
+    while ((2 * k + 1) ** 2 - 1) // 2 < components:
+        k += 1
+    return k
+
+
 class Waves:
     """The wave height field of an experiment (see module docstring)."""
 
@@ -29,9 +43,12 @@ class Waves:
         rng = np.random.default_rng(seed)
         self.amplitude, self.tile, self.slope_scale = float(amplitude), float(normal_tile), float(slope_scale)
         self.offsets = np.asarray(offsets, dtype=np.float64).reshape(4, 2)
+        if not 1 <= components <= MAX_COMPONENTS:
+            raise ValueError(f"waves.components = {components}: expected 1 to {MAX_COMPONENTS}")
+        kmax = wave_vector_bound(components)
         k = []
-        while len(k) < components:
-            kv = rng.integers(-4, 5, size=2)
+        while len(k) < components:      # ends: the grid holds >= components directions
+            kv = rng.integers(-kmax, kmax + 1, size=2)
             if kv.any() and not any((kv == q).all() or (kv == -q).all() for q in k):
                 k.append(kv)
         self.k = np.array(k, dtype=np.float64)                      # (M, 2) integer wave vectors

@@ -47,12 +47,12 @@ def pool_extent(exp: Experiment) -> tuple[float, float, float, float]:
 
 
 def _top_down_scene(mi, exp: Experiment, *, water: bool, integrator: dict):
-    from .geometry import envmap_image
-    from .mitsuba_scene import build_geometry, sky_params, water_medium
+    from .mitsuba_scene import build_geometry, water_medium
+    from .user_scene import reference_sky
 
     medium = water_medium(mi, exp) if water else None
     d = {"type": "scene", **build_geometry(mi, exp, water=water, medium=medium),
-         "sky": {"type": "envmap", "bitmap": mi.Bitmap(envmap_image(512, **sky_params(exp)))},
+         "sky": {"type": "envmap", "bitmap": mi.Bitmap(reference_sky(exp))},
          "integrator": integrator}
     return mi.load_dict(d), medium
 
@@ -85,7 +85,7 @@ def interpolate(lighting: np.ndarray, extent, X: np.ndarray, Z: np.ndarray) -> n
 
 
 def render_lighting(exp: Experiment, size: int, spp: int, seed: int, *, water: bool,
-                    y_cam: float) -> tuple[np.ndarray, np.ndarray]:
+                    y_cam: float, progress=None) -> tuple[np.ndarray, np.ndarray]:
     """Lighting ``radiance / albedo`` (size, size, 3) over the pool (GL order), corrected for the
     absorption of the camera's own vertical ray as ``top_down_colour`` does, and its per-texel
     standard error, from ``N_SEEDS`` renders of ``ceil(spp / N_SEEDS)`` spp each."""
@@ -104,16 +104,28 @@ def render_lighting(exp: Experiment, size: int, spp: int, seed: int, *, water: b
         img = _to_gl_order(mi, sensor, img, extent)
         radiance, albedo = img[..., :3], img[..., 3:6]
         if np.any(albedo <= 0.0):
-            raise RuntimeError("the lighting render found texels of zero floor albedo; "
-                               "use reference.texture_method = \"colour\" for such a floor")
+            from .experiment import ExperimentError
+            raise ExperimentError("the lighting render found texels of zero floor albedo (floor.tile_albedo, "
+                                  "floor.albedo_image); use reference.texture_method = \"colour\" for such "
+                                  "a floor")
         passes.append(radiance / albedo)
+        if progress:
+            progress(k + 1, N_SEEDS)
     passes = np.stack(passes)
     lighting = passes.mean(0)
     stderr = np.sqrt(passes.var(0, ddof=1) / N_SEEDS)
     if water:
         world_y = top_down_world_y(exp, extent, size)
         sigma = np.asarray(exp["water.sigma_t"], np.float64)
-        gain = np.exp(sigma * np.maximum(y_cam - world_y, 0.0)[..., None])
+        optical = sigma * np.maximum(y_cam - world_y, 0.0)[..., None]
+        from .shader_inputs import MAX_OPTICAL_DEPTH
+        if optical.max() > MAX_OPTICAL_DEPTH:
+            from .experiment import ExperimentError
+            raise ExperimentError(f"water.sigma_t: the floor's light through the water is lost (optical depth "
+                                  f"{optical.max():.3g} above the floor, more than {MAX_OPTICAL_DEPTH:g}); the "
+                                  "lighting texture cannot recover it: use reference.texture_method = "
+                                  "\"colour\" (the dry floor stands in there) or less absorption")
+        gain = np.exp(optical)
         lighting, stderr = lighting * gain, stderr * gain
     if not np.all(np.isfinite(lighting)):
         raise RuntimeError(f"the lighting render of {exp['name']!r} has non-finite texels")
@@ -128,16 +140,19 @@ def render_dry(exp: Experiment, extent, size: int, spp: int, seed: int) -> tuple
 
     from .shader_inputs import _ortho_sensor, _to_gl_order
 
+    from .user_scene import dry_camera_height
+
     spp = max(spp, ALBEDO_SPP)
     scene, _ = _top_down_scene(mi, exp, water=False, integrator={
         "type": "aov", "aovs": "alb:albedo", "transport": _transport(exp, False)})
-    sensor = _ortho_sensor(mi, extent, size, spp, seed)
+    sensor = _ortho_sensor(mi, extent, size, spp, seed, y_cam=dry_camera_height(mi, exp, extent))
     img = _to_gl_order(mi, sensor, np.array(mi.render(scene, sensor=sensor, spp=spp, seed=seed), np.float32),
                        extent)
     return img[..., :3], img[..., 3:6]
 
 
-def lighting_colour(exp: Experiment, extent, size: int, seed: int = 0, world_y=None) -> tuple[np.ndarray, dict]:
+def lighting_colour(exp: Experiment, extent, size: int, seed: int = 0, world_y=None,
+                    progress=None) -> tuple[np.ndarray, dict]:
     """(size, size, 3) float32 linear RGB top-down colour over ``extent`` (GL order) by
     lighting x albedo inside the pool and the dry colour render outside; and a dict with the
     measured noise (``noise``: RMS standard error of the colour over the pool texels) and the
@@ -148,7 +163,7 @@ def lighting_colour(exp: Experiment, extent, size: int, seed: int = 0, world_y=N
     y_cam = underwater_camera_height(exp) if wet else 100.0
     n_light = min(exp["reference.lighting_size"], size)     # never finer than the texture
     lighting, lighting_se = render_lighting(exp, n_light, exp["reference.texture_spp"], seed,
-                                            water=wet, y_cam=y_cam)
+                                            water=wet, y_cam=y_cam, progress=progress)
     dry, albedo = render_dry(exp, extent, size, exp["reference.wall_spp"], seed)
     if world_y is None:
         world_y = top_down_world_y(exp, extent, size)

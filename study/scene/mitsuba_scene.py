@@ -11,7 +11,10 @@
   lies inside the medium. The waves are geometry, not a normal-mapped flat BSDF, because
   a normal map on a dielectric bounding a medium breaks reciprocity and does not move
   the interface; the displaced mesh refracts exactly where the real surface is.
-* Sky and sun: one lat-long ``envmap`` (gradient sky, ground, sun disc). The sun is an
+* Mesh above the water: the user's OBJ/PLY (``mesh.file``, see ``user_files``), diffuse.
+* Floor from files: ``floor.heightmap`` and ``floor.albedo_image`` (see ``user_files``).
+* Sky and sun: one lat-long ``envmap`` (gradient sky, ground, sun disc; or the user's HDR
+  map, ``user_scene.reference_sky``). The sun is an
   area of the environment, not a delta light: a delta light never reaches the floor
   through a smooth dielectric. Its caustics are sampled by BSDF sampling only; the
   reference noise is measured, not assumed (see ``_reference``).
@@ -26,7 +29,7 @@ import numpy as np
 from shaders_port import perspective_view_proj
 
 from .experiment import Experiment
-from .geometry import Waves, envmap_image, floor_height, sun_direction
+from .geometry import Waves, floor_height, sun_direction
 
 WATER_INSET = 1e-3   # the water volume stays this far inside the walls (no coincident faces)
 LEDGE_GAP = 0.02     # the ends of an under-water ledge stay this far from the walls (and the
@@ -41,6 +44,9 @@ def waves_of(exp: Experiment) -> Waves:
 
 def floor_of(exp: Experiment, x, z) -> np.ndarray:
     f = exp.section("floor")
+    if f["shape"] == "heightmap":
+        from .user_files import heightmap_floor
+        return heightmap_floor(exp.values, x, z)
     return floor_height(f["shape"], f["depth"], f["relief"], f["steps"], f["seed"],
                         exp["pool.half_extent"], x, z)
 
@@ -99,8 +105,12 @@ def _grid_faces(nx: int, nz: int) -> np.ndarray:
 
 
 def tile_texture(exp: Experiment, px_per_tile: int = 32) -> np.ndarray:
-    """(N, N, 3) float32 albedo of the floor over [-hx, hx] x [-hz, hz] (row = z, column = x)."""
+    """(N, N, 3) float32 albedo of the floor over [-hx, hx] x [-hz, hz] (row = z, column = x):
+    the tiles, or ``floor.albedo_image`` resampled."""
     f = exp.section("floor")
+    if f["albedo_image"]:
+        from .user_files import albedo_over_pool
+        return albedo_over_pool(exp.values)
     hx, hz = exp["pool.half_extent"]
     nx = max(8, int(round(2 * hx / f["tile_size"] * px_per_tile)))
     nz = max(8, int(round(2 * hz / f["tile_size"] * px_per_tile)))
@@ -116,9 +126,10 @@ def tile_texture(exp: Experiment, px_per_tile: int = 32) -> np.ndarray:
     return np.where(grout, 0.5 * col, col).astype(np.float32)
 
 
-def build_geometry(mi, exp: Experiment, water: bool = True, medium=None) -> dict:
+def build_geometry(mi, exp: Experiment, water: bool = True, medium=None, mesh: bool = True) -> dict:
     """Shapes of the scene as a dict for ``mi.load_dict`` (no sensor, emitter or integrator).
-    ``medium``: the water's medium object (default: a new one from :func:`water_medium`)."""
+    ``medium``: the water's medium object (default: a new one from :func:`water_medium`);
+    ``mesh``: include the user's mesh above the water (``mesh.file``), if any."""
     hx, hz = exp["pool.half_extent"]
     res = exp["reference.water_mesh"]
     yb = floor_bottom(exp)
@@ -149,6 +160,10 @@ def build_geometry(mi, exp: Experiment, water: bool = True, medium=None) -> dict
         out["ledge"] = {"type": "cube", "bsdf": wall_bsdf,
                         "to_world": T().translate([(x_min + x_max) / 2, top - thick / 2, 0.0])
                         @ T().scale([(x_max - x_min) / 2, thick / 2, zl])}
+    if mesh and exp["mesh.file"]:
+        from .user_scene import mesh_bounds, mesh_shape
+        mesh_bounds(mi, exp)                      # loadable and above the water
+        out["mesh"] = mesh_shape(mi, exp)
     if water:
         out["water"] = water_mesh(mi, exp, yb, medium if medium is not None else water_medium(mi, exp))
     return out
@@ -227,7 +242,8 @@ def build_scene(exp: Experiment, width: int | None = None, height: int | None = 
     height = height or exp["resolution"][1]
     c = exp.section("camera")
     d = {"type": "scene", **build_geometry(mi, exp, water=True)}
-    d["sky"] = {"type": "envmap", "bitmap": mi.Bitmap(envmap_image(512, **sky_params(exp)))}
+    from .user_scene import reference_sky
+    d["sky"] = {"type": "envmap", "bitmap": mi.Bitmap(reference_sky(exp))}
     d["sensor"] = {
         "type": "perspective", "fov": c["fov_y"], "fov_axis": "y",
         "to_world": mi.ScalarTransform4f().look_at(origin=c["position"], target=c["target"], up=[0, 1, 0]),

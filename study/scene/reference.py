@@ -140,7 +140,8 @@ def choose_spp(exp: Experiment, progress=None) -> tuple[int, dict]:
     t0 = time.perf_counter()
     from .mitsuba_scene import build_scene
     scene = build_scene(exp)
-    pilot = render_passes(exp, PILOT_SPP, N_SEEDS, seed0=10_000 + exp["reference.seed"], scene=scene)
+    pilot = render_passes(exp, PILOT_SPP, N_SEEDS, seed0=10_000 + exp["reference.seed"], scene=scene,
+                          progress=progress)
     _, pilot_noise = noise_of(pilot, water_mask(exp, w, h, scene=scene))
     total_pilot = PILOT_SPP * N_SEEDS
     per_sample_var = pilot_noise ** 2 * total_pilot          # noise^2 = var / spp_total
@@ -157,7 +158,7 @@ def render_reference(exp: Experiment, variant: str, spp: int | None = None, prog
     """Render the reference (no cache): ``N_SEEDS`` independent passes, mean and noise."""
     info = {}
     if spp is None:
-        spp, info = (choose_spp(exp) if exp["reference.spp"] == "auto"
+        spp, info = (choose_spp(exp, progress) if exp["reference.spp"] == "auto"
                      else (int(exp["reference.spp"]), {}))
     per_pass = max(1, math.ceil(spp / N_SEEDS))
     from .mitsuba_scene import build_scene

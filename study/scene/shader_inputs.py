@@ -10,7 +10,7 @@ As the seed's application prepares them, but from the scene:
 * ``world_y``: world y of the first surface hit from above at each texel centre (ray cast,
   exact, no filtering), like ``WaterDrawTextureDepthRefractionTop``;
 * the bottom-up textures of the reflection shader: the geometry above the water is the
-  pool walls, whose bottom-up view (clipped at the water plane, looking up) shows their
+  pool walls (and the user's mesh, ``user_scene.mesh_reflection_textures``), whose bottom-up view (clipped at the water plane, looking up) shows their
   top at ``wall_height``; so ``refl_world_y`` is the top-down ``world_y`` where it is above
   the water and a sentinel -1e3 elsewhere, and ``refl_texture`` is the top-down colour there;
 * the normal map of the waves (``_geometry.Waves``) with its four offsets;
@@ -29,14 +29,14 @@ import numpy as np
 from shaders_port import ShaderInputs, fresnel_lut, ortho_tex_matrix
 
 from .experiment import Experiment
-from .geometry import cubemap_directions, sky_radiance
-from .mitsuba_scene import build_geometry, camera_view_proj, sky_params, waves_of
+from .mitsuba_scene import build_geometry, camera_view_proj, waves_of
 
-INPUTS_VERSION = 2        # bump whenever the construction of the inputs below changes
+INPUTS_VERSION = 3        # bump whenever the construction of the inputs below changes
 NO_GEOMETRY = -1e3
 CUBEMAP_SIZE = 64
 FRESNEL_SIZE = 256
 LIGHT_DISTANCE = 1000.0
+MAX_OPTICAL_DEPTH = 40.0  # exp(40) = 2e17: beyond it the under-water render holds no floor light
 
 
 def texture_extent(exp: Experiment) -> tuple[float, float, float, float]:
@@ -89,11 +89,12 @@ def _to_gl_order(mi, sensor, img: np.ndarray, extent) -> np.ndarray:
     return np.ascontiguousarray(img)
 
 
-def top_down_world_y(exp: Experiment, extent, size: int) -> np.ndarray:
-    """(size, size) float32 world y of the first hit from above at texel centres (GL order)."""
+def top_down_world_y(exp: Experiment, extent, size: int, mesh: bool = False) -> np.ndarray:
+    """(size, size) float32 world y of the first hit from above at texel centres (GL order);
+    the user's mesh above the water is left out unless ``mesh``."""
     import mitsuba as mi
 
-    scene = mi.load_dict({"type": "scene", **build_geometry(mi, exp, water=False)})
+    scene = mi.load_dict({"type": "scene", **build_geometry(mi, exp, water=False, mesh=mesh)})
     x0, z0, x1, z1 = extent
     c = (np.arange(size) + 0.5) / size
     X, Z = np.meshgrid(x0 + c * (x1 - x0), z0 + c * (z1 - z0))
@@ -114,18 +115,19 @@ def top_down_world_y(exp: Experiment, extent, size: int) -> np.ndarray:
 
 
 def _render_top_down(mi, exp: Experiment, extent, size: int, spp: int, seed: int, *, water: bool,
-                     y_cam: float = 100.0) -> np.ndarray:
-    from .geometry import envmap_image
+                     y_cam: float = 100.0, progress=None) -> np.ndarray:
     from .mitsuba_scene import has_medium, water_medium
+    from .user_scene import reference_sky
 
     medium = water_medium(mi, exp) if water else None
     d = {"type": "scene", **build_geometry(mi, exp, water=water, medium=medium),
-         "sky": {"type": "envmap", "bitmap": mi.Bitmap(envmap_image(512, **sky_params(exp)))},
+         "sky": {"type": "envmap", "bitmap": mi.Bitmap(reference_sky(exp))},
          "integrator": {"type": "volpath" if water and has_medium(exp) else "path",
                         "max_depth": exp["reference.max_depth"]}}
     scene = mi.load_dict(d)
     sensor = _ortho_sensor(mi, extent, size, spp, seed, y_cam=y_cam, medium=medium)
-    img = np.array(mi.render(scene, sensor=sensor, spp=spp, seed=seed), dtype=np.float32)
+    from .._progress import render_in_passes
+    img = render_in_passes(mi, scene, sensor, spp, seed, progress)
     return _to_gl_order(mi, sensor, img, extent)
 
 
@@ -143,7 +145,8 @@ def underwater_camera_height(exp: Experiment) -> float:
     return y_cam
 
 
-def top_down_colour(exp: Experiment, extent, size: int, spp: int, seed: int = 0, world_y=None) -> np.ndarray:
+def top_down_colour(exp: Experiment, extent, size: int, spp: int, seed: int = 0, world_y=None,
+                    stages=None) -> np.ndarray:
     """(size, size, 3) float32 linear RGB of the ground seen from above (GL order).
 
     ``reference.refraction_lighting``:
@@ -153,21 +156,36 @@ def top_down_colour(exp: Experiment, extent, size: int, spp: int, seed: int = 0,
       the water* (sky and sun refracted by the wave surface, light absorbed on its way down),
       seen by an orthographic camera placed inside the water just below the wave troughs;
       the absorption of the camera's own vertical ray, ``exp(-sigma_t (y_cam - world_y))``,
-      is divided out (exact for purely absorbing water, ``water.albedo = 0``). Outside the
+      is divided out (exact for purely absorbing water, ``water.albedo = 0``; where its optical
+      depth exceeds ``MAX_OPTICAL_DEPTH`` nothing is left to recover and the dry render is
+      used). Outside the
       pool (the walls) the dry render is used. With it the shader's attenuation stands for
       absorption along the view path only.
     """
     import mitsuba as mi
 
-    dry = _render_top_down(mi, exp, extent, size, spp, seed, water=False)
+    from .._progress import Stages
+    from .user_scene import dry_camera_height
+    st = stages or Stages(quiet=True)
+    label = f"shader inputs: top-down render without water ({size}x{size}, {spp} spp)"
+    with st.stage("inputs.dry_render_s", label):
+        dry = _render_top_down(mi, exp, extent, size, spp, seed, water=False,
+                               y_cam=dry_camera_height(mi, exp, extent), progress=st.counter("  passes"))
     if exp["reference.refraction_lighting"] == "dry":
         return dry
     y_cam = underwater_camera_height(exp)
-    wet = _render_top_down(mi, exp, extent, size, spp, seed, water=True, y_cam=y_cam)
+    label = f"shader inputs: top-down render through the water ({size}x{size}, {spp} spp)"
+    with st.stage("inputs.wet_render_s", label):
+        wet = _render_top_down(mi, exp, extent, size, spp, seed, water=True, y_cam=y_cam,
+                               progress=st.counter("  passes"))
     if world_y is None:
         world_y = top_down_world_y(exp, extent, size)
     sigma = np.asarray(exp["water.sigma_t"], np.float64)
-    wet = wet * np.exp(sigma * np.maximum(y_cam - world_y, 0.0)[..., None])
+    optical = sigma * np.maximum(y_cam - world_y, 0.0)[..., None]
+    # beyond an optical depth of MAX_OPTICAL_DEPTH the floor's light through the water is lost
+    # in float precision (very murky water): the dry render stands in for those texels
+    lost = optical > MAX_OPTICAL_DEPTH
+    wet = np.where(lost, dry, wet.astype(np.float64) * np.exp(np.minimum(optical, MAX_OPTICAL_DEPTH)))
     x0, z0, x1, z1 = extent
     c = (np.arange(size) + 0.5) / size
     X, Z = np.meshgrid(x0 + c * (x1 - x0), z0 + c * (z1 - z0))
@@ -179,8 +197,8 @@ def top_down_colour(exp: Experiment, extent, size: int, spp: int, seed: int = 0,
 def sky_cubemap(exp: Experiment, size: int = CUBEMAP_SIZE) -> np.ndarray:
     """(6, size, size, 3) float32 cube map of the sky without the sun, stored y-flipped
     to compensate the shader's ``* vec3(1, -1, 1)`` lookup."""
-    d = cubemap_directions(size) * np.array([1.0, -1.0, 1.0])
-    return sky_radiance(d, **sky_params(exp, with_sun=False)).astype(np.float32)
+    from .user_scene import shader_cubemap
+    return shader_cubemap(exp, size)
 
 
 def shader_fresnel_lut(exp: Experiment) -> np.ndarray:
@@ -196,51 +214,69 @@ def shader_fresnel_lut(exp: Experiment) -> np.ndarray:
 
 def light_of(exp: Experiment) -> tuple[np.ndarray, np.ndarray]:
     """(lightpos (3,), lightcolor (3,)): the sun far away, colour = sun radiance / its max."""
-    p = sky_params(exp)
-    rad = np.asarray(p["sun_radiance"], np.float64)
+    from .user_scene import sun_of
+    sun_dir, rad = sun_of(exp)
     colour = rad / rad.max() if rad.max() > 0 else np.zeros(3)
-    return LIGHT_DISTANCE * p["sun_dir"], colour
+    return LIGHT_DISTANCE * sun_dir, colour
 
 
 def build_shader_inputs(exp: Experiment, width: int | None = None, height: int | None = None,
                         progress=None, info: dict | None = None) -> ShaderInputs:
     """All shader inputs of ``exp`` at output resolution (width, height) (default: the experiment's).
+    ``progress``: a ``study._progress.Stages`` that times and reports each stage (default: quiet).
     ``info``, if given, receives how the refraction texture was made (``texture``: method,
     settings and, for ``lighting``, its measured noise)."""
+    from .._progress import Stages
+    st = progress or Stages(quiet=True)
     width = width or exp["resolution"][0]
     height = height or exp["resolution"][1]
     extent = texture_extent(exp)
     size = exp["reference.texture_size"]
-    world_y = top_down_world_y(exp, extent, size)
+    with st.stage("inputs.world_y_s", f"shader inputs: world-y ray cast ({size}x{size})"):
+        world_y = top_down_world_y(exp, extent, size)
     if exp["reference.texture_method"] == "lighting":
         from .lighting import lighting_colour
-        colour, tex_info = lighting_colour(exp, extent, size, exp["reference.seed"], world_y=world_y)
+        with st.stage("inputs.lighting_s", f"shader inputs: lighting x albedo texture ({size}x{size})"):
+            colour, tex_info = lighting_colour(exp, extent, size, exp["reference.seed"], world_y=world_y,
+                                               progress=st.counter("  passes"))
     else:
         colour = top_down_colour(exp, extent, size, exp["reference.texture_spp"], exp["reference.seed"],
-                                 world_y=world_y)
+                                 world_y=world_y, stages=st)
         tex_info = {"method": "colour", "spp": exp["reference.texture_spp"], "noise": None}
     if info is not None:
         info["texture"] = tex_info
-    above = world_y > 0.0
-    refl_y = np.where(above, world_y, NO_GEOMETRY).astype(np.float32)
-    refl_col = np.where(above[..., None], colour, 0.0).astype(np.float32)
     tm = ortho_tex_matrix(*extent)
+    if exp["mesh.file"]:
+        from .user_scene import mesh_reflection_textures
+        with st.stage("inputs.mesh_reflection_s", "shader inputs: reflection textures with the mesh"):
+            refl_y, refl_col, refl_extent = mesh_reflection_textures(exp, extent, size,
+                                                                     progress=st.counter("  passes"))
+        tm1 = ortho_tex_matrix(*refl_extent)
+    else:
+        above = world_y > 0.0
+        refl_y = np.where(above, world_y, NO_GEOMETRY).astype(np.float32)
+        refl_col = np.where(above[..., None], colour, 0.0).astype(np.float32)
+        tm1 = tm
     hx, hz = exp["pool.half_extent"]
     waves = waves_of(exp)
     lightpos, lightcolor = light_of(exp)
     c = exp.section("camera")
+    with st.stage("inputs.maps_s", "shader inputs: normal map, sky cube map, Fresnel LUT"):
+        normal_map, cubemap, lut = (waves.normal_map(exp["waves.normal_map_size"]), sky_cubemap(exp),
+                                    shader_fresnel_lut(exp))
     return ShaderInputs(
         refraction_texture=colour, world_y=world_y, tex_matrix0=tm,
-        normal_map=waves.normal_map(exp["waves.normal_map_size"]), cubemap=sky_cubemap(exp),
-        fresnel_lut=shader_fresnel_lut(exp),
-        refl_world_y=refl_y, refl_texture=refl_col, tex_matrix1=tm,
+        normal_map=normal_map, cubemap=cubemap,
+        fresnel_lut=lut,
+        refl_world_y=refl_y, refl_texture=refl_col, tex_matrix1=tm1,
         water_rect=(-hx, -hz, hx, hz), normal_tile=exp["waves.normal_tile"],
         waves=np.asarray(exp["waves.offsets"]), view_proj=camera_view_proj(exp, width, height),
         viewpos=np.asarray(c["position"]), lightpos=lightpos, lightcolor=lightcolor,
         width=width, height=height)
 
 
-def load_or_build_shader_inputs(exp: Experiment, variant: str, cache=None, log=print) -> ShaderInputs:
+def load_or_build_shader_inputs(exp: Experiment, variant: str, cache=None, log=print,
+                                progress=None) -> ShaderInputs:
     """The shader inputs of ``exp`` from ``<cache>/inputs/<key>.npz`` if present, else built
     and written there atomically. The key hashes every experiment value that affects them
     (``Experiment.inputs_hash``), the variant, ``SCENE_VERSION``, ``INPUTS_VERSION``, this
@@ -266,7 +302,7 @@ def load_or_build_shader_inputs(exp: Experiment, variant: str, cache=None, log=p
         if inputs is not None:
             return inputs
         info: dict = {}
-        inputs = build_shader_inputs(exp, info=info)
+        inputs = build_shader_inputs(exp, progress=progress, info=info)
         path.parent.mkdir(parents=True, exist_ok=True)
         inputs.save(path)
     tex = info["texture"]
