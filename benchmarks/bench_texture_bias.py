@@ -128,7 +128,7 @@ def main() -> None:
     from study.fit.model import ShaderModel, constants_from_experiment
     from study.scene import lighting, shader_inputs as si
 
-    variant = init_backend("llvm_ad_rgb")
+    init_backend("llvm_ad_rgb")
     exp = load_experiment(args.experiment, ["reference.texture_method=\"colour\""] + args.overrides)
     args.passes.mkdir(parents=True, exist_ok=True)
     _render(exp, "wet", args.passes, args.render_wet)
