@@ -89,11 +89,13 @@ def run_tradeoff(experiments: list, out, overrides=None, scheduler=None, workers
                 log(f"tradeoff: anchor fit of {job['variant']} on {job['experiment']} failed "
                     f"({row['error']}); its points start from the experiment's constants")
                 anchors[(i, job["variant"])] = job["start"]
-        rows = run_sweep(point_job, plan_points(exps, specs, anchors), out / "tradeoff.parquet",
-                         client=client, label="tradeoff: points", log=log)
+        points = plan_points(exps, specs, anchors)
+        # rows of this plan only (a table written by an earlier plan keeps its other rows)
+        rows = run_sweep(point_job, points, out / "tradeoff.parquet", client=client,
+                         label="tradeoff: points", log=log)[:len(points)]
     summary, recs = analyse(rows, names, tol)
     summary["experiments"] = [str(p) for p in experiments]
-    summary["exports"] = export_recommended(exps, specs, summary, out, variant, log)
+    summary["exports"] = export_recommended(exps, specs, summary, rows, out, variant, log)
     from ..report.tradeoff import pareto_figure, write_tradeoff_report
     pareto_figure(out / "pareto.png", recs, summary)
     write_tradeoff_report(out, summary)
@@ -207,7 +209,7 @@ def scene_findings(pts: list, all_pts: list, tolerance: float) -> dict:
             "halvings": [brief(r) for r in halvings]}
 
 
-def export_recommended(exps, specs, summary: dict, out: Path, variant: str, log) -> dict:
+def export_recommended(exps, specs, summary: dict, rows: list, out: Path, variant: str, log) -> dict:
     """Export each scene's recommended constants (``shaders/`` or ``shaders/<name>/``) and check
     the export on llvmpipe against the port."""
     from shaders_port import Constants
@@ -215,9 +217,8 @@ def export_recommended(exps, specs, summary: dict, out: Path, variant: str, log)
     from .._backend import init_backend
     from ..report.export import export_shaders
     from ..report.gl_check import gl_check
-    from ..sweep import load_scene, read_table
+    from ..sweep import load_scene
 
-    rows = read_table(out / "tradeoff.parquet")
     init_backend(variant)
     result = {}
     for exp, spec in zip(exps, specs):
