@@ -43,13 +43,14 @@ class BackendPlugin(WorkerPlugin):
     name = "study-backend"
 
     def __init__(self, variant: str = "llvm_ad_rgb", threads: int = 1):
+        """``threads``: Dr.Jit threads of the worker (0: all cores of its machine)."""
         self.variant, self.threads = variant, int(threads)
 
     def setup(self, worker=None):
         from .._backend import init_backend
         init_backend(self.variant)
         import drjit as dr
-        dr.set_thread_count(self.threads)
+        dr.set_thread_count(self.threads or cpu_count())   # 0: every core of the worker's machine
 
 
 
@@ -102,7 +103,8 @@ def open_client(scheduler: str | None = None, workers: int | None = None,
                                    dashboard_address=None, silence_logs=40)
             client = Client(cluster)
         try:
-            client.register_plugin(BackendPlugin(variant, threads), name=BackendPlugin.name)
+            # a remote worker sizes Dr.Jit's pool to its own machine, a local one to its share
+            client.register_plugin(BackendPlugin(variant, 0 if address else threads), name=BackendPlugin.name)
             yield client
         finally:
             client.close()
