@@ -466,6 +466,18 @@ def load_experiment(path, overrides: list[str] | None = None) -> Experiment:
     return validate(raw, overrides, path)
 
 
+def load_experiments(paths, overrides: list[str] | None = None) -> list[Experiment]:
+    """Several experiment files with the same overrides, for a study over scenes: at least one,
+    and distinct names (they name the study's outputs)."""
+    if not paths:
+        raise ExperimentError("give at least one experiment file")
+    exps = [load_experiment(p, overrides) for p in paths]
+    names = [e["name"] for e in exps]
+    if len(set(names)) != len(names):
+        raise ExperimentError(f"experiment names must be distinct (they name the outputs): {names}")
+    return exps
+
+
 def schema_markdown() -> str:
     """The key table of experiments/README.md, generated from SCHEMA."""
     lines = ["| key | type | default | units | allowed | meaning |", "|---|---|---|---|---|---|"]

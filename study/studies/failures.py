@@ -366,16 +366,12 @@ def run_failures(experiments: list, out, overrides=None, *, variant: str = "llvm
     from pathlib import Path
 
     from ..report.failures import write_failures_report
-    from ..scene.experiment import ExperimentError, load_experiment
+    from ..scene.experiment import load_experiments
     from ..sweep import run_sweep, scene_spec, write_table
 
     log = log or (lambda m: print(m, file=sys.stderr, flush=True))
-    if not experiments:
-        raise ExperimentError("give at least one experiment file")
-    exps = [load_experiment(p, overrides) for p in experiments]
+    exps = load_experiments(experiments, overrides)
     names = [e["name"] for e in exps]
-    if len(set(names)) != len(names):
-        raise ExperimentError(f"experiment names must be distinct (they name the outputs): {names}")
     if shader is not None:
         from shaders_port._variants import get_variant
         get_variant(shader)

@@ -58,16 +58,12 @@ def run_tradeoff(experiments: list, out, overrides=None, scheduler=None, workers
     """Run the study (see the module doc); returns the summary written to ``summary.json``."""
     from .._io import write_json
     from ..fit.model import constants_from_experiment
-    from ..scene.experiment import ExperimentError, load_experiment
+    from ..scene.experiment import load_experiments
     from ..sweep import run_sweep, scene_spec
     from ..sweep.cluster import open_client
 
-    if not experiments:
-        raise ExperimentError("give at least one experiment file")
-    exps = [load_experiment(p, overrides) for p in experiments]
+    exps = load_experiments(experiments, overrides)
     names = [e["name"] for e in exps]
-    if len(set(names)) != len(names):
-        raise ExperimentError(f"experiment names must be distinct (they name the outputs): {names}")
     tol = exps[0]["tradeoff.tolerance"] if tolerance is None else float(tolerance)
     if tol < 0:
         raise ValueError(f"--tolerance must be >= 0, got {tol}")
