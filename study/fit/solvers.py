@@ -519,6 +519,19 @@ def _result(problem, solver, names, base, u, loss0, losses, iters, res, n_grad, 
                      time.perf_counter() - t0, bool(ok), msg)
 
 
+def _aborted(res: DrJitResidual, exc: Exception, u0, steps: int):
+    """A jitted optimistix solve or step raised. A non-finite model value inside it (JAX wraps the
+    callback's error) is reported and the best point evaluated returned, as the solvers' result
+    tuple; any other error is a bug and propagates."""
+    if not isinstance(res.last_error, FloatingPointError):
+        raise (res.last_error or exc) from exc
+    cause = res.last_error
+    best = res.stats.best_x if res.stats.best_x is not None else np.asarray(u0)
+    first = str(cause).strip().splitlines()[0] if str(cause).strip() else repr(cause)
+    return np.asarray(best), steps, False, (f"solver aborted ({type(cause).__name__}): {first}; "
+                                            "returning the best point evaluated")
+
+
 def _optimistix(res: DrJitResidual, solver: str, u0, max_steps, rtol, atol, nm_step):
     import jax
     import jax.numpy as jnp
@@ -543,15 +556,7 @@ def _optimistix(res: DrJitResidual, solver: str, u0, max_steps, rtol, atol, nm_s
     try:
         value, result, steps = run(jnp.asarray(y0, jnp.float64))
     except Exception as e:
-        # A non-finite model value inside the jitted solve (JAX wraps the callback's error):
-        # report it and return the best point. Any other error is a bug and propagates.
-        if not isinstance(res.last_error, FloatingPointError):
-            raise (res.last_error or e) from e
-        cause = res.last_error
-        best = res.stats.best_x if res.stats.best_x is not None else np.asarray(u0)
-        first = str(cause).strip().splitlines()[0] if str(cause).strip() else repr(cause)
-        return np.asarray(best), 0, False, f"solver aborted ({type(cause).__name__}): {first}; " \
-                                           "returning the best point evaluated"
+        return _aborted(res, e, u0, 0)
     steps = int(steps)
     ok = bool(result == optx.RESULTS.successful)
     msg = "converged" if ok else optx.RESULTS[result]
@@ -616,15 +621,7 @@ def _optimistix_steps(res: DrJitResidual, solver: str, u0, max_steps, rtol, atol
                                  f"the last {window} steps, after {steps} steps")
                 break
     except Exception as e:
-        # a non-finite model value inside a jitted step (JAX wraps the callback's error): report
-        # it and return the best point. Any other error is a bug and propagates.
-        if not isinstance(res.last_error, FloatingPointError):
-            raise (res.last_error or e) from e
-        cause = res.last_error
-        best = res.stats.best_x if res.stats.best_x is not None else np.asarray(u0)
-        first = str(cause).strip().splitlines()[0] if str(cause).strip() else repr(cause)
-        return np.asarray(best), steps, False, f"solver aborted ({type(cause).__name__}): {first}; " \
-                                               "returning the best point evaluated"
+        return _aborted(res, e, u0, steps)
     u = np.asarray(y, np.float64)
     if not np.all(np.isfinite(u)):
         best = res.stats.best_x if res.stats.best_x is not None else np.asarray(u0)
