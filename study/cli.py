@@ -17,6 +17,20 @@ def _common(p: argparse.ArgumentParser, many: bool = False) -> None:
                    help="Mitsuba variant (default: the experiment's, normally llvm_ad_rgb)")
 
 
+def _sweep_common(p: argparse.ArgumentParser, experiments_help: str) -> None:
+    """Arguments of the commands that run a Dask sweep over several experiments."""
+    p.add_argument("experiments", nargs="+", metavar="EXPERIMENT", help=experiments_help)
+    p.add_argument("--out", required=True, help="output folder (created if missing; a re-run resumes)")
+    p.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE",
+                   help="override a key of every experiment (repeatable)")
+    p.add_argument("--variant", choices=["llvm_ad_rgb", "cuda_ad_rgb"], default="llvm_ad_rgb",
+                   help="Mitsuba variant of the workers")
+    p.add_argument("--scheduler", default=None, metavar="ADDRESS",
+                   help="Dask scheduler address (default: $STUDY_SCHEDULER, else a local cluster)")
+    p.add_argument("--workers", type=int, default=None,
+                   help="local cluster worker processes (default: one per core)")
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="study", description="Calibrate a real-time GLSL water shader against Mitsuba 3 references.")
@@ -35,27 +49,14 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--solver", default=None, help="override fit.solver")
     p = sub.add_parser("tradeoff", help="speed against accuracy: variants x step schedules, refitted, "
                        "costed and charted with Pareto fronts (a Dask sweep)")
-    p.add_argument("experiments", nargs="+", metavar="EXPERIMENT", help="experiment TOML file(s); "
-                   "the [tradeoff] table of the first sets the variants and grid of each")
-    p.add_argument("--out", required=True, help="output folder (created if missing; a re-run resumes)")
-    p.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE",
-                   help="override a key of every experiment (repeatable)")
-    p.add_argument("--variant", choices=["llvm_ad_rgb", "cuda_ad_rgb"], default="llvm_ad_rgb",
-                   help="Mitsuba variant of the workers")
+    _sweep_common(p, "experiment TOML file(s); each experiment's [tradeoff] table sets its variants "
+                  "and grid, the first's sets the tolerance")
     p.add_argument("--tolerance", type=float, default=None,
                    help="recommend the cheapest point within this fraction of the best FLIP "
                    "(default: tradeoff.tolerance, 0.02)")
-    p.add_argument("--scheduler", default=None, metavar="ADDRESS",
-                   help="Dask scheduler address (default: $STUDY_SCHEDULER, else a local cluster)")
-    p.add_argument("--workers", type=int, default=None,
-                   help="local cluster worker processes (default: one per core)")
     p = sub.add_parser("stability", help="where the fit fails: solvers from many starts, which residual, "
                        "reference and texture noise (Dask sweeps; stability.md)")
-    p.add_argument("experiments", nargs="+", metavar="EXPERIMENT", help="experiment TOML file(s)")
-    p.add_argument("--out", required=True, help="output folder (created if missing; a re-run resumes)")
-    p.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE",
-                   help="override a key of every experiment (repeatable)")
-    p.add_argument("--variant", choices=["llvm_ad_rgb", "cuda_ad_rgb"], default="llvm_ad_rgb")
+    _sweep_common(p, "experiment TOML file(s)")
     p.add_argument("--phases", nargs="+", default=["multistart", "loss", "noise"],
                    help="multistart, loss, noise (default: all)")
     p.add_argument("--starts", type=int, default=16, help="Latin-hypercube starts per scene and solver")
@@ -66,9 +67,6 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--noise-fixed-spp", type=int, default=1024)
     p.add_argument("--noise-seeds", type=int, default=3)
     p.add_argument("--noise-resolution", type=int, default=96)
-    p.add_argument("--scheduler", default=None, metavar="ADDRESS",
-                   help="Dask scheduler address (default: $STUDY_SCHEDULER, else a local cluster)")
-    p.add_argument("--workers", type=int, default=None, help="local cluster worker processes")
     p = sub.add_parser("failures", help="classify every water pixel by where the shader's method "
                        "fails; class maps beside FLIP maps, a table per class")
     p.add_argument("experiments", nargs="+", metavar="EXPERIMENT", help="experiment TOML files")
