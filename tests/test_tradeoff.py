@@ -84,19 +84,23 @@ def test_analysis_of_a_table():
             _row("A", "water_refraction", "scale", 2.0, 20, 6, 80, 0.165, 25.0),
             _row("A", "water_refraction", "converged", 16.0, 160, 48, 640, 0.1649, 150.0),
             _row("A", "water_refraction_noreflection", "scale", 1.0, 10, 3, 40, 0.30, 15.0),
+            _row("A", "water_refraction_beer", "scale", 1.0, 10, 3, 40, 0.150, 17.0),
+            _row("A", "water_refraction_beer", "scale", 2.0, 20, 6, 80, 0.140, 25.0),
             _row("B", "water_refraction", "scale", 0.5, 5, 1.5, 20, 0.120, 12.0),
             _row("B", "water_refraction", "scale", 1.0, 10, 3, 40, 0.110, 17.0),
             {**_row("B", "water_refraction", "scale", 2.0, 20, 6, 80, 0.0, 0.0), "status": "error",
              "error": "RuntimeError: boom", "flip": None}]
     summary, recs = analyse(rows, ["A", "B"], 0.02)
     a = summary["scenes"]["A"]
-    assert a["recommended"]["label"] == "water_refraction (10, 3, 40)"     # 0.166 <= 1.02 * 0.165
+    assert a["recommended"]["label"] == "water_refraction_beer (20, 6, 80)"     # only it is within 1.02 * 0.140
     assert a["seed"]["flip"] == 0.166
-    assert a["simplest_variant_within_tolerance"] == "water_refraction"
+    # at no more fetches than the seed's 17: beer at the seed's schedule, not its 25-fetch point
+    assert a["best_within_seed_budget"]["label"] == "water_refraction_beer (10, 3, 40)"
+    assert a["simplest_variant_within_tolerance"] == "water_refraction_beer"
     assert a["error_floor_by_variant"]["water_refraction"] == 0.1649
     assert a["smallest_crossing_loop_cap"]["water_refraction"] == 40      # cap 20 misses 2 %
-    assert [r["label"] for r in a["front"]] == ["water_refraction (5, 1.5, 20)", "water_refraction (10, 3, 40)",
-                                                "water_refraction (20, 6, 80)"]
+    assert [r["label"] for r in a["front"]] == ["water_refraction (5, 1.5, 20)", "water_refraction_beer (10, 3, 40)",
+                                                "water_refraction_beer (20, 6, 80)"]
     assert summary["n_failed"] == 1 and summary["failures"][0]["error_message"] == "RuntimeError: boom"
     # the joint front holds only configurations measured on both scenes
     assert {r["label"] for r in summary["joint"]["front"]} <= {"water_refraction (5, 1.5, 20)",

@@ -102,6 +102,11 @@ def write_tradeoff_report(out: Path, summary: dict) -> Path:
                          f"{_fmt(seed['flip'])} at {_fmt(seed['fetches_mean'], 3)} fetches "
                          f"({_fmt(seed['fetches_mean'] / rec['fetches_mean'], 3)}x the recommended cost, "
                          f"FLIP {100 * (seed['flip'] / rec['flip'] - 1):+.2f} %).")
+        bw = f.get("best_within_seed_budget")
+        if seed and bw:
+            lines.append(f"**Best within the seed's fetch budget** ({_fmt(seed['fetches_mean'], 3)} fetches): "
+                         f"{bw['label']}: FLIP {_fmt(bw['flip'])} at {_fmt(bw['fetches_mean'], 3)} fetches "
+                         f"(the fitted seed: {_fmt(seed['flip'])}, {100 * (bw['flip'] / seed['flip'] - 1):+.1f} %).")
         lines += ["", "What the scene needs:", ""]
         lines.append(f"- simplest variant within tolerance: `{f['simplest_variant_within_tolerance']}`; "
                      "best FLIP per variant: " + ", ".join(f"{v} {_fmt(x)}" for v, x in

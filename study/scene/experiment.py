@@ -154,6 +154,10 @@ SCHEMA: dict[str, Field] = {
                                       "at `reference.texture_size`).", choices=("lighting", "colour")),
     "reference.lighting_size": Field("int", 128, "Texels per side of the lighting render over the "
                                      "pool (`texture_method = \"lighting\"`; at most `reference.texture_size`).", "texels", 8, 4096),
+    "reference.lighting_denoise": Field("str", "none", "Denoise the lighting render (`texture_method = "
+                                        "\"lighting\"`): `none` or `oidn` (Intel Open Image Denoise, guided "
+                                        "by the floor albedo; see the README for its measured effect on the "
+                                        "fitted constants).", choices=("none", "oidn")),
     "reference.wall_spp": Field("int", 64, "Samples per pixel of the dry colour render used "
                                 "outside the pool (`texture_method = \"lighting\"`).", "", 1, 65536),
     "reference.refraction_lighting": Field("str", "underwater", "How the top-down refraction "
@@ -207,6 +211,7 @@ for _name, (_glsl, _kind, _default, (_lo, _hi)) in CONSTANT_SPECS.items():
 # keys that change only the shader's inputs, never the reference image
 SHADER_INPUT_KEYS = frozenset({"reference.texture_size", "reference.texture_spp",
                                "reference.texture_method", "reference.lighting_size", "reference.wall_spp",
+                               "reference.lighting_denoise",
                                "reference.refraction_lighting", "reference.fresnel_transmission",
                                "waves.normal_map_size", "waves.slope_scale"})
 
@@ -223,7 +228,8 @@ def _clip(v, limit: int = 80) -> str:
 # references and inputs of experiments that do not use them stay valid
 _LATER_KEYS = ("floor.ledge", "floor.heightmap", "floor.height_scale", "floor.albedo_image",
                "floor.extent", "sky.envmap", "sky.rotation", "sky.scale", "sun.source", "mesh.file",
-               "mesh.position", "mesh.scale", "mesh.rotation", "mesh.albedo", "mesh.texture")
+               "mesh.position", "mesh.scale", "mesh.rotation", "mesh.albedo", "mesh.texture",
+               "reference.lighting_denoise")
 
 
 def _unset_later_key(key: str, value) -> bool:

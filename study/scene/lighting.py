@@ -27,6 +27,13 @@ Noise is measured, not assumed: the lighting is the mean of ``N_SEEDS`` renders 
 independent seeds, and the RMS standard error of the resulting colour over the pool texels
 (linear RGB) is returned with the texture.
 
+With ``reference.lighting_denoise = "oidn"`` the mean radiance is denoised by Intel Open Image
+Denoise (``pyoidn``, the ``RT`` filter in HDR mode, guided by the floor albedo from the same
+samples, which is noise-free under the orthographic camera) before the division by the albedo.
+A denoiser trades variance for a bias of its own (it blurs what it takes for noise, caustics
+first); ``benchmarks/bench_denoise.py`` measures what it does to the fitted constants. The
+standard error returned is then that of the *input* to the denoiser.
+
 Texture arrays are in GL order (row = t, z increasing; column = s, x increasing), float32,
 linear RGB.
 """
@@ -84,11 +91,28 @@ def interpolate(lighting: np.ndarray, extent, X: np.ndarray, Z: np.ndarray) -> n
     return ((1 - fv) * ((1 - fu) * a + fu * b) + fv * ((1 - fu) * c + fu * d)).astype(np.float32)
 
 
+def denoise_radiance(radiance: np.ndarray, albedo: np.ndarray) -> np.ndarray:
+    """Open Image Denoise (``RT`` filter, HDR, high quality) of a (n, n, 3) float32 linear-RGB
+    radiance image guided by its noise-free (n, n, 3) albedo; returns (n, n, 3) float32."""
+    try:
+        import pyoidn
+    except ImportError as e:                              # pragma: no cover - pinned dependency
+        raise RuntimeError("reference.lighting_denoise = \"oidn\" needs the pyoidn package "
+                           "(pip install pyoidn, pinned in pyproject.toml)") from e
+    out = pyoidn.denoise(np.ascontiguousarray(radiance, np.float32), np.ascontiguousarray(albedo, np.float32),
+                         hdr=True, clean_aux=True, quality="high")
+    out = np.asarray(out, np.float32)
+    if out.shape != radiance.shape or not np.all(np.isfinite(out)):
+        raise RuntimeError("Open Image Denoise returned a non-finite or misshapen image")
+    return np.maximum(out, 0.0)
+
+
 def render_lighting(exp: Experiment, size: int, spp: int, seed: int, *, water: bool,
                     y_cam: float, progress=None) -> tuple[np.ndarray, np.ndarray]:
     """Lighting ``radiance / albedo`` (size, size, 3) over the pool (GL order), corrected for the
     absorption of the camera's own vertical ray as ``top_down_colour`` does, and its per-texel
-    standard error, from ``N_SEEDS`` renders of ``ceil(spp / N_SEEDS)`` spp each."""
+    standard error, from ``N_SEEDS`` renders of ``ceil(spp / N_SEEDS)`` spp each (denoised first
+    when ``reference.lighting_denoise = "oidn"``; the standard error is the denoiser's input's)."""
     import mitsuba as mi
 
     from .shader_inputs import _ortho_sensor, _to_gl_order, top_down_world_y
@@ -98,7 +122,7 @@ def render_lighting(exp: Experiment, size: int, spp: int, seed: int, *, water: b
         "type": "aov", "aovs": "alb:albedo", "transport": _transport(exp, water)})
     per_pass = max(1, -(-spp // N_SEEDS))
     sensor = _ortho_sensor(mi, extent, size, per_pass, seed, y_cam=y_cam, medium=medium)
-    passes = []
+    passes, radiances, albedos = [], [], []
     for k in range(N_SEEDS):
         img = np.array(mi.render(scene, sensor=sensor, spp=per_pass, seed=seed * N_SEEDS + k), np.float32)
         img = _to_gl_order(mi, sensor, img, extent)
@@ -109,11 +133,16 @@ def render_lighting(exp: Experiment, size: int, spp: int, seed: int, *, water: b
                                   "floor.albedo_image); use reference.texture_method = \"colour\" for such "
                                   "a floor")
         passes.append(radiance / albedo)
+        radiances.append(radiance)
+        albedos.append(albedo)
         if progress:
             progress(k + 1, N_SEEDS)
     passes = np.stack(passes)
     lighting = passes.mean(0)
     stderr = np.sqrt(passes.var(0, ddof=1) / N_SEEDS)
+    if exp["reference.lighting_denoise"] == "oidn":
+        albedo = np.mean(albedos, axis=0)
+        lighting = denoise_radiance(np.mean(radiances, axis=0), albedo) / albedo
     if water:
         world_y = top_down_world_y(exp, extent, size)
         sigma = np.asarray(exp["water.sigma_t"], np.float64)
@@ -175,5 +204,6 @@ def lighting_colour(exp: Experiment, extent, size: int, seed: int = 0, world_y=N
     se = interpolate(lighting_se, pool, X, Z) * albedo
     noise = float(np.sqrt(np.mean(se[inside] ** 2))) if inside.any() else 0.0
     info = {"method": "lighting", "lighting_size": n_light, "spp": exp["reference.texture_spp"],
-            "wall_spp": max(exp["reference.wall_spp"], ALBEDO_SPP), "noise": noise, "n_seeds": N_SEEDS}
+            "wall_spp": max(exp["reference.wall_spp"], ALBEDO_SPP), "noise": noise, "n_seeds": N_SEEDS,
+            "denoise": exp["reference.lighting_denoise"]}
     return colour.astype(np.float32), info

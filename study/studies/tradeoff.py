@@ -9,6 +9,8 @@ phases (anchors, then points warm-started from them), and analyses the table:
 * the recommendation: the cheapest configuration (mean texture fetches per water pixel, the
   machine-independent cost) whose FLIP is within ``tolerance`` of the best; per scene its
   constants are exported like ``study calibrate`` exports (compile-checked, GL-checked);
+* the best configuration at no more fetches per pixel than the seed's (``water_refraction`` at
+  the seed's schedule), the budget a game replacing the seed's shader already pays;
 * what the scene needs: the simplest variant within tolerance (variants counted simplest first,
   in the order of ``tradeoff.variants``), what the sky reflection and the reflection raycast add,
   the smallest loop cap at which rays cross the floor, the error floor of each variant (its
@@ -197,9 +199,13 @@ def scene_findings(pts: list, all_pts: list, tolerance: float) -> dict:
                        and r["not_crossed"] < 0.01})
         crossing[v] = caps[0] if caps else None
     halvings = sorted((r for r in pts if r["kind"] == "scale"), key=lambda r: (r["variant"], r["scale"]))
+    budget = seed[0][COST] * (1 + 1e-3) if seed and seed[0].get(COST) is not None else None
+    within = [r for r in pts if budget is not None and r.get(COST) is not None and r[COST] <= budget]
+    best_within = min(within, key=lambda r: r[ERROR], default=None)
     return {"front": [brief(r) for r in pareto_front(pts, COST, ERROR)],
             "fronts_by_cost": {c: [r["label"] for r in pareto_front(pts, c, ERROR)] for c in COSTS},
             "recommended": brief(rec), "seed": brief(seed[0]) if seed else None,
+            "best_within_seed_budget": brief(best_within),
             "best_flip_by_variant": best_by_variant, "simplest_variant_within_tolerance": simplest,
             "error_floor_by_variant": floor, "smallest_crossing_loop_cap": crossing,
             "halvings": [brief(r) for r in halvings]}
