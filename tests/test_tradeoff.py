@@ -132,6 +132,10 @@ def test_tradeoff_cli_tiny(tmp_path):
     assert (tmp_path / "shaders" / "core" / "water_refraction.frag").is_file()
     assert (tmp_path / "pareto.png").stat().st_size > 10_000
     assert "Recommended" in (tmp_path / "report.md").read_text()
+    # the reference beside the seed shader (seed constants, fitted) and the recommendation
+    assert summary["images"]["default"] == "images_default.png"
+    assert (tmp_path / "images_default.png").stat().st_size > 10_000
+    assert "images_default.png" in (tmp_path / "report.md").read_text()
     before = {r["key"]: r["seconds"] for r in rows}
     assert main(args) == 0                                       # resumes: nothing re-run
     assert {r["key"]: r["seconds"] for r in read_table(tmp_path / "tradeoff.parquet")} == before

@@ -107,6 +107,8 @@ def write_tradeoff_report(out: Path, summary: dict) -> Path:
             lines.append(f"**Best within the seed's fetch budget** ({_fmt(seed['fetches_mean'], 3)} fetches): "
                          f"{bw['label']}: FLIP {_fmt(bw['flip'])} at {_fmt(bw['fetches_mean'], 3)} fetches "
                          f"(the fitted seed: {_fmt(seed['flip'])}, {100 * (bw['flip'] / seed['flip'] - 1):+.1f} %).")
+        if summary.get("images", {}).get(scene):
+            lines += ["", f"![{scene}: reference and shaders]({summary['images'][scene]})"]
         lines += ["", "What the scene needs:", ""]
         lines.append(f"- simplest variant within tolerance: `{f['simplest_variant_within_tolerance']}`; "
                      "best FLIP per variant: " + ", ".join(f"{v} {_fmt(x)}" for v, x in

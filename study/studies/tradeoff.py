@@ -17,7 +17,8 @@ phases (anchors, then points warm-started from them), and analyses the table:
   converged raymarch), and what each halving of the seed's schedule costs.
 
 Outputs in ``out``: ``tradeoff.parquet`` (a row per point), ``anchors.parquet``, ``pareto.png``,
-``report.md``, ``summary.json``, ``shaders/`` (one experiment) or ``shaders/<name>/`` (several).
+``images_<scene>.png`` (the reference beside the seed shader with the seed's constants, fitted, the
+best configuration within the seed's fetch budget and the recommendation), ``report.md``, ``summary.json``, ``shaders/`` (one experiment) or ``shaders/<name>/`` (several).
 """
 from __future__ import annotations
 
@@ -94,6 +95,7 @@ def run_tradeoff(experiments: list, out, overrides=None, scheduler=None, workers
     summary, recs = analyse(rows, names, tol)
     summary["experiments"] = [str(p) for p in experiments]
     summary["exports"] = export_recommended(exps, specs, summary, rows, out, variant, log)
+    summary["images"] = side_by_side(exps, specs, summary, rows, out, variant)
     from ..report.tradeoff import pareto_figure, write_tradeoff_report
     pareto_figure(out / "pareto.png", recs, summary)
     write_tradeoff_report(out, summary)
@@ -194,6 +196,9 @@ def scene_findings(pts: list, all_pts: list, tolerance: float) -> dict:
              for v in variants}
     crossing = {}
     for v in variants:
+        if not any(r["schedule"] for r in all_pts if r["variant"] == v):
+            crossing[v] = "no raymarch"         # a loopless shader (the baselines)
+            continue
         caps = sorted({int(r["schedule"]["loop_cap"]) for r in pts if r["variant"] == v
                        and r["schedule"] and r.get("not_crossed") is not None
                        and r["not_crossed"] < 0.01})
@@ -241,4 +246,52 @@ def export_recommended(exps, specs, summary: dict, rows: list, out: Path, varian
                                "constants": constants.to_dict(), "gl_check": gl}
         log(f"tradeoff: {exp['name']}: exported {rec['label']} to {folder} (GL check "
             f"{'passed' if gl['passed'] else 'FAILED'})")
+    return result
+
+
+def _point_row(rows: list, scene: str, label: str) -> dict:
+    return next(r for r in rows if r.get("job.experiment") == scene and r["status"] == "ok"
+                and config_label(point_record(r)) == label and r.get("job.kind") != "converged")
+
+
+def side_by_side(exps, specs, summary: dict, rows: list, out: Path, variant: str) -> dict:
+    """Per scene, ``images_<scene>.png``: the reference | the seed shader with the experiment's
+    constants at the seed's schedule | the seed's configuration refitted | the best configuration
+    within the seed's fetch budget | the recommendation (duplicates left out), each at the
+    experiment's resolution with its FLIP and RMSE on the water pixels. Returns {scene: file name}."""
+    from shaders_port import Constants
+
+    from .._backend import drjit_backend
+    from .._metrics import errors
+    from ..fit.model import ShaderModel, constants_from_experiment
+    from ..report.calibration import comparison_figure
+    from ..scene.baseline_inputs import inputs_for_shader
+    from ..sweep import load_scene
+
+    result = {}
+    for exp, spec in zip(exps, specs):
+        f = summary["scenes"][exp["name"]]
+        panels = [("seed shader, seed constants", "water_refraction",
+                   constants_from_experiment(exp).replace(**SEED_SCHEDULE))]
+        for title, key in (("seed shader, fitted", "seed"), ("best within the seed's fetches",
+                                                             "best_within_seed_budget"),
+                           ("recommended", "recommended")):
+            r = f.get(key)
+            if r and r["label"] not in [p[0].split(": ", 1)[-1] for p in panels]:
+                row = _point_row(rows, exp["name"], r["label"])
+                panels.append((f"{title}: {r['label']}", r["variant"], Constants.from_dict(_constants_of(row))))
+        exp_s, ref, inputs = load_scene(spec, variant)
+        images, errs, mask = {"reference": ref.image}, {}, None
+        for title, shader, constants in panels:
+            ins = inputs_for_shader(exp_s, inputs, shader, variant, log=lambda m: None)
+            model = ShaderModel.from_experiment(exp_s, ins, ref.image, shader=shader,
+                                                backend=drjit_backend(variant),
+                                                resolution=tuple(exp_s["resolution"]))
+            img, _ = model.render(constants)
+            images[title] = img
+            errs[title] = errors(ref.image, img, model.mask)
+            mask = model.mask
+        name = f"images_{exp['name']}.png"
+        comparison_figure(out / name, images, errs, mask, title=exp["name"])
+        result[exp["name"]] = name
     return result
