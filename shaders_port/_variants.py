@@ -162,6 +162,10 @@ _seed_variant("water_refraction_ggx", ("GGX_SPECULAR",), {"specular": "ggx"},
 _seed_variant("water_refraction_beer_ggx", ("BEER_ATTENUATION", "GGX_SPECULAR"),
               {"attenuation": "beer", "specular": "ggx"},
               "seed + Beer-Lambert attenuation + GGX highlight", replaces={**_BEER, **_GGX})
+_seed_variant("water_refraction_beer_walls", ("BEER_ATTENUATION", "WALL_FACES"),
+              {"attenuation": "beer", "wall_faces": True},
+              "seed + Beer-Lambert attenuation + a crossing into a wall above the water shaded as "
+              "its submerged face (waterColor), not the wall's top", replaces=_BEER)
 _seed_variant("water_refraction_binary", ("BINARY_REFINE",), {"refine": "binary"},
               "seed + REFINE_STEPS binary-search steps after the linear search (relief mapping)",
               schedule=_REFINE)

@@ -71,16 +71,21 @@ class Options(NamedTuple):
     attenuation: 'linear' (seed: clamped mix over ``ATTENUATION_DISTANCE``) or 'beer'
         (``BEER_ATTENUATION``: ``exp(-ABSORPTION_RGB * travelLength)`` towards ``waterColor``).
     specular: 'phong' (seed), 'ggx' (``GGX_SPECULAR``) or 'none' (``NO_SPECULAR``).
+    wall_faces: False (seed) or True (``WALL_FACES``: a crossing into geometry that rises above
+        the water plane, e.g. a pool wall, hit that geometry's vertical face under the water,
+        which the top-down textures do not hold; it is shaded as ``waterColor``).
     """
 
     normal_layers: int = 4
     refine: str | None = None
     attenuation: str = "linear"
     specular: str = "phong"
+    wall_faces: bool = False
 
     def checked(self) -> "Options":
         for name, allowed in (("normal_layers", (1, 2, 4)), ("refine", (None, "binary", "secant")),
-                              ("attenuation", ("linear", "beer")), ("specular", ("phong", "ggx", "none"))):
+                              ("attenuation", ("linear", "beer")), ("specular", ("phong", "ggx", "none")),
+                              ("wall_faces", (False, True))):
             if getattr(self, name) not in allowed:
                 raise ValueError(f"shader option {name}={getattr(self, name)!r}; allowed: {allowed}")
         return self
@@ -218,7 +223,8 @@ def interpolate_crossing(m, P, current_position, current_position_old, depth, ol
     return current_position, vRefraction, denominator
 
 
-def attenuation(m, P, current_position, vRefraction, C, model: str = "linear"):
+def attenuation(m, P, current_position, vRefraction, depth, C, model: str = "linear",
+                wall_faces: bool = False):
     # ---- [6] Attenuation ----
     travelLength = dr.norm(current_position - P.varyingVecWorldPosition)
     if model == "beer":  # BEER_ATTENUATION
@@ -227,6 +233,8 @@ def attenuation(m, P, current_position, vRefraction, C, model: str = "linear"):
     else:
         travelLength = clamp(travelLength / C.attenuation_distance, 0.0, 1.0)
         vRefraction = mix(vRefraction, C.waterColor, travelLength)
+    if wall_faces:       # WALL_FACES
+        vRefraction = dr.select(depth > P.varyingVecWorldPosition.y, C.waterColor, vRefraction)
     return vRefraction
 
 
@@ -348,7 +356,8 @@ def refraction_blocks(m, P, C, opts: Options = Options()) -> Refracted:
     current_position, vRefraction, denominator = interpolate_crossing(
         m, P, current_position, current_position_old, depth, olddepth)
     loop_position, loop_position_old = loop_end
-    vRefraction = attenuation(m, P, current_position, vRefraction, C, opts.attenuation)
+    vRefraction = attenuation(m, P, current_position, vRefraction, depth, C, opts.attenuation,
+                              opts.wall_faces)
     return Refracted(vEye, vLight, vBumpTex, vBumpTexMore, R, current_position, vRefraction,
                      iterations, crossed, denominator, loop_position, loop_position_old, olddepth)
 

@@ -207,3 +207,94 @@ def test_reflection_shader_switches_match_gl(inputs, defines, options):
     assert diff.mean() <= 1e-3 and np.percentile(diff, 99.9) <= 1e-2, (diff.mean(), diff.max())
     seed = water_reflection.render(inputs, CUSTOM).numpy()
     assert np.abs(out["color"] - seed["color"]).max(-1)[both].mean() > 1e-3   # the switches act
+
+
+# ---- WALL_FACES: a crossing into geometry above the water is the geometry's submerged face ----
+
+def walled_inputs(width: int = 96, height: int = 72):
+    """The synthetic inputs with the reflection shader's wall (x0 .. x0 + 0.8, 0.6 high) in the
+    refraction depth texture too, as the study's top-down textures hold a pool wall: refracted
+    rays near it cross into the wall's column."""
+    import dataclasses
+    inp = synthetic_inputs(width=width, height=height)
+    world_y = inp.world_y.copy()
+    world_y[:, : world_y.shape[1] // 6] = 0.6
+    return dataclasses.replace(inp, world_y=world_y)
+
+
+@pytest.fixture(scope="module")
+def walled():
+    return walled_inputs()
+
+
+def _wall_lanes(out):
+    """Water pixels whose refraction crossing lies in the wall's column: with NOREFLECTION the
+    WALL_FACES variant's colour there is waterColor (float32)."""
+    water = out["mask"] > 0
+    return water & (np.abs(out["color"] - np.float32(CUSTOM.water_color[:3])).max(-1) <= 1e-7)
+
+
+def test_wall_faces_shade_the_submerged_face_as_water(walled):
+    beer = get_variant("water_refraction_beer").render(walled, CUSTOM, reflection=False).numpy()
+    walls = get_variant("water_refraction_beer_walls").render(walled, CUSTOM, reflection=False).numpy()
+    water = beer["mask"] > 0
+    at_wall = _wall_lanes(walls)
+    changed = water & (np.abs(walls["color"] - beer["color"]).max(-1) > 0.0)
+    # the switch acts on the lanes whose crossing is in the wall's column, and only there
+    assert 200 <= at_wall.sum() <= 0.5 * water.sum(), at_wall.sum()
+    assert changed.sum() > 0.9 * at_wall.sum() and not (changed & ~at_wall).any()
+    # those lanes showed the wall's top (the texture there) before; their crossing is at the wall
+    assert np.abs(beer["color"][at_wall] - np.array(CUSTOM.water_color[:3])).max(-1).mean() > 0.05
+    # no extra texture fetch, the same search
+    np.testing.assert_array_equal(walls["fetches"][water], beer["fetches"][water])
+    np.testing.assert_array_equal(walls["iterations"][water], beer["iterations"][water])
+    # without a wall in the depth texture it is the Beer-Lambert variant, bit for bit
+    plain = synthetic_inputs(width=96, height=72)
+    np.testing.assert_array_equal(
+        get_variant("water_refraction_beer_walls").render(plain, CUSTOM).numpy()["color"],
+        get_variant("water_refraction_beer").render(plain, CUSTOM).numpy()["color"])
+
+
+def test_wall_faces_port_matches_gl_where_it_acts(walled):
+    from test_gl_differential import _check, compare_or_skip
+    res = compare_or_skip(walled, CUSTOM, "water_refraction_beer_walls")
+    _check(res, "gl_water_refraction_beer_walls_walled")
+    beer = get_variant("water_refraction_beer").render(walled, CUSTOM).numpy()
+    water = beer["mask"] > 0
+    assert (np.abs(res["port"] - beer["color"]).max(-1)[water] > 1e-3).sum() > 200   # the switch acts
+
+
+def test_wall_faces_in_the_reflection_shader_match_gl(walled):
+    """water_reflection.frag shares block [6] and its WALL_FACES switch with the refraction shader."""
+    from shaders_port import water_reflection
+    from shaders_port._gl import GLRenderer
+    opts = {"attenuation": "beer", "wall_faces": True}
+    out = water_reflection.render(walled, CUSTOM, **opts).numpy()
+    with GLRenderer("water_reflection", walled, defines=("BEER_ATTENUATION", "WALL_FACES")) as r:
+        rgba, gl_mask = r.render(CUSTOM)
+    both = (out["mask"] > 0) & gl_mask
+    diff = np.abs(out["color"] - rgba[..., :3]).max(-1)[both]
+    assert both.sum() > 500
+    assert diff.mean() <= 1e-3 and np.percentile(diff, 99.9) <= 1e-2, (diff.mean(), diff.max())
+    beer = water_reflection.render(walled, CUSTOM, attenuation="beer").numpy()
+    assert (np.abs(out["color"] - beer["color"]).max(-1)[both] > 1e-3).sum() > 200
+
+
+@pytest.mark.parametrize("param", ["water_color[1]", "water_color[2]", "absorption_g", "bumptex_mult"])
+def test_wall_faces_jacobian_matches_central_differences(monkeypatch, param):
+    """waterColor now also enters where the switch acts (derivative F_T there); the others are
+    those of the Beer-Lambert variant, the select carrying none."""
+    inp = walled_inputs(width=48, height=36)
+    v = get_variant("water_refraction_beer_walls")
+    base, J = v.render_with_jacobian(inp, FD_AT, [param])
+    base = base.numpy()
+    assert _wall_lanes_at(base, inp).sum() > 20
+    monkeypatch.setitem(twr.FD_EPS, param, twr.FD_EPS.get(param, 1e-3))
+    twr.check_jacobian_column(lambda c: v.render(inp, c).numpy(), base, J[..., 0], FD_AT, param,
+                              ("iterations",))
+
+
+def _wall_lanes_at(out, inp):
+    """Lanes where the switch acts, from the refraction-only render at FD_AT."""
+    o = get_variant("water_refraction_beer_walls").render(inp, FD_AT, reflection=False).numpy()
+    return (o["mask"] > 0) & (np.abs(o["color"] - np.float32(FD_AT.water_color[:3])).max(-1) <= 1e-7)

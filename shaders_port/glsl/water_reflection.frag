@@ -191,6 +191,15 @@ void main (void)
     //Calc new attenuated vRefraction
     vRefraction=mix(vRefraction, waterColor, travelLength);
 #endif
+#ifdef WALL_FACES
+    //variant: the ray crossed into geometry that rises above the water plane (a pool wall),
+    //so it hit that geometry's vertical face under the water, which the top-down textures do
+    //not hold (they show its top): shade the face as water seen to full attenuation
+    if (depth > varyingVecWorldPosition.y)
+    {
+        vRefraction = waterColor;
+    }
+#endif
 
     // ---- [7] Reflection ----
 #ifndef NOREFLECTION

@@ -126,10 +126,12 @@ def tile_texture(exp: Experiment, px_per_tile: int = 32) -> np.ndarray:
     return np.where(grout, 0.5 * col, col).astype(np.float32)
 
 
-def build_geometry(mi, exp: Experiment, water: bool = True, medium=None, mesh: bool = True) -> dict:
+def build_geometry(mi, exp: Experiment, water: bool = True, medium=None, mesh: bool = True,
+                   water_bsdf: dict | None = None) -> dict:
     """Shapes of the scene as a dict for ``mi.load_dict`` (no sensor, emitter or integrator).
     ``medium``: the water's medium object (default: a new one from :func:`water_medium`);
-    ``mesh``: include the user's mesh above the water (``mesh.file``), if any."""
+    ``mesh``: include the user's mesh above the water (``mesh.file``), if any; ``water_bsdf``:
+    extra properties of the water's dielectric (see :func:`water_mesh`)."""
     hx, hz = exp["pool.half_extent"]
     res = exp["reference.water_mesh"]
     yb = floor_bottom(exp)
@@ -165,7 +167,8 @@ def build_geometry(mi, exp: Experiment, water: bool = True, medium=None, mesh: b
         mesh_bounds(mi, exp)                      # loadable and above the water
         out["mesh"] = mesh_shape(mi, exp)
     if water:
-        out["water"] = water_mesh(mi, exp, yb, medium if medium is not None else water_medium(mi, exp))
+        out["water"] = water_mesh(mi, exp, yb, medium if medium is not None else water_medium(mi, exp),
+                                  water_bsdf)
     return out
 
 
@@ -182,8 +185,11 @@ def water_medium(mi, exp: Experiment):
         "albedo": {"type": "rgb", "value": exp["water.albedo"]}})
 
 
-def water_mesh(mi, exp: Experiment, y_bottom: float, medium=None):
-    """The closed water volume: displaced top, vertical sides, flat bottom."""
+def water_mesh(mi, exp: Experiment, y_bottom: float, medium=None, bsdf: dict | None = None):
+    """The closed water volume: displaced top, vertical sides, flat bottom. ``bsdf``: extra
+    properties of its ``dielectric`` (e.g. ``specular_transmittance = 0`` keeps the reflected
+    light only, ``specular_reflectance = 0`` the transmitted: the terms of the shader's Fresnel
+    combine, ``benchmarks/bench_grazing.py``)."""
     hx, hz = exp["pool.half_extent"]
     hx, hz = hx - WATER_INSET, hz - WATER_INSET
     n = exp["reference.water_mesh"]
@@ -225,7 +231,8 @@ def water_mesh(mi, exp: Experiment, y_bottom: float, medium=None):
     outward = np.concatenate([np.tile([0.0, 1.0, 0.0], (nt, 1)), side_n, side_n,
                               np.tile([0.0, -1.0, 0.0], (m, 1))])
 
-    props = {"bsdf": mi.load_dict({"type": "dielectric", "int_ior": exp["water.ior"], "ext_ior": 1.0})}
+    props = {"bsdf": mi.load_dict({"type": "dielectric", "int_ior": exp["water.ior"], "ext_ior": 1.0,
+                                   **(bsdf or {})})}
     if medium is not None:
         props["interior"] = medium
     return _mesh(mi, "water", pos, faces, normals=nor, outward=outward, **props)
@@ -235,13 +242,16 @@ def has_medium(exp: Experiment) -> bool:
     return any(v > 0 for v in exp["water.sigma_t"])
 
 
-def build_scene(exp: Experiment, width: int | None = None, height: int | None = None, seed: int = 0):
-    """The reference scene (perspective camera, box pixel filter) as a loaded ``mi.Scene``."""
+def build_scene(exp: Experiment, width: int | None = None, height: int | None = None, seed: int = 0,
+                *, water_bsdf: dict | None = None, rows: tuple[int, int] | None = None):
+    """The reference scene (perspective camera, box pixel filter) as a loaded ``mi.Scene``.
+    ``water_bsdf``: extra properties of the water's dielectric (:func:`water_mesh`); ``rows``:
+    render only image rows ``[r0, r1)`` (a film crop; row 0 at the top)."""
     import mitsuba as mi
     width = width or exp["resolution"][0]
     height = height or exp["resolution"][1]
     c = exp.section("camera")
-    d = {"type": "scene", **build_geometry(mi, exp, water=True)}
+    d = {"type": "scene", **build_geometry(mi, exp, water=True, water_bsdf=water_bsdf)}
     from .user_scene import reference_sky
     d["sky"] = {"type": "envmap", "bitmap": mi.Bitmap(reference_sky(exp))}
     d["sensor"] = {
@@ -249,7 +259,9 @@ def build_scene(exp: Experiment, width: int | None = None, height: int | None = 
         "to_world": mi.ScalarTransform4f().look_at(origin=c["position"], target=c["target"], up=[0, 1, 0]),
         "sampler": {"type": "independent", "seed": seed},
         "film": {"type": "hdrfilm", "width": width, "height": height, "pixel_format": "rgb",
-                 "rfilter": {"type": "box"}},
+                 "rfilter": {"type": "box"},
+                 **({"crop_offset_x": 0, "crop_offset_y": rows[0], "crop_width": width,
+                     "crop_height": rows[1] - rows[0]} if rows is not None else {})},
     }
     d["integrator"] = {"type": "volpath" if has_medium(exp) else "path",
                        "max_depth": exp["reference.max_depth"]}
