@@ -67,6 +67,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--noise-fixed-spp", type=int, default=1024)
     p.add_argument("--noise-seeds", type=int, default=3)
     p.add_argument("--noise-resolution", type=int, default=96)
+    p.add_argument("--noise-inputs", nargs="+", default=["reference", "texture"],
+                   choices=["reference", "texture"], help="which renders the noise phase varies")
     p = sub.add_parser("failures", help="classify every water pixel by where the shader's method "
                        "fails; class maps beside FLIP maps, a table per class")
     p.add_argument("experiments", nargs="+", metavar="EXPERIMENT", help="experiment TOML files")
@@ -116,7 +118,8 @@ def main(argv=None) -> int:
                                 starts=args.starts, solvers=args.solvers or SOLVERS, adam_lrs=args.adam_lrs,
                                 max_steps=args.max_steps, nm_steps=4 * args.max_steps,
                                 noise_spp=args.noise_spp, noise_fixed_spp=args.noise_fixed_spp,
-                                noise_seeds=args.noise_seeds, noise_resolution=args.noise_resolution)
+                                noise_seeds=args.noise_seeds, noise_resolution=args.noise_resolution,
+                                noise_inputs=args.noise_inputs)
         elif args.command == "failures":
             _jobs.run_failures(args.experiments, args.out, args.overrides, args.variant,
                                shader=args.shader, constants_json=args.constants,

@@ -77,6 +77,11 @@ def test_scene_hash_tracks_scene_keys_only():
     for ref in ({"texture_method": "colour"}, {"lighting_size": 64}, {"wall_spp": 16}, {"texture_spp": 64}):
         b = validate({"reference": ref})
         assert b.scene_hash() == a.scene_hash() and b.inputs_hash() != a.inputs_hash(), ref
+    # the reference's sample count changes the reference's key, never the shader inputs' key
+    for ref in ({"spp": 64}, {"spp": "auto", "target_noise": 0.02, "max_spp": 512}):
+        b = validate({"reference": ref})
+        assert b.scene_hash() != a.scene_hash() and b.inputs_hash() == a.inputs_hash(), ref
+    assert validate({"reference": {"seed": 3}}).inputs_hash() != a.inputs_hash()     # seeds the textures too
 
 
 def test_readme_documents_every_key():

@@ -69,6 +69,24 @@ def test_analyse_noise_bias_agreement_and_cheapest():
     assert st[256]["a"]["bias_se"] == pytest.approx(math.sqrt(2) * 0.1)    # std 0.1414/sqrt(2) each
     assert nz["agrees"] == {64: False, 256: True, 1024: True}
     assert nz["cheapest_agreeing"] == 256
+    # a constant bound at 0 on every seed (no spread) agrees; one that moves without spread does not
+    for r in rows:
+        r["value.b"], r["status.b"] = 0.0, "bound"
+    assert analyse_noise(rows)["reference"]["agrees"] == {64: False, 256: True, 1024: True}
+    for r in rows:
+        r["value.b"] = 0.5 if r["job.spp"] == 256 else 0.0
+    assert analyse_noise(rows)["reference"]["agrees"] == {64: False, 256: False, 1024: True}
+
+
+def test_plan_noise_varies_the_chosen_inputs_only():
+    from study.studies.stability import plan_noise
+    path = str(REPO / "experiments" / "default.toml")
+    jobs = plan_noise(path, [], [64, 256], 1024, 2, 48, inputs=("reference",))
+    assert len(jobs) == 4 and {j["which"] for j in jobs} == {"reference"}
+    assert {(j["spp"], j["seed"]) for j in jobs} == {(64, 1000), (64, 1001), (256, 1000), (256, 1001)}
+    assert all("reference.texture_spp=1024" in j["scene"]["overrides"] for j in jobs)
+    both = plan_noise(path, [], [64], 1024, 1, 48)
+    assert [j["which"] for j in both] == ["reference", "texture"]
 
 
 def test_analyse_loss_picks_lower_mean_flip():

@@ -74,7 +74,7 @@ def _row(exp, variant, kind, scale, g, s, c, flip, fetches, ratio=1.0, crossed=0
             "job.schedule.steps_grazing": g, "job.schedule.steps_steep": s, "job.schedule.loop_cap": c,
             "status": "ok", "error": None, "flip": flip, "rmse": flip / 2, "fetches_mean": fetches,
             "fetches_p99": fetches + 2, "gl_ratio_1080p": ratio, "gl_ref_ms_1080p": 40.0,
-            "port_ms_512": fetches / 4, "not_crossed": crossed}
+            "port_ms_512": fetches / 4, "not_crossed": crossed, "n_fitted": 7, "bic": -1000.0 * (1 - flip)}
 
 
 def test_analysis_of_a_table():
@@ -97,6 +97,9 @@ def test_analysis_of_a_table():
     # at no more fetches than the seed's 17: beer at the seed's schedule, not its 25-fetch point
     assert a["best_within_seed_budget"]["label"] == "water_refraction_beer (10, 3, 40)"
     assert a["simplest_variant_within_tolerance"] == "water_refraction_beer"
+    # parsimony per variant at the seed's schedule
+    assert set(a["parsimony"]) == {"water_refraction", "water_refraction_noreflection", "water_refraction_beer"}
+    assert a["parsimony"]["water_refraction_beer"] == {"n_fitted": 7, "bic": -850.0, "flip": 0.150}
     assert a["error_floor_by_variant"]["water_refraction"] == 0.1649
     assert a["smallest_crossing_loop_cap"]["water_refraction"] == 40      # cap 20 misses 2 %
     assert [r["label"] for r in a["front"]] == ["water_refraction (5, 1.5, 20)", "water_refraction_beer (10, 3, 40)",

@@ -109,6 +109,14 @@ def write_tradeoff_report(out: Path, summary: dict) -> Path:
                          f"(the fitted seed: {_fmt(seed['flip'])}, {100 * (bw['flip'] / seed['flip'] - 1):+.1f} %).")
         if summary.get("images", {}).get(scene):
             lines += ["", f"![{scene}: reference and shaders]({summary['images'][scene]})"]
+        pars = {v: d for v, d in f.get("parsimony", {}).items() if d.get("bic") is not None}
+        if pars:
+            b0 = min(d["bic"] for d in pars.values())
+            lines += ["", "Each variant at the seed's schedule (constants fitted or at a bound; BIC of the fit "
+                      "residual, lower is better, relative to the lowest):", "",
+                      "| variant | constants | FLIP | BIC - min |", "|---|---|---|---|"]
+            lines += [f"| {v} | {d['n_fitted']} | {_fmt(d['flip'])} | {d['bic'] - b0:.0f} |"
+                      for v, d in sorted(pars.items(), key=lambda kv: kv[1]["bic"])]
         lines += ["", "What the scene needs:", ""]
         lines.append(f"- simplest variant within tolerance: `{f['simplest_variant_within_tolerance']}`; "
                      "best FLIP per variant: " + ", ".join(f"{v} {_fmt(x)}" for v, x in

@@ -215,6 +215,9 @@ SHADER_INPUT_KEYS = frozenset({"reference.texture_size", "reference.texture_spp"
                                "reference.refraction_lighting", "reference.fresnel_transmission",
                                "waves.normal_map_size", "waves.slope_scale"})
 
+# keys that change only the reference image's samples, never the shader's inputs
+REFERENCE_ONLY_KEYS = frozenset({"reference.spp", "reference.target_noise", "reference.max_spp"})
+
 _VEC_LEN = {"vec2": 2, "vec3": 3, "vec4": 4}
 
 
@@ -387,11 +390,12 @@ class Experiment:
 
     def inputs_hash(self) -> str:
         """SHA-256 over every value that affects the shader inputs (the scene and
-        ``SHADER_INPUT_KEYS``; not the fit, the start constants or the names)."""
+        ``SHADER_INPUT_KEYS``; not the reference's own sample count, ``REFERENCE_ONLY_KEYS``, nor
+        the fit, the start constants or the names)."""
         prefixes = ("resolution", "camera.", "pool.", "floor.", "water.", "waves.", "sky.", "sun.",
                     "mesh.", "reference.", "variant")
         data = {k: v for k, v in sorted(self.values.items())
-                if k.startswith(prefixes) and not _unset_later_key(k, v)}
+                if k.startswith(prefixes) and k not in REFERENCE_ONLY_KEYS and not _unset_later_key(k, v)}
         data.update(self._file_contents())
         return hashlib.sha256(json.dumps(data, sort_keys=True).encode()).hexdigest()
 

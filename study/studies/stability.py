@@ -18,7 +18,8 @@ Phases (``phases``):
   residual (``study.fit.losses``), both judged by FLIP at full resolution.
 * ``noise``: the calibration of the first scene against references at each of ``noise_spp``
   (texture spp held at ``noise_fixed_spp``) and with top-down textures at each of ``noise_spp``
-  (reference spp held at ``noise_fixed_spp``), ``noise_seeds`` independent seeds each
+  (reference spp held at ``noise_fixed_spp``; ``noise_inputs`` picks either or both),
+  ``noise_seeds`` independent seeds each
   (``reference.seed``, which seeds the reference *and* the texture renders), at
   ``noise_resolution``. Per level and constant: mean over seeds, its standard error (standard
   deviation over seeds / sqrt(seeds)), bias against the highest level, and whether it agrees
@@ -149,12 +150,13 @@ def analyse_loss(rows: list[dict]) -> dict:
             "winner": min((k for k in mean if mean[k] is not None), key=lambda k: mean[k], default=None)}
 
 
-def plan_noise(path: str, base_overrides: list, levels, fixed: int, seeds: int, resolution: int) -> list[dict]:
+def plan_noise(path: str, base_overrides: list, levels, fixed: int, seeds: int, resolution: int,
+               inputs=("reference", "texture")) -> list[dict]:
     from ..sweep import scene_spec
 
     res = [f"resolution=[{resolution},{resolution}]", f"fit.resolution=[{resolution},{resolution}]"]
     jobs = []
-    for which in ("reference", "texture"):
+    for which in inputs:
         for spp in levels:
             for s in range(seeds):
                 ref_spp, tex_spp = (spp, fixed) if which == "reference" else (fixed, spp)
@@ -195,7 +197,8 @@ def analyse_noise(rows: list[dict]) -> dict:
                 d["bias"] = d["mean"] - t["mean"]
                 se = math.sqrt((d["se"] or 0.0) ** 2 + (t["se"] or 0.0) ** 2) if spp != top else 0.0
                 d["bias_se"] = se
-                d["agrees"] = spp == top or (se > 0 and abs(d["bias"]) <= se)
+                # a constant at its bound on every seed (no spread, no bias) agrees too
+                d["agrees"] = spp == top or abs(d["bias"]) <= se
             agree[spp] = all(d.get("agrees", False) for d in stats[spp].values())
         cheapest = next((s for s in levels if all(agree[t] for t in levels if t >= s)), top)
         out[which] = {"levels": levels, "stats": stats, "agrees": agree, "cheapest_agreeing": cheapest}
@@ -205,7 +208,8 @@ def analyse_noise(rows: list[dict]) -> dict:
 def run_stability(experiments: list, out, overrides=None, *, phases=PHASES, starts: int = 16,
                   solvers=SOLVERS, adam_lrs=(0.02, 0.05, 0.1), max_steps: int = 100, nm_steps: int = 400,
                   noise_spp=(64, 256, 1024, 4096), noise_fixed_spp: int = 1024, noise_seeds: int = 3,
-                  noise_resolution: int = 96, scheduler=None, workers=None, variant: str = "llvm_ad_rgb",
+                  noise_resolution: int = 96, noise_inputs=("reference", "texture"), scheduler=None,
+                  workers=None, variant: str = "llvm_ad_rgb",
                   log=_log) -> dict:
     """Run the study (see the module doc); returns the summary written to ``summary.json``."""
     from .._io import write_json
@@ -214,6 +218,8 @@ def run_stability(experiments: list, out, overrides=None, *, phases=PHASES, star
     from ..sweep.cluster import open_client
     from ..report.stability import noise_figure, solver_figure, spread_figure, write_stability_report
 
+    if not noise_inputs or any(w not in ("reference", "texture") for w in noise_inputs):
+        raise ValueError(f"noise_inputs must be a non-empty subset of ('reference', 'texture'), got {noise_inputs}")
     bad = [p for p in phases if p not in PHASES]
     if bad:
         raise ValueError(f"unknown phase(s) {bad}; choose from {PHASES}")
@@ -245,7 +251,7 @@ def run_stability(experiments: list, out, overrides=None, *, phases=PHASES, star
             spread_figure(out / "spread.png", ms)
         if "noise" in phases:
             jobs = plan_noise(str(experiments[0]), overrides, list(noise_spp), noise_fixed_spp, noise_seeds,
-                              noise_resolution)
+                              noise_resolution, noise_inputs)
             rows = run_sweep(noise_job, jobs, out / "noise.parquet", client=client, label="stability: noise",
                              log=log)
             summary["noise"] = {**analyse_noise(rows[:len(jobs)]), "fixed_spp": noise_fixed_spp,

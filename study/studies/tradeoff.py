@@ -114,7 +114,7 @@ def point_record(row: dict) -> dict:
                         if k.startswith("job.schedule.") and row[k] is not None},
            "status": row.get("status"), "error_message": row.get("error")}
     for k in ("flip", "rmse", "fetches_mean", "fetches_p99", "iterations_mean", "iterations_p99",
-              "not_crossed", "gl_ms_512", "gl_ms_1080p", "gl_ratio_512", "gl_ratio_1080p", "port_ms_512",
+              "not_crossed", "n_fitted", "bic", "gl_ms_512", "gl_ms_1080p", "gl_ratio_512", "gl_ratio_1080p", "port_ms_512",
               "gl_ref_ms_1080p"):
         rec[k] = row.get(k)
     return rec
@@ -204,13 +204,18 @@ def scene_findings(pts: list, all_pts: list, tolerance: float) -> dict:
                        and r["not_crossed"] < 0.01})
         crossing[v] = caps[0] if caps else None
     halvings = sorted((r for r in pts if r["kind"] == "scale"), key=lambda r: (r["variant"], r["scale"]))
+    # parsimony: constants and BIC per variant at its seed's schedule (same reference, mask and
+    # resolution within a scene, so BIC differences compare)
+    at_seed = {r["variant"]: r for r in pts if (_is_seed(r) or r["kind"] == "fixed")}
+    parsimony = {v: {"n_fitted": r.get("n_fitted"), "bic": r.get("bic"), "flip": r["flip"]}
+                 for v, r in at_seed.items()}
     budget = seed[0][COST] * (1 + 1e-3) if seed and seed[0].get(COST) is not None else None
     within = [r for r in pts if budget is not None and r.get(COST) is not None and r[COST] <= budget]
     best_within = min(within, key=lambda r: r[ERROR], default=None)
     return {"front": [brief(r) for r in pareto_front(pts, COST, ERROR)],
             "fronts_by_cost": {c: [r["label"] for r in pareto_front(pts, c, ERROR)] for c in COSTS},
             "recommended": brief(rec), "seed": brief(seed[0]) if seed else None,
-            "best_within_seed_budget": brief(best_within),
+            "best_within_seed_budget": brief(best_within), "parsimony": parsimony,
             "best_flip_by_variant": best_by_variant, "simplest_variant_within_tolerance": simplest,
             "error_floor_by_variant": floor, "smallest_crossing_loop_cap": crossing,
             "halvings": [brief(r) for r in halvings]}

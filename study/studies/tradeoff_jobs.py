@@ -19,6 +19,8 @@ from the port's diagnostics; frame time of the fitted shader on llvmpipe at 512x
 reference shader (the seed's ``water_refraction`` with its own constants) in the same job, so the
 ratio to it compares fairly on a loaded machine; and the port's frame time (Dr.Jit LLVM, 512x512,
 median of 5). The converged raymarch gets no frame times (it is the error floor, not a candidate).
+For parsimony each point also carries its count of fitted constants (``n_fitted``: fitted or at a
+bound) and the AIC / BIC of its fit residual at the fit resolution (``study._metrics``).
 """
 from __future__ import annotations
 
@@ -130,12 +132,16 @@ def point_job(job: dict) -> dict:
     cal = calibrate_model(model, start, _fit_names(exp, job["variant"]), exp["fit.solver"],
                           exp["fit.max_steps"], frozen_by_scene=scene_frozen(exp))
     fit_s = time.perf_counter() - t0
+    from .._metrics import information_criteria
+    fitted_names = [n for n, p in cal.parameters.items() if p["status"] in ("fitted", "bound")]
+    ic = information_criteria(model.residual(cal.fitted), len(fitted_names))
     _, _, _, full = _model(job, resolution=tuple(exp["resolution"]))
     img, diag = full.render(cal.fitted)
     err = errors(ref.image, img, full.mask)
     m = full.mask
     out = {"flip": err["flip"], "rmse": err["rmse"], "fit_seconds": fit_s,
-           "fit_iterations": cal.fit_summary.get("iterations", 0), "water_pixels": int(m.sum())}
+           "fit_iterations": cal.fit_summary.get("iterations", 0), "water_pixels": int(m.sum()),
+           "n_fitted": len(fitted_names), "aic": ic["aic"], "bic": ic["bic"]}
     for k in ("fetches", "iterations", "refl_iterations"):
         if k in diag.maps:
             v = diag.maps[k][m]
