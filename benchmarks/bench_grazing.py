@@ -170,12 +170,12 @@ def main(argv=None) -> None:
     for b0, b1 in half:
         mk = sub.copy()
         mk[:b0 - r0], mk[b1 - r0:] = False, False
-        full = lambda t: t[r0:r1][mk].mean(0)   # noqa: E731
         rows = [("sky / walls (reflected, no sun | F*sky)", rt["reflected, no sun"][mk].mean(0), "F*sky"),
                 ("sun (reflected - no sun | F*spec)", (rt["reflected"] - rt["reflected, no sun"])[mk].mean(0), "F*spec"),
                 ("refraction (transmitted + both | T*refr)", (rt["transmitted"] + rt["both"])[mk].mean(0), "T*refr")]
         for label, rv, key in rows:
-            cells = [f"{_rgb(full(t[key]))} ({_rgb(full(t[key]) - rv)})" for t, _, _ in fits.values()]
+            cells = [f"{_rgb(t[key][r0:r1][mk].mean(0))} ({_rgb(t[key][r0:r1][mk].mean(0) - rv)})"
+                     for t, _, _ in fits.values()]
             print(f"| {b0}-{b1 - 1} | {label} | {_rgb(rv)} | " + " | ".join(cells) + " |")
         print(f"| {b0}-{b1 - 1} | of which both | {_rgb(rt['both'][mk].mean(0))} |" + " |" * len(fits))
     print("\n(shader cells: the term, and in brackets its excess over the reference's)")

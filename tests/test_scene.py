@@ -44,3 +44,29 @@ def test_cubemap_directions_follow_gl_face_table():
         assert (major[face] == axis).all() and (sign[face] == bool(positive)).all()
     # +Z face: s grows with +x, t grows with -y (GL table 8.19)
     assert d[4, 0, -1, 0] > d[4, 0, 0, 0] and d[4, -1, 0, 1] < d[4, 0, 0, 1]
+
+
+def test_water_bsdf_terms_and_row_crop(mi):
+    """``build_scene(water_bsdf=..., rows=...)`` (benchmarks/bench_grazing.py): the crop renders
+    the named rows, and the water's dielectric takes the overrides -- with neither reflection nor
+    transmission every pixel whose camera ray meets the water first is black, with either one
+    alone it is not, and the two alone add up to at most the full render (paths that do both are
+    missing from each)."""
+    from study._metrics import erode
+    from study.scene.reference import water_mask
+    exp = small_experiment(**{"resolution": "[32, 24]", "fit.resolution": "[32, 24]"})
+    rows = (6, 18)
+    water = erode(water_mask(exp, 32, 24), 1)[rows[0]:rows[1]]   # whole pixel footprints on the water
+    assert water.sum() > 50
+
+    def render(**bsdf):
+        img = np.array(mi.render(build_scene(exp, water_bsdf=bsdf, rows=rows), spp=16, seed=3))
+        assert img.shape == (rows[1] - rows[0], 32, 3)
+        return img
+    full = render()
+    refl = render(specular_transmittance=0.0)
+    trans = render(specular_reflectance=0.0)
+    black = render(specular_transmittance=0.0, specular_reflectance=0.0)
+    assert np.all(black[water] == 0.0) and np.all(full[water].sum(-1) > 0)
+    assert refl[water].mean() > 0.01 and trans[water].mean() > 0.01
+    assert (refl + trans)[water].mean() <= full[water].mean() * 1.05
