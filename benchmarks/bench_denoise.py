@@ -6,6 +6,10 @@ For each texture setting ``METHOD:SPP`` (``raw`` or ``oidn``; lighting at
 are built (cached in ``--cache``, so a re-run only fits), the shader is fitted against the same
 reference (the experiment's ``reference.spp``), and the script prints:
 
+A third field, ``METHOD:SPP:SEED``, renders the texture with ``reference.seed = SEED`` (other
+samples: the spread from seed to seed shows what one row's distance means). Every row is fitted
+against the same image, the reference of the experiment as given.
+
 * the wall seconds of the shader-input build (``cached`` when it came from the cache),
 * each fitted constant, and its distance in standard errors to the fit with the *best* texture
   (the highest raw spp of the list): ``(c - c_best) / SE_best``, SE the Gauss-Newton standard
@@ -56,14 +60,14 @@ def main() -> None:
     args = ap.parse_args()
     settings = []
     for item in args.textures:
-        method, _, spp = item.partition(":")
-        if method not in ("raw", "oidn") or not spp.isdigit():
-            ap.error(f"--textures {item!r}: expected raw:SPP or oidn:SPP")
-        settings.append((method, int(spp)))
-    raws = [s for m, s in settings if m == "raw"]
+        parts = item.split(":")
+        if len(parts) not in (2, 3) or parts[0] not in ("raw", "oidn") or not all(p.isdigit() for p in parts[1:]):
+            ap.error(f"--textures {item!r}: expected raw:SPP, oidn:SPP or METHOD:SPP:SEED")
+        settings.append((parts[0], int(parts[1]), int(parts[2]) if len(parts) == 3 else None))
+    raws = [s for s in settings if s[0] == "raw"]
     if not raws:
         ap.error("--textures needs at least one raw:SPP setting (the best one is the yardstick)")
-    best = ("raw", max(raws))
+    best = max(raws, key=lambda s: s[1])
     settings.sort(key=lambda s: s != best)          # the yardstick first
 
     args.cache.mkdir(parents=True, exist_ok=True)
@@ -92,11 +96,12 @@ def main() -> None:
           f"texels, texture {size}^2; yardstick {best[0]}:{best[1]}", flush=True)
 
     rows, yard = [], None
-    for method, spp in settings:
-        label = f"{method}:{spp}"
+    for method, spp, seed in settings:
+        label = f"{method}:{spp}" + (f" seed {seed}" if seed is not None else "")
         exp = load_experiment(args.experiment, args.overrides + [
             "reference.texture_method=\"lighting\"", f"reference.texture_spp={spp}",
-            f"reference.lighting_denoise=\"{'oidn' if method == 'oidn' else 'none'}\""])
+            f"reference.lighting_denoise=\"{'oidn' if method == 'oidn' else 'none'}\""]
+            + ([f"reference.seed={seed}"] if seed is not None else []))
         key = exp.inputs_hash()
         t0 = time.perf_counter()
         inputs = si.load_or_build_shader_inputs(exp, "llvm_ad_rgb", cache=args.cache, log=lambda m: None)
