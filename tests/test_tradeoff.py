@@ -142,3 +142,8 @@ def test_tradeoff_cli_tiny(tmp_path):
     before = {r["key"]: r["seconds"] for r in rows}
     assert main(args) == 0                                       # resumes: nothing re-run
     assert {r["key"]: r["seconds"] for r in read_table(tmp_path / "tradeoff.parquet")} == before
+    # a wider plan (one more scale) resumes too: only the new point runs
+    wider = [a.replace("tradeoff.scales=[0.5,1.0]", "tradeoff.scales=[0.5,1.0,2.0]") for a in args]
+    assert main(wider) == 0
+    after = {r["key"]: r["seconds"] for r in read_table(tmp_path / "tradeoff.parquet")}
+    assert len(after) == 5 and {k: after[k] for k in before} == before

@@ -34,6 +34,9 @@ COSTS = {"fetches_mean": "texture fetches / water pixel (mean)",
          "gl_norm_ms_1080p": "llvmpipe ms / frame at 1920x1080 (normalised)",
          "port_ms_512": "Dr.Jit LLVM port ms / frame at 512x512"}
 ERROR = "flip"
+# [tradeoff] keys that choose the jobs, never what one job computes
+PLAN_KEYS = frozenset({"tradeoff.variants", "tradeoff.steps_grazing", "tradeoff.steps_steep", "tradeoff.loop_cap",
+                       "tradeoff.scales", "tradeoff.converged_scale", "tradeoff.tolerance"})
 
 
 def _log(msg: str) -> None:
@@ -70,7 +73,10 @@ def run_tradeoff(experiments: list, out, overrides=None, scheduler=None, workers
     tol = exps[0]["tradeoff.tolerance"] if tolerance is None else float(tolerance)
     if tol < 0:
         raise ValueError(f"--tolerance must be >= 0, got {tol}")
-    specs = [scene_spec(p, overrides or []) for p in experiments]
+    # the jobs' scenes leave out the keys that only shape the plan (which variants and schedules),
+    # so that widening the plan resumes every point already measured
+    specs = [scene_spec(p, [o for o in overrides or [] if o.split("=", 1)[0].strip() not in PLAN_KEYS])
+             for p in experiments]
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     anchor_jobs = [{"scene": spec, "experiment": exp["name"], "variant": v,
