@@ -29,7 +29,8 @@ def test_lighting_texture_matches_colour_render_within_noise(mi):
     in the mean of every tile-sized block within the measured noise (the lighting is coarser, so
     texel by texel they differ by the caustics finer than a lighting texel)."""
     exp = small_experiment(**{"reference.texture_size": "32", "reference.lighting_size": "16",
-                              "reference.texture_spp": "64", "reference.wall_spp": "16"})
+                              "reference.texture_spp": "64", "reference.wall_spp": "16",
+                              "reference.lighting_denoise": '"none"'})
     extent = texture_extent(exp)
     size = 32
     world_y = top_down_world_y(exp, extent, size)

@@ -144,8 +144,10 @@ SCHEMA: dict[str, Field] = {
     "reference.max_depth": Field("int", 12, "Maximum path length.", "", 2, 256),
     "reference.texture_size": Field("int", 256, "Resolution of the top-down shader textures.",
                                     "texels", 16, 4096),
-    "reference.texture_spp": Field("int", 256, "Samples per pixel of the top-down colour texture.",
-                                   "", 1, 65536),
+    "reference.texture_spp": Field("int", 32, "Samples per texel of the top-down texture: of the "
+                                   "lighting render (`texture_method = \"lighting\"`, denoised by default: "
+                                   "32 is the measured sweet spot, see the README) or of the colour render "
+                                   "(`\"colour\"`: use 512 or more, its noise biases the fit).", "", 1, 65536),
     "reference.texture_method": Field("str", "lighting", "How the top-down refraction texture "
                                       "is rendered: `lighting` (the floor's lighting path traced at "
                                       "`reference.lighting_size` texels over the pool, times its known "
@@ -154,10 +156,11 @@ SCHEMA: dict[str, Field] = {
                                       "at `reference.texture_size`).", choices=("lighting", "colour")),
     "reference.lighting_size": Field("int", 128, "Texels per side of the lighting render over the "
                                      "pool (`texture_method = \"lighting\"`; at most `reference.texture_size`).", "texels", 8, 4096),
-    "reference.lighting_denoise": Field("str", "none", "Denoise the lighting render (`texture_method = "
-                                        "\"lighting\"`): `none` or `oidn` (Intel Open Image Denoise, guided "
-                                        "by the floor albedo; see the README for its measured effect on the "
-                                        "fitted constants).", choices=("none", "oidn")),
+    "reference.lighting_denoise": Field("str", "oidn", "Denoise the lighting render (`texture_method = "
+                                        "\"lighting\"`): `oidn` (Intel Open Image Denoise, guided by the floor "
+                                        "albedo) or `none` (raw path tracing: raise `reference.texture_spp` to "
+                                        "256 or more). Measured effect on the fitted constants: README, Fast "
+                                        "references.", choices=("none", "oidn")),
     "reference.wall_spp": Field("int", 64, "Samples per pixel of the dry colour render used "
                                 "outside the pool (`texture_method = \"lighting\"`).", "", 1, 65536),
     "reference.refraction_lighting": Field("str", "underwater", "How the top-down refraction "
@@ -231,8 +234,7 @@ def _clip(v, limit: int = 80) -> str:
 # references and inputs of experiments that do not use them stay valid
 _LATER_KEYS = ("floor.ledge", "floor.heightmap", "floor.height_scale", "floor.albedo_image",
                "floor.extent", "sky.envmap", "sky.rotation", "sky.scale", "sun.source", "mesh.file",
-               "mesh.position", "mesh.scale", "mesh.rotation", "mesh.albedo", "mesh.texture",
-               "reference.lighting_denoise")
+               "mesh.position", "mesh.scale", "mesh.rotation", "mesh.albedo", "mesh.texture")
 
 
 def _unset_later_key(key: str, value) -> bool:
