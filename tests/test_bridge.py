@@ -7,7 +7,7 @@ jax = pytest.importorskip("jax")
 import jax.numpy as jnp  # noqa: E402
 
 from drjit_toy import TRUTH, ToyModel  # noqa: E402
-from study.fit.bridge import NonFiniteResidualError, make_jax_residual  # noqa: E402
+from study.fit.bridge import NonFiniteParameterError, NonFiniteResidualError, make_jax_residual  # noqa: E402
 
 NAMES = ["amp", "rate", "shift"]
 X = np.array([0.9, 1.1, 0.12])
@@ -90,6 +90,19 @@ def test_nonfinite_residual_raises_clear_error(toy):
         jax.jit(jax.grad(lambda x: jnp.sum(res(x) ** 2)))(bad).block_until_ready()
     # and it works where the model is finite
     assert np.all(np.isfinite(np.asarray(jax.jit(res)(jnp.asarray(X)))))
+
+
+def test_nonfinite_parameters_are_refused_before_the_model_runs(toy):
+    """A solver step that diverged (NaN in x) is a FloatingPointError the solvers report as a
+    non-finite abort, never a shader's ValueError about a constant out of range."""
+    res = _bridge(toy)
+    bad = jnp.asarray([0.9, float("nan"), 0.12])
+    with pytest.raises(Exception, match="non-finite parameters"):
+        jax.jit(res)(bad).block_until_ready()
+    assert isinstance(res.last_error, NonFiniteParameterError)
+    assert isinstance(res.last_error, FloatingPointError)
+    with pytest.raises(NonFiniteParameterError):
+        res.value(np.asarray(bad))
 
 
 def test_shape_errors_name_the_problem(toy):

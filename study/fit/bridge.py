@@ -37,6 +37,11 @@ class NonFiniteResidualError(FloatingPointError):
     """The Dr.Jit residual or Jacobian contained NaN or infinity at some parameter vector."""
 
 
+class NonFiniteParameterError(FloatingPointError):
+    """A solver asked for the residual at a parameter vector holding NaN or infinity (a step that
+    blew up); raised before the model is called."""
+
+
 class ResidualShapeError(ValueError):
     """A Dr.Jit callable returned an array of the wrong shape."""
 
@@ -97,6 +102,10 @@ class DrJitResidual:
         if x.shape != (self.k,):
             self._fail(ResidualShapeError(f"{self.name}: parameter vector has shape {x.shape}, "
                                           f"expected ({self.k},)"))
+        if not np.all(np.isfinite(x)):
+            self._fail(NonFiniteParameterError(
+                f"{self.name}: the solver proposed non-finite parameters "
+                f"x={np.array2string(x, precision=6)} (its step diverged)"))
         return x
 
     def _check_r(self, r, x) -> np.ndarray:
