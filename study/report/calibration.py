@@ -4,6 +4,7 @@ Images are linear RGB (H, W, 3); figures show them sRGB-encoded and clipped to [
 """
 from __future__ import annotations
 
+import textwrap
 from pathlib import Path
 
 import numpy as np
@@ -30,7 +31,8 @@ def comparison_figure(path: Path, images: dict, errors: dict, mask: np.ndarray, 
     vmax = max(vmax, 1e-6)
     for j, k in enumerate(names):
         axes[0, j].imshow(to_srgb(images[k]))
-        label = k if k not in errors else f"{k}\nRMSE {errors[k]['rmse']:.4f}  FLIP {errors[k]['flip']:.4f}"
+        name = textwrap.fill(k, 34)
+        label = name if k not in errors else f"{name}\nRMSE {errors[k]['rmse']:.4f}  FLIP {errors[k]['flip']:.4f}"
         axes[0, j].set_title(label, fontsize=9)
         if j == 0:
             axes[1, j].imshow(mask, cmap="gray")
@@ -38,7 +40,7 @@ def comparison_figure(path: Path, images: dict, errors: dict, mask: np.ndarray, 
         else:
             err = np.where(mask, np.abs(images[k] - ref).mean(-1), np.nan)
             im = axes[1, j].imshow(err, cmap="magma", vmin=0, vmax=vmax)
-            axes[1, j].set_title(f"|{k} - {names[0]}|", fontsize=9)
+            axes[1, j].set_title(textwrap.fill(f"|{k} - {names[0]}|", 34), fontsize=9)
     for ax in axes.ravel():
         ax.set_xticks([]); ax.set_yticks([])
     if n > 1:
