@@ -137,8 +137,9 @@ SCHEMA: dict[str, Field] = {
                            "per fit pixel down to 256 (here 64 spp at 256x256 fitted at 128x128) the mean "
                            "fitted constants of three seeds stay within 1.3 % of those at 4096 (the "
                            "specular pair, set by a few glints; the others within 0.5 %; `study "
-                           "stability --phases noise`, README). The FLIP the report prints is against this reference, so "
-                           "its noise raises it: raise the spp for a final figure.", "", 1, 65536),
+                           "stability --phases noise`, README). The FLIP the report prints is against "
+                           "this reference, so its noise raises it: raise the spp for a final figure.",
+                           "", 1, 65536),
     "reference.target_noise": Field("float", 0.01, "Target RMS standard error on water pixels "
                                     "for `spp = \"auto\"`.", "linear RGB", 1e-5, 1.0),
     "reference.max_spp": Field("int", 1024, "Upper bound of the automatic spp.", "", 4, 65536),
