@@ -17,8 +17,9 @@ phases (anchors, then points warm-started from them), and analyses the table:
   converged raymarch), and what each halving of the seed's schedule costs.
 
 Outputs in ``out``: ``tradeoff.parquet`` (a row per point), ``anchors.parquet``, ``pareto.png``,
-``images_<scene>.png`` (the reference beside the seed shader with the seed's constants, fitted, the
-best configuration within the seed's fetch budget and the recommendation), ``report.md``, ``summary.json``, ``shaders/`` (one experiment) or ``shaders/<name>/`` (several).
+``images_<scene>.png`` (the reference beside the seed shader with the seed's constants, fitted,
+the best configuration within the seed's fetch budget and the recommendation), ``report.md``,
+``summary.json``, ``shaders/`` (one experiment) or ``shaders/<name>/`` (several).
 """
 from __future__ import annotations
 
@@ -120,8 +121,8 @@ def point_record(row: dict) -> dict:
                         if k.startswith("job.schedule.") and row[k] is not None},
            "status": row.get("status"), "error_message": row.get("error")}
     for k in ("flip", "rmse", "fetches_mean", "fetches_p99", "iterations_mean", "iterations_p99",
-              "not_crossed", "n_fitted", "bic", "gl_ms_512", "gl_ms_1080p", "gl_ratio_512", "gl_ratio_1080p", "port_ms_512",
-              "gl_ref_ms_1080p"):
+              "not_crossed", "n_fitted", "bic", "gl_ms_512", "gl_ms_1080p", "gl_ratio_512",
+              "gl_ratio_1080p", "port_ms_512", "gl_ref_ms_1080p"):
         rec[k] = row.get(k)
     return rec
 
