@@ -6,10 +6,6 @@ For each texture setting ``METHOD:SPP`` (``raw`` or ``oidn``; lighting at
 are built (cached in ``--cache``, so a re-run only fits), the shader is fitted against the same
 reference (the experiment's ``reference.spp``), and the script prints:
 
-A third field, ``METHOD:SPP:SEED``, renders the texture with ``reference.seed = SEED`` (other
-samples: the spread from seed to seed shows what one row's distance means). Every row is fitted
-against the same image, the reference of the experiment as given.
-
 * the wall seconds of the shader-input build (``cached`` when it came from the cache),
 * each fitted constant, and its distance in standard errors to the fit with the *best* texture
   (the highest raw spp of the list): ``(c - c_best) / SE_best``, SE the Gauss-Newton standard
@@ -19,6 +15,10 @@ against the same image, the reference of the experiment as given.
   the refraction texture, and the *detail kept*: the energy of its high-pass part (texture minus
   a Gaussian blur of 1.5 lighting texels) as a fraction of the best texture's (caustics and
   tile edges live there; a denoiser that blurs caustics lowers it, noise raises it).
+
+A third field, ``METHOD:SPP:SEED``, renders the texture with ``reference.seed = SEED`` (other
+samples: the spread from seed to seed shows what one row's distance means). Every row is fitted
+against the same image, the reference of the experiment as given.
 
     .venv/bin/python benchmarks/bench_denoise.py [EXPERIMENT.toml] [--textures raw:2048 raw:256 oidn:32 ...]
         [--cache DIR] [--set KEY=VALUE ...]
