@@ -273,12 +273,10 @@ def side_by_side(exps, specs, summary: dict, rows: list, out: Path, variant: str
     experiment's resolution with its FLIP and RMSE on the water pixels. Returns {scene: file name}."""
     from shaders_port import Constants
 
-    from .._backend import drjit_backend
     from .._metrics import errors
-    from ..fit.model import ShaderModel, constants_from_experiment
+    from ..fit.model import constants_from_experiment
     from ..report.calibration import comparison_figure
-    from ..scene.baseline_inputs import inputs_for_shader
-    from ..sweep import load_scene
+    from .tradeoff_jobs import _model
 
     result = {}
     for exp, spec in zip(exps, specs):
@@ -292,13 +290,11 @@ def side_by_side(exps, specs, summary: dict, rows: list, out: Path, variant: str
             if r and r["label"] not in [p[0].split(": ", 1)[-1] for p in panels]:
                 row = _point_row(rows, exp["name"], r["label"])
                 panels.append((f"{title}: {r['label']}", r["variant"], Constants.from_dict(_constants_of(row))))
-        exp_s, ref, inputs = load_scene(spec, variant)
-        images, errs, mask = {"reference": ref.image}, {}, None
+        images, errs, mask = {}, {}, None
         for title, shader, constants in panels:
-            ins = inputs_for_shader(exp_s, inputs, shader, variant, log=lambda m: None)
-            model = ShaderModel.from_experiment(exp_s, ins, ref.image, shader=shader,
-                                                backend=drjit_backend(variant),
-                                                resolution=tuple(exp_s["resolution"]))
+            _, ref, _, model = _model({"scene": spec, "variant": shader, "mitsuba_variant": variant},
+                                      resolution=tuple(exp["resolution"]))
+            images.setdefault("reference", ref.image)
             img, _ = model.render(constants)
             images[title] = img
             errs[title] = errors(ref.image, img, model.mask)
