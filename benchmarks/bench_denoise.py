@@ -74,8 +74,8 @@ def main() -> None:
     os.environ["STUDY_CACHE"] = str(args.cache)
     from study import init_backend, load_experiment
     from study._metrics import errors
-    from study.fit.calibrate import calibrate_model, scene_frozen
-    from study.fit.model import ShaderModel, constants_from_experiment
+    from study.fit.calibrate import calibrate_experiment
+    from study.fit.model import ShaderModel
     from study.scene import lighting, shader_inputs as si
     from study.scene.reference import load_or_render
 
@@ -111,8 +111,7 @@ def main() -> None:
             times_path.write_text(json.dumps(times))
         tex = np.asarray(inputs.refraction_texture, np.float64)
         model = ShaderModel.from_experiment(exp, inputs, ref_img)
-        cal = calibrate_model(model, constants_from_experiment(exp), exp["fit.parameters"], exp["fit.solver"],
-                              exp["fit.max_steps"], frozen_by_scene=scene_frozen(exp))
+        cal = calibrate_experiment(model, exp)
         w, h = exp["resolution"]
         full = ShaderModel.from_experiment(exp, inputs, ref_img, resolution=(w, h))
         img, _ = full.render(cal.fitted)
@@ -131,7 +130,7 @@ def main() -> None:
               flush=True)
 
     names = list(yard["params"])
-    print(f"\n| texture | input build s | FLIP | RMSE | texture RMS rel. diff | detail kept | "
+    print("\n| texture | input build s | FLIP | RMSE | texture RMS rel. diff | detail kept | "
           + " | ".join(names) + " |")
     print("|---|---|---|---|---|---|" + "---|" * len(names))
     for r in rows:

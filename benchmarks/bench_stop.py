@@ -38,16 +38,15 @@ SHIPPED = ["default", "calm", "clear", "grazing", "murky", "seed_lut"]
 def run_one(path: Path, overrides: list[str]) -> dict:
     from study import init_backend, load_experiment
     from study._jobs import load_scene_data
-    from study.fit.calibrate import calibrate_model, scene_frozen
-    from study.fit.model import ShaderModel, constants_from_experiment
+    from study.fit.calibrate import calibrate_experiment
+    from study.fit.model import ShaderModel
 
     variant = init_backend("llvm_ad_rgb")
     exp = load_experiment(path, overrides)
     ref, inputs, _ = load_scene_data(exp, variant)
     model = ShaderModel.from_experiment(exp, inputs, ref.image)
     t0 = time.perf_counter()
-    cal = calibrate_model(model, constants_from_experiment(exp), exp["fit.parameters"], exp["fit.solver"],
-                          exp["fit.max_steps"], frozen_by_scene=scene_frozen(exp))
+    cal = calibrate_experiment(model, exp)
     fs = cal.fit_summary
     return {"seconds": time.perf_counter() - t0, "iterations": fs.get("iterations", 0),
             "to_0.1pct": fs.get("steps_to_0.1pct_per_round", []), "rounds": fs.get("rounds", 0),

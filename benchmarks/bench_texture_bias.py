@@ -124,8 +124,8 @@ def main() -> None:
 
     from study import init_backend, load_experiment
     from study._metrics import errors
-    from study.fit.calibrate import calibrate_model, scene_frozen
-    from study.fit.model import ShaderModel, constants_from_experiment
+    from study.fit.calibrate import calibrate_experiment
+    from study.fit.model import ShaderModel
     from study.scene import lighting, shader_inputs as si
 
     init_backend("llvm_ad_rgb")
@@ -165,8 +165,7 @@ def main() -> None:
         t0 = time.perf_counter()
         inputs = with_colour(colour)
         model = ShaderModel.from_experiment(exp, inputs, ref_img)
-        cal = calibrate_model(model, constants_from_experiment(exp), exp["fit.parameters"], exp["fit.solver"],
-                              exp["fit.max_steps"], frozen_by_scene=scene_frozen(exp))
+        cal = calibrate_experiment(model, exp)
         w, h = exp["resolution"]
         full = ShaderModel.from_experiment(exp, inputs, full_ref, resolution=(w, h))
         img, _ = full.render(cal.fitted)

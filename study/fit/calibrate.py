@@ -261,6 +261,17 @@ def calibrate_model(model: ShaderModel, start: Constants, requested: list[str], 
     return Calibration(start, fitted, params, ident, summary, losses, sweep)
 
 
+def calibrate_experiment(model: ShaderModel, exp, start: Constants | None = None,
+                         requested: list[str] | None = None) -> Calibration:
+    """:func:`calibrate_model` with the experiment's fit settings (``fit.parameters``,
+    ``fit.solver``, ``fit.max_steps``, the scene's own frozen constants), from ``start`` (default:
+    the experiment's start constants) over ``requested`` (default: ``fit.parameters``)."""
+    from .model import constants_from_experiment
+    return calibrate_model(model, constants_from_experiment(exp) if start is None else start,
+                           exp["fit.parameters"] if requested is None else requested, exp["fit.solver"],
+                           exp["fit.max_steps"], frozen_by_scene=scene_frozen(exp))
+
+
 def step_sweep(problem: FitProblem, at: Constants, names: list[str]) -> dict:
     """Loss over the step-count grid (both counts, or one) at the other constants ``at``."""
     base = {n: get_value(at, n) for n in problem.names}

@@ -115,13 +115,12 @@ def multistart_job(job: dict) -> dict:
 def noise_job(job: dict) -> dict:
     """The calibration against the job's scene (its spp, texture spp and seed are in the scene's
     overrides): constants, statuses and relative standard errors."""
-    from ..fit.calibrate import calibrate_model, scene_frozen
-    from ..fit.model import constants_from_experiment, expand_parameters, get_value
+    from ..fit.calibrate import calibrate_experiment
+    from ..fit.model import expand_parameters, get_value
 
     exp, ref, _, model = _model(job)
     t0 = time.perf_counter()
-    cal = calibrate_model(model, constants_from_experiment(exp), exp["fit.parameters"], exp["fit.solver"],
-                          exp["fit.max_steps"], frozen_by_scene=scene_frozen(exp))
+    cal = calibrate_experiment(model, exp)
     names = expand_parameters(exp["fit.parameters"])
     return {"fit_seconds": time.perf_counter() - t0, "reference_noise": float(ref.noise or float("nan")),
             "value": {n: get_value(cal.fitted, n) for n in names},
@@ -132,14 +131,12 @@ def noise_job(job: dict) -> dict:
 def loss_job(job: dict) -> dict:
     """The calibration with residual ``job["loss"]``, scored at full resolution."""
     from .._metrics import errors
-    from ..fit.calibrate import calibrate_model, scene_frozen
-    from ..fit.model import constants_from_experiment, expand_parameters, get_value
+    from ..fit.calibrate import calibrate_experiment
+    from ..fit.model import expand_parameters, get_value
 
     exp, ref, inputs, model = _model(job, loss=job["loss"])
-    start = constants_from_experiment(exp)
     t0 = time.perf_counter()
-    cal = calibrate_model(model, start, exp["fit.parameters"], exp["fit.solver"], exp["fit.max_steps"],
-                          frozen_by_scene=scene_frozen(exp))
+    cal = calibrate_experiment(model, exp)
     fit_s = time.perf_counter() - t0
     _, _, _, full = _model(job, resolution=tuple(exp["resolution"]))
     img, _ = full.render(cal.fitted)

@@ -106,13 +106,12 @@ def anchor_job(job: dict) -> dict:
     """Phase 1: fit the continuous constants at the seed's schedule; returns them and the fit."""
     from shaders_port import Constants
 
-    from ..fit.calibrate import calibrate_model, scene_frozen
+    from ..fit.calibrate import calibrate_experiment
 
     exp, _, _, model = _model(job)
     start = Constants.from_dict(job["start"])
     t0 = time.perf_counter()
-    cal = calibrate_model(model, start, _fit_names(exp, job["variant"]), exp["fit.solver"],
-                          exp["fit.max_steps"], frozen_by_scene=scene_frozen(exp))
+    cal = calibrate_experiment(model, exp, start, _fit_names(exp, job["variant"]))
     return {"fitted": cal.fitted.to_dict(), "fit_seconds": time.perf_counter() - t0,
             "iterations": cal.fit_summary.get("iterations", 0),
             "status_of": {n: p["status"] for n, p in cal.parameters.items()}}
@@ -124,13 +123,12 @@ def point_job(job: dict) -> dict:
     from shaders_port import Constants
 
     from .._metrics import errors
-    from ..fit.calibrate import calibrate_model, scene_frozen
+    from ..fit.calibrate import calibrate_experiment
 
     exp, ref, inputs, model = _model(job)
     start = Constants.from_dict(job["start"]).replace(**job["schedule"])
     t0 = time.perf_counter()
-    cal = calibrate_model(model, start, _fit_names(exp, job["variant"]), exp["fit.solver"],
-                          exp["fit.max_steps"], frozen_by_scene=scene_frozen(exp))
+    cal = calibrate_experiment(model, exp, start, _fit_names(exp, job["variant"]))
     fit_s = time.perf_counter() - t0
     from .._metrics import information_criteria
     fitted_names = [n for n, p in cal.parameters.items() if p["status"] in ("fitted", "bound")]
