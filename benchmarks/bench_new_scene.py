@@ -37,6 +37,7 @@ sys.path.insert(0, str(REPO))
 
 # today's path: the reference and texture settings of main before the fast references
 TODAY = ["reference.texture_method=\"colour\"", "reference.spp=\"auto\"", "reference.target_noise=0.01",
+         "reference.sampler=\"independent\"",
          "reference.max_spp=1024"]
 # the texture_spp each shipped experiment used then (schema default 256; default and seed_lut set 1024)
 TODAY_TEXTURE_SPP = {"default": 1024, "seed_lut": 1024}

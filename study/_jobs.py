@@ -181,7 +181,7 @@ def run_calibrate(experiment, out, overrides=None, variant=None, solver=None, ca
     backend = drjit_backend(variant)
     start = constants_from_experiment(exp)
     with timed(timings, "model_s"):
-        model = ShaderModel.from_experiment(exp, inputs, ref.image, backend=backend)
+        model = ShaderModel.from_experiment(exp, inputs, ref.image, backend=backend, stderr_full=ref.stderr)
     _log(f"calibrate: fitting {exp['fit.parameters']} of {model.shader} with {solver} on "
          f"{int(model.mask.sum())} water pixels at {exp['fit.resolution'][0]}x{exp['fit.resolution'][1]}")
     with timed(timings, "fit_s"):

@@ -34,6 +34,12 @@ def downsample(img: np.ndarray, factor_y: int, factor_x: int) -> np.ndarray:
     return s.mean(axis=(1, 3))
 
 
+def downsample_stderr(se: np.ndarray, factor_y: int, factor_x: int) -> np.ndarray:
+    """The standard error of :func:`downsample`'s box mean of pixels with independent errors of
+    standard error ``se`` (H, W, ...): ``sqrt(mean(se^2) / (factor_y * factor_x))``."""
+    return np.sqrt(downsample(np.square(se, dtype=np.float64), factor_y, factor_x) / (factor_y * factor_x))
+
+
 def check_finite(name: str, img: np.ndarray, mask: np.ndarray | None = None) -> None:
     """Raise ValueError when ``img`` has non-finite values (inside ``mask`` if given)."""
     bad = ~np.isfinite(img)

@@ -30,6 +30,10 @@
      with relative standard errors of 6 and 12). Standard errors come from the Gauss-Newton
      covariance ``s^2 (J^T J)^-1`` with ``s^2 = ||r||^2 / (m - k)``, which treats residuals
      as independent: model error is correlated across pixels, so these are lower bounds.
+     When the model carries the reference's per-pixel standard error, each constant also gets
+     ``rel_noise_error`` (:func:`noise_errors`): how much the reference's Monte Carlo noise
+     alone moves it, the spread between renders of the same scene with other seeds. The sun's
+     glitter makes that spread the larger of the two for the specular pair at a few hundred spp.
 5. Step counts (``steps_grazing``, ``steps_steep``) are piecewise constant in their effect
    (the crossing step jumps), so no gradient solver sees them: when requested they are
    chosen by a 2-D sweep of the loss over a grid at the fitted continuous constants.
@@ -109,6 +113,24 @@ def std_errors(J: np.ndarray, r: np.ndarray, values: np.ndarray) -> list[float |
     return [float(x / abs(v)) if v else None for x, v in zip(d, values)]
 
 
+def noise_errors(J: np.ndarray, sigma: np.ndarray, values: np.ndarray) -> list[float | None]:
+    """Relative standard errors of the constants from the reference's Monte Carlo noise alone:
+    the sandwich ``A diag(sigma^2) A^T`` with ``A = (J^T J)^-1 J^T`` (the linearised least-squares
+    solution's response to independent zero-mean noise of standard deviation ``sigma`` (M,) in
+    the target), its diagonal's square root over |value|. Unlike :func:`std_errors` it does not
+    read the residual, so it says how far another render of the same reference (another seed)
+    moves each constant, whatever the model error."""
+    m, k = J.shape
+    if m < k:
+        return [None] * k
+    try:
+        A = np.linalg.solve(J.T @ J, J.T)
+    except np.linalg.LinAlgError:
+        return [None] * k
+    d = np.sqrt(np.maximum(np.einsum("km,m,km->k", A, np.square(sigma, dtype=np.float64), A), 0.0))
+    return [float(x / abs(v)) if v else None for x, v in zip(d, values)]
+
+
 def _ident_dict(rep, names, J=None, r=None, values=None) -> dict:
     out = {"names": list(names), "singular_values": rep.singular_values.tolist(),
            "condition": rep.condition if np.isfinite(rep.condition) else None,
@@ -178,7 +200,7 @@ def calibrate_model(model: ShaderModel, start: Constants, requested: list[str], 
     losses, result, bound, fits = [], None, {}, []
     fitted, x0 = start, None
     id1 = r1 = J1 = None
-    se = {}
+    se, noise_se = {}, {}
     for rnd in range(SE_ROUNDS + 1):
         if not free:
             break
@@ -209,6 +231,10 @@ def calibrate_model(model: ShaderModel, start: Constants, requested: list[str], 
         live = [i for i, n in enumerate(inner) if n not in bound]    # columns with a free direction
         vals = np.array([get_value(fitted, inner[i]) for i in live])
         se = dict(zip([inner[i] for i in live], std_errors(J1[:, live], r1, vals))) if live else {}
+        sigma = getattr(model, "reference_stderr", None)
+        noise_se = (dict(zip([inner[i] for i in live],
+                             noise_errors(J1[:, live], sigma[model.mask].astype(np.float64).ravel(), vals)))
+                    if live and sigma is not None else {})
         judged = {n: v for n, v in se.items() if v is not None}
         worst = max(judged, key=judged.get) if judged else None
         if worst is None or judged[worst] <= REL_SE_MAX or rnd == SE_ROUNDS:
@@ -227,6 +253,8 @@ def calibrate_model(model: ShaderModel, start: Constants, requested: list[str], 
         inner = list(id1.names)
         ident["solution"] = _ident_dict(id1, inner)
         ident["solution"]["rel_std_error"] = [se.get(n) for n in inner]
+        if noise_se:
+            ident["solution"]["rel_noise_error"] = [noise_se.get(n) for n in inner]
     sweep = None
     if discrete:
         sweep = step_sweep(problem, fitted, discrete)
@@ -244,6 +272,8 @@ def calibrate_model(model: ShaderModel, start: Constants, requested: list[str], 
                 j = ident["solution"]["names"].index(n)
                 params[n]["sensitivity"] = ident["solution"]["sensitivity"][j]
                 params[n]["rel_std_error"] = ident["solution"]["rel_std_error"][j]
+                if n in noise_se:
+                    params[n]["rel_noise_error"] = noise_se[n]
             else:
                 params[n]["sensitivity"] = id0.sensitivity[n] if id0 is not None else None
     if result is not None:

@@ -20,7 +20,7 @@ from shaders_port import CONSTANT_SPECS, Constants, ShaderInputs
 from shaders_port._variants import get_variant
 
 from ..scene.experiment import Experiment
-from .._metrics import downsample, erode
+from .._metrics import downsample, downsample_stderr, erode
 
 
 # ---- scalar names of constants: 'bumptex_mult', 'water_color[2]' (colours expand to RGB;
@@ -128,12 +128,16 @@ class ShaderModel:
     on ``inputs`` compared against ``reference`` (same size)."""
 
     def __init__(self, shader: str, inputs: ShaderInputs, reference: np.ndarray, backend: str = "llvm",
-                 reference_mask: np.ndarray | None = None):
+                 reference_mask: np.ndarray | None = None, reference_stderr: np.ndarray | None = None):
         self.shader, self.inputs, self.backend = shader, inputs, backend
         self.variant = get_variant(shader)
         if reference.shape != (inputs.height, inputs.width, 3):
             raise ValueError(f"reference is {reference.shape}, inputs are {inputs.height}x{inputs.width}")
+        if reference_stderr is not None and reference_stderr.shape != reference.shape:
+            raise ValueError(f"reference_stderr is {reference_stderr.shape}, the reference {reference.shape}")
         self.reference = np.asarray(reference, np.float32)
+        # (H, W, 3) float32 Monte Carlo standard error of each reference pixel (linear RGB), or None
+        self.reference_stderr = None if reference_stderr is None else np.asarray(reference_stderr, np.float32)
         out = self.variant.render(inputs, Constants(), backend=backend).numpy()
         mask = out["mask"] > 0.5
         if reference_mask is not None:
@@ -147,14 +151,22 @@ class ShaderModel:
     @classmethod
     def from_experiment(cls, exp: Experiment, inputs_full: ShaderInputs, reference_full: np.ndarray,
                         shader: str | None = None, backend: str = "llvm",
-                        resolution: tuple[int, int] | None = None) -> "ShaderModel":
+                        resolution: tuple[int, int] | None = None,
+                        stderr_full: np.ndarray | None = None) -> "ShaderModel":
+        """The model at ``resolution`` (default ``fit.resolution``) against the box-downsampled
+        ``reference_full`` (H, W, 3); ``stderr_full`` (H, W, 3), the reference's per-pixel Monte
+        Carlo standard error, is carried through the box filter (``study._metrics.downsample_stderr``)
+        for :func:`study.fit.calibrate.noise_errors`."""
         from ..scene.reference import water_mask
 
         w, h = resolution or exp["fit.resolution"]
         fy, fx = reference_full.shape[0] // h, reference_full.shape[1] // w
         ref = downsample(reference_full, fy, fx) if (fy, fx) != (1, 1) else reference_full
+        se = None
+        if stderr_full is not None:
+            se = downsample_stderr(stderr_full, fy, fx) if (fy, fx) != (1, 1) else stderr_full
         return cls(shader or exp["fit.shader"], inputs_full.with_resolution(w, h), ref, backend,
-                   reference_mask=water_mask(exp, w, h))
+                   reference_mask=water_mask(exp, w, h), reference_stderr=se)
 
     @_thread_handoff
     def render(self, constants: Constants) -> tuple[np.ndarray, Diagnostics]:

@@ -113,15 +113,16 @@ def constants_table(parameters: dict) -> list[str]:
 
 
 def identifiability_table(ident: dict) -> list[str]:
-    lines = ["| parameter | rel. sensitivity at start | at solution | rel. std. error at solution | decision |",
-             "|---|---|---|---|---|"]
+    lines = ["| parameter | rel. sensitivity at start | at solution | rel. std. error at solution | "
+             "rel. error from reference noise | decision |", "|---|---|---|---|---|---|"]
     start, sol = ident.get("start", {}), ident.get("solution", {})
     for name in start.get("names", []):
         i = start["names"].index(name)
         j = sol["names"].index(name) if name in sol.get("names", []) else None
         s1 = _fmt(sol["sensitivity"][j]) if j is not None else "-"
         se = _fmt(sol["rel_std_error"][j]) if j is not None and sol.get("rel_std_error") else "-"
-        lines.append(f"| `{name}` | {_fmt(start['sensitivity'][i])} | {s1} | {se} | {start['decision'][i]} |")
+        ne = _fmt(sol["rel_noise_error"][j]) if j is not None and sol.get("rel_noise_error") else "-"
+        lines.append(f"| `{name}` | {_fmt(start['sensitivity'][i])} | {s1} | {se} | {ne} | {start['decision'][i]} |")
     lines.append("")
     for label, d in (("start", start), ("solution", sol)):
         if d.get("singular_values"):

@@ -143,6 +143,12 @@ SCHEMA: dict[str, Field] = {
     "reference.target_noise": Field("float", 0.01, "Target RMS standard error on water pixels "
                                     "for `spp = \"auto\"`.", "linear RGB", 1e-5, 1.0),
     "reference.max_spp": Field("int", 1024, "Upper bound of the automatic spp.", "", 4, 65536),
+    "reference.sampler": Field("str", "stratified", "Sampler of the reference render: `stratified` "
+                               "(jittered strata per pass, each pass's spp rounded up to a square) or "
+                               "`independent`. At equal samples the stratified passes have 2.8x less "
+                               "variance on the water and 5.5x less on the sun's glitter (measured on the "
+                               "default scene, README \"Fast references\"), which is where the reference's "
+                               "noise moves the fitted specular pair.", choices=("stratified", "independent")),
     "reference.seed": Field("int", 0, "Base sampler seed (the per-pass seeds derived from it stay "
                             "within Mitsuba's 32-bit seeds).", "", 0, 2**28 - 1),
     "reference.max_depth": Field("int", 12, "Maximum path length.", "", 2, 256),
@@ -223,7 +229,8 @@ SHADER_INPUT_KEYS = frozenset({"reference.texture_size", "reference.texture_spp"
                                "waves.normal_map_size", "waves.slope_scale"})
 
 # keys that change only the reference image's samples, never the shader's inputs
-REFERENCE_ONLY_KEYS = frozenset({"reference.spp", "reference.target_noise", "reference.max_spp"})
+REFERENCE_ONLY_KEYS = frozenset({"reference.spp", "reference.target_noise", "reference.max_spp",
+                                 "reference.sampler"})
 
 _VEC_LEN = {"vec2": 2, "vec3": 3, "vec4": 4}
 

@@ -244,7 +244,8 @@ def has_medium(exp: Experiment) -> bool:
 
 def build_scene(exp: Experiment, width: int | None = None, height: int | None = None, seed: int = 0,
                 *, water_bsdf: dict | None = None, rows: tuple[int, int] | None = None):
-    """The reference scene (perspective camera, box pixel filter) as a loaded ``mi.Scene``.
+    """The reference scene (perspective camera, box pixel filter, ``reference.sampler``) as a
+    loaded ``mi.Scene`` (render it with :func:`study.scene.reference.pass_spp` samples per pass).
     ``water_bsdf``: extra properties of the water's dielectric (:func:`water_mesh`); ``rows``:
     render only image rows ``[r0, r1)`` (a film crop; row 0 at the top)."""
     import mitsuba as mi
@@ -257,7 +258,7 @@ def build_scene(exp: Experiment, width: int | None = None, height: int | None = 
     d["sensor"] = {
         "type": "perspective", "fov": c["fov_y"], "fov_axis": "y",
         "to_world": mi.ScalarTransform4f().look_at(origin=c["position"], target=c["target"], up=[0, 1, 0]),
-        "sampler": {"type": "independent", "seed": seed},
+        "sampler": {"type": exp["reference.sampler"], "seed": seed},
         "film": {"type": "hdrfilm", "width": width, "height": height, "pixel_format": "rgb",
                  "rfilter": {"type": "box"},
                  **({"crop_offset_x": 0, "crop_offset_y": rows[0], "crop_width": width,

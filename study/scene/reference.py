@@ -5,6 +5,11 @@ independent sampler seeds, and the per-pixel standard error of that mean is esti
 from their spread (unbiased sample variance / K). The scalar noise figure is the RMS of the
 standard error over the water pixels, in linear RGB.
 
+Each pass samples with ``reference.sampler`` (stratified by default: jittered strata, about a
+third of the independent sampler's variance at equal samples on the default scene and a fifth on
+the sun's glitter); the passes' seeds are independent, so their spread estimates the standard
+error of the mean for either sampler.
+
 Automatic spp renders a pilot (``K`` x ``PILOT_SPP``), estimates the per-sample variance on
 the water pixels and picks the smallest power of two whose predicted noise is below
 ``reference.target_noise`` (capped at ``reference.max_spp``; the cap is reported).
@@ -77,6 +82,15 @@ def reference_key(exp: Experiment, variant: str) -> str:
     return hashlib.sha256(json.dumps(data, sort_keys=True).encode()).hexdigest()[:32]
 
 
+def pass_spp(exp: Experiment, spp: int) -> int:
+    """Samples per pixel of one of ``N_SEEDS`` passes that together take at least ``spp``: a
+    ``stratified`` sampler's count is a square (its strata form a grid), rounded up."""
+    per_pass = max(1, math.ceil(spp / N_SEEDS))
+    if exp["reference.sampler"] == "stratified":
+        per_pass = math.ceil(math.sqrt(per_pass)) ** 2
+    return per_pass
+
+
 def render_passes(exp: Experiment, spp_per_pass: int, n_passes: int, seed0: int,
                   progress=None, scene=None) -> np.ndarray:
     """(n_passes, H, W, 3) float32 renders with independent seeds ``seed0 + i``
@@ -140,10 +154,10 @@ def choose_spp(exp: Experiment, progress=None) -> tuple[int, dict]:
     t0 = time.perf_counter()
     from .mitsuba_scene import build_scene
     scene = build_scene(exp)
-    pilot = render_passes(exp, PILOT_SPP, N_SEEDS, seed0=10_000 + exp["reference.seed"], scene=scene,
+    pilot = render_passes(exp, pass_spp(exp, PILOT_SPP), N_SEEDS, seed0=10_000 + exp["reference.seed"], scene=scene,
                           progress=progress)
     _, pilot_noise = noise_of(pilot, water_mask(exp, w, h, scene=scene))
-    total_pilot = PILOT_SPP * N_SEEDS
+    total_pilot = pass_spp(exp, PILOT_SPP) * N_SEEDS
     per_sample_var = pilot_noise ** 2 * total_pilot          # noise^2 = var / spp_total
     target = exp["reference.target_noise"]
     need = per_sample_var / target ** 2
@@ -160,7 +174,7 @@ def render_reference(exp: Experiment, variant: str, spp: int | None = None, prog
     if spp is None:
         spp, info = (choose_spp(exp, progress) if exp["reference.spp"] == "auto"
                      else (int(exp["reference.spp"]), {}))
-    per_pass = max(1, math.ceil(spp / N_SEEDS))
+    per_pass = pass_spp(exp, spp)
     from .mitsuba_scene import build_scene
     scene = build_scene(exp)
     t0 = time.perf_counter()
