@@ -13,7 +13,8 @@ threads; on a loaded machine CPU seconds measure the work, wall seconds the wait
   report, evaluation), total;
 
 then the fitted constants of both paths, whether the new ones lie within one standard error
-(the Gauss-Newton standard error of today's fit) of today's, and FLIP (water pixels, full
+(the Gauss-Newton standard error of today's fit) of today's, each path's standard error from its
+reference's Monte Carlo noise alone (``rel_noise_error``), and FLIP (water pixels, full
 resolution) of each path's fitted shader against *today's* reference (and against its own).
 With ``--repeats N`` each run is repeated and medians are printed.
 
@@ -122,7 +123,8 @@ def worker(experiment: str, path: str, out: Path, overrides: list[str]) -> dict:
     summary = _jobs.run_calibrate(experiment, out, sets, cache=out / "cache")
     t.wall["total"] = t.wall["startup"] + time.perf_counter() - w0
     t.cpu["total"] = t.cpu["startup"] + time.process_time() - c0
-    params = {n: {"fitted": p["fitted"], "rel_se": p.get("rel_std_error"), "status": p["status"]}
+    params = {n: {"fitted": p["fitted"], "rel_se": p.get("rel_std_error"), "rel_noise": p.get("rel_noise_error"),
+                  "status": p["status"]}
               for n, p in summary["parameters"].items()}
     return {"experiment": name, "path": path, "wall": t.wall, "cpu": t.cpu, "params": params,
             "flip_own": summary["error"]["flip"]["fitted"], "rmse_own": summary["error"]["rmse"]["fitted"],
@@ -247,13 +249,15 @@ def _print(name: str, runs: dict, cross: dict) -> None:
             print(f"| {n} | {_v(pa['fitted'])} ({_v(pa['rel_se'])}) [{pa['status']}] |")
     if len(paths) == 2:
         a, b = last["today"]["params"], last["new"]["params"]
-        print("\n| constant | today (rel. SE) | new | (new - today) / SE |")
+        print("\n| constant | today (rel. SE; from reference noise) | new (from reference noise) | "
+              "(new - today) / SE |")
         print("|---|---|---|---|")
         for n, pa in a.items():
             pb = b.get(n, {})
             va, vb, se = pa["fitted"], pb.get("fitted"), pa["rel_se"]
             z = (vb - va) / (se * abs(va)) if None not in (va, vb, se) and se * abs(va) > 0 else None
-            print(f"| {n} | {_v(va)} ({_v(se)}) [{pa['status']}] | {_v(vb)} [{pb.get('status')}] | {_v(z, 2)} |")
+            print(f"| {n} | {_v(va)} ({_v(se)}; {_v(pa.get('rel_noise'))}) [{pa['status']}] | {_v(vb)} "
+                  f"({_v(pb.get('rel_noise'))}) [{pb.get('status')}] | {_v(z, 2)} |")
     sys.stdout.flush()
 
 

@@ -2,7 +2,9 @@
 
 Prints, in one run: render seconds and the measured noise (RMS standard error on water
 pixels, linear RGB, from 4 independent seeds) at 64 / 256 / 1024 spp, the noise x sqrt(spp)
-product (constant if the estimate is sound), and the spp the automatic choice picks.
+product (constant if the estimate is sound and the sampler independent; it falls with spp for the
+stratified sampler, ``--set reference.sampler='"independent"'`` compares), and the spp the automatic
+choice picks. A stratified sampler's spp are rounded up to a square per pass.
 
     .venv/bin/python benchmarks/bench_reference.py [EXPERIMENT.toml] [--set KEY=VALUE ...]
 """
@@ -26,18 +28,20 @@ def main() -> None:
     args = ap.parse_args()
 
     from study import init_backend, load_experiment
-    from study.scene.reference import N_SEEDS, choose_spp, noise_of, render_passes, water_mask
+    from study.scene.reference import N_SEEDS, choose_spp, noise_of, pass_spp, render_passes, water_mask
 
     init_backend("llvm_ad_rgb")
     exp = load_experiment(args.experiment, args.overrides)
     w, h = exp["resolution"]
     mask = water_mask(exp, w, h)
     print(f"experiment {exp['name']}: {w}x{h}, {int(mask.sum())} water pixels, "
-          f"{N_SEEDS} independent seeds per estimate")
+          f"{N_SEEDS} independent seeds per estimate, {exp['reference.sampler']} sampler")
     print(f"{'spp':>6} {'seconds':>9} {'noise':>10} {'noise*sqrt(spp)':>16} {'mean':>8}")
-    for spp in args.spp:
+    for asked in args.spp:
         t0 = time.perf_counter()
-        passes = render_passes(exp, max(1, spp // N_SEEDS), N_SEEDS, seed0=1000 + spp)
+        per_pass = pass_spp(exp, asked)
+        spp = per_pass * N_SEEDS
+        passes = render_passes(exp, per_pass, N_SEEDS, seed0=1000 + asked)
         sec = time.perf_counter() - t0
         _, noise = noise_of(passes, mask)
         print(f"{spp:>6} {sec:>9.2f} {noise:>10.4g} {noise * math.sqrt(spp):>16.4g} "
