@@ -1,5 +1,5 @@
 """The command line: ``study --help``, errors with exit code 2 and a message naming the problem,
-and render / preview / calibrate / export on a tiny experiment (24x24, 8 spp), in-process
+and render / preview / calibrate / export on a tiny experiment (24x24, 16 spp), in-process
 through ``study.cli.main``."""
 from __future__ import annotations
 
@@ -14,7 +14,7 @@ from conftest import REPO
 from study.cli import main
 
 EXPERIMENT = str(REPO / "experiments" / "default.toml")
-TINY = ["resolution=[24,24]", "fit.resolution=[24,24]", "reference.spp=8", "reference.water_mesh=48",
+TINY = ["resolution=[24,24]", "fit.resolution=[24,24]", "reference.spp=16", "reference.water_mesh=48",
         "reference.texture_size=32", "reference.texture_spp=4", "waves.normal_map_size=32"]
 MAX_STEPS = 5
 
@@ -101,9 +101,9 @@ def test_render_writes_reference_inputs_and_summary(runs):
         assert (out / f).is_file(), f
     img, prov, _ = read_exr(out / "reference.exr")
     assert img.shape == (24, 24, 3) and np.all(np.isfinite(img)) and img.max() > 0
-    assert prov["spp"] == 8
+    assert prov["spp"] == 16
     summary = json.loads((out / "summary.json").read_text())
-    assert summary["reference"]["spp"] == 8 and "inputs/shader_inputs.npz" in summary["outputs"]
+    assert summary["reference"]["spp"] == 16 and "inputs/shader_inputs.npz" in summary["outputs"]
     inputs = ShaderInputs.load(out / "inputs" / "shader_inputs.npz")
     assert (inputs.width, inputs.height) == (24, 24)
     assert inputs.normal_map.shape[:2] == (32, 32)
@@ -118,7 +118,7 @@ def test_preview_writes_finite_errors(runs):
     p = json.loads((root / "preview" / "preview.json").read_text())
     assert _finite(p["error"]["rmse"]) and _finite(p["error"]["flip"])
     assert 0 < p["error"]["rmse"] and 0 < p["error"]["flip"] < 1
-    assert p["water_pixels"] > 100 and p["reference"]["spp"] == 8
+    assert p["water_pixels"] > 100 and p["reference"]["spp"] == 16
     assert (root / "preview" / "preview.png").is_file()
 
 
@@ -155,7 +155,7 @@ def test_calibrate_writes_constants_json(runs):
     assert all(1 <= n <= MAX_STEPS for n in rounds) and len(rounds) == c["fit"]["rounds"]
     assert all(_finite(v) and v >= 0 for v in c["timings"].values())
     assert {"reference_s", "fit_s", "export_s"} <= set(c["timings"])
-    assert c["reference"]["spp"] == 8 and _finite(c["reference"]["noise"]) and c["reference"]["noise"] > 0
+    assert c["reference"]["spp"] == 16 and _finite(c["reference"]["noise"]) and c["reference"]["noise"] > 0
     gl = c["gl_check"]
     assert gl["mean_abs"] <= 1e-3 and gl["p999"] <= 1e-2 and gl["unexplained"] == 0
 

@@ -45,6 +45,13 @@ def test_bad_values_name_the_key(raw, message):
         validate(raw)
 
 
+def test_a_long_bad_list_is_clipped_in_the_message():
+    """A list-of-numbers key given a huge string names the key without echoing all of it."""
+    with pytest.raises(ExperimentError, match="tradeoff.loop_cap: expected a non-empty list") as e:
+        validate({"tradeoff": {"loop_cap": "ab\n" * 3000}})
+    assert len(str(e.value)) < 400
+
+
 def test_bad_files(tmp_path):
     with pytest.raises(ExperimentError, match="does not exist"):
         load_experiment(tmp_path / "missing.toml")

@@ -350,7 +350,7 @@ def _check(key: str, f: Field, v):
         return list(v)
     if k == "list_float":
         if not isinstance(v, list) or not v:
-            bad(f"expected a non-empty list of numbers, got {v!r}")
+            bad(f"expected a non-empty list of numbers, got {_clip(v)}")
         out = [num(x) for x in v]
         if len(set(out)) != len(out):
             bad("entries must be unique")
