@@ -171,8 +171,9 @@ SCHEMA: dict[str, Field] = {
                                         "albedo) or `none` (raw path tracing: raise `reference.texture_spp` to "
                                         "256 or more). Measured effect on the fitted constants: README, Fast "
                                         "references.", choices=("none", "oidn")),
-    "reference.wall_spp": Field("int", 64, "Samples per pixel of the dry colour render used "
-                                "outside the pool (`texture_method = \"lighting\"`).", "", 1, 65536),
+    "reference.wall_spp": Field("int", 16, "Samples per pixel of the dry colour render used "
+                                "outside the pool and for the floor albedo (`texture_method = "
+                                "\"lighting\"`; stratified, rounded up to a square).", "", 1, 65536),
     "reference.refraction_lighting": Field("str", "underwater", "How the top-down refraction "
                                            "texture is lit: `underwater` (the floor as lit through the "
                                            "water) or `dry` (no water, as the seed's application does).",

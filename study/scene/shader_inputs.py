@@ -46,7 +46,8 @@ def texture_extent(exp: Experiment) -> tuple[float, float, float, float]:
     return (-hx - b, -hz - b, hx + b, hz + b)
 
 
-def _ortho_sensor(mi, extent, size: int, spp: int, seed: int, y_cam: float = 100.0, medium=None):
+def _ortho_sensor(mi, extent, size: int, spp: int, seed: int, y_cam: float = 100.0, medium=None,
+                  sampler: str = "independent"):
     x0, z0, x1, z1 = extent
     cx, cz = (x0 + x1) / 2, (z0 + z1) / 2
     T = mi.ScalarTransform4f
@@ -54,7 +55,7 @@ def _ortho_sensor(mi, extent, size: int, spp: int, seed: int, y_cam: float = 100
         "type": "orthographic",
         "to_world": T().look_at(origin=[cx, y_cam, cz], target=[cx, y_cam - 1.0, cz], up=[0, 0, 1])
         @ T().scale([(x1 - x0) / 2, (z1 - z0) / 2, 1.0]),
-        "sampler": {"type": "independent", "seed": seed},
+        "sampler": {"type": sampler, "seed": seed},
         "film": {"type": "hdrfilm", "width": size, "height": size, "pixel_format": "rgb",
                  "rfilter": {"type": "box"}},
     }
