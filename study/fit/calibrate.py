@@ -200,7 +200,7 @@ def calibrate_model(model: ShaderModel, start: Constants, requested: list[str], 
     losses, result, bound, fits = [], None, {}, []
     fitted, x0 = start, None
     id1 = r1 = J1 = None
-    se, noise_se = {}, {}
+    se = {}
     for rnd in range(SE_ROUNDS + 1):
         if not free:
             break
@@ -231,10 +231,6 @@ def calibrate_model(model: ShaderModel, start: Constants, requested: list[str], 
         live = [i for i, n in enumerate(inner) if n not in bound]    # columns with a free direction
         vals = np.array([get_value(fitted, inner[i]) for i in live])
         se = dict(zip([inner[i] for i in live], std_errors(J1[:, live], r1, vals))) if live else {}
-        sigma = getattr(model, "reference_stderr", None)
-        noise_se = (dict(zip([inner[i] for i in live],
-                             noise_errors(J1[:, live], sigma[model.mask].astype(np.float64).ravel(), vals)))
-                    if live and sigma is not None else {})
         judged = {n: v for n, v in se.items() if v is not None}
         worst = max(judged, key=judged.get) if judged else None
         if worst is None or judged[worst] <= REL_SE_MAX or rnd == SE_ROUNDS:
@@ -248,6 +244,12 @@ def calibrate_model(model: ShaderModel, start: Constants, requested: list[str], 
         x0[worst] = get_value(start, worst)
     if not free:
         fitted = start
+    # the reference's noise in the last round's live columns (it decides nothing in the rounds)
+    sigma = getattr(model, "reference_stderr", None)
+    noise_se = {}
+    if id1 is not None and live and sigma is not None:
+        sigma_m = sigma[model.mask].astype(np.float64).ravel()
+        noise_se = dict(zip([inner[i] for i in live], noise_errors(J1[:, live], sigma_m, vals)))
     ident = {"start": _ident_dict(id0, continuous)} if id0 is not None else {}
     if id1 is not None:
         inner = list(id1.names)

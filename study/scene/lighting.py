@@ -41,8 +41,6 @@ linear RGB.
 """
 from __future__ import annotations
 
-import math
-
 import numpy as np
 
 from .experiment import Experiment
@@ -168,7 +166,8 @@ def render_lighting(exp: Experiment, size: int, spp: int, seed: int, *, water: b
 def dry_spp(spp: int) -> int:
     """Samples per texel of the dry render for ``reference.wall_spp = spp``: at least
     ``ALBEDO_SPP``, rounded up to a square (the stratified sampler's grid)."""
-    return math.ceil(math.sqrt(max(spp, ALBEDO_SPP))) ** 2
+    from .mitsuba_scene import stratified_spp
+    return stratified_spp(max(spp, ALBEDO_SPP))
 
 
 def render_dry(exp: Experiment, extent, size: int, spp: int, seed: int) -> tuple[np.ndarray, np.ndarray]:

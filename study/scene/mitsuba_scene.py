@@ -24,6 +24,8 @@ Nothing here sets the Mitsuba variant; call ``study._backend.init_backend`` firs
 """
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from shaders_port import perspective_view_proj
@@ -240,6 +242,12 @@ def water_mesh(mi, exp: Experiment, y_bottom: float, medium=None, bsdf: dict | N
 
 def has_medium(exp: Experiment) -> bool:
     return any(v > 0 for v in exp["water.sigma_t"])
+
+
+def stratified_spp(spp: int) -> int:
+    """Samples per pixel a ``stratified`` sampler takes for at least ``spp``: its strata form a
+    square grid, so the count is rounded up to a square (Mitsuba would round it and warn)."""
+    return math.ceil(math.sqrt(max(1, spp))) ** 2
 
 
 def build_scene(exp: Experiment, width: int | None = None, height: int | None = None, seed: int = 0,

@@ -85,10 +85,9 @@ def reference_key(exp: Experiment, variant: str) -> str:
 def pass_spp(exp: Experiment, spp: int) -> int:
     """Samples per pixel of one of ``N_SEEDS`` passes that together take at least ``spp``: a
     ``stratified`` sampler's count is a square (its strata form a grid), rounded up."""
+    from .mitsuba_scene import stratified_spp
     per_pass = max(1, math.ceil(spp / N_SEEDS))
-    if exp["reference.sampler"] == "stratified":
-        per_pass = math.ceil(math.sqrt(per_pass)) ** 2
-    return per_pass
+    return stratified_spp(per_pass) if exp["reference.sampler"] == "stratified" else per_pass
 
 
 def render_passes(exp: Experiment, spp_per_pass: int, n_passes: int, seed0: int,
