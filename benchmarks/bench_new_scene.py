@@ -1,25 +1,37 @@
 """A new scene to its calibrated, exported, GL-checked shader: today's path vs the fast one.
 
 For each experiment, on a cold render cache (a fresh private ``STUDY_CACHE`` per run) and in a
-fresh process (as a new user's ``study calibrate``), runs the whole calibrate job twice, side by
-side: ``today`` (the settings before the fast references: automatic reference spp up to 1024,
-top-down texture path traced in colour at the experiment's former ``texture_spp``) and ``new``
-(the shipped defaults). Prints per stage, in wall seconds and CPU seconds of the process (all
-threads; on a loaded machine CPU seconds measure the work, wall seconds the wait):
+fresh process (as a new user's ``study calibrate``), runs the whole calibrate job once per path,
+side by side:
+
+* ``today``: the settings before the fast references (automatic reference spp up to 1024,
+  independent samples, top-down texture path traced in colour at the experiment's former
+  ``texture_spp``);
+* ``new``: the shipped defaults;
+* ``clean`` (optional, 10-15 min a scene): today's reference with a 2048-spp colour texture, the
+  yardstick where today's 256-spp texture biases the fit (noise in the shader's inputs biases
+  the constants it meets, unlike zero-mean noise in the reference).
+
+Prints per stage, in wall seconds and CPU seconds of the process (all threads; on a loaded
+machine CPU seconds measure the work, wall seconds the wait):
 
   startup (imports, backend), scene build, JIT (kernel code generation and LLVM compilation,
   all stages), reference passes, noise estimation (water mask, spread of the seeds), texture
   renders (world y, lighting / colour, albedo, walls), fit, export, GL check, rest (figures,
   report, evaluation), total;
 
-then the fitted constants of both paths, whether the new ones lie within one standard error
-(the Gauss-Newton standard error of today's fit) of today's, each path's standard error from its
-reference's Monte Carlo noise alone (``rel_noise_error``), and FLIP (water pixels, full
-resolution) of each path's fitted shader against *today's* reference (and against its own).
-With ``--repeats N`` each run is repeated and medians are printed.
+then the fitted constants of each path against the *baseline* (``clean`` when run, else
+``today``): the difference in the baseline's Gauss-Newton standard errors, each path's standard
+error from its reference's Monte Carlo noise alone (``rel_noise_error``), and FLIP (water pixels,
+full resolution) of each path's fitted shader against the baseline's reference (and against its
+own). With ``--seeds N`` the new path runs with ``reference.seed = 0 .. N-1`` (reference,
+lighting and dry renders all reseeded): its constants are given as mean and standard deviation
+over the seeds, the difference from the baseline also in that standard deviation (what a user
+rerunning the scene would see move), and the stage times are medians over the seeds. With
+``--repeats N`` each run is repeated and medians are printed.
 
-    .venv/bin/python benchmarks/bench_new_scene.py [EXPERIMENT.toml ...] [--repeats N] [--paths today new]
-        [--set KEY=VALUE ...] [--json OUT.json]
+    .venv/bin/python benchmarks/bench_new_scene.py [EXPERIMENT.toml ...] [--repeats N]
+        [--paths today new clean] [--seeds N] [--set KEY=VALUE ...] [--json OUT.json]
 """
 from __future__ import annotations
 
@@ -42,6 +54,17 @@ TODAY = ["reference.texture_method=\"colour\"", "reference.spp=\"auto\"", "refer
          "reference.max_spp=1024"]
 # the texture_spp each shipped experiment used then (schema default 256; default and seed_lut set 1024)
 TODAY_TEXTURE_SPP = {"default": 1024, "seed_lut": 1024}
+CLEAN_TEXTURE_SPP = 2048      # the clean yardstick's colour texture
+PATHS = ("today", "new", "clean")
+
+
+def path_settings(path: str, name: str) -> list[str]:
+    """``--set`` overrides of ``path`` for the experiment called ``name`` (``new``: none)."""
+    if path == "today":
+        return TODAY + [f"reference.texture_spp={TODAY_TEXTURE_SPP.get(name, 256)}"]
+    if path == "clean":
+        return TODAY + [f"reference.texture_spp={CLEAN_TEXTURE_SPP}"]
+    return []
 STAGES = ["startup", "scene build", "JIT", "reference passes", "noise estimation", "texture renders",
           "fit", "export", "GL check", "rest", "total"]
 
@@ -100,9 +123,7 @@ def worker(experiment: str, path: str, out: Path, overrides: list[str]) -> dict:
     init_backend("llvm_ad_rgb")
     dr.set_flag(dr.JitFlag.KernelHistory, True)
     name = exp_mod.load_experiment(experiment)["name"]
-    sets = list(overrides)
-    if path == "today":
-        sets = TODAY + [f"reference.texture_spp={TODAY_TEXTURE_SPP.get(name, 256)}"] + sets
+    sets = path_settings(path, name) + list(overrides)
     t = _Timer(dr)
     t._drain()
     t.wall, t.cpu = {}, {}
@@ -132,9 +153,9 @@ def worker(experiment: str, path: str, out: Path, overrides: list[str]) -> dict:
             "kernels": t.kernels, "kernel_cache_hits": t.hits}
 
 
-def cross_flip(experiment: str, run_dirs: dict, overrides: list[str]) -> dict:
-    """FLIP / RMSE (water pixels, full resolution) of each path's fitted constants against today's
-    reference, on today's shader inputs."""
+def cross_flip(experiment: str, baseline: str, run_dirs: dict, overrides: list[str]) -> dict:
+    """FLIP / RMSE (water pixels, full resolution) of each path's fitted constants (``run_dirs``:
+    path -> its output folder) against the ``baseline`` path's reference, on its shader inputs."""
     from study._backend import drjit_backend, init_backend
     from study._metrics import errors
     from study.fit.model import ShaderModel
@@ -145,9 +166,8 @@ def cross_flip(experiment: str, run_dirs: dict, overrides: list[str]) -> dict:
 
     variant = init_backend("llvm_ad_rgb")
     base = load_experiment(experiment)
-    sets = TODAY + [f"reference.texture_spp={TODAY_TEXTURE_SPP.get(base['name'], 256)}"] + overrides
-    exp = load_experiment(experiment, sets)
-    cache = Path(run_dirs["today"]) / "cache"
+    exp = load_experiment(experiment, path_settings(baseline, base["name"]) + overrides)
+    cache = Path(run_dirs[baseline]) / "cache"
     quiet = lambda *_: None  # noqa: E731
     ref = load_or_render(exp, variant, cache=cache, log=quiet)
     inputs = load_or_build_shader_inputs(exp, variant, cache=cache, log=quiet)
@@ -181,48 +201,68 @@ def _fmt(x, w=8, p=1):
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("experiments", nargs="*", default=None)
-    ap.add_argument("--paths", nargs="+", default=["today", "new"], choices=["today", "new"])
+    ap.add_argument("--paths", nargs="+", default=["today", "new"], choices=PATHS)
     ap.add_argument("--repeats", type=int, default=1)
+    ap.add_argument("--seeds", type=int, default=1, help="run the new path with reference.seed = 0 .. N-1")
     ap.add_argument("--set", dest="overrides", action="append", default=[])
     ap.add_argument("--json", type=Path)
     ap.add_argument("--worker", nargs=3, metavar=("EXPERIMENT", "PATH", "OUT"), help=argparse.SUPPRESS)
-    ap.add_argument("--cross", nargs=3, metavar=("EXPERIMENT", "TODAY_DIR", "NEW_DIR"), help=argparse.SUPPRESS)
+    ap.add_argument("--cross", nargs=3, metavar=("EXPERIMENT", "BASELINE", "DIRS_JSON"), help=argparse.SUPPRESS)
     ap.add_argument("--result", type=Path, help=argparse.SUPPRESS)
     args = ap.parse_args()
+    if args.repeats < 1 or args.seeds < 1:
+        ap.error("--repeats and --seeds take a count of at least 1")
     if args.worker:
         e, p, o = args.worker
         args.result.write_text(json.dumps(worker(e, p, Path(o), args.overrides)))
         return
     if args.cross:
-        e, a, b = args.cross
-        args.result.write_text(json.dumps(cross_flip(e, {"today": a, "new": b}, args.overrides)))
+        e, b, dirs = args.cross
+        args.result.write_text(json.dumps(cross_flip(e, b, json.loads(dirs), args.overrides)))
         return
 
+    paths = list(dict.fromkeys(args.paths))
+    baseline = "clean" if "clean" in paths else "today" if "today" in paths else None
     exps = args.experiments or sorted(str(p) for p in (REPO / "experiments").glob("*.toml"))
     load = os.getloadavg()
     print(f"# bench_new_scene: {os.cpu_count()} cores, load average {load[0]:.1f} / {load[1]:.1f} / "
-          f"{load[2]:.1f} at start; {args.repeats} repeat(s), medians; wall s (CPU s)", flush=True)
+          f"{load[2]:.1f} at start; {args.repeats} repeat(s), {args.seeds} seed(s) of the new path, "
+          f"medians; wall s (CPU s)", flush=True)
     results = []
     for e in exps:
-        runs = {p: [] for p in args.paths}
+        runs = {p: [] for p in paths}
         dirs = {}
         for r in range(args.repeats):
-            for p in args.paths:              # side by side: today, new, today, new, ...
-                d = Path(tempfile.mkdtemp(prefix=f"bench_{Path(e).stem}_{p}_"))
-                sets = sum((["--set", s] for s in args.overrides), [])
-                runs[p].append(_run(["--worker", e, p, str(d), *sets]))
-                dirs[p] = d
-                print(f"  {Path(e).stem} {p} run {r + 1}: {runs[p][-1]['wall']['total']:.1f} s wall", flush=True)
-        cross = _run(["--cross", e, str(dirs["today"]), str(dirs["new"])]) if len(args.paths) == 2 else {}
-        results.append({"experiment": Path(e).stem, "runs": runs, "cross": cross})
-        _print(Path(e).stem, runs, cross)
+            for seed in range(args.seeds):
+                for p in paths:              # side by side: today, new, today, new, ...
+                    if p != "new" and seed > 0:
+                        continue
+                    d = Path(tempfile.mkdtemp(prefix=f"bench_{Path(e).stem}_{p}_"))
+                    sets = args.overrides + ([f"reference.seed={seed}"] if p == "new" and args.seeds > 1 else [])
+                    runs[p].append(dict(_run(["--worker", e, p, str(d), *sum((["--set", s] for s in sets), [])]),
+                                        seed=seed))
+                    if seed == 0:
+                        dirs[p] = str(d)
+                    print(f"  {Path(e).stem} {p} run {r + 1} seed {seed}: {runs[p][-1]['wall']['total']:.1f} s wall",
+                          flush=True)
+        cross = _run(["--cross", e, baseline, json.dumps(dirs)]) if baseline and len(paths) > 1 else {}
+        results.append({"experiment": Path(e).stem, "baseline": baseline, "runs": runs, "cross": cross})
+        _print(Path(e).stem, runs, cross, baseline)
     load = os.getloadavg()
     print(f"# load average at the end {load[0]:.1f} / {load[1]:.1f} / {load[2]:.1f}")
     if args.json:
         args.json.write_text(json.dumps(results, indent=1))
 
 
-def _print(name: str, runs: dict, cross: dict) -> None:
+def _seed_stats(runs: list[dict], name: str) -> tuple[float, float | None, int]:
+    """(mean, sample standard deviation or None, count) of constant ``name`` over a path's seeds
+    (the last repeat of each seed)."""
+    by_seed = {r["seed"]: r["params"][name]["fitted"] for r in runs if name in r["params"]}
+    v = list(by_seed.values())
+    return statistics.fmean(v), (statistics.stdev(v) if len(v) > 1 else None), len(v)
+
+
+def _print(name: str, runs: dict, cross: dict, baseline: str | None) -> None:
     paths = list(runs)
     med = {p: {kind: {s: statistics.median(r[kind].get(s, 0.0) for r in runs[p]) for s in STAGES}
                for kind in ("wall", "cpu")} for p in paths}
@@ -231,33 +271,45 @@ def _print(name: str, runs: dict, cross: dict) -> None:
     print("|---|" + "---|" * len(paths))
     for s in STAGES:
         print(f"| {s} | " + " | ".join(f"{med[p]['wall'][s]:.1f} ({med[p]['cpu'][s]:.1f})" for p in paths) + " |")
-    last = {p: runs[p][-1] for p in paths}
+    first = {p: [r for r in runs[p] if r["seed"] == 0][-1] for p in paths}
     print("\n| | " + " | ".join(paths) + " |")
     print("|---|" + "---|" * len(paths))
-    print("| reference spp, noise | " + " | ".join(f"{last[p]['reference_spp']}, {last[p]['reference_noise']:.4f}"
+    print("| reference spp, noise | " + " | ".join(f"{first[p]['reference_spp']}, {first[p]['reference_noise']:.4f}"
                                              for p in paths) + " |")
-    print("| FLIP / RMSE vs own reference | " + " | ".join(f"{last[p]['flip_own']:.4f} / {last[p]['rmse_own']:.4f}"
+    print("| FLIP / RMSE vs own reference | " + " | ".join(f"{first[p]['flip_own']:.4f} / {first[p]['rmse_own']:.4f}"
                                                       for p in paths) + " |")
     if cross:
-        print("| FLIP / RMSE vs today's reference | " + " | ".join(
+        print(f"| FLIP / RMSE vs {baseline}'s reference | " + " | ".join(
             f"{cross[p]['flip']:.4f} / {cross[p]['rmse']:.4f}" for p in paths) + " |")
-    print("| kernels (disk-cache hits) | " + " | ".join(f"{last[p]['kernels']} ({last[p]['kernel_cache_hits']})"
+    print("| kernels (disk-cache hits) | " + " | ".join(f"{first[p]['kernels']} ({first[p]['kernel_cache_hits']})"
                                                     for p in paths) + " |")
-    if len(paths) == 1:
-        print("\n| constant | fitted (rel. SE) [status] |\n|---|---|")
-        for n, pa in last[paths[0]]["params"].items():
-            print(f"| {n} | {_v(pa['fitted'])} ({_v(pa['rel_se'])}) [{pa['status']}] |")
-    if len(paths) == 2:
-        a, b = last["today"]["params"], last["new"]["params"]
-        print("\n| constant | today (rel. SE; from reference noise) | new (from reference noise) | "
-              "(new - today) / SE |")
-        print("|---|---|---|---|")
-        for n, pa in a.items():
-            pb = b.get(n, {})
-            va, vb, se = pa["fitted"], pb.get("fitted"), pa["rel_se"]
-            z = (vb - va) / (se * abs(va)) if None not in (va, vb, se) and se * abs(va) > 0 else None
-            print(f"| {n} | {_v(va)} ({_v(se)}; {_v(pa.get('rel_noise'))}) [{pa['status']}] | {_v(vb)} "
-                  f"({_v(pb.get('rel_noise'))}) [{pb.get('status')}] | {_v(z, 2)} |")
+    if baseline is None:
+        for p in paths:
+            print(f"\n| constant | {p}: fitted (rel. SE) [status] |\n|---|---|")
+            for n, pa in first[p]["params"].items():
+                print(f"| {n} | {_v(pa['fitted'])} ({_v(pa['rel_se'])}) [{pa['status']}] |")
+        sys.stdout.flush()
+        return
+    others = [p for p in paths if p != baseline]
+    base = first[baseline]["params"]
+    print(f"\n| constant | {baseline} (rel. SE; from reference noise) | " + " | ".join(
+        f"{p} (from reference noise) | ({p} - {baseline}) / SE" for p in others) + " |")
+    print("|---|---|" + "---|---|" * len(others))
+    for n, pa in base.items():
+        va, se = pa["fitted"], pa["rel_se"]
+        se_abs = se * abs(va) if se else None
+        cells = []
+        for p in others:
+            pb = first[p]["params"].get(n, {})
+            mean, sd, k = _seed_stats(runs[p], n) if pb else (None, None, 0)
+            z = (mean - va) / se_abs if mean is not None and se_abs else None
+            if k > 1:
+                zs = (mean - va) / sd if sd else None
+                cells.append(f"{_v(mean)} +- {_v(sd, 2)} over {k} seeds [{pb.get('status')}] | "
+                             f"{_v(z, 2)} (in seed SD: {_v(zs, 2)})")
+            else:
+                cells.append(f"{_v(mean)} ({_v(pb.get('rel_noise'))}) [{pb.get('status')}] | {_v(z, 2)}")
+        print(f"| {n} | {_v(va)} ({_v(se)}; {_v(pa.get('rel_noise'))}) [{pa['status']}] | " + " | ".join(cells) + " |")
     sys.stdout.flush()
 
 

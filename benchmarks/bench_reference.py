@@ -3,8 +3,8 @@
 Prints, in one run: render seconds and the measured noise (RMS standard error on water
 pixels, linear RGB, from 4 independent seeds) at 64 / 256 / 1024 spp, the noise x sqrt(spp)
 product (constant if the estimate is sound and the sampler independent; it falls with spp for the
-stratified sampler, ``--set reference.sampler='"independent"'`` compares), and the spp the automatic
-choice picks. A stratified sampler's spp are rounded up to a square per pass.
+multi-jittered sampler, ``--set reference.sampler='"independent"'`` compares), and the spp the automatic
+choice picks. A jittered sampler's spp are rounded up to its grid per pass.
 
     .venv/bin/python benchmarks/bench_reference.py [EXPERIMENT.toml] [--set KEY=VALUE ...]
 """

@@ -71,28 +71,69 @@ def test_noise_estimate_scales_with_spp(mi):
     assert 2.0 < ratio < 8.0, ratio        # ideal 4.0; heavy-tailed paths widen the spread
 
 
-def test_pass_spp_rounds_stratified_passes_to_squares():
+def test_pass_spp_rounds_to_the_samplers_grid():
     from study.scene.reference import N_SEEDS, pass_spp
-    strat, ind = small_experiment(), small_experiment(**{"reference.sampler": '"independent"'})
+    counts = (1, 16, 64, 128, 1024)
+    mj = small_experiment(**{"reference.sampler": '"multijitter"'})
+    strat = small_experiment(**{"reference.sampler": '"stratified"'})
+    ind = small_experiment(**{"reference.sampler": '"independent"'})
     assert N_SEEDS == 4
-    assert [pass_spp(strat, s) for s in (1, 16, 64, 128, 1024)] == [1, 4, 16, 36, 256]
-    assert [pass_spp(ind, s) for s in (1, 16, 64, 128, 1024)] == [1, 4, 16, 32, 256]
+    assert [pass_spp(mj, s) for s in counts] == [1, 4, 16, 35, 256]     # a x b, b = floor(sqrt)
+    assert [pass_spp(strat, s) for s in counts] == [1, 4, 16, 36, 256]
+    assert [pass_spp(ind, s) for s in counts] == [1, 4, 16, 32, 256]
 
 
-def test_stratified_reference_is_unbiased_and_less_noisy(mi):
-    """The stratified sampler (default) against the independent one on the same scene at equal
-    spp: the two means agree within their measured standard errors (no bias), and the
-    stratified passes' measured noise is lower (on the default scene at 256x256 its variance is
-    2.8x lower; here, at 32x32 with 16 spp per pass, its RMS noise is 1.18x lower: the bound
+@pytest.mark.parametrize("sampler", ["multijitter", "stratified", "independent"])
+def test_sampler_spp_is_mitsubas_own_count(mi, sampler):
+    """``sampler_spp`` predicts the count the pinned Mitsuba's sampler takes (perfect cubes,
+    squares and everything between), so the spp recorded in a reference's provenance is the one
+    rendered and Mitsuba never rounds (and warns) behind the study's back."""
+    from study.scene.mitsuba_scene import sampler_spp
+    for spp in list(range(1, 130)) + [216, 255, 256, 343, 512, 1000, 1024]:
+        s = mi.load_dict({"type": sampler, "sample_count": sampler_spp(sampler, spp)})
+        assert s.sample_count() == sampler_spp(sampler, spp) >= spp, (sampler, spp)
+
+
+def _consecutive_dimension_correlation(mi, sampler: str, spp: int, n_pixels: int = 4096, dims: int = 12):
+    """Mean correlation of dimension d with d+1 over ``dims`` 1-D draws of ``n_pixels`` x ``spp``
+    samples, and its standard error (from the spread of the ``dims - 1`` pairs)."""
+    s = mi.load_dict({"type": sampler, "sample_count": spp})
+    s.seed(0, n_pixels * spp)
+    u = np.array([np.array(s.next_1d()) for _ in range(dims)])
+    c = np.corrcoef(u)
+    pairs = np.array([c[i, i + 1] for i in range(dims - 1)])
+    return pairs.mean(), pairs.std(ddof=1) / np.sqrt(len(pairs))
+
+
+def test_reference_sampler_draws_uncorrelated_dimensions(mi):
+    """The default reference sampler's successive dimensions are uncorrelated: a path tracer
+    assumes it, and Mitsuba's ``stratified`` sampler (permutations with consecutive seeds per
+    dimension) breaks it, which biased the volumetric reference (deep chromatic water about 1 %
+    too bright). The stratified sampler is the positive control: the same measurement finds its
+    correlation (about -0.01 at 36 spp)."""
+    from study.scene.experiment import SCHEMA
+    default = SCHEMA["reference.sampler"].default
+    assert default == "multijitter"
+    r, se = _consecutive_dimension_correlation(mi, default, 36)
+    assert abs(r) < max(4 * se, 2e-3), (r, se)
+    r_strat, se_strat = _consecutive_dimension_correlation(mi, "stratified", 36)
+    assert r_strat < -5e-3 and r_strat < -4 * se_strat, (r_strat, se_strat)
+
+
+def test_reference_sampler_is_unbiased_and_less_noisy(mi):
+    """The default (multi-jittered) sampler against the independent one on the same scene at
+    equal spp: the two means agree within their measured standard errors (no bias), and the
+    jittered passes' measured noise is lower (on the default scene at 256x256 its variance is
+    2.8x lower; here, at 32x32 with 16 spp per pass, its RMS noise is about 1.2x lower: the bound
     1.1 leaves the RMS's own sampling error, about 2 % over these water pixels)."""
     from study.scene.reference import render_reference
-    strat = render_reference(small_experiment(**{"reference.spp": "64"}), "llvm_ad_rgb")
+    jit = render_reference(small_experiment(**{"reference.spp": "64"}), "llvm_ad_rgb")
     ind = render_reference(small_experiment(**{"reference.spp": "64", "reference.sampler": '"independent"'}),
                            "llvm_ad_rgb")
-    assert strat.spp == ind.spp == 64
-    assert strat.noise * 1.1 < ind.noise, (strat.noise, ind.noise)
-    diff = strat.image - ind.image
-    se = np.sqrt(strat.stderr ** 2 + ind.stderr ** 2)
+    assert jit.spp == ind.spp == 64
+    assert jit.noise * 1.1 < ind.noise, (jit.noise, ind.noise)
+    diff = jit.image - ind.image
+    se = np.sqrt(jit.stderr ** 2 + ind.stderr ** 2)
     # the mean difference over the image in units of its standard error: a bias shows as |z| >> 1
     z = diff.sum() / np.sqrt((se ** 2).sum())
     assert abs(z) < 4.0, z

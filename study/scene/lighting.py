@@ -19,11 +19,11 @@ between lighting texel centres); the benchmark measures what that does to the fi
 constants (``benchmarks/bench_new_scene.py``).
 
 Outside the pool (the walls' tops, used where the shader's rays leave the pool) the dry scene
-is rendered in colour at ``reference.wall_spp`` (at least ``ALBEDO_SPP``, stratified, rounded up
-to a square; the same render gives the albedo): the walls are lit directly by the sky and the
-sun, with light sampling, and have little noise, and jittered strata average the albedo over
-each texel. 16 stratified samples instead of 64 independent ones halve the render's time and
-move no fitted constant by more than 0.3 standard errors on the default and grazing scenes.
+is rendered in colour at ``reference.wall_spp`` (at least ``ALBEDO_SPP``, multi-jittered; the
+same render gives the albedo): the walls are lit directly by the sky and the sun, with light
+sampling, and have little noise, and jittered strata average the albedo over each texel. 16
+jittered samples instead of 64 independent ones halve the render's time and move no fitted
+constant by more than 0.3 standard errors on the default and grazing scenes.
 
 Noise is measured, not assumed: the lighting is the mean of ``N_SEEDS`` renders with
 independent seeds, and the RMS standard error of the resulting colour over the pool texels
@@ -47,6 +47,7 @@ from .experiment import Experiment
 
 N_SEEDS = 4          # independent lighting renders (noise estimate from their spread)
 ALBEDO_SPP = 16      # least samples per texel of the dry render that also gives the albedo
+DRY_SAMPLER = "multijitter"   # its sampler (strata without the stratified sampler's correlations)
 
 
 def pool_extent(exp: Experiment) -> tuple[float, float, float, float]:
@@ -165,14 +166,14 @@ def render_lighting(exp: Experiment, size: int, spp: int, seed: int, *, water: b
 
 def dry_spp(spp: int) -> int:
     """Samples per texel of the dry render for ``reference.wall_spp = spp``: at least
-    ``ALBEDO_SPP``, rounded up to a square (the stratified sampler's grid)."""
-    from .mitsuba_scene import stratified_spp
-    return stratified_spp(max(spp, ALBEDO_SPP))
+    ``ALBEDO_SPP``, rounded up to the multi-jittered sampler's grid."""
+    from .mitsuba_scene import sampler_spp
+    return sampler_spp(DRY_SAMPLER, max(spp, ALBEDO_SPP))
 
 
 def render_dry(exp: Experiment, extent, size: int, spp: int, seed: int) -> tuple[np.ndarray, np.ndarray]:
     """(colour, albedo), each (size, size, 3) GL order: the dry scene (no water) seen from above,
-    path traced at :func:`dry_spp` stratified spp, and the texel-mean albedo of the first surface
+    path traced at :func:`dry_spp` multi-jittered spp, and the texel-mean albedo of the first surface
     hit, from the same samples (one scene, one render)."""
     import mitsuba as mi
 
@@ -184,7 +185,7 @@ def render_dry(exp: Experiment, extent, size: int, spp: int, seed: int) -> tuple
     scene, _ = _top_down_scene(mi, exp, water=False, integrator={
         "type": "aov", "aovs": "alb:albedo", "transport": _transport(exp, False)})
     sensor = _ortho_sensor(mi, extent, size, spp, seed, y_cam=dry_camera_height(mi, exp, extent),
-                           sampler="stratified")
+                           sampler=DRY_SAMPLER)
     img = _to_gl_order(mi, sensor, np.array(mi.render(scene, sensor=sensor, spp=spp, seed=seed), np.float32),
                        extent)
     return img[..., :3], img[..., 3:6]

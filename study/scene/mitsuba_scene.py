@@ -244,10 +244,19 @@ def has_medium(exp: Experiment) -> bool:
     return any(v > 0 for v in exp["water.sigma_t"])
 
 
-def stratified_spp(spp: int) -> int:
-    """Samples per pixel a ``stratified`` sampler takes for at least ``spp``: its strata form a
-    square grid, so the count is rounded up to a square (Mitsuba would round it and warn)."""
-    return math.ceil(math.sqrt(max(1, spp))) ** 2
+def sampler_spp(sampler: str, spp: int) -> int:
+    """Samples per pixel Mitsuba's ``sampler`` takes when asked for ``spp`` (at least ``spp``;
+    Mitsuba would round the same way and warn): ``stratified`` draws a square grid of strata,
+    ``multijitter`` an ``a x b`` grid with ``b = floor(sqrt(spp))`` and ``a = ceil(spp / b)``,
+    ``independent`` any count. ``tests/test_reference.py`` checks this against the pinned
+    Mitsuba's own ``sample_count()``."""
+    spp = max(1, int(spp))
+    if sampler == "stratified":
+        return math.ceil(math.sqrt(spp)) ** 2
+    if sampler == "multijitter":
+        b = math.isqrt(spp)
+        return -(-spp // b) * b
+    return spp
 
 
 def build_scene(exp: Experiment, width: int | None = None, height: int | None = None, seed: int = 0,
