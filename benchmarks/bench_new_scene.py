@@ -31,7 +31,8 @@ rerunning the scene would see move), and the stage times are medians over the se
 ``--repeats N`` each run is repeated and medians are printed.
 
     .venv/bin/python benchmarks/bench_new_scene.py [EXPERIMENT.toml ...] [--repeats N]
-        [--paths today new clean] [--seeds N] [--set KEY=VALUE ...] [--json OUT.json]
+        [--paths today new clean] [--seeds N] [--variant cuda_ad_rgb] [--set KEY=VALUE ...]
+        [--json OUT.json]
 """
 from __future__ import annotations
 
@@ -109,7 +110,7 @@ class _Timer:
         setattr(module, name, timed)
 
 
-def worker(experiment: str, path: str, out: Path, overrides: list[str]) -> dict:
+def worker(experiment: str, path: str, out: Path, overrides: list[str], variant: str = "llvm_ad_rgb") -> dict:
     w_start, c_start = time.perf_counter(), time.process_time()
     import drjit as dr
 
@@ -120,7 +121,7 @@ def worker(experiment: str, path: str, out: Path, overrides: list[str]) -> dict:
     from study.scene import experiment as exp_mod
     from study.scene import lighting, mitsuba_scene, reference, shader_inputs
 
-    init_backend("llvm_ad_rgb")
+    init_backend(variant)
     dr.set_flag(dr.JitFlag.KernelHistory, True)
     name = exp_mod.load_experiment(experiment)["name"]
     sets = path_settings(path, name) + list(overrides)
@@ -141,7 +142,7 @@ def worker(experiment: str, path: str, out: Path, overrides: list[str]) -> dict:
     t.wrap(_jobs, "gl_check", "GL check")
     t.wrap(_jobs, "run_calibrate", "rest")
     w0, c0 = time.perf_counter(), time.process_time()
-    summary = _jobs.run_calibrate(experiment, out, sets, cache=out / "cache")
+    summary = _jobs.run_calibrate(experiment, out, sets, variant, cache=out / "cache")
     t.wall["total"] = t.wall["startup"] + time.perf_counter() - w0
     t.cpu["total"] = t.cpu["startup"] + time.process_time() - c0
     params = {n: {"fitted": p["fitted"], "rel_se": p.get("rel_std_error"), "rel_noise": p.get("rel_noise_error"),
@@ -153,7 +154,8 @@ def worker(experiment: str, path: str, out: Path, overrides: list[str]) -> dict:
             "kernels": t.kernels, "kernel_cache_hits": t.hits}
 
 
-def cross_flip(experiment: str, baseline: str, run_dirs: dict, overrides: list[str]) -> dict:
+def cross_flip(experiment: str, baseline: str, run_dirs: dict, overrides: list[str],
+               variant: str = "llvm_ad_rgb") -> dict:
     """FLIP / RMSE (water pixels, full resolution) of each path's fitted constants (``run_dirs``:
     path -> its output folder) against the ``baseline`` path's reference, on its shader inputs."""
     from study._backend import drjit_backend, init_backend
@@ -164,7 +166,7 @@ def cross_flip(experiment: str, baseline: str, run_dirs: dict, overrides: list[s
     from study.scene.reference import load_or_render
     from study.scene.shader_inputs import load_or_build_shader_inputs
 
-    variant = init_backend("llvm_ad_rgb")
+    variant = init_backend(variant)
     base = load_experiment(experiment)
     exp = load_experiment(experiment, path_settings(baseline, base["name"]) + overrides)
     cache = Path(run_dirs[baseline]) / "cache"
@@ -185,7 +187,7 @@ def _run(args_list: list[str]) -> dict:
     with tempfile.NamedTemporaryFile(suffix=".json", delete=False) as f:
         res = Path(f.name)
     cmd = [sys.executable, __file__, *args_list, "--result", str(res)]
-    env = dict(os.environ, PYTHONPATH=str(REPO))
+    env = dict(os.environ, PYTHONPATH=os.pathsep.join([str(REPO)] + [p for p in [os.environ.get("PYTHONPATH")] if p]))
     p = subprocess.run(cmd, env=env, capture_output=True, text=True)
     if p.returncode != 0:
         raise RuntimeError(f"{' '.join(cmd)} failed:\n{p.stderr[-3000:]}")
@@ -205,6 +207,7 @@ def main() -> None:
     ap.add_argument("--repeats", type=int, default=1)
     ap.add_argument("--seeds", type=int, default=1, help="run the new path with reference.seed = 0 .. N-1")
     ap.add_argument("--set", dest="overrides", action="append", default=[])
+    ap.add_argument("--variant", default="llvm_ad_rgb", choices=["llvm_ad_rgb", "cuda_ad_rgb"])
     ap.add_argument("--json", type=Path)
     ap.add_argument("--worker", nargs=3, metavar=("EXPERIMENT", "PATH", "OUT"), help=argparse.SUPPRESS)
     ap.add_argument("--cross", nargs=3, metavar=("EXPERIMENT", "BASELINE", "DIRS_JSON"), help=argparse.SUPPRESS)
@@ -214,11 +217,11 @@ def main() -> None:
         ap.error("--repeats and --seeds take a count of at least 1")
     if args.worker:
         e, p, o = args.worker
-        args.result.write_text(json.dumps(worker(e, p, Path(o), args.overrides)))
+        args.result.write_text(json.dumps(worker(e, p, Path(o), args.overrides, args.variant)))
         return
     if args.cross:
         e, b, dirs = args.cross
-        args.result.write_text(json.dumps(cross_flip(e, b, json.loads(dirs), args.overrides)))
+        args.result.write_text(json.dumps(cross_flip(e, b, json.loads(dirs), args.overrides, args.variant)))
         return
 
     paths = list(dict.fromkeys(args.paths))
@@ -226,8 +229,8 @@ def main() -> None:
     exps = args.experiments or sorted(str(p) for p in (REPO / "experiments").glob("*.toml"))
     load = os.getloadavg()
     print(f"# bench_new_scene: {os.cpu_count()} cores, load average {load[0]:.1f} / {load[1]:.1f} / "
-          f"{load[2]:.1f} at start; {args.repeats} repeat(s), {args.seeds} seed(s) of the new path, "
-          f"medians; wall s (CPU s)", flush=True)
+          f"{load[2]:.1f} at start; {args.variant}; {args.repeats} repeat(s), {args.seeds} seed(s) of the new "
+          f"path, medians; wall s (CPU s)", flush=True)
     results = []
     for e in exps:
         runs = {p: [] for p in paths}
@@ -239,13 +242,15 @@ def main() -> None:
                         continue
                     d = Path(tempfile.mkdtemp(prefix=f"bench_{Path(e).stem}_{p}_"))
                     sets = args.overrides + ([f"reference.seed={seed}"] if p == "new" and args.seeds > 1 else [])
-                    runs[p].append(dict(_run(["--worker", e, p, str(d), *sum((["--set", s] for s in sets), [])]),
-                                        seed=seed))
+                    runs[p].append(dict(_run(["--worker", e, p, str(d), "--variant", args.variant,
+                                              *sum((["--set", s] for s in sets), [])]), seed=seed))
                     if seed == 0:
                         dirs[p] = str(d)
                     print(f"  {Path(e).stem} {p} run {r + 1} seed {seed}: {runs[p][-1]['wall']['total']:.1f} s wall",
                           flush=True)
-        cross = _run(["--cross", e, baseline, json.dumps(dirs)]) if baseline and len(paths) > 1 else {}
+        cross = (_run(["--cross", e, baseline, json.dumps(dirs), "--variant", args.variant,
+                       *sum((["--set", s] for s in args.overrides), [])])
+                 if baseline and len(paths) > 1 else {})
         results.append({"experiment": Path(e).stem, "baseline": baseline, "runs": runs, "cross": cross})
         _print(Path(e).stem, runs, cross, baseline)
     load = os.getloadavg()
