@@ -298,7 +298,7 @@ def _print(name: str, runs: dict, cross: dict, baseline: str | None) -> None:
     others = [p for p in paths if p != baseline]
     base = first[baseline]["params"]
     print(f"\n| constant | {baseline} (rel. SE; from reference noise) | " + " | ".join(
-        f"{p} (from reference noise) | ({p} - {baseline}) / SE" for p in others) + " |")
+        f"{p} (from reference noise, or mean +- SD over seeds) | ({p} - {baseline}) / SE" for p in others) + " |")
     print("|---|---|" + "---|---|" * len(others))
     for n, pa in base.items():
         va, se = pa["fitted"], pa["rel_se"]
