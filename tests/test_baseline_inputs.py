@@ -114,8 +114,13 @@ def test_tradeoff_tiny_with_baselines(tmp_path):
     assert len(by["water_baseline"]) == 1 and len(by["water_baseline_flat"]) == 1
     assert by["water_baseline"][0]["fetches_mean"] == 11 and by["water_baseline_flat"][0]["fetches_mean"] == 5
     assert by["water_baseline"][0]["iterations_mean"] == 0
-    assert all(r["gl_ms_512"] > 0 and 0 < r["flip"] < 1 for r in rows)
+    assert all(0 < r["flip"] < 1 for r in rows)
+    # frame times for every candidate; the converged run is the error floor, not timed
+    assert all(r["gl_ms_512"] > 0 for r in rows if r["job.kind"] != "converged")
+    assert all(r["gl_ms_512"] is None for r in rows if r["job.kind"] == "converged")
     b = by["water_baseline"][0]
-    # its own constants were fitted (moved from the start), the raycast's bump scale was not
-    assert b["fitted.refraction_strength"] != b["job.start.refraction_strength"]
+    # its own constants were fitted (moved from the start; at 32x32 the identifiability check
+    # freezes the refraction strength, so the index is the one that moves), the raycast's bump
+    # scale was not
+    assert b["fitted.refraction_index"] != b["job.start.refraction_index"]
     assert b["fitted.bumptex_mult"] == b["job.start.bumptex_mult"]
