@@ -290,9 +290,11 @@ def _print(name: str, runs: dict, cross: dict, baseline: str | None) -> None:
                                                     for p in paths) + " |")
     if baseline is None:
         for p in paths:
-            print(f"\n| constant | {p}: fitted (rel. SE) [status] |\n|---|---|")
+            print(f"\n| constant | {p}: fitted (rel. SE) [status] | mean +- SD over seeds |\n|---|---|---|")
             for n, pa in first[p]["params"].items():
-                print(f"| {n} | {_v(pa['fitted'])} ({_v(pa['rel_se'])}) [{pa['status']}] |")
+                mean, sd, k = _seed_stats(runs[p], n)
+                spread = f"{_v(mean)} +- {_v(sd, 2)} ({k})" if k > 1 else "-"
+                print(f"| {n} | {_v(pa['fitted'])} ({_v(pa['rel_se'])}) [{pa['status']}] | {spread} |")
         sys.stdout.flush()
         return
     others = [p for p in paths if p != baseline]
