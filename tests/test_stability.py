@@ -119,6 +119,32 @@ def test_log_residual_jacobian_matches_central_differences():
         transformed(model.base, "flip")
 
 
+def test_log_loss_calibration_recovers_a_synthetic_target():
+    """``calibrate_experiment`` on the log-residual model (``fit.loss = "log"``) runs end to end
+    (it reads the model's variant and reference standard error through the wrapper) and
+    recovers the constants a synthetic target was rendered with."""
+    from synthetic import synthetic_inputs
+    from shaders_port import Constants, water_refraction
+    from study import load_experiment
+    from study.fit.calibrate import calibrate_experiment
+    from study.fit.losses import transformed
+    from study.fit.model import ShaderModel
+
+    inputs = synthetic_inputs(width=32, height=24)
+    truth = Constants(attenuation_distance=5.0, water_color=(0.05, 0.2, 0.3, 1.0))
+    target = water_refraction.render(inputs, truth).numpy()["color"]
+    stderr = np.full_like(target, 1e-3)
+    model = transformed(ShaderModel("water_refraction", inputs, target, reference_stderr=stderr), "log")
+    assert model.variant is model.base.variant and model.reference_stderr.shape == target.shape
+    exp = load_experiment(REPO / "experiments" / "default.toml",
+                          ['fit.parameters=["attenuation_distance", "water_color"]'])
+    cal = calibrate_experiment(model, exp)
+    p = cal.parameters
+    assert p["attenuation_distance"]["fitted"] == pytest.approx(5.0, rel=1e-2)
+    assert p["water_color[1]"]["fitted"] == pytest.approx(0.2, rel=1e-2)
+    assert p["water_color[2]"]["fitted"] == pytest.approx(0.3, rel=1e-2)
+
+
 TINY = ["resolution=[24,24]", "fit.resolution=[24,24]", "reference.spp=8", "reference.water_mesh=48",
         "reference.texture_size=32", "reference.texture_spp=4", "waves.normal_map_size=32"]
 

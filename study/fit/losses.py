@@ -11,7 +11,8 @@ its residual is ``f(port) - f(reference)`` per water pixel and channel:
   Jacobian by the chain rule, ``J_f = f'(port) J``.
 
 The wrapper has the interface the fit uses (``residual``, ``residual_and_jacobian``, ``mask``,
-``shader``); ``loss_ad`` (Adam's reverse mode) exists only for ``linear``.
+``shader``, ``variant``, ``reference_stderr`` carried through ``f`` to first order); ``loss_ad``
+(Adam's reverse mode) exists only for ``linear``.
 """
 from __future__ import annotations
 
@@ -26,8 +27,12 @@ class LogResidualModel:
 
     def __init__(self, model, eps: float = LOG_EPS):
         self.base, self.eps = model, float(eps)
-        self.shader, self.mask = model.shader, model.mask
+        self.shader, self.mask, self.variant = model.shader, model.mask, model.variant
         self._ref = model.reference[model.mask].astype(np.float64).ravel()
+        # the reference's standard error carried through f to first order, sigma / (max(ref, 0) + eps)
+        se = getattr(model, "reference_stderr", None)
+        self.reference_stderr = (None if se is None else
+                                 (se / (np.maximum(model.reference, 0.0) + self.eps)).astype(np.float32))
 
     def _f(self, x):
         return np.log(np.maximum(x, 0.0) + self.eps)
