@@ -6,14 +6,14 @@ Prints, per sampler (independent, stratified, multijitter):
   a path tracer assumes independent dimensions;
 * the mean of the rendered water (linear RGB, over the water pixels) over ``--seeds`` references
   (each the study's ``N_SEEDS`` passes at ``--spp``), with the seed-to-seed SD of that mean and
-  the measured per-pixel noise; with ``--grey`` the same with the water's extinction made grey
-  (every channel at the mean ``sigma_t``).
+  the measured per-pixel noise; with ``--grey SIGMA_T`` the same with the water's extinction made
+  grey (every channel at ``SIGMA_T``).
 
 A biased sampler shows as a water mean that differs from the independent sampler's by many of
 their standard errors (the independent sampler is unbiased by construction).
 
     .venv/bin/python benchmarks/bench_sampler.py [EXPERIMENT.toml] [--size 128] [--spp 256]
-        [--seeds 3] [--grey]
+        [--seeds 3] [--grey SIGMA_T]
 """
 from __future__ import annotations
 
@@ -42,7 +42,7 @@ def main() -> None:
     ap.add_argument("--size", type=int, default=128)
     ap.add_argument("--spp", type=int, default=256)
     ap.add_argument("--seeds", type=int, default=3)
-    ap.add_argument("--grey", action="store_true")
+    ap.add_argument("--grey", type=float, metavar="SIGMA_T", help="every channel's water extinction")
     args = ap.parse_args()
 
     from study._backend import init_backend
@@ -54,11 +54,11 @@ def main() -> None:
     base = load_experiment(args.experiment)
     sets = [f"resolution=[{args.size}, {args.size}]", f"fit.resolution=[{args.size}, {args.size}]",
             f"reference.spp={args.spp}"]
-    if args.grey:
-        g = float(np.mean(base["water.sigma_t"]))
+    if args.grey is not None:
+        g = args.grey
         sets.append(f"water.sigma_t=[{g}, {g}, {g}]")
     print(f"# bench_sampler: {base['name']}, {args.size}x{args.size}, {args.spp} spp, seeds 0-{args.seeds - 1}"
-          f"{', grey water' if args.grey else ''}\n")
+          f"{f', grey water (sigma_t {args.grey})' if args.grey is not None else ''}\n")
     print("| sampler | dimension correlation (d, d+1) | water mean R / G / B | seed SD of the mean | RMS noise |")
     print("|---|---|---|---|---|")
     for sampler in SAMPLERS:
