@@ -149,10 +149,11 @@ def test_noise_of_known_gaussian():
 
 
 def test_auto_spp_reaches_target(mi):
-    from study.scene.reference import choose_spp
+    from study.scene.reference import N_SEEDS, PILOT_SPP, choose_spp
     exp = small_experiment(**{"reference.spp": '"auto"', "reference.target_noise": "0.02",
                               "reference.max_spp": "4096"})
     spp, info = choose_spp(exp)
+    assert info["pilot_spp"] == N_SEEDS * PILOT_SPP          # K passes of PILOT_SPP (8: a 4 x 2 grid)
     assert spp >= info["predicted_spp"] and spp < 2 * info["predicted_spp"] + 8
     loose = small_experiment(**{"reference.spp": '"auto"', "reference.target_noise": "0.2"})
     assert choose_spp(loose)[0] < spp

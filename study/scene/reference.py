@@ -156,12 +156,13 @@ def choose_spp(exp: Experiment, progress=None) -> tuple[int, dict]:
     """Pick spp for ``reference.target_noise`` from a measured pilot; return (spp, info)."""
     w, h = exp["resolution"]
     t0 = time.perf_counter()
-    from .mitsuba_scene import build_scene
+    from .mitsuba_scene import build_scene, sampler_spp
     scene = build_scene(exp)
-    pilot = render_passes(exp, pass_spp(exp, PILOT_SPP), N_SEEDS, seed0=10_000 + exp["reference.seed"], scene=scene,
+    per_pass = sampler_spp(exp["reference.sampler"], PILOT_SPP)      # K passes of PILOT_SPP
+    pilot = render_passes(exp, per_pass, N_SEEDS, seed0=10_000 + exp["reference.seed"], scene=scene,
                           progress=progress)
     _, pilot_noise = noise_of(pilot, water_mask(exp, w, h, scene=scene))
-    total_pilot = pass_spp(exp, PILOT_SPP) * N_SEEDS
+    total_pilot = per_pass * N_SEEDS
     per_sample_var = pilot_noise ** 2 * total_pilot          # noise^2 = var / spp_total
     target = exp["reference.target_noise"]
     need = per_sample_var / target ** 2
