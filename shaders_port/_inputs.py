@@ -21,7 +21,8 @@ import numpy as np
 
 IOR_WATER = 1.333
 # ShaderInputs fields that only some shaders read (None when not built)
-OPTIONAL_INPUTS = ("scene_color", "scene_depth", "reflection_color", "reflection_view_proj")
+OPTIONAL_INPUTS = ("scene_color", "scene_depth", "reflection_color", "reflection_view_proj",
+                   "refraction_halves")
 
 
 def _clip(v, limit: int = 80) -> str:
@@ -76,6 +77,12 @@ class ShaderInputs:
             window y; GLSL ``reflection_sampler``; bilinear, clamp to edge.
         reflection_view_proj: (4, 4) world -> clip space of the mirrored camera
             (``o2v_projection_reflection`` of seed 004; :func:`mirrored_view_proj`).
+
+    Optional, read by no shader (the fit's, ``None`` unless built):
+        refraction_halves: (2, H0, W0, 3) linear RGB, two independent Monte Carlo estimates of
+            ``refraction_texture`` (each from half of its samples, never denoised): the fit's
+            decorrelated loss multiplies residuals computed with one by residuals computed
+            with the other, so the textures' noise cancels in expectation.
     """
 
     refraction_texture: np.ndarray
@@ -100,6 +107,7 @@ class ShaderInputs:
     scene_depth: np.ndarray | None = None
     reflection_color: np.ndarray | None = None
     reflection_view_proj: np.ndarray | None = None
+    refraction_halves: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         shapes = {
@@ -109,7 +117,7 @@ class ShaderInputs:
             "waves": (2, 2), "view_proj": (2, None), "viewpos": (1, None),
             "lightpos": (1, None), "lightcolor": (1, None),
             "scene_color": (3, 3), "scene_depth": (2, None), "reflection_color": (3, 3),
-            "reflection_view_proj": (2, None),
+            "reflection_view_proj": (2, None), "refraction_halves": (4, 3),
         }
         for name, (ndim, last) in shapes.items():
             if name in OPTIONAL_INPUTS and getattr(self, name) is None:
@@ -128,6 +136,10 @@ class ShaderInputs:
                 raise ValueError(f"ShaderInputs.{name}: expected (4, 4)")
         if self.cubemap.shape[0] != 6 or self.cubemap.shape[1] != self.cubemap.shape[2]:
             raise ValueError(f"ShaderInputs.cubemap: expected (6, F, F, 3), got {self.cubemap.shape}")
+        if self.refraction_halves is not None and (self.refraction_halves.shape
+                                                   != (2,) + self.refraction_texture.shape):
+            raise ValueError(f"ShaderInputs.refraction_halves: expected (2,) + the refraction texture's "
+                             f"shape {self.refraction_texture.shape}, got {self.refraction_halves.shape}")
         if self.waves.shape != (4, 2):
             raise ValueError(f"ShaderInputs.waves: expected (4, 2), got {self.waves.shape}")
         self.water_rect = tuple(float(v) for v in self.water_rect)

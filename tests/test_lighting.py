@@ -34,8 +34,12 @@ def test_lighting_texture_matches_colour_render_within_noise(mi):
     extent = texture_extent(exp)
     size = 32
     world_y = top_down_world_y(exp, extent, size)
-    got, info = lighting.lighting_colour(exp, extent, size, seed=3, world_y=world_y)
+    got, info, halves = lighting.lighting_colour(exp, extent, size, seed=3, world_y=world_y)
     assert info["method"] == "lighting" and info["noise"] > 0
+    # undenoised, the texture is the mean of its two halves, which differ by the noise alone
+    assert halves.shape == (2,) + got.shape
+    np.testing.assert_allclose(halves.mean(0), got, rtol=1e-5, atol=1e-6)
+    assert not np.allclose(halves[0], halves[1])
     passes = np.stack([top_down_colour(exp, extent, size, 64, seed=11 + s, world_y=world_y) for s in range(4)])
     want = passes.mean(0)
     se_want = np.sqrt(passes.var(0, ddof=1) / 4)

@@ -176,9 +176,12 @@ def steps_to_within(step_losses: list, frac: float = 1e-3) -> int | None:
 
 
 def calibrate_model(model: ShaderModel, start: Constants, requested: list[str], solver: str,
-                    max_steps: int, frozen_by_scene: dict | None = None) -> Calibration:
+                    max_steps: int, frozen_by_scene: dict | None = None, halves: tuple | None = None) -> Calibration:
     """Steps 2-5 of the module docstring on a prepared model. ``frozen_by_scene``: name ->
     reason for constants frozen before looking at the Jacobian (:func:`scene_frozen`).
+    ``halves``: two models on the refraction texture's independent halves
+    (``study.fit.decorrelated.half_models``); when given, the fitted constants are refined on
+    the decorrelated loss (``study.fit.decorrelated.refine``) before the standard errors.
     ``requested`` names the seed's constants; a variant fits its own in their place
     (``Variant.fit_names``, e.g. the Beer-Lambert absorptions for ``attenuation_distance``)."""
     names = expand_parameters(model.variant.fit_names(requested))
@@ -244,6 +247,17 @@ def calibrate_model(model: ShaderModel, start: Constants, requested: list[str], 
         x0[worst] = get_value(start, worst)
     if not free:
         fitted = start
+    refined = None
+    if halves is not None and id1 is not None and live:
+        from .decorrelated import refine
+        refined = refine(halves[0], halves[1], problem.params, fitted, [inner[i] for i in live])
+        _log(f"calibrate: decorrelated loss {refined.loss_start:.6g} -> {refined.loss:.6g} in "
+             f"{refined.steps} Newton steps ({refined.message})")
+        if refined.accepted:
+            fitted = refined.fitted
+            r1, J1 = model.residual_and_jacobian(fitted, inner)
+            vals = np.array([get_value(fitted, inner[i]) for i in live])
+            se = dict(zip([inner[i] for i in live], std_errors(J1[:, live], r1, vals)))
     # the reference's noise in the last round's live columns (it decides nothing in the rounds)
     sigma = getattr(model, "reference_stderr", None)
     noise_se = {}
@@ -288,20 +302,23 @@ def calibrate_model(model: ShaderModel, start: Constants, requested: list[str], 
                                                       for f in fits],
                         "ftol": FTOL, "ftol_se": FTOL_SE, "ftol_window": FTOL_WINDOW, "rel_se_max": REL_SE_MAX,
                         "converged": all(f.converged for f in fits)})
+        if refined is not None:
+            summary["input_noise"] = refined.summary()
     else:
         summary = {"solver": solver, "iterations": 0, "converged": True, "message": "nothing to fit"}
     return Calibration(start, fitted, params, ident, summary, losses, sweep)
 
 
 def calibrate_experiment(model: ShaderModel, exp, start: Constants | None = None,
-                         requested: list[str] | None = None) -> Calibration:
+                         requested: list[str] | None = None, halves: tuple | None = None) -> Calibration:
     """:func:`calibrate_model` with the experiment's fit settings (``fit.parameters``,
     ``fit.solver``, ``fit.max_steps``, the scene's own frozen constants), from ``start`` (default:
-    the experiment's start constants) over ``requested`` (default: ``fit.parameters``)."""
+    the experiment's start constants) over ``requested`` (default: ``fit.parameters``);
+    ``halves`` as there (``fit.input_noise``: ``study.fit.decorrelated.half_models``)."""
     from .model import constants_from_experiment
     return calibrate_model(model, constants_from_experiment(exp) if start is None else start,
                            exp["fit.parameters"] if requested is None else requested, exp["fit.solver"],
-                           exp["fit.max_steps"], frozen_by_scene=scene_frozen(exp))
+                           exp["fit.max_steps"], frozen_by_scene=scene_frozen(exp), halves=halves)
 
 
 def step_sweep(problem: FitProblem, at: Constants, names: list[str]) -> dict:

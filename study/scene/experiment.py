@@ -197,6 +197,12 @@ SCHEMA: dict[str, Field] = {
     "fit.max_steps": Field("int", 100, "Solver iteration cap.", "", 1, 100000),
     "fit.resolution": Field("vec2", [128, 128], "Image size the fit runs at (the reference is "
                             "rendered at `resolution`, then box-downsampled when smaller).", "pixels", 8, 4096),
+    "fit.input_noise": Field("str", "ignore", "What the fit does about Monte Carlo noise in the "
+                             "refraction texture, which biases least squares (errors in the inputs): "
+                             "`ignore` (least squares on the texture as given) or `decorrelate` (then "
+                             "Newton steps on the decorrelated loss over the texture's two independent "
+                             "raw halves, which cancels the noise in expectation; needs "
+                             "`reference.texture_method = \"lighting\"`).", choices=("ignore", "decorrelate")),
     "tradeoff.variants": Field("list_str", ["water_refraction_noreflection", "water_refraction",
                                             "water_reflection"],
                                "Shader variants `study tradeoff` compares.", choices=SHADERS),
@@ -459,6 +465,10 @@ def validate(raw: dict, overrides: list[str] | None = None, path: Path | None = 
     if fmt[0] > res[0] or fmt[1] > res[1] or res[0] % fmt[0] or res[1] % fmt[1]:
         raise ExperimentError(f"fit.resolution {fmt} must divide resolution {res} "
                               "(the reference is box-downsampled to it)")
+    if values["fit.input_noise"] == "decorrelate" and values["reference.texture_method"] != "lighting":
+        raise ExperimentError("fit.input_noise = \"decorrelate\" needs the refraction texture's two "
+                              "independent halves, which only reference.texture_method = \"lighting\" "
+                              "renders; use that method or fit.input_noise = \"ignore\"")
     shader = VARIANTS[values["fit.shader"]]
     reads = shader.reads()
     # a constant the variant replaces (e.g. the Beer-Lambert absorptions for the attenuation

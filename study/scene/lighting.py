@@ -111,11 +111,13 @@ def denoise_radiance(radiance: np.ndarray, albedo: np.ndarray) -> np.ndarray:
 
 
 def render_lighting(exp: Experiment, size: int, spp: int, seed: int, *, water: bool,
-                    y_cam: float, progress=None) -> tuple[np.ndarray, np.ndarray]:
+                    y_cam: float, progress=None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Lighting ``radiance / albedo`` (size, size, 3) over the pool (GL order), corrected for the
     absorption of the camera's own vertical ray as ``top_down_colour`` does, and its per-texel
     standard error, from ``N_SEEDS`` renders of ``ceil(spp / N_SEEDS)`` spp each (denoised first
-    when ``reference.lighting_denoise = "oidn"``; the standard error is the denoiser's input's)."""
+    when ``reference.lighting_denoise = "oidn"``; the standard error is the denoiser's input's);
+    and the two *halves* (2, size, size, 3): the raw (never denoised) means of passes 0-1 and of
+    passes 2-3, independent estimates of the same lighting (``fit.input_noise = "decorrelate"``)."""
     import mitsuba as mi
 
     from .shader_inputs import _ortho_sensor, _to_gl_order, top_down_world_y
@@ -142,6 +144,7 @@ def render_lighting(exp: Experiment, size: int, spp: int, seed: int, *, water: b
             progress(k + 1, N_SEEDS)
     passes = np.stack(passes)
     lighting = passes.mean(0)
+    halves = np.stack([passes[: N_SEEDS // 2].mean(0), passes[N_SEEDS // 2:].mean(0)])
     stderr = np.sqrt(passes.var(0, ddof=1) / N_SEEDS)
     if exp["reference.lighting_denoise"] == "oidn":
         albedo = np.mean(albedos, axis=0)
@@ -158,10 +161,10 @@ def render_lighting(exp: Experiment, size: int, spp: int, seed: int, *, water: b
                                   "lighting texture cannot recover it: use reference.texture_method = "
                                   "\"colour\" (the dry floor stands in there) or less absorption")
         gain = np.exp(optical)
-        lighting, stderr = lighting * gain, stderr * gain
+        lighting, stderr, halves = lighting * gain, stderr * gain, halves * gain
     if not np.all(np.isfinite(lighting)):
         raise RuntimeError(f"the lighting render of {exp['name']!r} has non-finite texels")
-    return lighting.astype(np.float32), stderr.astype(np.float32)
+    return lighting.astype(np.float32), stderr.astype(np.float32), halves.astype(np.float32)
 
 
 def dry_spp(spp: int) -> int:
@@ -192,17 +195,18 @@ def render_dry(exp: Experiment, extent, size: int, spp: int, seed: int) -> tuple
 
 
 def lighting_colour(exp: Experiment, extent, size: int, seed: int = 0, world_y=None,
-                    progress=None) -> tuple[np.ndarray, dict]:
+                    progress=None) -> tuple[np.ndarray, dict, np.ndarray]:
     """(size, size, 3) float32 linear RGB top-down colour over ``extent`` (GL order) by
-    lighting x albedo inside the pool and the dry colour render outside; and a dict with the
+    lighting x albedo inside the pool and the dry colour render outside; a dict with the
     measured noise (``noise``: RMS standard error of the colour over the pool texels) and the
-    settings used."""
+    settings used; and the colour's two independent halves (2, size, size, 3) float32, each from
+    half of the raw lighting passes (the dry render outside the pool is shared by both)."""
     from .shader_inputs import top_down_world_y, underwater_camera_height
 
     wet = exp["reference.refraction_lighting"] == "underwater"
     y_cam = underwater_camera_height(exp) if wet else 100.0
     n_light = min(exp["reference.lighting_size"], size)     # never finer than the texture
-    lighting, lighting_se = render_lighting(exp, n_light, exp["reference.texture_spp"], seed,
+    lighting, lighting_se, halves = render_lighting(exp, n_light, exp["reference.texture_spp"], seed,
                                             water=wet, y_cam=y_cam, progress=progress)
     dry, albedo = render_dry(exp, extent, size, exp["reference.wall_spp"], seed)
     if world_y is None:
@@ -212,9 +216,11 @@ def lighting_colour(exp: Experiment, extent, size: int, seed: int = 0, world_y=N
     inside = (np.abs(X) < hx) & (np.abs(Z) < hz) & (world_y < y_cam)
     pool = pool_extent(exp)
     colour = np.where(inside[..., None], interpolate(lighting, pool, X, Z) * albedo, dry)
+    colour_halves = np.stack([np.where(inside[..., None], interpolate(h, pool, X, Z) * albedo, dry)
+                              for h in halves])
     se = interpolate(lighting_se, pool, X, Z) * albedo
     noise = float(np.sqrt(np.mean(se[inside] ** 2))) if inside.any() else 0.0
     info = {"method": "lighting", "lighting_size": n_light, "spp": exp["reference.texture_spp"],
             "wall_spp": dry_spp(exp["reference.wall_spp"]), "noise": noise, "n_seeds": N_SEEDS,
             "denoise": exp["reference.lighting_denoise"]}
-    return colour.astype(np.float32), info
+    return colour.astype(np.float32), info, colour_halves.astype(np.float32)

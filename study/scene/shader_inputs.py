@@ -20,9 +20,13 @@ As the seed's application prepares them, but from the scene:
   application side compensates, as the seed's application evidently did: texel of
   direction ``d`` stores the sky in direction ``d * (1, -1, 1)``;
 * the Fresnel LUT for the experiment's IOR (see :func:`shader_fresnel_lut`); the light at the sun's direction, 1000 world
-  units away, coloured as the normalised sun radiance; the camera of the experiment.
+  units away, coloured as the normalised sun radiance; the camera of the experiment;
+* for the fit alone, with ``reference.texture_method = "lighting"``: ``refraction_halves``, the
+  refraction texture's two independent halves (:func:`half_inputs`, ``fit.input_noise``).
 """
 from __future__ import annotations
+
+import dataclasses
 
 import numpy as np
 
@@ -31,7 +35,7 @@ from shaders_port import ShaderInputs, fresnel_lut, ortho_tex_matrix
 from .experiment import Experiment
 from .mitsuba_scene import build_geometry, camera_view_proj, waves_of
 
-INPUTS_VERSION = 5        # bump whenever the construction of the inputs below changes
+INPUTS_VERSION = 6        # bump whenever the construction of the inputs below changes
 NO_GEOMETRY = -1e3
 CUBEMAP_SIZE = 64
 FRESNEL_SIZE = 256
@@ -238,12 +242,13 @@ def build_shader_inputs(exp: Experiment, width: int | None = None, height: int |
     if exp["reference.texture_method"] == "lighting":
         from .lighting import lighting_colour
         with st.stage("inputs.lighting_s", f"shader inputs: lighting x albedo texture ({size}x{size})"):
-            colour, tex_info = lighting_colour(exp, extent, size, exp["reference.seed"], world_y=world_y,
+            colour, tex_info, halves = lighting_colour(exp, extent, size, exp["reference.seed"], world_y=world_y,
                                                progress=st.counter("  passes"))
     else:
         colour = top_down_colour(exp, extent, size, exp["reference.texture_spp"], exp["reference.seed"],
                                  world_y=world_y, stages=st)
         tex_info = {"method": "colour", "spp": exp["reference.texture_spp"], "noise": None}
+        halves = None
     if info is not None:
         info["texture"] = tex_info
     tm = ortho_tex_matrix(*extent)
@@ -273,7 +278,27 @@ def build_shader_inputs(exp: Experiment, width: int | None = None, height: int |
         water_rect=(-hx, -hz, hx, hz), normal_tile=exp["waves.normal_tile"],
         waves=np.asarray(exp["waves.offsets"]), view_proj=camera_view_proj(exp, width, height),
         viewpos=np.asarray(c["position"]), lightpos=lightpos, lightcolor=lightcolor,
-        width=width, height=height)
+        width=width, height=height, refraction_halves=halves)
+
+
+def half_inputs(exp: Experiment, inputs: ShaderInputs) -> tuple[ShaderInputs, ShaderInputs]:
+    """The inputs with their refraction texture replaced by each of its two independent halves
+    (``ShaderInputs.refraction_halves``), the reflection texture too where it is cut from the
+    refraction texture (no ``mesh.file``). Raises ExperimentError when the inputs have no halves
+    (``reference.texture_method = "colour"``)."""
+    if inputs.refraction_halves is None:
+        from .experiment import ExperimentError
+        raise ExperimentError("fit.input_noise = \"decorrelate\" needs two independent halves of the "
+                              "refraction texture, which only reference.texture_method = \"lighting\" "
+                              "renders; use that method or fit.input_noise = \"ignore\"")
+    out = []
+    for half in inputs.refraction_halves:
+        refl = inputs.refl_texture
+        if not exp["mesh.file"]:
+            refl = np.where((inputs.world_y > 0.0)[..., None], half, 0.0).astype(np.float32)
+        out.append(dataclasses.replace(inputs, refraction_texture=half, refl_texture=refl,
+                                       refraction_halves=None))
+    return out[0], out[1]
 
 
 def load_or_build_shader_inputs(exp: Experiment, variant: str, cache=None, log=print,
