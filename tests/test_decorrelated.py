@@ -96,6 +96,30 @@ def test_decorrelated_refinement_recovers_what_noise_biases():
     assert max(abs(v) for v in dec.values()) < 0.03, dec
 
 
+def test_decorrelated_refinement_may_end_on_a_bound():
+    """Water that absorbs no red (true red 0): least squares on the noisy mean texture lifts the
+    red above 0.04; the refinement takes it to its bound 0, where its curvature leaves the
+    check, and the calibration reports it on its bound."""
+    truth = TRUTH.replace(water_color=(0.0, 0.3, 0.2, 1.0))
+    clean, (a, b) = _halves(0)
+    target = water_refraction.render(clean, truth).numpy()["color"]
+    mean = dataclasses.replace(a, refraction_texture=0.5 * (a.refraction_texture + b.refraction_texture),
+                               refl_texture=0.5 * (a.refl_texture + b.refl_texture))
+    model = ShaderModel("water_refraction", mean, target)
+    halves = tuple(ShaderModel("water_refraction", i, target) for i in (a, b))
+    requested = ["attenuation_distance", "water_color", "specular_strength"]
+    start = Constants(bumptex_mult=TRUTH.bumptex_mult)
+    plain = calibrate_model(model, start, requested, "levenberg_marquardt", 100)
+    dec = calibrate_model(model, start, requested, "levenberg_marquardt", 100, halves=halves)
+    assert plain.parameters["water_color[0]"]["status"] == "fitted"
+    assert plain.parameters["water_color[0]"]["fitted"] > 0.04
+    info = dec.fit_summary["input_noise"]
+    assert info["accepted"] and info["at_bound"] == {"water_color[0]": "lower"}, info
+    p = dec.parameters["water_color[0]"]
+    assert p["status"] == "bound" and p["fitted"] == 0.0 and "decorrelated" in p["reason"]
+    assert dec.parameters["attenuation_distance"]["rel_std_error"] is not None
+
+
 def test_decorrelate_needs_the_lighting_texture():
     from conftest import small_experiment
     from study.scene.experiment import ExperimentError

@@ -255,9 +255,13 @@ def calibrate_model(model: ShaderModel, start: Constants, requested: list[str], 
              f"{refined.steps} Newton steps ({refined.message})")
         if refined.accepted:
             fitted = refined.fitted
+            for n, side in refined.at_bound.items():
+                bound[n] = (f"on its {side} bound {get_value(fitted, n):.4g} after the decorrelated "
+                            "refinement (fit.input_noise); exported at the bound")
+            live = [i for i in live if inner[i] not in bound]
             r1, J1 = model.residual_and_jacobian(fitted, inner)
             vals = np.array([get_value(fitted, inner[i]) for i in live])
-            se = dict(zip([inner[i] for i in live], std_errors(J1[:, live], r1, vals)))
+            se = dict(zip([inner[i] for i in live], std_errors(J1[:, live], r1, vals))) if live else {}
     # the reference's noise in the last round's live columns (it decides nothing in the rounds)
     sigma = getattr(model, "reference_stderr", None)
     noise_se = {}

@@ -22,7 +22,7 @@ as the least-squares problem ``min ||g(u)||^2`` with optimistix's Levenberg-Marq
 Newton steps on the gradient: plain Newton overshoots from a start far from the root), the
 Jacobian of ``g`` taken as in Gauss-Newton, ``H = 0.5 (J_A^T J_B + J_B^T J_A)``, starting from the
 least-squares solution. The result is accepted only when it converged, ``H`` is positive definite
-there (a minimum of ``L``, not a saddle) and ``L`` did not rise; otherwise the start is kept and
+there over the parameters not on a bound (a minimum of ``L``, not a saddle) and ``L`` did not rise; otherwise the start is kept and
 the reason returned. Each step costs two forward-mode Jacobian passes (one per half).
 """
 from __future__ import annotations
@@ -49,7 +49,8 @@ class Refined:
     """Outcome of :func:`refine`: the constants (``fitted``; the start when not ``accepted``),
     the decorrelated loss at the start and at the end, damped Newton steps, evaluations of both
     halves (each a residual, or a residual and Jacobian), ``message`` (why a result was refused)
-    and ``shift`` (name -> [start, end])."""
+    ``shift`` (name -> [start, end]) and ``at_bound`` (name -> 'lower' / 'upper': a ``clip``
+    parameter the refinement left on its bound)."""
 
     fitted: Constants
     accepted: bool
@@ -59,11 +60,12 @@ class Refined:
     evaluations: int
     message: str
     shift: dict = field(default_factory=dict)
+    at_bound: dict = field(default_factory=dict)
 
     def summary(self) -> dict:
         return {"method": "decorrelated", "accepted": self.accepted, "loss_start": self.loss_start,
                 "loss": self.loss, "steps": self.steps, "evaluations": self.evaluations,
-                "message": self.message, "shift": self.shift}
+                "message": self.message, "shift": self.shift, "at_bound": self.at_bound}
 
 
 def decorrelated_loss(r_a: np.ndarray, r_b: np.ndarray) -> float:
@@ -139,16 +141,20 @@ def refine(model_a, model_b, params: dict, start: Constants, names: list[str],
     else:
         why = f"no convergence in {max_steps} steps"
     fitted = at(u)
-    if ok:
-        eig = np.linalg.eigvalsh(h)
+    # a clip parameter may land on its bound (a colour channel at 0): its u-derivative is 0
+    # there, so it leaves H; the curvature is judged over the others
+    at_bound = {n: side for n, p, x in zip(names, ps, u) if (side := p.at_bound(float(x)))}
+    inner = [i for i, n in enumerate(names) if n not in at_bound]
+    if ok and inner:
+        eig = np.linalg.eigvalsh(h[np.ix_(inner, inner)])
         if not (np.all(np.isfinite(eig)) and eig.min() > 0):
             ok, why = False, (f"not a minimum of the decorrelated loss (smallest curvature {eig.min():.3g}); "
                               "kept the least-squares solution")
     if not ok:
-        fitted, loss = start, l0
+        fitted, loss, at_bound = start, l0, {}
         why = why or "no convergence"
     shift = {n: [get_value(start, n), get_value(fitted, n)] for n in names}
-    return Refined(fitted, ok, l0, loss, steps, passes["n"], why or "converged", shift)
+    return Refined(fitted, ok, l0, loss, steps, passes["n"], why or "converged", shift, at_bound)
 
 
 def half_models(exp, inputs, reference: np.ndarray, **kwargs) -> tuple | None:
