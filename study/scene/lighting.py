@@ -36,6 +36,11 @@ A denoiser trades variance for a bias of its own (it blurs what it takes for noi
 first); ``benchmarks/bench_denoise.py`` measures what it does to the fitted constants. The
 standard error returned is then that of the *input* to the denoiser.
 
+The four passes also give the texture's two *halves* (passes 0-1 and 2-3, raw even when the
+mean is denoised): independent estimates of the same lighting, whose product of residuals the
+fit's decorrelated loss uses (``fit.input_noise = "decorrelate"``, ``study.fit.decorrelated``)
+to cancel the texture's noise instead of being biased by it.
+
 Texture arrays are in GL order (row = t, z increasing; column = s, x increasing), float32,
 linear RGB.
 """
@@ -149,6 +154,10 @@ def render_lighting(exp: Experiment, size: int, spp: int, seed: int, *, water: b
     if exp["reference.lighting_denoise"] == "oidn":
         albedo = np.mean(albedos, axis=0)
         lighting = denoise_radiance(np.mean(radiances, axis=0), albedo) / albedo
+        # each half denoised on its own: their errors stay independent
+        h = N_SEEDS // 2
+        halves = np.stack([denoise_radiance(np.mean(radiances[s], axis=0), np.mean(albedos[s], axis=0))
+                           / np.mean(albedos[s], axis=0) for s in (slice(0, h), slice(h, None))])
     if water:
         world_y = top_down_world_y(exp, extent, size)
         sigma = np.asarray(exp["water.sigma_t"], np.float64)
