@@ -1,31 +1,33 @@
-"""Noise in the shader's textures biases the fit; a decorrelated loss removes that bias.
+"""Noise in the shader's textures biases the fit; the decorrelated loss removes that bias.
 
 The fitted constants meet the top-down texture's Monte Carlo noise inside the shader (errors in
 the inputs), so least squares on a noisy texture is biased by about the noise's variance. The
-shader is linear in its textures, so with two textures A and B rendered with independent seeds
-the decorrelated loss ``0.5 * sum(r_A * r_B)`` (``r_X`` the port's residual with texture X) has
-the expectation of the loss with the noise-free texture.
+shader is affine in its textures, so with the texture's two independent halves A and B the
+decorrelated loss ``0.5 * sum(r_A * r_B)`` has the expectation of the loss with the noise-free
+texture (``study.fit.decorrelated``, ``fit.input_noise = "decorrelate"``).
 
-For one experiment and reference (by default the slow path's: 1024-spp independent samples,
-cached under ``STUDY_CACHE``), prints the constants of
+For one experiment and one reference (by default the slow path's: 1024-spp independent samples,
+cached under ``STUDY_CACHE``), and the lighting texture made with the experiment's settings and
+``--set`` overrides at each of ``--seeds`` seeds, fits the same inputs twice, side by side:
 
-* the least-squares fit (``study.fit.calibrate``) on the mean texture ``(A + B) / 2``;
-* the same constants refined on the decorrelated loss (L-BFGS-B from that fit, gradient
-  ``0.5 * (J_A^T r_B + J_B^T r_A)`` from the port's forward-mode Jacobians);
+* ``least squares``: ``fit.input_noise = "ignore"`` on the texture as built;
+* ``decorrelated``: the same, then refined on the decorrelated loss over the texture's halves;
 
-for raw (not denoised) lighting textures of ``--spp`` samples each at ``--texels`` lighting
-texels; ``--yardstick`` adds the least-squares fit on a colour texture at 2048 spp (10-15 min).
+and prints each constant's mean and SD over the seeds, with the mean's distance to
+``--yardstick`` values (a ``constants.json`` of a clean fit, e.g. ``study calibrate`` with a
+2048-spp colour texture) in that file's Gauss-Newton standard errors.
 
-    .venv/bin/python benchmarks/bench_decorrelated.py [EXPERIMENT.toml] [--spp 16] [--texels 128]
-        [--seeds 100 101] [--yardstick]
+    .venv/bin/python benchmarks/bench_decorrelated.py [EXPERIMENT.toml] [--seeds 3]
+        [--set reference.lighting_size=256 ...] [--yardstick constants.json]
 """
 from __future__ import annotations
 
 import argparse
 import contextlib
-import dataclasses
 import io
+import json
 import sys
+import time
 from pathlib import Path
 
 import numpy as np
@@ -39,17 +41,15 @@ REFERENCE = ['reference.sampler="independent"', 'reference.spp="auto"', "referen
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("experiment", nargs="?", default=str(REPO / "experiments" / "grazing.toml"))
-    ap.add_argument("--spp", type=int, default=16, help="samples per texel of each lighting texture")
-    ap.add_argument("--texels", type=int, default=128, help="reference.lighting_size")
-    ap.add_argument("--seeds", type=int, nargs=2, default=[100, 101])
-    ap.add_argument("--yardstick", action="store_true")
+    ap.add_argument("--seeds", type=int, default=3, help="lighting textures with reference.seed = 0 .. N-1")
+    ap.add_argument("--set", dest="overrides", action="append", default=[])
+    ap.add_argument("--yardstick", type=Path, help="constants.json of a clean fit of the same experiment")
     args = ap.parse_args()
-
-    from scipy.optimize import minimize
 
     from study._backend import drjit_backend, init_backend
     from study.fit.calibrate import calibrate_experiment
-    from study.fit.model import ShaderModel, bounds, get_value, with_values
+    from study.fit.decorrelated import half_models
+    from study.fit.model import ShaderModel, get_value
     from study.scene.experiment import load_experiment
     from study.scene.reference import load_or_render
     from study.scene.shader_inputs import load_or_build_shader_inputs
@@ -57,48 +57,52 @@ def main() -> None:
     variant = init_backend("llvm_ad_rgb")
     backend = drjit_backend(variant)
     quiet = lambda *_: None  # noqa: E731
-    exp = load_experiment(args.experiment, REFERENCE)
-    ref = load_or_render(exp, variant, log=quiet)
-
-    def inputs(sets):
-        return load_or_build_shader_inputs(load_experiment(args.experiment, REFERENCE + sets), variant, log=quiet)
-
-    raw = ['reference.lighting_denoise="none"', f"reference.texture_spp={args.spp}",
-           f"reference.lighting_size={args.texels}"]
-    a, b = (inputs(raw + [f"reference.seed={s}"]) for s in args.seeds)
-    mean = dataclasses.replace(a, refraction_texture=0.5 * (a.refraction_texture + b.refraction_texture),
-                               refl_texture=0.5 * (a.refl_texture + b.refl_texture))
-    model_a, model_b, model_mean = (ShaderModel.from_experiment(exp, i, ref.image, backend=backend)
-                                    for i in (a, b, mean))
-    with contextlib.redirect_stderr(io.StringIO()):
-        cal = calibrate_experiment(model_mean, exp)
-    names = [n for n, p in cal.parameters.items() if p["status"] == "fitted"]
-    x0 = np.array([get_value(cal.fitted, n) for n in names])
-    scale = np.abs(x0) + 1e-3
-
-    def loss_and_grad(z):
-        c = with_values(cal.fitted, dict(zip(names, map(float, z * scale))))
-        r_a, j_a = model_a.residual_and_jacobian(c, names)
-        r_b, j_b = model_b.residual_and_jacobian(c, names)
-        return 0.5 * float(r_a @ r_b), 0.5 * (j_a.T @ r_b + j_b.T @ r_a) * scale
-
-    opt = minimize(loss_and_grad, x0 / scale, jac=True, method="L-BFGS-B",
-                   bounds=[(lo / s, hi / s) for (lo, hi), s in zip(map(bounds, names), scale)],
-                   options={"maxiter": 200, "ftol": 1e-12, "gtol": 1e-9})
-    cols = {"least squares, mean texture": x0, "decorrelated": opt.x * scale}
+    sets = args.overrides + ['fit.input_noise="decorrelate"']
+    ref = load_or_render(load_experiment(args.experiment, REFERENCE + sets), variant, log=quiet)
+    rows: dict[str, dict[str, list]] = {"least squares": {}, "decorrelated": {}}
+    seconds = {"least squares": [], "decorrelated": []}
+    for seed in range(args.seeds):
+        exp = load_experiment(args.experiment, sets + [f"reference.seed={seed}"])
+        inputs = load_or_build_shader_inputs(exp, variant, log=quiet)
+        model = ShaderModel.from_experiment(exp, inputs, ref.image, backend=backend)
+        halves = half_models(exp, inputs, ref.image, backend=backend)
+        for key, h in (("least squares", None), ("decorrelated", halves)):
+            t0 = time.perf_counter()
+            with contextlib.redirect_stderr(io.StringIO()):
+                cal = calibrate_experiment(model, exp, halves=h)
+            seconds[key].append(time.perf_counter() - t0)
+            for n, p in cal.parameters.items():
+                if p["fitted"] is not None:
+                    rows[key].setdefault(n, []).append(get_value(cal.fitted, n))
+            if h is not None:
+                info = cal.fit_summary.get("input_noise", {})
+                print(f"seed {seed}: decorrelated {info.get('message')} in {info.get('steps')} steps", flush=True)
+    yard = {}
     if args.yardstick:
-        clean = inputs(['reference.texture_method="colour"', "reference.texture_spp=2048"])
-        with contextlib.redirect_stderr(io.StringIO()):
-            c = calibrate_experiment(ShaderModel.from_experiment(exp, clean, ref.image, backend=backend), exp)
-        cols["colour 2048 spp"] = np.array([get_value(c.fitted, n) for n in names])
-    print(f"# bench_decorrelated: {exp['name']}, raw lighting 2 x {args.spp} spp at {args.texels} texels, "
-          f"seeds {args.seeds}, reference {ref.spp} spp; L-BFGS-B: {opt.message} ({opt.nit} steps)\n")
-    print("| constant | " + " | ".join(cols) + " | Gauss-Newton SE (mean texture) |")
-    print("|---|" + "---|" * (len(cols) + 1))
-    for i, n in enumerate(names):
-        se = cal.parameters[n].get("rel_std_error")
-        se_txt = f"{se * abs(x0[i]):.3g}" if se else "-"
-        print(f"| {n} | " + " | ".join(f"{v[i]:.4g}" for v in cols.values()) + f" | {se_txt} |")
+        y = json.loads(args.yardstick.read_text())["parameters"]
+        yard = {n: (p["fitted"], (p.get("rel_std_error") or 0) * abs(p["fitted"] or 0)) for n, p in y.items()}
+    print(f"\n# bench_decorrelated: {Path(args.experiment).stem}, {args.seeds} lighting seed(s), overrides "
+          f"{args.overrides or 'none'}, reference {ref.spp} spp; fit s (median): least squares "
+          f"{np.median(seconds['least squares']):.1f}, decorrelated {np.median(seconds['decorrelated']):.1f}\n")
+    head = "| constant | least squares, mean +- SD | decorrelated, mean +- SD |"
+    if yard:
+        head += " yardstick (SE) | least squares - yardstick, SE | decorrelated - yardstick, SE |"
+    print(head)
+    print("|---" * (head.count("|") - 1) + "|")
+    for n in rows["least squares"]:
+        cells = []
+        for key in rows:
+            v = np.array(rows[key].get(n, [np.nan]))
+            cells.append(f"{v.mean():.4g} +- {v.std(ddof=1) if len(v) > 1 else 0:.2g}")
+        line = f"| {n} | " + " | ".join(cells) + " |"
+        if yard:
+            y, se = yard.get(n, (None, 0))
+            if y is None or not se:
+                line += " - | - | - |"
+            else:
+                d = [(np.mean(rows[k][n]) - y) / se for k in rows]
+                line += f" {y:.4g} ({se:.2g}) | {d[0]:+.1f} | {d[1]:+.1f} |"
+        print(line)
 
 
 if __name__ == "__main__":

@@ -80,6 +80,8 @@ def runs(tmp_path_factory):
             "preview": main(["preview", EXPERIMENT, "--out", str(root / "preview")] + _sets(TINY)),
             "calibrate": main(["calibrate", EXPERIMENT, "--out", str(root / "calibrate")]
                               + _sets(TINY + [f"fit.max_steps={MAX_STEPS}"])),
+            "decorrelated": main(["calibrate", EXPERIMENT, "--out", str(root / "decorrelated")]
+                                 + _sets(TINY + [f"fit.max_steps={MAX_STEPS}", 'fit.input_noise="decorrelate"'])),
         }
         rc["export"] = main(["export", str(root / "calibrate" / "constants.json"),
                              "--out", str(root / "export")])
@@ -158,6 +160,18 @@ def test_calibrate_writes_constants_json(runs):
     assert c["reference"]["spp"] == 16 and _finite(c["reference"]["noise"]) and c["reference"]["noise"] > 0
     gl = c["gl_check"]
     assert gl["mean_abs"] <= 1e-3 and gl["p999"] <= 1e-2 and gl["unexplained"] == 0
+
+
+def test_calibrate_with_decorrelated_texture_noise(runs):
+    """fit.input_noise = "decorrelate": the same reference and inputs (one cache), the refinement's
+    record in constants.json and the report."""
+    root, rc = runs
+    assert rc["decorrelated"] == 0
+    c = json.loads((root / "decorrelated" / "constants.json").read_text())
+    info = c["fit"]["input_noise"]
+    assert info["method"] == "decorrelated" and isinstance(info["accepted"], bool) and info["message"]
+    assert set(info["shift"]) <= set(c["parameters"])
+    assert "decorrelated" in (root / "decorrelated" / "report.md").read_text()
 
 
 def test_calibrate_writes_shaders_with_fitted_constants_and_report(runs):

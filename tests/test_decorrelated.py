@@ -10,6 +10,7 @@ lands on it. Last, the experiment-level errors: the option needs the lighting te
 from __future__ import annotations
 
 import dataclasses
+import json
 
 import numpy as np
 import pytest
@@ -89,7 +90,8 @@ def test_decorrelated_refinement_recovers_what_noise_biases():
         for key, cal in (("plain", plain), ("decorrelated", dec)):
             errs[key].append([get_value(cal.fitted, n) / get_value(TRUTH, n) - 1 for n in names])
         info = dec.fit_summary["input_noise"]
-        assert info["accepted"] and info["steps"] >= 1 and info["loss"] < info["loss_start"], info
+        assert info["accepted"] is True and info["steps"] >= 1 and info["loss"] < info["loss_start"], info
+        json.loads(json.dumps(info))            # written to constants.json as it is
         assert "input_noise" not in plain.fit_summary
     plain, dec = (dict(zip(names, np.mean(errs[k], axis=0))) for k in ("plain", "decorrelated"))
     assert plain["attenuation_distance"] < -0.07 and plain["water_color[0]"] > 0.3, plain

@@ -63,9 +63,11 @@ class Refined:
     at_bound: dict = field(default_factory=dict)
 
     def summary(self) -> dict:
-        return {"method": "decorrelated", "accepted": self.accepted, "loss_start": self.loss_start,
-                "loss": self.loss, "steps": self.steps, "evaluations": self.evaluations,
-                "message": self.message, "shift": self.shift, "at_bound": self.at_bound}
+        """Plain Python types (JSON-ready)."""
+        return {"method": "decorrelated", "accepted": bool(self.accepted), "loss_start": float(self.loss_start),
+                "loss": float(self.loss), "steps": int(self.steps), "evaluations": int(self.evaluations),
+                "message": self.message, "shift": {n: [float(a), float(b)] for n, (a, b) in self.shift.items()},
+                "at_bound": dict(self.at_bound)}
 
 
 def decorrelated_loss(r_a: np.ndarray, r_b: np.ndarray) -> float:
@@ -128,7 +130,7 @@ def refine(model_a, model_b, params: dict, start: Constants, names: list[str],
                 break
             lam *= 10.0
         else:
-            ok = abs(g @ np.linalg.lstsq(h, g, rcond=None)[0]) < 2 * tol      # Newton decrement
+            ok = bool(abs(g @ np.linalg.lstsq(h, g, rcond=None)[0]) < 2 * tol)      # Newton decrement
             why = ("converged (no step lowers the loss further)" if ok else
                    "no step lowers the decorrelated loss, yet its gradient is not small")
             break

@@ -141,6 +141,14 @@ def write_report(out: Path, summary: dict, figures: dict) -> Path:
               f"water pixels, linear RGB). Fit at {summary['fit_resolution'][0]}x{summary['fit_resolution'][1]} "
               f"with `{summary['solver']}`: {summary['iterations']} iterations, "
               f"{'converged' if summary['converged'] else 'NOT converged'} ({summary['message']}).", ""]
+    dec = summary.get("fit", {}).get("input_noise")
+    if dec:
+        moved = ", ".join(f"{n} {_fmt(a)} -> {_fmt(b)}" for n, (a, b) in dec["shift"].items() if a != b)
+        lines += [f"Texture noise (`fit.input_noise = \"decorrelate\"`): the least-squares constants refined "
+                  f"on the decorrelated loss over the refraction texture's two independent halves, "
+                  f"{_fmt(dec['loss_start'])} -> {_fmt(dec['loss'])} in {dec['steps']} damped Newton steps: "
+                  + (f"{dec['message']}; {moved or 'nothing moved'}." if dec["accepted"] else
+                     f"refused ({dec['message']}), the least-squares constants kept."), ""]
     lines += ["| metric (water pixels) | default constants | fitted constants |", "|---|---|---|",
               f"| RMSE, linear RGB | {_fmt(e['rmse']['default'])} | {_fmt(e['rmse']['fitted'])} |",
               f"| FLIP (LDR, mean) | {_fmt(e['flip']['default'])} | {_fmt(e['flip']['fitted'])} |", ""]
