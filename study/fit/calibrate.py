@@ -181,7 +181,8 @@ def calibrate_model(model: ShaderModel, start: Constants, requested: list[str], 
     reason for constants frozen before looking at the Jacobian (:func:`scene_frozen`).
     ``halves``: two models on the refraction texture's independent halves
     (``study.fit.decorrelated.half_models``); when given, the fitted constants are refined on
-    the decorrelated loss (``study.fit.decorrelated.refine``) before the standard errors.
+    the decorrelated loss (``study.fit.decorrelated.refine``) before the standard errors (the
+    identifiability record stays that of the least-squares solution).
     ``requested`` names the seed's constants; a variant fits its own in their place
     (``Variant.fit_names``, e.g. the Beer-Lambert absorptions for ``attenuation_distance``)."""
     names = expand_parameters(model.variant.fit_names(requested))

@@ -16,18 +16,22 @@ and the decorrelated loss
     ``L(theta) = 0.5 * sum_i r_i(theta; A) * r_i(theta; B)``
 
 has the expectation ``0.5 ||r(theta; T)||^2`` of the noise-free loss: texture noise costs
-variance, no longer bias. Its gradient is ``g = 0.5 (J_A^T r_B + J_B^T r_A)``. :func:`refine`
-solves ``g(u) = 0`` in the solver's unconstrained coordinates ``u`` (``study.fit.solvers.Param``)
-as the least-squares problem ``min ||g(u)||^2`` with optimistix's Levenberg-Marquardt (damped
-Newton steps on the gradient: plain Newton overshoots from a start far from the root), the
-Jacobian of ``g`` taken as in Gauss-Newton, ``H = 0.5 (J_A^T J_B + J_B^T J_A)``, starting from the
-least-squares solution. The result is accepted only when it converged, ``H`` is positive definite
-there over the parameters not on a bound (a minimum of ``L``, not a saddle) and ``L`` did not rise; otherwise the start is kept and
-the reason returned. Each step costs two forward-mode Jacobian passes (one per half).
+variance, no longer bias. Its gradient is ``g = 0.5 (J_A^T r_B + J_B^T r_A)`` and, as in
+Gauss-Newton, its curvature ``H = 0.5 (J_A^T J_B + J_B^T J_A)``. :func:`refine` starts from the
+least-squares solution and takes damped Newton steps ``-(H + lambda diag(H))^-1 g`` in the
+solver's unconstrained coordinates ``u`` (``study.fit.solvers.Param``, so bounds hold), the
+damping raised tenfold until the step lowers ``L`` and lowered after each accepted step
+(Levenberg-Marquardt's rule, applied to a loss that is not a sum of squares: optimistix's
+least-squares solvers need one, and its BFGS would rebuild from the identity the curvature that
+``H`` gives for free). It stops when a step lowers ``L`` by less than one standard error's worth
+(``FTOL_SE * L / (m - k)``, as ``study.fit.solvers``) and moves no ``u`` by more than ``XTOL``,
+or when no damping lowers ``L`` and the Newton decrement ``g^T H^-1 g`` is below that. The result
+is accepted only when it converged and ``H`` is positive definite there over the parameters not
+on a bound (a minimum of ``L``, not a saddle); otherwise the start is kept and the reason
+returned. Each step costs two forward-mode Jacobian passes (one per half), each trial two renders.
 """
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass, field
 
 import numpy as np

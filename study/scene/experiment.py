@@ -200,8 +200,9 @@ SCHEMA: dict[str, Field] = {
     "fit.input_noise": Field("str", "ignore", "What the fit does about Monte Carlo noise in the "
                              "refraction texture, which biases least squares (errors in the inputs): "
                              "`ignore` (least squares on the texture as given) or `decorrelate` (then "
-                             "Newton steps on the decorrelated loss over the texture's two independent "
-                             "raw halves, which cancels the noise in expectation; needs "
+                             "damped Newton steps on the decorrelated loss over the texture's two "
+                             "independent halves, which cancels their noise in expectation (a denoiser's "
+                             "bias stays); needs "
                              "`reference.texture_method = \"lighting\"`).", choices=("ignore", "decorrelate")),
     "tradeoff.variants": Field("list_str", ["water_refraction_noreflection", "water_refraction",
                                             "water_reflection"],
