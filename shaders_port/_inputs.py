@@ -80,8 +80,7 @@ class ShaderInputs:
 
     Optional, read by no shader (the fit's, ``None`` unless built):
         refraction_halves: (2, H0, W0, 3) linear RGB, two independent Monte Carlo estimates of
-            ``refraction_texture`` (each from half of its samples, denoised on its own when the
-            texture is denoised, so their errors stay independent): the fit's
+            ``refraction_texture`` (each from half of its samples, never denoised): the fit's
             decorrelated loss multiplies residuals computed with one by residuals computed
             with the other, so the textures' noise cancels in expectation.
     """

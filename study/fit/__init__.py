@@ -1,2 +1,3 @@
 """The fit stage: the port against a reference (``model``), the JAX/Dr.Jit bridge, solvers,
-identifiability and the calibration of one experiment."""
+identifiability, the calibration of one experiment (or several, ``joint``) and the decorrelated
+loss that cancels the texture's noise (``decorrelated``)."""

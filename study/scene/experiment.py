@@ -201,8 +201,9 @@ SCHEMA: dict[str, Field] = {
                              "refraction texture, which biases least squares (errors in the inputs): "
                              "`ignore` (least squares on the texture as given) or `decorrelate` (then "
                              "damped Newton steps on the decorrelated loss over the texture's two "
-                             "independent halves, which cancels their noise in expectation (a denoiser's "
-                             "bias stays); needs "
+                             "independent raw halves, which cancels their noise in expectation; the "
+                             "least-squares start, and so the basin, comes from the texture as given, "
+                             "denoised or not; needs "
                              "`reference.texture_method = \"lighting\"`).", choices=("ignore", "decorrelate")),
     "tradeoff.variants": Field("list_str", ["water_refraction_noreflection", "water_refraction",
                                             "water_reflection"],

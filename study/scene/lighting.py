@@ -36,8 +36,8 @@ A denoiser trades variance for a bias of its own (it blurs what it takes for noi
 first); ``benchmarks/bench_denoise.py`` measures what it does to the fitted constants. The
 standard error returned is then that of the *input* to the denoiser.
 
-The four passes also give the texture's two *halves* (passes 0-1 and 2-3, each denoised on its
-own when the mean is): independent estimates of the same lighting, whose product of residuals the
+The four passes also give the texture's two *halves* (passes 0-1 and 2-3, raw even when the
+mean is denoised: a denoiser's bias would survive the decorrelation): independent estimates of the same lighting, whose product of residuals the
 fit's decorrelated loss uses (``fit.input_noise = "decorrelate"``, ``study.fit.decorrelated``)
 to cancel the texture's noise instead of being biased by it.
 
@@ -121,8 +121,8 @@ def render_lighting(exp: Experiment, size: int, spp: int, seed: int, *, water: b
     absorption of the camera's own vertical ray as ``top_down_colour`` does, and its per-texel
     standard error, from ``N_SEEDS`` renders of ``ceil(spp / N_SEEDS)`` spp each (denoised first
     when ``reference.lighting_denoise = "oidn"``; the standard error is the denoiser's input's);
-    and the two *halves* (2, size, size, 3): the means of passes 0-1 and of passes 2-3 (each
-    denoised on its own when the lighting is), independent estimates of the same lighting (``fit.input_noise = "decorrelate"``)."""
+    and the two *halves* (2, size, size, 3): the raw (never denoised) means of passes 0-1 and of
+    passes 2-3, independent estimates of the same lighting (``fit.input_noise = "decorrelate"``)."""
     import mitsuba as mi
 
     from .shader_inputs import _ortho_sensor, _to_gl_order, top_down_world_y
@@ -154,10 +154,6 @@ def render_lighting(exp: Experiment, size: int, spp: int, seed: int, *, water: b
     if exp["reference.lighting_denoise"] == "oidn":
         albedo = np.mean(albedos, axis=0)
         lighting = denoise_radiance(np.mean(radiances, axis=0), albedo) / albedo
-        # each half denoised on its own: their errors stay independent
-        h = N_SEEDS // 2
-        halves = np.stack([denoise_radiance(np.mean(radiances[s], axis=0), np.mean(albedos[s], axis=0))
-                           / np.mean(albedos[s], axis=0) for s in (slice(0, h), slice(h, None))])
     if water:
         world_y = top_down_world_y(exp, extent, size)
         sigma = np.asarray(exp["water.sigma_t"], np.float64)
