@@ -176,7 +176,8 @@ def steps_to_within(step_losses: list, frac: float = 1e-3) -> int | None:
 
 
 def calibrate_model(model: ShaderModel, start: Constants, requested: list[str], solver: str,
-                    max_steps: int, frozen_by_scene: dict | None = None, halves: tuple | None = None) -> Calibration:
+                    max_steps: int, frozen_by_scene: dict | None = None,
+                    halves: tuple | None = None) -> Calibration:
     """Steps 2-5 of the module docstring on a prepared model. ``frozen_by_scene``: name ->
     reason for constants frozen before looking at the Jacobian (:func:`scene_frozen`).
     ``halves``: two models on the refraction texture's independent halves
@@ -253,7 +254,7 @@ def calibrate_model(model: ShaderModel, start: Constants, requested: list[str], 
         from .decorrelated import refine
         refined = refine(halves[0], halves[1], problem.params, fitted, [inner[i] for i in live])
         _log(f"calibrate: decorrelated loss {refined.loss_start:.6g} -> {refined.loss:.6g} in "
-             f"{refined.steps} Newton steps ({refined.message})")
+             f"{refined.steps} damped Newton steps ({refined.message})")
         if refined.accepted:
             fitted = refined.fitted
             for n, side in refined.at_bound.items():

@@ -37,9 +37,10 @@ first); ``benchmarks/bench_denoise.py`` measures what it does to the fitted cons
 standard error returned is then that of the *input* to the denoiser.
 
 The four passes also give the texture's two *halves* (passes 0-1 and 2-3, raw even when the
-mean is denoised: a denoiser's bias would survive the decorrelation): independent estimates of the same lighting, whose product of residuals the
-fit's decorrelated loss uses (``fit.input_noise = "decorrelate"``, ``study.fit.decorrelated``)
-to cancel the texture's noise instead of being biased by it.
+mean is denoised: a denoiser's bias would survive the decorrelation), independent estimates of
+the same lighting, whose product of residuals the fit's decorrelated loss uses
+(``fit.input_noise = "decorrelate"``, ``study.fit.decorrelated``) to cancel the texture's noise
+instead of being biased by it.
 
 Texture arrays are in GL order (row = t, z increasing; column = s, x increasing), float32,
 linear RGB.
@@ -212,7 +213,7 @@ def lighting_colour(exp: Experiment, extent, size: int, seed: int = 0, world_y=N
     y_cam = underwater_camera_height(exp) if wet else 100.0
     n_light = min(exp["reference.lighting_size"], size)     # never finer than the texture
     lighting, lighting_se, halves = render_lighting(exp, n_light, exp["reference.texture_spp"], seed,
-                                            water=wet, y_cam=y_cam, progress=progress)
+                                                    water=wet, y_cam=y_cam, progress=progress)
     dry, albedo = render_dry(exp, extent, size, exp["reference.wall_spp"], seed)
     if world_y is None:
         world_y = top_down_world_y(exp, extent, size)

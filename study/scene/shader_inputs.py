@@ -242,8 +242,8 @@ def build_shader_inputs(exp: Experiment, width: int | None = None, height: int |
     if exp["reference.texture_method"] == "lighting":
         from .lighting import lighting_colour
         with st.stage("inputs.lighting_s", f"shader inputs: lighting x albedo texture ({size}x{size})"):
-            colour, tex_info, halves = lighting_colour(exp, extent, size, exp["reference.seed"], world_y=world_y,
-                                               progress=st.counter("  passes"))
+            colour, tex_info, halves = lighting_colour(exp, extent, size, exp["reference.seed"],
+                                                       world_y=world_y, progress=st.counter("  passes"))
     else:
         colour = top_down_colour(exp, extent, size, exp["reference.texture_spp"], exp["reference.seed"],
                                  world_y=world_y, stages=st)
