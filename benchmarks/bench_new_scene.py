@@ -252,6 +252,8 @@ def main() -> None:
                        *sum((["--set", s] for s in args.overrides), [])])
                  if baseline and len(paths) > 1 else {})
         results.append({"experiment": Path(e).stem, "baseline": baseline, "runs": runs, "cross": cross})
+        if args.json:                        # after every scene: a later failure loses nothing
+            args.json.write_text(json.dumps(results, indent=1))
         _print(Path(e).stem, runs, cross, baseline)
     load = os.getloadavg()
     print(f"# load average at the end {load[0]:.1f} / {load[1]:.1f} / {load[2]:.1f}")
@@ -259,11 +261,13 @@ def main() -> None:
         args.json.write_text(json.dumps(results, indent=1))
 
 
-def _seed_stats(runs: list[dict], name: str) -> tuple[float, float | None, int]:
+def _seed_stats(runs: list[dict], name: str) -> tuple[float | None, float | None, int]:
     """(mean, sample standard deviation or None, count) of constant ``name`` over a path's seeds
-    (the last repeat of each seed)."""
+    (the last repeat of each seed) where it was fitted (a seed may freeze it: no value)."""
     by_seed = {r["seed"]: r["params"][name]["fitted"] for r in runs if name in r["params"]}
-    v = list(by_seed.values())
+    v = [x for x in by_seed.values() if x is not None]
+    if not v:
+        return None, None, 0
     return statistics.fmean(v), (statistics.stdev(v) if len(v) > 1 else None), len(v)
 
 
@@ -309,9 +313,9 @@ def _print(name: str, runs: dict, cross: dict, baseline: str | None) -> None:
         for p in others:
             pb = first[p]["params"].get(n, {})
             mean, sd, k = _seed_stats(runs[p], n) if pb else (None, None, 0)
-            z = (mean - va) / se_abs if mean is not None and se_abs else None
+            z = (mean - va) / se_abs if mean is not None and va is not None and se_abs else None
             if k > 1:
-                zs = (mean - va) / sd if sd else None
+                zs = (mean - va) / sd if sd and va is not None else None
                 cells.append(f"{_v(mean)} +- {_v(sd, 2)} over {k} seeds [{pb.get('status')}] | "
                              f"{_v(z, 2)} (in seed SD: {_v(zs, 2)})")
             else:
