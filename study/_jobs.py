@@ -188,7 +188,7 @@ def run_calibrate(experiment, out, overrides=None, variant=None, solver=None, ca
          f"{int(model.mask.sum())} water pixels at {exp['fit.resolution'][0]}x{exp['fit.resolution'][1]}")
     with timed(timings, "fit_s"):
         cal = calibrate_model(model, start, exp["fit.parameters"], solver, exp["fit.max_steps"],
-                              frozen_by_scene=scene_frozen(exp), halves=halves)
+                              frozen_by_scene=scene_frozen(exp), halves=halves, scan_basins=True)
     with timed(timings, "evaluate_s"):
         w, h = exp["resolution"]
         full = ShaderModel.from_experiment(exp, inputs, ref.image, backend=backend, resolution=(w, h))

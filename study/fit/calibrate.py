@@ -177,13 +177,16 @@ def steps_to_within(step_losses: list, frac: float = 1e-3) -> int | None:
 
 def calibrate_model(model: ShaderModel, start: Constants, requested: list[str], solver: str,
                     max_steps: int, frozen_by_scene: dict | None = None,
-                    halves: tuple | None = None) -> Calibration:
+                    halves: tuple | None = None, scan_basins: bool = False) -> Calibration:
     """Steps 2-5 of the module docstring on a prepared model. ``frozen_by_scene``: name ->
     reason for constants frozen before looking at the Jacobian (:func:`scene_frozen`).
     ``halves``: two models on the refraction texture's independent halves
     (``study.fit.decorrelated.half_models``); when given, the fitted constants are refined on
     the decorrelated loss (``study.fit.decorrelated.refine``) before the standard errors (the
-    identifiability record stays that of the least-squares solution).
+    identifiability record stays that of the least-squares solution). ``scan_basins``: scan the
+    loss along the constants of ``study.fit.basins.BASIN_PARAMETERS`` that were fitted for other
+    basins the reference's noise cannot tell apart (``parameters[name]["basins"]``; reported,
+    the fit is not moved).
     ``requested`` names the seed's constants; a variant fits its own in their place
     (``Variant.fit_names``, e.g. the Beer-Lambert absorptions for ``attenuation_distance``)."""
     names = expand_parameters(model.variant.fit_names(requested))
@@ -270,6 +273,16 @@ def calibrate_model(model: ShaderModel, start: Constants, requested: list[str], 
     if id1 is not None and live and sigma is not None:
         sigma_m = sigma[model.mask].astype(np.float64).ravel()
         noise_se = dict(zip([inner[i] for i in live], noise_errors(J1[:, live], sigma_m, vals)))
+    scans = {}
+    if scan_basins and id1 is not None and live:
+        from .basins import BASIN_PARAMETERS, scan
+        sigma_m = None if sigma is None else sigma[model.mask].astype(np.float64).ravel()
+        for n in BASIN_PARAMETERS:
+            if n in [inner[i] for i in live]:
+                scans[n] = scan(model, fitted, n, sigma_m)
+                if scans[n]["indistinguishable"]:
+                    _log(f"calibrate: {n}: other basins the reference's noise cannot tell from the fit's "
+                         f"({get_value(fitted, n):.4g}): {', '.join(f'{v:.4g}' for v in scans[n]['indistinguishable'])}")
     ident = {"start": _ident_dict(id0, continuous)} if id0 is not None else {}
     if id1 is not None:
         inner = list(id1.names)
@@ -296,6 +309,8 @@ def calibrate_model(model: ShaderModel, start: Constants, requested: list[str], 
                 params[n]["rel_std_error"] = ident["solution"]["rel_std_error"][j]
                 if n in noise_se:
                     params[n]["rel_noise_error"] = noise_se[n]
+                if n in scans:
+                    params[n]["basins"] = scans[n]
             else:
                 params[n]["sensitivity"] = id0.sensitivity[n] if id0 is not None else None
     if result is not None:

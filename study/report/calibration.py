@@ -112,6 +112,29 @@ def constants_table(parameters: dict) -> list[str]:
     return lines
 
 
+def basin_lines(parameters: dict) -> list[str]:
+    """What the basin scan (``study.fit.basins``) found for each scanned constant."""
+    lines = []
+    for name, p in parameters.items():
+        b = p.get("basins")
+        if not b:
+            continue
+        span = f"{_fmt(min(b['grid']))}-{_fmt(max(b['grid']))}"
+        close = [o for o in b["basins"] if o["indistinguishable"]]
+        for o in close:
+            lines.append(f"`{name}`: another basin of the loss at {_fmt(o['value'])} (loss difference "
+                         f"{_fmt(o['delta_loss'])} +- {_fmt(o['noise_sd'])} from the reference's noise): the "
+                         "reference's noise cannot tell it from the fit's, so the exported value is one of "
+                         "these, not known to its standard error.")
+        rest = len(b["basins"]) - len(close)
+        if not close:
+            lines.append(f"`{name}`: " + (f"{rest} other local minima of the loss in {span}, each higher than the "
+                                          "fit's by more than the reference's noise explains."
+                                          if rest else f"no other basin of the loss in {span}.")
+                         + " (The other constants held at the solution.)")
+    return lines + [""] if lines else []
+
+
 def identifiability_table(ident: dict) -> list[str]:
     lines = ["| parameter | rel. sensitivity at start | at solution | rel. std. error at solution | "
              "rel. error from reference noise | decision |", "|---|---|---|---|---|---|"]
@@ -155,6 +178,7 @@ def write_report(out: Path, summary: dict, figures: dict) -> Path:
     if "comparison" in figures:
         lines += [f"![reference | default | fitted, with error maps]({figures['comparison']})", ""]
     lines += ["## Constants", ""] + constants_table(summary["parameters"]) + [""]
+    lines += basin_lines(summary["parameters"])
     lines += ["## Identifiability", "",
               "Sensitivity: norm of the Jacobian column with respect to log(value) (a relative change), "
               "divided by the largest column norm. Standard error from the Gauss-Newton covariance "

@@ -1,0 +1,89 @@
+"""The basin scan of the bump scale's loss (``study.fit.basins``).
+
+Local minima of a grid; the loss difference's standard deviation under target noise against
+the spread of that difference over 4000 noise draws; and the scan on the real port: its grid
+centred on the fitted value, whose loss is the fit's, and the calibration's record and report.
+"""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from synthetic import synthetic_inputs
+from shaders_port import Constants, water_refraction
+from study.fit.basins import NOISE_Z, POINTS, local_minima, loss_difference_sd, scan
+from study.fit.calibrate import calibrate_model
+from study.fit.model import ShaderModel, get_value
+
+
+def test_local_minima_of_a_grid():
+    loss = np.array([5.0, 3.0, 4.0, 4.0, 2.0, 2.0, 6.0, 1.0, np.nan, 0.5])
+    # 1: a basin; 4: lower than its left, equal to its right (a flat floor counts once); 7 is next
+    # to a NaN (never a minimum by comparison) and the ends are not interior
+    assert local_minima(loss) == [1, 4]
+    assert local_minima(np.array([1.0, 2.0, 3.0])) == []
+
+
+def test_loss_difference_sd_matches_the_spread_over_noise_draws():
+    rng = np.random.default_rng(0)
+    m = 500
+    target = rng.normal(size=m)
+    port_0 = target + rng.normal(scale=0.3, size=m)
+    port_b = target + rng.normal(scale=0.3, size=m)
+    sigma = rng.uniform(0.01, 0.2, size=m)
+    diffs = []
+    for _ in range(4000):
+        noisy = target + rng.normal(size=m) * sigma
+        r0, rb = port_0 - noisy, port_b - noisy
+        diffs.append(0.5 * rb @ rb - 0.5 * r0 @ r0)
+    predicted = loss_difference_sd(port_b - target, port_0 - target, sigma)
+    assert np.std(diffs, ddof=1) == pytest.approx(predicted, rel=0.05)
+
+
+@pytest.fixture(scope="module")
+def noisy_model():
+    inputs = synthetic_inputs(width=48, height=36)
+    truth = Constants(attenuation_distance=5.0, bumptex_mult=0.7, water_color=(0.1, 0.3, 0.2, 1.0))
+    clean = water_refraction.render(inputs, truth).numpy()["color"]
+    rng = np.random.default_rng(1)
+    sigma = np.full(clean.shape, 0.02, np.float32)
+    target = (clean + rng.normal(size=clean.shape) * sigma).astype(np.float32)
+    return ShaderModel("water_refraction", inputs, target, reference_stderr=sigma)
+
+
+def test_scan_is_centred_on_the_fit_and_reports_basins(noisy_model):
+    requested = ["attenuation_distance", "bumptex_mult", "water_color"]
+    cal = calibrate_model(noisy_model, Constants(), requested, "levenberg_marquardt", 100, scan_basins=True)
+    b = cal.parameters["bumptex_mult"]["basins"]
+    v = get_value(cal.fitted, "bumptex_mult")
+    assert len(b["grid"]) == len(b["loss"]) == POINTS and b["grid"][POINTS // 2] == pytest.approx(v)
+    r = noisy_model.residual(cal.fitted)
+    assert b["loss"][POINTS // 2] == pytest.approx(0.5 * float(r @ r), rel=1e-6)
+    assert min(b["grid"]) < v < max(b["grid"]) and np.all(np.isfinite(b["loss"]))
+    for o in b["basins"]:
+        assert o["value"] != v and o["noise_sd"] > 0
+        assert o["indistinguishable"] == (abs(o["delta_loss"]) < NOISE_Z * o["noise_sd"])
+    assert b["indistinguishable"] == [o["value"] for o in b["basins"] if o["indistinguishable"]]
+    # without the flag (the studies' fits) no scan is made; without a noise estimate no verdict
+    plain = calibrate_model(noisy_model, Constants(), requested, "levenberg_marquardt", 100)
+    assert "basins" not in plain.parameters["bumptex_mult"]
+    quiet = ShaderModel("water_refraction", noisy_model.inputs, noisy_model.reference)
+    s = scan(quiet, cal.fitted, "bumptex_mult")
+    assert all(o["noise_sd"] is None and not o["indistinguishable"] for o in s["basins"])
+    with pytest.raises(ValueError, match="odd"):
+        scan(quiet, cal.fitted, "bumptex_mult", points=4)
+
+
+def test_report_says_what_the_scan_found():
+    from study.report.calibration import basin_lines
+    params = {"bumptex_mult": {"basins": {"grid": [0.9, 1.0], "loss": [1.0, 1.0], "indistinguishable": [0.96],
+                                          "basins": [{"value": 0.96, "delta_loss": 0.004, "noise_sd": 0.01,
+                                                      "indistinguishable": True}]}},
+              "attenuation_distance": {}}
+    text = "\n".join(basin_lines(params))
+    assert "another basin of the loss at 0.96" in text and "cannot tell it from the fit's" in text
+    params["bumptex_mult"]["basins"]["basins"][0].update(indistinguishable=False, delta_loss=0.1)
+    assert "1 other local minima" in "\n".join(basin_lines(params))
+    params["bumptex_mult"]["basins"]["basins"] = []
+    assert "no other basin" in "\n".join(basin_lines(params))
+    assert basin_lines({"a": {}}) == []
