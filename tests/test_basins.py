@@ -64,6 +64,7 @@ def test_scan_is_centred_on_the_fit_and_reports_basins(noisy_model):
         assert o["value"] != v and o["noise_sd"] > 0
         assert o["indistinguishable"] == (abs(o["delta_loss"]) < NOISE_Z * o["noise_sd"])
     assert b["indistinguishable"] == [o["value"] for o in b["basins"] if o["indistinguishable"]]
+    assert b["lower"] == [o["value"] for o in b["basins"] if o["delta_loss"] < -NOISE_Z * o["noise_sd"]]
     # without the flag (the studies' fits) no scan is made; without a noise estimate no verdict
     plain = calibrate_model(noisy_model, Constants(), requested, "levenberg_marquardt", 100)
     assert "basins" not in plain.parameters["bumptex_mult"]
@@ -84,6 +85,10 @@ def test_report_says_what_the_scan_found():
     assert "another basin of the loss at 0.96" in text and "cannot tell it from the fit's" in text
     params["bumptex_mult"]["basins"]["basins"][0].update(indistinguishable=False, delta_loss=0.1)
     assert "1 other local minima" in "\n".join(basin_lines(params))
+    params["bumptex_mult"]["basins"]["basins"][0].update(delta_loss=-0.1)
+    params["bumptex_mult"]["basins"]["lower"] = [0.96]
+    text = "\n".join(basin_lines(params))
+    assert "lower than the fit's by 0.1" in text and "stopped short" in text and "other local minima" not in text
     params["bumptex_mult"]["basins"]["basins"] = []
     assert "no other basin" in "\n".join(basin_lines(params))
     assert basin_lines({"a": {}}) == []

@@ -13,8 +13,9 @@ and finds the grid's local minima. For each other minimum ``b`` it compares the 
 Monte Carlo noise: with zero-mean noise ``e`` of standard deviation ``sigma`` (m,) in the target,
 ``L(b) - L(b0)`` moves by ``-(r(b) - r(b0)) . e`` to first order, whose standard deviation is
 ``||sigma * (r(b) - r(b0))||``. A basin with ``|dL| < NOISE_Z`` of those is *indistinguishable*
-from the fit's: another render of the same reference could pick it. The texture's noise moves
-the loss too, so this is a lower bound on what the data cannot tell apart.
+from the fit's: another render of the same reference could pick it; one *lower* by more than
+that is a basin the local solver missed (its steps stop at a jump of the piecewise loss). The
+texture's noise moves the loss too, so this is a lower bound on what the data cannot tell apart.
 
 The scan reports; it does not move the fit. One scan costs ``POINTS`` renders at the fit
 resolution (about 1 s at 128 x 128 on 2 cores).
@@ -55,7 +56,8 @@ def scan(model, at: Constants, name: str, sigma: np.ndarray | None = None,
     """The loss along constant ``name`` around its value in ``at`` (others held) and its other
     basins; ``sigma``: the reference's per-residual standard error (m,) (None: no noise test).
     Returns ``{"name", "value", "grid", "loss", "basins": [{"value", "delta_loss", "noise_sd",
-    "indistinguishable"}], "indistinguishable": [values]}`` (JSON-ready)."""
+    "indistinguishable"}], "indistinguishable": [values], "lower": [values of basins lower than
+    the fit's by more than the noise explains: the solver stopped short]}`` (JSON-ready)."""
     if points < 3 or points % 2 == 0:
         raise ValueError(f"points must be odd and at least 3 (the fitted value in the middle), got {points}")
     v0 = get_value(at, name)
@@ -72,5 +74,6 @@ def scan(model, at: Constants, name: str, sigma: np.ndarray | None = None,
         dl = float(loss[j] - loss[mid])
         basins.append({"value": float(grid[j]), "delta_loss": dl, "noise_sd": sd,
                        "indistinguishable": bool(sd is not None and abs(dl) < NOISE_Z * sd)})
+    lower = [b["value"] for b in basins if b["noise_sd"] is not None and b["delta_loss"] < -NOISE_Z * b["noise_sd"]]
     return {"name": name, "value": v0, "grid": grid.tolist(), "loss": loss.tolist(), "basins": basins,
-            "indistinguishable": [b["value"] for b in basins if b["indistinguishable"]]}
+            "indistinguishable": [b["value"] for b in basins if b["indistinguishable"]], "lower": lower}

@@ -280,9 +280,13 @@ def calibrate_model(model: ShaderModel, start: Constants, requested: list[str], 
         for n in BASIN_PARAMETERS:
             if n in [inner[i] for i in live]:
                 scans[n] = scan(model, fitted, n, sigma_m)
-                if scans[n]["indistinguishable"]:
-                    _log(f"calibrate: {n}: other basins the reference's noise cannot tell from the fit's "
-                         f"({get_value(fitted, n):.4g}): {', '.join(f'{v:.4g}' for v in scans[n]['indistinguishable'])}")
+                for key, what in (("indistinguishable", "other basins the reference's noise cannot tell from "
+                                                           "the fit's"),
+                                  ("lower", "basins lower than the fit's by more than the reference's noise "
+                                            "explains (the solver stopped short)")):
+                    if scans[n][key]:
+                        _log(f"calibrate: {n}: {what} ({get_value(fitted, n):.4g}): "
+                             f"{', '.join(f'{v:.4g}' for v in scans[n][key])}")
     ident = {"start": _ident_dict(id0, continuous)} if id0 is not None else {}
     if id1 is not None:
         inner = list(id1.names)

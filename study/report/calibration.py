@@ -120,17 +120,22 @@ def basin_lines(parameters: dict) -> list[str]:
         if not b:
             continue
         span = f"{_fmt(min(b['grid']))}-{_fmt(max(b['grid']))}"
+        lower = [o for o in b["basins"] if o["value"] in b.get("lower", [])]
         close = [o for o in b["basins"] if o["indistinguishable"]]
+        for o in lower:
+            lines.append(f"`{name}`: a basin of the loss at {_fmt(o['value'])} is lower than the fit's by "
+                         f"{_fmt(-o['delta_loss'])}, more than the reference's noise explains "
+                         f"(+- {_fmt(o['noise_sd'])}): the solver stopped short of it (the loss is piecewise).")
         for o in close:
             lines.append(f"`{name}`: another basin of the loss at {_fmt(o['value'])} (loss difference "
                          f"{_fmt(o['delta_loss'])} +- {_fmt(o['noise_sd'])} from the reference's noise): the "
                          "reference's noise cannot tell it from the fit's, so the exported value is one of "
                          "these, not known to its standard error.")
-        rest = len(b["basins"]) - len(close)
-        if not close:
+        rest = len(b["basins"]) - len(close) - len(lower)
+        if rest or not b["basins"]:
             lines.append(f"`{name}`: " + (f"{rest} other local minima of the loss in {span}, each higher than the "
                                           "fit's by more than the reference's noise explains."
-                                          if rest else f"no other basin of the loss in {span}.")
+                                          if b["basins"] else f"no other basin of the loss in {span}.")
                          + " (The other constants held at the solution.)")
     return lines + [""] if lines else []
 
