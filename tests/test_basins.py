@@ -84,11 +84,14 @@ def test_report_says_what_the_scan_found():
     text = "\n".join(basin_lines(params))
     assert "another basin of the loss at 0.96" in text and "cannot tell it from the fit's" in text
     params["bumptex_mult"]["basins"]["basins"][0].update(indistinguishable=False, delta_loss=0.1)
-    assert "1 other local minima" in "\n".join(basin_lines(params))
+    assert "1 other local minimum of the loss" in "\n".join(basin_lines(params))
+    params["bumptex_mult"]["basins"]["basins"][0]["noise_sd"] = None
+    assert "no noise estimate" in "\n".join(basin_lines(params))
+    params["bumptex_mult"]["basins"]["basins"][0]["noise_sd"] = 0.01
     params["bumptex_mult"]["basins"]["basins"][0].update(delta_loss=-0.1)
     params["bumptex_mult"]["basins"]["lower"] = [0.96]
     text = "\n".join(basin_lines(params))
-    assert "lower than the fit's by 0.1" in text and "stopped short" in text and "other local minima" not in text
+    assert "lower than the fit's by 0.1" in text and "stopped short" in text and "other local minim" not in text
     params["bumptex_mult"]["basins"]["basins"] = []
     assert "no other basin" in "\n".join(basin_lines(params))
     assert basin_lines({"a": {}}) == []

@@ -132,11 +132,15 @@ def basin_lines(parameters: dict) -> list[str]:
                          "reference's noise cannot tell it from the fit's, so the exported value is one of "
                          "these, not known to its standard error.")
         rest = len(b["basins"]) - len(close) - len(lower)
+        minima = f"{rest} other local minim{'um' if rest == 1 else 'a'} of the loss in {span}"
+        if not b["basins"]:
+            what = f"no other basin of the loss in {span}."
+        elif any(o["noise_sd"] is None for o in b["basins"]):
+            what = f"{minima} (no noise estimate of the reference to compare them with)."
+        else:
+            what = f"{minima}, each higher than the fit's by more than the reference's noise explains."
         if rest or not b["basins"]:
-            lines.append(f"`{name}`: " + (f"{rest} other local minima of the loss in {span}, each higher than the "
-                                          "fit's by more than the reference's noise explains."
-                                          if b["basins"] else f"no other basin of the loss in {span}.")
-                         + " (The other constants held at the solution.)")
+            lines.append(f"`{name}`: {what} (The other constants held at the solution.)")
     return lines + [""] if lines else []
 
 
