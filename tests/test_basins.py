@@ -1,8 +1,9 @@
-"""The basin scan of the bump scale's loss (``study.fit.basins``).
+"""The basin scan of the bump scale's loss (``study.fit.basins``) and the restart it triggers.
 
 Local minima of a grid; the loss difference's standard deviation under target noise against
-the spread of that difference over 4000 noise draws; and the scan on the real port: its grid
-centred on the fitted value, whose loss is the fit's, and the calibration's record and report.
+the spread of that difference over 4000 noise draws; the scan on the real port: its grid
+centred on the fitted value, whose loss is the fit's, and the calibration's record and report;
+the restart from a lower basin, kept only when its loss is lower.
 """
 from __future__ import annotations
 
@@ -95,3 +96,34 @@ def test_report_says_what_the_scan_found():
     params["bumptex_mult"]["basins"]["basins"] = []
     assert "no other basin" in "\n".join(basin_lines(params))
     assert basin_lines({"a": {}}) == []
+
+
+def test_restart_from_a_lower_basin_keeps_the_lower_solution(noisy_model, monkeypatch):
+    """A scan that reports a basin lower beyond the noise (here made up at 0.9, the truth being
+    0.7) makes the calibration refit from there once; whichever of the two solutions has the
+    lower loss is exported, and the restart is recorded and reported."""
+    from study.fit import basins
+    from study.report.calibration import basin_lines
+    real_scan = basins.scan
+    calls = []
+
+    def fake_scan(model, at, name, sigma=None, **kw):
+        out = real_scan(model, at, name, sigma, **kw)
+        if not calls:                    # the first scan (the restart's) finds a lower basin
+            out["basins"].append({"value": 0.9, "delta_loss": -1.0, "noise_sd": 0.1, "indistinguishable": False})
+            out["lower"] = [0.9]
+        calls.append(name)
+        return out
+    monkeypatch.setattr(basins, "scan", fake_scan)
+    requested = ["attenuation_distance", "bumptex_mult", "water_color"]
+    first = calibrate_model(noisy_model, Constants(), requested, "levenberg_marquardt", 100)
+    cal = calibrate_model(noisy_model, Constants(), requested, "levenberg_marquardt", 100, scan_basins=True)
+    r = cal.parameters["bumptex_mult"]["basins"]["restart"]
+    assert r["to"] == 0.9 and r["from"] == pytest.approx(get_value(first.fitted, "bumptex_mult"), rel=1e-6)
+    assert len(calls) == 2 and cal.fit_summary["rounds"] == first.fit_summary["rounds"] + 1
+    loss = 0.5 * float(np.sum(noisy_model.residual(cal.fitted) ** 2))
+    assert loss == pytest.approx(min(r["loss_before"], r["loss_after"]), rel=1e-6)
+    assert r["kept"] == (r["loss_after"] < r["loss_before"])
+    if not r["kept"]:
+        assert get_value(cal.fitted, "bumptex_mult") == get_value(first.fitted, "bumptex_mult")
+    assert "refitted from there" in "\n".join(basin_lines(cal.parameters))

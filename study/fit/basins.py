@@ -17,8 +17,11 @@ from the fit's: another render of the same reference could pick it; one *lower* 
 that is a basin the local solver missed (its steps stop at a jump of the piecewise loss). The
 texture's noise moves the loss too, so this is a lower bound on what the data cannot tell apart.
 
-The scan reports; it does not move the fit. One scan costs ``POINTS`` renders at the fit
-resolution (about 1 s at 128 x 128 on 2 cores).
+``study.fit.calibrate.calibrate_model`` (``scan_basins``, every ``study calibrate``) refits once
+from the lowest basin that is lower beyond the noise and keeps the lower of the two solutions;
+indistinguishable basins it reports (the exported value is one of them, not known to its
+standard error). One scan costs ``POINTS`` renders at the fit resolution (0.4-0.9 s at
+128 x 128 on 2 cores).
 """
 from __future__ import annotations
 

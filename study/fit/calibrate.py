@@ -184,9 +184,11 @@ def calibrate_model(model: ShaderModel, start: Constants, requested: list[str], 
     (``study.fit.decorrelated.half_models``); when given, the fitted constants are refined on
     the decorrelated loss (``study.fit.decorrelated.refine``) before the standard errors (the
     identifiability record stays that of the least-squares solution). ``scan_basins``: scan the
-    loss along the constants of ``study.fit.basins.BASIN_PARAMETERS`` that were fitted for other
-    basins the reference's noise cannot tell apart (``parameters[name]["basins"]``; reported,
-    the fit is not moved).
+    loss along the constants of ``study.fit.basins.BASIN_PARAMETERS`` that were fitted; when a
+    basin is lower than the fit's by more than the reference's noise explains (the solver
+    stopped at a jump of the piecewise loss), refit once from the lowest such basin and keep
+    whichever solution has the lower loss; then scan again at the solution and record the basins
+    the noise cannot tell apart, and the restart, in ``parameters[name]["basins"]``.
     ``requested`` names the seed's constants; a variant fits its own in their place
     (``Variant.fit_names``, e.g. the Beer-Lambert absorptions for ``attenuation_distance``)."""
     names = expand_parameters(model.variant.fit_names(requested))
@@ -209,7 +211,10 @@ def calibrate_model(model: ShaderModel, start: Constants, requested: list[str], 
     fitted, x0 = start, None
     id1 = r1 = J1 = None
     se = {}
-    for rnd in range(SE_ROUNDS + 1):
+    sigma = getattr(model, "reference_stderr", None)
+    sigma_m = None if sigma is None else sigma[model.mask].astype(np.float64).ravel()
+    restart, before_restart = None, None
+    for rnd in range(SE_ROUNDS + 2):     # one more round than freezing needs: a basin restart
         if not free:
             break
         id1 = None
@@ -241,7 +246,14 @@ def calibrate_model(model: ShaderModel, start: Constants, requested: list[str], 
         se = dict(zip([inner[i] for i in live], std_errors(J1[:, live], r1, vals))) if live else {}
         judged = {n: v for n, v in se.items() if v is not None}
         worst = max(judged, key=judged.get) if judged else None
-        if worst is None or judged[worst] <= REL_SE_MAX or rnd == SE_ROUNDS:
+        if worst is None or judged[worst] <= REL_SE_MAX or rnd >= SE_ROUNDS:
+            if scan_basins and restart is None:
+                restart = _basin_restart(model, fitted, [inner[i] for i in live], sigma_m, result.loss)
+                if restart:
+                    before_restart = (result, fitted, bound, inner, r1, J1, id1, live, vals, se)
+                    x0 = {n: result.constants[n] for n in problem.names}
+                    x0[restart["name"]] = restart["to"]
+                    continue
             break
         frozen[worst] = (f"not identified at the solution: relative standard error {judged[worst]:.3g} "
                          f"> {REL_SE_MAX:g} (at {get_value(fitted, worst):.4g}); frozen at the start "
@@ -250,6 +262,14 @@ def calibrate_model(model: ShaderModel, start: Constants, requested: list[str], 
         free = [n for n in free if n != worst]
         x0 = {n: result.constants[n] for n in problem.names if n != worst}
         x0[worst] = get_value(start, worst)
+    if restart and before_restart is not None:
+        restart["loss_after"] = float(result.loss)
+        restart["kept"] = bool(result.loss < restart["loss_before"])
+        if not restart["kept"]:           # the restart found nothing better: back to the first solution
+            result, fitted, bound, inner, r1, J1, id1, live, vals, se = before_restart
+        _log(f"calibrate: restart from the {restart['name']} basin at {restart['to']:.4g}: loss "
+             f"{restart['loss_before']:.6g} -> {restart['loss_after']:.6g}, "
+             + ("kept" if restart["kept"] else "not lower; the first solution kept"))
     if not free:
         fitted = start
     refined = None
@@ -268,18 +288,17 @@ def calibrate_model(model: ShaderModel, start: Constants, requested: list[str], 
             vals = np.array([get_value(fitted, inner[i]) for i in live])
             se = dict(zip([inner[i] for i in live], std_errors(J1[:, live], r1, vals))) if live else {}
     # the reference's noise in the last round's live columns (it decides nothing in the rounds)
-    sigma = getattr(model, "reference_stderr", None)
     noise_se = {}
     if id1 is not None and live and sigma is not None:
-        sigma_m = sigma[model.mask].astype(np.float64).ravel()
         noise_se = dict(zip([inner[i] for i in live], noise_errors(J1[:, live], sigma_m, vals)))
     scans = {}
     if scan_basins and id1 is not None and live:
         from .basins import BASIN_PARAMETERS, scan
-        sigma_m = None if sigma is None else sigma[model.mask].astype(np.float64).ravel()
         for n in BASIN_PARAMETERS:
             if n in [inner[i] for i in live]:
                 scans[n] = scan(model, fitted, n, sigma_m)
+                if restart and restart["name"] == n:
+                    scans[n]["restart"] = restart
                 for key, what in (("indistinguishable", "other basins the reference's noise cannot tell from "
                                                            "the fit's"),
                                   ("lower", "basins lower than the fit's by more than the reference's noise "
@@ -332,6 +351,25 @@ def calibrate_model(model: ShaderModel, start: Constants, requested: list[str], 
     else:
         summary = {"solver": solver, "iterations": 0, "converged": True, "message": "nothing to fit"}
     return Calibration(start, fitted, params, ident, summary, losses, sweep)
+
+
+def _basin_restart(model, fitted: Constants, live: list[str], sigma_m, loss: float) -> dict | None:
+    """The restart the basin scan asks for: the lowest basin of a ``BASIN_PARAMETERS`` constant
+    that is lower than the fit's by more than the reference's noise explains (``name``, ``from``,
+    ``to``, ``loss_before``), or None."""
+    from .basins import BASIN_PARAMETERS, scan
+    for n in BASIN_PARAMETERS:
+        if n not in live or sigma_m is None:
+            continue
+        s = scan(model, fitted, n, sigma_m)
+        lower = [b for b in s["basins"] if b["value"] in s["lower"]]
+        if lower:
+            best = min(lower, key=lambda b: b["delta_loss"])
+            _log(f"calibrate: {n}: a basin at {best['value']:.4g} is lower than the fit's "
+                 f"({get_value(fitted, n):.4g}) by {-best['delta_loss']:.4g} (+- {best['noise_sd']:.2g} from the "
+                 "reference's noise); refitting from there")
+            return {"name": n, "from": get_value(fitted, n), "to": best["value"], "loss_before": float(loss)}
+    return None
 
 
 def calibrate_experiment(model: ShaderModel, exp, start: Constants | None = None,

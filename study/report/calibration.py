@@ -120,6 +120,12 @@ def basin_lines(parameters: dict) -> list[str]:
         if not b:
             continue
         span = f"{_fmt(min(b['grid']))}-{_fmt(max(b['grid']))}"
+        r = b.get("restart")
+        if r:
+            lines.append(f"`{name}`: the first fit stopped at {_fmt(r['from'])}, with a basin at {_fmt(r['to'])} lower "
+                         "by more than the reference's noise explains (the loss is piecewise); refitted from there: "
+                         f"loss {_fmt(r['loss_before'])} -> {_fmt(r['loss_after'])}, "
+                         + ("kept." if r["kept"] else "not lower, so the first solution is exported."))
         lower = [o for o in b["basins"] if o["value"] in b.get("lower", [])]
         close = [o for o in b["basins"] if o["indistinguishable"]]
         for o in lower:
