@@ -250,7 +250,8 @@ def calibrate_model(model: ShaderModel, start: Constants, requested: list[str], 
             if scan_basins and restart is None:
                 restart = _basin_restart(model, fitted, [inner[i] for i in live], sigma_m, result.loss)
                 if restart:
-                    before_restart = (result, fitted, bound, inner, r1, J1, id1, live, vals, se)
+                    before_restart = (result, fitted, bound, inner, r1, J1, id1, live, vals, se,
+                                      dict(frozen), list(free))
                     x0 = {n: result.constants[n] for n in problem.names}
                     x0[restart["name"]] = restart["to"]
                     continue
@@ -266,7 +267,7 @@ def calibrate_model(model: ShaderModel, start: Constants, requested: list[str], 
         restart["loss_after"] = float(result.loss)
         restart["kept"] = bool(result.loss < restart["loss_before"])
         if not restart["kept"]:           # the restart found nothing better: back to the first solution
-            result, fitted, bound, inner, r1, J1, id1, live, vals, se = before_restart
+            result, fitted, bound, inner, r1, J1, id1, live, vals, se, frozen, free = before_restart
         _log(f"calibrate: restart from the {restart['name']} basin at {restart['to']:.4g}: loss "
              f"{restart['loss_before']:.6g} -> {restart['loss_after']:.6g}, "
              + ("kept" if restart["kept"] else "not lower; the first solution kept"))
