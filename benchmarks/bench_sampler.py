@@ -28,14 +28,6 @@ sys.path.insert(0, str(REPO))
 SAMPLERS = ("independent", "stratified", "multijitter")
 
 
-def dimension_correlation(mi, sampler: str, spp: int = 36, n_pixels: int = 4096, dims: int = 12) -> float:
-    s = mi.load_dict({"type": sampler, "sample_count": spp})
-    s.seed(0, n_pixels * spp)
-    u = np.array([np.array(s.next_1d()) for _ in range(dims)])
-    c = np.corrcoef(u)
-    return float(np.mean([c[i, i + 1] for i in range(dims - 1)]))
-
-
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("experiment", nargs="?", default=str(REPO / "experiments" / "default.toml"))
@@ -47,6 +39,7 @@ def main() -> None:
 
     from study._backend import init_backend
     from study.scene.experiment import load_experiment
+    from study.scene.mitsuba_scene import dimension_correlation
     from study.scene.reference import render_reference, water_mask
     variant = init_backend("llvm_ad_rgb")
     import mitsuba as mi
@@ -71,7 +64,7 @@ def main() -> None:
             noise.append(ref.noise)
         means = np.array(means)
         sd = means.std(0, ddof=1) if len(means) > 1 else np.full(3, np.nan)
-        print(f"| {sampler} | {dimension_correlation(mi, sampler):+.4f} | "
+        print(f"| {sampler} | {dimension_correlation(mi, sampler)[0]:+.4f} | "
               f"{' / '.join(f'{x:.5f}' for x in means.mean(0))} | {' / '.join(f'{x:.5f}' for x in sd)} | "
               f"{np.mean(noise):.4f} |", flush=True)
 

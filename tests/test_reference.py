@@ -94,17 +94,6 @@ def test_sampler_spp_is_mitsubas_own_count(mi, sampler):
         assert s.sample_count() == sampler_spp(sampler, spp) >= spp, (sampler, spp)
 
 
-def _consecutive_dimension_correlation(mi, sampler: str, spp: int, n_pixels: int = 4096, dims: int = 12):
-    """Mean correlation of dimension d with d+1 over ``dims`` 1-D draws of ``n_pixels`` x ``spp``
-    samples, and its standard error (from the spread of the ``dims - 1`` pairs)."""
-    s = mi.load_dict({"type": sampler, "sample_count": spp})
-    s.seed(0, n_pixels * spp)
-    u = np.array([np.array(s.next_1d()) for _ in range(dims)])
-    c = np.corrcoef(u)
-    pairs = np.array([c[i, i + 1] for i in range(dims - 1)])
-    return pairs.mean(), pairs.std(ddof=1) / np.sqrt(len(pairs))
-
-
 def test_reference_sampler_draws_uncorrelated_dimensions(mi):
     """The default reference sampler's successive dimensions are uncorrelated: a path tracer
     assumes it, and Mitsuba's ``stratified`` sampler (permutations with consecutive seeds per
@@ -112,11 +101,12 @@ def test_reference_sampler_draws_uncorrelated_dimensions(mi):
     too bright). The stratified sampler is the positive control: the same measurement finds its
     correlation (about -0.01 at 36 spp)."""
     from study.scene.experiment import SCHEMA
+    from study.scene.mitsuba_scene import dimension_correlation
     default = SCHEMA["reference.sampler"].default
     assert default == "multijitter"
-    r, se = _consecutive_dimension_correlation(mi, default, 36)
+    r, se = dimension_correlation(mi, default, 36)
     assert abs(r) < max(4 * se, 2e-3), (r, se)
-    r_strat, se_strat = _consecutive_dimension_correlation(mi, "stratified", 36)
+    r_strat, se_strat = dimension_correlation(mi, "stratified", 36)
     assert r_strat < -5e-3 and r_strat < -4 * se_strat, (r_strat, se_strat)
 
 
