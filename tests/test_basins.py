@@ -120,7 +120,8 @@ def test_restart_from_a_lower_basin_keeps_the_lower_solution(noisy_model, monkey
     cal = calibrate_model(noisy_model, Constants(), requested, "levenberg_marquardt", 100, scan_basins=True)
     r = cal.parameters["bumptex_mult"]["basins"]["restart"]
     assert r["to"] == 0.9 and r["from"] == pytest.approx(get_value(first.fitted, "bumptex_mult"), rel=1e-6)
-    assert len(calls) == 2 and cal.fit_summary["rounds"] == first.fit_summary["rounds"] + 1
+    # scanned again only where the restart moved the solution (else the first scan is reused)
+    assert len(calls) == (2 if r["kept"] else 1) and cal.fit_summary["rounds"] == first.fit_summary["rounds"] + 1
     loss = 0.5 * float(np.sum(noisy_model.residual(cal.fitted) ** 2))
     assert loss == pytest.approx(min(r["loss_before"], r["loss_after"]), rel=1e-6)
     assert r["kept"] == (r["loss_after"] < r["loss_before"])

@@ -214,6 +214,7 @@ def calibrate_model(model: ShaderModel, start: Constants, requested: list[str], 
     sigma = getattr(model, "reference_stderr", None)
     sigma_m = None if sigma is None else sigma[model.mask].astype(np.float64).ravel()
     restart, before_restart = None, None
+    scanned: dict = {}        # name -> (the constants it was scanned at, the scan)
     for rnd in range(SE_ROUNDS + 2):     # one more round than freezing needs: a basin restart
         if not free:
             break
@@ -248,7 +249,8 @@ def calibrate_model(model: ShaderModel, start: Constants, requested: list[str], 
         worst = max(judged, key=judged.get) if judged else None
         if worst is None or judged[worst] <= REL_SE_MAX or rnd >= SE_ROUNDS:
             if scan_basins and restart is None:
-                restart = _basin_restart(model, fitted, [inner[i] for i in live], sigma_m, result.loss)
+                restart = _basin_restart(model, fitted, [inner[i] for i in live], sigma_m, result.loss,
+                                         scanned)
                 if restart:
                     before_restart = (result, fitted, bound, inner, r1, J1, id1, live, vals, se,
                                       dict(frozen), list(free))
@@ -297,7 +299,8 @@ def calibrate_model(model: ShaderModel, start: Constants, requested: list[str], 
         from .basins import BASIN_PARAMETERS, scan
         for n in BASIN_PARAMETERS:
             if n in [inner[i] for i in live]:
-                scans[n] = scan(model, fitted, n, sigma_m)
+                at, done = scanned.get(n, (None, None))
+                scans[n] = done if at is fitted else scan(model, fitted, n, sigma_m)   # moved since: again
                 if restart and restart["name"] == n:
                     scans[n]["restart"] = restart
                 for key, what in (("indistinguishable", "other basins the reference's noise cannot tell from "
@@ -354,15 +357,18 @@ def calibrate_model(model: ShaderModel, start: Constants, requested: list[str], 
     return Calibration(start, fitted, params, ident, summary, losses, sweep)
 
 
-def _basin_restart(model, fitted: Constants, live: list[str], sigma_m, loss: float) -> dict | None:
+def _basin_restart(model, fitted: Constants, live: list[str], sigma_m, loss: float,
+                   scanned: dict) -> dict | None:
     """The restart the basin scan asks for: the lowest basin of a ``BASIN_PARAMETERS`` constant
     that is lower than the fit's by more than the reference's noise explains (``name``, ``from``,
-    ``to``, ``loss_before``), or None."""
+    ``to``, ``loss_before``), or None. Each scan goes into ``scanned`` (name -> (``fitted``,
+    scan)), so that the report reuses it when the solution does not move."""
     from .basins import BASIN_PARAMETERS, scan
     for n in BASIN_PARAMETERS:
         if n not in live or sigma_m is None:
             continue
         s = scan(model, fitted, n, sigma_m)
+        scanned[n] = (fitted, s)
         lower = [b for b in s["basins"] if b["value"] in s["lower"]]
         if lower:
             best = min(lower, key=lambda b: b["delta_loss"])
