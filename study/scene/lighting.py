@@ -221,9 +221,10 @@ def lighting_colour(exp: Experiment, extent, size: int, seed: int = 0, world_y=N
     hx, hz = exp["pool.half_extent"]
     inside = (np.abs(X) < hx) & (np.abs(Z) < hz) & (world_y < y_cam)
     pool = pool_extent(exp)
-    colour = np.where(inside[..., None], interpolate(lighting, pool, X, Z) * albedo, dry)
-    colour_halves = np.stack([np.where(inside[..., None], interpolate(h, pool, X, Z) * albedo, dry)
-                              for h in halves])
+
+    def compose(light):          # lighting x albedo inside the pool, the dry render outside
+        return np.where(inside[..., None], interpolate(light, pool, X, Z) * albedo, dry)
+    colour, colour_halves = compose(lighting), np.stack([compose(h) for h in halves])
     se = interpolate(lighting_se, pool, X, Z) * albedo
     noise = float(np.sqrt(np.mean(se[inside] ** 2))) if inside.any() else 0.0
     info = {"method": "lighting", "lighting_size": n_light, "spp": exp["reference.texture_spp"],

@@ -259,9 +259,8 @@ def build_shader_inputs(exp: Experiment, width: int | None = None, height: int |
                                                                      progress=st.counter("  passes"))
         tm1 = ortho_tex_matrix(*refl_extent)
     else:
-        above = world_y > 0.0
-        refl_y = np.where(above, world_y, NO_GEOMETRY).astype(np.float32)
-        refl_col = np.where(above[..., None], colour, 0.0).astype(np.float32)
+        refl_y = np.where(world_y > 0.0, world_y, NO_GEOMETRY).astype(np.float32)
+        refl_col = reflection_colour(world_y, colour)
         tm1 = tm
     hx, hz = exp["pool.half_extent"]
     waves = waves_of(exp)
@@ -281,6 +280,12 @@ def build_shader_inputs(exp: Experiment, width: int | None = None, height: int |
         width=width, height=height, refraction_halves=halves)
 
 
+def reflection_colour(world_y: np.ndarray, colour: np.ndarray) -> np.ndarray:
+    """The reflection shader's bottom-up colour without a user mesh: the top-down ``colour``
+    (H, W, 3) where the geometry (``world_y`` (H, W)) rises above the water, 0 elsewhere; float32."""
+    return np.where((world_y > 0.0)[..., None], colour, 0.0).astype(np.float32)
+
+
 def half_inputs(exp: Experiment, inputs: ShaderInputs) -> tuple[ShaderInputs, ShaderInputs]:
     """The inputs with their refraction texture replaced by each of its two independent halves
     (``ShaderInputs.refraction_halves``), the reflection texture too where it is cut from the
@@ -293,9 +298,7 @@ def half_inputs(exp: Experiment, inputs: ShaderInputs) -> tuple[ShaderInputs, Sh
                               "renders; use that method or fit.input_noise = \"ignore\"")
     out = []
     for half in inputs.refraction_halves:
-        refl = inputs.refl_texture
-        if not exp["mesh.file"]:
-            refl = np.where((inputs.world_y > 0.0)[..., None], half, 0.0).astype(np.float32)
+        refl = inputs.refl_texture if exp["mesh.file"] else reflection_colour(inputs.world_y, half)
         out.append(dataclasses.replace(inputs, refraction_texture=half, refl_texture=refl,
                                        refraction_halves=None))
     return out[0], out[1]
