@@ -24,15 +24,24 @@ then the fitted constants of each path against the *baseline* (``clean`` when ru
 ``today``): the difference in the baseline's Gauss-Newton standard errors, each path's standard
 error from its reference's Monte Carlo noise alone (``rel_noise_error``), and FLIP (water pixels,
 full resolution) of each path's fitted shader against the baseline's reference (and against its
-own). With ``--seeds N`` the new path runs with ``reference.seed = 0 .. N-1`` (reference,
-lighting and dry renders all reseeded): its constants are given as mean and standard deviation
-over the seeds, the difference from the baseline also in that standard deviation (what a user
-rerunning the scene would see move), and the stage times are medians over the seeds. With
+own). With ``--seeds N`` the paths named by ``--seed-paths`` (default: the new one) run with
+``reference.seed = 0 .. N-1`` (reference, texture, lighting and dry renders all reseeded): their
+constants are given as mean and standard deviation over the seeds, the difference from the
+baseline also in that standard deviation (what a user rerunning the scene would see move), and
+the stage times are medians over the seeds. When the baseline itself runs over seeds, its seed
+standard deviation is the measured standard error of one of its fits (reference *and* texture
+noise, and the basin a fit lands in, which the Gauss-Newton standard error leaves out), and the
+difference of the means is given in it too, with the standard error of that difference. With
 ``--repeats N`` each run is repeated and medians are printed.
 
+``--merge A.json B.json ...`` prints the tables of earlier ``--json`` results together (the runs
+of one experiment joined by path; a path in a later file replaces the earlier one's), e.g. the
+baseline's seeds run on a GPU beside the new path's on the CPU; each path's variant is printed.
+
     .venv/bin/python benchmarks/bench_new_scene.py [EXPERIMENT.toml ...] [--repeats N]
-        [--paths today new clean] [--seeds N] [--variant cuda_ad_rgb] [--set KEY=VALUE ...]
-        [--json OUT.json]
+        [--paths today new clean] [--seeds N] [--seed-paths today new] [--variant cuda_ad_rgb]
+        [--set KEY=VALUE ...] [--json OUT.json]
+    .venv/bin/python benchmarks/bench_new_scene.py --merge A.json B.json
 """
 from __future__ import annotations
 
@@ -148,7 +157,7 @@ def worker(experiment: str, path: str, out: Path, overrides: list[str], variant:
     params = {n: {"fitted": p["fitted"], "rel_se": p.get("rel_std_error"), "rel_noise": p.get("rel_noise_error"),
                   "status": p["status"]}
               for n, p in summary["parameters"].items()}
-    return {"experiment": name, "path": path, "wall": t.wall, "cpu": t.cpu, "params": params,
+    return {"experiment": name, "path": path, "variant": variant, "wall": t.wall, "cpu": t.cpu, "params": params,
             "flip_own": summary["error"]["flip"]["fitted"], "rmse_own": summary["error"]["rmse"]["fitted"],
             "reference_spp": summary["reference"]["spp"], "reference_noise": summary["reference"]["noise"],
             "kernels": t.kernels, "kernel_cache_hits": t.hits}
@@ -205,7 +214,10 @@ def main() -> None:
     ap.add_argument("experiments", nargs="*", default=None)
     ap.add_argument("--paths", nargs="+", default=["today", "new"], choices=PATHS)
     ap.add_argument("--repeats", type=int, default=1)
-    ap.add_argument("--seeds", type=int, default=1, help="run the new path with reference.seed = 0 .. N-1")
+    ap.add_argument("--seeds", type=int, default=1, help="run --seed-paths with reference.seed = 0 .. N-1")
+    ap.add_argument("--seed-paths", nargs="+", default=["new"], choices=PATHS,
+                    help="the paths that --seeds reseeds (default: new)")
+    ap.add_argument("--merge", nargs="+", type=Path, help="print the tables of earlier --json results together")
     ap.add_argument("--set", dest="overrides", action="append", default=[])
     ap.add_argument("--variant", default="llvm_ad_rgb", choices=["llvm_ad_rgb", "cuda_ad_rgb"])
     ap.add_argument("--json", type=Path)
@@ -224,13 +236,16 @@ def main() -> None:
         args.result.write_text(json.dumps(cross_flip(e, b, json.loads(dirs), args.overrides, args.variant)))
         return
 
+    if args.merge:
+        _print_merged(args.merge)
+        return
     paths = list(dict.fromkeys(args.paths))
     baseline = "clean" if "clean" in paths else "today" if "today" in paths else None
     exps = args.experiments or sorted(str(p) for p in (REPO / "experiments").glob("*.toml"))
     load = os.getloadavg()
     print(f"# bench_new_scene: {os.cpu_count()} cores, load average {load[0]:.1f} / {load[1]:.1f} / "
-          f"{load[2]:.1f} at start; {args.variant}; {args.repeats} repeat(s), {args.seeds} seed(s) of the new "
-          f"path, medians; wall s (CPU s)", flush=True)
+          f"{load[2]:.1f} at start; {args.variant}; {args.repeats} repeat(s), {args.seeds} seed(s) of "
+          f"{' and '.join(args.seed_paths)}, medians; wall s (CPU s)", flush=True)
     results = []
     for e in exps:
         runs = {p: [] for p in paths}
@@ -238,16 +253,20 @@ def main() -> None:
         for r in range(args.repeats):
             for seed in range(args.seeds):
                 for p in paths:              # side by side: today, new, today, new, ...
-                    if p != "new" and seed > 0:
+                    if p not in args.seed_paths and seed > 0:
                         continue
                     d = Path(tempfile.mkdtemp(prefix=f"bench_{Path(e).stem}_{p}_"))
-                    sets = args.overrides + ([f"reference.seed={seed}"] if p == "new" and args.seeds > 1 else [])
+                    seeded = p in args.seed_paths and args.seeds > 1
+                    sets = args.overrides + ([f"reference.seed={seed}"] if seeded else [])
                     runs[p].append(dict(_run(["--worker", e, p, str(d), "--variant", args.variant,
                                               *sum((["--set", s] for s in sets), [])]), seed=seed))
                     if seed == 0:
                         dirs[p] = str(d)
                     print(f"  {Path(e).stem} {p} run {r + 1} seed {seed}: {runs[p][-1]['wall']['total']:.1f} s wall",
                           flush=True)
+                    if args.json:            # after every run: a run cut short loses only itself
+                        args.json.write_text(json.dumps(results + [{"experiment": Path(e).stem, "baseline": baseline,
+                                                                     "runs": runs, "cross": {}}], indent=1))
         cross = (_run(["--cross", e, baseline, json.dumps(dirs), "--variant", args.variant,
                        *sum((["--set", s] for s in args.overrides), [])])
                  if baseline and len(paths) > 1 else {})
@@ -283,6 +302,7 @@ def _print(name: str, runs: dict, cross: dict, baseline: str | None) -> None:
     first = {p: [r for r in runs[p] if r["seed"] == 0][-1] for p in paths}
     print("\n| | " + " | ".join(paths) + " |")
     print("|---|" + "---|" * len(paths))
+    print("| variant | " + " | ".join(first[p].get("variant", "llvm_ad_rgb") for p in paths) + " |")
     print("| reference spp, noise | " + " | ".join(f"{first[p]['reference_spp']}, {first[p]['reference_noise']:.4f}"
                                              for p in paths) + " |")
     print("| FLIP / RMSE vs own reference | " + " | ".join(f"{first[p]['flip_own']:.4f} / {first[p]['rmse_own']:.4f}"
@@ -303,6 +323,30 @@ def _print(name: str, runs: dict, cross: dict, baseline: str | None) -> None:
         return
     others = [p for p in paths if p != baseline]
     base = first[baseline]["params"]
+    nb = len({r["seed"] for r in runs[baseline]})
+    if nb > 1:      # the baseline's own seed spread: the measured standard error of one of its fits
+        print(f"\n| constant | {baseline}: mean +- SD over {nb} seeds (GN rel. SE of seed 0) | " + " | ".join(
+            f"{p}: mean +- SD over seeds | ({p} - {baseline}) / {baseline}'s seed SD (+- SE of the difference) "
+            f"| in GN SE" for p in others) + " |")
+        print("|---|---|" + "---|---|---|" * len(others))
+        for n, pa in base.items():
+            mb, sb, kb = _seed_stats(runs[baseline], n)
+            se_abs = pa["rel_se"] * abs(pa["fitted"]) if pa["rel_se"] and pa["fitted"] is not None else None
+            cells = []
+            for p in others:
+                mp, sp, kp = _seed_stats(runs[p], n)
+                if mp is None or mb is None:
+                    cells.append(f"{_v(mp)} | - | -")
+                    continue
+                d = mp - mb
+                z = d / sb if sb else None
+                sd_d = ((sb ** 2 / kb if sb else 0.0) + (sp ** 2 / kp if sp else 0.0)) ** 0.5
+                zd = f" (+- {_v(sd_d / sb, 2)})" if sb and sd_d else ""
+                cells.append(f"{_v(mp)} +- {_v(sp, 2)} ({kp}) | {_v(z, 2)}{zd} | {_v(d / se_abs if se_abs else None, 2)}")
+            print(f"| {n} | {_v(mb)} +- {_v(sb, 2)} ({kb}) ({_v(pa['rel_se'])}) [{pa['status']}] | "
+                  + " | ".join(cells) + " |")
+        sys.stdout.flush()
+        return
     print(f"\n| constant | {baseline} (rel. SE; from reference noise) | " + " | ".join(
         f"{p} (from reference noise, or mean +- SD over seeds) | ({p} - {baseline}) / SE" for p in others) + " |")
     print("|---|---|" + "---|---|" * len(others))
@@ -322,6 +366,21 @@ def _print(name: str, runs: dict, cross: dict, baseline: str | None) -> None:
                 cells.append(f"{_v(mean)} ({_v(pb.get('rel_noise'))}) [{pb.get('status')}] | {_v(z, 2)}")
         print(f"| {n} | {_v(va)} ({_v(se)}; {_v(pa.get('rel_noise'))}) [{pa['status']}] | " + " | ".join(cells) + " |")
     sys.stdout.flush()
+
+
+def _print_merged(files: list[Path]) -> None:
+    """The tables of earlier ``--json`` results, the runs of one experiment joined by path."""
+    merged: dict[str, dict] = {}
+    for f in files:
+        for res in json.loads(f.read_text()):
+            m = merged.setdefault(res["experiment"], {"runs": {}, "cross": {}})
+            m["runs"].update({p: r for p, r in res["runs"].items() if r})
+            m["cross"].update(res.get("cross") or {})
+    for name, m in merged.items():
+        runs = {p: m["runs"][p] for p in PATHS if p in m["runs"]}
+        baseline = "clean" if "clean" in runs else "today" if "today" in runs else None
+        cross = m["cross"] if all(p in m["cross"] for p in runs) else {}
+        _print(name, runs, cross, baseline)
 
 
 def _v(x, p=4):
