@@ -11,6 +11,8 @@ reference (the experiment's ``reference.spp``), and the script prints:
   (the highest raw spp of the list): ``(c - c_best) / SE_best``, SE the Gauss-Newton standard
   error at the solution,
 * FLIP and RMSE of the fitted shader at full resolution against the reference (water pixels),
+* the texture's mean per colour channel over the pool against the yardstick's (a denoiser's
+  bias in brightness; the raw textures' means are unbiased),
 * what the texture lost against the best one inside the pool: the RMS relative difference of
   the refraction texture, and the *detail kept*: the energy of its high-pass part (texture minus
   a Gaussian blur of 1.5 lighting texels) as a fraction of the best texture's (caustics and
@@ -125,14 +127,15 @@ def main() -> None:
             yard = row
         row["rel_diff"] = float(np.sqrt(np.mean(((tex - yard["tex"]) / np.maximum(yard["tex"], 1e-4))[inside] ** 2)))
         row["detail"] = row["hp_energy"] / yard["hp_energy"]
+        row["mean_ratio"] = (tex[inside].mean(0) / yard["tex"][inside].mean(0)).tolist()
         rows.append(row)
         print(f"{label:>10}: FLIP {e['flip']:.4f} " + " ".join(f"{n}={_g(v)}" for n, (v, _, _) in params.items()),
               flush=True)
 
     names = list(yard["params"])
-    print("\n| texture | input build s | FLIP | RMSE | texture RMS rel. diff | detail kept | "
-          + " | ".join(names) + " |")
-    print("|---|---|---|---|---|---|" + "---|" * len(names))
+    print("\n| texture | input build s | FLIP | RMSE | texture RMS rel. diff | detail kept | mean R / G / B vs "
+          "the yardstick's | " + " | ".join(names) + " |")
+    print("|---|---|---|---|---|---|---|" + "---|" * len(names))
     for r in rows:
         cells = []
         for n in names:
@@ -141,7 +144,8 @@ def main() -> None:
             z = (v - vb) / seb if r is not yard and v is not None and vb is not None and seb else None
             cells.append(f"{_g(v)}" + (f" ({z:+.2f} SE)" if z is not None else "") + ("" if st == "fitted" else f" {st}"))
         print(f"| {r['label']} | {_g(r['seconds'], 3) if r['seconds'] else 'cached'} | {r['flip']:.4f} | "
-              f"{r['rmse']:.4f} | {r['rel_diff']:.3f} | {r['detail']:.2f} | " + " | ".join(cells) + " |")
+              f"{r['rmse']:.4f} | {r['rel_diff']:.3f} | {r['detail']:.2f} | "
+              + " / ".join(f"{m:.3f}" for m in r["mean_ratio"]) + " | " + " | ".join(cells) + " |")
     if args.json:
         args.json.write_text(json.dumps([{k: v for k, v in r.items() if k != "tex"} for r in rows], indent=1))
 

@@ -163,7 +163,7 @@ def run_calibrate(experiment, out, overrides=None, variant=None, solver=None, ca
     constants.json in ``out``."""
     from ._backend import drjit_backend
     from .fit.calibrate import calibrate_model, scene_frozen, timed
-    from .fit.decorrelated import half_models
+    from .fit.decorrelated import half_models, texture_half_models
     from .report.export import export_shaders
     from .report.calibration import comparison_figure, diagnostics_figure, loss_figure
     from ._metrics import errors, information_criteria
@@ -184,11 +184,13 @@ def run_calibrate(experiment, out, overrides=None, variant=None, solver=None, ca
     with timed(timings, "model_s"):
         model = ShaderModel.from_experiment(exp, inputs, ref.image, backend=backend, stderr_full=ref.stderr)
         halves = half_models(exp, inputs, ref.image, backend=backend)
+        check = halves or texture_half_models(exp, inputs, ref.image, backend=backend)
     _log(f"calibrate: fitting {exp['fit.parameters']} of {model.shader} with {solver} on "
          f"{int(model.mask.sum())} water pixels at {exp['fit.resolution'][0]}x{exp['fit.resolution'][1]}")
     with timed(timings, "fit_s"):
         cal = calibrate_model(model, start, exp["fit.parameters"], solver, exp["fit.max_steps"],
-                              frozen_by_scene=scene_frozen(exp), halves=halves, scan_basins=True)
+                              frozen_by_scene=scene_frozen(exp), halves=halves, scan_basins=True,
+                              basin_check=check)
     with timed(timings, "evaluate_s"):
         w, h = exp["resolution"]
         full = ShaderModel.from_experiment(exp, inputs, ref.image, backend=backend, resolution=(w, h))

@@ -128,3 +128,58 @@ def test_restart_from_a_lower_basin_keeps_the_lower_solution(noisy_model, monkey
     if not r["kept"]:
         assert get_value(cal.fitted, "bumptex_mult") == get_value(first.fitted, "bumptex_mult")
     assert "refitted from there" in "\n".join(basin_lines(cal.parameters))
+
+
+def _half_models(model, noise: float, seed: int):
+    """Two models on independently noisy copies of ``model``'s refraction texture (the halves)."""
+    import dataclasses
+    rng = np.random.default_rng(seed)
+    tex = np.asarray(model.inputs.refraction_texture)
+    return tuple(ShaderModel("water_refraction", dataclasses.replace(
+        model.inputs, refraction_texture=(tex * (1.0 + noise * rng.standard_normal(tex.shape))).astype(np.float32)),
+        model.reference, reference_stderr=model.reference_stderr) for _ in range(2))
+
+
+def test_texture_delta_is_the_noise_free_loss_difference(noisy_model):
+    """The halves' decorrelated loss difference between two bump scales averages to the
+    noise-free texture's least-squares difference (each half 30 % noisy per texel), where least
+    squares on one noisy half is biased by the noise."""
+    from study.fit.basins import texture_delta
+    at = Constants(attenuation_distance=5.0, bumptex_mult=0.7, water_color=(0.1, 0.3, 0.2, 1.0))
+    r0, r1 = (noisy_model.residual(c) for c in (at, Constants(attenuation_distance=5.0, bumptex_mult=0.8,
+                                                               water_color=(0.1, 0.3, 0.2, 1.0))))
+    clean = 0.5 * float(r1 @ r1 - r0 @ r0)
+    deltas = [texture_delta(*_half_models(noisy_model, 0.3, s), at, "bumptex_mult", 0.8) for s in range(6)]
+    assert clean > 0 and abs(np.mean(deltas) - clean) < 0.1 * clean, (np.mean(deltas), clean)
+
+
+def test_a_lower_basin_the_texture_halves_do_not_confirm_is_reported_not_refitted(noisy_model, monkeypatch):
+    """The made-up lower basin at 0.9 (truth 0.7) of the restart test, with the texture's halves
+    given: their decorrelated loss puts 0.9 higher, so the fit is not restarted, the basin is
+    recorded as unconfirmed and the report says why; with halves that confirm it, it restarts."""
+    from study.fit import basins
+    from study.report.calibration import basin_lines
+    real_scan = basins.scan
+
+    def fake_scan(model, at, name, sigma=None, **kw):
+        out = real_scan(model, at, name, sigma, **kw)
+        out["basins"].append({"value": 0.9, "delta_loss": -1.0, "noise_sd": 0.1, "indistinguishable": False})
+        out["lower"] = [0.9]
+        return out
+    monkeypatch.setattr(basins, "scan", fake_scan)
+    requested = ["attenuation_distance", "bumptex_mult", "water_color"]
+    halves = _half_models(noisy_model, 0.1, 7)
+    first = calibrate_model(noisy_model, Constants(), requested, "levenberg_marquardt", 100)
+    cal = calibrate_model(noisy_model, Constants(), requested, "levenberg_marquardt", 100, scan_basins=True,
+                          basin_check=halves)
+    b = cal.parameters["bumptex_mult"]["basins"]
+    assert "restart" not in b and cal.fit_summary["rounds"] == first.fit_summary["rounds"]
+    assert get_value(cal.fitted, "bumptex_mult") == get_value(first.fitted, "bumptex_mult")
+    assert [o["value"] for o in b["unconfirmed"]] == [0.9] and b["unconfirmed"][0]["texture_delta"] > 0
+    text = "\n".join(basin_lines(cal.parameters))
+    assert "not refitted" in text and "stopped short" not in text
+    monkeypatch.setattr(basins, "texture_delta", lambda *a, **k: -0.5)     # halves that agree
+    cal = calibrate_model(noisy_model, Constants(), requested, "levenberg_marquardt", 100, scan_basins=True,
+                          basin_check=halves)
+    r = cal.parameters["bumptex_mult"]["basins"]["restart"]
+    assert r["to"] == 0.9 and r["texture_delta"] == -0.5

@@ -177,7 +177,8 @@ def steps_to_within(step_losses: list, frac: float = 1e-3) -> int | None:
 
 def calibrate_model(model: ShaderModel, start: Constants, requested: list[str], solver: str,
                     max_steps: int, frozen_by_scene: dict | None = None,
-                    halves: tuple | None = None, scan_basins: bool = False) -> Calibration:
+                    halves: tuple | None = None, scan_basins: bool = False,
+                    basin_check: tuple | None = None) -> Calibration:
     """Steps 2-5 of the module docstring on a prepared model. ``frozen_by_scene``: name ->
     reason for constants frozen before looking at the Jacobian (:func:`scene_frozen`).
     ``halves``: two models on the refraction texture's independent halves
@@ -189,6 +190,10 @@ def calibrate_model(model: ShaderModel, start: Constants, requested: list[str], 
     stopped at a jump of the piecewise loss), refit once from the lowest such basin and keep
     whichever solution has the lower loss; then scan again at the solution and record the basins
     the noise cannot tell apart, and the restart, in ``parameters[name]["basins"]``.
+    ``basin_check``: two models on the texture's independent halves
+    (``study.fit.decorrelated.texture_half_models``); when given, a lower basin is refitted only
+    if their decorrelated loss puts it lower too (``study.fit.basins.texture_delta``); one it
+    does not is recorded as ``unconfirmed`` and reported.
     ``requested`` names the seed's constants; a variant fits its own in their place
     (``Variant.fit_names``, e.g. the Beer-Lambert absorptions for ``attenuation_distance``)."""
     names = expand_parameters(model.variant.fit_names(requested))
@@ -250,7 +255,7 @@ def calibrate_model(model: ShaderModel, start: Constants, requested: list[str], 
         if worst is None or judged[worst] <= REL_SE_MAX or rnd >= SE_ROUNDS:
             if scan_basins and restart is None:
                 restart = _basin_restart(model, fitted, [inner[i] for i in live], sigma_m, result.loss,
-                                         scanned)
+                                         scanned, basin_check)
                 if restart:
                     before_restart = (result, fitted, bound, inner, r1, J1, id1, live, vals, se,
                                       dict(frozen), list(free))
@@ -307,9 +312,11 @@ def calibrate_model(model: ShaderModel, start: Constants, requested: list[str], 
                                                            "the fit's"),
                                   ("lower", "basins lower than the fit's by more than the reference's noise "
                                             "explains (the solver stopped short)")):
-                    if scans[n][key]:
+                    told = {o["value"] for o in scans[n].get("unconfirmed", [])}
+                    values = [v for v in scans[n][key] if key != "lower" or v not in told]
+                    if values:
                         _log(f"calibrate: {n}: {what} ({get_value(fitted, n):.4g}): "
-                             f"{', '.join(f'{v:.4g}' for v in scans[n][key])}")
+                             f"{', '.join(f'{v:.4g}' for v in values)}")
     ident = {"start": _ident_dict(id0, continuous)} if id0 is not None else {}
     if id1 is not None:
         inner = list(id1.names)
@@ -358,24 +365,35 @@ def calibrate_model(model: ShaderModel, start: Constants, requested: list[str], 
 
 
 def _basin_restart(model, fitted: Constants, live: list[str], sigma_m, loss: float,
-                   scanned: dict) -> dict | None:
+                   scanned: dict, check: tuple | None = None) -> dict | None:
     """The restart the basin scan asks for: the lowest basin of a ``BASIN_PARAMETERS`` constant
-    that is lower than the fit's by more than the reference's noise explains (``name``, ``from``,
-    ``to``, ``loss_before``), or None. Each scan goes into ``scanned`` (name -> (``fitted``,
-    scan)), so that the report reuses it when the solution does not move."""
-    from .basins import BASIN_PARAMETERS, scan
+    that is lower than the fit's by more than the reference's noise explains and, with ``check``
+    (two models on the texture's halves), lower in their decorrelated loss too (``name``,
+    ``from``, ``to``, ``loss_before``, ``texture_delta``), or None. Each scan goes into
+    ``scanned`` (name -> (``fitted``, scan)), so that the report reuses it when the solution does
+    not move; a lower basin the halves do not confirm is added to the scan's ``unconfirmed``."""
+    from .basins import BASIN_PARAMETERS, scan, texture_delta
     for n in BASIN_PARAMETERS:
         if n not in live or sigma_m is None:
             continue
         s = scan(model, fitted, n, sigma_m)
         scanned[n] = (fitted, s)
-        lower = [b for b in s["basins"] if b["value"] in s["lower"]]
-        if lower:
-            best = min(lower, key=lambda b: b["delta_loss"])
+        s["unconfirmed"] = []
+        for best in sorted((b for b in s["basins"] if b["value"] in s["lower"]), key=lambda b: b["delta_loss"]):
+            td = texture_delta(check[0], check[1], fitted, n, best["value"]) if check else None
+            if td is not None and td >= 0.0:
+                s["unconfirmed"].append({**best, "texture_delta": td})
+                _log(f"calibrate: {n}: a basin at {best['value']:.4g} is lower than the fit's "
+                     f"({get_value(fitted, n):.4g}) by {-best['delta_loss']:.4g} (+- {best['noise_sd']:.2g} from the "
+                     f"reference's noise), but higher by {td:.4g} in the decorrelated loss of the texture's "
+                     "independent halves: the texture's noise or denoiser makes it lower; not refitted")
+                continue
             _log(f"calibrate: {n}: a basin at {best['value']:.4g} is lower than the fit's "
                  f"({get_value(fitted, n):.4g}) by {-best['delta_loss']:.4g} (+- {best['noise_sd']:.2g} from the "
-                 "reference's noise); refitting from there")
-            return {"name": n, "from": get_value(fitted, n), "to": best["value"], "loss_before": float(loss)}
+                 "reference's noise" + (f"; by {-td:.4g} in the texture halves' decorrelated loss" if check else "")
+                 + "); refitting from there")
+            return {"name": n, "from": get_value(fitted, n), "to": best["value"], "loss_before": float(loss),
+                    "texture_delta": td}
     return None
 
 

@@ -172,3 +172,14 @@ def half_models(exp, inputs, reference: np.ndarray, **kwargs) -> tuple | None:
     from ..scene.shader_inputs import half_inputs
     from .model import ShaderModel
     return tuple(ShaderModel.from_experiment(exp, h, reference, **kwargs) for h in half_inputs(exp, inputs))
+
+
+def texture_half_models(exp, inputs, reference: np.ndarray, **kwargs) -> tuple | None:
+    """The two ``ShaderModel`` on the refraction texture's halves whenever the inputs carry them
+    (``reference.texture_method = "lighting"``), whatever ``fit.input_noise`` says, else None:
+    the basin scan's check of a lower basin (``study.fit.basins.texture_delta``)."""
+    if inputs.refraction_halves is None:
+        return None
+    from ..scene.shader_inputs import half_inputs
+    from .model import ShaderModel
+    return tuple(ShaderModel.from_experiment(exp, h, reference, **kwargs) for h in half_inputs(exp, inputs))

@@ -126,9 +126,18 @@ def basin_lines(parameters: dict) -> list[str]:
                          "by more than the reference's noise explains (the loss is piecewise); refitted from there: "
                          f"loss {_fmt(r['loss_before'])} -> {_fmt(r['loss_after'])}, "
                          + ("kept." if r["kept"] else "not lower, so the first solution is exported."))
+        unconfirmed = {o["value"]: o for o in b.get("unconfirmed", [])}
         lower = [o for o in b["basins"] if o["value"] in b.get("lower", [])]
         close = [o for o in b["basins"] if o["indistinguishable"]]
         for o in lower:
+            if o["value"] in unconfirmed:
+                lines.append(f"`{name}`: a basin of the loss at {_fmt(o['value'])} is lower than the fit's by "
+                             f"{_fmt(-o['delta_loss'])} (+- {_fmt(o['noise_sd'])} from the reference's noise) in "
+                             "this texture, but higher by "
+                             f"{_fmt(unconfirmed[o['value']]['texture_delta'])} in the decorrelated loss of the "
+                             "texture's independent halves (unbiased for the noise-free texture): the texture's "
+                             "noise or its denoiser makes it lower, so it was not refitted.")
+                continue
             lines.append(f"`{name}`: a basin of the loss at {_fmt(o['value'])} is lower than the fit's by "
                          f"{_fmt(-o['delta_loss'])}, more than the reference's noise explains "
                          f"(+- {_fmt(o['noise_sd'])}): the solver stopped short of it (the loss is piecewise).")

@@ -336,6 +336,9 @@ def load_or_build_shader_inputs(exp: Experiment, variant: str, cache=None, log=p
         inputs.save(path)
     tex = info["texture"]
     noise = f", texture noise {tex['noise']:.2e} (RMS standard error on the pool)" if tex.get("noise") else ""
+    if tex.get("denoise_gain"):
+        noise += (", denoised / raw lighting mean R / G / B " + " / ".join(f"{g:.3f}" for g in tex["denoise_gain"])
+                  + " (+- " + " / ".join(f"{e:.3f}" for e in tex["denoise_gain_se"]) + ")")
     log(f"shader inputs: built ({tex['method']} texture, {tex['spp']} spp{noise}) and cached at {path}")
     return inputs
 
