@@ -24,9 +24,10 @@ standard error). Where the texture has two independent halves (``reference.textu
 "lighting"``), a lower basin must also be lower in their *decorrelated* loss
 (:func:`texture_delta`; ``study.fit.decorrelated``), whose expectation is the noise-free
 texture's loss: the texture's noise, or the bias of its denoiser, can make a basin lower in
-the texture's own loss (on afternoon_steps the denoised lighting put the 0.756 basin 0.1 below
-the 0.817 one on two seeds of five, where the raw halves' decorrelated loss and the clean
-texture put it higher). Such a basin is reported, not refitted. One scan costs ``POINTS`` renders at the fit resolution (0.4-0.9 s at
+the texture's own loss (on afternoon_steps the denoised lighting put a basin at 0.76 below the
+fit's 0.82 by 4-5 noise SD on two seeds of five, where the halves' decorrelated loss put it
+higher by 0.05-0.08 and the clean texture's fits all land at 0.825). Such a basin is reported,
+not refitted. One scan costs ``POINTS`` renders at the fit resolution (0.4-0.9 s at
 128 x 128 on 2 cores).
 """
 from __future__ import annotations
