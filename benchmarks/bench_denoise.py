@@ -1,7 +1,8 @@
 """Fitted constants against how the lighting texture is made: raw path tracing at several spp
 against fewer samples denoised by Intel Open Image Denoise (``reference.lighting_denoise``).
 
-For each texture setting ``METHOD:SPP`` (``raw`` or ``oidn``; lighting at
+For each texture setting ``METHOD:SPP`` (``raw``, ``oidn`` or ``oidn_unmatched``: the values of
+``reference.lighting_denoise``, ``raw`` for ``none``; lighting at
 ``reference.lighting_size`` texels, ``reference.texture_method = "lighting"``) the shader inputs
 are built (cached in ``--cache``, so a re-run only fits), the shader is fitted against the same
 reference (the experiment's ``reference.spp``), and the script prints:
@@ -63,8 +64,9 @@ def main() -> None:
     settings = []
     for item in args.textures:
         parts = item.split(":")
-        if len(parts) not in (2, 3) or parts[0] not in ("raw", "oidn") or not all(p.isdigit() for p in parts[1:]):
-            ap.error(f"--textures {item!r}: expected raw:SPP, oidn:SPP or METHOD:SPP:SEED")
+        if (len(parts) not in (2, 3) or parts[0] not in ("raw", "oidn", "oidn_unmatched")
+                or not all(p.isdigit() for p in parts[1:])):
+            ap.error(f"--textures {item!r}: expected raw:SPP, oidn:SPP, oidn_unmatched:SPP or METHOD:SPP:SEED")
         settings.append((parts[0], int(parts[1]), int(parts[2]) if len(parts) == 3 else None))
     raws = [s for s in settings if s[0] == "raw"]
     if not raws:
@@ -102,7 +104,7 @@ def main() -> None:
         label = f"{method}:{spp}" + (f" seed {seed}" if seed is not None else "")
         exp = load_experiment(args.experiment, args.overrides + [
             "reference.texture_method=\"lighting\"", f"reference.texture_spp={spp}",
-            f"reference.lighting_denoise=\"{'oidn' if method == 'oidn' else 'none'}\""]
+            f"reference.lighting_denoise=\"{'none' if method == 'raw' else method}\""]
             + ([f"reference.seed={seed}"] if seed is not None else []))
         key = exp.inputs_hash()
         t0 = time.perf_counter()

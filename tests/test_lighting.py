@@ -117,3 +117,29 @@ def test_denoise_gain_measures_a_brightness_bias_with_its_standard_error():
     g, e = lighting.denoise_gain(truth * [1.06, 1.0, 1.0], raw, sd)
     assert abs(g[0] - 1.06) < 3 * e[0] and abs(g[1] - 1.0) < 3 * e[1] and abs(g[2] - 1.0) < 3 * e[2]
     assert e[0] < 0.01                                     # precise enough to see a 6 % bias
+
+
+def test_denoised_texture_keeps_the_raw_mean_and_reports_the_denoiser_bias(mi):
+    """``reference.lighting_denoise = "oidn"``: the denoised texture's mean over the pool is the
+    raw mean of the same samples in every colour channel (the path tracer's brightness), the
+    denoiser's own ratio is reported, and ``"oidn_unmatched"`` keeps it: its texture's mean over
+    the pool is the raw one times that ratio; outside the pool both are the dry render."""
+    base = {"reference.texture_size": "32", "reference.lighting_size": "16", "reference.texture_spp": "16",
+            "reference.wall_spp": "16"}
+    exp = small_experiment(**base, **{"reference.lighting_denoise": '"oidn"'})
+    raw_exp = small_experiment(**base, **{"reference.lighting_denoise": '"oidn_unmatched"'})
+    extent = texture_extent(exp)
+    world_y = top_down_world_y(exp, extent, 32)
+    got, info, halves = lighting.lighting_colour(exp, extent, 32, seed=2, world_y=world_y)
+    kept, info_u, _ = lighting.lighting_colour(raw_exp, extent, 32, seed=2, world_y=world_y)
+    X, Z = lighting.texel_centres(extent, 32)
+    hx, hz = exp["pool.half_extent"]
+    inside = (np.abs(X) < hx) & (np.abs(Z) < hz) & (world_y < 0.0)
+    raw_mean = halves.mean(0)[inside].mean(0)
+    np.testing.assert_allclose(got[inside].mean(0), raw_mean, rtol=1e-4)
+    assert info["denoise_matched"] and "denoise_matched" not in info_u
+    np.testing.assert_allclose(info["denoise_gain"], info_u["denoise_gain"], rtol=1e-6)
+    np.testing.assert_allclose(kept[inside].mean(0), raw_mean * np.array(info_u["denoise_gain"]), rtol=1e-4)
+    assert all(0 < e < 0.1 for e in info["denoise_gain_se"])
+    outside = ~((np.abs(X) < hx) & (np.abs(Z) < hz))
+    np.testing.assert_array_equal(got[outside], kept[outside])

@@ -171,9 +171,11 @@ SCHEMA: dict[str, Field] = {
                                      "pool (`texture_method = \"lighting\"`; at most `reference.texture_size`).", "texels", 8, 4096),
     "reference.lighting_denoise": Field("str", "oidn", "Denoise the lighting render (`texture_method = "
                                         "\"lighting\"`): `oidn` (Intel Open Image Denoise, guided by the floor "
-                                        "albedo) or `none` (raw path tracing: raise `reference.texture_spp` to "
-                                        "256 or more). Measured effect on the fitted constants: README, Fast "
-                                        "references.", choices=("none", "oidn")),
+                                        "albedo, the texture's mean over the pool then matched per colour channel "
+                                        "to the raw mean of the same samples), `oidn_unmatched` (denoised, its "
+                                        "own brightness kept) or `none` (raw path tracing: raise "
+                                        "`reference.texture_spp` to 256 or more). Measured effect on the fitted "
+                                        "constants: README, Fast references.", choices=("none", "oidn", "oidn_unmatched")),
     "reference.wall_spp": Field("int", 16, "Samples per pixel of the dry colour render used "
                                 "outside the pool and for the floor albedo (`texture_method = "
                                 "\"lighting\"`; multi-jittered, rounded up to its grid).", "", 1, 65536),

@@ -35,7 +35,7 @@ from shaders_port import ShaderInputs, fresnel_lut, ortho_tex_matrix
 from .experiment import Experiment
 from .mitsuba_scene import build_geometry, camera_view_proj, waves_of
 
-INPUTS_VERSION = 8        # bump whenever the construction of the inputs below changes
+INPUTS_VERSION = 9        # bump whenever the construction of the inputs below changes
 NO_GEOMETRY = -1e3
 CUBEMAP_SIZE = 64
 FRESNEL_SIZE = 256
@@ -337,8 +337,10 @@ def load_or_build_shader_inputs(exp: Experiment, variant: str, cache=None, log=p
     tex = info["texture"]
     noise = f", texture noise {tex['noise']:.2e} (RMS standard error on the pool)" if tex.get("noise") else ""
     if tex.get("denoise_gain"):
-        noise += (", denoised / raw lighting mean R / G / B " + " / ".join(f"{g:.3f}" for g in tex["denoise_gain"])
-                  + " (+- " + " / ".join(f"{e:.3f}" for e in tex["denoise_gain_se"]) + ")")
+        noise += (", denoised / raw texture mean on the pool R / G / B "
+                  + " / ".join(f"{g:.3f}" for g in tex["denoise_gain"])
+                  + " (+- " + " / ".join(f"{e:.3f}" for e in tex["denoise_gain_se"]) + ")"
+                  + (", matched to the raw mean" if tex.get("denoise_matched") else ""))
     log(f"shader inputs: built ({tex['method']} texture, {tex['spp']} spp{noise}) and cached at {path}")
     return inputs
 
