@@ -165,21 +165,24 @@ def refine(model_a, model_b, params: dict, start: Constants, names: list[str],
 
 def half_models(exp, inputs, reference: np.ndarray, **kwargs) -> tuple | None:
     """The two ``ShaderModel`` of ``exp`` on the refraction texture's halves
-    (``study.scene.shader_inputs.half_inputs``) when ``fit.input_noise = "decorrelate"``, else
-    None. ``kwargs`` go to ``ShaderModel.from_experiment`` (``backend``, ``shader``...)."""
+    (``study.scene.shader_inputs.half_inputs``, which raises ExperimentError without them) when
+    ``fit.input_noise = "decorrelate"``, else None. ``kwargs`` go to
+    ``ShaderModel.from_experiment`` (``backend``, ``shader``...)."""
     if exp["fit.input_noise"] != "decorrelate":
         return None
-    from ..scene.shader_inputs import half_inputs
-    from .model import ShaderModel
-    return tuple(ShaderModel.from_experiment(exp, h, reference, **kwargs) for h in half_inputs(exp, inputs))
+    return _models_on_halves(exp, inputs, reference, **kwargs)
 
 
 def texture_half_models(exp, inputs, reference: np.ndarray, **kwargs) -> tuple | None:
-    """The two ``ShaderModel`` on the refraction texture's halves whenever the inputs carry them
-    (``reference.texture_method = "lighting"``), whatever ``fit.input_noise`` says, else None:
-    the basin scan's check of a lower basin (``study.fit.basins.texture_delta``)."""
+    """The same two models whenever the inputs carry halves (``reference.texture_method =
+    "lighting"``), whatever ``fit.input_noise`` says, else None: the basin scan's check of a
+    lower basin (``study.fit.basins.texture_delta``)."""
     if inputs.refraction_halves is None:
         return None
+    return _models_on_halves(exp, inputs, reference, **kwargs)
+
+
+def _models_on_halves(exp, inputs, reference: np.ndarray, **kwargs) -> tuple:
     from ..scene.shader_inputs import half_inputs
     from .model import ShaderModel
     return tuple(ShaderModel.from_experiment(exp, h, reference, **kwargs) for h in half_inputs(exp, inputs))
