@@ -117,6 +117,9 @@ def test_denoise_gain_measures_a_brightness_bias_with_its_standard_error():
     g, e = lighting.denoise_gain(truth * [1.06, 1.0, 1.0], raw, sd)
     assert abs(g[0] - 1.06) < 3 * e[0] and abs(g[1] - 1.0) < 3 * e[1] and abs(g[2] - 1.0) < 3 * e[2]
     assert e[0] < 0.01                                     # precise enough to see a 6 % bias
+    dark = truth * [0.0, 1.0, 1.0]                         # a channel without light: nothing to match
+    g, e = lighting.denoise_gain(dark, dark, sd * [0.0, 1.0, 1.0])
+    assert g[0] == 1.0 and e[0] == 0.0 and np.all(np.isfinite(g + e))
 
 
 def test_denoised_texture_keeps_the_raw_mean_and_reports_the_denoiser_bias(mi):

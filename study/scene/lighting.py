@@ -29,9 +29,10 @@ Noise is measured, not assumed: the lighting is the mean of ``N_SEEDS`` renders 
 independent seeds, and the RMS standard error of the resulting colour over the pool texels
 (linear RGB) is returned with the texture.
 
-With ``reference.lighting_denoise = "oidn"`` (or ``"oidn_unmatched"``) the mean radiance is denoised by Intel Open Image
-Denoise (``pyoidn``, the ``RT`` filter in HDR mode, guided by the floor albedo from the same
-samples, which is noise-free under the orthographic camera) before the division by the albedo.
+With ``reference.lighting_denoise = "oidn"`` (or ``"oidn_unmatched"``) the mean radiance is
+denoised by Intel Open Image Denoise (``pyoidn``, the ``RT`` filter in HDR mode, guided by the
+floor albedo from the same samples, which is noise-free under the orthographic camera) before
+the division by the albedo.
 A denoiser trades variance for a bias of its own (it blurs what it takes for noise, caustics
 first); ``benchmarks/bench_denoise.py`` measures what it does to the fitted constants. The
 standard error returned is then that of the *input* to the denoiser. Its bias in brightness is
@@ -127,11 +128,14 @@ def denoise_gain(denoised: np.ndarray, raw: np.ndarray, raw_se: np.ndarray,
     they were denoised from (each (..., 3), linear RGB), and the standard error of that ratio from
     the raw texels' standard errors ``raw_se`` (..., 3), ``n_independent`` of them independent
     (default: every texel). The raw mean is unbiased, so a ratio away from 1 by several standard
-    errors is the denoiser's own bias in the texture's brightness (README, Fast references)."""
-    m_raw = raw.reshape(-1, 3).mean(0)
-    gain = denoised.reshape(-1, 3).mean(0) / m_raw
+    errors is the denoiser's own bias in the texture's brightness (README, Fast references). A
+    channel whose raw mean is not positive (no light at all) gets the ratio 1 and error 0."""
+    m_raw = raw.reshape(-1, 3).astype(np.float64).mean(0)
+    lit = m_raw > 0.0
+    safe = np.where(lit, m_raw, 1.0)
+    gain = np.where(lit, denoised.reshape(-1, 3).mean(0) / safe, 1.0)
     n = raw.size // 3 if n_independent is None else n_independent
-    se = np.sqrt((raw_se.reshape(-1, 3).astype(np.float64) ** 2).mean(0) / n) / m_raw * gain
+    se = np.where(lit, np.sqrt((raw_se.reshape(-1, 3).astype(np.float64) ** 2).mean(0) / n) / safe * gain, 0.0)
     return [float(g) for g in gain], [float(e) for e in se]
 
 
@@ -256,6 +260,7 @@ def lighting_colour(exp: Experiment, extent, size: int, seed: int = 0, world_y=N
                                      n_independent=n_light ** 2 * float(inside.mean()))
         info["denoise_gain"], info["denoise_gain_se"] = gain, gain_se
         if exp["reference.lighting_denoise"] == "oidn":      # the path tracer's brightness, the denoiser's detail
-            colour = np.where(inside[..., None], colour / np.asarray(gain, np.float32), colour)
+            g = np.asarray(gain, np.float32)
+            colour = np.where(inside[..., None], colour / np.where(g > 0.0, g, 1.0), colour)
             info["denoise_matched"] = True
     return colour.astype(np.float32), info, colour_halves.astype(np.float32)
