@@ -308,12 +308,12 @@ def calibrate_model(model: ShaderModel, start: Constants, requested: list[str], 
                 scans[n] = done if at is fitted else scan(model, fitted, n, sigma_m)   # moved since: again
                 if restart and restart["name"] == n:
                     scans[n]["restart"] = restart
+                told = {o["value"] for o in scans[n].get("unconfirmed", [])}    # reported as such
                 for key, what in (("indistinguishable", "other basins the reference's noise cannot tell from "
                                                            "the fit's"),
                                   ("lower", "basins lower than the fit's by more than the reference's noise "
                                             "explains (the solver stopped short)")):
-                    told = {o["value"] for o in scans[n].get("unconfirmed", [])}
-                    values = [v for v in scans[n][key] if key != "lower" or v not in told]
+                    values = [v for v in scans[n][key] if v not in told]
                     if values:
                         _log(f"calibrate: {n}: {what} ({get_value(fitted, n):.4g}): "
                              f"{', '.join(f'{v:.4g}' for v in values)}")
@@ -381,16 +381,15 @@ def _basin_restart(model, fitted: Constants, live: list[str], sigma_m, loss: flo
         s["unconfirmed"] = []
         for best in sorted((b for b in s["basins"] if b["value"] in s["lower"]), key=lambda b: b["delta_loss"]):
             td = texture_delta(check[0], check[1], fitted, n, best["value"]) if check else None
+            head = (f"calibrate: {n}: a basin at {best['value']:.4g} is lower than the fit's "
+                    f"({get_value(fitted, n):.4g}) by {-best['delta_loss']:.4g} (+- {best['noise_sd']:.2g} from the "
+                    "reference's noise")
             if td is not None and td >= 0.0:
                 s["unconfirmed"].append({**best, "texture_delta": td})
-                _log(f"calibrate: {n}: a basin at {best['value']:.4g} is lower than the fit's "
-                     f"({get_value(fitted, n):.4g}) by {-best['delta_loss']:.4g} (+- {best['noise_sd']:.2g} from the "
-                     f"reference's noise), but higher by {td:.4g} in the decorrelated loss of the texture's "
-                     "independent halves: the texture's noise or denoiser makes it lower; not refitted")
+                _log(f"{head}), but higher by {td:.4g} in the decorrelated loss of the texture's independent "
+                     "halves: the texture's noise or denoiser makes it lower; not refitted")
                 continue
-            _log(f"calibrate: {n}: a basin at {best['value']:.4g} is lower than the fit's "
-                 f"({get_value(fitted, n):.4g}) by {-best['delta_loss']:.4g} (+- {best['noise_sd']:.2g} from the "
-                 "reference's noise" + (f"; by {-td:.4g} in the texture halves' decorrelated loss" if check else "")
+            _log(head + (f"; by {-td:.4g} in the texture halves' decorrelated loss" if check else "")
                  + "); refitting from there")
             return {"name": n, "from": get_value(fitted, n), "to": best["value"], "loss_before": float(loss),
                     "texture_delta": td}
