@@ -205,8 +205,9 @@ def _run(args_list: list[str]) -> dict:
     return data
 
 
-def _fmt(x, w=8, p=1):
-    return f"{x:>{w}.{p}f}" if isinstance(x, (int, float)) else f"{'-':>{w}}"
+def _set_args(sets: list[str]) -> list[str]:
+    """``--set KEY=VALUE`` arguments of a worker's command line."""
+    return [a for s in sets for a in ("--set", s)]
 
 
 def main() -> None:
@@ -259,7 +260,7 @@ def main() -> None:
                     seeded = p in args.seed_paths and args.seeds > 1
                     sets = args.overrides + ([f"reference.seed={seed}"] if seeded else [])
                     runs[p].append(dict(_run(["--worker", e, p, str(d), "--variant", args.variant,
-                                              *sum((["--set", s] for s in sets), [])]), seed=seed))
+                                              *_set_args(sets)]), seed=seed))
                     if seed == 0:
                         dirs[p] = str(d)
                     print(f"  {Path(e).stem} {p} run {r + 1} seed {seed}: {runs[p][-1]['wall']['total']:.1f} s wall",
@@ -268,7 +269,7 @@ def main() -> None:
                         args.json.write_text(json.dumps(results + [{"experiment": Path(e).stem, "baseline": baseline,
                                                                      "runs": runs, "cross": {}}], indent=1))
         cross = (_run(["--cross", e, baseline, json.dumps(dirs), "--variant", args.variant,
-                       *sum((["--set", s] for s in args.overrides), [])])
+                       *_set_args(args.overrides)])
                  if baseline and len(paths) > 1 else {})
         results.append({"experiment": Path(e).stem, "baseline": baseline, "runs": runs, "cross": cross})
         if args.json:                        # after every scene: a later failure loses nothing
