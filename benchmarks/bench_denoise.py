@@ -3,7 +3,8 @@ against fewer samples denoised by Intel Open Image Denoise (``reference.lighting
 
 For each texture setting ``METHOD:SPP`` (``raw``, ``oidn`` or ``oidn_unmatched``: the values of
 ``reference.lighting_denoise``, ``raw`` for ``none``; lighting at
-``reference.lighting_size`` texels, ``reference.texture_method = "lighting"``) the shader inputs
+``reference.lighting_size`` texels, ``reference.texture_method = "lighting"``, all of it path
+traced: ``reference.lighting_direct = "path"``) the shader inputs
 are built (cached in ``--cache``, so a re-run only fits), the shader is fitted against the same
 reference (the experiment's ``reference.spp``), and the script prints:
 
@@ -103,7 +104,7 @@ def main() -> None:
     for method, spp, seed in settings:
         label = f"{method}:{spp}" + (f" seed {seed}" if seed is not None else "")
         exp = load_experiment(args.experiment, args.overrides + [
-            "reference.texture_method=\"lighting\"", f"reference.texture_spp={spp}",
+            "reference.texture_method=\"lighting\"", "reference.lighting_direct=\"path\"", f"reference.texture_spp={spp}",
             f"reference.lighting_denoise=\"{'none' if method == 'raw' else method}\""]
             + ([f"reference.seed={seed}"] if seed is not None else []))
         key = exp.inputs_hash()

@@ -17,8 +17,8 @@ machine CPU seconds measure the work, wall seconds the wait):
 
   startup (imports, backend), scene build, JIT (kernel code generation and LLVM compilation,
   all stages), reference passes, noise estimation (water mask, spread of the seeds), texture
-  renders (world y, lighting / colour, albedo, walls), fit, export, GL check, rest (figures,
-  report, evaluation), total;
+  renders (world y, lighting / colour, albedo, walls, the traced direct light), fit, export, GL
+  check, rest (figures, report, evaluation), total;
 
 then the fitted constants of each path against the *baseline* (``clean`` when run, else
 ``today``): the difference in the baseline's Gauss-Newton standard errors, each path's standard
@@ -128,7 +128,7 @@ def worker(experiment: str, path: str, out: Path, overrides: list[str], variant:
     from study.fit import calibrate
     from study.report import export
     from study.scene import experiment as exp_mod
-    from study.scene import lighting, mitsuba_scene, reference, shader_inputs
+    from study.scene import direct_light, lighting, mitsuba_scene, reference, shader_inputs
 
     init_backend(variant)
     dr.set_flag(dr.JitFlag.KernelHistory, True)
@@ -146,6 +146,7 @@ def worker(experiment: str, path: str, out: Path, overrides: list[str], variant:
         t.wrap(shader_inputs, fn, "texture renders")
     for fn in ("render_lighting", "render_dry"):
         t.wrap(lighting, fn, "texture renders")
+    t.wrap(direct_light, "traced_direct", "texture renders")
     t.wrap(calibrate, "calibrate_model", "fit")
     t.wrap(export, "export_shaders", "export")
     t.wrap(_jobs, "gl_check", "GL check")

@@ -128,7 +128,7 @@ def test_denoised_texture_keeps_the_raw_mean_and_reports_the_denoiser_bias(mi):
     denoiser's own ratio is reported, and ``"oidn_unmatched"`` keeps it: its texture's mean over
     the pool is the raw one times that ratio; outside the pool both are the dry render."""
     base = {"reference.texture_size": "32", "reference.lighting_size": "16", "reference.texture_spp": "16",
-            "reference.wall_spp": "16"}
+            "reference.wall_spp": "16", "reference.lighting_direct": '"path"'}
     exp = small_experiment(**base, **{"reference.lighting_denoise": '"oidn"'})
     raw_exp = small_experiment(**base, **{"reference.lighting_denoise": '"oidn_unmatched"'})
     extent = texture_extent(exp)

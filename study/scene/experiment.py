@@ -176,6 +176,21 @@ SCHEMA: dict[str, Field] = {
                                         "own brightness kept) or `none` (raw path tracing: raise "
                                         "`reference.texture_spp` to 256 or more). Measured effect on the fitted "
                                         "constants: README, Fast references.", choices=("none", "oidn", "oidn_unmatched")),
+    "reference.lighting_direct": Field("str", "traced", "The floor's direct light through the waves "
+                                       "(`texture_method = \"lighting\"` under water): `traced` (ray traced "
+                                       "without the path tracer's noise: the sun from the sun, its caustics "
+                                       "sharp; the sky gathered at the floor; only the light that bounced path "
+                                       "traced and denoised) or `path` (all of it path traced and denoised, "
+                                       "the caustics smoothed). README, Fast references.", choices=("traced", "path")),
+    "reference.bounce_spp": Field("int", 16, "Samples per texel of the path-traced lighting with "
+                                  "`lighting_direct = \"traced\"` (only the light that bounced is kept from "
+                                  "it; `texture_spp` otherwise).", "", 1, 65536),
+    "reference.sun_photons": Field("int", 16, "Photons per texture texel for the traced sunlight "
+                                   "(`lighting_direct = \"traced\"`; about 2/3 of them land in the pool).",
+                                   "", 1, 65536),
+    "reference.sky_directions": Field("int", 36, "Directions per texture texel, in each of two "
+                                      "independent halves, for the traced skylight (`lighting_direct = "
+                                      "\"traced\"`; a square number).", "", 1, 4096),
     "reference.wall_spp": Field("int", 16, "Samples per pixel of the dry colour render used "
                                 "outside the pool and for the floor albedo (`texture_method = "
                                 "\"lighting\"`; multi-jittered, rounded up to its grid).", "", 1, 65536),
@@ -238,7 +253,8 @@ for _name, (_glsl, _kind, _default, (_lo, _hi)) in CONSTANT_SPECS.items():
 # keys that change only the shader's inputs, never the reference image
 SHADER_INPUT_KEYS = frozenset({"reference.texture_size", "reference.texture_spp",
                                "reference.texture_method", "reference.lighting_size", "reference.wall_spp",
-                               "reference.lighting_denoise",
+                               "reference.lighting_denoise", "reference.lighting_direct", "reference.sun_photons",
+                               "reference.sky_directions", "reference.bounce_spp",
                                "reference.refraction_lighting", "reference.fresnel_transmission",
                                "waves.normal_map_size", "waves.slope_scale"})
 

@@ -42,6 +42,12 @@ scene's texture by 1.2-1.8 % in red and 0.3-0.9 % in green and blue) and, with `
 divided out per colour channel over the pool: the path tracer's brightness, the denoiser's
 detail (``"oidn_unmatched"`` keeps the denoiser's brightness).
 
+Under water (``reference.lighting_direct = "traced"``, the default) the floor's *direct* light
+through the waves -- where the sun's caustics and the sky's ripples are, and the path tracer's
+fireflies -- is ray traced at the texture's texels by :mod:`.direct_light`, and only the light
+that bounced comes from this render (``reference.bounce_spp``): each pass minus the same pass
+rendered with ``max_depth = 3`` (same seed, same paths), then denoised as above.
+
 The four passes also give the texture's two *halves* (passes 0-1 and 2-3, raw even when the
 mean is denoised: a denoiser's bias would survive the decorrelation), independent estimates of
 the same lighting, whose product of residuals the fit's decorrelated loss uses
@@ -68,15 +74,26 @@ def pool_extent(exp: Experiment) -> tuple[float, float, float, float]:
     return (-hx, -hz, hx, hz)
 
 
-def _top_down_scene(mi, exp: Experiment, *, water: bool, integrator: dict):
+def _top_down_scene(mi, exp: Experiment, *, water: bool, integrator: dict, sky=None, medium=None):
+    """(scene, the water's medium) lit by ``sky`` ((H, 2H, 3) lat-long; default: the reference's
+    envmap); ``medium``: reuse this medium object (default: a new one)."""
     from .mitsuba_scene import build_geometry, water_medium
     from .user_scene import reference_sky
 
-    medium = water_medium(mi, exp) if water else None
+    if medium is None:
+        medium = water_medium(mi, exp) if water else None
     d = {"type": "scene", **build_geometry(mi, exp, water=water, medium=medium),
-         "sky": {"type": "envmap", "bitmap": mi.Bitmap(reference_sky(exp))},
+         "sky": {"type": "envmap", "bitmap": mi.Bitmap(reference_sky(exp) if sky is None else sky)},
          "integrator": integrator}
     return mi.load_dict(d), medium
+
+
+def lighting_scene(exp: Experiment, water: bool):
+    """(scene, the water's medium) of the lighting render: its geometry, the reference's envmap and
+    the ``aov`` integrator giving radiance and the first hit's albedo."""
+    import mitsuba as mi
+    return _top_down_scene(mi, exp, water=water, integrator={
+        "type": "aov", "aovs": "alb:albedo", "transport": _transport(exp, water)})
 
 
 def _transport(exp: Experiment, water: bool) -> dict:
@@ -140,20 +157,29 @@ def denoise_gain(denoised: np.ndarray, raw: np.ndarray, raw_se: np.ndarray,
 
 
 def render_lighting(exp: Experiment, size: int, spp: int, seed: int, *, water: bool,
-                    y_cam: float, progress=None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+                    y_cam: float, progress=None, without_direct: bool = False, scene=None
+                    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Lighting ``radiance / albedo`` (size, size, 3) over the pool (GL order), corrected for the
     absorption of the camera's own vertical ray as ``top_down_colour`` does, and its per-texel
     standard error, from ``N_SEEDS`` renders of ``ceil(spp / N_SEEDS)`` spp each (denoised first
     when ``reference.lighting_denoise = "oidn"``; the standard error is the denoiser's input's);
     and the two *halves* (2, size, size, 3): the raw (never denoised) means of passes 0-1 and of
-    passes 2-3, independent estimates of the same lighting (``fit.input_noise = "decorrelate"``)."""
+    passes 2-3, independent estimates of the same lighting (``fit.input_noise = "decorrelate"``).
+
+    ``without_direct``: leave the direct light through the water's top out (it is ray traced,
+    :mod:`.direct_light`): each pass is rendered again with ``max_depth = 3``, the same envmap and
+    the same seed, which follows the full pass's paths sample for sample, and is subtracted.
+    ``scene``: (scene, medium) from :func:`lighting_scene` (default: built here)."""
     import mitsuba as mi
 
     from .shader_inputs import _ortho_sensor, _to_gl_order, top_down_world_y
 
     extent = pool_extent(exp)
-    scene, medium = _top_down_scene(mi, exp, water=water, integrator={
-        "type": "aov", "aovs": "alb:albedo", "transport": _transport(exp, water)})
+    scene, medium = scene if scene is not None else lighting_scene(exp, water)
+    direct = None
+    if without_direct:
+        direct = mi.load_dict({"type": "aov", "aovs": "alb:albedo",
+                               "transport": {**_transport(exp, water), "max_depth": 3}})
     per_pass = max(1, -(-spp // N_SEEDS))
     sensor = _ortho_sensor(mi, extent, size, per_pass, seed, y_cam=y_cam, medium=medium)
     passes, radiances, albedos = [], [], []
@@ -161,6 +187,12 @@ def render_lighting(exp: Experiment, size: int, spp: int, seed: int, *, water: b
         img = np.array(mi.render(scene, sensor=sensor, spp=per_pass, seed=seed * N_SEEDS + k), np.float32)
         img = _to_gl_order(mi, sensor, img, extent)
         radiance, albedo = img[..., :3], img[..., 3:6]
+        if direct is not None:
+            d3 = np.array(mi.render(scene, sensor=sensor, integrator=direct, spp=per_pass,
+                                    seed=seed * N_SEEDS + k), np.float32)
+            radiance = radiance - _to_gl_order(mi, sensor, d3, extent)[..., :3]
+            _check_lockstep(radiance, img[..., :3], exp)
+            radiance = np.maximum(radiance, 0.0)
         if np.any(albedo <= 0.0):
             from .experiment import ExperimentError
             raise ExperimentError("the lighting render found texels of zero floor albedo (floor.tile_albedo, "
@@ -194,6 +226,17 @@ def render_lighting(exp: Experiment, size: int, spp: int, seed: int, *, water: b
     if not np.all(np.isfinite(lighting)):
         raise RuntimeError(f"the lighting render of {exp['name']!r} has non-finite texels")
     return lighting.astype(np.float32), stderr.astype(np.float32), halves.astype(np.float32)
+
+
+def _check_lockstep(rest: np.ndarray, full: np.ndarray, exp: Experiment) -> None:
+    """The full pass minus its direct pass must be non-negative up to float rounding: a negative
+    texel means the two renders did not follow the same paths (a sampler or integrator that draws
+    its random numbers differently), and the subtraction would be wrong."""
+    floor = -1e-4 * max(float(full.max()), 1e-6)
+    if rest.min() < floor:
+        raise RuntimeError(f"the lighting render of {exp['name']!r}: the direct pass is brighter than the full "
+                           f"pass in some texels (min {rest.min():.3g}): the two renders did not follow the same "
+                           "paths; use reference.lighting_direct = \"path\"")
 
 
 def dry_spp(spp: int) -> int:
@@ -235,8 +278,11 @@ def lighting_colour(exp: Experiment, extent, size: int, seed: int = 0, world_y=N
     wet = exp["reference.refraction_lighting"] == "underwater"
     y_cam = underwater_camera_height(exp) if wet else 100.0
     n_light = min(exp["reference.lighting_size"], size)     # never finer than the texture
-    lighting, lighting_se, halves = render_lighting(exp, n_light, exp["reference.texture_spp"], seed,
-                                                    water=wet, y_cam=y_cam, progress=progress)
+    traced = wet and exp["reference.lighting_direct"] == "traced" and exp["reference.max_depth"] >= 3
+    spp = exp["reference.bounce_spp"] if traced else exp["reference.texture_spp"]
+    scene = lighting_scene(exp, wet)
+    lighting, lighting_se, halves = render_lighting(exp, n_light, spp, seed, water=wet, y_cam=y_cam,
+                                                    progress=progress, without_direct=traced, scene=scene)
     dry, albedo = render_dry(exp, extent, size, exp["reference.wall_spp"], seed)
     if world_y is None:
         world_y = top_down_world_y(exp, extent, size)
@@ -250,9 +296,9 @@ def lighting_colour(exp: Experiment, extent, size: int, seed: int = 0, world_y=N
     colour, colour_halves = compose(lighting), np.stack([compose(h) for h in halves])
     se = interpolate(lighting_se, pool, X, Z) * albedo
     noise = float(np.sqrt(np.mean(se[inside] ** 2))) if inside.any() else 0.0
-    info = {"method": "lighting", "lighting_size": n_light, "spp": exp["reference.texture_spp"],
+    info = {"method": "lighting", "lighting_size": n_light, "spp": spp,
             "wall_spp": dry_spp(exp["reference.wall_spp"]), "noise": noise, "n_seeds": N_SEEDS,
-            "denoise": exp["reference.lighting_denoise"]}
+            "denoise": exp["reference.lighting_denoise"], "direct": "traced" if traced else "path"}
     if exp["reference.lighting_denoise"] != "none" and inside.any():
         # the denoiser's brightness against the raw mean of its own samples, as the shader sees it
         # (albedo-weighted, on the texture; the lighting grid's texels taken as independent)
@@ -263,4 +309,12 @@ def lighting_colour(exp: Experiment, extent, size: int, seed: int = 0, world_y=N
             g = np.asarray(gain, np.float32)
             colour = np.where(inside[..., None], colour / np.where(g > 0.0, g, 1.0), colour)
             info["denoise_matched"] = True
+    if traced:                   # the direct sky- and sunlight, ray traced on the texture's texels
+        from .direct_light import traced_direct
+        d_mean, d_halves, d_se, d_info = traced_direct(exp, extent, size, seed, y_cam, albedo, inside,
+                                                       scene=scene[0])
+        colour, colour_halves = colour + d_mean, colour_halves + d_halves
+        if inside.any():
+            info["noise"] = float(np.sqrt(np.mean(se[inside] ** 2 + d_se[inside] ** 2)))
+        info.update(d_info)
     return colour.astype(np.float32), info, colour_halves.astype(np.float32)

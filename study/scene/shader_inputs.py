@@ -35,7 +35,7 @@ from shaders_port import ShaderInputs, fresnel_lut, ortho_tex_matrix
 from .experiment import Experiment
 from .mitsuba_scene import build_geometry, camera_view_proj, waves_of
 
-INPUTS_VERSION = 9        # bump whenever the construction of the inputs below changes
+INPUTS_VERSION = 10       # bump whenever the construction of the inputs below changes
 NO_GEOMETRY = -1e3
 CUBEMAP_SIZE = 64
 FRESNEL_SIZE = 256
@@ -341,7 +341,14 @@ def load_or_build_shader_inputs(exp: Experiment, variant: str, cache=None, log=p
                   + " / ".join(f"{g:.3f}" for g in tex["denoise_gain"])
                   + " (+- " + " / ".join(f"{e:.3f}" for e in tex["denoise_gain_se"]) + ")"
                   + (", matched to the raw mean" if tex.get("denoise_matched") else ""))
-    log(f"shader inputs: built ({tex['method']} texture, {tex['spp']} spp{noise}) and cached at {path}")
+    if tex.get("direct") == "traced":
+        noise += (f"; direct light traced: sky {tex['sky_directions']} directions per texel"
+                  + (", denoised / raw " + " / ".join(f"{g:.3f}" for g in tex["sky_denoise_gain"])
+                     if tex.get("sky_denoise_gain") else "")
+                  + (f", sun {tex['sun_photons'] / 1e6:.2f} M photons ({tex['sun_photons_landed'] / 1e6:.2f} M landed)"
+                     if tex.get("sun_photons") else ""))
+    what = "bounced light, " if tex.get("direct") == "traced" else ""
+    log(f"shader inputs: built ({tex['method']} texture, {what}{tex['spp']} spp{noise}) and cached at {path}")
     return inputs
 
 

@@ -71,6 +71,23 @@ def reference_sky(exp: Experiment) -> np.ndarray:
     return np.asarray(sky, np.float32)
 
 
+def reference_sky_parts(exp: Experiment) -> tuple[np.ndarray, np.ndarray]:
+    """The reference's envmap (:func:`reference_sky`) as (sky without the sun, the sun), each
+    (H, 2H, 3) float32 linear RGB, non-negative, adding up to it exactly: the sun is where the
+    map is brighter than the sky without it (the explicit sun's disc, or the sky file's sun
+    region filled from its surroundings); zero everywhere when there is no sun."""
+    ref = reference_sky(exp)
+    if not has_file(exp, "sky.envmap"):
+        p = dict(zenith=exp["sky.zenith"], horizon=exp["sky.horizon"], ground=exp["sky.ground"])
+        sky = envmap_image(SKY_HEIGHT, **p)
+    else:
+        sky, sun = file_sky(exp)
+        if exp["sun.source"] == "envmap" and sun is not None:
+            sky = uf.fill_region(sky, sun["mask"])
+    sun = np.maximum(ref - np.asarray(sky, np.float32), 0.0).astype(np.float32)
+    return (ref - sun).astype(np.float32), sun
+
+
 def shader_sky(exp: Experiment, d: np.ndarray) -> np.ndarray:
     """Sky radiance (..., 3) without the sun in unit directions d (..., 3) (the cube map's content)."""
     if not has_file(exp, "sky.envmap"):

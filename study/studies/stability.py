@@ -160,8 +160,9 @@ def plan_noise(path: str, base_overrides: list, levels, fixed: int, seeds: int, 
         for spp in levels:
             for s in range(seeds):
                 ref_spp, tex_spp = (spp, fixed) if which == "reference" else (fixed, spp)
+                # the texture's path-traced samples whichever way the direct light is made
                 ov = list(base_overrides) + res + [f"reference.spp={ref_spp}", f"reference.texture_spp={tex_spp}",
-                                                   f"reference.seed={1000 + s}"]
+                                                   f"reference.bounce_spp={tex_spp}", f"reference.seed={1000 + s}"]
                 jobs.append({"scene": scene_spec(path, ov), "which": which, "spp": spp, "seed": 1000 + s})
     return jobs
 
