@@ -164,3 +164,15 @@ def test_traced_texture_keeps_the_raw_mean_and_adds_up(mi):
     se = np.hypot(info["noise"], info_p["noise"]) / np.sqrt(inside.sum() / 4.0)   # 2 x 2 texels per lighting texel
     assert np.all(np.abs(got[inside].mean(0) - path[inside].mean(0)) < 4.0 * se), (got[inside].mean(0),
                                                                                   path[inside].mean(0), se)
+
+
+def test_scattering_water_and_the_dry_texture_keep_the_path_traced_direct_light(mi):
+    """The split holds for water that only absorbs: scattering water (``water.albedo`` > 0) and
+    the dry texture path trace all of the lighting, and say so in the texture's info."""
+    from study.scene.shader_inputs import texture_extent
+    base = {"reference.texture_size": "16", "reference.lighting_size": "8", "reference.texture_spp": "4",
+            "reference.wall_spp": "4"}
+    for extra in ({"water.albedo": "[0.5, 0.5, 0.5]"}, {"reference.refraction_lighting": '"dry"'}):
+        exp = small_experiment(**base, **extra)
+        _, info, _ = lighting.lighting_colour(exp, texture_extent(exp), 16, seed=0)
+        assert info["direct"] == "path" and info["spp"] == 4 and "sky_directions" not in info

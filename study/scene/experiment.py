@@ -180,8 +180,9 @@ SCHEMA: dict[str, Field] = {
                                        "(`texture_method = \"lighting\"` under water): `traced` (ray traced "
                                        "without the path tracer's noise: the sun from the sun, its caustics "
                                        "sharp; the sky gathered at the floor; only the light that bounced path "
-                                       "traced and denoised) or `path` (all of it path traced and denoised, "
-                                       "the caustics smoothed). README, Fast references.", choices=("traced", "path")),
+                                       "traced and denoised; scattering water, `water.albedo` > 0, keeps "
+                                       "`path`) or `path` (all of it path traced and denoised, the caustics "
+                                       "smoothed). README, Fast references.", choices=("traced", "path")),
     "reference.bounce_spp": Field("int", 16, "Samples per texel of the path-traced lighting with "
                                   "`lighting_direct = \"traced\"` (only the light that bounced is kept from "
                                   "it; `texture_spp` otherwise).", "", 1, 65536),

@@ -278,7 +278,10 @@ def lighting_colour(exp: Experiment, extent, size: int, seed: int = 0, world_y=N
     wet = exp["reference.refraction_lighting"] == "underwater"
     y_cam = underwater_camera_height(exp) if wet else 100.0
     n_light = min(exp["reference.lighting_size"], size)     # never finer than the texture
-    traced = wet and exp["reference.lighting_direct"] == "traced" and exp["reference.max_depth"] >= 3
+    # traced: under water, paths long enough to hold the direct term, and water that only absorbs
+    # (in scattering water the max_depth-3 pass also holds light scattered on the camera's own ray)
+    traced = (wet and exp["reference.lighting_direct"] == "traced" and exp["reference.max_depth"] >= 3
+              and max(exp["water.albedo"]) == 0.0)
     spp = exp["reference.bounce_spp"] if traced else exp["reference.texture_spp"]
     scene = lighting_scene(exp, wet)
     lighting, lighting_se, halves = render_lighting(exp, n_light, spp, seed, water=wet, y_cam=y_cam,
