@@ -23,7 +23,7 @@ def _render(mi, exp, sky, max_depth, size, spp, seed, medium=None):
 def test_sky_parts_add_up_to_the_reference_sky_and_the_sun_is_its_disc(mi):
     exp = small_experiment()
     sky, sun = reference_sky_parts(exp)
-    np.testing.assert_array_equal(sky + sun, reference_sky(exp))
+    np.testing.assert_allclose(sky + sun, reference_sky(exp), rtol=1e-6, atol=1e-7)
     assert sky.min() >= 0.0 and sun.min() >= 0.0
     axis, angle = direct_light.sun_cone(sun)
     from study.scene.geometry import sun_direction

@@ -73,9 +73,9 @@ def reference_sky(exp: Experiment) -> np.ndarray:
 
 def reference_sky_parts(exp: Experiment) -> tuple[np.ndarray, np.ndarray]:
     """The reference's envmap (:func:`reference_sky`) as (sky without the sun, the sun), each
-    (H, 2H, 3) float32 linear RGB, non-negative, adding up to it exactly: the sun is where the
-    map is brighter than the sky without it (the explicit sun's disc, or the sky file's sun
-    region filled from its surroundings); zero everywhere when there is no sun."""
+    (H, 2H, 3) float32 linear RGB, non-negative, adding up to it (to float rounding): the sun is
+    where the map is brighter than the sky without it (the explicit sun's disc, or the sky file's
+    sun region filled from its surroundings); zero everywhere when there is no sun."""
     ref = reference_sky(exp)
     if not has_file(exp, "sky.envmap"):
         p = dict(zenith=exp["sky.zenith"], horizon=exp["sky.horizon"], ground=exp["sky.ground"])
