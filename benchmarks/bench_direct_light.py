@@ -47,8 +47,8 @@ def run(exp, spp: int, n_est: int, repeats: int) -> list[dict]:
     import mitsuba as mi
 
     from study.scene import direct_light, lighting
-    from study.scene.shader_inputs import (_ortho_sensor, _to_gl_order, texture_extent, top_down_world_y,
-                                           underwater_camera_height)
+    from study.scene.shader_inputs import (_ortho_sensor, _to_gl_order, camera_ray_top, texture_extent,
+                                           top_down_world_y, underwater_camera_height)
     from study.scene.user_scene import reference_sky_parts
 
     size = exp["reference.texture_size"]
@@ -56,7 +56,7 @@ def run(exp, spp: int, n_est: int, repeats: int) -> list[dict]:
     y_cam = underwater_camera_height(exp)
     sky, sun = reference_sky_parts(exp)
     world_y = top_down_world_y(exp, extent, size)
-    gain = np.exp(np.asarray(exp["water.sigma_t"]) * np.maximum(y_cam - world_y, 0.0)[..., None])
+    gain = np.exp(np.asarray(exp["water.sigma_t"]) * np.maximum(camera_ray_top(y_cam) - world_y, 0.0)[..., None])
     X, Z = lighting.texel_centres(extent, size)
     hx, hz = exp["pool.half_extent"]
     inside = (np.abs(X) < hx - 0.1) & (np.abs(Z) < hz - 0.1) & (world_y < y_cam)

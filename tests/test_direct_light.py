@@ -75,10 +75,10 @@ def _compare(name, pt, traced, n_pass):
 
 
 def _camera_gain(exp, size):
-    from study.scene.shader_inputs import top_down_world_y
+    from study.scene.shader_inputs import camera_ray_top, top_down_world_y
     world_y = top_down_world_y(exp, lighting.pool_extent(exp), size)
-    y_cam = underwater_camera_height(exp)
-    return np.exp(np.asarray(exp["water.sigma_t"]) * np.maximum(y_cam - world_y, 0.0)[..., None])
+    y_top = camera_ray_top(underwater_camera_height(exp))
+    return np.exp(np.asarray(exp["water.sigma_t"]) * np.maximum(y_top - world_y, 0.0)[..., None])
 
 
 def test_traced_sunlight_matches_the_path_tracers_direct_sun(mi):
@@ -176,3 +176,18 @@ def test_scattering_water_and_the_dry_texture_keep_the_path_traced_direct_light(
         exp = small_experiment(**base, **extra)
         _, info, _ = lighting.lighting_colour(exp, texture_extent(exp), 16, seed=0)
         assert info["direct"] == "path" and info["spp"] == 4 and "sky_directions" not in info
+
+
+def test_the_camera_rays_start_where_their_absorption_is_divided_out_from(mi):
+    """The under-water camera's rays start at its near clip plane, not at the camera: the texture
+    divides out the absorption from there (``camera_ray_top``). Dividing it out from the camera
+    itself made the path-traced lighting exp(sigma_t * 1 cm) too bright (0.25 % in red), which the
+    traced skylight, computed at the floor, showed."""
+    from study.scene.shader_inputs import camera_ray_top
+    exp = small_experiment()
+    y_cam = underwater_camera_height(exp)
+    from study.scene.shader_inputs import _ortho_sensor
+    sensor = _ortho_sensor(mi, lighting.pool_extent(exp), 8, 1, 0, y_cam=y_cam)
+    ray, _ = sensor.sample_ray(0.0, 0.0, mi.Point2f(0.3, 0.6), mi.Point2f(0.5, 0.5))
+    assert abs(float(np.array(ray.o.y).ravel()[0]) - camera_ray_top(y_cam)) < 1e-6
+    assert camera_ray_top(y_cam) < y_cam

@@ -213,8 +213,8 @@ def render_lighting(exp: Experiment, size: int, spp: int, seed: int, *, water: b
     if water:
         world_y = top_down_world_y(exp, extent, size)
         sigma = np.asarray(exp["water.sigma_t"], np.float64)
-        optical = sigma * np.maximum(y_cam - world_y, 0.0)[..., None]
-        from .shader_inputs import MAX_OPTICAL_DEPTH
+        from .shader_inputs import MAX_OPTICAL_DEPTH, camera_ray_top
+        optical = sigma * np.maximum(camera_ray_top(y_cam) - world_y, 0.0)[..., None]
         if optical.max() > MAX_OPTICAL_DEPTH:
             from .experiment import ExperimentError
             raise ExperimentError(f"water.sigma_t: the floor's light through the water is lost (optical depth "

@@ -35,12 +35,13 @@ from shaders_port import ShaderInputs, fresnel_lut, ortho_tex_matrix
 from .experiment import Experiment
 from .mitsuba_scene import build_geometry, camera_view_proj, waves_of
 
-INPUTS_VERSION = 10       # bump whenever the construction of the inputs below changes
+INPUTS_VERSION = 11       # bump whenever the construction of the inputs below changes
 NO_GEOMETRY = -1e3
 CUBEMAP_SIZE = 64
 FRESNEL_SIZE = 256
 LIGHT_DISTANCE = 1000.0
 MAX_OPTICAL_DEPTH = 40.0  # exp(40) = 2e17: beyond it the under-water render holds no floor light
+ORTHO_NEAR_CLIP = 1e-2    # the top-down camera's rays start this far below it (Mitsuba's near clip)
 
 
 def texture_extent(exp: Experiment) -> tuple[float, float, float, float]:
@@ -59,6 +60,7 @@ def _ortho_sensor(mi, extent, size: int, spp: int, seed: int, y_cam: float = 100
         "type": "orthographic",
         "to_world": T().look_at(origin=[cx, y_cam, cz], target=[cx, y_cam - 1.0, cz], up=[0, 0, 1])
         @ T().scale([(x1 - x0) / 2, (z1 - z0) / 2, 1.0]),
+        "near_clip": ORTHO_NEAR_CLIP,
         "sampler": {"type": sampler, "seed": seed},
         "film": {"type": "hdrfilm", "width": size, "height": size, "pixel_format": "rgb",
                  "rfilter": {"type": "box"}},
@@ -66,6 +68,12 @@ def _ortho_sensor(mi, extent, size: int, spp: int, seed: int, y_cam: float = 100
     if medium is not None:
         d["medium"] = medium
     return mi.load_dict(d)
+
+
+def camera_ray_top(y_cam: float) -> float:
+    """Height where the rays of a top-down camera at ``y_cam`` start (its near clip plane): the
+    under-water camera's own ray through the water runs from there to the floor."""
+    return y_cam - ORTHO_NEAR_CLIP
 
 
 def _to_gl_order(mi, sensor, img: np.ndarray, extent) -> np.ndarray:
@@ -160,8 +168,8 @@ def top_down_colour(exp: Experiment, extent, size: int, spp: int, seed: int = 0,
     * ``"underwater"`` (default): inside the pool, the floor's own radiance as lit *through
       the water* (sky and sun refracted by the wave surface, light absorbed on its way down),
       seen by an orthographic camera placed inside the water just below the wave troughs;
-      the absorption of the camera's own vertical ray, ``exp(-sigma_t (y_cam - world_y))``,
-      is divided out (exact for purely absorbing water, ``water.albedo = 0``; where its optical
+      the absorption of the camera's own vertical ray, ``exp(-sigma_t (y_top - world_y))`` from
+      where its rays start (:func:`camera_ray_top`: its near clip plane, 1 cm below it), is divided out (exact for purely absorbing water, ``water.albedo = 0``; where its optical
       depth exceeds ``MAX_OPTICAL_DEPTH`` nothing is left to recover and the dry render is
       used). Outside the
       pool (the walls) the dry render is used. With it the shader's attenuation stands for
@@ -186,7 +194,7 @@ def top_down_colour(exp: Experiment, extent, size: int, spp: int, seed: int = 0,
     if world_y is None:
         world_y = top_down_world_y(exp, extent, size)
     sigma = np.asarray(exp["water.sigma_t"], np.float64)
-    optical = sigma * np.maximum(y_cam - world_y, 0.0)[..., None]
+    optical = sigma * np.maximum(camera_ray_top(y_cam) - world_y, 0.0)[..., None]
     # beyond an optical depth of MAX_OPTICAL_DEPTH the floor's light through the water is lost
     # in float precision (very murky water): the dry render stands in for those texels
     lost = optical > MAX_OPTICAL_DEPTH
