@@ -509,6 +509,10 @@ def validate(raw: dict, overrides: list[str] | None = None, path: Path | None = 
         values[key] = user_files.resolve(key, values[key], base.get(key))
     digests = user_files.check_files(values)
     _check_ledge(values)
+    n = values["reference.sky_directions"]
+    if round(n ** 0.5) ** 2 != n:
+        raise ExperimentError(f"reference.sky_directions = {n}: the directions are stratified on a square grid; "
+                              "use a square number (16, 25, 36, 49, ...)")
     return Experiment(values, path, digests)
 
 
