@@ -47,7 +47,7 @@ def run(exp, spp: int, n_est: int, repeats: int) -> list[dict]:
     import mitsuba as mi
 
     from study.scene import direct_light, lighting
-    from study.scene.shader_inputs import (_ortho_sensor, _to_gl_order, camera_ray_top, texture_extent,
+    from study.scene.shader_inputs import (_ortho_sensor, _to_gl_order, camera_ray_optical_depth, texture_extent,
                                            top_down_world_y, underwater_camera_height)
     from study.scene.user_scene import reference_sky_parts
 
@@ -56,7 +56,7 @@ def run(exp, spp: int, n_est: int, repeats: int) -> list[dict]:
     y_cam = underwater_camera_height(exp)
     sky, sun = reference_sky_parts(exp)
     world_y = top_down_world_y(exp, extent, size)
-    gain = np.exp(np.asarray(exp["water.sigma_t"]) * np.maximum(camera_ray_top(y_cam) - world_y, 0.0)[..., None])
+    gain = np.exp(camera_ray_optical_depth(exp, y_cam, world_y))
     X, Z = lighting.texel_centres(extent, size)
     hx, hz = exp["pool.half_extent"]
     inside = (np.abs(X) < hx - 0.1) & (np.abs(Z) < hz - 0.1) & (world_y < y_cam)
@@ -115,7 +115,9 @@ def main(argv=None) -> None:
     print("| experiment | term | path tracer s / traced s | mean traced / path tracer (R, G, B) | "
           "texel noise, path tracer (R, G, B) | texel noise, traced | efficiency (R, G, B) |")
     print("|---|---|---|---|---|---|---|")
-    f3 = lambda a: " / ".join(f"{v:.3f}" for v in a)     # noqa: E731
+
+    def f3(a):
+        return " / ".join(f"{v:.3f}" for v in a)
     for path in args.experiments:
         for r in run(load_experiment(path), args.spp, args.estimates, args.repeats):
             print(f"| {r['experiment']} | {r['term']} | {r['path']['seconds']:.2f} / {r['traced']['seconds']:.2f} | "

@@ -74,11 +74,18 @@ def _compare(name, pt, traced, n_pass):
     return np.mean(t_se), np.mean(p_se)
 
 
-def _camera_gain(exp, size):
-    from study.scene.shader_inputs import camera_ray_top, top_down_world_y
+def _path_traced_direct(mi, exp, sky, size, spp, seeds, lighting_only=False):
+    """Mitsuba's estimates of the direct term lit by ``sky``: the max_depth-3 render over the
+    pool at each seed, its radiance (or, ``lighting_only``, radiance over albedo) with the camera
+    ray's absorption divided out as the lighting texture does; and a scene of the geometry."""
+    from study.scene.shader_inputs import camera_ray_optical_depth, top_down_world_y
     world_y = top_down_world_y(exp, lighting.pool_extent(exp), size)
-    y_top = camera_ray_top(underwater_camera_height(exp))
-    return np.exp(np.asarray(exp["water.sigma_t"]) * np.maximum(y_top - world_y, 0.0)[..., None])
+    gain = np.exp(camera_ray_optical_depth(exp, underwater_camera_height(exp), world_y))
+    medium, out = None, []
+    for seed in seeds:
+        img, medium = _render(mi, exp, sky, 3, size, spp, seed, medium)
+        out.append(img[..., :3] / (img[..., 3:6] if lighting_only else 1.0) * gain)
+    return out, lighting.lighting_scene(exp, True)[0]
 
 
 def test_traced_sunlight_matches_the_path_tracers_direct_sun(mi):
@@ -91,13 +98,7 @@ def test_traced_sunlight_matches_the_path_tracers_direct_sun(mi):
     size, spp, n_pass = 16, 256, 8
     y_cam = underwater_camera_height(exp)
     extent = lighting.pool_extent(exp)
-    gain = _camera_gain(exp, size)
-    medium, pt = None, []
-    for k in range(n_pass):
-        img, medium = _render(mi, exp, sun, 3, size, spp, 40 + k, medium)
-        pt.append(img[..., :3] * gain)
-    from study.scene.mitsuba_scene import build_geometry
-    scene = mi.load_dict({"type": "scene", **build_geometry(mi, exp, water=True)})
+    pt, scene = _path_traced_direct(mi, exp, sun, size, spp, range(40, 40 + n_pass))
     traced = [direct_light.sun_direct(mi, scene, exp, sun, extent, size, 60_000, 90 + k, y_cam)[0]
               for k in range(n_pass)]
     t_se, p_se = _compare("traced_sunlight", pt, traced, n_pass)
@@ -112,13 +113,7 @@ def test_traced_skylight_matches_the_path_tracers_direct_sky(mi):
     size, spp, n_pass = 16, 64, 8
     y_cam = underwater_camera_height(exp)
     extent = lighting.pool_extent(exp)
-    gain = _camera_gain(exp, size)
-    medium, pt = None, []
-    for k in range(n_pass):
-        img, medium = _render(mi, exp, sky, 3, size, spp, 20 + k, medium)
-        pt.append(img[..., :3] / img[..., 3:6] * gain)
-    from study.scene.mitsuba_scene import build_geometry
-    scene = mi.load_dict({"type": "scene", **build_geometry(mi, exp, water=True)})
+    pt, scene = _path_traced_direct(mi, exp, sky, size, spp, range(20, 20 + n_pass), lighting_only=True)
     traced = [direct_light.sky_direct(mi, scene, exp, sky, extent, size, 64, 70 + k, y_cam) for k in range(n_pass)]
     t_se, p_se = _compare("traced_skylight", pt, traced, n_pass)
     assert t_se < 0.5 * p_se
@@ -133,8 +128,7 @@ def test_sun_below_the_horizon_lights_nothing(mi):
     exp = small_experiment()
     _, sun = reference_sky_parts(exp)
     flipped = sun[::-1].copy()                 # the same disc mirrored below the horizon
-    from study.scene.mitsuba_scene import build_geometry
-    scene = mi.load_dict({"type": "scene", **build_geometry(mi, exp, water=True)})
+    scene, _ = lighting.lighting_scene(exp, True)
     img, n = direct_light.sun_direct(mi, scene, exp, flipped, lighting.pool_extent(exp), 8, 1000, 0,
                                      underwater_camera_height(exp))
     assert n == 0 and img.max() == 0.0

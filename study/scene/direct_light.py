@@ -99,9 +99,10 @@ def _vec(mi, a: np.ndarray):
     return [mi.Float(np.ascontiguousarray(a[:, k], np.float32)) for k in range(3)]
 
 
-def _splat(mi, ok, p, value, extent, size: int) -> np.ndarray:
+def _splat(mi, ok, p, value, extent, size: int) -> tuple[np.ndarray, int]:
     """Sum of the (N, 3) ``value`` of the lanes ``ok`` into the (size, size, 3) texels of their
-    points ``p`` over ``extent``, GL order (one kernel evaluates the whole batch)."""
+    points ``p`` over ``extent``, GL order (one kernel evaluates the whole batch), and how many
+    lanes were ``ok``."""
     import drjit as dr
     dr.eval(ok, p, value)
     ok_np = np.array(ok, bool)
@@ -111,7 +112,7 @@ def _splat(mi, ok, p, value, extent, size: int) -> np.ndarray:
     idx = row * size + col
     out = np.stack([np.bincount(idx, weights=np.array(value[k])[ok_np].astype(np.float64), minlength=size * size)
                     for k in range(3)], -1)
-    return out.reshape(size, size, 3)
+    return out.reshape(size, size, 3), int(ok_np.sum())
 
 
 def sun_direct(mi, scene, exp: Experiment, sun: np.ndarray, extent, size: int, n_photons: int,
@@ -170,10 +171,10 @@ def sun_direct(mi, scene, exp: Experiment, sun: np.ndarray, extent, size: int, n
     x0, z0, x1, z1 = extent
     value = (power * dr.exp(-sigma * si2.t) * albedo * dr.abs(si2.n.y)
              * dr.opaque(F, size * size / (np.pi * (x1 - x0) * (z1 - z0))))
-    out = _splat(mi, ok, si2.p, value, extent, size)
+    out, landed = _splat(mi, ok, si2.p, value, extent, size)
     if not np.all(np.isfinite(out)):
         raise RuntimeError(f"the light-traced sunlight of {exp['name']!r} has non-finite texels")
-    return out.astype(np.float32), int(np.array(ok, bool).sum())
+    return out.astype(np.float32), landed
 
 
 def sky_direct(mi, scene, exp: Experiment, sky: np.ndarray, extent, size: int, n_dirs: int, seed: int,
@@ -226,7 +227,7 @@ def sky_direct(mi, scene, exp: Experiment, sky: np.ndarray, extent, size: int, n
 
 
 def traced_direct(exp: Experiment, extent, size: int, seed: int, y_cam: float, albedo: np.ndarray,
-                  inside: np.ndarray, scene=None) -> tuple[np.ndarray, np.ndarray, np.ndarray, dict]:
+                  inside: np.ndarray, scene) -> tuple[np.ndarray, np.ndarray, np.ndarray, dict]:
     """The direct sky- and sunlight's radiance on the texture's (size, size) texels over
     ``extent`` (GL order, linear RGB), zero outside the (size, size) bool ``inside``: (mean,
     its two independent halves (2, size, size, 3), per-texel standard error, a dict for the
@@ -234,15 +235,12 @@ def traced_direct(exp: Experiment, extent, size: int, seed: int, y_cam: float, a
     half, times the texel ``albedo`` (size, size, 3), its mean denoised (``reference.lighting_denoise``)
     and matched to the raw mean over the pool; the sun from ``reference.sun_photons`` photons per
     texel in ``N_BATCHES`` batches, raw (halves: batches 0-1 and 2-3). ``scene``: a Mitsuba scene
-    of the experiment's geometry with the water (default: built here)."""
+    of the experiment's geometry with the water (the lighting render's, :func:`.lighting.lighting_scene`)."""
     import mitsuba as mi
 
     from .lighting import denoise_gain, denoise_radiance
-    from .mitsuba_scene import build_geometry
     from .user_scene import reference_sky_parts
 
-    if scene is None:
-        scene = mi.load_dict({"type": "scene", **build_geometry(mi, exp, water=True)})
     sky, sun = reference_sky_parts(exp)
     mask = inside[..., None]
     nd = exp["reference.sky_directions"]

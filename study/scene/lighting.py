@@ -212,9 +212,8 @@ def render_lighting(exp: Experiment, size: int, spp: int, seed: int, *, water: b
         lighting = denoise_radiance(np.mean(radiances, axis=0), albedo) / albedo
     if water:
         world_y = top_down_world_y(exp, extent, size)
-        sigma = np.asarray(exp["water.sigma_t"], np.float64)
-        from .shader_inputs import MAX_OPTICAL_DEPTH, camera_ray_top
-        optical = sigma * np.maximum(camera_ray_top(y_cam) - world_y, 0.0)[..., None]
+        from .shader_inputs import MAX_OPTICAL_DEPTH, camera_ray_optical_depth
+        optical = camera_ray_optical_depth(exp, y_cam, world_y)
         if optical.max() > MAX_OPTICAL_DEPTH:
             from .experiment import ExperimentError
             raise ExperimentError(f"water.sigma_t: the floor's light through the water is lost (optical depth "

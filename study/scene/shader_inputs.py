@@ -76,6 +76,14 @@ def camera_ray_top(y_cam: float) -> float:
     return y_cam - ORTHO_NEAR_CLIP
 
 
+def camera_ray_optical_depth(exp: Experiment, y_cam: float, world_y: np.ndarray) -> np.ndarray:
+    """(..., 3) optical depth ``sigma_t (y_top - world_y)`` of the under-water camera's own vertical
+    ray, from where it starts (:func:`camera_ray_top`) down to the surface at ``world_y`` (...);
+    ``exp`` of it divides that ray's absorption out of a top-down render."""
+    sigma = np.asarray(exp["water.sigma_t"], np.float64)
+    return sigma * np.maximum(camera_ray_top(y_cam) - world_y, 0.0)[..., None]
+
+
 def _to_gl_order(mi, sensor, img: np.ndarray, extent) -> np.ndarray:
     """Reorder an orthographic render so that row = t (z increasing), column = s (x increasing),
     checking the sensor's own pixel-to-world map instead of assuming it."""
@@ -168,10 +176,10 @@ def top_down_colour(exp: Experiment, extent, size: int, spp: int, seed: int = 0,
     * ``"underwater"`` (default): inside the pool, the floor's own radiance as lit *through
       the water* (sky and sun refracted by the wave surface, light absorbed on its way down),
       seen by an orthographic camera placed inside the water just below the wave troughs;
-      the absorption of the camera's own vertical ray, ``exp(-sigma_t (y_top - world_y))`` from
-      where its rays start (:func:`camera_ray_top`: its near clip plane, 1 cm below it), is divided out (exact for purely absorbing water, ``water.albedo = 0``; where its optical
-      depth exceeds ``MAX_OPTICAL_DEPTH`` nothing is left to recover and the dry render is
-      used). Outside the
+      the absorption of the camera's own vertical ray (:func:`camera_ray_optical_depth`, from
+      where its rays start: its near clip plane, 1 cm below it) is divided out (exact for
+      purely absorbing water, ``water.albedo = 0``; where its optical depth exceeds
+      ``MAX_OPTICAL_DEPTH`` nothing is left to recover and the dry render is used). Outside the
       pool (the walls) the dry render is used. With it the shader's attenuation stands for
       absorption along the view path only.
     """
@@ -193,8 +201,7 @@ def top_down_colour(exp: Experiment, extent, size: int, spp: int, seed: int = 0,
                                progress=st.counter("  passes"))
     if world_y is None:
         world_y = top_down_world_y(exp, extent, size)
-    sigma = np.asarray(exp["water.sigma_t"], np.float64)
-    optical = sigma * np.maximum(camera_ray_top(y_cam) - world_y, 0.0)[..., None]
+    optical = camera_ray_optical_depth(exp, y_cam, world_y)
     # beyond an optical depth of MAX_OPTICAL_DEPTH the floor's light through the water is lost
     # in float precision (very murky water): the dry render stands in for those texels
     lost = optical > MAX_OPTICAL_DEPTH
