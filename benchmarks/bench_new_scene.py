@@ -10,7 +10,13 @@ side by side:
 * ``new``: the shipped defaults;
 * ``clean`` (optional, 10-15 min a scene): today's reference with a 2048-spp colour texture, the
   yardstick where today's 256-spp texture biases the fit (noise in the shader's inputs biases
-  the constants it meets, unlike zero-mean noise in the reference).
+  the constants it meets, unlike zero-mean noise in the reference: the attenuation distance
+  shortens as the texture's noise grows, ``study.fit.decorrelated``);
+* ``converged`` (optional, ~15 s a run more than ``new``): the new path with 16x the sun's
+  photons, 4x the sky's directions and 4x the samples of the bounced light (scenes whose direct
+  light is traced): its fits against the new path's at the same seeds (the same reference, so
+  the per-seed differences are the textures' alone) measure the bias the new path's own texture
+  noise leaves.
 
 Prints per stage, in wall seconds and CPU seconds of the process (all threads; on a loaded
 machine CPU seconds measure the work, wall seconds the wait):
@@ -20,8 +26,8 @@ machine CPU seconds measure the work, wall seconds the wait):
   renders (world y, lighting / colour, albedo, walls, the traced direct light), fit, export, GL
   check, rest (figures, report, evaluation), total;
 
-then the fitted constants of each path against the *baseline* (``clean`` when run, else
-``today``): the difference in the baseline's Gauss-Newton standard errors, each path's standard
+then the fitted constants of each path against the *baseline* (``--baseline``, by default
+``clean`` when run, else ``today``): the difference in the baseline's Gauss-Newton standard errors, each path's standard
 error from its reference's Monte Carlo noise alone (``rel_noise_error``), and FLIP (water pixels,
 full resolution) of each path's fitted shader against the baseline's reference (and against its
 own). With ``--seeds N`` the paths named by ``--seed-paths`` (default: the new one) run with
@@ -31,17 +37,19 @@ baseline also in that standard deviation (what a user rerunning the scene would 
 the stage times are medians over the seeds. When the baseline itself runs over seeds, its seed
 standard deviation is the measured standard error of one of its fits (reference *and* texture
 noise, and the basin a fit lands in, which the Gauss-Newton standard error leaves out), and the
-difference of the means is given in it too, with the standard error of that difference. With
-``--repeats N`` each run is repeated and medians are printed.
+difference of the means is given in it too, with the standard error of that difference; where
+a path ran the baseline's own references (same seeds, same reference settings and variant:
+``new`` against ``converged``), the per-seed differences are averaged as well, the reference's
+noise cancelling in them. With ``--repeats N`` each run is repeated and medians are printed.
 
 ``--merge A.json B.json ...`` prints the tables of earlier ``--json`` results together (the runs
 of one experiment joined by path; a path in a later file replaces the earlier one's), e.g. the
 baseline's seeds run on a GPU beside the new path's on the CPU; each path's variant is printed.
 
     .venv/bin/python benchmarks/bench_new_scene.py [EXPERIMENT.toml ...] [--repeats N]
-        [--paths today new clean] [--seeds N] [--seed-paths today new] [--variant cuda_ad_rgb]
-        [--set KEY=VALUE ...] [--json OUT.json]
-    .venv/bin/python benchmarks/bench_new_scene.py --merge A.json B.json
+        [--paths today new clean converged] [--seeds N] [--seed-paths today new converged]
+        [--baseline PATH] [--variant cuda_ad_rgb] [--set KEY=VALUE ...] [--json OUT.json]
+    .venv/bin/python benchmarks/bench_new_scene.py --merge A.json B.json [--baseline PATH]
 """
 from __future__ import annotations
 
@@ -65,7 +73,10 @@ TODAY = ["reference.texture_method=\"colour\"", "reference.spp=\"auto\"", "refer
 # the texture_spp each shipped experiment used then (schema default 256; default and seed_lut set 1024)
 TODAY_TEXTURE_SPP = {"default": 1024, "seed_lut": 1024}
 CLEAN_TEXTURE_SPP = 2048      # the clean yardstick's colour texture
-PATHS = ("today", "new", "clean")
+# the new path with its traced texture's noise cut 4x in standard deviation (the schema's
+# defaults x 16 photons, x 4 directions and samples); the reference unchanged
+CONVERGED = ["reference.sun_photons=256", "reference.sky_directions=144", "reference.bounce_spp=64"]
+PATHS = ("today", "new", "clean", "converged")
 
 
 def path_settings(path: str, name: str) -> list[str]:
@@ -74,7 +85,19 @@ def path_settings(path: str, name: str) -> list[str]:
         return TODAY + [f"reference.texture_spp={TODAY_TEXTURE_SPP.get(name, 256)}"]
     if path == "clean":
         return TODAY + [f"reference.texture_spp={CLEAN_TEXTURE_SPP}"]
+    if path == "converged":
+        return list(CONVERGED)
     return []
+
+
+def pick_baseline(paths, wanted: str | None) -> str | None:
+    """The path the others are compared with: ``wanted`` if given (it must be among ``paths``),
+    else ``clean``, else ``today``, else none."""
+    if wanted is not None:
+        if wanted not in paths:
+            raise SystemExit(f"--baseline {wanted}: that path was not run (paths: {', '.join(paths)})")
+        return wanted
+    return "clean" if "clean" in paths else "today" if "today" in paths else None
 STAGES = ["startup", "scene build", "JIT", "reference passes", "noise estimation", "texture renders",
           "fit", "export", "GL check", "rest", "total"]
 
@@ -222,6 +245,8 @@ def main() -> None:
     ap.add_argument("--merge", nargs="+", type=Path, help="print the tables of earlier --json results together")
     ap.add_argument("--set", dest="overrides", action="append", default=[])
     ap.add_argument("--variant", default="llvm_ad_rgb", choices=["llvm_ad_rgb", "cuda_ad_rgb"])
+    ap.add_argument("--baseline", choices=PATHS, help="the path the others are compared with "
+                    "(default: clean if run, else today)")
     ap.add_argument("--json", type=Path)
     ap.add_argument("--worker", nargs=3, metavar=("EXPERIMENT", "PATH", "OUT"), help=argparse.SUPPRESS)
     ap.add_argument("--cross", nargs=3, metavar=("EXPERIMENT", "BASELINE", "DIRS_JSON"), help=argparse.SUPPRESS)
@@ -239,10 +264,10 @@ def main() -> None:
         return
 
     if args.merge:
-        _print_merged(args.merge)
+        _print_merged(args.merge, args.baseline)
         return
     paths = list(dict.fromkeys(args.paths))
-    baseline = "clean" if "clean" in paths else "today" if "today" in paths else None
+    baseline = pick_baseline(paths, args.baseline)
     exps = args.experiments or sorted(str(p) for p in (REPO / "experiments").glob("*.toml"))
     load = os.getloadavg()
     print(f"# bench_new_scene: {os.cpu_count()} cores, load average {load[0]:.1f} / {load[1]:.1f} / "
@@ -347,6 +372,7 @@ def _print(name: str, runs: dict, cross: dict, baseline: str | None) -> None:
                 cells.append(f"{_v(mp)} +- {_v(sp, 2)} ({kp}) | {_v(z, 2)}{zd} | {_v(d / se_abs if se_abs else None, 2)}")
             print(f"| {n} | {_v(mb)} +- {_v(sb, 2)} ({kb}) ({_v(pa['rel_se'])}) [{pa['status']}] | "
                   + " | ".join(cells) + " |")
+        _print_paired(runs, baseline, others, base)
         sys.stdout.flush()
         return
     print(f"\n| constant | {baseline} (rel. SE; from reference noise) | " + " | ".join(
@@ -370,7 +396,50 @@ def _print(name: str, runs: dict, cross: dict, baseline: str | None) -> None:
     sys.stdout.flush()
 
 
-def _print_merged(files: list[Path]) -> None:
+def _paired(runs_b: list[dict], runs_p: list[dict], name: str) -> tuple[float, float | None, int] | None:
+    """(mean, its standard error or None, count) of the per-seed difference p - baseline of
+    constant ``name`` over the seeds both ran with *the same reference* (same variant, spp and
+    measured noise, so the same render: the difference is the texture's alone), or None when
+    they share no such seed."""
+    b = {r["seed"]: r for r in runs_b}
+    d = []
+    for r in runs_p:
+        rb = b.get(r["seed"])
+        if (rb is None or rb.get("variant") != r.get("variant") or rb["reference_spp"] != r["reference_spp"]
+                or rb["reference_noise"] != r["reference_noise"]):
+            continue
+        vb, vp = rb["params"].get(name, {}).get("fitted"), r["params"].get(name, {}).get("fitted")
+        if vb is not None and vp is not None:
+            d.append(vp - vb)
+    if not d:
+        return None
+    return statistics.fmean(d), (statistics.stdev(d) / len(d) ** 0.5 if len(d) > 1 else None), len(d)
+
+
+def _print_paired(runs: dict, baseline: str, others: list[str], base: dict) -> None:
+    """Per-seed differences from the baseline where a path ran the baseline's own reference (e.g.
+    ``new`` against ``converged``): the reference's noise cancels, what is left is the textures'."""
+    rows = {p: {n: _paired(runs[baseline], runs[p], n) for n in base} for p in others}
+    shown = [p for p in others if any(v is not None for v in rows[p].values())]
+    if not shown:
+        return
+    print("\n| constant | " + " | ".join(f"{p} - {baseline}, same reference, in GN SE: mean +- SE (seeds)"
+                                          for p in shown) + " |")
+    print("|---|" + "---|" * len(shown))
+    for n, pa in base.items():
+        se_abs = pa["rel_se"] * abs(pa["fitted"]) if pa["rel_se"] and pa["fitted"] is not None else None
+        cells = []
+        for p in shown:
+            v = rows[p][n]
+            if v is None or not se_abs:
+                cells.append("-")
+                continue
+            m, e, k = v
+            cells.append(f"{_v(m / se_abs, 2)}" + (f" +- {_v(e / se_abs, 2)}" if e is not None else "") + f" ({k})")
+        print(f"| {n} | " + " | ".join(cells) + " |")
+
+
+def _print_merged(files: list[Path], wanted: str | None = None) -> None:
     """The tables of earlier ``--json`` results, the runs of one experiment joined by path."""
     merged: dict[str, dict] = {}
     for f in files:
@@ -380,7 +449,7 @@ def _print_merged(files: list[Path]) -> None:
             m["cross"].update(res.get("cross") or {})
     for name, m in merged.items():
         runs = {p: m["runs"][p] for p in PATHS if p in m["runs"]}
-        baseline = "clean" if "clean" in runs else "today" if "today" in runs else None
+        baseline = pick_baseline(list(runs), wanted)
         cross = m["cross"] if all(p in m["cross"] for p in runs) else {}
         _print(name, runs, cross, baseline)
 
