@@ -373,6 +373,7 @@ def _print(name: str, runs: dict, cross: dict, baseline: str | None) -> None:
             print(f"| {n} | {_v(mb)} +- {_v(sb, 2)} ({kb}) ({_v(pa['rel_se'])}) [{pa['status']}] | "
                   + " | ".join(cells) + " |")
         _print_paired(runs, baseline, others, base)
+        _print_extrapolated(name, runs, base)
         sys.stdout.flush()
         return
     print(f"\n| constant | {baseline} (rel. SE; from reference noise) | " + " | ".join(
@@ -437,6 +438,35 @@ def _print_paired(runs: dict, baseline: str, others: list[str], base: dict) -> N
             m, e, k = v
             cells.append(f"{_v(m / se_abs, 2)}" + (f" +- {_v(e / se_abs, 2)}" if e is not None else "") + f" ({k})")
         print(f"| {n} | " + " | ".join(cells) + " |")
+
+
+def _print_extrapolated(name: str, runs: dict, base: dict) -> None:
+    """The path tracer's constants without texture noise, where ``today`` and ``clean`` ran the
+    same seeds: texture noise biases a fit by about its variance, which falls as 1 / spp, so
+    ``v(inf) = v(clean) + (v(clean) - v(today)) * (1 / s_clean) / (1 / s_today - 1 / s_clean)`` (the
+    per-seed shift today -> clean averaged over the common seeds); each other path's mean against it,
+    in the Gauss-Newton SE of the baseline's seed 0."""
+    if "today" not in runs or "clean" not in runs:
+        return
+    s_today, s_clean = TODAY_TEXTURE_SPP.get(name, 256), CLEAN_TEXTURE_SPP
+    w = (1.0 / s_clean) / (1.0 / s_today - 1.0 / s_clean)
+    others = [p for p in runs if p not in ("today", "clean")]
+    print(f"\n| constant | path tracer without texture noise ({s_today} and {s_clean} spp in 1/spp) | "
+          + " | ".join(f"{p} - it, in GN SE" for p in others) + " |")
+    print("|---|---|" + "---|" * len(others))
+    for n, pa in base.items():
+        shift = _paired(runs["today"], runs["clean"], n)
+        mc = _seed_stats(runs["clean"], n)[0]
+        se_abs = pa["rel_se"] * abs(pa["fitted"]) if pa["rel_se"] and pa["fitted"] is not None else None
+        if shift is None or mc is None:
+            print(f"| {n} | - |" + " - |" * len(others))
+            continue
+        v_inf = mc + w * shift[0]
+        cells = []
+        for p in others:
+            mp = _seed_stats(runs[p], n)[0]
+            cells.append(_v((mp - v_inf) / se_abs, 2) if mp is not None and se_abs else "-")
+        print(f"| {n} | {_v(v_inf)} (shift today -> clean {_v(shift[0])}, {shift[2]} seeds) | " + " | ".join(cells) + " |")
 
 
 def _print_merged(files: list[Path], wanted: str | None = None) -> None:
