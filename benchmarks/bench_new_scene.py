@@ -27,10 +27,10 @@ machine CPU seconds measure the work, wall seconds the wait):
   check, rest (figures, report, evaluation), total;
 
 then the fitted constants of each path against the *baseline* (``--baseline``, by default
-``clean`` when run, else ``today``): the difference in the baseline's Gauss-Newton standard errors, each path's standard
-error from its reference's Monte Carlo noise alone (``rel_noise_error``), and FLIP (water pixels,
-full resolution) of each path's fitted shader against the baseline's reference (and against its
-own). With ``--seeds N`` the paths named by ``--seed-paths`` (default: the new one) run with
+``clean`` when run, else ``today``): the difference in the baseline's Gauss-Newton standard
+errors, each path's standard error from its reference's Monte Carlo noise alone
+(``rel_noise_error``), and FLIP (water pixels, full resolution) of each path's fitted shader
+against the baseline's reference (and against its own). With ``--seeds N`` the paths named by ``--seed-paths`` (default: the new one) run with
 ``reference.seed = 0 .. N-1`` (reference, texture, lighting and dry renders all reseeded): their
 constants are given as mean and standard deviation over the seeds, the difference from the
 baseline also in that standard deviation (what a user rerunning the scene would see move), and
@@ -98,6 +98,8 @@ def pick_baseline(paths, wanted: str | None) -> str | None:
             raise SystemExit(f"--baseline {wanted}: that path was not run (paths: {', '.join(paths)})")
         return wanted
     return "clean" if "clean" in paths else "today" if "today" in paths else None
+
+
 STAGES = ["startup", "scene build", "JIT", "reference passes", "noise estimation", "texture renders",
           "fit", "export", "GL check", "rest", "total"]
 
@@ -358,7 +360,7 @@ def _print(name: str, runs: dict, cross: dict, baseline: str | None) -> None:
         print("|---|---|" + "---|---|---|" * len(others))
         for n, pa in base.items():
             mb, sb, kb = _seed_stats(runs[baseline], n)
-            se_abs = pa["rel_se"] * abs(pa["fitted"]) if pa["rel_se"] and pa["fitted"] is not None else None
+            se_abs = _se_abs(pa)
             cells = []
             for p in others:
                 mp, sp, kp = _seed_stats(runs[p], n)
@@ -397,6 +399,11 @@ def _print(name: str, runs: dict, cross: dict, baseline: str | None) -> None:
     sys.stdout.flush()
 
 
+def _se_abs(pa: dict) -> float | None:
+    """The Gauss-Newton standard error of a fitted constant (its ``params`` entry), or None."""
+    return pa["rel_se"] * abs(pa["fitted"]) if pa["rel_se"] and pa["fitted"] is not None else None
+
+
 def _paired(runs_b: list[dict], runs_p: list[dict], name: str) -> tuple[float, float | None, int] | None:
     """(mean, its standard error or None, count) of the per-seed difference p - baseline of
     constant ``name`` over the seeds both ran with *the same reference* (same variant, spp and
@@ -428,7 +435,7 @@ def _print_paired(runs: dict, baseline: str, others: list[str], base: dict) -> N
                                           for p in shown) + " |")
     print("|---|" + "---|" * len(shown))
     for n, pa in base.items():
-        se_abs = pa["rel_se"] * abs(pa["fitted"]) if pa["rel_se"] and pa["fitted"] is not None else None
+        se_abs = _se_abs(pa)
         cells = []
         for p in shown:
             v = rows[p][n]
@@ -457,7 +464,7 @@ def _print_extrapolated(name: str, runs: dict, base: dict) -> None:
     for n, pa in base.items():
         shift = _paired(runs["today"], runs["clean"], n)
         mc = _seed_stats(runs["clean"], n)[0]
-        se_abs = pa["rel_se"] * abs(pa["fitted"]) if pa["rel_se"] and pa["fitted"] is not None else None
+        se_abs = _se_abs(pa)
         if shift is None or mc is None:
             print(f"| {n} | - |" + " - |" * len(others))
             continue
