@@ -66,8 +66,8 @@ def run(exp, spp: int, n_est: int, repeats: int) -> list[dict]:
     for term, env in (("sun", sun), ("sky", sky)):
         if env.max() <= 0.0:
             continue
-        scene, _ = lighting._top_down_scene(mi, exp, water=True, sky=env, medium=medium, integrator={
-            "type": "aov", "aovs": "alb:albedo", "transport": {**lighting._transport(exp, True), "max_depth": 3}})
+        scene, _ = lighting._top_down_scene(mi, exp, water=True, sky=env, medium=medium,
+                                            integrator=lighting._albedo_aov(exp, True, max_depth=3))
         sensor = _ortho_sensor(mi, extent, size, spp, 0, y_cam=y_cam, medium=medium)
 
         def path_traced():

@@ -11,9 +11,8 @@ from study.scene.user_scene import reference_sky, reference_sky_parts
 
 def _render(mi, exp, sky, max_depth, size, spp, seed, medium=None):
     """(size, size, 6) GL-order radiance and albedo over the pool, camera under the waves."""
-    transport = {**lighting._transport(exp, True), "max_depth": max_depth}
-    scene, medium = lighting._top_down_scene(mi, exp, water=True, sky=sky, medium=medium, integrator={
-        "type": "aov", "aovs": "alb:albedo", "transport": transport})
+    scene, medium = lighting._top_down_scene(mi, exp, water=True, sky=sky, medium=medium,
+                                             integrator=lighting._albedo_aov(exp, True, max_depth=max_depth))
     extent = lighting.pool_extent(exp)
     sensor = _ortho_sensor(mi, extent, size, spp, seed, y_cam=underwater_camera_height(exp), medium=medium)
     img = np.array(mi.render(scene, sensor=sensor, spp=spp, seed=seed), np.float32)

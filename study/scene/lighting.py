@@ -92,14 +92,22 @@ def lighting_scene(exp: Experiment, water: bool):
     """(scene, the water's medium) of the lighting render: its geometry, the reference's envmap and
     the ``aov`` integrator giving radiance and the first hit's albedo."""
     import mitsuba as mi
-    return _top_down_scene(mi, exp, water=water, integrator={
-        "type": "aov", "aovs": "alb:albedo", "transport": _transport(exp, water)})
+    return _top_down_scene(mi, exp, water=water, integrator=_albedo_aov(exp, water))
 
 
 def _transport(exp: Experiment, water: bool) -> dict:
     from .mitsuba_scene import has_medium
     return {"type": "volpath" if water and has_medium(exp) else "path",
             "max_depth": exp["reference.max_depth"]}
+
+
+def _albedo_aov(exp: Experiment, water: bool, max_depth: int | None = None) -> dict:
+    """The top-down renders' integrator: radiance (:func:`_transport`, paths cut at ``max_depth``
+    if given) and the first hit's albedo, as 6 channels."""
+    transport = _transport(exp, water)
+    if max_depth is not None:
+        transport["max_depth"] = max_depth
+    return {"type": "aov", "aovs": "alb:albedo", "transport": transport}
 
 
 def texel_centres(extent, size: int) -> tuple[np.ndarray, np.ndarray]:
@@ -178,8 +186,7 @@ def render_lighting(exp: Experiment, size: int, spp: int, seed: int, *, water: b
     scene, medium = scene if scene is not None else lighting_scene(exp, water)
     direct = None
     if without_direct:
-        direct = mi.load_dict({"type": "aov", "aovs": "alb:albedo",
-                               "transport": {**_transport(exp, water), "max_depth": 3}})
+        direct = mi.load_dict(_albedo_aov(exp, water, max_depth=3))
     per_pass = max(1, -(-spp // N_SEEDS))
     sensor = _ortho_sensor(mi, extent, size, per_pass, seed, y_cam=y_cam, medium=medium)
     passes, radiances, albedos = [], [], []
@@ -256,8 +263,7 @@ def render_dry(exp: Experiment, extent, size: int, spp: int, seed: int) -> tuple
     from .user_scene import dry_camera_height
 
     spp = dry_spp(spp)
-    scene, _ = _top_down_scene(mi, exp, water=False, integrator={
-        "type": "aov", "aovs": "alb:albedo", "transport": _transport(exp, False)})
+    scene, _ = _top_down_scene(mi, exp, water=False, integrator=_albedo_aov(exp, False))
     sensor = _ortho_sensor(mi, extent, size, spp, seed, y_cam=dry_camera_height(mi, exp, extent),
                            sampler=DRY_SAMPLER)
     img = _to_gl_order(mi, sensor, np.array(mi.render(scene, sensor=sensor, spp=spp, seed=seed), np.float32),
