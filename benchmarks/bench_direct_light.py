@@ -46,7 +46,7 @@ def _timed(fn, repeats: int):
 def run(exp, spp: int, n_est: int, repeats: int) -> list[dict]:
     import mitsuba as mi
 
-    from study.scene import direct_light, lighting
+    from study.scene import direct_light, lighting, sun_photons
     from study.scene.shader_inputs import (_ortho_sensor, _to_gl_order, camera_ray_optical_depth, texture_extent,
                                            top_down_world_y, underwater_camera_height)
     from study.scene.user_scene import reference_sky_parts
@@ -79,7 +79,7 @@ def run(exp, spp: int, n_est: int, repeats: int) -> list[dict]:
             n = exp["reference.sun_photons"] * size * size
 
             def traced():
-                return direct_light.sun_direct(mi, geo, exp, sun, extent, size, n, next(seeds), y_cam)[0]
+                return sun_photons.sun_direct(mi, geo, exp, sun, extent, size, n, next(seeds), y_cam)[0]
         else:
             nd = exp["reference.sky_directions"]
             albedo = lighting.render_dry(exp, extent, size, exp["reference.wall_spp"], 0)[1]

@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 from conftest import save_failure, small_experiment
 
-from study.scene import direct_light, lighting
+from study.scene import direct_light, lighting, sun_photons
 from study.scene.shader_inputs import _ortho_sensor, _to_gl_order, underwater_camera_height
 from study.scene.user_scene import reference_sky, reference_sky_parts
 
@@ -24,7 +24,7 @@ def test_sky_parts_add_up_to_the_reference_sky_and_the_sun_is_its_disc(mi):
     sky, sun = reference_sky_parts(exp)
     np.testing.assert_allclose(sky + sun, reference_sky(exp), rtol=1e-6, atol=1e-7)
     assert sky.min() >= 0.0 and sun.min() >= 0.0
-    axis, angle = direct_light.sun_cone(sun)
+    axis, angle = sun_photons.sun_cone(sun)
     from study.scene.geometry import sun_direction
     assert np.degrees(np.arccos(axis @ sun_direction(exp["sun.elevation"], exp["sun.azimuth"]))) < 0.2
     # the cone holds the disc (sun.radius) and a margin of about two map texels, no more
@@ -73,16 +73,16 @@ def _compare(name, pt, traced, n_pass):
     return np.mean(t_se), np.mean(p_se)
 
 
-def _path_traced_direct(mi, exp, sky, size, spp, seeds, lighting_only=False):
-    """Mitsuba's estimates of the direct term lit by ``sky``: the max_depth-3 render over the
-    pool at each seed, its radiance (or, ``lighting_only``, radiance over albedo) with the camera
+def _path_traced_direct(mi, exp, sky, size, spp, seeds, lighting_only=False, max_depth=3):
+    """Mitsuba's estimates of the direct term lit by ``sky`` (``max_depth``: of all the light
+    up to that depth): the max_depth-3 render over the pool at each seed, its radiance (or, ``lighting_only``, radiance over albedo) with the camera
     ray's absorption divided out as the lighting texture does; and a scene of the geometry."""
     from study.scene.shader_inputs import camera_ray_optical_depth, top_down_world_y
     world_y = top_down_world_y(exp, lighting.pool_extent(exp), size)
     gain = np.exp(camera_ray_optical_depth(exp, underwater_camera_height(exp), world_y))
     medium, out = None, []
     for seed in seeds:
-        img, medium = _render(mi, exp, sky, 3, size, spp, seed, medium)
+        img, medium = _render(mi, exp, sky, max_depth, size, spp, seed, medium)
         out.append(img[..., :3] / (img[..., 3:6] if lighting_only else 1.0) * gain)
     return out, lighting.lighting_scene(exp, True)[0]
 
@@ -98,10 +98,42 @@ def test_traced_sunlight_matches_the_path_tracers_direct_sun(mi):
     y_cam = underwater_camera_height(exp)
     extent = lighting.pool_extent(exp)
     pt, scene = _path_traced_direct(mi, exp, sun, size, spp, range(40, 40 + n_pass))
-    traced = [direct_light.sun_direct(mi, scene, exp, sun, extent, size, 60_000, 90 + k, y_cam)[0]
-              for k in range(n_pass)]
+    traced = list(sun_photons.sun_direct(mi, scene, exp, sun, extent, size, 60_000, range(90, 90 + n_pass),
+                                         y_cam)[0])
     t_se, p_se = _compare("traced_sunlight", pt, traced, n_pass)
     assert t_se < 0.3 * p_se              # the light tracer is the far less noisy estimate
+
+
+def test_sun_walk_matches_the_path_tracers_sunlight_bounces_included(mi):
+    """All the sun's light traced from the sun (:func:`sun_photons.sun_walk`) against Mitsuba's
+    full-depth render lit by the sun alone (a wide sun, so that the path tracer converges in a
+    test's time): the total in 4 x 4 texel blocks within the standard errors, and the light that
+    bounced (walk minus direct photons; full minus max_depth-3 render, sample for sample) over the
+    pool and in its four quadrants."""
+    exp = small_experiment(**{"sun.radius": "15.0"})
+    _, sun = reference_sky_parts(exp)
+    size, spp, n_pass = 16, 512, 8
+    y_cam = underwater_camera_height(exp)
+    extent = lighting.pool_extent(exp)
+    direct_pt, scene = _path_traced_direct(mi, exp, sun, size, spp, range(40, 40 + n_pass))
+    full_pt = _path_traced_direct(mi, exp, sun, size, spp, range(40, 40 + n_pass),
+                                  max_depth=exp["reference.max_depth"])[0]
+    seeds = range(90, 90 + n_pass)
+    walk = sun_photons.sun_walk(mi, scene, exp, sun, extent, size, 100_000, seeds, y_cam)[0]
+    direct = sun_photons.sun_direct(mi, scene, exp, sun, extent, size, 100_000, seeds, y_cam)[0]
+    _compare("sun_walk", full_pt, list(walk), n_pass)
+    quad = lambda a: np.stack(a).reshape(n_pass, 2, size // 2, 2, size // 2, 3).mean((2, 4))   # noqa: E731
+    b_pt, b_walk = quad(full_pt) - quad(direct_pt), quad(walk) - quad(direct)
+    se = np.sqrt(b_pt.var(0, ddof=1) / n_pass + b_walk.var(0, ddof=1) / n_pass)
+    z = (b_walk.mean(0) - b_pt.mean(0)) / se
+    if np.abs(z).max() > 4.0:
+        save_failure("sun_walk_bounce", actual=np.mean(walk - direct, 0),
+                     expected=np.mean(np.stack(full_pt) - np.stack(direct_pt), 0))
+    assert b_walk.mean() > 0.1 * quad(walk).mean(), "no bounced light"     # a fifth of it, measured
+    assert np.abs(z).max() < 4.0, z
+    pool_pt, pool_walk = b_pt.mean((1, 2)), b_walk.mean((1, 2))
+    se_pool = np.sqrt(pool_pt.var(0, ddof=1) / n_pass + pool_walk.var(0, ddof=1) / n_pass)
+    assert np.all(np.abs(pool_walk.mean(0) - pool_pt.mean(0)) < 3.5 * se_pool)
 
 
 def test_traced_skylight_matches_the_path_tracers_direct_sky(mi):
@@ -128,9 +160,9 @@ def test_sun_below_the_horizon_lights_nothing(mi):
     _, sun = reference_sky_parts(exp)
     flipped = sun[::-1].copy()                 # the same disc mirrored below the horizon
     scene, _ = lighting.lighting_scene(exp, True)
-    img, n = direct_light.sun_direct(mi, scene, exp, flipped, lighting.pool_extent(exp), 8, 1000, 0,
-                                     underwater_camera_height(exp))
-    assert n == 0 and img.max() == 0.0
+    for trace in (sun_photons.sun_direct, sun_photons.sun_walk):
+        img, n = trace(mi, scene, exp, flipped, lighting.pool_extent(exp), 8, 1000, [0, 1], underwater_camera_height(exp))
+        assert n == 0 and img.shape == (2, 8, 8, 3) and img.max() == 0.0
 
 
 def test_traced_texture_keeps_the_raw_mean_and_adds_up(mi):

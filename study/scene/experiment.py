@@ -183,6 +183,13 @@ SCHEMA: dict[str, Field] = {
                                        "traced and denoised; scattering water, `water.albedo` > 0, keeps "
                                        "`path`) or `path` (all of it path traced and denoised, the caustics "
                                        "smoothed). README, Fast references.", choices=("traced", "path")),
+    "reference.sun_bounces": Field("str", "photons", "The sun's light that bounced under water (off the "
+                                   "walls, the floor, the water's underside) with `lighting_direct = "
+                                   "\"traced\"`: `photons` (light traced from the sun with its direct light; "
+                                   "the path tracer then renders the sky's bounced light alone) or `path` (path "
+                                   "traced and denoised with the sky's: fireflies that the denoiser darkens, "
+                                   "2-4 % at the feet of sunlit walls). README, Fast references.",
+                                   choices=("photons", "path")),
     "reference.bounce_spp": Field("int", 16, "Samples per texel of the path-traced lighting with "
                                   "`lighting_direct = \"traced\"` (only the light that bounced is kept from "
                                   "it; `texture_spp` otherwise).", "", 1, 65536),
@@ -255,7 +262,7 @@ for _name, (_glsl, _kind, _default, (_lo, _hi)) in CONSTANT_SPECS.items():
 SHADER_INPUT_KEYS = frozenset({"reference.texture_size", "reference.texture_spp",
                                "reference.texture_method", "reference.lighting_size", "reference.wall_spp",
                                "reference.lighting_denoise", "reference.lighting_direct", "reference.sun_photons",
-                               "reference.sky_directions", "reference.bounce_spp",
+                               "reference.sky_directions", "reference.bounce_spp", "reference.sun_bounces",
                                "reference.refraction_lighting", "reference.fresnel_transmission",
                                "waves.normal_map_size", "waves.slope_scale"})
 

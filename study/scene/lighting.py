@@ -46,7 +46,9 @@ Under water (``reference.lighting_direct = "traced"``, the default) the floor's 
 through the waves -- where the sun's caustics and the sky's ripples are, and the path tracer's
 fireflies -- is ray traced at the texture's texels by :mod:`.direct_light`, and only the light
 that bounced comes from this render (``reference.bounce_spp``): each pass minus the same pass
-rendered with ``max_depth = 3`` (same seed, same paths), then denoised as above.
+rendered with ``max_depth = 3`` (same seed, same paths), then denoised as above. With
+``reference.sun_bounces = "photons"`` (the default) the sun's bounced light is light traced too,
+and this render is lit by the sky without the sun.
 
 The four passes also give the texture's two *halves* (passes 0-1 and 2-3, raw even when the
 mean is denoised: a denoiser's bias would survive the decorrelation), independent estimates of
@@ -88,11 +90,16 @@ def _top_down_scene(mi, exp: Experiment, *, water: bool, integrator: dict, sky=N
     return mi.load_dict(d), medium
 
 
-def lighting_scene(exp: Experiment, water: bool):
-    """(scene, the water's medium) of the lighting render: its geometry, the reference's envmap and
-    the ``aov`` integrator giving radiance and the first hit's albedo."""
+def lighting_scene(exp: Experiment, water: bool, sky_only: bool = False):
+    """(scene, the water's medium) of the lighting render: its geometry, the reference's envmap
+    (``sky_only``: without the sun, :func:`.user_scene.reference_sky_parts`) and the ``aov``
+    integrator giving radiance and the first hit's albedo."""
     import mitsuba as mi
-    return _top_down_scene(mi, exp, water=water, integrator=_albedo_aov(exp, water))
+    sky = None
+    if sky_only:
+        from .user_scene import reference_sky_parts
+        sky = reference_sky_parts(exp)[0]
+    return _top_down_scene(mi, exp, water=water, integrator=_albedo_aov(exp, water), sky=sky)
 
 
 def _transport(exp: Experiment, water: bool) -> dict:
@@ -288,7 +295,9 @@ def lighting_colour(exp: Experiment, extent, size: int, seed: int = 0, world_y=N
     traced = (wet and exp["reference.lighting_direct"] == "traced" and exp["reference.max_depth"] >= 3
               and max(exp["water.albedo"]) == 0.0)
     spp = exp["reference.bounce_spp"] if traced else exp["reference.texture_spp"]
-    scene = lighting_scene(exp, wet)
+    # sun_bounces: all the sun's light traced from the sun, so the path tracer sees the sky alone
+    sun_bounces = traced and exp["reference.sun_bounces"] == "photons"
+    scene = lighting_scene(exp, wet, sky_only=sun_bounces)
     lighting, lighting_se, halves = render_lighting(exp, n_light, spp, seed, water=wet, y_cam=y_cam,
                                                     progress=progress, without_direct=traced, scene=scene)
     dry, albedo = render_dry(exp, extent, size, exp["reference.wall_spp"], seed)
@@ -320,7 +329,7 @@ def lighting_colour(exp: Experiment, extent, size: int, seed: int = 0, world_y=N
     if traced:                   # the direct sky- and sunlight, ray traced on the texture's texels
         from .direct_light import traced_direct
         d_mean, d_halves, d_se, d_info = traced_direct(exp, extent, size, seed, y_cam, albedo, inside,
-                                                       scene=scene[0])
+                                                       scene=scene[0], sun_bounces=sun_bounces)
         colour, colour_halves = colour + d_mean, colour_halves + d_halves
         if inside.any():
             info["noise"] = float(np.sqrt(np.mean(se[inside] ** 2 + d_se[inside] ** 2)))
