@@ -190,13 +190,6 @@ SCHEMA: dict[str, Field] = {
                                    "traced and denoised with the sky's: fireflies that the denoiser darkens, "
                                    "2-4 % at the feet of sunlit walls). README, Fast references.",
                                    choices=("photons", "path")),
-    "reference.bounce_filter": Field("str", "gaussian", "How the path-traced bounced light is denoised with "
-                                     "`lighting_direct = \"traced\"` and `sun_bounces = \"photons\"` (the sky's "
-                                     "bounced light alone, smooth): `gaussian` (a linear Gaussian of 3 lighting "
-                                     "texels, normalised at the pool's edges: keeps the light where it is) or "
-                                     "`oidn` (as `lighting_denoise`: Open Image Denoise, its mean matched over "
-                                     "the pool, which moves light between the pool's edges and its middle). "
-                                     "README, Fast references.", choices=("gaussian", "oidn")),
     "reference.bounce_spp": Field("int", 16, "Samples per texel of the path-traced lighting with "
                                   "`lighting_direct = \"traced\"` (only the light that bounced is kept from "
                                   "it; `texture_spp` otherwise).", "", 1, 65536),
@@ -269,7 +262,7 @@ for _name, (_glsl, _kind, _default, (_lo, _hi)) in CONSTANT_SPECS.items():
 SHADER_INPUT_KEYS = frozenset({"reference.texture_size", "reference.texture_spp",
                                "reference.texture_method", "reference.lighting_size", "reference.wall_spp",
                                "reference.lighting_denoise", "reference.lighting_direct", "reference.sun_photons",
-                               "reference.sky_directions", "reference.bounce_spp", "reference.sun_bounces", "reference.bounce_filter",
+                               "reference.sky_directions", "reference.bounce_spp", "reference.sun_bounces",
                                "reference.refraction_lighting", "reference.fresnel_transmission",
                                "waves.normal_map_size", "waves.slope_scale"})
 

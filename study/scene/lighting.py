@@ -68,7 +68,6 @@ from .experiment import Experiment
 N_SEEDS = 4          # independent lighting renders (noise estimate from their spread)
 ALBEDO_SPP = 16      # least samples per texel of the dry render that also gives the albedo
 DRY_SAMPLER = "multijitter"   # its sampler (strata without the stratified sampler's correlations)
-BOUNCE_BLUR_TEXELS = 3.0     # the Gaussian's sigma for the bounced skylight, lighting texels
 
 
 def pool_extent(exp: Experiment) -> tuple[float, float, float, float]:
@@ -155,19 +154,6 @@ def denoise_radiance(radiance: np.ndarray, albedo: np.ndarray) -> np.ndarray:
     return np.maximum(out, 0.0)
 
 
-def smooth_lighting(lighting: np.ndarray, sigma: float = BOUNCE_BLUR_TEXELS) -> np.ndarray:
-    """A (n, n, C) lighting grid filtered by a Gaussian of ``sigma`` texels, normalised at the
-    grid's edges (the weights that fall outside the pool are left out, not taken as zero light):
-    linear, so it keeps the mean of a field and removes no light that it takes for noise, and a
-    field that varies linearly over the kernel passes unchanged. For the bounced skylight, which
-    has no sharp features to keep (``reference.bounce_filter = "gaussian"``)."""
-    from scipy.ndimage import gaussian_filter
-    w = gaussian_filter(np.ones(lighting.shape[:2]), sigma, mode="constant", cval=0.0)
-    out = np.stack([gaussian_filter(lighting[..., c].astype(np.float64), sigma, mode="constant", cval=0.0)
-                    for c in range(lighting.shape[-1])], -1) / w[..., None]
-    return out.astype(np.float32)
-
-
 def denoise_gain(denoised: np.ndarray, raw: np.ndarray, raw_se: np.ndarray,
                  n_independent: float | None = None) -> tuple[list, list]:
     """Per colour channel, the mean of the ``denoised`` texels over the mean of the ``raw`` texels
@@ -236,12 +222,8 @@ def render_lighting(exp: Experiment, size: int, spp: int, seed: int, *, water: b
     halves = np.stack([passes[: N_SEEDS // 2].mean(0), passes[N_SEEDS // 2:].mean(0)])
     stderr = np.sqrt(passes.var(0, ddof=1) / N_SEEDS)
     if exp["reference.lighting_denoise"] != "none":
-        if (without_direct and exp["reference.sun_bounces"] == "photons"
-                and exp["reference.bounce_filter"] == "gaussian"):      # the sky's bounced light alone
-            lighting = smooth_lighting(lighting)
-        else:
-            albedo = np.mean(albedos, axis=0)
-            lighting = denoise_radiance(np.mean(radiances, axis=0), albedo) / albedo
+        albedo = np.mean(albedos, axis=0)
+        lighting = denoise_radiance(np.mean(radiances, axis=0), albedo) / albedo
     if water:
         world_y = top_down_world_y(exp, extent, size)
         from .shader_inputs import MAX_OPTICAL_DEPTH, camera_ray_optical_depth
