@@ -170,7 +170,8 @@ def test_traced_texture_keeps_the_raw_mean_and_adds_up(mi):
     direct light (sky denoised, sun raw), each denoised part matched to its raw mean, so over the
     pool the texture's mean is its halves' (raw) mean; the build reports the sky's denoiser ratio
     and the photons; outside the pool it is the dry render, as with ``"path"``; and the traced
-    texture agrees with the all-path-traced one over the pool within their noise."""
+    texture agrees with the all-path-traced one, and with the one whose sun's bounced light is
+    traced from the sun (``sun_bounces = "photons"``), over the pool within their noise."""
     from study.scene.shader_inputs import texture_extent, top_down_world_y
     base = {"reference.texture_size": "32", "reference.lighting_size": "16", "reference.texture_spp": "64",
             "reference.bounce_spp": "16", "reference.wall_spp": "16"}
@@ -192,6 +193,15 @@ def test_traced_texture_keeps_the_raw_mean_and_adds_up(mi):
     se = np.hypot(info["noise"], info_p["noise"]) / np.sqrt(inside.sum() / 4.0)   # 2 x 2 texels per lighting texel
     assert np.all(np.abs(got[inside].mean(0) - path[inside].mean(0)) < 4.0 * se), (got[inside].mean(0),
                                                                                   path[inside].mean(0), se)
+    # the sun's bounced light traced from the sun instead of path traced with the sky's: the same light
+    assert info["sun_bounces"] == "path"
+    photons, info_b, _ = lighting.lighting_colour(small_experiment(**base, **{"reference.sun_bounces": '"photons"'}),
+                                                    extent, 32, seed=2, world_y=world_y)
+    assert info_b["sun_bounces"] == "photons"
+    np.testing.assert_array_equal(got[outside], photons[outside])
+    se = np.hypot(info["noise"], info_b["noise"]) / np.sqrt(inside.sum() / 4.0)
+    assert np.all(np.abs(got[inside].mean(0) - photons[inside].mean(0)) < 4.0 * se), (
+        got[inside].mean(0), photons[inside].mean(0), se)
 
 
 def test_scattering_water_and_the_dry_texture_keep_the_path_traced_direct_light(mi):

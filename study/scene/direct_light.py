@@ -20,7 +20,7 @@ back down off the water's underside, off the walls, between floor and walls) is 
   leave, stops the build).
 * **The sun, traced from the sun** (:mod:`.sun_photons`, light tracing): its photons land where the
   waves focus the light, so the caustics are sharpest where they are brightest. With
-  ``reference.sun_bounces = "photons"`` (the default) the photons walk on after their first
+  ``reference.sun_bounces = "photons"`` the photons walk on after their first
   landing, so *all* the sun's light is traced from the sun, and the path tracer renders the
   bounced light of the sky alone (an envmap without the sun: no fireflies left to denoise).
 * **The sky, gathered at the floor** (:func:`sky_direct`): per texel, jittered points seen from the

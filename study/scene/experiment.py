@@ -183,13 +183,14 @@ SCHEMA: dict[str, Field] = {
                                        "traced and denoised; scattering water, `water.albedo` > 0, keeps "
                                        "`path`) or `path` (all of it path traced and denoised, the caustics "
                                        "smoothed). README, Fast references.", choices=("traced", "path")),
-    "reference.sun_bounces": Field("str", "photons", "The sun's light that bounced under water (off the "
+    "reference.sun_bounces": Field("str", "path", "The sun's light that bounced under water (off the "
                                    "walls, the floor, the water's underside) with `lighting_direct = "
-                                   "\"traced\"`: `photons` (light traced from the sun with its direct light; "
-                                   "the path tracer then renders the sky's bounced light alone) or `path` (path "
-                                   "traced and denoised with the sky's: fireflies that the denoiser darkens, "
-                                   "2-4 % at the feet of sunlit walls). README, Fast references.",
-                                   choices=("photons", "path")),
+                                   "\"traced\"`: `path` (path traced and denoised with the sky's: fireflies "
+                                   "that the denoiser darkens, 2-4 % in red at the feet of sunlit walls) or "
+                                   "`photons` (light traced from the sun with its direct light, the path tracer "
+                                   "then rendering the sky's bounced light alone: those bands within 1 %, "
+                                   "+2-3 s; the fitted constants move by less than 0.2 SE). README, Fast "
+                                   "references.", choices=("path", "photons")),
     "reference.bounce_spp": Field("int", 16, "Samples per texel of the path-traced lighting with "
                                   "`lighting_direct = \"traced\"` (only the light that bounced is kept from "
                                   "it; `texture_spp` otherwise).", "", 1, 65536),

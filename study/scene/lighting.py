@@ -47,8 +47,8 @@ through the waves -- where the sun's caustics and the sky's ripples are, and the
 fireflies -- is ray traced at the texture's texels by :mod:`.direct_light`, and only the light
 that bounced comes from this render (``reference.bounce_spp``): each pass minus the same pass
 rendered with ``max_depth = 3`` (same seed, same paths), then denoised as above. With
-``reference.sun_bounces = "photons"`` (the default) the sun's bounced light is light traced too,
-and this render is lit by the sky without the sun.
+``reference.sun_bounces = "photons"`` the sun's bounced light is light traced too, and this
+render is lit by the sky without the sun.
 
 The four passes also give the texture's two *halves* (passes 0-1 and 2-3, raw even when the
 mean is denoised: a denoiser's bias would survive the decorrelation), independent estimates of
