@@ -79,7 +79,7 @@ def run(exp, spp: int, n_est: int, repeats: int) -> list[dict]:
             n = exp["reference.sun_photons"] * size * size
 
             def traced():
-                return sun_photons.sun_direct(mi, geo, exp, sun, extent, size, n, next(seeds), y_cam)[0]
+                return sun_photons.sun_direct(mi, geo, exp, sun, extent, size, n, [next(seeds)], y_cam)[0][0]
         else:
             nd = exp["reference.sky_directions"]
             albedo = lighting.render_dry(exp, extent, size, exp["reference.wall_spp"], 0)[1]
