@@ -6,7 +6,7 @@ too (:func:`sun_walk`).
 happens to refract out through the waves into the sun's disc (a smooth dielectric blocks light
 sampling): the sun's caustics arrive as fireflies. The same holds for the sun's light that bounced
 -- off the sunlit walls onto the floor at their feet, off the floor and back down from the
-water's underside (total internal reflection holds 40 % of the floor's cosine-weighted light
+water's underside (total internal reflection holds 44 % of the floor's cosine-weighted light
 under water): at the texture's 16 spp a few texels catch a firefly, the denoiser takes them for
 noise, and the pool-wide brightness match spreads what it removed over the whole pool, so the
 light at the feet of the sunlit walls comes out 2-4 % too dark in red and the rest of the floor
