@@ -203,6 +203,11 @@ SCHEMA: dict[str, Field] = {
     "reference.wall_spp": Field("int", 16, "Samples per pixel of the dry colour render used "
                                 "outside the pool and for the floor albedo (`texture_method = "
                                 "\"lighting\"`; multi-jittered, rounded up to its grid).", "", 1, 65536),
+    "reference.wall_denoise": Field("str", "oidn", "Denoise the dry render that the refraction texture "
+                                    "takes outside the pool (`texture_method = \"lighting\"`; `reference.wall_spp`): "
+                                    "`oidn` (Open Image Denoise guided by its albedo, its mean outside the pool "
+                                    "matched to the raw mean there) or `none` (raw: 5-8 % noise per texel at 16 "
+                                    "spp, which biases the fit). README, Fast references.", choices=("oidn", "none")),
     "reference.refraction_lighting": Field("str", "underwater", "How the top-down refraction "
                                            "texture is lit: `underwater` (the floor as lit through the "
                                            "water) or `dry` (no water, as the seed's application does).",
@@ -261,7 +266,7 @@ for _name, (_glsl, _kind, _default, (_lo, _hi)) in CONSTANT_SPECS.items():
 
 # keys that change only the shader's inputs, never the reference image
 SHADER_INPUT_KEYS = frozenset({"reference.texture_size", "reference.texture_spp",
-                               "reference.texture_method", "reference.lighting_size", "reference.wall_spp",
+                               "reference.texture_method", "reference.lighting_size", "reference.wall_spp", "reference.wall_denoise",
                                "reference.lighting_denoise", "reference.lighting_direct", "reference.sun_photons",
                                "reference.sky_directions", "reference.bounce_spp", "reference.sun_bounces",
                                "reference.refraction_lighting", "reference.fresnel_transmission",
