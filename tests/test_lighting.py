@@ -146,3 +146,24 @@ def test_denoised_texture_keeps_the_raw_mean_and_reports_the_denoiser_bias(mi):
     assert all(0 < e < 0.1 for e in info["denoise_gain_se"])
     outside = ~((np.abs(X) < hx) & (np.abs(Z) < hz))
     np.testing.assert_array_equal(got[outside], kept[outside])
+
+
+def test_dry_render_denoised_outside_the_pool_keeps_its_raw_mean_there():
+    """``reference.wall_denoise = "oidn"``: the dry render's noise (5-8 % per texel at 16 spp)
+    cut by more than half outside the pool, its mean there equal to the raw mean per colour channel,
+    the denoiser's own brightness reported."""
+    rng = np.random.default_rng(1)
+    n = 96
+    y, x = np.mgrid[0:n, 0:n] / n
+    outside = (np.abs(x - 0.5) > 0.38) | (np.abs(y - 0.5) > 0.38)          # a ring of walls' tops
+    albedo = np.where(outside, 0.6, np.where(((x * 8).astype(int) + (y * 8).astype(int)) % 2 == 0, 0.7, 0.3))
+    albedo = (albedo[..., None] * [1.0, 0.95, 0.9]).astype(np.float32)
+    truth = (albedo * (1.2 + 0.3 * x[..., None])).astype(np.float32)
+    noisy = (truth * rng.gamma(200.0, 1 / 200.0, truth.shape)).astype(np.float32)   # relative noise 7 %
+    out, info = lighting.denoise_dry(noisy, albedo, outside)
+    assert out.shape == truth.shape and out.dtype == np.float32
+    np.testing.assert_allclose(out[outside].mean(0), noisy[outside].mean(0), rtol=1e-5)
+    err_in = np.sqrt(np.mean((noisy - truth)[outside] ** 2))
+    err_out = np.sqrt(np.mean((out - truth)[outside] ** 2))
+    assert err_out < err_in / 2, (err_out, err_in)          # measured: 2.4x less
+    assert len(info["wall_denoise_gain"]) == 3 and all(abs(g - 1.0) < 0.05 for g in info["wall_denoise_gain"])

@@ -362,6 +362,9 @@ def load_or_build_shader_inputs(exp: Experiment, variant: str, cache=None, log=p
                      if tex.get("sky_denoise_gain") else "")
                   + (f", sun {tex['sun_photons'] / 1e6:.2f} M photons ({tex['sun_photons_landed'] / 1e6:.2f} M landed)"
                      if tex.get("sun_photons") else ""))
+    if tex.get("wall_denoise_gain"):
+        noise += ("; outside the pool the dry render denoised, denoised / raw "
+                  + " / ".join(f"{g:.3f}" for g in tex["wall_denoise_gain"]) + ", matched")
     what = "bounced light, " if tex.get("direct") == "traced" else ""
     log(f"shader inputs: built ({tex['method']} texture, {what}{tex['spp']} spp{noise}) and cached at {path}")
     return inputs
