@@ -74,9 +74,10 @@ def _compare(name, pt, traced, n_pass):
 
 
 def _path_traced_direct(mi, exp, sky, size, spp, seeds, lighting_only=False, max_depth=3):
-    """Mitsuba's estimates of the direct term lit by ``sky`` (``max_depth``: of all the light
-    up to that depth): the max_depth-3 render over the pool at each seed, its radiance (or, ``lighting_only``, radiance over albedo) with the camera
-    ray's absorption divided out as the lighting texture does; and a scene of the geometry."""
+    """Mitsuba's estimates of the light lit by ``sky`` on paths up to ``max_depth`` (3: the
+    direct term) over the pool at each seed, its radiance (or, ``lighting_only``, radiance over
+    albedo) with the camera ray's absorption divided out as the lighting texture does; and a
+    scene of the geometry."""
     from study.scene.shader_inputs import camera_ray_optical_depth, top_down_world_y
     world_y = top_down_world_y(exp, lighting.pool_extent(exp), size)
     gain = np.exp(camera_ray_optical_depth(exp, underwater_camera_height(exp), world_y))
@@ -161,7 +162,8 @@ def test_sun_below_the_horizon_lights_nothing(mi):
     flipped = sun[::-1].copy()                 # the same disc mirrored below the horizon
     scene, _ = lighting.lighting_scene(exp, True)
     for trace in (sun_photons.sun_direct, sun_photons.sun_walk):
-        img, n = trace(mi, scene, exp, flipped, lighting.pool_extent(exp), 8, 1000, [0, 1], underwater_camera_height(exp))
+        img, n = trace(mi, scene, exp, flipped, lighting.pool_extent(exp), 8, 1000, [0, 1],
+                       underwater_camera_height(exp))
         assert n == 0 and img.shape == (2, 8, 8, 3) and img.max() == 0.0
 
 
@@ -196,7 +198,7 @@ def test_traced_texture_keeps_the_raw_mean_and_adds_up(mi):
     # the sun's bounced light traced from the sun instead of path traced with the sky's: the same light
     assert info["sun_bounces"] == "path"
     photons, info_b, _ = lighting.lighting_colour(small_experiment(**base, **{"reference.sun_bounces": '"photons"'}),
-                                                    extent, 32, seed=2, world_y=world_y)
+                                                  extent, 32, seed=2, world_y=world_y)
     assert info_b["sun_bounces"] == "photons"
     np.testing.assert_array_equal(got[outside], photons[outside])
     se = np.hypot(info["noise"], info_b["noise"]) / np.sqrt(inside.sum() / 4.0)
