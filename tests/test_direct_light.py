@@ -88,16 +88,20 @@ def _path_traced_direct(mi, exp, sky, size, spp, seeds, lighting_only=False, max
     return out, lighting.lighting_scene(exp, True)[0]
 
 
+def _wide_sun():
+    """(experiment, its sun map, the under-water camera's height, the pool's extent) with a 15-degree
+    sun, wide enough that the path tracer's estimate of its light converges in a test's time."""
+    exp = small_experiment(**{"sun.radius": "15.0"})
+    return exp, reference_sky_parts(exp)[1], underwater_camera_height(exp), lighting.pool_extent(exp)
+
+
 def test_traced_sunlight_matches_the_path_tracers_direct_sun(mi):
     """The light-traced direct sunlight against Mitsuba's max_depth-3 render lit by the sun alone,
     corrected for the camera ray's absorption as the lighting texture is: per colour channel over
     the pool and in 4 x 4 texel blocks, within their standard errors (a wide sun, so that the path
     tracer's estimate converges in a test's time)."""
-    exp = small_experiment(**{"sun.radius": "15.0"})
-    _, sun = reference_sky_parts(exp)
+    exp, sun, y_cam, extent = _wide_sun()
     size, spp, n_pass = 16, 256, 8
-    y_cam = underwater_camera_height(exp)
-    extent = lighting.pool_extent(exp)
     pt, scene = _path_traced_direct(mi, exp, sun, size, spp, range(40, 40 + n_pass))
     traced = list(sun_photons.sun_direct(mi, scene, exp, sun, extent, size, 60_000, range(90, 90 + n_pass),
                                          y_cam)[0])
@@ -111,11 +115,8 @@ def test_sun_walk_matches_the_path_tracers_sunlight_bounces_included(mi):
     test's time): the total in 4 x 4 texel blocks within the standard errors, and the light that
     bounced (walk minus direct photons; full minus max_depth-3 render, sample for sample) over the
     pool and in its four quadrants."""
-    exp = small_experiment(**{"sun.radius": "15.0"})
-    _, sun = reference_sky_parts(exp)
+    exp, sun, y_cam, extent = _wide_sun()
     size, spp, n_pass = 16, 512, 8
-    y_cam = underwater_camera_height(exp)
-    extent = lighting.pool_extent(exp)
     direct_pt, scene = _path_traced_direct(mi, exp, sun, size, spp, range(40, 40 + n_pass))
     full_pt = _path_traced_direct(mi, exp, sun, size, spp, range(40, 40 + n_pass),
                                   max_depth=exp["reference.max_depth"])[0]

@@ -288,11 +288,9 @@ def denoise_dry(dry: np.ndarray, albedo: np.ndarray, outside: np.ndarray) -> tup
     dict with that ratio (denoised / raw, before the match). At 16 spp its texels' noise is 5-8 %,
     and noise in the shader's inputs biases the fit (README, Fast references)."""
     den = denoise_radiance(dry, np.maximum(albedo, 1e-3))
-    raw_mean = dry[outside].astype(np.float64).mean(0)
-    den_mean = den[outside].astype(np.float64).mean(0)
-    ratio = np.where(raw_mean > 0.0, den_mean / np.where(raw_mean > 0.0, raw_mean, 1.0), 1.0)
-    matched = den / np.where(ratio > 0.0, ratio, 1.0).astype(np.float32)
-    return matched.astype(np.float32), {"wall_denoise_gain": [float(r) for r in ratio]}
+    ratio, _ = denoise_gain(den[outside], dry[outside], np.zeros_like(dry[outside]))   # no per-texel SE here
+    g = np.asarray(ratio, np.float32)
+    return (den / np.where(g > 0.0, g, 1.0)).astype(np.float32), {"wall_denoise_gain": ratio}
 
 
 def lighting_colour(exp: Experiment, extent, size: int, seed: int = 0, world_y=None,
