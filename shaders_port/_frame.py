@@ -6,12 +6,15 @@ of derivatives and the forward-mode Jacobian passes. Shader files hold only shad
 * :func:`finish_output`: lanes (water pixels in raster order) scattered into images, non-finite
   lanes zeroed, flagged and warned about;
 * :func:`jacobian_passes` / :func:`tangents`: one forward-mode pass per named constant;
-* ``USE_FROZEN``: plain renders and 'replay' Jacobians replay recorded kernels (``dr.freeze``).
+* ``USE_FROZEN`` / :func:`call_frozen`: plain renders and 'replay' Jacobians may replay recorded
+  kernels (``dr.freeze``; ``STUDY_FREEZE=0`` traces), outputs checked before use.
 """
 from __future__ import annotations
 
 import dataclasses
+import os
 import warnings
+from collections import OrderedDict
 from dataclasses import dataclass
 
 import drjit as dr
@@ -21,11 +24,25 @@ from ._inputs import CONSTANT_SPECS, Constants, ShaderInputs
 from ._raster import prepare
 from ._texture import backend_types
 
-# Plain (non-differentiable) renders replay recorded kernels instead of re-tracing the shader
-# (``dr.freeze``); a change of loop caps, shader variant or input sizes records anew.
-USE_FROZEN = True
+# Plain renders and 'replay' Jacobians replay recorded kernels instead of re-tracing the shader
+# (``dr.freeze``), which pays most where one process evaluates the same frames many times (a
+# joint fit: 3.5x; benchmarks/bench_freeze.py). ``STUDY_FREEZE=0`` (or this flag) traces every call.
+USE_FROZEN = os.environ.get("STUDY_FREEZE", "1") != "0"
 
-_FROZEN: dict = {}
+# One frozen function per configuration and uploaded frame (a fit's scene), at most
+# MAX_FUNCTIONS kept (the least recently used dropped). A frame records twice (the first call,
+# then once more when Dr.Jit makes the inputs that changed opaque); a function recorded more
+# than MAX_RECORDINGS times is keyed wrongly and is traced from then on.
+MAX_RECORDINGS = 4
+MAX_FUNCTIONS = 64
+
+_FROZEN: OrderedDict = OrderedDict()
+
+
+class FrozenReplayWarning(UserWarning):
+    """A frozen configuration gave a wrong replay or recorded too often and is traced now."""
+
+_BROKEN: set = set()
 
 
 def frozen(key: tuple, fn):
@@ -35,17 +52,112 @@ def frozen(key: tuple, fn):
     (``loop_cap=3`` after ``loop_cap=2`` replayed the 2-step loop; ``diagnose=True`` after
     ``False`` lost the extra outputs), so that configuration goes into the choice of the frozen
     function, never into its arguments. Scene values (texture matrices, sizes) are keyed
-    correctly by freeze itself (checked against traced renders in tests)."""
+    by freeze itself (checked against traced renders in tests). The shader code must not bake
+    a lane count into a recording (``dr.zeros(T, dr.width(x))`` inside the shader replays
+    at the recorded width): loop flags start as width-1 values that the loop widens."""
     f = _FROZEN.get(key)
     if f is None:
-        f = _FROZEN[key] = dr.freeze(fn)
+        def packed(*args):
+            return _pack(fn(*args))
+        f = _FROZEN[key] = dr.freeze(packed, limit=MAX_RECORDINGS, warn_after=MAX_RECORDINGS + 1)
+        while len(_FROZEN) > MAX_FUNCTIONS:
+            _FROZEN.popitem(last=False)
+    _FROZEN.move_to_end(key)
     return f
 
 
+def _pack(tree):
+    """A frozen function's result with every literal leaf (a value the same on every lane, e.g.
+    a structurally zero derivative) replaced by ``("__literal__", type, value)``: a literal
+    output would be recorded at its width and replayed at that width. Vectors (``Array3f``)
+    become ``("__vector__", type, components...)`` so that each component is packed."""
+    if isinstance(tree, dict):
+        return {k: _pack(v) for k, v in tree.items()}
+    if isinstance(tree, (list, tuple)):
+        return type(tree)(_pack(v) for v in tree)
+    if isinstance(tree, dr.ArrayBase):
+        if dr.depth_v(tree) > 1:
+            return ("__vector__", type(tree)) + tuple(_pack(tree[c]) for c in range(len(tree)))
+        if tree.state == dr.VarState.Literal:
+            return ("__literal__", type(tree), tree[0])
+    return tree
+
+
+def _unpack(tree, lanes: int):
+    """Inverse of :func:`_pack`: literals come back as ``lanes``-wide values."""
+    tag = tree[0] if isinstance(tree, tuple) and tree and isinstance(tree[0], str) else None
+    if tag == "__literal__":
+        return dr.full(tree[1], tree[2], lanes)
+    if tag == "__vector__":
+        return tree[1](*(_unpack(v, lanes) for v in tree[2:]))
+    if isinstance(tree, dict):
+        return {k: _unpack(v, lanes) for k, v in tree.items()}
+    if isinstance(tree, (list, tuple)):
+        return type(tree)(_unpack(v, lanes) for v in tree)
+    return tree
+
+
+def _widths(tree, out: list) -> list:
+    """Widths of every Dr.Jit leaf (each component of an ``Array3f``) of a nested result."""
+    if isinstance(tree, dict):
+        for v in tree.values():
+            _widths(v, out)
+    elif isinstance(tree, (list, tuple)):
+        for v in tree:
+            _widths(v, out)
+    elif isinstance(tree, dr.ArrayBase):
+        if dr.depth_v(tree) > 1:
+            for c in range(len(tree)):
+                _widths(tree[c], out)
+        else:
+            out.append(dr.width(tree))
+    return out
+
+
+def call_frozen(key: tuple, fn, m, P, *args):
+    """``fn(m, P, *args)``, replayed from a recording when :data:`USE_FROZEN` (see
+    :func:`frozen`); ``P`` is the frame's shading state (``Prepared``), whose upload number
+    joins ``key`` and whose lane count every output leaf must have.
+
+    A replay whose outputs have another width, or a function recorded more than
+    :data:`MAX_RECORDINGS` times, is never passed on: the call is traced instead, and that
+    configuration is traced from then on, with one warning."""
+    args = (m, P) + args
+    if not USE_FROZEN or key in _BROKEN:
+        return fn(*args)
+    lanes = lane_count(P)
+    f = frozen(key + (P.upload,), fn)
+    out = _unpack(f(*args), lanes)
+    bad = sorted({w for w in _widths(out, []) if w != lanes})
+    why = None
+    if bad:
+        why = f"a replay returned outputs of width {bad} for {lanes} lanes"
+    elif f.n_recordings > MAX_RECORDINGS:
+        why = f"it was recorded {f.n_recordings} times (its inputs' layout changes between calls)"
+    if why is None:
+        return out
+    _BROKEN.add(key)
+    warnings.warn(f"frozen {key[0]}: {why}; tracing this configuration from now on",
+                  FrozenReplayWarning, stacklevel=2)
+    return fn(*args) if bad else out
+
+
+def lane_count(P) -> int:
+    """Lanes (covered pixels) of a ``Prepared`` frame or its shading state."""
+    return dr.width(P.varyingVecWorldPosition.x)
+
+
 def python_config(C) -> tuple:
-    """The plain Python values of resolved constants ``C`` (integer loop caps, ``loop_ad``), as
-    a hashable tuple for :func:`frozen`."""
-    return tuple(sorted((k, v) for k, v in C.values.items() if isinstance(v, (bool, int, str))))
+    """The plain Python values of resolved constants ``C`` (integer loop caps, ``loop_ad``) and
+    which constants are differentiated (a Jacobian over other names is another recording), as a
+    hashable tuple for :func:`frozen`."""
+    plain = tuple(sorted((k, v) for k, v in C.values.items() if isinstance(v, (bool, int, str))))
+    graded = []
+    for k, v in sorted(C.values.items()):
+        for j, x in enumerate(v if isinstance(v, tuple) else (v,)):
+            if isinstance(x, dr.ArrayBase) and dr.grad_enabled(x):
+                graded.append((k, j))
+    return plain + (("differentiated", tuple(graded)),)
 
 
 @dataclass

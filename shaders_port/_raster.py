@@ -21,6 +21,8 @@ coordinates ``(c + 0.5, H - r - 0.5)`` (GL window origin at the bottom left).
 from __future__ import annotations
 
 import dataclasses
+import itertools
+from collections import OrderedDict
 from dataclasses import dataclass
 
 import numpy as np
@@ -117,13 +119,17 @@ class Prepared:
     tex_matrix0: tuple
     tex_matrix1: tuple
     lightcolor: tuple
+    upload: int = 0   # a number of its own per call of prepare() that uploaded (see _frame.call_frozen)
 
     def shading_state(self) -> "Prepared":
         """A copy without the NumPy-holding ``raster`` / ``inputs`` (what the shader reads)."""
         return dataclasses.replace(self, raster=None, inputs=None)
 
 
-_CACHE: dict = {}
+# the last few frames uploaded (a joint fit alternates between its scenes), least recent first
+_CACHE: OrderedDict = OrderedDict()
+_CACHE_SIZE = 8
+_UPLOADS = itertools.count(1)
 
 
 def _mat_tuple(M: np.ndarray) -> tuple:
@@ -131,8 +137,8 @@ def _mat_tuple(M: np.ndarray) -> tuple:
 
 
 def prepare(inputs: ShaderInputs, m) -> Prepared:
-    """Rasterise and upload ``inputs`` for the Dr.Jit type module ``m`` (cached per inputs object;
-    the cache entry is dropped when any array of ``inputs`` is replaced)."""
+    """Rasterise and upload ``inputs`` for the Dr.Jit type module ``m`` (cached per inputs object,
+    the last eight kept; the cache entry is not used when any array of ``inputs`` is replaced)."""
     from ._texture import CLAMP, LINEAR, NEAREST, REPEAT, CubeMap, Texture2D
 
     if not isinstance(inputs, ShaderInputs):
@@ -141,6 +147,7 @@ def prepare(inputs: ShaderInputs, m) -> Prepared:
     arrays = tuple(id(v) for v in vars(inputs).values())
     hit = _CACHE.get(key)
     if hit is not None and hit[0] == arrays and hit[1].inputs is inputs:
+        _CACHE.move_to_end(key)
         return hit[1]
     r = rasterize_water(inputs)
     if r.index.size == 0:
@@ -160,7 +167,9 @@ def prepare(inputs: ShaderInputs, m) -> Prepared:
         worldYComponentReflection=Texture2D.from_numpy(m, inputs.refl_world_y, NEAREST, CLAMP),
         reflectionBottom=Texture2D.from_numpy(m, inputs.refl_texture, LINEAR, CLAMP),
         tex_matrix0=_mat_tuple(inputs.tex_matrix0), tex_matrix1=_mat_tuple(inputs.tex_matrix1),
-        lightcolor=tuple(float(v) for v in inputs.lightcolor))
-    _CACHE.clear()
+        lightcolor=tuple(float(v) for v in inputs.lightcolor), upload=next(_UPLOADS))
     _CACHE[key] = (arrays, P)
+    _CACHE.move_to_end(key)
+    while len(_CACHE) > _CACHE_SIZE:
+        _CACHE.popitem(last=False)
     return P

@@ -271,9 +271,9 @@ def _options(defines) -> tuple[bool, bool]:
 
 def _frozen_shade(m, P, S, C, flat, planar):
     # one frozen function per Python-level configuration (see _frame.frozen)
-    f = _frame.frozen(("water_baseline", flat, planar) + _frame.python_config(C),
-                      lambda m, P, S, C: _shade(m, P, S, C, flat, planar))
-    return f(m, P, S, C)
+    return _frame.call_frozen(("water_baseline", flat, planar) + _frame.python_config(C),
+                              lambda m, P, S, C: _shade(m, P, S, C, flat, planar),
+                              m, P, S, C)
 
 
 def render(inputs: ShaderInputs, constants: Constants | None = None, *, defines: tuple = (),
@@ -301,9 +301,10 @@ def render(inputs: ShaderInputs, constants: Constants | None = None, *, defines:
 
 
 def _frozen_tangents(m, P, S, C, params, flat, planar):
-    f = _frame.frozen(("water_baseline.tangents", flat, planar) + _frame.python_config(C),
-                      lambda m, P, S, C, params: tangents(m, *_shade(m, P, S, C, flat, planar), params))
-    return f(m, P, S, C, params)
+    return _frame.call_frozen(
+        ("water_baseline.tangents", flat, planar) + _frame.python_config(C),
+        lambda m, P, S, C, params: tangents(m, *_shade(m, P, S, C, flat, planar), params),
+        m, P, S, C, params)
 
 
 def render_with_jacobian(inputs: ShaderInputs, constants: Constants | None, names: list[str], *,

@@ -42,8 +42,8 @@ def raycast_reflection(m, P, R, C):
     s, t = texmat_xy(P.tex_matrix1, current_position)
     depthtex = P.worldYComponentReflection.sample(m, s, t)
     depth = m.Float(depthtex[0])
-    noHit = dr.full(m.Bool, True, dr.width(depth))
-    done = dr.zeros(m.Bool, dr.width(depth))
+    noHit = m.Bool(True)  # width 1, widened by the loop (no width literal in a recording)
+    done = m.Bool(False)
     i = m.UInt32(0)
     loop_fetches = m.UInt32(0)
     # plain locals: loop-condition variables become loop state (keep constants' AD out of it)
@@ -139,9 +139,9 @@ def _shade(m, P, C, diagnose: bool = False, opts: Options = Options()):
 
 
 def _frozen_shade(m, P, C, diagnose, opts):
-    f = _frame.frozen(("water_reflection", diagnose, opts) + _frame.python_config(C),
-                      lambda m, P, C: _shade(m, P, C, diagnose, opts))
-    return f(m, P, C)
+    return _frame.call_frozen(("water_reflection", diagnose, opts) + _frame.python_config(C),
+                              lambda m, P, C: _shade(m, P, C, diagnose, opts),
+                              m, P, C)
 
 
 def render(inputs: ShaderInputs, constants: Constants | None = None, *,
@@ -173,9 +173,9 @@ def render(inputs: ShaderInputs, constants: Constants | None = None, *,
 
 
 def _frozen_tangents(m, P, C, params, opts):
-    f = _frame.frozen(("water_reflection.tangents", opts) + _frame.python_config(C),
-                      lambda m, P, C, params: tangents(m, *_shade(m, P, C, False, opts), params))
-    return f(m, P, C, params)
+    return _frame.call_frozen(("water_reflection.tangents", opts) + _frame.python_config(C),
+                              lambda m, P, C, params: tangents(m, *_shade(m, P, C, False, opts), params),
+                              m, P, C, params)
 
 
 def render_with_jacobian(inputs: ShaderInputs, constants: Constants | None, names: list[str], *,

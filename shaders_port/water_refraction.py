@@ -41,8 +41,9 @@ Loops and derivatives. The raycast loops are ``@dr.syntax`` while loops with a p
   not trusted. Slower (one kernel per iteration).
 
 Plain renders (no gradient) and ``'replay'`` Jacobians replay recorded kernels
-(``dr.freeze``; set ``shaders_port._frame.USE_FROZEN = False`` to trace every call). Constants enter the
-kernels as opaque float32 values, so traced and replayed renders are bit-identical.
+(``dr.freeze``; ``STUDY_FREEZE=0`` or ``shaders_port._frame.USE_FROZEN = False`` traces every
+call; see ``_frame.call_frozen``). Constants enter the kernels as opaque float32 values, so traced and replayed
+renders are bit-identical.
 """
 from __future__ import annotations
 
@@ -159,7 +160,7 @@ def raycast_ground(m, P, R, LOOP_CAP):
     depthtex = P.worldYComponent.sample(m, s, t)
     depth = m.Float(depthtex[0])
     i = m.UInt32(0)
-    crossed = dr.zeros(m.Bool, dr.width(depth))
+    crossed = m.Bool(False)  # width 1, widened by the loop (no width literal in a recording)
     while (i < LOOP_CAP) & ~crossed:
         current_position_old = m.Array3f(current_position)
         current_position += R
@@ -307,7 +308,7 @@ def refraction_failure_diagnostics(m, P, C, f: "Refracted") -> dict:
     Rn = dr.normalize(dr.detach(f.R))
     cpoy = dr.detach(f.loop_position_old.y)
     weight = (cpoy - dr.detach(f.olddepth)) / dr.detach(f.denominator)
-    outside = dr.zeros(m.Bool, dr.width(k))
+    outside = m.Bool(False)
     for p in (P.varyingVecWorldPosition, f.loop_position, f.current_position):
         s, t = texmat_xy(P.tex_matrix0, dr.detach(p))
         outside |= outside_unit_square(s, t)
@@ -389,9 +390,9 @@ def _shade(m, P, C, reflection: bool, diagnose: bool = False, opts: Options = Op
 
 
 def _frozen_shade(m, P, C, reflection, diagnose, opts):
-    f = _frame.frozen(("water_refraction", reflection, diagnose, opts) + _frame.python_config(C),
-                      lambda m, P, C: _shade(m, P, C, reflection, diagnose, opts))
-    return f(m, P, C)
+    return _frame.call_frozen(("water_refraction", reflection, diagnose, opts) + _frame.python_config(C),
+                              lambda m, P, C: _shade(m, P, C, reflection, diagnose, opts),
+                              m, P, C)
 
 
 def render(inputs: ShaderInputs, constants: Constants | None = None, *, reflection: bool = True,
@@ -424,9 +425,10 @@ def render(inputs: ShaderInputs, constants: Constants | None = None, *, reflecti
 
 
 def _frozen_tangents(m, P, C, params, reflection, opts):
-    f = _frame.frozen(("water_refraction.tangents", reflection, opts) + _frame.python_config(C),
-                      lambda m, P, C, params: tangents(m, *_shade(m, P, C, reflection, False, opts), params))
-    return f(m, P, C, params)
+    return _frame.call_frozen(
+        ("water_refraction.tangents", reflection, opts) + _frame.python_config(C),
+        lambda m, P, C, params: tangents(m, *_shade(m, P, C, reflection, False, opts), params),
+        m, P, C, params)
 
 
 def render_with_jacobian(inputs: ShaderInputs, constants: Constants | None, names: list[str], *,

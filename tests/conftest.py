@@ -18,8 +18,25 @@ def mi():
     return mitsuba
 
 
+@pytest.fixture(scope="session", autouse=True)
+def _session_cache(tmp_path_factory):
+    """Nothing in a test session reads or writes the project's ``.cache``: the session's own
+    cache is set before any fixture runs (module fixtures run before function ones)."""
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setenv("STUDY_CACHE", str(tmp_path_factory.mktemp("session_cache")))
+        yield
+
+
+@pytest.fixture(scope="module", autouse=True)
+def _module_cache(tmp_path_factory, _session_cache):
+    """Module-scoped fixtures (a shared reference, a CLI run) see their module's own cache."""
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setenv("STUDY_CACHE", str(tmp_path_factory.mktemp("module_cache")))
+        yield
+
+
 @pytest.fixture(autouse=True)
-def _private_cache(tmp_path_factory, monkeypatch):
+def _private_cache(tmp_path_factory, monkeypatch, _module_cache):
     """Every test uses a fresh reference cache, never the user's."""
     monkeypatch.setenv("STUDY_CACHE", str(tmp_path_factory.mktemp("cache")))
 

@@ -264,21 +264,18 @@ def test_ledge_is_validated():
 
 @pytest.mark.parametrize("shader,kw,cap", [(water_refraction, {}, "loop_cap"),
                                            (water_reflection, {}, "refl_loop_cap")])
-def test_frozen_renders_follow_the_loop_cap(shader, kw, cap):
+def test_frozen_renders_follow_the_loop_cap(shader, kw, cap, monkeypatch):
     """Measured on Dr.Jit 1.5.0 before shaders_port._frame.frozen: loop_cap 3 after 2 replayed
     the 2-step recording (iterations stayed 2)."""
     from shaders_port import _frame
     inputs = synthetic_inputs(32, 24)
     key = "iterations" if cap == "loop_cap" else "refl_iterations"
+    monkeypatch.setattr(_frame, "USE_FROZEN", True)
     frozen_runs = [shader.render(inputs, Constants(**{cap: c}), diagnose=d, **kw).numpy()
                    for c, d in ((2, False), (3, False), (4, True), (3, True), (2, False))]
-    old = _frame.USE_FROZEN
-    _frame.USE_FROZEN = False
-    try:
-        traced = [shader.render(inputs, Constants(**{cap: c}), diagnose=d, **kw).numpy()
-                  for c, d in ((2, False), (3, False), (4, True), (3, True), (2, False))]
-    finally:
-        _frame.USE_FROZEN = old
+    monkeypatch.setattr(_frame, "USE_FROZEN", False)
+    traced = [shader.render(inputs, Constants(**{cap: c}), diagnose=d, **kw).numpy()
+              for c, d in ((2, False), (3, False), (4, True), (3, True), (2, False))]
     for f, t in zip(frozen_runs, traced):
         assert set(f) == set(t)
         assert np.array_equal(f[key], t[key]) and np.array_equal(f["color"], t["color"])

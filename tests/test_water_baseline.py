@@ -136,6 +136,7 @@ def test_diagnostics_count_fetches_and_no_iterations(small):
 def test_frozen_replay_at_another_resolution(small, monkeypatch):
     # a recorded kernel replayed for another lane count must not reuse the old sizes
     from shaders_port import _frame
+    monkeypatch.setattr(_frame, "USE_FROZEN", True)
     for (w, h), d in (((48, 36), ()), ((40, 30), ()), ((48, 36), ("FLAT_WATER",)),
                       ((48, 36), ()), ((48, 36), ("NO_PLANAR_REFRACTION",))):
         inp = small.with_resolution(w, h)
