@@ -326,13 +326,15 @@ def jacobian_passes(shade_tangents, shader: str, inputs: ShaderInputs, constants
     for name in names:
         base, idx = _parse_name(name)
         cur = changes.get(base, getattr(constants, base))
+        # opaque, as resolve_constants makes the other constants: a literal would be folded into
+        # the first recording's kernels and round differently from the replays
         if idx is None:
-            p = m.Float(float(dr.detach(cur)[0]) if isinstance(cur, dr.ArrayBase) else float(cur))
+            p = dr.opaque(m.Float, float(dr.detach(cur)[0]) if isinstance(cur, dr.ArrayBase) else float(cur))
             changes[base] = p
         else:
             comps = list(cur)
             x = comps[idx]
-            p = m.Float(float(dr.detach(x)[0]) if isinstance(x, dr.ArrayBase) else float(x))
+            p = dr.opaque(m.Float, float(dr.detach(x)[0]) if isinstance(x, dr.ArrayBase) else float(x))
             comps[idx] = p
             changes[base] = tuple(comps)
         dr.enable_grad(p)
