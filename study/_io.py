@@ -10,6 +10,7 @@ never leaves a truncated file under the final name.
 from __future__ import annotations
 
 import contextlib
+import errno
 import fcntl
 import json
 import os
@@ -22,6 +23,30 @@ import numpy as np
 import OpenEXR
 
 PROVENANCE_KEY = "study_provenance"
+
+
+class DiskFullError(OSError):
+    """A write ran out of space (``errno.ENOSPC`` / ``EDQUOT``); the message names the folder.
+    The writers here write to a temporary file and rename it, so nothing half-written is left
+    and the files already there stay valid."""
+
+
+@contextlib.contextmanager
+def disk_full(folder):
+    """Turn running out of space while writing into ``folder`` into a :class:`DiskFullError`
+    that names it (OpenEXR reports it as a ``RuntimeError``; Python as ``OSError``)."""
+    try:
+        yield
+    except DiskFullError:
+        raise
+    except (OSError, RuntimeError) as exc:
+        full = (getattr(exc, "errno", None) in (errno.ENOSPC, errno.EDQUOT)
+                or "No space left on device" in str(exc))
+        if not full:
+            raise
+        raise DiskFullError(errno.ENOSPC, f"no space left on the device holding {folder}: nothing "
+                            "was written there; free space, or point --out / STUDY_CACHE at "
+                            "another disk") from exc
 
 
 def write_exr(path, rgb: np.ndarray, provenance: dict | None = None,
@@ -45,7 +70,8 @@ def write_exr(path, rgb: np.ndarray, provenance: dict | None = None,
     fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.stem}.", suffix=".exr.tmp")
     os.close(fd)
     try:
-        OpenEXR.File(header, channels).write(tmp)
+        with disk_full(path.parent):
+            OpenEXR.File(header, channels).write(tmp)
         os.replace(tmp, path)
     finally:
         if os.path.exists(tmp):
@@ -97,9 +123,10 @@ def write_json(path: Path, data: dict) -> None:
 def write_text_atomic(path: Path, text: str) -> None:
     """Write text under a unique temporary name beside ``path``, then rename it into place."""
     path = Path(path)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
+    with disk_full(path.parent):
+        fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
     try:
-        with os.fdopen(fd, "w") as f:
+        with disk_full(path.parent), os.fdopen(fd, "w") as f:
             f.write(text)
         os.replace(tmp, path)
     finally:

@@ -95,6 +95,7 @@ def main(argv=None) -> int:
     args = build_parser().parse_args(argv)
     from . import _jobs
     from ._backend import BackendError
+    from ._io import DiskFullError
     from .scene.experiment import ExperimentError
 
     try:
@@ -129,6 +130,13 @@ def main(argv=None) -> int:
     except (ExperimentError, BackendError, FileNotFoundError, ValueError) as exc:
         print(f"study {args.command}: error: {exc}", file=sys.stderr)
         return 2
+    except DiskFullError as exc:
+        print(f"study {args.command}: error: {exc.strerror}", file=sys.stderr)
+        return 1
+    except KeyboardInterrupt:
+        print(f"\nstudy {args.command}: interrupted; finished results are kept, and the same "
+              "command resumes from them", file=sys.stderr)
+        return 130
     return 0
 
 

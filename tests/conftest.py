@@ -58,3 +58,11 @@ def save_failure(name: str, **images) -> Path:
     for key, img in images.items():
         write_exr(FAILURES / f"{name}.{key}.exr", img)
     return FAILURES
+
+
+def pytest_terminal_summary(terminalreporter, exitstatus, config):
+    """The random order's seed, also under ``-q``: a failure's order can be replayed."""
+    seed = getattr(config.option, "randomly_seed", None)
+    if seed is not None and config.pluginmanager.has_plugin("randomly"):
+        terminalreporter.write_line(f"test order: pytest-randomly seed {seed} "
+                                    f"(replay with -p randomly --randomly-seed={seed})")

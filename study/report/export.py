@@ -24,6 +24,8 @@ from shaders_port import CONSTANT_SPECS, Constants
 from shaders_port._glsl import compile_check, read_source, write_constants
 from shaders_port._variants import VARIANTS
 
+from .._io import disk_full
+
 # every fragment shader file a registered variant uses, in registration order
 FRAGMENT_SHADERS = tuple(dict.fromkeys(v.shader for v in VARIANTS.values()))
 
@@ -73,9 +75,10 @@ def export_shaders(constants: Constants, out_dir) -> list[Path]:
     out_dir.parent.mkdir(parents=True, exist_ok=True)
     tmp = Path(tempfile.mkdtemp(dir=out_dir.parent, prefix=f".{out_dir.name}."))
     try:
-        for (dialect, fname), text in texts.items():
-            (tmp / dialect).mkdir(exist_ok=True)
-            (tmp / dialect / fname).write_text(text, encoding="utf-8")
+        with disk_full(out_dir):
+            for (dialect, fname), text in texts.items():
+                (tmp / dialect).mkdir(exist_ok=True)
+                (tmp / dialect / fname).write_text(text, encoding="utf-8")
         old = None
         if out_dir.exists():
             old = Path(tempfile.mkdtemp(dir=out_dir.parent, prefix=f".{out_dir.name}.old."))

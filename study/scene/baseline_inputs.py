@@ -32,6 +32,7 @@ import numpy as np
 from shaders_port import ShaderInputs
 from shaders_port._inputs import mirrored_view_proj
 
+from .._io import disk_full
 from .experiment import Experiment
 from .geometry import envmap_image, sky_radiance
 from .mitsuba_scene import build_geometry, sky_params
@@ -187,7 +188,7 @@ def with_baseline_inputs(exp: Experiment, inputs: ShaderInputs, variant: str, ca
         fd, tmp = tempfile.mkstemp(dir=path.parent, suffix=".npz.tmp")
         os.close(fd)
         try:
-            with open(tmp, "wb") as f:
+            with disk_full(path.parent), open(tmp, "wb") as f:
                 np.savez_compressed(f, **fields)
             os.replace(tmp, path)
         finally:

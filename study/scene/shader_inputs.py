@@ -340,7 +340,7 @@ def load_or_build_shader_inputs(exp: Experiment, variant: str, cache=None, log=p
     inputs = _cached_inputs(path, log)
     if inputs is not None:
         return inputs
-    from .._io import file_lock
+    from .._io import disk_full, file_lock
     with file_lock(path.with_suffix(".lock"), "shader inputs", log):
         inputs = _cached_inputs(path, log)   # another process may have built them meanwhile
         if inputs is not None:
@@ -348,7 +348,8 @@ def load_or_build_shader_inputs(exp: Experiment, variant: str, cache=None, log=p
         info: dict = {}
         inputs = build_shader_inputs(exp, progress=progress, info=info)
         path.parent.mkdir(parents=True, exist_ok=True)
-        inputs.save(path)
+        with disk_full(path.parent):
+            inputs.save(path)
     tex = info["texture"]
     noise = f", texture noise {tex['noise']:.2e} (RMS standard error on the pool)" if tex.get("noise") else ""
     if tex.get("denoise_gain"):

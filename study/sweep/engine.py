@@ -143,14 +143,18 @@ def _submit_all(client, job_fn, todo, rows, old, table, variant, label) -> None:
     progress = Progress(label, len(futures))
     progress.show()
     last_write = 0.0
-    for f in as_completed(list(futures)):
-        key, job = futures[f]
-        try:
-            row = f.result()
-        except Exception as exc:        # the worker died (e.g. a crash in native code)
-            row = {"key": key, "status": "error", "error": clip_error(exc), "seconds": None}
-        rows[key] = {**flatten({"job": job}), **row}
-        progress.update(row["status"] == "ok")
-        if time.perf_counter() - last_write > 2.0:    # keep finished rows on disk
-            write_table(table, list(rows.values()) + [r for k, r in old.items() if k not in rows])
-            last_write = time.perf_counter()
+    try:
+        for f in as_completed(list(futures)):
+            key, job = futures[f]
+            try:
+                row = f.result()
+            except Exception as exc:        # the worker died (e.g. a crash in native code)
+                row = {"key": key, "status": "error", "error": clip_error(exc), "seconds": None}
+            rows[key] = {**flatten({"job": job}), **row}
+            progress.update(row["status"] == "ok")
+            if time.perf_counter() - last_write > 2.0:    # keep finished rows on disk
+                write_table(table, list(rows.values()) + [r for k, r in old.items() if k not in rows])
+                last_write = time.perf_counter()
+    except KeyboardInterrupt:           # Ctrl-C: every finished row is kept, the rest re-run later
+        write_table(table, list(rows.values()) + [r for k, r in old.items() if k not in rows])
+        raise

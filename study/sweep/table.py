@@ -17,6 +17,8 @@ import os
 import tempfile
 from pathlib import Path
 
+from .._io import disk_full
+
 SCHEMA_VERSION = 1
 ERROR_CHARS = 2000
 
@@ -82,7 +84,8 @@ def write_table(path: Path, rows: list[dict]) -> Path:
     fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
     os.close(fd)
     try:
-        pq.write_table(table, tmp)
+        with disk_full(path.parent):
+            pq.write_table(table, tmp)
         os.replace(tmp, path)
     finally:
         if os.path.exists(tmp):
