@@ -3,7 +3,7 @@
 EXPERIMENT ?= experiments/default.toml
 OUT ?= out/default
 
-.PHONY: setup run test bench tradeoff
+.PHONY: setup run test lint docs bench tradeoff
 setup:
 	@bash scripts/setup.sh
 
@@ -13,9 +13,19 @@ run: setup
 tradeoff: setup
 	.venv/bin/study tradeoff experiments/default.toml experiments/deep_steps.toml --out out/tradeoff
 
-test: setup
+test: setup lint
 	.venv/bin/python -m pytest -q
 
+lint: setup
+	.venv/bin/ruff check .
+	.venv/bin/ruff format --check .
+
+# the documentation site, served at http://127.0.0.1:8000 (tests build it with --strict)
+docs: setup
+	.venv/bin/python scripts/build_docs.py
+	.venv/bin/mkdocs serve
+
+# the four headline benchmarks; the others in benchmarks/ are run alone (each says how)
 bench: setup
 	.venv/bin/python benchmarks/bench_reference.py
 	.venv/bin/python benchmarks/bench_port.py

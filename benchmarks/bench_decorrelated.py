@@ -20,6 +20,7 @@ and prints each constant's mean and SD over the seeds, with the mean's distance 
     .venv/bin/python benchmarks/bench_decorrelated.py [EXPERIMENT.toml] [--seeds 3]
         [--set reference.lighting_size=256 ...] [--yardstick constants.json]
 """
+
 from __future__ import annotations
 
 import argparse
@@ -34,16 +35,26 @@ import numpy as np
 
 REPO = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(REPO))
-REFERENCE = ['reference.sampler="independent"', 'reference.spp="auto"', "reference.target_noise=0.01",
-             "reference.max_spp=1024"]
+REFERENCE = [
+    'reference.sampler="independent"',
+    'reference.spp="auto"',
+    "reference.target_noise=0.01",
+    "reference.max_spp=1024",
+]
 
 
 def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap = argparse.ArgumentParser(
+        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
     ap.add_argument("experiment", nargs="?", default=str(REPO / "experiments" / "grazing.toml"))
-    ap.add_argument("--seeds", type=int, default=3, help="lighting textures with reference.seed = 0 .. N-1")
+    ap.add_argument(
+        "--seeds", type=int, default=3, help="lighting textures with reference.seed = 0 .. N-1"
+    )
     ap.add_argument("--set", dest="overrides", action="append", default=[])
-    ap.add_argument("--yardstick", type=Path, help="constants.json of a clean fit of the same experiment")
+    ap.add_argument(
+        "--yardstick", type=Path, help="constants.json of a clean fit of the same experiment"
+    )
     args = ap.parse_args()
 
     from study._backend import drjit_backend, init_backend
@@ -76,14 +87,22 @@ def main() -> None:
                     rows[key].setdefault(n, []).append(get_value(cal.fitted, n))
             if h is not None:
                 info = cal.fit_summary.get("input_noise", {})
-                print(f"seed {seed}: decorrelated {info.get('message')} in {info.get('steps')} steps", flush=True)
+                print(
+                    f"seed {seed}: decorrelated {info.get('message')} in {info.get('steps')} steps",
+                    flush=True,
+                )
     yard = {}
     if args.yardstick:
         y = json.loads(args.yardstick.read_text())["parameters"]
-        yard = {n: (p["fitted"], (p.get("rel_std_error") or 0) * abs(p["fitted"] or 0)) for n, p in y.items()}
-    print(f"\n# bench_decorrelated: {Path(args.experiment).stem}, {args.seeds} lighting seed(s), overrides "
-          f"{args.overrides or 'none'}, reference {ref.spp} spp; fit s (median): least squares "
-          f"{np.median(seconds['least squares']):.1f}, decorrelated {np.median(seconds['decorrelated']):.1f}\n")
+        yard = {
+            n: (p["fitted"], (p.get("rel_std_error") or 0) * abs(p["fitted"] or 0))
+            for n, p in y.items()
+        }
+    print(
+        f"\n# bench_decorrelated: {Path(args.experiment).stem}, {args.seeds} lighting seed(s), overrides "
+        f"{args.overrides or 'none'}, reference {ref.spp} spp; fit s (median): least squares "
+        f"{np.median(seconds['least squares']):.1f}, decorrelated {np.median(seconds['decorrelated']):.1f}\n"
+    )
     head = "| constant | least squares, mean +- SD | decorrelated, mean +- SD |"
     if yard:
         head += " yardstick (SE) | least squares - yardstick, SE | decorrelated - yardstick, SE |"

@@ -27,6 +27,7 @@ against the same image, the reference of the experiment as given.
     .venv/bin/python benchmarks/bench_denoise.py [EXPERIMENT.toml] [--textures raw:2048 raw:256 oidn:32 ...]
         [--cache DIR] [--set KEY=VALUE ...]
 """
+
 from __future__ import annotations
 
 import argparse
@@ -48,16 +49,30 @@ def _blur(a: np.ndarray, sigma: float) -> np.ndarray:
     k = np.exp(-0.5 * (np.arange(-r, r + 1) / sigma) ** 2)
     k /= k.sum()
     p = np.pad(a, ((r, r), (0, 0), (0, 0)), mode="edge")
-    a = sum(w * p[i:i + a.shape[0]] for i, w in enumerate(k))
+    a = sum(w * p[i : i + a.shape[0]] for i, w in enumerate(k))
     p = np.pad(a, ((0, 0), (r, r), (0, 0)), mode="edge")
-    return sum(w * p[:, i:i + a.shape[1]] for i, w in enumerate(k))
+    return sum(w * p[:, i : i + a.shape[1]] for i, w in enumerate(k))
 
 
 def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap = argparse.ArgumentParser(
+        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
     ap.add_argument("experiment", nargs="?", default=str(REPO / "experiments" / "default.toml"))
-    ap.add_argument("--textures", nargs="+", default=["raw:2048", "raw:256", "raw:64", "raw:32", "oidn:256",
-                                                      "oidn:64", "oidn:32", "oidn:16"])
+    ap.add_argument(
+        "--textures",
+        nargs="+",
+        default=[
+            "raw:2048",
+            "raw:256",
+            "raw:64",
+            "raw:32",
+            "oidn:256",
+            "oidn:64",
+            "oidn:32",
+            "oidn:16",
+        ],
+    )
     ap.add_argument("--cache", type=Path, default=REPO / ".bench_cache" / "denoise")
     ap.add_argument("--set", dest="overrides", action="append", default=[])
     ap.add_argument("--json", type=Path, default=None, help="write the rows here")
@@ -65,15 +80,20 @@ def main() -> None:
     settings = []
     for item in args.textures:
         parts = item.split(":")
-        if (len(parts) not in (2, 3) or parts[0] not in ("raw", "oidn", "oidn_unmatched")
-                or not all(p.isdigit() for p in parts[1:])):
-            ap.error(f"--textures {item!r}: expected raw:SPP, oidn:SPP, oidn_unmatched:SPP or METHOD:SPP:SEED")
+        if (
+            len(parts) not in (2, 3)
+            or parts[0] not in ("raw", "oidn", "oidn_unmatched")
+            or not all(p.isdigit() for p in parts[1:])
+        ):
+            ap.error(
+                f"--textures {item!r}: expected raw:SPP, oidn:SPP, oidn_unmatched:SPP or METHOD:SPP:SEED"
+            )
         settings.append((parts[0], int(parts[1]), int(parts[2]) if len(parts) == 3 else None))
     raws = [s for s in settings if s[0] == "raw"]
     if not raws:
         ap.error("--textures needs at least one raw:SPP setting (the best one is the yardstick)")
     best = max(raws, key=lambda s: s[1])
-    settings.sort(key=lambda s: s != best)          # the yardstick first
+    settings.sort(key=lambda s: s != best)  # the yardstick first
 
     args.cache.mkdir(parents=True, exist_ok=True)
     os.environ["STUDY_CACHE"] = str(args.cache)
@@ -97,19 +117,31 @@ def main() -> None:
     hx, hz = base["pool.half_extent"]
     inside = (np.abs(X) < hx) & (np.abs(Z) < hz) & (world_y < si.underwater_camera_height(base))
     sigma = 1.5 * size / min(base["reference.lighting_size"], size)
-    print(f"# {base['name']}: reference {base['reference.spp']} spp, lighting {base['reference.lighting_size']}^2 "
-          f"texels, texture {size}^2; yardstick {best[0]}:{best[1]}", flush=True)
+    print(
+        f"# {base['name']}: reference {base['reference.spp']} spp, lighting {base['reference.lighting_size']}^2 "
+        f"texels, texture {size}^2; yardstick {best[0]}:{best[1]}",
+        flush=True,
+    )
 
     rows, yard = [], None
     for method, spp, seed in settings:
         label = f"{method}:{spp}" + (f" seed {seed}" if seed is not None else "")
-        exp = load_experiment(args.experiment, args.overrides + [
-            "reference.texture_method=\"lighting\"", "reference.lighting_direct=\"path\"", f"reference.texture_spp={spp}",
-            f"reference.lighting_denoise=\"{'none' if method == 'raw' else method}\""]
-            + ([f"reference.seed={seed}"] if seed is not None else []))
+        exp = load_experiment(
+            args.experiment,
+            args.overrides
+            + [
+                'reference.texture_method="lighting"',
+                'reference.lighting_direct="path"',
+                f"reference.texture_spp={spp}",
+                f'reference.lighting_denoise="{"none" if method == "raw" else method}"',
+            ]
+            + ([f"reference.seed={seed}"] if seed is not None else []),
+        )
         key = exp.inputs_hash()
         t0 = time.perf_counter()
-        inputs = si.load_or_build_shader_inputs(exp, "llvm_ad_rgb", cache=args.cache, log=lambda m: None)
+        inputs = si.load_or_build_shader_inputs(
+            exp, "llvm_ad_rgb", cache=args.cache, log=lambda m: None
+        )
         dt = time.perf_counter() - t0
         if key not in times and dt > 1.0:
             times[key] = dt
@@ -121,36 +153,71 @@ def main() -> None:
         full = ShaderModel.from_experiment(exp, inputs, ref_img, resolution=(w, h))
         img, _ = full.render(cal.fitted)
         e = errors(ref_img, img, full.mask)
-        params = {n: (p["fitted"], abs(p["fitted"]) * p["rel_std_error"] if p.get("rel_std_error") else None,
-                       p["status"]) for n, p in cal.parameters.items()}
+        params = {
+            n: (
+                p["fitted"],
+                abs(p["fitted"]) * p["rel_std_error"] if p.get("rel_std_error") else None,
+                p["status"],
+            )
+            for n, p in cal.parameters.items()
+        }
         hp = tex - _blur(tex, sigma)
-        row = {"label": label, "seconds": times.get(key), "flip": e["flip"], "rmse": e["rmse"], "params": params,
-               "hp_energy": float(np.mean(hp[inside] ** 2)), "tex": tex}
+        row = {
+            "label": label,
+            "seconds": times.get(key),
+            "flip": e["flip"],
+            "rmse": e["rmse"],
+            "params": params,
+            "hp_energy": float(np.mean(hp[inside] ** 2)),
+            "tex": tex,
+        }
         if yard is None:
             yard = row
-        row["rel_diff"] = float(np.sqrt(np.mean(((tex - yard["tex"]) / np.maximum(yard["tex"], 1e-4))[inside] ** 2)))
+        row["rel_diff"] = float(
+            np.sqrt(np.mean(((tex - yard["tex"]) / np.maximum(yard["tex"], 1e-4))[inside] ** 2))
+        )
         row["detail"] = row["hp_energy"] / yard["hp_energy"]
         row["mean_ratio"] = (tex[inside].mean(0) / yard["tex"][inside].mean(0)).tolist()
         rows.append(row)
-        print(f"{label:>10}: FLIP {e['flip']:.4f} " + " ".join(f"{n}={_g(v)}" for n, (v, _, _) in params.items()),
-              flush=True)
+        print(
+            f"{label:>10}: FLIP {e['flip']:.4f} "
+            + " ".join(f"{n}={_g(v)}" for n, (v, _, _) in params.items()),
+            flush=True,
+        )
 
     names = list(yard["params"])
-    print("\n| texture | input build s | FLIP | RMSE | texture RMS rel. diff | detail kept | mean R / G / B vs "
-          "the yardstick's | " + " | ".join(names) + " |")
+    print(
+        "\n| texture | input build s | FLIP | RMSE | texture RMS rel. diff | detail kept | mean R / G / B vs "
+        "the yardstick's | " + " | ".join(names) + " |"
+    )
     print("|---|---|---|---|---|---|---|" + "---|" * len(names))
     for r in rows:
         cells = []
         for n in names:
             v, _, st = r["params"][n]
             vb, seb, _ = yard["params"][n]
-            z = (v - vb) / seb if r is not yard and v is not None and vb is not None and seb else None
-            cells.append(f"{_g(v)}" + (f" ({z:+.2f} SE)" if z is not None else "") + ("" if st == "fitted" else f" {st}"))
-        print(f"| {r['label']} | {_g(r['seconds'], 3) if r['seconds'] else 'cached'} | {r['flip']:.4f} | "
-              f"{r['rmse']:.4f} | {r['rel_diff']:.3f} | {r['detail']:.2f} | "
-              + " / ".join(f"{m:.3f}" for m in r["mean_ratio"]) + " | " + " | ".join(cells) + " |")
+            z = (
+                (v - vb) / seb
+                if r is not yard and v is not None and vb is not None and seb
+                else None
+            )
+            cells.append(
+                f"{_g(v)}"
+                + (f" ({z:+.2f} SE)" if z is not None else "")
+                + ("" if st == "fitted" else f" {st}")
+            )
+        print(
+            f"| {r['label']} | {_g(r['seconds'], 3) if r['seconds'] else 'cached'} | {r['flip']:.4f} | "
+            f"{r['rmse']:.4f} | {r['rel_diff']:.3f} | {r['detail']:.2f} | "
+            + " / ".join(f"{m:.3f}" for m in r["mean_ratio"])
+            + " | "
+            + " | ".join(cells)
+            + " |"
+        )
     if args.json:
-        args.json.write_text(json.dumps([{k: v for k, v in r.items() if k != "tex"} for r in rows], indent=1))
+        args.json.write_text(
+            json.dumps([{k: v for k, v in r.items() if k != "tex"} for r in rows], indent=1)
+        )
 
 
 def _g(x, p=4):

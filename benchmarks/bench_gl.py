@@ -5,6 +5,7 @@ Usage: .venv/bin/python benchmarks/bench_gl.py [--n 20] [--sizes 128x96,256x192,
 Prints one row per (shader variant, resolution, loop cap): median and min ms per frame
 (draw + glFinish, no read-back, after warm-up) and the ratio to the default-constants row.
 """
+
 from __future__ import annotations
 
 import argparse
@@ -20,9 +21,11 @@ from shaders_port._gl import GLRenderer, time_glsl  # noqa: E402,F401
 from synthetic import synthetic_inputs  # noqa: E402
 
 VARIANTS = [("water_refraction", False), ("water_refraction", True), ("water_reflection", True)]
-SCHEDULES = {"default (10,3,40)": Constants(),
-             "fine (20,6,80)": Constants(steps_grazing=20.0, steps_steep=6.0, loop_cap=80),
-             "coarse (5,2,20)": Constants(steps_grazing=5.0, steps_steep=2.0, loop_cap=20)}
+SCHEDULES = {
+    "default (10,3,40)": Constants(),
+    "fine (20,6,80)": Constants(steps_grazing=20.0, steps_steep=6.0, loop_cap=80),
+    "coarse (5,2,20)": Constants(steps_grazing=5.0, steps_steep=2.0, loop_cap=20),
+}
 
 
 def main(argv=None) -> None:
@@ -31,8 +34,10 @@ def main(argv=None) -> None:
     ap.add_argument("--sizes", default="128x96,256x192,512x384")
     args = ap.parse_args(argv)
     sizes = [tuple(int(v) for v in s.split("x")) for s in args.sizes.split(",")]
-    print(f"{'shader':<18} {'NOREFL':<6} {'size':>9} {'schedule':<18} {'median ms':>10} "
-          f"{'min ms':>8} {'ratio':>6}")
+    print(
+        f"{'shader':<18} {'NOREFL':<6} {'size':>9} {'schedule':<18} {'median ms':>10} "
+        f"{'min ms':>8} {'ratio':>6}"
+    )
     for w, h in sizes:
         inputs = synthetic_inputs(width=w, height=h)
         for name, refl in VARIANTS:
@@ -42,9 +47,12 @@ def main(argv=None) -> None:
                     t = r.time_frames(c, n=args.n)
                     med = statistics.median(t) * 1e3
                     base = base or med
-                    print(f"{name:<18} {str(not refl):<6} {f'{w}x{h}':>9} {label:<18} "
-                          f"{med:10.3f} {min(t) * 1e3:8.3f} {med / base:6.2f}")
+                    print(
+                        f"{name:<18} {str(not refl):<6} {f'{w}x{h}':>9} {label:<18} "
+                        f"{med:10.3f} {min(t) * 1e3:8.3f} {med / base:6.2f}"
+                    )
     import moderngl
+
     ctx = moderngl.create_context(standalone=True, backend="egl")
     print(f"\nGL: {ctx.info['GL_RENDERER']} ({ctx.info['GL_VERSION']})")
     ctx.release()

@@ -30,6 +30,7 @@ The README's figures: ``study calibrate experiments/default.toml --set
 fit.shader=water_refraction_beer`` and ``--set fit.shader=water_refraction_beer_walls`` into two
 folders, then this script on both (``--spp 256``).
 """
+
 from __future__ import annotations
 
 import argparse
@@ -43,7 +44,7 @@ import numpy as np
 REPO = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(REPO))
 
-BANDS_FAR = 10   # rows per band in the first table inside --rows
+BANDS_FAR = 10  # rows per band in the first table inside --rows
 
 
 def shader_terms(variant, inputs, constants) -> dict:
@@ -57,7 +58,9 @@ def shader_terms(variant, inputs, constants) -> dict:
     from shaders_port._texture import backend_types, clamp
 
     if variant.shader != "water_refraction" or not variant.port_options.get("reflection", True):
-        raise ValueError(f"{variant.name}: the term split covers the water_refraction shader with reflection")
+        raise ValueError(
+            f"{variant.name}: the term split covers the water_refraction shader with reflection"
+        )
     opts = wr.options_of({k: v for k, v in variant.port_options.items() if k != "reflection"})
     inputs = variant.prepare_inputs(inputs)
     m = backend_types("llvm")
@@ -68,20 +71,27 @@ def shader_terms(variant, inputs, constants) -> dict:
     R = dr.normalize(wr.reflect(m, -f.vEye, f.vBumpTexMore))
     R.y = dr.maximum(R.y, 0.001)
     sky = wr.cubemap_reflection(m, P, R) * C.reflectColor
-    spec = wr.specular_highlight(m, P, m.Array4f(0.0), f.vBumpTex, f.vEye, f.vLight, C, opts.specular)
+    spec = wr.specular_highlight(
+        m, P, m.Array4f(0.0), f.vBumpTex, f.vEye, f.vLight, C, opts.specular
+    )
     NdotV = clamp(dr.dot(f.vEye, f.vBumpTex), 0.0, 1.0)
     FresnelCoeffs = P.fresnelLookup.sample(m, NdotV, m.Float(0.5))
     r = P.raster
     out = {}
-    for name, v, k in (("F*sky", sky, FresnelCoeffs[1]), ("F*spec", spec, FresnelCoeffs[1]),
-                       ("T*refr", f.vRefraction, FresnelCoeffs[0])):
+    for name, v, k in (
+        ("F*sky", sky, FresnelCoeffs[1]),
+        ("F*spec", spec, FresnelCoeffs[1]),
+        ("T*refr", f.vRefraction, FresnelCoeffs[0]),
+    ):
         img = np.zeros((r.height * r.width, 3), np.float32)
         img[r.index] = np.stack([np.array(v[c] * k) for c in range(3)], -1)
         out[name] = img.reshape(r.height, r.width, 3)
     out["port"] = variant.render(inputs, constants).numpy()["color"]
     gap = np.abs(out["F*sky"] + out["F*spec"] + out["T*refr"] - out["port"]).max()
     if gap > 1e-4:
-        raise RuntimeError(f"{variant.name}: the terms do not add up to the port's colour (max gap {gap:.2g})")
+        raise RuntimeError(
+            f"{variant.name}: the terms do not add up to the port's colour (max gap {gap:.2g})"
+        )
     return out
 
 
@@ -92,16 +102,24 @@ def reference_terms(exp_path, overrides, rows, spp: int) -> dict:
 
     from study.scene.experiment import load_experiment
     from study.scene.mitsuba_scene import build_scene
+
     out = {}
-    for name, bsdf, extra in (("full", {}, []), ("reflected", {"specular_transmittance": 0.0}, []),
-                              ("reflected, no sun", {"specular_transmittance": 0.0}, ["sun.radiance=[0,0,0]"]),
-                              ("transmitted", {"specular_reflectance": 0.0}, [])):
+    for name, bsdf, extra in (
+        ("full", {}, []),
+        ("reflected", {"specular_transmittance": 0.0}, []),
+        ("reflected, no sun", {"specular_transmittance": 0.0}, ["sun.radiance=[0,0,0]"]),
+        ("transmitted", {"specular_reflectance": 0.0}, []),
+    ):
         exp = load_experiment(exp_path, list(overrides) + extra)
         t0 = time.perf_counter()
         scene = build_scene(exp, water_bsdf=bsdf, rows=rows)
         out[name] = np.array(mi.render(scene, spp=spp, seed=7919), np.float32)
-        print(f"# reference term '{name}': rows {rows[0]}-{rows[1] - 1}, {spp} spp, "
-              f"{time.perf_counter() - t0:.1f} s", file=sys.stderr, flush=True)
+        print(
+            f"# reference term '{name}': rows {rows[0]}-{rows[1] - 1}, {spp} spp, "
+            f"{time.perf_counter() - t0:.1f} s",
+            file=sys.stderr,
+            flush=True,
+        )
     out["both"] = out["full"] - out["reflected"] - out["transmitted"]
     return out
 
@@ -114,8 +132,12 @@ def main(argv=None) -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("fits", nargs="+", help="study calibrate output folders (constants.json)")
     ap.add_argument("--experiment", default=str(REPO / "experiments" / "default.toml"))
-    ap.add_argument("--rows", nargs=2, type=int, default=(40, 100), help="far band: first row, end row")
-    ap.add_argument("--spp", type=int, default=256, help="samples per pixel of the reference's term renders")
+    ap.add_argument(
+        "--rows", nargs=2, type=int, default=(40, 100), help="far band: first row, end row"
+    )
+    ap.add_argument(
+        "--spp", type=int, default=256, help="samples per pixel of the reference's term renders"
+    )
     ap.add_argument("--set", action="append", default=[], metavar="KEY=VALUE")
     a = ap.parse_args(argv)
 
@@ -138,46 +160,74 @@ def main(argv=None) -> None:
     for folder in a.fits:
         d = json.loads((Path(folder) / "constants.json").read_text())
         if d.get("experiment") != exp["name"]:
-            raise SystemExit(f"{folder} is a fit of {d.get('experiment')!r}, not of {exp['name']!r}")
+            raise SystemExit(
+                f"{folder} is a fit of {d.get('experiment')!r}, not of {exp['name']!r}"
+            )
         v = get_variant(d["shader"])
         c = Constants.from_dict(d["constants"])
-        mask = ShaderModel.from_experiment(exp, inputs, ref.image, shader=v.name, resolution=(w, h)).mask
+        mask = ShaderModel.from_experiment(
+            exp, inputs, ref.image, shader=v.name, resolution=(w, h)
+        ).mask
         terms = shader_terms(v, inputs, c)
         fits[f"{v.name} ({Path(folder).name})"] = (terms, flip_map(ref.image, terms["port"]), mask)
-    mask = np.logical_and.reduce([f[2] for f in fits.values()])   # pixels scored for every fit
+    mask = np.logical_and.reduce([f[2] for f in fits.values()])  # pixels scored for every fit
 
     bands = [(b, min(b + BANDS_FAR, r1)) for b in range(r0, r1, BANDS_FAR)]
     bands += [(r0, r1), (r1, h), (0, h)]
-    print(f"# {exp['name']}: reference {ref.spp} spp (noise {ref.noise:.3g}); FLIP and mean "
-          f"(shader - reference), linear RGB, per row band [first, end)")
+    print(
+        f"# {exp['name']}: reference {ref.spp} spp (noise {ref.noise:.3g}); FLIP and mean "
+        f"(shader - reference), linear RGB, per row band [first, end)"
+    )
     print("| rows | water px | " + " | ".join(f"{n}: FLIP, mean diff" for n in fits) + " |")
     print("|---|---|" + "---|" * len(fits))
     for b0, b1 in bands:
         mk = mask.copy()
         mk[:b0], mk[b1:] = False, False
-        cells = [f"{fm[mk].mean():.4f}, {_rgb((t['port'][mk] - ref.image[mk]).mean(0))}"
-                 for t, fm, _ in fits.values()]
+        cells = [
+            f"{fm[mk].mean():.4f}, {_rgb((t['port'][mk] - ref.image[mk]).mean(0))}"
+            for t, fm, _ in fits.values()
+        ]
         print(f"| {b0}-{b1 - 1} | {mk.sum()} | " + " | ".join(cells) + " |")
 
     rt = reference_terms(a.experiment, a.set, (r0, r1), a.spp)
     sub = mask[r0:r1]
     gap = np.abs((rt["full"] - ref.image[r0:r1])[sub].mean(0)).max()
-    print(f"\n# reference terms ({a.spp} spp) in rows {r0}-{r1 - 1}; |mean(full re-render - cached "
-          f"reference)| = {gap:.4f} (noise of the split)")
+    print(
+        f"\n# reference terms ({a.spp} spp) in rows {r0}-{r1 - 1}; |mean(full re-render - cached "
+        f"reference)| = {gap:.4f} (noise of the split)"
+    )
     half = [(r0, (r0 + r1) // 2), ((r0 + r1) // 2, r1), (r0, r1)]
     print("| rows | term | " + " | ".join(["reference"] + list(fits)) + " |")
     print("|---|---|" + "---|" * (1 + len(fits)))
     for b0, b1 in half:
         mk = sub.copy()
-        mk[:b0 - r0], mk[b1 - r0:] = False, False
-        rows = [("sky / walls (reflected, no sun | F*sky)", rt["reflected, no sun"][mk].mean(0), "F*sky"),
-                ("sun (reflected - no sun | F*spec)", (rt["reflected"] - rt["reflected, no sun"])[mk].mean(0), "F*spec"),
-                ("refraction (transmitted + both | T*refr)", (rt["transmitted"] + rt["both"])[mk].mean(0), "T*refr")]
+        mk[: b0 - r0], mk[b1 - r0 :] = False, False
+        rows = [
+            (
+                "sky / walls (reflected, no sun | F*sky)",
+                rt["reflected, no sun"][mk].mean(0),
+                "F*sky",
+            ),
+            (
+                "sun (reflected - no sun | F*spec)",
+                (rt["reflected"] - rt["reflected, no sun"])[mk].mean(0),
+                "F*spec",
+            ),
+            (
+                "refraction (transmitted + both | T*refr)",
+                (rt["transmitted"] + rt["both"])[mk].mean(0),
+                "T*refr",
+            ),
+        ]
         for label, rv, key in rows:
-            cells = [f"{_rgb(t[key][r0:r1][mk].mean(0))} ({_rgb(t[key][r0:r1][mk].mean(0) - rv)})"
-                     for t, _, _ in fits.values()]
+            cells = [
+                f"{_rgb(t[key][r0:r1][mk].mean(0))} ({_rgb(t[key][r0:r1][mk].mean(0) - rv)})"
+                for t, _, _ in fits.values()
+            ]
             print(f"| {b0}-{b1 - 1} | {label} | {_rgb(rv)} | " + " | ".join(cells) + " |")
-        print(f"| {b0}-{b1 - 1} | of which both | {_rgb(rt['both'][mk].mean(0))} |" + " |" * len(fits))
+        print(
+            f"| {b0}-{b1 - 1} | of which both | {_rgb(rt['both'][mk].mean(0))} |" + " |" * len(fits)
+        )
     print("\n(shader cells: the term, and in brackets its excess over the reference's)")
 
 

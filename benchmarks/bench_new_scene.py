@@ -51,6 +51,7 @@ baseline's seeds run on a GPU beside the new path's on the CPU; each path's vari
         [--baseline PATH] [--variant cuda_ad_rgb] [--set KEY=VALUE ...] [--json OUT.json]
     .venv/bin/python benchmarks/bench_new_scene.py --merge A.json B.json [--baseline PATH]
 """
+
 from __future__ import annotations
 
 import argparse
@@ -67,12 +68,16 @@ REPO = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(REPO))
 
 # today's path: the reference and texture settings of main before the fast references
-TODAY = ["reference.texture_method=\"colour\"", "reference.spp=\"auto\"", "reference.target_noise=0.01",
-         "reference.sampler=\"independent\"",
-         "reference.max_spp=1024"]
+TODAY = [
+    'reference.texture_method="colour"',
+    'reference.spp="auto"',
+    "reference.target_noise=0.01",
+    'reference.sampler="independent"',
+    "reference.max_spp=1024",
+]
 # the texture_spp each shipped experiment used then (schema default 256; default and seed_lut set 1024)
 TODAY_TEXTURE_SPP = {"default": 1024, "seed_lut": 1024}
-CLEAN_TEXTURE_SPP = 2048      # the clean yardstick's colour texture
+CLEAN_TEXTURE_SPP = 2048  # the clean yardstick's colour texture
 # the new path with its traced texture's noise cut 4x in standard deviation (the schema's
 # defaults x 16 photons, x 4 directions and samples); the reference unchanged
 CONVERGED = ["reference.sun_photons=256", "reference.sky_directions=144", "reference.bounce_spp=64"]
@@ -95,13 +100,26 @@ def pick_baseline(paths, wanted: str | None) -> str | None:
     else ``clean``, else ``today``, else none."""
     if wanted is not None:
         if wanted not in paths:
-            raise SystemExit(f"--baseline {wanted}: that path was not run (paths: {', '.join(paths)})")
+            raise SystemExit(
+                f"--baseline {wanted}: that path was not run (paths: {', '.join(paths)})"
+            )
         return wanted
     return "clean" if "clean" in paths else "today" if "today" in paths else None
 
 
-STAGES = ["startup", "scene build", "JIT", "reference passes", "noise estimation", "texture renders",
-          "fit", "export", "GL check", "rest", "total"]
+STAGES = [
+    "startup",
+    "scene build",
+    "JIT",
+    "reference passes",
+    "noise estimation",
+    "texture renders",
+    "fit",
+    "export",
+    "GL check",
+    "rest",
+    "total",
+]
 
 
 # ------------------------------------------------------------------------------------ worker
@@ -141,10 +159,13 @@ class _Timer:
                 if self.stack:
                     self.stack[-1][3] += dw
                     self.stack[-1][4] += dc
+
         setattr(module, name, timed)
 
 
-def worker(experiment: str, path: str, out: Path, overrides: list[str], variant: str = "llvm_ad_rgb") -> dict:
+def worker(
+    experiment: str, path: str, out: Path, overrides: list[str], variant: str = "llvm_ad_rgb"
+) -> dict:
     w_start, c_start = time.perf_counter(), time.process_time()
     import drjit as dr
 
@@ -162,7 +183,10 @@ def worker(experiment: str, path: str, out: Path, overrides: list[str], variant:
     t = _Timer(dr)
     t._drain()
     t.wall, t.cpu = {}, {}
-    t.wall["startup"], t.cpu["startup"] = time.perf_counter() - w_start, time.process_time() - c_start
+    t.wall["startup"], t.cpu["startup"] = (
+        time.perf_counter() - w_start,
+        time.process_time() - c_start,
+    )
     t.wrap(mitsuba_scene, "build_scene", "scene build")
     t.wrap(reference, "render_passes", "reference passes")
     t.wrap(reference, "water_mask", "noise estimation")
@@ -180,17 +204,38 @@ def worker(experiment: str, path: str, out: Path, overrides: list[str], variant:
     summary = _jobs.run_calibrate(experiment, out, sets, variant, cache=out / "cache")
     t.wall["total"] = t.wall["startup"] + time.perf_counter() - w0
     t.cpu["total"] = t.cpu["startup"] + time.process_time() - c0
-    params = {n: {"fitted": p["fitted"], "rel_se": p.get("rel_std_error"), "rel_noise": p.get("rel_noise_error"),
-                  "status": p["status"]}
-              for n, p in summary["parameters"].items()}
-    return {"experiment": name, "path": path, "variant": variant, "wall": t.wall, "cpu": t.cpu, "params": params,
-            "flip_own": summary["error"]["flip"]["fitted"], "rmse_own": summary["error"]["rmse"]["fitted"],
-            "reference_spp": summary["reference"]["spp"], "reference_noise": summary["reference"]["noise"],
-            "kernels": t.kernels, "kernel_cache_hits": t.hits}
+    params = {
+        n: {
+            "fitted": p["fitted"],
+            "rel_se": p.get("rel_std_error"),
+            "rel_noise": p.get("rel_noise_error"),
+            "status": p["status"],
+        }
+        for n, p in summary["parameters"].items()
+    }
+    return {
+        "experiment": name,
+        "path": path,
+        "variant": variant,
+        "wall": t.wall,
+        "cpu": t.cpu,
+        "params": params,
+        "flip_own": summary["error"]["flip"]["fitted"],
+        "rmse_own": summary["error"]["rmse"]["fitted"],
+        "reference_spp": summary["reference"]["spp"],
+        "reference_noise": summary["reference"]["noise"],
+        "kernels": t.kernels,
+        "kernel_cache_hits": t.hits,
+    }
 
 
-def cross_flip(experiment: str, baseline: str, run_dirs: dict, overrides: list[str],
-               variant: str = "llvm_ad_rgb") -> dict:
+def cross_flip(
+    experiment: str,
+    baseline: str,
+    run_dirs: dict,
+    overrides: list[str],
+    variant: str = "llvm_ad_rgb",
+) -> dict:
     """FLIP / RMSE (water pixels, full resolution) of each path's fitted constants (``run_dirs``:
     path -> its output folder) against the ``baseline`` path's reference, on its shader inputs."""
     from study._backend import drjit_backend, init_backend
@@ -209,7 +254,9 @@ def cross_flip(experiment: str, baseline: str, run_dirs: dict, overrides: list[s
     ref = load_or_render(exp, variant, cache=cache, log=quiet)
     inputs = load_or_build_shader_inputs(exp, variant, cache=cache, log=quiet)
     w, h = exp["resolution"]
-    model = ShaderModel.from_experiment(exp, inputs, ref.image, backend=drjit_backend(variant), resolution=(w, h))
+    model = ShaderModel.from_experiment(
+        exp, inputs, ref.image, backend=drjit_backend(variant), resolution=(w, h)
+    )
     out = {}
     for path, d in run_dirs.items():
         img, _ = model.render(load_constants_json(Path(d) / "constants.json"))
@@ -222,7 +269,10 @@ def _run(args_list: list[str]) -> dict:
     with tempfile.NamedTemporaryFile(suffix=".json", delete=False) as f:
         res = Path(f.name)
     cmd = [sys.executable, __file__, *args_list, "--result", str(res)]
-    env = dict(os.environ, PYTHONPATH=os.pathsep.join([str(REPO)] + [p for p in [os.environ.get("PYTHONPATH")] if p]))
+    env = dict(
+        os.environ,
+        PYTHONPATH=os.pathsep.join([str(REPO)] + [p for p in [os.environ.get("PYTHONPATH")] if p]),
+    )
     p = subprocess.run(cmd, env=env, capture_output=True, text=True)
     if p.returncode != 0:
         raise RuntimeError(f"{' '.join(cmd)} failed:\n{p.stderr[-3000:]}")
@@ -237,21 +287,39 @@ def _set_args(sets: list[str]) -> list[str]:
 
 
 def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap = argparse.ArgumentParser(
+        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
     ap.add_argument("experiments", nargs="*", default=None)
     ap.add_argument("--paths", nargs="+", default=["today", "new"], choices=PATHS)
     ap.add_argument("--repeats", type=int, default=1)
-    ap.add_argument("--seeds", type=int, default=1, help="run --seed-paths with reference.seed = 0 .. N-1")
-    ap.add_argument("--seed-paths", nargs="+", default=["new"], choices=PATHS,
-                    help="the paths that --seeds reseeds (default: new)")
-    ap.add_argument("--merge", nargs="+", type=Path, help="print the tables of earlier --json results together")
+    ap.add_argument(
+        "--seeds", type=int, default=1, help="run --seed-paths with reference.seed = 0 .. N-1"
+    )
+    ap.add_argument(
+        "--seed-paths",
+        nargs="+",
+        default=["new"],
+        choices=PATHS,
+        help="the paths that --seeds reseeds (default: new)",
+    )
+    ap.add_argument(
+        "--merge", nargs="+", type=Path, help="print the tables of earlier --json results together"
+    )
     ap.add_argument("--set", dest="overrides", action="append", default=[])
     ap.add_argument("--variant", default="llvm_ad_rgb", choices=["llvm_ad_rgb", "cuda_ad_rgb"])
-    ap.add_argument("--baseline", choices=PATHS, help="the path the others are compared with "
-                    "(default: clean if run, else today)")
+    ap.add_argument(
+        "--baseline",
+        choices=PATHS,
+        help="the path the others are compared with (default: clean if run, else today)",
+    )
     ap.add_argument("--json", type=Path)
-    ap.add_argument("--worker", nargs=3, metavar=("EXPERIMENT", "PATH", "OUT"), help=argparse.SUPPRESS)
-    ap.add_argument("--cross", nargs=3, metavar=("EXPERIMENT", "BASELINE", "DIRS_JSON"), help=argparse.SUPPRESS)
+    ap.add_argument(
+        "--worker", nargs=3, metavar=("EXPERIMENT", "PATH", "OUT"), help=argparse.SUPPRESS
+    )
+    ap.add_argument(
+        "--cross", nargs=3, metavar=("EXPERIMENT", "BASELINE", "DIRS_JSON"), help=argparse.SUPPRESS
+    )
     ap.add_argument("--result", type=Path, help=argparse.SUPPRESS)
     args = ap.parse_args()
     if args.repeats < 1 or args.seeds < 1:
@@ -262,7 +330,9 @@ def main() -> None:
         return
     if args.cross:
         e, b, dirs = args.cross
-        args.result.write_text(json.dumps(cross_flip(e, b, json.loads(dirs), args.overrides, args.variant)))
+        args.result.write_text(
+            json.dumps(cross_flip(e, b, json.loads(dirs), args.overrides, args.variant))
+        )
         return
 
     if args.merge:
@@ -272,35 +342,80 @@ def main() -> None:
     baseline = pick_baseline(paths, args.baseline)
     exps = args.experiments or sorted(str(p) for p in (REPO / "experiments").glob("*.toml"))
     load = os.getloadavg()
-    print(f"# bench_new_scene: {os.cpu_count()} cores, load average {load[0]:.1f} / {load[1]:.1f} / "
-          f"{load[2]:.1f} at start; {args.variant}; {args.repeats} repeat(s), {args.seeds} seed(s) of "
-          f"{' and '.join(args.seed_paths)}, medians; wall s (CPU s)", flush=True)
+    print(
+        f"# bench_new_scene: {os.cpu_count()} cores, load average {load[0]:.1f} / {load[1]:.1f} / "
+        f"{load[2]:.1f} at start; {args.variant}; {args.repeats} repeat(s), {args.seeds} seed(s) of "
+        f"{' and '.join(args.seed_paths)}, medians; wall s (CPU s)",
+        flush=True,
+    )
     results = []
     for e in exps:
         runs = {p: [] for p in paths}
         dirs = {}
         for r in range(args.repeats):
             for seed in range(args.seeds):
-                for p in paths:              # side by side: today, new, today, new, ...
+                for p in paths:  # side by side: today, new, today, new, ...
                     if p not in args.seed_paths and seed > 0:
                         continue
                     d = Path(tempfile.mkdtemp(prefix=f"bench_{Path(e).stem}_{p}_"))
                     seeded = p in args.seed_paths and args.seeds > 1
                     sets = args.overrides + ([f"reference.seed={seed}"] if seeded else [])
-                    runs[p].append(dict(_run(["--worker", e, p, str(d), "--variant", args.variant,
-                                              *_set_args(sets)]), seed=seed))
+                    runs[p].append(
+                        dict(
+                            _run(
+                                [
+                                    "--worker",
+                                    e,
+                                    p,
+                                    str(d),
+                                    "--variant",
+                                    args.variant,
+                                    *_set_args(sets),
+                                ]
+                            ),
+                            seed=seed,
+                        )
+                    )
                     if seed == 0:
                         dirs[p] = str(d)
-                    print(f"  {Path(e).stem} {p} run {r + 1} seed {seed}: {runs[p][-1]['wall']['total']:.1f} s wall",
-                          flush=True)
-                    if args.json:            # after every run: a run cut short loses only itself
-                        args.json.write_text(json.dumps(results + [{"experiment": Path(e).stem, "baseline": baseline,
-                                                                     "runs": runs, "cross": {}}], indent=1))
-        cross = (_run(["--cross", e, baseline, json.dumps(dirs), "--variant", args.variant,
-                       *_set_args(args.overrides)])
-                 if baseline and len(paths) > 1 else {})
-        results.append({"experiment": Path(e).stem, "baseline": baseline, "runs": runs, "cross": cross})
-        if args.json:                        # after every scene: a later failure loses nothing
+                    print(
+                        f"  {Path(e).stem} {p} run {r + 1} seed {seed}: {runs[p][-1]['wall']['total']:.1f} s wall",
+                        flush=True,
+                    )
+                    if args.json:  # after every run: a run cut short loses only itself
+                        args.json.write_text(
+                            json.dumps(
+                                results
+                                + [
+                                    {
+                                        "experiment": Path(e).stem,
+                                        "baseline": baseline,
+                                        "runs": runs,
+                                        "cross": {},
+                                    }
+                                ],
+                                indent=1,
+                            )
+                        )
+        cross = (
+            _run(
+                [
+                    "--cross",
+                    e,
+                    baseline,
+                    json.dumps(dirs),
+                    "--variant",
+                    args.variant,
+                    *_set_args(args.overrides),
+                ]
+            )
+            if baseline and len(paths) > 1
+            else {}
+        )
+        results.append(
+            {"experiment": Path(e).stem, "baseline": baseline, "runs": runs, "cross": cross}
+        )
+        if args.json:  # after every scene: a later failure loses nothing
             args.json.write_text(json.dumps(results, indent=1))
         _print(Path(e).stem, runs, cross, baseline)
     load = os.getloadavg()
@@ -321,42 +436,75 @@ def _seed_stats(runs: list[dict], name: str) -> tuple[float | None, float | None
 
 def _print(name: str, runs: dict, cross: dict, baseline: str | None) -> None:
     paths = list(runs)
-    med = {p: {kind: {s: statistics.median(r[kind].get(s, 0.0) for r in runs[p]) for s in STAGES}
-               for kind in ("wall", "cpu")} for p in paths}
+    med = {
+        p: {
+            kind: {s: statistics.median(r[kind].get(s, 0.0) for r in runs[p]) for s in STAGES}
+            for kind in ("wall", "cpu")
+        }
+        for p in paths
+    }
     print(f"\n## {name}\n")
     print("| stage | " + " | ".join(f"{p} wall s (CPU s)" for p in paths) + " |")
     print("|---|" + "---|" * len(paths))
     for s in STAGES:
-        print(f"| {s} | " + " | ".join(f"{med[p]['wall'][s]:.1f} ({med[p]['cpu'][s]:.1f})" for p in paths) + " |")
+        print(
+            f"| {s} | "
+            + " | ".join(f"{med[p]['wall'][s]:.1f} ({med[p]['cpu'][s]:.1f})" for p in paths)
+            + " |"
+        )
     first = {p: [r for r in runs[p] if r["seed"] == 0][-1] for p in paths}
     print("\n| | " + " | ".join(paths) + " |")
     print("|---|" + "---|" * len(paths))
     print("| variant | " + " | ".join(first[p].get("variant", "llvm_ad_rgb") for p in paths) + " |")
-    print("| reference spp, noise | " + " | ".join(f"{first[p]['reference_spp']}, {first[p]['reference_noise']:.4f}"
-                                             for p in paths) + " |")
-    print("| FLIP / RMSE vs own reference | " + " | ".join(f"{first[p]['flip_own']:.4f} / {first[p]['rmse_own']:.4f}"
-                                                      for p in paths) + " |")
+    print(
+        "| reference spp, noise | "
+        + " | ".join(
+            f"{first[p]['reference_spp']}, {first[p]['reference_noise']:.4f}" for p in paths
+        )
+        + " |"
+    )
+    print(
+        "| FLIP / RMSE vs own reference | "
+        + " | ".join(f"{first[p]['flip_own']:.4f} / {first[p]['rmse_own']:.4f}" for p in paths)
+        + " |"
+    )
     if cross:
-        print(f"| FLIP / RMSE vs {baseline}'s reference | " + " | ".join(
-            f"{cross[p]['flip']:.4f} / {cross[p]['rmse']:.4f}" for p in paths) + " |")
-    print("| kernels (disk-cache hits) | " + " | ".join(f"{first[p]['kernels']} ({first[p]['kernel_cache_hits']})"
-                                                    for p in paths) + " |")
+        print(
+            f"| FLIP / RMSE vs {baseline}'s reference | "
+            + " | ".join(f"{cross[p]['flip']:.4f} / {cross[p]['rmse']:.4f}" for p in paths)
+            + " |"
+        )
+    print(
+        "| kernels (disk-cache hits) | "
+        + " | ".join(f"{first[p]['kernels']} ({first[p]['kernel_cache_hits']})" for p in paths)
+        + " |"
+    )
     if baseline is None:
         for p in paths:
-            print(f"\n| constant | {p}: fitted (rel. SE) [status] | mean +- SD over seeds |\n|---|---|---|")
+            print(
+                f"\n| constant | {p}: fitted (rel. SE) [status] | mean +- SD over seeds |\n|---|---|---|"
+            )
             for n, pa in first[p]["params"].items():
                 mean, sd, k = _seed_stats(runs[p], n)
                 spread = f"{_v(mean)} +- {_v(sd, 2)} ({k})" if k > 1 else "-"
-                print(f"| {n} | {_v(pa['fitted'])} ({_v(pa['rel_se'])}) [{pa['status']}] | {spread} |")
+                print(
+                    f"| {n} | {_v(pa['fitted'])} ({_v(pa['rel_se'])}) [{pa['status']}] | {spread} |"
+                )
         sys.stdout.flush()
         return
     others = [p for p in paths if p != baseline]
     base = first[baseline]["params"]
     nb = len({r["seed"] for r in runs[baseline]})
-    if nb > 1:      # the baseline's own seed spread: the measured standard error of one of its fits
-        print(f"\n| constant | {baseline}: mean +- SD over {nb} seeds (GN rel. SE of seed 0) | " + " | ".join(
-            f"{p}: mean +- SD over seeds | ({p} - {baseline}) / {baseline}'s seed SD (+- SE of the difference) "
-            f"| in GN SE" for p in others) + " |")
+    if nb > 1:  # the baseline's own seed spread: the measured standard error of one of its fits
+        print(
+            f"\n| constant | {baseline}: mean +- SD over {nb} seeds (GN rel. SE of seed 0) | "
+            + " | ".join(
+                f"{p}: mean +- SD over seeds | ({p} - {baseline}) / {baseline}'s seed SD (+- SE of the difference) "
+                f"| in GN SE"
+                for p in others
+            )
+            + " |"
+        )
         print("|---|---|" + "---|---|---|" * len(others))
         for n, pa in base.items():
             mb, sb, kb = _seed_stats(runs[baseline], n)
@@ -369,17 +517,28 @@ def _print(name: str, runs: dict, cross: dict, baseline: str | None) -> None:
                     continue
                 d = mp - mb
                 z = d / sb if sb else None
-                sd_d = ((sb ** 2 / kb if sb else 0.0) + (sp ** 2 / kp if sp else 0.0)) ** 0.5
+                sd_d = ((sb**2 / kb if sb else 0.0) + (sp**2 / kp if sp else 0.0)) ** 0.5
                 zd = f" (+- {_v(sd_d / sb, 2)})" if sb and sd_d else ""
-                cells.append(f"{_v(mp)} +- {_v(sp, 2)} ({kp}) | {_v(z, 2)}{zd} | {_v(d / se_abs if se_abs else None, 2)}")
-            print(f"| {n} | {_v(mb)} +- {_v(sb, 2)} ({kb}) ({_v(pa['rel_se'])}) [{pa['status']}] | "
-                  + " | ".join(cells) + " |")
+                cells.append(
+                    f"{_v(mp)} +- {_v(sp, 2)} ({kp}) | {_v(z, 2)}{zd} | {_v(d / se_abs if se_abs else None, 2)}"
+                )
+            print(
+                f"| {n} | {_v(mb)} +- {_v(sb, 2)} ({kb}) ({_v(pa['rel_se'])}) [{pa['status']}] | "
+                + " | ".join(cells)
+                + " |"
+            )
         _print_paired(runs, baseline, others, base)
         _print_extrapolated(name, runs, base)
         sys.stdout.flush()
         return
-    print(f"\n| constant | {baseline} (rel. SE; from reference noise) | " + " | ".join(
-        f"{p} (from reference noise, or mean +- SD over seeds) | ({p} - {baseline}) / SE" for p in others) + " |")
+    print(
+        f"\n| constant | {baseline} (rel. SE; from reference noise) | "
+        + " | ".join(
+            f"{p} (from reference noise, or mean +- SD over seeds) | ({p} - {baseline}) / SE"
+            for p in others
+        )
+        + " |"
+    )
     print("|---|---|" + "---|---|" * len(others))
     for n, pa in base.items():
         va, se = pa["fitted"], pa["rel_se"]
@@ -391,11 +550,19 @@ def _print(name: str, runs: dict, cross: dict, baseline: str | None) -> None:
             z = (mean - va) / se_abs if mean is not None and va is not None and se_abs else None
             if k > 1:
                 zs = (mean - va) / sd if sd and va is not None else None
-                cells.append(f"{_v(mean)} +- {_v(sd, 2)} over {k} seeds [{pb.get('status')}] | "
-                             f"{_v(z, 2)} (in seed SD: {_v(zs, 2)})")
+                cells.append(
+                    f"{_v(mean)} +- {_v(sd, 2)} over {k} seeds [{pb.get('status')}] | "
+                    f"{_v(z, 2)} (in seed SD: {_v(zs, 2)})"
+                )
             else:
-                cells.append(f"{_v(mean)} ({_v(pb.get('rel_noise'))}) [{pb.get('status')}] | {_v(z, 2)}")
-        print(f"| {n} | {_v(va)} ({_v(se)}; {_v(pa.get('rel_noise'))}) [{pa['status']}] | " + " | ".join(cells) + " |")
+                cells.append(
+                    f"{_v(mean)} ({_v(pb.get('rel_noise'))}) [{pb.get('status')}] | {_v(z, 2)}"
+                )
+        print(
+            f"| {n} | {_v(va)} ({_v(se)}; {_v(pa.get('rel_noise'))}) [{pa['status']}] | "
+            + " | ".join(cells)
+            + " |"
+        )
     sys.stdout.flush()
 
 
@@ -404,7 +571,9 @@ def _se_abs(pa: dict) -> float | None:
     return pa["rel_se"] * abs(pa["fitted"]) if pa["rel_se"] and pa["fitted"] is not None else None
 
 
-def _paired(runs_b: list[dict], runs_p: list[dict], name: str) -> tuple[float, float | None, int] | None:
+def _paired(
+    runs_b: list[dict], runs_p: list[dict], name: str
+) -> tuple[float, float | None, int] | None:
     """(mean, its standard error or None, count) of the per-seed difference p - baseline of
     constant ``name`` over the seeds both ran with *the same reference* (same variant, spp and
     measured noise, so the same render: the difference is the texture's alone), or None when
@@ -413,15 +582,23 @@ def _paired(runs_b: list[dict], runs_p: list[dict], name: str) -> tuple[float, f
     d = []
     for r in runs_p:
         rb = b.get(r["seed"])
-        if (rb is None or rb.get("variant") != r.get("variant") or rb["reference_spp"] != r["reference_spp"]
-                or rb["reference_noise"] != r["reference_noise"]):
+        if (
+            rb is None
+            or rb.get("variant") != r.get("variant")
+            or rb["reference_spp"] != r["reference_spp"]
+            or rb["reference_noise"] != r["reference_noise"]
+        ):
             continue
         vb, vp = rb["params"].get(name, {}).get("fitted"), r["params"].get(name, {}).get("fitted")
         if vb is not None and vp is not None:
             d.append(vp - vb)
     if not d:
         return None
-    return statistics.fmean(d), (statistics.stdev(d) / len(d) ** 0.5 if len(d) > 1 else None), len(d)
+    return (
+        statistics.fmean(d),
+        (statistics.stdev(d) / len(d) ** 0.5 if len(d) > 1 else None),
+        len(d),
+    )
 
 
 def _print_paired(runs: dict, baseline: str, others: list[str], base: dict) -> None:
@@ -431,8 +608,13 @@ def _print_paired(runs: dict, baseline: str, others: list[str], base: dict) -> N
     shown = [p for p in others if any(v is not None for v in rows[p].values())]
     if not shown:
         return
-    print("\n| constant | " + " | ".join(f"{p} - {baseline}, same reference, in GN SE: mean +- SE (seeds)"
-                                          for p in shown) + " |")
+    print(
+        "\n| constant | "
+        + " | ".join(
+            f"{p} - {baseline}, same reference, in GN SE: mean +- SE (seeds)" for p in shown
+        )
+        + " |"
+    )
     print("|---|" + "---|" * len(shown))
     for n, pa in base.items():
         se_abs = _se_abs(pa)
@@ -443,7 +625,11 @@ def _print_paired(runs: dict, baseline: str, others: list[str], base: dict) -> N
                 cells.append("-")
                 continue
             m, e, k = v
-            cells.append(f"{_v(m / se_abs, 2)}" + (f" +- {_v(e / se_abs, 2)}" if e is not None else "") + f" ({k})")
+            cells.append(
+                f"{_v(m / se_abs, 2)}"
+                + (f" +- {_v(e / se_abs, 2)}" if e is not None else "")
+                + f" ({k})"
+            )
         print(f"| {n} | " + " | ".join(cells) + " |")
 
 
@@ -458,8 +644,11 @@ def _print_extrapolated(name: str, runs: dict, base: dict) -> None:
     s_today, s_clean = TODAY_TEXTURE_SPP.get(name, 256), CLEAN_TEXTURE_SPP
     w = (1.0 / s_clean) / (1.0 / s_today - 1.0 / s_clean)
     others = [p for p in runs if p not in ("today", "clean")]
-    print(f"\n| constant | path tracer without texture noise ({s_today} and {s_clean} spp in 1/spp) | "
-          + " | ".join(f"{p} - it, in GN SE" for p in others) + " |")
+    print(
+        f"\n| constant | path tracer without texture noise ({s_today} and {s_clean} spp in 1/spp) | "
+        + " | ".join(f"{p} - it, in GN SE" for p in others)
+        + " |"
+    )
     print("|---|---|" + "---|" * len(others))
     for n, pa in base.items():
         shift = _paired(runs["today"], runs["clean"], n)
@@ -473,7 +662,11 @@ def _print_extrapolated(name: str, runs: dict, base: dict) -> None:
         for p in others:
             mp = _seed_stats(runs[p], n)[0]
             cells.append(_v((mp - v_inf) / se_abs, 2) if mp is not None and se_abs else "-")
-        print(f"| {n} | {_v(v_inf)} (shift today -> clean {_v(shift[0])}, {shift[2]} seeds) | " + " | ".join(cells) + " |")
+        print(
+            f"| {n} | {_v(v_inf)} (shift today -> clean {_v(shift[0])}, {shift[2]} seeds) | "
+            + " | ".join(cells)
+            + " |"
+        )
 
 
 def _print_merged(files: list[Path], wanted: str | None = None) -> None:

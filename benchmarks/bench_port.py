@@ -7,6 +7,7 @@ milliseconds per frame (after warm-up) for each shader variant: the port's forwa
 (draw + glFinish, no read-back), and ``render_with_jacobian`` for k constants, with its cost
 in forward passes against the goal 1 + k/2. Goals: port fps >= llvmpipe fps.
 """
+
 from __future__ import annotations
 
 import argparse
@@ -23,11 +24,21 @@ import drjit as dr  # noqa: E402
 from synthetic import synthetic_inputs  # noqa: E402
 from shaders_port import Constants, water_reflection, water_refraction  # noqa: E402
 
-JAC_NAMES = {2: ["attenuation_distance", "bumptex_mult"],
-             4: ["attenuation_distance", "bumptex_mult", "steps_grazing", "steps_steep"],
-             9: ["attenuation_distance", "bumptex_mult", "steps_grazing", "steps_steep",
-                 "refr_coeff", "specular_strength", "specular_exponent", "water_color[1]",
-                 "reflect_color[0]"]}
+JAC_NAMES = {
+    2: ["attenuation_distance", "bumptex_mult"],
+    4: ["attenuation_distance", "bumptex_mult", "steps_grazing", "steps_steep"],
+    9: [
+        "attenuation_distance",
+        "bumptex_mult",
+        "steps_grazing",
+        "steps_steep",
+        "refr_coeff",
+        "specular_strength",
+        "specular_exponent",
+        "water_color[1]",
+        "reflect_color[0]",
+    ],
+}
 
 
 def median_time(fn, n: int, warmup: int = 2) -> float:
@@ -49,8 +60,10 @@ def main() -> None:
     inputs = synthetic_inputs(width=args.size, height=args.size, tex=256)
     C = Constants()
     variants = [("water_refraction", True), ("water_refraction", False), ("water_reflection", True)]
-    print(f"{args.size}x{args.size}, synthetic scene, median of {args.n} after warm-up "
-          f"(Dr.Jit {dr.__version__}, LLVM backend)")
+    print(
+        f"{args.size}x{args.size}, synthetic scene, median of {args.n} after warm-up "
+        f"(Dr.Jit {dr.__version__}, LLVM backend)"
+    )
     head = f"{'shader':<28}{'port ms':>9}{'port fps':>9}{'GL ms':>9}{'GL fps':>8}{'port/GL':>9}"
     print(head)
     print("-" * len(head))
@@ -63,18 +76,22 @@ def main() -> None:
             out = mod.render(inputs, C, **kw)
             dr.eval(out.color, out.diagnostics)
             dr.sync_thread()
+
         t_port = median_time(port_frame, args.n)
         fwd[(shader, refl)] = t_port
         try:
             from shaders_port._gl import GLRenderer
+
             with GLRenderer(shader, inputs, reflection=refl) as g:
                 t_gl = statistics.median(g.time_frames(C, n=args.n, warmup=2))
         except Exception as exc:  # no headless GL on this machine
             print(f"  (GL unavailable: {exc})")
             t_gl = float("nan")
         name = shader + ("" if refl else " NOREFLECTION")
-        print(f"{name:<28}{1e3 * t_port:>9.1f}{1 / t_port:>9.2f}{1e3 * t_gl:>9.1f}{1 / t_gl:>8.2f}"
-              f"{t_gl / t_port:>9.2f}")
+        print(
+            f"{name:<28}{1e3 * t_port:>9.1f}{1 / t_port:>9.2f}{1e3 * t_gl:>9.1f}{1 / t_gl:>8.2f}"
+            f"{t_gl / t_port:>9.2f}"
+        )
     print()
     head = f"{'shader':<28}{'k':>3}{'Jacobian ms':>13}{'forward passes':>16}{'goal 1+k/2':>12}"
     print(head)
@@ -82,8 +99,12 @@ def main() -> None:
     for shader, refl in (("water_refraction", True), ("water_reflection", True)):
         mod = water_refraction if shader == "water_refraction" else water_reflection
         for k, names in JAC_NAMES.items():
-            t = median_time(lambda: mod.render_with_jacobian(inputs, C, names), max(3, args.n // 2), 1)
-            print(f"{shader:<28}{k:>3}{1e3 * t:>13.1f}{t / fwd[(shader, refl)]:>16.2f}{1 + k / 2:>12.1f}")
+            t = median_time(
+                lambda: mod.render_with_jacobian(inputs, C, names), max(3, args.n // 2), 1
+            )
+            print(
+                f"{shader:<28}{k:>3}{1e3 * t:>13.1f}{t / fwd[(shader, refl)]:>16.2f}{1 + k / 2:>12.1f}"
+            )
 
 
 if __name__ == "__main__":

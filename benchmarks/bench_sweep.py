@@ -10,6 +10,7 @@ Prints two tables:
 Usage: ``.venv/bin/python benchmarks/bench_sweep.py [--jobs 8] [--skip-study]``. The render cache
 (``STUDY_CACHE``, default ``.cache/``) is shared with ``make run``.
 """
+
 from __future__ import annotations
 
 import argparse
@@ -33,8 +34,18 @@ def scaling(n_jobs: int) -> list[dict]:
     spec = scene_spec(DEFAULT)
     start = constants_from_experiment(exp).to_dict()
     sched = schedules(exp, "water_refraction")[:n_jobs]
-    jobs = [{"scene": spec, "experiment": exp["name"], "variant": "water_refraction", "kind": s["kind"],
-             "scale": s["scale"], "schedule": s["schedule"], "start": start} for s in sched]
+    jobs = [
+        {
+            "scene": spec,
+            "experiment": exp["name"],
+            "variant": "water_refraction",
+            "kind": s["kind"],
+            "scale": s["scale"],
+            "schedule": s["schedule"],
+            "start": start,
+        }
+        for s in sched
+    ]
     out = []
     for workers in (1, 2):
         tmp = Path(tempfile.mkdtemp(prefix="bench_sweep."))
@@ -42,12 +53,22 @@ def scaling(n_jobs: int) -> list[dict]:
         with open_client(workers=workers) as client:
             client.wait_for_workers(workers)
             t1 = time.perf_counter()
-            rows = run_sweep(point_job, jobs, tmp / "t.parquet", client=client, label=f"{workers} worker(s)")
+            rows = run_sweep(
+                point_job, jobs, tmp / "t.parquet", client=client, label=f"{workers} worker(s)"
+            )
             t2 = time.perf_counter()
         shutil.rmtree(tmp, ignore_errors=True)
         ok = sum(r["status"] == "ok" for r in rows)
-        out.append({"workers": workers, "startup_s": t1 - t0, "jobs": len(jobs), "ok": ok,
-                    "sweep_s": t2 - t1, "jobs_per_min": 60 * len(jobs) / (t2 - t1)})
+        out.append(
+            {
+                "workers": workers,
+                "startup_s": t1 - t0,
+                "jobs": len(jobs),
+                "ok": ok,
+                "sweep_s": t2 - t1,
+                "jobs_per_min": 60 * len(jobs) / (t2 - t1),
+            }
+        )
     return out
 
 
@@ -56,6 +77,7 @@ def prime_cache() -> None:
     from study import init_backend, load_experiment
     from study.scene.reference import load_or_render
     from study.scene.shader_inputs import load_or_build_shader_inputs
+
     exp = load_experiment(DEFAULT)
     init_backend("llvm_ad_rgb")
     load_or_render(exp, "llvm_ad_rgb")
@@ -65,12 +87,17 @@ def prime_cache() -> None:
 def study_time() -> dict:
     import subprocess
     import sys
+
     tmp = Path(tempfile.mkdtemp(prefix="bench_tradeoff."))
     t0 = time.perf_counter()
-    subprocess.run([sys.executable, "-m", "study.cli", "tradeoff", str(DEFAULT), "--out", str(tmp)],
-                   check=True, cwd=REPO)
+    subprocess.run(
+        [sys.executable, "-m", "study.cli", "tradeoff", str(DEFAULT), "--out", str(tmp)],
+        check=True,
+        cwd=REPO,
+    )
     seconds = time.perf_counter() - t0
     import json
+
     summary = json.loads((tmp / "summary.json").read_text())
     shutil.rmtree(tmp, ignore_errors=True)
     return {"seconds": seconds, "points": summary["n_points"], "failed": summary["n_failed"]}
@@ -86,14 +113,18 @@ def main() -> None:
     print("\n| workers | cluster start s | jobs | ok | sweep s | jobs / min | speed-up |")
     print("|---|---|---|---|---|---|---|")
     for r in rows:
-        print(f"| {r['workers']} | {r['startup_s']:.1f} | {r['jobs']} | {r['ok']} | {r['sweep_s']:.1f} | "
-              f"{r['jobs_per_min']:.1f} | {r['jobs_per_min'] / rows[0]['jobs_per_min']:.2f}x |")
+        print(
+            f"| {r['workers']} | {r['startup_s']:.1f} | {r['jobs']} | {r['ok']} | {r['sweep_s']:.1f} | "
+            f"{r['jobs_per_min']:.1f} | {r['jobs_per_min'] / rows[0]['jobs_per_min']:.2f}x |"
+        )
     if not args.skip_study:
         s = study_time()
         print("\n| study | points | failed | wall s | wall min |")
         print("|---|---|---|---|---|")
-        print(f"| study tradeoff experiments/default.toml | {s['points']} | {s['failed']} | "
-              f"{s['seconds']:.0f} | {s['seconds'] / 60:.1f} |")
+        print(
+            f"| study tradeoff experiments/default.toml | {s['points']} | {s['failed']} | "
+            f"{s['seconds']:.0f} | {s['seconds'] / 60:.1f} |"
+        )
 
 
 if __name__ == "__main__":

@@ -25,6 +25,7 @@ The figures in the README came from 8 under-water passes and 8 reference passes:
 ``--render-wet 8 --render-ref 8``, then ``--colour 1 4 8 --lighting 128:1 128:4 128:8 64:8
 --ref-passes 3`` and ``--colour --lighting --ref 2 8 --ref-sets 0:2 2:4 4:6 6:8 0:4 4:8``.
 """
+
 from __future__ import annotations
 
 import argparse
@@ -45,6 +46,7 @@ def _render(exp, kind: str, folder: Path, n: int, spp: int = 64) -> None:
 
     from study.scene import lighting, shader_inputs as si
     from study.scene.mitsuba_scene import build_scene
+
     have = len(list(folder.glob(f"{kind}[0-9]*_*.npy")))
     todo = list(range(have, n))
     if not todo:
@@ -57,14 +59,25 @@ def _render(exp, kind: str, folder: Path, n: int, spp: int = 64) -> None:
     else:
         water = kind == "wet"
         y_cam = si.underwater_camera_height(exp) if water else 100.0
-        scene, medium = lighting._top_down_scene(mi, exp, water=water, integrator=lighting._transport(exp, water))
+        scene, medium = lighting._top_down_scene(
+            mi, exp, water=water, integrator=lighting._transport(exp, water)
+        )
         sensor = si._ortho_sensor(mi, extent, size, spp, 0, y_cam=y_cam, medium=medium)
-        render = lambda i: si._to_gl_order(mi, sensor, np.array(  # noqa: E731
-            mi.render(scene, sensor=sensor, spp=spp, seed=7000 + i), np.float32), extent)
+
+        def render(i):
+            return si._to_gl_order(
+                mi,
+                sensor,
+                np.array(mi.render(scene, sensor=sensor, spp=spp, seed=7000 + i), np.float32),
+                extent,
+            )
+
     for i in todo:
         t0 = time.perf_counter()
         np.save(folder / f"{kind}{spp}_{i:02d}.npy", render(i))
-        print(f"rendered {kind} pass {i} ({spp} spp) in {time.perf_counter() - t0:.1f} s", flush=True)
+        print(
+            f"rendered {kind} pass {i} ({spp} spp) in {time.perf_counter() - t0:.1f} s", flush=True
+        )
 
 
 def _load(folder: Path, kind: str, k: int | None = None) -> np.ndarray:
@@ -76,7 +89,7 @@ def _load(folder: Path, kind: str, k: int | None = None) -> np.ndarray:
 
 def _box(a: np.ndarray, f: int) -> np.ndarray:
     n = a.shape[0] // f
-    return a[:n * f, :n * f].reshape(n, f, n, f, *a.shape[2:]).sum((1, 3))
+    return a[: n * f, : n * f].reshape(n, f, n, f, *a.shape[2:]).sum((1, 3))
 
 
 def lighting_texture(wet_mean, albedo, gain, inside, dry, n_light: int) -> np.ndarray:
@@ -98,7 +111,9 @@ def lighting_texture(wet_mean, albedo, gain, inside, dry, n_light: int) -> np.nd
     wsum = np.zeros((size, size, 1))
     for dj, wj in ((0, 1 - fu), (1, fu)):
         for di, wi in ((0, 1 - fu), (1, fu)):
-            ww = (wj[:, None] * wi[None, :])[..., None] * valid[(i0 + dj)[:, None], (i0 + di)[None, :]]
+            ww = (wj[:, None] * wi[None, :])[..., None] * valid[
+                (i0 + dj)[:, None], (i0 + di)[None, :]
+            ]
             acc += ww * light[(i0 + dj)[:, None], (i0 + di)[None, :]]
             wsum += ww
     light_up = acc / np.maximum(wsum, 1e-12)
@@ -106,20 +121,38 @@ def lighting_texture(wet_mean, albedo, gain, inside, dry, n_light: int) -> np.nd
 
 
 def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap = argparse.ArgumentParser(
+        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
     ap.add_argument("experiment", nargs="?", default=str(REPO / "experiments" / "default.toml"))
     ap.add_argument("--passes", type=Path, default=REPO / ".bench_cache")
-    ap.add_argument("--set", dest="overrides", action="append", default=[], help="experiment override "
-                    "KEY=VALUE (e.g. fit.max_steps=400)")
+    ap.add_argument(
+        "--set",
+        dest="overrides",
+        action="append",
+        default=[],
+        help="experiment override KEY=VALUE (e.g. fit.max_steps=400)",
+    )
     ap.add_argument("--render-wet", type=int, default=0)
     ap.add_argument("--render-ref", type=int, default=0)
     ap.add_argument("--colour", type=int, nargs="*", default=[1, 4, 8])
     ap.add_argument("--lighting", nargs="*", default=["128:1", "128:2", "128:8", "64:1", "64:8"])
-    ap.add_argument("--ref", type=int, nargs="*", default=[1, 2, 4], help="reference passes (64 spp each)")
-    ap.add_argument("--ref-passes", type=int, default=None, help="passes of the reference the texture "
-                    "fits use (default: all)")
-    ap.add_argument("--ref-sets", nargs="*", default=[], help="disjoint reference pass ranges START:STOP "
-                    "(the spread of their fitted constants measures the reference noise's effect)")
+    ap.add_argument(
+        "--ref", type=int, nargs="*", default=[1, 2, 4], help="reference passes (64 spp each)"
+    )
+    ap.add_argument(
+        "--ref-passes",
+        type=int,
+        default=None,
+        help="passes of the reference the texture fits use (default: all)",
+    )
+    ap.add_argument(
+        "--ref-sets",
+        nargs="*",
+        default=[],
+        help="disjoint reference pass ranges START:STOP "
+        "(the spread of their fitted constants measures the reference noise's effect)",
+    )
     args = ap.parse_args()
 
     from study import init_backend, load_experiment
@@ -129,7 +162,7 @@ def main() -> None:
     from study.scene import lighting, shader_inputs as si
 
     init_backend("llvm_ad_rgb")
-    exp = load_experiment(args.experiment, ["reference.texture_method=\"colour\""] + args.overrides)
+    exp = load_experiment(args.experiment, ['reference.texture_method="colour"'] + args.overrides)
     args.passes.mkdir(parents=True, exist_ok=True)
     _render(exp, "wet", args.passes, args.render_wet)
     _render(exp, "ref", args.passes, args.render_ref)
@@ -148,18 +181,23 @@ def main() -> None:
     gain = np.exp(np.asarray(exp["water.sigma_t"]) * np.maximum(y_cam - world_y, 0.0)[..., None])
     wet, dry = _load(args.passes, "wet"), _load(args.passes, "dry").mean(0)
     refs = _load(args.passes, "ref")
-    print(f"# {exp['name']}: {len(wet)} wet passes, {len(refs)} reference passes of 64 spp; texture {size}^2")
+    print(
+        f"# {exp['name']}: {len(wet)} wet passes, {len(refs)} reference passes of 64 spp; texture {size}^2"
+    )
 
     orig = si.top_down_colour
     si.top_down_colour = lambda *a, **k: np.zeros((size, size, 3), np.float32)
     base = si.build_shader_inputs(exp)
     si.top_down_colour = orig
-    full_ref = refs[:args.ref_passes].mean(0)
+    full_ref = refs[: args.ref_passes].mean(0)
 
     def with_colour(colour):
         above = world_y > 0.0
-        return dataclasses.replace(base, refraction_texture=colour,
-                                   refl_texture=np.where(above[..., None], colour, 0.0).astype(np.float32))
+        return dataclasses.replace(
+            base,
+            refraction_texture=colour,
+            refl_texture=np.where(above[..., None], colour, 0.0).astype(np.float32),
+        )
 
     def fit(label, colour, ref_img):
         t0 = time.perf_counter()
@@ -170,29 +208,50 @@ def main() -> None:
         full = ShaderModel.from_experiment(exp, inputs, full_ref, resolution=(w, h))
         img, _ = full.render(cal.fitted)
         e = errors(full_ref, img, full.mask)
-        row = {"label": label, "flip": e["flip"], "rmse": e["rmse"], "seconds": time.perf_counter() - t0,
-               "params": {n: (p["fitted"], p.get("rel_std_error"), p["status"]) for n, p in cal.parameters.items()}}
-        print(f"{label:>18}: FLIP {e['flip']:.4f} RMSE {e['rmse']:.4f} " + " ".join(
-            f"{n}={_g(v)}(±{_g(se)})" for n, (v, se, _) in row["params"].items()), flush=True)
+        row = {
+            "label": label,
+            "flip": e["flip"],
+            "rmse": e["rmse"],
+            "seconds": time.perf_counter() - t0,
+            "params": {
+                n: (p["fitted"], p.get("rel_std_error"), p["status"])
+                for n, p in cal.parameters.items()
+            },
+        }
+        print(
+            f"{label:>18}: FLIP {e['flip']:.4f} RMSE {e['rmse']:.4f} "
+            + " ".join(f"{n}={_g(v)}(±{_g(se)})" for n, (v, se, _) in row["params"].items()),
+            flush=True,
+        )
         return row
 
     rows = []
-    colour_of = lambda k: np.where(inside[..., None], wet[:k].mean(0) * gain, dry).astype(np.float32)  # noqa: E731
+
+    def colour_of(k):
+        return np.where(inside[..., None], wet[:k].mean(0) * gain, dry).astype(np.float32)
+
     best_tex = colour_of(len(wet))
     for k in args.colour:
         rows.append(fit(f"colour {64 * k}", colour_of(k), full_ref))
     for item in args.lighting:
         n, k = map(int, item.split(":"))
-        rows.append(fit(f"lighting {n} {64 * k}", lighting_texture(wet[:k].mean(0), albedo, gain, inside, dry, n),
-                        full_ref))
-    refs = _load(args.passes, "ref")        # again: more passes may have been rendered meanwhile
+        rows.append(
+            fit(
+                f"lighting {n} {64 * k}",
+                lighting_texture(wet[:k].mean(0), albedo, gain, inside, dry, n),
+                full_ref,
+            )
+        )
+    refs = _load(args.passes, "ref")  # again: more passes may have been rendered meanwhile
     for j in args.ref:
         if j <= len(refs):
             rows.append(fit(f"ref {64 * j} tex {64 * len(wet)}", best_tex, refs[:j].mean(0)))
     for item in args.ref_sets:
         a, b = map(int, item.split(":"))
         if b <= len(refs):
-            rows.append(fit(f"ref passes {a}-{b - 1} ({64 * (b - a)} spp)", best_tex, refs[a:b].mean(0)))
+            rows.append(
+                fit(f"ref passes {a}-{b - 1} ({64 * (b - a)} spp)", best_tex, refs[a:b].mean(0))
+            )
     if not rows:
         return
     # errors-in-variables extrapolation over the colour fits with the full reference
@@ -202,7 +261,7 @@ def main() -> None:
     print("\n| texture / reference | FLIP | " + " | ".join(names) + " |")
     print("|---|---|" + "---|" * len(names))
     inf = {}
-    for n in (names if len(col) >= 2 else []):
+    for n in names if len(col) >= 2 else []:
         v = np.array([r["params"][n][0] if r["params"][n][0] is not None else np.nan for r in col])
         if np.all(np.isfinite(v)) and len(v) >= 2:
             A = np.stack([np.ones_like(spp), 1.0 / spp], 1)

@@ -10,6 +10,7 @@ seed, and records pass / fail and seconds. Prints one table; the clones are remo
 A clone shares nothing with this checkout but the pip / apt caches and Dr.Jit's kernel cache
 (``~/.drjit``, content-addressed), as a user's second clone would.
 """
+
 from __future__ import annotations
 
 import argparse
@@ -39,13 +40,20 @@ def _summary(text: str) -> str:
 def main() -> None:
     import os
 
-    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap = argparse.ArgumentParser(
+        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
     ap.add_argument("--rounds", type=int, default=3)
     ap.add_argument("--seed", type=int, default=1, help="random order seed of the first round")
     ap.add_argument("--keep", action="store_true", help="keep the clones (their logs are in them)")
     args = ap.parse_args()
-    head = subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=REPO, capture_output=True,
-                          text=True, check=True).stdout.strip()
+    head = subprocess.run(
+        ["git", "rev-parse", "--short", "HEAD"],
+        cwd=REPO,
+        capture_output=True,
+        text=True,
+        check=True,
+    ).stdout.strip()
     rows = []
     for k in range(args.rounds):
         seed = args.seed + k
@@ -58,16 +66,21 @@ def main() -> None:
         rc_test, t_test, text = _run(["make", "test"], clone, env, root / "test.log")
         warn = text.count("frozen function has been recorded") + text.count("FrozenReplayWarning")
         rows.append((k + 1, seed, rc_run, t_run, rc_test, t_test, _summary(text), warn, root))
-        print(f"round {k + 1}: make run rc {rc_run} ({t_run:.0f} s), make test rc {rc_test} "
-              f"({t_test:.0f} s): {_summary(text)}", flush=True)
+        print(
+            f"round {k + 1}: make run rc {rc_run} ({t_run:.0f} s), make test rc {rc_test} "
+            f"({t_test:.0f} s): {_summary(text)}",
+            flush=True,
+        )
         if not args.keep and rc_run == 0 and rc_test == 0:
             shutil.rmtree(root, ignore_errors=True)
     print(f"\nsoak of {head}: {args.rounds} fresh clones, make run then make test (random order)")
     print("| round | seed | make run | s | make test | s | pytest | frozen warnings |")
     print("|------:|-----:|---------:|--:|----------:|--:|--------|----------------:|")
     for r, seed, rc1, t1, rc2, t2, summ, warn, root in rows:
-        print(f"| {r} | {seed} | {'pass' if rc1 == 0 else 'FAIL'} | {t1:.0f} | "
-              f"{'pass' if rc2 == 0 else 'FAIL'} | {t2:.0f} | {summ} | {warn} |")
+        print(
+            f"| {r} | {seed} | {'pass' if rc1 == 0 else 'FAIL'} | {t1:.0f} | "
+            f"{'pass' if rc2 == 0 else 'FAIL'} | {t2:.0f} | {summ} | {warn} |"
+        )
     failed = [str(r[8]) for r in rows if r[2] or r[4]]
     if failed:
         print("logs of the failed rounds:", *failed, sep="\n  ")

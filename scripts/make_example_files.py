@@ -17,6 +17,7 @@ Files (all procedural, deterministic; world units, +y up, water plane y = 0):
 * ``rock.ply``: the same mesh as an ASCII PLY (x y z u v);
 * ``rock_texture.png``: 8-bit sRGB stone texture for ``mesh.texture``.
 """
+
 from __future__ import annotations
 
 import argparse
@@ -30,11 +31,11 @@ REPO = Path(__file__).resolve().parent.parent
 
 def heightmap(n: int = 128) -> np.ndarray:
     c = (np.arange(n) + 0.5) / n * 9.0 - 4.5
-    x, z = np.meshgrid(c, c)                       # row = z, column = x
-    h = 0.55 + 0.25 * (x / 4.5)                    # slope: deeper towards -x
-    h += 0.25 * np.exp(-((x - 1.5) ** 2 + (z + 1.0) ** 2) / 0.8)        # mound
-    h += 0.12 * np.exp(-((z - 1.8) ** 2) / 0.15) * (x > -2.5)            # ridge
-    h += 0.03 * np.sin(3.1 * x + 1.3) * np.sin(2.7 * z)                 # ripples
+    x, z = np.meshgrid(c, c)  # row = z, column = x
+    h = 0.55 + 0.25 * (x / 4.5)  # slope: deeper towards -x
+    h += 0.25 * np.exp(-((x - 1.5) ** 2 + (z + 1.0) ** 2) / 0.8)  # mound
+    h += 0.12 * np.exp(-((z - 1.8) ** 2) / 0.15) * (x > -2.5)  # ridge
+    h += 0.03 * np.sin(3.1 * x + 1.3) * np.sin(2.7 * z)  # ripples
     return np.clip(h, 0.0, 1.0)
 
 
@@ -45,7 +46,7 @@ def albedo(n: int = 256) -> np.ndarray:
     sand = np.array([0.62, 0.55, 0.40])
     img = np.broadcast_to(sand, (n, n, 3)).copy()
     img *= (0.9 + 0.1 * np.sin(5 * x + 2 * np.sin(3 * z)))[..., None]
-    for _ in range(120):                           # pebbles
+    for _ in range(120):  # pebbles
         px, pz, r = rng.uniform(-4.5, 4.5), rng.uniform(-4.5, 4.5), rng.uniform(0.05, 0.18)
         inside = (x - px) ** 2 + (z - pz) ** 2 < r * r
         img[inside] = rng.uniform(0.15, 0.45) * np.array([1.0, 0.95, 0.9])
@@ -54,17 +55,27 @@ def albedo(n: int = 256) -> np.ndarray:
     return np.clip(img, 0.0, 1.0)
 
 
-def sky(h: int = 128, sun_elevation: float = 40.0, sun_azimuth: float = 250.0,
-        sun_radius: float = 4.0, sun_radiance=(9.0, 8.4, 7.0)) -> np.ndarray:
+def sky(
+    h: int = 128,
+    sun_elevation: float = 40.0,
+    sun_azimuth: float = 250.0,
+    sun_radius: float = 4.0,
+    sun_radiance=(9.0, 8.4, 7.0),
+) -> np.ndarray:
     v = (np.arange(h) + 0.5) / h
     u = (np.arange(2 * h) + 0.5) / (2 * h)
     th, ph = np.meshgrid(v * np.pi, u * 2 * np.pi, indexing="ij")
     d = np.stack([np.sin(th) * np.sin(ph), np.cos(th), -np.sin(th) * np.cos(ph)], -1)
     y = d[..., 1:2]
     t = np.sqrt(np.clip(y, 0, 1))
-    img = np.where(y >= 0, (1 - t) * np.array([0.85, 0.88, 0.95]) + t * np.array([0.22, 0.42, 0.88]),
-                   np.array([0.32, 0.3, 0.26]))
-    cloud = (np.sin(3 * ph + 1.0) * np.sin(5 * th) + 0.5 * np.sin(7 * ph + 2 * th)) * (y[..., 0] > 0.05)
+    img = np.where(
+        y >= 0,
+        (1 - t) * np.array([0.85, 0.88, 0.95]) + t * np.array([0.22, 0.42, 0.88]),
+        np.array([0.32, 0.3, 0.26]),
+    )
+    cloud = (np.sin(3 * ph + 1.0) * np.sin(5 * th) + 0.5 * np.sin(7 * ph + 2 * th)) * (
+        y[..., 0] > 0.05
+    )
     img = img + 0.15 * np.clip(cloud, 0, None)[..., None]
     e, a = math.radians(sun_elevation), math.radians(sun_azimuth)
     s = np.array([math.cos(e) * math.cos(a), math.sin(e), math.cos(e) * math.sin(a)])
@@ -77,10 +88,11 @@ def rock(nx: int = 33, nz: int = 9):
     """(positions (V, 3), texcoords (V, 2), faces (F, 3)) of a closed ridge over
     x in [-4.8, 4.8], z in [-6.2, -4.4], bottom at y = 0.36."""
     xs, zs = np.linspace(-4.8, 4.8, nx), np.linspace(-6.2, -4.4, nz)
-    x, z = np.meshgrid(xs, zs)                     # (nz, nx)
+    x, z = np.meshgrid(xs, zs)  # (nz, nx)
     edge = np.minimum(np.minimum(x + 4.8, 4.8 - x), np.minimum(z + 6.2, -4.4 - z))
-    top = 0.36 + np.clip(edge / 0.35, 0, 1) * (0.55 + 0.35 * np.sin(1.3 * x) ** 2
-                                                  + 0.15 * np.cos(3.7 * x + 2 * z))
+    top = 0.36 + np.clip(edge / 0.35, 0, 1) * (
+        0.55 + 0.35 * np.sin(1.3 * x) ** 2 + 0.15 * np.cos(3.7 * x + 2 * z)
+    )
     bottom = 0.36
     pos_top = np.stack([x, top, z], -1).reshape(-1, 3)
     pos_bot = np.stack([x, np.full_like(x, bottom), z], -1).reshape(-1, 3)
@@ -92,9 +104,9 @@ def rock(nx: int = 33, nz: int = 9):
     for j in range(nz - 1):
         for i in range(nx - 1):
             a, b, c, d = idx[j, i], idx[j, i + 1], idx[j + 1, i], idx[j + 1, i + 1]
-            faces += [(a, c, b), (b, c, d)]                       # top, facing +y
+            faces += [(a, c, b), (b, c, d)]  # top, facing +y
             off = nx * nz
-            faces += [(a + off, b + off, c + off), (b + off, d + off, c + off)]   # bottom, facing -y
+            faces += [(a + off, b + off, c + off), (b + off, d + off, c + off)]  # bottom, facing -y
     # skirt: the boundary of the top grid joined to the bottom grid's
     ring = np.concatenate([idx[0, :-1], idx[:-1, -1], idx[-1, :0:-1], idx[:0:-1, 0]])
     off = nx * nz
@@ -128,9 +140,19 @@ def write_obj(path: Path, pos, uv, faces) -> None:
 
 
 def write_ply(path: Path, pos, uv, faces) -> None:
-    head = ["ply", "format ascii 1.0", f"element vertex {len(pos)}", "property float x", "property float y",
-            "property float z", "property float u", "property float v", f"element face {len(faces)}",
-            "property list uchar int vertex_indices", "end_header"]
+    head = [
+        "ply",
+        "format ascii 1.0",
+        f"element vertex {len(pos)}",
+        "property float x",
+        "property float y",
+        "property float z",
+        "property float u",
+        "property float v",
+        f"element face {len(faces)}",
+        "property list uchar int vertex_indices",
+        "end_header",
+    ]
     body = [f"{p[0]:.6f} {p[1]:.6f} {p[2]:.6f} {t[0]:.6f} {t[1]:.6f}" for p, t in zip(pos, uv)]
     body += [f"3 {a} {b} {c}" for a, b, c in faces]
     path.write_text("\n".join(head + body) + "\n")
@@ -138,8 +160,11 @@ def write_ply(path: Path, pos, uv, faces) -> None:
 
 def write_exr(path: Path, channels: dict) -> None:
     import OpenEXR
+
     header = {"compression": OpenEXR.ZIP_COMPRESSION, "type": OpenEXR.scanlineimage}
-    OpenEXR.File(header, {k: np.ascontiguousarray(v, np.float32) for k, v in channels.items()}).write(str(path))
+    OpenEXR.File(
+        header, {k: np.ascontiguousarray(v, np.float32) for k, v in channels.items()}
+    ).write(str(path))
 
 
 def main(argv=None) -> None:
@@ -150,7 +175,7 @@ def main(argv=None) -> None:
     out = Path(ap.parse_args(argv).out)
     out.mkdir(parents=True, exist_ok=True)
     h16 = (heightmap() * 65535 + 0.5).astype(np.uint16)
-    Image.fromarray(h16).save(out / "heightmap.png")           # mode I;16
+    Image.fromarray(h16).save(out / "heightmap.png")  # mode I;16
     Image.fromarray(linear_to_srgb8(albedo())).save(out / "albedo.png")
     write_exr(out / "sky.exr", {"RGB": sky()})
     pos, uv, faces = rock()

@@ -20,6 +20,7 @@ float textures with float weights (no 8-bit sub-texel quantisation); the port an
 by at most ~3e-5, from float32 rounding of the rasteriser's interpolation and of the
 texture-coordinate arithmetic.
 """
+
 from __future__ import annotations
 
 import numpy as np
@@ -45,8 +46,14 @@ def _neighbour_differs(a: np.ndarray, valid: np.ndarray) -> np.ndarray:
     return out
 
 
-def compare_port_gl(inputs: ShaderInputs, constants: Constants | None, shader: str, *,
-                    reflection: bool = True, renderer=None) -> dict:
+def compare_port_gl(
+    inputs: ShaderInputs,
+    constants: Constants | None,
+    shader: str,
+    *,
+    reflection: bool = True,
+    renderer=None,
+) -> dict:
     """Render ``shader`` with the port (LLVM) and with the core GLSL on OpenGL and compare.
 
     Args:
@@ -67,7 +74,9 @@ def compare_port_gl(inputs: ShaderInputs, constants: Constants | None, shader: s
     variant = get_variant(shader)
     if not reflection:
         if shader != "water_refraction":
-            raise ValueError("reflection=False (NOREFLECTION) is a variant of water_refraction only")
+            raise ValueError(
+                "reflection=False (NOREFLECTION) is a variant of water_refraction only"
+            )
         variant = get_variant("water_refraction_noreflection")
     constants = constants if constants is not None else Constants()
     out = variant.render(inputs, constants).numpy()
@@ -85,22 +94,29 @@ def compare_port_gl(inputs: ShaderInputs, constants: Constants | None, shader: s
     d = diff[both]
     if d.size == 0:
         raise ValueError("the port and GL share no water pixel; check the camera and water_rect")
-    outlier = both & ~(diff <= OUTLIER)        # NaN on either side counts as an outlier
+    outlier = both & ~(diff <= OUTLIER)  # NaN on either side counts as an outlier
     reasons = {"crossing_step_edge": _neighbour_differs(out["iterations"], port_mask)}
-    if "denominator" in out:      # the raycast shaders' crossing interpolation
+    if "denominator" in out:  # the raycast shaders' crossing interpolation
         reasons["tiny_denominator"] = out["denominator"] < 1e-3
     if "refl_hit" in out:
-        reasons["reflection_decision"] = (_neighbour_differs(out["refl_hit"], port_mask)
-                                          | _neighbour_differs(out["refl_iterations"], port_mask))
+        reasons["reflection_decision"] = _neighbour_differs(
+            out["refl_hit"], port_mask
+        ) | _neighbour_differs(out["refl_iterations"], port_mask)
     explained, left = {}, outlier.copy()
     for name, why in reasons.items():
         explained[name] = int((left & why).sum())
         left &= ~why
     return {
-        "mean_abs": float(d.mean()), "p999": float(np.percentile(d, 99.9)),
-        "max_abs": float(d.max()), "n_water": int(both.sum()),
-        "mask_mismatch": int((port_mask ^ gl_mask).sum()), "n_outliers": int(outlier.sum()),
+        "mean_abs": float(d.mean()),
+        "p999": float(np.percentile(d, 99.9)),
+        "max_abs": float(d.max()),
+        "n_water": int(both.sum()),
+        "mask_mismatch": int((port_mask ^ gl_mask).sum()),
+        "n_outliers": int(outlier.sum()),
         "n_nonfinite": int((both & ~np.isfinite(diff)).sum()),
-        "explained": explained, "unexplained": int(left.sum()), "diff": diff,
-        "port": out["color"], "gl": rgba[..., :3],
+        "explained": explained,
+        "unexplained": int(left.sum()),
+        "diff": diff,
+        "port": out["color"],
+        "gl": rgba[..., :3],
     }

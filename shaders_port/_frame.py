@@ -9,6 +9,7 @@ of derivatives and the forward-mode Jacobian passes. Shader files hold only shad
 * ``USE_FROZEN`` / :func:`call_frozen`: plain renders and 'replay' Jacobians may replay recorded
   kernels (``dr.freeze``; ``STUDY_FREEZE=0`` traces), outputs checked before use.
 """
+
 from __future__ import annotations
 
 import dataclasses
@@ -42,6 +43,7 @@ _FROZEN: OrderedDict = OrderedDict()
 class FrozenReplayWarning(UserWarning):
     """A frozen configuration gave a wrong replay or recorded too often and is traced now."""
 
+
 _BROKEN: set = set()
 
 
@@ -57,8 +59,10 @@ def frozen(key: tuple, fn):
     at the recorded width): loop flags start as width-1 values that the loop widens."""
     f = _FROZEN.get(key)
     if f is None:
+
         def packed(*args):
             return _pack(fn(*args))
+
         f = _FROZEN[key] = dr.freeze(packed, limit=MAX_RECORDINGS, warn_after=MAX_RECORDINGS + 1)
         while len(_FROZEN) > MAX_FUNCTIONS:
             _FROZEN.popitem(last=False)
@@ -137,8 +141,11 @@ def call_frozen(key: tuple, fn, m, P, *args):
     if why is None:
         return out
     _BROKEN.add(key)
-    warnings.warn(f"frozen {key[0]}: {why}; tracing this configuration from now on",
-                  FrozenReplayWarning, stacklevel=2)
+    warnings.warn(
+        f"frozen {key[0]}: {why}; tracing this configuration from now on",
+        FrozenReplayWarning,
+        stacklevel=2,
+    )
     return fn(*args) if bad else out
 
 
@@ -179,9 +186,13 @@ class ShaderOutput:
 
     def numpy(self) -> dict:
         """``{'color': (H, W, 3), 'mask': (H, W), <diagnostic>: (H, W)}`` float32 NumPy arrays."""
-        out = {"color": np.asarray(self.color.numpy(), dtype=np.float32),
-               "mask": np.asarray(self.mask.numpy(), dtype=np.float32)}
-        out.update({k: np.asarray(v.numpy(), dtype=np.float32) for k, v in self.diagnostics.items()})
+        out = {
+            "color": np.asarray(self.color.numpy(), dtype=np.float32),
+            "mask": np.asarray(self.mask.numpy(), dtype=np.float32),
+        }
+        out.update(
+            {k: np.asarray(v.numpy(), dtype=np.float32) for k, v in self.diagnostics.items()}
+        )
         return out
 
 
@@ -209,7 +220,9 @@ def resolve_constants(m, constants: Constants, loop_ad: str = "replay") -> _Reso
         nonlocal diff
         if isinstance(x, dr.ArrayBase):
             if dr.width(x) != 1:
-                raise ValueError(f"constant {name}: a Dr.Jit value must have size 1, got {dr.width(x)}")
+                raise ValueError(
+                    f"constant {name}: a Dr.Jit value must have size 1, got {dr.width(x)}"
+                )
             v = float(np.asarray(dr.detach(x).numpy()).ravel()[0])
             lo, hi = CONSTANT_SPECS[name][3]
             if not (np.isfinite(v) and lo <= v <= hi):
@@ -224,7 +237,9 @@ def resolve_constants(m, constants: Constants, loop_ad: str = "replay") -> _Reso
         v = getattr(constants, name)
         if kind.endswith("int"):
             if isinstance(v, dr.ArrayBase):
-                raise TypeError(f"constant {name} ({glsl}) is an integer loop cap; pass a Python int")
+                raise TypeError(
+                    f"constant {name} ({glsl}) is an integer loop cap; pass a Python int"
+                )
             vals[name] = int(v)
         elif kind.endswith("vec4"):
             vals[name] = tuple(conv(name, x) for x in v)
@@ -277,9 +292,13 @@ def finish_output(m, P, color, diag: dict, shader: str) -> ShaderOutput:
         images[k] = m.TensorXf(img, shape=(r.height, r.width))
     count = int(dr.sum(diag["nonfinite"])[0]) if dr.width(diag["nonfinite"]) else 0
     if count:
-        warnings.warn(f"{shader}: {count} water pixel(s) were non-finite (NaN/inf) and set to 0; "
-                      "see diagnostics['nonfinite'] (e.g. a degenerate normal from bumptex_mult "
-                      "or a zero-length vector)", RuntimeWarning, stacklevel=3)
+        warnings.warn(
+            f"{shader}: {count} water pixel(s) were non-finite (NaN/inf) and set to 0; "
+            "see diagnostics['nonfinite'] (e.g. a degenerate normal from bumptex_mult "
+            "or a zero-length vector)",
+            RuntimeWarning,
+            stacklevel=3,
+        )
     mask = m.TensorXf(m.Float(r.mask.ravel().astype(np.float32)), shape=(r.height, r.width))
     return ShaderOutput(m.TensorXf(flat, shape=(r.height, r.width, 3)), mask, images, lanes)
 
@@ -291,8 +310,10 @@ def _parse_name(name: str):
             return base, int(idx)
     elif name in CONSTANT_SPECS and not CONSTANT_SPECS[name][1].endswith(("int", "vec4")):
         return name, None
-    raise ValueError(f"cannot differentiate with respect to {name!r}: use a float key of "
-                     "CONSTANT_SPECS or 'water_color[i]' / 'reflect_color[i]' (i = 0..3)")
+    raise ValueError(
+        f"cannot differentiate with respect to {name!r}: use a float key of "
+        "CONSTANT_SPECS or 'water_color[i]' / 'reflect_color[i]' (i = 0..3)"
+    )
 
 
 def tangents(m, color, diag: dict, params: list):
@@ -313,8 +334,15 @@ def tangents(m, color, diag: dict, params: list):
     return color, {k: dr.detach(v) for k, v in diag.items()}, grads
 
 
-def jacobian_passes(shade_tangents, shader: str, inputs: ShaderInputs, constants: Constants,
-                    names: list[str], backend: str, loop_ad: str):
+def jacobian_passes(
+    shade_tangents,
+    shader: str,
+    inputs: ShaderInputs,
+    constants: Constants,
+    names: list[str],
+    backend: str,
+    loop_ad: str,
+):
     """Shared driver of ``render_with_jacobian``: every named scalar becomes a gradient-enabled
     size-1 Float; ``shade_tangents(m, P, C, params, frozen)`` shades once and runs one
     forward-mode pass per name (see :func:`tangents`), replayed from recorded kernels
@@ -329,12 +357,16 @@ def jacobian_passes(shade_tangents, shader: str, inputs: ShaderInputs, constants
         # opaque, as resolve_constants makes the other constants: a literal would be folded into
         # the first recording's kernels and round differently from the replays
         if idx is None:
-            p = dr.opaque(m.Float, float(dr.detach(cur)[0]) if isinstance(cur, dr.ArrayBase) else float(cur))
+            p = dr.opaque(
+                m.Float, float(dr.detach(cur)[0]) if isinstance(cur, dr.ArrayBase) else float(cur)
+            )
             changes[base] = p
         else:
             comps = list(cur)
             x = comps[idx]
-            p = dr.opaque(m.Float, float(dr.detach(x)[0]) if isinstance(x, dr.ArrayBase) else float(x))
+            p = dr.opaque(
+                m.Float, float(dr.detach(x)[0]) if isinstance(x, dr.ArrayBase) else float(x)
+            )
             comps[idx] = p
             changes[base] = tuple(comps)
         dr.enable_grad(p)
@@ -344,7 +376,9 @@ def jacobian_passes(shade_tangents, shader: str, inputs: ShaderInputs, constants
     try:
         with evaluated_loops_if(loop_ad == "evaluated"):
             frozen = USE_FROZEN and loop_ad == "replay"
-            color, diag, grads = shade_tangents(m, P.shading_state() if frozen else P, C, params, frozen)
+            color, diag, grads = shade_tangents(
+                m, P.shading_state() if frozen else P, C, params, frozen
+            )
             dr.eval(color, diag, grads)  # primal and all tangents together
     finally:
         for p in params:

@@ -11,6 +11,7 @@ linear repeat; reflectionTexture cube RGB32F linear clamp, seamless cube filteri
 fresnelLookup (N x 1) RG32F nearest clamp; worldYComponentReflection R32F nearest clamp;
 reflectionBottom RGB32F linear clamp.
 """
+
 from __future__ import annotations
 
 import time
@@ -22,7 +23,9 @@ from ._inputs import CONSTANT_SPECS, Constants, ShaderInputs, normal_matrix
 
 _GL_TEXTURE_CUBE_MAP_SEAMLESS = 0x884F
 _FRAG_NAMES = ("water_refraction", "water_reflection", "water_baseline")
-_UNIFORM_CONSTANTS = {py: spec[0] for py, spec in CONSTANT_SPECS.items() if spec[1].startswith("uniform")}
+_UNIFORM_CONSTANTS = {
+    py: spec[0] for py, spec in CONSTANT_SPECS.items() if spec[1].startswith("uniform")
+}
 _MASK_FRAG = "#version 330 core\nout vec4 fragColor;\nvoid main(void) { fragColor = vec4(1.0); }\n"
 # sampler name -> (texture unit, filter 'linear'|'nearest', repeat)
 _SAMPLERS = {
@@ -39,8 +42,11 @@ _SAMPLERS = {
     "reflection_sampler": (9, "linear", False),
 }
 # sampler -> the optional ShaderInputs field it is made from
-_OPTIONAL_SAMPLERS = {"sceneColor": "scene_color", "sceneDepth": "scene_depth",
-                      "reflection_sampler": "reflection_color"}
+_OPTIONAL_SAMPLERS = {
+    "sceneColor": "scene_color",
+    "sceneDepth": "scene_depth",
+    "reflection_sampler": "reflection_color",
+}
 
 
 def create_egl_context():
@@ -55,7 +61,8 @@ def create_egl_context():
         raise RuntimeError(
             "could not create a headless OpenGL 3.3 context through EGL "
             f"({type(exc).__name__}: {exc}). Install Mesa's EGL and drivers, e.g. on Debian/Ubuntu "
-            "`apt-get install libegl1 libegl-mesa0 libgl1-mesa-dri` (llvmpipe needs no GPU)") from exc
+            "`apt-get install libegl1 libegl-mesa0 libgl1-mesa-dri` (llvmpipe needs no GPU)"
+        ) from exc
     return ctx
 
 
@@ -79,24 +86,35 @@ class GLRenderer:
             line (an exported variant file carries its own).
     """
 
-    MAX_PROGRAMS = 8   # compiled programs kept (one per distinct constants text), oldest dropped
+    MAX_PROGRAMS = 8  # compiled programs kept (one per distinct constants text), oldest dropped
 
-    def __init__(self, name: str, inputs: ShaderInputs, *, dialect: str = "core",
-                 reflection: bool = True, source: str | None = None, defines: tuple[str, ...] = ()):
+    def __init__(
+        self,
+        name: str,
+        inputs: ShaderInputs,
+        *,
+        dialect: str = "core",
+        reflection: bool = True,
+        source: str | None = None,
+        defines: tuple[str, ...] = (),
+    ):
         if name not in _FRAG_NAMES:
             raise ValueError(f"unknown water shader {name!r}; known: {_FRAG_NAMES}")
         if dialect not in ("core", "compat"):
             raise ValueError(f"dialect must be 'core' or 'compat', got {dialect!r}")
         if not reflection and name != "water_refraction":
-            raise ValueError("reflection=False (NOREFLECTION) is a variant of water_refraction only")
+            raise ValueError(
+                "reflection=False (NOREFLECTION) is a variant of water_refraction only"
+            )
         if not isinstance(inputs, ShaderInputs):
             raise TypeError(f"inputs must be a ShaderInputs, got {type(inputs).__name__}")
         import moderngl
+
         self._mgl = moderngl
         self.name, self.inputs, self.dialect, self.reflection = name, inputs, dialect, reflection
         self.defines = tuple(defines) + (() if reflection else ("NOREFLECTION",))
         for d in self.defines:
-            with_define("#version 120\n", d)   # raises on a name that is not a preprocessor name
+            with_define("#version 120\n", d)  # raises on a name that is not a preprocessor name
         self._source = source if source is not None else read_source(name, "frag", dialect)
         self._vert = read_source("water", "vert", "core")
         self._programs: dict[str, object] = {}
@@ -136,8 +154,9 @@ class GLRenderer:
             "refractionTexture": self._texture2d(i.refraction_texture),
             "worldYComponent": self._texture2d(i.world_y),
             "normalMap": self._texture2d(i.normal_map),
-            "reflectionTexture": self.ctx.texture_cube((cube.shape[1], cube.shape[1]), 3,
-                                                       cube.tobytes(), dtype="f4", alignment=4),
+            "reflectionTexture": self.ctx.texture_cube(
+                (cube.shape[1], cube.shape[1]), 3, cube.tobytes(), dtype="f4", alignment=4
+            ),
             "fresnelLookup": self._texture2d(lut),
             "worldYComponentReflection": self._texture2d(i.refl_world_y),
             "reflectionBottom": self._texture2d(i.refl_texture),
@@ -152,8 +171,9 @@ class GLRenderer:
             if sname not in self._textures:
                 continue
             f = mgl.LINEAR if filt == "linear" else mgl.NEAREST
-            self._samplers[sname] = self.ctx.sampler(repeat_x=repeat, repeat_y=repeat,
-                                                     repeat_z=repeat, filter=(f, f))
+            self._samplers[sname] = self.ctx.sampler(
+                repeat_x=repeat, repeat_y=repeat, repeat_z=repeat, filter=(f, f)
+            )
 
     def _bind_textures(self) -> None:
         for sname, (unit, _, _) in _SAMPLERS.items():
@@ -170,13 +190,15 @@ class GLRenderer:
             except self._mgl.Error as exc:
                 raise RuntimeError(f"OpenGL rejected the {self.name} shader:\n{exc}") from exc
             if "aMultiTexCoord0" in prog:
-                vao = self.ctx.vertex_array(prog, [(self._vbo, "3f 2f", "aVertex", "aMultiTexCoord0")])
-            else:   # a variant that reads no normal map (the linker dropped the texcoords)
+                vao = self.ctx.vertex_array(
+                    prog, [(self._vbo, "3f 2f", "aVertex", "aMultiTexCoord0")]
+                )
+            else:  # a variant that reads no normal map (the linker dropped the texcoords)
                 vao = self.ctx.vertex_array(prog, [(self._vbo, "3f 8x", "aVertex")])
             self._set_static_uniforms(prog)
             prog = (prog, vao)
             self._programs[frag_source] = prog
-            while len(self._programs) > self.MAX_PROGRAMS:   # oldest first (dicts keep order)
+            while len(self._programs) > self.MAX_PROGRAMS:  # oldest first (dicts keep order)
                 old_prog, old_vao = self._programs.pop(next(iter(self._programs)))
                 old_vao.release()
                 old_prog.release()
@@ -195,16 +217,19 @@ class GLRenderer:
         }
         if "uModelViewProjectionMatrixInverse" in prog:
             vals["uModelViewProjectionMatrixInverse"] = _mat_bytes(
-                np.linalg.inv(i.view_proj.astype(np.float64)).astype(np.float32))
+                np.linalg.inv(i.view_proj.astype(np.float64)).astype(np.float32)
+            )
         if "uNormalMatrix" in prog:
             vals["uNormalMatrix"] = np.ascontiguousarray(normal_matrix(i.view_proj).T).tobytes()
         if "screenSize" in prog:
             vals["screenSize"] = np.array([i.width, i.height], np.float32).tobytes()
         if "o2v_projection_reflection" in prog:
             if i.reflection_view_proj is None:
-                raise ValueError(f"{self.name} reads o2v_projection_reflection but "
-                                 "ShaderInputs.reflection_view_proj is None; build the inputs with "
-                                 "study.scene.baseline_inputs.with_baseline_inputs")
+                raise ValueError(
+                    f"{self.name} reads o2v_projection_reflection but "
+                    "ShaderInputs.reflection_view_proj is None; build the inputs with "
+                    "study.scene.baseline_inputs.with_baseline_inputs"
+                )
             vals["o2v_projection_reflection"] = _mat_bytes(i.reflection_view_proj)
         for k in range(4):
             vals[f"wave{k + 1}"] = i.waves[k].astype(np.float32).tobytes()
@@ -214,9 +239,11 @@ class GLRenderer:
         for sname, (unit, _, _) in _SAMPLERS.items():
             if sname in prog:
                 if sname not in self._textures:
-                    raise ValueError(f"{self.name} reads the sampler {sname} but ShaderInputs."
-                                     f"{_OPTIONAL_SAMPLERS[sname]} is None; build the inputs with "
-                                     "study.scene.baseline_inputs.with_baseline_inputs")
+                    raise ValueError(
+                        f"{self.name} reads the sampler {sname} but ShaderInputs."
+                        f"{_OPTIONAL_SAMPLERS[sname]} is None; build the inputs with "
+                        "study.scene.baseline_inputs.with_baseline_inputs"
+                    )
                 prog[sname].value = unit
 
     def _frag_source(self, constants: Constants | None) -> str:
@@ -251,7 +278,9 @@ class GLRenderer:
             for py, uname in _UNIFORM_CONSTANTS.items():
                 if uname in prog:
                     v = getattr(constants, py)
-                    prog[uname].value = tuple(float(x) for x in v) if isinstance(v, (tuple, list)) else float(v)
+                    prog[uname].value = (
+                        tuple(float(x) for x in v) if isinstance(v, (tuple, list)) else float(v)
+                    )
         self._bind_textures()
         self.fbo.use()
         self.fbo.clear(0.0, 0.0, 0.0, 0.0)
@@ -269,8 +298,9 @@ class GLRenderer:
         self.draw(constants)
         return self._read(), self._mask.copy()
 
-    def time_frames(self, constants: Constants | None = None, n: int = 20,
-                    warmup: int = 3) -> list[float]:
+    def time_frames(
+        self, constants: Constants | None = None, n: int = 20, warmup: int = 3
+    ) -> list[float]:
         """Seconds per frame (draw + glFinish, no read-back) for ``n`` frames after ``warmup``."""
         for _ in range(warmup):
             self.draw(constants)
@@ -298,16 +328,28 @@ class GLRenderer:
         self.release()
 
 
-def run_glsl(name: str, inputs: ShaderInputs, constants: Constants | None = None, *,
-             reflection: bool = True, source: str | None = None,
-             dialect: str = "core") -> tuple[np.ndarray, np.ndarray]:
+def run_glsl(
+    name: str,
+    inputs: ShaderInputs,
+    constants: Constants | None = None,
+    *,
+    reflection: bool = True,
+    source: str | None = None,
+    dialect: str = "core",
+) -> tuple[np.ndarray, np.ndarray]:
     """One-shot ``GLRenderer(name, inputs, ...).render(constants)``; see GLRenderer.render."""
     with GLRenderer(name, inputs, dialect=dialect, reflection=reflection, source=source) as r:
         return r.render(constants)
 
 
-def time_glsl(inputs: ShaderInputs, constants: Constants | None = None, n: int = 20, *,
-              name: str = "water_refraction", reflection: bool = True) -> list[float]:
+def time_glsl(
+    inputs: ShaderInputs,
+    constants: Constants | None = None,
+    n: int = 20,
+    *,
+    name: str = "water_refraction",
+    reflection: bool = True,
+) -> list[float]:
     """Seconds per frame of the core shader on this GL implementation, glFinish-synchronised,
     ``n`` frames after 3 warm-up frames (shader compilation excluded)."""
     with GLRenderer(name, inputs, reflection=reflection) as r:

@@ -12,6 +12,7 @@ Shaders (see ``shaders_port/README.md``): ``water`` (vertex), ``water_refraction
 Every fragment shader carries a block of tunable constants between ``BEGIN_MARKER`` and
 ``END_MARKER``; ``write_constants`` rewrites only the declarations inside it.
 """
+
 from __future__ import annotations
 
 import math
@@ -34,27 +35,46 @@ END_MARKER = "// ---- END TUNABLE CONSTANTS ----"
 _GLSL_TO_PY = {glsl: py for py, (glsl, _, _, _) in CONSTANT_SPECS.items()}
 _DECL_RE = re.compile(
     r"^(?P<indent>\s*)(?P<kind>const float|const int|uniform float|uniform vec4)\s+"
-    r"(?P<name>[A-Za-z_]\w*)\s*=\s*(?P<value>[^;]*);(?P<tail>.*)$")
+    r"(?P<name>[A-Za-z_]\w*)\s*=\s*(?P<value>[^;]*);(?P<tail>.*)$"
+)
 
 # compat -> core, applied in this order (regex, replacement per stage, why)
 CORE_SUBSTITUTIONS: tuple[tuple[str, dict[str, str], str], ...] = (
-    (r"^#version 120$", {"vert": "#version 330 core", "frag": "#version 330 core"},
-     "core profile; the declarations of the replaced built-ins follow this line"),
+    (
+        r"^#version 120$",
+        {"vert": "#version 330 core", "frag": "#version 330 core"},
+        "core profile; the declarations of the replaced built-ins follow this line",
+    ),
     (r"^varying ", {"vert": "out ", "frag": "in "}, "varying -> out / in (line start only)"),
     (r"\btexture2D\(", {"vert": "texture(", "frag": "texture("}, "overloaded texture()"),
     (r"\btextureCube\(", {"vert": "texture(", "frag": "texture("}, "overloaded texture()"),
-    (r"\bgl_TextureMatrix\[(\d)\]", {"vert": r"uTextureMatrix\1", "frag": r"uTextureMatrix\1"},
-     "texture matrices become uniforms"),
-    (r"\bgl_TexCoord\[(\d)\]", {"vert": r"vTexCoord\1", "frag": r"vTexCoord\1"},
-     "texture coordinate varyings become vec4 in/out"),
-    (r"\bgl_ModelViewProjectionMatrix\b", {"vert": "uModelViewProjectionMatrix",
-                                            "frag": "uModelViewProjectionMatrix"}, "uniform"),
-    (r"\bgl_ModelViewProjectionMatrixInverse\b", {"vert": "uModelViewProjectionMatrixInverse",
-                                                   "frag": "uModelViewProjectionMatrixInverse"}, "uniform"),
+    (
+        r"\bgl_TextureMatrix\[(\d)\]",
+        {"vert": r"uTextureMatrix\1", "frag": r"uTextureMatrix\1"},
+        "texture matrices become uniforms",
+    ),
+    (
+        r"\bgl_TexCoord\[(\d)\]",
+        {"vert": r"vTexCoord\1", "frag": r"vTexCoord\1"},
+        "texture coordinate varyings become vec4 in/out",
+    ),
+    (
+        r"\bgl_ModelViewProjectionMatrix\b",
+        {"vert": "uModelViewProjectionMatrix", "frag": "uModelViewProjectionMatrix"},
+        "uniform",
+    ),
+    (
+        r"\bgl_ModelViewProjectionMatrixInverse\b",
+        {"vert": "uModelViewProjectionMatrixInverse", "frag": "uModelViewProjectionMatrixInverse"},
+        "uniform",
+    ),
     (r"\bgl_NormalMatrix\b", {"vert": "uNormalMatrix", "frag": "uNormalMatrix"}, "uniform"),
     (r"\bgl_Vertex\b", {"vert": "aVertex", "frag": "aVertex"}, "vertex attribute"),
-    (r"\bgl_MultiTexCoord0\b", {"vert": "aMultiTexCoord0", "frag": "aMultiTexCoord0"},
-     "vertex attribute"),
+    (
+        r"\bgl_MultiTexCoord0\b",
+        {"vert": "aMultiTexCoord0", "frag": "aMultiTexCoord0"},
+        "vertex attribute",
+    ),
     (r"\bgl_FragColor\b", {"vert": "fragColor", "frag": "fragColor"}, "fragment output"),
 )
 
@@ -145,8 +165,10 @@ def _block_span(lines: list[str]) -> tuple[int, int]:
     begins = [i for i, ln in enumerate(lines) if ln.strip() == BEGIN_MARKER]
     ends = [i for i, ln in enumerate(lines) if ln.strip() == END_MARKER]
     if len(begins) != 1 or len(ends) != 1 or ends[0] < begins[0]:
-        raise ValueError("the source needs exactly one tunable-constants block delimited by\n"
-                         f"  {BEGIN_MARKER}\n  {END_MARKER}")
+        raise ValueError(
+            "the source needs exactly one tunable-constants block delimited by\n"
+            f"  {BEGIN_MARKER}\n  {END_MARKER}"
+        )
     return begins[0], ends[0]
 
 
@@ -160,16 +182,21 @@ def _declarations(lines: list[str]) -> dict[str, tuple[int, re.Match]]:
             continue
         m = _DECL_RE.match(lines[i])
         if m is None:
-            raise ValueError(f"line {i + 1} inside the constants block is not a declaration "
-                             f"'<kind> NAME = value;': {lines[i]!r}")
+            raise ValueError(
+                f"line {i + 1} inside the constants block is not a declaration "
+                f"'<kind> NAME = value;': {lines[i]!r}"
+            )
         glsl = m["name"]
         if glsl not in _GLSL_TO_PY:
-            raise ValueError(f"line {i + 1}: {glsl} is not a tunable constant; known: "
-                             f"{sorted(_GLSL_TO_PY)}")
+            raise ValueError(
+                f"line {i + 1}: {glsl} is not a tunable constant; known: {sorted(_GLSL_TO_PY)}"
+            )
         py = _GLSL_TO_PY[glsl]
         if m["kind"] != CONSTANT_SPECS[py][1]:
-            raise ValueError(f"line {i + 1}: {glsl} is declared '{m['kind']}', expected "
-                             f"'{CONSTANT_SPECS[py][1]}'")
+            raise ValueError(
+                f"line {i + 1}: {glsl} is declared '{m['kind']}', expected "
+                f"'{CONSTANT_SPECS[py][1]}'"
+            )
         if py in found:
             raise ValueError(f"line {i + 1}: {glsl} is declared twice in the constants block")
         found[py] = (i, m)
@@ -189,8 +216,10 @@ def _checked_scalar(name: str, x) -> float:
     glsl, kind, _, (lo, hi) = CONSTANT_SPECS[name]
     rng = f"allowed range [{lo}, {hi}]"
     if isinstance(x, (bool, np.bool_)) or not isinstance(x, numbers.Real):
-        raise ValueError(f"constant {name} ({glsl}) = {x!r}: not a plain number "
-                         f"({type(x).__name__}); {rng}. Convert it with float() first")
+        raise ValueError(
+            f"constant {name} ({glsl}) = {x!r}: not a plain number "
+            f"({type(x).__name__}); {rng}. Convert it with float() first"
+        )
     v = float(x)
     if not math.isfinite(v):
         raise ValueError(f"constant {name} ({glsl}) = {x!r} is not finite; {rng}")
@@ -205,8 +234,9 @@ def _literal(name: str, value) -> str:
     glsl, kind, _, _ = CONSTANT_SPECS[name]
     if kind == "uniform vec4":
         if isinstance(value, (str, bytes)) or not hasattr(value, "__len__") or len(value) != 4:
-            raise ValueError(f"constant {name} ({glsl}) = {value!r}: needs 4 components "
-                             "(linear RGBA)")
+            raise ValueError(
+                f"constant {name} ({glsl}) = {value!r}: needs 4 components (linear RGBA)"
+            )
         return "vec4(" + ", ".join(_float_literal(_checked_scalar(name, x)) for x in value) + ")"
     v = _checked_scalar(name, value)
     return str(int(v)) if kind == "const int" else _float_literal(v)
@@ -220,7 +250,9 @@ def write_constants(source: str, constants: Constants) -> str:
     non-finite, non-integer (``const int``) or out-of-range values.
     """
     if not isinstance(constants, Constants):
-        raise TypeError(f"constants must be a shaders_port.Constants, got {type(constants).__name__}")
+        raise TypeError(
+            f"constants must be a shaders_port.Constants, got {type(constants).__name__}"
+        )
     literals = {name: _literal(name, getattr(constants, name)) for name in CONSTANT_SPECS}
     constants.validate()
     lines = source.split("\n")
@@ -242,8 +274,9 @@ def _parse_value(name: str, text: str):
             return vals
         return int(text) if kind == "const int" else float(text)
     except ValueError:
-        raise ValueError(f"cannot parse the value of {CONSTANT_SPECS[name][0]} "
-                         f"({kind}): {text.strip()!r}") from None
+        raise ValueError(
+            f"cannot parse the value of {CONSTANT_SPECS[name][0]} ({kind}): {text.strip()!r}"
+        ) from None
 
 
 def declared_constants(source: str) -> list[str]:
@@ -267,12 +300,15 @@ def compile_check(path_or_source, stage: str | None = None) -> None:
     """
     exe = shutil.which("glslangValidator")
     if exe is None:
-        raise RuntimeError("glslangValidator not found on PATH; install it with "
-                           "`apt-get install glslang-tools`")
+        raise RuntimeError(
+            "glslangValidator not found on PATH; install it with `apt-get install glslang-tools`"
+        )
     text = None
-    if isinstance(path_or_source, Path) or (isinstance(path_or_source, str)
-                                            and "\n" not in path_or_source
-                                            and Path(path_or_source).is_file()):
+    if isinstance(path_or_source, Path) or (
+        isinstance(path_or_source, str)
+        and "\n" not in path_or_source
+        and Path(path_or_source).is_file()
+    ):
         p = Path(path_or_source)
         text, stage = p.read_text(encoding="utf-8"), stage or p.suffix.lstrip(".")
         label = str(p)
@@ -280,18 +316,23 @@ def compile_check(path_or_source, stage: str | None = None) -> None:
         text, label = str(path_or_source), "<source>"
     if stage not in ("vert", "frag"):
         raise ValueError(f"stage must be 'vert' or 'frag', got {stage!r}")
-    res = subprocess.run([exe, "--stdin", "-S", stage], input=text, capture_output=True,
-                         text=True, timeout=60)
+    res = subprocess.run(
+        [exe, "--stdin", "-S", stage], input=text, capture_output=True, text=True, timeout=60
+    )
     if res.returncode != 0:
-        raise RuntimeError(f"glslangValidator rejected {label} ({stage}):\n"
-                           f"{res.stdout}{res.stderr}")
+        raise RuntimeError(
+            f"glslangValidator rejected {label} ({stage}):\n{res.stdout}{res.stderr}"
+        )
 
 
 def _pp_condition(expr: str, defined: set) -> bool:
     """Value of a ``#if``/``#elif`` expression made of ``defined(NAME)``, ``!``, ``&&``, ``||`` and
     parentheses (the forms these shaders use); anything else is refused."""
-    text = re.sub(r"defined\s*\(\s*([A-Za-z_]\w*)\s*\)",
-                  lambda m: " True " if m.group(1) in defined else " False ", expr)
+    text = re.sub(
+        r"defined\s*\(\s*([A-Za-z_]\w*)\s*\)",
+        lambda m: " True " if m.group(1) in defined else " False ",
+        expr,
+    )
     text = text.replace("&&", " and ").replace("||", " or ").replace("!", " not ")
     if not re.fullmatch(r"[\s()]*((True|False|not|and|or)[\s()]*)+", text):
         raise ValueError(f"active_code: unsupported #if expression {expr!r}")
@@ -304,10 +345,11 @@ def active_code(source: str) -> str:
     ``#if``/``#elif`` over ``defined(NAME)`` with ``!``, ``&&``, ``||``, ``#else``, ``#endif``
     (the only ones these shaders use; other ``#if`` expressions are refused)."""
     defined, out = set(), []
-    stack = [(True, True)]          # (this branch is taken, some branch of this #if was taken)
+    stack = [(True, True)]  # (this branch is taken, some branch of this #if was taken)
 
     def live():
         return all(t for t, _ in stack)
+
     for line in source.split("\n"):
         s = line.strip()
         if s.startswith("#define ") and live():
@@ -337,5 +379,8 @@ def constants_read(source: str) -> list[str]:
     preprocessor keeps (comments removed; a use is any occurrence beyond the declaration):
     what the shader really reads."""
     code = active_code("\n".join(ln.split("//")[0] for ln in source.split("\n")))
-    return [py for py in declared_constants(source)
-            if len(re.findall(rf"\b{CONSTANT_SPECS[py][0]}\b", code)) >= 2]
+    return [
+        py
+        for py in declared_constants(source)
+        if len(re.findall(rf"\b{CONSTANT_SPECS[py][0]}\b", code)) >= 2
+    ]

@@ -11,6 +11,7 @@ exactly the same data. Conventions (shared by both):
 * Output images are ``(height, width, C)`` with row 0 at the *top* (image order);
   the GL framebuffer (row 0 at the bottom) is flipped when read back.
 """
+
 from __future__ import annotations
 
 import dataclasses
@@ -21,8 +22,13 @@ import numpy as np
 
 IOR_WATER = 1.333
 # ShaderInputs fields that only some shaders read (None when not built)
-OPTIONAL_INPUTS = ("scene_color", "scene_depth", "reflection_color", "reflection_view_proj",
-                   "refraction_halves")
+OPTIONAL_INPUTS = (
+    "scene_color",
+    "scene_depth",
+    "reflection_color",
+    "reflection_view_proj",
+    "refraction_halves",
+)
 
 
 def _clip(v, limit: int = 80) -> str:
@@ -111,35 +117,56 @@ class ShaderInputs:
 
     def __post_init__(self) -> None:
         shapes = {
-            "refraction_texture": (3, 3), "world_y": (2, None), "tex_matrix0": (2, None),
-            "normal_map": (3, 3), "cubemap": (4, 3), "fresnel_lut": (2, 2),
-            "refl_world_y": (2, None), "refl_texture": (3, 3), "tex_matrix1": (2, None),
-            "waves": (2, 2), "view_proj": (2, None), "viewpos": (1, None),
-            "lightpos": (1, None), "lightcolor": (1, None),
-            "scene_color": (3, 3), "scene_depth": (2, None), "reflection_color": (3, 3),
-            "reflection_view_proj": (2, None), "refraction_halves": (4, 3),
+            "refraction_texture": (3, 3),
+            "world_y": (2, None),
+            "tex_matrix0": (2, None),
+            "normal_map": (3, 3),
+            "cubemap": (4, 3),
+            "fresnel_lut": (2, 2),
+            "refl_world_y": (2, None),
+            "refl_texture": (3, 3),
+            "tex_matrix1": (2, None),
+            "waves": (2, 2),
+            "view_proj": (2, None),
+            "viewpos": (1, None),
+            "lightpos": (1, None),
+            "lightcolor": (1, None),
+            "scene_color": (3, 3),
+            "scene_depth": (2, None),
+            "reflection_color": (3, 3),
+            "reflection_view_proj": (2, None),
+            "refraction_halves": (4, 3),
         }
         for name, (ndim, last) in shapes.items():
             if name in OPTIONAL_INPUTS and getattr(self, name) is None:
                 continue
             a = np.ascontiguousarray(getattr(self, name), dtype=np.float32)
             if a.ndim != ndim or (last is not None and a.shape[-1] != last):
-                raise ValueError(f"ShaderInputs.{name}: expected {ndim}-d array"
-                                 + (f" with last axis {last}" if last else "")
-                                 + f", got shape {a.shape}")
+                raise ValueError(
+                    f"ShaderInputs.{name}: expected {ndim}-d array"
+                    + (f" with last axis {last}" if last else "")
+                    + f", got shape {a.shape}"
+                )
             if not np.all(np.isfinite(a)):
-                raise ValueError(f"ShaderInputs.{name} contains non-finite values; "
-                                 "rebuild the inputs from the scene")
+                raise ValueError(
+                    f"ShaderInputs.{name} contains non-finite values; "
+                    "rebuild the inputs from the scene"
+                )
             setattr(self, name, a)
         for name in ("tex_matrix0", "tex_matrix1", "view_proj", "reflection_view_proj"):
             if getattr(self, name) is not None and getattr(self, name).shape != (4, 4):
                 raise ValueError(f"ShaderInputs.{name}: expected (4, 4)")
         if self.cubemap.shape[0] != 6 or self.cubemap.shape[1] != self.cubemap.shape[2]:
-            raise ValueError(f"ShaderInputs.cubemap: expected (6, F, F, 3), got {self.cubemap.shape}")
-        if self.refraction_halves is not None and (self.refraction_halves.shape
-                                                   != (2,) + self.refraction_texture.shape):
-            raise ValueError(f"ShaderInputs.refraction_halves: expected (2,) + the refraction texture's "
-                             f"shape {self.refraction_texture.shape}, got {self.refraction_halves.shape}")
+            raise ValueError(
+                f"ShaderInputs.cubemap: expected (6, F, F, 3), got {self.cubemap.shape}"
+            )
+        if self.refraction_halves is not None and (
+            self.refraction_halves.shape != (2,) + self.refraction_texture.shape
+        ):
+            raise ValueError(
+                f"ShaderInputs.refraction_halves: expected (2,) + the refraction texture's "
+                f"shape {self.refraction_texture.shape}, got {self.refraction_halves.shape}"
+            )
         if self.waves.shape != (4, 2):
             raise ValueError(f"ShaderInputs.waves: expected (4, 2), got {self.waves.shape}")
         self.water_rect = tuple(float(v) for v in self.water_rect)
@@ -156,14 +183,21 @@ class ShaderInputs:
         """Write all fields to one ``.npz`` file (atomic: temp file then rename)."""
         import os
         import tempfile
+
         path = os.fspath(path)
         d = os.path.dirname(os.path.abspath(path))
         fd, tmp = tempfile.mkstemp(dir=d, suffix=".npz.tmp")
         os.close(fd)
         try:
             with open(tmp, "wb") as f:
-                np.savez_compressed(f, **{k: np.asarray(v) for k, v in dataclasses.asdict(self).items()
-                                          if v is not None})
+                np.savez_compressed(
+                    f,
+                    **{
+                        k: np.asarray(v)
+                        for k, v in dataclasses.asdict(self).items()
+                        if v is not None
+                    },
+                )
             os.replace(tmp, path)
         finally:
             if os.path.exists(tmp):
@@ -204,10 +238,20 @@ CONSTANT_SPECS: dict[str, tuple[str, str, object, tuple[float, float]]] = {
     "specular_roughness": ("SPECULAR_ROUGHNESS", "const float", 0.2, (1e-3, 1.0)),
     "refine_steps": ("REFINE_STEPS", "const int", 3, (0, 64)),
     # the baseline shader (water_baseline: seeds 001-004); defaults are the seeds' where given
-    "reflect_distortion": ("REFLECT_DISTORTION", "const float", 0.1, (0.0, 10.0)),       # 002: 0.1
+    "reflect_distortion": ("REFLECT_DISTORTION", "const float", 0.1, (0.0, 10.0)),  # 002: 0.1
     "refraction_index": ("refractionIndex", "uniform float", 1.0 / IOR_WATER, (0.1, 1.0)),  # 001
-    "refraction_strength": ("refractionStrength", "uniform float", 0.02, (-1.0, 1.0)),   # 003: none given
-    "chromatic_dispersion": ("chromaticDispersion", "uniform float", 0.002, (-0.1, 0.1)),  # 003: none given
+    "refraction_strength": (
+        "refractionStrength",
+        "uniform float",
+        0.02,
+        (-1.0, 1.0),
+    ),  # 003: none given
+    "chromatic_dispersion": (
+        "chromaticDispersion",
+        "uniform float",
+        0.002,
+        (-0.1, 0.1),
+    ),  # 003: none given
 }
 
 
@@ -264,14 +308,18 @@ class Constants:
                     raise ValueError(f"constant {name} ({glsl}) = {_clip(x)} is not a number")
                 try:
                     finite = not isinstance(x, bool) and math.isfinite(float(x))
-                except OverflowError:            # an integer too large for a float
+                except OverflowError:  # an integer too large for a float
                     finite = False
                 if not finite:
-                    raise ValueError(f"constant {name} ({glsl}) = {_clip(x)} is not a finite number")
+                    raise ValueError(
+                        f"constant {name} ({glsl}) = {_clip(x)} is not a finite number"
+                    )
                 if kind.endswith("int") and float(x) != int(x):
                     raise ValueError(f"constant {name} ({glsl}) = {_clip(x)} must be an integer")
                 if not lo <= float(x) <= hi:
-                    raise ValueError(f"constant {name} ({glsl}) = {_clip(x)} is outside [{lo}, {hi}]")
+                    raise ValueError(
+                        f"constant {name} ({glsl}) = {_clip(x)} is outside [{lo}, {hi}]"
+                    )
         return self
 
     def replace(self, **changes) -> "Constants":
@@ -286,8 +334,11 @@ class Constants:
         out = {}
         for name in CONSTANT_SPECS:
             v = getattr(self, name)
-            out[name] = [float(x) for x in v] if isinstance(v, (tuple, list)) else (
-                int(v) if CONSTANT_SPECS[name][1].endswith("int") else float(v))
+            out[name] = (
+                [float(x) for x in v]
+                if isinstance(v, (tuple, list))
+                else (int(v) if CONSTANT_SPECS[name][1].endswith("int") else float(v))
+            )
         return out
 
     @classmethod
@@ -301,15 +352,18 @@ class Constants:
         return cls(**kw).validate()
 
 
-def perspective_view_proj(eye, target, up=(0.0, 1.0, 0.0), fov_y_deg=45.0, aspect=1.0,
-                          near=0.05, far=100.0) -> np.ndarray:
+def perspective_view_proj(
+    eye, target, up=(0.0, 1.0, 0.0), fov_y_deg=45.0, aspect=1.0, near=0.05, far=100.0
+) -> np.ndarray:
     """OpenGL ``gluPerspective(fov_y) * gluLookAt(eye, target, up)`` as a (4, 4) float32."""
     eye, target, up = (np.asarray(v, dtype=np.float64) for v in (eye, target, up))
     f = target - eye
     f /= np.linalg.norm(f)
     s = np.cross(f, up)
     if np.linalg.norm(s) < 1e-9:
-        raise ValueError("camera: 'up' is parallel to the viewing direction; choose another up vector")
+        raise ValueError(
+            "camera: 'up' is parallel to the viewing direction; choose another up vector"
+        )
     s /= np.linalg.norm(s)
     u = np.cross(s, f)
     view = np.eye(4)
@@ -331,7 +385,9 @@ def normal_matrix(view_proj: np.ndarray) -> np.ndarray:
     rows = [vp[0, :3], vp[1, :3], -vp[3, :3]]
     R = np.stack([r / np.linalg.norm(r) for r in rows])
     if not np.allclose(R @ R.T, np.eye(3), atol=1e-5):
-        raise ValueError("normal_matrix: view_proj is not a symmetric perspective times a rigid view")
+        raise ValueError(
+            "normal_matrix: view_proj is not a symmetric perspective times a rigid view"
+        )
     return R.astype(np.float32)
 
 
@@ -357,11 +413,11 @@ def ortho_tex_matrix(x0: float, z0: float, x1: float, z1: float) -> np.ndarray:
 def fresnel_unpolarized(cos_i, ior: float = IOR_WATER) -> np.ndarray:
     """Fresnel reflectance of a smooth dielectric seen from the outside (eta = ior)."""
     cos_i = np.clip(np.asarray(cos_i, dtype=np.float64), 0.0, 1.0)
-    sin_t2 = (1.0 - cos_i ** 2) / ior ** 2
+    sin_t2 = (1.0 - cos_i**2) / ior**2
     cos_t = np.sqrt(np.maximum(0.0, 1.0 - sin_t2))
     rs = (cos_i - ior * cos_t) / (cos_i + ior * cos_t)
     rp = (ior * cos_i - cos_t) / (ior * cos_i + cos_t)
-    return 0.5 * (rs ** 2 + rp ** 2)
+    return 0.5 * (rs**2 + rp**2)
 
 
 def fresnel_lut(ior: float = IOR_WATER, n: int = 256) -> np.ndarray:
@@ -373,6 +429,7 @@ def fresnel_lut(ior: float = IOR_WATER, n: int = 256) -> np.ndarray:
 
 # ---- texture precision as a game would ship it (the application-side variant) ---------------
 
+
 def _srgb8(x: np.ndarray) -> np.ndarray:
     """Linear values stored in an 8-bit sRGB texture and read back (decoded to linear)."""
     x = np.clip(np.asarray(x, np.float64), 0.0, 1.0)
@@ -383,7 +440,9 @@ def _srgb8(x: np.ndarray) -> np.ndarray:
 
 def _unorm8(x: np.ndarray) -> np.ndarray:
     """Values in [0, 1] stored in an 8-bit UNORM texture and read back."""
-    return (np.round(np.clip(np.asarray(x, np.float64), 0.0, 1.0) * 255.0) / 255.0).astype(np.float32)
+    return (np.round(np.clip(np.asarray(x, np.float64), 0.0, 1.0) * 255.0) / 255.0).astype(
+        np.float32
+    )
 
 
 def _half(x: np.ndarray) -> np.ndarray:
@@ -414,9 +473,15 @@ def game_precision(inputs: ShaderInputs) -> ShaderInputs:
     if hit is not None and hit[0] == arrays and hit[1] is inputs:
         return hit[2]
     out = dataclasses.replace(
-        inputs, refraction_texture=_srgb8(inputs.refraction_texture), refl_texture=_srgb8(inputs.refl_texture),
-        normal_map=_unorm8(inputs.normal_map), fresnel_lut=_unorm8(inputs.fresnel_lut),
-        world_y=_half(inputs.world_y), refl_world_y=_half(inputs.refl_world_y), cubemap=_half(inputs.cubemap))
+        inputs,
+        refraction_texture=_srgb8(inputs.refraction_texture),
+        refl_texture=_srgb8(inputs.refl_texture),
+        normal_map=_unorm8(inputs.normal_map),
+        fresnel_lut=_unorm8(inputs.fresnel_lut),
+        world_y=_half(inputs.world_y),
+        refl_world_y=_half(inputs.refl_world_y),
+        cubemap=_half(inputs.cubemap),
+    )
     _GAME_CACHE.clear()
     _GAME_CACHE[key] = (arrays, inputs, out)
     return out

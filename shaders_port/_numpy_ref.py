@@ -6,6 +6,7 @@ one Python loop iteration per covered pixel, float32 arithmetic (``np.float32`` 
 Returns ``(color (H, W, 3) float32, diagnostics dict of (H, W) float32)``; non-finite colours
 are returned as they are (not zeroed) so that tests can see them.
 """
+
 from __future__ import annotations
 
 import math
@@ -20,13 +21,17 @@ f32 = np.float32
 
 def _norm(v):
     with np.errstate(all="ignore"):
-        return (v * f32(1.0 / math.sqrt(float(np.dot(v, v))) if np.dot(v, v) > 0 else f32(np.inf))
-                ).astype(f32)
+        return (
+            v * f32(1.0 / math.sqrt(float(np.dot(v, v))) if np.dot(v, v) > 0 else f32(np.inf))
+        ).astype(f32)
 
 
 def _mix(x, y, a):
-    return (x * (f32(1) - f32(a)) + y * f32(a)).astype(f32) if isinstance(x, np.ndarray) else \
-        f32(x * (f32(1) - f32(a)) + y * f32(a))
+    return (
+        (x * (f32(1) - f32(a)) + y * f32(a)).astype(f32)
+        if isinstance(x, np.ndarray)
+        else f32(x * (f32(1) - f32(a)) + y * f32(a))
+    )
 
 
 def _clamp(x, lo, hi):
@@ -50,8 +55,12 @@ def _tex2d(arr, s, t, linear, repeat):
     i0, i1 = _wrap(fu, W, repeat), _wrap(fu + 1, W, repeat)
     j0, j1 = _wrap(fv, H, repeat), _wrap(fv + 1, H, repeat)
     one = f32(1)
-    return ((one - a) * (one - b) * arr[j0, i0] + a * (one - b) * arr[j0, i1]
-            + (one - a) * b * arr[j1, i0] + a * b * arr[j1, i1]).astype(f32)
+    return (
+        (one - a) * (one - b) * arr[j0, i0]
+        + a * (one - b) * arr[j0, i1]
+        + (one - a) * b * arr[j1, i0]
+        + a * b * arr[j1, i1]
+    ).astype(f32)
 
 
 def _cube(cube, d):
@@ -114,7 +123,9 @@ def _pixel(inp, C, world, eye, light, tcs, reflection, raycast_reflections):
         cp = _mix(cpo, cp, f32((cpoy - olddepth) / den))
     vRefraction = np.append(_tex2d(inp.refraction_texture, *_texmat(M0, cp), True, False), f32(1))
     # [6]
-    travelLength = _clamp(f32(math.sqrt(float(np.dot(cp - world, cp - world)))) / f32(C.attenuation_distance), 0, 1)
+    travelLength = _clamp(
+        f32(math.sqrt(float(np.dot(cp - world, cp - world)))) / f32(C.attenuation_distance), 0, 1
+    )
     vRefraction = _mix(vRefraction, np.array(C.water_color, f32), travelLength)
     fetches = 4 + 1 + it + 1
     diag.update(iterations=it, crossed=float(crossed), denominator=abs(float(den)))
@@ -126,7 +137,9 @@ def _pixel(inp, C, world, eye, light, tcs, reflection, raycast_reflections):
     R[1] = max(R[1], f32(0.001))
     refl_color = np.array(C.reflect_color, f32)
     if not raycast_reflections:
-        vReflection = np.append(_cube(inp.cubemap, _norm(R) * np.array([1, -1, 1], f32)), f32(1)) * refl_color
+        vReflection = (
+            np.append(_cube(inp.cubemap, _norm(R) * np.array([1, -1, 1], f32)), f32(1)) * refl_color
+        )
     else:
         R = _norm(R)
         numsteps = _mix(f32(C.refl_steps_steep), f32(C.refl_steps_grazing), f32(1) - R[1])
@@ -156,9 +169,15 @@ def _pixel(inp, C, world, eye, light, tcs, reflection, raycast_reflections):
             cpoy, cpy = cpo[1], cp[1]
             with np.errstate(all="ignore"):
                 cp = _mix(cpo, cp, f32((cpoy - olddepth) / (cpoy - cpy + depth - olddepth)))
-            vReflection = np.append(_tex2d(inp.refl_texture, *_texmat(M1, cp), True, False), f32(1)) * refl_color
+            vReflection = (
+                np.append(_tex2d(inp.refl_texture, *_texmat(M1, cp), True, False), f32(1))
+                * refl_color
+            )
         else:
-            vReflection = np.append(_cube(inp.cubemap, _norm(R) * np.array([1, -1, 1], f32)), f32(1)) * refl_color
+            vReflection = (
+                np.append(_cube(inp.cubemap, _norm(R) * np.array([1, -1, 1], f32)), f32(1))
+                * refl_color
+            )
         diag.update(refl_iterations=rit, refl_hit=float(not noHit))
     # [8]
     rLight = (f32(np.dot(f32(2) * vBumpTex, vLight)) * vBumpTex - vLight).astype(f32)
@@ -173,8 +192,9 @@ def _pixel(inp, C, world, eye, light, tcs, reflection, raycast_reflections):
     return (vReflection * F[1] + vRefraction * F[0])[:3].astype(f32), diag
 
 
-def render_reference(name: str, inputs: ShaderInputs, constants: Constants | None = None, *,
-                     reflection: bool = True):
+def render_reference(
+    name: str, inputs: ShaderInputs, constants: Constants | None = None, *, reflection: bool = True
+):
     """Per-pixel reference of ``name`` ('water_refraction' or 'water_reflection')."""
     C = (constants or Constants()).validate()
     if name not in ("water_refraction", "water_reflection"):
@@ -187,8 +207,16 @@ def render_reference(name: str, inputs: ShaderInputs, constants: Constants | Non
         keys += ["refl_iterations", "refl_hit"]
     diag = {k: np.zeros(H * W, np.float32) for k in keys}
     for n, idx in enumerate(r.index):
-        col, d = _pixel(inputs, C, r.world[n], r.vec_eye[n], r.vec_light[n], r.texcoord[:, n],
-                        reflection or name == "water_reflection", name == "water_reflection")
+        col, d = _pixel(
+            inputs,
+            C,
+            r.world[n],
+            r.vec_eye[n],
+            r.vec_light[n],
+            r.texcoord[:, n],
+            reflection or name == "water_reflection",
+            name == "water_reflection",
+        )
         color[idx] = col
         for k, v in d.items():
             diag[k][idx] = v

@@ -18,6 +18,7 @@ the camera and inside the near/far clip range.
 Pixel ``(row r, column c)`` of the image (row 0 at the top) has its centre at window
 coordinates ``(c + 0.5, H - r - 0.5)`` (GL window origin at the bottom left).
 """
+
 from __future__ import annotations
 
 import dataclasses
@@ -61,8 +62,9 @@ def rasterize_water(inputs: ShaderInputs) -> Raster:
     try:
         inv = np.linalg.inv(vp)
     except np.linalg.LinAlgError as e:
-        raise ValueError("ShaderInputs.view_proj is singular; build it with "
-                         "perspective_view_proj") from e
+        raise ValueError(
+            "ShaderInputs.view_proj is singular; build it with perspective_view_proj"
+        ) from e
     c, r = np.meshgrid(np.arange(W, dtype=np.float64), np.arange(H, dtype=np.float64))
     ndc_x = 2.0 * (c + 0.5) / W - 1.0
     ndc_y = 2.0 * (H - r - 0.5) / H - 1.0
@@ -80,17 +82,31 @@ def rasterize_water(inputs: ShaderInputs) -> Raster:
     x0, z0, x1, z1 = inputs.water_rect
     clip = np.concatenate([p, np.ones_like(p[..., :1])], -1) @ vp.T
     w = clip[..., 3]
-    mask = (np.isfinite(t) & (t >= 0.0) & (t <= 1.0) & (w > 0) & (np.abs(clip[..., 2]) <= w)
-            & (p[..., 0] >= x0) & (p[..., 0] <= x1) & (p[..., 2] >= z0) & (p[..., 2] <= z1))
+    mask = (
+        np.isfinite(t)
+        & (t >= 0.0)
+        & (t <= 1.0)
+        & (w > 0)
+        & (np.abs(clip[..., 2]) <= w)
+        & (p[..., 0] >= x0)
+        & (p[..., 0] <= x1)
+        & (p[..., 2] >= z0)
+        & (p[..., 2] <= z1)
+    )
     index = np.flatnonzero(mask.ravel())
     world = p.reshape(-1, 3)[index]
     base = world[:, [0, 2]] / inputs.normal_tile
     texcoord = np.stack([base + inputs.waves[k].astype(np.float64) for k in range(4)])
     return Raster(
-        mask=mask, index=index, world=world.astype(np.float32),
+        mask=mask,
+        index=index,
+        world=world.astype(np.float32),
         vec_eye=(inputs.viewpos.astype(np.float64) - world).astype(np.float32),
         vec_light=(inputs.lightpos.astype(np.float64) - world).astype(np.float32),
-        texcoord=texcoord.astype(np.float32), width=W, height=H)
+        texcoord=texcoord.astype(np.float32),
+        width=W,
+        height=H,
+    )
 
 
 @dataclass
@@ -119,7 +135,9 @@ class Prepared:
     tex_matrix0: tuple
     tex_matrix1: tuple
     lightcolor: tuple
-    upload: int = 0   # a number of its own per call of prepare() that uploaded (see _frame.call_frozen)
+    upload: int = (
+        0  # a number of its own per call of prepare() that uploaded (see _frame.call_frozen)
+    )
 
     def shading_state(self) -> "Prepared":
         """A copy without the NumPy-holding ``raster`` / ``inputs`` (what the shader reads)."""
@@ -151,12 +169,16 @@ def prepare(inputs: ShaderInputs, m) -> Prepared:
         return hit[1]
     r = rasterize_water(inputs)
     if r.index.size == 0:
-        raise ValueError("the water quad covers no pixel: check water_rect, view_proj and "
-                         "the camera position in ShaderInputs")
+        raise ValueError(
+            "the water quad covers no pixel: check water_rect, view_proj and "
+            "the camera position in ShaderInputs"
+        )
     lut = inputs.fresnel_lut[None, :, :]
     P = Prepared(
-        raster=r, inputs=inputs,
-        varyingVecWorldPosition=m.Array3f(r.world.T), varyingVecEye=m.Array3f(r.vec_eye.T),
+        raster=r,
+        inputs=inputs,
+        varyingVecWorldPosition=m.Array3f(r.world.T),
+        varyingVecEye=m.Array3f(r.vec_eye.T),
         varyingVecLight=m.Array3f(r.vec_light.T),
         texcoord=[(m.Float(r.texcoord[k, :, 0]), m.Float(r.texcoord[k, :, 1])) for k in range(4)],
         refractionTexture=Texture2D.from_numpy(m, inputs.refraction_texture, LINEAR, CLAMP),
@@ -166,8 +188,11 @@ def prepare(inputs: ShaderInputs, m) -> Prepared:
         fresnelLookup=Texture2D.from_numpy(m, lut, NEAREST, CLAMP),
         worldYComponentReflection=Texture2D.from_numpy(m, inputs.refl_world_y, NEAREST, CLAMP),
         reflectionBottom=Texture2D.from_numpy(m, inputs.refl_texture, LINEAR, CLAMP),
-        tex_matrix0=_mat_tuple(inputs.tex_matrix0), tex_matrix1=_mat_tuple(inputs.tex_matrix1),
-        lightcolor=tuple(float(v) for v in inputs.lightcolor), upload=next(_UPLOADS))
+        tex_matrix0=_mat_tuple(inputs.tex_matrix0),
+        tex_matrix1=_mat_tuple(inputs.tex_matrix1),
+        lightcolor=tuple(float(v) for v in inputs.lightcolor),
+        upload=next(_UPLOADS),
+    )
     _CACHE[key] = (arrays, P)
     _CACHE.move_to_end(key)
     while len(_CACHE) > _CACHE_SIZE:

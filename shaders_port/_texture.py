@@ -18,6 +18,7 @@ Textures are stored as flat Dr.Jit ``Float`` arrays in OpenGL upload order: texe
 lane); results are lists of ``C`` Dr.Jit ``Float`` arrays. Derivatives flow through the
 bilinear weights (texel values carry no gradient; nearest lookups have zero derivative).
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -61,8 +62,14 @@ class Texture2D:
             raise ValueError(f"texture must be (H, W) or (H, W, C), got shape {a.shape}")
         if filter not in (NEAREST, LINEAR) or wrap not in (CLAMP, REPEAT):
             raise ValueError(f"unknown filter/wrap {filter!r}/{wrap!r}")
-        return cls(m.Float(np.ascontiguousarray(a).ravel()), a.shape[1], a.shape[0],
-                   a.shape[2], filter, wrap)
+        return cls(
+            m.Float(np.ascontiguousarray(a).ravel()),
+            a.shape[1],
+            a.shape[0],
+            a.shape[2],
+            filter,
+            wrap,
+        )
 
     def sample(self, m, s, t, active=True) -> list:
         """``texture2D(tex, vec2(s, t))``: list of ``channels`` Float arrays."""
@@ -82,8 +89,9 @@ class Texture2D:
         t00, t10 = self._fetch(m, i0, j0, active), self._fetch(m, i1, j0, active)
         t01, t11 = self._fetch(m, i0, j1, active), self._fetch(m, i1, j1, active)
         w00, w10, w01, w11 = (1 - a) * (1 - b), a * (1 - b), (1 - a) * b, a * b
-        return [w00 * t00[c] + w10 * t10[c] + w01 * t01[c] + w11 * t11[c]
-                for c in range(self.channels)]
+        return [
+            w00 * t00[c] + w10 * t10[c] + w01 * t01[c] + w11 * t11[c] for c in range(self.channels)
+        ]
 
     def _fetch(self, m, i, j, active) -> list:
         base = m.UInt32((j * self.width + i) * self.channels)
@@ -130,6 +138,7 @@ class CubeMap:
         def fetch(i, j):
             o = m.UInt32((base + j * n + i) * C)
             return [dr.gather(m.Float, self.data, o + c, active) for c in range(C)]
+
         t00, t10, t01, t11 = fetch(i0, j0), fetch(i1, j0), fetch(i0, j1), fetch(i1, j1)
         w00, w10, w01, w11 = (1 - a) * (1 - b), a * (1 - b), (1 - a) * b, a * b
         return [w00 * t00[c] + w10 * t10[c] + w01 * t01[c] + w11 * t11[c] for c in range(C)]
@@ -143,12 +152,20 @@ def cube_face_coords(m, rx, ry, rz):
     ax, ay, az = dr.abs(rx), dr.abs(ry), dr.abs(rz)
     use_x = (ax >= ay) & (ax >= az)
     use_y = ~use_x & (ay >= az)
-    face = dr.select(use_x, dr.select(rx >= 0, m.UInt32(0), m.UInt32(1)),
-                     dr.select(use_y, dr.select(ry >= 0, m.UInt32(2), m.UInt32(3)),
-                               dr.select(rz >= 0, m.UInt32(4), m.UInt32(5))))
+    face = dr.select(
+        use_x,
+        dr.select(rx >= 0, m.UInt32(0), m.UInt32(1)),
+        dr.select(
+            use_y,
+            dr.select(ry >= 0, m.UInt32(2), m.UInt32(3)),
+            dr.select(rz >= 0, m.UInt32(4), m.UInt32(5)),
+        ),
+    )
     # face: +X (sc=-rz, tc=-ry), -X (sc=+rz, tc=-ry), +Y (sc=+rx, tc=+rz),
     #       -Y (sc=+rx, tc=-rz), +Z (sc=+rx, tc=-ry), -Z (sc=-rx, tc=-ry)
-    sc = dr.select(use_x, dr.select(rx >= 0, -rz, rz), dr.select(use_y, rx, dr.select(rz >= 0, rx, -rx)))
+    sc = dr.select(
+        use_x, dr.select(rx >= 0, -rz, rz), dr.select(use_y, rx, dr.select(rz >= 0, rx, -rx))
+    )
     tc = dr.select(use_y, dr.select(ry >= 0, rz, -rz), -ry)
     ma = dr.select(use_x, ax, dr.select(use_y, ay, az))
     s = 0.5 * (sc / ma + 1.0)
@@ -157,6 +174,7 @@ def cube_face_coords(m, rx, ry, rz):
 
 
 # ---- GLSL built-ins with their specified semantics -------------------------------------
+
 
 def mix(x, y, a):
     """GLSL ``mix``: ``x * (1 - a) + y * a``."""

@@ -11,6 +11,7 @@ tables). Shipped: ``water_refraction`` (seed 000, section 2), ``water_refraction
 (the same file with ``#define NOREFLECTION``: refraction and specular, no sky reflection) and
 ``water_reflection`` (seed 000, section 3: reflections raycast too).
 """
+
 from __future__ import annotations
 
 import importlib
@@ -59,6 +60,7 @@ class Variant:
         """The inputs as this variant's application uploads them (see ``textures``)."""
         if self.textures == "game":
             from ._inputs import game_precision
+
             return game_precision(inputs)
         return inputs
 
@@ -78,6 +80,7 @@ class Variant:
         """``CONSTANT_SPECS`` names the variant's GLSL declares and uses with its defines (the only
         constants a fit of it may name)."""
         from ._glsl import constants_read
+
         return tuple(constants_read(self.source()))
 
     def port(self):
@@ -90,8 +93,9 @@ class Variant:
 
     def render_with_jacobian(self, inputs, constants, names, **kw):
         """``port.render_with_jacobian`` with this variant's options: ``(ShaderOutput, J)``."""
-        return self.port().render_with_jacobian(self.prepare_inputs(inputs), constants, names,
-                                                **self.port_options, **kw)
+        return self.port().render_with_jacobian(
+            self.prepare_inputs(inputs), constants, names, **self.port_options, **kw
+        )
 
     def source(self, dialect: str = "core", text: str | None = None) -> str:
         """Fragment shader text of the variant: ``text`` (e.g. an export) or the shipped file,
@@ -105,8 +109,14 @@ class Variant:
         """A ``GLRenderer`` drawing this variant (``source``: the shader file's text without the
         variant's defines, e.g. an export; the renderer adds them)."""
         from ._gl import GLRenderer
-        return GLRenderer(self.shader, self.prepare_inputs(inputs), dialect=dialect, source=source,
-                          defines=self.defines)
+
+        return GLRenderer(
+            self.shader,
+            self.prepare_inputs(inputs),
+            dialect=dialect,
+            source=source,
+            defines=self.defines,
+        )
 
 
 VARIANTS: dict[str, Variant] = {}
@@ -115,10 +125,12 @@ VARIANTS: dict[str, Variant] = {}
 def register(variant: Variant) -> Variant:
     """Add a variant; its name must be new and its shader a shipped file."""
     if variant.textures not in ("float", "game"):
-        raise ValueError(f"variant {variant.name!r}: textures must be 'float' or 'game', got {variant.textures!r}")
+        raise ValueError(
+            f"variant {variant.name!r}: textures must be 'float' or 'game', got {variant.textures!r}"
+        )
     if variant.name in VARIANTS:
         raise ValueError(f"shader variant {variant.name!r} is already registered")
-    read_source(variant.shader, "frag", "core")   # raises naming the missing file
+    read_source(variant.shader, "frag", "core")  # raises naming the missing file
     VARIANTS[variant.name] = variant
     return variant
 
@@ -133,14 +145,32 @@ def get_variant(name: str) -> Variant:
 
 _RAYCAST = ("steps_grazing", "steps_steep", "loop_cap")
 
-register(Variant("water_refraction", "water_refraction", schedule=_RAYCAST,
-                 description="seed 000 section 2: raycast refraction, cube-map sky reflection, Phong highlight"))
-register(Variant("water_refraction_noreflection", "water_refraction", defines=("NOREFLECTION",),
-                 port_options={"reflection": False}, schedule=_RAYCAST,
-                 description="seed 000 section 2 with NOREFLECTION: raycast refraction and highlight, no sky"))
-register(Variant("water_reflection", "water_reflection",
-                 schedule=_RAYCAST + ("refl_steps_steep", "refl_steps_grazing", "refl_loop_cap"),
-                 description="seed 000 section 3: refraction and reflection both raycast"))
+register(
+    Variant(
+        "water_refraction",
+        "water_refraction",
+        schedule=_RAYCAST,
+        description="seed 000 section 2: raycast refraction, cube-map sky reflection, Phong highlight",
+    )
+)
+register(
+    Variant(
+        "water_refraction_noreflection",
+        "water_refraction",
+        defines=("NOREFLECTION",),
+        port_options={"reflection": False},
+        schedule=_RAYCAST,
+        description="seed 000 section 2 with NOREFLECTION: raycast refraction and highlight, no sky",
+    )
+)
+register(
+    Variant(
+        "water_reflection",
+        "water_reflection",
+        schedule=_RAYCAST + ("refl_steps_steep", "refl_steps_grazing", "refl_loop_cap"),
+        description="seed 000 section 3: refraction and reflection both raycast",
+    )
+)
 
 # ---- variants of the seed's refraction shader (one GLSL switch each, or a combination) -------
 # Each answers one limitation of the seed (see shaders_port/README.md, "Variants").
@@ -150,60 +180,154 @@ _NOSPEC = {"specular_strength": (), "specular_exponent": ()}
 _REFINE = _RAYCAST + ("refine_steps",)
 
 
-def _seed_variant(name, defines, options, description, schedule=_RAYCAST, replaces=None, textures="float"):
-    register(Variant(name, "water_refraction", defines=defines, port_options=options, schedule=schedule,
-                     description=description, replaces=replaces or {}, textures=textures))
+def _seed_variant(
+    name, defines, options, description, schedule=_RAYCAST, replaces=None, textures="float"
+):
+    register(
+        Variant(
+            name,
+            "water_refraction",
+            defines=defines,
+            port_options=options,
+            schedule=schedule,
+            description=description,
+            replaces=replaces or {},
+            textures=textures,
+        )
+    )
 
 
-_seed_variant("water_refraction_beer", ("BEER_ATTENUATION",), {"attenuation": "beer"},
-              "seed + Beer-Lambert attenuation per colour channel towards waterColor", replaces=_BEER)
-_seed_variant("water_refraction_ggx", ("GGX_SPECULAR",), {"specular": "ggx"},
-              "seed + GGX microfacet highlight (Smith masking) in place of Phong", replaces=_GGX)
-_seed_variant("water_refraction_beer_ggx", ("BEER_ATTENUATION", "GGX_SPECULAR"),
-              {"attenuation": "beer", "specular": "ggx"},
-              "seed + Beer-Lambert attenuation + GGX highlight", replaces={**_BEER, **_GGX})
-_seed_variant("water_refraction_beer_walls", ("BEER_ATTENUATION", "WALL_FACES"),
-              {"attenuation": "beer", "wall_faces": True},
-              "seed + Beer-Lambert attenuation + a crossing into a wall above the water shaded as "
-              "its submerged face (waterColor), not the wall's top", replaces=_BEER)
-_seed_variant("water_refraction_binary", ("BINARY_REFINE",), {"refine": "binary"},
-              "seed + REFINE_STEPS binary-search steps after the linear search (relief mapping)",
-              schedule=_REFINE)
-_seed_variant("water_refraction_secant", ("SECANT_REFINE",), {"refine": "secant"},
-              "seed + REFINE_STEPS secant steps after the linear search (parallax occlusion mapping)",
-              schedule=_REFINE)
-_seed_variant("water_refraction_2layers", ("TWO_NORMAL_LAYERS",), {"normal_layers": 2},
-              "seed with two normal-map layers instead of four")
-_seed_variant("water_refraction_1layer", ("ONE_NORMAL_LAYER",), {"normal_layers": 1},
-              "seed with one normal-map layer instead of four")
-_seed_variant("water_refraction_nospecular", ("NO_SPECULAR",), {"specular": "none"},
-              "seed without the specular highlight", replaces=_NOSPEC)
-_seed_variant("water_refraction_game_textures", (), {},
-              "seed with 8-bit sRGB colour, 8-bit normal map and Fresnel LUT, half-float depth and sky",
-              textures="game")
-register(Variant("water_reflection_beer_ggx", "water_reflection", defines=("BEER_ATTENUATION", "GGX_SPECULAR"),
-                 port_options={"attenuation": "beer", "specular": "ggx"},
-                 schedule=_RAYCAST + ("refl_steps_steep", "refl_steps_grazing", "refl_loop_cap"),
-                 description="seed 000 section 3 + Beer-Lambert attenuation + GGX highlight",
-                 replaces={**_BEER, **_GGX}))
-register(Variant("water_reflection_beer", "water_reflection", defines=("BEER_ATTENUATION",),
-                 port_options={"attenuation": "beer"},
-                 schedule=_RAYCAST + ("refl_steps_steep", "refl_steps_grazing", "refl_loop_cap"),
-                 description="seed 000 section 3 + Beer-Lambert attenuation", replaces=_BEER))
+_seed_variant(
+    "water_refraction_beer",
+    ("BEER_ATTENUATION",),
+    {"attenuation": "beer"},
+    "seed + Beer-Lambert attenuation per colour channel towards waterColor",
+    replaces=_BEER,
+)
+_seed_variant(
+    "water_refraction_ggx",
+    ("GGX_SPECULAR",),
+    {"specular": "ggx"},
+    "seed + GGX microfacet highlight (Smith masking) in place of Phong",
+    replaces=_GGX,
+)
+_seed_variant(
+    "water_refraction_beer_ggx",
+    ("BEER_ATTENUATION", "GGX_SPECULAR"),
+    {"attenuation": "beer", "specular": "ggx"},
+    "seed + Beer-Lambert attenuation + GGX highlight",
+    replaces={**_BEER, **_GGX},
+)
+_seed_variant(
+    "water_refraction_beer_walls",
+    ("BEER_ATTENUATION", "WALL_FACES"),
+    {"attenuation": "beer", "wall_faces": True},
+    "seed + Beer-Lambert attenuation + a crossing into a wall above the water shaded as "
+    "its submerged face (waterColor), not the wall's top",
+    replaces=_BEER,
+)
+_seed_variant(
+    "water_refraction_binary",
+    ("BINARY_REFINE",),
+    {"refine": "binary"},
+    "seed + REFINE_STEPS binary-search steps after the linear search (relief mapping)",
+    schedule=_REFINE,
+)
+_seed_variant(
+    "water_refraction_secant",
+    ("SECANT_REFINE",),
+    {"refine": "secant"},
+    "seed + REFINE_STEPS secant steps after the linear search (parallax occlusion mapping)",
+    schedule=_REFINE,
+)
+_seed_variant(
+    "water_refraction_2layers",
+    ("TWO_NORMAL_LAYERS",),
+    {"normal_layers": 2},
+    "seed with two normal-map layers instead of four",
+)
+_seed_variant(
+    "water_refraction_1layer",
+    ("ONE_NORMAL_LAYER",),
+    {"normal_layers": 1},
+    "seed with one normal-map layer instead of four",
+)
+_seed_variant(
+    "water_refraction_nospecular",
+    ("NO_SPECULAR",),
+    {"specular": "none"},
+    "seed without the specular highlight",
+    replaces=_NOSPEC,
+)
+_seed_variant(
+    "water_refraction_game_textures",
+    (),
+    {},
+    "seed with 8-bit sRGB colour, 8-bit normal map and Fresnel LUT, half-float depth and sky",
+    textures="game",
+)
+register(
+    Variant(
+        "water_reflection_beer_ggx",
+        "water_reflection",
+        defines=("BEER_ATTENUATION", "GGX_SPECULAR"),
+        port_options={"attenuation": "beer", "specular": "ggx"},
+        schedule=_RAYCAST + ("refl_steps_steep", "refl_steps_grazing", "refl_loop_cap"),
+        description="seed 000 section 3 + Beer-Lambert attenuation + GGX highlight",
+        replaces={**_BEER, **_GGX},
+    )
+)
+register(
+    Variant(
+        "water_reflection_beer",
+        "water_reflection",
+        defines=("BEER_ATTENUATION",),
+        port_options={"attenuation": "beer"},
+        schedule=_RAYCAST + ("refl_steps_steep", "refl_steps_grazing", "refl_loop_cap"),
+        description="seed 000 section 3 + Beer-Lambert attenuation",
+        replaces=_BEER,
+    )
+)
 
 # seeds 001-004: the baseline game water shader (no raycast, so no step schedule)
 _BASELINE_INPUTS = ("scene_color", "scene_depth", "reflection_color", "reflection_view_proj")
-_BASELINE_FIT = ("refraction_index", "refraction_strength", "chromatic_dispersion", "reflect_distortion")
-register(Variant("water_baseline", "water_baseline",
-                 inputs=_BASELINE_INPUTS, fit_parameters=_BASELINE_FIT,
-                 description="seeds 001-004: planar refraction + normal-map distortion with dispersion "
-                             "of the screen-space scene, planar reflection distorted by the wave normal"))
-register(Variant("water_baseline_flat", "water_baseline", defines=("FLAT_WATER",), inputs=_BASELINE_INPUTS, fit_parameters=_BASELINE_FIT,
-                 port_options={"defines": ("FLAT_WATER",)},
-                 description="seeds 001 + 004 (FLAT_WATER): planar refraction and planar reflection "
-                             "of flat water, no waves"))
-register(Variant("water_baseline_noplanar", "water_baseline", defines=("NO_PLANAR_REFRACTION",),
-                 inputs=_BASELINE_INPUTS, fit_parameters=_BASELINE_FIT,
-                 port_options={"defines": ("NO_PLANAR_REFRACTION",)},
-                 description="seeds 002-004 (NO_PLANAR_REFRACTION): the classic distorted "
-                             "screen-space refraction and planar reflection, no 001"))
+_BASELINE_FIT = (
+    "refraction_index",
+    "refraction_strength",
+    "chromatic_dispersion",
+    "reflect_distortion",
+)
+register(
+    Variant(
+        "water_baseline",
+        "water_baseline",
+        inputs=_BASELINE_INPUTS,
+        fit_parameters=_BASELINE_FIT,
+        description="seeds 001-004: planar refraction + normal-map distortion with dispersion "
+        "of the screen-space scene, planar reflection distorted by the wave normal",
+    )
+)
+register(
+    Variant(
+        "water_baseline_flat",
+        "water_baseline",
+        defines=("FLAT_WATER",),
+        inputs=_BASELINE_INPUTS,
+        fit_parameters=_BASELINE_FIT,
+        port_options={"defines": ("FLAT_WATER",)},
+        description="seeds 001 + 004 (FLAT_WATER): planar refraction and planar reflection "
+        "of flat water, no waves",
+    )
+)
+register(
+    Variant(
+        "water_baseline_noplanar",
+        "water_baseline",
+        defines=("NO_PLANAR_REFRACTION",),
+        inputs=_BASELINE_INPUTS,
+        fit_parameters=_BASELINE_FIT,
+        port_options={"defines": ("NO_PLANAR_REFRACTION",)},
+        description="seeds 002-004 (NO_PLANAR_REFRACTION): the classic distorted "
+        "screen-space refraction and planar reflection, no 001",
+    )
+)

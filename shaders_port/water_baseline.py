@@ -29,6 +29,7 @@ near a flat normal (its offset goes to 0 there, continuously, but its direction 
 Diagnostics: ``fetches`` (texture reads per pixel: this shader's, plus :data:`PASS_FETCHES`
 for the mirrored camera's extra pass), ``iterations`` (0: no loop), ``nonfinite``.
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -37,8 +38,14 @@ import drjit as dr
 import numpy as np
 
 from . import _frame
-from ._frame import (ShaderOutput, finish_output, jacobian_passes, nonfinite_any,
-                     resolve_constants, tangents)
+from ._frame import (
+    ShaderOutput,
+    finish_output,
+    jacobian_passes,
+    nonfinite_any,
+    resolve_constants,
+    tangents,
+)
 from ._inputs import Constants, ShaderInputs, normal_matrix
 from ._raster import prepare
 from ._texture import CLAMP, LINEAR, NEAREST, Texture2D, backend_types, clamp, gl_pow, mix
@@ -53,22 +60,30 @@ DEFINES = ("FLAT_WATER", "NO_PLANAR_REFRACTION")
 PASS_FETCHES = 1
 # the constants the GLSL declares; FLAT_WATER reads neither REFLECT_DISTORTION nor the 003 pair
 # (see reads_with)
-READS = ("attenuation_distance", "specular_strength", "specular_exponent", "reflect_distortion",
-         "refraction_index", "refraction_strength", "chromatic_dispersion", "water_color",
-         "reflect_color")
+READS = (
+    "attenuation_distance",
+    "specular_strength",
+    "specular_exponent",
+    "reflect_distortion",
+    "refraction_index",
+    "refraction_strength",
+    "chromatic_dispersion",
+    "water_color",
+    "reflect_color",
+)
 
 
 @dataclass
 class Screen:
     """What the baseline reads beyond the seed-000 inputs (freeze-traversable)."""
 
-    bumpUV: tuple             # (s, t) Float: gl_FragCoord.xy / screenSize per lane
+    bumpUV: tuple  # (s, t) Float: gl_FragCoord.xy / screenSize per lane
     sceneColor: object
     sceneDepth: object
     reflection_sampler: object
-    mvp: tuple                # gl_ModelViewProjectionMatrix (= view_proj), nested float32 tuples
-    mvp_inverse: tuple        # gl_ModelViewProjectionMatrixInverse
-    normal_matrix: tuple      # gl_NormalMatrix (3, 3)
+    mvp: tuple  # gl_ModelViewProjectionMatrix (= view_proj), nested float32 tuples
+    mvp_inverse: tuple  # gl_ModelViewProjectionMatrixInverse
+    normal_matrix: tuple  # gl_NormalMatrix (3, 3)
     o2v_projection_reflection: tuple
     viewpos: tuple
 
@@ -79,16 +94,21 @@ def _mat(M) -> tuple:
 
 def screen_state(m, P, inputs: ShaderInputs) -> Screen:
     """Upload the screen-space buffers and the per-lane window coordinate."""
-    missing = [f for f in ("scene_color", "scene_depth", "reflection_color", "reflection_view_proj")
-               if getattr(inputs, f) is None]
+    missing = [
+        f
+        for f in ("scene_color", "scene_depth", "reflection_color", "reflection_view_proj")
+        if getattr(inputs, f) is None
+    ]
     if missing:
-        raise ValueError(f"water_baseline needs ShaderInputs.{', '.join(missing)}; build the inputs "
-                         "with study.scene.baseline_inputs.with_baseline_inputs (or set them)")
+        raise ValueError(
+            f"water_baseline needs ShaderInputs.{', '.join(missing)}; build the inputs "
+            "with study.scene.baseline_inputs.with_baseline_inputs (or set them)"
+        )
     r = P.raster
     col = (r.index % r.width).astype(np.float32)
     row = (r.index // r.width).astype(np.float32)
     fx, fy = col + np.float32(0.5), np.float32(r.height) - row - np.float32(0.5)
-    s = fx / np.float32(inputs.width)   # gl_FragCoord.x / screenSize.x in float32
+    s = fx / np.float32(inputs.width)  # gl_FragCoord.x / screenSize.x in float32
     t = fy / np.float32(inputs.height)
     return Screen(
         bumpUV=(m.Float(s), m.Float(t)),
@@ -99,7 +119,8 @@ def screen_state(m, P, inputs: ShaderInputs) -> Screen:
         mvp_inverse=_mat(np.linalg.inv(inputs.view_proj.astype(np.float64))),
         normal_matrix=_mat(normal_matrix(inputs.view_proj)),
         o2v_projection_reflection=_mat(inputs.reflection_view_proj),
-        viewpos=tuple(float(v) for v in inputs.viewpos))
+        viewpos=tuple(float(v) for v in inputs.viewpos),
+    )
 
 
 def mat4_vec4(m, M, x, y, z, w):
@@ -109,30 +130,31 @@ def mat4_vec4(m, M, x, y, z, w):
 
 # ---- seed 001 ----------------------------------------------------------------------------
 
+
 def Refract(m, S, position, surface, refractionIndex):
     """Seed 001: the perceived position of ``position`` seen through the plane ``surface``."""
-    #ray origin is the camera position
+    # ray origin is the camera position
     viewerPosition = m.Array3f(*S.viewpos)
-    #ray end is the vertex's undistorted position
+    # ray end is the vertex's undistorted position
     vertexPosition = position
-    #get the vector from the camera to the vertex
+    # get the vector from the camera to the vertex
     worldRay = vertexPosition - viewerPosition
-    #normalize it for direction
+    # normalize it for direction
     worldRayDir = dr.normalize(worldRay)
-    #surface is a vector4 that defines a plane
+    # surface is a vector4 that defines a plane
     worldPlaneNormal = m.Array3f(*surface[:3])
-    #define a known position on the plane
+    # define a known position on the plane
     worldPlaneOrigin = worldPlaneNormal * surface[3]
-    #get the vector result of the worldRay entering the water
+    # get the vector result of the worldRay entering the water
     refraction = refract(m, worldRayDir, dr.normalize(worldPlaneNormal), refractionIndex)
-    #raycast from the vertex, backwards along the refraction vector
+    # raycast from the vertex, backwards along the refraction vector
     denom = dr.dot(-worldPlaneNormal, -refraction)
     p010 = worldPlaneOrigin - vertexPosition
     t = dr.dot(p010, -worldPlaneNormal) / denom
     intersection = vertexPosition + refraction * -t
-    #get the vector from the camera to the intersection, this is the perceived position
+    # get the vector from the camera to the intersection, this is the perceived position
     originToIntersection = intersection - viewerPosition
-    #starting from the camera, move along the perceived position vector by the original ray length
+    # starting from the camera, move along the perceived position vector by the original ray length
     return viewerPosition + dr.normalize(originToIntersection) * dr.norm(worldRay)
 
 
@@ -141,6 +163,7 @@ MIRROR_NORMAL = (0.0, 1.0, 0.0)
 
 
 # ---- the shader ---------------------------------------------------------------------------
+
 
 def _shade(m, P, S, C, flat: bool, planar: bool):
     # ---- [1] Eye and light vectors ----
@@ -163,26 +186,38 @@ def _shade(m, P, S, C, flat: bool, planar: bool):
     bumpUV = S.bumpUV
     sceneZ = S.sceneDepth.sample(m, bumpUV[0], bumpUV[1])[0]
     fetches += 1
-    groundClip = mat4_vec4(m, S.mvp_inverse, 2.0 * bumpUV[0] - 1.0, 2.0 * bumpUV[1] - 1.0,
-                           2.0 * sceneZ - 1.0, 1.0)
+    groundClip = mat4_vec4(
+        m, S.mvp_inverse, 2.0 * bumpUV[0] - 1.0, 2.0 * bumpUV[1] - 1.0, 2.0 * sceneZ - 1.0, 1.0
+    )
     groundPosition = m.Array3f(groundClip.x, groundClip.y, groundClip.z) / groundClip.w
     if planar:
         a = Refract(m, S, groundPosition, WATER_PLANE, C.refraction_index)
         apparentClip = mat4_vec4(m, S.mvp, a.x, a.y, a.z, 1.0)
-        apparentUV = (0.5 + 0.5 * apparentClip.x / apparentClip.w,
-                      0.5 + 0.5 * apparentClip.y / apparentClip.w)
-        refractedUV = (bumpUV[0] - (apparentUV[0] - bumpUV[0]), bumpUV[1] - (apparentUV[1] - bumpUV[1]))
+        apparentUV = (
+            0.5 + 0.5 * apparentClip.x / apparentClip.w,
+            0.5 + 0.5 * apparentClip.y / apparentClip.w,
+        )
+        refractedUV = (
+            bumpUV[0] - (apparentUV[0] - bumpUV[0]),
+            bumpUV[1] - (apparentUV[1] - bumpUV[1]),
+        )
     else:
         refractedUV = bumpUV
 
     # ---- [4] Normal-map distortion and chromatic dispersion (seed 003) ----
     if not flat:
         bump = (vBumpTex.x, vBumpTex.z)
-        newUV = (refractedUV[0] + bump[0] * C.refraction_strength,
-                 refractedUV[1] + bump[1] * C.refraction_strength)
-        red = S.sceneColor.sample(m, newUV[0] - C.chromatic_dispersion, newUV[1] - C.chromatic_dispersion)
+        newUV = (
+            refractedUV[0] + bump[0] * C.refraction_strength,
+            refractedUV[1] + bump[1] * C.refraction_strength,
+        )
+        red = S.sceneColor.sample(
+            m, newUV[0] - C.chromatic_dispersion, newUV[1] - C.chromatic_dispersion
+        )
         green = S.sceneColor.sample(m, newUV[0], newUV[1])
-        blue = S.sceneColor.sample(m, newUV[0] - C.chromatic_dispersion, newUV[1] - C.chromatic_dispersion)
+        blue = S.sceneColor.sample(
+            m, newUV[0] - C.chromatic_dispersion, newUV[1] - C.chromatic_dispersion
+        )
         refractionColor = m.Array3f(red[0], green[1], blue[2])
         fetches += 3
     else:
@@ -198,27 +233,43 @@ def _shade(m, P, S, C, flat: bool, planar: bool):
     # ---- [6] Planar reflection (seed 004), distorted by the wave normal (seed 002) ----
     wp = P.varyingVecWorldPosition
     vClipReflection = mat4_vec4(m, S.o2v_projection_reflection, wp.x, 0.0, wp.z, 1.0)
-    vDeviceReflection = (vClipReflection.x / vClipReflection.w, vClipReflection.y / vClipReflection.w)
+    vDeviceReflection = (
+        vClipReflection.x / vClipReflection.w,
+        vClipReflection.y / vClipReflection.w,
+    )
     vTextureReflection = (0.5 + 0.5 * vDeviceReflection[0], 0.5 + 0.5 * vDeviceReflection[1])
     if not flat:
         flatNormal = vBumpTex - dr.dot(vBumpTex, mirrorNormal) * mirrorNormal
         N = S.normal_matrix
-        eyeNormal = m.Array3f(*(N[i][0] * flatNormal.x + N[i][1] * flatNormal.y + N[i][2] * flatNormal.z
-                                for i in range(3)))
+        eyeNormal = m.Array3f(
+            *(
+                N[i][0] * flatNormal.x + N[i][1] * flatNormal.y + N[i][2] * flatNormal.z
+                for i in range(3)
+            )
+        )
         exy = m.Array2f(eyeNormal.x, eyeNormal.y)
-        #a flat normal must not deform the image: no offset where eyeNormal.xy is 0
-        reflectOffset = dr.select(dr.norm(exy) > 0.0,
-                                  dr.normalize(exy) * dr.norm(flatNormal) * C.reflect_distortion,
-                                  m.Array2f(0.0, 0.0))
-        vTextureReflection = (vTextureReflection[0] + reflectOffset.x, vTextureReflection[1] + reflectOffset.y)
-    reflectionTextureColor = S.reflection_sampler.sample(m, vTextureReflection[0], vTextureReflection[1])
+        # a flat normal must not deform the image: no offset where eyeNormal.xy is 0
+        reflectOffset = dr.select(
+            dr.norm(exy) > 0.0,
+            dr.normalize(exy) * dr.norm(flatNormal) * C.reflect_distortion,
+            m.Array2f(0.0, 0.0),
+        )
+        vTextureReflection = (
+            vTextureReflection[0] + reflectOffset.x,
+            vTextureReflection[1] + reflectOffset.y,
+        )
+    reflectionTextureColor = S.reflection_sampler.sample(
+        m, vTextureReflection[0], vTextureReflection[1]
+    )
     fetches += 1
     vReflection = m.Array4f(*reflectionTextureColor, 1.0) * C.reflectColor
 
     # ---- [7] Specular highlight ----
     rLight = dr.dot(2.0 * vBumpTex, vLight) * vBumpTex - vLight
     spec = gl_pow(clamp(dr.dot(rLight, vEye), 0.0, 1.0), C.specular_exponent)
-    specular = m.Array4f(spec * P.lightcolor[0], spec * P.lightcolor[1], spec * P.lightcolor[2], 1.0)
+    specular = m.Array4f(
+        spec * P.lightcolor[0], spec * P.lightcolor[1], spec * P.lightcolor[2], 1.0
+    )
     vReflection += specular * C.specular_strength
 
     # ---- [8] Fresnel combine ----
@@ -232,7 +283,7 @@ def _shade(m, P, S, C, flat: bool, planar: bool):
         bad |= ~(dr.isfinite(vTextureReflection[0]) & dr.isfinite(vTextureReflection[1]))
     if planar:
         bad |= ~(dr.isfinite(refractedUV[0]) & dr.isfinite(refractedUV[1]))
-    assert fetches + PASS_FETCHES == fetch_count(flat)   # the count below matches the code above
+    assert fetches + PASS_FETCHES == fetch_count(flat)  # the count below matches the code above
     diagnostics = {"nonfinite": dr.select(bad, 1.0, 0.0)}
     return gl_FragColor, diagnostics
 
@@ -248,13 +299,17 @@ def with_static_diagnostics(m, diag: dict, flat: bool) -> dict:
     here, outside the recorded kernels (a width baked into a frozen recording would be replayed
     at the wrong size)."""
     n = dr.width(diag["nonfinite"])
-    return {"iterations": dr.zeros(m.Float, n), "fetches": dr.full(m.Float, float(fetch_count(flat)), n),
-            **diag}
+    return {
+        "iterations": dr.zeros(m.Float, n),
+        "fetches": dr.full(m.Float, float(fetch_count(flat)), n),
+        **diag,
+    }
 
 
 def reads_with(defines=()) -> tuple[str, ...]:
     """The constants the GLSL reads when compiled with ``defines`` (see ``_glsl.constants_read``)."""
     from ._glsl import constants_read, read_source, with_define
+
     src = read_source("water_baseline", "frag", "core")
     for d in defines:
         src = with_define(src, d)
@@ -271,13 +326,25 @@ def _options(defines) -> tuple[bool, bool]:
 
 def _frozen_shade(m, P, S, C, flat, planar):
     # one frozen function per Python-level configuration (see _frame.frozen)
-    return _frame.call_frozen(("water_baseline", flat, planar) + _frame.python_config(C),
-                              lambda m, P, S, C: _shade(m, P, S, C, flat, planar),
-                              m, P, S, C)
+    return _frame.call_frozen(
+        ("water_baseline", flat, planar) + _frame.python_config(C),
+        lambda m, P, S, C: _shade(m, P, S, C, flat, planar),
+        m,
+        P,
+        S,
+        C,
+    )
 
 
-def render(inputs: ShaderInputs, constants: Constants | None = None, *, defines: tuple = (),
-           backend: str = "llvm", loop_ad: str = "replay", diagnose: bool = False) -> ShaderOutput:
+def render(
+    inputs: ShaderInputs,
+    constants: Constants | None = None,
+    *,
+    defines: tuple = (),
+    backend: str = "llvm",
+    loop_ad: str = "replay",
+    diagnose: bool = False,
+) -> ShaderOutput:
     """Render ``water_baseline`` compiled with ``defines`` (a subset of :data:`DEFINES`).
 
     Returns a :class:`ShaderOutput`: ``color`` TensorXf (H, W, 3) linear RGB, 0 off the water;
@@ -286,8 +353,10 @@ def render(inputs: ShaderInputs, constants: Constants | None = None, *, defines:
     ``diagnose=True`` (the raycast ports' failure diagnostics) is refused: this shader has none.
     """
     if diagnose:
-        raise ValueError("water_baseline has no failure diagnostics (they classify raycast failures); "
-                         "study failures applies to the raycast variants only")
+        raise ValueError(
+            "water_baseline has no failure diagnostics (they classify raycast failures); "
+            "study failures applies to the raycast variants only"
+        )
     flat, planar = _options(defines)
     m = backend_types(backend)
     P = prepare(inputs, m)
@@ -304,11 +373,23 @@ def _frozen_tangents(m, P, S, C, params, flat, planar):
     return _frame.call_frozen(
         ("water_baseline.tangents", flat, planar) + _frame.python_config(C),
         lambda m, P, S, C, params: tangents(m, *_shade(m, P, S, C, flat, planar), params),
-        m, P, S, C, params)
+        m,
+        P,
+        S,
+        C,
+        params,
+    )
 
 
-def render_with_jacobian(inputs: ShaderInputs, constants: Constants | None, names: list[str], *,
-                         defines: tuple = (), backend: str = "llvm", loop_ad: str = "replay"):
+def render_with_jacobian(
+    inputs: ShaderInputs,
+    constants: Constants | None,
+    names: list[str],
+    *,
+    defines: tuple = (),
+    backend: str = "llvm",
+    loop_ad: str = "replay",
+):
     """Render and return ``(ShaderOutput, J)``, ``J`` float32 (H, W, 3, len(names)): the
     forward-mode derivative of the linear-RGB colour with respect to each named scalar
     constant (``"water_color[i]"`` for colour components); zero off the water."""
@@ -316,8 +397,10 @@ def render_with_jacobian(inputs: ShaderInputs, constants: Constants | None, name
     reads = reads_with(defines)
     unread = [n for n in names if n.split("[")[0] not in reads]
     if unread:
-        raise ValueError(f"water_baseline{''.join(' ' + d for d in defines)} does not read {unread}: "
-                         f"no derivative with respect to them; it reads: {', '.join(reads)}")
+        raise ValueError(
+            f"water_baseline{''.join(' ' + d for d in defines)} does not read {unread}: "
+            f"no derivative with respect to them; it reads: {', '.join(reads)}"
+        )
 
     def shade_tangents(m, P, C, params, frozen):
         S = screen_state(m, prepare(inputs, m), inputs)
@@ -326,5 +409,13 @@ def render_with_jacobian(inputs: ShaderInputs, constants: Constants | None, name
         else:
             color, diag, grads = tangents(m, *_shade(m, P, S, C, flat, planar), params)
         return color, with_static_diagnostics(m, diag, flat), grads
-    return jacobian_passes(shade_tangents, "water_baseline", inputs,
-                           constants if constants is not None else Constants(), names, backend, loop_ad)
+
+    return jacobian_passes(
+        shade_tangents,
+        "water_baseline",
+        inputs,
+        constants if constants is not None else Constants(),
+        names,
+        backend,
+        loop_ad,
+    )

@@ -16,6 +16,7 @@ listed in ``water_refraction``; in addition the reflection step schedule
 (``diagnostics['refl_hit']``) switches between ``reflectionBottom`` and the cube map with
 a jump in colour; ``REFL_HEIGHT_CUT`` and the texture bounds end rays discontinuously.
 """
+
 from __future__ import annotations
 
 import drjit as dr
@@ -24,11 +25,28 @@ from ._inputs import Constants, ShaderInputs
 from ._raster import prepare
 from ._texture import backend_types, mix, texmat_xy
 from . import _frame
-from ._frame import (ShaderOutput, evaluated_loops_if, finish_output, jacobian_passes, nonfinite_any,
-                     resolve_constants, tangents)
-from .water_refraction import (Options, cubemap_reflection, fresnel_combine, loop_positions, loop_R,
-                               options_of, outside_unit_square, reflect, refraction_blocks,
-                               refraction_failure_diagnostics, specular_highlight)
+from ._frame import (
+    ShaderOutput,
+    evaluated_loops_if,
+    finish_output,
+    jacobian_passes,
+    nonfinite_any,
+    resolve_constants,
+    tangents,
+)
+from .water_refraction import (
+    Options,
+    cubemap_reflection,
+    fresnel_combine,
+    loop_positions,
+    loop_R,
+    options_of,
+    outside_unit_square,
+    reflect,
+    refraction_blocks,
+    refraction_failure_diagnostics,
+    specular_highlight,
+)
 
 __all__ = ["render", "render_with_jacobian", "ShaderOutput"]
 
@@ -82,8 +100,9 @@ def reflection_exit(m, P, C, loop_position, noHit):
     s, t = texmat_xy(P.tex_matrix1, p)
     outside = outside_unit_square(s, t)
     too_high = p.y > dr.detach(C.refl_height_cut)
-    code = dr.select(outside, REFL_EXIT_OUTSIDE,
-                     dr.select(too_high, REFL_EXIT_HEIGHT_CUT, REFL_EXIT_LOOP_CAP))
+    code = dr.select(
+        outside, REFL_EXIT_OUTSIDE, dr.select(too_high, REFL_EXIT_HEIGHT_CUT, REFL_EXIT_LOOP_CAP)
+    )
     return m.Float(dr.select(noHit, code, REFL_EXIT_HIT))
 
 
@@ -91,30 +110,46 @@ def _shade(m, P, C, diagnose: bool = False, opts: Options = Options()):
     # ---- [1]-[6]: as in water_refraction ----
     f = refraction_blocks(m, P, C, opts)
     vEye, vLight, vBumpTex, vBumpTexMore = f.vEye, f.vLight, f.vBumpTex, f.vBumpTexMore
-    vRefraction, iterations, crossed, denominator = f.vRefraction, f.iterations, f.crossed, f.denominator
+    vRefraction, iterations, crossed, denominator = (
+        f.vRefraction,
+        f.iterations,
+        f.crossed,
+        f.denominator,
+    )
     refraction_R, refracted_position = f.R, f.current_position
 
     # ---- [7] Reflection ----
     R = dr.normalize(reflect(m, -vEye, vBumpTexMore))
     R.y = dr.maximum(R.y, 0.001)
     R = dr.normalize(R)
-    refl_dir = R   # kept for the diagnostics
+    refl_dir = R  # kept for the diagnostics
     numsteps = mix(C.refl_steps_steep, C.refl_steps_grazing, 1.0 - R.y)
     stepsize = 1.0 / numsteps
     R *= stepsize
-    current_position, current_position_old, depth, olddepth, noHit, refl_iterations, refl_fetches = \
-        raycast_reflection(m, P, loop_R(C, R), C)
-    refl_loop_position = current_position   # kept for the diagnostics
+    (
+        current_position,
+        current_position_old,
+        depth,
+        olddepth,
+        noHit,
+        refl_iterations,
+        refl_fetches,
+    ) = raycast_reflection(m, P, loop_R(C, R), C)
+    refl_loop_position = current_position  # kept for the diagnostics
     current_position, current_position_old = loop_positions(
-        m, C, R, current_position, current_position_old, refl_iterations)
+        m, C, R, current_position, current_position_old, refl_iterations
+    )
     # if (!noHit): interpolate, one step of zero-approximation
     cpoy = current_position_old.y
     cpy = current_position.y
-    current_position = mix(current_position_old, current_position,
-                           (cpoy - olddepth) / (cpoy - cpy + depth - olddepth))
+    current_position = mix(
+        current_position_old, current_position, (cpoy - olddepth) / (cpoy - cpy + depth - olddepth)
+    )
     s, t = texmat_xy(P.tex_matrix1, current_position)
     hit_active = ~noHit
-    vReflection_hit = m.Array4f(*P.reflectionBottom.sample(m, s, t, hit_active), 1.0) * C.reflectColor
+    vReflection_hit = (
+        m.Array4f(*P.reflectionBottom.sample(m, s, t, hit_active), 1.0) * C.reflectColor
+    )
     # else: no hit with reflection surface -> fetch colour from the cube map
     vReflection_sky = cubemap_reflection(m, P, R) * C.reflectColor
     vReflection = dr.select(noHit, vReflection_sky, vReflection_hit)
@@ -122,31 +157,54 @@ def _shade(m, P, C, diagnose: bool = False, opts: Options = Options()):
     vReflection = specular_highlight(m, P, vReflection, vBumpTex, vEye, vLight, C, opts.specular)
     gl_FragColor = fresnel_combine(m, P, vReflection, vRefraction, vEye, vBumpTex)
     fetches = opts.normal_layers + 1 + iterations + 1 + 1 + refl_fetches + 1 + 1
-    bad = nonfinite_any(vEye, vLight, vBumpTex, vBumpTexMore, refraction_R, refracted_position, R,
-                        dr.select(noHit, refracted_position, current_position))
-    diagnostics = {"iterations": m.Float(iterations), "fetches": m.Float(fetches),
-                   "crossed": dr.select(crossed, 1.0, 0.0), "denominator": dr.abs(denominator),
-                   "refl_iterations": m.Float(refl_iterations),
-                   "refl_hit": dr.select(noHit, 0.0, 1.0),
-                   "nonfinite": dr.select(bad, 1.0, 0.0)}
+    bad = nonfinite_any(
+        vEye,
+        vLight,
+        vBumpTex,
+        vBumpTexMore,
+        refraction_R,
+        refracted_position,
+        R,
+        dr.select(noHit, refracted_position, current_position),
+    )
+    diagnostics = {
+        "iterations": m.Float(iterations),
+        "fetches": m.Float(fetches),
+        "crossed": dr.select(crossed, 1.0, 0.0),
+        "denominator": dr.abs(denominator),
+        "refl_iterations": m.Float(refl_iterations),
+        "refl_hit": dr.select(noHit, 0.0, 1.0),
+        "nonfinite": dr.select(bad, 1.0, 0.0),
+    }
     if diagnose:
         diagnostics.update(refraction_failure_diagnostics(m, P, C, f))
         diagnostics["refl_exit"] = reflection_exit(m, P, C, refl_loop_position, noHit)
         d = dr.detach(refl_dir)
-        diagnostics.update({"refl_dir_x": m.Float(d.x), "refl_dir_y": m.Float(d.y),
-                            "refl_dir_z": m.Float(d.z)})
+        diagnostics.update(
+            {"refl_dir_x": m.Float(d.x), "refl_dir_y": m.Float(d.y), "refl_dir_z": m.Float(d.z)}
+        )
     return gl_FragColor, diagnostics
 
 
 def _frozen_shade(m, P, C, diagnose, opts):
-    return _frame.call_frozen(("water_reflection", diagnose, opts) + _frame.python_config(C),
-                              lambda m, P, C: _shade(m, P, C, diagnose, opts),
-                              m, P, C)
+    return _frame.call_frozen(
+        ("water_reflection", diagnose, opts) + _frame.python_config(C),
+        lambda m, P, C: _shade(m, P, C, diagnose, opts),
+        m,
+        P,
+        C,
+    )
 
 
-def render(inputs: ShaderInputs, constants: Constants | None = None, *,
-           backend: str = "llvm", loop_ad: str = "replay", diagnose: bool = False,
-           **options) -> ShaderOutput:
+def render(
+    inputs: ShaderInputs,
+    constants: Constants | None = None,
+    *,
+    backend: str = "llvm",
+    loop_ad: str = "replay",
+    diagnose: bool = False,
+    **options,
+) -> ShaderOutput:
     """Render ``water_reflection`` (``**options``: the variant switches of blocks [2], [5], [6]
     and [8], see ``water_refraction.Options``).
 
@@ -173,13 +231,25 @@ def render(inputs: ShaderInputs, constants: Constants | None = None, *,
 
 
 def _frozen_tangents(m, P, C, params, opts):
-    return _frame.call_frozen(("water_reflection.tangents", opts) + _frame.python_config(C),
-                              lambda m, P, C, params: tangents(m, *_shade(m, P, C, False, opts), params),
-                              m, P, C, params)
+    return _frame.call_frozen(
+        ("water_reflection.tangents", opts) + _frame.python_config(C),
+        lambda m, P, C, params: tangents(m, *_shade(m, P, C, False, opts), params),
+        m,
+        P,
+        C,
+        params,
+    )
 
 
-def render_with_jacobian(inputs: ShaderInputs, constants: Constants | None, names: list[str], *,
-                         backend: str = "llvm", loop_ad: str = "replay", **options):
+def render_with_jacobian(
+    inputs: ShaderInputs,
+    constants: Constants | None,
+    names: list[str],
+    *,
+    backend: str = "llvm",
+    loop_ad: str = "replay",
+    **options,
+):
     """``(ShaderOutput, J)`` with ``J`` float32 (H, W, 3, len(names)): forward-mode derivatives
     of the linear-RGB colour w.r.t. the named scalars (see ``water_refraction``)."""
     opts = options_of(options)
@@ -188,5 +258,13 @@ def render_with_jacobian(inputs: ShaderInputs, constants: Constants | None, name
         if frozen:
             return _frozen_tangents(m, P, C, params, opts)
         return tangents(m, *_shade(m, P, C, False, opts), params)
-    return jacobian_passes(shade_tangents, "water_reflection", inputs,
-                           constants if constants is not None else Constants(), names, backend, loop_ad)
+
+    return jacobian_passes(
+        shade_tangents,
+        "water_reflection",
+        inputs,
+        constants if constants is not None else Constants(),
+        names,
+        backend,
+        loop_ad,
+    )

@@ -45,6 +45,7 @@ Plain renders (no gradient) and ``'replay'`` Jacobians replay recorded kernels
 call; see ``_frame.call_frozen``). Constants enter the kernels as opaque float32 values, so traced and replayed
 renders are bit-identical.
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -53,8 +54,15 @@ from typing import NamedTuple
 import drjit as dr
 
 from . import _frame
-from ._frame import (ShaderOutput, evaluated_loops_if, finish_output, jacobian_passes,
-                     nonfinite_any, resolve_constants, tangents)
+from ._frame import (
+    ShaderOutput,
+    evaluated_loops_if,
+    finish_output,
+    jacobian_passes,
+    nonfinite_any,
+    resolve_constants,
+    tangents,
+)
 from ._inputs import Constants, ShaderInputs
 from ._raster import prepare
 from ._texture import backend_types, clamp, gl_pow, mix, texmat_xy
@@ -84,11 +92,17 @@ class Options(NamedTuple):
     wall_faces: bool = False
 
     def checked(self) -> "Options":
-        for name, allowed in (("normal_layers", (1, 2, 4)), ("refine", (None, "binary", "secant")),
-                              ("attenuation", ("linear", "beer")), ("specular", ("phong", "ggx", "none")),
-                              ("wall_faces", (False, True))):
+        for name, allowed in (
+            ("normal_layers", (1, 2, 4)),
+            ("refine", (None, "binary", "secant")),
+            ("attenuation", ("linear", "beer")),
+            ("specular", ("phong", "ggx", "none")),
+            ("wall_faces", (False, True)),
+        ):
             if getattr(self, name) not in allowed:
-                raise ValueError(f"shader option {name}={getattr(self, name)!r}; allowed: {allowed}")
+                raise ValueError(
+                    f"shader option {name}={getattr(self, name)!r}; allowed: {allowed}"
+                )
         return self
 
 
@@ -96,11 +110,14 @@ def options_of(kw: dict) -> Options:
     """``Options`` from a port's keyword options (``normal_layers=``, ``refine=``, ...)."""
     unknown = set(kw) - set(Options._fields)
     if unknown:
-        raise TypeError(f"unknown shader option(s) {sorted(unknown)}; known: {list(Options._fields)}")
+        raise TypeError(
+            f"unknown shader option(s) {sorted(unknown)}; known: {list(Options._fields)}"
+        )
     return Options(**kw).checked()
 
 
 # ---- blocks shared with water_reflection -----------------------------------------------
+
 
 def eye_and_light(m, P):
     # ---- [1] Eye and light vectors ----
@@ -111,7 +128,7 @@ def eye_and_light(m, P):
 
 def normal_map_block(m, P, BumptexMult, layers: int = 4):
     # ---- [2] Normal map: average four layers, bump scaling ----
-    if layers == 1:    # ONE_NORMAL_LAYER
+    if layers == 1:  # ONE_NORMAL_LAYER
         vBumpTexA = m.Array3f(P.normalMap.sample(m, P.texcoord[0][0], P.texcoord[0][1]))
         vBumpTex = dr.normalize(2.0 * vBumpTexA - 1.0)
     elif layers == 2:  # TWO_NORMAL_LAYERS
@@ -200,9 +217,12 @@ def refine_crossing(m, P, current_position, current_position_old, depth, olddept
         if refine == "binary":
             middle_position = 0.5 * (current_position_old + current_position)
         else:
-            middle_position = mix(current_position_old, current_position,
-                                  (current_position_old.y - olddepth)
-                                  / (current_position_old.y - current_position.y + depth - olddepth))
+            middle_position = mix(
+                current_position_old,
+                current_position,
+                (current_position_old.y - olddepth)
+                / (current_position_old.y - current_position.y + depth - olddepth),
+            )
         s, t = texmat_xy(P.tex_matrix0, middle_position)
         middle_depth = m.Float(P.worldYComponent.sample(m, s, t)[0])
         below = middle_depth > middle_position.y
@@ -224,17 +244,20 @@ def interpolate_crossing(m, P, current_position, current_position_old, depth, ol
     return current_position, vRefraction, denominator
 
 
-def attenuation(m, P, current_position, vRefraction, depth, C, model: str = "linear",
-                wall_faces: bool = False):
+def attenuation(
+    m, P, current_position, vRefraction, depth, C, model: str = "linear", wall_faces: bool = False
+):
     # ---- [6] Attenuation ----
     travelLength = dr.norm(current_position - P.varyingVecWorldPosition)
     if model == "beer":  # BEER_ATTENUATION
-        transmittance = dr.exp(-m.Array3f(C.absorption_r, C.absorption_g, C.absorption_b) * travelLength)
+        transmittance = dr.exp(
+            -m.Array3f(C.absorption_r, C.absorption_g, C.absorption_b) * travelLength
+        )
         vRefraction = mix(C.waterColor, vRefraction, m.Array4f(*transmittance, 1.0))
     else:
         travelLength = clamp(travelLength / C.attenuation_distance, 0.0, 1.0)
         vRefraction = mix(vRefraction, C.waterColor, travelLength)
-    if wall_faces:       # WALL_FACES
+    if wall_faces:  # WALL_FACES
         vRefraction = dr.select(depth > P.varyingVecWorldPosition.y, C.waterColor, vRefraction)
     return vRefraction
 
@@ -247,9 +270,9 @@ def cubemap_reflection(m, P, R):
 
 def specular_highlight(m, P, vReflection, vBumpTex, vEye, vLight, C, lobe: str = "phong"):
     # ---- [8] Specular highlight ----
-    if lobe == "none":   # NO_SPECULAR
+    if lobe == "none":  # NO_SPECULAR
         return vReflection
-    if lobe == "ggx":    # GGX_SPECULAR
+    if lobe == "ggx":  # GGX_SPECULAR
         vHalf = dr.normalize(vLight + vEye)
         NdotH = clamp(dr.dot(vBumpTex, vHalf), 0.0, 1.0)
         NdotL = clamp(dr.dot(vBumpTex, vLight), 0.0, 1.0)
@@ -257,15 +280,21 @@ def specular_highlight(m, P, vReflection, vBumpTex, vEye, vLight, C, lobe: str =
         alpha2 = C.specular_roughness * C.specular_roughness
         ggxDenominator = NdotH * NdotH * (alpha2 - 1.0) + 1.0
         ggxD = alpha2 / (3.14159265 * ggxDenominator * ggxDenominator)
-        smithVis = 1.0 / ((NdotL + dr.sqrt(alpha2 + (1.0 - alpha2) * NdotL * NdotL))
-                          * (NdotE + dr.sqrt(alpha2 + (1.0 - alpha2) * NdotE * NdotE)))
+        smithVis = 1.0 / (
+            (NdotL + dr.sqrt(alpha2 + (1.0 - alpha2) * NdotL * NdotL))
+            * (NdotE + dr.sqrt(alpha2 + (1.0 - alpha2) * NdotE * NdotE))
+        )
         spec = ggxD * smithVis * NdotL
-        specular = m.Array4f(spec * P.lightcolor[0], spec * P.lightcolor[1], spec * P.lightcolor[2], 1.0)
+        specular = m.Array4f(
+            spec * P.lightcolor[0], spec * P.lightcolor[1], spec * P.lightcolor[2], 1.0
+        )
         vReflection += specular * C.specular_strength
         return vReflection
     rLight = dr.dot(2.0 * vBumpTex, vLight) * vBumpTex - vLight
     spec = gl_pow(clamp(dr.dot(rLight, vEye), 0.0, 1.0), C.specular_exponent)
-    specular = m.Array4f(spec * P.lightcolor[0], spec * P.lightcolor[1], spec * P.lightcolor[2], 1.0)
+    specular = m.Array4f(
+        spec * P.lightcolor[0], spec * P.lightcolor[1], spec * P.lightcolor[2], 1.0
+    )
     vReflection += specular * C.specular_strength
     return vReflection
 
@@ -278,6 +307,7 @@ def fresnel_combine(m, P, vReflection, vRefraction, vEye, vBumpTex):
 
 
 # ---- failure diagnostics (not in the GLSL: extra outputs, the colour is unchanged) --------
+
 
 def outside_unit_square(s, t):
     """Bool per lane: texture coordinate (s, t) outside [0, 1]^2 (clamp-to-edge substitutes
@@ -312,12 +342,19 @@ def refraction_failure_diagnostics(m, P, C, f: "Refracted") -> dict:
     for p in (P.varyingVecWorldPosition, f.loop_position, f.current_position):
         s, t = texmat_xy(P.tex_matrix0, dr.detach(p))
         outside |= outside_unit_square(s, t)
-    return {"refract_k": m.Float(k), "cos_eye_normal": m.Float(-d),
-            "refr_dir_x": m.Float(Rn.x), "refr_dir_y": m.Float(Rn.y), "refr_dir_z": m.Float(Rn.z),
-            "interp_weight": m.Float(weight), "lookup_outside": dr.select(outside, 1.0, 0.0)}
+    return {
+        "refract_k": m.Float(k),
+        "cos_eye_normal": m.Float(-d),
+        "refr_dir_x": m.Float(Rn.x),
+        "refr_dir_y": m.Float(Rn.y),
+        "refr_dir_z": m.Float(Rn.z),
+        "interp_weight": m.Float(weight),
+        "lookup_outside": dr.select(outside, 1.0, 0.0),
+    }
 
 
 # ---- the shader ---------------------------------------------------------------------------
+
 
 @dataclass
 class Refracted:
@@ -327,15 +364,15 @@ class Refracted:
     vLight: object
     vBumpTex: object
     vBumpTexMore: object
-    R: object                  # the scaled refraction step vector
-    current_position: object   # the interpolated crossing
-    vRefraction: object        # attenuated refraction colour (vec4)
+    R: object  # the scaled refraction step vector
+    current_position: object  # the interpolated crossing
+    vRefraction: object  # attenuated refraction colour (vec4)
     iterations: object
     crossed: object
     denominator: object
     # the loop's last state (before the interpolation), for the failure diagnostics only
-    loop_position: object = None       # current_position after the last step
-    loop_position_old: object = None   # current_position_old
+    loop_position: object = None  # current_position after the last step
+    loop_position_old: object = None  # current_position_old
     olddepth: object = None
 
 
@@ -345,22 +382,40 @@ def refraction_blocks(m, P, C, opts: Options = Options()) -> Refracted:
     vEye, vLight = eye_and_light(m, P)
     vBumpTex, vBumpTexMore = normal_map_block(m, P, C.bumptex_mult, opts.normal_layers)
     R = refraction_vector(m, vEye, vBumpTexMore, C)
-    current_position, current_position_old, depth, olddepth, iterations, crossed = \
-        raycast_ground(m, P, loop_R(C, R), C.loop_cap)
+    current_position, current_position_old, depth, olddepth, iterations, crossed = raycast_ground(
+        m, P, loop_R(C, R), C.loop_cap
+    )
     current_position, current_position_old = loop_positions(
-        m, C, R, current_position, current_position_old, iterations)
+        m, C, R, current_position, current_position_old, iterations
+    )
     if opts.refine is not None:
         current_position, current_position_old, depth, olddepth = refine_crossing(
-            m, P, current_position, current_position_old, depth, olddepth, C, opts.refine)
+            m, P, current_position, current_position_old, depth, olddepth, C, opts.refine
+        )
         iterations = iterations + C.refine_steps
-    loop_end = (current_position, current_position_old)   # kept for the diagnostics
+    loop_end = (current_position, current_position_old)  # kept for the diagnostics
     current_position, vRefraction, denominator = interpolate_crossing(
-        m, P, current_position, current_position_old, depth, olddepth)
+        m, P, current_position, current_position_old, depth, olddepth
+    )
     loop_position, loop_position_old = loop_end
-    vRefraction = attenuation(m, P, current_position, vRefraction, depth, C, opts.attenuation,
-                              opts.wall_faces)
-    return Refracted(vEye, vLight, vBumpTex, vBumpTexMore, R, current_position, vRefraction,
-                     iterations, crossed, denominator, loop_position, loop_position_old, olddepth)
+    vRefraction = attenuation(
+        m, P, current_position, vRefraction, depth, C, opts.attenuation, opts.wall_faces
+    )
+    return Refracted(
+        vEye,
+        vLight,
+        vBumpTex,
+        vBumpTexMore,
+        R,
+        current_position,
+        vRefraction,
+        iterations,
+        crossed,
+        denominator,
+        loop_position,
+        loop_position_old,
+        olddepth,
+    )
 
 
 def _shade(m, P, C, reflection: bool, diagnose: bool = False, opts: Options = Options()):
@@ -368,36 +423,53 @@ def _shade(m, P, C, reflection: bool, diagnose: bool = False, opts: Options = Op
     vEye, vLight, vBumpTex, vBumpTexMore = f.vEye, f.vLight, f.vBumpTex, f.vBumpTexMore
     R, current_position, vRefraction = f.R, f.current_position, f.vRefraction
     iterations, crossed, denominator = f.iterations, f.crossed, f.denominator
-    fetches = opts.normal_layers + 1 + iterations + 1   # iterations include the refinement steps
+    fetches = opts.normal_layers + 1 + iterations + 1  # iterations include the refinement steps
     bad = nonfinite_any(vEye, vBumpTex, vBumpTexMore, R, current_position)
     if reflection:
         # ---- [7] Reflection ----
         R = dr.normalize(reflect(m, -vEye, vBumpTexMore))
         R.y = dr.maximum(R.y, 0.001)
         vReflection = cubemap_reflection(m, P, R) * C.reflectColor
-        vReflection = specular_highlight(m, P, vReflection, vBumpTex, vEye, vLight, C, opts.specular)
+        vReflection = specular_highlight(
+            m, P, vReflection, vBumpTex, vEye, vLight, C, opts.specular
+        )
         gl_FragColor = fresnel_combine(m, P, vReflection, vRefraction, vEye, vBumpTex)
         fetches = fetches + 2
         bad |= nonfinite_any(R, vLight)
     else:
         gl_FragColor = vRefraction
-    diagnostics = {"iterations": m.Float(iterations), "fetches": m.Float(fetches),
-                   "crossed": dr.select(crossed, 1.0, 0.0), "denominator": dr.abs(denominator),
-                   "nonfinite": dr.select(bad, 1.0, 0.0)}
+    diagnostics = {
+        "iterations": m.Float(iterations),
+        "fetches": m.Float(fetches),
+        "crossed": dr.select(crossed, 1.0, 0.0),
+        "denominator": dr.abs(denominator),
+        "nonfinite": dr.select(bad, 1.0, 0.0),
+    }
     if diagnose:
         diagnostics.update(refraction_failure_diagnostics(m, P, C, f))
     return gl_FragColor, diagnostics
 
 
 def _frozen_shade(m, P, C, reflection, diagnose, opts):
-    return _frame.call_frozen(("water_refraction", reflection, diagnose, opts) + _frame.python_config(C),
-                              lambda m, P, C: _shade(m, P, C, reflection, diagnose, opts),
-                              m, P, C)
+    return _frame.call_frozen(
+        ("water_refraction", reflection, diagnose, opts) + _frame.python_config(C),
+        lambda m, P, C: _shade(m, P, C, reflection, diagnose, opts),
+        m,
+        P,
+        C,
+    )
 
 
-def render(inputs: ShaderInputs, constants: Constants | None = None, *, reflection: bool = True,
-           backend: str = "llvm", loop_ad: str = "replay", diagnose: bool = False,
-           **options) -> ShaderOutput:
+def render(
+    inputs: ShaderInputs,
+    constants: Constants | None = None,
+    *,
+    reflection: bool = True,
+    backend: str = "llvm",
+    loop_ad: str = "replay",
+    diagnose: bool = False,
+    **options,
+) -> ShaderOutput:
     """Render ``water_refraction`` (``reflection=False``: the ``NOREFLECTION`` variant;
     ``**options``: the other variant switches, see :class:`Options`).
 
@@ -428,12 +500,23 @@ def _frozen_tangents(m, P, C, params, reflection, opts):
     return _frame.call_frozen(
         ("water_refraction.tangents", reflection, opts) + _frame.python_config(C),
         lambda m, P, C, params: tangents(m, *_shade(m, P, C, reflection, False, opts), params),
-        m, P, C, params)
+        m,
+        P,
+        C,
+        params,
+    )
 
 
-def render_with_jacobian(inputs: ShaderInputs, constants: Constants | None, names: list[str], *,
-                         reflection: bool = True, backend: str = "llvm", loop_ad: str = "replay",
-                         **options):
+def render_with_jacobian(
+    inputs: ShaderInputs,
+    constants: Constants | None,
+    names: list[str],
+    *,
+    reflection: bool = True,
+    backend: str = "llvm",
+    loop_ad: str = "replay",
+    **options,
+):
     """Render and return ``(ShaderOutput, J)``, ``J`` float32 (H, W, 3, len(names)).
 
     ``J[..., j]`` is the forward-mode derivative of the linear-RGB colour with respect to
@@ -448,5 +531,13 @@ def render_with_jacobian(inputs: ShaderInputs, constants: Constants | None, name
         if frozen:
             return _frozen_tangents(m, P, C, params, reflection, opts)
         return tangents(m, *_shade(m, P, C, reflection, False, opts), params)
-    return jacobian_passes(shade_tangents, "water_refraction", inputs,
-                           constants if constants is not None else Constants(), names, backend, loop_ad)
+
+    return jacobian_passes(
+        shade_tangents,
+        "water_refraction",
+        inputs,
+        constants if constants is not None else Constants(),
+        names,
+        backend,
+        loop_ad,
+    )

@@ -10,6 +10,7 @@ inputs (``build_shader_inputs``), the port against a reference (``ShaderModel``)
 (``FitProblem``, ``Param``, ``fit``, ``identify``, ``make_jax_residual``), export
 (``export_shaders``, ``load_constants_json``), metrics (``rmse``, ``flip``).
 """
+
 from ._backend import BackendError, init_backend
 from .fit.bridge import DrJitResidual, NonFiniteResidualError, make_jax_residual
 from .scene.experiment import Experiment, ExperimentError, load_experiment, validate
@@ -24,10 +25,40 @@ from .scene.reference import Reference, load_or_render
 from .scene.shader_inputs import build_shader_inputs
 
 __all__ = [
-    "BackendError", "init_backend", "DrJitResidual", "NonFiniteResidualError", "make_jax_residual",
-    "Experiment", "ExperimentError", "load_experiment", "validate", "export_shaders",
-    "load_constants_json", "read_exr", "write_exr", "write_png", "SOLVERS", "FitProblem", "FitResult",
-    "Param", "fit", "IdentifyReport", "identify", "probe_gradient_solver", "sweep_1d", "sweep_2d",
-    "run_calibrate", "run_export", "run_preview", "run_render", "run_tradeoff", "flip", "rmse", "ShaderModel",
-    "constants_from_experiment", "Reference", "load_or_render", "build_shader_inputs",
+    "BackendError",
+    "init_backend",
+    "DrJitResidual",
+    "NonFiniteResidualError",
+    "make_jax_residual",
+    "Experiment",
+    "ExperimentError",
+    "load_experiment",
+    "validate",
+    "export_shaders",
+    "load_constants_json",
+    "read_exr",
+    "write_exr",
+    "write_png",
+    "SOLVERS",
+    "FitProblem",
+    "FitResult",
+    "Param",
+    "fit",
+    "IdentifyReport",
+    "identify",
+    "probe_gradient_solver",
+    "sweep_1d",
+    "sweep_2d",
+    "run_calibrate",
+    "run_export",
+    "run_preview",
+    "run_render",
+    "run_tradeoff",
+    "flip",
+    "rmse",
+    "ShaderModel",
+    "constants_from_experiment",
+    "Reference",
+    "load_or_render",
+    "build_shader_inputs",
 ]

@@ -7,6 +7,7 @@
 
 Nothing here runs at import time: call :func:`init_backend` from the entry point.
 """
+
 from __future__ import annotations
 
 import glob
@@ -17,12 +18,21 @@ MIN_LLVM_MAJOR = 16
 TESTED_LLVM_MAJOR = 19
 DEFAULT_VARIANT = "llvm_ad_rgb"
 VARIANTS = ("llvm_ad_rgb", "cuda_ad_rgb")
-_LIB_DIRS = ("/usr/lib/x86_64-linux-gnu", "/usr/lib/aarch64-linux-gnu", "/usr/lib64",
-             "/usr/lib", "/usr/local/lib", "/opt/homebrew/opt/llvm/lib", "/usr/local/opt/llvm/lib")
+_LIB_DIRS = (
+    "/usr/lib/x86_64-linux-gnu",
+    "/usr/lib/aarch64-linux-gnu",
+    "/usr/lib64",
+    "/usr/lib",
+    "/usr/local/lib",
+    "/opt/homebrew/opt/llvm/lib",
+    "/usr/local/opt/llvm/lib",
+)
 
-FIX = ("install a newer libLLVM (Debian/Ubuntu: `apt-get install libllvm19`, or run "
-       "`bash scripts/setup.sh`), or point DRJIT_LIBLLVM_PATH at a libLLVM.so of version "
-       f">= {MIN_LLVM_MAJOR}")
+FIX = (
+    "install a newer libLLVM (Debian/Ubuntu: `apt-get install libllvm19`, or run "
+    "`bash scripts/setup.sh`), or point DRJIT_LIBLLVM_PATH at a libLLVM.so of version "
+    f">= {MIN_LLVM_MAJOR}"
+)
 
 
 class BackendError(RuntimeError):
@@ -38,7 +48,9 @@ def find_libllvm() -> list[tuple[int, str]]:
     """Candidate libLLVM shared libraries on this machine as (major version, path), newest first."""
     found: dict[str, int] = {}
     for d in _LIB_DIRS:
-        for p in glob.glob(os.path.join(d, "libLLVM*.so*")) + glob.glob(os.path.join(d, "libLLVM*.dylib")):
+        for p in glob.glob(os.path.join(d, "libLLVM*.so*")) + glob.glob(
+            os.path.join(d, "libLLVM*.dylib")
+        ):
             major = _major_from_name(p)
             if major is not None and os.path.isfile(p):
                 found.setdefault(os.path.realpath(p), major)
@@ -63,6 +75,7 @@ def ensure_llvm() -> tuple[int, int, int]:
         if good:
             os.environ["DRJIT_LIBLLVM_PATH"] = good[0][1]
     import drjit as dr
+
     version = tuple(dr.detail.llvm_version())
     if version[0] < 0:
         where = os.environ.get("DRJIT_LIBLLVM_PATH", "the default search path")
@@ -70,7 +83,8 @@ def ensure_llvm() -> tuple[int, int, int]:
     if version[0] < MIN_LLVM_MAJOR:
         raise BackendError(
             f"Dr.Jit found libLLVM {'.'.join(map(str, version))}, which makes Dr.Jit 1.5 abort "
-            f"(instruction selection fails on fmaximum); {FIX}.")
+            f"(instruction selection fails on fmaximum); {FIX}."
+        )
     _checked = version
     return version
 
@@ -87,11 +101,13 @@ def init_backend(variant: str | None = None) -> str:
     if variant.startswith("llvm"):
         ensure_llvm()
     import mitsuba as mi
+
     try:
         mi.set_variant(variant)
     except Exception as exc:  # e.g. no CUDA driver
-        raise BackendError(f"cannot use Mitsuba variant {variant!r}: {exc}. "
-                           f"Use {DEFAULT_VARIANT} (CPU) instead.") from exc
+        raise BackendError(
+            f"cannot use Mitsuba variant {variant!r}: {exc}. Use {DEFAULT_VARIANT} (CPU) instead."
+        ) from exc
     return variant
 
 

@@ -7,6 +7,7 @@ dictionary stored as the string attribute ``study_provenance``. Writes are atomi
 is written under a temporary name in the same folder and renamed, so a killed process
 never leaves a truncated file under the final name.
 """
+
 from __future__ import annotations
 
 import contextlib
@@ -40,17 +41,26 @@ def disk_full(folder):
     except DiskFullError:
         raise
     except (OSError, RuntimeError) as exc:
-        full = (getattr(exc, "errno", None) in (errno.ENOSPC, errno.EDQUOT)
-                or "No space left on device" in str(exc))
+        full = getattr(exc, "errno", None) in (
+            errno.ENOSPC,
+            errno.EDQUOT,
+        ) or "No space left on device" in str(exc)
         if not full:
             raise
-        raise DiskFullError(errno.ENOSPC, f"no space left on the device holding {folder}: nothing "
-                            "was written there; free space, or point --out / STUDY_CACHE at "
-                            "another disk") from exc
+        raise DiskFullError(
+            errno.ENOSPC,
+            f"no space left on the device holding {folder}: nothing "
+            "was written there; free space, or point --out / STUDY_CACHE at "
+            "another disk",
+        ) from exc
 
 
-def write_exr(path, rgb: np.ndarray, provenance: dict | None = None,
-              extra: dict[str, np.ndarray] | None = None) -> Path:
+def write_exr(
+    path,
+    rgb: np.ndarray,
+    provenance: dict | None = None,
+    extra: dict[str, np.ndarray] | None = None,
+) -> Path:
     """Write ``rgb`` (H, W, 3) and optional extra (H, W) or (H, W, 3) layers atomically; return the path."""
     path = Path(path)
     rgb = np.ascontiguousarray(rgb, dtype=np.float32)
@@ -60,8 +70,10 @@ def write_exr(path, rgb: np.ndarray, provenance: dict | None = None,
     for name, arr in (extra or {}).items():
         arr = np.ascontiguousarray(arr, dtype=np.float32)
         if arr.shape not in (rgb.shape[:2], rgb.shape):
-            raise ValueError(f"write_exr: channel {name!r} has shape {arr.shape}, expected "
-                             f"{rgb.shape[:2]} or {rgb.shape}")
+            raise ValueError(
+                f"write_exr: channel {name!r} has shape {arr.shape}, expected "
+                f"{rgb.shape[:2]} or {rgb.shape}"
+            )
         channels[name] = arr
     header = {"compression": OpenEXR.ZIP_COMPRESSION, "type": OpenEXR.scanlineimage}
     if provenance is not None:
@@ -86,10 +98,12 @@ def read_exr(path) -> tuple[np.ndarray, dict, dict[str, np.ndarray]]:
         raise FileNotFoundError(f"no EXR file at {path}")
     try:
         with OpenEXR.File(str(path)) as f:
-            raw = f.header().get(PROVENANCE_KEY)   # read before the file closes
+            raw = f.header().get(PROVENANCE_KEY)  # read before the file closes
             channels = {k: np.array(v.pixels, dtype=np.float32) for k, v in f.channels().items()}
     except Exception as exc:  # OpenEXR raises plain exceptions on corrupt files
-        raise ValueError(f"{path} is not a readable EXR file ({exc}); delete it and re-render") from exc
+        raise ValueError(
+            f"{path} is not a readable EXR file ({exc}); delete it and re-render"
+        ) from exc
     if "RGB" not in channels:
         raise ValueError(f"{path} has no RGB channel (channels: {sorted(channels)})")
     rgb = channels.pop("RGB")
@@ -162,11 +176,13 @@ def file_lock(path, what: str = "", log=None, timeout: float | None = None):
                     log(f"{what or path.name}: waiting for {holder} (lock {path})")
                     told = True
                 if timeout is not None and time.monotonic() - t0 > timeout:
-                    raise TimeoutError(f"{path} stayed locked for more than {timeout:.0f} s; "
-                                       "the holder is still running (see the file's text)") from None
+                    raise TimeoutError(
+                        f"{path} stayed locked for more than {timeout:.0f} s; "
+                        "the holder is still running (see the file's text)"
+                    ) from None
                 time.sleep(0.2)
         os.ftruncate(fd, 0)
         os.write(fd, f"host {socket.gethostname()} pid {os.getpid()}\n".encode())
         yield
     finally:
-        os.close(fd)      # releases the lock
+        os.close(fd)  # releases the lock

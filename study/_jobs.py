@@ -1,4 +1,5 @@
 """The study's jobs, one function per CLI command; each writes its artifacts into one folder."""
+
 from __future__ import annotations
 
 import math
@@ -23,6 +24,7 @@ def prepare(experiment, out, overrides=None, variant=None):
     (the mesh), create the output folder."""
     from .scene.user_scene import check_scene
     from .scene.view import check_water_in_view
+
     exp = load_experiment(experiment, overrides)
     check_water_in_view(exp)
     variant = init_backend(variant or exp["variant"])
@@ -42,9 +44,13 @@ def run_render(experiment, out, overrides=None, variant=None, cache=None) -> dic
     write_exr(out / "reference.exr", ref.image, ref.provenance)
     write_png(out / "reference.png", ref.image)
     save_shader_inputs(inputs, out / "inputs")
-    summary = {"experiment": exp["name"], "variant": variant, "reference": ref.provenance,
-               "timings": timings,
-               "outputs": sorted(str(p.relative_to(out)) for p in out.rglob("*") if p.is_file())}
+    summary = {
+        "experiment": exp["name"],
+        "variant": variant,
+        "reference": ref.provenance,
+        "timings": timings,
+        "outputs": sorted(str(p.relative_to(out)) for p in out.rglob("*") if p.is_file()),
+    }
     write_json(out / "summary.json", summary)
     _log(f"render: wrote {out}")
     return summary
@@ -60,11 +66,12 @@ def save_shader_inputs(inputs, folder: Path) -> None:
     write_exr(folder / "refl_world_y.exr", np.repeat(inputs.refl_world_y[..., None], 3, -1))
     write_exr(folder / "refl_texture.exr", inputs.refl_texture)
     f = inputs.cubemap.shape[1]
-    write_exr(folder / "cubemap_cross.exr", inputs.cubemap.transpose(1, 0, 2, 3).reshape(f, 6 * f, 3))
+    write_exr(
+        folder / "cubemap_cross.exr", inputs.cubemap.transpose(1, 0, 2, 3).reshape(f, 6 * f, 3)
+    )
     lut = np.zeros((1, len(inputs.fresnel_lut), 3), np.float32)
     lut[0, :, :2] = inputs.fresnel_lut
     write_exr(folder / "fresnel_lut.exr", lut)
-
 
 
 def load_scene_data(exp, variant, cache=None):
@@ -73,13 +80,18 @@ def load_scene_data(exp, variant, cache=None):
     from .scene.shader_inputs import load_or_build_shader_inputs
 
     from ._progress import Stages
-    from .scene.baseline_inputs import inputs_for_shader   # e.g. the baseline's screen buffers
+    from .scene.baseline_inputs import inputs_for_shader  # e.g. the baseline's screen buffers
 
     st = Stages(log=_log)
     spp = exp["reference.spp"]
-    with st.stage("reference_s", f"reference: {exp['resolution'][0]}x{exp['resolution'][1]}, "
-                  + ("automatic spp (pilot, then final passes)" if spp == "auto" else f"{spp} spp")):
-        ref = load_or_render(exp, variant, cache=cache, progress=st.counter("  reference passes"), log=_log)
+    with st.stage(
+        "reference_s",
+        f"reference: {exp['resolution'][0]}x{exp['resolution'][1]}, "
+        + ("automatic spp (pilot, then final passes)" if spp == "auto" else f"{spp} spp"),
+    ):
+        ref = load_or_render(
+            exp, variant, cache=cache, progress=st.counter("  reference passes"), log=_log
+        )
     with st.stage("inputs_s", "shader inputs"):
         inputs = load_or_build_shader_inputs(exp, variant, cache=cache, log=_log, progress=st)
         inputs = inputs_for_shader(exp, inputs, exp["fit.shader"], variant, cache=cache, log=_log)
@@ -101,8 +113,9 @@ def run_preview(experiment, out, overrides=None, variant=None, cache=None) -> di
     timings = {"setup_s": setup_s, **timings}
     w, h = exp["resolution"]
     t0 = time.perf_counter()
-    model = ShaderModel.from_experiment(exp, inputs, ref.image, backend=drjit_backend(variant),
-                                        resolution=(w, h))
+    model = ShaderModel.from_experiment(
+        exp, inputs, ref.image, backend=drjit_backend(variant), resolution=(w, h)
+    )
     constants = constants_from_experiment(exp)
     timings["model_s"] = time.perf_counter() - t0
     t0 = time.perf_counter()
@@ -114,37 +127,72 @@ def run_preview(experiment, out, overrides=None, variant=None, cache=None) -> di
     write_exr(out / "port.exr", img, {"shader": model.shader, "constants": constants.to_dict()})
     write_png(out / "reference.png", ref.image)
     write_png(out / "port.png", img)
-    comparison_figure(out / "preview.png", {"reference": ref.image, "port (start constants)": img},
-                      {"port (start constants)": err}, model.mask, title=f"{exp['name']}: {model.shader}")
+    comparison_figure(
+        out / "preview.png",
+        {"reference": ref.image, "port (start constants)": img},
+        {"port (start constants)": err},
+        model.mask,
+        title=f"{exp['name']}: {model.shader}",
+    )
     diagnostics_figure(out / "diagnostics.png", diag.maps, model.mask, title="port diagnostics")
     timings["figures_s"] = time.perf_counter() - t0
     timings["total_s"] = time.perf_counter() - t_start
-    summary = {"experiment": exp["name"], "shader": model.shader, "variant": variant,
-               "constants": constants.to_dict(), "error": err, "water_pixels": int(model.mask.sum()),
-               "reference": {"spp": ref.spp, "noise": ref.noise, "path": str(ref.path)},
-               "diagnostics": diag.summary(model.mask), "timings": timings, "sun": _sun(exp)}
+    summary = {
+        "experiment": exp["name"],
+        "shader": model.shader,
+        "variant": variant,
+        "constants": constants.to_dict(),
+        "error": err,
+        "water_pixels": int(model.mask.sum()),
+        "reference": {"spp": ref.spp, "noise": ref.noise, "path": str(ref.path)},
+        "diagnostics": diag.summary(model.mask),
+        "timings": timings,
+        "sun": _sun(exp),
+    }
     write_json(out / "preview.json", summary)
-    _log(f"preview: RMSE {err['rmse']:.4f}, FLIP {err['flip']:.4f} on {summary['water_pixels']} water "
-         f"pixels; wrote {out}")
+    _log(
+        f"preview: RMSE {err['rmse']:.4f}, FLIP {err['flip']:.4f} on {summary['water_pixels']} water "
+        f"pixels; wrote {out}"
+    )
     return summary
 
 
-def run_tradeoff(experiments, out, overrides=None, variant=None, tolerance=None, scheduler=None,
-                 workers=None) -> dict:
+def run_tradeoff(
+    experiments, out, overrides=None, variant=None, tolerance=None, scheduler=None, workers=None
+) -> dict:
     """``study tradeoff``: the speed-versus-accuracy study over ``experiments`` on the sweep engine
     (``study.studies.tradeoff``); tables, ``pareto.png``, ``report.md`` and shaders in ``out``."""
     from .studies.tradeoff import run_tradeoff as run
-    return run(list(experiments), out, overrides, scheduler=scheduler, workers=workers,
-               tolerance=tolerance, variant=variant or "llvm_ad_rgb", log=_log)
+
+    return run(
+        list(experiments),
+        out,
+        overrides,
+        scheduler=scheduler,
+        workers=workers,
+        tolerance=tolerance,
+        variant=variant or "llvm_ad_rgb",
+        log=_log,
+    )
 
 
-def run_stability(experiments, out, overrides=None, variant=None, scheduler=None, workers=None,
-                  **options) -> dict:
+def run_stability(
+    experiments, out, overrides=None, variant=None, scheduler=None, workers=None, **options
+) -> dict:
     """``study stability``: solvers from many starts, which residual, reference noise
     (``study.studies.stability``); tables, charts and ``stability.md`` in ``out``."""
     from .studies.stability import run_stability as run
-    return run(list(experiments), out, overrides, scheduler=scheduler, workers=workers,
-               variant=variant or "llvm_ad_rgb", log=_log, **options)
+
+    return run(
+        list(experiments),
+        out,
+        overrides,
+        scheduler=scheduler,
+        workers=workers,
+        variant=variant or "llvm_ad_rgb",
+        log=_log,
+        **options,
+    )
 
 
 def run_export(constants_json, out) -> list:
@@ -154,7 +202,9 @@ def run_export(constants_json, out) -> list:
     constants = load_constants_json(constants_json)
     out = Path(out)
     paths = export_shaders(constants, out / "shaders")
-    _log(f"export: wrote {len(paths)} shaders (compiled with glslangValidator) to {out / 'shaders'}")
+    _log(
+        f"export: wrote {len(paths)} shaders (compiled with glslangValidator) to {out / 'shaders'}"
+    )
     return paths
 
 
@@ -171,6 +221,7 @@ def run_calibrate(experiment, out, overrides=None, variant=None, solver=None, ca
     from .report.calibration import write_report
 
     from .fit.solvers import SOLVERS
+
     if solver is not None and solver not in SOLVERS:
         raise ValueError(f"unknown solver {solver!r}; choose one of {', '.join(SOLVERS)}")
     t_start = time.perf_counter()
@@ -182,24 +233,41 @@ def run_calibrate(experiment, out, overrides=None, variant=None, solver=None, ca
     backend = drjit_backend(variant)
     start = constants_from_experiment(exp)
     with timed(timings, "model_s"):
-        model = ShaderModel.from_experiment(exp, inputs, ref.image, backend=backend, stderr_full=ref.stderr)
+        model = ShaderModel.from_experiment(
+            exp, inputs, ref.image, backend=backend, stderr_full=ref.stderr
+        )
         halves = half_models(exp, inputs, ref.image, backend=backend)
         check = halves or texture_half_models(exp, inputs, ref.image, backend=backend)
-    _log(f"calibrate: fitting {exp['fit.parameters']} of {model.shader} with {solver} on "
-         f"{int(model.mask.sum())} water pixels at {exp['fit.resolution'][0]}x{exp['fit.resolution'][1]}")
+    _log(
+        f"calibrate: fitting {exp['fit.parameters']} of {model.shader} with {solver} on "
+        f"{int(model.mask.sum())} water pixels at {exp['fit.resolution'][0]}x{exp['fit.resolution'][1]}"
+    )
     with timed(timings, "fit_s"):
-        cal = calibrate_model(model, start, exp["fit.parameters"], solver, exp["fit.max_steps"],
-                              frozen_by_scene=scene_frozen(exp), halves=halves, scan_basins=True,
-                              basin_check=check)
+        cal = calibrate_model(
+            model,
+            start,
+            exp["fit.parameters"],
+            solver,
+            exp["fit.max_steps"],
+            frozen_by_scene=scene_frozen(exp),
+            halves=halves,
+            scan_basins=True,
+            basin_check=check,
+        )
     with timed(timings, "evaluate_s"):
         w, h = exp["resolution"]
-        full = ShaderModel.from_experiment(exp, inputs, ref.image, backend=backend, resolution=(w, h))
+        full = ShaderModel.from_experiment(
+            exp, inputs, ref.image, backend=backend, resolution=(w, h)
+        )
         img0, _ = full.render(start)
         img1, diag1 = full.render(cal.fitted)
         e0, e1 = errors(ref.image, img0, full.mask), errors(ref.image, img1, full.mask)
         fitted_names = [n for n, p in cal.parameters.items() if p["status"] in ("fitted", "bound")]
-        parsimony = {**information_criteria(model.residual(cal.fitted), len(fitted_names)),
-                     "fitted": fitted_names, "defines": list(model.variant.defines)}
+        parsimony = {
+            **information_criteria(model.residual(cal.fitted), len(fitted_names)),
+            "fitted": fitted_names,
+            "defines": list(model.variant.defines),
+        }
     with timed(timings, "export_s"):
         _log("calibrate: exporting and compiling the shaders")
         export_shaders(cal.fitted, out / "shaders")
@@ -208,40 +276,68 @@ def run_calibrate(experiment, out, overrides=None, variant=None, solver=None, ca
         gl = gl_check(model.shader, inputs, cal.fitted, out / "shaders")
     t_figures = time.perf_counter()
     figs = {"comparison": "comparison.png", "diagnostics": "diagnostics.png", "loss": "loss.png"}
-    comparison_figure(out / figs["comparison"], {"reference": ref.image, "default": img0, "fitted": img1},
-                      {"default": e0, "fitted": e1}, full.mask, title=f"{exp['name']}: {model.shader}")
-    diagnostics_figure(out / figs["diagnostics"], diag1.maps, full.mask, title="diagnostics, fitted constants")
+    comparison_figure(
+        out / figs["comparison"],
+        {"reference": ref.image, "default": img0, "fitted": img1},
+        {"default": e0, "fitted": e1},
+        full.mask,
+        title=f"{exp['name']}: {model.shader}",
+    )
+    diagnostics_figure(
+        out / figs["diagnostics"], diag1.maps, full.mask, title="diagnostics, fitted constants"
+    )
     loss_figure(out / figs["loss"], {solver: cal.losses}, title="loss at each evaluation")
     write_exr(out / "fitted.exr", img1, {"constants": cal.fitted.to_dict()})
     write_exr(out / "default.exr", img0, {"constants": start.to_dict()})
     write_exr(out / "reference.exr", ref.image, ref.provenance)
     timings["figures_s"] = time.perf_counter() - t_figures
-    timings["total_s"] = time.perf_counter() - t_start   # up to the report (written last)
+    timings["total_s"] = time.perf_counter() - t_start  # up to the report (written last)
     fs = cal.fit_summary
     summary = {
-        "experiment": exp["name"], "shader": model.shader, "variant": variant,
-        "fit_resolution": exp["fit.resolution"], "resolution": exp["resolution"],
-        "parameters": cal.parameters, "constants": cal.fitted.to_dict(),
-        "error": {"rmse": {"default": e0["rmse"], "fitted": e1["rmse"]},
-                  "flip": {"default": e0["flip"], "fitted": e1["flip"]}},
-        "solver": solver, "iterations": fs.get("iterations", 0), "converged": fs.get("converged", False),
-        "message": fs.get("message", ""), "fit": fs, "identifiability": cal.identifiability,
-        "step_sweep": cal.sweep, "timings": timings,
-        "reference": {"spp": ref.spp, "noise": ref.noise, "path": str(ref.path), "key": ref.provenance["key"]},
-        "diagnostics": diag1.summary(full.mask), "gl_check": gl, "sun": _sun(exp),
+        "experiment": exp["name"],
+        "shader": model.shader,
+        "variant": variant,
+        "fit_resolution": exp["fit.resolution"],
+        "resolution": exp["resolution"],
+        "parameters": cal.parameters,
+        "constants": cal.fitted.to_dict(),
+        "error": {
+            "rmse": {"default": e0["rmse"], "fitted": e1["rmse"]},
+            "flip": {"default": e0["flip"], "fitted": e1["flip"]},
+        },
+        "solver": solver,
+        "iterations": fs.get("iterations", 0),
+        "converged": fs.get("converged", False),
+        "message": fs.get("message", ""),
+        "fit": fs,
+        "identifiability": cal.identifiability,
+        "step_sweep": cal.sweep,
+        "timings": timings,
+        "reference": {
+            "spp": ref.spp,
+            "noise": ref.noise,
+            "path": str(ref.path),
+            "key": ref.provenance["key"],
+        },
+        "diagnostics": diag1.summary(full.mask),
+        "gl_check": gl,
+        "sun": _sun(exp),
         # constant count and information criteria at the fit resolution (study._metrics)
         "parsimony": parsimony,
     }
     write_json(out / "constants.json", _jsonable(summary))
     write_report(out, _jsonable(summary), figs)
-    _log(f"calibrate: RMSE {e0['rmse']:.4f} -> {e1['rmse']:.4f}, FLIP {e0['flip']:.4f} -> {e1['flip']:.4f}; "
-         f"wrote {out}")
+    _log(
+        f"calibrate: RMSE {e0['rmse']:.4f} -> {e1['rmse']:.4f}, FLIP {e0['flip']:.4f} -> {e1['flip']:.4f}; "
+        f"wrote {out}"
+    )
     return summary
 
 
 def _sun(exp) -> dict:
     """The shader's sun (explicit, or found in the sky file: direction, solid angle, radiance)."""
     from .scene.user_scene import sun_summary
+
     return sun_summary(exp)
 
 
@@ -263,6 +359,7 @@ def _jsonable(x):
 
 # ---- several scenes: the joint fit and leave-one-scene-out -----------------------------------
 
+
 def _scenes(experiments, overrides, variant, cache):
     """Load every experiment (same overrides for all), its reference, inputs and fit model.
     Returns (variant, list of dicts: name, exp, ref, inputs, model, frozen)."""
@@ -282,8 +379,17 @@ def _scenes(experiments, overrides, variant, cache):
             name = f"{name}#{seen[name]}"
         ref, inputs, _ = load_scene_data(exp, variant, cache)
         model = ShaderModel.from_experiment(exp, inputs, ref.image, backend=drjit_backend(variant))
-        scenes.append({"name": name, "path": str(path), "exp": exp, "ref": ref, "inputs": inputs,
-                       "model": model, "frozen": scene_frozen(exp)})
+        scenes.append(
+            {
+                "name": name,
+                "path": str(path),
+                "exp": exp,
+                "ref": ref,
+                "inputs": inputs,
+                "model": model,
+                "frozen": scene_frozen(exp),
+            }
+        )
     return variant, scenes
 
 
@@ -298,16 +404,23 @@ def _evaluator(scenes, variant):
     def evaluate(i, constants):
         s = scenes[i]
         if i not in full:
-            full[i] = ShaderModel.from_experiment(s["exp"], s["inputs"], s["ref"].image,
-                                                  backend=drjit_backend(variant),
-                                                  resolution=tuple(s["exp"]["resolution"]))
+            full[i] = ShaderModel.from_experiment(
+                s["exp"],
+                s["inputs"],
+                s["ref"].image,
+                backend=drjit_backend(variant),
+                resolution=tuple(s["exp"]["resolution"]),
+            )
         img, _ = full[i].render(constants)
         e = errors(s["ref"].image, img, full[i].mask)
         return {"rmse": float(e["rmse"]), "flip": float(e["flip"])}
+
     return evaluate
 
 
-def run_calibrate_joint(experiments, out, overrides=None, variant=None, solver=None, cache=None) -> dict:
+def run_calibrate_joint(
+    experiments, out, overrides=None, variant=None, solver=None, cache=None
+) -> dict:
     """``study calibrate A.toml B.toml ...``: one constants block fitted on all scenes (each
     weighted equally), exported and GL-checked like a single fit; constants.json and report.md
     with every scene's error under the start and the joint constants. The first experiment
@@ -328,23 +441,44 @@ def _joint_fit(scenes, variant, out: Path, solver):
     solver = solver or first["fit.solver"]
     start = constants_from_experiment(first)
     t0 = time.perf_counter()
-    cal = joint_calibrate([s["model"] for s in scenes], start, first["fit.parameters"], solver,
-                          first["fit.max_steps"], [s["frozen"] for s in scenes], [s["name"] for s in scenes])
+    cal = joint_calibrate(
+        [s["model"] for s in scenes],
+        start,
+        first["fit.parameters"],
+        solver,
+        first["fit.max_steps"],
+        [s["frozen"] for s in scenes],
+        [s["name"] for s in scenes],
+    )
     fit_s = time.perf_counter() - t0
     evaluate = _evaluator(scenes, variant)
-    per_scene = {s["name"]: {"default": evaluate(i, start), "fitted": evaluate(i, cal.fitted)}
-                 for i, s in enumerate(scenes)}
+    per_scene = {
+        s["name"]: {"default": evaluate(i, start), "fitted": evaluate(i, cal.fitted)}
+        for i, s in enumerate(scenes)
+    }
     export_shaders(cal.fitted, out / "shaders")
     gl = gl_check(scenes[0]["model"].shader, scenes[0]["inputs"], cal.fitted, out / "shaders")
     fs = cal.fit_summary
     weights = JointModel([s["model"] for s in scenes]).weights
-    summary = {"experiments": [s["path"] for s in scenes], "scenes": [s["name"] for s in scenes],
-               "shader": scenes[0]["model"].shader, "variant": variant, "joint": True,
-               "weights": {s["name"]: float(w) for s, w in zip(scenes, weights)},
-               "parameters": cal.parameters, "constants": cal.fitted.to_dict(), "error": per_scene,
-               "solver": solver, "iterations": fs.get("iterations", 0), "converged": fs.get("converged", False),
-               "message": fs.get("message", ""), "fit": fs, "identifiability": cal.identifiability,
-               "timings": {"fit_s": fit_s}, "gl_check": gl}
+    summary = {
+        "experiments": [s["path"] for s in scenes],
+        "scenes": [s["name"] for s in scenes],
+        "shader": scenes[0]["model"].shader,
+        "variant": variant,
+        "joint": True,
+        "weights": {s["name"]: float(w) for s, w in zip(scenes, weights)},
+        "parameters": cal.parameters,
+        "constants": cal.fitted.to_dict(),
+        "error": per_scene,
+        "solver": solver,
+        "iterations": fs.get("iterations", 0),
+        "converged": fs.get("converged", False),
+        "message": fs.get("message", ""),
+        "fit": fs,
+        "identifiability": cal.identifiability,
+        "timings": {"fit_s": fit_s},
+        "gl_check": gl,
+    }
     write_json(out / "constants.json", _jsonable(summary))
     write_joint_report(out, _jsonable(summary))
     _log(f"calibrate (joint, {len(scenes)} scenes): wrote {out}")
@@ -366,23 +500,52 @@ def run_generalise(experiments, out, overrides=None, variant=None, solver=None, 
     out = Path(out)
     joint, cal, evaluate = _joint_fit(scenes, variant, out, solver)
     first = scenes[0]["exp"]
-    rows = leave_one_out([s["model"] for s in scenes], constants_from_experiment(first),
-                         first["fit.parameters"], joint["solver"], first["fit.max_steps"], evaluate,
-                         [s["frozen"] for s in scenes], [s["name"] for s in scenes], log=_log)
+    rows = leave_one_out(
+        [s["model"] for s in scenes],
+        constants_from_experiment(first),
+        first["fit.parameters"],
+        joint["solver"],
+        first["fit.max_steps"],
+        evaluate,
+        [s["frozen"] for s in scenes],
+        [s["name"] for s in scenes],
+        log=_log,
+    )
     uni = universality({r["scene"]: r["own_calibration"] for r in rows}, cal)
-    table = [{"scene": r["scene"], "seed": r["seed"], "others": r["others"], "own": r["own"],
-              "own_constants": {n: p["fitted"] for n, p in r["own_calibration"].parameters.items()},
-              "own_status": {n: p["status"] for n, p in r["own_calibration"].parameters.items()}}
-             for r in rows]
-    summary = {"experiments": joint["experiments"], "scenes": joint["scenes"], "joint": joint,
-               "leave_one_out": table, "universality": uni}
+    table = [
+        {
+            "scene": r["scene"],
+            "seed": r["seed"],
+            "others": r["others"],
+            "own": r["own"],
+            "own_constants": {n: p["fitted"] for n, p in r["own_calibration"].parameters.items()},
+            "own_status": {n: p["status"] for n, p in r["own_calibration"].parameters.items()},
+        }
+        for r in rows
+    ]
+    summary = {
+        "experiments": joint["experiments"],
+        "scenes": joint["scenes"],
+        "joint": joint,
+        "leave_one_out": table,
+        "universality": uni,
+    }
     write_json(out / "generalise.json", _jsonable(summary))
     write_generalise_report(out, _jsonable(summary))
     _log(f"generalise: wrote {out / 'generalise.md'}")
     return summary
 
-def run_failures(experiments, out, overrides=None, variant=None, shader=None, constants_json=None,
-                 scheduler=None, workers=None) -> list:
+
+def run_failures(
+    experiments,
+    out,
+    overrides=None,
+    variant=None,
+    shader=None,
+    constants_json=None,
+    scheduler=None,
+    workers=None,
+) -> list:
     """``study failures``: the failure catalogue of each experiment, one sweep job per experiment
     (``study.studies.failures``): ``<out>/<name>/failures.png``, ``failures.parquet``,
     ``report.md``."""
@@ -390,5 +553,14 @@ def run_failures(experiments, out, overrides=None, variant=None, shader=None, co
     from .studies.failures import run_failures as run
 
     constants = load_constants_json(constants_json) if constants_json else None
-    return run(list(experiments), out, overrides, variant=variant or "llvm_ad_rgb", shader=shader,
-               constants=constants, scheduler=scheduler, workers=workers, log=_log)
+    return run(
+        list(experiments),
+        out,
+        overrides,
+        variant=variant or "llvm_ad_rgb",
+        shader=shader,
+        constants=constants,
+        scheduler=scheduler,
+        workers=workers,
+        log=_log,
+    )

@@ -8,6 +8,7 @@
   pixel whose footprint also covers the pool wall is scored (the reference integrates the
   pixel footprint with a box filter, the shader shades the centre only).
 """
+
 from __future__ import annotations
 
 import numpy as np
@@ -21,7 +22,7 @@ def erode(mask: np.ndarray, r: int = 1) -> np.ndarray:
     p = np.pad(m, r, constant_values=False)
     for dy in range(-r, r + 1):
         for dx in range(-r, r + 1):
-            out &= p[r + dy:r + dy + h, r + dx:r + dx + w]
+            out &= p[r + dy : r + dy + h, r + dx : r + dx + w]
     return out
 
 
@@ -37,7 +38,9 @@ def downsample(img: np.ndarray, factor_y: int, factor_x: int) -> np.ndarray:
 def downsample_stderr(se: np.ndarray, factor_y: int, factor_x: int) -> np.ndarray:
     """The standard error of :func:`downsample`'s box mean of pixels with independent errors of
     standard error ``se`` (H, W, ...): ``sqrt(mean(se^2) / (factor_y * factor_x))``."""
-    return np.sqrt(downsample(np.square(se, dtype=np.float64), factor_y, factor_x) / (factor_y * factor_x))
+    return np.sqrt(
+        downsample(np.square(se, dtype=np.float64), factor_y, factor_x) / (factor_y * factor_x)
+    )
 
 
 def check_finite(name: str, img: np.ndarray, mask: np.ndarray | None = None) -> None:
@@ -58,7 +61,7 @@ def rmse(a: np.ndarray, b: np.ndarray, mask: np.ndarray) -> float:
     if not mask.any():
         raise ValueError("rmse: the water mask is empty; does the camera see the water?")
     d = (np.asarray(a, np.float64) - np.asarray(b, np.float64))[mask]
-    return float(np.sqrt(np.mean(d ** 2)))
+    return float(np.sqrt(np.mean(d**2)))
 
 
 def flip_map(reference: np.ndarray, test: np.ndarray) -> np.ndarray:
@@ -67,8 +70,9 @@ def flip_map(reference: np.ndarray, test: np.ndarray) -> np.ndarray:
 
     ref = np.ascontiguousarray(np.clip(reference, 0, 1), dtype=np.float32)
     tst = np.ascontiguousarray(np.clip(test, 0, 1), dtype=np.float32)
-    fmap, _, _ = flip_evaluator.evaluate(ref, tst, "LDR", inputsRGB=False, applyMagma=False,
-                                         computeMeanError=False)
+    fmap, _, _ = flip_evaluator.evaluate(
+        ref, tst, "LDR", inputsRGB=False, applyMagma=False, computeMeanError=False
+    )
     fmap = np.asarray(fmap, np.float32)
     return fmap[..., 0] if fmap.ndim == 3 else fmap
 
@@ -102,7 +106,15 @@ def information_criteria(residual: np.ndarray, k: int) -> dict:
     r = np.asarray(residual, dtype=np.float64).ravel()
     n = r.size
     if n <= k or not np.all(np.isfinite(r)):
-        raise ValueError(f"information criteria need a finite residual longer than k = {k} (got n = {n})")
+        raise ValueError(
+            f"information criteria need a finite residual longer than k = {k} (got n = {n})"
+        )
     rss = float(r @ r)
     ll = n * np.log(max(rss, 1e-300) / n)
-    return {"n": int(n), "k": int(k), "rss": rss, "aic": float(ll + 2 * k), "bic": float(ll + k * np.log(n))}
+    return {
+        "n": int(n),
+        "k": int(k),
+        "rss": rss,
+        "aic": float(ll + 2 * k),
+        "bic": float(ll + k * np.log(n)),
+    }

@@ -5,6 +5,7 @@ prints a line when each starts and ends, and keeps the seconds in ``timings`` (t
 timing table). ``stages.counter(label)`` returns a ``(done, total)`` callback that redraws
 one progress line (``label: 3/8``). ``Stages(quiet=True)`` times without printing.
 """
+
 from __future__ import annotations
 
 import contextlib
@@ -49,8 +50,13 @@ class Stages:
             if self.quiet:
                 return
             end = "\n" if done >= total else ""
-            print(f"\r{label}: {done}/{total} ({time.perf_counter() - t0:.1f} s)", end=end,
-                  file=sys.stderr, flush=True)
+            print(
+                f"\r{label}: {done}/{total} ({time.perf_counter() - t0:.1f} s)",
+                end=end,
+                file=sys.stderr,
+                flush=True,
+            )
+
         return report
 
 
@@ -64,8 +70,10 @@ def render_in_passes(mi, scene, sensor, spp: int, seed: int, progress=None, max_
     n = max(d for d in range(1, min(spp, max_passes) + 1) if spp % d == 0)
     acc = None
     for i in range(n):
-        img = np.array(mi.render(scene, sensor=sensor, spp=spp // n, seed=seed * max_passes + i),
-                       dtype=np.float32)
+        img = np.array(
+            mi.render(scene, sensor=sensor, spp=spp // n, seed=seed * max_passes + i),
+            dtype=np.float32,
+        )
         acc = img if acc is None else acc + img
         if progress:
             progress(i + 1, n)

@@ -1,4 +1,5 @@
 """Command line: ``study <command> ...``. Argument parsing only; the work is in ``study._jobs``."""
+
 from __future__ import annotations
 
 import argparse
@@ -7,59 +8,120 @@ import sys
 
 def _common(p: argparse.ArgumentParser, many: bool = False) -> None:
     if many:
-        p.add_argument("experiment", nargs="+", help="experiment TOML file(s) (see experiments/README.md)")
+        p.add_argument(
+            "experiment", nargs="+", help="experiment TOML file(s) (see experiments/README.md)"
+        )
     else:
         p.add_argument("experiment", help="experiment TOML file (see experiments/README.md)")
     p.add_argument("--out", required=True, help="output folder (created if missing)")
-    p.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE",
-                   help="override an experiment key, e.g. --set water.ior=1.33 (repeatable)")
-    p.add_argument("--variant", choices=["llvm_ad_rgb", "cuda_ad_rgb"], default=None,
-                   help="Mitsuba variant (default: the experiment's, normally llvm_ad_rgb)")
+    p.add_argument(
+        "--set",
+        dest="overrides",
+        action="append",
+        default=[],
+        metavar="KEY=VALUE",
+        help="override an experiment key, e.g. --set water.ior=1.33 (repeatable)",
+    )
+    p.add_argument(
+        "--variant",
+        choices=["llvm_ad_rgb", "cuda_ad_rgb"],
+        default=None,
+        help="Mitsuba variant (default: the experiment's, normally llvm_ad_rgb)",
+    )
 
 
 def _sweep_common(p: argparse.ArgumentParser, experiments_help: str) -> None:
     """Arguments of the commands that run a Dask sweep over several experiments."""
     p.add_argument("experiments", nargs="+", metavar="EXPERIMENT", help=experiments_help)
-    p.add_argument("--out", required=True, help="output folder (created if missing; a re-run resumes)")
-    p.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE",
-                   help="override a key of every experiment (repeatable)")
-    p.add_argument("--variant", choices=["llvm_ad_rgb", "cuda_ad_rgb"], default="llvm_ad_rgb",
-                   help="Mitsuba variant of the workers")
-    p.add_argument("--scheduler", default=None, metavar="ADDRESS",
-                   help="Dask scheduler address (default: $STUDY_SCHEDULER, else a local cluster)")
-    p.add_argument("--workers", type=int, default=None,
-                   help="local cluster worker processes (default: one per core)")
+    p.add_argument(
+        "--out", required=True, help="output folder (created if missing; a re-run resumes)"
+    )
+    p.add_argument(
+        "--set",
+        dest="overrides",
+        action="append",
+        default=[],
+        metavar="KEY=VALUE",
+        help="override a key of every experiment (repeatable)",
+    )
+    p.add_argument(
+        "--variant",
+        choices=["llvm_ad_rgb", "cuda_ad_rgb"],
+        default="llvm_ad_rgb",
+        help="Mitsuba variant of the workers",
+    )
+    p.add_argument(
+        "--scheduler",
+        default=None,
+        metavar="ADDRESS",
+        help="Dask scheduler address (default: $STUDY_SCHEDULER, else a local cluster)",
+    )
+    p.add_argument(
+        "--workers",
+        type=int,
+        default=None,
+        help="local cluster worker processes (default: one per core)",
+    )
 
 
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
-        prog="study", description="Calibrate a real-time GLSL water shader against Mitsuba 3 references.")
+        prog="study",
+        description="Calibrate a real-time GLSL water shader against Mitsuba 3 references.",
+    )
     sub = parser.add_subparsers(dest="command", required=True)
-    p = sub.add_parser("render", help="render (or reuse the cached) reference and the shader inputs")
+    p = sub.add_parser(
+        "render", help="render (or reuse the cached) reference and the shader inputs"
+    )
     _common(p)
     p = sub.add_parser("preview", help="the port with default constants next to the reference")
     _common(p)
-    p = sub.add_parser("calibrate", help="reference, fit, export and report (the main job); several "
-                       "experiments: one constants block fitted on all of them (joint fit)")
+    p = sub.add_parser(
+        "calibrate",
+        help="reference, fit, export and report (the main job); several "
+        "experiments: one constants block fitted on all of them (joint fit)",
+    )
     _common(p, many=True)
     p.add_argument("--solver", default=None, help="override fit.solver")
-    p = sub.add_parser("generalise", help="joint fit over several experiments and leave-one-scene-out "
-                       "validation (generalise.md)")
+    p = sub.add_parser(
+        "generalise",
+        help="joint fit over several experiments and leave-one-scene-out "
+        "validation (generalise.md)",
+    )
     _common(p, many=True)
     p.add_argument("--solver", default=None, help="override fit.solver")
-    p = sub.add_parser("tradeoff", help="speed against accuracy: variants x step schedules, refitted, "
-                       "costed and charted with Pareto fronts (a Dask sweep)")
-    _sweep_common(p, "experiment TOML file(s); each experiment's [tradeoff] table sets its variants "
-                  "and grid, the first's sets the tolerance")
-    p.add_argument("--tolerance", type=float, default=None,
-                   help="recommend the cheapest point within this fraction of the best FLIP "
-                   "(default: tradeoff.tolerance, 0.02)")
-    p = sub.add_parser("stability", help="where the fit fails: solvers from many starts, which residual, "
-                       "reference and texture noise (Dask sweeps; stability.md)")
+    p = sub.add_parser(
+        "tradeoff",
+        help="speed against accuracy: variants x step schedules, refitted, "
+        "costed and charted with Pareto fronts (a Dask sweep)",
+    )
+    _sweep_common(
+        p,
+        "experiment TOML file(s); each experiment's [tradeoff] table sets its variants "
+        "and grid, the first's sets the tolerance",
+    )
+    p.add_argument(
+        "--tolerance",
+        type=float,
+        default=None,
+        help="recommend the cheapest point within this fraction of the best FLIP "
+        "(default: tradeoff.tolerance, 0.02)",
+    )
+    p = sub.add_parser(
+        "stability",
+        help="where the fit fails: solvers from many starts, which residual, "
+        "reference and texture noise (Dask sweeps; stability.md)",
+    )
     _sweep_common(p, "experiment TOML file(s)")
-    p.add_argument("--phases", nargs="+", default=["multistart", "loss", "noise"],
-                   help="multistart, loss, noise (default: all)")
-    p.add_argument("--starts", type=int, default=16, help="Latin-hypercube starts per scene and solver")
+    p.add_argument(
+        "--phases",
+        nargs="+",
+        default=["multistart", "loss", "noise"],
+        help="multistart, loss, noise (default: all)",
+    )
+    p.add_argument(
+        "--starts", type=int, default=16, help="Latin-hypercube starts per scene and solver"
+    )
     p.add_argument("--solvers", nargs="+", default=None, help="default: all six")
     p.add_argument("--adam-lrs", nargs="+", type=float, default=[0.02, 0.05, 0.1])
     p.add_argument("--max-steps", type=int, default=100, help="step cap (Nelder-Mead: 4x)")
@@ -67,26 +129,61 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--noise-fixed-spp", type=int, default=1024)
     p.add_argument("--noise-seeds", type=int, default=3)
     p.add_argument("--noise-resolution", type=int, default=96)
-    p.add_argument("--noise-inputs", nargs="+", default=["reference", "texture"],
-                   choices=["reference", "texture"], help="which renders the noise phase varies")
-    p = sub.add_parser("failures", help="classify every water pixel by where the shader's method "
-                       "fails; class maps beside FLIP maps, a table per class")
+    p.add_argument(
+        "--noise-inputs",
+        nargs="+",
+        default=["reference", "texture"],
+        choices=["reference", "texture"],
+        help="which renders the noise phase varies",
+    )
+    p = sub.add_parser(
+        "failures",
+        help="classify every water pixel by where the shader's method "
+        "fails; class maps beside FLIP maps, a table per class",
+    )
     p.add_argument("experiments", nargs="+", metavar="EXPERIMENT", help="experiment TOML files")
     p.add_argument("--out", required=True, help="output folder (created if missing)")
-    p.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE",
-                   help="override an experiment key in every experiment (repeatable)")
-    p.add_argument("--variant", choices=["llvm_ad_rgb", "cuda_ad_rgb"], default=None,
-                   help="Mitsuba variant (default: each experiment's)")
-    p.add_argument("--shader", default=None, help="shader variant (default: each experiment's fit.shader)")
-    p.add_argument("--constants", default=None, help="constants JSON (e.g. a calibrate's "
-                   "constants.json); default: each experiment's start constants")
-    p.add_argument("--scheduler", default=None, metavar="ADDRESS",
-                   help="Dask scheduler address (default: $STUDY_SCHEDULER, else a local cluster)")
-    p.add_argument("--workers", type=int, default=None,
-                   help="local cluster worker processes (default: one per core)")
+    p.add_argument(
+        "--set",
+        dest="overrides",
+        action="append",
+        default=[],
+        metavar="KEY=VALUE",
+        help="override an experiment key in every experiment (repeatable)",
+    )
+    p.add_argument(
+        "--variant",
+        choices=["llvm_ad_rgb", "cuda_ad_rgb"],
+        default=None,
+        help="Mitsuba variant (default: each experiment's)",
+    )
+    p.add_argument(
+        "--shader", default=None, help="shader variant (default: each experiment's fit.shader)"
+    )
+    p.add_argument(
+        "--constants",
+        default=None,
+        help="constants JSON (e.g. a calibrate's "
+        "constants.json); default: each experiment's start constants",
+    )
+    p.add_argument(
+        "--scheduler",
+        default=None,
+        metavar="ADDRESS",
+        help="Dask scheduler address (default: $STUDY_SCHEDULER, else a local cluster)",
+    )
+    p.add_argument(
+        "--workers",
+        type=int,
+        default=None,
+        help="local cluster worker processes (default: one per core)",
+    )
     p = sub.add_parser("export", help="write the shaders with constants from a JSON file")
-    p.add_argument("constants", help="constants.json written by `study calibrate`, or a flat JSON "
-                   "object of constant name -> value")
+    p.add_argument(
+        "constants",
+        help="constants.json written by `study calibrate`, or a flat JSON "
+        "object of constant name -> value",
+    )
     p.add_argument("--out", required=True, help="output folder")
     return parser
 
@@ -104,27 +201,60 @@ def main(argv=None) -> int:
         elif args.command == "preview":
             _jobs.run_preview(args.experiment, args.out, args.overrides, args.variant)
         elif args.command == "calibrate" and len(args.experiment) == 1:
-            _jobs.run_calibrate(args.experiment[0], args.out, args.overrides, args.variant, solver=args.solver)
+            _jobs.run_calibrate(
+                args.experiment[0], args.out, args.overrides, args.variant, solver=args.solver
+            )
         elif args.command == "calibrate":
-            _jobs.run_calibrate_joint(args.experiment, args.out, args.overrides, args.variant, solver=args.solver)
+            _jobs.run_calibrate_joint(
+                args.experiment, args.out, args.overrides, args.variant, solver=args.solver
+            )
         elif args.command == "generalise":
-            _jobs.run_generalise(args.experiment, args.out, args.overrides, args.variant, solver=args.solver)
+            _jobs.run_generalise(
+                args.experiment, args.out, args.overrides, args.variant, solver=args.solver
+            )
         elif args.command == "tradeoff":
-            _jobs.run_tradeoff(args.experiments, args.out, args.overrides, args.variant,
-                               tolerance=args.tolerance, scheduler=args.scheduler, workers=args.workers)
+            _jobs.run_tradeoff(
+                args.experiments,
+                args.out,
+                args.overrides,
+                args.variant,
+                tolerance=args.tolerance,
+                scheduler=args.scheduler,
+                workers=args.workers,
+            )
         elif args.command == "stability":
             from .studies.stability import SOLVERS
-            _jobs.run_stability(args.experiments, args.out, args.overrides, args.variant,
-                                scheduler=args.scheduler, workers=args.workers, phases=args.phases,
-                                starts=args.starts, solvers=args.solvers or SOLVERS, adam_lrs=args.adam_lrs,
-                                max_steps=args.max_steps, nm_steps=4 * args.max_steps,
-                                noise_spp=args.noise_spp, noise_fixed_spp=args.noise_fixed_spp,
-                                noise_seeds=args.noise_seeds, noise_resolution=args.noise_resolution,
-                                noise_inputs=args.noise_inputs)
+
+            _jobs.run_stability(
+                args.experiments,
+                args.out,
+                args.overrides,
+                args.variant,
+                scheduler=args.scheduler,
+                workers=args.workers,
+                phases=args.phases,
+                starts=args.starts,
+                solvers=args.solvers or SOLVERS,
+                adam_lrs=args.adam_lrs,
+                max_steps=args.max_steps,
+                nm_steps=4 * args.max_steps,
+                noise_spp=args.noise_spp,
+                noise_fixed_spp=args.noise_fixed_spp,
+                noise_seeds=args.noise_seeds,
+                noise_resolution=args.noise_resolution,
+                noise_inputs=args.noise_inputs,
+            )
         elif args.command == "failures":
-            _jobs.run_failures(args.experiments, args.out, args.overrides, args.variant,
-                               shader=args.shader, constants_json=args.constants,
-                               scheduler=args.scheduler, workers=args.workers)
+            _jobs.run_failures(
+                args.experiments,
+                args.out,
+                args.overrides,
+                args.variant,
+                shader=args.shader,
+                constants_json=args.constants,
+                scheduler=args.scheduler,
+                workers=args.workers,
+            )
         elif args.command == "export":
             _jobs.run_export(args.constants, args.out)
     except (ExperimentError, BackendError, FileNotFoundError, ValueError) as exc:
@@ -134,8 +264,11 @@ def main(argv=None) -> int:
         print(f"study {args.command}: error: {exc.strerror}", file=sys.stderr)
         return 1
     except KeyboardInterrupt:
-        print(f"\nstudy {args.command}: interrupted; finished results are kept, and the same "
-              "command resumes from them", file=sys.stderr)
+        print(
+            f"\nstudy {args.command}: interrupted; finished results are kept, and the same "
+            "command resumes from them",
+            file=sys.stderr,
+        )
         return 130
     return 0
 

@@ -13,8 +13,10 @@ FAILURES = Path(__file__).parent / "_failures"
 def mi():
     """Mitsuba with the default LLVM variant (after the libLLVM check)."""
     from study import init_backend
+
     init_backend("llvm_ad_rgb")
     import mitsuba
+
     return mitsuba
 
 
@@ -44,16 +46,28 @@ def _private_cache(tmp_path_factory, monkeypatch, _module_cache):
 def small_experiment(**overrides):
     """The default experiment, shrunk for tests: 32x32, few spp, coarse meshes and textures."""
     from study import load_experiment
-    base = {"resolution": "[32, 32]", "fit.resolution": "[32, 32]", "reference.spp": "16",
-            "reference.water_mesh": "96", "reference.texture_size": "64", "reference.texture_spp": "8",
-            "reference.lighting_size": "32", "reference.wall_spp": "8", "waves.normal_map_size": "64"}
+
+    base = {
+        "resolution": "[32, 32]",
+        "fit.resolution": "[32, 32]",
+        "reference.spp": "16",
+        "reference.water_mesh": "96",
+        "reference.texture_size": "64",
+        "reference.texture_spp": "8",
+        "reference.lighting_size": "32",
+        "reference.wall_spp": "8",
+        "waves.normal_map_size": "64",
+    }
     base.update({k: str(v) for k, v in overrides.items()})
-    return load_experiment(REPO / "experiments" / "default.toml", [f"{k}={v}" for k, v in base.items()])
+    return load_experiment(
+        REPO / "experiments" / "default.toml", [f"{k}={v}" for k, v in base.items()]
+    )
 
 
 def save_failure(name: str, **images) -> Path:
     """Write actual / expected / error images of a failed comparison to tests/_failures/."""
     from study import write_exr
+
     FAILURES.mkdir(exist_ok=True)
     for key, img in images.items():
         write_exr(FAILURES / f"{name}.{key}.exr", img)
@@ -64,5 +78,7 @@ def pytest_terminal_summary(terminalreporter, exitstatus, config):
     """The random order's seed, also under ``-q``: a failure's order can be replayed."""
     seed = getattr(config.option, "randomly_seed", None)
     if seed is not None and config.pluginmanager.has_plugin("randomly"):
-        terminalreporter.write_line(f"test order: pytest-randomly seed {seed} "
-                                    f"(replay with -p randomly --randomly-seed={seed})")
+        terminalreporter.write_line(
+            f"test order: pytest-randomly seed {seed} "
+            f"(replay with -p randomly --randomly-seed={seed})"
+        )

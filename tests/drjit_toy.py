@@ -8,6 +8,7 @@ bilinearly with wrap-around. By construction ``amp`` and ``gain`` enter only as 
 (one flat direction), ``dead`` has no effect on the image (x < 2) and ``levels`` is piecewise
 constant (zero derivative almost everywhere). The residual is image(params) - image(truth).
 """
+
 from __future__ import annotations
 
 import math
@@ -22,12 +23,14 @@ TRUTH = {"amp": 0.8, "rate": 1.3, "shift": 0.15, "gain": 1.0, "dead": 0.5, "leve
 
 
 def toy_params() -> list[Param]:
-    return [Param("amp", 1.0, 1e-3, 10.0),
-            Param("rate", 1.0, 0.0, math.inf, scale=1.0),
-            Param("shift", 0.1, -1.0, 1.0, scale=0.1),
-            Param("gain", 1.0, 0.1, 10.0),
-            Param("dead", 0.4, 0.0, 1.0),
-            Param("levels", 2.0, 1.0, 10.0, scale=1.0, transform="linear", derivative_free=True)]
+    return [
+        Param("amp", 1.0, 1e-3, 10.0),
+        Param("rate", 1.0, 0.0, math.inf, scale=1.0),
+        Param("shift", 0.1, -1.0, 1.0, scale=0.1),
+        Param("gain", 1.0, 0.1, 10.0),
+        Param("dead", 0.4, 0.0, 1.0),
+        Param("levels", 2.0, 1.0, 10.0, scale=1.0, transform="linear", derivative_free=True),
+    ]
 
 
 class ToyModel:
@@ -41,29 +44,40 @@ class ToyModel:
         T = m.TensorXf if float32 else m.TensorXf64
         i, j = np.meshgrid(np.arange(16), np.arange(16), indexing="ij")
         tex = 0.6 + 0.3 * np.sin(2 * np.pi * i / 16) * np.cos(2 * np.pi * j / 16 + 0.4)
-        self.tex = Tex(T(tex[..., None].astype(np.float32 if float32 else np.float64)),
-                       filter_mode=dr.FilterMode.Linear, wrap_mode=dr.WrapMode.Repeat)
-        yy, xx = np.meshgrid((np.arange(height) + 0.5) / height, (np.arange(width) + 0.5) / width,
-                             indexing="ij")
+        self.tex = Tex(
+            T(tex[..., None].astype(np.float32 if float32 else np.float64)),
+            filter_mode=dr.FilterMode.Linear,
+            wrap_mode=dr.WrapMode.Repeat,
+        )
+        yy, xx = np.meshgrid(
+            (np.arange(height) + 0.5) / height, (np.arange(width) + 0.5) / width, indexing="ij"
+        )
         self.x, self.y = self.F(xx.ravel()), self.F(yy.ravel())
         self.nan_rate = None
         self.truth = dict(TRUTH if truth is None else truth)
         self.ref = None
         self.ref = self.image({k: self.F(v) for k, v in self.truth.items()})
         dr.eval(self.ref)
-        self.nan_rate = nan_rate     # the reference itself is always finite
+        self.nan_rate = nan_rate  # the reference itself is always finite
         self.m = height * width
 
     def image(self, v: dict):
         """Dr.Jit image (H*W,) from a dict of Dr.Jit scalars."""
         F = self.F
-        pos = m.Array2f64(self.x + v["shift"], self.y) if self.F is m.Float64 else \
-            m.Array2f(self.x + v["shift"], self.y)
+        pos = (
+            m.Array2f64(self.x + v["shift"], self.y)
+            if self.F is m.Float64
+            else m.Array2f(self.x + v["shift"], self.y)
+        )
         t = self.tex.eval(pos)[0]
-        img = v["amp"] * v["gain"] * dr.exp(-v["rate"] * self.x) * t \
-            + 0.02 * dr.floor(v["levels"]) * self.y + v["dead"] * dr.maximum(self.x - 2.0, 0.0) + 0.1
+        img = (
+            v["amp"] * v["gain"] * dr.exp(-v["rate"] * self.x) * t
+            + 0.02 * dr.floor(v["levels"]) * self.y
+            + v["dead"] * dr.maximum(self.x - 2.0, 0.0)
+            + 0.1
+        )
         if self.nan_rate is not None:
-            img = img + 1e-30 * dr.log(F(self.nan_rate) - v["rate"])   # NaN for rate > nan_rate
+            img = img + 1e-30 * dr.log(F(self.nan_rate) - v["rate"])  # NaN for rate > nan_rate
         return img if self.ref is None else img - self.ref
 
     def residual(self, values: dict) -> np.ndarray:
@@ -86,12 +100,19 @@ class ToyModel:
         return r, np.stack(cols, axis=1) if cols else np.zeros((len(r), 0))
 
     def loss_drjit(self, values: dict):
-        v = {k: (val if isinstance(val, dr.ArrayBase) else self.F(val)) for k, val in values.items()}
+        v = {
+            k: (val if isinstance(val, dr.ArrayBase) else self.F(val)) for k, val in values.items()
+        }
         v = {k: (self.F(val) if type(val) is not self.F else val) for k, val in v.items()}
         r = self.image(v)
         return 0.5 * dr.sum(r * r)
 
     def problem(self, with_adam_reverse=True) -> FitProblem:
-        return FitProblem(toy_params(), self.residual, self.residual_and_jacobian,
-                          loss_drjit=self.loss_drjit if with_adam_reverse else None,
-                          drjit_float=self.F, name="toy")
+        return FitProblem(
+            toy_params(),
+            self.residual,
+            self.residual_and_jacobian,
+            loss_drjit=self.loss_drjit if with_adam_reverse else None,
+            drjit_float=self.F,
+            name="toy",
+        )

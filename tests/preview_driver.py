@@ -9,6 +9,7 @@ ends: ``{"case", "status": "ok" | "error" | "crash", "seconds", "message"}``; a 
 clear stop (ExperimentError, ValueError, BackendError: what the CLI reports as one line);
 ``crash`` is any other exception (a bug), with its traceback.
 """
+
 from __future__ import annotations
 
 import json
@@ -20,8 +21,15 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
-TINY = ["resolution=[16,16]", "fit.resolution=[16,16]", "reference.spp=4", "reference.water_mesh=24",
-        "reference.texture_size=16", "reference.texture_spp=1", "waves.normal_map_size=8"]
+TINY = [
+    "resolution=[16,16]",
+    "fit.resolution=[16,16]",
+    "reference.spp=4",
+    "reference.water_mesh=24",
+    "reference.texture_size=16",
+    "reference.texture_spp=1",
+    "waves.normal_map_size=8",
+]
 
 
 def main() -> int:
@@ -40,7 +48,9 @@ def main() -> int:
         rec = {"case": name}
         try:
             with contextlib.redirect_stderr(io.StringIO()):
-                s = run_preview(ROOT / "experiments" / "default.toml", out / name, TINY + list(sets))
+                s = run_preview(
+                    ROOT / "experiments" / "default.toml", out / name, TINY + list(sets)
+                )
             rec.update(status="ok", message=f"rmse {s['error']['rmse']}")
         except (ExperimentError, ValueError, BackendError, FileNotFoundError) as exc:
             rec.update(status="error", message=str(exc))

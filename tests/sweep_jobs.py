@@ -1,8 +1,9 @@
 """Job functions for the sweep tests (importable by the spawned workers through PYTHONPATH)."""
+
 import os
 from pathlib import Path
 
-PARENT_MARK = "not set"     # the parent test process changes it; a spawned worker never sees that
+PARENT_MARK = "not set"  # the parent test process changes it; a spawned worker never sees that
 
 
 def square(job: dict) -> dict:
@@ -18,12 +19,22 @@ def worker_state(job: dict) -> dict:
     """What a worker process looks like from inside: the mark, Dr.Jit's threads, the variant."""
     import drjit as dr
     import mitsuba as mi
-    return {"mark": PARENT_MARK, "threads": dr.thread_count(), "variant": mi.variant(),
-            "pid": os.getpid()}
+
+    return {
+        "mark": PARENT_MARK,
+        "threads": dr.thread_count(),
+        "variant": mi.variant(),
+        "pid": os.getpid(),
+    }
 
 
 def scene_job(job: dict) -> dict:
     from study.sweep import load_scene
+
     exp, ref, inputs = load_scene(job["scene"])
-    return {"shape": list(ref.image.shape), "spp": ref.spp, "tex": inputs.refraction_texture.shape[0],
-            "cache": str(Path(ref.path).parent)}
+    return {
+        "shape": list(ref.image.shape),
+        "spp": ref.spp,
+        "tex": inputs.refraction_texture.shape[0],
+        "cache": str(Path(ref.path).parent),
+    }

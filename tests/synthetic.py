@@ -1,4 +1,5 @@
 """Small analytic shader inputs (NumPy only) for tests of the shader layer."""
+
 from __future__ import annotations
 
 import numpy as np
@@ -6,7 +7,9 @@ import numpy as np
 from shaders_port import ShaderInputs, fresnel_lut, ortho_tex_matrix, perspective_view_proj
 
 
-def synthetic_inputs(width: int = 64, height: int = 48, tex: int = 128, seed: int = 0) -> ShaderInputs:
+def synthetic_inputs(
+    width: int = 64, height: int = 48, tex: int = 128, seed: int = 0
+) -> ShaderInputs:
     """A 4x4 pool, floor sloping from y=-0.4 to y=-1.6, checker floor, sinusoidal normal map,
     gradient sky, a wall rising above the water on one side for the reflection shader."""
     rng = np.random.default_rng(seed)
@@ -16,7 +19,7 @@ def synthetic_inputs(width: int = 64, height: int = 48, tex: int = 128, seed: in
     Z = z0 + s[:, None] * (z1 - z0)
     world_y = (-1.0 + 0.3 * X / 2.5 + 0.1 * np.sin(2.0 * Z)).astype(np.float32)
     checker = ((np.floor(X * 2) + np.floor(Z * 2)) % 2)[..., None]
-    colour = (0.2 + 0.6 * checker * np.array([0.9, 0.8, 0.6]) + 0.1 * rng.random((tex, tex, 3)))
+    colour = 0.2 + 0.6 * checker * np.array([0.9, 0.8, 0.6]) + 0.1 * rng.random((tex, tex, 3))
     # normal map of h(u, v) = a sin(2 pi u) sin(2 pi 2 v), tile 1.25 world units
     n = 64
     u = (np.arange(n) + 0.5) / n
@@ -29,21 +32,36 @@ def synthetic_inputs(width: int = 64, height: int = 48, tex: int = 128, seed: in
     f = 16
     sky = np.zeros((6, f, f, 3), np.float32)
     for face in range(6):
-        sky[face] = np.linspace(0.3, 1.0, f)[:, None, None] * np.array([0.5, 0.7, 1.0]) * (1 + 0.1 * face)
+        sky[face] = (
+            np.linspace(0.3, 1.0, f)[:, None, None] * np.array([0.5, 0.7, 1.0]) * (1 + 0.1 * face)
+        )
     refl_y = np.full((tex, tex), -1e3, np.float32)
-    refl_y[:, : tex // 6] = 0.6          # a wall along x = x0 .. x0 + 0.8, 0.6 high
+    refl_y[:, : tex // 6] = 0.6  # a wall along x = x0 .. x0 + 0.8, 0.6 high
     refl_col = np.zeros((tex, tex, 3), np.float32)
     refl_col[:, : tex // 6] = (0.8, 0.3, 0.2)
     eye = (0.3, 2.5, 4.5)
     return ShaderInputs(
-        refraction_texture=colour, world_y=world_y, tex_matrix0=ortho_tex_matrix(x0, z0, x1, z1),
-        normal_map=0.5 * nrm + 0.5, cubemap=sky, fresnel_lut=fresnel_lut(),
-        refl_world_y=refl_y, refl_texture=refl_col, tex_matrix1=ortho_tex_matrix(x0, z0, x1, z1),
-        water_rect=(-2.0, -2.0, 2.0, 2.0), normal_tile=tile,
+        refraction_texture=colour,
+        world_y=world_y,
+        tex_matrix0=ortho_tex_matrix(x0, z0, x1, z1),
+        normal_map=0.5 * nrm + 0.5,
+        cubemap=sky,
+        fresnel_lut=fresnel_lut(),
+        refl_world_y=refl_y,
+        refl_texture=refl_col,
+        tex_matrix1=ortho_tex_matrix(x0, z0, x1, z1),
+        water_rect=(-2.0, -2.0, 2.0, 2.0),
+        normal_tile=tile,
         waves=np.array([[0.0, 0.0], [0.31, 0.17], [0.53, 0.71], [0.13, 0.47]]),
-        view_proj=perspective_view_proj(eye, (0.0, -0.8, 0.0), fov_y_deg=50.0, aspect=width / height),
-        viewpos=np.array(eye), lightpos=np.array([-3.0, 6.0, -8.0]), lightcolor=np.array([1.0, 0.95, 0.8]),
-        width=width, height=height)
+        view_proj=perspective_view_proj(
+            eye, (0.0, -0.8, 0.0), fov_y_deg=50.0, aspect=width / height
+        ),
+        viewpos=np.array(eye),
+        lightpos=np.array([-3.0, 6.0, -8.0]),
+        lightcolor=np.array([1.0, 0.95, 0.8]),
+        width=width,
+        height=height,
+    )
 
 
 def _synthetic_floor(x, z):
@@ -65,6 +83,7 @@ def _pixel_rays(vp: np.ndarray, w: int, h: int):
     def unproject(zn):
         q = np.stack([2 * S - 1, 2 * T - 1, np.full_like(S, zn), np.ones_like(S)], -1) @ inv.T
         return q[..., :3] / q[..., 3:4]
+
     a, b = unproject(-1.0), unproject(1.0)
     return a, b - a
 
@@ -79,7 +98,7 @@ def synthetic_baseline_inputs(width: int = 64, height: int = 48, seed: int = 0) 
 
     base = synthetic_inputs(width, height, seed=seed)
     vp = base.view_proj.astype(np.float64)
-    o, d = _pixel_rays(vp, width, height)              # o on the near plane, o + d on the far plane
+    o, d = _pixel_rays(vp, width, height)  # o on the near plane, o + d on the far plane
     t = np.linspace(0.0, 1.0, 801)[:, None, None]
     p = o[None] + t[..., None] * d[None]
     above = p[..., 1] > _synthetic_floor(p[..., 0], p[..., 2])
@@ -87,7 +106,7 @@ def synthetic_baseline_inputs(width: int = 64, height: int = 48, seed: int = 0) 
     hit = (~above).any(axis=0)
     lo = np.where(hit, t[np.maximum(first - 1, 0), 0, 0], 0.0)
     hi = np.where(hit, t[first, 0, 0], 1.0)
-    for _ in range(40):                                  # bisection to the floor
+    for _ in range(40):  # bisection to the floor
         mid = 0.5 * (lo + hi)
         q = o + mid[..., None] * d
         up = q[..., 1] > _synthetic_floor(q[..., 0], q[..., 2])
@@ -95,9 +114,14 @@ def synthetic_baseline_inputs(width: int = 64, height: int = 48, seed: int = 0) 
     q = o + hi[..., None] * d
     clip = np.concatenate([q, np.ones_like(q[..., :1])], -1) @ vp.T
     depth = np.where(hit, 0.5 * clip[..., 2] / clip[..., 3] + 0.5, 1.0)
-    sky = lambda dy: np.array([0.5, 0.7, 1.0]) * (0.4 + 0.5 * np.clip(dy, 0, 1))[..., None]
+
+    def sky(dy):
+        return np.array([0.5, 0.7, 1.0]) * (0.4 + 0.5 * np.clip(dy, 0, 1))[..., None]
+
     dn = d / np.linalg.norm(d, axis=-1, keepdims=True)
-    colour = np.where(hit[..., None], _synthetic_floor_colour(q[..., 0], q[..., 2]), sky(dn[..., 1]))
+    colour = np.where(
+        hit[..., None], _synthetic_floor_colour(q[..., 0], q[..., 2]), sky(dn[..., 1])
+    )
     # mirrored camera: rays from the mirrored eye, clipped at y = 0 (what is above the water)
     rvp = mirrored_view_proj(base.view_proj)
     ro, rd = _pixel_rays(rvp.astype(np.float64), width, height)
@@ -108,6 +132,10 @@ def synthetic_baseline_inputs(width: int = 64, height: int = 48, seed: int = 0) 
     wall = (rd[..., 0] < 0) & (tw > 0) & (yw > 0.0) & (yw < 0.6)
     wall_col = np.array([0.8, 0.3, 0.2]) * (0.7 + 0.3 * yw / 0.6)[..., None]
     refl = np.where(wall[..., None], wall_col, sky(rdn[..., 1]))
-    return dataclasses.replace(base, scene_color=colour.astype(np.float32),
-                               scene_depth=depth.astype(np.float32),
-                               reflection_color=refl.astype(np.float32), reflection_view_proj=rvp)
+    return dataclasses.replace(
+        base,
+        scene_color=colour.astype(np.float32),
+        scene_depth=depth.astype(np.float32),
+        reflection_color=refl.astype(np.float32),
+        reflection_view_proj=rvp,
+    )

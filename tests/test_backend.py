@@ -1,4 +1,5 @@
 """The backend check stops with a clear message before Dr.Jit can abort on an old libLLVM."""
+
 import os
 import subprocess
 import sys
@@ -13,12 +14,16 @@ def test_working_llvm_found():
 
 
 def _run_with(libpath: str) -> subprocess.CompletedProcess:
-    code = ("from study._backend import init_backend\n"
-            "init_backend('llvm_ad_rgb')\n"
-            "import drjit as dr, drjit.llvm as l\n"
-            "print(dr.maximum(l.Float(1, 2), 1.5))\n")
+    code = (
+        "from study._backend import init_backend\n"
+        "init_backend('llvm_ad_rgb')\n"
+        "import drjit as dr, drjit.llvm as l\n"
+        "print(dr.maximum(l.Float(1, 2), 1.5))\n"
+    )
     env = dict(os.environ, DRJIT_LIBLLVM_PATH=libpath)
-    return subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, timeout=120)
+    return subprocess.run(
+        [sys.executable, "-c", code], env=env, capture_output=True, text=True, timeout=120
+    )
 
 
 def test_old_llvm_is_refused_cleanly():
@@ -26,7 +31,7 @@ def test_old_llvm_is_refused_cleanly():
     if not old:
         pytest.skip("no libLLVM older than the minimum on this machine")
     r = _run_with(old[0])
-    assert r.returncode == 1, r.stderr          # a Python exception, not an abort (134/136)
+    assert r.returncode == 1, r.stderr  # a Python exception, not an abort (134/136)
     assert "BackendError" in r.stderr and "apt-get install libllvm19" in r.stderr
 
 

@@ -5,6 +5,7 @@ the spread of that difference over 4000 noise draws; the scan on the real port: 
 centred on the fitted value, whose loss is the fit's, and the calibration's record and report;
 the restart from a lower basin, kept only when its loss is lower.
 """
+
 from __future__ import annotations
 
 import numpy as np
@@ -54,7 +55,9 @@ def noisy_model():
 
 def test_scan_is_centred_on_the_fit_and_reports_basins(noisy_model):
     requested = ["attenuation_distance", "bumptex_mult", "water_color"]
-    cal = calibrate_model(noisy_model, Constants(), requested, "levenberg_marquardt", 100, scan_basins=True)
+    cal = calibrate_model(
+        noisy_model, Constants(), requested, "levenberg_marquardt", 100, scan_basins=True
+    )
     b = cal.parameters["bumptex_mult"]["basins"]
     v = get_value(cal.fitted, "bumptex_mult")
     assert len(b["grid"]) == len(b["loss"]) == POINTS and b["grid"][POINTS // 2] == pytest.approx(v)
@@ -65,7 +68,9 @@ def test_scan_is_centred_on_the_fit_and_reports_basins(noisy_model):
         assert o["value"] != v and o["noise_sd"] > 0
         assert o["indistinguishable"] == (abs(o["delta_loss"]) < NOISE_Z * o["noise_sd"])
     assert b["indistinguishable"] == [o["value"] for o in b["basins"] if o["indistinguishable"]]
-    assert b["lower"] == [o["value"] for o in b["basins"] if o["delta_loss"] < -NOISE_Z * o["noise_sd"]]
+    assert b["lower"] == [
+        o["value"] for o in b["basins"] if o["delta_loss"] < -NOISE_Z * o["noise_sd"]
+    ]
     # without the flag (the studies' fits) no scan is made; without a noise estimate no verdict
     plain = calibrate_model(noisy_model, Constants(), requested, "levenberg_marquardt", 100)
     assert "basins" not in plain.parameters["bumptex_mult"]
@@ -78,10 +83,25 @@ def test_scan_is_centred_on_the_fit_and_reports_basins(noisy_model):
 
 def test_report_says_what_the_scan_found():
     from study.report.calibration import basin_lines
-    params = {"bumptex_mult": {"basins": {"grid": [0.9, 1.0], "loss": [1.0, 1.0], "indistinguishable": [0.96],
-                                          "basins": [{"value": 0.96, "delta_loss": 0.004, "noise_sd": 0.01,
-                                                      "indistinguishable": True}]}},
-              "attenuation_distance": {}}
+
+    params = {
+        "bumptex_mult": {
+            "basins": {
+                "grid": [0.9, 1.0],
+                "loss": [1.0, 1.0],
+                "indistinguishable": [0.96],
+                "basins": [
+                    {
+                        "value": 0.96,
+                        "delta_loss": 0.004,
+                        "noise_sd": 0.01,
+                        "indistinguishable": True,
+                    }
+                ],
+            }
+        },
+        "attenuation_distance": {},
+    }
     text = "\n".join(basin_lines(params))
     assert "another basin of the loss at 0.96" in text and "cannot tell it from the fit's" in text
     params["bumptex_mult"]["basins"]["basins"][0].update(indistinguishable=False, delta_loss=0.1)
@@ -92,7 +112,11 @@ def test_report_says_what_the_scan_found():
     params["bumptex_mult"]["basins"]["basins"][0].update(delta_loss=-0.1)
     params["bumptex_mult"]["basins"]["lower"] = [0.96]
     text = "\n".join(basin_lines(params))
-    assert "lower than the fit's by 0.1" in text and "stopped short" in text and "other local minim" not in text
+    assert (
+        "lower than the fit's by 0.1" in text
+        and "stopped short" in text
+        and "other local minim" not in text
+    )
     params["bumptex_mult"]["basins"]["basins"] = []
     assert "no other basin" in "\n".join(basin_lines(params))
     assert basin_lines({"a": {}}) == []
@@ -104,24 +128,35 @@ def test_restart_from_a_lower_basin_keeps_the_lower_solution(noisy_model, monkey
     lower loss is exported, and the restart is recorded and reported."""
     from study.fit import basins
     from study.report.calibration import basin_lines
+
     real_scan = basins.scan
     calls = []
 
     def fake_scan(model, at, name, sigma=None, **kw):
         out = real_scan(model, at, name, sigma, **kw)
-        if not calls:                    # the first scan (the restart's) finds a lower basin
-            out["basins"].append({"value": 0.9, "delta_loss": -1.0, "noise_sd": 0.1, "indistinguishable": False})
+        if not calls:  # the first scan (the restart's) finds a lower basin
+            out["basins"].append(
+                {"value": 0.9, "delta_loss": -1.0, "noise_sd": 0.1, "indistinguishable": False}
+            )
             out["lower"] = [0.9]
         calls.append(name)
         return out
+
     monkeypatch.setattr(basins, "scan", fake_scan)
     requested = ["attenuation_distance", "bumptex_mult", "water_color"]
     first = calibrate_model(noisy_model, Constants(), requested, "levenberg_marquardt", 100)
-    cal = calibrate_model(noisy_model, Constants(), requested, "levenberg_marquardt", 100, scan_basins=True)
+    cal = calibrate_model(
+        noisy_model, Constants(), requested, "levenberg_marquardt", 100, scan_basins=True
+    )
     r = cal.parameters["bumptex_mult"]["basins"]["restart"]
-    assert r["to"] == 0.9 and r["from"] == pytest.approx(get_value(first.fitted, "bumptex_mult"), rel=1e-6)
+    assert r["to"] == 0.9 and r["from"] == pytest.approx(
+        get_value(first.fitted, "bumptex_mult"), rel=1e-6
+    )
     # scanned again only where the restart moved the solution (else the first scan is reused)
-    assert len(calls) == (2 if r["kept"] else 1) and cal.fit_summary["rounds"] == first.fit_summary["rounds"] + 1
+    assert (
+        len(calls) == (2 if r["kept"] else 1)
+        and cal.fit_summary["rounds"] == first.fit_summary["rounds"] + 1
+    )
     loss = 0.5 * float(np.sum(noisy_model.residual(cal.fitted) ** 2))
     assert loss == pytest.approx(min(r["loss_before"], r["loss_after"]), rel=1e-6)
     assert r["kept"] == (r["loss_after"] < r["loss_before"])
@@ -133,11 +168,23 @@ def test_restart_from_a_lower_basin_keeps_the_lower_solution(noisy_model, monkey
 def _half_models(model, noise: float, seed: int):
     """Two models on independently noisy copies of ``model``'s refraction texture (the halves)."""
     import dataclasses
+
     rng = np.random.default_rng(seed)
     tex = np.asarray(model.inputs.refraction_texture)
-    return tuple(ShaderModel("water_refraction", dataclasses.replace(
-        model.inputs, refraction_texture=(tex * (1.0 + noise * rng.standard_normal(tex.shape))).astype(np.float32)),
-        model.reference, reference_stderr=model.reference_stderr) for _ in range(2))
+    return tuple(
+        ShaderModel(
+            "water_refraction",
+            dataclasses.replace(
+                model.inputs,
+                refraction_texture=(tex * (1.0 + noise * rng.standard_normal(tex.shape))).astype(
+                    np.float32
+                ),
+            ),
+            model.reference,
+            reference_stderr=model.reference_stderr,
+        )
+        for _ in range(2)
+    )
 
 
 def test_texture_delta_is_the_noise_free_loss_difference(noisy_model):
@@ -145,41 +192,71 @@ def test_texture_delta_is_the_noise_free_loss_difference(noisy_model):
     noise-free texture's least-squares difference (each half 30 % noisy per texel), where least
     squares on one noisy half is biased by the noise."""
     from study.fit.basins import texture_delta
+
     at = Constants(attenuation_distance=5.0, bumptex_mult=0.7, water_color=(0.1, 0.3, 0.2, 1.0))
-    r0, r1 = (noisy_model.residual(c) for c in (at, Constants(attenuation_distance=5.0, bumptex_mult=0.8,
-                                                               water_color=(0.1, 0.3, 0.2, 1.0))))
+    r0, r1 = (
+        noisy_model.residual(c)
+        for c in (
+            at,
+            Constants(attenuation_distance=5.0, bumptex_mult=0.8, water_color=(0.1, 0.3, 0.2, 1.0)),
+        )
+    )
     clean = 0.5 * float(r1 @ r1 - r0 @ r0)
-    deltas = [texture_delta(*_half_models(noisy_model, 0.3, s), at, "bumptex_mult", 0.8) for s in range(6)]
+    deltas = [
+        texture_delta(*_half_models(noisy_model, 0.3, s), at, "bumptex_mult", 0.8) for s in range(6)
+    ]
     assert clean > 0 and abs(np.mean(deltas) - clean) < 0.1 * clean, (np.mean(deltas), clean)
 
 
-def test_a_lower_basin_the_texture_halves_do_not_confirm_is_reported_not_refitted(noisy_model, monkeypatch):
+def test_a_lower_basin_the_texture_halves_do_not_confirm_is_reported_not_refitted(
+    noisy_model, monkeypatch
+):
     """The made-up lower basin at 0.9 (truth 0.7) of the restart test, with the texture's halves
     given: their decorrelated loss puts 0.9 higher, so the fit is not restarted, the basin is
     recorded as unconfirmed and the report says why; with halves that confirm it, it restarts."""
     from study.fit import basins
     from study.report.calibration import basin_lines
+
     real_scan = basins.scan
 
     def fake_scan(model, at, name, sigma=None, **kw):
         out = real_scan(model, at, name, sigma, **kw)
-        out["basins"].append({"value": 0.9, "delta_loss": -1.0, "noise_sd": 0.1, "indistinguishable": False})
+        out["basins"].append(
+            {"value": 0.9, "delta_loss": -1.0, "noise_sd": 0.1, "indistinguishable": False}
+        )
         out["lower"] = [0.9]
         return out
+
     monkeypatch.setattr(basins, "scan", fake_scan)
     requested = ["attenuation_distance", "bumptex_mult", "water_color"]
     halves = _half_models(noisy_model, 0.1, 7)
     first = calibrate_model(noisy_model, Constants(), requested, "levenberg_marquardt", 100)
-    cal = calibrate_model(noisy_model, Constants(), requested, "levenberg_marquardt", 100, scan_basins=True,
-                          basin_check=halves)
+    cal = calibrate_model(
+        noisy_model,
+        Constants(),
+        requested,
+        "levenberg_marquardt",
+        100,
+        scan_basins=True,
+        basin_check=halves,
+    )
     b = cal.parameters["bumptex_mult"]["basins"]
     assert "restart" not in b and cal.fit_summary["rounds"] == first.fit_summary["rounds"]
     assert get_value(cal.fitted, "bumptex_mult") == get_value(first.fitted, "bumptex_mult")
-    assert [o["value"] for o in b["unconfirmed"]] == [0.9] and b["unconfirmed"][0]["texture_delta"] > 0
+    assert [o["value"] for o in b["unconfirmed"]] == [0.9] and b["unconfirmed"][0][
+        "texture_delta"
+    ] > 0
     text = "\n".join(basin_lines(cal.parameters))
     assert "not refitted" in text and "stopped short" not in text
-    monkeypatch.setattr(basins, "texture_delta", lambda *a, **k: -0.5)     # halves that agree
-    cal = calibrate_model(noisy_model, Constants(), requested, "levenberg_marquardt", 100, scan_basins=True,
-                          basin_check=halves)
+    monkeypatch.setattr(basins, "texture_delta", lambda *a, **k: -0.5)  # halves that agree
+    cal = calibrate_model(
+        noisy_model,
+        Constants(),
+        requested,
+        "levenberg_marquardt",
+        100,
+        scan_basins=True,
+        basin_check=halves,
+    )
     r = cal.parameters["bumptex_mult"]["basins"]["restart"]
     assert r["to"] == 0.9 and r["texture_delta"] == -0.5

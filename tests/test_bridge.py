@@ -1,5 +1,6 @@
 """The JAX <-> Dr.Jit bridge on a small Dr.Jit image model: JVP and VJP against central
 finite differences (eagerly and under jax.jit), call counting, shape and non-finite errors."""
+
 import numpy as np
 import pytest
 
@@ -25,8 +26,12 @@ def _bridge(toy, nan_rate=None):
     def vals(x):
         return {**base, **dict(zip(NAMES, map(float, x)))}
 
-    return make_jax_residual(lambda x: model.residual(vals(x)),
-                             lambda x: model.residual_and_jacobian(vals(x), NAMES), 3, model.m)
+    return make_jax_residual(
+        lambda x: model.residual(vals(x)),
+        lambda x: model.residual_and_jacobian(vals(x), NAMES),
+        3,
+        model.m,
+    )
 
 
 def _fd_jac(f, x, h=1e-6):
@@ -48,13 +53,16 @@ def test_jvp_and_vjp_match_central_differences(toy, jit):
     res = _bridge(toy)
     J_fd = _fd_jac(lambda x: res.value(x), X)
     t = np.array([0.3, -0.7, 1.1])
-    jvp = (lambda x, t: jax.jvp(res, (x,), (t,))[1])
+
+    def jvp(x, t):
+        return jax.jvp(res, (x,), (t,))[1]
+
     grad = jax.grad(lambda x: 0.5 * jnp.sum(res(x) ** 2))
     if jit:
         jvp, grad = jax.jit(jvp), jax.jit(grad)
     n_j = res.stats.n_jac_calls
     jt = np.asarray(jvp(jnp.asarray(X), jnp.asarray(t)))
-    assert res.stats.n_jac_calls == n_j + 1          # one callback gives r and J together
+    assert res.stats.n_jac_calls == n_j + 1  # one callback gives r and J together
     np.testing.assert_allclose(jt, J_fd @ t, rtol=1e-6, atol=1e-8 * np.abs(J_fd).max())
     g = np.asarray(grad(jnp.asarray(X)))
     r = res.value(X)
@@ -70,8 +78,12 @@ def test_float32_model_jacobian_matches_differences():
     agrees with a (coarser) central difference."""
     model = ToyModel(height=32, width=48, float32=True)
     vals = lambda x: {**TRUTH, **dict(zip(NAMES, map(float, x)))}  # noqa: E731
-    res = make_jax_residual(lambda x: model.residual(vals(x)),
-                            lambda x: model.residual_and_jacobian(vals(x), NAMES), 3, model.m)
+    res = make_jax_residual(
+        lambda x: model.residual(vals(x)),
+        lambda x: model.residual_and_jacobian(vals(x), NAMES),
+        3,
+        model.m,
+    )
     J = np.asarray(jax.jacfwd(res)(jnp.asarray(X)))
     J_fd = _fd_jac(res.value, X, h=1e-3)
     assert J.dtype == np.float64
@@ -79,7 +91,7 @@ def test_float32_model_jacobian_matches_differences():
 
 
 def test_nonfinite_residual_raises_clear_error(toy):
-    res = _bridge(toy, nan_rate=1.4)       # the image is NaN for rate > 1.4
+    res = _bridge(toy, nan_rate=1.4)  # the image is NaN for rate > 1.4
     bad = jnp.asarray([0.9, 1.5, 0.12])
     with pytest.raises(Exception, match="non-finite"):
         jax.jit(res)(bad).block_until_ready()

@@ -7,6 +7,7 @@ starts from the shader's defaults (attenuation 7.5, BumptexMult 1, waterColor
 differences, the automatic freezing of what a scene cannot identify, and the step schedule,
 which no gradient solver can fit and a sweep chooses instead.
 """
+
 from __future__ import annotations
 
 import dataclasses
@@ -24,9 +25,15 @@ from study.fit.model import ShaderModel
 from study.fit.model import get_value, with_values
 
 TRUTH = Constants(attenuation_distance=5.0, bumptex_mult=0.7, water_color=(0.1, 0.3, 0.2, 1.0))
-NAMES = ["attenuation_distance", "bumptex_mult", "water_color[0]", "water_color[1]", "water_color[2]"]
+NAMES = [
+    "attenuation_distance",
+    "bumptex_mult",
+    "water_color[0]",
+    "water_color[1]",
+    "water_color[2]",
+]
 REQUESTED = ["attenuation_distance", "bumptex_mult", "water_color", "specular_strength"]
-FLAT_NORMAL = (0.5, 1.0, 0.5)       # encoded (0, 1, 0): calm water
+FLAT_NORMAL = (0.5, 1.0, 0.5)  # encoded (0, 1, 0): calm water
 
 
 def _inputs(**changes):
@@ -49,8 +56,10 @@ def model():
 
 # ---- recovery with every solver family ---------------------------------------------------
 
-@pytest.mark.parametrize("solver", ["levenberg_marquardt", "gauss_newton", "dogleg", "bfgs",
-                                    "nelder_mead"])
+
+@pytest.mark.parametrize(
+    "solver", ["levenberg_marquardt", "gauss_newton", "dogleg", "bfgs", "nelder_mead"]
+)
 def test_solver_recovers_known_constants(model, solver):
     """All five continuous constants from the defaults to 1e-3 relative. Nelder-Mead (NumPy,
     values only) gets a 2000-step cap and tight tolerances: on these 5 parameters it converges
@@ -87,7 +96,7 @@ def test_adam_reduces_loss(model, reverse):
 # ---- the JAX bridge on the port ------------------------------------------------------------
 
 SMOOTH = ["attenuation_distance", "water_color[0]", "water_color[1]", "water_color[2]"]
-X0 = np.array([6.0, 0.08, 0.27, 0.25])   # travel lengths stay below 6: no attenuation clamp
+X0 = np.array([6.0, 0.08, 0.27, 0.25])  # travel lengths stay below 6: no attenuation clamp
 BASE = Constants(bumptex_mult=0.9)
 
 
@@ -98,8 +107,12 @@ def _jax_residual(model, names):
         return with_values(BASE, dict(zip(names, map(float, x))))
 
     m = model.residual(BASE).size
-    return make_jax_residual(lambda x: model.residual(vals(x)),
-                             lambda x: model.residual_and_jacobian(vals(x), names), len(names), m)
+    return make_jax_residual(
+        lambda x: model.residual(vals(x)),
+        lambda x: model.residual_and_jacobian(vals(x), names),
+        len(names),
+        m,
+    )
 
 
 @pytest.mark.parametrize("jit", [False, True])
@@ -118,7 +131,7 @@ def test_bridge_jvp_on_port_matches_central_differences(model, jit):
     # the primal of the Jacobian render may differ from a plain render by an ulp (measured:
     # 1.2e-7 on ~10% of entries when attenuation_distance is differentiated)
     np.testing.assert_allclose(np.asarray(r), res.value(X0), rtol=0, atol=1e-6)
-    assert np.linalg.norm(fd) > 1.0                                   # a real derivative
+    assert np.linalg.norm(fd) > 1.0  # a real derivative
     assert np.linalg.norm(np.asarray(jt) - fd) < 2e-3 * np.linalg.norm(fd)
 
 
@@ -135,8 +148,12 @@ def test_bridge_grad_of_loss_on_port_matches_central_differences(model):
         r = res.value(x)
         return 0.5 * float(r @ r)
 
-    fd = np.array([(loss(X0 + e) - loss(X0 - e)) / (2 * e[j])
-                   for j, e in enumerate(np.diag(1e-2 * np.abs(X0)))])
+    fd = np.array(
+        [
+            (loss(X0 + e) - loss(X0 - e)) / (2 * e[j])
+            for j, e in enumerate(np.diag(1e-2 * np.abs(X0)))
+        ]
+    )
     assert np.all(np.abs(fd) > 1e-3), fd
     assert np.all(np.abs(g - fd) < 1e-3 * np.linalg.norm(fd)), (g, fd)
 
@@ -160,10 +177,11 @@ def test_bridge_jvp_bumptex_mult_matches_between_jumps(model):
     agree = np.abs(jt - fd) < tol
     assert agree.mean() >= 0.9, agree.mean()
     assert np.linalg.norm((jt - fd)[agree]) < 1e-2 * np.linalg.norm(jt[agree])
-    assert (np.abs(fd) < tol).mean() < 0.5        # zero would not pass the first test
+    assert (np.abs(fd) < tol).mean() < 0.5  # zero would not pass the first test
 
 
 # ---- identifiability: what a scene cannot tell is frozen -----------------------------------
+
 
 def _calibrate(inputs, truth):
     model = _model(inputs, truth)
@@ -194,11 +212,25 @@ def test_calm_water_freezes_bumptex_mult():
     flat = np.tile(np.array(FLAT_NORMAL, np.float32), (8, 8, 1))
     cal = _calibrate(_inputs(normal_map=flat), TRUTH_SPEC)
     p = cal.parameters["bumptex_mult"]
-    assert p["frozen"] and p["status"] == "frozen" and p["fitted"] is None and "sensitivity" in p["reason"], p
+    assert (
+        p["frozen"]
+        and p["status"] == "frozen"
+        and p["fitted"] is None
+        and "sensitivity" in p["reason"]
+    ), p
     assert p["sensitivity_start"] < 1e-3
     assert cal.fitted.bumptex_mult == Constants().bumptex_mult
-    _check_fitted(cal, TRUTH_SPEC, ["attenuation_distance", "water_color[0]", "water_color[1]",
-                                    "water_color[2]", "specular_strength"])
+    _check_fitted(
+        cal,
+        TRUTH_SPEC,
+        [
+            "attenuation_distance",
+            "water_color[0]",
+            "water_color[1]",
+            "water_color[2]",
+            "specular_strength",
+        ],
+    )
 
 
 def test_black_light_freezes_specular_strength():
@@ -221,8 +253,11 @@ def test_calm_experiment_freezes_bumptex_mult(mi):
     cal = _calibrate(inputs, TRUTH_SPEC)
     p = cal.parameters["bumptex_mult"]
     assert p["frozen"] and "sensitivity" in p["reason"], p
-    _check_fitted(cal, TRUTH_SPEC, ["attenuation_distance", "water_color[0]", "water_color[1]",
-                                    "water_color[2]"])
+    _check_fitted(
+        cal,
+        TRUTH_SPEC,
+        ["attenuation_distance", "water_color[0]", "water_color[1]", "water_color[2]"],
+    )
 
 
 # ---- the step schedule ---------------------------------------------------------------------
@@ -234,8 +269,9 @@ STEP_TRUTH = TRUTH.replace(steps_grazing=6.0, steps_steep=2.0)
 def step_problem():
     """Truth at steps (6, 2); the other constants already at the truth; start at (10, 3)."""
     model = _model(_inputs(), STEP_TRUTH)
-    return make_problem(model, TRUTH, ["steps_grazing", "steps_steep", "attenuation_distance"],
-                        progress=False)
+    return make_problem(
+        model, TRUTH, ["steps_grazing", "steps_steep", "attenuation_distance"], progress=False
+    )
 
 
 def test_gradient_solver_does_not_move_steps_grazing(step_problem):
@@ -276,8 +312,10 @@ def test_step_sweep_returns_grid_minimum(step_problem):
     grid = np.array(sw["loss"])
     assert grid.shape == (len(STEP_GRID["steps_grazing"]), len(STEP_GRID["steps_steep"]))
     i, j = np.unravel_index(np.argmin(grid), grid.shape)
-    assert sw["best"] == {"steps_grazing": STEP_GRID["steps_grazing"][i],
-                          "steps_steep": STEP_GRID["steps_steep"][j]}
+    assert sw["best"] == {
+        "steps_grazing": STEP_GRID["steps_grazing"][i],
+        "steps_steep": STEP_GRID["steps_steep"][j],
+    }
     assert sw["best"] == {"steps_grazing": 6.0, "steps_steep": 2.0}
     assert grid[i, j] < 1e-12 and np.sort(grid.ravel())[1] > 1e-4
     sw1 = step_sweep(step_problem, TRUTH.replace(steps_steep=2.0), ["steps_grazing"])
@@ -291,12 +329,24 @@ def test_clear_water_freezes_attenuation_distance():
     from conftest import small_experiment
 
     from study.fit.calibrate import scene_frozen
+
     assert scene_frozen(small_experiment()) == {}
     why = scene_frozen(small_experiment(**{"water.sigma_t": "[0, 0, 0]"}))
-    assert set(why) == {"attenuation_distance", "absorption_r", "absorption_g", "absorption_b"}  # seed and Beer variant
+    assert set(why) == {
+        "attenuation_distance",
+        "absorption_r",
+        "absorption_g",
+        "absorption_b",
+    }  # seed and Beer variant
     assert "sigma_t = 0" in why["attenuation_distance"]
-    cal = calibrate_model(_model(_inputs(), TRUTH_SPEC), Constants(), ["attenuation_distance", "bumptex_mult"],
-                          "levenberg_marquardt", 100, frozen_by_scene=why)
+    cal = calibrate_model(
+        _model(_inputs(), TRUTH_SPEC),
+        Constants(),
+        ["attenuation_distance", "bumptex_mult"],
+        "levenberg_marquardt",
+        100,
+        frozen_by_scene=why,
+    )
     p = cal.parameters["attenuation_distance"]
     assert p["status"] == "frozen" and p["fitted"] is None and "sigma_t = 0" in p["reason"]
     assert cal.fitted.attenuation_distance == Constants().attenuation_distance
@@ -308,17 +358,28 @@ def test_calibrate_model_with_step_counts():
     (status 'swept'), the sweep table in the result; and step counts alone work too."""
     truth = Constants(attenuation_distance=5.0, steps_grazing=6.0, steps_steep=2.0)
     model = _model(_inputs(), truth)
-    cal = calibrate_model(model, Constants(), ["attenuation_distance", "steps_grazing", "steps_steep"],
-                          "levenberg_marquardt", 60)
+    cal = calibrate_model(
+        model,
+        Constants(),
+        ["attenuation_distance", "steps_grazing", "steps_steep"],
+        "levenberg_marquardt",
+        60,
+    )
     assert cal.parameters["steps_grazing"]["status"] == "swept"
     assert (cal.fitted.steps_grazing, cal.fitted.steps_steep) == (6.0, 2.0)
     assert cal.sweep["best"] == {"steps_grazing": 6.0, "steps_steep": 2.0}
-    assert np.array(cal.sweep["loss"]).shape == (len(STEP_GRID["steps_grazing"]), len(STEP_GRID["steps_steep"]))
+    assert np.array(cal.sweep["loss"]).shape == (
+        len(STEP_GRID["steps_grazing"]),
+        len(STEP_GRID["steps_steep"]),
+    )
     only = calibrate_model(model, Constants(), ["steps_grazing"], "levenberg_marquardt", 60)
-    assert only.parameters["steps_grazing"]["status"] == "swept" and only.sweep["names"] == ["steps_grazing"]
+    assert only.parameters["steps_grazing"]["status"] == "swept" and only.sweep["names"] == [
+        "steps_grazing"
+    ]
 
 
 # ---- standard errors from the reference's noise ------------------------------------------
+
 
 def test_noise_errors_match_the_spread_of_least_squares_solutions():
     """``noise_errors`` (the sandwich A diag(sigma^2) A^T) against the spread of 4000 least-squares
@@ -326,12 +387,13 @@ def test_noise_errors_match_the_spread_of_least_squares_solutions():
     in the target: within 5 % (the sampling error of a standard deviation from 4000 draws is
     about 1.1 %). ``std_errors`` reads the residual instead and misses the glitter's weight."""
     from study.fit.calibrate import noise_errors, std_errors
+
     rng = np.random.default_rng(3)
     m, k = 600, 3
     J = rng.normal(size=(m, k))
-    J[:20, 2] *= 10.0                       # the third parameter is set by a few bright pixels ...
+    J[:20, 2] *= 10.0  # the third parameter is set by a few bright pixels ...
     sigma = np.full(m, 0.01)
-    sigma[:20] = 0.3                        # ... which are the noisy ones
+    sigma[:20] = 0.3  # ... which are the noisy ones
     theta = np.array([2.0, -1.0, 0.5])
     sols = []
     for _ in range(4000):
@@ -362,13 +424,16 @@ def test_calibration_reports_the_reference_noise_error():
         assert out[0.01][n] > 0
         assert out[0.02][n] == pytest.approx(2 * out[0.01][n], rel=1e-3)
     with pytest.raises(ValueError, match="reference_stderr"):
-        ShaderModel("water_refraction", inputs, target, reference_stderr=np.zeros((2, 2, 3), np.float32))
+        ShaderModel(
+            "water_refraction", inputs, target, reference_stderr=np.zeros((2, 2, 3), np.float32)
+        )
 
 
 def test_downsample_stderr_matches_the_spread_of_box_means():
     """The standard error carried through the fit's 2x2 box filter against the spread of box
     means of 4000 noisy images (unequal errors within each box): within 5 %."""
     from study._metrics import downsample, downsample_stderr
+
     rng = np.random.default_rng(4)
     se = rng.uniform(0.01, 0.2, size=(4, 6, 3))
     means = np.stack([downsample(rng.normal(size=se.shape) * se, 2, 2) for _ in range(4000)])

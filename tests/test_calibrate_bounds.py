@@ -5,6 +5,7 @@ Synthetic targets rendered by the port itself (tests/synthetic.py, 48x36) with k
 a water colour whose red channel lies *below* 0 (so the best value inside the constant's range
 is the bound 0 and the loss still falls beyond it), and a control with every channel inside.
 """
+
 from __future__ import annotations
 
 import math
@@ -44,8 +45,9 @@ def _model(water_color) -> ShaderModel:
 
 @pytest.fixture(scope="module")
 def below_zero():
-    return calibrate_model(_model((-0.04, 0.3, 0.2, 1.0)), Constants(), REQUESTED, "levenberg_marquardt",
-                           MAX_STEPS)
+    return calibrate_model(
+        _model((-0.04, 0.3, 0.2, 1.0)), Constants(), REQUESTED, "levenberg_marquardt", MAX_STEPS
+    )
 
 
 def test_channel_beyond_its_bound_is_reported_bound_at_the_bound(below_zero):
@@ -69,8 +71,9 @@ def test_bounded_fit_stops_early_not_at_the_cap(below_zero):
 
 def test_interior_truth_is_fitted_not_bound():
     """Control: the same scene with every channel inside its range is recovered, nothing bound."""
-    cal = calibrate_model(_model((0.1, 0.3, 0.2, 1.0)), Constants(), REQUESTED, "levenberg_marquardt",
-                          MAX_STEPS)
+    cal = calibrate_model(
+        _model((0.1, 0.3, 0.2, 1.0)), Constants(), REQUESTED, "levenberg_marquardt", MAX_STEPS
+    )
     assert all(p["status"] == "fitted" for p in cal.parameters.values()), cal.parameters
     assert abs(cal.fitted.water_color[0] - 0.1) < 1e-3 * 0.1
     assert abs(cal.fitted.attenuation_distance - 5.0) < 1e-3 * 5.0
@@ -81,7 +84,13 @@ def test_start_on_the_bound_with_truth_inside_is_recovered():
     the fit leaves the bound and recovers the truth."""
     model = _model((0.1, 0.3, 0.2, 1.0))
     start = Constants(water_color=(0.0, 0.25, 0.3, 1.0))
-    names = ["water_color[0]", "water_color[1]", "water_color[2]", "attenuation_distance", "bumptex_mult"]
+    names = [
+        "water_color[0]",
+        "water_color[1]",
+        "water_color[2]",
+        "attenuation_distance",
+        "bumptex_mult",
+    ]
     problem = make_problem(model, start, names, progress=False)
     assert problem.params["water_color[0]"].kind == "clip"
     res = fit(problem, solver="levenberg_marquardt", max_steps=MAX_STEPS, ftol=1e-6)
@@ -102,7 +111,7 @@ def test_kkt_check_at_a_clipped_channel(red, violated):
     names = ["water_color[0]", "water_color[1]"]
     problem = make_problem(model, truth, names, progress=False)
     ps = [problem.params[n] for n in names]
-    u = np.array([-3.0, 0.0])                      # red: 0.05 + 0.025 * -3 < 0 -> clipped to 0
+    u = np.array([-3.0, 0.0])  # red: 0.05 + 0.025 * -3 < 0 -> clipped to 0
     assert ps[0].at_bound(u[0]) == "lower"
     base = problem.start_values(None)
     got = _kkt_violations(problem, base, ps, u, problem.bridge(base, names))
@@ -112,15 +121,15 @@ def test_kkt_check_at_a_clipped_channel(red, violated):
 def test_clip_transform():
     p = Param("c", 0.05, 0.0, 100.0, scale=0.025, transform="clip")
     assert p.kind == "clip" and float(p.to_u(0.05)) == 0.0
-    assert float(p.from_u(-2.0)) == 0.0 and float(p.from_u(-50.0)) == 0.0     # reached, then flat
+    assert float(p.from_u(-2.0)) == 0.0 and float(p.from_u(-50.0)) == 0.0  # reached, then flat
     assert p.at_bound(-2.0) == "lower" and p.at_bound(-1.0) is None
     assert abs(float(p.from_u(1.0)) - 0.075) < 1e-12
-    for u in (-1.5, 0.3, 4.0):                    # central differences inside the box
+    for u in (-1.5, 0.3, 4.0):  # central differences inside the box
         h = 1e-6
         fd = (float(p.from_u(u + h)) - float(p.from_u(u - h))) / (2 * h)
         assert abs(float(p.dp_du(u)) - fd) < 1e-9
     assert float(p.dp_du(-3.0)) == 0.0
-    assert float(p.to_u(0.0)) == -2.0             # the bound itself is a valid value
+    assert float(p.to_u(0.0)) == -2.0  # the bound itself is a valid value
     with pytest.raises(ValueError, match="outside"):
         p.to_u(-0.1)
 

@@ -1,6 +1,7 @@
 """The command line: ``study --help``, errors with exit code 2 and a message naming the problem,
 and render / preview / calibrate / export on a tiny experiment (24x24, 16 spp), in-process
 through ``study.cli.main``."""
+
 from __future__ import annotations
 
 import json
@@ -14,8 +15,15 @@ from conftest import REPO
 from study.cli import main
 
 EXPERIMENT = str(REPO / "experiments" / "default.toml")
-TINY = ["resolution=[24,24]", "fit.resolution=[24,24]", "reference.spp=16", "reference.water_mesh=48",
-        "reference.texture_size=32", "reference.texture_spp=4", "waves.normal_map_size=32"]
+TINY = [
+    "resolution=[24,24]",
+    "fit.resolution=[24,24]",
+    "reference.spp=16",
+    "reference.water_mesh=48",
+    "reference.texture_size=32",
+    "reference.texture_spp=4",
+    "waves.normal_map_size=32",
+]
 MAX_STEPS = 5
 
 
@@ -24,8 +32,12 @@ def _sets(items):
 
 
 def test_help_lists_commands():
-    res = subprocess.run([str(REPO / ".venv" / "bin" / "study"), "--help"], capture_output=True,
-                         text=True, timeout=120)
+    res = subprocess.run(
+        [str(REPO / ".venv" / "bin" / "study"), "--help"],
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
     assert res.returncode == 0, res.stderr
     for cmd in ("render", "preview", "calibrate", "export"):
         assert cmd in res.stdout, res.stdout
@@ -34,14 +46,34 @@ def test_help_lists_commands():
 # ---- errors --------------------------------------------------------------------------------
 
 BAD = {
-    "missing_experiment": (["render", "{tmp}/nope.toml"], r"study render: error: .*nope\.toml does not exist"),
-    "unknown_key": (["render", EXPERIMENT, "--set", "water.iorr=1.3"], r"unknown key.*'water\.iorr'"),
-    "set_syntax": (["preview", EXPERIMENT, "--set", "resolution"], r"--set 'resolution': expected KEY=VALUE"),
-    "bad_value": (["render", EXPERIMENT, "--set", "resolution=[24"], r"resolution: expected a list of 2"),
-    "unknown_solver": (["calibrate", EXPERIMENT, "--solver", "newton"],
-                       r"study calibrate: error: unknown solver 'newton'.*levenberg_marquardt"),
-    "bad_constants": (["export", "{tmp}/bad.json"], r"study export: error: .*bumptex_mult.*outside"),
-    "missing_constants": (["export", "{tmp}/none.json"], r"study export: error: .*none\.json does not exist"),
+    "missing_experiment": (
+        ["render", "{tmp}/nope.toml"],
+        r"study render: error: .*nope\.toml does not exist",
+    ),
+    "unknown_key": (
+        ["render", EXPERIMENT, "--set", "water.iorr=1.3"],
+        r"unknown key.*'water\.iorr'",
+    ),
+    "set_syntax": (
+        ["preview", EXPERIMENT, "--set", "resolution"],
+        r"--set 'resolution': expected KEY=VALUE",
+    ),
+    "bad_value": (
+        ["render", EXPERIMENT, "--set", "resolution=[24"],
+        r"resolution: expected a list of 2",
+    ),
+    "unknown_solver": (
+        ["calibrate", EXPERIMENT, "--solver", "newton"],
+        r"study calibrate: error: unknown solver 'newton'.*levenberg_marquardt",
+    ),
+    "bad_constants": (
+        ["export", "{tmp}/bad.json"],
+        r"study export: error: .*bumptex_mult.*outside",
+    ),
+    "missing_constants": (
+        ["export", "{tmp}/none.json"],
+        r"study export: error: .*none\.json does not exist",
+    ),
 }
 
 
@@ -52,8 +84,9 @@ def test_bad_input_exits_2_with_message(tmp_path, capsys, case):
     argv = [a.format(tmp=tmp_path) for a in argv] + ["--out", str(tmp_path / "out")]
     assert main(argv) == 2
     err = capsys.readouterr().err
-    assert len(err.strip().splitlines()) == 1, err          # one message, no traceback
+    assert len(err.strip().splitlines()) == 1, err  # one message, no traceback
     import re
+
     assert re.search(pattern, err), err
 
 
@@ -68,6 +101,7 @@ def test_unknown_variant_is_an_argparse_error(tmp_path, capsys):
 
 # ---- the commands on a tiny experiment --------------------------------------------------------
 
+
 @pytest.fixture(scope="module")
 def runs(tmp_path_factory):
     """render, preview, calibrate (LM, at most 5 steps) and export of calibrate's constants.json,
@@ -78,13 +112,18 @@ def runs(tmp_path_factory):
         rc = {
             "render": main(["render", EXPERIMENT, "--out", str(root / "render")] + _sets(TINY)),
             "preview": main(["preview", EXPERIMENT, "--out", str(root / "preview")] + _sets(TINY)),
-            "calibrate": main(["calibrate", EXPERIMENT, "--out", str(root / "calibrate")]
-                              + _sets(TINY + [f"fit.max_steps={MAX_STEPS}"])),
-            "decorrelated": main(["calibrate", EXPERIMENT, "--out", str(root / "decorrelated")]
-                                 + _sets(TINY + [f"fit.max_steps={MAX_STEPS}", 'fit.input_noise="decorrelate"'])),
+            "calibrate": main(
+                ["calibrate", EXPERIMENT, "--out", str(root / "calibrate")]
+                + _sets(TINY + [f"fit.max_steps={MAX_STEPS}"])
+            ),
+            "decorrelated": main(
+                ["calibrate", EXPERIMENT, "--out", str(root / "decorrelated")]
+                + _sets(TINY + [f"fit.max_steps={MAX_STEPS}", 'fit.input_noise="decorrelate"'])
+            ),
         }
-        rc["export"] = main(["export", str(root / "calibrate" / "constants.json"),
-                             "--out", str(root / "export")])
+        rc["export"] = main(
+            ["export", str(root / "calibrate" / "constants.json"), "--out", str(root / "export")]
+        )
     return root, rc
 
 
@@ -133,6 +172,7 @@ def test_calibrate_writes_constants_json(runs):
     params = c["parameters"]
     from study import load_experiment
     from study.fit.model import expand_parameters
+
     requested = load_experiment(REPO / "experiments" / "default.toml")["fit.parameters"]
     assert set(params) == set(expand_parameters(requested))
     for name, p in params.items():
@@ -157,7 +197,11 @@ def test_calibrate_writes_constants_json(runs):
     assert all(1 <= n <= MAX_STEPS for n in rounds) and len(rounds) == c["fit"]["rounds"]
     assert all(_finite(v) and v >= 0 for v in c["timings"].values())
     assert {"reference_s", "fit_s", "export_s"} <= set(c["timings"])
-    assert c["reference"]["spp"] == 16 and _finite(c["reference"]["noise"]) and c["reference"]["noise"] > 0
+    assert (
+        c["reference"]["spp"] == 16
+        and _finite(c["reference"]["noise"])
+        and c["reference"]["noise"] > 0
+    )
     gl = c["gl_check"]
     assert gl["mean_abs"] <= 1e-3 and gl["p999"] <= 1e-2 and gl["unexplained"] == 0
 
@@ -169,7 +213,9 @@ def test_calibrate_with_decorrelated_texture_noise(runs):
     assert rc["decorrelated"] == 0
     c = json.loads((root / "decorrelated" / "constants.json").read_text())
     info = c["fit"]["input_noise"]
-    assert info["method"] == "decorrelated" and isinstance(info["accepted"], bool) and info["message"]
+    assert (
+        info["method"] == "decorrelated" and isinstance(info["accepted"], bool) and info["message"]
+    )
     assert set(info["shift"]) <= set(c["parameters"])
     assert "decorrelated" in (root / "decorrelated" / "report.md").read_text()
 
@@ -184,8 +230,12 @@ def test_calibrate_writes_shaders_with_fitted_constants_and_report(runs):
         names = sorted(p.name for p in (out / "shaders" / dialect).iterdir())
         # the shader files, and one file per variant named otherwise (it carries its #defines)
         from shaders_port._variants import VARIANTS
-        assert names == sorted({"water.vert"} | {f"{v.shader}.frag" for v in VARIANTS.values()}
-                               | {f"{v.name}.frag" for v in VARIANTS.values()})
+
+        assert names == sorted(
+            {"water.vert"}
+            | {f"{v.shader}.frag" for v in VARIANTS.values()}
+            | {f"{v.name}.frag" for v in VARIANTS.values()}
+        )
         got = read_constants((out / "shaders" / dialect / "water_refraction.frag").read_text())
         for name, p in c["parameters"].items():
             if p["frozen"]:
@@ -205,5 +255,6 @@ def test_export_of_calibrate_output_reproduces_its_shaders(runs):
     assert rc["export"] == 0
     for dialect in ("compat", "core"):
         for f in ("water.vert", "water_refraction.frag", "water_reflection.frag"):
-            assert (root / "export" / "shaders" / dialect / f).read_bytes() == \
-                (root / "calibrate" / "shaders" / dialect / f).read_bytes(), (dialect, f)
+            assert (root / "export" / "shaders" / dialect / f).read_bytes() == (
+                root / "calibrate" / "shaders" / dialect / f
+            ).read_bytes(), (dialect, f)

@@ -1,5 +1,6 @@
 """``study calibrate A.toml B.toml`` (joint fit, exported like a single fit) and ``study
 generalise`` (leave-one-scene-out table) through the CLI on two tiny experiments (24x24)."""
+
 from __future__ import annotations
 
 import json
@@ -9,9 +10,17 @@ import pytest
 from conftest import REPO
 from study.cli import main
 
-TINY = ["resolution=[24,24]", "fit.resolution=[24,24]", "reference.spp=8", "reference.water_mesh=48",
-        "reference.texture_size=32", "reference.texture_spp=4", "waves.normal_map_size=32",
-        "fit.max_steps=8", 'fit.parameters=["attenuation_distance","water_color"]']
+TINY = [
+    "resolution=[24,24]",
+    "fit.resolution=[24,24]",
+    "reference.spp=8",
+    "reference.water_mesh=48",
+    "reference.texture_size=32",
+    "reference.texture_spp=4",
+    "waves.normal_map_size=32",
+    "fit.max_steps=8",
+    'fit.parameters=["attenuation_distance","water_color"]',
+]
 EXPS = [str(REPO / "experiments" / "default.toml"), str(REPO / "experiments" / "murky.toml")]
 
 

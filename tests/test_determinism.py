@@ -7,6 +7,7 @@ threads in an order that varies), while the texture stays bit-identical. The ref
 noise is ~1e-2 per pixel, five orders larger, so no fitted constant can tell the two apart;
 the cache key does not include it (a cached reference is reused as is).
 """
+
 from __future__ import annotations
 
 import subprocess
@@ -33,18 +34,33 @@ _RENDER = textwrap.dedent("""
     inputs = load_or_build_shader_inputs(exp, "llvm_ad_rgb", cache=cache, log=lambda m: None)
     np.savez({out!r}, reference=ref.image, texture=np.asarray(inputs.refraction_texture))
 """)
-SMALL = ["resolution=[32,32]", "fit.resolution=[32,32]", "reference.spp=16", "reference.water_mesh=96",
-         "reference.texture_size=64", "reference.texture_spp=8", "reference.lighting_size=32",
-         "reference.wall_spp=8", "waves.normal_map_size=64"]
+SMALL = [
+    "resolution=[32,32]",
+    "fit.resolution=[32,32]",
+    "reference.spp=16",
+    "reference.water_mesh=96",
+    "reference.texture_size=64",
+    "reference.texture_spp=8",
+    "reference.lighting_size=32",
+    "reference.wall_spp=8",
+    "waves.normal_map_size=64",
+]
 
 
 def _cold_renders(tmp_path, overrides):
     outs = []
     for i in range(2):
         out = tmp_path / f"render{i}.npz"
-        code = _RENDER.format(tests=str(REPO / "tests"), exp=str(REPO / "experiments" / "default.toml"),
-                              overrides=overrides, cache=str(tmp_path / f"cache{i}"), out=str(out))
-        r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=1200)
+        code = _RENDER.format(
+            tests=str(REPO / "tests"),
+            exp=str(REPO / "experiments" / "default.toml"),
+            overrides=overrides,
+            cache=str(tmp_path / f"cache{i}"),
+            out=str(out),
+        )
+        r = subprocess.run(
+            [sys.executable, "-c", code], capture_output=True, text=True, timeout=1200
+        )
         assert r.returncode == 0, r.stderr[-3000:]
         outs.append(np.load(out))
     return outs

@@ -1,4 +1,5 @@
 """Experiment schema: every bad input names the key and what is allowed."""
+
 import re
 from pathlib import Path
 
@@ -10,7 +11,9 @@ from study.scene.experiment import SCHEMA, schema_markdown
 REPO = Path(__file__).resolve().parent.parent
 
 
-@pytest.mark.parametrize("path", sorted((REPO / "experiments").glob("*.toml")), ids=lambda p: p.stem)
+@pytest.mark.parametrize(
+    "path", sorted((REPO / "experiments").glob("*.toml")), ids=lambda p: p.stem
+)
 def test_shipped_experiments_are_valid(path):
     exp = load_experiment(path)
     assert exp["name"] == path.stem
@@ -24,13 +27,19 @@ BAD = [
     ({"water": {"ior": float("nan")}}, r"water.ior: nan is not finite"),
     ({"water": {"sigma_t": [0.1, 0.2]}}, r"water.sigma_t: expected a list of 3 numbers"),
     ({"water": {"sigma_t": [0.1, -0.2, 0.0]}}, r"water.sigma_t: -0.2 is out of range"),
-    ({"floor": {"shape": "bowl"}}, r"floor.shape: unknown value 'bowl'.*Allowed: flat, slope, steps, terrain"),
+    (
+        {"floor": {"shape": "bowl"}},
+        r"floor.shape: unknown value 'bowl'.*Allowed: flat, slope, steps, terrain",
+    ),
     ({"floor": {"steps": 2.5}}, r"floor.steps: expected an integer"),
     ({"floor": {"depth": True}}, r"floor.depth: expected a number, got True"),
     ({"resolution": [256, 0]}, r"resolution: 0 is out of range"),
     ({"waves": {"offsets": [[0, 0]]}}, r"waves.offsets: expected 4 pairs"),
     ({"fit": {"solver": "newton"}}, r"fit.solver: unknown value 'newton'.*levenberg_marquardt"),
-    ({"fit": {"parameters": ["attenuation_distance", "fresnel"]}}, r"fit.parameters: unknown entry 'fresnel'"),
+    (
+        {"fit": {"parameters": ["attenuation_distance", "fresnel"]}},
+        r"fit.parameters: unknown entry 'fresnel'",
+    ),
     ({"fit": {"resolution": [100, 100]}}, r"fit.resolution \[100, 100\] must divide resolution"),
     ({"camera": {"position": [0, -1, 3]}}, r"camera must be above the water plane"),
     ({"reference": {"spp": "lots"}}, r"reference.spp: expected a number, got 'lots'"),
@@ -62,8 +71,16 @@ def test_bad_files(tmp_path):
 
 
 def test_overrides():
-    exp = validate({}, ["water.ior=1.5", "floor.shape=steps", "resolution=[64, 32]",
-                        "fit.resolution=[32, 16]", "reference.spp=auto"])
+    exp = validate(
+        {},
+        [
+            "water.ior=1.5",
+            "floor.shape=steps",
+            "resolution=[64, 32]",
+            "fit.resolution=[32, 16]",
+            "reference.spp=auto",
+        ],
+    )
     assert exp["water.ior"] == 1.5 and exp["floor.shape"] == "steps"
     assert exp["resolution"] == [64, 32] and exp["reference.spp"] == "auto"
     with pytest.raises(ExperimentError, match="expected KEY=VALUE"):
@@ -77,18 +94,36 @@ def test_scene_hash_tracks_scene_keys_only():
     assert validate({"water": {"ior": 1.34}}).scene_hash() != a.scene_hash()
     assert validate({"fit": {"solver": "bfgs"}}).scene_hash() == a.scene_hash()
     # shader-input keys do not change the reference image
-    assert validate({"reference": {"texture_size": 128, "fresnel_transmission": "radiance"},
-                     "waves": {"normal_map_size": 64}}).scene_hash() == a.scene_hash()
+    assert (
+        validate(
+            {
+                "reference": {"texture_size": 128, "fresnel_transmission": "radiance"},
+                "waves": {"normal_map_size": 64},
+            }
+        ).scene_hash()
+        == a.scene_hash()
+    )
     assert validate({"waves": {"amplitude": 0.02}}).scene_hash() != a.scene_hash()
     # how the refraction texture is made changes the shader inputs' key, never the reference's
-    for ref in ({"texture_method": "colour"}, {"lighting_size": 64}, {"wall_spp": 64}, {"texture_spp": 64}):
+    for ref in (
+        {"texture_method": "colour"},
+        {"lighting_size": 64},
+        {"wall_spp": 64},
+        {"texture_spp": 64},
+    ):
         b = validate({"reference": ref})
         assert b.scene_hash() == a.scene_hash() and b.inputs_hash() != a.inputs_hash(), ref
     # the reference's sample count changes the reference's key, never the shader inputs' key
-    for ref in ({"spp": 64}, {"spp": "auto", "target_noise": 0.02, "max_spp": 512}, {"sampler": "independent"}):
+    for ref in (
+        {"spp": 64},
+        {"spp": "auto", "target_noise": 0.02, "max_spp": 512},
+        {"sampler": "independent"},
+    ):
         b = validate({"reference": ref})
         assert b.scene_hash() != a.scene_hash() and b.inputs_hash() == a.inputs_hash(), ref
-    assert validate({"reference": {"seed": 3}}).inputs_hash() != a.inputs_hash()     # seeds the textures too
+    assert (
+        validate({"reference": {"seed": 3}}).inputs_hash() != a.inputs_hash()
+    )  # seeds the textures too
 
 
 def test_readme_documents_every_key():

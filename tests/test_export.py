@@ -1,6 +1,7 @@
 """Export of fitted constants into the shipped GLSL: both dialects compile, the constants block
 holds the constants and nothing else changes, the exported shader runs on llvmpipe like the
 port, constants files are checked, and a refused export leaves nothing behind."""
+
 from __future__ import annotations
 
 import json
@@ -19,17 +20,41 @@ from shaders_port._variants import VARIANTS, get_variant
 
 # every constant away from its default; 0.1, 0.3, 0.7, 0.76 and the fitted-looking
 # attenuation are not exact in float32
-EXPORTED = Constants(attenuation_distance=4.999999836762939, steps_grazing=8.0, steps_steep=2.5,
-                     loop_cap=50, refl_steps_steep=0.75, refl_steps_grazing=3.5, refl_loop_cap=48,
-                     refl_height_cut=0.7, specular_strength=1.5, specular_exponent=128.0,
-                     bumptex_mult=0.7, refr_coeff=0.76, water_color=(0.1, 0.3, 0.2, 1.0),
-                     reflect_color=(0.9, 0.95, 1.0, 1.0), absorption_r=0.3, absorption_g=0.07,
-                     absorption_b=0.05, specular_roughness=0.15, refine_steps=2)
+EXPORTED = Constants(
+    attenuation_distance=4.999999836762939,
+    steps_grazing=8.0,
+    steps_steep=2.5,
+    loop_cap=50,
+    refl_steps_steep=0.75,
+    refl_steps_grazing=3.5,
+    refl_loop_cap=48,
+    refl_height_cut=0.7,
+    specular_strength=1.5,
+    specular_exponent=128.0,
+    bumptex_mult=0.7,
+    refr_coeff=0.76,
+    water_color=(0.1, 0.3, 0.2, 1.0),
+    reflect_color=(0.9, 0.95, 1.0, 1.0),
+    absorption_r=0.3,
+    absorption_g=0.07,
+    absorption_b=0.05,
+    specular_roughness=0.15,
+    refine_steps=2,
+)
 # the shader files, then one file per variant compiled with preprocessor names
-FILES = [(d, n, s) for d in ("compat", "core")
-         for n, s in (("water", "vert"), ("water_refraction", "frag"), ("water_reflection", "frag"),
-                      ("water_baseline", "frag"))]
-VARIANT_FILES = [(d, v.name, "frag") for d in ("compat", "core") for v in VARIANTS.values() if v.name != v.shader]
+FILES = [
+    (d, n, s)
+    for d in ("compat", "core")
+    for n, s in (
+        ("water", "vert"),
+        ("water_refraction", "frag"),
+        ("water_reflection", "frag"),
+        ("water_baseline", "frag"),
+    )
+]
+VARIANT_FILES = [
+    (d, v.name, "frag") for d in ("compat", "core") for v in VARIANTS.values() if v.name != v.shader
+]
 
 
 def _split_block(text: str) -> tuple[str, list[str], str]:
@@ -38,7 +63,7 @@ def _split_block(text: str) -> tuple[str, list[str], str]:
     b = [i for i, ln in enumerate(lines) if ln.strip() == BEGIN_MARKER]
     e = [i for i, ln in enumerate(lines) if ln.strip() == END_MARKER]
     assert len(b) == 1 and len(e) == 1, "one constants block expected"
-    return "\n".join(lines[:b[0] + 1]), lines[b[0] + 1:e[0]], "\n".join(lines[e[0]:])
+    return "\n".join(lines[: b[0] + 1]), lines[b[0] + 1 : e[0]], "\n".join(lines[e[0] :])
 
 
 def _f32(v):
@@ -56,7 +81,7 @@ def test_writes_both_dialects_and_they_compile(exported):
     out, paths = exported
     assert sorted(paths) == sorted(out / d / f"{n}.{s}" for d, n, s in FILES + VARIANT_FILES)
     for p in paths:
-        compile_check(p)   # raises RuntimeError with the compiler log
+        compile_check(p)  # raises RuntimeError with the compiler log
 
 
 @pytest.mark.parametrize("dialect", ["compat", "core"])
@@ -88,20 +113,25 @@ def test_block_holds_constants_and_nothing_else_changes(exported, dialect, name)
 def test_vertex_shaders_copied_as_shipped(exported):
     out, _ = exported
     for dialect in ("compat", "core"):
-        assert (out / dialect / "water.vert").read_bytes() == \
-            read_source("water", "vert", dialect).encode("utf-8")
+        assert (out / dialect / "water.vert").read_bytes() == read_source(
+            "water", "vert", dialect
+        ).encode("utf-8")
 
 
 def test_default_constants_reproduce_the_shipped_files(tmp_path):
     paths = export_shaders(Constants(), tmp_path / "shaders")
     assert len(paths) == len(FILES) + len(VARIANT_FILES)
     for d, n, s in FILES:
-        assert (tmp_path / "shaders" / d / f"{n}.{s}").read_text(encoding="utf-8") == read_source(n, s, d)
-    for d, n, s in VARIANT_FILES:   # the shader file with the variant's #define lines
+        assert (tmp_path / "shaders" / d / f"{n}.{s}").read_text(encoding="utf-8") == read_source(
+            n, s, d
+        )
+    for d, n, s in VARIANT_FILES:  # the shader file with the variant's #define lines
         v = get_variant(n)
         text = (tmp_path / "shaders" / d / f"{n}.{s}").read_text(encoding="utf-8")
         assert text == v.source(d)
-        assert text.split("\n")[1:1 + len(v.defines)] == [f"#define {x}" for x in reversed(v.defines)]
+        assert text.split("\n")[1 : 1 + len(v.defines)] == [
+            f"#define {x}" for x in reversed(v.defines)
+        ]
 
 
 @pytest.mark.parametrize("name", ["water_refraction_beer_ggx", "water_refraction_secant"])
@@ -123,6 +153,7 @@ def test_exported_variant_file_runs_like_the_variant(exported, name):
 
 
 # ---- the exported shader on llvmpipe against the port -------------------------------------
+
 
 @pytest.mark.parametrize("shader", ["water_refraction", "water_reflection"])
 def test_exported_core_shader_runs_like_the_port(exported, shader):
@@ -150,8 +181,9 @@ def test_gl_renderer_on_exported_text_matches_port(exported):
 
     out, _ = exported
     inputs = synthetic_inputs(width=48, height=36)
-    with GLRenderer("water_refraction", inputs,
-                    source=(out / "core" / "water_refraction.frag").read_text()) as r:
+    with GLRenderer(
+        "water_refraction", inputs, source=(out / "core" / "water_refraction.frag").read_text()
+    ) as r:
         rgba, gl_mask = r.render(None)
     port = water_refraction.render(inputs, EXPORTED).numpy()
     both = gl_mask & (port["mask"] > 0.5)
@@ -159,12 +191,18 @@ def test_gl_renderer_on_exported_text_matches_port(exported):
     assert both.sum() > 500
     if not (d.mean() <= 1e-3 and np.percentile(d, 99.9) <= 1e-2):
         from conftest import save_failure
-        save_failure("export_gl_vs_port", gl=rgba[..., :3], port=port["color"],
-                     error=np.abs(rgba[..., :3] - port["color"]))
+
+        save_failure(
+            "export_gl_vs_port",
+            gl=rgba[..., :3],
+            port=port["color"],
+            error=np.abs(rgba[..., :3] - port["color"]),
+        )
     assert d.mean() <= 1e-3 and np.percentile(d, 99.9) <= 1e-2, (d.mean(), np.percentile(d, 99.9))
 
 
 # ---- constants files --------------------------------------------------------------------------
+
 
 def _write(tmp_path, text, name="c.json") -> Path:
     p = tmp_path / name
@@ -173,17 +211,23 @@ def _write(tmp_path, text, name="c.json") -> Path:
 
 
 def test_load_calibrate_style_file(tmp_path):
-    data = {"experiment": "x", "error": {"rmse": {"default": 0.2, "fitted": 0.1}},
-            "constants": EXPORTED.to_dict()}
+    data = {
+        "experiment": "x",
+        "error": {"rmse": {"default": 0.2, "fitted": 0.1}},
+        "constants": EXPORTED.to_dict(),
+    }
     c = load_constants_json(_write(tmp_path, json.dumps(data)))
     assert c.to_dict() == EXPORTED.to_dict()
 
 
 def test_load_flat_file(tmp_path):
-    c = load_constants_json(_write(tmp_path, json.dumps({"attenuation_distance": 5.5,
-                                                         "water_color": [0.1, 0.2, 0.3, 1.0]})))
+    c = load_constants_json(
+        _write(
+            tmp_path, json.dumps({"attenuation_distance": 5.5, "water_color": [0.1, 0.2, 0.3, 1.0]})
+        )
+    )
     assert c.attenuation_distance == 5.5 and c.water_color == (0.1, 0.2, 0.3, 1.0)
-    assert c.bumptex_mult == Constants().bumptex_mult      # the rest at the defaults
+    assert c.bumptex_mult == Constants().bumptex_mult  # the rest at the defaults
 
 
 BAD_FILES = {
@@ -193,7 +237,10 @@ BAD_FILES = {
     "unknown": ('{"attenuation_distanse": 5.0}', r"unknown constant.*attenuation_distanse"),
     "nan": ('{"attenuation_distance": NaN}', r"attenuation_distance.*nan.*not a finite"),
     "infinity": ('{"bumptex_mult": Infinity}', r"bumptex_mult.*inf.*not a finite"),
-    "string": ('{"attenuation_distance": "7.5; discard"}', r"attenuation_distance.*7\.5; discard.*not a number"),
+    "string": (
+        '{"attenuation_distance": "7.5; discard"}',
+        r"attenuation_distance.*7\.5; discard.*not a number",
+    ),
     "bool": ('{"specular_strength": true}', r"specular_strength.*True"),
     "null": ('{"specular_strength": null}', r"specular_strength.*None.*not a number"),
     "out_of_range": ('{"attenuation_distance": 1e9}', r"attenuation_distance.*outside"),
@@ -211,7 +258,7 @@ def test_bad_constants_file_is_refused(tmp_path, case):
     path = _write(tmp_path, text)
     with pytest.raises(ValueError, match=pattern) as exc:
         load_constants_json(path)
-    assert str(path) in str(exc.value)                 # the message names the file
+    assert str(path) in str(exc.value)  # the message names the file
     out = tmp_path / "out"
     with pytest.raises(ValueError, match=pattern):
         run_export(path, out)
@@ -237,8 +284,11 @@ def test_scalar_given_as_list_is_refused_without_leftovers(tmp_path):
 
 # ---- a failing export keeps a good one -------------------------------------------------------
 
+
 def _snapshot(folder: Path) -> dict:
-    return {str(p.relative_to(folder)): p.read_bytes() for p in sorted(folder.rglob("*")) if p.is_file()}
+    return {
+        str(p.relative_to(folder)): p.read_bytes() for p in sorted(folder.rglob("*")) if p.is_file()
+    }
 
 
 def test_failed_export_keeps_existing_export(tmp_path, monkeypatch):
@@ -257,6 +307,7 @@ def test_failed_export_keeps_existing_export(tmp_path, monkeypatch):
     assert _snapshot(out) == before
     # a shader that does not compile, the fifth of six
     import study.report.export as ex
+
     calls = {"n": 0}
     real = ex.compile_check
 
@@ -271,10 +322,11 @@ def test_failed_export_keeps_existing_export(tmp_path, monkeypatch):
         export_shaders(Constants(), out / "shaders")
     assert calls["n"] == 5
     assert _snapshot(out) == before
-    assert sorted(p.name for p in out.iterdir()) == ["shaders"]    # no temp or .old folders left
+    assert sorted(p.name for p in out.iterdir()) == ["shaders"]  # no temp or .old folders left
     # a good export replaces the old one completely
     monkeypatch.setattr(ex, "compile_check", real)
     export_shaders(Constants(), out / "shaders")
     assert sorted(p.name for p in out.iterdir()) == ["shaders"]
-    assert (out / "shaders" / "core" / "water_refraction.frag").read_text() == \
-        read_source("water_refraction", "frag", "core")
+    assert (out / "shaders" / "core" / "water_refraction.frag").read_text() == read_source(
+        "water_refraction", "frag", "core"
+    )

@@ -1,4 +1,5 @@
 """EXR round trip with provenance; atomic writes."""
+
 import os
 
 import numpy as np
@@ -18,8 +19,8 @@ def test_round_trip_with_provenance(tmp_path):
     np.testing.assert_array_equal(got, rgb)
     np.testing.assert_array_equal(extra["var"], var)
     np.testing.assert_array_equal(extra["stderr"], se)
-    assert prov2 == prov                       # floats survive exactly (JSON text)
-    assert [f for f in os.listdir(tmp_path)] == ["a.exr"]   # no temporary file left
+    assert prov2 == prov  # floats survive exactly (JSON text)
+    assert [f for f in os.listdir(tmp_path)] == ["a.exr"]  # no temporary file left
 
 
 def test_bad_shapes_and_files(tmp_path):

@@ -4,6 +4,7 @@ corrupt kernel cache, and (slow) a real Dask cluster losing a worker.
 Run by default: the full-disk tests (injected, and a real 256 KiB tmpfs where this user may
 mount one), the kernel cache, Ctrl-C, two calibrations. Slow (``-m slow``): the cluster.
 """
+
 from __future__ import annotations
 
 import errno
@@ -25,9 +26,17 @@ from conftest import REPO
 
 TESTS = Path(__file__).parent
 STUDY = [sys.executable, "-m", "study.cli"]
-SMALL = ["resolution=[32,32]", "fit.resolution=[32,32]", "reference.spp=16", "reference.water_mesh=96",
-         "reference.texture_size=64", "reference.texture_spp=8", "reference.lighting_size=32",
-         "reference.wall_spp=8", "waves.normal_map_size=64"]
+SMALL = [
+    "resolution=[32,32]",
+    "fit.resolution=[32,32]",
+    "reference.spp=16",
+    "reference.water_mesh=96",
+    "reference.texture_size=64",
+    "reference.texture_spp=8",
+    "reference.lighting_size=32",
+    "reference.wall_spp=8",
+    "waves.normal_map_size=64",
+]
 
 
 def _sets(overrides):
@@ -36,6 +45,7 @@ def _sets(overrides):
 
 def _constants_file(tmp_path) -> Path:
     from shaders_port import Constants
+
     path = tmp_path / "constants.json"
     path.write_text(json.dumps(Constants(bumptex_mult=0.8).to_dict()))
     return path
@@ -43,10 +53,12 @@ def _constants_file(tmp_path) -> Path:
 
 # ---- a full disk: one line naming the folder, nothing half-written, old entries valid -------
 
+
 def test_disk_full_is_one_line_and_leaves_nothing(tmp_path, monkeypatch, capsys):
     """ENOSPC injected into the shader export's writes: the CLI prints one line naming the
     output folder and exits 1; no temporary folder is left and the previous export is intact."""
     from study.cli import main
+
     consts = _constants_file(tmp_path)
     out = tmp_path / "out"
     assert main(["export", str(consts), "--out", str(out)]) == 0
@@ -59,12 +71,13 @@ def test_disk_full_is_one_line_and_leaves_nothing(tmp_path, monkeypatch, capsys)
         if len(calls) > 3:
             raise OSError(errno.ENOSPC, "No space left on device", str(self))
         return real(self, *a, **k)
+
     monkeypatch.setattr(Path, "write_text", full)
     capsys.readouterr()
     assert main(["export", str(consts), "--out", str(out)]) == 1
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "no space left" in err[0] and str(out / "shaders") in err[0], err
-    assert sorted(p.name for p in out.iterdir()) == ["shaders"]          # no temporary folder
+    assert sorted(p.name for p in out.iterdir()) == ["shaders"]  # no temporary folder
     assert {p: p.read_bytes() for p in (out / "shaders").rglob("*.*")} == before
 
 
@@ -72,10 +85,16 @@ def test_disk_full_on_a_real_small_filesystem(tmp_path):
     """A 256 KiB tmpfs as the cache: an EXR that does not fit fails with DiskFullError naming
     the folder, leaves no temporary file, and the entry written before still reads back."""
     from study._io import DiskFullError, read_exr, write_exr, write_json
+
     mnt = tmp_path / "tiny"
     mnt.mkdir()
-    if os.geteuid() != 0 or subprocess.run(["mount", "-t", "tmpfs", "-o", "size=256k", "tmpfs", str(mnt)],
-                                           capture_output=True).returncode != 0:
+    if (
+        os.geteuid() != 0
+        or subprocess.run(
+            ["mount", "-t", "tmpfs", "-o", "size=256k", "tmpfs", str(mnt)], capture_output=True
+        ).returncode
+        != 0
+    ):
         pytest.skip("mounting a tmpfs needs root (the injected ENOSPC test covers the same path)")
     try:
         small = np.full((8, 8, 3), 0.25, np.float32)
@@ -113,9 +132,12 @@ def test_corrupt_kernel_cache_is_rebuilt(tmp_path):
 
     def render(name):
         code = _RENDER_PORT.format(tests=str(TESTS), out=str(tmp_path / name))
-        r = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, timeout=600)
+        r = subprocess.run(
+            [sys.executable, "-c", code], env=env, capture_output=True, text=True, timeout=600
+        )
         assert r.returncode == 0, r.stderr[-3000:]
         return np.load(tmp_path / name)
+
     clean = render("clean.npy")
     files = sorted(kc.iterdir())
     assert files, "the render wrote no kernel to DRJIT_CACHE_DIR"
@@ -130,44 +152,76 @@ def test_corrupt_kernel_cache_is_rebuilt(tmp_path):
 
 # ---- two processes, one new scene: one renders, one waits; the same constants ----------------
 
+
 def test_two_calibrations_of_one_new_scene(tmp_path):
     env = {**os.environ, "STUDY_CACHE": str(tmp_path / "cache")}
     args = [str(REPO / "experiments" / "default.toml")] + _sets(SMALL + ["fit.max_steps=8"])
-    procs = [subprocess.Popen(STUDY + ["calibrate"] + args + ["--out", str(tmp_path / f"out{i}")], env=env,
-                              cwd=tmp_path, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
-             for i in range(2)]
+    procs = [
+        subprocess.Popen(
+            STUDY + ["calibrate"] + args + ["--out", str(tmp_path / f"out{i}")],
+            env=env,
+            cwd=tmp_path,
+            stdout=subprocess.PIPE,
+            stderr=subprocess.STDOUT,
+            text=True,
+        )
+        for i in range(2)
+    ]
     outs = [p.communicate(timeout=900)[0] for p in procs]
     assert all(p.returncode == 0 for p in procs), [o[-3000:] for o in outs]
     assert sum("reference: rendered" in o for o in outs) == 1, outs
     assert sum("reference: cached" in o for o in outs) == 1, outs
-    consts = [json.loads((tmp_path / f"out{i}" / "constants.json").read_text())["constants"] for i in range(2)]
+    consts = [
+        json.loads((tmp_path / f"out{i}" / "constants.json").read_text())["constants"]
+        for i in range(2)
+    ]
     assert consts[0] == consts[1]
     assert not list((tmp_path / "cache").rglob("*.tmp"))
 
 
 # ---- Ctrl-C in a sweep: a valid table, and the re-run computes only the missing points --------
 
-TINY_TRADEOFF = SMALL + ['tradeoff.variants=["water_refraction"]', "tradeoff.steps_grazing=[5.0]",
-                         "tradeoff.steps_steep=[3.0]", "tradeoff.loop_cap=[20]",
-                         "tradeoff.scales=[0.25,0.5,0.75,1.0,1.5,2.0]", "tradeoff.converged_scale=4.0",
-                         "tradeoff.gl_repeats=3", "fit.max_steps=5"]
+TINY_TRADEOFF = SMALL + [
+    'tradeoff.variants=["water_refraction"]',
+    "tradeoff.steps_grazing=[5.0]",
+    "tradeoff.steps_steep=[3.0]",
+    "tradeoff.loop_cap=[20]",
+    "tradeoff.scales=[0.25,0.5,0.75,1.0,1.5,2.0]",
+    "tradeoff.converged_scale=4.0",
+    "tradeoff.gl_repeats=3",
+    "fit.max_steps=5",
+]
 
 
 def test_ctrl_c_in_a_sweep_keeps_a_valid_table_and_resumes(tmp_path):
     from study.sweep import read_table
+
     env = {**os.environ, "STUDY_CACHE": str(tmp_path / "cache")}
     out = tmp_path / "out"
-    args = (STUDY + ["tradeoff", str(REPO / "experiments" / "default.toml"), "--out", str(out), "--workers", "1"]
-            + _sets(TINY_TRADEOFF))
-    proc = subprocess.Popen(args, env=env, cwd=tmp_path, stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
-                            text=True)
+    args = (
+        STUDY
+        + [
+            "tradeoff",
+            str(REPO / "experiments" / "default.toml"),
+            "--out",
+            str(out),
+            "--workers",
+            "1",
+        ]
+        + _sets(TINY_TRADEOFF)
+    )
+    proc = subprocess.Popen(
+        args, env=env, cwd=tmp_path, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True
+    )
     table = out / "tradeoff.parquet"
     deadline = time.monotonic() + 600
     while time.monotonic() < deadline and proc.poll() is None:
         if table.exists() and len(read_table(table)) >= 1:
             break
         time.sleep(0.2)
-    assert proc.poll() is None, "the sweep ended before it could be interrupted: " + proc.stdout.read()[-2000:]
+    assert proc.poll() is None, (
+        "the sweep ended before it could be interrupted: " + proc.stdout.read()[-2000:]
+    )
     proc.send_signal(signal.SIGINT)
     log = proc.communicate(timeout=300)[0]
     assert proc.returncode == 130, log[-3000:]
@@ -177,8 +231,10 @@ def test_ctrl_c_in_a_sweep_keeps_a_valid_table_and_resumes(tmp_path):
     assert not list(out.glob(".*.tmp"))
     rerun = subprocess.run(args, env=env, cwd=tmp_path, capture_output=True, text=True, timeout=900)
     assert rerun.returncode == 0, rerun.stderr[-3000:]
-    m = re.search(rf"points: {len(done)} of (\d+) jobs already in \S+tradeoff.parquet; running (\d+)",
-                  rerun.stderr)
+    m = re.search(
+        rf"points: {len(done)} of (\d+) jobs already in \S+tradeoff.parquet; running (\d+)",
+        rerun.stderr,
+    )
     assert m, rerun.stderr[-3000:]
     total = int(m.group(1))
     assert int(m.group(2)) == total - len(done) > 0
@@ -190,8 +246,10 @@ def test_ctrl_c_in_a_sweep_keeps_a_valid_table_and_resumes(tmp_path):
 
 # ---- a real cluster losing a worker ------------------------------------------------------------
 
+
 def _free_port() -> int:
     import socket
+
     with socket.socket() as s:
         s.bind(("127.0.0.1", 0))
         return s.getsockname()[1]
@@ -203,21 +261,48 @@ def test_real_cluster_survives_a_killed_worker(tmp_path):
     SIGKILL once the first rows are in: every point is in the table once, none failed, and the
     rows equal those of a LocalCluster run of the same sweep."""
     from study.sweep import read_table
+
     dask = str(Path(sys.executable).with_name("dask"))
     port = _free_port()
     env = {**os.environ, "STUDY_CACHE": str(tmp_path / "cache"), "PYTHONPATH": str(REPO)}
-    procs = [subprocess.Popen([dask, "scheduler", "--host", "127.0.0.1", "--port", str(port),
-                               "--no-dashboard"], env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)]
+    procs = [
+        subprocess.Popen(
+            [dask, "scheduler", "--host", "127.0.0.1", "--port", str(port), "--no-dashboard"],
+            env=env,
+            stdout=subprocess.DEVNULL,
+            stderr=subprocess.DEVNULL,
+        )
+    ]
     time.sleep(3)
     try:
         for _ in range(2):
-            procs.append(subprocess.Popen([dask, "worker", f"tcp://127.0.0.1:{port}", "--nthreads", "1",
-                                           "--no-dashboard"], env=env, cwd=tmp_path,
-                                          stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL))
+            procs.append(
+                subprocess.Popen(
+                    [
+                        dask,
+                        "worker",
+                        f"tcp://127.0.0.1:{port}",
+                        "--nthreads",
+                        "1",
+                        "--no-dashboard",
+                    ],
+                    env=env,
+                    cwd=tmp_path,
+                    stdout=subprocess.DEVNULL,
+                    stderr=subprocess.DEVNULL,
+                )
+            )
         args = ["tradeoff", str(REPO / "experiments" / "default.toml")] + _sets(TINY_TRADEOFF)
-        run = subprocess.Popen(STUDY + args + ["--out", str(tmp_path / "cluster"), "--scheduler",
-                                               f"tcp://127.0.0.1:{port}"], env=env, cwd=tmp_path,
-                               stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+        run = subprocess.Popen(
+            STUDY
+            + args
+            + ["--out", str(tmp_path / "cluster"), "--scheduler", f"tcp://127.0.0.1:{port}"],
+            env=env,
+            cwd=tmp_path,
+            stdout=subprocess.PIPE,
+            stderr=subprocess.STDOUT,
+            text=True,
+        )
         table = tmp_path / "cluster" / "tradeoff.parquet"
         deadline = time.monotonic() + 900
         while time.monotonic() < deadline and run.poll() is None and not table.exists():
@@ -231,8 +316,14 @@ def test_real_cluster_survives_a_killed_worker(tmp_path):
             p.wait()
     rows = read_table(table)
     assert len({r["key"] for r in rows}) == len(rows) and all(r["status"] == "ok" for r in rows)
-    local = subprocess.run(STUDY + args + ["--out", str(tmp_path / "local"), "--workers", "2"], env=env,
-                           cwd=tmp_path, capture_output=True, text=True, timeout=1200)
+    local = subprocess.run(
+        STUDY + args + ["--out", str(tmp_path / "local"), "--workers", "2"],
+        env=env,
+        cwd=tmp_path,
+        capture_output=True,
+        text=True,
+        timeout=1200,
+    )
     assert local.returncode == 0, local.stderr[-3000:]
     ref = {r["key"]: r for r in read_table(tmp_path / "local" / "tradeoff.parquet")}
     assert set(ref) == {r["key"] for r in rows}

@@ -1,6 +1,7 @@
 """The fitting engine on a small Dr.Jit image model (tests/drjit_toy.py): parameter recovery
 with every solver family, the Adam baseline, failures reported not raised, transforms,
 identifiability and derivative-free parameters."""
+
 import math
 
 import numpy as np
@@ -23,8 +24,9 @@ def _rel_err(res):
     return max(abs(res.constants[n] - TRUTH[n]) / abs(TRUTH[n]) for n in FREE)
 
 
-@pytest.mark.parametrize("solver", ["levenberg_marquardt", "gauss_newton", "dogleg", "bfgs",
-                                    "nelder_mead"])
+@pytest.mark.parametrize(
+    "solver", ["levenberg_marquardt", "gauss_newton", "dogleg", "bfgs", "nelder_mead"]
+)
 def test_recovers_parameters(toy, solver):
     kw = {"rtol": 1e-10, "atol": 1e-14, "max_steps": 2000} if solver == "nelder_mead" else {}
     res = fit(toy.problem(), START, solver=solver, free=FREE, **kw)
@@ -32,7 +34,7 @@ def test_recovers_parameters(toy, solver):
     assert _rel_err(res) < 1e-3, (res.constants, res.message)
     assert res.loss < 1e-8 * res.loss_start
     assert res.names == FREE and res.x.shape == (3,)
-    assert res.constants["gain"] == 1.0 and res.constants["levels"] == 3.0   # held
+    assert res.constants["gain"] == 1.0 and res.constants["levels"] == 3.0  # held
     if solver == "nelder_mead":
         assert res.n_jac_calls == 0 and res.n_value_calls > 10
     else:
@@ -43,8 +45,14 @@ def test_recovers_parameters(toy, solver):
 def test_adam_decreases_loss(toy, reverse):
     """Adam (lr 0.05 in u units, up to 300 iterations): documented criterion, loss down by 1e5 and
     parameters within 1e-2 relative (measured on this model: 23 -> 2e-14, ~1e-7 relative)."""
-    res = fit(toy.problem(with_adam_reverse=reverse), START, solver="adam", free=FREE,
-              max_steps=300, lr=0.05)
+    res = fit(
+        toy.problem(with_adam_reverse=reverse),
+        START,
+        solver="adam",
+        free=FREE,
+        max_steps=300,
+        lr=0.05,
+    )
     assert len(res.losses) == res.iterations
     assert res.loss < 1e-5 * res.loss_start, res.message
     assert _rel_err(res) < 1e-2
@@ -54,8 +62,14 @@ def test_adam_decreases_loss(toy, reverse):
 def test_unknown_solver_lists_valid_names(toy):
     with pytest.raises(ValueError, match="unknown solver 'newton'.*levenberg_marquardt.*adam"):
         fit(toy.problem(), solver="newton")
-    assert set(SOLVERS) >= {"levenberg_marquardt", "gauss_newton", "dogleg", "bfgs", "nelder_mead",
-                            "adam"}
+    assert set(SOLVERS) >= {
+        "levenberg_marquardt",
+        "gauss_newton",
+        "dogleg",
+        "bfgs",
+        "nelder_mead",
+        "adam",
+    }
 
 
 def test_bad_start_and_names_are_rejected(toy):
@@ -88,12 +102,29 @@ def test_nonfinite_is_reported_not_raised():
     assert math.isfinite(hit.loss) and hit.loss <= hit.loss_start and hit.constants["rate"] <= 1.2
 
 
-@pytest.mark.parametrize("param", [Param("a", 2.0), Param("b", 0.3, 0.0, 1.0), Param("c", 7.5, 1e-3, 1e4),
-                                   Param("d", -1.0, hi=0.0), Param("e", 0.0, scale=0.5),
-                                   Param("f", 0.5, 0.2, math.inf, scale=0.1)])
+@pytest.mark.parametrize(
+    "param",
+    [
+        Param("a", 2.0),
+        Param("b", 0.3, 0.0, 1.0),
+        Param("c", 7.5, 1e-3, 1e4),
+        Param("d", -1.0, hi=0.0),
+        Param("e", 0.0, scale=0.5),
+        Param("f", 0.5, 0.2, math.inf, scale=0.1),
+    ],
+)
 def test_transforms_round_trip_and_chain_rule(param):
-    assert param.kind == {"a": "linear", "b": "logit", "c": "log_logit", "d": "neglog", "e": "linear",
-                          "f": "log"}[param.name]
+    assert (
+        param.kind
+        == {
+            "a": "linear",
+            "b": "logit",
+            "c": "log_logit",
+            "d": "neglog",
+            "e": "linear",
+            "f": "log",
+        }[param.name]
+    )
     assert abs(param.to_u(param.default)) < 1e-12
     for u in (-2.0, -0.3, 0.0, 0.7, 3.0):
         p = float(param.from_u(u))
@@ -104,7 +135,7 @@ def test_transforms_round_trip_and_chain_rule(param):
         assert abs(float(param.dp_du(u)) - fd) <= 1e-6 * max(1.0, abs(fd))
     # near the default, one unit of u is about one scale
     assert abs(float(param.dp_du(0.0)) - param.typical) < 1e-9 * param.typical
-    for u in (-60.0, 60.0):                  # saturates inside the bounds, no NaN
+    for u in (-60.0, 60.0):  # saturates inside the bounds, no NaN
         assert param.lo <= float(param.from_u(u)) <= param.hi and np.isfinite(param.dp_du(u))
 
 

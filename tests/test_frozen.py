@@ -5,6 +5,7 @@ The reduction of the defect: a frozen function whose body builds a value of widt
 ``dr.width(x)`` (a Python int, baked into the recording) replays it at the recorded width when
 called with another lane count, so the outputs come back ragged (:func:`_width_literal`).
 """
+
 from __future__ import annotations
 
 import dataclasses
@@ -32,6 +33,7 @@ def _lanes(n):
 @dataclasses.dataclass
 class _Frame:
     """The part of a port's shading state that call_frozen reads: lanes and upload number."""
+
     varyingVecWorldPosition: object
     upload: int = 0
 
@@ -51,8 +53,8 @@ def test_dr_freeze_replays_a_width_literal_at_the_recorded_width():
     fails, Dr.Jit keys such recordings itself and the guard in call_frozen is belt and braces."""
     f = dr.freeze(_width_literal)
     widths = [(n,) + tuple(dr.width(v) for v in f(_lanes(n))) for n in (10, 20, 10, 30)]
-    assert all(w[1] == w[0] for w in widths)               # the first output follows its input
-    assert any(w[2] != w[0] for w in widths), widths       # the baked width does not
+    assert all(w[1] == w[0] for w in widths)  # the first output follows its input
+    assert any(w[2] != w[0] for w in widths), widths  # the baked width does not
 
 
 def test_call_frozen_replays_literal_outputs_at_the_lane_count(monkeypatch):
@@ -86,7 +88,7 @@ def test_call_frozen_never_passes_a_ragged_replay_on(monkeypatch):
     msgs = [str(r.message) for r in rec if "frozen width_literal_test" in str(r.message)]
     assert len(msgs) == 1 and "a replay returned outputs of width" in msgs[0], msgs
     with warnings.catch_warnings():
-        warnings.simplefilter("error")                      # traced from now on, silently
+        warnings.simplefilter("error")  # traced from now on, silently
         a, b = _frame.call_frozen(key, _shade_width_literal, m, _frame_of(40))
     assert dr.width(b) == 40 and key in _frame._BROKEN
 
@@ -100,6 +102,7 @@ def test_recordings_are_bounded(monkeypatch):
 
     def fn(m, P, scale):
         return P.varyingVecWorldPosition.x * scale
+
     with warnings.catch_warnings(record=True) as rec:
         warnings.simplefilter("always")
         for k in range(_frame.MAX_RECORDINGS + 4):
@@ -122,11 +125,15 @@ def test_ports_replay_at_any_lane_count(shader, monkeypatch):
     c = Constants(bumptex_mult=0.8)
     with warnings.catch_warnings():
         warnings.simplefilter("error", _frame.FrozenReplayWarning)
-        frozen = [(shader.render(f, c).numpy(), shader.render_with_jacobian(f, c, names)[1])
-                  for f in frames + frames]
+        frozen = [
+            (shader.render(f, c).numpy(), shader.render_with_jacobian(f, c, names)[1])
+            for f in frames + frames
+        ]
     monkeypatch.setattr(_frame, "USE_FROZEN", False)
-    traced = [(shader.render(f, c).numpy(), shader.render_with_jacobian(f, c, names)[1])
-              for f in frames + frames]
+    traced = [
+        (shader.render(f, c).numpy(), shader.render_with_jacobian(f, c, names)[1])
+        for f in frames + frames
+    ]
     for (img, J), (img_t, J_t) in zip(frozen, traced):
         assert img["color"].shape == img_t["color"].shape
         for k in img_t:
@@ -134,4 +141,4 @@ def test_ports_replay_at_any_lane_count(shader, monkeypatch):
         assert np.array_equal(J, J_t)
     assert not _frame._BROKEN
     ups = {k for k in _frame._FROZEN if k[0].startswith(shader.__name__.split(".")[-1])}
-    assert all(_frame._FROZEN[k].n_recordings <= 2 for k in ups)   # each frame records twice at most
+    assert all(_frame._FROZEN[k].n_recordings <= 2 for k in ups)  # each frame records twice at most

@@ -2,6 +2,7 @@
 schema (TOML tables and ``--set`` overrides) and the constants JSON file. Any input gives a
 valid result or one clear error (``ExperimentError`` / ``ValueError``) that names the key at
 fault and echoes a bad value clipped to a readable length; never another exception."""
+
 from __future__ import annotations
 
 import json
@@ -16,16 +17,29 @@ from shaders_port import CONSTANT_SPECS
 from study.report.export import load_constants_json
 from study.scene.experiment import SCHEMA, Experiment, ExperimentError, validate
 
-MAX_MESSAGE = 1200          # characters: an error message stays readable
+MAX_MESSAGE = 1200  # characters: an error message stays readable
 # long strings (thousands of characters), built cheaply: hypothesis draws big texts slowly
-LONG = st.builds(lambda n, c: c * n, st.integers(600, 1200), st.sampled_from(["ab\u00e9\n\x00\"'", "x.y=", "[1,"]))
+LONG = st.builds(
+    lambda n, c: c * n,
+    st.integers(600, 1200),
+    st.sampled_from(["ab\u00e9\n\x00\"'", "x.y=", "[1,"]),
+)
 FUZZ = settings(max_examples=100, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 
-scalars = (st.none() | st.booleans() | st.integers() | st.integers(min_value=-2**2000, max_value=2**2000)
-           | st.floats(allow_nan=True, allow_infinity=True) | st.text(max_size=20)
-           | LONG)
-values = st.recursive(scalars, lambda c: st.lists(c, max_size=6) | st.dictionaries(st.text(max_size=8), c, max_size=4),
-                      max_leaves=12)
+scalars = (
+    st.none()
+    | st.booleans()
+    | st.integers()
+    | st.integers(min_value=-(2**2000), max_value=2**2000)
+    | st.floats(allow_nan=True, allow_infinity=True)
+    | st.text(max_size=20)
+    | LONG
+)
+values = st.recursive(
+    scalars,
+    lambda c: st.lists(c, max_size=6) | st.dictionaries(st.text(max_size=8), c, max_size=4),
+    max_leaves=12,
+)
 keys = st.sampled_from(sorted(SCHEMA)) | st.text(max_size=30) | LONG
 
 
@@ -58,8 +72,12 @@ def test_any_value_of_one_key_is_valid_or_an_error_naming_the_key(key, value):
     try:
         exp = validate(_nest({key: value}))
     except ExperimentError as exc:
-        _check_error(exc, key if key not in ("resolution", "fit.resolution", "camera.position",
-                                              "camera.target") else None)
+        _check_error(
+            exc,
+            key
+            if key not in ("resolution", "fit.resolution", "camera.position", "camera.target")
+            else None,
+        )
         return
     assert isinstance(exp, Experiment)
     assert set(exp.values) == set(SCHEMA)
@@ -75,8 +93,12 @@ def test_any_table_is_valid_or_one_clear_error(raw):
 
 
 @FUZZ
-@given(items=st.lists(st.text(max_size=60) | st.builds(lambda k, v: f"{k}={v}", keys, st.text(max_size=40)),
-                      max_size=4))
+@given(
+    items=st.lists(
+        st.text(max_size=60) | st.builds(lambda k, v: f"{k}={v}", keys, st.text(max_size=40)),
+        max_size=4,
+    )
+)
 def test_any_set_override_is_valid_or_one_clear_error(items):
     try:
         validate({}, items)
@@ -86,7 +108,7 @@ def test_any_set_override_is_valid_or_one_clear_error(items):
 
 def test_a_long_bad_value_is_clipped_in_the_message():
     long = "x" * 5000
-    for item in (f"floor.shape={long}", f"water.ior=\"{long}\"", f"{long}=1", long):
+    for item in (f"floor.shape={long}", f'water.ior="{long}"', f"{long}=1", long):
         with pytest.raises(ExperimentError) as err:
             validate({}, [item])
         _check_error(err.value)
@@ -95,12 +117,19 @@ def test_a_long_bad_value_is_clipped_in_the_message():
 
 # ---- constants JSON -----------------------------------------------------------------------
 
-json_scalars = (st.none() | st.booleans() | st.integers(min_value=-2**2000, max_value=2**2000)
-                | st.floats(allow_nan=False, allow_infinity=False) | st.text(max_size=20)
-                | LONG)
-json_values = st.recursive(json_scalars, lambda c: st.lists(c, max_size=5) | st.dictionaries(st.text(max_size=8), c,
-                                                                                             max_size=3),
-                           max_leaves=10)
+json_scalars = (
+    st.none()
+    | st.booleans()
+    | st.integers(min_value=-(2**2000), max_value=2**2000)
+    | st.floats(allow_nan=False, allow_infinity=False)
+    | st.text(max_size=20)
+    | LONG
+)
+json_values = st.recursive(
+    json_scalars,
+    lambda c: st.lists(c, max_size=5) | st.dictionaries(st.text(max_size=8), c, max_size=3),
+    max_leaves=10,
+)
 constant_names = st.sampled_from(sorted(CONSTANT_SPECS))
 
 
@@ -126,8 +155,11 @@ def test_any_constant_value_is_valid_or_an_error_naming_it(tmp_path_factory, nam
 
 
 @FUZZ
-@given(data=json_values | st.dictionaries(st.text(max_size=30) | constant_names, json_values, max_size=5),
-       garbage=st.one_of(st.none(), st.text(max_size=50)))
+@given(
+    data=json_values
+    | st.dictionaries(st.text(max_size=30) | constant_names, json_values, max_size=5),
+    garbage=st.one_of(st.none(), st.text(max_size=50)),
+)
 def test_any_json_file_is_constants_or_one_clear_error(tmp_path_factory, data, garbage):
     tmp = tmp_path_factory.mktemp("c")
     try:

@@ -7,6 +7,7 @@ The range ends of every numeric key are run (``slow``), and random combinations 
 (``slow``); a quick subset of the riskiest combinations runs by default. The upper ends of
 the keys that only set cost (image, texture, mesh and normal-map sizes, sample counts) are
 left out: they are slow by design, not wrong."""
+
 from __future__ import annotations
 
 import json
@@ -20,10 +21,19 @@ import pytest
 from conftest import REPO
 from study.scene.experiment import SCHEMA
 
-CASE_SECONDS = 120       # per case, tiny sizes, 2 shared cores (the first one compiles the kernels)
-COST_KEYS = {"resolution", "fit.resolution", "reference.texture_size", "reference.water_mesh",
-             "waves.normal_map_size", "reference.spp", "reference.texture_spp", "reference.max_spp",
-             "fit.max_steps", "reference.max_depth"}
+CASE_SECONDS = 120  # per case, tiny sizes, 2 shared cores (the first one compiles the kernels)
+COST_KEYS = {
+    "resolution",
+    "fit.resolution",
+    "reference.texture_size",
+    "reference.water_mesh",
+    "waves.normal_map_size",
+    "reference.spp",
+    "reference.texture_spp",
+    "reference.max_spp",
+    "fit.max_steps",
+    "reference.max_depth",
+}
 SKIP = {"name", "description", "fit.parameters", "fit.solver", "fit.max_steps"}
 
 
@@ -40,10 +50,12 @@ def _ends(key: str):
         return [(f"{key}={c}", [f"{key}={_toml(c)}"]) for c in f.choices if c != f.default]
     if f.kind == "vec2x4":
         return [(f"{key}=huge", [f"{key}=[[1e9, -1e9], [0, 0], [0.5, 0.5], [-1e9, 1e9]]"])]
-    if f.lo is None:                                     # camera vectors: far away / close
+    if f.lo is None:  # camera vectors: far away / close
         if key == "camera.position":
-            return [("camera.position=close", ["camera.position=[0.0, 0.001, 0.01]"]),
-                    ("camera.position=far", ["camera.position=[0.0, 1e4, 1e4]"])]
+            return [
+                ("camera.position=close", ["camera.position=[0.0, 0.001, 0.01]"]),
+                ("camera.position=far", ["camera.position=[0.0, 1e4, 1e4]"]),
+            ]
         if key == "camera.target":
             return [("camera.target=far", ["camera.target=[1e6, -1e6, 1e6]"])]
         return []
@@ -59,8 +71,11 @@ def _ends(key: str):
         if key == "resolution":
             sets.append(f"fit.resolution={text}")
         if key == "reference.target_noise" or key == "reference.max_spp":
-            sets += ["reference.spp=\"auto\"", "reference.max_spp=4"] if key != "reference.max_spp" else \
-                ["reference.spp=\"auto\""]
+            sets += (
+                ['reference.spp="auto"', "reference.max_spp=4"]
+                if key != "reference.max_spp"
+                else ['reference.spp="auto"']
+            )
         out.append((f"{key}={end}", sets))
     return out
 
@@ -75,31 +90,52 @@ def random_cases(n: int, seed: int = 0):
     out = []
     for i in range(n):
         picks = rng.sample(pool, rng.randint(3, 6))
-        out.append((f"random{i}:" + "+".join(p[0] for p in picks), [s for p in picks for s in p[1]]))
+        out.append(
+            (f"random{i}:" + "+".join(p[0] for p in picks), [s for p in picks for s in p[1]])
+        )
     return out
 
 
 QUICK = [
     ("waves.components=64+normal_tile=lo", ["waves.components=64", "waves.normal_tile=0.01"]),
-    ("loop caps=hi+steps=lo", ["constants.loop_cap=10000", "constants.refl_loop_cap=10000",
-                               "constants.steps_grazing=0.5", "constants.steps_steep=0.5",
-                               "fit.shader=\"water_reflection\""]),
-    ("bright sun+sky", ["sun.radius=20", "sun.radiance=[1e6, 1e6, 1e6]", "sky.zenith=[1e4, 1e4, 1e4]",
-                        "sun.elevation=0"]),
+    (
+        "loop caps=hi+steps=lo",
+        [
+            "constants.loop_cap=10000",
+            "constants.refl_loop_cap=10000",
+            "constants.steps_grazing=0.5",
+            "constants.steps_steep=0.5",
+            'fit.shader="water_reflection"',
+        ],
+    ),
+    (
+        "bright sun+sky",
+        [
+            "sun.radius=20",
+            "sun.radiance=[1e6, 1e6, 1e6]",
+            "sky.zenith=[1e4, 1e4, 1e4]",
+            "sun.elevation=0",
+        ],
+    ),
     ("dense water", ["water.ior=3", "water.sigma_t=[1000, 1000, 1000]", "water.albedo=[1, 1, 1]"]),
     ("floor at the surface", ["floor.depth=0.01"]),
     ("wide fov, tiny pool", ["camera.fov_y=170", "pool.half_extent=[0.1, 0.1]"]),
-    ("largest reference seed", ["reference.seed=268435455"]),       # once beyond Mitsuba's 32-bit seeds
+    ("largest reference seed", ["reference.seed=268435455"]),  # once beyond Mitsuba's 32-bit seeds
 ]
 
 
 def run_cases(cases, tmp_path):
     (tmp_path / "cases.json").write_text(json.dumps(cases))
-    cmd = [sys.executable, str(REPO / "tests" / "preview_driver.py"), str(tmp_path / "cases.json"),
-           str(tmp_path / "out")]
+    cmd = [
+        sys.executable,
+        str(REPO / "tests" / "preview_driver.py"),
+        str(tmp_path / "cases.json"),
+        str(tmp_path / "out"),
+    ]
     try:
-        res = subprocess.run(cmd, capture_output=True, text=True, timeout=60 + CASE_SECONDS * len(cases),
-                             cwd=REPO)
+        res = subprocess.run(
+            cmd, capture_output=True, text=True, timeout=60 + CASE_SECONDS * len(cases), cwd=REPO
+        )
         stdout = res.stdout
     except subprocess.TimeoutExpired as exc:
         stdout = exc.stdout.decode() if isinstance(exc.stdout, bytes) else (exc.stdout or "")
@@ -124,8 +160,8 @@ def run_cases(cases, tmp_path):
 def test_quick_extremes_complete_or_stop_clearly(tmp_path):
     recs = run_cases(QUICK, tmp_path)
     status = {r["case"]: r["status"] for r in recs}
-    assert status["waves.components=64+normal_tile=lo"] == "ok"       # once a hang
-    assert status["floor at the surface"] == "error"                  # the floor above the troughs
+    assert status["waves.components=64+normal_tile=lo"] == "ok"  # once a hang
+    assert status["floor at the surface"] == "error"  # the floor above the troughs
 
 
 @pytest.mark.slow
@@ -144,9 +180,17 @@ def test_same_experiment_same_constants_bit_identical(tmp_path, monkeypatch):
     """Two previews from empty caches (reference, shader inputs and port all recomputed)."""
     from study._io import read_exr
     from study._jobs import run_preview
-    sets = ["resolution=[16,16]", "fit.resolution=[16,16]", "reference.spp=4", "reference.water_mesh=24",
-            "reference.texture_size=16", "reference.texture_spp=2", "waves.normal_map_size=16",
-            "fit.shader=\"water_reflection\""]
+
+    sets = [
+        "resolution=[16,16]",
+        "fit.resolution=[16,16]",
+        "reference.spp=4",
+        "reference.water_mesh=24",
+        "reference.texture_size=16",
+        "reference.texture_spp=2",
+        "waves.normal_map_size=16",
+        'fit.shader="water_reflection"',
+    ]
     out = []
     for i in range(2):
         monkeypatch.setenv("STUDY_CACHE", str(tmp_path / f"cache{i}"))

@@ -1,4 +1,5 @@
 """Analytic scene content: the wave field's components are distinct and drawing them ends."""
+
 import subprocess
 import sys
 
@@ -14,12 +15,16 @@ OFFSETS = [[0, 0], [0.31, 0.17], [0.53, 0.71], [0.13, 0.47]]
 def test_every_component_count_ends_within_a_time_bound():
     """Up to 40 components fit the [-4, 4]^2 grid; 41..64 once looped forever there. In a
     subprocess with a timeout, so a hang fails the test instead of stalling the suite."""
-    code = ("from study.scene.geometry import Waves\n"
-            "for m in range(1, 65):\n"
-            "    for seed in range(3):\n"
-            "        Waves(0.05, 2.0, m, seed, [[0, 0]] * 4)\n"
-            "print('done')\n")
-    res = subprocess.run([sys.executable, "-c", code], cwd=REPO, capture_output=True, text=True, timeout=120)
+    code = (
+        "from study.scene.geometry import Waves\n"
+        "for m in range(1, 65):\n"
+        "    for seed in range(3):\n"
+        "        Waves(0.05, 2.0, m, seed, [[0, 0]] * 4)\n"
+        "print('done')\n"
+    )
+    res = subprocess.run(
+        [sys.executable, "-c", code], cwd=REPO, capture_output=True, text=True, timeout=120
+    )
     assert res.returncode == 0 and "done" in res.stdout, res.stderr
 
 

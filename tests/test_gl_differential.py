@@ -6,6 +6,7 @@ diagnostics (see shaders_port._compare) and their number stays below 0.1 % of th
 Measured on these inputs: max |diff| ~3e-5 (llvmpipe filters float textures with float
 weights), no pixel beyond 1e-2, coverage identical.
 """
+
 from __future__ import annotations
 
 import pytest
@@ -36,8 +37,12 @@ def compare_or_skip(inputs, constants, shader, **kw) -> dict:
 
 
 def _check(res: dict, tag: str) -> None:
-    ok = (res["mean_abs"] <= 1e-3 and res["p999"] <= 1e-2 and res["unexplained"] == 0
-          and res["n_outliers"] <= 1e-3 * res["n_water"])
+    ok = (
+        res["mean_abs"] <= 1e-3
+        and res["p999"] <= 1e-2
+        and res["unexplained"] == 0
+        and res["n_outliers"] <= 1e-3 * res["n_water"]
+    )
     if not ok:
         save_failure(tag, res["port"], res["gl"])
     assert res["n_water"] > 500
@@ -48,7 +53,9 @@ def _check(res: dict, tag: str) -> None:
     assert res["n_outliers"] <= 1e-3 * res["n_water"], (res["n_outliers"], res["explained"])
 
 
-@pytest.mark.parametrize("shader,reflection", CASES, ids=["refraction", "noreflection", "reflection"])
+@pytest.mark.parametrize(
+    "shader,reflection", CASES, ids=["refraction", "noreflection", "reflection"]
+)
 @pytest.mark.parametrize("which", ["default", "custom"])
 def test_port_matches_gl(inputs, shader, reflection, which):
     constants = Constants() if which == "default" else CUSTOM

@@ -1,4 +1,5 @@
 """The OpenGL runner (headless EGL) on the synthetic inputs."""
+
 from __future__ import annotations
 
 from pathlib import Path
@@ -27,6 +28,7 @@ def inputs():
 def save_failure(tag: str, actual: np.ndarray, expected: np.ndarray | None = None) -> None:
     """Write the actual image (and |error| against ``expected``) to tests/_failures/."""
     import matplotlib.pyplot as plt
+
     FAILURES.mkdir(exist_ok=True)
     plt.imsave(FAILURES / f"{tag}_actual.png", np.clip(actual[..., :3], 0, 1))
     if expected is not None:
@@ -95,7 +97,9 @@ def test_water_color_and_attenuation_distance(inputs):
         mask = r.render(Constants())[1]
         a = _attenuation(r, Constants())
         # same weight in every channel, in [0, 1], positive on every water pixel
-        assert np.allclose(a[..., 0], a[..., 1], atol=1e-5) and np.allclose(a[..., 0], a[..., 2], atol=1e-5)
+        assert np.allclose(a[..., 0], a[..., 1], atol=1e-5) and np.allclose(
+            a[..., 0], a[..., 2], atol=1e-5
+        )
         a = a[..., 0]
         assert np.all(a[~mask] == 0)
         assert np.all((a[mask] > 0.01) & (a[mask] <= 1 + 1e-6))
@@ -133,15 +137,23 @@ def test_reflection_raycast_sees_the_wall(inputs):
     changed = mask & (diff > 1e-5)
     assert 0 < changed.sum() < 0.5 * mask.sum()
     assert (rr - ref)[changed][:, 0].mean() > 0 > (rr - ref)[changed][:, 2].mean()
-    assert changed[:, : inputs.width // 2].sum() > changed[:, inputs.width // 2:].sum()
+    assert changed[:, : inputs.width // 2].sum() > changed[:, inputs.width // 2 :].sum()
 
 
 @pytest.mark.parametrize("name", ["water_refraction", "water_reflection"])
 def test_exported_source_renders_like_constants(inputs, name):
-    custom = Constants(attenuation_distance=4.0, steps_grazing=14.0, steps_steep=2.0,
-                       loop_cap=60, bumptex_mult=0.5, refr_coeff=0.74,
-                       water_color=(0.02, 0.3, 0.2, 1.0), reflect_color=(0.8, 0.9, 1.0, 1.0),
-                       specular_exponent=128.0, refl_height_cut=1.0)
+    custom = Constants(
+        attenuation_distance=4.0,
+        steps_grazing=14.0,
+        steps_steep=2.0,
+        loop_cap=60,
+        bumptex_mult=0.5,
+        refr_coeff=0.74,
+        water_color=(0.02, 0.3, 0.2, 1.0),
+        reflect_color=(0.8, 0.9, 1.0, 1.0),
+        specular_exponent=128.0,
+        refl_height_cut=1.0,
+    )
     exported = write_constants(read_source(name, "frag", "core"), custom)
     with GLRenderer(name, inputs, source=exported) as r:
         got, mask = r.render(None)  # the file as an engine would use it: uniforms not set
@@ -186,10 +198,13 @@ def test_time_glsl_returns_positive_seconds(inputs):
 def test_cubemap_faces_filtered_without_seams(inputs):
     """Seamless cube filtering is off: a direction next to the +X/+Y edge reads +X only."""
     import dataclasses
+
     cube = np.broadcast_to(np.arange(6, dtype=np.float32)[:, None, None, None], (6, 4, 4, 3))
     inp = dataclasses.replace(inputs, cubemap=np.ascontiguousarray(cube), width=4, height=4)
-    frag = ("#version 330 core\nuniform samplerCube reflectionTexture; out vec4 o;\n"
-            "void main(void) { o = texture(reflectionTexture, vec3(1.0, 0.999, 0.2)); }\n")
+    frag = (
+        "#version 330 core\nuniform samplerCube reflectionTexture; out vec4 o;\n"
+        "void main(void) { o = texture(reflectionTexture, vec3(1.0, 0.999, 0.2)); }\n"
+    )
     vert = "#version 330 core\nin vec2 p; void main(void) { gl_Position = vec4(p, 0, 1); }\n"
     with GLRenderer("water_refraction", inp) as r:
         prog = r.ctx.program(vertex_shader=vert, fragment_shader=frag)
@@ -208,6 +223,7 @@ def test_missing_egl_names_the_packages(monkeypatch):
 
     def fail(**kw):
         raise Exception("libEGL.so.1: cannot open shared object file")
+
     monkeypatch.setattr(moderngl, "create_context", fail)
     with pytest.raises(RuntimeError, match="libegl1 libegl-mesa0 libgl1-mesa-dri"):
         create_egl_context()

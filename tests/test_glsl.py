@@ -1,4 +1,5 @@
 """The shipped GLSL: compiles, core == compat through the table, seed fixes, constants block."""
+
 from __future__ import annotations
 
 import math
@@ -10,28 +11,67 @@ import pytest
 
 from shaders_port import CONSTANT_SPECS, Constants
 from shaders_port import _glsl
-from shaders_port._glsl import (BEGIN_MARKER, END_MARKER, compat_to_core, compile_check,
-                                declared_constants, glsl_path, read_constants, read_source,
-                                with_define, write_constants)
+from shaders_port._glsl import (
+    BEGIN_MARKER,
+    END_MARKER,
+    compat_to_core,
+    compile_check,
+    declared_constants,
+    glsl_path,
+    read_constants,
+    read_source,
+    with_define,
+    write_constants,
+)
 
-SHADERS = [("water", "vert"), ("water_refraction", "frag"), ("water_reflection", "frag"),
-           ("water_baseline", "frag")]
+SHADERS = [
+    ("water", "vert"),
+    ("water_refraction", "frag"),
+    ("water_reflection", "frag"),
+    ("water_baseline", "frag"),
+]
 FRAGS = ["water_refraction", "water_reflection"]
-BANNERS = ["Eye and light vectors", "Normal map: average four layers, bump scaling",
-           "Refraction vector and step schedule", "Raycast the ground", "Interpolate the crossing",
-           "Attenuation", "Reflection", "Specular highlight", "Fresnel combine"]
+BANNERS = [
+    "Eye and light vectors",
+    "Normal map: average four layers, bump scaling",
+    "Refraction vector and step schedule",
+    "Raycast the ground",
+    "Interpolate the crossing",
+    "Attenuation",
+    "Reflection",
+    "Specular highlight",
+    "Fresnel combine",
+]
 REFL_ONLY = {"refl_steps_steep", "refl_steps_grazing", "refl_loop_cap", "refl_height_cut"}
 # constants only the baseline shader (seeds 001-004, tests/test_water_baseline.py) declares
-BASELINE_ONLY = {"reflect_distortion", "refraction_index", "refraction_strength", "chromatic_dispersion"}
+BASELINE_ONLY = {
+    "reflect_distortion",
+    "refraction_index",
+    "refraction_strength",
+    "chromatic_dispersion",
+}
 
-CUSTOM = Constants(attenuation_distance=3.25, steps_grazing=17.0, steps_steep=2.5, loop_cap=77,
-                   refl_steps_steep=0.75, refl_steps_grazing=6.5, refl_loop_cap=90,
-                   refl_height_cut=1.5, specular_strength=0.3, specular_exponent=64.0,
-                   bumptex_mult=0.4, refr_coeff=0.7, water_color=(0.1, 0.2, 0.35, 0.9),
-                   reflect_color=(0.9, 0.95, 1.0, 1.0))
+CUSTOM = Constants(
+    attenuation_distance=3.25,
+    steps_grazing=17.0,
+    steps_steep=2.5,
+    loop_cap=77,
+    refl_steps_steep=0.75,
+    refl_steps_grazing=6.5,
+    refl_loop_cap=90,
+    refl_height_cut=1.5,
+    specular_strength=0.3,
+    specular_exponent=64.0,
+    bumptex_mult=0.4,
+    refr_coeff=0.7,
+    water_color=(0.1, 0.2, 0.35, 0.9),
+    reflect_color=(0.9, 0.95, 1.0, 1.0),
+)
 
-needs_glslang = pytest.mark.skipif(shutil.which("glslangValidator") is None,
-                                   reason="glslangValidator missing: apt-get install glslang-tools")
+needs_glslang = pytest.mark.skipif(
+    shutil.which("glslangValidator") is None,
+    reason="glslangValidator missing: apt-get install glslang-tools",
+)
 
 
 def f32(c: Constants) -> dict:
@@ -60,8 +100,12 @@ def test_core_is_compat_through_substitution_table(name, stage):
     assert compat.startswith("#version 120\n") and core.startswith("#version 330 core\n")
     assert compat_to_core(compat, stage) == core
     # no compatibility built-in survives in the core file
-    assert not re.search(r"\bgl_(TexCoord|TextureMatrix|FragColor|Vertex|MultiTexCoord0|"
-                         r"ModelViewProjectionMatrix|ModelViewProjectionMatrixInverse|NormalMatrix)\b|texture2D|textureCube|^varying", core, re.M)
+    assert not re.search(
+        r"\bgl_(TexCoord|TextureMatrix|FragColor|Vertex|MultiTexCoord0|"
+        r"ModelViewProjectionMatrix|ModelViewProjectionMatrixInverse|NormalMatrix)\b|texture2D|textureCube|^varying",
+        core,
+        re.M,
+    )
 
 
 @pytest.mark.parametrize("name", FRAGS)
@@ -76,11 +120,18 @@ def test_block_banners_in_order(name):
 def test_seed_fixes_applied_and_quirks_kept(name):
     src = read_source(name)
     code = "\n".join(ln.split("//")[0] for ln in src.split("\n"))  # without comments
-    for bad in ("varyingVecworldPosition", "waterTransformationMatrix", "waterDepth",
-                "reflectionTop", "cpy-cpy", "texture2D(fresnelLookup, NdotV)"):
+    for bad in (
+        "varyingVecworldPosition",
+        "waterTransformationMatrix",
+        "waterDepth",
+        "reflectionTop",
+        "cpy-cpy",
+        "texture2D(fresnelLookup, NdotV)",
+    ):
         assert bad not in code, bad
     assert code.count("(cpoy-olddepth) / (cpoy-cpy+depth-olddepth)") == (
-        1 if name == "water_refraction" else 2)
+        1 if name == "water_refraction" else 2
+    )
     assert "texture2D(fresnelLookup, vec2(NdotV, 0.5))" in code
     # quirks of the seed that are kept
     assert code.count("normalize(R)*vec3(1,-1,1)") == 1
@@ -103,7 +154,9 @@ def test_shipped_block_holds_the_defaults(name, dialect):
     assert f32(read_constants(src)) == f32(Constants())
     assert write_constants(src, Constants()) == src  # shipped files use the writer's format
     declared = set(declared_constants(src))
-    expected = set(CONSTANT_SPECS) - BASELINE_ONLY - (REFL_ONLY if name == "water_refraction" else set())
+    expected = (
+        set(CONSTANT_SPECS) - BASELINE_ONLY - (REFL_ONLY if name == "water_refraction" else set())
+    )
     assert declared == expected
 
 
@@ -119,7 +172,7 @@ def test_write_constants_round_trip(name, dialect):
     a, b = src.split("\n"), out.split("\n")
     assert len(a) == len(b)
     i0, i1 = a.index(BEGIN_MARKER), a.index(END_MARKER)
-    assert a[:i0 + 1] == b[:i0 + 1] and a[i1:] == b[i1:]
+    assert a[: i0 + 1] == b[: i0 + 1] and a[i1:] == b[i1:]
     changed = [i for i in range(len(a)) if a[i] != b[i]]
     assert changed and all(i0 < i < i1 for i in changed)
     assert "const int LOOP_CAP = 77;" in out and "const float STEPS_GRAZING = 17.0;" in out
@@ -169,8 +222,11 @@ def test_block_errors_are_clear():
     with pytest.raises(ValueError, match="FOO is not a tunable constant"):
         read_constants(src.replace("const int LOOP_CAP = 40;", "const int FOO = 40;"))
     with pytest.raises(ValueError, match="declared twice"):
-        read_constants(src.replace("const int LOOP_CAP = 40;",
-                                   "const int LOOP_CAP = 40;\nconst int LOOP_CAP = 41;"))
+        read_constants(
+            src.replace(
+                "const int LOOP_CAP = 40;", "const int LOOP_CAP = 40;\nconst int LOOP_CAP = 41;"
+            )
+        )
     with pytest.raises(ValueError, match="expected 'const float'"):
         read_constants(src.replace("const float STEPS_STEEP", "uniform float STEPS_STEEP"))
 

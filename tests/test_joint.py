@@ -4,6 +4,7 @@ Two views of the synthetic pool (tests/synthetic.py, 40x30, different cameras): 
 rendered by the port with known constants, so the joint fit has an exact answer when the
 scenes share their constants, and must call a constant scene-specific when they do not.
 """
+
 from __future__ import annotations
 
 import dataclasses
@@ -17,15 +18,23 @@ from study.fit.joint import JointModel, joint_calibrate, joint_frozen, leave_one
 from study.fit.model import ShaderModel, get_value
 
 REQUESTED = ["attenuation_distance", "bumptex_mult", "water_color"]
-NAMES = ["attenuation_distance", "bumptex_mult", "water_color[0]", "water_color[1]", "water_color[2]"]
+NAMES = [
+    "attenuation_distance",
+    "bumptex_mult",
+    "water_color[0]",
+    "water_color[1]",
+    "water_color[2]",
+]
 SHARED = Constants(attenuation_distance=5.0, bumptex_mult=0.7, water_color=(0.1, 0.3, 0.2, 1.0))
 
 
 def _view(eye, w=40, h=30):
     inputs = synthetic_inputs(width=w, height=h)
-    return dataclasses.replace(inputs, viewpos=np.array(eye),
-                               view_proj=perspective_view_proj(eye, (0.0, -0.8, 0.0), fov_y_deg=50.0,
-                                                               aspect=w / h))
+    return dataclasses.replace(
+        inputs,
+        viewpos=np.array(eye),
+        view_proj=perspective_view_proj(eye, (0.0, -0.8, 0.0), fov_y_deg=50.0, aspect=w / h),
+    )
 
 
 EYES = [(0.3, 2.5, 4.5), (-2.0, 1.6, 3.5)]
@@ -34,7 +43,9 @@ EYES = [(0.3, 2.5, 4.5), (-2.0, 1.6, 3.5)]
 def _model(inputs, truth, noise=0.0, seed=0):
     target = water_refraction.render(inputs, truth).numpy()["color"]
     if noise:
-        target = target + np.random.default_rng(seed).normal(0, noise, target.shape).astype(np.float32)
+        target = target + np.random.default_rng(seed).normal(0, noise, target.shape).astype(
+            np.float32
+        )
     return ShaderModel("water_refraction", inputs, target)
 
 
@@ -56,7 +67,7 @@ def test_scenes_weighted_equally(shared_models):
         own = m.residual(c)
         assert np.isclose(part @ part / mbar, own @ own / own.size, rtol=1e-9)
     r2, J = jm.residual_and_jacobian(c, ["attenuation_distance"])
-    assert np.allclose(r2, r, rtol=0, atol=1e-6) and J.shape == (r.size, 1)   # float32 AD pass
+    assert np.allclose(r2, r, rtol=0, atol=1e-6) and J.shape == (r.size, 1)  # float32 AD pass
 
 
 def test_joint_fit_recovers_shared_constants(shared_models):
@@ -84,14 +95,24 @@ def test_leave_one_out_and_universality():
     scores best on itself, the attenuation distance is scene-specific, and the seed's
     constants score worst."""
     truths = [SHARED.replace(attenuation_distance=4.0), SHARED.replace(attenuation_distance=8.0)]
-    models = [_model(_view(e), t, noise=0.003, seed=i) for i, (e, t) in enumerate(zip(EYES, truths))]
+    models = [
+        _model(_view(e), t, noise=0.003, seed=i) for i, (e, t) in enumerate(zip(EYES, truths))
+    ]
 
     def evaluate(i, c):
         r = models[i].residual(c)
-        return {"rmse": float(np.sqrt(np.mean(r ** 2)))}
+        return {"rmse": float(np.sqrt(np.mean(r**2)))}
 
-    rows = leave_one_out(models, Constants(), REQUESTED, "levenberg_marquardt", 100, evaluate,
-                         names=["a", "b"], log=lambda m: None)
+    rows = leave_one_out(
+        models,
+        Constants(),
+        REQUESTED,
+        "levenberg_marquardt",
+        100,
+        evaluate,
+        names=["a", "b"],
+        log=lambda m: None,
+    )
     assert [r["scene"] for r in rows] == ["a", "b"]
     for row, t in zip(rows, truths):
         assert row["own"]["rmse"] < row["others"]["rmse"] < row["seed"]["rmse"], row

@@ -1,6 +1,7 @@
 """Physics no one here invented, checked on the reference renderer and scene:
 Fresnel reflectance of water at normal incidence (~0.0204), the critical angle (~48.6 deg),
 and the apparent depth of a flat pool seen from straight above (real depth / 1.333)."""
+
 import math
 
 import numpy as np
@@ -39,12 +40,24 @@ def test_rendered_reflectance_at_normal_incidence(mi):
     the pixel value is the Fresnel reflectance (transmitted light is absorbed). Mitsuba's smooth
     dielectric picks reflection with probability R per sample, so the mean over N samples has a
     binomial standard error sqrt(R (1 - R) / N); the bound is 4 of those."""
-    exp = small_experiment(**{
-        "resolution": "[8, 8]", "fit.resolution": "[8, 8]", "camera.position": "[0.0, 4.0, 0.001]",
-        "camera.target": "[0.0, 0.0, 0.0]", "camera.fov_y": "5.0", "waves.amplitude": "0.0",
-        "sky.zenith": "[1, 1, 1]", "sky.horizon": "[1, 1, 1]", "sky.ground": "[1, 1, 1]",
-        "sun.radiance": "[0, 0, 0]", "floor.tile_albedo": "[0, 0, 0]", "floor.tile_albedo2": "[0, 0, 0]",
-        "pool.wall_albedo": "[0, 0, 0]", "water.sigma_t": "[5, 5, 5]"})
+    exp = small_experiment(
+        **{
+            "resolution": "[8, 8]",
+            "fit.resolution": "[8, 8]",
+            "camera.position": "[0.0, 4.0, 0.001]",
+            "camera.target": "[0.0, 0.0, 0.0]",
+            "camera.fov_y": "5.0",
+            "waves.amplitude": "0.0",
+            "sky.zenith": "[1, 1, 1]",
+            "sky.horizon": "[1, 1, 1]",
+            "sky.ground": "[1, 1, 1]",
+            "sun.radiance": "[0, 0, 0]",
+            "floor.tile_albedo": "[0, 0, 0]",
+            "floor.tile_albedo2": "[0, 0, 0]",
+            "pool.wall_albedo": "[0, 0, 0]",
+            "water.sigma_t": "[5, 5, 5]",
+        }
+    )
     spp = 2048
     img = np.array(mi.render(build_scene(exp), spp=spp))
     r = fresnel_unpolarized(1.0, IOR)
@@ -57,12 +70,24 @@ def test_apparent_depth_from_above(mi):
     floor at depth / 1.333 would put them (paraxial). The view strip runs along the middle of
     a row of tiles (z = 0.25) and crosses the grout lines at x = +-0.5."""
     depth, h, w = 1.5, 3.0, 512
-    exp = small_experiment(**{
-        "resolution": f"[{w}, 16]", "fit.resolution": f"[{w}, 16]", "camera.position": f"[0.0, {h}, 0.251]",
-        "camera.target": "[0.0, 0.0, 0.25]", "camera.fov_y": "1.6", "waves.amplitude": "0.0",
-        "floor.shape": "flat", "floor.depth": str(depth), "floor.tile_size": "0.5",
-        "floor.tile_albedo": "[0.8, 0.8, 0.8]", "floor.tile_albedo2": "[0.8, 0.8, 0.8]",
-        "water.sigma_t": "[0, 0, 0]", "sun.radiance": "[0, 0, 0]", "reference.water_mesh": "16"})
+    exp = small_experiment(
+        **{
+            "resolution": f"[{w}, 16]",
+            "fit.resolution": f"[{w}, 16]",
+            "camera.position": f"[0.0, {h}, 0.251]",
+            "camera.target": "[0.0, 0.0, 0.25]",
+            "camera.fov_y": "1.6",
+            "waves.amplitude": "0.0",
+            "floor.shape": "flat",
+            "floor.depth": str(depth),
+            "floor.tile_size": "0.5",
+            "floor.tile_albedo": "[0.8, 0.8, 0.8]",
+            "floor.tile_albedo2": "[0.8, 0.8, 0.8]",
+            "water.sigma_t": "[0, 0, 0]",
+            "sun.radiance": "[0, 0, 0]",
+            "reference.water_mesh": "16",
+        }
+    )
     img = np.array(mi.render(build_scene(exp), spp=128, seed=3))
     row = img[6:10].mean(axis=(0, 2))
     inv = np.linalg.inv(camera_view_proj(exp, w, 16).astype(np.float64))
@@ -77,7 +102,7 @@ def test_apparent_depth_from_above(mi):
 
     x_w = np.array([water_x(c) for c in range(w)])
     apparent = []
-    for x_edge in (0.5, -0.5):                  # grout lines at +-1 tile from the centre
+    for x_edge in (0.5, -0.5):  # grout lines at +-1 tile from the centre
         expect_w = x_edge * h / (h + depth / IOR)
         near = np.abs(x_w - expect_w) < 0.06
         dip = np.clip(np.median(row[near]) - row[near], 0, None)
@@ -85,4 +110,4 @@ def test_apparent_depth_from_above(mi):
         apparent.append(h * (x_edge / centre - 1))
     for d_app in apparent:
         assert d_app == pytest.approx(depth / IOR, rel=0.03), apparent
-        assert abs(d_app - depth) > 0.3          # clearly not the real depth
+        assert abs(d_app - depth) > 0.3  # clearly not the real depth

@@ -1,5 +1,6 @@
 """Reference cache: keyed on everything that affects the image, atomic, provenance in the EXR;
 noise measured from independent passes."""
+
 import numpy as np
 import pytest
 from conftest import small_experiment
@@ -41,6 +42,7 @@ def test_foreign_or_corrupt_cache_file_is_not_reused(mi, tmp_path):
     assert any("unreadable" in m for m in logs) and np.isfinite(b.image).all()
     # a valid EXR whose recorded key differs (e.g. copied from elsewhere) is not trusted
     from study import write_exr
+
     write_exr(b.path, b.image, dict(b.provenance, key="someone-else"), extra={"stderr": b.stderr})
     logs = []
     load_or_render(exp, "llvm_ad_rgb", cache=tmp_path, log=logs.append)
@@ -49,6 +51,7 @@ def test_foreign_or_corrupt_cache_file_is_not_reused(mi, tmp_path):
 
 def test_killed_render_leaves_no_cache_file(mi, tmp_path, monkeypatch):
     import study.scene.reference as R
+
     exp = small_experiment()
 
     def killed(*a, **k):
@@ -63,22 +66,24 @@ def test_killed_render_leaves_no_cache_file(mi, tmp_path, monkeypatch):
 def test_noise_estimate_scales_with_spp(mi):
     """Measured noise follows 1/sqrt(spp) (independent sampler and seeds), within sampling error."""
     from study.scene.reference import render_passes, water_mask
+
     exp = small_experiment(**{"reference.sampler": '"independent"'})
     mask = water_mask(exp, 32, 32)
     _, n4 = noise_of(render_passes(exp, 4, 6, seed0=100), mask)
     _, n64 = noise_of(render_passes(exp, 64, 6, seed0=200), mask)
     ratio = n4 / n64
-    assert 2.0 < ratio < 8.0, ratio        # ideal 4.0; heavy-tailed paths widen the spread
+    assert 2.0 < ratio < 8.0, ratio  # ideal 4.0; heavy-tailed paths widen the spread
 
 
 def test_pass_spp_rounds_to_the_samplers_grid():
     from study.scene.reference import N_SEEDS, pass_spp
+
     counts = (1, 16, 64, 128, 1024)
     mj = small_experiment(**{"reference.sampler": '"multijitter"'})
     strat = small_experiment(**{"reference.sampler": '"stratified"'})
     ind = small_experiment(**{"reference.sampler": '"independent"'})
     assert N_SEEDS == 4
-    assert [pass_spp(mj, s) for s in counts] == [1, 4, 16, 35, 256]     # a x b, b = floor(sqrt)
+    assert [pass_spp(mj, s) for s in counts] == [1, 4, 16, 35, 256]  # a x b, b = floor(sqrt)
     assert [pass_spp(strat, s) for s in counts] == [1, 4, 16, 36, 256]
     assert [pass_spp(ind, s) for s in counts] == [1, 4, 16, 32, 256]
 
@@ -89,6 +94,7 @@ def test_sampler_spp_is_mitsubas_own_count(mi, sampler):
     squares and everything between), so the spp recorded in a reference's provenance is the one
     rendered and Mitsuba never rounds (and warns) behind the study's back."""
     from study.scene.mitsuba_scene import sampler_spp
+
     for spp in list(range(1, 130)) + [216, 255, 256, 343, 512, 1000, 1024]:
         s = mi.load_dict({"type": sampler, "sample_count": sampler_spp(sampler, spp)})
         assert s.sample_count() == sampler_spp(sampler, spp) >= spp, (sampler, spp)
@@ -102,6 +108,7 @@ def test_reference_sampler_draws_uncorrelated_dimensions(mi):
     correlation (about -0.01 at 36 spp)."""
     from study.scene.experiment import SCHEMA
     from study.scene.mitsuba_scene import dimension_correlation
+
     default = SCHEMA["reference.sampler"].default
     assert default == "multijitter"
     r, se = dimension_correlation(mi, default, 36)
@@ -117,15 +124,18 @@ def test_reference_sampler_is_unbiased_and_less_noisy(mi):
     2.8x lower; here, at 32x32 with 16 spp per pass, its RMS noise is about 1.2x lower: the bound
     1.1 leaves the RMS's own sampling error, about 2 % over these water pixels)."""
     from study.scene.reference import render_reference
+
     jit = render_reference(small_experiment(**{"reference.spp": "64"}), "llvm_ad_rgb")
-    ind = render_reference(small_experiment(**{"reference.spp": "64", "reference.sampler": '"independent"'}),
-                           "llvm_ad_rgb")
+    ind = render_reference(
+        small_experiment(**{"reference.spp": "64", "reference.sampler": '"independent"'}),
+        "llvm_ad_rgb",
+    )
     assert jit.spp == ind.spp == 64
     assert jit.noise * 1.1 < ind.noise, (jit.noise, ind.noise)
     diff = jit.image - ind.image
-    se = np.sqrt(jit.stderr ** 2 + ind.stderr ** 2)
+    se = np.sqrt(jit.stderr**2 + ind.stderr**2)
     # the mean difference over the image in units of its standard error: a bias shows as |z| >> 1
-    z = diff.sum() / np.sqrt((se ** 2).sum())
+    z = diff.sum() / np.sqrt((se**2).sum())
     assert abs(z) < 4.0, z
 
 
@@ -140,10 +150,12 @@ def test_noise_of_known_gaussian():
 
 def test_auto_spp_reaches_target(mi):
     from study.scene.reference import N_SEEDS, PILOT_SPP, choose_spp
-    exp = small_experiment(**{"reference.spp": '"auto"', "reference.target_noise": "0.02",
-                              "reference.max_spp": "4096"})
+
+    exp = small_experiment(
+        **{"reference.spp": '"auto"', "reference.target_noise": "0.02", "reference.max_spp": "4096"}
+    )
     spp, info = choose_spp(exp)
-    assert info["pilot_spp"] == N_SEEDS * PILOT_SPP          # K passes of PILOT_SPP (8: a 4 x 2 grid)
+    assert info["pilot_spp"] == N_SEEDS * PILOT_SPP  # K passes of PILOT_SPP (8: a 4 x 2 grid)
     assert spp >= info["predicted_spp"] and spp < 2 * info["predicted_spp"] + 8
     loose = small_experiment(**{"reference.spp": '"auto"', "reference.target_noise": "0.2"})
     assert choose_spp(loose)[0] < spp
@@ -151,6 +163,7 @@ def test_auto_spp_reaches_target(mi):
 
 def test_shader_inputs_cache(mi, tmp_path):
     from study.scene.shader_inputs import load_or_build_shader_inputs
+
     exp = small_experiment()
     logs = []
     a = load_or_build_shader_inputs(exp, "llvm_ad_rgb", cache=tmp_path, log=logs.append)
@@ -161,13 +174,21 @@ def test_shader_inputs_cache(mi, tmp_path):
     np.testing.assert_array_equal(a.view_proj, b.view_proj)
     # a key that changes only the inputs (not the reference) is a different entry
     assert exp["reference.fresnel_transmission"] == "radiance"
-    c = load_or_build_shader_inputs(small_experiment(**{"reference.fresnel_transmission": '"energy"'}),
-                                    "llvm_ad_rgb", cache=tmp_path, log=logs.append)
+    c = load_or_build_shader_inputs(
+        small_experiment(**{"reference.fresnel_transmission": '"energy"'}),
+        "llvm_ad_rgb",
+        cache=tmp_path,
+        log=logs.append,
+    )
     assert "built" in logs[-1]
-    np.testing.assert_allclose(c.fresnel_lut[:, 0], a.fresnel_lut[:, 0] * 1.333 ** 2, rtol=1e-6)
+    np.testing.assert_allclose(c.fresnel_lut[:, 0], a.fresnel_lut[:, 0] * 1.333**2, rtol=1e-6)
     # so is a changed lighting resolution of the refraction texture: a new render, never a stale one
-    load_or_build_shader_inputs(small_experiment(**{"reference.lighting_size": "16"}), "llvm_ad_rgb",
-                                cache=tmp_path, log=logs.append)
+    load_or_build_shader_inputs(
+        small_experiment(**{"reference.lighting_size": "16"}),
+        "llvm_ad_rgb",
+        cache=tmp_path,
+        log=logs.append,
+    )
     assert "built" in logs[-1] and "lighting texture" in logs[-1]
     # a corrupt file is rebuilt, not trusted
     for p in (tmp_path / "inputs").glob("*.npz"):

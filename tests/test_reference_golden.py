@@ -1,4 +1,5 @@
 """Small reference renders against golden EXRs (regenerate: python tests/golden/reference_scenes.py)."""
+
 import sys
 from pathlib import Path
 
@@ -16,10 +17,14 @@ from study import read_exr  # noqa: E402
 def test_reference_matches_golden(mi, name):
     expected, prov, _ = read_exr(G.golden_path(name))
     exp = G.experiment(name)
-    assert prov["scene_hash"] == exp.scene_hash(), "scene changed on purpose? regenerate the goldens"
+    assert prov["scene_hash"] == exp.scene_hash(), (
+        "scene changed on purpose? regenerate the goldens"
+    )
     got = G.render(name).image
     rmse = float(np.sqrt(np.mean((got - expected) ** 2)))
     limit = G.SCENES[name][2] * prov["noise"]
     if not rmse <= limit:
-        save_failure(f"reference_{name}", actual=got, expected=expected, error=np.abs(got - expected))
+        save_failure(
+            f"reference_{name}", actual=got, expected=expected, error=np.abs(got - expected)
+        )
     assert rmse <= limit, f"{name}: RMSE {rmse:.3e} > {limit:.3e} (images in tests/_failures/)"

@@ -1,4 +1,5 @@
 """The Mitsuba scene and the shader see the same world: camera, sky, textures."""
+
 import numpy as np
 import pytest
 from conftest import small_experiment
@@ -13,11 +14,13 @@ def test_mitsuba_camera_matches_gl_projection(mi):
     sensor = build_scene(exp).sensors()[0]
     vp = camera_view_proj(exp, w, h).astype(np.float64)
     for i, j in [(0, 0), (39, 0), (0, 23), (17, 9), (39, 23)]:
-        ray, _ = sensor.sample_ray(0.0, 0.0, mi.Point2f((i + 0.5) / w, (j + 0.5) / h), mi.Point2f(0.5, 0.5))
+        ray, _ = sensor.sample_ray(
+            0.0, 0.0, mi.Point2f((i + 0.5) / w, (j + 0.5) / h), mi.Point2f(0.5, 0.5)
+        )
         p = np.array(ray.o).ravel() + 3.0 * np.array(ray.d).ravel()
         clip = vp @ np.append(p, 1.0)
         ndc = clip[:2] / clip[3]
-        px = ((ndc[0] + 1) / 2 * w, (1 - ndc[1]) / 2 * h)   # row 0 at the top
+        px = ((ndc[0] + 1) / 2 * w, (1 - ndc[1]) / 2 * h)  # row 0 at the top
         assert px == pytest.approx((i + 0.5, j + 0.5), abs=1e-3)
 
 
@@ -28,7 +31,7 @@ def test_envmap_matches_sky_function(mi):
     rng = np.random.default_rng(0)
     d = rng.normal(size=(200, 3))
     d /= np.linalg.norm(d, axis=1, keepdims=True)
-    d = d[np.abs(d[:, 1]) > 0.05]                 # away from the horizon's kink
+    d = d[np.abs(d[:, 1]) > 0.05]  # away from the horizon's kink
     si = mi.SurfaceInteraction3f()
     si.wi = mi.Vector3f(*[mi.Float(-d[:, k].astype(np.float32)) for k in range(3)])
     got = np.array(emitter.eval(si))
@@ -54,15 +57,19 @@ def test_water_bsdf_terms_and_row_crop(mi):
     missing from each)."""
     from study._metrics import erode
     from study.scene.reference import water_mask
+
     exp = small_experiment(**{"resolution": "[32, 24]", "fit.resolution": "[32, 24]"})
     rows = (6, 18)
-    water = erode(water_mask(exp, 32, 24), 1)[rows[0]:rows[1]]   # whole pixel footprints on the water
+    water = erode(water_mask(exp, 32, 24), 1)[
+        rows[0] : rows[1]
+    ]  # whole pixel footprints on the water
     assert water.sum() > 50
 
     def render(**bsdf):
         img = np.array(mi.render(build_scene(exp, water_bsdf=bsdf, rows=rows), spp=16, seed=3))
         assert img.shape == (rows[1] - rows[0], 32, 3)
         return img
+
     full = render()
     refl = render(specular_transmittance=0.0)
     trans = render(specular_reflectance=0.0)

@@ -1,6 +1,7 @@
 """The stability study: Latin-hypercube starts, failure classes, the analysis of multi-start and
 noise tables on hand-made rows (exact answers), the log residual's Jacobian against central
 differences, and a tiny ``study stability`` through the CLI (slow)."""
+
 from __future__ import annotations
 
 import json
@@ -22,37 +23,57 @@ def test_latin_hypercube_one_point_per_stratum():
         lo, hi, log = BOX[n]
         v = np.array([p[n] for p in pts])
         assert np.all((v >= lo) & (v <= hi))
-        q = (np.log(v) - math.log(lo)) / (math.log(hi) - math.log(lo)) if log else (v - lo) / (hi - lo)
-        assert sorted(np.floor(q * 8).astype(int).tolist()) == list(range(8))     # every stratum once
+        q = (
+            (np.log(v) - math.log(lo)) / (math.log(hi) - math.log(lo))
+            if log
+            else (v - lo) / (hi - lo)
+        )
+        assert sorted(np.floor(q * 8).astype(int).tolist()) == list(range(8))  # every stratum once
     with pytest.raises(ValueError, match="no start box"):
         latin_hypercube(["loop_cap"], 2)
 
 
 def test_failure_classes():
     assert failure_class(True, "converged after 5 steps", 5, 100) == "converged"
-    assert failure_class(False, "maximum number of steps reached (max_steps=100)", 100, 100) == "step_cap"
-    assert failure_class(False, "solver aborted (NonFiniteResidualError): ...", 3, 100) == "nonfinite"
+    assert (
+        failure_class(False, "maximum number of steps reached (max_steps=100)", 100, 100)
+        == "step_cap"
+    )
+    assert (
+        failure_class(False, "solver aborted (NonFiniteResidualError): ...", 3, 100) == "nonfinite"
+    )
     assert failure_class(False, "something else", 3, 100) == "error"
 
 
 def _row(scene, solver, loss, seconds, trace, failure="converged", lr=None, fitted=1.0):
-    return {"status": "ok", "job.experiment": scene, "job.solver": solver, "job.lr": lr, "loss": loss,
-            "fit_seconds": seconds, "failure": failure, "iterations": len(trace),
-            "trace_loss": [t[0] for t in trace], "trace_seconds": [t[1] for t in trace],
-            "fitted.a": fitted}
+    return {
+        "status": "ok",
+        "job.experiment": scene,
+        "job.solver": solver,
+        "job.lr": lr,
+        "loss": loss,
+        "fit_seconds": seconds,
+        "failure": failure,
+        "iterations": len(trace),
+        "trace_loss": [t[0] for t in trace],
+        "trace_seconds": [t[1] for t in trace],
+        "fitted.a": fitted,
+    }
 
 
 def test_analyse_multistart_success_basin_and_time_to_target():
-    rows = [_row("s", "lm", 1.0, 3.0, [(5.0, 1.0), (1.0005, 2.0), (1.0, 3.0)]),
-            _row("s", "lm", 1.5, 2.0, [(5.0, 1.0), (1.5, 2.0)]),                      # another basin
-            _row("s", "nm", 4.0, 9.0, [(4.0, 9.0)], failure="step_cap"),
-            _row("s", "adam", 1.0008, 8.0, [(2.0, 4.0), (1.0008, 8.0)], lr=0.1),
-            _row("s", "adam", 3.0, 8.0, [(3.0, 8.0)], failure="step_cap", lr=0.01)]
+    rows = [
+        _row("s", "lm", 1.0, 3.0, [(5.0, 1.0), (1.0005, 2.0), (1.0, 3.0)]),
+        _row("s", "lm", 1.5, 2.0, [(5.0, 1.0), (1.5, 2.0)]),  # another basin
+        _row("s", "nm", 4.0, 9.0, [(4.0, 9.0)], failure="step_cap"),
+        _row("s", "adam", 1.0008, 8.0, [(2.0, 4.0), (1.0008, 8.0)], lr=0.1),
+        _row("s", "adam", 3.0, 8.0, [(3.0, 8.0)], failure="step_cap", lr=0.01),
+    ]
     ms = analyse_multistart(rows)
     lm = ms["solvers"]["lm"]
     assert ms["best_loss"]["s"] == 1.0
     assert lm["success_rate"] == 0.5 and lm["classes"] == {"success": 1, "another_basin": 1}
-    assert lm["time_to_target_median"] == 2.0           # 1.0005 <= 1.001 at 2 s
+    assert lm["time_to_target_median"] == 2.0  # 1.0005 <= 1.001 at 2 s
     assert ms["solvers"]["nm"]["classes"] == {"step_cap": 1}
     assert ms["best_adam"] == "adam lr=0.1" and ms["reported"] == ["lm", "nm", "adam lr=0.1"]
 
@@ -61,12 +82,22 @@ def test_analyse_noise_bias_agreement_and_cheapest():
     rows = []
     for spp, vals in {64: [2.0, 2.2], 256: [2.9, 3.1], 1024: [3.0, 3.2]}.items():
         for s, v in enumerate(vals):
-            rows.append({"status": "ok", "job.which": "reference", "job.spp": spp, "job.seed": s,
-                         "value.a": v, "status.a": "fitted"})
+            rows.append(
+                {
+                    "status": "ok",
+                    "job.which": "reference",
+                    "job.spp": spp,
+                    "job.seed": s,
+                    "value.a": v,
+                    "status.a": "fitted",
+                }
+            )
     nz = analyse_noise(rows)["reference"]
     st = nz["stats"]
-    assert st[64]["a"]["bias"] == pytest.approx(-1.0) and st[256]["a"]["bias"] == pytest.approx(-0.1)
-    assert st[256]["a"]["bias_se"] == pytest.approx(math.sqrt(2) * 0.1)    # std 0.1414/sqrt(2) each
+    assert st[64]["a"]["bias"] == pytest.approx(-1.0) and st[256]["a"]["bias"] == pytest.approx(
+        -0.1
+    )
+    assert st[256]["a"]["bias_se"] == pytest.approx(math.sqrt(2) * 0.1)  # std 0.1414/sqrt(2) each
     assert nz["agrees"] == {64: False, 256: True, 1024: True}
     assert nz["cheapest_agreeing"] == 256
     # a constant bound at 0 on every seed (no spread) agrees; one that moves without spread does not
@@ -80,18 +111,31 @@ def test_analyse_noise_bias_agreement_and_cheapest():
 
 def test_plan_noise_varies_the_chosen_inputs_only():
     from study.studies.stability import plan_noise
+
     path = str(REPO / "experiments" / "default.toml")
     jobs = plan_noise(path, [], [64, 256], 1024, 2, 48, inputs=("reference",))
     assert len(jobs) == 4 and {j["which"] for j in jobs} == {"reference"}
-    assert {(j["spp"], j["seed"]) for j in jobs} == {(64, 1000), (64, 1001), (256, 1000), (256, 1001)}
+    assert {(j["spp"], j["seed"]) for j in jobs} == {
+        (64, 1000),
+        (64, 1001),
+        (256, 1000),
+        (256, 1001),
+    }
     assert all("reference.texture_spp=1024" in j["scene"]["overrides"] for j in jobs)
     both = plan_noise(path, [], [64], 1024, 1, 48)
     assert [j["which"] for j in both] == ["reference", "texture"]
 
 
 def test_analyse_loss_picks_lower_mean_flip():
-    rows = [{"status": "ok", "job.experiment": e, "job.loss": l, "flip": f, "rmse": 0.1}
-            for e, l, f in [("a", "linear", 0.2), ("a", "log", 0.18), ("b", "linear", 0.3), ("b", "log", 0.31)]]
+    rows = [
+        {"status": "ok", "job.experiment": e, "job.loss": l, "flip": f, "rmse": 0.1}
+        for e, l, f in [
+            ("a", "linear", 0.2),
+            ("a", "log", 0.18),
+            ("b", "linear", 0.3),
+            ("b", "log", 0.31),
+        ]
+    ]
     ls = analyse_loss(rows)
     assert ls["wins"] == {"linear": 1, "log": 1} and ls["winner"] == "log"
 
@@ -111,7 +155,9 @@ def test_log_residual_jacobian_matches_central_differences():
     assert np.allclose(r, model.residual(c), atol=1e-5)
     for j, (n, h) in enumerate(zip(names, [1e-2, 1e-3])):
         v = {"attenuation_distance": 6.0, "water_color[1]": 0.27}[n]
-        fd = (model.residual(with_values(c, {n: v + h})) - model.residual(with_values(c, {n: v - h}))) / (2 * h)
+        fd = (
+            model.residual(with_values(c, {n: v + h})) - model.residual(with_values(c, {n: v - h}))
+        ) / (2 * h)
         assert np.linalg.norm(J[:, j] - fd) < 2e-2 * np.linalg.norm(fd), n
     with pytest.raises(NotImplementedError, match="Adam"):
         model.loss_ad(c)
@@ -134,10 +180,14 @@ def test_log_loss_calibration_recovers_a_synthetic_target():
     truth = Constants(attenuation_distance=5.0, water_color=(0.05, 0.2, 0.3, 1.0))
     target = water_refraction.render(inputs, truth).numpy()["color"]
     stderr = np.full_like(target, 1e-3)
-    model = transformed(ShaderModel("water_refraction", inputs, target, reference_stderr=stderr), "log")
+    model = transformed(
+        ShaderModel("water_refraction", inputs, target, reference_stderr=stderr), "log"
+    )
     assert model.variant is model.base.variant and model.reference_stderr.shape == target.shape
-    exp = load_experiment(REPO / "experiments" / "default.toml",
-                          ['fit.parameters=["attenuation_distance", "water_color"]'])
+    exp = load_experiment(
+        REPO / "experiments" / "default.toml",
+        ['fit.parameters=["attenuation_distance", "water_color"]'],
+    )
     cal = calibrate_experiment(model, exp)
     p = cal.parameters
     assert p["attenuation_distance"]["fitted"] == pytest.approx(5.0, rel=1e-2)
@@ -145,8 +195,15 @@ def test_log_loss_calibration_recovers_a_synthetic_target():
     assert p["water_color[2]"]["fitted"] == pytest.approx(0.3, rel=1e-2)
 
 
-TINY = ["resolution=[24,24]", "fit.resolution=[24,24]", "reference.spp=8", "reference.water_mesh=48",
-        "reference.texture_size=32", "reference.texture_spp=4", "waves.normal_map_size=32"]
+TINY = [
+    "resolution=[24,24]",
+    "fit.resolution=[24,24]",
+    "reference.spp=8",
+    "reference.water_mesh=48",
+    "reference.texture_size=32",
+    "reference.texture_spp=4",
+    "waves.normal_map_size=32",
+]
 
 
 @pytest.mark.slow
@@ -154,10 +211,31 @@ def test_stability_cli_tiny(tmp_path):
     from study.cli import main
 
     out = tmp_path / "stab"
-    argv = ["stability", str(REPO / "experiments" / "default.toml"), "--out", str(out),
-            *[a for kv in TINY for a in ("--set", kv)], "--starts", "2", "--solvers", "levenberg_marquardt",
-            "nelder_mead", "--max-steps", "8", "--noise-spp", "4", "8", "--noise-fixed-spp", "4",
-            "--noise-seeds", "2", "--noise-resolution", "24", "--workers", "1"]
+    argv = [
+        "stability",
+        str(REPO / "experiments" / "default.toml"),
+        "--out",
+        str(out),
+        *[a for kv in TINY for a in ("--set", kv)],
+        "--starts",
+        "2",
+        "--solvers",
+        "levenberg_marquardt",
+        "nelder_mead",
+        "--max-steps",
+        "8",
+        "--noise-spp",
+        "4",
+        "8",
+        "--noise-fixed-spp",
+        "4",
+        "--noise-seeds",
+        "2",
+        "--noise-resolution",
+        "24",
+        "--workers",
+        "1",
+    ]
     assert main(argv) == 0
     s = json.loads((out / "summary.json").read_text())
     assert set(s["multistart"]["solvers"]) == {"levenberg_marquardt", "nelder_mead"}

@@ -1,5 +1,6 @@
 """The sweep engine: Dask workers (spawned, backend set up once), resumable tidy tables, failing
 jobs recorded, scenes prepared once, the cache lock between real processes."""
+
 import os
 import signal
 import subprocess
@@ -14,14 +15,22 @@ import sweep_jobs
 from conftest import REPO
 
 TESTS = Path(__file__).parent
-SMALL = ["resolution=[32,32]", "fit.resolution=[32,32]", "reference.spp=16", "reference.water_mesh=96",
-         "reference.texture_size=64", "reference.texture_spp=8", "waves.normal_map_size=64"]
+SMALL = [
+    "resolution=[32,32]",
+    "fit.resolution=[32,32]",
+    "reference.spp=16",
+    "reference.water_mesh=96",
+    "reference.texture_size=64",
+    "reference.texture_spp=8",
+    "waves.normal_map_size=64",
+]
 
 
 @pytest.fixture(scope="module")
 def client(tmp_path_factory):
     """One LocalCluster (2 spawned workers) for the module; workers see tests/ and a private cache."""
     from study.sweep.cluster import open_client
+
     mp = pytest.MonkeyPatch()
     mp.setenv("PYTHONPATH", os.pathsep.join([str(TESTS), os.environ.get("PYTHONPATH", "")]))
     mp.setenv("STUDY_CACHE", str(tmp_path_factory.mktemp("sweep_cache")))
@@ -35,19 +44,22 @@ def test_workers_are_spawned_and_set_up_once(tmp_path, monkeypatch):
     parent's modules (and the mark set here before the cluster starts)."""
     from study.sweep import run_sweep
     from study.sweep.cluster import cpu_count
+
     monkeypatch.setenv("PYTHONPATH", str(TESTS))
     monkeypatch.setattr(sweep_jobs, "PARENT_MARK", "changed in the parent")
-    rows = run_sweep(sweep_jobs.worker_state, [{"i": i} for i in range(3)], tmp_path / "w.parquet",
-                     workers=1)
+    rows = run_sweep(
+        sweep_jobs.worker_state, [{"i": i} for i in range(3)], tmp_path / "w.parquet", workers=1
+    )
     assert all(r["status"] == "ok" for r in rows), rows
-    assert {r["mark"] for r in rows} == {"not set"}          # spawned, not forked
-    assert {r["variant"] for r in rows} == {"llvm_ad_rgb"}   # the plugin initialised the backend
-    assert {r["threads"] for r in rows} == {cpu_count()}     # one worker: every core
-    assert len({r["pid"] for r in rows}) == 1                # set up once, reused by every job
+    assert {r["mark"] for r in rows} == {"not set"}  # spawned, not forked
+    assert {r["variant"] for r in rows} == {"llvm_ad_rgb"}  # the plugin initialised the backend
+    assert {r["threads"] for r in rows} == {cpu_count()}  # one worker: every core
+    assert len({r["pid"] for r in rows}) == 1  # set up once, reused by every job
 
 
 def test_sweep_records_failures_and_resumes(client, tmp_path):
     from study.sweep import read_table, run_sweep
+
     log = tmp_path / "runs.txt"
     table = tmp_path / "t.parquet"
     jobs = [{"x": i, "log": str(log)} for i in range(5)]
@@ -66,12 +78,14 @@ def test_sweep_records_failures_and_resumes(client, tmp_path):
 
 def test_duplicate_jobs_are_refused(tmp_path):
     from study.sweep import run_sweep
+
     with pytest.raises(ValueError, match="same job twice"):
         run_sweep(sweep_jobs.square, [{"x": 1}, {"x": 1}], tmp_path / "t.parquet", client=object())
 
 
 def test_damaged_table_is_named_not_replaced(tmp_path):
     from study.sweep import read_table
+
     bad = tmp_path / "t.parquet"
     bad.write_bytes(b"not parquet")
     with pytest.raises(ValueError, match="move it away"):
@@ -81,13 +95,18 @@ def test_damaged_table_is_named_not_replaced(tmp_path):
 
 def test_scene_prepared_once_and_shared(client, tmp_path):
     from study.sweep import run_sweep, scene_spec
+
     spec = scene_spec(REPO / "experiments" / "default.toml", SMALL)
-    rows = run_sweep(sweep_jobs.scene_job, [{"scene": spec, "i": i} for i in range(3)],
-                     tmp_path / "s.parquet", client=client)
+    rows = run_sweep(
+        sweep_jobs.scene_job,
+        [{"scene": spec, "i": i} for i in range(3)],
+        tmp_path / "s.parquet",
+        client=client,
+    )
     assert all(r["status"] == "ok" for r in rows), [r["error"] for r in rows]
     assert {tuple(r["shape"]) for r in rows} == {(32.0, 32.0, 3.0)}
     refs = list(Path(rows[0]["cache"]).glob("*.exr"))
-    assert len(refs) == 1     # one reference file for the three jobs
+    assert len(refs) == 1  # one reference file for the three jobs
 
 
 _RENDER = textwrap.dedent("""
@@ -103,9 +122,19 @@ _RENDER = textwrap.dedent("""
 
 def test_two_processes_on_one_key_render_once(tmp_path):
     env = {**os.environ, "STUDY_CACHE": str(tmp_path)}
-    code = _RENDER.format(tests=str(TESTS), exp=str(REPO / "experiments" / "default.toml"), small=SMALL)
-    procs = [subprocess.Popen([sys.executable, "-c", code], env=env, stdout=subprocess.PIPE,
-                              stderr=subprocess.STDOUT, text=True) for _ in range(2)]
+    code = _RENDER.format(
+        tests=str(TESTS), exp=str(REPO / "experiments" / "default.toml"), small=SMALL
+    )
+    procs = [
+        subprocess.Popen(
+            [sys.executable, "-c", code],
+            env=env,
+            stdout=subprocess.PIPE,
+            stderr=subprocess.STDOUT,
+            text=True,
+        )
+        for _ in range(2)
+    ]
     outs = [p.communicate(timeout=600)[0] for p in procs]
     assert all(p.returncode == 0 for p in procs), outs
     rendered = sum("reference: rendered" in o for o in outs)
@@ -117,14 +146,23 @@ def test_two_processes_on_one_key_render_once(tmp_path):
 
 def test_lock_of_a_killed_holder_is_recovered(tmp_path):
     from study._io import file_lock
+
     lock = tmp_path / "x.lock"
-    holder = subprocess.Popen([sys.executable, "-c", textwrap.dedent(f"""
+    holder = subprocess.Popen(
+        [
+            sys.executable,
+            "-c",
+            textwrap.dedent(f"""
         import time
         from study._io import file_lock
         with file_lock({str(lock)!r}):
             print("held", flush=True)
             time.sleep(600)
-    """)], stdout=subprocess.PIPE, text=True)
+    """),
+        ],
+        stdout=subprocess.PIPE,
+        text=True,
+    )
     assert holder.stdout.readline().strip() == "held"
     with pytest.raises(TimeoutError, match="stayed locked"):
         with file_lock(lock, timeout=0.5):

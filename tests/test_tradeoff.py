@@ -1,5 +1,6 @@
 """The speed-versus-accuracy study: Pareto fronts and the recommendation, the schedule plan, the
 analysis of a table, and a tiny `study tradeoff` end to end through the CLI."""
+
 import json
 
 import numpy as np
@@ -14,8 +15,20 @@ def _pts(pairs):
 
 
 def test_pareto_front_hand_checked():
-    pts = _pts([("a", 10, 0.30), ("b", 12, 0.25), ("c", 12, 0.27), ("d", 15, 0.25), ("e", 20, 0.20),
-                ("f", 25, 0.22), ("g", 8, 0.40), ("h", 30, 0.19), ("nan", 5, float("nan")), ("none", 4, None)])
+    pts = _pts(
+        [
+            ("a", 10, 0.30),
+            ("b", 12, 0.25),
+            ("c", 12, 0.27),
+            ("d", 15, 0.25),
+            ("e", 20, 0.20),
+            ("f", 25, 0.22),
+            ("g", 8, 0.40),
+            ("h", 30, 0.19),
+            ("nan", 5, float("nan")),
+            ("none", 4, None),
+        ]
+    )
     front = [p["name"] for p in pareto_front(pts, "cost", "err")]
     # c is dominated by b (same cost, more error); d by b (costlier, same error); f by e
     assert front == ["g", "a", "b", "e", "h"]
@@ -23,7 +36,7 @@ def test_pareto_front_hand_checked():
 
 def test_recommendation_hand_checked():
     pts = _pts([("a", 10, 0.30), ("b", 12, 0.2029), ("e", 20, 0.20), ("h", 30, 0.199)])
-    assert recommend(pts, "cost", "err", 0.02)["name"] == "b"      # 0.2029 <= 1.02 * 0.199 = 0.20298
+    assert recommend(pts, "cost", "err", 0.02)["name"] == "b"  # 0.2029 <= 1.02 * 0.199 = 0.20298
     assert recommend(pts, "cost", "err", 0.0)["name"] == "h"
     assert recommend(pts, "cost", "err", 1.0)["name"] == "a"
     assert recommend([], "cost", "err", 0.02) is None
@@ -36,17 +49,23 @@ def test_recommended_point_is_on_the_front_and_within_tolerance(seed):
     rng = np.random.default_rng(seed)
     n = int(rng.integers(1, 40))
     # coarse values make ties in cost and in error common
-    pts = _pts([(str(i), float(rng.integers(1, 8)), float(rng.integers(1, 6)) / 10) for i in range(n)])
+    pts = _pts(
+        [(str(i), float(rng.integers(1, 8)), float(rng.integers(1, 6)) / 10) for i in range(n)]
+    )
     tol = float(rng.choice([0.0, 0.02, 0.3, 2.0]))
     front = pareto_front(pts, "cost", "err")
     rec = recommend(pts, "cost", "err", tol)
     best = min(p["err"] for p in pts)
     assert rec["err"] <= best * (1 + tol)
     assert (rec["cost"], rec["err"]) in {(p["cost"], p["err"]) for p in front}
-    for p in front:     # no point dominates a front point
-        assert not any(q["cost"] <= p["cost"] and q["err"] <= p["err"]
-                       and (q["cost"], q["err"]) != (p["cost"], p["err"]) for q in pts)
-    for p in pts:       # every point off the front is dominated or ties a front point
+    for p in front:  # no point dominates a front point
+        assert not any(
+            q["cost"] <= p["cost"]
+            and q["err"] <= p["err"]
+            and (q["cost"], q["err"]) != (p["cost"], p["err"])
+            for q in pts
+        )
+    for p in pts:  # every point off the front is dominated or ties a front point
         if p not in front:
             assert any(q["cost"] <= p["cost"] and q["err"] <= p["err"] for q in front)
 
@@ -54,60 +73,99 @@ def test_recommended_point_is_on_the_front_and_within_tolerance(seed):
 def test_schedules_hold_the_seed_halvings_and_the_grid():
     from study import load_experiment
     from study.studies.tradeoff_jobs import schedules
+
     exp = load_experiment(REPO / "experiments" / "default.toml")
     s = schedules(exp, "water_refraction")
     scales = {x["scale"]: x["schedule"] for x in s if x["kind"] == "scale"}
     assert scales[1.0] == {"steps_grazing": 10.0, "steps_steep": 3.0, "loop_cap": 40}
     assert scales[0.5] == {"steps_grazing": 5.0, "steps_steep": 1.5, "loop_cap": 20}
     grid = [x for x in s if x["kind"] == "grid"]
-    assert len(s) == len({json.dumps(x["schedule"], sort_keys=True) for x in s})    # distinct
+    assert len(s) == len({json.dumps(x["schedule"], sort_keys=True) for x in s})  # distinct
     # the grid's points that equal a scaled schedule are kept once, as the scaled one
     assert len(grid) == 2 * 2 * 2 - 1
     conv = [x for x in s if x["kind"] == "converged"]
     assert conv[0]["schedule"]["loop_cap"] == 640
     r = schedules(exp, "water_reflection")
-    assert {x["scale"]: x["schedule"] for x in r if x["kind"] == "scale"}[2.0]["refl_loop_cap"] == 120
+    assert {x["scale"]: x["schedule"] for x in r if x["kind"] == "scale"}[2.0][
+        "refl_loop_cap"
+    ] == 120
 
 
 def _row(exp, variant, kind, scale, g, s, c, flip, fetches, ratio=1.0, crossed=0.0):
-    return {"job.experiment": exp, "job.variant": variant, "job.kind": kind, "job.scale": scale,
-            "job.schedule.steps_grazing": g, "job.schedule.steps_steep": s, "job.schedule.loop_cap": c,
-            "status": "ok", "error": None, "flip": flip, "rmse": flip / 2, "fetches_mean": fetches,
-            "fetches_p99": fetches + 2, "gl_ratio_1080p": ratio, "gl_ref_ms_1080p": 40.0,
-            "port_ms_512": fetches / 4, "not_crossed": crossed, "n_fitted": 7, "bic": -1000.0 * (1 - flip)}
+    return {
+        "job.experiment": exp,
+        "job.variant": variant,
+        "job.kind": kind,
+        "job.scale": scale,
+        "job.schedule.steps_grazing": g,
+        "job.schedule.steps_steep": s,
+        "job.schedule.loop_cap": c,
+        "status": "ok",
+        "error": None,
+        "flip": flip,
+        "rmse": flip / 2,
+        "fetches_mean": fetches,
+        "fetches_p99": fetches + 2,
+        "gl_ratio_1080p": ratio,
+        "gl_ref_ms_1080p": 40.0,
+        "port_ms_512": fetches / 4,
+        "not_crossed": crossed,
+        "n_fitted": 7,
+        "bic": -1000.0 * (1 - flip),
+    }
 
 
 def test_analysis_of_a_table():
     from study.studies.tradeoff import analyse
-    rows = [_row("A", "water_refraction", "scale", 0.5, 5, 1.5, 20, 0.170, 12.0, crossed=0.02),
-            _row("A", "water_refraction", "scale", 1.0, 10, 3, 40, 0.166, 17.0),
-            _row("A", "water_refraction", "scale", 2.0, 20, 6, 80, 0.165, 25.0),
-            _row("A", "water_refraction", "converged", 16.0, 160, 48, 640, 0.1649, 150.0),
-            _row("A", "water_refraction_noreflection", "scale", 1.0, 10, 3, 40, 0.30, 15.0),
-            _row("A", "water_refraction_beer", "scale", 1.0, 10, 3, 40, 0.150, 17.0),
-            _row("A", "water_refraction_beer", "scale", 2.0, 20, 6, 80, 0.140, 25.0),
-            _row("B", "water_refraction", "scale", 0.5, 5, 1.5, 20, 0.120, 12.0),
-            _row("B", "water_refraction", "scale", 1.0, 10, 3, 40, 0.110, 17.0),
-            {**_row("B", "water_refraction", "scale", 2.0, 20, 6, 80, 0.0, 0.0), "status": "error",
-             "error": "RuntimeError: boom", "flip": None}]
+
+    rows = [
+        _row("A", "water_refraction", "scale", 0.5, 5, 1.5, 20, 0.170, 12.0, crossed=0.02),
+        _row("A", "water_refraction", "scale", 1.0, 10, 3, 40, 0.166, 17.0),
+        _row("A", "water_refraction", "scale", 2.0, 20, 6, 80, 0.165, 25.0),
+        _row("A", "water_refraction", "converged", 16.0, 160, 48, 640, 0.1649, 150.0),
+        _row("A", "water_refraction_noreflection", "scale", 1.0, 10, 3, 40, 0.30, 15.0),
+        _row("A", "water_refraction_beer", "scale", 1.0, 10, 3, 40, 0.150, 17.0),
+        _row("A", "water_refraction_beer", "scale", 2.0, 20, 6, 80, 0.140, 25.0),
+        _row("B", "water_refraction", "scale", 0.5, 5, 1.5, 20, 0.120, 12.0),
+        _row("B", "water_refraction", "scale", 1.0, 10, 3, 40, 0.110, 17.0),
+        {
+            **_row("B", "water_refraction", "scale", 2.0, 20, 6, 80, 0.0, 0.0),
+            "status": "error",
+            "error": "RuntimeError: boom",
+            "flip": None,
+        },
+    ]
     summary, recs = analyse(rows, ["A", "B"], 0.02)
     a = summary["scenes"]["A"]
-    assert a["recommended"]["label"] == "water_refraction_beer (20, 6, 80)"     # only it is within 1.02 * 0.140
+    assert (
+        a["recommended"]["label"] == "water_refraction_beer (20, 6, 80)"
+    )  # only it is within 1.02 * 0.140
     assert a["seed"]["flip"] == 0.166
     # at no more fetches than the seed's 17: beer at the seed's schedule, not its 25-fetch point
     assert a["best_within_seed_budget"]["label"] == "water_refraction_beer (10, 3, 40)"
     assert a["simplest_variant_within_tolerance"] == "water_refraction_beer"
     # parsimony per variant at the seed's schedule
-    assert set(a["parsimony"]) == {"water_refraction", "water_refraction_noreflection", "water_refraction_beer"}
+    assert set(a["parsimony"]) == {
+        "water_refraction",
+        "water_refraction_noreflection",
+        "water_refraction_beer",
+    }
     assert a["parsimony"]["water_refraction_beer"] == {"n_fitted": 7, "bic": -850.0, "flip": 0.150}
     assert a["error_floor_by_variant"]["water_refraction"] == 0.1649
-    assert a["smallest_crossing_loop_cap"]["water_refraction"] == 40      # cap 20 misses 2 %
-    assert [r["label"] for r in a["front"]] == ["water_refraction (5, 1.5, 20)", "water_refraction_beer (10, 3, 40)",
-                                                "water_refraction_beer (20, 6, 80)"]
-    assert summary["n_failed"] == 1 and summary["failures"][0]["error_message"] == "RuntimeError: boom"
+    assert a["smallest_crossing_loop_cap"]["water_refraction"] == 40  # cap 20 misses 2 %
+    assert [r["label"] for r in a["front"]] == [
+        "water_refraction (5, 1.5, 20)",
+        "water_refraction_beer (10, 3, 40)",
+        "water_refraction_beer (20, 6, 80)",
+    ]
+    assert (
+        summary["n_failed"] == 1 and summary["failures"][0]["error_message"] == "RuntimeError: boom"
+    )
     # the joint front holds only configurations measured on both scenes
-    assert {r["label"] for r in summary["joint"]["front"]} <= {"water_refraction (5, 1.5, 20)",
-                                                               "water_refraction (10, 3, 40)"}
+    assert {r["label"] for r in summary["joint"]["front"]} <= {
+        "water_refraction (5, 1.5, 20)",
+        "water_refraction (10, 3, 40)",
+    }
     assert summary["joint"]["recommended"]["flip"] == pytest.approx((0.166 + 0.110) / 2)
     assert all("label" in r for r in recs)
 
@@ -116,18 +174,39 @@ def test_tradeoff_cli_tiny(tmp_path):
     """A few points at 32x32 through the CLI: table, chart, report, recommended shaders, resume."""
     from study.cli import main
     from study.sweep import read_table
-    small = ["resolution=[32,32]", "fit.resolution=[32,32]", "reference.spp=16", "reference.water_mesh=96",
-             "reference.texture_size=64", "reference.texture_spp=8", "waves.normal_map_size=64",
-             "tradeoff.variants=[\"water_refraction\"]", "tradeoff.steps_grazing=[5.0]",
-             "tradeoff.steps_steep=[3.0]", "tradeoff.loop_cap=[20]", "tradeoff.scales=[0.5,1.0]",
-             "tradeoff.converged_scale=4.0", "tradeoff.gl_repeats=3", "fit.max_steps=5"]
-    args = ["tradeoff", str(REPO / "experiments" / "default.toml"), "--out", str(tmp_path),
-            "--workers", "1"] + [a for s in small for a in ("--set", s)]
+
+    small = [
+        "resolution=[32,32]",
+        "fit.resolution=[32,32]",
+        "reference.spp=16",
+        "reference.water_mesh=96",
+        "reference.texture_size=64",
+        "reference.texture_spp=8",
+        "waves.normal_map_size=64",
+        'tradeoff.variants=["water_refraction"]',
+        "tradeoff.steps_grazing=[5.0]",
+        "tradeoff.steps_steep=[3.0]",
+        "tradeoff.loop_cap=[20]",
+        "tradeoff.scales=[0.5,1.0]",
+        "tradeoff.converged_scale=4.0",
+        "tradeoff.gl_repeats=3",
+        "fit.max_steps=5",
+    ]
+    args = [
+        "tradeoff",
+        str(REPO / "experiments" / "default.toml"),
+        "--out",
+        str(tmp_path),
+        "--workers",
+        "1",
+    ] + [a for s in small for a in ("--set", s)]
     assert main(args) == 0
     rows = read_table(tmp_path / "tradeoff.parquet")
     assert len(rows) == 4 and all(r["status"] == "ok" for r in rows), [r.get("error") for r in rows]
     assert all(r["fetches_mean"] > 0 and 0 < r["flip"] < 1 for r in rows)
-    assert all(r["gl_ms_512"] > 0 and r["gl_ratio_1080p"] > 0 for r in rows if r["job.kind"] != "converged")
+    assert all(
+        r["gl_ms_512"] > 0 and r["gl_ratio_1080p"] > 0 for r in rows if r["job.kind"] != "converged"
+    )
     summary = json.loads((tmp_path / "summary.json").read_text())
     rec = summary["scenes"]["default"]["recommended"]
     assert rec["label"] in {r["label"] for r in summary["scenes"]["default"]["front"]}
@@ -140,7 +219,7 @@ def test_tradeoff_cli_tiny(tmp_path):
     assert (tmp_path / "images_default.png").stat().st_size > 10_000
     assert "images_default.png" in (tmp_path / "report.md").read_text()
     before = {r["key"]: r["seconds"] for r in rows}
-    assert main(args) == 0                                       # resumes: nothing re-run
+    assert main(args) == 0  # resumes: nothing re-run
     assert {r["key"]: r["seconds"] for r in read_table(tmp_path / "tradeoff.parquet")} == before
     # a wider plan (one more scale) resumes too: only the new point runs
     wider = [a.replace("tradeoff.scales=[0.5,1.0]", "tradeoff.scales=[0.5,1.0,2.0]") for a in args]

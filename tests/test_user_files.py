@@ -1,6 +1,7 @@
 """The user's scene files: reading, validation (errors name the key and the file), the sun
 found in an HDR map, cache keys on file contents, the mesh in the reference and in the
 reflection textures, and the example files' script."""
+
 from __future__ import annotations
 
 import math
@@ -18,15 +19,24 @@ from study.scene import user_files as uf
 
 FILES = REPO / "experiments" / "files"
 USER = REPO / "experiments" / "user_files.toml"
-TINY = {"resolution": "[24, 24]", "fit.resolution": "[24, 24]", "reference.spp": "8",
-        "reference.water_mesh": "48", "reference.texture_size": "32", "reference.texture_spp": "4",
-        "waves.normal_map_size": "32"}
+TINY = {
+    "resolution": "[24, 24]",
+    "fit.resolution": "[24, 24]",
+    "reference.spp": "8",
+    "reference.water_mesh": "48",
+    "reference.texture_size": "32",
+    "reference.texture_spp": "4",
+    "waves.normal_map_size": "32",
+}
 
 
 def _exr(path, channels):
     import OpenEXR
+
     hdr = {"compression": OpenEXR.ZIP_COMPRESSION, "type": OpenEXR.scanlineimage}
-    OpenEXR.File(hdr, {k: np.ascontiguousarray(v, np.float32) for k, v in channels.items()}).write(str(path))
+    OpenEXR.File(hdr, {k: np.ascontiguousarray(v, np.float32) for k, v in channels.items()}).write(
+        str(path)
+    )
     return path
 
 
@@ -40,11 +50,15 @@ def _hm(path):
 
 # ---- validation ---------------------------------------------------------------------------
 
+
 def _bad_cases(tmp):
     rgb = _exr(tmp / "rgb.exr", {"RGB": np.full((8, 8, 3), 0.5)})
-    nan = np.zeros((8, 8)); nan[3, 4] = np.nan
-    sky = np.full((8, 16, 3), 0.5); sky[2, 3, 1] = -1.0
-    png8 = tmp / "h8.png"; Image.fromarray(np.zeros((8, 8), np.uint8)).save(png8)
+    nan = np.zeros((8, 8))
+    nan[3, 4] = np.nan
+    sky = np.full((8, 16, 3), 0.5)
+    sky[2, 3, 1] = -1.0
+    png8 = tmp / "h8.png"
+    Image.fromarray(np.zeros((8, 8), np.uint8)).save(png8)
     (tmp / "junk.exr").write_bytes(b"not an exr at all")
     (tmp / "junk.ply").write_text("solid nonsense\n")
     return {
@@ -56,19 +70,45 @@ def _bad_cases(tmp):
         "8bit": (_hm(png8), "floor.heightmap", "16-bit PNG"),
         "no_map": ({"floor.shape": '"heightmap"'}, "floor.shape", "needs floor.heightmap"),
         "shape": ({"floor.heightmap": f'"{rgb}"'}, "floor.heightmap", "set floor.shape"),
-        "extent": ({**_hm(_exr(tmp / "y.exr", {"Y": np.zeros((8, 8))})), "floor.extent": "[-1, -1, 1, 1]"},
-                   "floor.heightmap", "does not cover the water"),
-        "albedo_range": ({"floor.albedo_image": f'"{_exr(tmp / "a.exr", {"RGB": np.full((8, 8, 3), 1.5)})}"'},
-                         "floor.albedo_image", "in [0, 1]"),
-        "sky_negative": ({"sky.envmap": f'"{_exr(tmp / "s.exr", {"RGB": sky})}"'}, "sky.envmap", "negative"),
+        "extent": (
+            {**_hm(_exr(tmp / "y.exr", {"Y": np.zeros((8, 8))})), "floor.extent": "[-1, -1, 1, 1]"},
+            "floor.heightmap",
+            "does not cover the water",
+        ),
+        "albedo_range": (
+            {"floor.albedo_image": f'"{_exr(tmp / "a.exr", {"RGB": np.full((8, 8, 3), 1.5)})}"'},
+            "floor.albedo_image",
+            "in [0, 1]",
+        ),
+        "sky_negative": (
+            {"sky.envmap": f'"{_exr(tmp / "s.exr", {"RGB": sky})}"'},
+            "sky.envmap",
+            "negative",
+        ),
         "sky_aspect": ({"sky.envmap": f'"{rgb}"'}, "sky.envmap", "twice as wide"),
-        "no_sun": ({"sky.envmap": f'"{_exr(tmp / "flat.exr", {"RGB": np.ones((8, 16, 3))})}"',
-                    "sun.source": '"envmap"'}, "sky.envmap", "no sun"),
+        "no_sun": (
+            {
+                "sky.envmap": f'"{_exr(tmp / "flat.exr", {"RGB": np.ones((8, 16, 3))})}"',
+                "sun.source": '"envmap"',
+            },
+            "sky.envmap",
+            "no sun",
+        ),
         "sun_without_map": ({"sun.source": '"envmap"'}, "sun.source", "needs sky.envmap"),
-        "sun_radius": ({"sky.envmap": f'"{_exr(tmp / "s2.exr", {"RGB": np.ones((8, 16, 3))})}"',
-                        "sun.radius": "1.0"}, "sun.radius", "below one texel"),
+        "sun_radius": (
+            {
+                "sky.envmap": f'"{_exr(tmp / "s2.exr", {"RGB": np.ones((8, 16, 3))})}"',
+                "sun.radius": "1.0",
+            },
+            "sun.radius",
+            "below one texel",
+        ),
         "ply": ({"mesh.file": f'"{tmp / "junk.ply"}"'}, "mesh.file", "not a PLY"),
-        "texture_alone": ({"mesh.texture": f'"{FILES / "rock_texture.png"}"'}, "mesh.texture", "without mesh.file"),
+        "texture_alone": (
+            {"mesh.texture": f'"{FILES / "rock_texture.png"}"'},
+            "mesh.texture",
+            "without mesh.file",
+        ),
     }
 
 
@@ -93,26 +133,35 @@ def test_relative_paths_resolve_against_the_experiment_file():
 
 # ---- heightmap and albedo -----------------------------------------------------------------
 
+
 def test_heightmap_png16_and_exr_give_the_same_floor(tmp_path):
     from study.scene.mitsuba_scene import floor_of
+
     rng = np.random.default_rng(0)
     h = rng.integers(0, 65536, size=(16, 12)).astype(np.uint16)
     Image.fromarray(h).save(tmp_path / "h.png")
     _exr(tmp_path / "h.exr", {"Y": h / 65535.0})
     ext = "[-5, -6, 7, 6]"
-    e1 = _exp(**_hm(tmp_path / "h.png"), **{"floor.extent": ext, "floor.height_scale": "0.5", "floor.depth": "2"})
-    e2 = _exp(**_hm(tmp_path / "h.exr"), **{"floor.extent": ext, "floor.height_scale": "0.5", "floor.depth": "2"})
+    e1 = _exp(
+        **_hm(tmp_path / "h.png"),
+        **{"floor.extent": ext, "floor.height_scale": "0.5", "floor.depth": "2"},
+    )
+    e2 = _exp(
+        **_hm(tmp_path / "h.exr"),
+        **{"floor.extent": ext, "floor.height_scale": "0.5", "floor.depth": "2"},
+    )
     # texel centres: x = -5 + (i + 0.5) * 1, z = -6 + (j + 0.5) * 0.75
     i, j = np.meshgrid(np.arange(12), np.arange(16))
     x, z = -5 + (i + 0.5), -6 + (j + 0.5) * 0.75
     want = -2 + 0.5 * h / 65535.0
     np.testing.assert_allclose(floor_of(e1, x, z), want, atol=1e-6)
     np.testing.assert_allclose(floor_of(e2, x, z), want, atol=1e-6)
-    assert e1.scene_hash() != e2.scene_hash()          # different files, different scenes
+    assert e1.scene_hash() != e2.scene_hash()  # different files, different scenes
 
 
 def test_albedo_png_is_decoded_from_srgb(tmp_path):
-    img = np.zeros((8, 8, 3), np.uint8); img[...] = (128, 0, 255)
+    img = np.zeros((8, 8, 3), np.uint8)
+    img[...] = (128, 0, 255)
     Image.fromarray(img).save(tmp_path / "a.png")
     exp = _exp(**{"floor.albedo_image": f'"{tmp_path / "a.png"}"'})
     a = uf.albedo_over_pool(exp.values)
@@ -121,18 +170,27 @@ def test_albedo_png_is_decoded_from_srgb(tmp_path):
 
 # ---- sky and sun --------------------------------------------------------------------------
 
+
 def _sky_with_sun(h, elev, azim, radius, radiance):
     sys.path.insert(0, str(REPO / "scripts"))
     from make_example_files import sky
+
     return sky(h, elev, azim, radius, radiance)
 
 
 @pytest.mark.parametrize("rotation", [0.0, 30.0, -75.0])
 def test_sun_found_in_the_map_follows_the_rotation(tmp_path, rotation):
     _exr(tmp_path / "sky.exr", {"RGB": _sky_with_sun(256, 35.0, 120.0, 3.0, (50.0, 45.0, 40.0))})
-    exp = _exp(**{"sky.envmap": f'"{tmp_path / "sky.exr"}"', "sun.source": '"envmap"',
-                  "sky.rotation": str(rotation), "sky.scale": "2.0"})
+    exp = _exp(
+        **{
+            "sky.envmap": f'"{tmp_path / "sky.exr"}"',
+            "sun.source": '"envmap"',
+            "sky.rotation": str(rotation),
+            "sky.scale": "2.0",
+        }
+    )
     from study.scene.user_scene import sun_summary
+
     s = sun_summary(exp)
     assert s["elevation_deg"] == pytest.approx(35.0, abs=0.5)
     assert (s["azimuth_deg"] - (120.0 + rotation) + 180) % 360 - 180 == pytest.approx(0.0, abs=0.8)
@@ -145,24 +203,37 @@ def test_sun_found_in_the_map_follows_the_rotation(tmp_path, rotation):
 def test_shader_cube_map_is_the_map_without_its_sun(tmp_path):
     from study.scene.geometry import cubemap_directions
     from study.scene.user_scene import reference_sky, shader_cubemap
+
     _exr(tmp_path / "sky.exr", {"RGB": _sky_with_sun(128, 40.0, 250.0, 4.0, (9.0, 8.4, 7.0))})
     exp = _exp(**{"sky.envmap": f'"{tmp_path / "sky.exr"}"', "sun.source": '"envmap"'})
     cube = shader_cubemap(exp, 16)
     ref = reference_sky(exp)
-    assert ref.max() > 8.0 and cube.max() < 2.0            # the sun stays in the reference only
-    d = cubemap_directions(16) * np.array([1.0, -1.0, 1.0])   # stored y-flipped
+    assert ref.max() > 8.0 and cube.max() < 2.0  # the sun stays in the reference only
+    d = cubemap_directions(16) * np.array([1.0, -1.0, 1.0])  # stored y-flipped
     no_sun = _sky_with_sun(128, 40.0, 250.0, 4.0, (0.0, 0.0, 0.0))
     want = uf.latlong_lookup(no_sun.astype(np.float64), d)
-    sun = np.array([math.cos(math.radians(40)) * math.cos(math.radians(250)), math.sin(math.radians(40)),
-                    math.cos(math.radians(40)) * math.sin(math.radians(250))])
+    sun = np.array(
+        [
+            math.cos(math.radians(40)) * math.cos(math.radians(250)),
+            math.sin(math.radians(40)),
+            math.cos(math.radians(40)) * math.sin(math.radians(250)),
+        ]
+    )
     away = (d * np.array([1.0, -1.0, 1.0])) @ sun < math.cos(math.radians(15))
     assert np.abs(cube - want)[away].mean() < 0.02
 
 
 def test_explicit_sun_is_added_to_the_map(tmp_path):
     from study.scene.user_scene import reference_sky, sun_of
+
     _exr(tmp_path / "sky.exr", {"RGB": np.full((64, 128, 3), 0.5)})
-    exp = _exp(**{"sky.envmap": f'"{tmp_path / "sky.exr"}"', "sun.radius": "5", "sun.radiance": "[10, 10, 10]"})
+    exp = _exp(
+        **{
+            "sky.envmap": f'"{tmp_path / "sky.exr"}"',
+            "sun.radius": "5",
+            "sun.radiance": "[10, 10, 10]",
+        }
+    )
     ref = reference_sky(exp)
     assert ref.max() == pytest.approx(10.5) and ref.min() == pytest.approx(0.5)
     d, rad = sun_of(exp)
@@ -171,6 +242,7 @@ def test_explicit_sun_is_added_to_the_map(tmp_path):
 
 # ---- cache keys ---------------------------------------------------------------------------
 
+
 def test_file_contents_are_in_the_cache_keys(tmp_path):
     for name in ("heightmap.png", "albedo.png", "sky.exr", "rock.obj", "rock_texture.png"):
         shutil.copy(FILES / name, tmp_path / name)
@@ -178,7 +250,7 @@ def test_file_contents_are_in_the_cache_keys(tmp_path):
     text = (tmp_path / "user.toml").read_text().replace("files/", "")
     (tmp_path / "user.toml").write_text(text)
     a = load_experiment(tmp_path / "user.toml")
-    b = load_experiment(USER)                              # same contents, other paths
+    b = load_experiment(USER)  # same contents, other paths
     assert a.scene_hash() == b.scene_hash() and a.inputs_hash() == b.inputs_hash()
     with open(tmp_path / "rock.obj", "a") as f:
         f.write("# changed\n")
@@ -188,8 +260,10 @@ def test_file_contents_are_in_the_cache_keys(tmp_path):
 
 # ---- mesh ---------------------------------------------------------------------------------
 
+
 def test_obj_and_ply_load_to_the_same_placed_mesh(mi):
     from study.scene.user_scene import mesh_bounds
+
     sets = {"mesh.position": "[0.5, 0.2, -0.3]", "mesh.scale": "1.1", "mesh.rotation": "10"}
     a = mesh_bounds(mi, _exp(**{"mesh.file": f'"{FILES / "rock.obj"}"', **sets}))
     b = mesh_bounds(mi, _exp(**{"mesh.file": f'"{FILES / "rock.ply"}"', **sets}))
@@ -200,6 +274,7 @@ def test_obj_and_ply_load_to_the_same_placed_mesh(mi):
 
 def test_mesh_into_the_water_is_refused(mi):
     from study.scene.user_scene import check_scene
+
     exp = _exp(**{"mesh.file": f'"{FILES / "rock.obj"}"', "mesh.position": "[0, -0.35, 0]"})
     with pytest.raises(ExperimentError, match=r"mesh.file: .*into the water.*rock\.obj"):
         check_scene(exp)
@@ -207,12 +282,21 @@ def test_mesh_into_the_water_is_refused(mi):
 
 def test_mesh_texture_needs_texture_coordinates(mi, tmp_path):
     from study.scene.user_scene import check_scene
-    text = "\n".join(l for l in (FILES / "rock.obj").read_text().splitlines() if not l.startswith("vt"))
+
+    text = "\n".join(
+        l for l in (FILES / "rock.obj").read_text().splitlines() if not l.startswith("vt")
+    )
     text = text.replace("f ", "F ").replace("F ", "f ")
     import re
+
     text = re.sub(r"(\d+)/\d+", r"\1", text)
     (tmp_path / "bare.obj").write_text(text + "\n")
-    exp = _exp(**{"mesh.file": f'"{tmp_path / "bare.obj"}"', "mesh.texture": f'"{FILES / "rock_texture.png"}"'})
+    exp = _exp(
+        **{
+            "mesh.file": f'"{tmp_path / "bare.obj"}"',
+            "mesh.texture": f'"{FILES / "rock_texture.png"}"',
+        }
+    )
     with pytest.raises(ExperimentError, match="mesh.texture needs texture coordinates"):
         check_scene(exp)
 
@@ -220,14 +304,15 @@ def test_mesh_texture_needs_texture_coordinates(mi, tmp_path):
 def test_mesh_is_in_the_reference_and_the_reflection_textures(mi):
     from study.scene.mitsuba_scene import build_scene
     from study.scene.shader_inputs import build_shader_inputs
+
     exp = load_experiment(USER, [f"{k}={v}" for k, v in TINY.items()])
     scene = build_scene(exp)
     ray = mi.Ray3f(mi.Point3f(0.0, 5.0, -5.3), mi.Vector3f(0.0, -1.0, 0.0))
     si = scene.ray_intersect(ray)
-    assert bool(si.is_valid()[0]) and float(si.p.y[0]) > 0.36           # the ridge, above the water
+    assert bool(si.is_valid()[0]) and float(si.p.y[0]) > 0.36  # the ridge, above the water
     inputs = build_shader_inputs(exp, 24, 24)
     tm = inputs.tex_matrix1
-    s, t = tm[0, 0] * 0.0 + tm[0, 3], tm[1, 2] * -5.3 + tm[1, 3]      # texel under (0, -5.3)
+    s, t = tm[0, 0] * 0.0 + tm[0, 3], tm[1, 2] * -5.3 + tm[1, 3]  # texel under (0, -5.3)
     n = inputs.refl_world_y.shape[0]
     y = inputs.refl_world_y[int(t * n), int(s * n)]
     assert y == pytest.approx(float(si.p.y[0]), abs=0.1)
@@ -237,13 +322,21 @@ def test_mesh_is_in_the_reference_and_the_reflection_textures(mi):
 
 # ---- example files ------------------------------------------------------------------------
 
+
 def test_example_files_script_reproduces_the_shipped_files(tmp_path):
-    res = subprocess.run([sys.executable, str(REPO / "scripts" / "make_example_files.py"), "--out",
-                          str(tmp_path)], capture_output=True, text=True, timeout=120)
+    res = subprocess.run(
+        [sys.executable, str(REPO / "scripts" / "make_example_files.py"), "--out", str(tmp_path)],
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
     assert res.returncode == 0, res.stderr
     for p in sorted(FILES.iterdir()):
-        if p.suffix == ".exr":   # compare texels (the header may carry a writer version)
-            a, b = uf._read_image("k", str(p), "a"), uf._read_image("k", str(tmp_path / p.name), "b")
+        if p.suffix == ".exr":  # compare texels (the header may carry a writer version)
+            a, b = (
+                uf._read_image("k", str(p), "a"),
+                uf._read_image("k", str(tmp_path / p.name), "b"),
+            )
             assert np.array_equal(a, b), p.name
         else:
             assert (tmp_path / p.name).read_bytes() == p.read_bytes(), p.name
@@ -254,12 +347,22 @@ def test_user_files_experiment_calibrates_end_to_end(tmp_path):
     """`study calibrate experiments/user_files.toml` at tiny sizes: reference, inputs with the
     mesh, fit of water_reflection, export and GL check, report."""
     from study.cli import main
+
     sets = [a for k, v in {**TINY, "fit.max_steps": "3"}.items() for a in ("--set", f"{k}={v}")]
     assert main(["calibrate", str(USER), "--out", str(tmp_path), *sets]) == 0
     summary = __import__("json").loads((tmp_path / "constants.json").read_text())
     assert summary["shader"] == "water_reflection"
-    assert summary["gl_check"]["passed"] and (tmp_path / "shaders" / "core" / "water_reflection.frag").is_file()
-    assert {"inputs.mesh_reflection_s", "inputs.lighting_s", "fit_s", "gl_check_s", "figures_s",
-            "total_s"} <= set(summary["timings"])
+    assert (
+        summary["gl_check"]["passed"]
+        and (tmp_path / "shaders" / "core" / "water_reflection.frag").is_file()
+    )
+    assert {
+        "inputs.mesh_reflection_s",
+        "inputs.lighting_s",
+        "fit_s",
+        "gl_check_s",
+        "figures_s",
+        "total_s",
+    } <= set(summary["timings"])
     report = (tmp_path / "report.md").read_text()
     assert "inputs.mesh_reflection_s" in report and "gl_check_s" in report

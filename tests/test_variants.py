@@ -2,6 +2,7 @@
 against its Dr.Jit option on llvmpipe (the thresholds of test_gl_differential), the diagnostics
 count what each variant does, central differences of every constant a variant adds, and the
 fit substitutes a variant's constants for the seed's it replaces."""
+
 from __future__ import annotations
 
 import numpy as np
@@ -13,10 +14,15 @@ from shaders_port import Constants
 from shaders_port._variants import VARIANTS, get_variant
 
 SEED = "water_refraction"
-NEW = [n for n, v in VARIANTS.items() if v.shader == SEED and n not in (SEED, "water_refraction_noreflection")]
+NEW = [
+    n
+    for n, v in VARIANTS.items()
+    if v.shader == SEED and n not in (SEED, "water_refraction_noreflection")
+]
 # every constant away from the seed's defaults, the variants' own ones too
-CUSTOM = twr.CUSTOM.replace(absorption_r=0.45, absorption_g=0.12, absorption_b=0.08,
-                            specular_roughness=0.12, refine_steps=4)
+CUSTOM = twr.CUSTOM.replace(
+    absorption_r=0.45, absorption_g=0.12, absorption_b=0.08, specular_roughness=0.12, refine_steps=4
+)
 
 
 @pytest.fixture(scope="module")
@@ -30,9 +36,16 @@ def seed_out(inputs):
 
 
 def test_registered_variants():
-    assert {"water_refraction_beer", "water_refraction_ggx", "water_refraction_beer_ggx",
-            "water_refraction_binary", "water_refraction_secant", "water_refraction_2layers",
-            "water_refraction_1layer", "water_refraction_nospecular"} <= set(NEW)
+    assert {
+        "water_refraction_beer",
+        "water_refraction_ggx",
+        "water_refraction_beer_ggx",
+        "water_refraction_binary",
+        "water_refraction_secant",
+        "water_refraction_2layers",
+        "water_refraction_1layer",
+        "water_refraction_nospecular",
+    } <= set(NEW)
     for n in NEW:
         v = get_variant(n)
         assert (v.defines and v.port_options or v.textures == "game") and v.description
@@ -42,6 +55,7 @@ def test_registered_variants():
 @pytest.mark.parametrize("name", NEW)
 def test_variant_port_matches_gl(inputs, seed_out, name):
     from test_gl_differential import _check, compare_or_skip
+
     res = compare_or_skip(inputs, CUSTOM, name)
     _check(res, f"gl_{name}_custom")
     # the switch does something: the variant's image is not the seed's
@@ -57,11 +71,14 @@ def test_diagnostics_count_what_each_variant_does(inputs, seed_out):
         layers = v.port_options.get("normal_layers", 4)
         # fetches: normal-map layers, the start depth, one per iteration (linear search and
         # refinement), the refraction colour, cube map and Fresnel LUT
-        np.testing.assert_array_equal(out["fetches"][water], layers + 1 + out["iterations"][water] + 1 + 2)
+        np.testing.assert_array_equal(
+            out["fetches"][water], layers + 1 + out["iterations"][water] + 1 + 2
+        )
         if v.port_options.get("refine"):
-            np.testing.assert_array_equal(out["iterations"][water],
-                                          seed_out["iterations"][water] + CUSTOM.refine_steps)
-        elif layers == 4 and v.textures == "float":   # same normals, same depths: same search
+            np.testing.assert_array_equal(
+                out["iterations"][water], seed_out["iterations"][water] + CUSTOM.refine_steps
+            )
+        elif layers == 4 and v.textures == "float":  # same normals, same depths: same search
             np.testing.assert_array_equal(out["iterations"][water], seed_out["iterations"][water])
 
 
@@ -71,25 +88,35 @@ def test_refinement_finds_the_crossing_closer_than_the_seed():
     a slope where the bracket matters and compare the refraction positions' error through the
     colour: refinement steps give a smaller error against a 64-steps-per-unit reference."""
     inp = synthetic_inputs(width=64, height=48)
-    fine = get_variant(SEED).render(inp, Constants(steps_grazing=64.0, steps_steep=64.0,
-                                                     loop_cap=800)).numpy()
+    fine = (
+        get_variant(SEED)
+        .render(inp, Constants(steps_grazing=64.0, steps_steep=64.0, loop_cap=800))
+        .numpy()
+    )
     water = fine["mask"] > 0
     coarse = Constants(steps_grazing=3.0, steps_steep=1.0)
     err = {}
     for name in (SEED, "water_refraction_binary", "water_refraction_secant"):
         out = get_variant(name).render(inp, coarse.replace(refine_steps=4)).numpy()
         err[name] = float(np.abs(out["color"] - fine["color"]).max(-1)[water].mean())
-    assert err["water_refraction_binary"] < err[SEED] and err["water_refraction_secant"] < err[SEED], err
+    assert (
+        err["water_refraction_binary"] < err[SEED] and err["water_refraction_secant"] < err[SEED]
+    ), err
 
 
 def test_beer_lambert_is_the_exponential_law():
     """Beer variant with waterColor 0: colour = the seed's unattenuated colour times
     exp(-sigma d), channel by channel (d from the shader's own travel length)."""
     inp = synthetic_inputs(width=48, height=36)
-    c = Constants(water_color=(0.0, 0.0, 0.0, 1.0), absorption_r=0.9, absorption_g=0.3,
-                  absorption_b=0.1, attenuation_distance=1e4)
+    c = Constants(
+        water_color=(0.0, 0.0, 0.0, 1.0),
+        absorption_r=0.9,
+        absorption_g=0.3,
+        absorption_b=0.1,
+        attenuation_distance=1e4,
+    )
     beer = get_variant("water_refraction_beer").render(inp, c, reflection=False).numpy()
-    clear = get_variant(SEED).render(inp, c, reflection=False).numpy()   # mix by d / 1e4 only
+    clear = get_variant(SEED).render(inp, c, reflection=False).numpy()  # mix by d / 1e4 only
     water = beer["mask"] > 0
     ratio = beer["color"][water] / np.maximum(clear["color"][water], 1e-6)
     # -log(ratio) / sigma is the same travel length in all three channels
@@ -98,11 +125,12 @@ def test_beer_lambert_is_the_exponential_law():
     assert ok.sum() > 100
     np.testing.assert_allclose(d[ok, 0], d[ok, 2], rtol=2e-2, atol=2e-3)
     np.testing.assert_allclose(d[ok, 1], d[ok, 2], rtol=2e-2, atol=2e-3)
-    assert d[ok].mean() > 0.5   # a real path length through the water (world units)
+    assert d[ok].mean() > 0.5  # a real path length through the water (world units)
 
 
 def test_unknown_option_refused(inputs):
     from shaders_port import water_refraction
+
     with pytest.raises(TypeError, match="unknown shader option"):
         water_refraction.render(inputs, Constants(), refinement="binary")
     with pytest.raises(ValueError, match="allowed"):
@@ -111,16 +139,25 @@ def test_unknown_option_refused(inputs):
 
 # ---- forward-mode derivatives of the variants' constants vs central differences ------------
 
-FD_CASES = [("water_refraction_beer", "absorption_r", 1e-3), ("water_refraction_beer", "absorption_g", 1e-3),
-            ("water_refraction_beer", "absorption_b", 1e-3), ("water_refraction_beer", "water_color[1]", 1e-3),
-            ("water_refraction_ggx", "specular_roughness", 1e-3),
-            ("water_refraction_ggx", "specular_strength", 1e-3),
-            ("water_refraction_ggx", "bumptex_mult", 3e-4),
-            ("water_refraction_secant", "steps_steep", 3e-4),
-            ("water_refraction_binary", "steps_steep", 3e-4),
-            ("water_refraction_secant", "bumptex_mult", 3e-4)]
-FD_AT = twr.FD_CONSTANTS.replace(absorption_r=0.6, absorption_g=0.25, absorption_b=0.15,
-                                 specular_roughness=0.3, specular_strength=0.5)
+FD_CASES = [
+    ("water_refraction_beer", "absorption_r", 1e-3),
+    ("water_refraction_beer", "absorption_g", 1e-3),
+    ("water_refraction_beer", "absorption_b", 1e-3),
+    ("water_refraction_beer", "water_color[1]", 1e-3),
+    ("water_refraction_ggx", "specular_roughness", 1e-3),
+    ("water_refraction_ggx", "specular_strength", 1e-3),
+    ("water_refraction_ggx", "bumptex_mult", 3e-4),
+    ("water_refraction_secant", "steps_steep", 3e-4),
+    ("water_refraction_binary", "steps_steep", 3e-4),
+    ("water_refraction_secant", "bumptex_mult", 3e-4),
+]
+FD_AT = twr.FD_CONSTANTS.replace(
+    absorption_r=0.6,
+    absorption_g=0.25,
+    absorption_b=0.15,
+    specular_roughness=0.3,
+    specular_strength=0.5,
+)
 
 
 @pytest.fixture(scope="module")
@@ -135,36 +172,67 @@ def variant_jacobians():
 
 
 @pytest.mark.parametrize("name,param,eps", FD_CASES, ids=[f"{n[17:]}-{p}" for n, p, _ in FD_CASES])
-def test_variant_jacobian_matches_central_differences(variant_jacobians, monkeypatch, name, param, eps):
+def test_variant_jacobian_matches_central_differences(
+    variant_jacobians, monkeypatch, name, param, eps
+):
     inp, jac = variant_jacobians
     base, J, names = jac[name]
     v = get_variant(name)
     assert np.array_equal(v.render(inp, FD_AT).numpy()["color"], base["color"])
     monkeypatch.setitem(twr.FD_EPS, param, eps)
-    twr.check_jacobian_column(lambda c: v.render(inp, c).numpy(), base, J[..., names.index(param)],
-                              FD_AT, param, ("iterations",))
+    twr.check_jacobian_column(
+        lambda c: v.render(inp, c).numpy(),
+        base,
+        J[..., names.index(param)],
+        FD_AT,
+        param,
+        ("iterations",),
+    )
 
 
 # ---- the fit: a variant fits its own constants in place of the seed's -------------------------
 
+
 def test_fit_names_substitute_the_variants_constants():
-    req = ["attenuation_distance", "bumptex_mult", "water_color", "specular_strength", "specular_exponent"]
+    req = [
+        "attenuation_distance",
+        "bumptex_mult",
+        "water_color",
+        "specular_strength",
+        "specular_exponent",
+    ]
     assert get_variant(SEED).fit_names(req) == req
     assert get_variant("water_refraction_beer_ggx").fit_names(req) == [
-        "absorption_r", "absorption_g", "absorption_b", "bumptex_mult", "water_color",
-        "specular_strength", "specular_roughness"]
+        "absorption_r",
+        "absorption_g",
+        "absorption_b",
+        "bumptex_mult",
+        "water_color",
+        "specular_strength",
+        "specular_roughness",
+    ]
     assert get_variant("water_refraction_nospecular").fit_names(req) == req[:3]
-    for n in NEW:   # every constant the variant fits is one its shader code reads
+    for n in NEW:  # every constant the variant fits is one its shader code reads
         for c in get_variant(n).fit_names(req):
-            assert c in ("bumptex_mult", "water_color", "specular_strength", "attenuation_distance",
-                         "specular_exponent", "absorption_r", "absorption_g", "absorption_b",
-                         "specular_roughness"), (n, c)
+            assert c in (
+                "bumptex_mult",
+                "water_color",
+                "specular_strength",
+                "attenuation_distance",
+                "specular_exponent",
+                "absorption_r",
+                "absorption_g",
+                "absorption_b",
+                "specular_roughness",
+            ), (n, c)
 
 
 # ---- parsimony: information criteria of a fit ---------------------------------------------
 
+
 def test_information_criteria():
     from study._metrics import information_criteria
+
     rng = np.random.default_rng(1)
     r = rng.normal(0.0, 0.1, 3000)
     ic = information_criteria(r, 4)
@@ -183,21 +251,32 @@ def test_information_criteria():
 
 # ---- the reflection shader (seed section 3) shares blocks [2], [5], [6], [8] and their switches ----
 
+
 def test_reflection_variant_registered_matches_gl(inputs):
     from test_gl_differential import _check
     from shaders_port._compare import compare_port_gl
+
     res = compare_port_gl(inputs, CUSTOM, "water_reflection_beer_ggx")
     _check(res, "gl_water_reflection_beer_ggx_custom")
 
 
-@pytest.mark.parametrize("defines,options", [
-    (("TWO_NORMAL_LAYERS", "SECANT_REFINE", "NO_SPECULAR"), {"normal_layers": 2, "refine": "secant", "specular": "none"}),
-    (("ONE_NORMAL_LAYER", "BINARY_REFINE"), {"normal_layers": 1, "refine": "binary"})], ids=["2layers-secant-nospec", "1layer-binary"])
+@pytest.mark.parametrize(
+    "defines,options",
+    [
+        (
+            ("TWO_NORMAL_LAYERS", "SECANT_REFINE", "NO_SPECULAR"),
+            {"normal_layers": 2, "refine": "secant", "specular": "none"},
+        ),
+        (("ONE_NORMAL_LAYER", "BINARY_REFINE"), {"normal_layers": 1, "refine": "binary"}),
+    ],
+    ids=["2layers-secant-nospec", "1layer-binary"],
+)
 def test_reflection_shader_switches_match_gl(inputs, defines, options):
     """The other switches in water_reflection.frag against the reflection port's options (the
     registry ships only the Beer + GGX reflection variant)."""
     from shaders_port import water_reflection
     from shaders_port._gl import GLRenderer
+
     out = water_reflection.render(inputs, CUSTOM, **options).numpy()
     with GLRenderer("water_reflection", inputs, defines=defines) as r:
         rgba, gl_mask = r.render(CUSTOM)
@@ -206,16 +285,18 @@ def test_reflection_shader_switches_match_gl(inputs, defines, options):
     assert both.sum() > 500
     assert diff.mean() <= 1e-3 and np.percentile(diff, 99.9) <= 1e-2, (diff.mean(), diff.max())
     seed = water_reflection.render(inputs, CUSTOM).numpy()
-    assert np.abs(out["color"] - seed["color"]).max(-1)[both].mean() > 1e-3   # the switches act
+    assert np.abs(out["color"] - seed["color"]).max(-1)[both].mean() > 1e-3  # the switches act
 
 
 # ---- WALL_FACES: a crossing into geometry above the water is the geometry's submerged face ----
+
 
 def walled_inputs(width: int = 96, height: int = 72):
     """The synthetic inputs with the reflection shader's wall (x0 .. x0 + 0.8, 0.6 high) in the
     refraction depth texture too, as the study's top-down textures hold a pool wall: refracted
     rays near it cross into the wall's column."""
     import dataclasses
+
     inp = synthetic_inputs(width=width, height=height)
     world_y = inp.world_y.copy()
     world_y[:, : world_y.shape[1] // 6] = 0.6
@@ -236,7 +317,9 @@ def _wall_lanes(out):
 
 def test_wall_faces_shade_the_submerged_face_as_water(walled):
     beer = get_variant("water_refraction_beer").render(walled, CUSTOM, reflection=False).numpy()
-    walls = get_variant("water_refraction_beer_walls").render(walled, CUSTOM, reflection=False).numpy()
+    walls = (
+        get_variant("water_refraction_beer_walls").render(walled, CUSTOM, reflection=False).numpy()
+    )
     water = beer["mask"] > 0
     at_wall = _wall_lanes(walls)
     changed = water & (np.abs(walls["color"] - beer["color"]).max(-1) > 0.0)
@@ -252,22 +335,27 @@ def test_wall_faces_shade_the_submerged_face_as_water(walled):
     plain = synthetic_inputs(width=96, height=72)
     np.testing.assert_array_equal(
         get_variant("water_refraction_beer_walls").render(plain, CUSTOM).numpy()["color"],
-        get_variant("water_refraction_beer").render(plain, CUSTOM).numpy()["color"])
+        get_variant("water_refraction_beer").render(plain, CUSTOM).numpy()["color"],
+    )
 
 
 def test_wall_faces_port_matches_gl_where_it_acts(walled):
     from test_gl_differential import _check, compare_or_skip
+
     res = compare_or_skip(walled, CUSTOM, "water_refraction_beer_walls")
     _check(res, "gl_water_refraction_beer_walls_walled")
     beer = get_variant("water_refraction_beer").render(walled, CUSTOM).numpy()
     water = beer["mask"] > 0
-    assert (np.abs(res["port"] - beer["color"]).max(-1)[water] > 1e-3).sum() > 200   # the switch acts
+    assert (
+        np.abs(res["port"] - beer["color"]).max(-1)[water] > 1e-3
+    ).sum() > 200  # the switch acts
 
 
 def test_wall_faces_in_the_reflection_shader_match_gl(walled):
     """water_reflection.frag shares block [6] and its WALL_FACES switch with the refraction shader."""
     from shaders_port import water_reflection
     from shaders_port._gl import GLRenderer
+
     opts = {"attenuation": "beer", "wall_faces": True}
     out = water_reflection.render(walled, CUSTOM, **opts).numpy()
     with GLRenderer("water_reflection", walled, defines=("BEER_ATTENUATION", "WALL_FACES")) as r:
@@ -280,7 +368,9 @@ def test_wall_faces_in_the_reflection_shader_match_gl(walled):
     assert (np.abs(out["color"] - beer["color"]).max(-1)[both] > 1e-3).sum() > 200
 
 
-@pytest.mark.parametrize("param", ["water_color[1]", "water_color[2]", "absorption_g", "bumptex_mult"])
+@pytest.mark.parametrize(
+    "param", ["water_color[1]", "water_color[2]", "absorption_g", "bumptex_mult"]
+)
 def test_wall_faces_jacobian_matches_central_differences(monkeypatch, param):
     """waterColor now also enters where the switch acts (derivative F_T there); the others are
     those of the Beer-Lambert variant, the select carrying none."""
@@ -290,11 +380,14 @@ def test_wall_faces_jacobian_matches_central_differences(monkeypatch, param):
     base = base.numpy()
     assert _wall_lanes_at(base, inp).sum() > 20
     monkeypatch.setitem(twr.FD_EPS, param, twr.FD_EPS.get(param, 1e-3))
-    twr.check_jacobian_column(lambda c: v.render(inp, c).numpy(), base, J[..., 0], FD_AT, param,
-                              ("iterations",))
+    twr.check_jacobian_column(
+        lambda c: v.render(inp, c).numpy(), base, J[..., 0], FD_AT, param, ("iterations",)
+    )
 
 
 def _wall_lanes_at(out, inp):
     """Lanes where the switch acts, from the refraction-only render at FD_AT."""
     o = get_variant("water_refraction_beer_walls").render(inp, FD_AT, reflection=False).numpy()
-    return (o["mask"] > 0) & (np.abs(o["color"] - np.float32(FD_AT.water_color[:3])).max(-1) <= 1e-7)
+    return (o["mask"] > 0) & (
+        np.abs(o["color"] - np.float32(FD_AT.water_color[:3])).max(-1) <= 1e-7
+    )

@@ -1,6 +1,7 @@
 """The baseline water shader (seeds 001-004, ``water_baseline`` and its variants): the Dr.Jit
 port against the core GLSL on llvmpipe (same bounds as tests/test_gl_differential.py), its
 forward-mode derivatives against central differences, its diagnostics and input checks."""
+
 from __future__ import annotations
 
 import numpy as np
@@ -13,16 +14,35 @@ from shaders_port._variants import VARIANTS, get_variant
 from test_water_refraction import FD_NOISE, FD_RTOL, _perturbed
 
 BASELINES = ("water_baseline", "water_baseline_flat", "water_baseline_noplanar")
-CUSTOM = Constants(refraction_index=0.6, refraction_strength=0.05, chromatic_dispersion=0.01,
-                   reflect_distortion=0.2, attenuation_distance=2.0, specular_strength=1.3,
-                   specular_exponent=32.0, water_color=(0.1, 0.3, 0.25, 1.0),
-                   reflect_color=(0.9, 0.95, 1.0, 1.0))
-FD_CONSTANTS = Constants(attenuation_distance=2.0, specular_exponent=32.0, refraction_strength=0.05,
-                         chromatic_dispersion=0.01)
-FD_EPS = {"refraction_index": 3e-4, "refraction_strength": 2e-4, "chromatic_dispersion": 2e-4,
-          "reflect_distortion": 1e-3, "attenuation_distance": 1e-3, "specular_strength": 1e-3,
-          "specular_exponent": 1e-3, "water_color[0]": 1e-3, "water_color[2]": 1e-3,
-          "reflect_color[1]": 1e-3}
+CUSTOM = Constants(
+    refraction_index=0.6,
+    refraction_strength=0.05,
+    chromatic_dispersion=0.01,
+    reflect_distortion=0.2,
+    attenuation_distance=2.0,
+    specular_strength=1.3,
+    specular_exponent=32.0,
+    water_color=(0.1, 0.3, 0.25, 1.0),
+    reflect_color=(0.9, 0.95, 1.0, 1.0),
+)
+FD_CONSTANTS = Constants(
+    attenuation_distance=2.0,
+    specular_exponent=32.0,
+    refraction_strength=0.05,
+    chromatic_dispersion=0.01,
+)
+FD_EPS = {
+    "refraction_index": 3e-4,
+    "refraction_strength": 2e-4,
+    "chromatic_dispersion": 2e-4,
+    "reflect_distortion": 1e-3,
+    "attenuation_distance": 1e-3,
+    "specular_strength": 1e-3,
+    "specular_exponent": 1e-3,
+    "water_color[0]": 1e-3,
+    "water_color[2]": 1e-3,
+    "reflect_color[1]": 1e-3,
+}
 
 
 @pytest.fixture(scope="module")
@@ -36,6 +56,7 @@ def small():
 
 
 # ---- port vs GLSL on llvmpipe ------------------------------------------------------------
+
 
 @pytest.mark.parametrize("which", ["default", "custom"])
 @pytest.mark.parametrize("variant", BASELINES)
@@ -54,9 +75,12 @@ def test_port_matches_gl(inputs, variant, which):
 def test_compat_source_runs_like_core(inputs):
     pytest.importorskip("moderngl")
     from shaders_port._gl import GLRenderer
+
     try:
-        with GLRenderer("water_baseline", inputs, dialect="core") as g1, \
-                GLRenderer("water_baseline", inputs, dialect="compat") as g2:
+        with (
+            GLRenderer("water_baseline", inputs, dialect="core") as g1,
+            GLRenderer("water_baseline", inputs, dialect="compat") as g2,
+        ):
             a, _ = g1.render(CUSTOM)
             b, _ = g2.render(CUSTOM)
     except RuntimeError as exc:
@@ -91,18 +115,23 @@ def test_jacobian_matches_central_differences(small, jacobian, name):
     water = base["mask"] > 0
     # pixels whose one-sided slopes agree (no texel edge of a bilinear lookup or clamp in the stencil)
     smooth = water & (np.abs(fp - fm) <= 0.2 * np.abs(fd) + 2 * noise).all(-1)
-    assert smooth.sum() >= 0.8 * water.sum(), f"{name}: only {smooth.sum()} of {water.sum()} comparable"
+    assert smooth.sum() >= 0.8 * water.sum(), (
+        f"{name}: only {smooth.sum()} of {water.sum()} comparable"
+    )
     Jn = J[..., _FD_NAMES.index(name)]
     err = np.abs(Jn - fd)
     bad = smooth & ~(err <= 2 * noise + FD_RTOL * np.abs(fd)).all(-1)
     assert np.abs(fd[smooth]).max() > 10 * noise, f"{name}: colour does not depend on it here"
-    assert not bad.any(), (f"{name}: forward-mode derivative differs from central differences at "
-                           f"{bad.sum()} pixels (worst |err| {err.max(-1)[bad].max():.3g})")
+    assert not bad.any(), (
+        f"{name}: forward-mode derivative differs from central differences at "
+        f"{bad.sum()} pixels (worst |err| {err.max(-1)[bad].max():.3g})"
+    )
 
 
 def test_flat_variant_refraction_index_derivative(small):
-    out, J = water_baseline.render_with_jacobian(small, FD_CONSTANTS, ["refraction_index"],
-                                                 defines=("FLAT_WATER",))
+    out, J = water_baseline.render_with_jacobian(
+        small, FD_CONSTANTS, ["refraction_index"], defines=("FLAT_WATER",)
+    )
     cp, h = _perturbed(FD_CONSTANTS, "refraction_index", 3e-4)
     cm, _ = _perturbed(FD_CONSTANTS, "refraction_index", -3e-4)
     r = lambda c: water_baseline.render(small, c, defines=("FLAT_WATER",)).numpy()["color"]  # noqa: E731
@@ -117,14 +146,20 @@ def test_flat_variant_refraction_index_derivative(small):
 
 def test_constants_not_read_are_rejected_by_the_jacobian(small):
     with pytest.raises(ValueError, match=r"does not read \['bumptex_mult'\]"):
-        water_baseline.render_with_jacobian(small, FD_CONSTANTS, ["bumptex_mult", "refraction_index"])
+        water_baseline.render_with_jacobian(
+            small, FD_CONSTANTS, ["bumptex_mult", "refraction_index"]
+        )
 
 
 # ---- diagnostics, registry, inputs -------------------------------------------------------
 
+
 def test_diagnostics_count_fetches_and_no_iterations(small):
-    expected = {"water_baseline": 4 + 1 + 3 + 1 + 1, "water_baseline_flat": 1 + 1 + 1 + 1,
-                "water_baseline_noplanar": 4 + 1 + 3 + 1 + 1}
+    expected = {
+        "water_baseline": 4 + 1 + 3 + 1 + 1,
+        "water_baseline_flat": 1 + 1 + 1 + 1,
+        "water_baseline_noplanar": 4 + 1 + 3 + 1 + 1,
+    }
     for name, n in expected.items():
         out = get_variant(name).render(small).numpy()
         water = out["mask"] > 0
@@ -136,9 +171,15 @@ def test_diagnostics_count_fetches_and_no_iterations(small):
 def test_frozen_replay_at_another_resolution(small, monkeypatch):
     # a recorded kernel replayed for another lane count must not reuse the old sizes
     from shaders_port import _frame
+
     monkeypatch.setattr(_frame, "USE_FROZEN", True)
-    for (w, h), d in (((48, 36), ()), ((40, 30), ()), ((48, 36), ("FLAT_WATER",)),
-                      ((48, 36), ()), ((48, 36), ("NO_PLANAR_REFRACTION",))):
+    for (w, h), d in (
+        ((48, 36), ()),
+        ((40, 30), ()),
+        ((48, 36), ("FLAT_WATER",)),
+        ((48, 36), ()),
+        ((48, 36), ("NO_PLANAR_REFRACTION",)),
+    ):
         inp = small.with_resolution(w, h)
         out = water_baseline.render(inp, CUSTOM, defines=d).numpy()
         monkeypatch.setattr(_frame, "USE_FROZEN", False)
@@ -151,8 +192,9 @@ def test_frozen_replay_at_another_resolution(small, monkeypatch):
 def test_flat_normal_map_is_finite_and_undistorted(small):
     # calm water: every wave normal is the mirror normal; seed 002's offset must vanish (fix 15)
     import dataclasses
+
     calm = dataclasses.replace(small, normal_map=np.tile(np.float32([0.5, 1.0, 0.5]), (8, 8, 1)))
-    c = CUSTOM.replace(chromatic_dispersion=0.0)   # FLAT_WATER has no dispersion either
+    c = CUSTOM.replace(chromatic_dispersion=0.0)  # FLAT_WATER has no dispersion either
     with_waves = get_variant("water_baseline").render(calm, c).numpy()
     flat = get_variant("water_baseline_flat").render(calm, c).numpy()
     assert (with_waves["nonfinite"] == 0).all()
@@ -173,18 +215,28 @@ def test_variants_differ_where_they_should(small):
 
 def test_reads_are_the_constants_the_active_code_uses():
     assert set(VARIANTS["water_baseline"].reads()) == set(water_baseline.READS)
-    assert set(VARIANTS["water_baseline_noplanar"].reads()) == set(water_baseline.READS) - {"refraction_index"}
+    assert set(VARIANTS["water_baseline_noplanar"].reads()) == set(water_baseline.READS) - {
+        "refraction_index"
+    }
     assert set(VARIANTS["water_baseline_flat"].reads()) == set(water_baseline.READS) - {
-        "reflect_distortion", "refraction_strength", "chromatic_dispersion"}
+        "reflect_distortion",
+        "refraction_strength",
+        "chromatic_dispersion",
+    }
     assert "bumptex_mult" not in VARIANTS["water_baseline"].reads()
     assert "reflect_distortion" not in VARIANTS["water_refraction"].reads()
     # NOREFLECTION drops the reflection, its colour and the highlight
     assert not {"reflect_color", "specular_strength", "specular_exponent"} & set(
-        VARIANTS["water_refraction_noreflection"].reads())
+        VARIANTS["water_refraction_noreflection"].reads()
+    )
     assert {"reflect_color", "specular_strength"} <= set(VARIANTS["water_refraction"].reads())
     with pytest.raises(ValueError, match="does not read"):
-        water_baseline.render_with_jacobian(synthetic_baseline_inputs(16, 12), Constants(),
-                                            ["refraction_strength"], defines=("FLAT_WATER",))
+        water_baseline.render_with_jacobian(
+            synthetic_baseline_inputs(16, 12),
+            Constants(),
+            ["refraction_strength"],
+            defines=("FLAT_WATER",),
+        )
 
 
 def test_missing_screen_buffers_are_a_clear_error():
@@ -199,6 +251,7 @@ def test_unknown_define_is_rejected(small):
 
 def test_optional_inputs_survive_save_and_load(small, tmp_path):
     from shaders_port import ShaderInputs
+
     small.save(tmp_path / "i.npz")
     back = ShaderInputs.load(tmp_path / "i.npz")
     assert np.array_equal(back.scene_depth, small.scene_depth)
@@ -210,15 +263,22 @@ def test_optional_inputs_survive_save_and_load(small, tmp_path):
 
 # ---- the GLSL text: banners, the seeds' code kept, the constants block -----------------------
 
-BANNERS = ["Eye and light vectors", "Normal map: average four layers", "Planar refraction (seed 001)",
-           "Normal-map distortion and chromatic dispersion (seed 003)", "Depth tint",
-           "Planar reflection (seed 004), distorted by the wave normal (seed 002)",
-           "Specular highlight", "Fresnel combine"]
+BANNERS = [
+    "Eye and light vectors",
+    "Normal map: average four layers",
+    "Planar refraction (seed 001)",
+    "Normal-map distortion and chromatic dispersion (seed 003)",
+    "Depth tint",
+    "Planar reflection (seed 004), distorted by the wave normal (seed 002)",
+    "Specular highlight",
+    "Fresnel combine",
+]
 
 
 def test_banners_in_order_in_glsl_and_port():
     import inspect
     from shaders_port._glsl import read_source
+
     for text in (read_source("water_baseline"), inspect.getsource(water_baseline)):
         pos = [text.find(f"[{i}] {t}") for i, t in enumerate(BANNERS, 1)]
         assert all(p >= 0 for p in pos) and pos == sorted(pos), dict(zip(BANNERS, pos))
@@ -226,32 +286,42 @@ def test_banners_in_order_in_glsl_and_port():
 
 def test_seed_code_kept():
     from shaders_port._glsl import read_source
+
     code = "\n".join(ln.split("//")[0] for ln in read_source("water_baseline").split("\n"))
     # 001 (float3 -> vec3, _WorldSpaceCameraPos -> viewpos)
-    for line in ("vec3 refraction = refract(worldRayDir, normalize(worldPlaneNormal), refractionIndex);",
-                 "float denom = dot(-worldPlaneNormal, -refraction);",
-                 "float t = dot(p010, -worldPlaneNormal) / denom;",
-                 "vec3 intersection = vertexPosition + refraction * -t;",
-                 "return viewerPosition + normalize(originToIntersection) * length(worldRay);",
-                 # 002
-                 "vec3 flatNormal = vBumpTex - dot (vBumpTex, mirrorNormal) * mirrorNormal;",
-                 "vec3 eyeNormal = gl_NormalMatrix * flatNormal;",
-                 "normalize (eyeNormal.xy) * length (flatNormal) * REFLECT_DISTORTION : vec2(0.0, 0.0);",
-                 # 003 (the red and blue channels shifted alike: kept)
-                 "vec2 newUV = refractedUV + bump * refractionStrength;",
-                 "texture2D(sceneColor, newUV - chromaticDispersion).r,",
-                 "texture2D(sceneColor, newUV).g, texture2D(sceneColor, newUV - chromaticDispersion).b);",
-                 # 004
-                 "vec2 vDeviceReflection = vClipReflection.st / vClipReflection.q;",
-                 "vec2 vTextureReflection = vec2(0.5, 0.5) + 0.5 * vDeviceReflection;",
-                 "reflectionTextureColor.a = 1.0;"):
+    for line in (
+        "vec3 refraction = refract(worldRayDir, normalize(worldPlaneNormal), refractionIndex);",
+        "float denom = dot(-worldPlaneNormal, -refraction);",
+        "float t = dot(p010, -worldPlaneNormal) / denom;",
+        "vec3 intersection = vertexPosition + refraction * -t;",
+        "return viewerPosition + normalize(originToIntersection) * length(worldRay);",
+        # 002
+        "vec3 flatNormal = vBumpTex - dot (vBumpTex, mirrorNormal) * mirrorNormal;",
+        "vec3 eyeNormal = gl_NormalMatrix * flatNormal;",
+        "normalize (eyeNormal.xy) * length (flatNormal) * REFLECT_DISTORTION : vec2(0.0, 0.0);",
+        # 003 (the red and blue channels shifted alike: kept)
+        "vec2 newUV = refractedUV + bump * refractionStrength;",
+        "texture2D(sceneColor, newUV - chromaticDispersion).r,",
+        "texture2D(sceneColor, newUV).g, texture2D(sceneColor, newUV - chromaticDispersion).b);",
+        # 004
+        "vec2 vDeviceReflection = vClipReflection.st / vClipReflection.q;",
+        "vec2 vTextureReflection = vec2(0.5, 0.5) + 0.5 * vDeviceReflection;",
+        "reflectionTextureColor.a = 1.0;",
+    ):
         assert line in code, line
 
 
 @pytest.mark.parametrize("dialect", ["compat", "core"])
 def test_block_holds_the_defaults_and_round_trips(dialect):
-    from shaders_port._glsl import (compile_check, declared_constants, read_constants, read_source,
-                                    with_define, write_constants)
+    from shaders_port._glsl import (
+        compile_check,
+        declared_constants,
+        read_constants,
+        read_source,
+        with_define,
+        write_constants,
+    )
+
     src = read_source("water_baseline", "frag", dialect)
     assert set(declared_constants(src)) == set(water_baseline.READS)
     assert write_constants(src, Constants()) == src
@@ -259,6 +329,7 @@ def test_block_holds_the_defaults_and_round_trips(dialect):
     for k in water_baseline.READS:
         assert np.allclose(np.float32(getattr(back, k)), np.float32(getattr(CUSTOM, k))), k
     import shutil
+
     if shutil.which("glslangValidator"):
         for d in water_baseline.DEFINES:
             compile_check(with_define(src, d), "frag")

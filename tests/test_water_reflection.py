@@ -1,4 +1,5 @@
 """Tests of the Dr.Jit port of ``water_reflection`` (LLVM backend, small synthetic inputs)."""
+
 from __future__ import annotations
 
 from pathlib import Path
@@ -9,10 +10,20 @@ import pytest
 from shaders_port import Constants
 from shaders_port import water_reflection
 from shaders_port._numpy_ref import render_reference
-from test_water_refraction import (CUSTOM, FD_CONSTANTS, FD_EPS, SCENES, _small,
-                                   assert_matches_reference, check_jacobian_column,
-                                   degenerate_light_inputs, flat_pool, read_exr, render_scene,
-                                   save_failure)
+from test_water_refraction import (
+    CUSTOM,
+    FD_CONSTANTS,
+    FD_EPS,
+    SCENES,
+    _small,
+    assert_matches_reference,
+    check_jacobian_column,
+    degenerate_light_inputs,
+    flat_pool,
+    read_exr,
+    render_scene,
+    save_failure,
+)
 
 
 @pytest.mark.parametrize("which", ["default", "custom"])
@@ -23,7 +34,9 @@ def test_port_matches_numpy_reference(which):
     ref, ref_diag = render_reference("water_reflection", inputs, constants)
     assert out["refl_hit"].sum() > 10, "the scene must exercise both hit and no-hit"
     assert (out["refl_hit"][out["mask"] > 0] == 0).sum() > 10
-    assert_matches_reference("water_reflection", out, ref, ref_diag, f"water_reflection_ref_{which}")
+    assert_matches_reference(
+        "water_reflection", out, ref, ref_diag, f"water_reflection_ref_{which}"
+    )
 
 
 _FD_NAMES = list(FD_EPS)
@@ -39,18 +52,25 @@ def jacobian():
 @pytest.mark.parametrize("name", _FD_NAMES)
 def test_jacobian_matches_central_differences(jacobian, name):
     inputs, base, J = jacobian
-    check_jacobian_column(lambda c: water_reflection.render(inputs, c).numpy(), base,
-                          J[..., _FD_NAMES.index(name)], FD_CONSTANTS, name,
-                          ("iterations", "refl_iterations", "refl_hit"))
+    check_jacobian_column(
+        lambda c: water_reflection.render(inputs, c).numpy(),
+        base,
+        J[..., _FD_NAMES.index(name)],
+        FD_CONSTANTS,
+        name,
+        ("iterations", "refl_iterations", "refl_hit"),
+    )
 
 
 def test_replay_jacobian_equals_evaluated_loop_ad(jacobian):
     inputs, base, J = jacobian
     names = _FD_NAMES + ["refl_steps_grazing", "refl_steps_steep", "refl_height_cut"]
-    out_e, J_e = water_reflection.render_with_jacobian(inputs, FD_CONSTANTS, names, loop_ad="evaluated")
+    out_e, J_e = water_reflection.render_with_jacobian(
+        inputs, FD_CONSTANTS, names, loop_ad="evaluated"
+    )
     out_r, J_r = water_reflection.render_with_jacobian(inputs, FD_CONSTANTS, names)
     assert np.array_equal(out_e.numpy()["color"], out_r.numpy()["color"])
-    assert np.array_equal(J_r[..., :len(_FD_NAMES)], J)
+    assert np.array_equal(J_r[..., : len(_FD_NAMES)], J)
     scale = np.abs(J_e).max(axis=(0, 1, 2)) + 1e-6
     assert (np.abs(J_e - J_r).max(axis=(0, 1, 2)) <= 1e-5 * scale + 1e-6).all()
 
@@ -69,8 +89,11 @@ def test_diagnostics_ceiling_hit_interpolates_to_the_ceiling():
     # geometry above at y = 3 everywhere: the first step (y = 2) is below it -> hit at step 1;
     # t = (cpoy - olddepth) / (cpoy - cpy + depth - olddepth) = (0 - 3) / (0 - 2) = 1.5 -> y = 3.
     tex = 32
-    inputs = flat_pool(0.9, refl_world_y=np.full((tex, tex), 3.0, np.float32),
-                       refl_texture=np.full((tex, tex, 3), (0.7, 0.1, 0.2), np.float32))
+    inputs = flat_pool(
+        0.9,
+        refl_world_y=np.full((tex, tex), 3.0, np.float32),
+        refl_texture=np.full((tex, tex, 3), (0.7, 0.1, 0.2), np.float32),
+    )
     out = water_reflection.render(inputs, Constants(refl_height_cut=5.0)).numpy()
     sky = water_reflection.render(flat_pool(0.9), Constants(refl_height_cut=5.0)).numpy()
     c = out["mask"] > 0
@@ -100,5 +123,6 @@ def test_golden(scene):
     err = np.abs(actual - expected)
     if not (err.max() <= max_tol and err.mean() <= mean_tol):
         save_failure(scene, actual, expected)
-    assert err.max() <= max_tol and err.mean() <= mean_tol, \
+    assert err.max() <= max_tol and err.mean() <= mean_tol, (
         f"{scene}: max {err.max():.3g} (<= {max_tol}), mean {err.mean():.3g} (<= {mean_tol})"
+    )

@@ -1,4 +1,5 @@
 """Tests of the Dr.Jit port of ``water_refraction`` (LLVM backend, small synthetic inputs)."""
+
 from __future__ import annotations
 
 import sys
@@ -10,7 +11,13 @@ import numpy as np
 import pytest
 
 from synthetic import synthetic_inputs
-from shaders_port import Constants, ShaderInputs, fresnel_lut, ortho_tex_matrix, perspective_view_proj
+from shaders_port import (
+    Constants,
+    ShaderInputs,
+    fresnel_lut,
+    ortho_tex_matrix,
+    perspective_view_proj,
+)
 from shaders_port import water_refraction
 from shaders_port._numpy_ref import render_reference
 
@@ -18,13 +25,20 @@ sys.path.insert(0, str(Path(__file__).parent / "golden"))
 from regenerate import CUSTOM, SCENES, read_exr, render_scene, write_exr  # noqa: E402
 
 FAILURES = Path(__file__).parent / "_failures"
-PRIMAL_ATOL = 5e-5          # port vs NumPy reference, linear RGB (both float32)
-FD_RTOL, FD_NOISE = 0.1, 4e-6   # finite differences: relative truncation, float32 colour noise
+PRIMAL_ATOL = 5e-5  # port vs NumPy reference, linear RGB (both float32)
+FD_RTOL, FD_NOISE = 0.1, 4e-6  # finite differences: relative truncation, float32 colour noise
 FD_EPS = {  # relative step of the central differences
-    "attenuation_distance": 1e-3, "bumptex_mult": 3e-4, "water_color[1]": 1e-3,
-    "water_color[2]": 1e-3, "reflect_color[0]": 1e-3, "reflect_color[2]": 1e-3,
-    "specular_strength": 1e-3, "specular_exponent": 1e-3, "refr_coeff": 3e-4,
-    "steps_grazing": 3e-4, "steps_steep": 3e-4,
+    "attenuation_distance": 1e-3,
+    "bumptex_mult": 3e-4,
+    "water_color[1]": 1e-3,
+    "water_color[2]": 1e-3,
+    "reflect_color[0]": 1e-3,
+    "reflect_color[2]": 1e-3,
+    "specular_strength": 1e-3,
+    "specular_exponent": 1e-3,
+    "refr_coeff": 3e-4,
+    "steps_grazing": 3e-4,
+    "steps_steep": 3e-4,
 }
 FD_CONSTANTS = Constants(attenuation_distance=2.0, specular_exponent=32.0)
 
@@ -63,8 +77,14 @@ def _perturbed(constants: Constants, name: str, delta: float) -> tuple[Constants
     return constants.replace(**{name: x + h}), h
 
 
-def check_jacobian_column(render, base: dict, J: np.ndarray, constants: Constants, name: str,
-                          decision_keys: tuple[str, ...]) -> None:
+def check_jacobian_column(
+    render,
+    base: dict,
+    J: np.ndarray,
+    constants: Constants,
+    name: str,
+    decision_keys: tuple[str, ...],
+) -> None:
     """Central differences of ``render`` vs the forward-mode column ``J`` for ``name``.
 
     Compared on water pixels whose decision diagnostics (crossing step index, ...) are equal
@@ -80,16 +100,20 @@ def check_jacobian_column(render, base: dict, J: np.ndarray, constants: Constant
     fp, fm = (p["color"] - base["color"]) / h, (base["color"] - m["color"]) / h
     noise = FD_NOISE / h
     smooth = same & (np.abs(fp - fm) <= 0.2 * np.abs(fd) + 2 * noise).all(-1)
-    assert smooth.sum() >= 0.8 * (base["mask"] > 0).sum(), \
+    assert smooth.sum() >= 0.8 * (base["mask"] > 0).sum(), (
         f"{name}: only {smooth.sum()} of {(base['mask'] > 0).sum()} water pixels are comparable"
+    )
     err = np.abs(J - fd)
     bad = smooth & ~(err <= 2 * noise + FD_RTOL * np.abs(fd)).all(-1)
     assert np.abs(fd[smooth]).max() > 10 * noise, f"{name}: colour does not depend on it here"
-    assert not bad.any(), (f"{name}: forward-mode derivative differs from central differences at "
-                           f"{bad.sum()} pixels (worst |err| {err.max(-1)[bad].max():.3g})")
+    assert not bad.any(), (
+        f"{name}: forward-mode derivative differs from central differences at "
+        f"{bad.sum()} pixels (worst |err| {err.max(-1)[bad].max():.3g})"
+    )
 
 
 # ---- port vs the per-pixel NumPy reference ---------------------------------------------------
+
 
 @pytest.mark.parametrize("reflection", [True, False], ids=["reflection", "noreflection"])
 @pytest.mark.parametrize("which", ["default", "custom"])
@@ -99,8 +123,9 @@ def test_port_matches_numpy_reference(reflection, which):
     out = water_refraction.render(inputs, constants, reflection=reflection).numpy()
     ref, ref_diag = render_reference("water_refraction", inputs, constants, reflection=reflection)
     assert (out["mask"] > 0).sum() > 100
-    assert_matches_reference("water_refraction", out, ref, ref_diag,
-                             f"water_refraction_ref_{which}_{reflection}")
+    assert_matches_reference(
+        "water_refraction", out, ref, ref_diag, f"water_refraction_ref_{which}_{reflection}"
+    )
 
 
 # ---- forward-mode derivatives vs central differences ------------------------------------
@@ -120,8 +145,14 @@ def test_jacobian_matches_central_differences(jacobian, name):
     inputs, base, J = jacobian
     plain = water_refraction.render(inputs, FD_CONSTANTS).numpy()
     assert np.array_equal(plain["color"], base["color"])
-    check_jacobian_column(lambda c: water_refraction.render(inputs, c).numpy(), base,
-                          J[..., _FD_NAMES.index(name)], FD_CONSTANTS, name, ("iterations",))
+    check_jacobian_column(
+        lambda c: water_refraction.render(inputs, c).numpy(),
+        base,
+        J[..., _FD_NAMES.index(name)],
+        FD_CONSTANTS,
+        name,
+        ("iterations",),
+    )
 
 
 @pytest.mark.parametrize("reflection", [True, False], ids=["reflection", "noreflection"])
@@ -129,10 +160,12 @@ def test_replay_jacobian_equals_evaluated_loop_ad(jacobian, reflection):
     # loop_ad='replay' (symbolic loops, derivatives attached after the loop) against AD through
     # the unrolled loop in evaluated mode (the mode checked against finite differences)
     inputs, base, J = jacobian
-    out_e, J_e = water_refraction.render_with_jacobian(inputs, FD_CONSTANTS, _FD_NAMES,
-                                                       reflection=reflection, loop_ad="evaluated")
-    out_r, J_r = water_refraction.render_with_jacobian(inputs, FD_CONSTANTS, _FD_NAMES,
-                                                       reflection=reflection)
+    out_e, J_e = water_refraction.render_with_jacobian(
+        inputs, FD_CONSTANTS, _FD_NAMES, reflection=reflection, loop_ad="evaluated"
+    )
+    out_r, J_r = water_refraction.render_with_jacobian(
+        inputs, FD_CONSTANTS, _FD_NAMES, reflection=reflection
+    )
     assert np.array_equal(out_e.numpy()["color"], out_r.numpy()["color"])
     scale = np.abs(J_e).max(axis=(0, 1, 2)) + 1e-6
     assert (np.abs(J_e - J_r).max(axis=(0, 1, 2)) <= 1e-5 * scale + 1e-6).all()
@@ -142,10 +175,16 @@ def test_frozen_replay_equals_traced_render(monkeypatch):
     # plain renders replay recorded kernels (dr.freeze); a change of constants, of the loop cap
     # and of the inputs must give exactly what a freshly traced render gives
     inputs, other = _small(), synthetic_inputs(width=40, height=30, seed=1)
-    cases = [(inputs, Constants()), (inputs, CUSTOM), (inputs, Constants(steps_grazing=6.5)),
-             (other, Constants(loop_cap=12)), (inputs, Constants())]
+    cases = [
+        (inputs, Constants()),
+        (inputs, CUSTOM),
+        (inputs, Constants(steps_grazing=6.5)),
+        (other, Constants(loop_cap=12)),
+        (inputs, Constants()),
+    ]
     frozen = [water_refraction.render(i, c).numpy() for i, c in cases]
     from shaders_port import _frame
+
     monkeypatch.setattr(_frame, "USE_FROZEN", False)
     for (i, c), f in zip(cases, frozen):
         t = water_refraction.render(i, c).numpy()
@@ -168,6 +207,7 @@ def test_symbolic_loop_flag_restored_after_jacobian():
 
 # ---- diagnostics on hand-checked cases --------------------------------------------------
 
+
 def flat_pool(depth: float, normal=(0.0, 1.0, 0.0), size: int = 9, **kw) -> ShaderInputs:
     """A flat floor at y = -depth of constant colour, camera 3 units straight above it."""
     tex = 32
@@ -176,14 +216,24 @@ def flat_pool(depth: float, normal=(0.0, 1.0, 0.0), size: int = 9, **kw) -> Shad
     nm = np.broadcast_to(0.5 * n + 0.5, (8, 8, 3)).copy()
     args = dict(
         refraction_texture=np.full((tex, tex, 3), (0.2, 0.4, 0.6), np.float32),
-        world_y=np.full((tex, tex), -depth, np.float32), tex_matrix0=ortho_tex_matrix(x0, z0, x1, z1),
-        normal_map=nm, cubemap=np.full((6, 4, 4, 3), 0.5, np.float32), fresnel_lut=fresnel_lut(),
-        refl_world_y=np.full((tex, tex), -1e3, np.float32), refl_texture=np.zeros((tex, tex, 3), np.float32),
-        tex_matrix1=ortho_tex_matrix(x0, z0, x1, z1), water_rect=(-1.0, -1.0, 1.0, 1.0), normal_tile=1.0,
-        waves=np.zeros((4, 2)), view_proj=perspective_view_proj((0, 3, 0), (0, 0, 0), up=(0, 0, -1),
-                                                                 fov_y_deg=2.0),
-        viewpos=np.array([0.0, 3.0, 0.0]), lightpos=np.array([0.0, 10.0, 5.0]),
-        lightcolor=np.array([1.0, 1.0, 1.0]), width=size, height=size)
+        world_y=np.full((tex, tex), -depth, np.float32),
+        tex_matrix0=ortho_tex_matrix(x0, z0, x1, z1),
+        normal_map=nm,
+        cubemap=np.full((6, 4, 4, 3), 0.5, np.float32),
+        fresnel_lut=fresnel_lut(),
+        refl_world_y=np.full((tex, tex), -1e3, np.float32),
+        refl_texture=np.zeros((tex, tex, 3), np.float32),
+        tex_matrix1=ortho_tex_matrix(x0, z0, x1, z1),
+        water_rect=(-1.0, -1.0, 1.0, 1.0),
+        normal_tile=1.0,
+        waves=np.zeros((4, 2)),
+        view_proj=perspective_view_proj((0, 3, 0), (0, 0, 0), up=(0, 0, -1), fov_y_deg=2.0),
+        viewpos=np.array([0.0, 3.0, 0.0]),
+        lightpos=np.array([0.0, 10.0, 5.0]),
+        lightcolor=np.array([1.0, 1.0, 1.0]),
+        width=size,
+        height=size,
+    )
     args.update(kw)
     return ShaderInputs(**args)
 
@@ -217,6 +267,7 @@ def degenerate_light_inputs():
     """Light placed exactly on the surface point of one water pixel: varyingVecLight = 0 there,
     so vLight = normalize(0) is NaN (no constant within its valid range can force a NaN)."""
     from shaders_port._raster import rasterize_water
+
     base = flat_pool(0.9)
     r = rasterize_water(base)
     k = len(r.index) // 2
@@ -248,6 +299,7 @@ def test_no_warning_and_no_nonfinite_on_normal_input():
 
 def test_bad_constants_are_rejected_with_the_name():
     import drjit.llvm.ad as m
+
     with pytest.raises(ValueError, match="attenuation_distance"):
         water_refraction.render(_small(), Constants(attenuation_distance=float("nan")))
     with pytest.raises(ValueError, match="refr_coeff"):
@@ -257,6 +309,7 @@ def test_bad_constants_are_rejected_with_the_name():
 
 
 # ---- golden images ----------------------------------------------------------------------
+
 
 @pytest.mark.parametrize("scene", [s for s in SCENES if SCENES[s][0] == "water_refraction"])
 def test_golden(scene):
@@ -268,5 +321,6 @@ def test_golden(scene):
     err = np.abs(actual - expected)
     if not (err.max() <= max_tol and err.mean() <= mean_tol):
         save_failure(scene, actual, expected)
-    assert err.max() <= max_tol and err.mean() <= mean_tol, \
+    assert err.max() <= max_tol and err.mean() <= mean_tol, (
         f"{scene}: max {err.max():.3g} (<= {max_tol}), mean {err.mean():.3g} (<= {mean_tol})"
+    )

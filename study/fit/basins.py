@@ -30,6 +30,7 @@ higher by 0.05-0.08 and the clean texture's fits all land at 0.825). Such a basi
 not refitted. One scan costs ``POINTS`` renders at the fit resolution (0.4-0.9 s at
 128 x 128 on 2 cores).
 """
+
 from __future__ import annotations
 
 import numpy as np
@@ -39,8 +40,8 @@ from shaders_port import Constants
 from .model import bounds, get_value, with_values
 
 BASIN_PARAMETERS = ("bumptex_mult",)
-SPAN, POINTS = 0.12, 49     # grid: +- 12 % of the fitted value in 49 points (0.5 % apart)
-NOISE_Z = 2.0               # |dL| below this many noise standard deviations: indistinguishable
+SPAN, POINTS = 0.12, 49  # grid: +- 12 % of the fitted value in 49 points (0.5 % apart)
+NOISE_Z = 2.0  # |dL| below this many noise standard deviations: indistinguishable
 
 
 def local_minima(loss: np.ndarray) -> list[int]:
@@ -66,20 +67,33 @@ def texture_delta(model_a, model_b, at: Constants, name: str, value: float) -> f
     minus at ``at`` (the others held), on the models of the texture's two independent halves:
     the loss difference of the noise-free texture, in expectation (negative: ``value`` lower)."""
     moved = with_values(at, {name: float(value)})
-    d = [float(np.asarray(model_a.residual(c), np.float64) @ np.asarray(model_b.residual(c), np.float64))
-         for c in (moved, at)]
+    d = [
+        float(
+            np.asarray(model_a.residual(c), np.float64)
+            @ np.asarray(model_b.residual(c), np.float64)
+        )
+        for c in (moved, at)
+    ]
     return 0.5 * (d[0] - d[1])
 
 
-def scan(model, at: Constants, name: str, sigma: np.ndarray | None = None,
-         span: float = SPAN, points: int = POINTS) -> dict:
+def scan(
+    model,
+    at: Constants,
+    name: str,
+    sigma: np.ndarray | None = None,
+    span: float = SPAN,
+    points: int = POINTS,
+) -> dict:
     """The loss along constant ``name`` around its value in ``at`` (others held) and its other
     basins; ``sigma``: the reference's per-residual standard error (m,) (None: no noise test).
     Returns ``{"name", "value", "grid", "loss", "basins": [{"value", "delta_loss", "noise_sd",
     "indistinguishable"}], "indistinguishable": [values], "lower": [values of basins lower than
     the fit's by more than the noise explains: the solver stopped short]}`` (JSON-ready)."""
     if points < 3 or points % 2 == 0:
-        raise ValueError(f"points must be odd and at least 3 (the fitted value in the middle), got {points}")
+        raise ValueError(
+            f"points must be odd and at least 3 (the fitted value in the middle), got {points}"
+        )
     v0 = get_value(at, name)
     lo, hi = bounds(name)
     grid = np.clip(v0 * (1.0 + np.linspace(-span, span, points)), lo, hi)
@@ -92,8 +106,25 @@ def scan(model, at: Constants, name: str, sigma: np.ndarray | None = None,
             continue
         sd = loss_difference_sd(res[j], res[mid], sigma) if sigma is not None else None
         dl = float(loss[j] - loss[mid])
-        basins.append({"value": float(grid[j]), "delta_loss": dl, "noise_sd": sd,
-                       "indistinguishable": bool(sd is not None and abs(dl) < NOISE_Z * sd)})
-    lower = [b["value"] for b in basins if b["noise_sd"] is not None and b["delta_loss"] < -NOISE_Z * b["noise_sd"]]
-    return {"name": name, "value": v0, "grid": grid.tolist(), "loss": loss.tolist(), "basins": basins,
-            "indistinguishable": [b["value"] for b in basins if b["indistinguishable"]], "lower": lower}
+        basins.append(
+            {
+                "value": float(grid[j]),
+                "delta_loss": dl,
+                "noise_sd": sd,
+                "indistinguishable": bool(sd is not None and abs(dl) < NOISE_Z * sd),
+            }
+        )
+    lower = [
+        b["value"]
+        for b in basins
+        if b["noise_sd"] is not None and b["delta_loss"] < -NOISE_Z * b["noise_sd"]
+    ]
+    return {
+        "name": name,
+        "value": v0,
+        "grid": grid.tolist(),
+        "loss": loss.tolist(),
+        "basins": basins,
+        "indistinguishable": [b["value"] for b in basins if b["indistinguishable"]],
+        "lower": lower,
+    }

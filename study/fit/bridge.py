@@ -25,6 +25,7 @@ entries were bad); JAX re-raises it from the jitted computation (wrapped in its 
 The residual object also keeps it in ``last_error`` so that a caller that catches JAX's error
 (as :func:`study._fit.fit` does) can report the original cause. Nothing continues with NaN.
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass, field
@@ -81,10 +82,13 @@ class DrJitResidual:
     (counted the same way).
     """
 
-    def __init__(self, fn_value: Callable, fn_value_and_jac: Callable, k: int, m: int,
-                 name: str = "residual"):
+    def __init__(
+        self, fn_value: Callable, fn_value_and_jac: Callable, k: int, m: int, name: str = "residual"
+    ):
         if int(k) < 1 or int(m) < 1:
-            raise ValueError(f"{name}: need k >= 1 parameters and m >= 1 residuals, got k={k}, m={m}")
+            raise ValueError(
+                f"{name}: need k >= 1 parameters and m >= 1 residuals, got k={k}, m={m}"
+            )
         enable_x64()
         self.fn_value, self.fn_value_and_jac = fn_value, fn_value_and_jac
         self.k, self.m, self.name = int(k), int(m), name
@@ -100,26 +104,39 @@ class DrJitResidual:
     def _check_x(self, x) -> np.ndarray:
         x = np.asarray(x, dtype=np.float64).reshape(-1)
         if x.shape != (self.k,):
-            self._fail(ResidualShapeError(f"{self.name}: parameter vector has shape {x.shape}, "
-                                          f"expected ({self.k},)"))
+            self._fail(
+                ResidualShapeError(
+                    f"{self.name}: parameter vector has shape {x.shape}, expected ({self.k},)"
+                )
+            )
         if not np.all(np.isfinite(x)):
-            self._fail(NonFiniteParameterError(
-                f"{self.name}: the solver proposed non-finite parameters "
-                f"x={np.array2string(x, precision=6)} (its step diverged)"))
+            self._fail(
+                NonFiniteParameterError(
+                    f"{self.name}: the solver proposed non-finite parameters "
+                    f"x={np.array2string(x, precision=6)} (its step diverged)"
+                )
+            )
         return x
 
     def _check_r(self, r, x) -> np.ndarray:
         r = np.asarray(r, dtype=np.float64)
         if r.shape != (self.m,):
-            self._fail(ResidualShapeError(f"{self.name}: residual has shape {r.shape}, expected "
-                                          f"({self.m},); the residual length must not change "
-                                          "between calls (fix the pixel mask once)"))
+            self._fail(
+                ResidualShapeError(
+                    f"{self.name}: residual has shape {r.shape}, expected "
+                    f"({self.m},); the residual length must not change "
+                    "between calls (fix the pixel mask once)"
+                )
+            )
         bad = ~np.isfinite(r)
         if bad.any():
-            self._fail(NonFiniteResidualError(
-                f"{self.name}: {int(bad.sum())} of {self.m} residual entries are non-finite at "
-                f"x={np.array2string(x, precision=6)}; the model produced NaN/inf there (check the "
-                "parameter bounds or the model's 'nonfinite' diagnostics)"))
+            self._fail(
+                NonFiniteResidualError(
+                    f"{self.name}: {int(bad.sum())} of {self.m} residual entries are non-finite at "
+                    f"x={np.array2string(x, precision=6)}; the model produced NaN/inf there (check the "
+                    "parameter bounds or the model's 'nonfinite' diagnostics)"
+                )
+            )
         return r
 
     def _record(self, x, r, kind: str):
@@ -138,7 +155,7 @@ class DrJitResidual:
         t0 = time.perf_counter()
         try:
             r = self.fn_value(x)
-        except Exception as exc:        # kept: JAX re-raises callback errors wrapped
+        except Exception as exc:  # kept: JAX re-raises callback errors wrapped
             self._fail(exc)
         self.stats.seconds_in_drjit += time.perf_counter() - t0
         self.stats.n_value_calls += 1
@@ -161,14 +178,20 @@ class DrJitResidual:
         r = self._check_r(r, x)
         J = np.asarray(J, dtype=np.float64)
         if J.shape != (self.m, self.k):
-            self._fail(ResidualShapeError(f"{self.name}: Jacobian has shape {J.shape}, expected "
-                                          f"({self.m}, {self.k})"))
+            self._fail(
+                ResidualShapeError(
+                    f"{self.name}: Jacobian has shape {J.shape}, expected ({self.m}, {self.k})"
+                )
+            )
         bad = ~np.isfinite(J)
         if bad.any():
             cols = sorted(set(np.nonzero(bad)[1].tolist()))
-            self._fail(NonFiniteResidualError(
-                f"{self.name}: {int(bad.sum())} Jacobian entries are non-finite (columns {cols}) at "
-                f"x={np.array2string(x, precision=6)}; a derivative of the model is undefined there"))
+            self._fail(
+                NonFiniteResidualError(
+                    f"{self.name}: {int(bad.sum())} Jacobian entries are non-finite (columns {cols}) at "
+                    f"x={np.array2string(x, precision=6)}; a derivative of the model is undefined there"
+                )
+            )
         self._record(x, r, "j")
         return r, J
 
@@ -193,7 +216,9 @@ class DrJitResidual:
         @residual.defjvp
         def residual_jvp(primals, tangents):
             (x,), (t,) = primals, tangents
-            r, J = jax.pure_callback(cb_value_and_jac, (r_spec, j_spec), x, vmap_method="sequential")
+            r, J = jax.pure_callback(
+                cb_value_and_jac, (r_spec, j_spec), x, vmap_method="sequential"
+            )
             return r, J @ t
 
         return residual
@@ -204,13 +229,15 @@ class DrJitResidual:
 
         x = jnp.asarray(x, dtype=jnp.float64)
         if x.shape != (self.k,):
-            raise ResidualShapeError(f"{self.name}: parameter vector has shape {x.shape}, "
-                                     f"expected ({self.k},)")
+            raise ResidualShapeError(
+                f"{self.name}: parameter vector has shape {x.shape}, expected ({self.k},)"
+            )
         return self._jax_fn(x)
 
 
-def make_jax_residual(fn_value: Callable, fn_value_and_jac: Callable, k: int, m: int,
-                      name: str = "residual") -> DrJitResidual:
+def make_jax_residual(
+    fn_value: Callable, fn_value_and_jac: Callable, k: int, m: int, name: str = "residual"
+) -> DrJitResidual:
     """Wrap Dr.Jit callables as a JAX-differentiable residual (see the module docstring).
 
     ``fn_value(x (k,) float64) -> r (m,)``; ``fn_value_and_jac(x) -> (r (m,), J (m, k))``.

@@ -30,6 +30,7 @@ is accepted only when it converged and ``H`` is positive definite there over the
 on a bound (a minimum of ``L``, not a saddle); otherwise the start is kept and the reason
 returned. Each step costs two forward-mode Jacobian passes (one per half), each trial two renders.
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass, field
@@ -68,10 +69,17 @@ class Refined:
 
     def summary(self) -> dict:
         """Plain Python types (JSON-ready)."""
-        return {"method": "decorrelated", "accepted": bool(self.accepted), "loss_start": float(self.loss_start),
-                "loss": float(self.loss), "steps": int(self.steps), "evaluations": int(self.evaluations),
-                "message": self.message, "shift": {n: [float(a), float(b)] for n, (a, b) in self.shift.items()},
-                "at_bound": dict(self.at_bound)}
+        return {
+            "method": "decorrelated",
+            "accepted": bool(self.accepted),
+            "loss_start": float(self.loss_start),
+            "loss": float(self.loss),
+            "steps": int(self.steps),
+            "evaluations": int(self.evaluations),
+            "message": self.message,
+            "shift": {n: [float(a), float(b)] for n, (a, b) in self.shift.items()},
+            "at_bound": dict(self.at_bound),
+        }
 
 
 def decorrelated_loss(r_a: np.ndarray, r_b: np.ndarray) -> float:
@@ -90,8 +98,9 @@ def loss_grad_hessian(model_a, model_b, constants: Constants, names: list[str]):
     return decorrelated_loss(r_a, r_b), g, 0.5 * (h + h.T)
 
 
-def refine(model_a, model_b, params: dict, start: Constants, names: list[str],
-           max_steps: int = MAX_STEPS) -> Refined:
+def refine(
+    model_a, model_b, params: dict, start: Constants, names: list[str], max_steps: int = MAX_STEPS
+) -> Refined:
     """Minimise the decorrelated loss of ``model_a`` / ``model_b`` (the same port and reference,
     the texture's two halves) over ``names`` from ``start``, the others held at ``start``.
     ``params``: name -> ``study.fit.solvers.Param`` (bounds and the ``u`` transform)."""
@@ -110,7 +119,7 @@ def refine(model_a, model_b, params: dict, start: Constants, names: list[str],
     def derivatives(u):
         passes["n"] += 1
         loss, g, h = loss_grad_hessian(model_a, model_b, at(u), names)
-        d = np.array([float(p.dp_du(x)) for p, x in zip(ps, u)])    # chain rule to u
+        d = np.array([float(p.dp_du(x)) for p, x in zip(ps, u)])  # chain rule to u
         return loss, d * g, d[:, None] * h * d[None, :]
 
     loss, g, h = derivatives(u)
@@ -128,15 +137,18 @@ def refine(model_a, model_b, params: dict, start: Constants, names: list[str],
             except np.linalg.LinAlgError:
                 lam *= 10.0
                 continue
-            pred = -(g @ step + 0.5 * step @ h @ step)       # predicted decrease of L
+            pred = -(g @ step + 0.5 * step @ h @ step)  # predicted decrease of L
             trial = value(u + step)
             if pred > 0 and np.isfinite(trial) and trial < loss:
                 break
             lam *= 10.0
         else:
-            ok = bool(abs(g @ np.linalg.lstsq(h, g, rcond=None)[0]) < 2 * tol)      # Newton decrement
-            why = ("converged (no step lowers the loss further)" if ok else
-                   "no step lowers the decorrelated loss, yet its gradient is not small")
+            ok = bool(abs(g @ np.linalg.lstsq(h, g, rcond=None)[0]) < 2 * tol)  # Newton decrement
+            why = (
+                "converged (no step lowers the loss further)"
+                if ok
+                else "no step lowers the decorrelated loss, yet its gradient is not small"
+            )
             break
         u, drop = u + step, loss - trial
         loss, g, h = derivatives(u)
@@ -154,8 +166,13 @@ def refine(model_a, model_b, params: dict, start: Constants, names: list[str],
     if ok and inner:
         eig = np.linalg.eigvalsh(h[np.ix_(inner, inner)])
         if not (np.all(np.isfinite(eig)) and eig.min() > 0):
-            ok, why = False, (f"not a minimum of the decorrelated loss (smallest curvature {eig.min():.3g}); "
-                              "kept the least-squares solution")
+            ok, why = (
+                False,
+                (
+                    f"not a minimum of the decorrelated loss (smallest curvature {eig.min():.3g}); "
+                    "kept the least-squares solution"
+                ),
+            )
     if not ok:
         fitted, loss, at_bound = start, l0, {}
         why = why or "no convergence"
@@ -185,4 +202,7 @@ def texture_half_models(exp, inputs, reference: np.ndarray, **kwargs) -> tuple |
 def _models_on_halves(exp, inputs, reference: np.ndarray, **kwargs) -> tuple:
     from ..scene.shader_inputs import half_inputs
     from .model import ShaderModel
-    return tuple(ShaderModel.from_experiment(exp, h, reference, **kwargs) for h in half_inputs(exp, inputs))
+
+    return tuple(
+        ShaderModel.from_experiment(exp, h, reference, **kwargs) for h in half_inputs(exp, inputs)
+    )

@@ -22,6 +22,7 @@ parameters such as step counts, which are fitted by Nelder-Mead or chosen from a
 :func:`probe_gradient_solver` measures what happens when a gradient solver is pointed at a
 ``derivative_free`` parameter anyway.
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -58,17 +59,23 @@ class IdentifyReport:
         return [n for n in self.names if self.freeze[n]]
 
     def summary(self) -> dict:
-        return {"singular_values": self.singular_values.tolist(), "condition": self.condition,
-                "condition_kept": self.condition_kept, "sensitivity": self.sensitivity,
-                "freeze": self.freeze, "reasons": self.reasons}
+        return {
+            "singular_values": self.singular_values.tolist(),
+            "condition": self.condition,
+            "condition_kept": self.condition_kept,
+            "sensitivity": self.sensitivity,
+            "freeze": self.freeze,
+            "reasons": self.reasons,
+        }
 
 
 def _cond(s: np.ndarray) -> float:
     return float(s[0] / s[-1]) if len(s) and s[-1] > 0 else float("inf")
 
 
-def identify(J: np.ndarray, names: list[str], *, scales=None, rel_tol: float = 1e-3,
-             sens_tol: float = 1e-3) -> IdentifyReport:
+def identify(
+    J: np.ndarray, names: list[str], *, scales=None, rel_tol: float = 1e-3, sens_tol: float = 1e-3
+) -> IdentifyReport:
     """Freeze decisions from ``J`` (m, k) = d residual / d parameter (physical units).
 
     ``scales`` (k,): each parameter's typical change (default 1: ``J`` already scaled).
@@ -91,8 +98,10 @@ def identify(J: np.ndarray, names: list[str], *, scales=None, rel_tol: float = 1
     for n, s in zip(names, sens):
         if s < sens_tol:
             freeze[n] = True
-            reasons[n] = (f"insensitive: relative sensitivity {s:.3g} < {sens_tol:g} (a change of one "
-                          "scale barely moves the residual)")
+            reasons[n] = (
+                f"insensitive: relative sensitivity {s:.3g} < {sens_tol:g} (a change of one "
+                "scale barely moves the residual)"
+            )
     kept = [i for i, n in enumerate(names) if n not in freeze]
     while len(kept) > 1:
         A = Js[:, kept] / norms[kept][None, :]
@@ -101,13 +110,15 @@ def identify(J: np.ndarray, names: list[str], *, scales=None, rel_tol: float = 1
         if ratio >= rel_tol:
             break
         v = np.abs(vt[-1])
-        j = int(np.argmax(v + 1e-9 * (1 - sens[kept])))     # ties: freeze the less sensitive
+        j = int(np.argmax(v + 1e-9 * (1 - sens[kept])))  # ties: freeze the less sensitive
         i = kept[j]
         partners = [names[kept[q]] for q in range(len(kept)) if q != j and v[q] > NULL_COMPONENT]
         freeze[names[i]] = True
-        reasons[names[i]] = (f"null space: normalised singular value ratio {ratio:.3g} < {rel_tol:g}, "
-                             f"component {v[j]:.2f} in its singular vector"
-                             + (f", confounded with {partners}" if partners else ""))
+        reasons[names[i]] = (
+            f"null space: normalised singular value ratio {ratio:.3g} < {rel_tol:g}, "
+            f"component {v[j]:.2f} in its singular vector"
+            + (f", confounded with {partners}" if partners else "")
+        )
         kept.pop(j)
     for n in names:
         if n not in freeze:
@@ -118,17 +129,22 @@ def identify(J: np.ndarray, names: list[str], *, scales=None, rel_tol: float = 1
         cond_kept = _cond(s_kept)
     else:
         cond_kept = float("nan")
-    return IdentifyReport(list(names), sv, _cond(sv), dict(zip(names, sens.tolist())), freeze,
-                          reasons, cond_kept)
+    return IdentifyReport(
+        list(names), sv, _cond(sv), dict(zip(names, sens.tolist())), freeze, reasons, cond_kept
+    )
 
 
-def identify_problem(problem: FitProblem, x: dict | None = None, names: list[str] | None = None,
-                     **kw) -> IdentifyReport:
+def identify_problem(
+    problem: FitProblem, x: dict | None = None, names: list[str] | None = None, **kw
+) -> IdentifyReport:
     """:func:`identify` on the problem's Jacobian at ``x`` (default: the defaults) for ``names``
     (default: every parameter not marked ``derivative_free``), scaled by each ``Param.typical``."""
     vals = problem.start_values(x)
-    names = [n for n in problem.names if not problem.params[n].derivative_free] if names is None \
+    names = (
+        [n for n in problem.names if not problem.params[n].derivative_free]
+        if names is None
         else list(names)
+    )
     _, J = problem.residual_and_jacobian(vals, names)
     return identify(J, names, scales=[problem.params[n].typical for n in names], **kw)
 
@@ -147,20 +163,31 @@ def sweep_1d(problem: FitProblem, name: str, values, x: dict | None = None) -> n
     return np.array([_loss(problem, {**base, name: float(v)}) for v in values])
 
 
-def sweep_2d(problem: FitProblem, name_a: str, values_a, name_b: str, values_b,
-             x: dict | None = None) -> np.ndarray:
+def sweep_2d(
+    problem: FitProblem, name_a: str, values_a, name_b: str, values_b, x: dict | None = None
+) -> np.ndarray:
     """Loss table (len(values_a), len(values_b)) over two parameters, the rest at ``x``."""
     base = problem.start_values(x)
     for n in (name_a, name_b):
         if n not in problem.params:
             raise ValueError(f"unknown parameter {n!r}; known: {problem.names}")
-    return np.array([[_loss(problem, {**base, name_a: float(a), name_b: float(b)}) for b in values_b]
-                     for a in values_a])
+    return np.array(
+        [
+            [_loss(problem, {**base, name_a: float(a), name_b: float(b)}) for b in values_b]
+            for a in values_a
+        ]
+    )
 
 
-def probe_gradient_solver(problem: FitProblem, name: str, x0: dict | None = None, *,
-                          solver: str = "levenberg_marquardt", free: list[str] | None = None,
-                          **fit_kw) -> dict:
+def probe_gradient_solver(
+    problem: FitProblem,
+    name: str,
+    x0: dict | None = None,
+    *,
+    solver: str = "levenberg_marquardt",
+    free: list[str] | None = None,
+    **fit_kw,
+) -> dict:
     """Point a gradient solver at a ``derivative_free`` parameter and measure the outcome.
 
     Returns ``{"fit": FitResult, "ad_derivative": ||dr/dp|| by AD, "fd_derivative": ||dr/dp||
@@ -179,6 +206,12 @@ def probe_gradient_solver(problem: FitProblem, name: str, x0: dict | None = None
     free = list(free) if free is not None else [name]
     if name not in free:
         free.append(name)
-    res: FitResult = fit(problem, vals, solver=solver, free=free, treat_as_continuous=[name], **fit_kw)
-    return {"fit": res, "ad_derivative": float(np.linalg.norm(J[:, 0])), "fd_derivative": float(fd),
-            "moved": abs(res.constants[name] - vals[name])}
+    res: FitResult = fit(
+        problem, vals, solver=solver, free=free, treat_as_continuous=[name], **fit_kw
+    )
+    return {
+        "fit": res,
+        "ad_derivative": float(np.linalg.norm(J[:, 0])),
+        "fd_derivative": float(fd),
+        "moved": abs(res.constants[name] - vals[name]),
+    }

@@ -17,6 +17,7 @@ scores the left-out scene under the seed's constants, the others' fit and its ow
 standard errors are Gauss-Newton ones, lower bounds under correlated model error, so "scene-
 specific" is the safer verdict).
 """
+
 from __future__ import annotations
 
 import math
@@ -41,8 +42,10 @@ class JointModel:
             raise ValueError("a joint fit needs at least one scene")
         shaders = {m.shader for m in models}
         if len(shaders) != 1:
-            raise ValueError(f"a joint fit needs one shader variant for all scenes, got {sorted(shaders)}; "
-                             "set the same fit.shader in every experiment")
+            raise ValueError(
+                f"a joint fit needs one shader variant for all scenes, got {sorted(shaders)}; "
+                "set the same fit.shader in every experiment"
+            )
         self.models = list(models)
         self.names = list(names) if names else [f"scene{i}" for i in range(len(models))]
         self.shader = models[0].shader
@@ -53,7 +56,9 @@ class JointModel:
 
     def residual(self, constants: Constants) -> np.ndarray:
         """(sum m_i,) float64: each scene's residual times its weight."""
-        return np.concatenate([w * m.residual(constants) for w, m in zip(self.weights, self.models)])
+        return np.concatenate(
+            [w * m.residual(constants) for w, m in zip(self.weights, self.models)]
+        )
 
     def residual_and_jacobian(self, constants: Constants, names: list[str]):
         rs, Js = [], []
@@ -76,19 +81,43 @@ def joint_frozen(frozen_per_scene: list[dict]) -> dict:
     if not frozen_per_scene:
         return {}
     common = set(frozen_per_scene[0]).intersection(*map(set, frozen_per_scene[1:]))
-    return {n: "every scene of the joint fit freezes it: " + frozen_per_scene[0][n] for n in sorted(common)}
+    return {
+        n: "every scene of the joint fit freezes it: " + frozen_per_scene[0][n]
+        for n in sorted(common)
+    }
 
 
-def joint_calibrate(models: list, start: Constants, requested: list[str], solver: str, max_steps: int,
-                    frozen_per_scene: list[dict] | None = None, names: list[str] | None = None) -> Calibration:
+def joint_calibrate(
+    models: list,
+    start: Constants,
+    requested: list[str],
+    solver: str,
+    max_steps: int,
+    frozen_per_scene: list[dict] | None = None,
+    names: list[str] | None = None,
+) -> Calibration:
     """The joint fit: :func:`calibrate_model` on the :class:`JointModel` of ``models``."""
-    return calibrate_model(JointModel(models, names), start, requested, solver, max_steps,
-                           frozen_by_scene=joint_frozen(frozen_per_scene or [{} for _ in models]))
+    return calibrate_model(
+        JointModel(models, names),
+        start,
+        requested,
+        solver,
+        max_steps,
+        frozen_by_scene=joint_frozen(frozen_per_scene or [{} for _ in models]),
+    )
 
 
-def leave_one_out(models: list, start: Constants, requested: list[str], solver: str, max_steps: int,
-                  evaluate: Callable[[int, Constants], dict], frozen_per_scene: list[dict] | None = None,
-                  names: list[str] | None = None, log: Callable = print) -> list[dict]:
+def leave_one_out(
+    models: list,
+    start: Constants,
+    requested: list[str],
+    solver: str,
+    max_steps: int,
+    evaluate: Callable[[int, Constants], dict],
+    frozen_per_scene: list[dict] | None = None,
+    names: list[str] | None = None,
+    log: Callable = print,
+) -> list[dict]:
     """For each scene ``i``: fit on the others (joint) and on ``i`` alone, and score ``i`` with
     ``evaluate(i, constants) -> {"rmse": .., "flip": ..}`` under the seed's (``start``), the
     others' and its own constants. Returns one dict per scene with the three scores and both
@@ -100,17 +129,32 @@ def leave_one_out(models: list, start: Constants, requested: list[str], solver: 
     rows = []
     for i in range(n):
         log(f"generalise: scene {names[i]} ({i + 1}/{n}): own fit")
-        own = calibrate_model(models[i], start, requested, solver, max_steps, frozen_by_scene=frozen[i])
+        own = calibrate_model(
+            models[i], start, requested, solver, max_steps, frozen_by_scene=frozen[i]
+        )
         others = None
         if n > 1:
             idx = [j for j in range(n) if j != i]
             log(f"generalise: scene {names[i]}: fit on the other {n - 1} scenes")
-            others = joint_calibrate([models[j] for j in idx], start, requested, solver, max_steps,
-                                     [frozen[j] for j in idx], [names[j] for j in idx])
-        rows.append({"scene": names[i], "seed": evaluate(i, start),
-                     "others": evaluate(i, others.fitted) if others is not None else None,
-                     "own": evaluate(i, own.fitted), "own_calibration": own,
-                     "others_calibration": others})
+            others = joint_calibrate(
+                [models[j] for j in idx],
+                start,
+                requested,
+                solver,
+                max_steps,
+                [frozen[j] for j in idx],
+                [names[j] for j in idx],
+            )
+        rows.append(
+            {
+                "scene": names[i],
+                "seed": evaluate(i, start),
+                "others": evaluate(i, others.fitted) if others is not None else None,
+                "own": evaluate(i, own.fitted),
+                "own_calibration": own,
+                "others_calibration": others,
+            }
+        )
     return rows
 
 
@@ -135,7 +179,12 @@ def universality(own: dict, joint: Calibration, z: float = Z_UNIVERSAL) -> dict:
                 se = rse * abs(v)
                 per[scene] = {"value": v, "se": se, "z": (v - vj) / se if se > 0 else math.inf}
             else:
-                per[scene] = {"value": p.get("fitted"), "status": p.get("status"), "se": None, "z": None}
+                per[scene] = {
+                    "value": p.get("fitted"),
+                    "status": p.get("status"),
+                    "se": None,
+                    "z": None,
+                }
         zs = [d["z"] for d in per.values() if d.get("z") is not None]
         if len(zs) < 2:
             verdict = "undetermined"
@@ -145,6 +194,10 @@ def universality(own: dict, joint: Calibration, z: float = Z_UNIVERSAL) -> dict:
             verdict = "scene-specific"
         else:
             verdict = "undetermined"
-        out[n] = {"joint": vj, "scenes": per, "max_abs_z": max((abs(q) for q in zs), default=None),
-                  "verdict": verdict}
+        out[n] = {
+            "joint": vj,
+            "scenes": per,
+            "max_abs_z": max((abs(q) for q in zs), default=None),
+            "verdict": verdict,
+        }
     return out

@@ -14,6 +14,7 @@ The wrapper has the interface the fit uses (``residual``, ``residual_and_jacobia
 ``shader``, ``variant``, ``reference_stderr`` carried through ``f`` to first order); ``loss_ad``
 (Adam's reverse mode) exists only for ``linear``.
 """
+
 from __future__ import annotations
 
 import numpy as np
@@ -31,8 +32,11 @@ class LogResidualModel:
         self._ref = model.reference[model.mask].astype(np.float64).ravel()
         # the reference's standard error carried through f to first order, sigma / (max(ref, 0) + eps)
         se = getattr(model, "reference_stderr", None)
-        self.reference_stderr = (None if se is None else
-                                 (se / (np.maximum(model.reference, 0.0) + self.eps)).astype(np.float32))
+        self.reference_stderr = (
+            None
+            if se is None
+            else (se / (np.maximum(model.reference, 0.0) + self.eps)).astype(np.float32)
+        )
 
     def _f(self, x):
         return np.log(np.maximum(x, 0.0) + self.eps)
@@ -48,8 +52,10 @@ class LogResidualModel:
         return self._f(port) - self._f(self._ref), d[:, None] * J
 
     def loss_ad(self, constants):
-        raise NotImplementedError("the log residual has no reverse-mode loss; fit it with a "
-                                  "least-squares solver, not Adam")
+        raise NotImplementedError(
+            "the log residual has no reverse-mode loss; fit it with a "
+            "least-squares solver, not Adam"
+        )
 
 
 class _Linear:

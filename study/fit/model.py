@@ -8,6 +8,7 @@ difference port - reference in linear RGB (unweighted: every water pixel and cha
 counts the same); ``residual_and_jacobian`` adds the forward-mode Jacobian of the
 residual with respect to named constants.
 """
+
 from __future__ import annotations
 
 import threading
@@ -26,6 +27,7 @@ from .._metrics import downsample, downsample_stderr, erode
 # ---- scalar names of constants: 'bumptex_mult', 'water_color[2]' (colours expand to RGB;
 # alpha is not fitted since the shader's output alpha is not compared) ----
 
+
 def expand_parameters(names: list[str]) -> list[str]:
     """['water_color', 'bumptex_mult'] -> ['water_color[0]', 'water_color[1]', 'water_color[2]', 'bumptex_mult']."""
     out = []
@@ -35,7 +37,9 @@ def expand_parameters(names: list[str]) -> list[str]:
         if CONSTANT_SPECS[n][1].endswith("vec4"):
             out += [f"{n}[{i}]" for i in range(3)]
         elif CONSTANT_SPECS[n][1].endswith("int"):
-            raise ValueError(f"{n} is an integer loop cap: it belongs to the speed/accuracy study, not the fit")
+            raise ValueError(
+                f"{n} is an integer loop cap: it belongs to the speed/accuracy study, not the fit"
+            )
         else:
             out.append(n)
     return out
@@ -92,7 +96,11 @@ class Diagnostics:
         out = {}
         for k, v in self.maps.items():
             vals = v[mask]
-            out[k] = {"mean": float(vals.mean()), "max": float(vals.max()), "min": float(vals.min())}
+            out[k] = {
+                "mean": float(vals.mean()),
+                "max": float(vals.max()),
+                "min": float(vals.min()),
+            }
         if "crossed" in self.maps:
             out["not_crossed_fraction"] = float(1.0 - self.maps["crossed"][mask].mean())
         if "nonfinite" in self.maps:
@@ -113,6 +121,7 @@ def _thread_handoff(fn):
     @functools.wraps(fn)
     def wrapper(self, *a, **k):
         import drjit as dr
+
         be = dr.JitBackend.CUDA if self.backend == "cuda" else dr.JitBackend.LLVM
         with _DRJIT_LOCK:
             dr.detail.new_scope(be)
@@ -120,6 +129,7 @@ def _thread_handoff(fn):
                 return fn(self, *a, **k)
             finally:
                 dr.detail.new_scope(be)
+
     return wrapper
 
 
@@ -127,17 +137,30 @@ class ShaderModel:
     """The port of the shader variant ``shader`` (a name in ``shaders_port._variants.VARIANTS``)
     on ``inputs`` compared against ``reference`` (same size)."""
 
-    def __init__(self, shader: str, inputs: ShaderInputs, reference: np.ndarray, backend: str = "llvm",
-                 reference_mask: np.ndarray | None = None, reference_stderr: np.ndarray | None = None):
+    def __init__(
+        self,
+        shader: str,
+        inputs: ShaderInputs,
+        reference: np.ndarray,
+        backend: str = "llvm",
+        reference_mask: np.ndarray | None = None,
+        reference_stderr: np.ndarray | None = None,
+    ):
         self.shader, self.inputs, self.backend = shader, inputs, backend
         self.variant = get_variant(shader)
         if reference.shape != (inputs.height, inputs.width, 3):
-            raise ValueError(f"reference is {reference.shape}, inputs are {inputs.height}x{inputs.width}")
+            raise ValueError(
+                f"reference is {reference.shape}, inputs are {inputs.height}x{inputs.width}"
+            )
         if reference_stderr is not None and reference_stderr.shape != reference.shape:
-            raise ValueError(f"reference_stderr is {reference_stderr.shape}, the reference {reference.shape}")
+            raise ValueError(
+                f"reference_stderr is {reference_stderr.shape}, the reference {reference.shape}"
+            )
         self.reference = np.asarray(reference, np.float32)
         # (H, W, 3) float32 Monte Carlo standard error of each reference pixel (linear RGB), or None
-        self.reference_stderr = None if reference_stderr is None else np.asarray(reference_stderr, np.float32)
+        self.reference_stderr = (
+            None if reference_stderr is None else np.asarray(reference_stderr, np.float32)
+        )
         out = self.variant.render(inputs, Constants(), backend=backend).numpy()
         mask = out["mask"] > 0.5
         if reference_mask is not None:
@@ -149,10 +172,16 @@ class ShaderModel:
         self.n_jacobians = 0
 
     @classmethod
-    def from_experiment(cls, exp: Experiment, inputs_full: ShaderInputs, reference_full: np.ndarray,
-                        shader: str | None = None, backend: str = "llvm",
-                        resolution: tuple[int, int] | None = None,
-                        stderr_full: np.ndarray | None = None) -> "ShaderModel":
+    def from_experiment(
+        cls,
+        exp: Experiment,
+        inputs_full: ShaderInputs,
+        reference_full: np.ndarray,
+        shader: str | None = None,
+        backend: str = "llvm",
+        resolution: tuple[int, int] | None = None,
+        stderr_full: np.ndarray | None = None,
+    ) -> "ShaderModel":
         """The model at ``resolution`` (default ``fit.resolution``) against the box-downsampled
         ``reference_full`` (H, W, 3); ``stderr_full`` (H, W, 3), the reference's per-pixel Monte
         Carlo standard error, is carried through the box filter (``study._metrics.downsample_stderr``)
@@ -165,17 +194,27 @@ class ShaderModel:
         se = None
         if stderr_full is not None:
             se = downsample_stderr(stderr_full, fy, fx) if (fy, fx) != (1, 1) else stderr_full
-        return cls(shader or exp["fit.shader"], inputs_full.with_resolution(w, h), ref, backend,
-                   reference_mask=water_mask(exp, w, h), reference_stderr=se)
+        return cls(
+            shader or exp["fit.shader"],
+            inputs_full.with_resolution(w, h),
+            ref,
+            backend,
+            reference_mask=water_mask(exp, w, h),
+            reference_stderr=se,
+        )
 
     @_thread_handoff
     def render(self, constants: Constants) -> tuple[np.ndarray, Diagnostics]:
         """Port image (H, W, 3) float32 linear RGB and its diagnostics."""
         with warnings.catch_warnings():
-            warnings.simplefilter("ignore", RuntimeWarning)   # non-finite pixels are in the diagnostics
+            warnings.simplefilter(
+                "ignore", RuntimeWarning
+            )  # non-finite pixels are in the diagnostics
             out = self.variant.render(self.inputs, constants, backend=self.backend).numpy()
         self.n_renders += 1
-        return out["color"], Diagnostics({k: v for k, v in out.items() if k not in ("color", "mask")})
+        return out["color"], Diagnostics(
+            {k: v for k, v in out.items() if k not in ("color", "mask")}
+        )
 
     @_thread_handoff
     def residual(self, constants: Constants) -> np.ndarray:
@@ -185,11 +224,15 @@ class ShaderModel:
         return (img[self.mask] - self.reference[self.mask]).astype(np.float64).ravel()
 
     @_thread_handoff
-    def residual_and_jacobian(self, constants: Constants, names: list[str]) -> tuple[np.ndarray, np.ndarray]:
+    def residual_and_jacobian(
+        self, constants: Constants, names: list[str]
+    ) -> tuple[np.ndarray, np.ndarray]:
         """(residual (M,), J (M, k)) with J the derivative w.r.t. the named scalar constants."""
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", RuntimeWarning)
-            out, jac = self.variant.render_with_jacobian(self.inputs, constants, names, backend=self.backend)
+            out, jac = self.variant.render_with_jacobian(
+                self.inputs, constants, names, backend=self.backend
+            )
         o = out.numpy()
         self.n_jacobians += 1
         self._check(Diagnostics({k: v for k, v in o.items() if k not in ("color", "mask")}))
@@ -206,6 +249,7 @@ class ShaderModel:
         import drjit as dr
 
         from shaders_port._texture import backend_types
+
         m = backend_types(self.backend)
         if not hasattr(self, "_ref_t"):
             self._ref_t = m.TensorXf(self.reference)
@@ -216,13 +260,16 @@ class ShaderModel:
         self.n_renders += 1
         bad = out.diagnostics.get("nonfinite")
         if bad is not None and float(dr.sum(bad * self._mask_t[..., 0], axis=None).array[0]) > 0:
-            raise FloatingPointError("the port produced non-finite water pixels; see the 'nonfinite' "
-                                     "diagnostic")
+            raise FloatingPointError(
+                "the port produced non-finite water pixels; see the 'nonfinite' diagnostic"
+            )
         d = (out.color - self._ref_t) * self._mask_t
-        return (0.5 * dr.sum(d * d, axis=None)).array      # a size-1 Float
+        return (0.5 * dr.sum(d * d, axis=None)).array  # a size-1 Float
 
     def _check(self, diag: Diagnostics) -> None:
         bad = diag.maps.get("nonfinite")
         if bad is not None and bad[self.mask].any():
-            raise FloatingPointError(f"the port produced {int(bad[self.mask].sum())} non-finite water "
-                                     "pixels; see the 'nonfinite' diagnostic")
+            raise FloatingPointError(
+                f"the port produced {int(bad[self.mask].sum())} non-finite water "
+                "pixels; see the 'nonfinite' diagnostic"
+            )

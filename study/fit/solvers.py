@@ -48,6 +48,7 @@ a :class:`FitResult` with ``converged=False``, the reason in ``message`` and, fo
 the best point evaluated. A start on a bound is moved inside by 1e-3 of the scale. Bad arguments (unknown solver or parameter, start outside the
 bounds) raise ValueError.
 """
+
 from __future__ import annotations
 
 import math
@@ -74,7 +75,7 @@ FTOL, FTOL_SE, FTOL_WINDOW = 1e-6, 1.0, 3
 
 
 def _sigmoid(z, xp):
-    return 0.5 + 0.5 * xp.tanh(0.5 * z)   # no overflow for large |z|
+    return 0.5 + 0.5 * xp.tanh(0.5 * z)  # no overflow for large |z|
 
 
 @dataclass(frozen=True)
@@ -93,17 +94,23 @@ class Param:
     def __post_init__(self):
         lo, hi, d = float(self.lo), float(self.hi), float(self.default)
         if self.transform not in TRANSFORMS:
-            raise ValueError(f"parameter {self.name}: unknown transform {self.transform!r}; "
-                             f"choose one of {TRANSFORMS}")
+            raise ValueError(
+                f"parameter {self.name}: unknown transform {self.transform!r}; "
+                f"choose one of {TRANSFORMS}"
+            )
         if not math.isfinite(d) or not lo < hi:
-            raise ValueError(f"parameter {self.name}: need a finite default and lo < hi, "
-                             f"got default={d}, lo={lo}, hi={hi}")
+            raise ValueError(
+                f"parameter {self.name}: need a finite default and lo < hi, "
+                f"got default={d}, lo={lo}, hi={hi}"
+            )
         kind = self.kind
         if kind == "clip" and not lo <= d <= hi:
             raise ValueError(f"parameter {self.name}: default {d} must lie inside [{lo}, {hi}]")
         if kind not in ("linear", "clip") and not lo < d < hi:
-            raise ValueError(f"parameter {self.name}: default {d} must lie strictly inside "
-                             f"({lo}, {hi}) for the {kind} transform; move it or widen the bounds")
+            raise ValueError(
+                f"parameter {self.name}: default {d} must lie strictly inside "
+                f"({lo}, {hi}) for the {kind} transform; move it or widen the bounds"
+            )
         if kind in ("logit", "log_logit") and not (math.isfinite(lo) and math.isfinite(hi)):
             raise ValueError(f"parameter {self.name}: transform {kind} needs finite bounds")
         if kind == "log_logit" and lo <= 0:
@@ -113,7 +120,9 @@ class Param:
         if kind == "neglog" and not math.isfinite(hi):
             raise ValueError(f"parameter {self.name}: transform neglog needs a finite hi")
         if self.scale is not None and not (math.isfinite(self.scale) and self.scale > 0):
-            raise ValueError(f"parameter {self.name}: scale must be finite and > 0, got {self.scale}")
+            raise ValueError(
+                f"parameter {self.name}: scale must be finite and > 0, got {self.scale}"
+            )
 
     @property
     def kind(self) -> str:
@@ -188,8 +197,9 @@ class Param:
         if self.kind == "clip" and np.any((p < self.lo) | (p > self.hi)):
             raise ValueError(f"parameter {self.name}: value {p} is outside [{self.lo}, {self.hi}]")
         if self.kind not in ("linear", "clip") and np.any((p <= self.lo) | (p >= self.hi)):
-            raise ValueError(f"parameter {self.name}: value {p} is not strictly inside "
-                             f"({self.lo}, {self.hi})")
+            raise ValueError(
+                f"parameter {self.name}: value {p} is not strictly inside ({self.lo}, {self.hi})"
+            )
         return (self._g(p) - self._g(np.float64(self.default))) / self._s
 
     def from_u(self, u, xp=np):
@@ -211,7 +221,7 @@ class Param:
         k, lo, hi = self.kind, self.lo, self.hi
         if k == "linear":
             d = np.ones_like(z)
-        elif k == "clip":      # one-sided at the bound itself (the inward derivative)
+        elif k == "clip":  # one-sided at the bound itself (the inward derivative)
             d = ((z >= lo) & (z <= hi)).astype(np.float64)
         elif k == "log":
             d = np.exp(z)
@@ -219,8 +229,11 @@ class Param:
             d = np.exp(-z)
         else:
             sg = _sigmoid(z, np)
-            d = (hi - lo) * sg * (1 - sg) if k == "logit" else \
-                self._ginv(z) * math.log(hi / lo) * sg * (1 - sg)
+            d = (
+                (hi - lo) * sg * (1 - sg)
+                if k == "logit"
+                else self._ginv(z) * math.log(hi / lo) * sg * (1 - sg)
+            )
         return self._s * d
 
 
@@ -231,11 +244,21 @@ class FitProblem:
     of the Adam variables handed to ``loss_drjit`` (default ``drjit.llvm.ad.Float``).
     """
 
-    def __init__(self, params: list[Param], residual: Callable, residual_and_jacobian: Callable, *,
-                 loss_drjit: Callable | None = None, drjit_float=None, name: str = "problem"):
+    def __init__(
+        self,
+        params: list[Param],
+        residual: Callable,
+        residual_and_jacobian: Callable,
+        *,
+        loss_drjit: Callable | None = None,
+        drjit_float=None,
+        name: str = "problem",
+    ):
         names = [p.name for p in params]
         if not names or len(set(names)) != len(names):
-            raise ValueError(f"{name}: need a non-empty list of uniquely named parameters, got {names}")
+            raise ValueError(
+                f"{name}: need a non-empty list of uniquely named parameters, got {names}"
+            )
         self.params = {p.name: p for p in params}
         self.names = names
         self.residual, self.residual_and_jacobian = residual, residual_and_jacobian
@@ -246,13 +269,16 @@ class FitProblem:
         x0 = dict(x0 or {})
         unknown = set(x0) - set(self.names)
         if unknown:
-            raise ValueError(f"{self.name}: unknown parameter(s) {sorted(unknown)}; known: {self.names}")
+            raise ValueError(
+                f"{self.name}: unknown parameter(s) {sorted(unknown)}; known: {self.names}"
+            )
         vals = {n: float(x0.get(n, p.default)) for n, p in self.params.items()}
         for n, v in vals.items():
             p = self.params[n]
             if not (math.isfinite(v) and p.lo <= v <= p.hi):
-                raise ValueError(f"{self.name}: start value {n}={v} is not finite or outside "
-                                 f"[{p.lo}, {p.hi}]")
+                raise ValueError(
+                    f"{self.name}: start value {n}={v} is not finite or outside [{p.lo}, {p.hi}]"
+                )
         return vals
 
     def bridge(self, base: dict, free: list[str]) -> DrJitResidual:
@@ -271,8 +297,10 @@ class FitProblem:
             r, J = self.residual_and_jacobian(values(u), list(free))
             J = np.asarray(J, np.float64)
             if J.ndim != 2 or J.shape[1] != len(free):
-                raise ValueError(f"{self.name}: residual_and_jacobian returned J of shape {J.shape} "
-                                 f"for {len(free)} names")
+                raise ValueError(
+                    f"{self.name}: residual_and_jacobian returned J of shape {J.shape} "
+                    f"for {len(free)} names"
+                )
             return r, J * np.array([p.dp_du(ui) for p, ui in zip(ps, u)])[None, :]
 
         m = len(np.asarray(self.residual(base)).reshape(-1))
@@ -308,10 +336,19 @@ class FitResult:
 
     def summary(self) -> dict:
         """JSON-serialisable summary (no history)."""
-        return {"solver": self.solver, "constants": self.constants, "loss_start": self.loss_start,
-                "loss": self.loss, "iterations": self.iterations, "n_value_calls": self.n_value_calls,
-                "n_jac_calls": self.n_jac_calls, "n_grad_calls": self.n_grad_calls,
-                "seconds": self.seconds, "converged": self.converged, "message": self.message}
+        return {
+            "solver": self.solver,
+            "constants": self.constants,
+            "loss_start": self.loss_start,
+            "loss": self.loss,
+            "iterations": self.iterations,
+            "n_value_calls": self.n_value_calls,
+            "n_jac_calls": self.n_jac_calls,
+            "n_grad_calls": self.n_grad_calls,
+            "seconds": self.seconds,
+            "converged": self.converged,
+            "message": self.message,
+        }
 
 
 def _optx_solver(name: str, rtol: float, atol: float):
@@ -321,11 +358,15 @@ def _optx_solver(name: str, rtol: float, atol: float):
     assumes a well-posed operator, then returns NaN and stops the fit."""
     import lineax as lx
     import optimistix as optx
+
     if name in ("gauss_newton", "dogleg"):
         cls = optx.GaussNewton if name == "gauss_newton" else optx.Dogleg
         return cls(rtol=rtol, atol=atol, linear_solver=lx.AutoLinearSolver(well_posed=False))
-    return {"levenberg_marquardt": optx.LevenbergMarquardt, "bfgs": optx.BFGS,
-            "nelder_mead_optimistix": optx.NelderMead}[name](rtol=rtol, atol=atol)
+    return {
+        "levenberg_marquardt": optx.LevenbergMarquardt,
+        "bfgs": optx.BFGS,
+        "nelder_mead_optimistix": optx.NelderMead,
+    }[name](rtol=rtol, atol=atol)
 
 
 def _free_names(problem: FitProblem, solver: str, free, treat_as_continuous) -> list[str]:
@@ -335,15 +376,20 @@ def _free_names(problem: FitProblem, solver: str, free, treat_as_continuous) -> 
         raise ValueError(f"unknown parameter(s) {sorted(unknown)}; known: {problem.names}")
     gradient = solver not in DERIVATIVE_FREE
     if free is None:
-        free = [n for n in problem.names
-                if not (gradient and problem.params[n].derivative_free and n not in cont)]
+        free = [
+            n
+            for n in problem.names
+            if not (gradient and problem.params[n].derivative_free and n not in cont)
+        ]
     free = list(free)
     if gradient:
         bad = [n for n in free if problem.params[n].derivative_free and n not in cont]
         if bad:
-            raise ValueError(f"parameter(s) {bad} are marked derivative_free; fit them with "
-                             "solver='nelder_mead' or sweep_1d/sweep_2d, or pass "
-                             "treat_as_continuous=[...] to measure what a gradient solver does")
+            raise ValueError(
+                f"parameter(s) {bad} are marked derivative_free; fit them with "
+                "solver='nelder_mead' or sweep_1d/sweep_2d, or pass "
+                "treat_as_continuous=[...] to measure what a gradient solver does"
+            )
     if not free:
         raise ValueError("nothing to fit: no free parameter for this solver")
     return free
@@ -358,11 +404,24 @@ def _inside(p: Param, v: float) -> float:
     return min(max(v, p.lo + eps), p.hi - eps)
 
 
-def fit(problem: FitProblem, x0: dict | None = None, *, solver: str, max_steps: int = 200,
-        rtol: float = 1e-8, atol: float = 1e-12, free: list[str] | None = None,
-        treat_as_continuous: list[str] = (), lr: float = 0.05, patience: int | None = None,
-        nm_step: float = 0.5, ftol: float | None = None, ftol_window: int = FTOL_WINDOW,
-        ftol_se: float | None = None, kkt_restarts: int = 3) -> FitResult:
+def fit(
+    problem: FitProblem,
+    x0: dict | None = None,
+    *,
+    solver: str,
+    max_steps: int = 200,
+    rtol: float = 1e-8,
+    atol: float = 1e-12,
+    free: list[str] | None = None,
+    treat_as_continuous: list[str] = (),
+    lr: float = 0.05,
+    patience: int | None = None,
+    nm_step: float = 0.5,
+    ftol: float | None = None,
+    ftol_window: int = FTOL_WINDOW,
+    ftol_se: float | None = None,
+    kkt_restarts: int = 3,
+) -> FitResult:
     """Fit ``problem`` from ``x0`` (dict name -> physical value; missing: defaults).
 
     ``solver``: one of :data:`SOLVERS`. ``free``: names to fit (default: every parameter the
@@ -405,8 +464,21 @@ def fit(problem: FitProblem, x0: dict | None = None, *, solver: str, max_steps: 
     try:
         loss0 = 0.5 * float(np.sum(res.value(u0) ** 2))
     except FloatingPointError as e:
-        return _result(problem, solver, names, base, u0, math.nan, [], 0, res, 0, t0, False,
-                       f"start point rejected: {e}")
+        return _result(
+            problem,
+            solver,
+            names,
+            base,
+            u0,
+            math.nan,
+            [],
+            0,
+            res,
+            0,
+            t0,
+            False,
+            f"start point rejected: {e}",
+        )
     trace = _Trace(t0, loss0)
     if ftol is not None and ftol_se:
         ftol = max(ftol, ftol_se / max(res.m - len(names), 1))
@@ -416,16 +488,30 @@ def fit(problem: FitProblem, x0: dict | None = None, *, solver: str, max_steps: 
         if solver == "nelder_mead":
             u, it, ok, msg = _nelder_mead(res, u, left, rtol, atol, nm_step, trace)
         elif solver == "adam":
-            u, it, ok, msg, ng, ls = _adam(problem, res, base, names, u, left, lr, rtol, atol,
-                                           patience, trace, ftol, ftol_window)
+            u, it, ok, msg, ng, ls = _adam(
+                problem,
+                res,
+                base,
+                names,
+                u,
+                left,
+                lr,
+                rtol,
+                atol,
+                patience,
+                trace,
+                ftol,
+                ftol_window,
+            )
             n_grad += ng
             adam_losses += ls
         elif solver == "nelder_mead_optimistix":
             u, it, ok, msg = _optimistix(res, solver, u, left, rtol, atol, nm_step)
             trace.note(res.stats.best_loss)
         else:
-            u, it, ok, msg = _optimistix_steps(res, solver, u, left, rtol, atol, ftol, ftol_window,
-                                               trace)
+            u, it, ok, msg = _optimistix_steps(
+                res, solver, u, left, rtol, atol, ftol, ftol_window, trace
+            )
         iters += it
         if not ok or restarts >= kkt_restarts or iters >= max_steps:
             break
@@ -434,11 +520,16 @@ def fit(problem: FitProblem, x0: dict | None = None, *, solver: str, max_steps: 
             break
         restarts += 1
         u = np.array(u, np.float64)
-        for j, side in inward.items():      # just inside the bound the loss falls inwards
+        for j, side in inward.items():  # just inside the bound the loss falls inwards
             p = ps[j]
             step = 0.05 * p.typical
-            u[j] = float(p.to_u(min(max(p.lo + step, p.lo), p.hi) if side == "lower"
-                                else max(min(p.hi - step, p.hi), p.lo)))
+            u[j] = float(
+                p.to_u(
+                    min(max(p.lo + step, p.lo), p.hi)
+                    if side == "lower"
+                    else max(min(p.hi - step, p.hi), p.lo)
+                )
+            )
         msg += f"; restarted from inside the bound for {[ps[j].name for j in inward]}"
     if restarts:
         msg += f" ({iters} steps in all)"
@@ -448,13 +539,30 @@ def fit(problem: FitProblem, x0: dict | None = None, *, solver: str, max_steps: 
         loss, ok, msg = math.nan, False, f"{msg}; final point non-finite: {e}"
     if res.stats.best_x is not None and res.stats.best_loss < loss and solver != "adam":
         u, loss = np.asarray(res.stats.best_x, np.float64), float(res.stats.best_loss)
-    out = _result(problem, solver, names, base, u, loss0,
-                  adam_losses if solver == "adam" else list(res.stats.losses), iters, res, n_grad,
-                  t0, ok, msg, loss)
-    out.extra.update({"step_losses": trace.losses, "step_seconds": trace.seconds,
-                      "at_bound": {p.name: p.at_bound(ui) for p, ui in zip(ps, out.u)
-                                   if p.at_bound(ui)},
-                      "restarts": restarts})
+    out = _result(
+        problem,
+        solver,
+        names,
+        base,
+        u,
+        loss0,
+        adam_losses if solver == "adam" else list(res.stats.losses),
+        iters,
+        res,
+        n_grad,
+        t0,
+        ok,
+        msg,
+        loss,
+    )
+    out.extra.update(
+        {
+            "step_losses": trace.losses,
+            "step_seconds": trace.seconds,
+            "at_bound": {p.name: p.at_bound(ui) for p, ui in zip(ps, out.u) if p.at_bound(ui)},
+            "restarts": restarts,
+        }
+    )
     return out
 
 
@@ -478,8 +586,9 @@ class _Trace:
         return self.losses[-window - 1] - self.losses[-1] <= ftol * self.losses[-1]
 
 
-def _kkt_violations(problem: FitProblem, base: dict, ps: list, u, res: DrJitResidual,
-                    ftol: float | None = None) -> dict:
+def _kkt_violations(
+    problem: FitProblem, base: dict, ps: list, u, res: DrJitResidual, ftol: float | None = None
+) -> dict:
     """Index -> side for the ``clip`` parameters on a bound where the loss decreases inwards
     (``dL/dp < 0`` at a lower bound, ``> 0`` at an upper one) by a worthwhile amount: the
     Gauss-Newton gain of moving that parameter alone inwards, ``g^2 / (2 ||J_j||^2)``, exceeds
@@ -496,27 +605,42 @@ def _kkt_violations(problem: FitProblem, base: dict, ps: list, u, res: DrJitResi
     except FloatingPointError:
         return {}
     r, J = np.asarray(r, np.float64), np.asarray(J, np.float64)
-    g = J.T @ r                                           # dL/dp, physical units
+    g = J.T @ r  # dL/dp, physical units
     loss = 0.5 * float(r @ r)
     out = {}
     tol = (ftol if ftol is not None else 1e-9) * max(loss, 1e-300)
     for q, ((j, side), gj) in enumerate(zip(at.items(), g)):
-        inward = gj if side == "lower" else -gj             # dL per unit step inwards
+        inward = gj if side == "lower" else -gj  # dL per unit step inwards
         h = float(J[:, q] @ J[:, q])
         if inward < 0 and h > 0 and gj * gj / (2 * h) > tol:
             out[j] = side
     return out
 
 
-def _result(problem, solver, names, base, u, loss0, losses, iters, res, n_grad, t0, ok, msg,
-            loss=math.nan) -> FitResult:
+def _result(
+    problem, solver, names, base, u, loss0, losses, iters, res, n_grad, t0, ok, msg, loss=math.nan
+) -> FitResult:
     ps = [problem.params[n] for n in names]
     x = np.array([float(p.from_u(ui)) for p, ui in zip(ps, u)])
     consts = dict(base)
     consts.update(dict(zip(names, x.tolist())))
-    return FitResult(solver, names, x, np.asarray(u, np.float64), consts, loss0, loss, losses, iters,
-                     res.stats.n_value_calls, res.stats.n_jac_calls, n_grad,
-                     time.perf_counter() - t0, bool(ok), msg)
+    return FitResult(
+        solver,
+        names,
+        x,
+        np.asarray(u, np.float64),
+        consts,
+        loss0,
+        loss,
+        losses,
+        iters,
+        res.stats.n_value_calls,
+        res.stats.n_jac_calls,
+        n_grad,
+        time.perf_counter() - t0,
+        bool(ok),
+        msg,
+    )
 
 
 def _aborted(res: DrJitResidual, exc: Exception, u0, steps: int):
@@ -528,8 +652,12 @@ def _aborted(res: DrJitResidual, exc: Exception, u0, steps: int):
     cause = res.last_error
     best = res.stats.best_x if res.stats.best_x is not None else np.asarray(u0)
     first = str(cause).strip().splitlines()[0] if str(cause).strip() else repr(cause)
-    return np.asarray(best), steps, False, (f"solver aborted ({type(cause).__name__}): {first}; "
-                                            "returning the best point evaluated")
+    return (
+        np.asarray(best),
+        steps,
+        False,
+        (f"solver aborted ({type(cause).__name__}): {first}; returning the best point evaluated"),
+    )
 
 
 def _optimistix(res: DrJitResidual, solver: str, u0, max_steps, rtol, atol, nm_step):
@@ -545,11 +673,13 @@ def _optimistix(res: DrJitResidual, solver: str, u0, max_steps, rtol, atol, nm_s
             sol = optx.least_squares(lambda y, _: res(y), s, y0, max_steps=max_steps, throw=False)
         elif solver == "nelder_mead_optimistix":
             nm = optx.NelderMead(rtol=rtol, atol=atol, rdelta=0.0, adelta=nm_step)
-            sol = optx.minimise(lambda y, _: 0.5 * jnp.sum(res(y) ** 2), nm, y0, max_steps=max_steps,
-                                throw=False)
+            sol = optx.minimise(
+                lambda y, _: 0.5 * jnp.sum(res(y) ** 2), nm, y0, max_steps=max_steps, throw=False
+            )
         else:
-            sol = optx.minimise(lambda y, _: 0.5 * jnp.sum(res(y) ** 2), s, y0,
-                                max_steps=max_steps, throw=False)
+            sol = optx.minimise(
+                lambda y, _: 0.5 * jnp.sum(res(y) ** 2), s, y0, max_steps=max_steps, throw=False
+            )
         return sol.value, sol.result, sol.stats["num_steps"]
 
     y0 = np.asarray(u0, np.float64)
@@ -563,13 +693,18 @@ def _optimistix(res: DrJitResidual, solver: str, u0, max_steps, rtol, atol, nm_s
     u = np.asarray(value, np.float64)
     if not np.all(np.isfinite(u)):
         best = res.stats.best_x if res.stats.best_x is not None else np.asarray(u0)
-        return np.asarray(best), steps, False, "solver returned non-finite parameters; " \
-                                               "returning the best point evaluated"
+        return (
+            np.asarray(best),
+            steps,
+            False,
+            "solver returned non-finite parameters; returning the best point evaluated",
+        )
     return u, steps, ok, f"{msg} after {steps} steps"
 
 
-def _optimistix_steps(res: DrJitResidual, solver: str, u0, max_steps, rtol, atol, ftol, window,
-                      trace: _Trace):
+def _optimistix_steps(
+    res: DrJitResidual, solver: str, u0, max_steps, rtol, atol, ftol, window, trace: _Trace
+):
     """The optimistix solver driven one step at a time from Python (its ``init``/``step``/
     ``terminate`` interface, each step jitted), so that the loss-stall rule (:meth:`_Trace.stalled`)
     can stop it; otherwise the same iteration as ``optx.least_squares`` / ``optx.minimise``.
@@ -581,12 +716,16 @@ def _optimistix_steps(res: DrJitResidual, solver: str, u0, max_steps, rtol, atol
 
     s = _optx_solver(solver, rtol, atol)
     if solver in LEAST_SQUARES:
+
         def fn(y, args):
             return res(y), None
+
         f_struct = jax.ShapeDtypeStruct((res.m,), jnp.float64)
     else:
+
         def fn(y, args):
             return 0.5 * jnp.sum(res(y) ** 2), None
+
         f_struct = jax.ShapeDtypeStruct((), jnp.float64)
     tags = frozenset()
 
@@ -613,25 +752,50 @@ def _optimistix_steps(res: DrJitResidual, solver: str, u0, max_steps, rtol, atol
                 break
             if bool(done):
                 ok = bool(result == optx.RESULTS.successful)
-                msg = (f"converged (optimistix's step and loss tolerances) after {steps} steps" if ok
-                       else f"{optx.RESULTS[result]} after {steps} steps")
+                msg = (
+                    f"converged (optimistix's step and loss tolerances) after {steps} steps"
+                    if ok
+                    else f"{optx.RESULTS[result]} after {steps} steps"
+                )
                 break
             if trace.stalled(ftol, window):
-                ok, msg = True, (f"converged: the loss fell by less than {ftol:g} (relative) over "
-                                 f"the last {window} steps, after {steps} steps")
+                ok, msg = (
+                    True,
+                    (
+                        f"converged: the loss fell by less than {ftol:g} (relative) over "
+                        f"the last {window} steps, after {steps} steps"
+                    ),
+                )
                 break
     except Exception as e:
         return _aborted(res, e, u0, steps)
     u = np.asarray(y, np.float64)
     if not np.all(np.isfinite(u)):
         best = res.stats.best_x if res.stats.best_x is not None else np.asarray(u0)
-        return np.asarray(best), steps, False, "solver returned non-finite parameters; " \
-                                               "returning the best point evaluated"
+        return (
+            np.asarray(best),
+            steps,
+            False,
+            "solver returned non-finite parameters; returning the best point evaluated",
+        )
     return u, steps, ok, msg
 
 
-def _adam(problem: FitProblem, res: DrJitResidual, base: dict, names, u0, max_steps, lr, rtol, atol,
-          patience, trace: _Trace | None = None, ftol: float | None = None, window: int = FTOL_WINDOW):
+def _adam(
+    problem: FitProblem,
+    res: DrJitResidual,
+    base: dict,
+    names,
+    u0,
+    max_steps,
+    lr,
+    rtol,
+    atol,
+    patience,
+    trace: _Trace | None = None,
+    ftol: float | None = None,
+    window: int = FTOL_WINDOW,
+):
     """The tutorial loop: Dr.Jit Adam on ``u``; gradient from ``dr.backward`` of ``loss_drjit``
     or, without it, ``J^T r`` (forward-mode Jacobian). Returns (u, iters, ok, msg, n_grad, losses)."""
     import drjit as dr
@@ -641,6 +805,7 @@ def _adam(problem: FitProblem, res: DrJitResidual, base: dict, names, u0, max_st
     Float = problem.drjit_float
     if Float is None:
         import drjit.llvm.ad as m
+
         Float = m.Float
     opt = dr.opt.Adam(lr=lr)
     for p, ui in zip(ps, u0):
@@ -671,7 +836,14 @@ def _adam(problem: FitProblem, res: DrJitResidual, base: dict, names, u0, max_st
                 dr.set_grad(opt[p.name], Float(float(gi)))
             grads = g
         if not (math.isfinite(value) and np.all(np.isfinite(grads))):
-            return best_u, it, False, f"stopped at iteration {it}: non-finite loss or gradient", n_grad, losses
+            return (
+                best_u,
+                it,
+                False,
+                f"stopped at iteration {it}: non-finite loss or gradient",
+                n_grad,
+                losses,
+            )
         losses.append(value)
         if value <= min(losses):
             best_u = np.array([float(opt[p.name][0]) for p in ps])
@@ -679,18 +851,33 @@ def _adam(problem: FitProblem, res: DrJitResidual, base: dict, names, u0, max_st
             trace.note(value)
         opt.step()
         if trace is not None and trace.stalled(ftol, window * 10):
-            ok, msg = True, (f"converged: the best loss fell by less than {ftol:g} (relative) over "
-                             f"the last {window * 10} iterations (iteration {it})")
+            ok, msg = (
+                True,
+                (
+                    f"converged: the best loss fell by less than {ftol:g} (relative) over "
+                    f"the last {window * 10} iterations (iteration {it})"
+                ),
+            )
             break
-        if patience is not None and len(losses) > patience and \
-                min(losses[:-patience]) - min(losses[-patience:]) <= rtol * value + atol:
-            ok, msg = True, (f"best loss improved by less than rtol*loss+atol over the last "
-                             f"{patience} iterations (iteration {it})")
+        if (
+            patience is not None
+            and len(losses) > patience
+            and min(losses[:-patience]) - min(losses[-patience:]) <= rtol * value + atol
+        ):
+            ok, msg = (
+                True,
+                (
+                    f"best loss improved by less than rtol*loss+atol over the last "
+                    f"{patience} iterations (iteration {it})"
+                ),
+            )
             break
     return best_u, it, ok, msg, n_grad, losses
 
 
-def _nelder_mead(res: DrJitResidual, u0, max_steps, rtol, atol, nm_step, trace: _Trace | None = None):
+def _nelder_mead(
+    res: DrJitResidual, u0, max_steps, rtol, atol, nm_step, trace: _Trace | None = None
+):
     """Nelder-Mead on ``0.5*||r(u)||^2`` (NumPy; values only). Converged when every vertex is
     within ``atol + rtol*|u_best|`` of the best (max norm) and every value within
     ``atol + rtol*|f_best|`` of the best one (optimistix's criterion). Returns (u, steps, ok, msg)."""
@@ -709,8 +896,9 @@ def _nelder_mead(res: DrJitResidual, u0, max_steps, rtol, atol, nm_step, trace: 
             X, F = X[order], F[order]
             if trace is not None and step > 1:
                 trace.note(float(F[0]))
-            if np.max(np.abs(X - X[0])) <= atol + rtol * np.max(np.abs(X[0])) and \
-                    np.max(np.abs(F - F[0])) <= atol + rtol * abs(F[0]):
+            if np.max(np.abs(X - X[0])) <= atol + rtol * np.max(np.abs(X[0])) and np.max(
+                np.abs(F - F[0])
+            ) <= atol + rtol * abs(F[0]):
                 return X[0], step - 1, True, f"converged after {step - 1} steps"
             c = X[:-1].mean(axis=0)
             xr = c + a_r * (c - X[-1])
@@ -733,5 +921,9 @@ def _nelder_mead(res: DrJitResidual, u0, max_steps, rtol, atol, nm_step, trace: 
         return X[i], max_steps, False, f"stopped at max_steps={max_steps} before converging"
     except FloatingPointError as e:
         best = res.stats.best_x if res.stats.best_x is not None else np.asarray(u0)
-        return np.asarray(best), 0, False, f"solver aborted ({type(e).__name__}): {e}; " \
-                                           "returning the best point evaluated"
+        return (
+            np.asarray(best),
+            0,
+            False,
+            f"solver aborted ({type(e).__name__}): {e}; returning the best point evaluated",
+        )

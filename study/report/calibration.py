@@ -2,6 +2,7 @@
 
 Images are linear RGB (H, W, 3); figures show them sRGB-encoded and clipped to [0, 1].
 """
+
 from __future__ import annotations
 
 import textwrap
@@ -14,12 +15,16 @@ from .._io import to_srgb
 
 def _plt():
     import matplotlib
+
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
+
     return plt
 
 
-def comparison_figure(path: Path, images: dict, errors: dict, mask: np.ndarray, title: str = "") -> Path:
+def comparison_figure(
+    path: Path, images: dict, errors: dict, mask: np.ndarray, title: str = ""
+) -> Path:
     """Row 1: the images (e.g. reference | default | fitted); row 2: |image - reference| averaged
     over RGB on the water pixels, one shared colour scale."""
     plt = _plt()
@@ -27,12 +32,20 @@ def comparison_figure(path: Path, images: dict, errors: dict, mask: np.ndarray, 
     ref = images[names[0]]
     n = len(names)
     fig, axes = plt.subplots(2, n, figsize=(3.2 * n, 6.4), squeeze=False)
-    vmax = max(float(np.abs(images[k] - ref).mean(-1)[mask].max()) for k in names[1:]) if n > 1 else 1.0
+    vmax = (
+        max(float(np.abs(images[k] - ref).mean(-1)[mask].max()) for k in names[1:])
+        if n > 1
+        else 1.0
+    )
     vmax = max(vmax, 1e-6)
     for j, k in enumerate(names):
         axes[0, j].imshow(to_srgb(images[k]))
         name = textwrap.fill(k, 34)
-        label = name if k not in errors else f"{name}\nRMSE {errors[k]['rmse']:.4f}  FLIP {errors[k]['flip']:.4f}"
+        label = (
+            name
+            if k not in errors
+            else f"{name}\nRMSE {errors[k]['rmse']:.4f}  FLIP {errors[k]['flip']:.4f}"
+        )
         axes[0, j].set_title(label, fontsize=9)
         if j == 0:
             axes[1, j].imshow(mask, cmap="gray")
@@ -42,7 +55,8 @@ def comparison_figure(path: Path, images: dict, errors: dict, mask: np.ndarray, 
             im = axes[1, j].imshow(err, cmap="magma", vmin=0, vmax=vmax)
             axes[1, j].set_title(textwrap.fill(f"|{k} - {names[0]}|", 34), fontsize=9)
     for ax in axes.ravel():
-        ax.set_xticks([]); ax.set_yticks([])
+        ax.set_xticks([])
+        ax.set_yticks([])
     if n > 1:
         fig.colorbar(im, ax=axes[1, :].tolist(), shrink=0.8, label="mean abs. error (linear RGB)")
     if title:
@@ -64,7 +78,8 @@ def diagnostics_figure(path: Path, maps: dict, mask: np.ndarray, title: str = ""
             k = "log10 |denominator|"
         im = ax.imshow(v, cmap="viridis")
         ax.set_title(k, fontsize=9)
-        ax.set_xticks([]); ax.set_yticks([])
+        ax.set_xticks([])
+        ax.set_yticks([])
         fig.colorbar(im, ax=ax, shrink=0.75)
     if title:
         fig.suptitle(title)
@@ -107,8 +122,10 @@ def constants_table(parameters: dict) -> list[str]:
     lines = ["| constant | default | exported | status | why |", "|---|---|---|---|---|"]
     for name, p in parameters.items():
         shown = p["fitted"] if p["fitted"] is not None else p["default"]
-        lines.append(f"| `{name}` | {_fmt(p['default'])} | {_fmt(shown)} | {p.get('status', '')} | "
-                     f"{p.get('reason', '')} |")
+        lines.append(
+            f"| `{name}` | {_fmt(p['default'])} | {_fmt(shown)} | {p.get('status', '')} | "
+            f"{p.get('reason', '')} |"
+        )
     return lines
 
 
@@ -122,30 +139,38 @@ def basin_lines(parameters: dict) -> list[str]:
         span = f"{_fmt(min(b['grid']))}-{_fmt(max(b['grid']))}"
         r = b.get("restart")
         if r:
-            lines.append(f"`{name}`: the first fit stopped at {_fmt(r['from'])}, with a basin at {_fmt(r['to'])} lower "
-                         "by more than the reference's noise explains (the loss is piecewise); refitted from there: "
-                         f"loss {_fmt(r['loss_before'])} -> {_fmt(r['loss_after'])}, "
-                         + ("kept." if r["kept"] else "not lower, so the first solution is exported."))
+            lines.append(
+                f"`{name}`: the first fit stopped at {_fmt(r['from'])}, with a basin at {_fmt(r['to'])} lower "
+                "by more than the reference's noise explains (the loss is piecewise); refitted from there: "
+                f"loss {_fmt(r['loss_before'])} -> {_fmt(r['loss_after'])}, "
+                + ("kept." if r["kept"] else "not lower, so the first solution is exported.")
+            )
         unconfirmed = {o["value"]: o for o in b.get("unconfirmed", [])}
         lower = [o for o in b["basins"] if o["value"] in b.get("lower", [])]
         close = [o for o in b["basins"] if o["indistinguishable"]]
         for o in lower:
             if o["value"] in unconfirmed:
-                lines.append(f"`{name}`: a basin of the loss at {_fmt(o['value'])} is lower than the fit's by "
-                             f"{_fmt(-o['delta_loss'])} (+- {_fmt(o['noise_sd'])} from the reference's noise) in "
-                             "this texture, but higher by "
-                             f"{_fmt(unconfirmed[o['value']]['texture_delta'])} in the decorrelated loss of the "
-                             "texture's independent halves (unbiased for the noise-free texture): the texture's "
-                             "noise or its denoiser makes it lower, so it was not refitted.")
+                lines.append(
+                    f"`{name}`: a basin of the loss at {_fmt(o['value'])} is lower than the fit's by "
+                    f"{_fmt(-o['delta_loss'])} (+- {_fmt(o['noise_sd'])} from the reference's noise) in "
+                    "this texture, but higher by "
+                    f"{_fmt(unconfirmed[o['value']]['texture_delta'])} in the decorrelated loss of the "
+                    "texture's independent halves (unbiased for the noise-free texture): the texture's "
+                    "noise or its denoiser makes it lower, so it was not refitted."
+                )
                 continue
-            lines.append(f"`{name}`: a basin of the loss at {_fmt(o['value'])} is lower than the fit's by "
-                         f"{_fmt(-o['delta_loss'])}, more than the reference's noise explains "
-                         f"(+- {_fmt(o['noise_sd'])}): the solver stopped short of it (the loss is piecewise).")
+            lines.append(
+                f"`{name}`: a basin of the loss at {_fmt(o['value'])} is lower than the fit's by "
+                f"{_fmt(-o['delta_loss'])}, more than the reference's noise explains "
+                f"(+- {_fmt(o['noise_sd'])}): the solver stopped short of it (the loss is piecewise)."
+            )
         for o in close:
-            lines.append(f"`{name}`: another basin of the loss at {_fmt(o['value'])} (loss difference "
-                         f"{_fmt(o['delta_loss'])} +- {_fmt(o['noise_sd'])} from the reference's noise): the "
-                         "reference's noise cannot tell it from the fit's, so the exported value is one of "
-                         "these, not known to its standard error.")
+            lines.append(
+                f"`{name}`: another basin of the loss at {_fmt(o['value'])} (loss difference "
+                f"{_fmt(o['delta_loss'])} +- {_fmt(o['noise_sd'])} from the reference's noise): the "
+                "reference's noise cannot tell it from the fit's, so the exported value is one of "
+                "these, not known to its standard error."
+            )
         rest = len(b["basins"]) - len(close) - len(lower)
         minima = f"{rest} other local minim{'um' if rest == 1 else 'a'} of the loss in {span}"
         if not b["basins"]:
@@ -153,29 +178,40 @@ def basin_lines(parameters: dict) -> list[str]:
         elif any(o["noise_sd"] is None for o in b["basins"]):
             what = f"{minima} (no noise estimate of the reference to compare them with)."
         else:
-            what = f"{minima}, each higher than the fit's by more than the reference's noise explains."
+            what = (
+                f"{minima}, each higher than the fit's by more than the reference's noise explains."
+            )
         if rest or not b["basins"]:
             lines.append(f"`{name}`: {what} (The other constants held at the solution.)")
     return lines + [""] if lines else []
 
 
 def identifiability_table(ident: dict) -> list[str]:
-    lines = ["| parameter | rel. sensitivity at start | at solution | rel. std. error at solution | "
-             "rel. error from reference noise | decision |", "|---|---|---|---|---|---|"]
+    lines = [
+        "| parameter | rel. sensitivity at start | at solution | rel. std. error at solution | "
+        "rel. error from reference noise | decision |",
+        "|---|---|---|---|---|---|",
+    ]
     start, sol = ident.get("start", {}), ident.get("solution", {})
     for name in start.get("names", []):
         i = start["names"].index(name)
         j = sol["names"].index(name) if name in sol.get("names", []) else None
         s1 = _fmt(sol["sensitivity"][j]) if j is not None else "-"
         se = _fmt(sol["rel_std_error"][j]) if j is not None and sol.get("rel_std_error") else "-"
-        ne = _fmt(sol["rel_noise_error"][j]) if j is not None and sol.get("rel_noise_error") else "-"
-        lines.append(f"| `{name}` | {_fmt(start['sensitivity'][i])} | {s1} | {se} | {ne} | {start['decision'][i]} |")
+        ne = (
+            _fmt(sol["rel_noise_error"][j]) if j is not None and sol.get("rel_noise_error") else "-"
+        )
+        lines.append(
+            f"| `{name}` | {_fmt(start['sensitivity'][i])} | {s1} | {se} | {ne} | {start['decision'][i]} |"
+        )
     lines.append("")
     for label, d in (("start", start), ("solution", sol)):
         if d.get("singular_values"):
             sv = ", ".join(_fmt(v, 3) for v in d["singular_values"])
-            lines.append(f"Singular values of the scaled Jacobian at the {label}: {sv} "
-                         f"(condition number {_fmt(d.get('condition'), 3)}).")
+            lines.append(
+                f"Singular values of the scaled Jacobian at the {label}: {sv} "
+                f"(condition number {_fmt(d.get('condition'), 3)})."
+            )
     return lines
 
 
@@ -184,40 +220,65 @@ def write_report(out: Path, summary: dict, figures: dict) -> Path:
     e = summary["error"]
     ref = summary["reference"]
     lines = [f"# Calibration: {summary['experiment']} ({summary['shader']})", ""]
-    lines += [f"Reference: {ref['spp']} spp, measured noise {_fmt(ref['noise'], 3)} (RMS standard error on "
-              f"water pixels, linear RGB). Fit at {summary['fit_resolution'][0]}x{summary['fit_resolution'][1]} "
-              f"with `{summary['solver']}`: {summary['iterations']} iterations, "
-              f"{'converged' if summary['converged'] else 'NOT converged'} ({summary['message']}).", ""]
+    lines += [
+        f"Reference: {ref['spp']} spp, measured noise {_fmt(ref['noise'], 3)} (RMS standard error on "
+        f"water pixels, linear RGB). Fit at {summary['fit_resolution'][0]}x{summary['fit_resolution'][1]} "
+        f"with `{summary['solver']}`: {summary['iterations']} iterations, "
+        f"{'converged' if summary['converged'] else 'NOT converged'} ({summary['message']}).",
+        "",
+    ]
     dec = summary.get("fit", {}).get("input_noise")
     if dec:
-        moved = ", ".join(f"{n} {_fmt(a)} -> {_fmt(b)}" for n, (a, b) in dec["shift"].items() if a != b)
-        lines += [f"Texture noise (`fit.input_noise = \"decorrelate\"`): the least-squares constants refined "
-                  f"on the decorrelated loss over the refraction texture's two independent halves, "
-                  f"{_fmt(dec['loss_start'])} -> {_fmt(dec['loss'])} in {dec['steps']} damped Newton steps: "
-                  + (f"{dec['message']}; {moved or 'nothing moved'}." if dec["accepted"] else
-                     f"refused ({dec['message']}), the least-squares constants kept."), ""]
-    lines += ["| metric (water pixels) | default constants | fitted constants |", "|---|---|---|",
-              f"| RMSE, linear RGB | {_fmt(e['rmse']['default'])} | {_fmt(e['rmse']['fitted'])} |",
-              f"| FLIP (LDR, mean) | {_fmt(e['flip']['default'])} | {_fmt(e['flip']['fitted'])} |", ""]
+        moved = ", ".join(
+            f"{n} {_fmt(a)} -> {_fmt(b)}" for n, (a, b) in dec["shift"].items() if a != b
+        )
+        lines += [
+            f'Texture noise (`fit.input_noise = "decorrelate"`): the least-squares constants refined '
+            f"on the decorrelated loss over the refraction texture's two independent halves, "
+            f"{_fmt(dec['loss_start'])} -> {_fmt(dec['loss'])} in {dec['steps']} damped Newton steps: "
+            + (
+                f"{dec['message']}; {moved or 'nothing moved'}."
+                if dec["accepted"]
+                else f"refused ({dec['message']}), the least-squares constants kept."
+            ),
+            "",
+        ]
+    lines += [
+        "| metric (water pixels) | default constants | fitted constants |",
+        "|---|---|---|",
+        f"| RMSE, linear RGB | {_fmt(e['rmse']['default'])} | {_fmt(e['rmse']['fitted'])} |",
+        f"| FLIP (LDR, mean) | {_fmt(e['flip']['default'])} | {_fmt(e['flip']['fitted'])} |",
+        "",
+    ]
     if "comparison" in figures:
         lines += [f"![reference | default | fitted, with error maps]({figures['comparison']})", ""]
     lines += ["## Constants", ""] + constants_table(summary["parameters"]) + [""]
     lines += basin_lines(summary["parameters"])
-    lines += ["## Identifiability", "",
-              "Sensitivity: norm of the Jacobian column with respect to log(value) (a relative change), "
-              "divided by the largest column norm. Standard error from the Gauss-Newton covariance "
-              "s^2 (J^T J)^-1 at the solution, s^2 = ||r||^2 / (m - k), as a relative error of the value.", ""]
+    lines += [
+        "## Identifiability",
+        "",
+        "Sensitivity: norm of the Jacobian column with respect to log(value) (a relative change), "
+        "divided by the largest column norm. Standard error from the Gauss-Newton covariance "
+        "s^2 (J^T J)^-1 at the solution, s^2 = ||r||^2 / (m - k), as a relative error of the value.",
+        "",
+    ]
     lines += identifiability_table(summary["identifiability"]) + [""]
     sw = summary.get("step_sweep")
     if sw:
-        lines += ["## Step schedule (sweep)", "",
-                  "Step counts change which step crosses the floor, so their effect is piecewise "
-                  "constant: they are chosen from a grid of the loss at the fitted continuous "
-                  f"constants, not by a gradient. Best: {sw['best']}.", ""]
+        lines += [
+            "## Step schedule (sweep)",
+            "",
+            "Step counts change which step crosses the floor, so their effect is piecewise "
+            "constant: they are chosen from a grid of the loss at the fitted continuous "
+            f"constants, not by a gradient. Best: {sw['best']}.",
+            "",
+        ]
         if len(sw["names"]) == 2:
             a, b = sw["names"]
-            lines += [f"| {a} \\ {b} | " + " | ".join(_fmt(v) for v in sw["grid"][b]) + " |",
-                      "|---|" + "---|" * len(sw["grid"][b])]
+            lines += [
+                f"| {a} \\ {b} | " + " | ".join(_fmt(v) for v in sw["grid"][b]) + " |",
+                "|---|" + "---|" * len(sw["grid"][b]),
+            ]
             for va, row in zip(sw["grid"][a], sw["loss"]):
                 lines.append(f"| {_fmt(va)} | " + " | ".join(_fmt(v) for v in row) + " |")
         else:
@@ -229,23 +290,41 @@ def write_report(out: Path, summary: dict, figures: dict) -> Path:
         lines += ["## Convergence", "", f"![loss per iteration]({figures['loss']})", ""]
     if "diagnostics" in figures:
         d = summary.get("diagnostics", {})
-        lines += ["## Shader diagnostics (fitted constants)", "",
-                  f"Rays not crossing the floor within the loop cap: {_fmt(d.get('not_crossed_fraction'))} "
-                  f"of water pixels; non-finite pixels: {d.get('nonfinite_pixels', '-')}; mean loop "
-                  f"iterations {_fmt(d.get('iterations', {}).get('mean'))}, mean texture fetches "
-                  f"{_fmt(d.get('fetches', {}).get('mean'))} per pixel.", "",
-                  f"![diagnostics]({figures['diagnostics']})", ""]
+        lines += [
+            "## Shader diagnostics (fitted constants)",
+            "",
+            f"Rays not crossing the floor within the loop cap: {_fmt(d.get('not_crossed_fraction'))} "
+            f"of water pixels; non-finite pixels: {d.get('nonfinite_pixels', '-')}; mean loop "
+            f"iterations {_fmt(d.get('iterations', {}).get('mean'))}, mean texture fetches "
+            f"{_fmt(d.get('fetches', {}).get('mean'))} per pixel.",
+            "",
+            f"![diagnostics]({figures['diagnostics']})",
+            "",
+        ]
     t = summary["timings"]
     lines += ["## Timings (seconds)", "", "| stage | s |", "|---|---|"]
     lines += [f"| {k} | {_fmt(v, 3)} |" for k, v in t.items()] + [""]
-    lines += ["## Exported shaders", "", "`shaders/compat/` (GLSL 1.20, drop-in) and `shaders/core/` "
-              "(GLSL 330 core); every file compiled with glslangValidator"
-              + (f"; the exported core shader on llvmpipe vs the port with the fitted constants: "
-                 f"mean |diff| {_fmt(summary['gl_check']['mean_abs'], 3)}, 99.9th percentile "
-                 f"{_fmt(summary['gl_check']['p999'], 3)}"
-                 + ("." if summary['gl_check'].get('passed') else " -- **MISMATCH: do not ship these "
-                    "shaders; see constants.json gl_check**.") if summary.get("gl_check") else "."), ""]
+    lines += [
+        "## Exported shaders",
+        "",
+        "`shaders/compat/` (GLSL 1.20, drop-in) and `shaders/core/` "
+        "(GLSL 330 core); every file compiled with glslangValidator"
+        + (
+            f"; the exported core shader on llvmpipe vs the port with the fitted constants: "
+            f"mean |diff| {_fmt(summary['gl_check']['mean_abs'], 3)}, 99.9th percentile "
+            f"{_fmt(summary['gl_check']['p999'], 3)}"
+            + (
+                "."
+                if summary["gl_check"].get("passed")
+                else " -- **MISMATCH: do not ship these shaders; see constants.json gl_check**."
+            )
+            if summary.get("gl_check")
+            else "."
+        ),
+        "",
+    ]
     from .._io import write_text_atomic
+
     path = out / "report.md"
     write_text_atomic(path, "\n".join(lines))
     return path

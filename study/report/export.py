@@ -12,6 +12,7 @@ shader file with the constants and the variant's ``#define`` lines right after `
 that file alone reproduces the variant (``study.report.gl_check`` runs exactly it; a variant
 with ``textures = 'game'`` needs the application to upload its textures at that precision).
 """
+
 from __future__ import annotations
 
 import json
@@ -49,7 +50,9 @@ def load_constants_json(path) -> Constants:
     if unknown:
         names = ", ".join(repr(u) if len(u) <= 80 else repr(u[:80]) + "..." for u in unknown[:5])
         more = f" and {len(unknown) - 5} more" if len(unknown) > 5 else ""
-        raise ValueError(f"{path}: unknown constant(s) {names}{more}; known: {sorted(CONSTANT_SPECS)}")
+        raise ValueError(
+            f"{path}: unknown constant(s) {names}{more}; known: {sorted(CONSTANT_SPECS)}"
+        )
     try:
         return Constants.from_dict(table)
     except (TypeError, ValueError) as exc:
@@ -65,10 +68,14 @@ def export_shaders(constants: Constants, out_dir) -> list[Path]:
     for dialect in ("compat", "core"):
         texts[(dialect, "water.vert")] = read_source("water", "vert", dialect)
         for name in FRAGMENT_SHADERS:
-            texts[(dialect, f"{name}.frag")] = write_constants(read_source(name, "frag", dialect), constants)
+            texts[(dialect, f"{name}.frag")] = write_constants(
+                read_source(name, "frag", dialect), constants
+            )
         for v in VARIANTS.values():
             if v.name != v.shader:
-                texts[(dialect, f"{v.name}.frag")] = v.source(dialect, text=texts[(dialect, f"{v.shader}.frag")])
+                texts[(dialect, f"{v.name}.frag")] = v.source(
+                    dialect, text=texts[(dialect, f"{v.shader}.frag")]
+                )
     for (dialect, fname), text in texts.items():
         compile_check(text, fname.rsplit(".", 1)[1])
     out_dir = Path(out_dir)

@@ -4,6 +4,7 @@ Inputs are the JSON-able summaries written by ``study._jobs.run_calibrate_joint`
 ``run_generalise`` (constants.json / generalise.json); errors are on water pixels at each
 experiment's full resolution (RMSE in linear RGB, mean FLIP).
 """
+
 from __future__ import annotations
 
 from pathlib import Path
@@ -14,23 +15,37 @@ from .calibration import _fmt, constants_table, identifiability_table
 
 def joint_lines(summary: dict) -> list[str]:
     fs = summary.get("fit", {})
-    lines = [f"# Joint calibration over {len(summary['scenes'])} scenes ({summary['shader']})", "",
-             "One constants block fitted on every scene at once; residuals stacked, each scene weighted "
-             "equally (its residual times sqrt(mean size / its size)). Solver "
-             f"`{summary['solver']}`: {summary['iterations']} iterations, "
-             f"{'converged' if summary['converged'] else 'NOT converged'} ({summary['message']}); "
-             f"{fs.get('rounds', 1)} fit round(s).", "",
-             "| scene | weight | RMSE start | RMSE joint | FLIP start | FLIP joint |", "|---|---|---|---|---|---|"]
+    lines = [
+        f"# Joint calibration over {len(summary['scenes'])} scenes ({summary['shader']})",
+        "",
+        "One constants block fitted on every scene at once; residuals stacked, each scene weighted "
+        "equally (its residual times sqrt(mean size / its size)). Solver "
+        f"`{summary['solver']}`: {summary['iterations']} iterations, "
+        f"{'converged' if summary['converged'] else 'NOT converged'} ({summary['message']}); "
+        f"{fs.get('rounds', 1)} fit round(s).",
+        "",
+        "| scene | weight | RMSE start | RMSE joint | FLIP start | FLIP joint |",
+        "|---|---|---|---|---|---|",
+    ]
     for name in summary["scenes"]:
         e = summary["error"][name]
-        lines.append(f"| {name} | {_fmt(summary['weights'][name], 3)} | {_fmt(e['default']['rmse'])} | "
-                     f"{_fmt(e['fitted']['rmse'])} | {_fmt(e['default']['flip'])} | {_fmt(e['fitted']['flip'])} |")
+        lines.append(
+            f"| {name} | {_fmt(summary['weights'][name], 3)} | {_fmt(e['default']['rmse'])} | "
+            f"{_fmt(e['fitted']['rmse'])} | {_fmt(e['default']['flip'])} | {_fmt(e['fitted']['flip'])} |"
+        )
     lines += ["", "## Constants", ""] + constants_table(summary["parameters"]) + [""]
-    lines += ["## Identifiability (joint Jacobian)", ""] + identifiability_table(summary["identifiability"]) + [""]
+    lines += (
+        ["## Identifiability (joint Jacobian)", ""]
+        + identifiability_table(summary["identifiability"])
+        + [""]
+    )
     gl = summary.get("gl_check")
     if gl:
-        lines += [f"Exported shaders in `shaders/`; GL check on the first scene: mean |diff| "
-                  f"{_fmt(gl.get('mean_abs'), 3)}, {'passed' if gl.get('passed') else '**MISMATCH**'}.", ""]
+        lines += [
+            f"Exported shaders in `shaders/`; GL check on the first scene: mean |diff| "
+            f"{_fmt(gl.get('mean_abs'), 3)}, {'passed' if gl.get('passed') else '**MISMATCH**'}.",
+            "",
+        ]
     return lines
 
 
@@ -42,19 +57,26 @@ def write_joint_report(out: Path, summary: dict) -> Path:
 
 def loso_table(rows: list[dict]) -> list[str]:
     """FLIP (and RMSE) of each left-out scene under the seed's, the others' and its own constants."""
-    lines = ["| left-out scene | FLIP seed | FLIP others' fit | FLIP own fit | RMSE seed | RMSE others' fit | "
-             "RMSE own fit |", "|---|---|---|---|---|---|---|"]
+    lines = [
+        "| left-out scene | FLIP seed | FLIP others' fit | FLIP own fit | RMSE seed | RMSE others' fit | "
+        "RMSE own fit |",
+        "|---|---|---|---|---|---|---|",
+    ]
     for r in rows:
         o = r.get("others") or {}
-        lines.append(f"| {r['scene']} | {_fmt(r['seed']['flip'])} | {_fmt(o.get('flip'))} | {_fmt(r['own']['flip'])} | "
-                     f"{_fmt(r['seed']['rmse'])} | {_fmt(o.get('rmse'))} | {_fmt(r['own']['rmse'])} |")
+        lines.append(
+            f"| {r['scene']} | {_fmt(r['seed']['flip'])} | {_fmt(o.get('flip'))} | {_fmt(r['own']['flip'])} | "
+            f"{_fmt(r['seed']['rmse'])} | {_fmt(o.get('rmse'))} | {_fmt(r['own']['rmse'])} |"
+        )
     return lines
 
 
 def universality_table(uni: dict, scenes: list[str]) -> list[str]:
     """Per constant: the joint value, each scene's own value +- standard error, max |z|, verdict."""
-    lines = ["| constant | joint | " + " | ".join(scenes) + " | max abs z | verdict |",
-             "|---|---|" + "---|" * len(scenes) + "---|---|"]
+    lines = [
+        "| constant | joint | " + " | ".join(scenes) + " | max abs z | verdict |",
+        "|---|---|" + "---|" * len(scenes) + "---|---|",
+    ]
     for n, u in uni.items():
         cells = []
         for s in scenes:
@@ -63,21 +85,32 @@ def universality_table(uni: dict, scenes: list[str]) -> list[str]:
                 cells.append(f"{_fmt(d['value'])} +- {_fmt(d['se'], 2)}")
             else:
                 cells.append(f"{d.get('status', '-')}")
-        lines.append(f"| `{n}` | {_fmt(u['joint'])} | " + " | ".join(cells) +
-                     f" | {_fmt(u['max_abs_z'], 3)} | {u['verdict']} |")
+        lines.append(
+            f"| `{n}` | {_fmt(u['joint'])} | "
+            + " | ".join(cells)
+            + f" | {_fmt(u['max_abs_z'], 3)} | {u['verdict']} |"
+        )
     return lines
 
 
 def write_generalise_report(out: Path, summary: dict) -> Path:
-    lines = ["# Constants that generalise", "",
-             "Leave-one-scene-out: each scene scored (water pixels, full resolution) under the seed's "
-             "constants, the constants fitted jointly on the *other* scenes, and its own fit.", ""]
+    lines = [
+        "# Constants that generalise",
+        "",
+        "Leave-one-scene-out: each scene scored (water pixels, full resolution) under the seed's "
+        "constants, the constants fitted jointly on the *other* scenes, and its own fit.",
+        "",
+    ]
     lines += loso_table(summary["leave_one_out"]) + [""]
-    lines += ["## Universal or scene-specific", "",
-              "Each scene's own fitted value +- its standard error (Gauss-Newton, a lower bound under "
-              "correlated model error) against the joint value; universal when every scene fitted it and "
-              "lies within 2 standard errors of the joint value (|z| <= 2), scene-specific when some scene "
-              "lies further. A constant frozen or bound in a scene shows its status there.", ""]
+    lines += [
+        "## Universal or scene-specific",
+        "",
+        "Each scene's own fitted value +- its standard error (Gauss-Newton, a lower bound under "
+        "correlated model error) against the joint value; universal when every scene fitted it and "
+        "lies within 2 standard errors of the joint value (|z| <= 2), scene-specific when some scene "
+        "lies further. A constant frozen or bound in a scene shows its status there.",
+        "",
+    ]
     lines += universality_table(summary["universality"], summary["scenes"]) + [""]
     lines += ["", "---", ""] + joint_lines(summary["joint"])
     path = Path(out) / "generalise.md"

@@ -1,4 +1,5 @@
 """The exported core shader run on llvmpipe (Mesa, headless EGL) against the Dr.Jit port."""
+
 from __future__ import annotations
 
 import sys
@@ -20,12 +21,30 @@ def gl_check(shader: str, inputs, constants, shaders_dir: Path) -> dict:
     source = (shaders_dir / "core" / f"{variant.name}.frag").read_text()
     with GLRenderer(variant.shader, variant.prepare_inputs(inputs), source=source) as r:
         res = compare_port_gl(inputs, constants, shader, renderer=_OwnBlock(r))
-    out = {k: res[k] for k in ("mean_abs", "p999", "max_abs", "n_water", "n_outliers", "n_nonfinite",
-                               "unexplained")}
-    out["passed"] = bool(np.isfinite(res["mean_abs"]) and res["mean_abs"] <= 1e-3 and res["p999"] <= 1e-2
-                         and res["unexplained"] == 0 and res["n_nonfinite"] == 0)
+    out = {
+        k: res[k]
+        for k in (
+            "mean_abs",
+            "p999",
+            "max_abs",
+            "n_water",
+            "n_outliers",
+            "n_nonfinite",
+            "unexplained",
+        )
+    }
+    out["passed"] = bool(
+        np.isfinite(res["mean_abs"])
+        and res["mean_abs"] <= 1e-3
+        and res["p999"] <= 1e-2
+        and res["unexplained"] == 0
+        and res["n_nonfinite"] == 0
+    )
     if not out["passed"]:
-        print(f"calibrate: WARNING: the exported shader on llvmpipe does not match the port: {out}", file=sys.stderr)
+        print(
+            f"calibrate: WARNING: the exported shader on llvmpipe does not match the port: {out}",
+            file=sys.stderr,
+        )
     return out
 
 

@@ -1,5 +1,6 @@
 """Figures and ``stability.md`` of ``study stability`` (inputs: the study's JSON-able summary,
 ``study.studies.stability``). Times in seconds of wall clock on the machine that ran the jobs."""
+
 from __future__ import annotations
 
 from pathlib import Path
@@ -18,7 +19,9 @@ def solver_figure(path: Path, ms: dict) -> Path:
         if t is None:
             continue
         ax.scatter([t], [s["success_rate"]], s=40)
-        ax.annotate(label, (t, s["success_rate"]), fontsize=8, xytext=(4, 4), textcoords="offset points")
+        ax.annotate(
+            label, (t, s["success_rate"]), fontsize=8, xytext=(4, 4), textcoords="offset points"
+        )
     ax.set_xscale("log")
     ax.set_xlabel("median time to stop (s)")
     ax.set_ylabel("success rate (final loss within 0.1 % of the best)")
@@ -33,6 +36,7 @@ def solver_figure(path: Path, ms: dict) -> Path:
 def spread_figure(path: Path, ms: dict) -> Path:
     """Relative spread (std / |median| over the runs, median over scenes) per constant and solver."""
     import numpy as np
+
     plt = _plt()
     labels = ms["reported"]
     names = sorted({n for l in labels for n in ms["solvers"][l]["rel_spread"]})
@@ -57,7 +61,9 @@ def noise_figure(path: Path, noise: dict) -> Path:
     """Bias against the highest spp, with its standard error, per constant, against spp."""
     plt = _plt()
     whichs = [w for w in ("reference", "texture") if w in noise]
-    fig, axes = plt.subplots(1, max(len(whichs), 1), figsize=(5.5 * max(len(whichs), 1), 4.0), squeeze=False)
+    fig, axes = plt.subplots(
+        1, max(len(whichs), 1), figsize=(5.5 * max(len(whichs), 1), 4.0), squeeze=False
+    )
     for ax, which in zip(axes[0], whichs):
         d = noise[which]
         names = sorted({n for s in d["stats"].values() for n in s})
@@ -84,14 +90,21 @@ def noise_figure(path: Path, noise: dict) -> Path:
 
 
 def solver_table(ms: dict) -> list[str]:
-    lines = ["| solver | runs | success rate | time to target median / p90 (s) | time to stop median / p90 (s) "
-             "| median iterations | failures |", "|---|---|---|---|---|---|---|"]
+    lines = [
+        "| solver | runs | success rate | time to target median / p90 (s) | time to stop median / p90 (s) "
+        "| median iterations | failures |",
+        "|---|---|---|---|---|---|---|",
+    ]
     for label in ms["reported"]:
         s = ms["solvers"][label]
-        fails = ", ".join(f"{k} {v}" for k, v in sorted(s["classes"].items()) if k != "success") or "-"
-        lines.append(f"| {label} | {s['runs']} | {_fmt(s['success_rate'], 3)} | {_fmt(s['time_to_target_median'], 3)}"
-                     f" / {_fmt(s['time_to_target_p90'], 3)} | {_fmt(s['time_to_stop_median'], 3)} / "
-                     f"{_fmt(s['time_to_stop_p90'], 3)} | {_fmt(s['iterations_median'], 3)} | {fails} |")
+        fails = (
+            ", ".join(f"{k} {v}" for k, v in sorted(s["classes"].items()) if k != "success") or "-"
+        )
+        lines.append(
+            f"| {label} | {s['runs']} | {_fmt(s['success_rate'], 3)} | {_fmt(s['time_to_target_median'], 3)}"
+            f" / {_fmt(s['time_to_target_p90'], 3)} | {_fmt(s['time_to_stop_median'], 3)} / "
+            f"{_fmt(s['time_to_stop_p90'], 3)} | {_fmt(s['iterations_median'], 3)} | {fails} |"
+        )
     return lines
 
 
@@ -100,7 +113,11 @@ def spread_table(ms: dict) -> list[str]:
     names = sorted({n for l in labels for n in ms["solvers"][l]["rel_spread"]})
     lines = ["| constant | " + " | ".join(labels) + " |", "|---|" + "---|" * len(labels)]
     for n in names:
-        lines.append(f"| `{n}` | " + " | ".join(_fmt(ms["solvers"][l]["rel_spread"].get(n), 2) for l in labels) + " |")
+        lines.append(
+            f"| `{n}` | "
+            + " | ".join(_fmt(ms["solvers"][l]["rel_spread"].get(n), 2) for l in labels)
+            + " |"
+        )
     return lines
 
 
@@ -108,53 +125,93 @@ def write_stability_report(out: Path, summary: dict) -> Path:
     lines = ["# Stability where methods fail", ""]
     ms = summary.get("multistart")
     if ms:
-        lines += ["## Solvers from many starts", "",
-                  f"{ms['starts']} Latin-hypercube starts per scene and solver; success: final loss within "
-                  f"0.1 % of the best loss of all runs on the scene; step cap {ms['max_steps']} "
-                  f"(Nelder-Mead {ms['nm_steps']}); Adam at learning rates {ms['adam_lrs']}, reported at the "
-                  f"best ({ms['best_adam']}).", ""]
-        lines += solver_table(ms) + ["", "![success rate against median time](solvers.png)", "",
-                                     "Relative spread of each fitted constant (std / |median| over the runs, "
-                                     "median over scenes):", ""]
+        lines += [
+            "## Solvers from many starts",
+            "",
+            f"{ms['starts']} Latin-hypercube starts per scene and solver; success: final loss within "
+            f"0.1 % of the best loss of all runs on the scene; step cap {ms['max_steps']} "
+            f"(Nelder-Mead {ms['nm_steps']}); Adam at learning rates {ms['adam_lrs']}, reported at the "
+            f"best ({ms['best_adam']}).",
+            "",
+        ]
+        lines += solver_table(ms) + [
+            "",
+            "![success rate against median time](solvers.png)",
+            "",
+            "Relative spread of each fitted constant (std / |median| over the runs, "
+            "median over scenes):",
+            "",
+        ]
         lines += spread_table(ms) + ["", "![spread](spread.png)", ""]
         if any(k.startswith("adam") for k in ms["solvers"]):
-            lines += ["Adam's learning-rate sweep:", "", "| learning rate | success rate | median time to stop (s) |",
-                      "|---|---|---|"]
+            lines += [
+                "Adam's learning-rate sweep:",
+                "",
+                "| learning rate | success rate | median time to stop (s) |",
+                "|---|---|---|",
+            ]
             for k, s in ms["solvers"].items():
                 if k.startswith("adam"):
-                    lines.append(f"| {k} | {_fmt(s['success_rate'], 3)} | {_fmt(s['time_to_stop_median'], 3)} |")
+                    lines.append(
+                        f"| {k} | {_fmt(s['success_rate'], 3)} | {_fmt(s['time_to_stop_median'], 3)} |"
+                    )
             lines.append("")
     ls = summary.get("loss")
     if ls:
-        lines += ["## Which residual", "", "FLIP (water pixels, full resolution) of each scene calibrated with the "
-                  "linear-RGB residual and the log residual (`study.fit.losses`).", "",
-                  "| scene | FLIP linear | FLIP log | RMSE linear | RMSE log |", "|---|---|---|---|---|"]
+        lines += [
+            "## Which residual",
+            "",
+            "FLIP (water pixels, full resolution) of each scene calibrated with the "
+            "linear-RGB residual and the log residual (`study.fit.losses`).",
+            "",
+            "| scene | FLIP linear | FLIP log | RMSE linear | RMSE log |",
+            "|---|---|---|---|---|",
+        ]
         for scene, d in ls["per_scene"].items():
             a, b = d.get("linear", {}), d.get("log", {})
-            lines.append(f"| {scene} | {_fmt(a.get('flip'))} | {_fmt(b.get('flip'))} | {_fmt(a.get('rmse'))} | "
-                         f"{_fmt(b.get('rmse'))} |")
-        lines += ["", f"Mean FLIP: linear {_fmt(ls['mean_flip']['linear'])}, log {_fmt(ls['mean_flip']['log'])}; "
-                  f"scenes won: {ls['wins']}; lower mean FLIP: **{ls['winner']}**.", ""]
+            lines.append(
+                f"| {scene} | {_fmt(a.get('flip'))} | {_fmt(b.get('flip'))} | {_fmt(a.get('rmse'))} | "
+                f"{_fmt(b.get('rmse'))} |"
+            )
+        lines += [
+            "",
+            f"Mean FLIP: linear {_fmt(ls['mean_flip']['linear'])}, log {_fmt(ls['mean_flip']['log'])}; "
+            f"scenes won: {ls['wins']}; lower mean FLIP: **{ls['winner']}**.",
+            "",
+        ]
     nz = summary.get("noise")
     if nz:
-        lines += ["## Noise of the references and textures", "",
-                  f"{nz['seeds']} seeds per level at {nz['resolution']}x{nz['resolution']}; the other spp held at "
-                  f"{nz['fixed_spp']}. Bias against the highest level +- its standard error (seeds).", ""]
+        lines += [
+            "## Noise of the references and textures",
+            "",
+            f"{nz['seeds']} seeds per level at {nz['resolution']}x{nz['resolution']}; the other spp held at "
+            f"{nz['fixed_spp']}. Bias against the highest level +- its standard error (seeds).",
+            "",
+        ]
         for which in ("reference", "texture"):
             d = nz.get(which)
             if not d:
                 continue
             names = sorted({n for s in d["stats"].values() for n in s})
-            lines += [f"### {which} spp (cheapest agreeing with {d['levels'][-1]} within one standard error: "
-                      f"**{d['cheapest_agreeing']}**)", "",
-                      "| spp | " + " | ".join(f"`{n}`" for n in names) + " | all agree |",
-                      "|---|" + "---|" * len(names) + "---|"]
+            lines += [
+                f"### {which} spp (cheapest agreeing with {d['levels'][-1]} within one standard error: "
+                f"**{d['cheapest_agreeing']}**)",
+                "",
+                "| spp | " + " | ".join(f"`{n}`" for n in names) + " | all agree |",
+                "|---|" + "---|" * len(names) + "---|",
+            ]
             for spp in d["levels"]:
                 cells = []
                 for n in names:
                     st = d["stats"][spp].get(n, {})
-                    cells.append(f"{_fmt(st.get('mean'))} ({_fmt(st.get('bias'), 2)} +- {_fmt(st.get('bias_se'), 2)})")
-                lines.append(f"| {spp} | " + " | ".join(cells) + f" | {'yes' if d['agrees'][spp] else 'no'} |")
+                    cells.append(
+                        f"{_fmt(st.get('mean'))} ({_fmt(st.get('bias'), 2)} +- {_fmt(st.get('bias_se'), 2)})"
+                    )
+                lines.append(
+                    f"| {spp} | "
+                    + " | ".join(cells)
+                    + f" | {'yes' if d['agrees'][spp] else 'no'} |"
+                )
             lines.append("")
         lines += ["![bias against spp](noise.png)", ""]
     path = Path(out) / "stability.md"

@@ -2,15 +2,18 @@
 Pareto front, the seed's schedule and the recommendation marked, one colour per variant, a row of
 panels per scene) and ``report.md`` (the fronts as tables, the recommendation, what each scene
 needs, each halving of the seed's schedule)."""
+
 from __future__ import annotations
 
 from pathlib import Path
 
 from .calibration import _fmt, _plt
 
-COSTS = {"fetches_mean": "texture fetches / water pixel (mean)",
-         "gl_norm_ms_1080p": "llvmpipe ms / frame, 1920x1080 (normalised)",
-         "port_ms_512": "Dr.Jit LLVM port ms / frame, 512x512"}
+COSTS = {
+    "fetches_mean": "texture fetches / water pixel (mean)",
+    "gl_norm_ms_1080p": "llvmpipe ms / frame, 1920x1080 (normalised)",
+    "port_ms_512": "Dr.Jit LLVM port ms / frame, 512x512",
+}
 MARKERS = {"grid": "o", "scale": "s", "converged": "*", "fixed": "D"}
 
 
@@ -23,8 +26,9 @@ def pareto_figure(path: Path, recs: list, summary: dict) -> Path:
     scenes = list(summary["scenes"])
     variants = list(dict.fromkeys(r["variant"] for r in recs))
     colours = {v: plt.cm.tab10(i % 10) for i, v in enumerate(variants)}
-    fig, axes = plt.subplots(len(scenes), len(COSTS), figsize=(5.2 * len(COSTS), 4.2 * len(scenes)),
-                             squeeze=False)
+    fig, axes = plt.subplots(
+        len(scenes), len(COSTS), figsize=(5.2 * len(COSTS), 4.2 * len(scenes)), squeeze=False
+    )
     for i, scene in enumerate(scenes):
         pts = [r for r in recs if r["experiment"] == scene]
         cands = [r for r in pts if r["kind"] != "converged"]
@@ -34,24 +38,58 @@ def pareto_figure(path: Path, recs: list, summary: dict) -> Path:
             for r in pts:
                 if r.get(cost) is None:
                     continue
-                ax.scatter(r[cost], r["flip"], color=colours[r["variant"]], marker=MARKERS.get(r["kind"], "o"),
-                           s=60 if r["kind"] == "converged" else 22, alpha=0.8, edgecolors="none")
+                ax.scatter(
+                    r[cost],
+                    r["flip"],
+                    color=colours[r["variant"]],
+                    marker=MARKERS.get(r["kind"], "o"),
+                    s=60 if r["kind"] == "converged" else 22,
+                    alpha=0.8,
+                    edgecolors="none",
+                )
             on = summary["scenes"][scene]["fronts_by_cost"][cost]
-            front = sorted((r for r in cands if r["label"] in on and r.get(cost) is not None),
-                           key=lambda r: r[cost])
+            front = sorted(
+                (r for r in cands if r["label"] in on and r.get(cost) is not None),
+                key=lambda r: r[cost],
+            )
             if front:
-                ax.step([r[cost] for r in front], [r["flip"] for r in front], where="post", color="k",
-                        lw=1.0, label="Pareto front")
-            seed = [r for r in cands if r["kind"] == "scale" and r["scale"] == 1.0 and r.get(cost) is not None]
+                ax.step(
+                    [r[cost] for r in front],
+                    [r["flip"] for r in front],
+                    where="post",
+                    color="k",
+                    lw=1.0,
+                    label="Pareto front",
+                )
+            seed = [
+                r
+                for r in cands
+                if r["kind"] == "scale" and r["scale"] == 1.0 and r.get(cost) is not None
+            ]
             for r in seed:
-                ax.scatter(r[cost], r["flip"], s=120, facecolors="none", edgecolors=colours[r["variant"]],
-                           linewidths=1.5)
+                ax.scatter(
+                    r[cost],
+                    r["flip"],
+                    s=120,
+                    facecolors="none",
+                    edgecolors=colours[r["variant"]],
+                    linewidths=1.5,
+                )
             if seed:
-                ax.scatter([], [], s=120, facecolors="none", edgecolors="k", label="seed schedule (10, 3, 40)")
+                ax.scatter(
+                    [],
+                    [],
+                    s=120,
+                    facecolors="none",
+                    edgecolors="k",
+                    label="seed schedule (10, 3, 40)",
+                )
             if rec is not None:
                 match = [r for r in cands if r["label"] == rec["label"] and r.get(cost) is not None]
                 for r in match:
-                    ax.scatter(r[cost], r["flip"], marker="x", s=120, color="red", label="recommended")
+                    ax.scatter(
+                        r[cost], r["flip"], marker="x", s=120, color="red", label="recommended"
+                    )
             ax.set_xscale("log")
             ax.set_xlabel(label, fontsize=9)
             ax.set_ylabel("FLIP on water pixels" if j == 0 else "")
@@ -60,7 +98,9 @@ def pareto_figure(path: Path, recs: list, summary: dict) -> Path:
             if i == 0 and j == 0:
                 for v in variants:
                     ax.scatter([], [], color=colours[v], label=v)
-                ax.scatter([], [], marker="*", color="gray", s=60, label="converged raymarch (floor)")
+                ax.scatter(
+                    [], [], marker="*", color="gray", s=60, label="converged raymarch (floor)"
+                )
                 ax.legend(fontsize=7, loc="upper right")
     fig.tight_layout()
     fig.savefig(path, dpi=110)
@@ -75,83 +115,137 @@ def _sched(rec) -> str:
 def write_tradeoff_report(out: Path, summary: dict) -> Path:
     """``out/report.md`` from the tradeoff summary (the content of summary.json)."""
     from .._io import write_text_atomic
+
+    path = out / "report.md"
+    write_text_atomic(path, tradeoff_report_text(summary))
+    return path
+
+
+def tradeoff_report_text(summary: dict) -> str:
+    """The Markdown of ``report.md`` from the tradeoff summary (the content of summary.json)."""
     tol = summary["tolerance"]
-    lines = ["# Speed against accuracy", "",
-             f"{summary['n_points']} points, {summary['n_failed']} failed. Error: FLIP on the water pixels "
-             "at full resolution against the reference; every point's continuous constants refitted for "
-             "its schedule. Cost: mean texture fetches per water pixel (machine-independent, used for the "
-             "recommendation), llvmpipe frame time at 1920x1080 normalised by a fixed reference shader timed "
-             f"in the same job (reference median {_fmt(summary.get('gl_reference_ms_1080p'), 3)} ms), the "
-             f"port's frame time. Recommendation: the cheapest point within {100 * tol:g} % of the best FLIP.",
-             "", "![error against cost, Pareto fronts](pareto.png)", ""]
+    lines = [
+        "# Speed against accuracy",
+        "",
+        f"{summary['n_points']} points, {summary['n_failed']} failed. Error: FLIP on the water pixels "
+        "at full resolution against the reference; every point's continuous constants refitted for "
+        "its schedule. Cost: mean texture fetches per water pixel (machine-independent, used for the "
+        "recommendation), llvmpipe frame time at 1920x1080 normalised by a fixed reference shader timed "
+        f"in the same job (reference median {_fmt(summary.get('gl_reference_ms_1080p'), 3)} ms), the "
+        f"port's frame time. Recommendation: the cheapest point within {100 * tol:g} % of the best FLIP.",
+        "",
+        "![error against cost, Pareto fronts](pareto.png)",
+        "",
+    ]
     for scene, f in summary["scenes"].items():
         rec, seed = f["recommended"], f["seed"]
         lines += [f"## {scene}", ""]
-        lines += ["| configuration | fetches (mean) | fetches (p99) | GL ms 1080p (norm.) | port ms | FLIP | RMSE |",
-                  "|---|---|---|---|---|---|---|"]
+        lines += [
+            "| configuration | fetches (mean) | fetches (p99) | GL ms 1080p (norm.) | port ms | FLIP | RMSE |",
+            "|---|---|---|---|---|---|---|",
+        ]
         for r in f["front"]:
-            lines.append(f"| {r['label']} | {_fmt(r['fetches_mean'], 3)} | {_fmt(r.get('fetches_p99'), 3)} | "
-                         f"{_fmt(r.get('gl_norm_ms_1080p'), 3)} | {_fmt(r.get('port_ms_512'), 3)} | "
-                         f"{_fmt(r['flip'])} | {_fmt(r['rmse'])} |")
+            lines.append(
+                f"| {r['label']} | {_fmt(r['fetches_mean'], 3)} | {_fmt(r.get('fetches_p99'), 3)} | "
+                f"{_fmt(r.get('gl_norm_ms_1080p'), 3)} | {_fmt(r.get('port_ms_512'), 3)} | "
+                f"{_fmt(r['flip'])} | {_fmt(r['rmse'])} |"
+            )
         lines.append("")
         if rec:
-            lines.append(f"**Recommended**: {rec['label']}: FLIP {_fmt(rec['flip'])} at "
-                         f"{_fmt(rec['fetches_mean'], 3)} fetches per pixel.")
+            lines.append(
+                f"**Recommended**: {rec['label']}: FLIP {_fmt(rec['flip'])} at "
+                f"{_fmt(rec['fetches_mean'], 3)} fetches per pixel."
+            )
         if seed and rec:
-            lines.append(f"The seed's configuration (water_refraction (10, 3, 40), refitted): FLIP "
-                         f"{_fmt(seed['flip'])} at {_fmt(seed['fetches_mean'], 3)} fetches "
-                         f"({_fmt(seed['fetches_mean'] / rec['fetches_mean'], 3)}x the recommended cost, "
-                         f"FLIP {100 * (seed['flip'] / rec['flip'] - 1):+.2f} %).")
+            lines.append(
+                f"The seed's configuration (water_refraction (10, 3, 40), refitted): FLIP "
+                f"{_fmt(seed['flip'])} at {_fmt(seed['fetches_mean'], 3)} fetches "
+                f"({_fmt(seed['fetches_mean'] / rec['fetches_mean'], 3)}x the recommended cost, "
+                f"FLIP {100 * (seed['flip'] / rec['flip'] - 1):+.2f} %)."
+            )
         bw = f.get("best_within_seed_budget")
         if seed and bw:
-            lines.append(f"**Best within the seed's fetch budget** ({_fmt(seed['fetches_mean'], 3)} fetches): "
-                         f"{bw['label']}: FLIP {_fmt(bw['flip'])} at {_fmt(bw['fetches_mean'], 3)} fetches "
-                         f"(the fitted seed: {_fmt(seed['flip'])}, {100 * (bw['flip'] / seed['flip'] - 1):+.1f} %).")
+            lines.append(
+                f"**Best within the seed's fetch budget** ({_fmt(seed['fetches_mean'], 3)} fetches): "
+                f"{bw['label']}: FLIP {_fmt(bw['flip'])} at {_fmt(bw['fetches_mean'], 3)} fetches "
+                f"(the fitted seed: {_fmt(seed['flip'])}, {100 * (bw['flip'] / seed['flip'] - 1):+.1f} %)."
+            )
         if summary.get("images", {}).get(scene):
             lines += ["", f"![{scene}: reference and shaders]({summary['images'][scene]})"]
         pars = {v: d for v, d in f.get("parsimony", {}).items() if d.get("bic") is not None}
         if pars:
             b0 = min(d["bic"] for d in pars.values())
-            lines += ["", "Each variant at the seed's schedule (constants fitted or at a bound; BIC of the fit "
-                      "residual, lower is better, relative to the lowest):", "",
-                      "| variant | constants | FLIP | BIC - min |", "|---|---|---|---|"]
-            lines += [f"| {v} | {d['n_fitted']} | {_fmt(d['flip'])} | {d['bic'] - b0:.0f} |"
-                      for v, d in sorted(pars.items(), key=lambda kv: kv[1]["bic"])]
+            lines += [
+                "",
+                "Each variant at the seed's schedule (constants fitted or at a bound; BIC of the fit "
+                "residual, lower is better, relative to the lowest):",
+                "",
+                "| variant | constants | FLIP | BIC - min |",
+                "|---|---|---|---|",
+            ]
+            lines += [
+                f"| {v} | {d['n_fitted']} | {_fmt(d['flip'])} | {d['bic'] - b0:.0f} |"
+                for v, d in sorted(pars.items(), key=lambda kv: kv[1]["bic"])
+            ]
         lines += ["", "What the scene needs:", ""]
-        lines.append(f"- simplest variant within tolerance: `{f['simplest_variant_within_tolerance']}`; "
-                     "best FLIP per variant: " + ", ".join(f"{v} {_fmt(x)}" for v, x in
-                                                          f["best_flip_by_variant"].items()))
-        lines.append("- error floor (converged raymarch) per variant: " + ", ".join(
-            f"{v} {_fmt(x)}" for v, x in f["error_floor_by_variant"].items()))
-        lines.append("- smallest loop cap at which fewer than 1 % of rays miss the floor: " + ", ".join(
-            f"{v} {x if x is not None else 'none in the grid'}" for v, x in f["smallest_crossing_loop_cap"].items()))
+        lines.append(
+            f"- simplest variant within tolerance: `{f['simplest_variant_within_tolerance']}`; "
+            "best FLIP per variant: "
+            + ", ".join(f"{v} {_fmt(x)}" for v, x in f["best_flip_by_variant"].items())
+        )
+        lines.append(
+            "- error floor (converged raymarch) per variant: "
+            + ", ".join(f"{v} {_fmt(x)}" for v, x in f["error_floor_by_variant"].items())
+        )
+        lines.append(
+            "- smallest loop cap at which fewer than 1 % of rays miss the floor: "
+            + ", ".join(
+                f"{v} {x if x is not None else 'none in the grid'}"
+                for v, x in f["smallest_crossing_loop_cap"].items()
+            )
+        )
         if f["halvings"]:
-            lines += ["", "Each halving of the seed's schedule (scaled family):", "",
-                      "| configuration | scale | fetches | GL ms 1080p (norm.) | FLIP | not crossed |",
-                      "|---|---|---|---|---|---|"]
+            lines += [
+                "",
+                "Each halving of the seed's schedule (scaled family):",
+                "",
+                "| configuration | scale | fetches | GL ms 1080p (norm.) | FLIP | not crossed |",
+                "|---|---|---|---|---|---|",
+            ]
             for r in f["halvings"]:
-                lines.append(f"| {r['label']} | {_fmt(r['scale'], 3)} | {_fmt(r['fetches_mean'], 3)} | "
-                             f"{_fmt(r.get('gl_norm_ms_1080p'), 3)} | {_fmt(r['flip'])} | "
-                             f"{_fmt(r.get('not_crossed'), 3)} |")
+                lines.append(
+                    f"| {r['label']} | {_fmt(r['scale'], 3)} | {_fmt(r['fetches_mean'], 3)} | "
+                    f"{_fmt(r.get('gl_norm_ms_1080p'), 3)} | {_fmt(r['flip'])} | "
+                    f"{_fmt(r.get('not_crossed'), 3)} |"
+                )
         lines.append("")
     if "joint" in summary:
         j = summary["joint"]
-        lines += ["## Joint front (error averaged over the scenes)", "",
-                  "| configuration | fetches (mean) | FLIP (mean) |", "|---|---|---|"]
-        lines += [f"| {r['label']} | {_fmt(r['fetches_mean'], 3)} | {_fmt(r['flip'])} |" for r in j["front"]]
+        lines += [
+            "## Joint front (error averaged over the scenes)",
+            "",
+            "| configuration | fetches (mean) | FLIP (mean) |",
+            "|---|---|---|",
+        ]
+        lines += [
+            f"| {r['label']} | {_fmt(r['fetches_mean'], 3)} | {_fmt(r['flip'])} |"
+            for r in j["front"]
+        ]
         lines += ["", f"**Recommended for all scenes**: {_sched(j['recommended'])}.", ""]
     if summary.get("exports"):
         lines += ["## Exported shaders", ""]
         for scene, e in summary["exports"].items():
             gl = e["gl_check"]
-            lines.append(f"- {scene}: `{e['folder']}` ({e['label']}), compiled with glslangValidator; "
-                         f"llvmpipe vs port mean |diff| {_fmt(gl['mean_abs'], 3)}, p99.9 {_fmt(gl['p999'], 3)}"
-                         + ("" if gl["passed"] else " -- **MISMATCH: do not ship**"))
+            lines.append(
+                f"- {scene}: `{e['folder']}` ({e['label']}), compiled with glslangValidator; "
+                f"llvmpipe vs port mean |diff| {_fmt(gl['mean_abs'], 3)}, p99.9 {_fmt(gl['p999'], 3)}"
+                + ("" if gl["passed"] else " -- **MISMATCH: do not ship**")
+            )
         lines.append("")
     if summary["failures"]:
         lines += ["## Failed points", ""]
-        lines += [f"- {x['experiment']} {x['variant']} {x['schedule']}: {x['error_message']}"
-                  for x in summary["failures"]]
-    path = out / "report.md"
-    write_text_atomic(path, "\n".join(lines) + "\n")
-    return path
+        lines += [
+            f"- {x['experiment']} {x['variant']} {x['schedule']}: {x['error_message']}"
+            for x in summary["failures"]
+        ]
+    return "\n".join(lines) + "\n"

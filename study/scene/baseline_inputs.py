@@ -23,6 +23,7 @@ order (row 0 = bottom of the screen). Linear RGB, float32.
 Cost: two path-traced passes of ``width x height`` rays at ``BASELINE_SPP``;
 cached under ``<cache>/inputs/baseline_<key>.npz`` keyed like the shader inputs.
 """
+
 from __future__ import annotations
 
 import dataclasses
@@ -37,7 +38,7 @@ from .experiment import Experiment
 from .geometry import envmap_image, sky_radiance
 from .mitsuba_scene import build_geometry, sky_params
 
-BASELINE_INPUTS_VERSION = 1   # bump whenever the construction below changes
+BASELINE_INPUTS_VERSION = 1  # bump whenever the construction below changes
 # path-traced samples per pixel of the two views (only the dry walls and their shading are
 # path traced: the floor under the water comes from the top-down texture); measured: see README
 BASELINE_SPP = 32
@@ -63,9 +64,12 @@ def pixel_rays(view_proj: np.ndarray, width: int, height: int):
 
 
 def _dry_scene(mi, exp: Experiment):
-    d = {"type": "scene", **build_geometry(mi, exp, water=False),
-         "sky": {"type": "envmap", "bitmap": mi.Bitmap(envmap_image(512, **sky_params(exp)))},
-         "integrator": {"type": "path", "max_depth": exp["reference.max_depth"]}}
+    d = {
+        "type": "scene",
+        **build_geometry(mi, exp, water=False),
+        "sky": {"type": "envmap", "bitmap": mi.Bitmap(envmap_image(512, **sky_params(exp)))},
+        "integrator": {"type": "path", "max_depth": exp["reference.max_depth"]},
+    }
     return mi.load_dict(d)
 
 
@@ -97,8 +101,12 @@ def _bilinear(tex: np.ndarray, s: np.ndarray, t: np.ndarray) -> np.ndarray:
     a, b = (u - i0)[..., None], (v - j0)[..., None]
     i1, j1 = np.clip(i0 + 1, 0, w - 1), np.clip(j0 + 1, 0, h - 1)
     i0, j0 = np.clip(i0, 0, w - 1), np.clip(j0, 0, h - 1)
-    return ((1 - a) * (1 - b) * tex[j0, i0] + a * (1 - b) * tex[j0, i1]
-            + (1 - a) * b * tex[j1, i0] + a * b * tex[j1, i1])
+    return (
+        (1 - a) * (1 - b) * tex[j0, i0]
+        + a * (1 - b) * tex[j0, i1]
+        + (1 - a) * b * tex[j1, i0]
+        + a * b * tex[j1, i1]
+    )
 
 
 def camera_buffers(mi, exp: Experiment, inputs: ShaderInputs, width: int, height: int, spp: int):
@@ -119,11 +127,20 @@ def camera_buffers(mi, exp: Experiment, inputs: ShaderInputs, width: int, height
     i = np.clip(np.floor(st[:, 0] * wx).astype(int), 0, wx - 1)
     j = np.clip(np.floor(st[:, 1] * hy).astype(int), 0, hy - 1)
     hx, hz = exp["pool.half_extent"]
-    under = (hit & (p[:, 1] < 0.0) & (np.abs(p[:, 0]) < hx) & (np.abs(p[:, 2]) < hz)
-             & (np.abs(wy[j, i] - p[:, 1]) < 0.05))
-    colour = np.where(under[:, None], _bilinear(inputs.refraction_texture, st[:, 0], st[:, 1]), colour)
-    return (colour.reshape(height, width, 3).astype(np.float32),
-            depth.reshape(height, width).astype(np.float32))
+    under = (
+        hit
+        & (p[:, 1] < 0.0)
+        & (np.abs(p[:, 0]) < hx)
+        & (np.abs(p[:, 2]) < hz)
+        & (np.abs(wy[j, i] - p[:, 1]) < 0.05)
+    )
+    colour = np.where(
+        under[:, None], _bilinear(inputs.refraction_texture, st[:, 0], st[:, 1]), colour
+    )
+    return (
+        colour.reshape(height, width, 3).astype(np.float32),
+        depth.reshape(height, width).astype(np.float32),
+    )
 
 
 def reflection_buffer(mi, exp: Experiment, rvp: np.ndarray, width: int, height: int, spp: int):
@@ -133,7 +150,7 @@ def reflection_buffer(mi, exp: Experiment, rvp: np.ndarray, width: int, height: 
     o, d = o.reshape(-1, 3), d.reshape(-1, 3)
     up = d[:, 1] > 1e-6
     t = np.where(up, -o[:, 1] / np.where(up, d[:, 1], 1.0), 0.0)
-    start = o + np.maximum(t, 0.0)[:, None] * d + np.array([0.0, 1e-4, 0.0])   # on the clip plane
+    start = o + np.maximum(t, 0.0)[:, None] * d + np.array([0.0, 1e-4, 0.0])  # on the clip plane
     rad, hit, _ = trace(mi, scene, start, d, spp, exp["reference.seed"] + 1)
     sky = sky_radiance(d, **sky_params(exp, with_sun=False))
     colour = np.where((up & hit)[:, None], rad, sky)
@@ -147,12 +164,17 @@ def build_baseline_inputs(exp: Experiment, inputs: ShaderInputs) -> dict:
     w, h, spp = inputs.width, inputs.height, BASELINE_SPP
     colour, depth = camera_buffers(mi, exp, inputs, w, h, spp)
     rvp = mirrored_view_proj(inputs.view_proj)
-    return {"scene_color": colour, "scene_depth": depth,
-            "reflection_color": reflection_buffer(mi, exp, rvp, w, h, spp), "reflection_view_proj": rvp}
+    return {
+        "scene_color": colour,
+        "scene_depth": depth,
+        "reflection_color": reflection_buffer(mi, exp, rvp, w, h, spp),
+        "reflection_view_proj": rvp,
+    }
 
 
-def with_baseline_inputs(exp: Experiment, inputs: ShaderInputs, variant: str, cache=None,
-                         log=print) -> ShaderInputs:
+def with_baseline_inputs(
+    exp: Experiment, inputs: ShaderInputs, variant: str, cache=None, log=print
+) -> ShaderInputs:
     """``inputs`` with the baseline buffers, from ``<cache>/inputs/baseline_<key>.npz`` when
     present, else built and written there atomically. The key hashes the experiment's
     shader-input values (``Experiment.inputs_hash``), the Mitsuba variant, the resolution,
@@ -166,18 +188,35 @@ def with_baseline_inputs(exp: Experiment, inputs: ShaderInputs, variant: str, ca
     from .reference import SCENE_VERSION, _versions, cache_dir
     from .shader_inputs import INPUTS_VERSION
 
-    key = hashlib.sha256(json.dumps({"inputs": exp.inputs_hash(), "variant": variant,
-                                     "scene_version": SCENE_VERSION, "inputs_version": INPUTS_VERSION,
-                                     "baseline_version": BASELINE_INPUTS_VERSION, "spp": BASELINE_SPP,
-                                     "size": [inputs.width, inputs.height], "versions": _versions()},
-                                    sort_keys=True).encode()).hexdigest()[:32]
+    key = hashlib.sha256(
+        json.dumps(
+            {
+                "inputs": exp.inputs_hash(),
+                "variant": variant,
+                "scene_version": SCENE_VERSION,
+                "inputs_version": INPUTS_VERSION,
+                "baseline_version": BASELINE_INPUTS_VERSION,
+                "spp": BASELINE_SPP,
+                "size": [inputs.width, inputs.height],
+                "versions": _versions(),
+            },
+            sort_keys=True,
+        ).encode()
+    ).hexdigest()[:32]
     path = (cache or cache_dir()) / "inputs" / f"baseline_{key}.npz"
     fields = None
     if path.exists():
         try:
             with np.load(path) as z:
-                fields = {k: z[k] for k in ("scene_color", "scene_depth", "reflection_color",
-                                            "reflection_view_proj")}
+                fields = {
+                    k: z[k]
+                    for k in (
+                        "scene_color",
+                        "scene_depth",
+                        "reflection_color",
+                        "reflection_view_proj",
+                    )
+                }
             log(f"baseline inputs: cached {path}")
         except (OSError, ValueError, KeyError) as exc:
             log(f"baseline inputs: unreadable cache file {path} ({exc}); rebuilding")
@@ -198,11 +237,13 @@ def with_baseline_inputs(exp: Experiment, inputs: ShaderInputs, variant: str, ca
     return dataclasses.replace(inputs, **fields)
 
 
-def inputs_for_shader(exp: Experiment, inputs: ShaderInputs, shader: str, variant: str, cache=None,
-                      log=print) -> ShaderInputs:
+def inputs_for_shader(
+    exp: Experiment, inputs: ShaderInputs, shader: str, variant: str, cache=None, log=print
+) -> ShaderInputs:
     """``inputs`` with whatever optional fields the shader variant ``shader`` reads (its
     ``Variant.inputs``; today only the baseline's buffers), else ``inputs`` unchanged."""
     from shaders_port._variants import get_variant
+
     if get_variant(shader).inputs:
         return with_baseline_inputs(exp, inputs, variant, cache=cache, log=log)
     return inputs

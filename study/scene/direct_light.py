@@ -37,6 +37,7 @@ block by texel block.
 Texture arrays are in GL order (row = t, z increasing; column = s, x increasing), float32, linear
 RGB radiance of the floor seen from above (texel mean over its horizontal area).
 """
+
 from __future__ import annotations
 
 import numpy as np
@@ -45,8 +46,17 @@ from .experiment import Experiment
 from .sun_photons import N_BATCHES, _shape, sun_direct, sun_walk
 
 
-def sky_direct(mi, scene, exp: Experiment, sky: np.ndarray, extent, size: int, n_dirs: int, seed: int,
-               y_cam: float) -> np.ndarray:
+def sky_direct(
+    mi,
+    scene,
+    exp: Experiment,
+    sky: np.ndarray,
+    extent,
+    size: int,
+    n_dirs: int,
+    seed: int,
+    y_cam: float,
+) -> np.ndarray:
     """Direct skylight ``E / pi`` (size, size, 3) float32 (the texel's lighting: multiply by its
     albedo for its radiance) on the surfaces the under-water camera at ``y_cam`` sees, over
     ``extent``, GL order, linear RGB: per texel ``n_dirs`` (a square number) jittered points and
@@ -57,10 +67,14 @@ def sky_direct(mi, scene, exp: Experiment, sky: np.ndarray, extent, size: int, n
 
     F = mi.Float
     water = _shape(scene, "water")
-    emitter = mi.load_dict({"type": "envmap", "bitmap": mi.Bitmap(np.ascontiguousarray(sky, np.float32))})
+    emitter = mi.load_dict(
+        {"type": "envmap", "bitmap": mi.Bitmap(np.ascontiguousarray(sky, np.float32))}
+    )
     side = int(round(np.sqrt(n_dirs)))
     if side * side != n_dirs:
-        raise ValueError(f"reference.sky_directions = {n_dirs}: use a square number (16, 25, 36, ...)")
+        raise ValueError(
+            f"reference.sky_directions = {n_dirs}: use a square number (16, 25, 36, ...)"
+        )
     rng = np.random.default_rng(seed)
     x0, z0, x1, z1 = extent
     n = size * size * n_dirs
@@ -72,31 +86,47 @@ def sky_direct(mi, scene, exp: Experiment, sky: np.ndarray, extent, size: int, n
     u, v = (kd % side + rng.random(n)) / side, (kd // side + rng.random(n)) / side
     del row, col, k, kd
 
-    o = mi.Point3f(F(px.astype(np.float32)), F(np.full(n, y_cam, np.float32)), F(pz.astype(np.float32)))
+    o = mi.Point3f(
+        F(px.astype(np.float32)), F(np.full(n, y_cam, np.float32)), F(pz.astype(np.float32))
+    )
     si = scene.ray_intersect(mi.Ray3f(o, mi.Vector3f(0.0, -1.0, 0.0)))
     ok = si.is_valid() & (si.shape != mi.ShapePtr(water))
-    wo_local = mi.warp.square_to_cosine_hemisphere(mi.Point2f(F(u.astype(np.float32)), F(v.astype(np.float32))))
+    wo_local = mi.warp.square_to_cosine_hemisphere(
+        mi.Point2f(F(u.astype(np.float32)), F(v.astype(np.float32)))
+    )
     frame = mi.Frame3f(dr.select(si.n.y < 0, -si.n, si.n))
     si2 = scene.ray_intersect(si.spawn_ray(frame.to_world(wo_local)), ok)
     ok &= si2.is_valid() & (si2.shape == mi.ShapePtr(water)) & (mi.Frame3f.cos_theta(si2.wi) < 0)
     r, cos_t, _, eta_ti = mi.fresnel(mi.Frame3f.cos_theta(si2.wi), dr.opaque(F, exp["water.ior"]))
-    ok &= cos_t != 0                              # total internal reflection: no skylight this way
+    ok &= cos_t != 0  # total internal reflection: no skylight this way
     wo = si2.to_world(mi.refract(si2.wi, cos_t, eta_ti))
     ok &= ~scene.ray_test(si2.spawn_ray(wo), ok)
     sigma = mi.Color3f(*[dr.opaque(F, float(v)) for v in exp["water.sigma_t"]])
     si_e = dr.zeros(mi.SurfaceInteraction3f, n)
     si_e.wi = -wo
-    value = dr.select(ok, dr.exp(-sigma * si2.t) * (1.0 - r) * dr.square(eta_ti) * emitter.eval(si_e, ok), 0.0)
+    value = dr.select(
+        ok, dr.exp(-sigma * si2.t) * (1.0 - r) * dr.square(eta_ti) * emitter.eval(si_e, ok), 0.0
+    )
     dr.eval(value)
-    out = np.stack([np.array(value[c]) for c in range(3)], -1).reshape(size * size, n_dirs, 3).mean(1)
+    out = (
+        np.stack([np.array(value[c]) for c in range(3)], -1).reshape(size * size, n_dirs, 3).mean(1)
+    )
     if not np.all(np.isfinite(out)):
         raise RuntimeError(f"the traced skylight of {exp['name']!r} has non-finite texels")
     return out.reshape(size, size, 3).astype(np.float32)
 
 
-def traced_direct(exp: Experiment, extent, size: int, seed: int, y_cam: float, albedo: np.ndarray,
-                  inside: np.ndarray, scene, sun_bounces: bool = False
-                  ) -> tuple[np.ndarray, np.ndarray, np.ndarray, dict]:
+def traced_direct(
+    exp: Experiment,
+    extent,
+    size: int,
+    seed: int,
+    y_cam: float,
+    albedo: np.ndarray,
+    inside: np.ndarray,
+    scene,
+    sun_bounces: bool = False,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, dict]:
     """The direct sky- and sunlight's radiance (with ``sun_bounces``, all the sunlight's,
     :func:`.sun_photons.sun_walk`) on the texture's (size, size) texels over
     ``extent`` (GL order, linear RGB), zero outside the (size, size) bool ``inside``: (mean,
@@ -114,7 +144,9 @@ def traced_direct(exp: Experiment, extent, size: int, seed: int, y_cam: float, a
     sky, sun = reference_sky_parts(exp)
     mask = inside[..., None]
     nd = exp["reference.sky_directions"]
-    sky_h = np.stack([sky_direct(mi, scene, exp, sky, extent, size, nd, 2 * seed + h, y_cam) for h in range(2)])
+    sky_h = np.stack(
+        [sky_direct(mi, scene, exp, sky, extent, size, nd, 2 * seed + h, y_cam) for h in range(2)]
+    )
     sky_h = np.where(mask, sky_h * albedo, 0.0)
     sky_raw = sky_h.mean(0)
     sky_se = np.abs(sky_h[0] - sky_h[1]) / 2.0
@@ -131,15 +163,31 @@ def traced_direct(exp: Experiment, extent, size: int, seed: int, y_cam: float, a
     if sun.max() > 0.0:
         per_batch = exp["reference.sun_photons"] * size * size // N_BATCHES
         trace = sun_walk if sun_bounces else sun_direct
-        batches, landed = trace(mi, scene, exp, sun, extent, size, per_batch,
-                                [seed * N_BATCHES + b for b in range(N_BATCHES)], y_cam)
+        batches, landed = trace(
+            mi,
+            scene,
+            exp,
+            sun,
+            extent,
+            size,
+            per_batch,
+            [seed * N_BATCHES + b for b in range(N_BATCHES)],
+            y_cam,
+        )
         batches = np.where(mask, batches, 0.0)
         half = N_BATCHES // 2
         sun_mean = batches.mean(0)
         sun_h = np.stack([batches[:half].mean(0), batches[half:].mean(0)])
         sun_se = np.sqrt(batches.var(0, ddof=1) / N_BATCHES)
-        info.update(sun_photons=per_batch * N_BATCHES, sun_photons_landed=landed,
-                    sun_bounces="photons" if sun_bounces else "path")
-    se = np.sqrt(sky_se ** 2 + sun_se ** 2)
-    return ((sky_mean + sun_mean).astype(np.float32), (sky_h + sun_h).astype(np.float32),
-            se.astype(np.float32), info)
+        info.update(
+            sun_photons=per_batch * N_BATCHES,
+            sun_photons_landed=landed,
+            sun_bounces="photons" if sun_bounces else "path",
+        )
+    se = np.sqrt(sky_se**2 + sun_se**2)
+    return (
+        (sky_mean + sun_mean).astype(np.float32),
+        (sky_h + sun_h).astype(np.float32),
+        se.astype(np.float32),
+        info,
+    )

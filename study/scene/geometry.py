@@ -15,6 +15,7 @@ World units throughout, ``+y`` up, water plane at ``y = 0``. Colours are linear 
 * the sky: a zenith-to-horizon gradient, a constant ground below the horizon, and a sun
   disc of given angular radius and radiance.
 """
+
 from __future__ import annotations
 
 import math
@@ -38,23 +39,34 @@ def wave_vector_bound(components: int) -> int:
 class Waves:
     """The wave height field of an experiment (see module docstring)."""
 
-    def __init__(self, amplitude: float, normal_tile: float, components: int, seed: int,
-                 offsets, slope_scale: float = 1.0):
+    def __init__(
+        self,
+        amplitude: float,
+        normal_tile: float,
+        components: int,
+        seed: int,
+        offsets,
+        slope_scale: float = 1.0,
+    ):
         rng = np.random.default_rng(seed)
-        self.amplitude, self.tile, self.slope_scale = float(amplitude), float(normal_tile), float(slope_scale)
+        self.amplitude, self.tile, self.slope_scale = (
+            float(amplitude),
+            float(normal_tile),
+            float(slope_scale),
+        )
         self.offsets = np.asarray(offsets, dtype=np.float64).reshape(4, 2)
         if not 1 <= components <= MAX_COMPONENTS:
             raise ValueError(f"waves.components = {components}: expected 1 to {MAX_COMPONENTS}")
         kmax = wave_vector_bound(components)
         k = []
-        while len(k) < components:      # ends: the grid holds >= components directions
+        while len(k) < components:  # ends: the grid holds >= components directions
             kv = rng.integers(-kmax, kmax + 1, size=2)
             if kv.any() and not any((kv == q).all() or (kv == -q).all() for q in k):
                 k.append(kv)
-        self.k = np.array(k, dtype=np.float64)                      # (M, 2) integer wave vectors
+        self.k = np.array(k, dtype=np.float64)  # (M, 2) integer wave vectors
         self.phase = rng.uniform(0, 2 * np.pi, size=components)
         a = 1.0 / np.linalg.norm(self.k, axis=1)
-        self.a = a / a.sum()                                        # |h0| <= 1
+        self.a = a / a.sum()  # |h0| <= 1
 
     def _h0(self, u, v):
         arg = 2 * np.pi * (u[..., None] * self.k[:, 0] + v[..., None] * self.k[:, 1]) + self.phase
@@ -65,10 +77,14 @@ class Waves:
     def height_and_gradient(self, x, z):
         """Surface height H and its gradient (dH/dx, dH/dz) at world (x, z); arrays of x's shape."""
         x, z = np.asarray(x, np.float64), np.asarray(z, np.float64)
-        h = np.zeros_like(x); gx = np.zeros_like(x); gz = np.zeros_like(x)
+        h = np.zeros_like(x)
+        gx = np.zeros_like(x)
+        gz = np.zeros_like(x)
         for ou, ov in self.offsets:
             hk, hu, hv = self._h0(x / self.tile + ou, z / self.tile + ov)
-            h += hk; gx += hu / self.tile; gz += hv / self.tile
+            h += hk
+            gx += hu / self.tile
+            gz += hv / self.tile
         s = self.amplitude / 4.0
         return s * h, s * gx, s * gz
 
@@ -84,8 +100,9 @@ class Waves:
         return (0.5 * n + 0.5).astype(np.float32)
 
 
-def floor_height(shape: str, depth: float, relief: float, steps: int, seed: int,
-                 half_extent, x, z) -> np.ndarray:
+def floor_height(
+    shape: str, depth: float, relief: float, steps: int, seed: int, half_extent, x, z
+) -> np.ndarray:
     """World y of the pool floor at (x, z); mean depth ``depth`` below the water plane."""
     x, z = np.asarray(x, np.float64), np.asarray(z, np.float64)
     hx, hz = half_extent
@@ -113,13 +130,22 @@ def sun_direction(elevation_deg: float, azimuth_deg: float) -> np.ndarray:
     return np.array([math.cos(e) * math.cos(a), math.sin(e), math.cos(e) * math.sin(a)])
 
 
-def sky_radiance(d: np.ndarray, zenith, horizon, ground, sun_dir=None, sun_radius_deg=0.0,
-                 sun_radiance=(0.0, 0.0, 0.0)) -> np.ndarray:
+def sky_radiance(
+    d: np.ndarray,
+    zenith,
+    horizon,
+    ground,
+    sun_dir=None,
+    sun_radius_deg=0.0,
+    sun_radiance=(0.0, 0.0, 0.0),
+) -> np.ndarray:
     """Sky radiance (..., 3) in unit directions d (..., 3); the sun disc is included when sun_dir is given."""
     d = np.asarray(d, np.float64)
     y = d[..., 1:2]
     t = np.sqrt(np.clip(y, 0, 1))
-    sky = np.where(y >= 0, (1 - t) * np.asarray(horizon) + t * np.asarray(zenith), np.asarray(ground))
+    sky = np.where(
+        y >= 0, (1 - t) * np.asarray(horizon) + t * np.asarray(zenith), np.asarray(ground)
+    )
     if sun_dir is not None:
         inside = (d @ np.asarray(sun_dir)) >= math.cos(math.radians(sun_radius_deg))
         sky = sky + inside[..., None] * np.asarray(sun_radiance)
@@ -138,9 +164,12 @@ def envmap_image(height: int, **sky) -> np.ndarray:
 
 # GL cube-map faces +X, -X, +Y, -Y, +Z, -Z: direction for face coordinates (sc, tc) in [-1, 1]
 _CUBE_FACES = (
-    lambda s, t: (np.ones_like(s), -t, -s), lambda s, t: (-np.ones_like(s), -t, s),
-    lambda s, t: (s, np.ones_like(s), t), lambda s, t: (s, -np.ones_like(s), -t),
-    lambda s, t: (s, -t, np.ones_like(s)), lambda s, t: (-s, -t, -np.ones_like(s)),
+    lambda s, t: (np.ones_like(s), -t, -s),
+    lambda s, t: (-np.ones_like(s), -t, s),
+    lambda s, t: (s, np.ones_like(s), t),
+    lambda s, t: (s, -np.ones_like(s), -t),
+    lambda s, t: (s, -t, np.ones_like(s)),
+    lambda s, t: (-s, -t, -np.ones_like(s)),
 )
 
 

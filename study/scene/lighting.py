@@ -62,15 +62,16 @@ instead of being biased by it.
 Texture arrays are in GL order (row = t, z increasing; column = s, x increasing), float32,
 linear RGB.
 """
+
 from __future__ import annotations
 
 import numpy as np
 
 from .experiment import Experiment
 
-N_SEEDS = 4          # independent lighting renders (noise estimate from their spread)
-ALBEDO_SPP = 16      # least samples per texel of the dry render that also gives the albedo
-DRY_SAMPLER = "multijitter"   # its sampler (strata without the stratified sampler's correlations)
+N_SEEDS = 4  # independent lighting renders (noise estimate from their spread)
+ALBEDO_SPP = 16  # least samples per texel of the dry render that also gives the albedo
+DRY_SAMPLER = "multijitter"  # its sampler (strata without the stratified sampler's correlations)
 
 
 def pool_extent(exp: Experiment) -> tuple[float, float, float, float]:
@@ -87,9 +88,12 @@ def _top_down_scene(mi, exp: Experiment, *, water: bool, integrator: dict, sky=N
 
     if medium is None:
         medium = water_medium(mi, exp) if water else None
-    d = {"type": "scene", **build_geometry(mi, exp, water=water, medium=medium),
-         "sky": {"type": "envmap", "bitmap": mi.Bitmap(reference_sky(exp) if sky is None else sky)},
-         "integrator": integrator}
+    d = {
+        "type": "scene",
+        **build_geometry(mi, exp, water=water, medium=medium),
+        "sky": {"type": "envmap", "bitmap": mi.Bitmap(reference_sky(exp) if sky is None else sky)},
+        "integrator": integrator,
+    }
     return mi.load_dict(d), medium
 
 
@@ -98,17 +102,22 @@ def lighting_scene(exp: Experiment, water: bool, sky_only: bool = False):
     (``sky_only``: without the sun, :func:`.user_scene.reference_sky_parts`) and the ``aov``
     integrator giving radiance and the first hit's albedo."""
     import mitsuba as mi
+
     sky = None
     if sky_only:
         from .user_scene import reference_sky_parts
+
         sky = reference_sky_parts(exp)[0]
     return _top_down_scene(mi, exp, water=water, integrator=_albedo_aov(exp, water), sky=sky)
 
 
 def _transport(exp: Experiment, water: bool) -> dict:
     from .mitsuba_scene import has_medium
-    return {"type": "volpath" if water and has_medium(exp) else "path",
-            "max_depth": exp["reference.max_depth"]}
+
+    return {
+        "type": "volpath" if water and has_medium(exp) else "path",
+        "max_depth": exp["reference.max_depth"],
+    }
 
 
 def _albedo_aov(exp: Experiment, water: bool, max_depth: int | None = None) -> dict:
@@ -134,7 +143,10 @@ def interpolate(lighting: np.ndarray, extent, X: np.ndarray, Z: np.ndarray) -> n
     n_z, n_x = lighting.shape[:2]
     u = np.clip((X - x0) / (x1 - x0) * n_x - 0.5, 0.0, n_x - 1.0)
     v = np.clip((Z - z0) / (z1 - z0) * n_z - 0.5, 0.0, n_z - 1.0)
-    i0, j0 = np.minimum(np.floor(u).astype(int), n_x - 2), np.minimum(np.floor(v).astype(int), n_z - 2)
+    i0, j0 = (
+        np.minimum(np.floor(u).astype(int), n_x - 2),
+        np.minimum(np.floor(v).astype(int), n_z - 2),
+    )
     fu, fv = (u - i0)[..., None], (v - j0)[..., None]
     a, b = lighting[j0, i0], lighting[j0, i0 + 1]
     c, d = lighting[j0 + 1, i0], lighting[j0 + 1, i0 + 1]
@@ -146,19 +158,27 @@ def denoise_radiance(radiance: np.ndarray, albedo: np.ndarray) -> np.ndarray:
     radiance image guided by its noise-free (n, n, 3) albedo; returns (n, n, 3) float32."""
     try:
         import pyoidn
-    except ImportError as e:                              # pragma: no cover - pinned dependency
-        raise RuntimeError("reference.lighting_denoise = \"oidn\" needs the pyoidn package "
-                           "(pip install pyoidn, pinned in pyproject.toml)") from e
-    out = pyoidn.denoise(np.ascontiguousarray(radiance, np.float32), np.ascontiguousarray(albedo, np.float32),
-                         hdr=True, clean_aux=True, quality="high")
+    except ImportError as e:  # pragma: no cover - pinned dependency
+        raise RuntimeError(
+            'reference.lighting_denoise = "oidn" needs the pyoidn package '
+            "(pip install pyoidn, pinned in pyproject.toml)"
+        ) from e
+    out = pyoidn.denoise(
+        np.ascontiguousarray(radiance, np.float32),
+        np.ascontiguousarray(albedo, np.float32),
+        hdr=True,
+        clean_aux=True,
+        quality="high",
+    )
     out = np.asarray(out, np.float32)
     if out.shape != radiance.shape or not np.all(np.isfinite(out)):
         raise RuntimeError("Open Image Denoise returned a non-finite or misshapen image")
     return np.maximum(out, 0.0)
 
 
-def denoise_gain(denoised: np.ndarray, raw: np.ndarray, raw_se: np.ndarray,
-                 n_independent: float | None = None) -> tuple[list, list]:
+def denoise_gain(
+    denoised: np.ndarray, raw: np.ndarray, raw_se: np.ndarray, n_independent: float | None = None
+) -> tuple[list, list]:
     """Per colour channel, the mean of the ``denoised`` texels over the mean of the ``raw`` texels
     they were denoised from (each (..., 3), linear RGB), and the standard error of that ratio from
     the raw texels' standard errors ``raw_se`` (..., 3), ``n_independent`` of them independent
@@ -170,13 +190,24 @@ def denoise_gain(denoised: np.ndarray, raw: np.ndarray, raw_se: np.ndarray,
     safe = np.where(lit, m_raw, 1.0)
     gain = np.where(lit, denoised.reshape(-1, 3).mean(0) / safe, 1.0)
     n = raw.size // 3 if n_independent is None else n_independent
-    se = np.where(lit, np.sqrt((raw_se.reshape(-1, 3).astype(np.float64) ** 2).mean(0) / n) / safe * gain, 0.0)
+    se = np.where(
+        lit, np.sqrt((raw_se.reshape(-1, 3).astype(np.float64) ** 2).mean(0) / n) / safe * gain, 0.0
+    )
     return [float(g) for g in gain], [float(e) for e in se]
 
 
-def render_lighting(exp: Experiment, size: int, spp: int, seed: int, *, water: bool,
-                    y_cam: float, progress=None, without_direct: bool = False, scene=None
-                    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def render_lighting(
+    exp: Experiment,
+    size: int,
+    spp: int,
+    seed: int,
+    *,
+    water: bool,
+    y_cam: float,
+    progress=None,
+    without_direct: bool = False,
+    scene=None,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Lighting ``radiance / albedo`` (size, size, 3) over the pool (GL order), corrected for the
     absorption of the camera's own vertical ray as ``top_down_colour`` does, and its per-texel
     standard error, from ``N_SEEDS`` renders of ``ceil(spp / N_SEEDS)`` spp each (denoised first
@@ -201,20 +232,29 @@ def render_lighting(exp: Experiment, size: int, spp: int, seed: int, *, water: b
     sensor = _ortho_sensor(mi, extent, size, per_pass, seed, y_cam=y_cam, medium=medium)
     passes, radiances, albedos = [], [], []
     for k in range(N_SEEDS):
-        img = np.array(mi.render(scene, sensor=sensor, spp=per_pass, seed=seed * N_SEEDS + k), np.float32)
+        img = np.array(
+            mi.render(scene, sensor=sensor, spp=per_pass, seed=seed * N_SEEDS + k), np.float32
+        )
         img = _to_gl_order(mi, sensor, img, extent)
         radiance, albedo = img[..., :3], img[..., 3:6]
         if direct is not None:
-            d3 = np.array(mi.render(scene, sensor=sensor, integrator=direct, spp=per_pass,
-                                    seed=seed * N_SEEDS + k), np.float32)
+            d3 = np.array(
+                mi.render(
+                    scene, sensor=sensor, integrator=direct, spp=per_pass, seed=seed * N_SEEDS + k
+                ),
+                np.float32,
+            )
             radiance = radiance - _to_gl_order(mi, sensor, d3, extent)[..., :3]
             _check_lockstep(radiance, img[..., :3], exp)
             radiance = np.maximum(radiance, 0.0)
         if np.any(albedo <= 0.0):
             from .experiment import ExperimentError
-            raise ExperimentError("the lighting render found texels of zero floor albedo (floor.tile_albedo, "
-                                  "floor.albedo_image); use reference.texture_method = \"colour\" for such "
-                                  "a floor")
+
+            raise ExperimentError(
+                "the lighting render found texels of zero floor albedo (floor.tile_albedo, "
+                'floor.albedo_image); use reference.texture_method = "colour" for such '
+                "a floor"
+            )
         passes.append(radiance / albedo)
         radiances.append(radiance)
         albedos.append(albedo)
@@ -222,7 +262,7 @@ def render_lighting(exp: Experiment, size: int, spp: int, seed: int, *, water: b
             progress(k + 1, N_SEEDS)
     passes = np.stack(passes)
     lighting = passes.mean(0)
-    halves = np.stack([passes[: N_SEEDS // 2].mean(0), passes[N_SEEDS // 2:].mean(0)])
+    halves = np.stack([passes[: N_SEEDS // 2].mean(0), passes[N_SEEDS // 2 :].mean(0)])
     stderr = np.sqrt(passes.var(0, ddof=1) / N_SEEDS)
     if exp["reference.lighting_denoise"] != "none":
         albedo = np.mean(albedos, axis=0)
@@ -230,13 +270,17 @@ def render_lighting(exp: Experiment, size: int, spp: int, seed: int, *, water: b
     if water:
         world_y = top_down_world_y(exp, extent, size)
         from .shader_inputs import MAX_OPTICAL_DEPTH, camera_ray_optical_depth
+
         optical = camera_ray_optical_depth(exp, y_cam, world_y)
         if optical.max() > MAX_OPTICAL_DEPTH:
             from .experiment import ExperimentError
-            raise ExperimentError(f"water.sigma_t: the floor's light through the water is lost (optical depth "
-                                  f"{optical.max():.3g} above the floor, more than {MAX_OPTICAL_DEPTH:g}); the "
-                                  "lighting texture cannot recover it: use reference.texture_method = "
-                                  "\"colour\" (the dry floor stands in there) or less absorption")
+
+            raise ExperimentError(
+                f"water.sigma_t: the floor's light through the water is lost (optical depth "
+                f"{optical.max():.3g} above the floor, more than {MAX_OPTICAL_DEPTH:g}); the "
+                "lighting texture cannot recover it: use reference.texture_method = "
+                '"colour" (the dry floor stands in there) or less absorption'
+            )
         gain = np.exp(optical)
         lighting, stderr, halves = lighting * gain, stderr * gain, halves * gain
     if not np.all(np.isfinite(lighting)):
@@ -250,19 +294,24 @@ def _check_lockstep(rest: np.ndarray, full: np.ndarray, exp: Experiment) -> None
     its random numbers differently), and the subtraction would be wrong."""
     floor = -1e-4 * max(float(full.max()), 1e-6)
     if rest.min() < floor:
-        raise RuntimeError(f"the lighting render of {exp['name']!r}: the direct pass is brighter than the full "
-                           f"pass in some texels (min {rest.min():.3g}): the two renders did not follow the same "
-                           "paths; use reference.lighting_direct = \"path\"")
+        raise RuntimeError(
+            f"the lighting render of {exp['name']!r}: the direct pass is brighter than the full "
+            f"pass in some texels (min {rest.min():.3g}): the two renders did not follow the same "
+            'paths; use reference.lighting_direct = "path"'
+        )
 
 
 def dry_spp(spp: int) -> int:
     """Samples per texel of the dry render for ``reference.wall_spp = spp``: at least
     ``ALBEDO_SPP``, rounded up to the multi-jittered sampler's grid."""
     from .mitsuba_scene import sampler_spp
+
     return sampler_spp(DRY_SAMPLER, max(spp, ALBEDO_SPP))
 
 
-def render_dry(exp: Experiment, extent, size: int, spp: int, seed: int) -> tuple[np.ndarray, np.ndarray]:
+def render_dry(
+    exp: Experiment, extent, size: int, spp: int, seed: int
+) -> tuple[np.ndarray, np.ndarray]:
     """(colour, albedo), each (size, size, 3) GL order: the dry scene (no water) seen from above,
     path traced at :func:`dry_spp` multi-jittered spp, and the texel-mean albedo of the first surface
     hit, from the same samples (one scene, one render)."""
@@ -274,27 +323,37 @@ def render_dry(exp: Experiment, extent, size: int, spp: int, seed: int) -> tuple
 
     spp = dry_spp(spp)
     scene, _ = _top_down_scene(mi, exp, water=False, integrator=_albedo_aov(exp, False))
-    sensor = _ortho_sensor(mi, extent, size, spp, seed, y_cam=dry_camera_height(mi, exp, extent),
-                           sampler=DRY_SAMPLER)
-    img = _to_gl_order(mi, sensor, np.array(mi.render(scene, sensor=sensor, spp=spp, seed=seed), np.float32),
-                       extent)
+    sensor = _ortho_sensor(
+        mi, extent, size, spp, seed, y_cam=dry_camera_height(mi, exp, extent), sampler=DRY_SAMPLER
+    )
+    img = _to_gl_order(
+        mi,
+        sensor,
+        np.array(mi.render(scene, sensor=sensor, spp=spp, seed=seed), np.float32),
+        extent,
+    )
     return img[..., :3], img[..., 3:6]
 
 
-def denoise_dry(dry: np.ndarray, albedo: np.ndarray, outside: np.ndarray) -> tuple[np.ndarray, dict]:
+def denoise_dry(
+    dry: np.ndarray, albedo: np.ndarray, outside: np.ndarray
+) -> tuple[np.ndarray, dict]:
     """The (n, n, 3) linear-RGB dry render denoised by Open Image Denoise guided by its albedo
     (``reference.wall_denoise = "oidn"``), its mean over the (n, n) bool ``outside`` texels (the
     only ones the texture takes from it) matched per colour channel to the raw mean there; and a
     dict with that ratio (denoised / raw, before the match). At 16 spp its texels' noise is 5-8 %,
     and noise in the shader's inputs biases the fit (README, Fast references)."""
     den = denoise_radiance(dry, np.maximum(albedo, 1e-3))
-    ratio, _ = denoise_gain(den[outside], dry[outside], np.zeros_like(dry[outside]))   # no per-texel SE here
+    ratio, _ = denoise_gain(
+        den[outside], dry[outside], np.zeros_like(dry[outside])
+    )  # no per-texel SE here
     g = np.asarray(ratio, np.float32)
     return (den / np.where(g > 0.0, g, 1.0)).astype(np.float32), {"wall_denoise_gain": ratio}
 
 
-def lighting_colour(exp: Experiment, extent, size: int, seed: int = 0, world_y=None,
-                    progress=None) -> tuple[np.ndarray, dict, np.ndarray]:
+def lighting_colour(
+    exp: Experiment, extent, size: int, seed: int = 0, world_y=None, progress=None
+) -> tuple[np.ndarray, dict, np.ndarray]:
     """(size, size, 3) float32 linear RGB top-down colour over ``extent`` (GL order) by
     lighting x albedo inside the pool and the dry colour render outside; a dict with the
     measured noise (``noise``: RMS standard error of the colour over the pool texels) and the
@@ -304,17 +363,30 @@ def lighting_colour(exp: Experiment, extent, size: int, seed: int = 0, world_y=N
 
     wet = exp["reference.refraction_lighting"] == "underwater"
     y_cam = underwater_camera_height(exp) if wet else 100.0
-    n_light = min(exp["reference.lighting_size"], size)     # never finer than the texture
+    n_light = min(exp["reference.lighting_size"], size)  # never finer than the texture
     # traced: under water, paths long enough to hold the direct term, and water that only absorbs
     # (in scattering water the max_depth-3 pass also holds light scattered on the camera's own ray)
-    traced = (wet and exp["reference.lighting_direct"] == "traced" and exp["reference.max_depth"] >= 3
-              and max(exp["water.albedo"]) == 0.0)
+    traced = (
+        wet
+        and exp["reference.lighting_direct"] == "traced"
+        and exp["reference.max_depth"] >= 3
+        and max(exp["water.albedo"]) == 0.0
+    )
     spp = exp["reference.bounce_spp"] if traced else exp["reference.texture_spp"]
     # sun_bounces: all the sun's light traced from the sun, so the path tracer sees the sky alone
     sun_bounces = traced and exp["reference.sun_bounces"] == "photons"
     scene = lighting_scene(exp, wet, sky_only=sun_bounces)
-    lighting, lighting_se, halves = render_lighting(exp, n_light, spp, seed, water=wet, y_cam=y_cam,
-                                                    progress=progress, without_direct=traced, scene=scene)
+    lighting, lighting_se, halves = render_lighting(
+        exp,
+        n_light,
+        spp,
+        seed,
+        water=wet,
+        y_cam=y_cam,
+        progress=progress,
+        without_direct=traced,
+        scene=scene,
+    )
     dry, albedo = render_dry(exp, extent, size, exp["reference.wall_spp"], seed)
     if world_y is None:
         world_y = top_down_world_y(exp, extent, size)
@@ -327,28 +399,45 @@ def lighting_colour(exp: Experiment, extent, size: int, seed: int = 0, world_y=N
     if exp["reference.wall_denoise"] == "oidn" and not inside.all():
         dry, wall_info = denoise_dry(dry, albedo, ~inside)
 
-    def compose(light):          # lighting x albedo inside the pool, the dry render outside
+    def compose(light):  # lighting x albedo inside the pool, the dry render outside
         return np.where(inside[..., None], interpolate(light, pool, X, Z) * albedo, dry)
+
     colour, colour_halves = compose(lighting), np.stack([compose(h) for h in halves])
     se = interpolate(lighting_se, pool, X, Z) * albedo
     noise = float(np.sqrt(np.mean(se[inside] ** 2))) if inside.any() else 0.0
-    info = {"method": "lighting", "lighting_size": n_light, "spp": spp,
-            "wall_spp": dry_spp(exp["reference.wall_spp"]), "noise": noise, "n_seeds": N_SEEDS,
-            "denoise": exp["reference.lighting_denoise"], "direct": "traced" if traced else "path", **wall_info}
+    info = {
+        "method": "lighting",
+        "lighting_size": n_light,
+        "spp": spp,
+        "wall_spp": dry_spp(exp["reference.wall_spp"]),
+        "noise": noise,
+        "n_seeds": N_SEEDS,
+        "denoise": exp["reference.lighting_denoise"],
+        "direct": "traced" if traced else "path",
+        **wall_info,
+    }
     if exp["reference.lighting_denoise"] != "none" and inside.any():
         # the denoiser's brightness against the raw mean of its own samples, as the shader sees it
         # (albedo-weighted, on the texture; the lighting grid's texels taken as independent)
-        gain, gain_se = denoise_gain(colour[inside], colour_halves.mean(0)[inside], se[inside],
-                                     n_independent=n_light ** 2 * float(inside.mean()))
+        gain, gain_se = denoise_gain(
+            colour[inside],
+            colour_halves.mean(0)[inside],
+            se[inside],
+            n_independent=n_light**2 * float(inside.mean()),
+        )
         info["denoise_gain"], info["denoise_gain_se"] = gain, gain_se
-        if exp["reference.lighting_denoise"] == "oidn":      # the path tracer's brightness, the denoiser's detail
+        if (
+            exp["reference.lighting_denoise"] == "oidn"
+        ):  # the path tracer's brightness, the denoiser's detail
             g = np.asarray(gain, np.float32)
             colour = np.where(inside[..., None], colour / np.where(g > 0.0, g, 1.0), colour)
             info["denoise_matched"] = True
-    if traced:                   # the direct sky- and sunlight, ray traced on the texture's texels
+    if traced:  # the direct sky- and sunlight, ray traced on the texture's texels
         from .direct_light import traced_direct
-        d_mean, d_halves, d_se, d_info = traced_direct(exp, extent, size, seed, y_cam, albedo, inside,
-                                                       scene=scene[0], sun_bounces=sun_bounces)
+
+        d_mean, d_halves, d_se, d_info = traced_direct(
+            exp, extent, size, seed, y_cam, albedo, inside, scene=scene[0], sun_bounces=sun_bounces
+        )
         colour, colour_halves = colour + d_mean, colour_halves + d_halves
         if inside.any():
             info["noise"] = float(np.sqrt(np.mean(se[inside] ** 2 + d_se[inside] ** 2)))

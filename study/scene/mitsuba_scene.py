@@ -22,6 +22,7 @@
 
 Nothing here sets the Mitsuba variant; call ``study._backend.init_backend`` first.
 """
+
 from __future__ import annotations
 
 import math
@@ -33,37 +34,45 @@ from shaders_port import perspective_view_proj
 from .experiment import Experiment
 from .geometry import Waves, floor_height, sun_direction
 
-WATER_INSET = 1e-3   # the water volume stays this far inside the walls (no coincident faces)
-LEDGE_GAP = 0.02     # the ends of an under-water ledge stay this far from the walls (and the
-                     # water volume's sides), so no faces intersect
+WATER_INSET = 1e-3  # the water volume stays this far inside the walls (no coincident faces)
+LEDGE_GAP = 0.02  # the ends of an under-water ledge stay this far from the walls (and the
+# water volume's sides), so no faces intersect
 
 
 def waves_of(exp: Experiment) -> Waves:
     w = exp.section("waves")
-    return Waves(w["amplitude"], w["normal_tile"], w["components"], w["seed"], w["offsets"],
-                 w["slope_scale"])
+    return Waves(
+        w["amplitude"], w["normal_tile"], w["components"], w["seed"], w["offsets"], w["slope_scale"]
+    )
 
 
 def floor_of(exp: Experiment, x, z) -> np.ndarray:
     f = exp.section("floor")
     if f["shape"] == "heightmap":
         from .user_files import heightmap_floor
+
         return heightmap_floor(exp.values, x, z)
-    return floor_height(f["shape"], f["depth"], f["relief"], f["steps"], f["seed"],
-                        exp["pool.half_extent"], x, z)
+    return floor_height(
+        f["shape"], f["depth"], f["relief"], f["steps"], f["seed"], exp["pool.half_extent"], x, z
+    )
 
 
 def sky_params(exp: Experiment, with_sun: bool = True) -> dict:
     p = dict(zenith=exp["sky.zenith"], horizon=exp["sky.horizon"], ground=exp["sky.ground"])
     if with_sun:
-        p.update(sun_dir=sun_direction(exp["sun.elevation"], exp["sun.azimuth"]),
-                 sun_radius_deg=exp["sun.radius"], sun_radiance=exp["sun.radiance"])
+        p.update(
+            sun_dir=sun_direction(exp["sun.elevation"], exp["sun.azimuth"]),
+            sun_radius_deg=exp["sun.radius"],
+            sun_radiance=exp["sun.radiance"],
+        )
     return p
 
 
 def camera_view_proj(exp: Experiment, width: int, height: int) -> np.ndarray:
     c = exp.section("camera")
-    return perspective_view_proj(c["position"], c["target"], fov_y_deg=c["fov_y"], aspect=width / height)
+    return perspective_view_proj(
+        c["position"], c["target"], fov_y_deg=c["fov_y"], aspect=width / height
+    )
 
 
 def floor_bottom(exp: Experiment) -> float:
@@ -86,8 +95,14 @@ def _mesh(mi, name, positions, faces, normals=None, uv=None, outward=None, **pro
     props = mi.Properties()
     for k, v in props_in.items():
         props[k] = v
-    m = mi.Mesh(name, len(positions), len(faces), props=props,
-                has_vertex_normals=normals is not None, has_vertex_texcoords=uv is not None)
+    m = mi.Mesh(
+        name,
+        len(positions),
+        len(faces),
+        props=props,
+        has_vertex_normals=normals is not None,
+        has_vertex_texcoords=uv is not None,
+    )
     params = mi.traverse(m)
     params["vertex_positions"] = positions.ravel()
     params["faces"] = faces.ravel()
@@ -112,6 +127,7 @@ def tile_texture(exp: Experiment, px_per_tile: int = 32) -> np.ndarray:
     f = exp.section("floor")
     if f["albedo_image"]:
         from .user_files import albedo_over_pool
+
         return albedo_over_pool(exp.values)
     hx, hz = exp["pool.half_extent"]
     nx = max(8, int(round(2 * hx / f["tile_size"] * px_per_tile)))
@@ -128,8 +144,14 @@ def tile_texture(exp: Experiment, px_per_tile: int = 32) -> np.ndarray:
     return np.where(grout, 0.5 * col, col).astype(np.float32)
 
 
-def build_geometry(mi, exp: Experiment, water: bool = True, medium=None, mesh: bool = True,
-                   water_bsdf: dict | None = None) -> dict:
+def build_geometry(
+    mi,
+    exp: Experiment,
+    water: bool = True,
+    medium=None,
+    mesh: bool = True,
+    water_bsdf: dict | None = None,
+) -> dict:
     """Shapes of the scene as a dict for ``mi.load_dict`` (no sensor, emitter or integrator).
     ``medium``: the water's medium object (default: a new one from :func:`water_medium`);
     ``mesh``: include the user's mesh above the water (``mesh.file``), if any; ``water_bsdf``:
@@ -144,33 +166,62 @@ def build_geometry(mi, exp: Experiment, water: bool = True, medium=None, mesh: b
     y = floor_of(exp, x, z)
     pos = np.stack([x, y, z], -1).reshape(-1, 3)
     uv = np.stack([(x + hx) / (2 * hx), (z + hz) / (2 * hz)], -1).reshape(-1, 2)
-    tex = mi.load_dict({"type": "bitmap", "bitmap": mi.Bitmap(tile_texture(exp)), "raw": True,
-                        "filter_type": "bilinear", "wrap_mode": "clamp"})
-    out["floor"] = _mesh(mi, "floor", pos, _grid_faces(nfx, nfz), uv=uv, outward=np.array([0, 1, 0]),
-                         bsdf=mi.load_dict({"type": "diffuse", "reflectance": tex}))
+    tex = mi.load_dict(
+        {
+            "type": "bitmap",
+            "bitmap": mi.Bitmap(tile_texture(exp)),
+            "raw": True,
+            "filter_type": "bilinear",
+            "wrap_mode": "clamp",
+        }
+    )
+    out["floor"] = _mesh(
+        mi,
+        "floor",
+        pos,
+        _grid_faces(nfx, nfz),
+        uv=uv,
+        outward=np.array([0, 1, 0]),
+        bsdf=mi.load_dict({"type": "diffuse", "reflectance": tex}),
+    )
     # ---- walls
     w, top = exp["pool.wall_width"], exp["pool.wall_height"]
-    wall_bsdf = {"type": "diffuse", "reflectance": {"type": "rgb", "value": exp["pool.wall_albedo"]}}
-    boxes = {"wall_px": ((hx, hx + w), (-hz - w, hz + w)), "wall_nx": ((-hx - w, -hx), (-hz - w, hz + w)),
-             "wall_pz": ((-hx, hx), (hz, hz + w)), "wall_nz": ((-hx, hx), (-hz - w, -hz))}
+    wall_bsdf = {
+        "type": "diffuse",
+        "reflectance": {"type": "rgb", "value": exp["pool.wall_albedo"]},
+    }
+    boxes = {
+        "wall_px": ((hx, hx + w), (-hz - w, hz + w)),
+        "wall_nx": ((-hx - w, -hx), (-hz - w, hz + w)),
+        "wall_pz": ((-hx, hx), (hz, hz + w)),
+        "wall_nz": ((-hx, hx), (-hz - w, -hz)),
+    }
     T = mi.ScalarTransform4f
     for name, ((x0, x1), (z0, z1)) in boxes.items():
-        out[name] = {"type": "cube", "bsdf": wall_bsdf,
-                     "to_world": T().translate([(x0 + x1) / 2, (yb + top) / 2, (z0 + z1) / 2])
-                     @ T().scale([(x1 - x0) / 2, (top - yb) / 2, (z1 - z0) / 2])}
+        out[name] = {
+            "type": "cube",
+            "bsdf": wall_bsdf,
+            "to_world": T().translate([(x0 + x1) / 2, (yb + top) / 2, (z0 + z1) / 2])
+            @ T().scale([(x1 - x0) / 2, (top - yb) / 2, (z1 - z0) / 2]),
+        }
     x_min, x_max, top, thick = exp["floor.ledge"]
-    if thick > 0.0:   # an under-water slab across the pool in z (see floor.ledge)
+    if thick > 0.0:  # an under-water slab across the pool in z (see floor.ledge)
         zl = hz - LEDGE_GAP
-        out["ledge"] = {"type": "cube", "bsdf": wall_bsdf,
-                        "to_world": T().translate([(x_min + x_max) / 2, top - thick / 2, 0.0])
-                        @ T().scale([(x_max - x_min) / 2, thick / 2, zl])}
+        out["ledge"] = {
+            "type": "cube",
+            "bsdf": wall_bsdf,
+            "to_world": T().translate([(x_min + x_max) / 2, top - thick / 2, 0.0])
+            @ T().scale([(x_max - x_min) / 2, thick / 2, zl]),
+        }
     if mesh and exp["mesh.file"]:
         from .user_scene import mesh_bounds, mesh_shape
-        mesh_bounds(mi, exp)                      # loadable and above the water
+
+        mesh_bounds(mi, exp)  # loadable and above the water
         out["mesh"] = mesh_shape(mi, exp)
     if water:
-        out["water"] = water_mesh(mi, exp, yb, medium if medium is not None else water_medium(mi, exp),
-                                  water_bsdf)
+        out["water"] = water_mesh(
+            mi, exp, yb, medium if medium is not None else water_medium(mi, exp), water_bsdf
+        )
     return out
 
 
@@ -181,10 +232,14 @@ def water_medium(mi, exp: Experiment):
     # sigma_t enters as an RGB in [0, 1] times a scalar scale (Mitsuba's RGB volume
     # values are reflectance-like and must lie in [0, 1])
     scale = max(exp["water.sigma_t"])
-    return mi.load_dict({
-        "type": "homogeneous", "scale": scale,
-        "sigma_t": {"type": "rgb", "value": [v / scale for v in exp["water.sigma_t"]]},
-        "albedo": {"type": "rgb", "value": exp["water.albedo"]}})
+    return mi.load_dict(
+        {
+            "type": "homogeneous",
+            "scale": scale,
+            "sigma_t": {"type": "rgb", "value": [v / scale for v in exp["water.sigma_t"]]},
+            "albedo": {"type": "rgb", "value": exp["water.albedo"]},
+        }
+    )
 
 
 def water_mesh(mi, exp: Experiment, y_bottom: float, medium=None, bsdf: dict | None = None):
@@ -212,8 +267,14 @@ def water_mesh(mi, exp: Experiment, y_bottom: float, medium=None, bsdf: dict | N
     m = len(ring)
     mid = 0.5 * (p0 + p1)
     on_x = np.abs(mid[:, 0]) >= hx - 1e-6
-    side_n = np.stack([np.where(on_x, np.sign(mid[:, 0]), 0.0), np.zeros(m),
-                       np.where(on_x, 0.0, np.sign(mid[:, 2]))], -1)
+    side_n = np.stack(
+        [
+            np.where(on_x, np.sign(mid[:, 0]), 0.0),
+            np.zeros(m),
+            np.where(on_x, 0.0, np.sign(mid[:, 2])),
+        ],
+        -1,
+    )
     # each side quad has its own 4 vertices (flat shading): p0, p1 on top, then at the bottom
     q = np.stack([p0, p1, p1, p0], 1)
     q[:, 2:, 1] = y_bottom
@@ -230,11 +291,15 @@ def water_mesh(mi, exp: Experiment, y_bottom: float, medium=None, bsdf: dict | N
     faces.append(np.stack([b0 + k, b0 + (k + 1) % m, np.full(m, b0 + m)], 1))
     pos, nor, faces = np.concatenate(pos), np.concatenate(nor), np.concatenate(faces)
     nt = (n - 1) * (n - 1) * 2
-    outward = np.concatenate([np.tile([0.0, 1.0, 0.0], (nt, 1)), side_n, side_n,
-                              np.tile([0.0, -1.0, 0.0], (m, 1))])
+    outward = np.concatenate(
+        [np.tile([0.0, 1.0, 0.0], (nt, 1)), side_n, side_n, np.tile([0.0, -1.0, 0.0], (m, 1))]
+    )
 
-    props = {"bsdf": mi.load_dict({"type": "dielectric", "int_ior": exp["water.ior"], "ext_ior": 1.0,
-                                   **(bsdf or {})})}
+    props = {
+        "bsdf": mi.load_dict(
+            {"type": "dielectric", "int_ior": exp["water.ior"], "ext_ior": 1.0, **(bsdf or {})}
+        )
+    }
     if medium is not None:
         props["interior"] = medium
     return _mesh(mi, "water", pos, faces, normals=nor, outward=outward, **props)
@@ -259,8 +324,9 @@ def sampler_spp(sampler: str, spp: int) -> int:
     return spp
 
 
-def dimension_correlation(mi, sampler: str, spp: int = 36, n_pixels: int = 4096,
-                          dims: int = 12) -> tuple[float, float]:
+def dimension_correlation(
+    mi, sampler: str, spp: int = 36, n_pixels: int = 4096, dims: int = 12
+) -> tuple[float, float]:
     """Mean correlation of sample dimension d with d+1 of Mitsuba's ``sampler`` over ``dims``
     1-D draws of ``n_pixels`` x ``spp`` samples (seed 0), and its standard error from the spread
     of the ``dims - 1`` pairs. A path tracer assumes independent dimensions: the ``stratified``
@@ -273,28 +339,56 @@ def dimension_correlation(mi, sampler: str, spp: int = 36, n_pixels: int = 4096,
     return float(pairs.mean()), float(pairs.std(ddof=1) / np.sqrt(len(pairs)))
 
 
-def build_scene(exp: Experiment, width: int | None = None, height: int | None = None, seed: int = 0,
-                *, water_bsdf: dict | None = None, rows: tuple[int, int] | None = None):
+def build_scene(
+    exp: Experiment,
+    width: int | None = None,
+    height: int | None = None,
+    seed: int = 0,
+    *,
+    water_bsdf: dict | None = None,
+    rows: tuple[int, int] | None = None,
+):
     """The reference scene (perspective camera, box pixel filter, ``reference.sampler``) as a
     loaded ``mi.Scene`` (render it with :func:`study.scene.reference.pass_spp` samples per pass).
     ``water_bsdf``: extra properties of the water's dielectric (:func:`water_mesh`); ``rows``:
     render only image rows ``[r0, r1)`` (a film crop; row 0 at the top)."""
     import mitsuba as mi
+
     width = width or exp["resolution"][0]
     height = height or exp["resolution"][1]
     c = exp.section("camera")
     d = {"type": "scene", **build_geometry(mi, exp, water=True, water_bsdf=water_bsdf)}
     from .user_scene import reference_sky
+
     d["sky"] = {"type": "envmap", "bitmap": mi.Bitmap(reference_sky(exp))}
     d["sensor"] = {
-        "type": "perspective", "fov": c["fov_y"], "fov_axis": "y",
-        "to_world": mi.ScalarTransform4f().look_at(origin=c["position"], target=c["target"], up=[0, 1, 0]),
+        "type": "perspective",
+        "fov": c["fov_y"],
+        "fov_axis": "y",
+        "to_world": mi.ScalarTransform4f().look_at(
+            origin=c["position"], target=c["target"], up=[0, 1, 0]
+        ),
         "sampler": {"type": exp["reference.sampler"], "seed": seed},
-        "film": {"type": "hdrfilm", "width": width, "height": height, "pixel_format": "rgb",
-                 "rfilter": {"type": "box"},
-                 **({"crop_offset_x": 0, "crop_offset_y": rows[0], "crop_width": width,
-                     "crop_height": rows[1] - rows[0]} if rows is not None else {})},
+        "film": {
+            "type": "hdrfilm",
+            "width": width,
+            "height": height,
+            "pixel_format": "rgb",
+            "rfilter": {"type": "box"},
+            **(
+                {
+                    "crop_offset_x": 0,
+                    "crop_offset_y": rows[0],
+                    "crop_width": width,
+                    "crop_height": rows[1] - rows[0],
+                }
+                if rows is not None
+                else {}
+            ),
+        },
     }
-    d["integrator"] = {"type": "volpath" if has_medium(exp) else "path",
-                       "max_depth": exp["reference.max_depth"]}
+    d["integrator"] = {
+        "type": "volpath" if has_medium(exp) else "path",
+        "max_depth": exp["reference.max_depth"],
+    }
     return mi.load_dict(d)

@@ -25,6 +25,7 @@ affects the image, the spp policy, the variant, the versions of Mitsuba and Dr.J
 the full provenance and the key is re-checked on load, so a stale or foreign file is never
 reused. Files are written atomically.
 """
+
 from __future__ import annotations
 
 import hashlib
@@ -78,12 +79,18 @@ def cache_dir() -> Path:
 def _versions() -> dict:
     import drjit
     import mitsuba
+
     return {"mitsuba": mitsuba.__version__, "drjit": drjit.__version__}
 
 
 def reference_key(exp: Experiment, variant: str) -> str:
-    data = {"scene": exp.scene_hash(), "variant": variant, "scene_version": SCENE_VERSION,
-            "versions": _versions(), "n_seeds": N_SEEDS}
+    data = {
+        "scene": exp.scene_hash(),
+        "variant": variant,
+        "scene_version": SCENE_VERSION,
+        "versions": _versions(),
+        "n_seeds": N_SEEDS,
+    }
     return hashlib.sha256(json.dumps(data, sort_keys=True).encode()).hexdigest()[:32]
 
 
@@ -92,11 +99,13 @@ def pass_spp(exp: Experiment, spp: int) -> int:
     rounded up to a count ``reference.sampler`` can stratify (:func:`~.mitsuba_scene.sampler_spp`:
     128 spp are 4 passes of 35 for ``multijitter``, of 36 for ``stratified``)."""
     from .mitsuba_scene import sampler_spp
+
     return sampler_spp(exp["reference.sampler"], max(1, math.ceil(spp / N_SEEDS)))
 
 
-def render_passes(exp: Experiment, spp_per_pass: int, n_passes: int, seed0: int,
-                  progress=None, scene=None) -> np.ndarray:
+def render_passes(
+    exp: Experiment, spp_per_pass: int, n_passes: int, seed0: int, progress=None, scene=None
+) -> np.ndarray:
     """(n_passes, H, W, 3) float32 renders with independent seeds ``seed0 + i``
     (of ``scene``, default: ``build_scene(exp)``)."""
     import mitsuba as mi
@@ -113,7 +122,7 @@ def render_passes(exp: Experiment, spp_per_pass: int, n_passes: int, seed0: int,
     return np.stack(out)
 
 
-_MASKS: dict = {}      # (scene hash, width, height) -> water mask, per process
+_MASKS: dict = {}  # (scene hash, width, height) -> water mask, per process
 
 
 def water_mask(exp: Experiment, width: int, height: int, scene=None) -> np.ndarray:
@@ -133,8 +142,10 @@ def water_mask(exp: Experiment, width: int, height: int, scene=None) -> np.ndarr
         scene = build_scene(exp, width, height)
     sensor = scene.sensors()[0]
     j, i = np.meshgrid(np.arange(height), np.arange(width), indexing="ij")
-    uv = mi.Point2f(mi.Float(((i.ravel() + 0.5) / width).astype(np.float32)),
-                    mi.Float(((j.ravel() + 0.5) / height).astype(np.float32)))
+    uv = mi.Point2f(
+        mi.Float(((i.ravel() + 0.5) / width).astype(np.float32)),
+        mi.Float(((j.ravel() + 0.5) / height).astype(np.float32)),
+    )
     ray, _ = sensor.sample_ray(0.0, 0.0, uv, mi.Point2f(0.5, 0.5))
     si = scene.ray_intersect(ray)
     is_water = si.is_valid() & mi.has_flag(si.bsdf().flags(), mi.BSDFFlags.DeltaTransmission)
@@ -157,52 +168,84 @@ def choose_spp(exp: Experiment, progress=None) -> tuple[int, dict]:
     w, h = exp["resolution"]
     t0 = time.perf_counter()
     from .mitsuba_scene import build_scene, sampler_spp
+
     scene = build_scene(exp)
-    per_pass = sampler_spp(exp["reference.sampler"], PILOT_SPP)      # K passes of PILOT_SPP
-    pilot = render_passes(exp, per_pass, N_SEEDS, seed0=10_000 + exp["reference.seed"], scene=scene,
-                          progress=progress)
+    per_pass = sampler_spp(exp["reference.sampler"], PILOT_SPP)  # K passes of PILOT_SPP
+    pilot = render_passes(
+        exp, per_pass, N_SEEDS, seed0=10_000 + exp["reference.seed"], scene=scene, progress=progress
+    )
     _, pilot_noise = noise_of(pilot, water_mask(exp, w, h, scene=scene))
     total_pilot = per_pass * N_SEEDS
-    per_sample_var = pilot_noise ** 2 * total_pilot          # noise^2 = var / spp_total
+    per_sample_var = pilot_noise**2 * total_pilot  # noise^2 = var / spp_total
     target = exp["reference.target_noise"]
-    need = per_sample_var / target ** 2
+    need = per_sample_var / target**2
     spp = 2 ** max(2, math.ceil(math.log2(max(need, 1.0))))
     spp = max(N_SEEDS, min(spp, exp["reference.max_spp"]))
-    info = {"pilot_spp": total_pilot, "pilot_noise": pilot_noise, "predicted_spp": need,
-            "capped": bool(need > exp["reference.max_spp"]), "pilot_seconds": time.perf_counter() - t0}
+    info = {
+        "pilot_spp": total_pilot,
+        "pilot_noise": pilot_noise,
+        "predicted_spp": need,
+        "capped": bool(need > exp["reference.max_spp"]),
+        "pilot_seconds": time.perf_counter() - t0,
+    }
     return spp, info
 
 
-def render_reference(exp: Experiment, variant: str, spp: int | None = None, progress=None) -> Reference:
+def render_reference(
+    exp: Experiment, variant: str, spp: int | None = None, progress=None
+) -> Reference:
     """Render the reference (no cache): ``N_SEEDS`` independent passes, mean and noise."""
     info = {}
     if spp is None:
-        spp, info = (choose_spp(exp, progress) if exp["reference.spp"] == "auto"
-                     else (int(exp["reference.spp"]), {}))
+        spp, info = (
+            choose_spp(exp, progress)
+            if exp["reference.spp"] == "auto"
+            else (int(exp["reference.spp"]), {})
+        )
     per_pass = pass_spp(exp, spp)
     from .mitsuba_scene import build_scene
+
     scene = build_scene(exp)
     t0 = time.perf_counter()
-    passes = render_passes(exp, per_pass, N_SEEDS, seed0=exp["reference.seed"] * N_SEEDS,
-                           progress=progress, scene=scene)
+    passes = render_passes(
+        exp,
+        per_pass,
+        N_SEEDS,
+        seed0=exp["reference.seed"] * N_SEEDS,
+        progress=progress,
+        scene=scene,
+    )
     seconds = time.perf_counter() - t0
     w, h = exp["resolution"]
     mask = water_mask(exp, w, h, scene=scene)
     stderr, noise = noise_of(passes, mask)
     image = passes.mean(0)
     if not np.all(np.isfinite(image)):
-        raise RuntimeError(f"the reference render of {exp['name']!r} has non-finite pixels; "
-                           "check the scene (e.g. degenerate geometry)")
-    prov = {"key": reference_key(exp, variant), "scene_hash": exp.scene_hash(), "experiment": exp["name"],
-            "spp": per_pass * N_SEEDS, "n_seeds": N_SEEDS, "seed": exp["reference.seed"],
-            "variant": variant, "versions": _versions(), "scene_version": SCENE_VERSION,
-            "render_seconds": seconds, "noise": noise, "auto_spp": info,
-            "integrator": "volpath" if any(v > 0 for v in exp["water.sigma_t"]) else "path"}
+        raise RuntimeError(
+            f"the reference render of {exp['name']!r} has non-finite pixels; "
+            "check the scene (e.g. degenerate geometry)"
+        )
+    prov = {
+        "key": reference_key(exp, variant),
+        "scene_hash": exp.scene_hash(),
+        "experiment": exp["name"],
+        "spp": per_pass * N_SEEDS,
+        "n_seeds": N_SEEDS,
+        "seed": exp["reference.seed"],
+        "variant": variant,
+        "versions": _versions(),
+        "scene_version": SCENE_VERSION,
+        "render_seconds": seconds,
+        "noise": noise,
+        "auto_spp": info,
+        "integrator": "volpath" if any(v > 0 for v in exp["water.sigma_t"]) else "path",
+    }
     return Reference(image.astype(np.float32), stderr, prov)
 
 
-def load_or_render(exp: Experiment, variant: str, cache: Path | None = None, progress=None,
-                   log=print) -> Reference:
+def load_or_render(
+    exp: Experiment, variant: str, cache: Path | None = None, progress=None, log=print
+) -> Reference:
     """The cached reference of ``exp`` if its key matches, else a fresh render written to the cache.
 
     Safe with concurrent callers (a sweep's workers): a miss takes the entry's lock, looks again
@@ -221,8 +264,10 @@ def load_or_render(exp: Experiment, variant: str, cache: Path | None = None, pro
         ref = render_reference(exp, variant, progress=progress)
         write_exr(path, ref.image, ref.provenance, extra={"stderr": ref.stderr})
     ref.path = path
-    log(f"reference: rendered {ref.spp} spp in {ref.provenance['render_seconds']:.1f} s, "
-        f"noise {ref.noise:.2e}; cached at {path}")
+    log(
+        f"reference: rendered {ref.spp} spp in {ref.provenance['render_seconds']:.1f} s, "
+        f"noise {ref.noise:.2e}; cached at {path}"
+    )
     return ref
 
 
@@ -233,8 +278,12 @@ def _cached_reference(exp: Experiment, key: str, path: Path, log) -> Reference |
     try:
         rgb, prov, extra = read_exr(path)
         se = extra.get("stderr")
-        if (prov.get("key") == key and rgb.shape[:2] == tuple(exp["resolution"][::-1])
-                and se is not None and se.shape == rgb.shape):
+        if (
+            prov.get("key") == key
+            and rgb.shape[:2] == tuple(exp["resolution"][::-1])
+            and se is not None
+            and se.shape == rgb.shape
+        ):
             log(f"reference: cached {path} (spp {prov['spp']}, noise {prov['noise']:.2e})")
             return Reference(rgb, se, prov, path)
         log(f"reference: {path} does not match this experiment; re-rendering")

@@ -24,6 +24,7 @@ As the seed's application prepares them, but from the scene:
 * for the fit alone, with ``reference.texture_method = "lighting"``: ``refraction_halves``, the
   refraction texture's two independent halves (:func:`half_inputs`, ``fit.input_noise``).
 """
+
 from __future__ import annotations
 
 import dataclasses
@@ -35,13 +36,13 @@ from shaders_port import ShaderInputs, fresnel_lut, ortho_tex_matrix
 from .experiment import Experiment
 from .mitsuba_scene import build_geometry, camera_view_proj, waves_of
 
-INPUTS_VERSION = 12       # bump whenever the construction of the inputs below changes
+INPUTS_VERSION = 12  # bump whenever the construction of the inputs below changes
 NO_GEOMETRY = -1e3
 CUBEMAP_SIZE = 64
 FRESNEL_SIZE = 256
 LIGHT_DISTANCE = 1000.0
 MAX_OPTICAL_DEPTH = 40.0  # exp(40) = 2e17: beyond it the under-water render holds no floor light
-ORTHO_NEAR_CLIP = 1e-2    # the top-down camera's rays start this far below it (Mitsuba's near clip)
+ORTHO_NEAR_CLIP = 1e-2  # the top-down camera's rays start this far below it (Mitsuba's near clip)
 
 
 def texture_extent(exp: Experiment) -> tuple[float, float, float, float]:
@@ -51,8 +52,16 @@ def texture_extent(exp: Experiment) -> tuple[float, float, float, float]:
     return (-hx - b, -hz - b, hx + b, hz + b)
 
 
-def _ortho_sensor(mi, extent, size: int, spp: int, seed: int, y_cam: float = 100.0, medium=None,
-                  sampler: str = "independent"):
+def _ortho_sensor(
+    mi,
+    extent,
+    size: int,
+    spp: int,
+    seed: int,
+    y_cam: float = 100.0,
+    medium=None,
+    sampler: str = "independent",
+):
     x0, z0, x1, z1 = extent
     cx, cz = (x0 + x1) / 2, (z0 + z1) / 2
     T = mi.ScalarTransform4f
@@ -62,8 +71,13 @@ def _ortho_sensor(mi, extent, size: int, spp: int, seed: int, y_cam: float = 100
         @ T().scale([(x1 - x0) / 2, (z1 - z0) / 2, 1.0]),
         "near_clip": ORTHO_NEAR_CLIP,
         "sampler": {"type": sampler, "seed": seed},
-        "film": {"type": "hdrfilm", "width": size, "height": size, "pixel_format": "rgb",
-                 "rfilter": {"type": "box"}},
+        "film": {
+            "type": "hdrfilm",
+            "width": size,
+            "height": size,
+            "pixel_format": "rgb",
+            "rfilter": {"type": "box"},
+        },
     }
     if medium is not None:
         d["medium"] = medium
@@ -96,12 +110,12 @@ def _to_gl_order(mi, sensor, img: np.ndarray, extent) -> np.ndarray:
     dcol, drow = o[1] - o[0], o[2] - o[0]
     if abs(dcol[1]) > 1e-6 or abs(drow[1]) > 1e-6:
         raise RuntimeError("orthographic sensor is not looking straight down")
-    if abs(dcol[0]) > abs(dcol[2]):          # columns run along x
+    if abs(dcol[0]) > abs(dcol[2]):  # columns run along x
         if dcol[0] < 0:
             img = img[:, ::-1]
         if drow[2] < 0:
             img = img[::-1]
-    else:                                     # columns run along z: transpose
+    else:  # columns run along z: transpose
         img = np.swapaxes(img, 0, 1)
         if dcol[2] < 0:
             img = img[::-1]
@@ -122,8 +136,11 @@ def top_down_world_y(exp: Experiment, extent, size: int, mesh: bool = False) -> 
     n = X.size
 
     def cast(dx: float, dz: float):
-        o = mi.Point3f(mi.Float((X.ravel() + dx).astype(np.float32)), mi.Float(np.full(n, 100.0, np.float32)),
-                       mi.Float((Z.ravel() + dz).astype(np.float32)))
+        o = mi.Point3f(
+            mi.Float((X.ravel() + dx).astype(np.float32)),
+            mi.Float(np.full(n, 100.0, np.float32)),
+            mi.Float((Z.ravel() + dz).astype(np.float32)),
+        )
         si = scene.ray_intersect(mi.Ray3f(o, mi.Vector3f(0.0, -1.0, 0.0)))
         return np.array(si.is_valid()), np.array(si.p.y, dtype=np.float32)
 
@@ -135,19 +152,35 @@ def top_down_world_y(exp: Experiment, extent, size: int, mesh: bool = False) -> 
     return y.astype(np.float32).reshape(size, size)
 
 
-def _render_top_down(mi, exp: Experiment, extent, size: int, spp: int, seed: int, *, water: bool,
-                     y_cam: float = 100.0, progress=None) -> np.ndarray:
+def _render_top_down(
+    mi,
+    exp: Experiment,
+    extent,
+    size: int,
+    spp: int,
+    seed: int,
+    *,
+    water: bool,
+    y_cam: float = 100.0,
+    progress=None,
+) -> np.ndarray:
     from .mitsuba_scene import has_medium, water_medium
     from .user_scene import reference_sky
 
     medium = water_medium(mi, exp) if water else None
-    d = {"type": "scene", **build_geometry(mi, exp, water=water, medium=medium),
-         "sky": {"type": "envmap", "bitmap": mi.Bitmap(reference_sky(exp))},
-         "integrator": {"type": "volpath" if water and has_medium(exp) else "path",
-                        "max_depth": exp["reference.max_depth"]}}
+    d = {
+        "type": "scene",
+        **build_geometry(mi, exp, water=water, medium=medium),
+        "sky": {"type": "envmap", "bitmap": mi.Bitmap(reference_sky(exp))},
+        "integrator": {
+            "type": "volpath" if water and has_medium(exp) else "path",
+            "max_depth": exp["reference.max_depth"],
+        },
+    }
     scene = mi.load_dict(d)
     sensor = _ortho_sensor(mi, extent, size, spp, seed, y_cam=y_cam, medium=medium)
     from .._progress import render_in_passes
+
     img = render_in_passes(mi, scene, sensor, spp, seed, progress)
     return _to_gl_order(mi, sensor, img, extent)
 
@@ -155,19 +188,23 @@ def _render_top_down(mi, exp: Experiment, extent, size: int, spp: int, seed: int
 def underwater_camera_height(exp: Experiment) -> float:
     """Height of the under-water orthographic camera: below the lowest wave trough, above the floor."""
     from .mitsuba_scene import floor_of
+
     y_cam = -exp["waves.amplitude"] - 0.02
     hx, hz = exp["pool.half_extent"]
     x, z = np.meshgrid(np.linspace(-hx, hx, 129), np.linspace(-hz, hz, 129))
     top = float(floor_of(exp, x, z).max())
     if top >= y_cam - 0.01:
-        raise ValueError(f"the floor rises to y = {top:.3f}, above the wave troughs (y = {y_cam + 0.02:.3f}): "
-                         "make floor.depth larger or floor.relief / waves.amplitude smaller, or set "
-                         "reference.refraction_lighting = \"dry\"")
+        raise ValueError(
+            f"the floor rises to y = {top:.3f}, above the wave troughs (y = {y_cam + 0.02:.3f}): "
+            "make floor.depth larger or floor.relief / waves.amplitude smaller, or set "
+            'reference.refraction_lighting = "dry"'
+        )
     return y_cam
 
 
-def top_down_colour(exp: Experiment, extent, size: int, spp: int, seed: int = 0, world_y=None,
-                    stages=None) -> np.ndarray:
+def top_down_colour(
+    exp: Experiment, extent, size: int, spp: int, seed: int = 0, world_y=None, stages=None
+) -> np.ndarray:
     """(size, size, 3) float32 linear RGB of the ground seen from above (GL order).
 
     ``reference.refraction_lighting``:
@@ -187,25 +224,46 @@ def top_down_colour(exp: Experiment, extent, size: int, spp: int, seed: int = 0,
 
     from .._progress import Stages
     from .user_scene import dry_camera_height
+
     st = stages or Stages(quiet=True)
     label = f"shader inputs: top-down render without water ({size}x{size}, {spp} spp)"
     with st.stage("inputs.dry_render_s", label):
-        dry = _render_top_down(mi, exp, extent, size, spp, seed, water=False,
-                               y_cam=dry_camera_height(mi, exp, extent), progress=st.counter("  passes"))
+        dry = _render_top_down(
+            mi,
+            exp,
+            extent,
+            size,
+            spp,
+            seed,
+            water=False,
+            y_cam=dry_camera_height(mi, exp, extent),
+            progress=st.counter("  passes"),
+        )
     if exp["reference.refraction_lighting"] == "dry":
         return dry
     y_cam = underwater_camera_height(exp)
     label = f"shader inputs: top-down render through the water ({size}x{size}, {spp} spp)"
     with st.stage("inputs.wet_render_s", label):
-        wet = _render_top_down(mi, exp, extent, size, spp, seed, water=True, y_cam=y_cam,
-                               progress=st.counter("  passes"))
+        wet = _render_top_down(
+            mi,
+            exp,
+            extent,
+            size,
+            spp,
+            seed,
+            water=True,
+            y_cam=y_cam,
+            progress=st.counter("  passes"),
+        )
     if world_y is None:
         world_y = top_down_world_y(exp, extent, size)
     optical = camera_ray_optical_depth(exp, y_cam, world_y)
     # beyond an optical depth of MAX_OPTICAL_DEPTH the floor's light through the water is lost
     # in float precision (very murky water): the dry render stands in for those texels
     lost = optical > MAX_OPTICAL_DEPTH
-    wet = np.where(lost, dry, wet.astype(np.float64) * np.exp(np.minimum(optical, MAX_OPTICAL_DEPTH)))
+    wet = np.where(
+        lost, dry, wet.astype(np.float64) * np.exp(np.minimum(optical, MAX_OPTICAL_DEPTH))
+    )
     x0, z0, x1, z1 = extent
     c = (np.arange(size) + 0.5) / size
     X, Z = np.meshgrid(x0 + c * (x1 - x0), z0 + c * (z1 - z0))
@@ -218,6 +276,7 @@ def sky_cubemap(exp: Experiment, size: int = CUBEMAP_SIZE) -> np.ndarray:
     """(6, size, size, 3) float32 cube map of the sky without the sun, stored y-flipped
     to compensate the shader's ``* vec3(1, -1, 1)`` lookup."""
     from .user_scene import shader_cubemap
+
     return shader_cubemap(exp, size)
 
 
@@ -235,18 +294,25 @@ def shader_fresnel_lut(exp: Experiment) -> np.ndarray:
 def light_of(exp: Experiment) -> tuple[np.ndarray, np.ndarray]:
     """(lightpos (3,), lightcolor (3,)): the sun far away, colour = sun radiance / its max."""
     from .user_scene import sun_of
+
     sun_dir, rad = sun_of(exp)
     colour = rad / rad.max() if rad.max() > 0 else np.zeros(3)
     return LIGHT_DISTANCE * sun_dir, colour
 
 
-def build_shader_inputs(exp: Experiment, width: int | None = None, height: int | None = None,
-                        progress=None, info: dict | None = None) -> ShaderInputs:
+def build_shader_inputs(
+    exp: Experiment,
+    width: int | None = None,
+    height: int | None = None,
+    progress=None,
+    info: dict | None = None,
+) -> ShaderInputs:
     """All shader inputs of ``exp`` at output resolution (width, height) (default: the experiment's).
     ``progress``: a ``study._progress.Stages`` that times and reports each stage (default: quiet).
     ``info``, if given, receives how the refraction texture was made (``texture``: method,
     settings and, for ``lighting``, its measured noise)."""
     from .._progress import Stages
+
     st = progress or Stages(quiet=True)
     width = width or exp["resolution"][0]
     height = height or exp["resolution"][1]
@@ -256,12 +322,28 @@ def build_shader_inputs(exp: Experiment, width: int | None = None, height: int |
         world_y = top_down_world_y(exp, extent, size)
     if exp["reference.texture_method"] == "lighting":
         from .lighting import lighting_colour
-        with st.stage("inputs.lighting_s", f"shader inputs: lighting x albedo texture ({size}x{size})"):
-            colour, tex_info, halves = lighting_colour(exp, extent, size, exp["reference.seed"],
-                                                       world_y=world_y, progress=st.counter("  passes"))
+
+        with st.stage(
+            "inputs.lighting_s", f"shader inputs: lighting x albedo texture ({size}x{size})"
+        ):
+            colour, tex_info, halves = lighting_colour(
+                exp,
+                extent,
+                size,
+                exp["reference.seed"],
+                world_y=world_y,
+                progress=st.counter("  passes"),
+            )
     else:
-        colour = top_down_colour(exp, extent, size, exp["reference.texture_spp"], exp["reference.seed"],
-                                 world_y=world_y, stages=st)
+        colour = top_down_colour(
+            exp,
+            extent,
+            size,
+            exp["reference.texture_spp"],
+            exp["reference.seed"],
+            world_y=world_y,
+            stages=st,
+        )
         tex_info = {"method": "colour", "spp": exp["reference.texture_spp"], "noise": None}
         halves = None
     if info is not None:
@@ -269,9 +351,13 @@ def build_shader_inputs(exp: Experiment, width: int | None = None, height: int |
     tm = ortho_tex_matrix(*extent)
     if exp["mesh.file"]:
         from .user_scene import mesh_reflection_textures
-        with st.stage("inputs.mesh_reflection_s", "shader inputs: reflection textures with the mesh"):
-            refl_y, refl_col, refl_extent = mesh_reflection_textures(exp, extent, size,
-                                                                     progress=st.counter("  passes"))
+
+        with st.stage(
+            "inputs.mesh_reflection_s", "shader inputs: reflection textures with the mesh"
+        ):
+            refl_y, refl_col, refl_extent = mesh_reflection_textures(
+                exp, extent, size, progress=st.counter("  passes")
+            )
         tm1 = ortho_tex_matrix(*refl_extent)
     else:
         refl_y = np.where(world_y > 0.0, world_y, NO_GEOMETRY).astype(np.float32)
@@ -282,17 +368,32 @@ def build_shader_inputs(exp: Experiment, width: int | None = None, height: int |
     lightpos, lightcolor = light_of(exp)
     c = exp.section("camera")
     with st.stage("inputs.maps_s", "shader inputs: normal map, sky cube map, Fresnel LUT"):
-        normal_map, cubemap, lut = (waves.normal_map(exp["waves.normal_map_size"]), sky_cubemap(exp),
-                                    shader_fresnel_lut(exp))
+        normal_map, cubemap, lut = (
+            waves.normal_map(exp["waves.normal_map_size"]),
+            sky_cubemap(exp),
+            shader_fresnel_lut(exp),
+        )
     return ShaderInputs(
-        refraction_texture=colour, world_y=world_y, tex_matrix0=tm,
-        normal_map=normal_map, cubemap=cubemap,
+        refraction_texture=colour,
+        world_y=world_y,
+        tex_matrix0=tm,
+        normal_map=normal_map,
+        cubemap=cubemap,
         fresnel_lut=lut,
-        refl_world_y=refl_y, refl_texture=refl_col, tex_matrix1=tm1,
-        water_rect=(-hx, -hz, hx, hz), normal_tile=exp["waves.normal_tile"],
-        waves=np.asarray(exp["waves.offsets"]), view_proj=camera_view_proj(exp, width, height),
-        viewpos=np.asarray(c["position"]), lightpos=lightpos, lightcolor=lightcolor,
-        width=width, height=height, refraction_halves=halves)
+        refl_world_y=refl_y,
+        refl_texture=refl_col,
+        tex_matrix1=tm1,
+        water_rect=(-hx, -hz, hx, hz),
+        normal_tile=exp["waves.normal_tile"],
+        waves=np.asarray(exp["waves.offsets"]),
+        view_proj=camera_view_proj(exp, width, height),
+        viewpos=np.asarray(c["position"]),
+        lightpos=lightpos,
+        lightcolor=lightcolor,
+        width=width,
+        height=height,
+        refraction_halves=halves,
+    )
 
 
 def reflection_colour(world_y: np.ndarray, colour: np.ndarray) -> np.ndarray:
@@ -308,19 +409,26 @@ def half_inputs(exp: Experiment, inputs: ShaderInputs) -> tuple[ShaderInputs, Sh
     (``reference.texture_method = "colour"``)."""
     if inputs.refraction_halves is None:
         from .experiment import ExperimentError
-        raise ExperimentError("fit.input_noise = \"decorrelate\" needs two independent halves of the "
-                              "refraction texture, which only reference.texture_method = \"lighting\" "
-                              "renders; use that method or fit.input_noise = \"ignore\"")
+
+        raise ExperimentError(
+            'fit.input_noise = "decorrelate" needs two independent halves of the '
+            'refraction texture, which only reference.texture_method = "lighting" '
+            'renders; use that method or fit.input_noise = "ignore"'
+        )
     out = []
     for half in inputs.refraction_halves:
         refl = inputs.refl_texture if exp["mesh.file"] else reflection_colour(inputs.world_y, half)
-        out.append(dataclasses.replace(inputs, refraction_texture=half, refl_texture=refl,
-                                       refraction_halves=None))
+        out.append(
+            dataclasses.replace(
+                inputs, refraction_texture=half, refl_texture=refl, refraction_halves=None
+            )
+        )
     return out[0], out[1]
 
 
-def load_or_build_shader_inputs(exp: Experiment, variant: str, cache=None, log=print,
-                                progress=None) -> ShaderInputs:
+def load_or_build_shader_inputs(
+    exp: Experiment, variant: str, cache=None, log=print, progress=None
+) -> ShaderInputs:
     """The shader inputs of ``exp`` from ``<cache>/inputs/<key>.npz`` if present, else built
     and written there atomically. The key hashes every experiment value that affects them
     (``Experiment.inputs_hash``), the variant, ``SCENE_VERSION``, ``INPUTS_VERSION``, this
@@ -331,18 +439,27 @@ def load_or_build_shader_inputs(exp: Experiment, variant: str, cache=None, log=p
 
     from .reference import SCENE_VERSION, _versions, cache_dir
 
-    key = hashlib.sha256(json.dumps({"inputs": exp.inputs_hash(), "variant": variant,
-                                     "scene_version": SCENE_VERSION, "inputs_version": INPUTS_VERSION,
-                                     "sizes": [CUBEMAP_SIZE, FRESNEL_SIZE, LIGHT_DISTANCE, NO_GEOMETRY],
-                                     "versions": _versions()},
-                                    sort_keys=True).encode()).hexdigest()[:32]
+    key = hashlib.sha256(
+        json.dumps(
+            {
+                "inputs": exp.inputs_hash(),
+                "variant": variant,
+                "scene_version": SCENE_VERSION,
+                "inputs_version": INPUTS_VERSION,
+                "sizes": [CUBEMAP_SIZE, FRESNEL_SIZE, LIGHT_DISTANCE, NO_GEOMETRY],
+                "versions": _versions(),
+            },
+            sort_keys=True,
+        ).encode()
+    ).hexdigest()[:32]
     path = (cache or cache_dir()) / "inputs" / f"{key}.npz"
     inputs = _cached_inputs(path, log)
     if inputs is not None:
         return inputs
     from .._io import disk_full, file_lock
+
     with file_lock(path.with_suffix(".lock"), "shader inputs", log):
-        inputs = _cached_inputs(path, log)   # another process may have built them meanwhile
+        inputs = _cached_inputs(path, log)  # another process may have built them meanwhile
         if inputs is not None:
             return inputs
         info: dict = {}
@@ -351,23 +468,44 @@ def load_or_build_shader_inputs(exp: Experiment, variant: str, cache=None, log=p
         with disk_full(path.parent):
             inputs.save(path)
     tex = info["texture"]
-    noise = f", texture noise {tex['noise']:.2e} (RMS standard error on the pool)" if tex.get("noise") else ""
+    noise = (
+        f", texture noise {tex['noise']:.2e} (RMS standard error on the pool)"
+        if tex.get("noise")
+        else ""
+    )
     if tex.get("denoise_gain"):
-        noise += (", denoised / raw texture mean on the pool R / G / B "
-                  + " / ".join(f"{g:.3f}" for g in tex["denoise_gain"])
-                  + " (+- " + " / ".join(f"{e:.3f}" for e in tex["denoise_gain_se"]) + ")"
-                  + (", matched to the raw mean" if tex.get("denoise_matched") else ""))
+        noise += (
+            ", denoised / raw texture mean on the pool R / G / B "
+            + " / ".join(f"{g:.3f}" for g in tex["denoise_gain"])
+            + " (+- "
+            + " / ".join(f"{e:.3f}" for e in tex["denoise_gain_se"])
+            + ")"
+            + (", matched to the raw mean" if tex.get("denoise_matched") else "")
+        )
     if tex.get("direct") == "traced":
-        noise += (f"; direct light traced: sky {tex['sky_directions']} directions per texel"
-                  + (", denoised / raw " + " / ".join(f"{g:.3f}" for g in tex["sky_denoise_gain"])
-                     if tex.get("sky_denoise_gain") else "")
-                  + (f", sun {tex['sun_photons'] / 1e6:.2f} M photons ({tex['sun_photons_landed'] / 1e6:.2f} M landed)"
-                     if tex.get("sun_photons") else ""))
+        noise += (
+            f"; direct light traced: sky {tex['sky_directions']} directions per texel"
+            + (
+                ", denoised / raw " + " / ".join(f"{g:.3f}" for g in tex["sky_denoise_gain"])
+                if tex.get("sky_denoise_gain")
+                else ""
+            )
+            + (
+                f", sun {tex['sun_photons'] / 1e6:.2f} M photons ({tex['sun_photons_landed'] / 1e6:.2f} M landed)"
+                if tex.get("sun_photons")
+                else ""
+            )
+        )
     if tex.get("wall_denoise_gain"):
-        noise += ("; outside the pool the dry render denoised, denoised / raw "
-                  + " / ".join(f"{g:.3f}" for g in tex["wall_denoise_gain"]) + ", matched")
+        noise += (
+            "; outside the pool the dry render denoised, denoised / raw "
+            + " / ".join(f"{g:.3f}" for g in tex["wall_denoise_gain"])
+            + ", matched"
+        )
     what = "bounced light, " if tex.get("direct") == "traced" else ""
-    log(f"shader inputs: built ({tex['method']} texture, {what}{tex['spp']} spp{noise}) and cached at {path}")
+    log(
+        f"shader inputs: built ({tex['method']} texture, {what}{tex['spp']} spp{noise}) and cached at {path}"
+    )
     return inputs
 
 

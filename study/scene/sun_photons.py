@@ -38,16 +38,17 @@ alone, texel block by texel block.
 Texture arrays are in GL order (row = t, z increasing; column = s, x increasing), float32, linear
 RGB radiance of the floor seen from above.
 """
+
 from __future__ import annotations
 
 import numpy as np
 
 from .experiment import Experiment
 
-CONE_MARGIN_TEXELS = 2.0   # the cone around the sun's texels, grown by this many map texels
-                           # (the envmap interpolates bilinearly: its disc is one texel wider)
-PLANE_ABOVE_CREST = 0.01   # the photons' plane above the highest point of the water's top (m)
-N_BATCHES = 4              # independent photon batches (noise estimate from their spread)
+CONE_MARGIN_TEXELS = 2.0  # the cone around the sun's texels, grown by this many map texels
+# (the envmap interpolates bilinearly: its disc is one texel wider)
+PLANE_ABOVE_CREST = 0.01  # the photons' plane above the highest point of the water's top (m)
+N_BATCHES = 4  # independent photon batches (noise estimate from their spread)
 
 
 def sun_cone(sun: np.ndarray) -> tuple[np.ndarray, float]:
@@ -73,14 +74,17 @@ def sun_cone(sun: np.ndarray) -> tuple[np.ndarray, float]:
 def _cone_directions(axis: np.ndarray, angle: float, u: np.ndarray, v: np.ndarray) -> np.ndarray:
     """(N, 3) unit directions uniform in solid angle in the cone (axis, angle) from uniforms u, v."""
     cos_t = 1.0 - u * (1.0 - np.cos(angle))
-    sin_t = np.sqrt(np.maximum(0.0, 1.0 - cos_t ** 2))
+    sin_t = np.sqrt(np.maximum(0.0, 1.0 - cos_t**2))
     phi = 2.0 * np.pi * v
     a = np.array([1.0, 0.0, 0.0]) if abs(axis[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
     t1 = np.cross(axis, a)
     t1 /= np.linalg.norm(t1)
     t2 = np.cross(axis, t1)
-    return (np.outer(sin_t * np.cos(phi), t1) + np.outer(sin_t * np.sin(phi), t2)
-            + np.outer(cos_t, axis))
+    return (
+        np.outer(sin_t * np.cos(phi), t1)
+        + np.outer(sin_t * np.sin(phi), t2)
+        + np.outer(cos_t, axis)
+    )
 
 
 def _shape(scene, name: str):
@@ -94,11 +98,14 @@ def _vec(mi, a: np.ndarray):
     return [mi.Float(np.ascontiguousarray(a[:, k], np.float32)) for k in range(3)]
 
 
-def _splat(mi, ok, p, value, extent, size: int, batch: np.ndarray, n_batches: int) -> tuple[np.ndarray, int]:
+def _splat(
+    mi, ok, p, value, extent, size: int, batch: np.ndarray, n_batches: int
+) -> tuple[np.ndarray, int]:
     """Sum of the (N, 3) ``value`` of the lanes ``ok`` into the (n_batches, size, size, 3) texels
     of their ``batch`` (N,) and their points ``p`` over ``extent``, GL order (one kernel evaluates
     them all), and how many lanes were ``ok``."""
     import drjit as dr
+
     dr.eval(ok, p, value)
     ok_np = np.array(ok, bool)
     x0, z0, x1, z1 = extent
@@ -106,8 +113,13 @@ def _splat(mi, ok, p, value, extent, size: int, batch: np.ndarray, n_batches: in
     row = np.clip(((np.array(p.z)[ok_np] - z0) / (z1 - z0) * size).astype(int), 0, size - 1)
     idx = (batch[ok_np] * size + row) * size + col
     m = n_batches * size * size
-    out = np.stack([np.bincount(idx, weights=np.array(value[k])[ok_np].astype(np.float64), minlength=m)
-                    for k in range(3)], -1)
+    out = np.stack(
+        [
+            np.bincount(idx, weights=np.array(value[k])[ok_np].astype(np.float64), minlength=m)
+            for k in range(3)
+        ],
+        -1,
+    )
     return out.reshape(n_batches, size, size, 3), int(ok_np.sum())
 
 
@@ -121,35 +133,47 @@ def _emit(mi, scene, exp: Experiment, sun: np.ndarray, n_photons: int, seeds, y_
     F = mi.Float
     water = _shape(scene, "water")
     axis, angle = sun_cone(sun)
-    if axis[1] <= 0.0:               # the sun is below the horizon: no direct light through the water
+    if axis[1] <= 0.0:  # the sun is below the horizon: no direct light through the water
         return None
     y_plane = float(water.bbox().max.y) + PLANE_ABOVE_CREST
     y_start = float(scene.bbox().max.y) + 1.0
     # the plane's rectangle: the pool, grown by how far a sun ray moves sideways between the
     # plane and the camera (which is below the lowest wave trough)
     cos_low = max(np.cos(np.arccos(min(1.0, axis[1])) + angle), 1e-3)
-    reach = (y_plane - y_cam) * np.sqrt(max(0.0, 1.0 - cos_low ** 2)) / cos_low
+    reach = (y_plane - y_cam) * np.sqrt(max(0.0, 1.0 - cos_low**2)) / cos_low
     hx, hz = exp["pool.half_extent"]
     rx0, rx1, rz0, rz1 = -hx - reach, hx + reach, -hz - reach, hz + reach
     area = (rx1 - rx0) * (rz1 - rz0)
     omega = 2.0 * np.pi * (1.0 - np.cos(angle))
 
-    side = max(1, int(np.sqrt(n_photons)))        # jittered strata over the rectangle
+    side = max(1, int(np.sqrt(n_photons)))  # jittered strata over the rectangle
     n = side * side
     j, i = np.divmod(np.arange(n), side)
     origins, directions = [], []
     for seed in seeds:
         rng = np.random.default_rng(seed)
-        plane = np.stack([rx0 + (i + rng.random(n)) / side * (rx1 - rx0), np.full(n, y_plane),
-                          rz0 + (j + rng.random(n)) / side * (rz1 - rz0)], -1)
-        dirs = -_cone_directions(axis, angle, rng.random(n), rng.random(n))      # travelling down
+        plane = np.stack(
+            [
+                rx0 + (i + rng.random(n)) / side * (rx1 - rx0),
+                np.full(n, y_plane),
+                rz0 + (j + rng.random(n)) / side * (rz1 - rz0),
+            ],
+            -1,
+        )
+        dirs = -_cone_directions(axis, angle, rng.random(n), rng.random(n))  # travelling down
         origins.append(plane - dirs * ((y_start - y_plane) / -dirs[:, 1])[:, None])
         directions.append(dirs)
     o, dirs = np.concatenate(origins), np.concatenate(directions)
     si_e = dr.zeros(mi.SurfaceInteraction3f, len(o))
-    si_e.wi = mi.Vector3f(*_vec(mi, dirs))        # the envmap looks up -wi: towards the sun
-    emitter = mi.load_dict({"type": "envmap", "bitmap": mi.Bitmap(np.ascontiguousarray(sun, np.float32))})
-    power = emitter.eval(si_e) * F(np.abs(dirs[:, 1]).astype(np.float32)) * dr.opaque(F, omega * area / n)
+    si_e.wi = mi.Vector3f(*_vec(mi, dirs))  # the envmap looks up -wi: towards the sun
+    emitter = mi.load_dict(
+        {"type": "envmap", "bitmap": mi.Bitmap(np.ascontiguousarray(sun, np.float32))}
+    )
+    power = (
+        emitter.eval(si_e)
+        * F(np.abs(dirs[:, 1]).astype(np.float32))
+        * dr.opaque(F, omega * area / n)
+    )
     return o, dirs, power, np.repeat(np.arange(len(seeds)), n)
 
 
@@ -157,6 +181,7 @@ def _seen_from_above(mi, scene, si, ok, y_cam: float):
     """Lanes of ``ok`` whose surface point the under-water camera at ``y_cam`` sees: below it, and
     nothing between the point and the camera straight above."""
     import drjit as dr
+
     up = si.spawn_ray(mi.Vector3f(0.0, 1.0, 0.0))
     up.maxt = dr.opaque(mi.Float, y_cam) - si.p.y
     return ok & (up.maxt > 0) & ~scene.ray_test(up, ok)
@@ -165,12 +190,22 @@ def _seen_from_above(mi, scene, si, ok, y_cam: float):
 def _texel_scale(mi, extent, size: int):
     """``1 / (pi A_texel)``: photon power x albedo x |n_y| to the texel-mean radiance."""
     import drjit as dr
+
     x0, z0, x1, z1 = extent
     return dr.opaque(mi.Float, size * size / (np.pi * (x1 - x0) * (z1 - z0)))
 
 
-def sun_direct(mi, scene, exp: Experiment, sun: np.ndarray, extent, size: int, n_photons: int,
-               seeds, y_cam: float) -> tuple[np.ndarray, int]:
+def sun_direct(
+    mi,
+    scene,
+    exp: Experiment,
+    sun: np.ndarray,
+    extent,
+    size: int,
+    n_photons: int,
+    seeds,
+    y_cam: float,
+) -> tuple[np.ndarray, int]:
     """Light-traced radiance of the direct sunlight on the surfaces the under-water camera at
     ``y_cam`` sees (the floor, a ledge), (B, size, size, 3) float32 over the texture ``extent``
     (x0, z0, x1, z1), GL order, linear RGB: one independent batch of ``n_photons`` photons of the
@@ -194,15 +229,26 @@ def sun_direct(mi, scene, exp: Experiment, sun: np.ndarray, extent, size: int, n
     ok = _seen_from_above(mi, scene, si2, ok, y_cam)
     sigma = mi.Color3f(*[dr.opaque(F, float(v)) for v in exp["water.sigma_t"]])
     albedo = si2.bsdf().eval_diffuse_reflectance(si2, ok)
-    value = power * dr.exp(-sigma * si2.t) * albedo * dr.abs(si2.n.y) * _texel_scale(mi, extent, size)
+    value = (
+        power * dr.exp(-sigma * si2.t) * albedo * dr.abs(si2.n.y) * _texel_scale(mi, extent, size)
+    )
     out, landed = _splat(mi, ok, si2.p, value, extent, size, batch, len(seeds))
     if not np.all(np.isfinite(out)):
         raise RuntimeError(f"the light-traced sunlight of {exp['name']!r} has non-finite texels")
     return out.astype(np.float32), landed
 
 
-def sun_walk(mi, scene, exp: Experiment, sun: np.ndarray, extent, size: int, n_photons: int,
-             seeds, y_cam: float) -> tuple[np.ndarray, int]:
+def sun_walk(
+    mi,
+    scene,
+    exp: Experiment,
+    sun: np.ndarray,
+    extent,
+    size: int,
+    n_photons: int,
+    seeds,
+    y_cam: float,
+) -> tuple[np.ndarray, int]:
     """Light-traced radiance of *all* the sun's light (direct and bounced, up to
     ``reference.max_depth``) on the surfaces the under-water camera at ``y_cam`` sees, (B, size,
     size, 3) float32 over ``extent``, GL order, linear RGB, one batch of ``n_photons`` photons per
@@ -223,10 +269,12 @@ def sun_walk(mi, scene, exp: Experiment, sun: np.ndarray, extent, size: int, n_p
     x0, z0, x1, z1 = extent
     sx, sz = dr.opaque(F, size / (x1 - x0)), dr.opaque(F, size / (z1 - z0))
     ox, oz, n_side = dr.opaque(F, x0), dr.opaque(F, z0), dr.opaque(mi.Int32, size)
-    max_surfaces = dr.opaque(U, exp["reference.max_depth"] - 1)   # the k-th surface: a path of depth k + 1
+    max_surfaces = dr.opaque(
+        U, exp["reference.max_depth"] - 1
+    )  # the k-th surface: a path of depth k + 1
     ctx = mi.BSDFContext(mi.TransportMode.Importance)
     texels = dr.zeros(F, len(seeds) * size * size * 3)
-    first = U(np.ascontiguousarray(batch * size * size, np.uint32))       # each batch's first texel
+    first = U(np.ascontiguousarray(batch * size * size, np.uint32))  # each batch's first texel
     rng = mi.PCG32(n, dr.opaque(mi.UInt64, seeds[0]), dr.arange(mi.UInt64, n))
 
     def cond(ray, p, inside, k, landed, active, rng):
@@ -246,19 +294,29 @@ def sun_walk(mi, scene, exp: Experiment, sun: np.ndarray, extent, size: int, n_p
         for c in range(3):
             dr.scatter_reduce(dr.ReduceOp.Add, texels, value[c], idx + c, seen)
         landed = landed + dr.select(seen, 1, 0)
-        bs, weight = bsdf.sample(ctx, si, rng.next_float32(), mi.Point2f(rng.next_float32(), rng.next_float32()),
-                                 valid)
+        bs, weight = bsdf.sample(
+            ctx, si, rng.next_float32(), mi.Point2f(rng.next_float32(), rng.next_float32()), valid
+        )
         wo = si.to_world(bs.wo)
         p = p * weight
-        inside = dr.select(valid & is_water, dr.dot(wo, si.n) < 0.0, inside)   # in or out of the water
+        inside = dr.select(
+            valid & is_water, dr.dot(wo, si.n) < 0.0, inside
+        )  # in or out of the water
         ray = dr.select(valid, si.spawn_ray(wo), ray)
         k = k + 1
         active = valid & (dr.max(p) > 0.0) & (k < max_surfaces)
         return ray, p, inside, k, landed, active, rng
 
     ray = mi.Ray3f(mi.Point3f(*_vec(mi, o)), mi.Vector3f(*_vec(mi, d)))
-    state = (ray, mi.Color3f(power), dr.zeros(mi.Bool, n), dr.zeros(U, n), dr.zeros(U, n),
-             dr.full(mi.Bool, True, n), rng)
+    state = (
+        ray,
+        mi.Color3f(power),
+        dr.zeros(mi.Bool, n),
+        dr.zeros(U, n),
+        dr.zeros(U, n),
+        dr.full(mi.Bool, True, n),
+        rng,
+    )
     _, _, _, _, landed, _, _ = dr.while_loop(state, cond, body, label="sun_walk")
     dr.eval(texels, landed)
     out = np.array(texels, np.float64).reshape(len(seeds), size, size, 3)

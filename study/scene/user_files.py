@@ -27,6 +27,7 @@ Files and conventions (world units, ``+y`` up, water plane at ``y = 0``):
 
 Errors are :class:`~study.scene.experiment.ExperimentError` naming the key and the file.
 """
+
 from __future__ import annotations
 
 import functools
@@ -40,19 +41,22 @@ FILE_KEYS = ("floor.heightmap", "floor.albedo_image", "sky.envmap", "mesh.file",
 IMAGE_EXT = (".exr", ".png", ".jpg", ".jpeg")
 MESH_EXT = (".obj", ".ply")
 MAX_TEXELS = 4096 * 4096
-SUN_THRESHOLD = 0.1        # the sun region: texels brighter than this fraction of the brightest one
-SUN_CONTRAST = 20.0        # ... whose brightest texel is this many times the median, or no sun
+SUN_THRESHOLD = 0.1  # the sun region: texels brighter than this fraction of the brightest one
+SUN_CONTRAST = 20.0  # ... whose brightest texel is this many times the median, or no sun
 
 
 def _error(key: str, path, msg: str):
     from .experiment import ExperimentError
+
     return ExperimentError(f"{key}: {msg} (file {path})")
 
 
 def clip_text(text: str, limit: int = 80) -> str:
     """``text`` cut to ``limit`` characters with the number of characters left out."""
     text = str(text)
-    return text if len(text) <= limit else f"{text[:limit]}... ({len(text) - limit} more characters)"
+    return (
+        text if len(text) <= limit else f"{text[:limit]}... ({len(text) - limit} more characters)"
+    )
 
 
 def resolve(key: str, value: str, base: Path | None) -> str:
@@ -82,6 +86,7 @@ def digest(path: str) -> str:
 
 # ---- images ---------------------------------------------------------------------------------
 
+
 @functools.lru_cache(maxsize=16)
 def _read_image(key: str, path: str, sha: str) -> np.ndarray:
     """(H, W, C) float32 texels of an EXR (as stored) or PNG/JPEG (8-bit / 255, 16-bit / 65535,
@@ -90,6 +95,7 @@ def _read_image(key: str, path: str, sha: str) -> np.ndarray:
     try:
         if suffix == ".exr":
             import OpenEXR
+
             with OpenEXR.File(path) as f:
                 ch = {k: np.array(v.pixels, dtype=np.float32) for k, v in f.channels().items()}
             if len(ch) == 1:
@@ -97,10 +103,14 @@ def _read_image(key: str, path: str, sha: str) -> np.ndarray:
             elif "RGB" in ch or "RGBA" in ch:
                 img = ch.get("RGB", ch.get("RGBA"))
             else:
-                raise _error(key, path, f"unexpected EXR channels {clip_text(sorted(ch))}; "
-                                        "write one channel, or RGB")
+                raise _error(
+                    key,
+                    path,
+                    f"unexpected EXR channels {clip_text(sorted(ch))}; write one channel, or RGB",
+                )
         else:
             from PIL import Image
+
             with Image.open(path) as im:
                 im.load()
                 mode = im.mode
@@ -119,6 +129,7 @@ def _read_image(key: str, path: str, sha: str) -> np.ndarray:
                 img = img.reshape(img.shape[0], img.shape[1], -1)
     except Exception as exc:
         from .experiment import ExperimentError
+
         if isinstance(exc, ExperimentError):
             raise
         raise _error(key, path, f"not a readable image ({clip_text(exc)})") from exc
@@ -126,8 +137,11 @@ def _read_image(key: str, path: str, sha: str) -> np.ndarray:
     if img.ndim == 2:
         img = img[..., None]
     if img.shape[0] < 2 or img.shape[1] < 2 or img.shape[0] * img.shape[1] > MAX_TEXELS:
-        raise _error(key, path, f"image of {img.shape[1]}x{img.shape[0]} texels; expected 2x2 to "
-                                f"{MAX_TEXELS} texels")
+        raise _error(
+            key,
+            path,
+            f"image of {img.shape[1]}x{img.shape[0]} texels; expected 2x2 to {MAX_TEXELS} texels",
+        )
     if not np.all(np.isfinite(img)):
         raise _error(key, path, f"{int((~np.isfinite(img)).sum())} texels are NaN or infinite")
     return img
@@ -137,6 +151,7 @@ def _is_8bit_png(path: str) -> bool:
     if Path(path).suffix.lower() != ".png":
         return False
     from PIL import Image
+
     with Image.open(path) as im:
         return im.mode in ("L", "LA", "RGB", "RGBA", "P")
 
@@ -148,7 +163,9 @@ def heightmap(values: dict) -> np.ndarray:
     if img.shape[2] != 1:
         raise _error(key, path, f"expected one channel (a height), got {img.shape[2]}")
     if _is_8bit_png(path):
-        raise _error(key, path, "an 8-bit PNG has 256 height levels (terraces); write a 16-bit PNG or an EXR")
+        raise _error(
+            key, path, "an 8-bit PNG has 256 height levels (terraces); write a 16-bit PNG or an EXR"
+        )
     return img[..., 0].astype(np.float64)
 
 
@@ -167,7 +184,9 @@ def albedo_image(values: dict, key: str = "floor.albedo_image") -> np.ndarray:
         rgb = srgb_to_linear(rgb.astype(np.float64))
     lo, hi = float(rgb.min()), float(rgb.max())
     if lo < 0 or hi > 1:
-        raise _error(key, path, f"albedo texels span [{lo:.4g}, {hi:.4g}]; an albedo lies in [0, 1]")
+        raise _error(
+            key, path, f"albedo texels span [{lo:.4g}, {hi:.4g}]; an albedo lies in [0, 1]"
+        )
     return np.asarray(rgb, np.float32)
 
 
@@ -196,6 +215,7 @@ def envmap_file(values: dict) -> np.ndarray:
 
 # ---- lat-long geometry ----------------------------------------------------------------------
 
+
 def latlong_directions(h: int) -> tuple[np.ndarray, np.ndarray]:
     """(h, 2h, 3) unit directions of the texel centres of a lat-long map (Mitsuba's envmap
     convention) and (h, 2h) their solid angles (steradians)."""
@@ -218,8 +238,9 @@ def latlong_lookup(img: np.ndarray, d: np.ndarray) -> np.ndarray:
     fx, fy = (x - x0)[..., None], (y - y0)[..., None]
     y1 = np.minimum(y0 + 1, h - 1)
     x0w, x1w = x0 % w, (x0 + 1) % w
-    return ((1 - fy) * ((1 - fx) * img[y0, x0w] + fx * img[y0, x1w])
-            + fy * ((1 - fx) * img[y1, x0w] + fx * img[y1, x1w]))
+    return (1 - fy) * ((1 - fx) * img[y0, x0w] + fx * img[y0, x1w]) + fy * (
+        (1 - fx) * img[y1, x0w] + fx * img[y1, x1w]
+    )
 
 
 def find_sun(img: np.ndarray) -> dict:
@@ -236,10 +257,12 @@ def find_sun(img: np.ndarray) -> dict:
     peak = float(lum.max())
     med = float(np.median(lum))
     if peak <= 0 or peak < SUN_CONTRAST * med:
-        raise ValueError(f"no sun in the map: its brightest texel is {peak / max(med, 1e-30):.3g} x the "
-                         f"median (at least {SUN_CONTRAST:g} x needed)")
+        raise ValueError(
+            f"no sun in the map: its brightest texel is {peak / max(med, 1e-30):.3g} x the "
+            f"median (at least {SUN_CONTRAST:g} x needed)"
+        )
     r, c = np.unravel_index(int(np.argmax(lum)), lum.shape)
-    shift = w // 2 - c                       # centre the peak so the region does not wrap
+    shift = w // 2 - c  # centre the peak so the region does not wrap
     rolled = np.roll(lum, shift, axis=1)
     labels, _ = ndimage.label(rolled >= SUN_THRESHOLD * peak)
     mask = np.roll(labels == labels[r, w // 2], -shift, axis=1)
@@ -250,8 +273,13 @@ def find_sun(img: np.ndarray) -> dict:
     solid = float(omega[mask].sum())
     radiance = (img[mask] * omega[mask][:, None]).sum(0) / solid
     radius = math.degrees(math.acos(max(-1.0, 1 - solid / (2 * np.pi))))
-    return {"direction": direction, "solid_angle": solid, "radiance": radiance, "radius_deg": radius,
-            "mask": mask}
+    return {
+        "direction": direction,
+        "solid_angle": solid,
+        "radiance": radiance,
+        "radius_deg": radius,
+        "mask": mask,
+    }
 
 
 def fill_region(img: np.ndarray, mask: np.ndarray) -> np.ndarray:
@@ -267,6 +295,7 @@ def fill_region(img: np.ndarray, mask: np.ndarray) -> np.ndarray:
 
 
 # ---- world rectangles -----------------------------------------------------------------------
+
 
 def floor_extent(values: dict) -> tuple[float, float, float, float]:
     """(x0, z0, x1, z1) covered by the floor images (``floor.extent``, or the pool's rectangle)."""
@@ -286,14 +315,18 @@ def sample_rect(img: np.ndarray, extent, x, z) -> np.ndarray:
     i0, j0 = np.floor(fx).astype(int), np.floor(fz).astype(int)
     i1, j1 = np.minimum(i0 + 1, w - 1), np.minimum(j0 + 1, h - 1)
     ax, az = (fx - i0)[..., None], (fz - j0)[..., None]
-    return ((1 - az) * ((1 - ax) * img[j0, i0] + ax * img[j0, i1])
-            + az * ((1 - ax) * img[j1, i0] + ax * img[j1, i1]))
+    return (1 - az) * ((1 - ax) * img[j0, i0] + ax * img[j0, i1]) + az * (
+        (1 - ax) * img[j1, i0] + ax * img[j1, i1]
+    )
 
 
 def heightmap_floor(values: dict, x, z) -> np.ndarray:
     """World y of a heightmap floor at (x, z)."""
     hm = heightmap(values)[..., None]
-    return -values["floor.depth"] + values["floor.height_scale"] * sample_rect(hm, floor_extent(values), x, z)[..., 0]
+    return (
+        -values["floor.depth"]
+        + values["floor.height_scale"] * sample_rect(hm, floor_extent(values), x, z)[..., 0]
+    )
 
 
 def albedo_over_pool(values: dict, max_size: int = 2048) -> np.ndarray:
@@ -312,13 +345,18 @@ def albedo_over_pool(values: dict, max_size: int = 2048) -> np.ndarray:
 
 # ---- validation -----------------------------------------------------------------------------
 
+
 def _covers(key: str, path, extent, values) -> None:
     hx, hz = values["pool.half_extent"]
     x0, z0, x1, z1 = extent
     if not (x0 <= -hx and z0 <= -hz and x1 >= hx and z1 >= hz):
-        raise _error(key, path, f"floor.extent {list(extent)} does not cover the water "
-                                f"[{-hx:g}, {-hz:g}, {hx:g}, {hz:g}]; widen floor.extent or shrink "
-                                "pool.half_extent")
+        raise _error(
+            key,
+            path,
+            f"floor.extent {list(extent)} does not cover the water "
+            f"[{-hx:g}, {-hz:g}, {hx:g}, {hz:g}]; widen floor.extent or shrink "
+            "pool.half_extent",
+        )
 
 
 def check_files(values: dict) -> dict:
@@ -328,19 +366,26 @@ def check_files(values: dict) -> dict:
 
     has = {k: values[k] != "" for k in FILE_KEYS}
     if values["floor.shape"] == "heightmap" and not has["floor.heightmap"]:
-        raise ExperimentError("floor.shape = \"heightmap\" needs floor.heightmap (a single-channel "
-                              "EXR or 16-bit PNG)")
+        raise ExperimentError(
+            'floor.shape = "heightmap" needs floor.heightmap (a single-channel EXR or 16-bit PNG)'
+        )
     if has["floor.heightmap"] and values["floor.shape"] != "heightmap":
-        raise ExperimentError(f"floor.heightmap is given ({values['floor.heightmap']}) but floor.shape is "
-                              f"{values['floor.shape']!r}; set floor.shape = \"heightmap\" (or remove "
-                              "floor.heightmap)")
+        raise ExperimentError(
+            f"floor.heightmap is given ({values['floor.heightmap']}) but floor.shape is "
+            f'{values["floor.shape"]!r}; set floor.shape = "heightmap" (or remove '
+            "floor.heightmap)"
+        )
     if values["sun.source"] == "envmap" and not has["sky.envmap"]:
-        raise ExperimentError("sun.source = \"envmap\" needs sky.envmap (the sun is taken from the map)")
+        raise ExperimentError(
+            'sun.source = "envmap" needs sky.envmap (the sun is taken from the map)'
+        )
     if has["mesh.texture"] and not has["mesh.file"]:
         raise ExperimentError(f"mesh.texture is given ({values['mesh.texture']}) without mesh.file")
     e = values["floor.extent"]
     if e != "pool" and not (e[2] > e[0] and e[3] > e[1]):
-        raise ExperimentError(f"floor.extent {e}: expected [x0, z0, x1, z1] with x1 > x0 and z1 > z0")
+        raise ExperimentError(
+            f"floor.extent {e}: expected [x0, z0, x1, z1] with x1 > x0 and z1 > z0"
+        )
     if has["floor.heightmap"]:
         heightmap(values)
         _covers("floor.heightmap", values["floor.heightmap"], floor_extent(values), values)
@@ -353,14 +398,19 @@ def check_files(values: dict) -> dict:
             try:
                 find_sun(sky)
             except ValueError as exc:
-                raise _error("sky.envmap", values["sky.envmap"],
-                             f"{exc}; give the sun explicitly (sun.source = \"explicit\")") from exc
+                raise _error(
+                    "sky.envmap",
+                    values["sky.envmap"],
+                    f'{exc}; give the sun explicitly (sun.source = "explicit")',
+                ) from exc
         elif max(values["sun.radiance"]) > 0:
             texel = 180.0 / sky.shape[0]
             if values["sun.radius"] < texel:
-                raise ExperimentError(f"sun.radius = {values['sun.radius']:g} degrees is below one texel "
-                                      f"({texel:.3g} degrees) of sky.envmap {values['sky.envmap']}; make the "
-                                      "sun larger or the map finer")
+                raise ExperimentError(
+                    f"sun.radius = {values['sun.radius']:g} degrees is below one texel "
+                    f"({texel:.3g} degrees) of sky.envmap {values['sky.envmap']}; make the "
+                    "sun larger or the map finer"
+                )
     if has["mesh.texture"]:
         albedo_image(values, "mesh.texture")
     if has["mesh.file"]:

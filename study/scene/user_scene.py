@@ -15,6 +15,7 @@ turns them into what the Mitsuba scene and the shader inputs use:
 
 Errors about files are ``ExperimentError`` naming the key and the file.
 """
+
 from __future__ import annotations
 
 import functools
@@ -26,9 +27,9 @@ from . import user_files as uf
 from .experiment import Experiment, ExperimentError
 from .geometry import envmap_image, sky_radiance, sun_direction
 
-SKY_HEIGHT = 512          # rows of the built-in gradient sky's lat-long map (0.35 degree texels)
-CUBE_SUPERSAMPLE = 4      # lookups per cube-map texel side when resampling a sky file
-MESH_CLEARANCE = 0.01     # the mesh stays this far above the highest wave crest (world units)
+SKY_HEIGHT = 512  # rows of the built-in gradient sky's lat-long map (0.35 degree texels)
+CUBE_SUPERSAMPLE = 4  # lookups per cube-map texel side when resampling a sky file
+MESH_CLEARANCE = 0.01  # the mesh stays this far above the highest wave crest (world units)
 
 
 def has_file(exp: Experiment, key: str) -> bool:
@@ -37,9 +38,13 @@ def has_file(exp: Experiment, key: str) -> bool:
 
 # ---- sky and sun ----------------------------------------------------------------------------
 
+
 def _explicit_sun(exp: Experiment) -> dict:
-    return dict(sun_dir=sun_direction(exp["sun.elevation"], exp["sun.azimuth"]),
-                sun_radius_deg=exp["sun.radius"], sun_radiance=exp["sun.radiance"])
+    return dict(
+        sun_dir=sun_direction(exp["sun.elevation"], exp["sun.azimuth"]),
+        sun_radius_deg=exp["sun.radius"],
+        sun_radiance=exp["sun.radiance"],
+    )
 
 
 @functools.lru_cache(maxsize=4)
@@ -54,7 +59,9 @@ def _file_sky(path: str, sha: str, rotation: float, scale: float) -> tuple[np.nd
 
 
 def file_sky(exp: Experiment) -> tuple[np.ndarray, dict | None]:
-    return _file_sky(exp["sky.envmap"], exp.digests.get("sky.envmap", ""), exp["sky.rotation"], exp["sky.scale"])
+    return _file_sky(
+        exp["sky.envmap"], exp.digests.get("sky.envmap", ""), exp["sky.rotation"], exp["sky.scale"]
+    )
 
 
 def reference_sky(exp: Experiment) -> np.ndarray:
@@ -91,7 +98,9 @@ def reference_sky_parts(exp: Experiment) -> tuple[np.ndarray, np.ndarray]:
 def shader_sky(exp: Experiment, d: np.ndarray) -> np.ndarray:
     """Sky radiance (..., 3) without the sun in unit directions d (..., 3) (the cube map's content)."""
     if not has_file(exp, "sky.envmap"):
-        return sky_radiance(d, zenith=exp["sky.zenith"], horizon=exp["sky.horizon"], ground=exp["sky.ground"])
+        return sky_radiance(
+            d, zenith=exp["sky.zenith"], horizon=exp["sky.horizon"], ground=exp["sky.ground"]
+        )
     sky, sun = file_sky(exp)
     if exp["sun.source"] == "envmap":
         sky = uf.fill_region(sky, sun["mask"])
@@ -103,6 +112,7 @@ def shader_cubemap(exp: Experiment, size: int) -> np.ndarray:
     shader's ``* vec3(1, -1, 1)`` lookup. A sky file is averaged over CUBE_SUPERSAMPLE^2
     directions per texel (the map is usually finer than the cube map)."""
     from .geometry import cubemap_directions
+
     if not has_file(exp, "sky.envmap"):
         d = cubemap_directions(size) * np.array([1.0, -1.0, 1.0])
         return shader_sky(exp, d).astype(np.float32)
@@ -117,7 +127,9 @@ def sun_of(exp: Experiment) -> tuple[np.ndarray, np.ndarray]:
     if exp["sun.source"] == "envmap":
         _, sun = file_sky(exp)
         if sun is None:
-            raise ExperimentError(f"sky.envmap: no sun found in {exp['sky.envmap']}; set sun.source = \"explicit\"")
+            raise ExperimentError(
+                f'sky.envmap: no sun found in {exp["sky.envmap"]}; set sun.source = "explicit"'
+            )
         return np.asarray(sun["direction"]), np.asarray(sun["radiance"], np.float64)
     s = _explicit_sun(exp)
     return np.asarray(s["sun_dir"]), np.asarray(s["sun_radiance"], np.float64)
@@ -126,10 +138,13 @@ def sun_of(exp: Experiment) -> tuple[np.ndarray, np.ndarray]:
 def sun_summary(exp: Experiment) -> dict:
     """JSON-able description of the sun the shader gets (for reports)."""
     d, rad = sun_of(exp)
-    out = {"source": exp["sun.source"], "direction": [float(v) for v in d],
-           "elevation_deg": math.degrees(math.asin(max(-1.0, min(1.0, float(d[1]))))),
-           "azimuth_deg": math.degrees(math.atan2(float(d[2]), float(d[0]))),
-           "radiance": [float(v) for v in rad]}
+    out = {
+        "source": exp["sun.source"],
+        "direction": [float(v) for v in d],
+        "elevation_deg": math.degrees(math.asin(max(-1.0, min(1.0, float(d[1]))))),
+        "azimuth_deg": math.degrees(math.atan2(float(d[2]), float(d[0]))),
+        "radiance": [float(v) for v in rad],
+    }
     if exp["sun.source"] == "envmap":
         _, sun = file_sky(exp)
         out.update(solid_angle_sr=sun["solid_angle"], radius_deg=sun["radius_deg"])
@@ -138,20 +153,35 @@ def sun_summary(exp: Experiment) -> dict:
 
 # ---- mesh above the water -------------------------------------------------------------------
 
+
 def mesh_shape(mi, exp: Experiment) -> dict:
     """The mesh as a Mitsuba shape dict (``obj`` or ``ply`` plugin), diffuse."""
     path = exp["mesh.file"]
     T = mi.ScalarTransform4f
-    to_world = (T().translate(list(exp["mesh.position"]))
-                @ T().rotate([0.0, 1.0, 0.0], -exp["mesh.rotation"])   # Mitsuba turns +x towards -z
-                @ T().scale(exp["mesh.scale"]))
+    to_world = (
+        T().translate(list(exp["mesh.position"]))
+        @ T().rotate([0.0, 1.0, 0.0], -exp["mesh.rotation"])  # Mitsuba turns +x towards -z
+        @ T().scale(exp["mesh.scale"])
+    )
     if has_file(exp, "mesh.texture"):
-        tex = {"type": "bitmap", "bitmap": mi.Bitmap(uf.albedo_image(exp.values, "mesh.texture")),
-               "raw": True, "filter_type": "bilinear"}
+        tex = {
+            "type": "bitmap",
+            "bitmap": mi.Bitmap(uf.albedo_image(exp.values, "mesh.texture")),
+            "raw": True,
+            "filter_type": "bilinear",
+        }
         bsdf = {"type": "diffuse", "reflectance": tex}
     else:
-        bsdf = {"type": "diffuse", "reflectance": {"type": "rgb", "value": list(exp["mesh.albedo"])}}
-    return {"type": path.rsplit(".", 1)[1].lower(), "filename": path, "to_world": to_world, "bsdf": bsdf}
+        bsdf = {
+            "type": "diffuse",
+            "reflectance": {"type": "rgb", "value": list(exp["mesh.albedo"])},
+        }
+    return {
+        "type": path.rsplit(".", 1)[1].lower(),
+        "filename": path,
+        "to_world": to_world,
+        "bsdf": bsdf,
+    }
 
 
 def _load_mesh(mi, exp: Experiment):
@@ -159,31 +189,46 @@ def _load_mesh(mi, exp: Experiment):
     try:
         return mi.load_dict(d)
     except Exception as exc:  # Mitsuba raises RuntimeError with its own message
-        raise ExperimentError(f"mesh.file: Mitsuba cannot load it ({uf.clip_text(exc, 300)}) "
-                              f"(file {exp['mesh.file']})") from exc
+        raise ExperimentError(
+            f"mesh.file: Mitsuba cannot load it ({uf.clip_text(exc, 300)}) "
+            f"(file {exp['mesh.file']})"
+        ) from exc
 
 
 def mesh_bounds(mi, exp: Experiment) -> tuple[np.ndarray, np.ndarray]:
     """World bounding box (min (3,), max (3,)) of the placed mesh, checked: loadable, texture
     coordinates when ``mesh.texture`` is given, entirely above the water's highest crest."""
-    key = (exp["mesh.file"], exp.digests.get("mesh.file"), exp.digests.get("mesh.texture"),
-           tuple(exp["mesh.position"]), exp["mesh.scale"], exp["mesh.rotation"], exp["waves.amplitude"])
+    key = (
+        exp["mesh.file"],
+        exp.digests.get("mesh.file"),
+        exp.digests.get("mesh.texture"),
+        tuple(exp["mesh.position"]),
+        exp["mesh.scale"],
+        exp["mesh.rotation"],
+        exp["waves.amplitude"],
+    )
     if key in _BOUNDS:
         return _BOUNDS[key]
     shape = _load_mesh(mi, exp)
     if has_file(exp, "mesh.texture") and not shape.has_vertex_texcoords():
-        raise ExperimentError(f"mesh.texture needs texture coordinates, and mesh.file {exp['mesh.file']} "
-                              "has none; give mesh.albedo instead")
+        raise ExperimentError(
+            f"mesh.texture needs texture coordinates, and mesh.file {exp['mesh.file']} "
+            "has none; give mesh.albedo instead"
+        )
     bb = shape.bbox()
     lo = np.array([bb.min.x, bb.min.y, bb.min.z], np.float64).ravel()
     hi = np.array([bb.max.x, bb.max.y, bb.max.z], np.float64).ravel()
     if not (np.all(np.isfinite(lo)) and np.all(np.isfinite(hi))) or shape.face_count() == 0:
-        raise ExperimentError(f"mesh.file: no faces or non-finite vertices (file {exp['mesh.file']})")
+        raise ExperimentError(
+            f"mesh.file: no faces or non-finite vertices (file {exp['mesh.file']})"
+        )
     crest = exp["waves.amplitude"] + MESH_CLEARANCE
     if lo[1] < crest:
-        raise ExperimentError(f"mesh.file: the placed mesh reaches down to y = {lo[1]:.4g}, into the water "
-                              f"(it must stay above y = {crest:.4g}, the highest wave crest plus "
-                              f"{MESH_CLEARANCE}); raise mesh.position (file {exp['mesh.file']})")
+        raise ExperimentError(
+            f"mesh.file: the placed mesh reaches down to y = {lo[1]:.4g}, into the water "
+            f"(it must stay above y = {crest:.4g}, the highest wave crest plus "
+            f"{MESH_CLEARANCE}); raise mesh.position (file {exp['mesh.file']})"
+        )
     _BOUNDS[key] = (lo, hi)
     return lo, hi
 
@@ -205,12 +250,14 @@ def dry_camera_height(mi, exp: Experiment, extent) -> float:
     if not _overlaps(lo, hi, extent):
         return 100.0
     top = exp["pool.wall_height"]
-    y = lo[1] - 0.015                     # the orthographic sensor's near clip is 0.01
+    y = lo[1] - 0.015  # the orthographic sensor's near clip is 0.01
     if y < top + 0.005:
-        raise ExperimentError(f"mesh.file: over the pool and its walls the mesh must stay above the "
-                              f"wall tops (pool.wall_height = {top:g}) so that it does not hide them from "
-                              f"the top-down refraction texture; it reaches down to y = {lo[1]:.4g} "
-                              f"(file {exp['mesh.file']})")
+        raise ExperimentError(
+            f"mesh.file: over the pool and its walls the mesh must stay above the "
+            f"wall tops (pool.wall_height = {top:g}) so that it does not hide them from "
+            f"the top-down refraction texture; it reaches down to y = {lo[1]:.4g} "
+            f"(file {exp['mesh.file']})"
+        )
     return float(y)
 
 
@@ -220,13 +267,19 @@ def reflection_extent(mi, exp: Experiment, extent) -> tuple[float, float, float,
         return tuple(extent)
     lo, hi = mesh_bounds(mi, exp)
     x0, z0, x1, z1 = extent
-    return (min(x0, float(lo[0])), min(z0, float(lo[2])), max(x1, float(hi[0])), max(z1, float(hi[2])))
+    return (
+        min(x0, float(lo[0])),
+        min(z0, float(lo[2])),
+        max(x1, float(hi[0])),
+        max(z1, float(hi[2])),
+    )
 
 
 def check_scene(exp: Experiment) -> None:
     """Checks that need Mitsuba (the mesh); call after the backend is initialised."""
     if has_file(exp, "mesh.file"):
         import mitsuba as mi
+
         mesh_bounds(mi, exp)
 
 
@@ -242,8 +295,16 @@ def mesh_reflection_textures(exp: Experiment, extent, size: int, progress=None):
 
     ext = reflection_extent(mi, exp, extent)
     world_y = top_down_world_y(exp, ext, size, mesh=True)
-    colour = _render_top_down(mi, exp, ext, size, exp["reference.texture_spp"], exp["reference.seed"],
-                              water=False, progress=progress)
+    colour = _render_top_down(
+        mi,
+        exp,
+        ext,
+        size,
+        exp["reference.texture_spp"],
+        exp["reference.seed"],
+        water=False,
+        progress=progress,
+    )
     above = world_y > 0.0
     refl_y = np.where(above, world_y, NO_GEOMETRY).astype(np.float32)
     refl_col = np.where(above[..., None], colour, 0.0).astype(np.float32)

@@ -5,6 +5,7 @@ the pixels whose centres it covers; with none, there is nothing to compare or fi
 casts the camera ray of every pixel centre at the experiment's and the fit's resolutions
 onto the plane (NumPy, exact for the flat quad the shader rasterises).
 """
+
 from __future__ import annotations
 
 import numpy as np
@@ -18,7 +19,7 @@ def water_pixel_count(exp: Experiment, width: int, height: int) -> int:
     inv = np.linalg.inv(camera_view_proj(exp, width, height).astype(np.float64))
     j, i = np.meshgrid(np.arange(height), np.arange(width), indexing="ij")
     x = (i.ravel() + 0.5) / width * 2 - 1
-    y = 1 - (j.ravel() + 0.5) / height * 2                 # row 0 at the top
+    y = 1 - (j.ravel() + 0.5) / height * 2  # row 0 at the top
     one = np.ones_like(x)
 
     def unproject(zn):
@@ -44,4 +45,5 @@ def check_water_in_view(exp: Experiment) -> None:
             raise ExperimentError(
                 f"no water in view at {key} = [{w}, {h}]: the water rectangle (pool.half_extent = "
                 f"{exp['pool.half_extent']}) covers no pixel centre of the camera (camera.position, "
-                "camera.target, camera.fov_y); aim the camera at the water or enlarge it")
+                "camera.target, camera.fov_y); aim the camera at the water or enlarge it"
+            )

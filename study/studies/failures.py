@@ -54,6 +54,7 @@ The table (:func:`failure_table`) gives per class its share of the water pixels,
 the total FLIP error, and the mean FLIP inside and outside the class (classes overlap; the
 ``none`` row is the pixels in no class).
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -63,7 +64,7 @@ import numpy as np
 GRAZING_RY = 0.25
 DENOMINATOR_EPS = 1e-3
 HIDDEN_OFFSET = 1e-3
-REFL_FINE_STEP = 0.25      # texels per step of the fine march of reflection rays
+REFL_FINE_STEP = 0.25  # texels per step of the fine march of reflection rays
 
 
 @dataclass(frozen=True)
@@ -75,32 +76,64 @@ class FailureClass:
 
 
 CLASSES: tuple[FailureClass, ...] = (
-    FailureClass("invalid_refraction", "TIR, back-facing normal or non-finite vector",
-                 "k < 0 or dot(vEye, vBumpTexMore) <= 0 or non-finite"),
-    FailureClass("depth_complexity", "floor hidden from the top-down view (depth complexity > 1)",
-                 "refracted ray's first hit has geometry above it (Mitsuba ray queries)"),
+    FailureClass(
+        "invalid_refraction",
+        "TIR, back-facing normal or non-finite vector",
+        "k < 0 or dot(vEye, vBumpTexMore) <= 0 or non-finite",
+    ),
+    FailureClass(
+        "depth_complexity",
+        "floor hidden from the top-down view (depth complexity > 1)",
+        "refracted ray's first hit has geometry above it (Mitsuba ray queries)",
+    ),
     FailureClass("no_crossing", "no crossing within LOOP_CAP (extrapolated)", "crossed == 0"),
-    FailureClass("outside_textures", "top-down lookup outside the textures",
-                 "a depth or colour lookup outside [0, 1]^2"),
-    FailureClass("small_denominator", "interpolation denominator near 0",
-                 f"abs(denominator) < {DENOMINATOR_EPS:g}"),
+    FailureClass(
+        "outside_textures",
+        "top-down lookup outside the textures",
+        "a depth or colour lookup outside [0, 1]^2",
+    ),
+    FailureClass(
+        "small_denominator",
+        "interpolation denominator near 0",
+        f"abs(denominator) < {DENOMINATOR_EPS:g}",
+    ),
     FailureClass("grazing", "grazing (or upward) refraction", f"normalize(R).y > -{GRAZING_RY:g}"),
-    FailureClass("refl_left_textures", "reflection ray left the reflection textures",
-                 "refl_exit == outside", reflection_only=True),
-    FailureClass("refl_no_hit", "reflection ray missed geometry it hits, cube map used",
-                 "no hit, but a 1/4-texel march hits the reflection textures", reflection_only=True),
+    FailureClass(
+        "refl_left_textures",
+        "reflection ray left the reflection textures",
+        "refl_exit == outside",
+        reflection_only=True,
+    ),
+    FailureClass(
+        "refl_no_hit",
+        "reflection ray missed geometry it hits, cube map used",
+        "no hit, but a 1/4-texel march hits the reflection textures",
+        reflection_only=True,
+    ),
 )
 CLASS_KEYS = tuple(c.key for c in CLASSES)
-REQUIRED = ("crossed", "denominator", "nonfinite", "refract_k", "cos_eye_normal", "refr_dir_y",
-            "lookup_outside")
+REQUIRED = (
+    "crossed",
+    "denominator",
+    "nonfinite",
+    "refract_k",
+    "cos_eye_normal",
+    "refr_dir_y",
+    "lookup_outside",
+)
 
 
 def classes_for(shader_has_reflection_loop: bool) -> tuple[FailureClass, ...]:
     return tuple(c for c in CLASSES if shader_has_reflection_loop or not c.reflection_only)
 
 
-def classify(maps: dict, water: np.ndarray, *, hidden: np.ndarray | None = None,
-             refl_missed: np.ndarray | None = None) -> dict:
+def classify(
+    maps: dict,
+    water: np.ndarray,
+    *,
+    hidden: np.ndarray | None = None,
+    refl_missed: np.ndarray | None = None,
+) -> dict:
     """Boolean (H, W) membership of every class for the port's diagnostics ``maps``.
 
     Args:
@@ -119,18 +152,22 @@ def classify(maps: dict, water: np.ndarray, *, hidden: np.ndarray | None = None,
         raise ValueError(f"diagnostics {missing} are missing: render the port with diagnose=True")
     w = np.asarray(water, bool)
     out = {
-        "invalid_refraction": (maps["refract_k"] < 0) | (maps["cos_eye_normal"] <= 0)
-        | (maps["nonfinite"] > 0) | ~np.isfinite(maps["refr_dir_y"]),
+        "invalid_refraction": (maps["refract_k"] < 0)
+        | (maps["cos_eye_normal"] <= 0)
+        | (maps["nonfinite"] > 0)
+        | ~np.isfinite(maps["refr_dir_y"]),
         "depth_complexity": np.zeros_like(w) if hidden is None else np.asarray(hidden, bool),
         "no_crossing": maps["crossed"] < 0.5,
         "outside_textures": maps["lookup_outside"] > 0.5,
-        "small_denominator": ~(np.abs(maps["denominator"]) >= DENOMINATOR_EPS),   # NaN counts
+        "small_denominator": ~(np.abs(maps["denominator"]) >= DENOMINATOR_EPS),  # NaN counts
         "grazing": ~(maps["refr_dir_y"] <= -GRAZING_RY),
     }
     if "refl_exit" in maps:
         if refl_missed is None:
-            raise ValueError("refl_missed (reflection_would_hit) is needed to classify "
-                             "water_reflection's reflection rays")
+            raise ValueError(
+                "refl_missed (reflection_would_hit) is needed to classify "
+                "water_reflection's reflection rays"
+            )
         e = maps["refl_exit"]
         out["refl_left_textures"] = e == 1
         out["refl_no_hit"] = (e != 0) & np.asarray(refl_missed, bool)
@@ -164,15 +201,22 @@ def failure_table(classes: dict, flip: np.ndarray, scored: np.ndarray) -> list[d
         anyc |= m
     for k, m in list(classes.items()) + [("none", ~anyc)]:
         inside, outside = m & s, ~m & s
-        rows.append({"class": k, "pixels": int(inside.sum()), "pixel_share": inside.sum() / n,
-                     "flip_share": float(f[inside].sum()) / total if total > 0 else float("nan"),
-                     "flip_inside": float(f[inside].mean()) if inside.any() else float("nan"),
-                     "flip_outside": float(f[outside].mean()) if outside.any() else float("nan")})
+        rows.append(
+            {
+                "class": k,
+                "pixels": int(inside.sum()),
+                "pixel_share": inside.sum() / n,
+                "flip_share": float(f[inside].sum()) / total if total > 0 else float("nan"),
+                "flip_inside": float(f[inside].mean()) if inside.any() else float("nan"),
+                "flip_outside": float(f[outside].mean()) if outside.any() else float("nan"),
+            }
+        )
     return rows
 
 
-def reflection_would_hit(inputs, origins: np.ndarray, directions: np.ndarray,
-                         chunk: int = 4096) -> np.ndarray:
+def reflection_would_hit(
+    inputs, origins: np.ndarray, directions: np.ndarray, chunk: int = 4096
+) -> np.ndarray:
     """(N,) bool: the ray ``origins + t directions`` (N, 3), marched in steps of
     ``REFL_FINE_STEP`` texels of ``refl_world_y``, meets a texel whose world y is above it (the
     shader's hit test, nearest texel, ``tex_matrix1``) before it leaves the textures' [0, 1]^2
@@ -187,8 +231,10 @@ def reflection_would_hit(inputs, origins: np.ndarray, directions: np.ndarray,
     if top <= 0.0 or not len(o):
         return out
     # world length of a texel along the ray's horizontal direction: the smaller of the two axes
-    texel = min(1.0 / (W * max(np.linalg.norm(M[0, :3]), 1e-12)),
-                1.0 / (H * max(np.linalg.norm(M[1, :3]), 1e-12)))
+    texel = min(
+        1.0 / (W * max(np.linalg.norm(M[0, :3]), 1e-12)),
+        1.0 / (H * max(np.linalg.norm(M[1, :3]), 1e-12)),
+    )
     step = REFL_FINE_STEP * texel
     ok = np.isfinite(d).all(1) & (d[:, 1] > 0)
     for a in range(0, len(o), chunk):
@@ -239,7 +285,7 @@ def hidden_from_top_down(exp, origins: np.ndarray, directions: np.ndarray) -> np
     valid = np.array(si.is_valid(), bool) & ok
     p = np.stack([np.array(si.p.x), np.array(si.p.y), np.array(si.p.z)], 1).astype(np.float64)
     n = np.stack([np.array(si.n.x), np.array(si.n.y), np.array(si.n.z)], 1).astype(np.float64)
-    n = np.where(((n * d).sum(1) > 0)[:, None], -n, n)          # facing the incoming ray
+    n = np.where(((n * d).sum(1) > 0)[:, None], -n, n)  # facing the incoming ray
     q = np.where(valid[:, None], p + HIDDEN_OFFSET * n, np.array([0.0, -1.0, 0.0]))
     q[:, 1] = np.minimum(q[:, 1], -HIDDEN_OFFSET)
     up = mi.Ray3f(vec(q, mi.Point3f), mi.Vector3f(0.0, 1.0, 0.0))
@@ -256,19 +302,27 @@ class SceneCatalogue:
     shader: str
     reference: np.ndarray
     port: np.ndarray
-    classes: dict        # key -> (H, W) bool
-    label: np.ndarray    # (H, W) int, see primary_class
-    flip: np.ndarray     # (H, W) float32 LDR-FLIP
-    scored: np.ndarray   # (H, W) bool, the scored water pixels (as in the fit)
-    rows: list           # failure_table rows
+    classes: dict  # key -> (H, W) bool
+    label: np.ndarray  # (H, W) int, see primary_class
+    flip: np.ndarray  # (H, W) float32 LDR-FLIP
+    scored: np.ndarray  # (H, W) bool, the scored water pixels (as in the fit)
+    rows: list  # failure_table rows
 
     def records(self) -> list[dict]:
         """Tidy rows (one per class) for a table file."""
         return [{"experiment": self.experiment, "shader": self.shader, **r} for r in self.rows]
 
 
-def catalogue_scene(exp, reference: np.ndarray, inputs, constants, *, shader: str | None = None,
-                    backend: str = "llvm", depth_complexity: bool = True) -> SceneCatalogue:
+def catalogue_scene(
+    exp,
+    reference: np.ndarray,
+    inputs,
+    constants,
+    *,
+    shader: str | None = None,
+    backend: str = "llvm",
+    depth_complexity: bool = True,
+) -> SceneCatalogue:
     """Render the port of ``shader`` (default ``fit.shader``) with its failure diagnostics at the
     experiment's resolution, classify the water pixels, and score them with FLIP against
     ``reference`` (H, W, 3) linear RGB. ``depth_complexity=False`` skips the Mitsuba queries."""
@@ -280,10 +334,11 @@ def catalogue_scene(exp, reference: np.ndarray, inputs, constants, *, shader: st
     from ..fit.model import ShaderModel
 
     w, h = exp["resolution"]
-    model = ShaderModel.from_experiment(exp, inputs, reference, shader=shader, backend=backend,
-                                        resolution=(w, h))
+    model = ShaderModel.from_experiment(
+        exp, inputs, reference, shader=shader, backend=backend, resolution=(w, h)
+    )
     with warnings.catch_warnings():
-        warnings.simplefilter("ignore", RuntimeWarning)      # non-finite pixels are a class here
+        warnings.simplefilter("ignore", RuntimeWarning)  # non-finite pixels are a class here
         out = model.variant.render(model.inputs, constants, backend=backend, diagnose=True).numpy()
     water = out["mask"] > 0.5
     hidden = None
@@ -304,11 +359,21 @@ def catalogue_scene(exp, reference: np.ndarray, inputs, constants, *, shader: st
     classes = classify(out, water, hidden=hidden, refl_missed=refl_missed)
     fmap = flip_map(model.reference, out["color"])
     rows = failure_table(classes, fmap, model.mask)
-    return SceneCatalogue(exp["name"], model.shader, model.reference, out["color"], classes,
-                          primary_class(classes, water), fmap, model.mask, rows)
+    return SceneCatalogue(
+        exp["name"],
+        model.shader,
+        model.reference,
+        out["color"],
+        classes,
+        primary_class(classes, water),
+        fmap,
+        model.mask,
+        rows,
+    )
 
 
 # ---- the study on the sweep engine: one job per experiment ---------------------------------
+
 
 def failures_job(job: dict) -> dict:
     """Sweep job (``study.sweep.run_sweep``): the catalogue of one scene. ``job``: ``scene`` (a
@@ -325,19 +390,42 @@ def failures_job(job: dict) -> dict:
     from ..sweep import load_scene
 
     exp, ref, inputs = load_scene(job["scene"], job["variant"])
-    constants = (Constants.from_dict(job["constants"]) if job.get("constants")
-                 else constants_from_experiment(exp))
-    cat = catalogue_scene(exp, ref.image, inputs, constants, shader=job.get("shader"),
-                          backend=drjit_backend(job["variant"]))
+    constants = (
+        Constants.from_dict(job["constants"])
+        if job.get("constants")
+        else constants_from_experiment(exp)
+    )
+    cat = catalogue_scene(
+        exp,
+        ref.image,
+        inputs,
+        constants,
+        shader=job.get("shader"),
+        backend=drjit_backend(job["variant"]),
+    )
     folder = Path(job["out"]) / exp["name"]
     folder.mkdir(parents=True, exist_ok=True)
-    failures_figure(folder / "failures.png", cat.reference, cat.port, cat.label, cat.flip, cat.scored,
-                    list(CLASS_KEYS), title=f"{exp['name']}: {cat.shader}")
+    failures_figure(
+        folder / "failures.png",
+        cat.reference,
+        cat.port,
+        cat.label,
+        cat.flip,
+        cat.scored,
+        list(CLASS_KEYS),
+        title=f"{exp['name']}: {cat.shader}",
+    )
     fields = ("pixels", "pixel_share", "flip_share", "flip_inside", "flip_outside")
-    return {"experiment": exp["name"], "shader": cat.shader, "figure": f"{exp['name']}/failures.png",
-            "flip": float(cat.flip[cat.scored].mean()), "water_pixels": int(cat.scored.sum()),
-            "reference_spp": ref.spp, "reference_noise": ref.noise,
-            "classes": {r["class"]: {k: r[k] for k in fields} for r in cat.rows}}
+    return {
+        "experiment": exp["name"],
+        "shader": cat.shader,
+        "figure": f"{exp['name']}/failures.png",
+        "flip": float(cat.flip[cat.scored].mean()),
+        "water_pixels": int(cat.scored.sum()),
+        "reference_spp": ref.spp,
+        "reference_noise": ref.noise,
+        "classes": {r["class"]: {k: r[k] for k in fields} for r in cat.rows},
+    }
 
 
 def tidy_rows(sweep_rows: list[dict]) -> list[dict]:
@@ -349,15 +437,38 @@ def tidy_rows(sweep_rows: list[dict]) -> list[dict]:
         for k in CLASS_KEYS + ("none",):
             if f"classes.{k}.pixels" not in row or row[f"classes.{k}.pixels"] is None:
                 continue
-            out.append({"experiment": row["experiment"], "shader": row["shader"], "class": k,
-                        **{f: row[f"classes.{k}.{f}"] for f in
-                           ("pixels", "pixel_share", "flip_share", "flip_inside", "flip_outside")}})
+            out.append(
+                {
+                    "experiment": row["experiment"],
+                    "shader": row["shader"],
+                    "class": k,
+                    **{
+                        f: row[f"classes.{k}.{f}"]
+                        for f in (
+                            "pixels",
+                            "pixel_share",
+                            "flip_share",
+                            "flip_inside",
+                            "flip_outside",
+                        )
+                    },
+                }
+            )
     return out
 
 
-def run_failures(experiments: list, out, overrides=None, *, variant: str = "llvm_ad_rgb",
-                 shader: str | None = None, constants=None, scheduler=None, workers=None,
-                 log=None) -> list[dict]:
+def run_failures(
+    experiments: list,
+    out,
+    overrides=None,
+    *,
+    variant: str = "llvm_ad_rgb",
+    shader: str | None = None,
+    constants=None,
+    scheduler=None,
+    workers=None,
+    log=None,
+) -> list[dict]:
     """``study failures``: one sweep job per experiment (:func:`failures_job`), then
     ``failures.parquet`` (one row per experiment and class), ``report.md`` and the sweep's own
     resumable table ``sweep.parquet`` in ``out``. ``constants``: a ``Constants`` for every scene
@@ -374,15 +485,31 @@ def run_failures(experiments: list, out, overrides=None, *, variant: str = "llvm
     names = [e["name"] for e in exps]
     if shader is not None:
         from shaders_port._variants import get_variant
+
         get_variant(shader)
     out_arg, out = str(out), Path(out).resolve()
     out.mkdir(parents=True, exist_ok=True)
-    jobs = [{"scene": scene_spec(p, overrides or []), "variant": variant, "shader": shader,
-             "constants": constants.to_dict() if constants is not None else None, "out": str(out)}
-            for p in experiments]
-    rows = run_sweep(failures_job, jobs, out / "sweep.parquet", scheduler=scheduler, workers=workers,
-                     variant=variant, label="failures", log=log)
-    rows = rows[:len(jobs)]
+    jobs = [
+        {
+            "scene": scene_spec(p, overrides or []),
+            "variant": variant,
+            "shader": shader,
+            "constants": constants.to_dict() if constants is not None else None,
+            "out": str(out),
+        }
+        for p in experiments
+    ]
+    rows = run_sweep(
+        failures_job,
+        jobs,
+        out / "sweep.parquet",
+        scheduler=scheduler,
+        workers=workers,
+        variant=variant,
+        label="failures",
+        log=log,
+    )
+    rows = rows[: len(jobs)]
     bad = [(n, r.get("error")) for n, r in zip(names, rows) if r.get("status") != "ok"]
     for n, err in bad:
         log(f"failures: {n} failed: {err}")
@@ -395,15 +522,31 @@ def run_failures(experiments: list, out, overrides=None, *, variant: str = "llvm
         if r.get("status") != "ok":
             continue
         scene_rows = [t for t in tidy if t["experiment"] == r["experiment"]]
-        scenes.append({"experiment": r["experiment"], "shader": r["shader"], "figure": r["figure"],
-                       "rows": scene_rows, "flip": r["flip"], "spp": r.get("reference_spp"),
-                       "noise": r.get("reference_noise"),
-                       "water_pixels": r["water_pixels"]})
-    command = ("study failures " + " ".join(str(p) for p in experiments)
-               + "".join(f" --set {o}" for o in overrides or []) + f" --out {out_arg}")
+        scenes.append(
+            {
+                "experiment": r["experiment"],
+                "shader": r["shader"],
+                "figure": r["figure"],
+                "rows": scene_rows,
+                "flip": r["flip"],
+                "spp": r.get("reference_spp"),
+                "noise": r.get("reference_noise"),
+                "water_pixels": r["water_pixels"],
+            }
+        )
+    command = (
+        "study failures "
+        + " ".join(str(p) for p in experiments)
+        + "".join(f" --set {o}" for o in overrides or [])
+        + f" --out {out_arg}"
+    )
     write_failures_report(out, scenes, list(CLASSES), command)
     for s in scenes:
-        log(f"failures: {s['experiment']}: " + ", ".join(
-            f"{t['class']} {100 * t['pixel_share']:.1f} %" for t in s["rows"] if t["pixels"]))
+        log(
+            f"failures: {s['experiment']}: "
+            + ", ".join(
+                f"{t['class']} {100 * t['pixel_share']:.1f} %" for t in s["rows"] if t["pixels"]
+            )
+        )
     log(f"failures: wrote {out}")
     return tidy

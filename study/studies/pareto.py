@@ -7,6 +7,7 @@ of the best error; ties in cost go to the lower error. It always lies on the fro
 dominated by another one is either costlier than it or no better, so the dominating point is
 within tolerance too and at most as costly.
 """
+
 from __future__ import annotations
 
 import math
@@ -22,7 +23,7 @@ def pareto_front(points: list, cost: str, error: str) -> list:
     valid.sort(key=lambda p: (p[cost], p[error]))
     front, best = [], math.inf
     for p in valid:
-        if p[error] < best:       # strictly better than every cheaper-or-equal point
+        if p[error] < best:  # strictly better than every cheaper-or-equal point
             front.append(p)
             best = p[error]
     return front

@@ -29,6 +29,7 @@ Phases (``phases``):
 Outputs in ``out``: ``multistart.parquet``, ``loss.parquet``, ``noise.parquet``, ``summary.json``,
 ``stability.md`` and the charts.
 """
+
 from __future__ import annotations
 
 import math
@@ -47,22 +48,43 @@ def _log(msg: str) -> None:
     print(msg, file=sys.stderr, flush=True)
 
 
-def plan_multistart(specs: list[dict], exps: list, starts: int, solvers, adam_lrs, max_steps: int,
-                    nm_steps: int, seed: int = 0) -> list[dict]:
+def plan_multistart(
+    specs: list[dict],
+    exps: list,
+    starts: int,
+    solvers,
+    adam_lrs,
+    max_steps: int,
+    nm_steps: int,
+    seed: int = 0,
+) -> list[dict]:
     from ..fit.calibrate import DISCRETE, scene_frozen
     from ..fit.model import expand_parameters
 
     jobs = []
     for spec, exp in zip(specs, exps):
         frozen = scene_frozen(exp)
-        names = [n for n in expand_parameters(exp["fit.parameters"]) if n not in DISCRETE and n not in frozen]
+        names = [
+            n
+            for n in expand_parameters(exp["fit.parameters"])
+            if n not in DISCRETE and n not in frozen
+        ]
         pts = latin_hypercube(names, starts, seed)
         for solver in solvers:
-            for lr in (adam_lrs if solver == "adam" else [None]):
+            for lr in adam_lrs if solver == "adam" else [None]:
                 for i, p in enumerate(pts):
-                    jobs.append({"scene": spec, "experiment": exp["name"], "solver": solver, "lr": lr,
-                                 "start_index": i, "start": p, "names": names,
-                                 "max_steps": nm_steps if solver == "nelder_mead" else max_steps})
+                    jobs.append(
+                        {
+                            "scene": spec,
+                            "experiment": exp["name"],
+                            "solver": solver,
+                            "lr": lr,
+                            "start_index": i,
+                            "start": p,
+                            "names": names,
+                            "max_steps": nm_steps if solver == "nelder_mead" else max_steps,
+                        }
+                    )
     return jobs
 
 
@@ -89,22 +111,47 @@ def analyse_multistart(rows: list[dict]) -> dict:
             best[r["experiment"]] = min(best.get(r["experiment"], math.inf), r["loss"])
     for r in rows:
         b = best.get(r.get("experiment"))
-        r["success"] = bool(r.get("status") == "ok" and r.get("loss") is not None and b is not None
-                            and r["loss"] <= b * (1 + SUCCESS))
-        r["class"] = ("sweep_error" if r.get("status") != "ok" else "success" if r["success"] else
-                      r["failure"] if r["failure"] != "converged" else "another_basin")
-        r["time_to_target"] = _time_to(r.get("trace_loss"), r.get("trace_seconds"),
-                                       b * (1 + SUCCESS)) if r["success"] else None
+        r["success"] = bool(
+            r.get("status") == "ok"
+            and r.get("loss") is not None
+            and b is not None
+            and r["loss"] <= b * (1 + SUCCESS)
+        )
+        r["class"] = (
+            "sweep_error"
+            if r.get("status") != "ok"
+            else "success"
+            if r["success"]
+            else r["failure"]
+            if r["failure"] != "converged"
+            else "another_basin"
+        )
+        r["time_to_target"] = (
+            _time_to(r.get("trace_loss"), r.get("trace_seconds"), b * (1 + SUCCESS))
+            if r["success"]
+            else None
+        )
     groups = {}
     for r in rows:
         label = r["solver"] if r["solver"] != "adam" else f"adam lr={r['lr']:g}"
         groups.setdefault(label, []).append(r)
     per = {label: _solver_stats(rs) for label, rs in groups.items()}
     adams = {k: v for k, v in per.items() if k.startswith("adam")}
-    best_adam = min(adams, key=lambda k: (-adams[k]["success_rate"], adams[k]["time_to_stop_median"] or math.inf)) \
-        if adams else None
-    return {"best_loss": best, "solvers": per, "best_adam": best_adam,
-            "reported": [k for k in per if not k.startswith("adam")] + ([best_adam] if best_adam else [])}
+    best_adam = (
+        min(
+            adams,
+            key=lambda k: (-adams[k]["success_rate"], adams[k]["time_to_stop_median"] or math.inf),
+        )
+        if adams
+        else None
+    )
+    return {
+        "best_loss": best,
+        "solvers": per,
+        "best_adam": best_adam,
+        "reported": [k for k in per if not k.startswith("adam")]
+        + ([best_adam] if best_adam else []),
+    }
 
 
 def _solver_stats(rs: list[dict]) -> dict:
@@ -116,22 +163,37 @@ def _solver_stats(rs: list[dict]) -> dict:
     ts = [r.get("fit_seconds") for r in rs if r.get("fit_seconds") is not None]
     spread = {}
     for scene in sorted({r["experiment"] for r in rs}):
-        sub = [r for r in rs if r["experiment"] == scene and r.get("status") == "ok" and r.get("loss") is not None]
+        sub = [
+            r
+            for r in rs
+            if r["experiment"] == scene and r.get("status") == "ok" and r.get("loss") is not None
+        ]
         for k in sorted({k for r in sub for k in r if k.startswith("fitted.")}):
             vals = [r[k] for r in sub if r.get(k) is not None]
             if len(vals) >= 2:
                 med = statistics.median(vals)
-                spread.setdefault(k[len("fitted."):], []).append(statistics.stdev(vals) / max(abs(med), 1e-12))
-    return {"runs": n, "success_rate": sum(r["success"] for r in rs) / n if n else 0.0,
-            "time_to_target_median": quantile(tt, 0.5), "time_to_target_p90": quantile(tt, 0.9),
-            "time_to_stop_median": quantile(ts, 0.5), "time_to_stop_p90": quantile(ts, 0.9),
-            "iterations_median": quantile([r.get("iterations") for r in rs], 0.5),
-            "classes": classes, "rel_spread": {k: statistics.median(v) for k, v in spread.items()}}
+                spread.setdefault(k[len("fitted.") :], []).append(
+                    statistics.stdev(vals) / max(abs(med), 1e-12)
+                )
+    return {
+        "runs": n,
+        "success_rate": sum(r["success"] for r in rs) / n if n else 0.0,
+        "time_to_target_median": quantile(tt, 0.5),
+        "time_to_target_p90": quantile(tt, 0.9),
+        "time_to_stop_median": quantile(ts, 0.5),
+        "time_to_stop_p90": quantile(ts, 0.9),
+        "iterations_median": quantile([r.get("iterations") for r in rs], 0.5),
+        "classes": classes,
+        "rel_spread": {k: statistics.median(v) for k, v in spread.items()},
+    }
 
 
 def plan_loss(specs, exps) -> list[dict]:
-    return [{"scene": s, "experiment": e["name"], "loss": loss} for s, e in zip(specs, exps)
-            for loss in ("linear", "log")]
+    return [
+        {"scene": s, "experiment": e["name"], "loss": loss}
+        for s, e in zip(specs, exps)
+        for loss in ("linear", "log")
+    ]
 
 
 def analyse_loss(rows: list[dict]) -> dict:
@@ -139,19 +201,39 @@ def analyse_loss(rows: list[dict]) -> dict:
     table = {}
     for r in rows:
         if r.get("status") == "ok":
-            table.setdefault(r["experiment"], {})[r["loss"]] = {"flip": r["flip"], "rmse": r["rmse"]}
+            table.setdefault(r["experiment"], {})[r["loss"]] = {
+                "flip": r["flip"],
+                "rmse": r["rmse"],
+            }
     wins = {"linear": 0, "log": 0}
     for d in table.values():
         if "linear" in d and "log" in d:
             wins["log" if d["log"]["flip"] < d["linear"]["flip"] else "linear"] += 1
-    mean = {k: statistics.mean([d[k]["flip"] for d in table.values() if k in d]) if any(k in d for d in table.values())
-            else None for k in ("linear", "log")}
-    return {"per_scene": table, "wins": wins, "mean_flip": mean,
-            "winner": min((k for k in mean if mean[k] is not None), key=lambda k: mean[k], default=None)}
+    mean = {
+        k: statistics.mean([d[k]["flip"] for d in table.values() if k in d])
+        if any(k in d for d in table.values())
+        else None
+        for k in ("linear", "log")
+    }
+    return {
+        "per_scene": table,
+        "wins": wins,
+        "mean_flip": mean,
+        "winner": min(
+            (k for k in mean if mean[k] is not None), key=lambda k: mean[k], default=None
+        ),
+    }
 
 
-def plan_noise(path: str, base_overrides: list, levels, fixed: int, seeds: int, resolution: int,
-               inputs=("reference", "texture")) -> list[dict]:
+def plan_noise(
+    path: str,
+    base_overrides: list,
+    levels,
+    fixed: int,
+    seeds: int,
+    resolution: int,
+    inputs=("reference", "texture"),
+) -> list[dict]:
     from ..sweep import scene_spec
 
     res = [f"resolution=[{resolution},{resolution}]", f"fit.resolution=[{resolution},{resolution}]"]
@@ -161,9 +243,19 @@ def plan_noise(path: str, base_overrides: list, levels, fixed: int, seeds: int, 
             for s in range(seeds):
                 ref_spp, tex_spp = (spp, fixed) if which == "reference" else (fixed, spp)
                 # the texture's path-traced samples whichever way the direct light is made
-                ov = list(base_overrides) + res + [f"reference.spp={ref_spp}", f"reference.texture_spp={tex_spp}",
-                                                   f"reference.bounce_spp={tex_spp}", f"reference.seed={1000 + s}"]
-                jobs.append({"scene": scene_spec(path, ov), "which": which, "spp": spp, "seed": 1000 + s})
+                ov = (
+                    list(base_overrides)
+                    + res
+                    + [
+                        f"reference.spp={ref_spp}",
+                        f"reference.texture_spp={tex_spp}",
+                        f"reference.bounce_spp={tex_spp}",
+                        f"reference.seed={1000 + s}",
+                    ]
+                )
+                jobs.append(
+                    {"scene": scene_spec(path, ov), "which": which, "spp": spp, "seed": 1000 + s}
+                )
     return jobs
 
 
@@ -175,7 +267,7 @@ def analyse_noise(rows: list[dict]) -> dict:
         levels = sorted({r["spp"] for r in sub})
         if not levels:
             continue
-        names = sorted({k[len("value."):] for r in sub for k in r if k.startswith("value.")})
+        names = sorted({k[len("value.") :] for r in sub for k in r if k.startswith("value.")})
         stats = {}
         for spp in levels:
             rs = [r for r in sub if r["spp"] == spp]
@@ -186,8 +278,12 @@ def analyse_noise(rows: list[dict]) -> dict:
                     continue
                 mean = statistics.mean(vals)
                 se = statistics.stdev(vals) / math.sqrt(len(vals)) if len(vals) > 1 else None
-                stats[spp][n] = {"mean": mean, "se": se, "n": len(vals),
-                                 "status": sorted({r.get(f"status.{n}") for r in rs})}
+                stats[spp][n] = {
+                    "mean": mean,
+                    "se": se,
+                    "n": len(vals),
+                    "status": sorted({r.get(f"status.{n}") for r in rs}),
+                }
         top = levels[-1]
         agree = {}
         for spp in levels:
@@ -202,25 +298,52 @@ def analyse_noise(rows: list[dict]) -> dict:
                 d["agrees"] = spp == top or abs(d["bias"]) <= se
             agree[spp] = all(d.get("agrees", False) for d in stats[spp].values())
         cheapest = next((s for s in levels if all(agree[t] for t in levels if t >= s)), top)
-        out[which] = {"levels": levels, "stats": stats, "agrees": agree, "cheapest_agreeing": cheapest}
+        out[which] = {
+            "levels": levels,
+            "stats": stats,
+            "agrees": agree,
+            "cheapest_agreeing": cheapest,
+        }
     return out
 
 
-def run_stability(experiments: list, out, overrides=None, *, phases=PHASES, starts: int = 16,
-                  solvers=SOLVERS, adam_lrs=(0.02, 0.05, 0.1), max_steps: int = 100, nm_steps: int = 400,
-                  noise_spp=(64, 256, 1024, 4096), noise_fixed_spp: int = 1024, noise_seeds: int = 3,
-                  noise_resolution: int = 96, noise_inputs=("reference", "texture"), scheduler=None,
-                  workers=None, variant: str = "llvm_ad_rgb",
-                  log=_log) -> dict:
+def run_stability(
+    experiments: list,
+    out,
+    overrides=None,
+    *,
+    phases=PHASES,
+    starts: int = 16,
+    solvers=SOLVERS,
+    adam_lrs=(0.02, 0.05, 0.1),
+    max_steps: int = 100,
+    nm_steps: int = 400,
+    noise_spp=(64, 256, 1024, 4096),
+    noise_fixed_spp: int = 1024,
+    noise_seeds: int = 3,
+    noise_resolution: int = 96,
+    noise_inputs=("reference", "texture"),
+    scheduler=None,
+    workers=None,
+    variant: str = "llvm_ad_rgb",
+    log=_log,
+) -> dict:
     """Run the study (see the module doc); returns the summary written to ``summary.json``."""
     from .._io import write_json
     from ..scene.experiment import load_experiment
     from ..sweep import run_sweep, scene_spec
     from ..sweep.cluster import open_client
-    from ..report.stability import noise_figure, solver_figure, spread_figure, write_stability_report
+    from ..report.stability import (
+        noise_figure,
+        solver_figure,
+        spread_figure,
+        write_stability_report,
+    )
 
     if not noise_inputs or any(w not in ("reference", "texture") for w in noise_inputs):
-        raise ValueError(f"noise_inputs must be a non-empty subset of ('reference', 'texture'), got {noise_inputs}")
+        raise ValueError(
+            f"noise_inputs must be a non-empty subset of ('reference', 'texture'), got {noise_inputs}"
+        )
     bad = [p for p in phases if p not in PHASES]
     if bad:
         raise ValueError(f"unknown phase(s) {bad}; choose from {PHASES}")
@@ -234,29 +357,67 @@ def run_stability(experiments: list, out, overrides=None, *, phases=PHASES, star
     overrides = list(overrides or [])
     exps = [load_experiment(p, overrides) for p in experiments]
     specs = [scene_spec(p, overrides) for p in experiments]
-    summary = {"experiments": [str(p) for p in experiments], "overrides": overrides, "phases": list(phases)}
+    summary = {
+        "experiments": [str(p) for p in experiments],
+        "overrides": overrides,
+        "phases": list(phases),
+    }
     with open_client(scheduler, workers, variant, log=log) as client:
         if "loss" in phases:
             jobs = plan_loss(specs, exps)
-            rows = run_sweep(loss_job, jobs, out / "loss.parquet", client=client, label="stability: loss",
-                             log=log)
-            summary["loss"] = analyse_loss(rows[:len(jobs)])
+            rows = run_sweep(
+                loss_job,
+                jobs,
+                out / "loss.parquet",
+                client=client,
+                label="stability: loss",
+                log=log,
+            )
+            summary["loss"] = analyse_loss(rows[: len(jobs)])
         if "multistart" in phases:
             jobs = plan_multistart(specs, exps, starts, solvers, adam_lrs, max_steps, nm_steps)
-            rows = run_sweep(multistart_job, jobs, out / "multistart.parquet", client=client,
-                             label="stability: multi-start", log=log)
-            ms = analyse_multistart(rows[:len(jobs)])
-            summary["multistart"] = {**ms, "starts": starts, "max_steps": max_steps, "nm_steps": nm_steps,
-                                     "adam_lrs": list(adam_lrs)}
+            rows = run_sweep(
+                multistart_job,
+                jobs,
+                out / "multistart.parquet",
+                client=client,
+                label="stability: multi-start",
+                log=log,
+            )
+            ms = analyse_multistart(rows[: len(jobs)])
+            summary["multistart"] = {
+                **ms,
+                "starts": starts,
+                "max_steps": max_steps,
+                "nm_steps": nm_steps,
+                "adam_lrs": list(adam_lrs),
+            }
             solver_figure(out / "solvers.png", ms)
             spread_figure(out / "spread.png", ms)
         if "noise" in phases:
-            jobs = plan_noise(str(experiments[0]), overrides, list(noise_spp), noise_fixed_spp, noise_seeds,
-                              noise_resolution, noise_inputs)
-            rows = run_sweep(noise_job, jobs, out / "noise.parquet", client=client, label="stability: noise",
-                             log=log)
-            summary["noise"] = {**analyse_noise(rows[:len(jobs)]), "fixed_spp": noise_fixed_spp,
-                                "seeds": noise_seeds, "resolution": noise_resolution}
+            jobs = plan_noise(
+                str(experiments[0]),
+                overrides,
+                list(noise_spp),
+                noise_fixed_spp,
+                noise_seeds,
+                noise_resolution,
+                noise_inputs,
+            )
+            rows = run_sweep(
+                noise_job,
+                jobs,
+                out / "noise.parquet",
+                client=client,
+                label="stability: noise",
+                log=log,
+            )
+            summary["noise"] = {
+                **analyse_noise(rows[: len(jobs)]),
+                "fixed_spp": noise_fixed_spp,
+                "seeds": noise_seeds,
+                "resolution": noise_resolution,
+            }
             noise_figure(out / "noise.png", summary["noise"])
     write_json(out / "summary.json", summary)
     write_stability_report(out, summary)

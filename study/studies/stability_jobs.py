@@ -20,6 +20,7 @@ point or the solver returned non-finite parameters), ``step_cap`` (stopped at ``
 ``error`` (anything else not converged), else ``converged``; ``another_basin`` is decided by
 the analysis (converged, but the loss is not within 0.1 % of the best of all runs).
 """
+
 from __future__ import annotations
 
 import math
@@ -57,8 +58,11 @@ def latin_hypercube(names: list[str], n: int, seed: int = 0) -> list[dict]:
         d = {}
         for k, q in zip(names, row):
             lo, hi, log = BOX[k]
-            d[k] = float(math.exp(math.log(lo) + q * (math.log(hi) - math.log(lo)))) if log else \
-                float(lo + q * (hi - lo))
+            d[k] = (
+                float(math.exp(math.log(lo) + q * (math.log(hi) - math.log(lo))))
+                if log
+                else float(lo + q * (hi - lo))
+            )
         out.append(d)
     return out
 
@@ -82,8 +86,9 @@ def _model(job, resolution=None, loss: str = "linear"):
 
     mv = job.get("mitsuba_variant", "llvm_ad_rgb")
     exp, ref, inputs = load_scene(job["scene"], mv)
-    model = ShaderModel.from_experiment(exp, inputs, ref.image, backend=drjit_backend(mv),
-                                        resolution=resolution)
+    model = ShaderModel.from_experiment(
+        exp, inputs, ref.image, backend=drjit_backend(mv), resolution=resolution
+    )
     return exp, ref, inputs, transformed(model, loss)
 
 
@@ -99,17 +104,33 @@ def multistart_job(job: dict) -> dict:
     problem = make_problem(model, start, job["names"], progress=False)
     kw = {"lr": job["lr"]} if job["solver"] == "adam" else {}
     t0 = time.perf_counter()
-    res = fit(problem, job["start"], solver=job["solver"], free=job["names"], max_steps=job["max_steps"],
-              rtol=1e-6, atol=1e-9, ftol=FTOL, ftol_window=FTOL_WINDOW, ftol_se=FTOL_SE, **kw)
+    res = fit(
+        problem,
+        job["start"],
+        solver=job["solver"],
+        free=job["names"],
+        max_steps=job["max_steps"],
+        rtol=1e-6,
+        atol=1e-9,
+        ftol=FTOL,
+        ftol_window=FTOL_WINDOW,
+        ftol_se=FTOL_SE,
+        **kw,
+    )
     seconds = time.perf_counter() - t0
     loss = res.loss if math.isfinite(res.loss) else None
-    return {"loss": loss, "loss_start": res.loss_start if math.isfinite(res.loss_start) else None,
-            "iterations": res.iterations, "fit_seconds": seconds, "converged": res.converged,
-            "message": res.message[:300],
-            "failure": failure_class(res.converged, res.message, res.iterations, job["max_steps"]),
-            "fitted": {n: float(res.constants[n]) for n in job["names"]},
-            "trace_loss": [float(v) for v in res.extra.get("step_losses", [])],
-            "trace_seconds": [float(v) for v in res.extra.get("step_seconds", [])]}
+    return {
+        "loss": loss,
+        "loss_start": res.loss_start if math.isfinite(res.loss_start) else None,
+        "iterations": res.iterations,
+        "fit_seconds": seconds,
+        "converged": res.converged,
+        "message": res.message[:300],
+        "failure": failure_class(res.converged, res.message, res.iterations, job["max_steps"]),
+        "fitted": {n: float(res.constants[n]) for n in job["names"]},
+        "trace_loss": [float(v) for v in res.extra.get("step_losses", [])],
+        "trace_seconds": [float(v) for v in res.extra.get("step_seconds", [])],
+    }
 
 
 def noise_job(job: dict) -> dict:
@@ -122,10 +143,13 @@ def noise_job(job: dict) -> dict:
     t0 = time.perf_counter()
     cal = calibrate_experiment(model, exp)
     names = expand_parameters(exp["fit.parameters"])
-    return {"fit_seconds": time.perf_counter() - t0, "reference_noise": float(ref.noise or float("nan")),
-            "value": {n: get_value(cal.fitted, n) for n in names},
-            "status": {n: cal.parameters[n]["status"] for n in names},
-            "rel_se": {n: cal.parameters[n].get("rel_std_error") for n in names}}
+    return {
+        "fit_seconds": time.perf_counter() - t0,
+        "reference_noise": float(ref.noise or float("nan")),
+        "value": {n: get_value(cal.fitted, n) for n in names},
+        "status": {n: cal.parameters[n]["status"] for n in names},
+        "rel_se": {n: cal.parameters[n].get("rel_std_error") for n in names},
+    }
 
 
 def loss_job(job: dict) -> dict:
@@ -142,9 +166,13 @@ def loss_job(job: dict) -> dict:
     img, _ = full.render(cal.fitted)
     err = errors(ref.image, img, full.base.mask)
     names = expand_parameters(exp["fit.parameters"])
-    return {"flip": float(err["flip"]), "rmse": float(err["rmse"]), "fit_seconds": fit_s,
-            "iterations": cal.fit_summary.get("iterations", 0),
-            "value": {n: get_value(cal.fitted, n) for n in names}}
+    return {
+        "flip": float(err["flip"]),
+        "rmse": float(err["rmse"]),
+        "fit_seconds": fit_s,
+        "iterations": cal.fit_summary.get("iterations", 0),
+        "value": {n: get_value(cal.fitted, n) for n in names},
+    }
 
 
 def quantile(values, q: float):

@@ -22,6 +22,7 @@ median of 5). The converged raymarch gets no frame times (it is the error floor,
 For parsimony each point also carries its count of fitted constants (``n_fitted``: fitted or at a
 bound) and the AIC / BIC of its fit residual at the fit resolution (``study._metrics``).
 """
+
 from __future__ import annotations
 
 import itertools
@@ -37,13 +38,19 @@ REFERENCE_SHADER = "water_refraction"
 
 
 def _scaled(variant, factor: float) -> dict:
-    s = {"steps_grazing": SEED_SCHEDULE["steps_grazing"] * factor,
-         "steps_steep": max(0.5, SEED_SCHEDULE["steps_steep"] * factor),
-         "loop_cap": max(1, int(round(SEED_SCHEDULE["loop_cap"] * factor)))}
+    s = {
+        "steps_grazing": SEED_SCHEDULE["steps_grazing"] * factor,
+        "steps_steep": max(0.5, SEED_SCHEDULE["steps_steep"] * factor),
+        "loop_cap": max(1, int(round(SEED_SCHEDULE["loop_cap"] * factor))),
+    }
     if "refl_loop_cap" in variant.schedule:
-        s.update({"refl_steps_steep": SEED_REFL_SCHEDULE["refl_steps_steep"] * factor,
-                  "refl_steps_grazing": SEED_REFL_SCHEDULE["refl_steps_grazing"] * factor,
-                  "refl_loop_cap": max(1, int(round(SEED_REFL_SCHEDULE["refl_loop_cap"] * factor)))})
+        s.update(
+            {
+                "refl_steps_steep": SEED_REFL_SCHEDULE["refl_steps_steep"] * factor,
+                "refl_steps_grazing": SEED_REFL_SCHEDULE["refl_steps_grazing"] * factor,
+                "refl_loop_cap": max(1, int(round(SEED_REFL_SCHEDULE["refl_loop_cap"] * factor))),
+            }
+        )
     return s
 
 
@@ -62,24 +69,32 @@ def schedules(exp, variant_name: str) -> list[dict]:
         if k not in seen:
             seen.add(k)
             out.append({"kind": kind, "scale": scale, "schedule": sched})
+
     for f in sorted(exp["tradeoff.scales"]):
         add("scale", f, _scaled(variant, f))
-    for g, s, c in itertools.product(exp["tradeoff.steps_grazing"], exp["tradeoff.steps_steep"],
-                                     exp["tradeoff.loop_cap"]):
+    for g, s, c in itertools.product(
+        exp["tradeoff.steps_grazing"], exp["tradeoff.steps_steep"], exp["tradeoff.loop_cap"]
+    ):
         sched = {"steps_grazing": float(g), "steps_steep": float(s), "loop_cap": int(round(c))}
         if "refl_loop_cap" in variant.schedule:
             sched.update(SEED_REFL_SCHEDULE)
         add("grid", None, sched)
-    add("converged", exp["tradeoff.converged_scale"], _scaled(variant, exp["tradeoff.converged_scale"]))
+    add(
+        "converged",
+        exp["tradeoff.converged_scale"],
+        _scaled(variant, exp["tradeoff.converged_scale"]),
+    )
     return out
 
 
 # ---- worker side ------------------------------------------------------------------------------
 
+
 def _fit_names(exp, variant_name: str) -> list[str]:
     """``fit.parameters`` the variant reads, without its schedule constants (the sweep sets
     those), plus the variant's own ``fit_parameters`` (e.g. the baseline's distortions)."""
     from shaders_port._variants import get_variant
+
     v = get_variant(variant_name)
     names = [n for n in v.fit_names(exp["fit.parameters"]) if n not in v.schedule]
     reads = set(v.reads())
@@ -96,9 +111,14 @@ def _model(job, resolution=None):
     mv = job.get("mitsuba_variant", "llvm_ad_rgb")
     exp, ref, inputs = load_scene(job["scene"], mv)
     inputs = inputs_for_shader(exp, inputs, job["variant"], mv, log=lambda m: None)
-    model = ShaderModel.from_experiment(exp, inputs, ref.image, shader=job["variant"],
-                                        backend=drjit_backend(job.get("mitsuba_variant", "llvm_ad_rgb")),
-                                        resolution=resolution)
+    model = ShaderModel.from_experiment(
+        exp,
+        inputs,
+        ref.image,
+        shader=job["variant"],
+        backend=drjit_backend(job.get("mitsuba_variant", "llvm_ad_rgb")),
+        resolution=resolution,
+    )
     return exp, ref, inputs, model
 
 
@@ -112,9 +132,12 @@ def anchor_job(job: dict) -> dict:
     start = Constants.from_dict(job["start"])
     t0 = time.perf_counter()
     cal = calibrate_experiment(model, exp, start, _fit_names(exp, job["variant"]))
-    return {"fitted": cal.fitted.to_dict(), "fit_seconds": time.perf_counter() - t0,
-            "iterations": cal.fit_summary.get("iterations", 0),
-            "status_of": {n: p["status"] for n, p in cal.parameters.items()}}
+    return {
+        "fitted": cal.fitted.to_dict(),
+        "fit_seconds": time.perf_counter() - t0,
+        "iterations": cal.fit_summary.get("iterations", 0),
+        "status_of": {n: p["status"] for n, p in cal.parameters.items()},
+    }
 
 
 def point_job(job: dict) -> dict:
@@ -131,23 +154,33 @@ def point_job(job: dict) -> dict:
     cal = calibrate_experiment(model, exp, start, _fit_names(exp, job["variant"]))
     fit_s = time.perf_counter() - t0
     from .._metrics import information_criteria
+
     fitted_names = [n for n, p in cal.parameters.items() if p["status"] in ("fitted", "bound")]
     ic = information_criteria(model.residual(cal.fitted), len(fitted_names))
     _, _, _, full = _model(job, resolution=tuple(exp["resolution"]))
     img, diag = full.render(cal.fitted)
     err = errors(ref.image, img, full.mask)
     m = full.mask
-    out = {"flip": err["flip"], "rmse": err["rmse"], "fit_seconds": fit_s,
-           "fit_iterations": cal.fit_summary.get("iterations", 0), "water_pixels": int(m.sum()),
-           "n_fitted": len(fitted_names), "aic": ic["aic"], "bic": ic["bic"]}
+    out = {
+        "flip": err["flip"],
+        "rmse": err["rmse"],
+        "fit_seconds": fit_s,
+        "fit_iterations": cal.fit_summary.get("iterations", 0),
+        "water_pixels": int(m.sum()),
+        "n_fitted": len(fitted_names),
+        "aic": ic["aic"],
+        "bic": ic["bic"],
+    }
     for k in ("fetches", "iterations", "refl_iterations"):
         if k in diag.maps:
             v = diag.maps[k][m]
             out[f"{k}_mean"], out[f"{k}_p99"] = float(v.mean()), float(np.percentile(v, 99))
     if "crossed" in diag.maps:
         out["not_crossed"] = float(1.0 - diag.maps["crossed"][m].mean())
-    out["nonfinite_pixels"] = int(diag.maps["nonfinite"][m].sum()) if "nonfinite" in diag.maps else 0
-    if job["kind"] != "converged":      # the error floor is not a candidate: its frame time is moot
+    out["nonfinite_pixels"] = (
+        int(diag.maps["nonfinite"][m].sum()) if "nonfinite" in diag.maps else 0
+    )
+    if job["kind"] != "converged":  # the error floor is not a candidate: its frame time is moot
         out.update(frame_times(job["variant"], inputs, cal.fitted, exp["tradeoff.gl_repeats"]))
     out["fitted"] = cal.fitted.to_dict()
     return out
@@ -175,7 +208,7 @@ def frame_times(variant_name: str, inputs, constants, repeats: int) -> dict:
         out[f"gl_ref_ms_{label}"] = statistics.mean(ref_ms)
         out[f"gl_ratio_{label}"] = out[f"gl_ms_{label}"] / out[f"gl_ref_ms_{label}"]
     frame = inputs.with_resolution(512, 512)
-    variant.render(frame, constants)           # compile / record the kernels
+    variant.render(frame, constants)  # compile / record the kernels
     times = []
     for _ in range(5):
         t0 = time.perf_counter()

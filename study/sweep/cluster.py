@@ -18,6 +18,7 @@ each is started and closed with the sweep. The kernel cache (``~/.drjit`` or
 ``DRJIT_CACHE_DIR``) is shared by the processes; the render cache (``STUDY_CACHE``) must be on a
 file system all workers see when the cluster spans machines.
 """
+
 from __future__ import annotations
 
 import contextlib
@@ -32,7 +33,7 @@ def cpu_count() -> int:
     """Cores this process may use (the affinity mask, not the machine's count)."""
     try:
         return max(1, len(os.sched_getaffinity(0)))
-    except AttributeError:      # not Linux
+    except AttributeError:  # not Linux
         return max(1, os.cpu_count() or 1)
 
 
@@ -48,10 +49,11 @@ class BackendPlugin(WorkerPlugin):
 
     def setup(self, worker=None):
         from .._backend import init_backend
+
         init_backend(self.variant)
         import drjit as dr
-        dr.set_thread_count(self.threads or cpu_count())   # 0: every core of the worker's machine
 
+        dr.set_thread_count(self.threads or cpu_count())  # 0: every core of the worker's machine
 
 
 def scheduler_address(scheduler: str | None = None) -> str | None:
@@ -60,8 +62,9 @@ def scheduler_address(scheduler: str | None = None) -> str | None:
 
 
 @contextlib.contextmanager
-def open_client(scheduler: str | None = None, workers: int | None = None,
-                variant: str = "llvm_ad_rgb", log=None):
+def open_client(
+    scheduler: str | None = None, workers: int | None = None, variant: str = "llvm_ad_rgb", log=None
+):
     """A ``distributed.Client`` with :class:`BackendPlugin` registered on every worker.
 
     Args:
@@ -80,18 +83,25 @@ def open_client(scheduler: str | None = None, workers: int | None = None,
     threads = max(1, cpu_count() // n)
     # XLA's CPU client (the JAX bridge of the fits) starts its own thread pools: keep them to the
     # worker's share of the cores unless the user set XLA_FLAGS
-    xla = "--xla_cpu_multi_thread_eigen=false intra_op_parallelism_threads=1" if threads == 1 else ""
-    env = {"XLA_FLAGS": os.environ.get("XLA_FLAGS", xla), "OMP_NUM_THREADS": str(threads),
-           "LP_NUM_THREADS": os.environ.get("LP_NUM_THREADS", str(threads))}   # llvmpipe's rasteriser
+    xla = (
+        "--xla_cpu_multi_thread_eigen=false intra_op_parallelism_threads=1" if threads == 1 else ""
+    )
+    env = {
+        "XLA_FLAGS": os.environ.get("XLA_FLAGS", xla),
+        "OMP_NUM_THREADS": str(threads),
+        "LP_NUM_THREADS": os.environ.get("LP_NUM_THREADS", str(threads)),
+    }  # llvmpipe's rasteriser
     for k in ("STUDY_CACHE", "DRJIT_LIBLLVM_PATH", "DRJIT_CACHE_DIR", "PYTHONPATH"):
         if k in os.environ:
             env[k] = os.environ[k]
-    config = {"distributed.worker.multiprocessing-method": "spawn",
-              "distributed.nanny.pre-spawn-environ": env,
-              "distributed.worker.daemon": False,
-              "distributed.scheduler.worker-ttl": None,
-              "distributed.admin.tick.limit": "3h",
-              "logging.distributed": "error"}
+    config = {
+        "distributed.worker.multiprocessing-method": "spawn",
+        "distributed.nanny.pre-spawn-environ": env,
+        "distributed.worker.daemon": False,
+        "distributed.scheduler.worker-ttl": None,
+        "distributed.admin.tick.limit": "3h",
+        "logging.distributed": "error",
+    }
     with dask.config.set(config):
         if address:
             if log:
@@ -99,12 +109,19 @@ def open_client(scheduler: str | None = None, workers: int | None = None,
             cluster = None
             client = Client(address, timeout="30s")
         else:
-            cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True,
-                                   dashboard_address=None, silence_logs=40)
+            cluster = LocalCluster(
+                n_workers=n,
+                threads_per_worker=1,
+                processes=True,
+                dashboard_address=None,
+                silence_logs=40,
+            )
             client = Client(cluster)
         try:
             # a remote worker sizes Dr.Jit's pool to its own machine, a local one to its share
-            client.register_plugin(BackendPlugin(variant, 0 if address else threads), name=BackendPlugin.name)
+            client.register_plugin(
+                BackendPlugin(variant, 0 if address else threads), name=BackendPlugin.name
+            )
             yield client
         finally:
             client.close()

@@ -18,6 +18,7 @@ The job function runs in a worker process whose backend was set up by ``BackendP
 be importable by name (a module-level function of an installed package). Jobs that need no
 scene leave out the ``scene`` entry.
 """
+
 from __future__ import annotations
 
 import contextlib
@@ -47,9 +48,11 @@ def _run_job(fn, job: dict, key: str, scene_ready=None) -> dict:
                 raise RuntimeError(f"scene preparation failed: {scene_ready['error']}")
             out = fn(job)
         if not isinstance(out, dict):
-            raise TypeError(f"{_qualname(fn)} returned {type(out).__name__}, expected a dict of results")
+            raise TypeError(
+                f"{_qualname(fn)} returned {type(out).__name__}, expected a dict of results"
+            )
         row.update(flatten(out))
-    except Exception as exc:       # recorded, not raised: one failing job never stops a sweep
+    except Exception as exc:  # recorded, not raised: one failing job never stops a sweep
         row["status"], row["error"] = "error", clip_error(exc)
         row["log_tail"] = "\n".join(captured.getvalue().replace("\r", "\n").splitlines()[-20:])
     row["seconds"] = time.perf_counter() - t0
@@ -83,13 +86,26 @@ class Progress:
         bar = "#" * round(frac * self.width) + "." * (self.width - round(frac * self.width))
         fail = f", {self.failed} failed" if self.failed else ""
         end = "\n" if self.done >= self.total else ""
-        print(f"\r{self.label} [{bar}] {self.done}/{self.total}{fail} {time.perf_counter() - self.t0:.0f} s",
-              end=end, file=self.stream, flush=True)
+        print(
+            f"\r{self.label} [{bar}] {self.done}/{self.total}{fail} {time.perf_counter() - self.t0:.0f} s",
+            end=end,
+            file=self.stream,
+            flush=True,
+        )
 
 
-def run_sweep(job_fn, jobs: list[dict], table, *, scheduler: str | None = None,
-              workers: int | None = None, variant: str = "llvm_ad_rgb", label: str = "sweep",
-              client=None, log=None) -> list[dict]:
+def run_sweep(
+    job_fn,
+    jobs: list[dict],
+    table,
+    *,
+    scheduler: str | None = None,
+    workers: int | None = None,
+    variant: str = "llvm_ad_rgb",
+    label: str = "sweep",
+    client=None,
+    log=None,
+) -> list[dict]:
     """Run ``job_fn`` on every job (see the module doc) and return all rows of the table, in the
     order of ``jobs`` (rows of other jobs already in the table follow them).
 
@@ -132,13 +148,16 @@ def _submit_all(client, job_fn, todo, rows, old, table, variant, label) -> None:
     for _, job in todo:
         spec = job.get("scene")
         if spec is not None and spec_text(spec) not in scenes:
-            scenes[spec_text(spec)] = client.submit(_prepare, spec, variant, pure=False,
-                                                    key=f"scene-{len(scenes)}-{time.time_ns()}")
+            scenes[spec_text(spec)] = client.submit(
+                _prepare, spec, variant, pure=False, key=f"scene-{len(scenes)}-{time.time_ns()}"
+            )
     futures = {}
     for key, job in todo:
         spec = job.get("scene")
         dep = scenes[spec_text(spec)] if spec is not None else None
-        f = client.submit(_run_job, job_fn, job, key, dep, pure=False, key=f"job-{key}-{time.time_ns()}")
+        f = client.submit(
+            _run_job, job_fn, job, key, dep, pure=False, key=f"job-{key}-{time.time_ns()}"
+        )
         futures[f] = (key, job)
     progress = Progress(label, len(futures))
     progress.show()
@@ -148,13 +167,15 @@ def _submit_all(client, job_fn, todo, rows, old, table, variant, label) -> None:
             key, job = futures[f]
             try:
                 row = f.result()
-            except Exception as exc:        # the worker died (e.g. a crash in native code)
+            except Exception as exc:  # the worker died (e.g. a crash in native code)
                 row = {"key": key, "status": "error", "error": clip_error(exc), "seconds": None}
             rows[key] = {**flatten({"job": job}), **row}
             progress.update(row["status"] == "ok")
-            if time.perf_counter() - last_write > 2.0:    # keep finished rows on disk
-                write_table(table, list(rows.values()) + [r for k, r in old.items() if k not in rows])
+            if time.perf_counter() - last_write > 2.0:  # keep finished rows on disk
+                write_table(
+                    table, list(rows.values()) + [r for k, r in old.items() if k not in rows]
+                )
                 last_write = time.perf_counter()
-    except KeyboardInterrupt:           # Ctrl-C: every finished row is kept, the rest re-run later
+    except KeyboardInterrupt:  # Ctrl-C: every finished row is kept, the rest re-run later
         write_table(table, list(rows.values()) + [r for k, r in old.items() if k not in rows])
         raise

@@ -6,6 +6,7 @@ their spec under ``job["scene"]``; the engine runs :func:`prepare_scene` once pe
 before the jobs that need it, and a job calls :func:`load_scene` (a cache hit, memoised per
 worker process).
 """
+
 from __future__ import annotations
 
 import functools
@@ -16,7 +17,10 @@ import sys
 
 def scene_spec(experiment, overrides=()) -> dict:
     """The canonical spec of an experiment file with ``--set`` overrides."""
-    return {"experiment": os.path.abspath(str(experiment)), "overrides": [str(o) for o in overrides]}
+    return {
+        "experiment": os.path.abspath(str(experiment)),
+        "overrides": [str(o) for o in overrides],
+    }
 
 
 def spec_text(spec: dict) -> str:
@@ -31,8 +35,12 @@ def prepare_scene(spec: dict, variant: str = "llvm_ad_rgb") -> dict:
     """Render (or find cached) the reference and shader inputs of ``spec``; return a summary
     (reference key, spp, noise). Runs in a worker; concurrent calls on one key render once."""
     exp, ref, _ = load_scene(spec, variant)
-    return {"reference_key": ref.provenance.get("key"), "spp": ref.spp, "noise": ref.noise,
-            "experiment": exp["name"]}
+    return {
+        "reference_key": ref.provenance.get("key"),
+        "spp": ref.spp,
+        "noise": ref.noise,
+        "experiment": exp["name"],
+    }
 
 
 @functools.lru_cache(maxsize=4)

@@ -8,6 +8,7 @@ text. Every row carries ``key`` (the job's identity, :func:`job_key`), ``status`
 ``error``), ``error`` (the exception's type and message, clipped), ``seconds`` (wall time of the
 job in its worker) and ``worker``.
 """
+
 from __future__ import annotations
 
 import hashlib
@@ -26,8 +27,12 @@ ERROR_CHARS = 2000
 def job_key(fn_name: str, job: dict) -> str:
     """Identity of a job: a hash of the job function's qualified name and the canonical JSON of
     its inputs. Equal keys mean the same computation (the render cache keys the scene data)."""
-    text = json.dumps({"fn": fn_name, "job": job, "v": SCHEMA_VERSION}, sort_keys=True,
-                      default=str, allow_nan=False)
+    text = json.dumps(
+        {"fn": fn_name, "job": job, "v": SCHEMA_VERSION},
+        sort_keys=True,
+        default=str,
+        allow_nan=False,
+    )
     return hashlib.sha256(text.encode()).hexdigest()[:24]
 
 
@@ -104,6 +109,8 @@ def read_table(path: Path) -> list[dict]:
         return []
     try:
         return pq.read_table(path).to_pylist()
-    except Exception as exc:     # pyarrow raises several types for a damaged file
-        raise ValueError(f"{path} is not a readable Parquet table ({exc}); move it away to start "
-                         "this sweep afresh") from exc
+    except Exception as exc:  # pyarrow raises several types for a damaged file
+        raise ValueError(
+            f"{path} is not a readable Parquet table ({exc}); move it away to start "
+            "this sweep afresh"
+        ) from exc

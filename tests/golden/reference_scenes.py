@@ -10,6 +10,7 @@ a scene change keeps most paths correlated, so it moves the RMSE by much less th
 0.36 x noise, another seed 1.3 x noise, an unchanged renderer exactly 0). A threshold of 0.1 x
 noise catches both changes and tolerates about 0.5 % of pixels diverging by rounding.
 """
+
 from __future__ import annotations
 
 import sys
@@ -24,13 +25,20 @@ SCENES = {
     "murky": ("murky.toml", {}, 0.1),
     "clear": ("clear.toml", {}, 0.1),
 }
-SMALL = {"resolution": "[32, 32]", "fit.resolution": "[32, 32]", "reference.spp": "64",
-         "reference.water_mesh": "96", "reference.texture_size": "64", "reference.texture_spp": "8",
-         "waves.normal_map_size": "64"}
+SMALL = {
+    "resolution": "[32, 32]",
+    "fit.resolution": "[32, 32]",
+    "reference.spp": "64",
+    "reference.water_mesh": "96",
+    "reference.texture_size": "64",
+    "reference.texture_spp": "8",
+    "waves.normal_map_size": "64",
+}
 
 
 def experiment(name: str):
     from study import load_experiment
+
     file, overrides, _ = SCENES[name]
     ov = dict(SMALL, **overrides)
     return load_experiment(REPO / "experiments" / file, [f"{k}={v}" for k, v in ov.items()])
@@ -42,11 +50,13 @@ def golden_path(name: str) -> Path:
 
 def render(name: str):
     from study.scene.reference import render_reference
+
     return render_reference(experiment(name), "llvm_ad_rgb")
 
 
 def main() -> None:
     from study import init_backend, write_exr
+
     init_backend("llvm_ad_rgb")
     for name in SCENES:
         ref = render(name)

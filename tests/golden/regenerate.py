@@ -5,6 +5,7 @@ float32 linear, 48 x 64, row 0 at the top). Regenerate only after a deliberate c
 shader arithmetic, and say why in the commit. ``SCENES`` and the per-scene thresholds are
 used by tests/test_water_refraction.py and tests/test_water_reflection.py.
 """
+
 from __future__ import annotations
 
 import os
@@ -25,11 +26,22 @@ from shaders_port import Constants  # noqa: E402
 
 WIDTH, HEIGHT = 64, 48
 
-CUSTOM = Constants(attenuation_distance=2.0, steps_grazing=14.0, steps_steep=2.0, loop_cap=6,
-                   bumptex_mult=0.4, refr_coeff=0.7, water_color=(0.1, 0.3, 0.2, 1.0),
-                   reflect_color=(0.9, 0.8, 1.0, 1.0), specular_strength=3.0,
-                   specular_exponent=64.0, refl_steps_steep=0.7, refl_steps_grazing=6.0,
-                   refl_loop_cap=20, refl_height_cut=0.5)
+CUSTOM = Constants(
+    attenuation_distance=2.0,
+    steps_grazing=14.0,
+    steps_steep=2.0,
+    loop_cap=6,
+    bumptex_mult=0.4,
+    refr_coeff=0.7,
+    water_color=(0.1, 0.3, 0.2, 1.0),
+    reflect_color=(0.9, 0.8, 1.0, 1.0),
+    specular_strength=3.0,
+    specular_exponent=64.0,
+    refl_steps_steep=0.7,
+    refl_steps_grazing=6.0,
+    refl_loop_cap=20,
+    refl_height_cut=0.5,
+)
 
 # scene -> (shader, reflection flag, constants, max |diff| threshold, mean |diff| threshold)
 # Thresholds: float32 rounding of a different CPU / LLVM version moves colours by ~1e-6;
@@ -47,6 +59,7 @@ def render_scene(scene: str) -> np.ndarray:
     """(HEIGHT, WIDTH, 3) float32 colour of ``scene`` rendered by the port."""
     from synthetic import synthetic_inputs
     from shaders_port import water_reflection, water_refraction
+
     shader, reflection, constants, _, _ = SCENES[scene]
     inputs = synthetic_inputs(WIDTH, HEIGHT)
     if shader == "water_refraction":
