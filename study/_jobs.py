@@ -269,8 +269,8 @@ def run_calibrate(experiment, out, overrides=None, variant=None, solver=None, ca
             "defines": list(model.variant.defines),
         }
     with timed(timings, "export_s"):
-        _log("calibrate: exporting and compiling the shaders")
-        export_shaders(cal.fitted, out / "shaders")
+        _log(f"calibrate: exporting and compiling {model.shader} (and its vertex shader)")
+        export_shaders(cal.fitted, out / "shaders", [model.shader])
     with timed(timings, "gl_check_s"):
         _log("calibrate: running the exported shader on OpenGL (llvmpipe)")
         gl = gl_check(model.shader, inputs, cal.fitted, out / "shaders")
@@ -456,7 +456,7 @@ def _joint_fit(scenes, variant, out: Path, solver):
         s["name"]: {"default": evaluate(i, start), "fitted": evaluate(i, cal.fitted)}
         for i, s in enumerate(scenes)
     }
-    export_shaders(cal.fitted, out / "shaders")
+    export_shaders(cal.fitted, out / "shaders", [scenes[0]["model"].shader])
     gl = gl_check(scenes[0]["model"].shader, scenes[0]["inputs"], cal.fitted, out / "shaders")
     fs = cal.fit_summary
     weights = JointModel([s["model"] for s in scenes]).weights

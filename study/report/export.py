@@ -59,23 +59,28 @@ def load_constants_json(path) -> Constants:
         raise ValueError(f"{path}: {exc}") from exc
 
 
-def export_shaders(constants: Constants, out_dir) -> list[Path]:
-    """Write ``out_dir/{compat,core}/water.vert`` and every fragment shader of the registered
-    variants (``water_refraction.frag``, ``water_reflection.frag``, ...) with ``constants``; return the written paths. Raises ValueError on bad constants and
-    RuntimeError if a shader does not compile (nothing is written then)."""
+def export_shaders(constants: Constants, out_dir, shaders=None) -> list[Path]:
+    """Write ``out_dir/{compat,core}/water.vert`` and the fragment shaders of the registered
+    variants named in ``shaders`` (default: every one -- ``water_refraction.frag``,
+    ``water_reflection.frag``, ...) with ``constants``; return the written paths. Constants
+    are fitted for one shader, so a calibration exports that shader alone. Raises ValueError
+    on bad constants or an unknown name and RuntimeError if a shader does not compile (nothing
+    is written then)."""
     constants.validate()
+    names = list(VARIANTS) if shaders is None else list(shaders)
+    unknown = [n for n in names if n not in VARIANTS]
+    if unknown or not names:
+        raise ValueError(f"export: unknown shader(s) {unknown or names}; known: {sorted(VARIANTS)}")
     texts = {}
     for dialect in ("compat", "core"):
         texts[(dialect, "water.vert")] = read_source("water", "vert", dialect)
-        for name in FRAGMENT_SHADERS:
-            texts[(dialect, f"{name}.frag")] = write_constants(
-                read_source(name, "frag", dialect), constants
-            )
-        for v in VARIANTS.values():
-            if v.name != v.shader:
-                texts[(dialect, f"{v.name}.frag")] = v.source(
-                    dialect, text=texts[(dialect, f"{v.shader}.frag")]
-                )
+        bases = {}
+        for name in names:
+            v = VARIANTS[name]
+            if v.shader not in bases:
+                bases[v.shader] = write_constants(read_source(v.shader, "frag", dialect), constants)
+            text = bases[v.shader] if v.name == v.shader else v.source(dialect, text=bases[v.shader])
+            texts[(dialect, f"{v.name}.frag")] = text
     for (dialect, fname), text in texts.items():
         compile_check(text, fname.rsplit(".", 1)[1])
     out_dir = Path(out_dir)

@@ -404,7 +404,7 @@ def export_recommended(
         )
         constants = Constants.from_dict(_constants_of(row))
         folder = out / "shaders" if len(exps) == 1 else out / "shaders" / exp["name"]
-        export_shaders(constants, folder)
+        export_shaders(constants, folder, [rec["variant"]])
         from ..scene.baseline_inputs import inputs_for_shader
 
         exp_s, _, inputs = load_scene(spec, variant)
