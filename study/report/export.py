@@ -79,7 +79,9 @@ def export_shaders(constants: Constants, out_dir, shaders=None) -> list[Path]:
             v = VARIANTS[name]
             if v.shader not in bases:
                 bases[v.shader] = write_constants(read_source(v.shader, "frag", dialect), constants)
-            text = bases[v.shader] if v.name == v.shader else v.source(dialect, text=bases[v.shader])
+            text = (
+                bases[v.shader] if v.name == v.shader else v.source(dialect, text=bases[v.shader])
+            )
             texts[(dialect, f"{v.name}.frag")] = text
     for (dialect, fname), text in texts.items():
         compile_check(text, fname.rsplit(".", 1)[1])
