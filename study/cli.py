@@ -23,10 +23,12 @@ def _common(p: argparse.ArgumentParser, many: bool = False) -> None:
         help="override an experiment key, e.g. --set water.ior=1.33 (repeatable)",
     )
     p.add_argument(
+        "--backend",
         "--variant",
+        dest="variant",
         choices=["llvm_ad_rgb", "cuda_ad_rgb"],
         default=None,
-        help="Mitsuba variant (default: the experiment's, normally llvm_ad_rgb)",
+        help="Mitsuba / Dr.Jit backend (default: the experiment's, normally llvm_ad_rgb; --variant is the old name)",
     )
 
 
@@ -45,10 +47,12 @@ def _sweep_common(p: argparse.ArgumentParser, experiments_help: str) -> None:
         help="override a key of every experiment (repeatable)",
     )
     p.add_argument(
+        "--backend",
         "--variant",
+        dest="variant",
         choices=["llvm_ad_rgb", "cuda_ad_rgb"],
         default="llvm_ad_rgb",
-        help="Mitsuba variant of the workers",
+        help="Mitsuba / Dr.Jit backend of the workers (--variant is the old name)",
     )
     p.add_argument(
         "--scheduler",
@@ -152,10 +156,12 @@ def build_parser() -> argparse.ArgumentParser:
         help="override an experiment key in every experiment (repeatable)",
     )
     p.add_argument(
+        "--backend",
         "--variant",
+        dest="variant",
         choices=["llvm_ad_rgb", "cuda_ad_rgb"],
         default=None,
-        help="Mitsuba variant (default: each experiment's)",
+        help="Mitsuba / Dr.Jit backend (default: each experiment's; --variant is the old name)",
     )
     p.add_argument(
         "--shader", default=None, help="shader variant (default: each experiment's fit.shader)"
