@@ -7,9 +7,12 @@ GL check) names a shader by its variant name only, so a new shader joins the stu
 file pair and one :func:`register` call here.
 
 ``VARIANTS`` maps names to :class:`Variant`, in registration order (the order of charts and
-tables). Shipped: ``water_refraction`` (seed 000, section 2), ``water_refraction_noreflection``
-(the same file with ``#define NOREFLECTION``: refraction and specular, no sky reflection) and
-``water_reflection`` (seed 000, section 3: reflections raycast too).
+tables). Shipped: 18 variants, registered below: ``water_refraction`` (the original shader,
+section 2), ``water_reflection`` (section 3: reflections raycast too), their ``#define`` variants
+(Beer-Lambert attenuation, wall faces, GGX, the crossing refinement, fewer normal-map layers,
+game-precision textures, no highlight, and ``water_refraction_noreflection``: ``#define
+NOREFLECTION``, the refraction alone -- no sky reflection and so no highlight either) and the
+game-water baseline ``water_baseline`` with its two ``#define`` variants.
 """
 
 from __future__ import annotations

@@ -5,6 +5,7 @@ fails)."""
 from __future__ import annotations
 
 import importlib.util
+import os
 import shutil
 import subprocess
 
@@ -43,9 +44,11 @@ def test_mkdocs_build_strict(tmp_path):
     mkdocs = shutil.which("mkdocs", path=str(REPO / ".venv" / "bin")) or shutil.which("mkdocs")
     if mkdocs is None:
         pytest.fail("mkdocs is not installed: run `make setup` (it is a dev dependency)")
+    env = {**os.environ, "NO_MKDOCS_2_WARNING": "1"}
     r = subprocess.run(
         [mkdocs, "build", "--strict", "--site-dir", str(tmp_path / "site")],
         cwd=REPO,
+        env=env,
         capture_output=True,
         text=True,
         timeout=300,

@@ -326,7 +326,7 @@ SCHEMA: dict[str, Field] = {
         "pass's spp is rounded up to the sampler's grid (128 spp: 4 x 35). At equal "
         "samples the jittered passes have 2.8x less variance on the water and 5.5x "
         "less on the sun's glitter than independent ones (measured on the default "
-        'scene, README "Fast references"), which is where the reference\'s noise moves '
+        "scene, docs/fast-references.md), which is where the reference's noise moves "
         "the fitted specular pair.",
         choices=("multijitter", "independent", "stratified"),
     ),
@@ -383,7 +383,7 @@ SCHEMA: dict[str, Field] = {
         "to the raw mean of the same samples), `oidn_unmatched` (denoised, its "
         "own brightness kept) or `none` (raw path tracing: raise "
         "`reference.texture_spp` to 256 or more). Measured effect on the fitted "
-        "constants: README, Fast references.",
+        "constants: docs/fast-references.md.",
         choices=("none", "oidn", "oidn_unmatched"),
     ),
     "reference.lighting_direct": Field(
@@ -395,7 +395,7 @@ SCHEMA: dict[str, Field] = {
         "sharp; the sky gathered at the floor; only the light that bounced path "
         "traced and denoised; scattering water, `water.albedo` > 0, keeps "
         "`path`) or `path` (all of it path traced and denoised, the caustics "
-        "smoothed). README, Fast references.",
+        "smoothed). docs/fast-references.md.",
         choices=("traced", "path"),
     ),
     "reference.sun_bounces": Field(
@@ -457,7 +457,7 @@ SCHEMA: dict[str, Field] = {
         'takes outside the pool (`texture_method = "lighting"`; `reference.wall_spp`): '
         "`oidn` (Open Image Denoise guided by its albedo, its mean outside the pool "
         "matched to the raw mean there) or `none` (raw: 5-8 % noise per texel at 16 "
-        "spp, which biases the fit). README, Fast references.",
+        "spp, which biases the fit). docs/fast-references.md.",
         choices=("oidn", "none"),
     ),
     "reference.refraction_lighting": Field(
@@ -974,5 +974,5 @@ def schema_markdown() -> str:
     return "\n".join(lines) + "\n"
 
 
-if __name__ == "__main__":  # python -m study._experiment > table (for experiments/README.md)
+if __name__ == "__main__":  # python -m study.scene.experiment > table (for experiments/README.md)
     print(schema_markdown(), end="")

@@ -183,7 +183,7 @@ def denoise_gain(
     they were denoised from (each (..., 3), linear RGB), and the standard error of that ratio from
     the raw texels' standard errors ``raw_se`` (..., 3), ``n_independent`` of them independent
     (default: every texel). The raw mean is unbiased, so a ratio away from 1 by several standard
-    errors is the denoiser's own bias in the texture's brightness (README, Fast references). A
+    errors is the denoiser's own bias in the texture's brightness (docs/fast-references.md). A
     channel whose raw mean is not positive (no light at all) gets the ratio 1 and error 0."""
     m_raw = raw.reshape(-1, 3).astype(np.float64).mean(0)
     lit = m_raw > 0.0
@@ -342,7 +342,7 @@ def denoise_dry(
     (``reference.wall_denoise = "oidn"``), its mean over the (n, n) bool ``outside`` texels (the
     only ones the texture takes from it) matched per colour channel to the raw mean there; and a
     dict with that ratio (denoised / raw, before the match). At 16 spp its texels' noise is 5-8 %,
-    and noise in the shader's inputs biases the fit (README, Fast references)."""
+    and noise in the shader's inputs biases the fit (docs/fast-references.md)."""
     den = denoise_radiance(dry, np.maximum(albedo, 1e-3))
     ratio, _ = denoise_gain(
         den[outside], dry[outside], np.zeros_like(dry[outside])

@@ -13,7 +13,7 @@ sampler reduces the variance as much but draws consecutive dimensions from permu
 consecutive seeds, which correlates them (measured: -0.01 at 36 spp, -0.004 at 144; multijitter
 and independent: none), and that biases volumetric path tracing: deep, chromatic water came out
 about 1 % too bright in green and blue, which moved the fitted water colour on the murky scene
-by 2.5 standard errors (README "Fast references").
+by 2.5 standard errors (docs/fast-references.md).
 
 Automatic spp renders a pilot (``K`` x ``PILOT_SPP``), estimates the per-sample variance on
 the water pixels and picks the smallest power of two whose predicted noise is below
