@@ -210,8 +210,16 @@ def test_ctrl_c_in_a_sweep_keeps_a_valid_table_and_resumes(tmp_path):
         ]
         + _sets(TINY_TRADEOFF)
     )
+    # a shell that starts jobs in the background (nohup, make under CI) leaves SIGINT ignored,
+    # and Python then installs no KeyboardInterrupt handler: give the sweep a terminal's default
     proc = subprocess.Popen(
-        args, env=env, cwd=tmp_path, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True
+        args,
+        env=env,
+        cwd=tmp_path,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.STDOUT,
+        text=True,
+        preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL),
     )
     table = out / "tradeoff.parquet"
     deadline = time.monotonic() + 600

@@ -23,8 +23,10 @@ from __future__ import annotations
 
 import contextlib
 import io
+import signal
 import socket
 import sys
+import threading
 import time
 from pathlib import Path
 
@@ -141,6 +143,22 @@ def run_sweep(
     return ordered
 
 
+@contextlib.contextmanager
+def _ctrl_c():
+    """While active, SIGINT (Ctrl-C) sets the yielded event instead of raising wherever the
+    main thread happens to be (inside Dask's client, a table write); the sweep loop checks it
+    between results and stops cleanly. Outside the main thread, a no-op event."""
+    stop = threading.Event()
+    if threading.current_thread() is not threading.main_thread():
+        yield stop
+        return
+    old = signal.signal(signal.SIGINT, lambda signum, frame: stop.set())
+    try:
+        yield stop
+    finally:
+        signal.signal(signal.SIGINT, old)
+
+
 def _submit_all(client, job_fn, todo, rows, old, table, variant, label) -> None:
     from distributed import as_completed
 
@@ -162,20 +180,24 @@ def _submit_all(client, job_fn, todo, rows, old, table, variant, label) -> None:
     progress = Progress(label, len(futures))
     progress.show()
     last_write = 0.0
-    try:
-        for f in as_completed(list(futures)):
-            key, job = futures[f]
-            try:
-                row = f.result()
-            except Exception as exc:  # the worker died (e.g. a crash in native code)
-                row = {"key": key, "status": "error", "error": clip_error(exc), "seconds": None}
-            rows[key] = {**flatten({"job": job}), **row}
-            progress.update(row["status"] == "ok")
-            if time.perf_counter() - last_write > 2.0:  # keep finished rows on disk
-                write_table(
-                    table, list(rows.values()) + [r for k, r in old.items() if k not in rows]
-                )
-                last_write = time.perf_counter()
-    except KeyboardInterrupt:  # Ctrl-C: every finished row is kept, the rest re-run later
+    with _ctrl_c() as stop:
+        pending = as_completed(list(futures))
+        while not pending.is_empty() and not stop.is_set():
+            for f in pending.next_batch(block=False):
+                key, job = futures[f]
+                try:
+                    row = f.result()
+                except Exception as exc:  # the worker died (e.g. a crash in native code)
+                    row = {"key": key, "status": "error", "error": clip_error(exc), "seconds": None}
+                rows[key] = {**flatten({"job": job}), **row}
+                progress.update(row["status"] == "ok")
+                if time.perf_counter() - last_write > 2.0:  # keep finished rows on disk
+                    write_table(
+                        table, list(rows.values()) + [r for k, r in old.items() if k not in rows]
+                    )
+                    last_write = time.perf_counter()
+            time.sleep(0.05)
+    if stop.is_set():  # Ctrl-C: every finished row is kept, the rest re-run later
+        client.cancel(list(futures) + list(scenes.values()))
         write_table(table, list(rows.values()) + [r for k, r in old.items() if k not in rows])
-        raise
+        raise KeyboardInterrupt
