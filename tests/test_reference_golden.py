@@ -1,14 +1,10 @@
 """Small reference renders against golden EXRs (regenerate: python tests/golden/reference_scenes.py)."""
 
-import sys
-from pathlib import Path
-
 import numpy as np
 import pytest
 from conftest import save_failure
 
-sys.path.insert(0, str(Path(__file__).parent / "golden"))
-import reference_scenes as G  # noqa: E402
+import reference_scenes as G
 
 from study import read_exr  # noqa: E402
 

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import sys
 import warnings
 from pathlib import Path
 
@@ -21,8 +20,7 @@ from shaders_port import (
 from shaders_port import water_refraction
 from shaders_port._numpy_ref import render_reference
 
-sys.path.insert(0, str(Path(__file__).parent / "golden"))
-from regenerate import CUSTOM, SCENES, read_exr, render_scene, write_exr  # noqa: E402
+from regenerate import CUSTOM, SCENES, read_exr, render_scene, write_exr
 
 FAILURES = Path(__file__).parent / "_failures"
 PRIMAL_ATOL = 5e-5  # port vs NumPy reference, linear RGB (both float32)
