@@ -101,7 +101,7 @@ def main() -> None:
     from study._metrics import errors
     from study.fit.calibrate import calibrate_experiment
     from study.fit.model import ShaderModel
-    from study.scene import lighting, shader_inputs as si
+    from study.scene import lighting, shader_inputs as si, topdown as td
     from study.scene.reference import load_or_render
 
     init_backend("llvm_ad_rgb")
@@ -110,12 +110,12 @@ def main() -> None:
     base = load_experiment(args.experiment, args.overrides)
     ref = load_or_render(base, "llvm_ad_rgb", cache=args.cache)
     ref_img = np.asarray(ref.image if hasattr(ref, "image") else ref, np.float32)
-    extent = si.texture_extent(base)
+    extent = td.texture_extent(base)
     size = base["reference.texture_size"]
-    world_y = si.top_down_world_y(base, extent, size)
+    world_y = td.top_down_world_y(base, extent, size)
     X, Z = lighting.texel_centres(extent, size)
     hx, hz = base["pool.half_extent"]
-    inside = (np.abs(X) < hx) & (np.abs(Z) < hz) & (world_y < si.underwater_camera_height(base))
+    inside = (np.abs(X) < hx) & (np.abs(Z) < hz) & (world_y < td.underwater_camera_height(base))
     sigma = 1.5 * size / min(base["reference.lighting_size"], size)
     print(
         f"# {base['name']}: reference {base['reference.spp']} spp, lighting {base['reference.lighting_size']}^2 "

@@ -48,9 +48,9 @@ def run(exp, spp: int, n_est: int, repeats: int) -> list[dict]:
     import mitsuba as mi
 
     from study.scene import direct_light, lighting, sun_photons
-    from study.scene.shader_inputs import (
-        _ortho_sensor,
-        _to_gl_order,
+    from study.scene.topdown import (
+        ortho_sensor,
+        to_gl_order,
         camera_ray_optical_depth,
         texture_extent,
         top_down_world_y,
@@ -81,10 +81,10 @@ def run(exp, spp: int, n_est: int, repeats: int) -> list[dict]:
             medium=medium,
             integrator=lighting._albedo_aov(exp, True, max_depth=3),
         )
-        sensor = _ortho_sensor(mi, extent, size, spp, 0, y_cam=y_cam, medium=medium)
+        sensor = ortho_sensor(mi, extent, size, spp, 0, y_cam=y_cam, medium=medium)
 
         def path_traced():
-            img = _to_gl_order(
+            img = to_gl_order(
                 mi,
                 sensor,
                 np.array(mi.render(scene, sensor=sensor, spp=spp, seed=next(seeds)), np.float32),

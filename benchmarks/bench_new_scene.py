@@ -191,7 +191,7 @@ def worker(
     t.wrap(reference, "render_passes", "reference passes")
     t.wrap(reference, "water_mask", "noise estimation")
     t.wrap(reference, "noise_of", "noise estimation")
-    for fn in ("top_down_world_y", "_render_top_down", "top_down_colour"):
+    for fn in ("top_down_world_y", "render_top_down", "top_down_colour"):
         t.wrap(shader_inputs, fn, "texture renders")
     for fn in ("render_lighting", "render_dry"):
         t.wrap(lighting, fn, "texture renders")

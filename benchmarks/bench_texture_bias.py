@@ -44,28 +44,28 @@ def _render(exp, kind: str, folder: Path, n: int, spp: int = 64) -> None:
     """Passes ``<kind>64_<i>.npy`` (GL order for textures) up to ``n``, skipping existing ones."""
     import mitsuba as mi
 
-    from study.scene import lighting, shader_inputs as si
+    from study.scene import lighting, topdown as td
     from study.scene.mitsuba_scene import build_scene
 
     have = len(list(folder.glob(f"{kind}[0-9]*_*.npy")))
     todo = list(range(have, n))
     if not todo:
         return
-    extent = si.texture_extent(exp)
+    extent = td.texture_extent(exp)
     size = exp["reference.texture_size"]
     if kind == "ref":
         scene = build_scene(exp)
         render = lambda i: np.array(mi.render(scene, spp=spp, seed=5000 + i), np.float32)  # noqa: E731
     else:
         water = kind == "wet"
-        y_cam = si.underwater_camera_height(exp) if water else 100.0
+        y_cam = td.underwater_camera_height(exp) if water else 100.0
         scene, medium = lighting._top_down_scene(
             mi, exp, water=water, integrator=lighting._transport(exp, water)
         )
-        sensor = si._ortho_sensor(mi, extent, size, spp, 0, y_cam=y_cam, medium=medium)
+        sensor = td.ortho_sensor(mi, extent, size, spp, 0, y_cam=y_cam, medium=medium)
 
         def render(i):
-            return si._to_gl_order(
+            return td.to_gl_order(
                 mi,
                 sensor,
                 np.array(mi.render(scene, sensor=sensor, spp=spp, seed=7000 + i), np.float32),
@@ -159,7 +159,7 @@ def main() -> None:
     from study._metrics import errors
     from study.fit.calibrate import calibrate_experiment
     from study.fit.model import ShaderModel
-    from study.scene import lighting, shader_inputs as si
+    from study.scene import lighting, shader_inputs as si, topdown as td
 
     init_backend("llvm_ad_rgb")
     exp = load_experiment(args.experiment, ['reference.texture_method="colour"'] + args.overrides)
@@ -168,13 +168,13 @@ def main() -> None:
     _render(exp, "ref", args.passes, args.render_ref)
     _render(exp, "dry", args.passes, 2)
     size = exp["reference.texture_size"]
-    extent = si.texture_extent(exp)
+    extent = td.texture_extent(exp)
     alb_path = args.passes / "albedo.npy"
     if not alb_path.exists():
         np.save(alb_path, lighting.render_dry(exp, extent, size, lighting.ALBEDO_SPP, 0)[1])
     albedo = np.load(alb_path).astype(np.float64)
-    world_y = si.top_down_world_y(exp, extent, size)
-    y_cam = si.underwater_camera_height(exp)
+    world_y = td.top_down_world_y(exp, extent, size)
+    y_cam = td.underwater_camera_height(exp)
     X, Z = lighting.texel_centres(extent, size)
     hx, hz = exp["pool.half_extent"]
     inside = (np.abs(X) < hx) & (np.abs(Z) < hz) & (world_y < y_cam)

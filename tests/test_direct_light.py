@@ -6,7 +6,7 @@ import pytest
 from conftest import save_failure, small_experiment
 
 from study.scene import direct_light, lighting, sun_photons
-from study.scene.shader_inputs import _ortho_sensor, _to_gl_order, underwater_camera_height
+from study.scene.topdown import ortho_sensor, to_gl_order, underwater_camera_height
 from study.scene.user_scene import reference_sky, reference_sky_parts
 
 
@@ -21,11 +21,11 @@ def _render(mi, exp, sky, max_depth, size, spp, seed, medium=None):
         integrator=lighting._albedo_aov(exp, True, max_depth=max_depth),
     )
     extent = lighting.pool_extent(exp)
-    sensor = _ortho_sensor(
+    sensor = ortho_sensor(
         mi, extent, size, spp, seed, y_cam=underwater_camera_height(exp), medium=medium
     )
     img = np.array(mi.render(scene, sensor=sensor, spp=spp, seed=seed), np.float32)
-    return _to_gl_order(mi, sensor, img, extent), medium
+    return to_gl_order(mi, sensor, img, extent), medium
 
 
 def test_sky_parts_add_up_to_the_reference_sky_and_the_sun_is_its_disc(mi):
@@ -100,7 +100,7 @@ def _path_traced_direct(mi, exp, sky, size, spp, seeds, lighting_only=False, max
     direct term) over the pool at each seed, its radiance (or, ``lighting_only``, radiance over
     albedo) with the camera ray's absorption divided out as the lighting texture does; and a
     scene of the geometry."""
-    from study.scene.shader_inputs import camera_ray_optical_depth, top_down_world_y
+    from study.scene.topdown import camera_ray_optical_depth, top_down_world_y
 
     world_y = top_down_world_y(exp, lighting.pool_extent(exp), size)
     gain = np.exp(camera_ray_optical_depth(exp, underwater_camera_height(exp), world_y))
@@ -225,7 +225,7 @@ def test_traced_texture_keeps_the_raw_mean_and_adds_up(mi):
     and the photons; outside the pool it is the dry render, as with ``"path"``; and the traced
     texture agrees with the all-path-traced one, and with the one whose sun's bounced light is
     traced from the sun (``sun_bounces = "photons"``), over the pool within their noise."""
-    from study.scene.shader_inputs import texture_extent, top_down_world_y
+    from study.scene.topdown import texture_extent, top_down_world_y
 
     base = {
         "reference.texture_size": "32",
@@ -284,7 +284,7 @@ def test_traced_texture_keeps_the_raw_mean_and_adds_up(mi):
 def test_scattering_water_and_the_dry_texture_keep_the_path_traced_direct_light(mi):
     """The split holds for water that only absorbs: scattering water (``water.albedo`` > 0) and
     the dry texture path trace all of the lighting, and say so in the texture's info."""
-    from study.scene.shader_inputs import texture_extent
+    from study.scene.topdown import texture_extent
 
     base = {
         "reference.texture_size": "16",
@@ -303,13 +303,13 @@ def test_the_camera_rays_start_where_their_absorption_is_divided_out_from(mi):
     divides out the absorption from there (``camera_ray_top``). Dividing it out from the camera
     itself made the path-traced lighting exp(sigma_t * 1 cm) too bright (0.25 % in red), which the
     traced skylight, computed at the floor, showed."""
-    from study.scene.shader_inputs import camera_ray_top
+    from study.scene.topdown import camera_ray_top
 
     exp = small_experiment()
     y_cam = underwater_camera_height(exp)
-    from study.scene.shader_inputs import _ortho_sensor
+    from study.scene.topdown import ortho_sensor
 
-    sensor = _ortho_sensor(mi, lighting.pool_extent(exp), 8, 1, 0, y_cam=y_cam)
+    sensor = ortho_sensor(mi, lighting.pool_extent(exp), 8, 1, 0, y_cam=y_cam)
     ray, _ = sensor.sample_ray(0.0, 0.0, mi.Point2f(0.3, 0.6), mi.Point2f(0.5, 0.5))
     assert abs(float(np.array(ray.o.y).ravel()[0]) - camera_ray_top(y_cam)) < 1e-6
     assert camera_ray_top(y_cam) < y_cam

@@ -294,7 +294,7 @@ def test_depth_complexity_found_under_the_ledge(mi):
 
 
 def test_ledge_is_in_the_top_down_textures_and_the_scene_key(mi):
-    from study.scene.shader_inputs import texture_extent, top_down_world_y
+    from study.scene.topdown import texture_extent, top_down_world_y
 
     exp, flat = (
         ledge_experiment("[-1.4, 0.2, -0.35, 0.15]"),

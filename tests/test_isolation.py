@@ -15,7 +15,7 @@ _SEEN: dict = {}
 
 @pytest.fixture(scope="module")
 def module_cache_dir():
-    from study.scene.reference import cache_dir
+    from study.scene.cache import cache_dir
 
     return cache_dir()
 
@@ -28,7 +28,7 @@ def test_module_fixtures_see_a_temporary_cache(module_cache_dir):
 @pytest.mark.parametrize("k", [0, 1])
 def test_each_test_has_its_own_cache(k):
     """Run in either order (pytest-randomly), the second sees another folder than the first."""
-    from study.scene.reference import cache_dir
+    from study.scene.cache import cache_dir
 
     d = cache_dir()
     assert REPO not in d.parents

@@ -5,7 +5,8 @@ import pytest
 from conftest import save_failure, small_experiment
 
 from study.scene import lighting
-from study.scene.shader_inputs import texture_extent, top_down_colour, top_down_world_y
+from study.scene.shader_inputs import top_down_colour
+from study.scene.topdown import texture_extent, top_down_world_y
 
 
 def test_interpolate_reproduces_linear_functions_and_clamps():

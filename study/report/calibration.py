@@ -13,7 +13,7 @@ import numpy as np
 from .._io import to_srgb
 
 
-def _plt():
+def pyplot():
     import matplotlib
 
     matplotlib.use("Agg")
@@ -27,7 +27,7 @@ def comparison_figure(
 ) -> Path:
     """Row 1: the images (e.g. reference | default | fitted); row 2: |image - reference| averaged
     over RGB on the water pixels, one shared colour scale."""
-    plt = _plt()
+    plt = pyplot()
     names = list(images)
     ref = images[names[0]]
     n = len(names)
@@ -68,7 +68,7 @@ def comparison_figure(
 
 def diagnostics_figure(path: Path, maps: dict, mask: np.ndarray, title: str = "") -> Path:
     """One panel per diagnostic map, water pixels only."""
-    plt = _plt()
+    plt = pyplot()
     keys = list(maps)
     fig, axes = plt.subplots(1, len(keys), figsize=(3.2 * len(keys), 3.4), squeeze=False)
     for ax, k in zip(axes[0], keys):
@@ -90,7 +90,7 @@ def diagnostics_figure(path: Path, maps: dict, mask: np.ndarray, title: str = ""
 
 def loss_figure(path: Path, curves: dict, title: str = "") -> Path:
     """Loss (0.5 * sum r^2) against iteration, one line per run, log scale."""
-    plt = _plt()
+    plt = pyplot()
     fig, ax = plt.subplots(figsize=(5.5, 3.8))
     for name, ys in curves.items():
         if len(ys):
@@ -106,11 +106,11 @@ def loss_figure(path: Path, curves: dict, title: str = "") -> Path:
     return path
 
 
-def _fmt(x, digits: int = 4) -> str:
+def fmt(x, digits: int = 4) -> str:
     if x is None:
         return "-"
     if isinstance(x, (list, tuple)):
-        return "(" + ", ".join(_fmt(v, digits) for v in x) + ")"
+        return "(" + ", ".join(fmt(v, digits) for v in x) + ")"
     if isinstance(x, bool):
         return "yes" if x else "no"
     if isinstance(x, int):
@@ -123,7 +123,7 @@ def constants_table(parameters: dict) -> list[str]:
     for name, p in parameters.items():
         shown = p["fitted"] if p["fitted"] is not None else p["default"]
         lines.append(
-            f"| `{name}` | {_fmt(p['default'])} | {_fmt(shown)} | {p.get('status', '')} | "
+            f"| `{name}` | {fmt(p['default'])} | {fmt(shown)} | {p.get('status', '')} | "
             f"{p.get('reason', '')} |"
         )
     return lines
@@ -136,13 +136,13 @@ def basin_lines(parameters: dict) -> list[str]:
         b = p.get("basins")
         if not b:
             continue
-        span = f"{_fmt(min(b['grid']))}-{_fmt(max(b['grid']))}"
+        span = f"{fmt(min(b['grid']))}-{fmt(max(b['grid']))}"
         r = b.get("restart")
         if r:
             lines.append(
-                f"`{name}`: the first fit stopped at {_fmt(r['from'])}, with a basin at {_fmt(r['to'])} lower "
+                f"`{name}`: the first fit stopped at {fmt(r['from'])}, with a basin at {fmt(r['to'])} lower "
                 "by more than the reference's noise explains (the loss is piecewise); refitted from there: "
-                f"loss {_fmt(r['loss_before'])} -> {_fmt(r['loss_after'])}, "
+                f"loss {fmt(r['loss_before'])} -> {fmt(r['loss_after'])}, "
                 + ("kept." if r["kept"] else "not lower, so the first solution is exported.")
             )
         unconfirmed = {o["value"]: o for o in b.get("unconfirmed", [])}
@@ -151,23 +151,23 @@ def basin_lines(parameters: dict) -> list[str]:
         for o in lower:
             if o["value"] in unconfirmed:
                 lines.append(
-                    f"`{name}`: a basin of the loss at {_fmt(o['value'])} is lower than the fit's by "
-                    f"{_fmt(-o['delta_loss'])} (+- {_fmt(o['noise_sd'])} from the reference's noise) in "
+                    f"`{name}`: a basin of the loss at {fmt(o['value'])} is lower than the fit's by "
+                    f"{fmt(-o['delta_loss'])} (+- {fmt(o['noise_sd'])} from the reference's noise) in "
                     "this texture, but higher by "
-                    f"{_fmt(unconfirmed[o['value']]['texture_delta'])} in the decorrelated loss of the "
+                    f"{fmt(unconfirmed[o['value']]['texture_delta'])} in the decorrelated loss of the "
                     "texture's independent halves (unbiased for the noise-free texture): the texture's "
                     "noise or its denoiser makes it lower, so it was not refitted."
                 )
                 continue
             lines.append(
-                f"`{name}`: a basin of the loss at {_fmt(o['value'])} is lower than the fit's by "
-                f"{_fmt(-o['delta_loss'])}, more than the reference's noise explains "
-                f"(+- {_fmt(o['noise_sd'])}): the solver stopped short of it (the loss is piecewise)."
+                f"`{name}`: a basin of the loss at {fmt(o['value'])} is lower than the fit's by "
+                f"{fmt(-o['delta_loss'])}, more than the reference's noise explains "
+                f"(+- {fmt(o['noise_sd'])}): the solver stopped short of it (the loss is piecewise)."
             )
         for o in close:
             lines.append(
-                f"`{name}`: another basin of the loss at {_fmt(o['value'])} (loss difference "
-                f"{_fmt(o['delta_loss'])} +- {_fmt(o['noise_sd'])} from the reference's noise): the "
+                f"`{name}`: another basin of the loss at {fmt(o['value'])} (loss difference "
+                f"{fmt(o['delta_loss'])} +- {fmt(o['noise_sd'])} from the reference's noise): the "
                 "reference's noise cannot tell it from the fit's, so the exported value is one of "
                 "these, not known to its standard error."
             )
@@ -196,21 +196,19 @@ def identifiability_table(ident: dict) -> list[str]:
     for name in start.get("names", []):
         i = start["names"].index(name)
         j = sol["names"].index(name) if name in sol.get("names", []) else None
-        s1 = _fmt(sol["sensitivity"][j]) if j is not None else "-"
-        se = _fmt(sol["rel_std_error"][j]) if j is not None and sol.get("rel_std_error") else "-"
-        ne = (
-            _fmt(sol["rel_noise_error"][j]) if j is not None and sol.get("rel_noise_error") else "-"
-        )
+        s1 = fmt(sol["sensitivity"][j]) if j is not None else "-"
+        se = fmt(sol["rel_std_error"][j]) if j is not None and sol.get("rel_std_error") else "-"
+        ne = fmt(sol["rel_noise_error"][j]) if j is not None and sol.get("rel_noise_error") else "-"
         lines.append(
-            f"| `{name}` | {_fmt(start['sensitivity'][i])} | {s1} | {se} | {ne} | {start['decision'][i]} |"
+            f"| `{name}` | {fmt(start['sensitivity'][i])} | {s1} | {se} | {ne} | {start['decision'][i]} |"
         )
     lines.append("")
     for label, d in (("start", start), ("solution", sol)):
         if d.get("singular_values"):
-            sv = ", ".join(_fmt(v, 3) for v in d["singular_values"])
+            sv = ", ".join(fmt(v, 3) for v in d["singular_values"])
             lines.append(
                 f"Singular values of the scaled Jacobian at the {label}: {sv} "
-                f"(condition number {_fmt(d.get('condition'), 3)})."
+                f"(condition number {fmt(d.get('condition'), 3)})."
             )
     return lines
 
@@ -221,7 +219,7 @@ def write_report(out: Path, summary: dict, figures: dict) -> Path:
     ref = summary["reference"]
     lines = [f"# Calibration: {summary['experiment']} ({summary['shader']})", ""]
     lines += [
-        f"Reference: {ref['spp']} spp, measured noise {_fmt(ref['noise'], 3)} (RMS standard error on "
+        f"Reference: {ref['spp']} spp, measured noise {fmt(ref['noise'], 3)} (RMS standard error on "
         f"water pixels, linear RGB). Fit at {summary['fit_resolution'][0]}x{summary['fit_resolution'][1]} "
         f"with `{summary['solver']}`: {summary['iterations']} iterations, "
         f"{'converged' if summary['converged'] else 'NOT converged'} ({summary['message']}).",
@@ -230,12 +228,12 @@ def write_report(out: Path, summary: dict, figures: dict) -> Path:
     dec = summary.get("fit", {}).get("input_noise")
     if dec:
         moved = ", ".join(
-            f"{n} {_fmt(a)} -> {_fmt(b)}" for n, (a, b) in dec["shift"].items() if a != b
+            f"{n} {fmt(a)} -> {fmt(b)}" for n, (a, b) in dec["shift"].items() if a != b
         )
         lines += [
             f'Texture noise (`fit.input_noise = "decorrelate"`): the least-squares constants refined '
             f"on the decorrelated loss over the refraction texture's two independent halves, "
-            f"{_fmt(dec['loss_start'])} -> {_fmt(dec['loss'])} in {dec['steps']} damped Newton steps: "
+            f"{fmt(dec['loss_start'])} -> {fmt(dec['loss'])} in {dec['steps']} damped Newton steps: "
             + (
                 f"{dec['message']}; {moved or 'nothing moved'}."
                 if dec["accepted"]
@@ -246,8 +244,8 @@ def write_report(out: Path, summary: dict, figures: dict) -> Path:
     lines += [
         "| metric (water pixels) | default constants | fitted constants |",
         "|---|---|---|",
-        f"| RMSE, linear RGB | {_fmt(e['rmse']['default'])} | {_fmt(e['rmse']['fitted'])} |",
-        f"| FLIP (LDR, mean) | {_fmt(e['flip']['default'])} | {_fmt(e['flip']['fitted'])} |",
+        f"| RMSE, linear RGB | {fmt(e['rmse']['default'])} | {fmt(e['rmse']['fitted'])} |",
+        f"| FLIP (LDR, mean) | {fmt(e['flip']['default'])} | {fmt(e['flip']['fitted'])} |",
         "",
     ]
     if "comparison" in figures:
@@ -276,15 +274,15 @@ def write_report(out: Path, summary: dict, figures: dict) -> Path:
         if len(sw["names"]) == 2:
             a, b = sw["names"]
             lines += [
-                f"| {a} \\ {b} | " + " | ".join(_fmt(v) for v in sw["grid"][b]) + " |",
+                f"| {a} \\ {b} | " + " | ".join(fmt(v) for v in sw["grid"][b]) + " |",
                 "|---|" + "---|" * len(sw["grid"][b]),
             ]
             for va, row in zip(sw["grid"][a], sw["loss"]):
-                lines.append(f"| {_fmt(va)} | " + " | ".join(_fmt(v) for v in row) + " |")
+                lines.append(f"| {fmt(va)} | " + " | ".join(fmt(v) for v in row) + " |")
         else:
             (a,) = sw["names"]
             lines += [f"| {a} | loss |", "|---|---|"]
-            lines += [f"| {_fmt(v)} | {_fmt(l)} |" for v, l in zip(sw["grid"][a], sw["loss"])]
+            lines += [f"| {fmt(v)} | {fmt(l)} |" for v, l in zip(sw["grid"][a], sw["loss"])]
         lines.append("")
     if "loss" in figures:
         lines += ["## Convergence", "", f"![loss per iteration]({figures['loss']})", ""]
@@ -293,17 +291,17 @@ def write_report(out: Path, summary: dict, figures: dict) -> Path:
         lines += [
             "## Shader diagnostics (fitted constants)",
             "",
-            f"Rays not crossing the floor within the loop cap: {_fmt(d.get('not_crossed_fraction'))} "
+            f"Rays not crossing the floor within the loop cap: {fmt(d.get('not_crossed_fraction'))} "
             f"of water pixels; non-finite pixels: {d.get('nonfinite_pixels', '-')}; mean loop "
-            f"iterations {_fmt(d.get('iterations', {}).get('mean'))}, mean texture fetches "
-            f"{_fmt(d.get('fetches', {}).get('mean'))} per pixel.",
+            f"iterations {fmt(d.get('iterations', {}).get('mean'))}, mean texture fetches "
+            f"{fmt(d.get('fetches', {}).get('mean'))} per pixel.",
             "",
             f"![diagnostics]({figures['diagnostics']})",
             "",
         ]
     t = summary["timings"]
     lines += ["## Timings (seconds)", "", "| stage | s |", "|---|---|"]
-    lines += [f"| {k} | {_fmt(v, 3)} |" for k, v in t.items()] + [""]
+    lines += [f"| {k} | {fmt(v, 3)} |" for k, v in t.items()] + [""]
     lines += [
         "## Exported shaders",
         "",
@@ -311,8 +309,8 @@ def write_report(out: Path, summary: dict, figures: dict) -> Path:
         "(GLSL 330 core); every file compiled with glslangValidator"
         + (
             f"; the exported core shader on llvmpipe vs the port with the fitted constants: "
-            f"mean |diff| {_fmt(summary['gl_check']['mean_abs'], 3)}, 99.9th percentile "
-            f"{_fmt(summary['gl_check']['p999'], 3)}"
+            f"mean |diff| {fmt(summary['gl_check']['mean_abs'], 3)}, 99.9th percentile "
+            f"{fmt(summary['gl_check']['p999'], 3)}"
             + (
                 "."
                 if summary["gl_check"].get("passed")

@@ -13,7 +13,7 @@ from pathlib import Path
 import numpy as np
 
 from .._io import to_srgb, write_text_atomic
-from .calibration import _plt
+from .calibration import pyplot
 
 # one colour per class, in catalogue order (tab10 without its grey), 'none' light grey
 _COLOURS = ["#d62728", "#9467bd", "#ff7f0e", "#8c564b", "#e377c2", "#1f77b4", "#17becf", "#bcbd22"]
@@ -32,7 +32,7 @@ def failures_figure(
     """Reference | port | class map | FLIP map. ``label``: (H, W) int from
     ``studies.failures.primary_class`` (-1 off the water, 0 none, i + 1 class ``class_keys[i]``
     of the full catalogue order); ``class_keys``: the catalogue's keys."""
-    plt = _plt()
+    plt = pyplot()
     from matplotlib.colors import ListedColormap
     from matplotlib.patches import Patch
 

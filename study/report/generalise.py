@@ -10,7 +10,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from .._io import write_text_atomic
-from .calibration import _fmt, constants_table, identifiability_table
+from .calibration import fmt, constants_table, identifiability_table
 
 
 def joint_lines(summary: dict) -> list[str]:
@@ -30,8 +30,8 @@ def joint_lines(summary: dict) -> list[str]:
     for name in summary["scenes"]:
         e = summary["error"][name]
         lines.append(
-            f"| {name} | {_fmt(summary['weights'][name], 3)} | {_fmt(e['default']['rmse'])} | "
-            f"{_fmt(e['fitted']['rmse'])} | {_fmt(e['default']['flip'])} | {_fmt(e['fitted']['flip'])} |"
+            f"| {name} | {fmt(summary['weights'][name], 3)} | {fmt(e['default']['rmse'])} | "
+            f"{fmt(e['fitted']['rmse'])} | {fmt(e['default']['flip'])} | {fmt(e['fitted']['flip'])} |"
         )
     lines += ["", "## Constants", ""] + constants_table(summary["parameters"]) + [""]
     lines += (
@@ -43,7 +43,7 @@ def joint_lines(summary: dict) -> list[str]:
     if gl:
         lines += [
             f"Exported shaders in `shaders/`; GL check on the first scene: mean |diff| "
-            f"{_fmt(gl.get('mean_abs'), 3)}, {'passed' if gl.get('passed') else '**MISMATCH**'}.",
+            f"{fmt(gl.get('mean_abs'), 3)}, {'passed' if gl.get('passed') else '**MISMATCH**'}.",
             "",
         ]
     return lines
@@ -65,8 +65,8 @@ def loso_table(rows: list[dict]) -> list[str]:
     for r in rows:
         o = r.get("others") or {}
         lines.append(
-            f"| {r['scene']} | {_fmt(r['seed']['flip'])} | {_fmt(o.get('flip'))} | {_fmt(r['own']['flip'])} | "
-            f"{_fmt(r['seed']['rmse'])} | {_fmt(o.get('rmse'))} | {_fmt(r['own']['rmse'])} |"
+            f"| {r['scene']} | {fmt(r['seed']['flip'])} | {fmt(o.get('flip'))} | {fmt(r['own']['flip'])} | "
+            f"{fmt(r['seed']['rmse'])} | {fmt(o.get('rmse'))} | {fmt(r['own']['rmse'])} |"
         )
     return lines
 
@@ -82,13 +82,13 @@ def universality_table(uni: dict, scenes: list[str]) -> list[str]:
         for s in scenes:
             d = u["scenes"].get(s, {})
             if d.get("se") is not None:
-                cells.append(f"{_fmt(d['value'])} +- {_fmt(d['se'], 2)}")
+                cells.append(f"{fmt(d['value'])} +- {fmt(d['se'], 2)}")
             else:
                 cells.append(f"{d.get('status', '-')}")
         lines.append(
-            f"| `{n}` | {_fmt(u['joint'])} | "
+            f"| `{n}` | {fmt(u['joint'])} | "
             + " | ".join(cells)
-            + f" | {_fmt(u['max_abs_z'], 3)} | {u['verdict']} |"
+            + f" | {fmt(u['max_abs_z'], 3)} | {u['verdict']} |"
         )
     return lines
 

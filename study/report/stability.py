@@ -6,12 +6,12 @@ from __future__ import annotations
 from pathlib import Path
 
 from .._io import write_text_atomic
-from .calibration import _fmt, _plt
+from .calibration import fmt, pyplot
 
 
 def solver_figure(path: Path, ms: dict) -> Path:
     """Success rate against median time to stop, one point per reported solver."""
-    plt = _plt()
+    plt = pyplot()
     fig, ax = plt.subplots(figsize=(5.8, 4.0))
     for label in ms["reported"]:
         s = ms["solvers"][label]
@@ -37,7 +37,7 @@ def spread_figure(path: Path, ms: dict) -> Path:
     """Relative spread (std / |median| over the runs, median over scenes) per constant and solver."""
     import numpy as np
 
-    plt = _plt()
+    plt = pyplot()
     labels = ms["reported"]
     names = sorted({n for l in labels for n in ms["solvers"][l]["rel_spread"]})
     fig, ax = plt.subplots(figsize=(max(6.0, 1.1 * len(names) + 2), 4.0))
@@ -59,7 +59,7 @@ def spread_figure(path: Path, ms: dict) -> Path:
 
 def noise_figure(path: Path, noise: dict) -> Path:
     """Bias against the highest spp, with its standard error, per constant, against spp."""
-    plt = _plt()
+    plt = pyplot()
     whichs = [w for w in ("reference", "texture") if w in noise]
     fig, axes = plt.subplots(
         1, max(len(whichs), 1), figsize=(5.5 * max(len(whichs), 1), 4.0), squeeze=False
@@ -101,9 +101,9 @@ def solver_table(ms: dict) -> list[str]:
             ", ".join(f"{k} {v}" for k, v in sorted(s["classes"].items()) if k != "success") or "-"
         )
         lines.append(
-            f"| {label} | {s['runs']} | {_fmt(s['success_rate'], 3)} | {_fmt(s['time_to_target_median'], 3)}"
-            f" / {_fmt(s['time_to_target_p90'], 3)} | {_fmt(s['time_to_stop_median'], 3)} / "
-            f"{_fmt(s['time_to_stop_p90'], 3)} | {_fmt(s['iterations_median'], 3)} | {fails} |"
+            f"| {label} | {s['runs']} | {fmt(s['success_rate'], 3)} | {fmt(s['time_to_target_median'], 3)}"
+            f" / {fmt(s['time_to_target_p90'], 3)} | {fmt(s['time_to_stop_median'], 3)} / "
+            f"{fmt(s['time_to_stop_p90'], 3)} | {fmt(s['iterations_median'], 3)} | {fails} |"
         )
     return lines
 
@@ -115,7 +115,7 @@ def spread_table(ms: dict) -> list[str]:
     for n in names:
         lines.append(
             f"| `{n}` | "
-            + " | ".join(_fmt(ms["solvers"][l]["rel_spread"].get(n), 2) for l in labels)
+            + " | ".join(fmt(ms["solvers"][l]["rel_spread"].get(n), 2) for l in labels)
             + " |"
         )
     return lines
@@ -153,7 +153,7 @@ def write_stability_report(out: Path, summary: dict) -> Path:
             for k, s in ms["solvers"].items():
                 if k.startswith("adam"):
                     lines.append(
-                        f"| {k} | {_fmt(s['success_rate'], 3)} | {_fmt(s['time_to_stop_median'], 3)} |"
+                        f"| {k} | {fmt(s['success_rate'], 3)} | {fmt(s['time_to_stop_median'], 3)} |"
                     )
             lines.append("")
     ls = summary.get("loss")
@@ -170,12 +170,12 @@ def write_stability_report(out: Path, summary: dict) -> Path:
         for scene, d in ls["per_scene"].items():
             a, b = d.get("linear", {}), d.get("log", {})
             lines.append(
-                f"| {scene} | {_fmt(a.get('flip'))} | {_fmt(b.get('flip'))} | {_fmt(a.get('rmse'))} | "
-                f"{_fmt(b.get('rmse'))} |"
+                f"| {scene} | {fmt(a.get('flip'))} | {fmt(b.get('flip'))} | {fmt(a.get('rmse'))} | "
+                f"{fmt(b.get('rmse'))} |"
             )
         lines += [
             "",
-            f"Mean FLIP: linear {_fmt(ls['mean_flip']['linear'])}, log {_fmt(ls['mean_flip']['log'])}; "
+            f"Mean FLIP: linear {fmt(ls['mean_flip']['linear'])}, log {fmt(ls['mean_flip']['log'])}; "
             f"scenes won: {ls['wins']}; lower mean FLIP: **{ls['winner']}**.",
             "",
         ]
@@ -205,7 +205,7 @@ def write_stability_report(out: Path, summary: dict) -> Path:
                 for n in names:
                     st = d["stats"][spp].get(n, {})
                     cells.append(
-                        f"{_fmt(st.get('mean'))} ({_fmt(st.get('bias'), 2)} +- {_fmt(st.get('bias_se'), 2)})"
+                        f"{fmt(st.get('mean'))} ({fmt(st.get('bias'), 2)} +- {fmt(st.get('bias_se'), 2)})"
                     )
                 lines.append(
                     f"| {spp} | "

@@ -7,7 +7,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from .calibration import _fmt, _plt
+from .calibration import fmt, pyplot
 
 COSTS = {
     "fetches_mean": "texture fetches / water pixel (mean)",
@@ -22,7 +22,7 @@ def pareto_figure(path: Path, recs: list, summary: dict) -> Path:
     ``scale``, ``label``, ``flip`` and the cost measures); the fronts are
     ``summary["scenes"][scene]["fronts_by_cost"]`` (labels, cheapest first). The converged
     raymarch (star) is drawn but is not a candidate."""
-    plt = _plt()
+    plt = pyplot()
     scenes = list(summary["scenes"])
     variants = list(dict.fromkeys(r["variant"] for r in recs))
     colours = {v: plt.cm.tab10(i % 10) for i, v in enumerate(variants)}
@@ -131,7 +131,7 @@ def tradeoff_report_text(summary: dict) -> str:
         "at full resolution against the reference; every point's continuous constants refitted for "
         "its schedule. Cost: mean texture fetches per water pixel (machine-independent, used for the "
         "recommendation), llvmpipe frame time at 1920x1080 normalised by a fixed reference shader timed "
-        f"in the same job (reference median {_fmt(summary.get('gl_reference_ms_1080p'), 3)} ms), the "
+        f"in the same job (reference median {fmt(summary.get('gl_reference_ms_1080p'), 3)} ms), the "
         f"port's frame time. Recommendation: the cheapest point within {100 * tol:g} % of the best FLIP.",
         "",
         "![error against cost, Pareto fronts](pareto.png)",
@@ -146,29 +146,29 @@ def tradeoff_report_text(summary: dict) -> str:
         ]
         for r in f["front"]:
             lines.append(
-                f"| {r['label']} | {_fmt(r['fetches_mean'], 3)} | {_fmt(r.get('fetches_p99'), 3)} | "
-                f"{_fmt(r.get('gl_norm_ms_1080p'), 3)} | {_fmt(r.get('port_ms_512'), 3)} | "
-                f"{_fmt(r['flip'])} | {_fmt(r['rmse'])} |"
+                f"| {r['label']} | {fmt(r['fetches_mean'], 3)} | {fmt(r.get('fetches_p99'), 3)} | "
+                f"{fmt(r.get('gl_norm_ms_1080p'), 3)} | {fmt(r.get('port_ms_512'), 3)} | "
+                f"{fmt(r['flip'])} | {fmt(r['rmse'])} |"
             )
         lines.append("")
         if rec:
             lines.append(
-                f"**Recommended**: {rec['label']}: FLIP {_fmt(rec['flip'])} at "
-                f"{_fmt(rec['fetches_mean'], 3)} fetches per pixel."
+                f"**Recommended**: {rec['label']}: FLIP {fmt(rec['flip'])} at "
+                f"{fmt(rec['fetches_mean'], 3)} fetches per pixel."
             )
         if seed and rec:
             lines.append(
                 f"The seed's configuration (water_refraction (10, 3, 40), refitted): FLIP "
-                f"{_fmt(seed['flip'])} at {_fmt(seed['fetches_mean'], 3)} fetches "
-                f"({_fmt(seed['fetches_mean'] / rec['fetches_mean'], 3)}x the recommended cost, "
+                f"{fmt(seed['flip'])} at {fmt(seed['fetches_mean'], 3)} fetches "
+                f"({fmt(seed['fetches_mean'] / rec['fetches_mean'], 3)}x the recommended cost, "
                 f"FLIP {100 * (seed['flip'] / rec['flip'] - 1):+.2f} %)."
             )
         bw = f.get("best_within_seed_budget")
         if seed and bw:
             lines.append(
-                f"**Best within the seed's fetch budget** ({_fmt(seed['fetches_mean'], 3)} fetches): "
-                f"{bw['label']}: FLIP {_fmt(bw['flip'])} at {_fmt(bw['fetches_mean'], 3)} fetches "
-                f"(the fitted seed: {_fmt(seed['flip'])}, {100 * (bw['flip'] / seed['flip'] - 1):+.1f} %)."
+                f"**Best within the seed's fetch budget** ({fmt(seed['fetches_mean'], 3)} fetches): "
+                f"{bw['label']}: FLIP {fmt(bw['flip'])} at {fmt(bw['fetches_mean'], 3)} fetches "
+                f"(the fitted seed: {fmt(seed['flip'])}, {100 * (bw['flip'] / seed['flip'] - 1):+.1f} %)."
             )
         if summary.get("images", {}).get(scene):
             lines += ["", f"![{scene}: reference and shaders]({summary['images'][scene]})"]
@@ -184,18 +184,18 @@ def tradeoff_report_text(summary: dict) -> str:
                 "|---|---|---|---|",
             ]
             lines += [
-                f"| {v} | {d['n_fitted']} | {_fmt(d['flip'])} | {d['bic'] - b0:.0f} |"
+                f"| {v} | {d['n_fitted']} | {fmt(d['flip'])} | {d['bic'] - b0:.0f} |"
                 for v, d in sorted(pars.items(), key=lambda kv: kv[1]["bic"])
             ]
         lines += ["", "What the scene needs:", ""]
         lines.append(
             f"- simplest variant within tolerance: `{f['simplest_variant_within_tolerance']}`; "
             "best FLIP per variant: "
-            + ", ".join(f"{v} {_fmt(x)}" for v, x in f["best_flip_by_variant"].items())
+            + ", ".join(f"{v} {fmt(x)}" for v, x in f["best_flip_by_variant"].items())
         )
         lines.append(
             "- error floor (converged raymarch) per variant: "
-            + ", ".join(f"{v} {_fmt(x)}" for v, x in f["error_floor_by_variant"].items())
+            + ", ".join(f"{v} {fmt(x)}" for v, x in f["error_floor_by_variant"].items())
         )
         lines.append(
             "- smallest loop cap at which fewer than 1 % of rays miss the floor: "
@@ -214,9 +214,9 @@ def tradeoff_report_text(summary: dict) -> str:
             ]
             for r in f["halvings"]:
                 lines.append(
-                    f"| {r['label']} | {_fmt(r['scale'], 3)} | {_fmt(r['fetches_mean'], 3)} | "
-                    f"{_fmt(r.get('gl_norm_ms_1080p'), 3)} | {_fmt(r['flip'])} | "
-                    f"{_fmt(r.get('not_crossed'), 3)} |"
+                    f"| {r['label']} | {fmt(r['scale'], 3)} | {fmt(r['fetches_mean'], 3)} | "
+                    f"{fmt(r.get('gl_norm_ms_1080p'), 3)} | {fmt(r['flip'])} | "
+                    f"{fmt(r.get('not_crossed'), 3)} |"
                 )
         lines.append("")
     if "joint" in summary:
@@ -228,8 +228,7 @@ def tradeoff_report_text(summary: dict) -> str:
             "|---|---|---|",
         ]
         lines += [
-            f"| {r['label']} | {_fmt(r['fetches_mean'], 3)} | {_fmt(r['flip'])} |"
-            for r in j["front"]
+            f"| {r['label']} | {fmt(r['fetches_mean'], 3)} | {fmt(r['flip'])} |" for r in j["front"]
         ]
         lines += ["", f"**Recommended for all scenes**: {_sched(j['recommended'])}.", ""]
     if summary.get("exports"):
@@ -238,7 +237,7 @@ def tradeoff_report_text(summary: dict) -> str:
             gl = e["gl_check"]
             lines.append(
                 f"- {scene}: `{e['folder']}` ({e['label']}), compiled with glslangValidator; "
-                f"llvmpipe vs port mean |diff| {_fmt(gl['mean_abs'], 3)}, p99.9 {_fmt(gl['p999'], 3)}"
+                f"llvmpipe vs port mean |diff| {fmt(gl['mean_abs'], 3)}, p99.9 {fmt(gl['p999'], 3)}"
                 + ("" if gl["passed"] else " -- **MISMATCH: do not ship**")
             )
         lines.append("")

@@ -185,7 +185,7 @@ def with_baseline_inputs(
     import os
     import tempfile
 
-    from .reference import SCENE_VERSION, _versions, cache_dir
+    from .cache import SCENE_VERSION, cache_dir, versions
     from .shader_inputs import INPUTS_VERSION
 
     key = hashlib.sha256(
@@ -198,7 +198,7 @@ def with_baseline_inputs(
                 "baseline_version": BASELINE_INPUTS_VERSION,
                 "spp": BASELINE_SPP,
                 "size": [inputs.width, inputs.height],
-                "versions": _versions(),
+                "versions": versions(),
             },
             sort_keys=True,
         ).encode()

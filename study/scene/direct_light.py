@@ -43,7 +43,7 @@ from __future__ import annotations
 import numpy as np
 
 from .experiment import Experiment
-from .sun_photons import N_BATCHES, _shape, sun_direct, sun_walk
+from .sun_photons import N_BATCHES, shape_named, sun_direct, sun_walk
 
 
 def sky_direct(
@@ -66,7 +66,7 @@ def sky_direct(
     import drjit as dr
 
     F = mi.Float
-    water = _shape(scene, "water")
+    water = shape_named(scene, "water")
     emitter = mi.load_dict(
         {"type": "envmap", "bitmap": mi.Bitmap(np.ascontiguousarray(sky, np.float32))}
     )
@@ -138,7 +138,7 @@ def traced_direct(
     of the experiment's geometry with the water (the lighting render's, :func:`.lighting.lighting_scene`)."""
     import mitsuba as mi
 
-    from .lighting import denoise_gain, denoise_radiance
+    from .denoise import denoise_gain, denoise_radiance
     from .user_scene import reference_sky_parts
 
     sky, sun = reference_sky_parts(exp)

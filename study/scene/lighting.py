@@ -67,6 +67,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from .denoise import denoise_gain, denoise_radiance
 from .experiment import Experiment
 
 N_SEEDS = 4  # independent lighting renders (noise estimate from their spread)
@@ -153,49 +154,6 @@ def interpolate(lighting: np.ndarray, extent, X: np.ndarray, Z: np.ndarray) -> n
     return ((1 - fv) * ((1 - fu) * a + fu * b) + fv * ((1 - fu) * c + fu * d)).astype(np.float32)
 
 
-def denoise_radiance(radiance: np.ndarray, albedo: np.ndarray) -> np.ndarray:
-    """Open Image Denoise (``RT`` filter, HDR, high quality) of a (n, n, 3) float32 linear-RGB
-    radiance image guided by its noise-free (n, n, 3) albedo; returns (n, n, 3) float32."""
-    try:
-        import pyoidn
-    except ImportError as e:  # pragma: no cover - pinned dependency
-        raise RuntimeError(
-            'reference.lighting_denoise = "oidn" needs the pyoidn package '
-            "(pip install pyoidn, pinned in pyproject.toml)"
-        ) from e
-    out = pyoidn.denoise(
-        np.ascontiguousarray(radiance, np.float32),
-        np.ascontiguousarray(albedo, np.float32),
-        hdr=True,
-        clean_aux=True,
-        quality="high",
-    )
-    out = np.asarray(out, np.float32)
-    if out.shape != radiance.shape or not np.all(np.isfinite(out)):
-        raise RuntimeError("Open Image Denoise returned a non-finite or misshapen image")
-    return np.maximum(out, 0.0)
-
-
-def denoise_gain(
-    denoised: np.ndarray, raw: np.ndarray, raw_se: np.ndarray, n_independent: float | None = None
-) -> tuple[list, list]:
-    """Per colour channel, the mean of the ``denoised`` texels over the mean of the ``raw`` texels
-    they were denoised from (each (..., 3), linear RGB), and the standard error of that ratio from
-    the raw texels' standard errors ``raw_se`` (..., 3), ``n_independent`` of them independent
-    (default: every texel). The raw mean is unbiased, so a ratio away from 1 by several standard
-    errors is the denoiser's own bias in the texture's brightness (docs/fast-references.md). A
-    channel whose raw mean is not positive (no light at all) gets the ratio 1 and error 0."""
-    m_raw = raw.reshape(-1, 3).astype(np.float64).mean(0)
-    lit = m_raw > 0.0
-    safe = np.where(lit, m_raw, 1.0)
-    gain = np.where(lit, denoised.reshape(-1, 3).mean(0) / safe, 1.0)
-    n = raw.size // 3 if n_independent is None else n_independent
-    se = np.where(
-        lit, np.sqrt((raw_se.reshape(-1, 3).astype(np.float64) ** 2).mean(0) / n) / safe * gain, 0.0
-    )
-    return [float(g) for g in gain], [float(e) for e in se]
-
-
 def render_lighting(
     exp: Experiment,
     size: int,
@@ -221,7 +179,7 @@ def render_lighting(
     ``scene``: (scene, medium) from :func:`lighting_scene` (default: built here)."""
     import mitsuba as mi
 
-    from .shader_inputs import _ortho_sensor, _to_gl_order, top_down_world_y
+    from .topdown import ortho_sensor, to_gl_order, top_down_world_y
 
     extent = pool_extent(exp)
     scene, medium = scene if scene is not None else lighting_scene(exp, water)
@@ -229,13 +187,13 @@ def render_lighting(
     if without_direct:
         direct = mi.load_dict(_albedo_aov(exp, water, max_depth=3))
     per_pass = max(1, -(-spp // N_SEEDS))
-    sensor = _ortho_sensor(mi, extent, size, per_pass, seed, y_cam=y_cam, medium=medium)
+    sensor = ortho_sensor(mi, extent, size, per_pass, seed, y_cam=y_cam, medium=medium)
     passes, radiances, albedos = [], [], []
     for k in range(N_SEEDS):
         img = np.array(
             mi.render(scene, sensor=sensor, spp=per_pass, seed=seed * N_SEEDS + k), np.float32
         )
-        img = _to_gl_order(mi, sensor, img, extent)
+        img = to_gl_order(mi, sensor, img, extent)
         radiance, albedo = img[..., :3], img[..., 3:6]
         if direct is not None:
             d3 = np.array(
@@ -244,11 +202,11 @@ def render_lighting(
                 ),
                 np.float32,
             )
-            radiance = radiance - _to_gl_order(mi, sensor, d3, extent)[..., :3]
+            radiance = radiance - to_gl_order(mi, sensor, d3, extent)[..., :3]
             _check_lockstep(radiance, img[..., :3], exp)
             radiance = np.maximum(radiance, 0.0)
         if np.any(albedo <= 0.0):
-            from .experiment import ExperimentError
+            from .errors import ExperimentError
 
             raise ExperimentError(
                 "the lighting render found texels of zero floor albedo (floor.tile_albedo, "
@@ -269,11 +227,11 @@ def render_lighting(
         lighting = denoise_radiance(np.mean(radiances, axis=0), albedo) / albedo
     if water:
         world_y = top_down_world_y(exp, extent, size)
-        from .shader_inputs import MAX_OPTICAL_DEPTH, camera_ray_optical_depth
+        from .topdown import MAX_OPTICAL_DEPTH, camera_ray_optical_depth
 
         optical = camera_ray_optical_depth(exp, y_cam, world_y)
         if optical.max() > MAX_OPTICAL_DEPTH:
-            from .experiment import ExperimentError
+            from .errors import ExperimentError
 
             raise ExperimentError(
                 f"water.sigma_t: the floor's light through the water is lost (optical depth "
@@ -317,16 +275,16 @@ def render_dry(
     hit, from the same samples (one scene, one render)."""
     import mitsuba as mi
 
-    from .shader_inputs import _ortho_sensor, _to_gl_order
+    from .topdown import ortho_sensor, to_gl_order
 
     from .user_scene import dry_camera_height
 
     spp = dry_spp(spp)
     scene, _ = _top_down_scene(mi, exp, water=False, integrator=_albedo_aov(exp, False))
-    sensor = _ortho_sensor(
+    sensor = ortho_sensor(
         mi, extent, size, spp, seed, y_cam=dry_camera_height(mi, exp, extent), sampler=DRY_SAMPLER
     )
-    img = _to_gl_order(
+    img = to_gl_order(
         mi,
         sensor,
         np.array(mi.render(scene, sensor=sensor, spp=spp, seed=seed), np.float32),
@@ -359,7 +317,7 @@ def lighting_colour(
     measured noise (``noise``: RMS standard error of the colour over the pool texels) and the
     settings used; and the colour's two independent halves (2, size, size, 3) float32, each from
     half of the lighting passes (the dry render outside the pool is shared by both)."""
-    from .shader_inputs import top_down_world_y, underwater_camera_height
+    from .topdown import top_down_world_y, underwater_camera_height
 
     wet = exp["reference.refraction_lighting"] == "underwater"
     y_cam = underwater_camera_height(exp) if wet else 100.0

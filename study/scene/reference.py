@@ -31,7 +31,6 @@ from __future__ import annotations
 import hashlib
 import json
 import math
-import os
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -39,9 +38,9 @@ from pathlib import Path
 import numpy as np
 
 from .._io import file_lock, read_exr, write_exr
+from .cache import SCENE_VERSION, cache_dir, versions
 from .experiment import Experiment
 
-SCENE_VERSION = 2
 N_SEEDS = 4
 PILOT_SPP = 8
 
@@ -71,24 +70,12 @@ class Reference:
         return int(self.provenance["spp"])
 
 
-def cache_dir() -> Path:
-    """``$STUDY_CACHE`` or ``./.cache`` (relative to the working directory)."""
-    return Path(os.environ.get("STUDY_CACHE", ".cache")).resolve()
-
-
-def _versions() -> dict:
-    import drjit
-    import mitsuba
-
-    return {"mitsuba": mitsuba.__version__, "drjit": drjit.__version__}
-
-
 def reference_key(exp: Experiment, variant: str) -> str:
     data = {
         "scene": exp.scene_hash(),
         "variant": variant,
         "scene_version": SCENE_VERSION,
-        "versions": _versions(),
+        "versions": versions(),
         "n_seeds": N_SEEDS,
     }
     return hashlib.sha256(json.dumps(data, sort_keys=True).encode()).hexdigest()[:32]
@@ -233,7 +220,7 @@ def render_reference(
         "n_seeds": N_SEEDS,
         "seed": exp["reference.seed"],
         "variant": variant,
-        "versions": _versions(),
+        "versions": versions(),
         "scene_version": SCENE_VERSION,
         "render_seconds": seconds,
         "noise": noise,

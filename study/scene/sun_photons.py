@@ -87,7 +87,7 @@ def _cone_directions(axis: np.ndarray, angle: float, u: np.ndarray, v: np.ndarra
     )
 
 
-def _shape(scene, name: str):
+def shape_named(scene, name: str):
     for s in scene.shapes():
         if s.id() == name:
             return s
@@ -131,7 +131,7 @@ def _emit(mi, scene, exp: Experiment, sun: np.ndarray, n_photons: int, seeds, y_
     import drjit as dr
 
     F = mi.Float
-    water = _shape(scene, "water")
+    water = shape_named(scene, "water")
     axis, angle = sun_cone(sun)
     if axis[1] <= 0.0:  # the sun is below the horizon: no direct light through the water
         return None
@@ -219,7 +219,7 @@ def sun_direct(
     if emitted is None:
         return np.zeros((len(seeds), size, size, 3), np.float32), 0
     o, dirs, power, batch = emitted
-    water = _shape(scene, "water")
+    water = shape_named(scene, "water")
     si = scene.ray_intersect(mi.Ray3f(mi.Point3f(*_vec(mi, o)), mi.Vector3f(*_vec(mi, dirs))))
     ok = si.is_valid() & (si.shape == mi.ShapePtr(water)) & (mi.Frame3f.cos_theta(si.wi) > 0)
     r, cos_t, _, eta_ti = mi.fresnel(mi.Frame3f.cos_theta(si.wi), dr.opaque(F, exp["water.ior"]))
@@ -263,7 +263,7 @@ def sun_walk(
         return np.zeros((len(seeds), size, size, 3), np.float32), 0
     o, d, power, batch = emitted
     n = len(o)
-    water = mi.ShapePtr(_shape(scene, "water"))
+    water = mi.ShapePtr(shape_named(scene, "water"))
     sigma = mi.Color3f(*[dr.opaque(F, float(v)) for v in exp["water.sigma_t"]])
     scale = _texel_scale(mi, extent, size)
     x0, z0, x1, z1 = extent

@@ -46,7 +46,7 @@ SUN_CONTRAST = 20.0  # ... whose brightest texel is this many times the median, 
 
 
 def _error(key: str, path, msg: str):
-    from .experiment import ExperimentError
+    from .errors import ExperimentError
 
     return ExperimentError(f"{key}: {msg} (file {path})")
 
@@ -128,7 +128,7 @@ def _read_image(key: str, path: str, sha: str) -> np.ndarray:
                     img = img[..., None]
                 img = img.reshape(img.shape[0], img.shape[1], -1)
     except Exception as exc:
-        from .experiment import ExperimentError
+        from .errors import ExperimentError
 
         if isinstance(exc, ExperimentError):
             raise
@@ -362,7 +362,7 @@ def _covers(key: str, path, extent, values) -> None:
 def check_files(values: dict) -> dict:
     """Validate every file key of a validated experiment's ``values`` (paths already resolved by
     :func:`resolve`) and the keys that go with them; return ``{key: sha256}`` of the files given."""
-    from .experiment import ExperimentError
+    from .errors import ExperimentError
 
     has = {k: values[k] != "" for k in FILE_KEYS}
     if values["floor.shape"] == "heightmap" and not has["floor.heightmap"]:

@@ -24,7 +24,8 @@ import math
 import numpy as np
 
 from . import user_files as uf
-from .experiment import Experiment, ExperimentError
+from .errors import ExperimentError
+from .experiment import Experiment
 from .geometry import envmap_image, sky_radiance, sun_direction
 
 SKY_HEIGHT = 512  # rows of the built-in gradient sky's lat-long map (0.35 degree texels)
@@ -281,31 +282,3 @@ def check_scene(exp: Experiment) -> None:
         import mitsuba as mi
 
         mesh_bounds(mi, exp)
-
-
-def mesh_reflection_textures(exp: Experiment, extent, size: int, progress=None):
-    """The reflection textures with the user's mesh: ``(refl_world_y (size, size) float32,
-    refl_texture (size, size, 3) float32, extent)`` over :func:`reflection_extent`. As for
-    the walls, the geometry above the water is taken as a height field: world y of the first
-    hit from above (walls and mesh) where it is above the water (else the sentinel
-    ``NO_GEOMETRY``), coloured by the dry top-down render (sun and sky, mesh included)."""
-    import mitsuba as mi
-
-    from .shader_inputs import NO_GEOMETRY, _render_top_down, top_down_world_y
-
-    ext = reflection_extent(mi, exp, extent)
-    world_y = top_down_world_y(exp, ext, size, mesh=True)
-    colour = _render_top_down(
-        mi,
-        exp,
-        ext,
-        size,
-        exp["reference.texture_spp"],
-        exp["reference.seed"],
-        water=False,
-        progress=progress,
-    )
-    above = world_y > 0.0
-    refl_y = np.where(above, world_y, NO_GEOMETRY).astype(np.float32)
-    refl_col = np.where(above[..., None], colour, 0.0).astype(np.float32)
-    return refl_y, refl_col, ext

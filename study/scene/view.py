@@ -10,7 +10,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from .experiment import Experiment, ExperimentError
+from .errors import ExperimentError
+from .experiment import Experiment
 from .mitsuba_scene import camera_view_proj
 
 

@@ -445,7 +445,7 @@ def side_by_side(exps, specs, summary: dict, rows: list, out: Path, variant: str
     from .._metrics import errors
     from ..fit.model import constants_from_experiment
     from ..report.calibration import comparison_figure
-    from .tradeoff_jobs import _model
+    from .tradeoff_jobs import job_model
 
     result = {}
     for exp, spec in zip(exps, specs):
@@ -474,7 +474,7 @@ def side_by_side(exps, specs, summary: dict, rows: list, out: Path, variant: str
                 )
         images, errs, mask = {}, {}, None
         for title, shader, constants in panels:
-            _, ref, _, model = _model(
+            _, ref, _, model = job_model(
                 {"scene": spec, "variant": shader, "mitsuba_variant": variant},
                 resolution=tuple(exp["resolution"]),
             )

@@ -101,7 +101,7 @@ def _fit_names(exp, variant_name: str) -> list[str]:
     return names + [n for n in v.fit_parameters if n in reads and n not in names]
 
 
-def _model(job, resolution=None):
+def job_model(job, resolution=None):
     from .._backend import drjit_backend
     from ..fit.model import ShaderModel
     from ..sweep import load_scene
@@ -128,7 +128,7 @@ def anchor_job(job: dict) -> dict:
 
     from ..fit.calibrate import calibrate_experiment
 
-    exp, _, _, model = _model(job)
+    exp, _, _, model = job_model(job)
     start = Constants.from_dict(job["start"])
     t0 = time.perf_counter()
     cal = calibrate_experiment(model, exp, start, _fit_names(exp, job["variant"]))
@@ -148,7 +148,7 @@ def point_job(job: dict) -> dict:
     from .._metrics import errors
     from ..fit.calibrate import calibrate_experiment
 
-    exp, ref, inputs, model = _model(job)
+    exp, ref, inputs, model = job_model(job)
     start = Constants.from_dict(job["start"]).replace(**job["schedule"])
     t0 = time.perf_counter()
     cal = calibrate_experiment(model, exp, start, _fit_names(exp, job["variant"]))
@@ -157,7 +157,7 @@ def point_job(job: dict) -> dict:
 
     fitted_names = [n for n, p in cal.parameters.items() if p["status"] in ("fitted", "bound")]
     ic = information_criteria(model.residual(cal.fitted), len(fitted_names))
-    _, _, _, full = _model(job, resolution=tuple(exp["resolution"]))
+    _, _, _, full = job_model(job, resolution=tuple(exp["resolution"]))
     img, diag = full.render(cal.fitted)
     err = errors(ref.image, img, full.mask)
     m = full.mask
