@@ -386,7 +386,7 @@ def test_noise_errors_match_the_spread_of_least_squares_solutions():
     solutions with heteroscedastic noise (a few pixels 30x noisier, like the sun's glitter) drawn
     in the target: within 5 % (the sampling error of a standard deviation from 4000 draws is
     about 1.1 %). ``std_errors`` reads the residual instead and misses the glitter's weight."""
-    from study.fit.calibrate import noise_errors, std_errors
+    from study.fit.rounds import noise_errors, std_errors
 
     rng = np.random.default_rng(3)
     m, k = 600, 3

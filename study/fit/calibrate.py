@@ -51,17 +51,19 @@ import numpy as np
 
 from shaders_port import Constants
 
-from .solvers import FTOL, FTOL_SE, FTOL_WINDOW, FitProblem, Param, fit
+from .solvers import FTOL, FTOL_SE, FTOL_WINDOW, FitProblem, Param
 from .identify import identify, sweep_1d, sweep_2d
 from .model import ShaderModel, bounds, expand_parameters, get_value, with_values
+from .rounds import (
+    REL_SE_MAX,
+    basin_scans,
+    fit_rounds,
+    noise_errors,
+    refine_decorrelated,
+    std_errors,
+)
 
 DISCRETE = ("steps_grazing", "steps_steep")
-# solver stopping tolerances (on u = transformed parameters, where one unit is about a 50 %
-# change, and on the loss): 1e-6 is far below the parameters' standard errors
-FIT_RTOL, FIT_ATOL = 1e-6, 1e-9
-# a constant whose standard error at the solution exceeds this fraction of its value is not
-# identified (frozen at its start value, the rest refitted); at most SE_ROUNDS such rounds
-REL_SE_MAX, SE_ROUNDS = 0.5, 4
 STEP_GRID = {
     "steps_grazing": [4.0, 6.0, 8.0, 10.0, 14.0, 20.0],
     "steps_steep": [1.0, 2.0, 3.0, 4.0, 6.0],
@@ -120,38 +122,6 @@ def make_problem(
     )
 
 
-def std_errors(J: np.ndarray, r: np.ndarray, values: np.ndarray) -> list[float | None]:
-    """Relative standard errors sqrt(diag(s^2 (J^T J)^-1)) / |value|, s^2 = ||r||^2 / (m - k)."""
-    m, k = J.shape
-    if m <= k:
-        return [None] * k
-    s2 = float(r @ r) / (m - k)
-    try:
-        cov = s2 * np.linalg.inv(J.T @ J)
-    except np.linalg.LinAlgError:
-        return [None] * k
-    d = np.sqrt(np.maximum(np.diag(cov), 0.0))
-    return [float(x / abs(v)) if v else None for x, v in zip(d, values)]
-
-
-def noise_errors(J: np.ndarray, sigma: np.ndarray, values: np.ndarray) -> list[float | None]:
-    """Relative standard errors of the constants from the reference's Monte Carlo noise alone:
-    the sandwich ``A diag(sigma^2) A^T`` with ``A = (J^T J)^-1 J^T`` (the linearised least-squares
-    solution's response to independent zero-mean noise of standard deviation ``sigma`` (M,) in
-    the target), its diagonal's square root over |value|. Unlike :func:`std_errors` it does not
-    read the residual, so it says how far another render of the same reference (another seed)
-    moves each constant, whatever the model error."""
-    m, k = J.shape
-    if m < k:
-        return [None] * k
-    try:
-        A = np.linalg.solve(J.T @ J, J.T)
-    except np.linalg.LinAlgError:
-        return [None] * k
-    d = np.sqrt(np.maximum(np.einsum("km,m,km->k", A, np.square(sigma, dtype=np.float64), A), 0.0))
-    return [float(x / abs(v)) if v else None for x, v in zip(d, values)]
-
-
 def _ident_dict(rep, names, J=None, r=None, values=None) -> dict:
     out = {
         "names": list(names),
@@ -206,6 +176,72 @@ def steps_to_within(step_losses: list, frac: float = 1e-3) -> int | None:
     return len(step_losses)
 
 
+def _parameter_table(
+    names, start, fitted, frozen, bound, discrete, continuous, id0, ident, noise_se, scans
+) -> dict:
+    """``Calibration.parameters``: per constant its default, exported value, status and why."""
+    params = {}
+    for n in names:
+        status = (
+            "frozen"
+            if n in frozen
+            else "bound"
+            if n in bound
+            else "swept"
+            if n in discrete
+            else "fitted"
+        )
+        params[n] = {
+            "default": get_value(start, n),
+            "fitted": None if n in frozen else get_value(fitted, n),
+            "frozen": n in frozen,
+            "status": status,
+            "reason": frozen.get(n)
+            or bound.get(n)
+            or ("chosen by the step sweep" if n in discrete else "identified and fitted"),
+        }
+        if n in continuous:
+            params[n]["sensitivity_start"] = id0.sensitivity[n] if id0 is not None else None
+            if "solution" in ident and n in ident["solution"]["names"]:
+                j = ident["solution"]["names"].index(n)
+                params[n]["sensitivity"] = ident["solution"]["sensitivity"][j]
+                params[n]["rel_std_error"] = ident["solution"]["rel_std_error"][j]
+                if n in noise_se:
+                    params[n]["rel_noise_error"] = noise_se[n]
+                if n in scans:
+                    params[n]["basins"] = scans[n]
+            else:
+                params[n]["sensitivity"] = id0.sensitivity[n] if id0 is not None else None
+    return params
+
+
+def _fit_summary(sol, fits, refined, solver) -> dict:
+    """``Calibration.fit_summary``: the last fit's summary over every round's steps."""
+    if sol is None:
+        return {"solver": solver, "iterations": 0, "converged": True, "message": "nothing to fit"}
+    summary = sol.result.summary()
+    steps = [f.iterations for f in fits]
+    summary.update(
+        {
+            "iterations": int(sum(steps)),
+            "rounds": len(fits),
+            "iterations_per_round": steps,
+            "step_losses": [v for f in fits for v in f.extra.get("step_losses", [])],
+            "steps_to_0.1pct_per_round": [
+                steps_to_within(f.extra.get("step_losses", [])) for f in fits
+            ],
+            "ftol": FTOL,
+            "ftol_se": FTOL_SE,
+            "ftol_window": FTOL_WINDOW,
+            "rel_se_max": REL_SE_MAX,
+            "converged": all(f.converged for f in fits),
+        }
+    )
+    if refined is not None:
+        summary["input_noise"] = refined.summary()
+    return summary
+
+
 def calibrate_model(
     model: ShaderModel,
     start: Constants,
@@ -252,300 +288,43 @@ def calibrate_model(
     free = [n for n in continuous if n not in frozen]
     for n, why in frozen.items():
         _log(f"calibrate: freezing {n} at {get_value(start, n):.4g}: {why}")
-    losses, result, bound, fits = [], None, {}, []
-    fitted, x0 = start, None
-    id1 = r1 = J1 = None
-    se = {}
     sigma = getattr(model, "reference_stderr", None)
     sigma_m = None if sigma is None else sigma[model.mask].astype(np.float64).ravel()
-    restart, before_restart = None, None
-    scanned: dict = {}  # name -> (the constants it was scanned at, the scan)
-    for rnd in range(SE_ROUNDS + 2):  # one more round than freezing needs: a basin restart
-        if not free:
-            break
-        id1 = None
-        result = fit(
-            problem,
-            x0,
-            solver=solver,
-            free=free,
-            max_steps=max_steps,
-            rtol=FIT_RTOL,
-            atol=FIT_ATOL,
-            ftol=FTOL,
-            ftol_window=FTOL_WINDOW,
-            ftol_se=FTOL_SE,
-        )
-        print(file=sys.stderr)
-        fits.append(result)
-        losses += list(result.losses)
-        fitted = with_values(start, {n: result.constants[n] for n in free})
-        _log(
-            f"calibrate: {solver}: loss {result.loss_start:.6g} -> {result.loss:.6g} "
-            f"in {result.iterations} iterations ({result.message})"
-        )
-        at_bound = result.extra.get("at_bound", {})
-        bound = {
-            n: (
-                f"on its {side} bound {get_value(fitted, n):.4g}: the loss still falls beyond "
-                "it, so the data want a value outside the constant's range; exported at the bound"
-            )
-            for n, side in at_bound.items()
-        }
-        inner = [n for n in free if n not in bound]
-        if not inner:
-            break
-        r1, J1 = model.residual_and_jacobian(fitted, inner)
-        id1 = identify(J1, inner, scales=[problem.params[n].typical for n in inner])
-        for n in inner:
-            if id1.freeze[n]:
-                bound[n] = (
-                    f"one-sided: at the solution ({get_value(fitted, n):.4g}) the image no longer "
-                    f"depends on it ({id1.reasons[n]}); any value beyond it in the same direction "
-                    "gives the same image, so only a bound is identified"
-                )
-                _log(f"calibrate: {n} is only bounded by the data: {bound[n]}")
-        live = [i for i, n in enumerate(inner) if n not in bound]  # columns with a free direction
-        vals = np.array([get_value(fitted, inner[i]) for i in live])
-        se = dict(zip([inner[i] for i in live], std_errors(J1[:, live], r1, vals))) if live else {}
-        judged = {n: v for n, v in se.items() if v is not None}
-        worst = max(judged, key=judged.get) if judged else None
-        if worst is None or judged[worst] <= REL_SE_MAX or rnd >= SE_ROUNDS:
-            if scan_basins and restart is None:
-                restart = _basin_restart(
-                    model,
-                    fitted,
-                    [inner[i] for i in live],
-                    sigma_m,
-                    result.loss,
-                    scanned,
-                    basin_check,
-                )
-                if restart:
-                    before_restart = (
-                        result,
-                        fitted,
-                        bound,
-                        inner,
-                        r1,
-                        J1,
-                        id1,
-                        live,
-                        vals,
-                        se,
-                        dict(frozen),
-                        list(free),
-                    )
-                    x0 = {n: result.constants[n] for n in problem.names}
-                    x0[restart["name"]] = restart["to"]
-                    continue
-            break
-        frozen[worst] = (
-            f"not identified at the solution: relative standard error {judged[worst]:.3g} "
-            f"> {REL_SE_MAX:g} (at {get_value(fitted, worst):.4g}); frozen at the start "
-            "value, the rest refitted"
-        )
-        _log(f"calibrate: freezing {worst} at {get_value(start, worst):.4g}: {frozen[worst]}")
-        free = [n for n in free if n != worst]
-        x0 = {n: result.constants[n] for n in problem.names if n != worst}
-        x0[worst] = get_value(start, worst)
-    if restart and before_restart is not None:
-        restart["loss_after"] = float(result.loss)
-        restart["kept"] = bool(result.loss < restart["loss_before"])
-        if not restart["kept"]:  # the restart found nothing better: back to the first solution
-            result, fitted, bound, inner, r1, J1, id1, live, vals, se, frozen, free = before_restart
-        _log(
-            f"calibrate: restart from the {restart['name']} basin at {restart['to']:.4g}: loss "
-            f"{restart['loss_before']:.6g} -> {restart['loss_after']:.6g}, "
-            + ("kept" if restart["kept"] else "not lower; the first solution kept")
-        )
-    if not free:
-        fitted = start
+    sol, frozen, free, fits, losses, restart, scanned = fit_rounds(
+        model, problem, start, free, frozen, solver, max_steps, sigma_m, scan_basins, basin_check
+    )
+    if sol is not None and not free:  # every constant frozen in the end: the start values
+        sol.fitted = start
+    measured = sol is not None and sol.id1 is not None and bool(sol.live)
     refined = None
-    if halves is not None and id1 is not None and live:
-        from .decorrelated import refine
-
-        refined = refine(halves[0], halves[1], problem.params, fitted, [inner[i] for i in live])
-        _log(
-            f"calibrate: decorrelated loss {refined.loss_start:.6g} -> {refined.loss:.6g} in "
-            f"{refined.steps} damped Newton steps ({refined.message})"
-        )
-        if refined.accepted:
-            fitted = refined.fitted
-            for n, side in refined.at_bound.items():
-                bound[n] = (
-                    f"on its {side} bound {get_value(fitted, n):.4g} after the decorrelated "
-                    "refinement (fit.input_noise); exported at the bound"
-                )
-            live = [i for i in live if inner[i] not in bound]
-            r1, J1 = model.residual_and_jacobian(fitted, inner)
-            vals = np.array([get_value(fitted, inner[i]) for i in live])
-            se = (
-                dict(zip([inner[i] for i in live], std_errors(J1[:, live], r1, vals)))
-                if live
-                else {}
-            )
+    if halves is not None and measured:
+        refined = refine_decorrelated(model, halves, problem, sol)
+    fitted = sol.fitted if sol is not None else start
+    bound = sol.bound if sol is not None else {}
     # the reference's noise in the last round's live columns (it decides nothing in the rounds)
     noise_se = {}
-    if id1 is not None and live and sigma is not None:
-        noise_se = dict(zip([inner[i] for i in live], noise_errors(J1[:, live], sigma_m, vals)))
+    if measured and sol.live and sigma is not None:
+        noise_se = dict(zip(sol.live_names, noise_errors(sol.J1[:, sol.live], sigma_m, sol.vals)))
     scans = {}
-    if scan_basins and id1 is not None and live:
-        from .basins import BASIN_PARAMETERS, scan
-
-        for n in BASIN_PARAMETERS:
-            if n in [inner[i] for i in live]:
-                at, done = scanned.get(n, (None, None))
-                scans[n] = (
-                    done if at is fitted else scan(model, fitted, n, sigma_m)
-                )  # moved since: again
-                if restart and restart["name"] == n:
-                    scans[n]["restart"] = restart
-                told = {o["value"] for o in scans[n].get("unconfirmed", [])}  # reported as such
-                for key, what in (
-                    (
-                        "indistinguishable",
-                        "other basins the reference's noise cannot tell from the fit's",
-                    ),
-                    (
-                        "lower",
-                        "basins lower than the fit's by more than the reference's noise "
-                        "explains (the solver stopped short)",
-                    ),
-                ):
-                    values = [v for v in scans[n][key] if v not in told]
-                    if values:
-                        _log(
-                            f"calibrate: {n}: {what} ({get_value(fitted, n):.4g}): "
-                            f"{', '.join(f'{v:.4g}' for v in values)}"
-                        )
+    if scan_basins and measured and sol.live:
+        scans = basin_scans(model, fitted, sol.live_names, sigma_m, scanned, restart)
     ident = {"start": _ident_dict(id0, continuous)} if id0 is not None else {}
-    if id1 is not None:
-        inner = list(id1.names)
-        ident["solution"] = _ident_dict(id1, inner)
-        ident["solution"]["rel_std_error"] = [se.get(n) for n in inner]
+    if sol is not None and sol.id1 is not None:
+        inner = list(sol.id1.names)
+        ident["solution"] = _ident_dict(sol.id1, inner)
+        ident["solution"]["rel_std_error"] = [sol.se.get(n) for n in inner]
         if noise_se:
             ident["solution"]["rel_noise_error"] = [noise_se.get(n) for n in inner]
     sweep = None
     if discrete:
         sweep = step_sweep(problem, fitted, discrete)
         fitted = with_values(fitted, sweep["best"])
-    params = {}
-    for n in names:
-        status = (
-            "frozen"
-            if n in frozen
-            else "bound"
-            if n in bound
-            else "swept"
-            if n in discrete
-            else "fitted"
-        )
-        params[n] = {
-            "default": get_value(start, n),
-            "fitted": None if n in frozen else get_value(fitted, n),
-            "frozen": n in frozen,
-            "status": status,
-            "reason": frozen.get(n)
-            or bound.get(n)
-            or ("chosen by the step sweep" if n in discrete else "identified and fitted"),
-        }
-        if n in continuous:
-            params[n]["sensitivity_start"] = id0.sensitivity[n] if id0 is not None else None
-            if "solution" in ident and n in ident["solution"]["names"]:
-                j = ident["solution"]["names"].index(n)
-                params[n]["sensitivity"] = ident["solution"]["sensitivity"][j]
-                params[n]["rel_std_error"] = ident["solution"]["rel_std_error"][j]
-                if n in noise_se:
-                    params[n]["rel_noise_error"] = noise_se[n]
-                if n in scans:
-                    params[n]["basins"] = scans[n]
-            else:
-                params[n]["sensitivity"] = id0.sensitivity[n] if id0 is not None else None
-    if result is not None:
-        summary = result.summary()
-        steps = [f.iterations for f in fits]
-        trace = [v for f in fits for v in f.extra.get("step_losses", [])]
-        summary.update(
-            {
-                "iterations": int(sum(steps)),
-                "rounds": len(fits),
-                "iterations_per_round": steps,
-                "step_losses": trace,
-                "steps_to_0.1pct_per_round": [
-                    steps_to_within(f.extra.get("step_losses", [])) for f in fits
-                ],
-                "ftol": FTOL,
-                "ftol_se": FTOL_SE,
-                "ftol_window": FTOL_WINDOW,
-                "rel_se_max": REL_SE_MAX,
-                "converged": all(f.converged for f in fits),
-            }
-        )
-        if refined is not None:
-            summary["input_noise"] = refined.summary()
-    else:
-        summary = {
-            "solver": solver,
-            "iterations": 0,
-            "converged": True,
-            "message": "nothing to fit",
-        }
-    return Calibration(start, fitted, params, ident, summary, losses, sweep)
-
-
-def _basin_restart(
-    model,
-    fitted: Constants,
-    live: list[str],
-    sigma_m,
-    loss: float,
-    scanned: dict,
-    check: tuple | None = None,
-) -> dict | None:
-    """The restart the basin scan asks for: the lowest basin of a ``BASIN_PARAMETERS`` constant
-    that is lower than the fit's by more than the reference's noise explains and, with ``check``
-    (two models on the texture's halves), lower in their decorrelated loss too (``name``,
-    ``from``, ``to``, ``loss_before``, ``texture_delta``), or None. Each scan goes into
-    ``scanned`` (name -> (``fitted``, scan)), so that the report reuses it when the solution does
-    not move; a lower basin the halves do not confirm is added to the scan's ``unconfirmed``."""
-    from .basins import BASIN_PARAMETERS, scan, texture_delta
-
-    for n in BASIN_PARAMETERS:
-        if n not in live or sigma_m is None:
-            continue
-        s = scan(model, fitted, n, sigma_m)
-        scanned[n] = (fitted, s)
-        s["unconfirmed"] = []
-        for best in sorted(
-            (b for b in s["basins"] if b["value"] in s["lower"]), key=lambda b: b["delta_loss"]
-        ):
-            td = texture_delta(check[0], check[1], fitted, n, best["value"]) if check else None
-            head = (
-                f"calibrate: {n}: a basin at {best['value']:.4g} is lower than the fit's "
-                f"({get_value(fitted, n):.4g}) by {-best['delta_loss']:.4g} (+- {best['noise_sd']:.2g} from the "
-                "reference's noise"
-            )
-            if td is not None and td >= 0.0:
-                s["unconfirmed"].append({**best, "texture_delta": td})
-                _log(
-                    f"{head}), but higher by {td:.4g} in the decorrelated loss of the texture's independent "
-                    "halves: the texture's noise or denoiser makes it lower; not refitted"
-                )
-                continue
-            _log(
-                head
-                + (f"; by {-td:.4g} in the texture halves' decorrelated loss" if check else "")
-                + "); refitting from there"
-            )
-            return {
-                "name": n,
-                "from": get_value(fitted, n),
-                "to": best["value"],
-                "loss_before": float(loss),
-                "texture_delta": td,
-            }
-    return None
+    params = _parameter_table(
+        names, start, fitted, frozen, bound, discrete, continuous, id0, ident, noise_se, scans
+    )
+    return Calibration(
+        start, fitted, params, ident, _fit_summary(sol, fits, refined, solver), losses, sweep
+    )
 
 
 def calibrate_experiment(

@@ -53,320 +53,41 @@ from __future__ import annotations
 
 import math
 import time
-from dataclasses import dataclass, field
-from typing import Callable
 
 import numpy as np
 
-from .bridge import DrJitResidual, make_jax_residual
+from .bridge import DrJitResidual
+from .adam import adam
+from .nelder_mead import nelder_mead
+from .optx import optimistix_fit, optimistix_stepped
+from .params import TRANSFORMS, Param
+from .problem import (
+    DERIVATIVE_FREE,
+    FTOL,
+    FTOL_SE,
+    FTOL_WINDOW,
+    LEAST_SQUARES,
+    MINIMISERS,
+    SOLVERS,
+    FitProblem,
+    FitResult,
+)
+from .steps import Trace
 
-LEAST_SQUARES = ("levenberg_marquardt", "gauss_newton", "dogleg")
-MINIMISERS = ("bfgs", "nelder_mead", "nelder_mead_optimistix")
-SOLVERS = LEAST_SQUARES + MINIMISERS + ("adam",)
-DERIVATIVE_FREE = ("nelder_mead", "nelder_mead_optimistix")
-TRANSFORMS = ("auto", "linear", "log", "neglog", "logit", "log_logit", "clip")
-# default stopping rule of the gradient solvers (see :func:`fit`): the fit has stopped improving
-# when the lowest loss seen fell by less than FTOL (relative) over the last FTOL_WINDOW steps
-# when the lowest loss seen fell by less than max(FTOL, FTOL_SE / (m - k)) (relative) over the
-# last FTOL_WINDOW steps. FTOL_SE / (m - k): with m residuals and k parameters, moving one
-# parameter by d standard errors from the optimum raises the loss by about d^2 * loss / (m - k),
-# so an improvement below 1.0 * loss / (m - k) is worth less than one standard error
-FTOL, FTOL_SE, FTOL_WINDOW = 1e-6, 1.0, 3
-
-
-def _sigmoid(z, xp):
-    return 0.5 + 0.5 * xp.tanh(0.5 * z)  # no overflow for large |z|
-
-
-@dataclass(frozen=True)
-class Param:
-    """One fitted scalar: physical ``default``, bounds ``[lo, hi]``, ``scale`` (physical units;
-    None: ``|default|``, or ``(hi - lo) / 10`` when the default is 0, or 1)."""
-
-    name: str
-    default: float
-    lo: float = -math.inf
-    hi: float = math.inf
-    scale: float | None = None
-    transform: str = "auto"
-    derivative_free: bool = False
-
-    def __post_init__(self):
-        lo, hi, d = float(self.lo), float(self.hi), float(self.default)
-        if self.transform not in TRANSFORMS:
-            raise ValueError(
-                f"parameter {self.name}: unknown transform {self.transform!r}; "
-                f"choose one of {TRANSFORMS}"
-            )
-        if not math.isfinite(d) or not lo < hi:
-            raise ValueError(
-                f"parameter {self.name}: need a finite default and lo < hi, "
-                f"got default={d}, lo={lo}, hi={hi}"
-            )
-        kind = self.kind
-        if kind == "clip" and not lo <= d <= hi:
-            raise ValueError(f"parameter {self.name}: default {d} must lie inside [{lo}, {hi}]")
-        if kind not in ("linear", "clip") and not lo < d < hi:
-            raise ValueError(
-                f"parameter {self.name}: default {d} must lie strictly inside "
-                f"({lo}, {hi}) for the {kind} transform; move it or widen the bounds"
-            )
-        if kind in ("logit", "log_logit") and not (math.isfinite(lo) and math.isfinite(hi)):
-            raise ValueError(f"parameter {self.name}: transform {kind} needs finite bounds")
-        if kind == "log_logit" and lo <= 0:
-            raise ValueError(f"parameter {self.name}: transform log_logit needs lo > 0, got {lo}")
-        if kind == "log" and not math.isfinite(lo):
-            raise ValueError(f"parameter {self.name}: transform log needs a finite lo")
-        if kind == "neglog" and not math.isfinite(hi):
-            raise ValueError(f"parameter {self.name}: transform neglog needs a finite hi")
-        if self.scale is not None and not (math.isfinite(self.scale) and self.scale > 0):
-            raise ValueError(
-                f"parameter {self.name}: scale must be finite and > 0, got {self.scale}"
-            )
-
-    @property
-    def kind(self) -> str:
-        """The transform actually used (``auto`` resolved from the bounds)."""
-        if self.transform != "auto":
-            return self.transform
-        lo_f, hi_f = math.isfinite(self.lo), math.isfinite(self.hi)
-        if lo_f and hi_f:
-            return "log_logit" if self.lo > 0 and self.hi / self.lo >= 1e3 else "logit"
-        return "log" if lo_f else ("neglog" if hi_f else "linear")
-
-    @property
-    def typical(self) -> float:
-        """The scale actually used (physical units)."""
-        if self.scale is not None:
-            return float(self.scale)
-        if self.default != 0:
-            return abs(float(self.default))
-        return (self.hi - self.lo) / 10 if math.isfinite(self.hi - self.lo) else 1.0
-
-    # g, g^-1, g' -------------------------------------------------------------------------
-    def _g(self, p):
-        lo, hi, k = self.lo, self.hi, self.kind
-        if k in ("linear", "clip"):
-            return p
-        if k == "log":
-            return np.log(p - lo)
-        if k == "neglog":
-            return -np.log(hi - p)
-        q = (p - lo) / (hi - lo) if k == "logit" else np.log(p / lo) / np.log(hi / lo)
-        return np.log(q) - np.log1p(-q)
-
-    def _ginv(self, z, xp=np):
-        lo, hi, k = self.lo, self.hi, self.kind
-        if k == "linear":
-            return z
-        if k == "clip":
-            return xp.clip(z, lo, hi) if xp is np else xp.clip(z, float(lo), float(hi))
-        if k == "log":
-            return lo + xp.exp(z)
-        if k == "neglog":
-            return hi - xp.exp(-z)
-        # clipped: at saturation the float rounding of lo*exp(log(hi/lo)) can exceed hi
-        if k == "logit":
-            p = lo + (hi - lo) * _sigmoid(z, xp)
-        else:
-            p = lo * xp.exp(math.log(hi / lo) * _sigmoid(z, xp))
-        return np.clip(p, lo, hi) if xp is np else xp.clip(p, float(lo), float(hi))
-
-    def _gprime(self, p):
-        lo, hi, k = self.lo, self.hi, self.kind
-        if k in ("linear", "clip"):
-            return np.ones_like(p)
-        if k == "log":
-            return 1.0 / (p - lo)
-        if k == "neglog":
-            return 1.0 / (hi - p)
-        if k == "logit":
-            q = (p - lo) / (hi - lo)
-            return 1.0 / ((hi - lo) * q * (1 - q))
-        L = math.log(hi / lo)
-        q = np.log(p / lo) / L
-        return 1.0 / (p * L * q * (1 - q))
-
-    @property
-    def _s(self) -> float:
-        return float(self._gprime(np.float64(self.default))) * self.typical
-
-    def to_u(self, p) -> np.ndarray:
-        """Physical value(s) -> unconstrained ``u`` (float64)."""
-        p = np.asarray(p, np.float64)
-        if self.kind == "clip" and np.any((p < self.lo) | (p > self.hi)):
-            raise ValueError(f"parameter {self.name}: value {p} is outside [{self.lo}, {self.hi}]")
-        if self.kind not in ("linear", "clip") and np.any((p <= self.lo) | (p >= self.hi)):
-            raise ValueError(
-                f"parameter {self.name}: value {p} is not strictly inside ({self.lo}, {self.hi})"
-            )
-        return (self._g(p) - self._g(np.float64(self.default))) / self._s
-
-    def from_u(self, u, xp=np):
-        """Unconstrained ``u`` -> physical value; ``xp`` = ``numpy`` or ``drjit`` (differentiable)."""
-        return self._ginv(float(self._g(np.float64(self.default))) + self._s * u, xp)
-
-    def at_bound(self, u) -> str | None:
-        """``'lower'`` / ``'upper'`` when ``u`` maps onto (or beyond) a bound of a ``clip``
-        parameter, else None (the other transforms never reach their bounds)."""
-        if self.kind != "clip":
-            return None
-        z = float(self.default) + self._s * float(u)
-        return "lower" if z <= self.lo else "upper" if z >= self.hi else None
-
-    def dp_du(self, u) -> np.ndarray:
-        """Derivative of the physical value with respect to ``u`` (float64); computed from
-        ``z = g(default) + s*u`` so that it tends to 0, not NaN, where ``p`` saturates at a bound."""
-        z = float(self._g(np.float64(self.default))) + self._s * np.asarray(u, np.float64)
-        k, lo, hi = self.kind, self.lo, self.hi
-        if k == "linear":
-            d = np.ones_like(z)
-        elif k == "clip":  # one-sided at the bound itself (the inward derivative)
-            d = ((z >= lo) & (z <= hi)).astype(np.float64)
-        elif k == "log":
-            d = np.exp(z)
-        elif k == "neglog":
-            d = np.exp(-z)
-        else:
-            sg = _sigmoid(z, np)
-            d = (
-                (hi - lo) * sg * (1 - sg)
-                if k == "logit"
-                else self._ginv(z) * math.log(hi / lo) * sg * (1 - sg)
-            )
-        return self._s * d
-
-
-class FitProblem:
-    """Residual over named parameters (see the module docstring for the callables' contract).
-
-    ``params``: list of :class:`Param` (unique names). ``drjit_float``: the Dr.Jit float type
-    of the Adam variables handed to ``loss_drjit`` (default ``drjit.llvm.ad.Float``).
-    """
-
-    def __init__(
-        self,
-        params: list[Param],
-        residual: Callable,
-        residual_and_jacobian: Callable,
-        *,
-        loss_drjit: Callable | None = None,
-        drjit_float=None,
-        name: str = "problem",
-    ):
-        names = [p.name for p in params]
-        if not names or len(set(names)) != len(names):
-            raise ValueError(
-                f"{name}: need a non-empty list of uniquely named parameters, got {names}"
-            )
-        self.params = {p.name: p for p in params}
-        self.names = names
-        self.residual, self.residual_and_jacobian = residual, residual_and_jacobian
-        self.loss_drjit, self.drjit_float, self.name = loss_drjit, drjit_float, name
-
-    def start_values(self, x0: dict | None) -> dict:
-        """Full dict name -> float: ``x0`` over the defaults, checked against the bounds."""
-        x0 = dict(x0 or {})
-        unknown = set(x0) - set(self.names)
-        if unknown:
-            raise ValueError(
-                f"{self.name}: unknown parameter(s) {sorted(unknown)}; known: {self.names}"
-            )
-        vals = {n: float(x0.get(n, p.default)) for n, p in self.params.items()}
-        for n, v in vals.items():
-            p = self.params[n]
-            if not (math.isfinite(v) and p.lo <= v <= p.hi):
-                raise ValueError(
-                    f"{self.name}: start value {n}={v} is not finite or outside [{p.lo}, {p.hi}]"
-                )
-        return vals
-
-    def bridge(self, base: dict, free: list[str]) -> DrJitResidual:
-        """JAX residual of ``u`` (len(free),) with the other parameters held at ``base``."""
-        ps = [self.params[n] for n in free]
-
-        def values(u):
-            v = dict(base)
-            v.update({p.name: float(p.from_u(ui)) for p, ui in zip(ps, u)})
-            return v
-
-        def fn_value(u):
-            return self.residual(values(u))
-
-        def fn_value_and_jac(u):
-            r, J = self.residual_and_jacobian(values(u), list(free))
-            J = np.asarray(J, np.float64)
-            if J.ndim != 2 or J.shape[1] != len(free):
-                raise ValueError(
-                    f"{self.name}: residual_and_jacobian returned J of shape {J.shape} "
-                    f"for {len(free)} names"
-                )
-            return r, J * np.array([p.dp_du(ui) for p, ui in zip(ps, u)])[None, :]
-
-        m = len(np.asarray(self.residual(base)).reshape(-1))
-        return make_jax_residual(fn_value, fn_value_and_jac, len(free), m, name=self.name)
-
-
-@dataclass
-class FitResult:
-    """Outcome of :func:`fit`.
-
-    ``names``: fitted parameters; ``x`` (k,) their physical values; ``u`` (k,) unconstrained;
-    ``constants``: every parameter's value (fitted and held); ``losses``: ``0.5*||r||^2`` at each
-    evaluation in call order (optimistix: every evaluated point, trial points included; Adam:
-    one per iteration); ``iterations``: solver steps.
-    """
-
-    solver: str
-    names: list
-    x: np.ndarray
-    u: np.ndarray
-    constants: dict
-    loss_start: float
-    loss: float
-    losses: list
-    iterations: int
-    n_value_calls: int
-    n_jac_calls: int
-    n_grad_calls: int
-    seconds: float
-    converged: bool
-    message: str
-    extra: dict = field(default_factory=dict)
-
-    def summary(self) -> dict:
-        """JSON-serialisable summary (no history)."""
-        return {
-            "solver": self.solver,
-            "constants": self.constants,
-            "loss_start": self.loss_start,
-            "loss": self.loss,
-            "iterations": self.iterations,
-            "n_value_calls": self.n_value_calls,
-            "n_jac_calls": self.n_jac_calls,
-            "n_grad_calls": self.n_grad_calls,
-            "seconds": self.seconds,
-            "converged": self.converged,
-            "message": self.message,
-        }
-
-
-def _optx_solver(name: str, rtol: float, atol: float):
-    """The optimistix solver. Gauss-Newton and Dogleg get a rank-revealing least-squares
-    linear solver (``AutoLinearSolver(well_posed=False)``): a Jacobian column can vanish at a
-    trial point (e.g. the attenuation clamp saturating), and the default solver, which
-    assumes a well-posed operator, then returns NaN and stops the fit."""
-    import lineax as lx
-    import optimistix as optx
-
-    if name in ("gauss_newton", "dogleg"):
-        cls = optx.GaussNewton if name == "gauss_newton" else optx.Dogleg
-        return cls(rtol=rtol, atol=atol, linear_solver=lx.AutoLinearSolver(well_posed=False))
-    return {
-        "levenberg_marquardt": optx.LevenbergMarquardt,
-        "bfgs": optx.BFGS,
-        "nelder_mead_optimistix": optx.NelderMead,
-    }[name](rtol=rtol, atol=atol)
+__all__ = [
+    "DERIVATIVE_FREE",
+    "FTOL",
+    "FTOL_SE",
+    "FTOL_WINDOW",
+    "LEAST_SQUARES",
+    "MINIMISERS",
+    "SOLVERS",
+    "TRANSFORMS",
+    "FitProblem",
+    "FitResult",
+    "Param",
+    "fit",
+]
 
 
 def _free_names(problem: FitProblem, solver: str, free, treat_as_continuous) -> list[str]:
@@ -479,16 +200,16 @@ def fit(
             False,
             f"start point rejected: {e}",
         )
-    trace = _Trace(t0, loss0)
+    trace = Trace(t0, loss0)
     if ftol is not None and ftol_se:
         ftol = max(ftol, ftol_se / max(res.m - len(names), 1))
     u, iters, restarts, adam_losses = u0, 0, 0, []
     while True:
         left = max_steps - iters
         if solver == "nelder_mead":
-            u, it, ok, msg = _nelder_mead(res, u, left, rtol, atol, nm_step, trace)
+            u, it, ok, msg = nelder_mead(res, u, left, rtol, atol, nm_step, trace)
         elif solver == "adam":
-            u, it, ok, msg, ng, ls = _adam(
+            u, it, ok, msg, ng, ls = adam(
                 problem,
                 res,
                 base,
@@ -506,10 +227,10 @@ def fit(
             n_grad += ng
             adam_losses += ls
         elif solver == "nelder_mead_optimistix":
-            u, it, ok, msg = _optimistix(res, solver, u, left, rtol, atol, nm_step)
+            u, it, ok, msg = optimistix_fit(res, solver, u, left, rtol, atol, nm_step)
             trace.note(res.stats.best_loss)
         else:
-            u, it, ok, msg = _optimistix_steps(
+            u, it, ok, msg = optimistix_stepped(
                 res, solver, u, left, rtol, atol, ftol, ftol_window, trace
             )
         iters += it
@@ -564,26 +285,6 @@ def fit(
         }
     )
     return out
-
-
-class _Trace:
-    """Lowest loss seen and seconds since the start, after each solver step."""
-
-    def __init__(self, t0: float, loss0: float):
-        self.t0, self.best = t0, loss0
-        self.losses, self.seconds = [], []
-
-    def note(self, loss: float) -> None:
-        if math.isfinite(loss):
-            self.best = min(self.best, float(loss))
-        self.losses.append(self.best)
-        self.seconds.append(time.perf_counter() - self.t0)
-
-    def stalled(self, ftol: float | None, window: int) -> bool:
-        """The lowest loss fell by less than ``ftol * loss`` over the last ``window`` steps."""
-        if ftol is None or len(self.losses) <= window:
-            return False
-        return self.losses[-window - 1] - self.losses[-1] <= ftol * self.losses[-1]
 
 
 def _kkt_violations(
@@ -641,289 +342,3 @@ def _result(
         bool(ok),
         msg,
     )
-
-
-def _aborted(res: DrJitResidual, exc: Exception, u0, steps: int):
-    """A jitted optimistix solve or step raised. A non-finite model value inside it (JAX wraps the
-    callback's error) is reported and the best point evaluated returned, as the solvers' result
-    tuple; any other error is a bug and propagates."""
-    if not isinstance(res.last_error, FloatingPointError):
-        raise (res.last_error or exc) from exc
-    cause = res.last_error
-    best = res.stats.best_x if res.stats.best_x is not None else np.asarray(u0)
-    first = str(cause).strip().splitlines()[0] if str(cause).strip() else repr(cause)
-    return (
-        np.asarray(best),
-        steps,
-        False,
-        (f"solver aborted ({type(cause).__name__}): {first}; returning the best point evaluated"),
-    )
-
-
-def _optimistix(res: DrJitResidual, solver: str, u0, max_steps, rtol, atol, nm_step):
-    import jax
-    import jax.numpy as jnp
-    import optimistix as optx
-
-    s = _optx_solver(solver, rtol, atol)
-
-    @jax.jit
-    def run(y0):
-        if solver in LEAST_SQUARES:
-            sol = optx.least_squares(lambda y, _: res(y), s, y0, max_steps=max_steps, throw=False)
-        elif solver == "nelder_mead_optimistix":
-            nm = optx.NelderMead(rtol=rtol, atol=atol, rdelta=0.0, adelta=nm_step)
-            sol = optx.minimise(
-                lambda y, _: 0.5 * jnp.sum(res(y) ** 2), nm, y0, max_steps=max_steps, throw=False
-            )
-        else:
-            sol = optx.minimise(
-                lambda y, _: 0.5 * jnp.sum(res(y) ** 2), s, y0, max_steps=max_steps, throw=False
-            )
-        return sol.value, sol.result, sol.stats["num_steps"]
-
-    y0 = np.asarray(u0, np.float64)
-    try:
-        value, result, steps = run(jnp.asarray(y0, jnp.float64))
-    except Exception as e:
-        return _aborted(res, e, u0, 0)
-    steps = int(steps)
-    ok = bool(result == optx.RESULTS.successful)
-    msg = "converged" if ok else optx.RESULTS[result]
-    u = np.asarray(value, np.float64)
-    if not np.all(np.isfinite(u)):
-        best = res.stats.best_x if res.stats.best_x is not None else np.asarray(u0)
-        return (
-            np.asarray(best),
-            steps,
-            False,
-            "solver returned non-finite parameters; returning the best point evaluated",
-        )
-    return u, steps, ok, f"{msg} after {steps} steps"
-
-
-def _optimistix_steps(
-    res: DrJitResidual, solver: str, u0, max_steps, rtol, atol, ftol, window, trace: _Trace
-):
-    """The optimistix solver driven one step at a time from Python (its ``init``/``step``/
-    ``terminate`` interface, each step jitted), so that the loss-stall rule (:meth:`_Trace.stalled`)
-    can stop it; otherwise the same iteration as ``optx.least_squares`` / ``optx.minimise``.
-    Returns (u, steps, ok, msg)."""
-    import equinox as eqx
-    import jax
-    import jax.numpy as jnp
-    import optimistix as optx
-
-    s = _optx_solver(solver, rtol, atol)
-    if solver in LEAST_SQUARES:
-
-        def fn(y, args):
-            return res(y), None
-
-        f_struct = jax.ShapeDtypeStruct((res.m,), jnp.float64)
-    else:
-
-        def fn(y, args):
-            return 0.5 * jnp.sum(res(y) ** 2), None
-
-        f_struct = jax.ShapeDtypeStruct((), jnp.float64)
-    tags = frozenset()
-
-    @eqx.filter_jit
-    def init(y):
-        return s.init(fn, y, None, {}, f_struct, None, tags)
-
-    @eqx.filter_jit
-    def step(y, state):
-        y1, state1, _ = s.step(fn, y, None, {}, state, tags)
-        done, result = s.terminate(fn, y1, None, {}, state1, tags)
-        return y1, state1, done, result
-
-    y = jnp.asarray(np.asarray(u0, np.float64), jnp.float64)
-    steps, ok, msg = 0, False, f"maximum number of steps reached (max_steps={max_steps})"
-    try:
-        state = init(y)
-        while steps < max_steps:
-            y, state, done, result = step(y, state)
-            steps += 1
-            trace.note(res.stats.best_loss)
-            if not bool(jnp.all(jnp.isfinite(y))):
-                ok, msg = False, "solver returned non-finite parameters"
-                break
-            if bool(done):
-                ok = bool(result == optx.RESULTS.successful)
-                msg = (
-                    f"converged (optimistix's step and loss tolerances) after {steps} steps"
-                    if ok
-                    else f"{optx.RESULTS[result]} after {steps} steps"
-                )
-                break
-            if trace.stalled(ftol, window):
-                ok, msg = (
-                    True,
-                    (
-                        f"converged: the loss fell by less than {ftol:g} (relative) over "
-                        f"the last {window} steps, after {steps} steps"
-                    ),
-                )
-                break
-    except Exception as e:
-        return _aborted(res, e, u0, steps)
-    u = np.asarray(y, np.float64)
-    if not np.all(np.isfinite(u)):
-        best = res.stats.best_x if res.stats.best_x is not None else np.asarray(u0)
-        return (
-            np.asarray(best),
-            steps,
-            False,
-            "solver returned non-finite parameters; returning the best point evaluated",
-        )
-    return u, steps, ok, msg
-
-
-def _adam(
-    problem: FitProblem,
-    res: DrJitResidual,
-    base: dict,
-    names,
-    u0,
-    max_steps,
-    lr,
-    rtol,
-    atol,
-    patience,
-    trace: _Trace | None = None,
-    ftol: float | None = None,
-    window: int = FTOL_WINDOW,
-):
-    """The tutorial loop: Dr.Jit Adam on ``u``; gradient from ``dr.backward`` of ``loss_drjit``
-    or, without it, ``J^T r`` (forward-mode Jacobian). Returns (u, iters, ok, msg, n_grad, losses)."""
-    import drjit as dr
-    import drjit.opt  # noqa: F401  (registers dr.opt)
-
-    ps = [problem.params[n] for n in names]
-    Float = problem.drjit_float
-    if Float is None:
-        import drjit.llvm.ad as m
-
-        Float = m.Float
-    opt = dr.opt.Adam(lr=lr)
-    for p, ui in zip(ps, u0):
-        opt[p.name] = Float(float(ui))
-    losses, n_grad, ok, best_u = [], 0, False, np.asarray(u0, np.float64)
-    msg = f"stopped at the iteration cap max_steps={max_steps}"
-    it = 0
-    for it in range(1, max_steps + 1):
-        if problem.loss_drjit is not None:
-            vals = dict(base)
-            vals.update({p.name: p.from_u(opt[p.name], xp=dr) for p in ps})
-            try:
-                loss = problem.loss_drjit(vals)
-            except FloatingPointError as e:
-                return best_u, it, False, f"stopped: {e}", n_grad, losses
-            dr.backward(loss)
-            value = float(dr.detach(loss)[0] if dr.width(loss) else loss)
-            n_grad += 1
-            grads = np.array([float(dr.grad(opt[p.name])[0]) for p in ps])
-        else:
-            u = np.array([float(opt[p.name][0]) for p in ps])
-            try:
-                r, J = res.value_and_jac(u)
-            except FloatingPointError as e:
-                return best_u, it, False, f"stopped: {e}", n_grad, losses
-            value, g = 0.5 * float(r @ r), J.T @ r
-            for p, gi in zip(ps, g):
-                dr.set_grad(opt[p.name], Float(float(gi)))
-            grads = g
-        if not (math.isfinite(value) and np.all(np.isfinite(grads))):
-            return (
-                best_u,
-                it,
-                False,
-                f"stopped at iteration {it}: non-finite loss or gradient",
-                n_grad,
-                losses,
-            )
-        losses.append(value)
-        if value <= min(losses):
-            best_u = np.array([float(opt[p.name][0]) for p in ps])
-        if trace is not None:
-            trace.note(value)
-        opt.step()
-        if trace is not None and trace.stalled(ftol, window * 10):
-            ok, msg = (
-                True,
-                (
-                    f"converged: the best loss fell by less than {ftol:g} (relative) over "
-                    f"the last {window * 10} iterations (iteration {it})"
-                ),
-            )
-            break
-        if (
-            patience is not None
-            and len(losses) > patience
-            and min(losses[:-patience]) - min(losses[-patience:]) <= rtol * value + atol
-        ):
-            ok, msg = (
-                True,
-                (
-                    f"best loss improved by less than rtol*loss+atol over the last "
-                    f"{patience} iterations (iteration {it})"
-                ),
-            )
-            break
-    return best_u, it, ok, msg, n_grad, losses
-
-
-def _nelder_mead(
-    res: DrJitResidual, u0, max_steps, rtol, atol, nm_step, trace: _Trace | None = None
-):
-    """Nelder-Mead on ``0.5*||r(u)||^2`` (NumPy; values only). Converged when every vertex is
-    within ``atol + rtol*|u_best|`` of the best (max norm) and every value within
-    ``atol + rtol*|f_best|`` of the best one (optimistix's criterion). Returns (u, steps, ok, msg)."""
-    k = len(u0)
-    a_r, a_e, a_c, a_s = 1.0, 2.0, 0.5, 0.5
-
-    def f(u):
-        r = res.value(u)
-        return 0.5 * float(r @ r)
-
-    try:
-        X = np.vstack([u0, u0[None, :] + nm_step * np.eye(k)])
-        F = np.array([f(x) for x in X])
-        for step in range(1, max_steps + 1):
-            order = np.argsort(F)
-            X, F = X[order], F[order]
-            if trace is not None and step > 1:
-                trace.note(float(F[0]))
-            if np.max(np.abs(X - X[0])) <= atol + rtol * np.max(np.abs(X[0])) and np.max(
-                np.abs(F - F[0])
-            ) <= atol + rtol * abs(F[0]):
-                return X[0], step - 1, True, f"converged after {step - 1} steps"
-            c = X[:-1].mean(axis=0)
-            xr = c + a_r * (c - X[-1])
-            fr = f(xr)
-            if fr < F[0]:
-                xe = c + a_e * (xr - c)
-                fe = f(xe)
-                X[-1], F[-1] = (xe, fe) if fe < fr else (xr, fr)
-            elif fr < F[-2]:
-                X[-1], F[-1] = xr, fr
-            else:
-                xc = c + a_c * (xr - c) if fr < F[-1] else c - a_c * (c - X[-1])
-                fc = f(xc)
-                if fc < min(fr, F[-1]):
-                    X[-1], F[-1] = xc, fc
-                else:
-                    X[1:] = X[0] + a_s * (X[1:] - X[0])
-                    F[1:] = [f(x) for x in X[1:]]
-        i = int(np.argmin(F))
-        return X[i], max_steps, False, f"stopped at max_steps={max_steps} before converging"
-    except FloatingPointError as e:
-        best = res.stats.best_x if res.stats.best_x is not None else np.asarray(u0)
-        return (
-            np.asarray(best),
-            0,
-            False,
-            f"solver aborted ({type(e).__name__}): {e}; returning the best point evaluated",
-        )

@@ -1,0 +1,140 @@
+"""The fit problem (a residual and its parameters), the typed result, the solver names and the
+default stopping rule."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Callable
+
+import numpy as np
+
+from .bridge import DrJitResidual, make_jax_residual
+from .params import Param
+
+
+LEAST_SQUARES = ("levenberg_marquardt", "gauss_newton", "dogleg")
+MINIMISERS = ("bfgs", "nelder_mead", "nelder_mead_optimistix")
+SOLVERS = LEAST_SQUARES + MINIMISERS + ("adam",)
+DERIVATIVE_FREE = ("nelder_mead", "nelder_mead_optimistix")
+
+# default stopping rule of the gradient solvers (see ``solvers.fit``): the fit has stopped
+# improving when the lowest loss seen fell by less than max(FTOL, FTOL_SE / (m - k)) (relative) over the
+# last FTOL_WINDOW steps. FTOL_SE / (m - k): with m residuals and k parameters, moving one
+# parameter by d standard errors from the optimum raises the loss by about d^2 * loss / (m - k),
+# so an improvement below 1.0 * loss / (m - k) is worth less than one standard error
+FTOL, FTOL_SE, FTOL_WINDOW = 1e-6, 1.0, 3
+
+
+class FitProblem:
+    """Residual over named parameters (see the module docstring for the callables' contract).
+
+    ``params``: list of :class:`Param` (unique names). ``drjit_float``: the Dr.Jit float type
+    of the Adam variables handed to ``loss_drjit`` (default ``drjit.llvm.ad.Float``).
+    """
+
+    def __init__(
+        self,
+        params: list[Param],
+        residual: Callable,
+        residual_and_jacobian: Callable,
+        *,
+        loss_drjit: Callable | None = None,
+        drjit_float=None,
+        name: str = "problem",
+    ):
+        names = [p.name for p in params]
+        if not names or len(set(names)) != len(names):
+            raise ValueError(
+                f"{name}: need a non-empty list of uniquely named parameters, got {names}"
+            )
+        self.params = {p.name: p for p in params}
+        self.names = names
+        self.residual, self.residual_and_jacobian = residual, residual_and_jacobian
+        self.loss_drjit, self.drjit_float, self.name = loss_drjit, drjit_float, name
+
+    def start_values(self, x0: dict | None) -> dict:
+        """Full dict name -> float: ``x0`` over the defaults, checked against the bounds."""
+        x0 = dict(x0 or {})
+        unknown = set(x0) - set(self.names)
+        if unknown:
+            raise ValueError(
+                f"{self.name}: unknown parameter(s) {sorted(unknown)}; known: {self.names}"
+            )
+        vals = {n: float(x0.get(n, p.default)) for n, p in self.params.items()}
+        for n, v in vals.items():
+            p = self.params[n]
+            if not (math.isfinite(v) and p.lo <= v <= p.hi):
+                raise ValueError(
+                    f"{self.name}: start value {n}={v} is not finite or outside [{p.lo}, {p.hi}]"
+                )
+        return vals
+
+    def bridge(self, base: dict, free: list[str]) -> DrJitResidual:
+        """JAX residual of ``u`` (len(free),) with the other parameters held at ``base``."""
+        ps = [self.params[n] for n in free]
+
+        def values(u):
+            v = dict(base)
+            v.update({p.name: float(p.from_u(ui)) for p, ui in zip(ps, u)})
+            return v
+
+        def fn_value(u):
+            return self.residual(values(u))
+
+        def fn_value_and_jac(u):
+            r, J = self.residual_and_jacobian(values(u), list(free))
+            J = np.asarray(J, np.float64)
+            if J.ndim != 2 or J.shape[1] != len(free):
+                raise ValueError(
+                    f"{self.name}: residual_and_jacobian returned J of shape {J.shape} "
+                    f"for {len(free)} names"
+                )
+            return r, J * np.array([p.dp_du(ui) for p, ui in zip(ps, u)])[None, :]
+
+        m = len(np.asarray(self.residual(base)).reshape(-1))
+        return make_jax_residual(fn_value, fn_value_and_jac, len(free), m, name=self.name)
+
+
+@dataclass
+class FitResult:
+    """Outcome of :func:`fit`.
+
+    ``names``: fitted parameters; ``x`` (k,) their physical values; ``u`` (k,) unconstrained;
+    ``constants``: every parameter's value (fitted and held); ``losses``: ``0.5*||r||^2`` at each
+    evaluation in call order (optimistix: every evaluated point, trial points included; Adam:
+    one per iteration); ``iterations``: solver steps.
+    """
+
+    solver: str
+    names: list
+    x: np.ndarray
+    u: np.ndarray
+    constants: dict
+    loss_start: float
+    loss: float
+    losses: list
+    iterations: int
+    n_value_calls: int
+    n_jac_calls: int
+    n_grad_calls: int
+    seconds: float
+    converged: bool
+    message: str
+    extra: dict = field(default_factory=dict)
+
+    def summary(self) -> dict:
+        """JSON-serialisable summary (no history)."""
+        return {
+            "solver": self.solver,
+            "constants": self.constants,
+            "loss_start": self.loss_start,
+            "loss": self.loss,
+            "iterations": self.iterations,
+            "n_value_calls": self.n_value_calls,
+            "n_jac_calls": self.n_jac_calls,
+            "n_grad_calls": self.n_grad_calls,
+            "seconds": self.seconds,
+            "converged": self.converged,
+            "message": self.message,
+        }
