@@ -37,6 +37,14 @@ def _summary(text: str) -> str:
     return lines[-1].strip("= ") if lines else "no pytest summary"
 
 
+def _warnings(text: str) -> list[str]:
+    """The lines of pytest's warnings summary that name a warning (not the test ids)."""
+    if "warnings summary" not in text:
+        return []
+    block = text.split("warnings summary", 1)[1].split("-- Docs", 1)[0]
+    return [ln.strip() for ln in block.splitlines() if "Warning" in ln]
+
+
 def main() -> None:
     import os
 
@@ -66,11 +74,16 @@ def main() -> None:
         rc_test, t_test, text = _run(["make", "test"], clone, env, root / "test.log")
         warn = text.count("frozen function has been recorded") + text.count("FrozenReplayWarning")
         rows.append((k + 1, seed, rc_run, t_run, rc_test, t_test, _summary(text), warn, root))
+        commit = subprocess.run(
+            ["git", "rev-parse", "--short", "HEAD"], cwd=clone, capture_output=True, text=True
+        ).stdout.strip()
         print(
-            f"round {k + 1}: make run rc {rc_run} ({t_run:.0f} s), make test rc {rc_test} "
-            f"({t_test:.0f} s): {_summary(text)}",
+            f"round {k + 1} ({commit}): make run rc {rc_run} ({t_run:.0f} s), make test rc "
+            f"{rc_test} ({t_test:.0f} s): {_summary(text)}",
             flush=True,
         )
+        for line in _warnings(text):
+            print(f"    warning: {line}", flush=True)
         if not args.keep and rc_run == 0 and rc_test == 0:
             shutil.rmtree(root, ignore_errors=True)
     print(f"\nsoak of {head}: {args.rounds} fresh clones, make run then make test (random order)")

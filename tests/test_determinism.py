@@ -1,11 +1,13 @@
 """References rendered cold twice, in two processes, with the same seed.
 
 Measured: at the tests' size (32x32) the reference and the top-down texture are bit-identical;
-at the default experiment's size (256x256, 128 spp) 24 of 196,608 reference values differ, by
-at most one float32 ulp (6e-8 at 1.0; Mitsuba's LLVM film accumulates samples from its worker
-threads in an order that varies), while the texture stays bit-identical. The reference's own
-noise is ~1e-2 per pixel, five orders larger, so no fitted constant can tell the two apart;
-the cache key does not include it (a cached reference is reused as is).
+at the default experiment's size (256x256, 128 spp) a few dozen of 196,608 reference values
+differ, by one or two float32 ulps in the runs seen (6e-8 at 1.0: Mitsuba's LLVM film
+accumulates the samples of its worker threads in an order that varies), while the texture stays
+bit-identical. The slow test bounds the difference at 16 ulps: reordering a sum of 128 samples
+can move it by several ulps, and anything beyond that would be a real nondeterminism. The
+reference's own noise is ~1e-2 per pixel, five orders above, so no fitted constant can tell the
+two apart; a cached reference is reused as is.
 """
 
 from __future__ import annotations
@@ -73,7 +75,7 @@ def test_small_reference_is_bit_identical_across_processes(tmp_path):
 
 
 @pytest.mark.slow
-def test_default_reference_differs_by_at_most_one_ulp(tmp_path):
+def test_default_reference_differs_by_rounding_only(tmp_path):
     a, b = _cold_renders(tmp_path, [])
-    np.testing.assert_array_max_ulp(a["reference"], b["reference"], maxulp=1)
+    np.testing.assert_array_max_ulp(a["reference"], b["reference"], maxulp=16)
     assert np.array_equal(a["texture"], b["texture"])
