@@ -58,7 +58,7 @@ def write_joint_report(out: Path, summary: dict) -> Path:
 def loso_table(rows: list[dict]) -> list[str]:
     """FLIP (and RMSE) of each left-out scene under the seed's, the others' and its own constants."""
     lines = [
-        "| left-out scene | FLIP seed | FLIP others' fit | FLIP own fit | RMSE seed | RMSE others' fit | "
+        "| left-out scene | FLIP original | FLIP others' fit | FLIP own fit | RMSE original | RMSE others' fit | "
         "RMSE own fit |",
         "|---|---|---|---|---|---|---|",
     ]
@@ -97,8 +97,8 @@ def write_generalise_report(out: Path, summary: dict) -> Path:
     lines = [
         "# Constants that generalise",
         "",
-        "Leave-one-scene-out: each scene scored (water pixels, full resolution) under the seed's "
-        "constants, the constants fitted jointly on the *other* scenes, and its own fit.",
+        "Leave-one-scene-out: each scene scored (water pixels, full resolution) under the original "
+        "shader's constants, the constants fitted jointly on the *other* scenes, and its own fit.",
         "",
     ]
     lines += loso_table(summary["leave_one_out"]) + [""]

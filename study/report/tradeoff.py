@@ -1,7 +1,7 @@
 """The tradeoff report: ``pareto.png`` (error against each cost measure, every point drawn, the
-Pareto front, the seed's schedule and the recommendation marked, one colour per variant, a row of
+Pareto front, the original shader's schedule and the recommendation marked, one colour per variant, a row of
 panels per scene) and ``report.md`` (the fronts as tables, the recommendation, what each scene
-needs, each halving of the seed's schedule)."""
+needs, each halving of the original's schedule)."""
 
 from __future__ import annotations
 
@@ -82,7 +82,7 @@ def pareto_figure(path: Path, recs: list, summary: dict) -> Path:
                     s=120,
                     facecolors="none",
                     edgecolors="k",
-                    label="seed schedule (10, 3, 40)",
+                    label="original schedule (10, 3, 40)",
                 )
             if rec is not None:
                 match = [r for r in cands if r["label"] == rec["label"] and r.get(cost) is not None]
@@ -158,7 +158,7 @@ def tradeoff_report_text(summary: dict) -> str:
             )
         if seed and rec:
             lines.append(
-                f"The seed's configuration (water_refraction (10, 3, 40), refitted): FLIP "
+                f"The original shader's configuration (water_refraction (10, 3, 40), refitted): FLIP "
                 f"{fmt(seed['flip'])} at {fmt(seed['fetches_mean'], 3)} fetches "
                 f"({fmt(seed['fetches_mean'] / rec['fetches_mean'], 3)}x the recommended cost, "
                 f"FLIP {100 * (seed['flip'] / rec['flip'] - 1):+.2f} %)."
@@ -166,9 +166,9 @@ def tradeoff_report_text(summary: dict) -> str:
         bw = f.get("best_within_seed_budget")
         if seed and bw:
             lines.append(
-                f"**Best within the seed's fetch budget** ({fmt(seed['fetches_mean'], 3)} fetches): "
+                f"**Best within the original's fetch budget** ({fmt(seed['fetches_mean'], 3)} fetches): "
                 f"{bw['label']}: FLIP {fmt(bw['flip'])} at {fmt(bw['fetches_mean'], 3)} fetches "
-                f"(the fitted seed: {fmt(seed['flip'])}, {100 * (bw['flip'] / seed['flip'] - 1):+.1f} %)."
+                f"(the fitted original: {fmt(seed['flip'])}, {100 * (bw['flip'] / seed['flip'] - 1):+.1f} %)."
             )
         if summary.get("images", {}).get(scene):
             lines += ["", f"![{scene}: reference and shaders]({summary['images'][scene]})"]
@@ -177,7 +177,7 @@ def tradeoff_report_text(summary: dict) -> str:
             b0 = min(d["bic"] for d in pars.values())
             lines += [
                 "",
-                "Each variant at the seed's schedule (constants fitted or at a bound; BIC of the fit "
+                "Each variant at the original's schedule (constants fitted or at a bound; BIC of the fit "
                 "residual, lower is better, relative to the lowest):",
                 "",
                 "| variant | constants | FLIP | BIC - min |",
@@ -207,7 +207,7 @@ def tradeoff_report_text(summary: dict) -> str:
         if f["halvings"]:
             lines += [
                 "",
-                "Each halving of the seed's schedule (scaled family):",
+                "Each halving of the original's schedule (scaled family):",
                 "",
                 "| configuration | scale | fetches | GL ms 1080p (norm.) | FLIP | not crossed |",
                 "|---|---|---|---|---|---|",

@@ -451,7 +451,7 @@ SCHEMA: dict[str, Field] = {
         "underwater",
         "How the top-down refraction "
         "texture is lit: `underwater` (the floor as lit through the "
-        "water) or `dry` (no water, as the seed's application does).",
+        "water) or `dry` (no water, as the original shader's application does).",
         choices=("underwater", "dry"),
     ),
     "reference.fresnel_transmission": Field(
@@ -526,7 +526,7 @@ SCHEMA: dict[str, Field] = {
         "list_float",
         [0.25, 0.5, 1.0, 2.0, 4.0],
         "Schedules added to the grid: the "
-        "seed's (10, 3, 40) (and for `water_reflection` its reflection schedule) "
+        "original shader's (10, 3, 40) (and for `water_reflection` its reflection schedule) "
         "times each factor, so every halving of the step count is measured.",
         "",
         0.01,
@@ -535,7 +535,7 @@ SCHEMA: dict[str, Field] = {
     "tradeoff.converged_scale": Field(
         "float",
         16.0,
-        "Factor on the seed's schedule of the converged "
+        "Factor on the original shader's schedule of the converged "
         "raymarch that measures each variant's error floor.",
         "",
         1.0,
