@@ -6,6 +6,18 @@ import argparse
 import sys
 
 
+def _backend_arg(p: argparse.ArgumentParser, default: str | None, what: str) -> None:
+    """``--backend`` (the Mitsuba / Dr.Jit variant; ``--variant`` is its old name)."""
+    p.add_argument(
+        "--backend",
+        "--variant",
+        dest="variant",
+        choices=["llvm_ad_rgb", "cuda_ad_rgb"],
+        default=default,
+        help=f"Mitsuba / Dr.Jit backend ({what}; --variant is the old name)",
+    )
+
+
 def _common(p: argparse.ArgumentParser, many: bool = False) -> None:
     if many:
         p.add_argument(
@@ -22,14 +34,7 @@ def _common(p: argparse.ArgumentParser, many: bool = False) -> None:
         metavar="KEY=VALUE",
         help="override an experiment key, e.g. --set water.ior=1.33 (repeatable)",
     )
-    p.add_argument(
-        "--backend",
-        "--variant",
-        dest="variant",
-        choices=["llvm_ad_rgb", "cuda_ad_rgb"],
-        default=None,
-        help="Mitsuba / Dr.Jit backend (default: the experiment's, normally llvm_ad_rgb; --variant is the old name)",
-    )
+    _backend_arg(p, None, "default: the experiment's, normally llvm_ad_rgb")
 
 
 def _sweep_common(p: argparse.ArgumentParser, experiments_help: str) -> None:
@@ -46,14 +51,7 @@ def _sweep_common(p: argparse.ArgumentParser, experiments_help: str) -> None:
         metavar="KEY=VALUE",
         help="override a key of every experiment (repeatable)",
     )
-    p.add_argument(
-        "--backend",
-        "--variant",
-        dest="variant",
-        choices=["llvm_ad_rgb", "cuda_ad_rgb"],
-        default="llvm_ad_rgb",
-        help="Mitsuba / Dr.Jit backend of the workers (--variant is the old name)",
-    )
+    _backend_arg(p, "llvm_ad_rgb", "of the workers")
     p.add_argument(
         "--scheduler",
         default=None,
@@ -155,14 +153,7 @@ def build_parser() -> argparse.ArgumentParser:
         metavar="KEY=VALUE",
         help="override an experiment key in every experiment (repeatable)",
     )
-    p.add_argument(
-        "--backend",
-        "--variant",
-        dest="variant",
-        choices=["llvm_ad_rgb", "cuda_ad_rgb"],
-        default=None,
-        help="Mitsuba / Dr.Jit backend (default: each experiment's; --variant is the old name)",
-    )
+    _backend_arg(p, None, "default: each experiment's")
     p.add_argument(
         "--shader", default=None, help="shader variant (default: each experiment's fit.shader)"
     )

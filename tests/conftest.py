@@ -40,21 +40,25 @@ def _private_cache(tmp_path_factory, monkeypatch, _module_cache):
     monkeypatch.setenv("STUDY_CACHE", str(tmp_path_factory.mktemp("cache")))
 
 
+# the default experiment shrunk for tests, as ``--set`` overrides
+SMALL_OVERRIDES = [
+    "resolution=[32, 32]",
+    "fit.resolution=[32, 32]",
+    "reference.spp=16",
+    "reference.water_mesh=96",
+    "reference.texture_size=64",
+    "reference.texture_spp=8",
+    "reference.lighting_size=32",
+    "reference.wall_spp=8",
+    "waves.normal_map_size=64",
+]
+
+
 def small_experiment(**overrides):
     """The default experiment, shrunk for tests: 32x32, few spp, coarse meshes and textures."""
     from study import load_experiment
 
-    base = {
-        "resolution": "[32, 32]",
-        "fit.resolution": "[32, 32]",
-        "reference.spp": "16",
-        "reference.water_mesh": "96",
-        "reference.texture_size": "64",
-        "reference.texture_spp": "8",
-        "reference.lighting_size": "32",
-        "reference.wall_spp": "8",
-        "waves.normal_map_size": "64",
-    }
+    base = dict(o.split("=", 1) for o in SMALL_OVERRIDES)
     base.update({k: str(v) for k, v in overrides.items()})
     return load_experiment(
         REPO / "experiments" / "default.toml", [f"{k}={v}" for k, v in base.items()]

@@ -19,7 +19,7 @@ import textwrap
 import numpy as np
 import pytest
 
-from conftest import REPO
+from conftest import REPO, SMALL_OVERRIDES
 
 _RENDER = textwrap.dedent("""
     import sys
@@ -36,17 +36,6 @@ _RENDER = textwrap.dedent("""
     inputs = load_or_build_shader_inputs(exp, "llvm_ad_rgb", cache=cache, log=lambda m: None)
     np.savez({out!r}, reference=ref.image, texture=np.asarray(inputs.refraction_texture))
 """)
-SMALL = [
-    "resolution=[32,32]",
-    "fit.resolution=[32,32]",
-    "reference.spp=16",
-    "reference.water_mesh=96",
-    "reference.texture_size=64",
-    "reference.texture_spp=8",
-    "reference.lighting_size=32",
-    "reference.wall_spp=8",
-    "waves.normal_map_size=64",
-]
 
 
 def _cold_renders(tmp_path, overrides):
@@ -69,7 +58,7 @@ def _cold_renders(tmp_path, overrides):
 
 
 def test_small_reference_is_bit_identical_across_processes(tmp_path):
-    a, b = _cold_renders(tmp_path, SMALL)
+    a, b = _cold_renders(tmp_path, SMALL_OVERRIDES)
     assert np.array_equal(a["reference"], b["reference"])
     assert np.array_equal(a["texture"], b["texture"])
 

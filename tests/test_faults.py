@@ -22,21 +22,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from conftest import REPO
+from conftest import REPO, SMALL_OVERRIDES
 
 TESTS = Path(__file__).parent
 STUDY = [sys.executable, "-m", "study.cli"]
-SMALL = [
-    "resolution=[32,32]",
-    "fit.resolution=[32,32]",
-    "reference.spp=16",
-    "reference.water_mesh=96",
-    "reference.texture_size=64",
-    "reference.texture_spp=8",
-    "reference.lighting_size=32",
-    "reference.wall_spp=8",
-    "waves.normal_map_size=64",
-]
 
 
 def _sets(overrides):
@@ -155,7 +144,9 @@ def test_corrupt_kernel_cache_is_rebuilt(tmp_path):
 
 def test_two_calibrations_of_one_new_scene(tmp_path):
     env = {**os.environ, "STUDY_CACHE": str(tmp_path / "cache")}
-    args = [str(REPO / "experiments" / "default.toml")] + _sets(SMALL + ["fit.max_steps=8"])
+    args = [str(REPO / "experiments" / "default.toml")] + _sets(
+        SMALL_OVERRIDES + ["fit.max_steps=8"]
+    )
     procs = [
         subprocess.Popen(
             STUDY + ["calibrate"] + args + ["--out", str(tmp_path / f"out{i}")],
@@ -181,7 +172,7 @@ def test_two_calibrations_of_one_new_scene(tmp_path):
 
 # ---- Ctrl-C in a sweep: a valid table, and the re-run computes only the missing points --------
 
-TINY_TRADEOFF = SMALL + [
+TINY_TRADEOFF = SMALL_OVERRIDES + [
     'tradeoff.variants=["water_refraction"]',
     "tradeoff.steps_grazing=[5.0]",
     "tradeoff.steps_steep=[3.0]",

@@ -179,6 +179,10 @@ def _submit_all(client, job_fn, todo, rows, old, table, variant, label) -> None:
         futures[f] = (key, job)
     progress = Progress(label, len(futures))
     progress.show()
+
+    def save():  # the finished rows, then the table's rows of other jobs
+        write_table(table, list(rows.values()) + [r for k, r in old.items() if k not in rows])
+
     last_write = 0.0
     with _ctrl_c() as stop:
         pending = as_completed(list(futures))
@@ -192,12 +196,10 @@ def _submit_all(client, job_fn, todo, rows, old, table, variant, label) -> None:
                 rows[key] = {**flatten({"job": job}), **row}
                 progress.update(row["status"] == "ok")
                 if time.perf_counter() - last_write > 2.0:  # keep finished rows on disk
-                    write_table(
-                        table, list(rows.values()) + [r for k, r in old.items() if k not in rows]
-                    )
+                    save()
                     last_write = time.perf_counter()
             time.sleep(0.05)
     if stop.is_set():  # Ctrl-C: every finished row is kept, the rest re-run later
         client.cancel(list(futures) + list(scenes.values()))
-        write_table(table, list(rows.values()) + [r for k, r in old.items() if k not in rows])
+        save()
         raise KeyboardInterrupt
