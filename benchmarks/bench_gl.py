@@ -41,7 +41,7 @@ def main(argv=None) -> None:
     for w, h in sizes:
         inputs = synthetic_inputs(width=w, height=h)
         for name, refl in VARIANTS:
-            with GLRenderer(name, inputs, reflection=refl) as r:
+            with GLRenderer(name, inputs, defines=() if refl else ("NOREFLECTION",)) as r:
                 base = None
                 for label, c in SCHEDULES.items():
                     t = r.time_frames(c, n=args.n)

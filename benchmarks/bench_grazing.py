@@ -57,11 +57,11 @@ def shader_terms(variant, inputs, constants) -> dict:
     from shaders_port._raster import prepare
     from shaders_port._texture import backend_types, clamp
 
-    if variant.shader != "water_refraction" or not variant.port_options.get("reflection", True):
+    opts = wr.options_of(variant.defines) if variant.shader == "water_refraction" else None
+    if opts is None or not opts.reflection:
         raise ValueError(
             f"{variant.name}: the term split covers the water_refraction shader with reflection"
         )
-    opts = wr.options_of({k: v for k, v in variant.port_options.items() if k != "reflection"})
     inputs = variant.prepare_inputs(inputs)
     m = backend_types("llvm")
     P = prepare(inputs, m)

@@ -70,10 +70,10 @@ def main() -> None:
     fwd = {}
     for shader, refl in variants:
         mod = water_refraction if shader == "water_refraction" else water_reflection
-        kw = {"reflection": refl} if shader == "water_refraction" else {}
+        defines = () if refl else ("NOREFLECTION",)
 
         def port_frame():
-            out = mod.render(inputs, C, **kw)
+            out = mod.render(inputs, C, defines=defines)
             dr.eval(out.color, out.diagnostics)
             dr.sync_thread()
 
@@ -82,7 +82,7 @@ def main() -> None:
         try:
             from shaders_port._gl import GLRenderer
 
-            with GLRenderer(shader, inputs, reflection=refl) as g:
+            with GLRenderer(shader, inputs, defines=defines) as g:
                 t_gl = statistics.median(g.time_frames(C, n=args.n, warmup=2))
         except Exception as exc:  # no headless GL on this machine
             print(f"  (GL unavailable: {exc})")

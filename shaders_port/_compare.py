@@ -51,7 +51,6 @@ def compare_port_gl(
     constants: Constants | None,
     shader: str,
     *,
-    reflection: bool = True,
     renderer=None,
 ) -> dict:
     """Render ``shader`` with the port (LLVM) and with the core GLSL on OpenGL and compare.
@@ -59,8 +58,6 @@ def compare_port_gl(
     Args:
         inputs, constants: the frame (constants None = defaults).
         shader: a shader variant name (``shaders_port._variants.VARIANTS``).
-        reflection: False for the NOREFLECTION variant of water_refraction (same as the
-            variant ``water_refraction_noreflection``).
         renderer: an open ``GLRenderer`` for these inputs to reuse (else one is made).
 
     Returns a dict: ``mean_abs`` and ``p999`` (99.9th percentile) and ``max_abs`` of the
@@ -72,12 +69,6 @@ def compare_port_gl(
     from ._variants import get_variant
 
     variant = get_variant(shader)
-    if not reflection:
-        if shader != "water_refraction":
-            raise ValueError(
-                "reflection=False (NOREFLECTION) is a variant of water_refraction only"
-            )
-        variant = get_variant("water_refraction_noreflection")
     constants = constants if constants is not None else Constants()
     out = variant.render(inputs, constants).numpy()
     own = renderer is None

@@ -79,7 +79,6 @@ class GLRenderer:
         inputs: textures, matrices, uniforms and output resolution.
         dialect: dialect of ``source`` (and of the shipped file when ``source`` is None):
             'core' runs as is; 'compat' (GLSL 1.20) runs through ``compat_to_core``.
-        reflection: False compiles with ``#define NOREFLECTION`` (water_refraction only).
         source: fragment shader text to run instead of the shipped file (e.g. an export).
         defines: preprocessor names to define (a shader variant, ``shaders_port._variants``),
             each inserted after ``#version`` unless the source already has that ``#define``
@@ -94,7 +93,6 @@ class GLRenderer:
         inputs: ShaderInputs,
         *,
         dialect: str = "core",
-        reflection: bool = True,
         source: str | None = None,
         defines: tuple[str, ...] = (),
     ):
@@ -102,17 +100,13 @@ class GLRenderer:
             raise ValueError(f"unknown water shader {name!r}; known: {_FRAG_NAMES}")
         if dialect not in ("core", "compat"):
             raise ValueError(f"dialect must be 'core' or 'compat', got {dialect!r}")
-        if not reflection and name != "water_refraction":
-            raise ValueError(
-                "reflection=False (NOREFLECTION) is a variant of water_refraction only"
-            )
         if not isinstance(inputs, ShaderInputs):
             raise TypeError(f"inputs must be a ShaderInputs, got {type(inputs).__name__}")
         import moderngl
 
         self._mgl = moderngl
-        self.name, self.inputs, self.dialect, self.reflection = name, inputs, dialect, reflection
-        self.defines = tuple(defines) + (() if reflection else ("NOREFLECTION",))
+        self.name, self.inputs, self.dialect = name, inputs, dialect
+        self.defines = tuple(defines)
         for d in self.defines:
             with_define("#version 120\n", d)  # raises on a name that is not a preprocessor name
         self._source = source if source is not None else read_source(name, "frag", dialect)
@@ -333,12 +327,12 @@ def run_glsl(
     inputs: ShaderInputs,
     constants: Constants | None = None,
     *,
-    reflection: bool = True,
+    defines: tuple[str, ...] = (),
     source: str | None = None,
     dialect: str = "core",
 ) -> tuple[np.ndarray, np.ndarray]:
     """One-shot ``GLRenderer(name, inputs, ...).render(constants)``; see GLRenderer.render."""
-    with GLRenderer(name, inputs, dialect=dialect, reflection=reflection, source=source) as r:
+    with GLRenderer(name, inputs, dialect=dialect, defines=defines, source=source) as r:
         return r.render(constants)
 
 
@@ -348,9 +342,9 @@ def time_glsl(
     n: int = 20,
     *,
     name: str = "water_refraction",
-    reflection: bool = True,
+    defines: tuple[str, ...] = (),
 ) -> list[float]:
     """Seconds per frame of the core shader on this GL implementation, glFinish-synchronised,
     ``n`` frames after 3 warm-up frames (shader compilation excluded)."""
-    with GLRenderer(name, inputs, reflection=reflection) as r:
+    with GLRenderer(name, inputs, defines=defines) as r:
         return r.time_frames(constants, n=n)

@@ -374,6 +374,18 @@ def active_code(source: str) -> str:
     return "\n".join(out)
 
 
+def switches_of(source: str) -> list[str]:
+    """The preprocessor names ``source`` tests (``#ifdef``, ``#ifndef``, ``defined(NAME)``) and
+    does not define itself: its variant switches, in order of first use."""
+    code = "\n".join(ln.split("//")[0] for ln in source.split("\n"))
+    own = set(re.findall(r"^\s*#define\s+([A-Za-z_]\w*)", code, re.M))
+    tested = re.findall(
+        r"^\s*#if(?:n?def)\s+([A-Za-z_]\w*)|defined\s*\(\s*([A-Za-z_]\w*)\s*\)", code, re.M
+    )
+    names = dict.fromkeys(a or b for a, b in tested)
+    return [n for n in names if n not in own]
+
+
 def constants_read(source: str) -> list[str]:
     """``CONSTANT_SPECS`` names declared in the constants block *and* used by the code the
     preprocessor keeps (comments removed; a use is any occurrence beyond the declaration):

@@ -1,8 +1,9 @@
 """The registry of shader variants: one entry per shader the study can fit, time and chart.
 
-A *variant* is one GLSL fragment shader (a file in ``glsl/`` and its Dr.Jit port module of the
-same name) compiled with a set of preprocessor names, and the port called with the matching
-options. Everything above this layer (the fit, the sweeps, the tradeoff chart, export and the
+A *variant* is a name, one GLSL fragment shader (a file in ``glsl/`` and its Dr.Jit port module
+of the same name) and the preprocessor names it is compiled with. The port reads the same names
+through its one table ``DEFINES`` (``shaders_port._switches``), so GL, export and port take the
+same code path by construction. Everything above this layer (the fit, the sweeps, the tradeoff chart, export and the
 GL check) names a shader by its variant name only, so a new shader joins the study with one
 file pair and one :func:`register` call here.
 
@@ -20,7 +21,7 @@ from __future__ import annotations
 import importlib
 from dataclasses import dataclass, field
 
-from ._glsl import read_source, with_define
+from ._glsl import read_source, switches_of, with_define
 
 
 @dataclass(frozen=True)
@@ -30,9 +31,8 @@ class Variant:
     Attributes:
         name: registry key; also the file stem of an exported variant.
         shader: GLSL file stem under ``glsl/`` and port module under ``shaders_port``.
-        defines: preprocessor names inserted after ``#version`` (GL and export).
-        port_options: keyword arguments of the port's ``render`` / ``render_with_jacobian`` and
-            of ``GLRenderer`` that select the same variant there.
+        defines: preprocessor names inserted after ``#version`` (GL and export) and decoded by
+            the port's ``DEFINES`` table (``render(..., defines=...)``).
         schedule: names of the integer-valued step-schedule constants the variant reads (swept by
             the tradeoff study, never fitted by a gradient).
         description: one line for reports.
@@ -51,7 +51,6 @@ class Variant:
     name: str
     shader: str
     defines: tuple[str, ...] = ()
-    port_options: dict = field(default_factory=dict)
     schedule: tuple[str, ...] = ()
     description: str = ""
     replaces: dict = field(default_factory=dict)
@@ -91,13 +90,15 @@ class Variant:
         return importlib.import_module(f"shaders_port.{self.shader}")
 
     def render(self, inputs, constants=None, **kw):
-        """``port.render`` with this variant's options: a ``ShaderOutput``."""
-        return self.port().render(self.prepare_inputs(inputs), constants, **self.port_options, **kw)
+        """``port.render`` compiled with this variant's defines: a ``ShaderOutput``."""
+        return self.port().render(
+            self.prepare_inputs(inputs), constants, defines=self.defines, **kw
+        )
 
     def render_with_jacobian(self, inputs, constants, names, **kw):
-        """``port.render_with_jacobian`` with this variant's options: ``(ShaderOutput, J)``."""
+        """``port.render_with_jacobian`` with this variant's defines: ``(ShaderOutput, J)``."""
         return self.port().render_with_jacobian(
-            self.prepare_inputs(inputs), constants, names, **self.port_options, **kw
+            self.prepare_inputs(inputs), constants, names, defines=self.defines, **kw
         )
 
     def source(self, dialect: str = "core", text: str | None = None) -> str:
@@ -133,7 +134,13 @@ def register(variant: Variant) -> Variant:
         )
     if variant.name in VARIANTS:
         raise ValueError(f"shader variant {variant.name!r} is already registered")
-    read_source(variant.shader, "frag", "core")  # raises naming the missing file
+    src = read_source(variant.shader, "frag", "core")  # raises naming the missing file
+    unknown = [d for d in variant.defines if d not in switches_of(src)]
+    if unknown:
+        raise ValueError(
+            f"variant {variant.name!r}: {variant.shader}.frag tests no #define {unknown}; "
+            f"it tests: {', '.join(switches_of(src))}"
+        )
     VARIANTS[variant.name] = variant
     return variant
 
@@ -153,7 +160,7 @@ register(
         "water_refraction",
         "water_refraction",
         schedule=_RAYCAST,
-        description="seed 000 section 2: raycast refraction, cube-map sky reflection, Phong highlight",
+        description="the original shader (source 000, section 2): raycast refraction, cube-map sky reflection, Phong highlight",
     )
 )
 register(
@@ -161,9 +168,8 @@ register(
         "water_refraction_noreflection",
         "water_refraction",
         defines=("NOREFLECTION",),
-        port_options={"reflection": False},
         schedule=_RAYCAST,
-        description="seed 000 section 2 with NOREFLECTION: raycast refraction and highlight, no sky",
+        description="the original shader with NOREFLECTION: raycast refraction and highlight, no sky",
     )
 )
 register(
@@ -171,27 +177,24 @@ register(
         "water_reflection",
         "water_reflection",
         schedule=_RAYCAST + ("refl_steps_steep", "refl_steps_grazing", "refl_loop_cap"),
-        description="seed 000 section 3: refraction and reflection both raycast",
+        description="source 000, section 3: refraction and reflection both raycast",
     )
 )
 
-# ---- variants of the seed's refraction shader (one GLSL switch each, or a combination) -------
-# Each answers one limitation of the seed (see shaders_port/README.md, "Variants").
+# ---- variants of the original refraction shader (one GLSL switch each, or a combination) -------
+# Each answers one limitation of the original (see shaders_port/README.md, "Variants").
 _BEER = {"attenuation_distance": ("absorption_r", "absorption_g", "absorption_b")}
 _GGX = {"specular_exponent": ("specular_roughness",)}
 _NOSPEC = {"specular_strength": (), "specular_exponent": ()}
 _REFINE = _RAYCAST + ("refine_steps",)
 
 
-def _seed_variant(
-    name, defines, options, description, schedule=_RAYCAST, replaces=None, textures="float"
-):
+def _seed_variant(name, defines, description, schedule=_RAYCAST, replaces=None, textures="float"):
     register(
         Variant(
             name,
             "water_refraction",
             defines=defines,
-            port_options=options,
             schedule=schedule,
             description=description,
             replaces=replaces or {},
@@ -203,70 +206,60 @@ def _seed_variant(
 _seed_variant(
     "water_refraction_beer",
     ("BEER_ATTENUATION",),
-    {"attenuation": "beer"},
-    "seed + Beer-Lambert attenuation per colour channel towards waterColor",
+    "original + Beer-Lambert attenuation per colour channel towards waterColor",
     replaces=_BEER,
 )
 _seed_variant(
     "water_refraction_ggx",
     ("GGX_SPECULAR",),
-    {"specular": "ggx"},
-    "seed + GGX microfacet highlight (Smith masking) in place of Phong",
+    "original + GGX microfacet highlight (Smith masking) in place of Phong",
     replaces=_GGX,
 )
 _seed_variant(
     "water_refraction_beer_ggx",
     ("BEER_ATTENUATION", "GGX_SPECULAR"),
-    {"attenuation": "beer", "specular": "ggx"},
-    "seed + Beer-Lambert attenuation + GGX highlight",
+    "original + Beer-Lambert attenuation + GGX highlight",
     replaces={**_BEER, **_GGX},
 )
 _seed_variant(
     "water_refraction_beer_walls",
     ("BEER_ATTENUATION", "WALL_FACES"),
-    {"attenuation": "beer", "wall_faces": True},
-    "seed + Beer-Lambert attenuation + a crossing into a wall above the water shaded as "
+    "original + Beer-Lambert attenuation + a crossing into a wall above the water shaded as "
     "its submerged face (waterColor), not the wall's top",
     replaces=_BEER,
 )
 _seed_variant(
     "water_refraction_binary",
     ("BINARY_REFINE",),
-    {"refine": "binary"},
-    "seed + REFINE_STEPS binary-search steps after the linear search (relief mapping)",
+    "original + REFINE_STEPS binary-search steps after the linear search (relief mapping)",
     schedule=_REFINE,
 )
 _seed_variant(
     "water_refraction_secant",
     ("SECANT_REFINE",),
-    {"refine": "secant"},
-    "seed + REFINE_STEPS secant steps after the linear search (parallax occlusion mapping)",
+    "original + REFINE_STEPS secant steps after the linear search (parallax occlusion mapping)",
     schedule=_REFINE,
 )
 _seed_variant(
     "water_refraction_2layers",
     ("TWO_NORMAL_LAYERS",),
-    {"normal_layers": 2},
-    "seed with two normal-map layers instead of four",
+    "original with two normal-map layers instead of four",
 )
 _seed_variant(
     "water_refraction_1layer",
     ("ONE_NORMAL_LAYER",),
-    {"normal_layers": 1},
-    "seed with one normal-map layer instead of four",
+    "original with one normal-map layer instead of four",
 )
 _seed_variant(
     "water_refraction_nospecular",
     ("NO_SPECULAR",),
-    {"specular": "none"},
-    "seed without the specular highlight",
+    "original without the specular highlight",
     replaces=_NOSPEC,
 )
 _seed_variant(
     "water_refraction_game_textures",
     (),
-    {},
-    "seed with 8-bit sRGB colour, 8-bit normal map and Fresnel LUT, half-float depth and sky",
+    "original with 8-bit sRGB colour, 8-bit normal map and Fresnel LUT, half-float depth and sky",
     textures="game",
 )
 register(
@@ -274,9 +267,8 @@ register(
         "water_reflection_beer_ggx",
         "water_reflection",
         defines=("BEER_ATTENUATION", "GGX_SPECULAR"),
-        port_options={"attenuation": "beer", "specular": "ggx"},
         schedule=_RAYCAST + ("refl_steps_steep", "refl_steps_grazing", "refl_loop_cap"),
-        description="seed 000 section 3 + Beer-Lambert attenuation + GGX highlight",
+        description="source 000, section 3 + Beer-Lambert attenuation + GGX highlight",
         replaces={**_BEER, **_GGX},
     )
 )
@@ -285,14 +277,13 @@ register(
         "water_reflection_beer",
         "water_reflection",
         defines=("BEER_ATTENUATION",),
-        port_options={"attenuation": "beer"},
         schedule=_RAYCAST + ("refl_steps_steep", "refl_steps_grazing", "refl_loop_cap"),
-        description="seed 000 section 3 + Beer-Lambert attenuation",
+        description="source 000, section 3 + Beer-Lambert attenuation",
         replaces=_BEER,
     )
 )
 
-# seeds 001-004: the baseline game water shader (no raycast, so no step schedule)
+# sources 001-004: the baseline game water shader (no raycast, so no step schedule)
 _BASELINE_INPUTS = ("scene_color", "scene_depth", "reflection_color", "reflection_view_proj")
 _BASELINE_FIT = (
     "refraction_index",
@@ -306,7 +297,7 @@ register(
         "water_baseline",
         inputs=_BASELINE_INPUTS,
         fit_parameters=_BASELINE_FIT,
-        description="seeds 001-004: planar refraction + normal-map distortion with dispersion "
+        description="sources 001-004: planar refraction + normal-map distortion with dispersion "
         "of the screen-space scene, planar reflection distorted by the wave normal",
     )
 )
@@ -317,8 +308,7 @@ register(
         defines=("FLAT_WATER",),
         inputs=_BASELINE_INPUTS,
         fit_parameters=_BASELINE_FIT,
-        port_options={"defines": ("FLAT_WATER",)},
-        description="seeds 001 + 004 (FLAT_WATER): planar refraction and planar reflection "
+        description="sources 001 + 004 (FLAT_WATER): planar refraction and planar reflection "
         "of flat water, no waves",
     )
 )
@@ -329,8 +319,7 @@ register(
         defines=("NO_PLANAR_REFRACTION",),
         inputs=_BASELINE_INPUTS,
         fit_parameters=_BASELINE_FIT,
-        port_options={"defines": ("NO_PLANAR_REFRACTION",)},
-        description="seeds 002-004 (NO_PLANAR_REFRACTION): the classic distorted "
+        description="sources 002-004 (NO_PLANAR_REFRACTION): the classic distorted "
         "screen-space refraction and planar reflection, no 001",
     )
 )

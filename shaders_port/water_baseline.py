@@ -48,12 +48,14 @@ from ._frame import (
 )
 from ._inputs import Constants, ShaderInputs, normal_matrix
 from ._raster import prepare
+from ._switches import decode
 from ._texture import CLAMP, LINEAR, NEAREST, Texture2D, backend_types, clamp, gl_pow, mix
 from .water_refraction import eye_and_light, refract
 
 __all__ = ["render", "render_with_jacobian", "ShaderOutput", "READS", "DEFINES", "PASS_FETCHES"]
 
-DEFINES = ("FLAT_WATER", "NO_PLANAR_REFRACTION")
+# the one table from the GLSL file's #define names to the port's options (see _switches)
+DEFINES = {"FLAT_WATER": {"flat": True}, "NO_PLANAR_REFRACTION": {"planar": False}}
 # texture reads per pixel attributed to the shader for the mirrored camera's pass (one surface
 # texture read per pixel of the reflection render); the scene colour/depth pass is the frame
 # the game renders anyway and is not counted
@@ -317,11 +319,10 @@ def reads_with(defines=()) -> tuple[str, ...]:
 
 
 def _options(defines) -> tuple[bool, bool]:
-    defines = tuple(defines)
-    unknown = set(defines) - set(DEFINES)
-    if unknown:
-        raise ValueError(f"water_baseline: unknown define(s) {sorted(unknown)}; known: {DEFINES}")
-    return "FLAT_WATER" in defines, "NO_PLANAR_REFRACTION" not in defines
+    """(flat, planar) of the port compiled with ``defines`` (``FLAT_WATER``: flat; no
+    ``NO_PLANAR_REFRACTION``: planar)."""
+    opts = {"flat": False, "planar": True, **decode("water_baseline", DEFINES, defines)}
+    return opts["flat"], opts["planar"]
 
 
 def _frozen_shade(m, P, S, C, flat, planar):

@@ -34,6 +34,7 @@ from ._frame import (
     resolve_constants,
     tangents,
 )
+from .water_refraction import DEFINES as _REFRACTION_DEFINES
 from .water_refraction import (
     Options,
     cubemap_reflection,
@@ -47,6 +48,11 @@ from .water_refraction import (
     refraction_failure_diagnostics,
     specular_highlight,
 )
+
+# the one table from the GLSL file's #define names to the port's options (see _switches): those
+# of water_refraction's blocks [2]-[6] and [8]; NOREFLECTION (block [7] skipped) is the
+# water_refraction_noreflection variant of the other shader, not a switch of this port
+DEFINES = {k: v for k, v in _REFRACTION_DEFINES.items() if k != "NOREFLECTION"}
 
 __all__ = ["render", "render_with_jacobian", "ShaderOutput"]
 
@@ -203,10 +209,10 @@ def render(
     backend: str = "llvm",
     loop_ad: str = "replay",
     diagnose: bool = False,
-    **options,
+    defines: tuple = (),
 ) -> ShaderOutput:
-    """Render ``water_reflection`` (``**options``: the variant switches of blocks [2], [5], [6]
-    and [8], see ``water_refraction.Options``).
+    """Render ``water_reflection`` compiled with ``defines`` (``#define`` names of
+    :data:`DEFINES`: the switches of blocks [2], [5], [6] and [8]).
 
     Returns a :class:`ShaderOutput` as ``water_refraction.render`` does, with two more
     diagnostics: ``refl_iterations`` (reflection loop iterations) and ``refl_hit`` (1 where
@@ -218,7 +224,7 @@ def render(
     (:func:`reflection_exit`) and ``refl_dir_x/y/z`` (the unit reflection direction after the
     clamp of ``R.y``, before the step scaling); extra outputs only, the colour is bit-identical.
     """
-    opts = options_of(options)
+    opts = options_of(defines, "water_reflection", DEFINES)
     m = backend_types(backend)
     P = prepare(inputs, m)
     C = resolve_constants(m, constants if constants is not None else Constants(), loop_ad)
@@ -248,11 +254,11 @@ def render_with_jacobian(
     *,
     backend: str = "llvm",
     loop_ad: str = "replay",
-    **options,
+    defines: tuple = (),
 ):
     """``(ShaderOutput, J)`` with ``J`` float32 (H, W, 3, len(names)): forward-mode derivatives
     of the linear-RGB colour w.r.t. the named scalars (see ``water_refraction``)."""
-    opts = options_of(options)
+    opts = options_of(defines, "water_reflection", DEFINES)
 
     def shade_tangents(m, P, C, params, frozen):
         if frozen:

@@ -64,56 +64,55 @@ from ._frame import (
     tangents,
 )
 from ._inputs import Constants, ShaderInputs
+from ._switches import decode
 from ._raster import prepare
 from ._texture import backend_types, clamp, gl_pow, mix, texmat_xy
 
-__all__ = ["render", "render_with_jacobian", "ShaderOutput", "Options"]
+__all__ = ["render", "render_with_jacobian", "ShaderOutput", "Options", "DEFINES"]
 
 
 class Options(NamedTuple):
-    """The port's side of the GLSL variant switches (``shaders_port._variants``); the defaults
-    are the seed's code path.
+    """The port's side of the GLSL variant switches; the defaults are the original shader's code
+    path. Made from ``#define`` names by :data:`DEFINES` only (:func:`options_of`).
 
-    normal_layers: 4 (seed), 2 (``TWO_NORMAL_LAYERS``) or 1 (``ONE_NORMAL_LAYER``).
-    refine: None (seed), 'binary' (``BINARY_REFINE``) or 'secant' (``SECANT_REFINE``): that
+    reflection: True (original) or False (``NOREFLECTION``: block [7] skipped, the refraction
+        colour alone -- no sky reflection and so no highlight).
+    normal_layers: 4 (original), 2 (``TWO_NORMAL_LAYERS``) or 1 (``ONE_NORMAL_LAYER``).
+    refine: None (original), 'binary' (``BINARY_REFINE``) or 'secant' (``SECANT_REFINE``): that
         many (``REFINE_STEPS``) bracket refinements after the linear search.
-    attenuation: 'linear' (seed: clamped mix over ``ATTENUATION_DISTANCE``) or 'beer'
+    attenuation: 'linear' (original: clamped mix over ``ATTENUATION_DISTANCE``) or 'beer'
         (``BEER_ATTENUATION``: ``exp(-ABSORPTION_RGB * travelLength)`` towards ``waterColor``).
-    specular: 'phong' (seed), 'ggx' (``GGX_SPECULAR``) or 'none' (``NO_SPECULAR``).
-    wall_faces: False (seed) or True (``WALL_FACES``: a crossing into geometry that rises above
-        the water plane, e.g. a pool wall, hit that geometry's vertical face under the water,
-        which the top-down textures do not hold; it is shaded as ``waterColor``).
+    specular: 'phong' (original), 'ggx' (``GGX_SPECULAR``) or 'none' (``NO_SPECULAR``).
+    wall_faces: False (original) or True (``WALL_FACES``: a crossing into geometry that rises
+        above the water plane, e.g. a pool wall, hit that geometry's vertical face under the
+        water, which the top-down textures do not hold; it is shaded as ``waterColor``).
     """
 
+    reflection: bool = True
     normal_layers: int = 4
     refine: str | None = None
     attenuation: str = "linear"
     specular: str = "phong"
     wall_faces: bool = False
 
-    def checked(self) -> "Options":
-        for name, allowed in (
-            ("normal_layers", (1, 2, 4)),
-            ("refine", (None, "binary", "secant")),
-            ("attenuation", ("linear", "beer")),
-            ("specular", ("phong", "ggx", "none")),
-            ("wall_faces", (False, True)),
-        ):
-            if getattr(self, name) not in allowed:
-                raise ValueError(
-                    f"shader option {name}={getattr(self, name)!r}; allowed: {allowed}"
-                )
-        return self
+
+# the one table from the GLSL file's #define names to the port's options (see _switches)
+DEFINES = {
+    "NOREFLECTION": {"reflection": False},
+    "TWO_NORMAL_LAYERS": {"normal_layers": 2},
+    "ONE_NORMAL_LAYER": {"normal_layers": 1},
+    "BINARY_REFINE": {"refine": "binary"},
+    "SECANT_REFINE": {"refine": "secant"},
+    "BEER_ATTENUATION": {"attenuation": "beer"},
+    "GGX_SPECULAR": {"specular": "ggx"},
+    "NO_SPECULAR": {"specular": "none"},
+    "WALL_FACES": {"wall_faces": True},
+}
 
 
-def options_of(kw: dict) -> Options:
-    """``Options`` from a port's keyword options (``normal_layers=``, ``refine=``, ...)."""
-    unknown = set(kw) - set(Options._fields)
-    if unknown:
-        raise TypeError(
-            f"unknown shader option(s) {sorted(unknown)}; known: {list(Options._fields)}"
-        )
-    return Options(**kw).checked()
+def options_of(defines, shader: str = "water_refraction", table: dict = DEFINES) -> Options:
+    """``Options`` of ``shader`` compiled with the ``#define`` names ``defines`` (a tuple)."""
+    return Options(**decode(shader, table, defines))
 
 
 # ---- blocks shared with water_reflection -----------------------------------------------
@@ -418,14 +417,14 @@ def refraction_blocks(m, P, C, opts: Options = Options()) -> Refracted:
     )
 
 
-def _shade(m, P, C, reflection: bool, diagnose: bool = False, opts: Options = Options()):
+def _shade(m, P, C, diagnose: bool = False, opts: Options = Options()):
     f = refraction_blocks(m, P, C, opts)
     vEye, vLight, vBumpTex, vBumpTexMore = f.vEye, f.vLight, f.vBumpTex, f.vBumpTexMore
     R, current_position, vRefraction = f.R, f.current_position, f.vRefraction
     iterations, crossed, denominator = f.iterations, f.crossed, f.denominator
     fetches = opts.normal_layers + 1 + iterations + 1  # iterations include the refinement steps
     bad = nonfinite_any(vEye, vBumpTex, vBumpTexMore, R, current_position)
-    if reflection:
+    if opts.reflection:
         # ---- [7] Reflection ----
         R = dr.normalize(reflect(m, -vEye, vBumpTexMore))
         R.y = dr.maximum(R.y, 0.001)
@@ -450,10 +449,10 @@ def _shade(m, P, C, reflection: bool, diagnose: bool = False, opts: Options = Op
     return gl_FragColor, diagnostics
 
 
-def _frozen_shade(m, P, C, reflection, diagnose, opts):
+def _frozen_shade(m, P, C, diagnose, opts):
     return _frame.call_frozen(
-        ("water_refraction", reflection, diagnose, opts) + _frame.python_config(C),
-        lambda m, P, C: _shade(m, P, C, reflection, diagnose, opts),
+        ("water_refraction", diagnose, opts) + _frame.python_config(C),
+        lambda m, P, C: _shade(m, P, C, diagnose, opts),
         m,
         P,
         C,
@@ -464,14 +463,13 @@ def render(
     inputs: ShaderInputs,
     constants: Constants | None = None,
     *,
-    reflection: bool = True,
+    defines: tuple = (),
     backend: str = "llvm",
     loop_ad: str = "replay",
     diagnose: bool = False,
-    **options,
 ) -> ShaderOutput:
-    """Render ``water_refraction`` (``reflection=False``: the ``NOREFLECTION`` variant;
-    ``**options``: the other variant switches, see :class:`Options`).
+    """Render ``water_refraction`` compiled with ``defines`` (``#define`` names of
+    :data:`DEFINES`, e.g. ``("NOREFLECTION",)``).
 
     Returns a :class:`ShaderOutput`: ``color`` TensorXf (H, W, 3) linear RGB, 0 off the
     water; ``mask`` TensorXf (H, W); ``diagnostics`` TensorXf (H, W) each: ``iterations``
@@ -484,22 +482,22 @@ def render(
     ``diagnose=True`` adds the failure diagnostics of :func:`refraction_failure_diagnostics`
     (extra outputs only: the colour is bit-identical).
     """
-    opts = options_of(options)
+    opts = options_of(defines)
     m = backend_types(backend)
     P = prepare(inputs, m)
     C = resolve_constants(m, constants if constants is not None else Constants(), loop_ad)
     with evaluated_loops_if(C.differentiable and loop_ad == "evaluated"):
         if _frame.USE_FROZEN and not C.differentiable:
-            color, diag = _frozen_shade(m, P.shading_state(), C, reflection, diagnose, opts)
+            color, diag = _frozen_shade(m, P.shading_state(), C, diagnose, opts)
         else:
-            color, diag = _shade(m, P, C, reflection, diagnose, opts)
+            color, diag = _shade(m, P, C, diagnose, opts)
         return finish_output(m, P, color, diag, "water_refraction")
 
 
-def _frozen_tangents(m, P, C, params, reflection, opts):
+def _frozen_tangents(m, P, C, params, opts):
     return _frame.call_frozen(
-        ("water_refraction.tangents", reflection, opts) + _frame.python_config(C),
-        lambda m, P, C, params: tangents(m, *_shade(m, P, C, reflection, False, opts), params),
+        ("water_refraction.tangents", opts) + _frame.python_config(C),
+        lambda m, P, C, params: tangents(m, *_shade(m, P, C, False, opts), params),
         m,
         P,
         C,
@@ -512,10 +510,9 @@ def render_with_jacobian(
     constants: Constants | None,
     names: list[str],
     *,
-    reflection: bool = True,
+    defines: tuple = (),
     backend: str = "llvm",
     loop_ad: str = "replay",
-    **options,
 ):
     """Render and return ``(ShaderOutput, J)``, ``J`` float32 (H, W, 3, len(names)).
 
@@ -525,12 +522,12 @@ def render_with_jacobian(
     pixels. ``loop_ad``: 'replay' (default; symbolic loops, loop positions differentiated as
     ``start + i R``) or 'evaluated' (AD through the unrolled loop in evaluated mode).
     """
-    opts = options_of(options)
+    opts = options_of(defines)
 
     def shade_tangents(m, P, C, params, frozen):
         if frozen:
-            return _frozen_tangents(m, P, C, params, reflection, opts)
-        return tangents(m, *_shade(m, P, C, reflection, False, opts), params)
+            return _frozen_tangents(m, P, C, params, opts)
+        return tangents(m, *_shade(m, P, C, False, opts), params)
 
     return jacobian_passes(
         shade_tangents,

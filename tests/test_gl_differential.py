@@ -18,7 +18,7 @@ from test_water_refraction import CUSTOM, save_failure
 _gl = pytest.importorskip("shaders_port._gl")
 from shaders_port._compare import compare_port_gl  # noqa: E402
 
-CASES = [("water_refraction", True), ("water_refraction", False), ("water_reflection", True)]
+CASES = ["water_refraction", "water_refraction_noreflection", "water_reflection"]
 
 
 @pytest.fixture(scope="module")
@@ -53,11 +53,9 @@ def _check(res: dict, tag: str) -> None:
     assert res["n_outliers"] <= 1e-3 * res["n_water"], (res["n_outliers"], res["explained"])
 
 
-@pytest.mark.parametrize(
-    "shader,reflection", CASES, ids=["refraction", "noreflection", "reflection"]
-)
+@pytest.mark.parametrize("shader", CASES, ids=["refraction", "noreflection", "reflection"])
 @pytest.mark.parametrize("which", ["default", "custom"])
-def test_port_matches_gl(inputs, shader, reflection, which):
+def test_port_matches_gl(inputs, shader, which):
     constants = Constants() if which == "default" else CUSTOM
-    res = compare_or_skip(inputs, constants, shader, reflection=reflection)
-    _check(res, f"gl_{shader}_{reflection}_{which}")
+    res = compare_or_skip(inputs, constants, shader)
+    _check(res, f"gl_{shader}_{which}")

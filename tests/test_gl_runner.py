@@ -13,7 +13,11 @@ from shaders_port._glsl import read_source, write_constants
 from synthetic import synthetic_inputs
 
 FAILURES = Path(__file__).parent / "_failures"
-VARIANTS = [("water_refraction", True), ("water_refraction", False), ("water_reflection", True)]
+VARIANTS = [
+    ("water_refraction", ()),
+    ("water_refraction", ("NOREFLECTION",)),
+    ("water_reflection", ()),
+]
 
 
 @pytest.fixture(scope="module")
@@ -64,9 +68,9 @@ def projected_quad_mask(inp):
     return np.all(signed > 0, 0), np.any(np.abs(signed) < 1e-3, 0)
 
 
-@pytest.mark.parametrize("name,reflection", VARIANTS)
-def test_finite_inside_zero_outside(inputs, name, reflection):
-    rgba, mask = run_glsl(name, inputs, Constants(), reflection=reflection)
+@pytest.mark.parametrize("name,defines", VARIANTS)
+def test_finite_inside_zero_outside(inputs, name, defines):
+    rgba, mask = run_glsl(name, inputs, Constants(), defines=defines)
     assert rgba.shape == (48, 64, 4) and rgba.dtype == np.float32 and mask.dtype == bool
     assert mask.sum() > 0.2 * mask.size
     assert np.all(np.isfinite(rgba[mask]))
@@ -93,7 +97,7 @@ def _attenuation(renderer, base: Constants) -> np.ndarray:
 
 
 def test_water_color_and_attenuation_distance(inputs):
-    with GLRenderer("water_refraction", inputs, reflection=False) as r:
+    with GLRenderer("water_refraction", inputs, defines=("NOREFLECTION",)) as r:
         mask = r.render(Constants())[1]
         a = _attenuation(r, Constants())
         # same weight in every channel, in [0, 1], positive on every water pixel
@@ -117,7 +121,7 @@ def test_reflect_color_and_specular_act_on_reflection_only(inputs):
     with GLRenderer("water_refraction", inputs) as r:
         base, mask = r.render(Constants())
         dark, _ = r.render(Constants(reflect_color=(0.0, 0.0, 0.0, 0.0), specular_strength=0.0))
-        no_refl, _ = run_glsl("water_refraction", inputs, Constants(), reflection=False)
+        no_refl, _ = run_glsl("water_refraction", inputs, Constants(), defines=("NOREFLECTION",))
     # without reflection colour and highlight, out = vRefraction * T(NdotV), T from the LUT
     ratio = dark[mask][:, :3] / no_refl[mask][:, :3]
     assert np.allclose(ratio, ratio[:, :1], atol=1e-5)  # one factor for all channels
@@ -164,11 +168,11 @@ def test_exported_source_renders_like_constants(inputs, name):
     assert np.abs(got - default)[mask].max() > 1e-2  # the export really changed the image
 
 
-@pytest.mark.parametrize("name,reflection", VARIANTS)
-def test_compat_source_runs_like_core(inputs, name, reflection):
-    core, _ = run_glsl(name, inputs, Constants(), reflection=reflection)
-    compat, _ = run_glsl(name, inputs, Constants(), reflection=reflection, dialect="compat")
-    assert_images_close(f"compat_{name}_{reflection}", compat, core, atol=0.0)
+@pytest.mark.parametrize("name,defines", VARIANTS)
+def test_compat_source_runs_like_core(inputs, name, defines):
+    core, _ = run_glsl(name, inputs, Constants(), defines=defines)
+    compat, _ = run_glsl(name, inputs, Constants(), defines=defines, dialect="compat")
+    assert_images_close(f"compat_{name}_{'_'.join(defines)}", compat, core, atol=0.0)
 
 
 def test_default_source_without_constants_equals_defaults(inputs):
@@ -179,8 +183,8 @@ def test_default_source_without_constants_equals_defaults(inputs):
 
 
 def test_bad_requests_refused(inputs):
-    with pytest.raises(ValueError, match="water_refraction only"):
-        GLRenderer("water_reflection", inputs, reflection=False)
+    with pytest.raises(ValueError, match="not a preprocessor name"):
+        GLRenderer("water_reflection", inputs, defines=("NO REFLECTION",))
     with pytest.raises(ValueError, match="unknown water shader"):
         GLRenderer("water", inputs)
     with GLRenderer("water_refraction", inputs) as r:

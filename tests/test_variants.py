@@ -10,7 +10,7 @@ import pytest
 
 import test_water_refraction as twr
 from synthetic import synthetic_inputs
-from shaders_port import Constants
+from shaders_port import Constants, water_refraction
 from shaders_port._variants import VARIANTS, get_variant
 
 SEED = "water_refraction"
@@ -48,7 +48,8 @@ def test_registered_variants():
     } <= set(NEW)
     for n in NEW:
         v = get_variant(n)
-        assert (v.defines and v.port_options or v.textures == "game") and v.description
+        assert (v.defines or v.textures == "game") and v.description
+        water_refraction.options_of(v.defines)  # the port implements every name
         assert v.source().split("\n")[1].startswith("#define ") or not v.defines
 
 
@@ -68,13 +69,14 @@ def test_diagnostics_count_what_each_variant_does(inputs, seed_out):
     for name in NEW + [SEED]:
         v = get_variant(name)
         out = v.render(inputs, CUSTOM).numpy()
-        layers = v.port_options.get("normal_layers", 4)
+        opts = water_refraction.options_of(v.defines)
+        layers = opts.normal_layers
         # fetches: normal-map layers, the start depth, one per iteration (linear search and
         # refinement), the refraction colour, cube map and Fresnel LUT
         np.testing.assert_array_equal(
             out["fetches"][water], layers + 1 + out["iterations"][water] + 1 + 2
         )
-        if v.port_options.get("refine"):
+        if opts.refine:
             np.testing.assert_array_equal(
                 out["iterations"][water], seed_out["iterations"][water] + CUSTOM.refine_steps
             )
@@ -115,8 +117,10 @@ def test_beer_lambert_is_the_exponential_law():
         absorption_b=0.1,
         attenuation_distance=1e4,
     )
-    beer = get_variant("water_refraction_beer").render(inp, c, reflection=False).numpy()
-    clear = get_variant(SEED).render(inp, c, reflection=False).numpy()  # mix by d / 1e4 only
+    beer = water_refraction.render(inp, c, defines=("BEER_ATTENUATION", "NOREFLECTION")).numpy()
+    clear = water_refraction.render(
+        inp, c, defines=("NOREFLECTION",)
+    ).numpy()  # mix by d / 1e4 only
     water = beer["mask"] > 0
     ratio = beer["color"][water] / np.maximum(clear["color"][water], 1e-6)
     # -log(ratio) / sigma is the same travel length in all three channels
@@ -128,13 +132,35 @@ def test_beer_lambert_is_the_exponential_law():
     assert d[ok].mean() > 0.5  # a real path length through the water (world units)
 
 
-def test_unknown_option_refused(inputs):
-    from shaders_port import water_refraction
+def test_each_port_decodes_exactly_the_names_its_glsl_tests():
+    """One table per port (``DEFINES``) holds every switch of its GLSL file and nothing else
+    (water_reflection leaves out NOREFLECTION, the other shader's variant), and every registered
+    variant's names decode in its port; the registry refuses a name the file does not test."""
+    from shaders_port import water_baseline, water_reflection
+    from shaders_port._glsl import read_source, switches_of
+    from shaders_port._switches import decode
+    from shaders_port._variants import Variant, register
 
-    with pytest.raises(TypeError, match="unknown shader option"):
-        water_refraction.render(inputs, Constants(), refinement="binary")
-    with pytest.raises(ValueError, match="allowed"):
-        water_refraction.render(inputs, Constants(), normal_layers=3)
+    ports = {"water_refraction": water_refraction, "water_reflection": water_reflection}
+    ports["water_baseline"] = water_baseline
+    for name, port in ports.items():
+        tested = set(switches_of(read_source(name, "frag", "core")))
+        own = set(port.DEFINES) | ({"NOREFLECTION"} if name == "water_reflection" else set())
+        assert own == tested, name
+    for v in VARIANTS.values():
+        decode(v.shader, ports[v.shader].DEFINES, v.defines)
+    with pytest.raises(ValueError, match="tests no #define"):
+        register(Variant("water_refraction_typo", "water_refraction", defines=("BEER_ATENUATION",)))
+    assert "water_refraction_typo" not in VARIANTS
+
+
+def test_unknown_option_refused(inputs):
+    with pytest.raises(ValueError, match="does not implement #define THREE_NORMAL_LAYERS"):
+        water_refraction.render(inputs, Constants(), defines=("THREE_NORMAL_LAYERS",))
+    with pytest.raises(ValueError, match="GGX_SPECULAR and #define NO_SPECULAR both choose"):
+        water_refraction.render(inputs, Constants(), defines=("GGX_SPECULAR", "NO_SPECULAR"))
+    with pytest.raises(TypeError, match="tuple of names"):
+        water_refraction.render(inputs, Constants(), defines="NOREFLECTION")
 
 
 # ---- forward-mode derivatives of the variants' constants vs central differences ------------
@@ -272,12 +298,15 @@ def test_reflection_variant_registered_matches_gl(inputs):
     ids=["2layers-secant-nospec", "1layer-binary"],
 )
 def test_reflection_shader_switches_match_gl(inputs, defines, options):
-    """The other switches in water_reflection.frag against the reflection port's options (the
-    registry ships only the Beer + GGX reflection variant)."""
+    """The other switches in water_reflection.frag against the reflection port compiled with the
+    same names (the registry ships only its Beer and Beer + GGX variants); the port's table
+    decodes them to the expected options."""
     from shaders_port import water_reflection
     from shaders_port._gl import GLRenderer
 
-    out = water_reflection.render(inputs, CUSTOM, **options).numpy()
+    decoded = water_reflection.options_of(defines, "water_reflection", water_reflection.DEFINES)
+    assert {k: getattr(decoded, k) for k in options} == options
+    out = water_reflection.render(inputs, CUSTOM, defines=defines).numpy()
     with GLRenderer("water_reflection", inputs, defines=defines) as r:
         rgba, gl_mask = r.render(CUSTOM)
     both = (out["mask"] > 0) & gl_mask
@@ -315,11 +344,15 @@ def _wall_lanes(out):
     return water & (np.abs(out["color"] - np.float32(CUSTOM.water_color[:3])).max(-1) <= 1e-7)
 
 
+def _refraction_only(name, inputs, constants) -> dict:
+    """The water_refraction variant ``name`` compiled with NOREFLECTION too, as numpy arrays."""
+    defines = get_variant(name).defines + ("NOREFLECTION",)
+    return water_refraction.render(inputs, constants, defines=defines).numpy()
+
+
 def test_wall_faces_shade_the_submerged_face_as_water(walled):
-    beer = get_variant("water_refraction_beer").render(walled, CUSTOM, reflection=False).numpy()
-    walls = (
-        get_variant("water_refraction_beer_walls").render(walled, CUSTOM, reflection=False).numpy()
-    )
+    beer = _refraction_only("water_refraction_beer", walled, CUSTOM)
+    walls = _refraction_only("water_refraction_beer_walls", walled, CUSTOM)
     water = beer["mask"] > 0
     at_wall = _wall_lanes(walls)
     changed = water & (np.abs(walls["color"] - beer["color"]).max(-1) > 0.0)
@@ -356,15 +389,15 @@ def test_wall_faces_in_the_reflection_shader_match_gl(walled):
     from shaders_port import water_reflection
     from shaders_port._gl import GLRenderer
 
-    opts = {"attenuation": "beer", "wall_faces": True}
-    out = water_reflection.render(walled, CUSTOM, **opts).numpy()
-    with GLRenderer("water_reflection", walled, defines=("BEER_ATTENUATION", "WALL_FACES")) as r:
+    defines = ("BEER_ATTENUATION", "WALL_FACES")
+    out = water_reflection.render(walled, CUSTOM, defines=defines).numpy()
+    with GLRenderer("water_reflection", walled, defines=defines) as r:
         rgba, gl_mask = r.render(CUSTOM)
     both = (out["mask"] > 0) & gl_mask
     diff = np.abs(out["color"] - rgba[..., :3]).max(-1)[both]
     assert both.sum() > 500
     assert diff.mean() <= 1e-3 and np.percentile(diff, 99.9) <= 1e-2, (diff.mean(), diff.max())
-    beer = water_reflection.render(walled, CUSTOM, attenuation="beer").numpy()
+    beer = water_reflection.render(walled, CUSTOM, defines=("BEER_ATTENUATION",)).numpy()
     assert (np.abs(out["color"] - beer["color"]).max(-1)[both] > 1e-3).sum() > 200
 
 
@@ -387,7 +420,7 @@ def test_wall_faces_jacobian_matches_central_differences(monkeypatch, param):
 
 def _wall_lanes_at(out, inp):
     """Lanes where the switch acts, from the refraction-only render at FD_AT."""
-    o = get_variant("water_refraction_beer_walls").render(inp, FD_AT, reflection=False).numpy()
+    o = _refraction_only("water_refraction_beer_walls", inp, FD_AT)
     return (o["mask"] > 0) & (
         np.abs(o["color"] - np.float32(FD_AT.water_color[:3])).max(-1) <= 1e-7
     )

@@ -245,7 +245,7 @@ def test_missing_screen_buffers_are_a_clear_error():
 
 
 def test_unknown_define_is_rejected(small):
-    with pytest.raises(ValueError, match="unknown define"):
+    with pytest.raises(ValueError, match="does not implement #define NOREFLECTION"):
         water_baseline.render(small, defines=("NOREFLECTION",))
 
 

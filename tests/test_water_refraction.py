@@ -22,6 +22,12 @@ from shaders_port._numpy_ref import render_reference
 
 from regenerate import CUSTOM, SCENES, read_exr, render_scene, write_exr
 
+
+def _defines(reflection: bool) -> tuple:
+    """The ``#define`` names of water_refraction with (True) or without its sky reflection."""
+    return () if reflection else ("NOREFLECTION",)
+
+
 FAILURES = Path(__file__).parent / "_failures"
 PRIMAL_ATOL = 5e-5  # port vs NumPy reference, linear RGB (both float32)
 FD_RTOL, FD_NOISE = 0.1, 4e-6  # finite differences: relative truncation, float32 colour noise
@@ -118,7 +124,7 @@ def check_jacobian_column(
 def test_port_matches_numpy_reference(reflection, which):
     inputs = _small()
     constants = Constants() if which == "default" else CUSTOM
-    out = water_refraction.render(inputs, constants, reflection=reflection).numpy()
+    out = water_refraction.render(inputs, constants, defines=_defines(reflection)).numpy()
     ref, ref_diag = render_reference("water_refraction", inputs, constants, reflection=reflection)
     assert (out["mask"] > 0).sum() > 100
     assert_matches_reference(
@@ -159,10 +165,10 @@ def test_replay_jacobian_equals_evaluated_loop_ad(jacobian, reflection):
     # the unrolled loop in evaluated mode (the mode checked against finite differences)
     inputs, base, J = jacobian
     out_e, J_e = water_refraction.render_with_jacobian(
-        inputs, FD_CONSTANTS, _FD_NAMES, reflection=reflection, loop_ad="evaluated"
+        inputs, FD_CONSTANTS, _FD_NAMES, defines=_defines(reflection), loop_ad="evaluated"
     )
     out_r, J_r = water_refraction.render_with_jacobian(
-        inputs, FD_CONSTANTS, _FD_NAMES, reflection=reflection
+        inputs, FD_CONSTANTS, _FD_NAMES, defines=_defines(reflection)
     )
     assert np.array_equal(out_e.numpy()["color"], out_r.numpy()["color"])
     scale = np.abs(J_e).max(axis=(0, 1, 2)) + 1e-6
@@ -240,7 +246,7 @@ def test_diagnostics_flat_floor_straight_down():
     # R = (0, -1, 0): numsteps = STEPS_STEEP = 3, steps of 1/3; the floor at -0.9 is crossed at
     # step 3 (y = -1); t = (cpoy - olddepth) / (cpoy - cpy) = (-2/3 + 0.9) / (1/3) = 0.7 puts the
     # interpolated point on the floor, travelLength = 0.9.
-    out = water_refraction.render(flat_pool(0.9), Constants(), reflection=False).numpy()
+    out = water_refraction.render(flat_pool(0.9), Constants(), defines=("NOREFLECTION",)).numpy()
     c = out["mask"] > 0
     assert c.all()
     assert np.all(out["iterations"][c] == 3)
@@ -255,7 +261,9 @@ def test_diagnostics_flat_floor_straight_down():
 
 
 def test_diagnostics_loop_cap_reached():
-    out = water_refraction.render(flat_pool(0.9), Constants(loop_cap=2), reflection=False).numpy()
+    out = water_refraction.render(
+        flat_pool(0.9), Constants(loop_cap=2), defines=("NOREFLECTION",)
+    ).numpy()
     c = out["mask"] > 0
     assert np.all(out["iterations"][c] == 2) and np.all(out["crossed"][c] == 0)
     assert np.all(np.isfinite(out["color"]))

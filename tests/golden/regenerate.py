@@ -63,7 +63,9 @@ def render_scene(scene: str) -> np.ndarray:
     shader, reflection, constants, _, _ = SCENES[scene]
     inputs = synthetic_inputs(WIDTH, HEIGHT)
     if shader == "water_refraction":
-        out = water_refraction.render(inputs, constants, reflection=reflection)
+        out = water_refraction.render(
+            inputs, constants, defines=() if reflection else ("NOREFLECTION",)
+        )
     else:
         out = water_reflection.render(inputs, constants)
     return np.asarray(out.color.numpy(), dtype=np.float32)
