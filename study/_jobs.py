@@ -2,8 +2,6 @@
 
 from __future__ import annotations
 
-import math
-import sys
 import time
 from pathlib import Path
 
@@ -13,10 +11,8 @@ from ._backend import init_backend
 from .scene.experiment import load_experiment
 from ._io import write_exr, write_json, write_png
 from .report.gl_check import gl_check
-
-
-def _log(msg: str) -> None:
-    print(msg, file=sys.stderr, flush=True)
+from ._progress import log as _log
+from .fit.result import jsonable
 
 
 def prepare(experiment, out, overrides=None, variant=None):
@@ -210,17 +206,13 @@ def run_export(constants_json, out) -> list:
 
 def run_calibrate(experiment, out, overrides=None, variant=None, solver=None, cache=None) -> dict:
     """``study calibrate``: reference (cached), fit, export, GL check, figures, report.md and
-    constants.json in ``out``."""
+    constants.json (a ``CalibrationResult``) in ``out``. Returns the JSON object written."""
     from ._backend import drjit_backend
     from .fit.calibrate import calibrate_model, scene_frozen, timed
     from .fit.decorrelated import half_models, texture_half_models
-    from .report.export import export_shaders
-    from .report.calibration import comparison_figure, diagnostics_figure, loss_figure
-    from ._metrics import errors, information_criteria
     from .fit.model import ShaderModel, constants_from_experiment
-    from .report.calibration import write_report
-
     from .fit.solvers import SOLVERS
+    from .report.export import export_shaders
 
     if solver is not None and solver not in SOLVERS:
         raise ValueError(f"unknown solver {solver!r}; choose one of {', '.join(SOLVERS)}")
@@ -255,81 +247,119 @@ def run_calibrate(experiment, out, overrides=None, variant=None, solver=None, ca
             basin_check=check,
         )
     with timed(timings, "evaluate_s"):
-        w, h = exp["resolution"]
-        full = ShaderModel.from_experiment(
-            exp, inputs, ref.image, backend=backend, resolution=(w, h)
-        )
-        img0, _ = full.render(start)
-        img1, diag1 = full.render(cal.fitted)
-        e0, e1 = errors(ref.image, img0, full.mask), errors(ref.image, img1, full.mask)
-        fitted_names = [n for n, p in cal.parameters.items() if p["status"] in ("fitted", "bound")]
-        parsimony = {
-            **information_criteria(model.residual(cal.fitted), len(fitted_names)),
-            "fitted": fitted_names,
-            "defines": list(model.variant.defines),
-        }
+        ev = _evaluate_calibration(exp, inputs, ref, model, cal, backend)
     with timed(timings, "export_s"):
         _log(f"calibrate: exporting and compiling {model.shader} (and its vertex shader)")
         export_shaders(cal.fitted, out / "shaders", [model.shader])
     with timed(timings, "gl_check_s"):
         _log("calibrate: running the exported shader on OpenGL (llvmpipe)")
         gl = gl_check(model.shader, inputs, cal.fitted, out / "shaders")
-    t_figures = time.perf_counter()
+    with timed(timings, "figures_s"):
+        figs = _calibration_figures(out, exp, model, ref, ev, cal, solver)
+    timings["total_s"] = time.perf_counter() - t_start  # up to the report (written last)
+    result = _calibration_result(exp, variant, model, ref, cal, ev, solver, timings, gl)
+    return _write_result(out, result, figs, ev)
+
+
+def _evaluate_calibration(exp, inputs, ref, model, cal, backend) -> dict:
+    """The start and fitted constants at the experiment's full resolution: the model ``full``,
+    images ``img0`` / ``img1`` ((H, W, 3) linear RGB), their errors ``e0`` / ``e1`` (rmse, flip
+    on the water pixels), the fitted render's diagnostics ``diag1`` and the ``parsimony`` of the
+    fit at the fit resolution (information criteria)."""
+    from ._metrics import errors, information_criteria
+    from .fit.model import ShaderModel
+
+    w, h = exp["resolution"]
+    full = ShaderModel.from_experiment(exp, inputs, ref.image, backend=backend, resolution=(w, h))
+    img0, _ = full.render(cal.start)
+    img1, diag1 = full.render(cal.fitted)
+    fitted_names = [n for n, p in cal.parameters.items() if p["status"] in ("fitted", "bound")]
+    parsimony = {
+        **information_criteria(model.residual(cal.fitted), len(fitted_names)),
+        "fitted": fitted_names,
+        "defines": list(model.variant.defines),
+    }
+    return {
+        "full": full,
+        "img0": img0,
+        "img1": img1,
+        "diag1": diag1,
+        "e0": errors(ref.image, img0, full.mask),
+        "e1": errors(ref.image, img1, full.mask),
+        "parsimony": parsimony,
+    }
+
+
+def _calibration_figures(out, exp, model, ref, ev, cal, solver) -> dict:
+    """comparison.png, diagnostics.png, loss.png and the three EXRs (reference, default,
+    fitted) in ``out``; returns figure name -> file name for the report."""
+    from .report.calibration import comparison_figure, diagnostics_figure, loss_figure
+
     figs = {"comparison": "comparison.png", "diagnostics": "diagnostics.png", "loss": "loss.png"}
+    mask = ev["full"].mask
     comparison_figure(
         out / figs["comparison"],
-        {"reference": ref.image, "default": img0, "fitted": img1},
-        {"default": e0, "fitted": e1},
-        full.mask,
+        {"reference": ref.image, "default": ev["img0"], "fitted": ev["img1"]},
+        {"default": ev["e0"], "fitted": ev["e1"]},
+        mask,
         title=f"{exp['name']}: {model.shader}",
     )
     diagnostics_figure(
-        out / figs["diagnostics"], diag1.maps, full.mask, title="diagnostics, fitted constants"
+        out / figs["diagnostics"], ev["diag1"].maps, mask, title="diagnostics, fitted constants"
     )
     loss_figure(out / figs["loss"], {solver: cal.losses}, title="loss at each evaluation")
-    write_exr(out / "fitted.exr", img1, {"constants": cal.fitted.to_dict()})
-    write_exr(out / "default.exr", img0, {"constants": start.to_dict()})
+    write_exr(out / "fitted.exr", ev["img1"], {"constants": cal.fitted.to_dict()})
+    write_exr(out / "default.exr", ev["img0"], {"constants": cal.start.to_dict()})
     write_exr(out / "reference.exr", ref.image, ref.provenance)
-    timings["figures_s"] = time.perf_counter() - t_figures
-    timings["total_s"] = time.perf_counter() - t_start  # up to the report (written last)
-    fs = cal.fit_summary
-    summary = {
-        "experiment": exp["name"],
-        "shader": model.shader,
-        "variant": variant,
-        "fit_resolution": exp["fit.resolution"],
-        "resolution": exp["resolution"],
-        "parameters": cal.parameters,
-        "constants": cal.fitted.to_dict(),
-        "error": {
+    return figs
+
+
+def _calibration_result(exp, variant, model, ref, cal, ev, solver, timings, gl):
+    """The ``CalibrationResult`` of one scene's calibration."""
+    from .fit.result import CalibrationResult
+
+    e0, e1 = ev["e0"], ev["e1"]
+    return CalibrationResult(
+        shader=model.shader,
+        backend=variant,
+        parameters=cal.parameters,
+        constants=cal.fitted.to_dict(),
+        error={
             "rmse": {"default": e0["rmse"], "fitted": e1["rmse"]},
             "flip": {"default": e0["flip"], "fitted": e1["flip"]},
         },
-        "solver": solver,
-        "iterations": fs.get("iterations", 0),
-        "converged": fs.get("converged", False),
-        "message": fs.get("message", ""),
-        "fit": fs,
-        "identifiability": cal.identifiability,
-        "step_sweep": cal.sweep,
-        "timings": timings,
-        "reference": {
+        solver=solver,
+        fit=cal.fit_summary,
+        identifiability=cal.identifiability,
+        timings=timings,
+        gl_check=gl,
+        experiment=exp["name"],
+        fit_resolution=exp["fit.resolution"],
+        resolution=exp["resolution"],
+        step_sweep=cal.sweep,
+        reference={
             "spp": ref.spp,
             "noise": ref.noise,
             "path": str(ref.path),
             "key": ref.provenance["key"],
         },
-        "diagnostics": diag1.summary(full.mask),
-        "gl_check": gl,
-        "sun": _sun(exp),
-        # constant count and information criteria at the fit resolution (study._metrics)
-        "parsimony": parsimony,
-    }
-    write_json(out / "constants.json", _jsonable(summary))
-    write_report(out, _jsonable(summary), figs)
+        diagnostics=ev["diag1"].summary(ev["full"].mask),
+        sun=_sun(exp),
+        parsimony=ev["parsimony"],
+    )
+
+
+def _write_result(out, result, figs, ev) -> dict:
+    """constants.json and report.md of ``result`` in ``out``; returns the JSON object."""
+    from .report.calibration import write_report
+
+    summary = result.to_json()
+    write_json(out / "constants.json", summary)
+    write_report(out, summary, figs)
+    e0, e1 = ev["e0"], ev["e1"]
     _log(
-        f"calibrate: RMSE {e0['rmse']:.4f} -> {e1['rmse']:.4f}, FLIP {e0['flip']:.4f} -> {e1['flip']:.4f}; "
-        f"wrote {out}"
+        f"calibrate: RMSE {e0['rmse']:.4f} -> {e1['rmse']:.4f}, FLIP {e0['flip']:.4f} -> "
+        f"{e1['flip']:.4f}; wrote {out}"
     )
     return summary
 
@@ -339,22 +369,6 @@ def _sun(exp) -> dict:
     from .scene.user_scene import sun_summary
 
     return sun_summary(exp)
-
-
-def _jsonable(x):
-    if isinstance(x, dict):
-        return {str(k): _jsonable(v) for k, v in x.items()}
-    if isinstance(x, (list, tuple)):
-        return [_jsonable(v) for v in x]
-    if isinstance(x, np.bool_):
-        return bool(x)
-    if isinstance(x, (np.floating, float)):
-        return float(x) if math.isfinite(float(x)) else None
-    if isinstance(x, np.integer):
-        return int(x)
-    if isinstance(x, np.ndarray):
-        return _jsonable(x.tolist())
-    return x
 
 
 # ---- several scenes: the joint fit and leave-one-scene-out -----------------------------------
@@ -434,6 +448,7 @@ def _joint_fit(scenes, variant, out: Path, solver):
     from .fit.joint import JointModel, joint_calibrate
     from .fit.model import constants_from_experiment
     from .report.export import export_shaders
+    from .fit.result import CalibrationResult
     from .report.generalise import write_joint_report
 
     out.mkdir(parents=True, exist_ok=True)
@@ -458,29 +473,25 @@ def _joint_fit(scenes, variant, out: Path, solver):
     }
     export_shaders(cal.fitted, out / "shaders", [scenes[0]["model"].shader])
     gl = gl_check(scenes[0]["model"].shader, scenes[0]["inputs"], cal.fitted, out / "shaders")
-    fs = cal.fit_summary
     weights = JointModel([s["model"] for s in scenes]).weights
-    summary = {
-        "experiments": [s["path"] for s in scenes],
-        "scenes": [s["name"] for s in scenes],
-        "shader": scenes[0]["model"].shader,
-        "variant": variant,
-        "joint": True,
-        "weights": {s["name"]: float(w) for s, w in zip(scenes, weights)},
-        "parameters": cal.parameters,
-        "constants": cal.fitted.to_dict(),
-        "error": per_scene,
-        "solver": solver,
-        "iterations": fs.get("iterations", 0),
-        "converged": fs.get("converged", False),
-        "message": fs.get("message", ""),
-        "fit": fs,
-        "identifiability": cal.identifiability,
-        "timings": {"fit_s": fit_s},
-        "gl_check": gl,
-    }
-    write_json(out / "constants.json", _jsonable(summary))
-    write_joint_report(out, _jsonable(summary))
+    result = CalibrationResult(
+        shader=scenes[0]["model"].shader,
+        backend=variant,
+        parameters=cal.parameters,
+        constants=cal.fitted.to_dict(),
+        error=per_scene,
+        solver=solver,
+        fit=cal.fit_summary,
+        identifiability=cal.identifiability,
+        timings={"fit_s": fit_s},
+        gl_check=gl,
+        experiments=[s["path"] for s in scenes],
+        scenes=[s["name"] for s in scenes],
+        weights={s["name"]: float(w) for s, w in zip(scenes, weights)},
+    )
+    summary = result.to_json()
+    write_json(out / "constants.json", summary)
+    write_joint_report(out, summary)
     _log(f"calibrate (joint, {len(scenes)} scenes): wrote {out}")
     return summary, cal, evaluate
 
@@ -530,8 +541,9 @@ def run_generalise(experiments, out, overrides=None, variant=None, solver=None, 
         "leave_one_out": table,
         "universality": uni,
     }
-    write_json(out / "generalise.json", _jsonable(summary))
-    write_generalise_report(out, _jsonable(summary))
+    summary = jsonable(summary)
+    write_json(out / "generalise.json", summary)
+    write_generalise_report(out, summary)
     _log(f"generalise: wrote {out / 'generalise.md'}")
     return summary
 

@@ -13,6 +13,11 @@ import sys
 import time
 
 
+def log(msg: str) -> None:
+    """One progress line on stderr, flushed (the study's log: stdout stays free for results)."""
+    print(msg, file=sys.stderr, flush=True)
+
+
 class Stages:
     """Named, timed stages with progress lines on stderr (see module docstring)."""
 
@@ -28,7 +33,7 @@ class Stages:
         if self._log is not None:
             self._log(msg)
         else:
-            print(msg, file=sys.stderr, flush=True)
+            log(msg)
 
     @contextlib.contextmanager
     def stage(self, key: str, label: str):

@@ -169,6 +169,11 @@ def test_calibrate_writes_constants_json(runs):
     root, rc = runs
     assert rc["calibrate"] == 0
     c = json.loads((root / "calibrate" / "constants.json").read_text())
+    from study.fit.result import CalibrationResult
+
+    result = CalibrationResult.from_json(c)  # the typed record reads back what it wrote
+    assert result.to_json() == c and not result.joint and result.extra == {}
+    assert result.backend == "llvm_ad_rgb" and result.shader == "water_refraction"
     params = c["parameters"]
     from study import load_experiment
     from study.fit.model import expand_parameters
@@ -252,3 +257,10 @@ def test_export_of_calibrate_output_reproduces_its_shaders(runs):
             assert (root / "export" / "shaders" / dialect / f).read_bytes() == (
                 root / "calibrate" / "shaders" / dialect / f
             ).read_bytes(), (dialect, f)
+
+
+def test_calibration_result_refuses_what_is_not_one():
+    from study.fit.result import CalibrationResult
+
+    with pytest.raises(ValueError, match="not a calibration result: missing.*'shader'"):
+        CalibrationResult.from_json({"constants": {}})

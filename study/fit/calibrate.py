@@ -54,6 +54,7 @@ from shaders_port import Constants
 from .solvers import FTOL, FTOL_SE, FTOL_WINDOW, FitProblem, Param
 from .identify import identify, sweep_1d, sweep_2d
 from .model import ShaderModel, bounds, expand_parameters, get_value, with_values
+from .._progress import log as _log
 from .rounds import (
     REL_SE_MAX,
     basin_scans,
@@ -68,10 +69,6 @@ STEP_GRID = {
     "steps_grazing": [4.0, 6.0, 8.0, 10.0, 14.0, 20.0],
     "steps_steep": [1.0, 2.0, 3.0, 4.0, 6.0],
 }
-
-
-def _log(msg: str) -> None:
-    print(msg, file=sys.stderr, flush=True)
 
 
 def make_problem(

@@ -15,6 +15,7 @@ from shaders_port import Constants
 from .identify import identify
 from .model import get_value, with_values
 from .solvers import FTOL, FTOL_SE, FTOL_WINDOW, fit
+from .._progress import log as _log
 
 # solver stopping tolerances (on u = transformed parameters, where one unit is about a 50 %
 # change, and on the loss): 1e-6 is far below the parameters' standard errors
@@ -22,10 +23,6 @@ FIT_RTOL, FIT_ATOL = 1e-6, 1e-9
 # a constant whose standard error at the solution exceeds this fraction of its value is not
 # identified (frozen at its start value, the rest refitted); at most SE_ROUNDS such rounds
 REL_SE_MAX, SE_ROUNDS = 0.5, 4
-
-
-def _log(msg: str) -> None:
-    print(msg, file=sys.stderr, flush=True)
 
 
 def std_errors(J: np.ndarray, r: np.ndarray, values: np.ndarray) -> list[float | None]:

@@ -34,18 +34,14 @@ from __future__ import annotations
 
 import math
 import statistics
-import sys
 from pathlib import Path
 
 from .stability_jobs import latin_hypercube, loss_job, multistart_job, noise_job, quantile
+from .._progress import log as _log
 
 SOLVERS = ("levenberg_marquardt", "gauss_newton", "dogleg", "bfgs", "nelder_mead", "adam")
 SUCCESS = 1e-3
 PHASES = ("multistart", "loss", "noise")
-
-
-def _log(msg: str) -> None:
-    print(msg, file=sys.stderr, flush=True)
 
 
 def plan_multistart(

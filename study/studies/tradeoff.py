@@ -25,11 +25,11 @@ the best configuration within the seed's fetch budget and the recommendation), `
 from __future__ import annotations
 
 import statistics
-import sys
 from pathlib import Path
 
 from .pareto import pareto_front, recommend
 from .tradeoff_jobs import SEED_SCHEDULE, anchor_job, point_job, schedules
+from .._progress import log as _log
 
 COST = "fetches_mean"
 COSTS = {
@@ -50,10 +50,6 @@ PLAN_KEYS = frozenset(
         "tradeoff.tolerance",
     }
 )
-
-
-def _log(msg: str) -> None:
-    print(msg, file=sys.stderr, flush=True)
 
 
 def _constants_of(row: dict) -> dict:

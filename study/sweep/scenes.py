@@ -12,7 +12,7 @@ from __future__ import annotations
 import functools
 import json
 import os
-import sys
+from .._progress import log as _log
 
 
 def scene_spec(experiment, overrides=()) -> dict:
@@ -25,10 +25,6 @@ def scene_spec(experiment, overrides=()) -> dict:
 
 def spec_text(spec: dict) -> str:
     return json.dumps(spec, sort_keys=True)
-
-
-def _log(msg: str) -> None:
-    print(msg, file=sys.stderr, flush=True)
 
 
 def prepare_scene(spec: dict, variant: str = "llvm_ad_rgb") -> dict:

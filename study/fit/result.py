@@ -1,0 +1,110 @@
+"""The result of a calibration as one typed record: what ``constants.json`` holds.
+
+``study calibrate`` (one scene) and its joint form (several scenes, one constants block) both
+write a :class:`CalibrationResult`; the reports read it back from the JSON. Fields shared by
+both forms come first; the one-scene and joint-only fields are ``None`` when they do not apply
+and are then left out of the JSON. Numbers are plain Python floats (non-finite ones written as
+``null``), so the file is strict JSON.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import MISSING, asdict, dataclass, field, fields
+
+import numpy as np
+
+
+def jsonable(x):
+    """``x`` with numpy scalars and arrays turned into Python numbers and lists, tuples into
+    lists, dict keys into strings and non-finite floats into ``None`` (strict JSON)."""
+    if isinstance(x, dict):
+        return {str(k): jsonable(v) for k, v in x.items()}
+    if isinstance(x, (list, tuple)):
+        return [jsonable(v) for v in x]
+    if isinstance(x, np.bool_):
+        return bool(x)
+    if isinstance(x, (np.floating, float)):
+        return float(x) if math.isfinite(float(x)) else None
+    if isinstance(x, np.integer):
+        return int(x)
+    if isinstance(x, np.ndarray):
+        return jsonable(x.tolist())
+    return x
+
+
+@dataclass
+class CalibrationResult:
+    """One calibration, as written to ``constants.json``.
+
+    Shared:
+        shader: the shader variant fitted (``shaders_port._variants``).
+        backend: the Mitsuba variant the reference was rendered with (e.g. ``llvm_ad_rgb``).
+        parameters: constant -> {"status", "value", "start", ...} (``study.fit.calibrate``).
+        constants: the fitted constants, ``Constants.to_dict()`` (what ``study export`` reads).
+        error: one scene: {"rmse": {"default", "fitted"}, "flip": {...}} on the water pixels at
+            the experiment's resolution; joint: scene -> {"default": {...}, "fitted": {...}}.
+        solver: the solver's name; fit: its summary (iterations, converged, message, steps).
+        identifiability: the identifiability analysis at the fitted constants.
+        timings: stage -> seconds.
+        gl_check: the exported shader on OpenGL against the port (``study.report.gl_check``).
+    One scene:
+        experiment, fit_resolution / resolution ([width, height] pixels), step_sweep (the
+        integer step schedule's sweep), reference (spp, noise, path, key), diagnostics (the
+        port's diagnostics over the water), sun, parsimony (information criteria).
+    Joint:
+        experiments (paths), scenes (names), weights (scene -> weight of its residuals).
+    """
+
+    shader: str
+    backend: str
+    parameters: dict
+    constants: dict
+    error: dict
+    solver: str
+    fit: dict
+    identifiability: dict
+    timings: dict
+    gl_check: dict
+    experiment: str | None = None
+    fit_resolution: list | None = None
+    resolution: list | None = None
+    step_sweep: dict | None = None
+    reference: dict | None = None
+    diagnostics: dict | None = None
+    sun: dict | None = None
+    parsimony: dict | None = None
+    experiments: list | None = None
+    scenes: list | None = None
+    weights: dict | None = None
+    extra: dict = field(default_factory=dict)
+
+    @property
+    def joint(self) -> bool:
+        return self.scenes is not None
+
+    def to_json(self) -> dict:
+        """The JSON object of ``constants.json``: the fields (``None`` ones left out), the fit's
+        ``iterations``, ``converged`` and ``message`` at the top level too, ``joint`` when joint."""
+        d = {k: v for k, v in asdict(self).items() if v is not None and k != "extra"}
+        d.update(
+            iterations=self.fit.get("iterations", 0),
+            converged=self.fit.get("converged", False),
+            message=self.fit.get("message", ""),
+        )
+        if self.joint:
+            d["joint"] = True
+        d.update(self.extra)
+        return jsonable(d)
+
+    @classmethod
+    def from_json(cls, data: dict) -> "CalibrationResult":
+        """The record of a ``constants.json`` object (keys not of this class kept in ``extra``)."""
+        names = {f.name for f in fields(cls)} - {"extra"}
+        derived = {"iterations", "converged", "message", "joint"}
+        required = [f.name for f in fields(cls) if f.default is MISSING and f.name != "extra"]
+        missing = [n for n in required if n not in data]
+        if missing:
+            raise ValueError(f"not a calibration result: missing {missing}")
+        extra = {k: v for k, v in data.items() if k not in names | derived}
+        return cls(**{k: v for k, v in data.items() if k in names}, extra=extra)
