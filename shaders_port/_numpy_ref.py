@@ -85,7 +85,7 @@ def _texmat(M, p):
 
 def _pixel(inp, C, world, eye, light, tcs, reflection, raycast_reflections):
     diag = {}
-    M0, M1 = inp.tex_matrix0, inp.tex_matrix1
+    M0 = inp.tex_matrix0
     wy = inp.world_y[..., None]
     # [1]
     vEye, vLight = _norm(eye), _norm(light)
@@ -141,44 +141,9 @@ def _pixel(inp, C, world, eye, light, tcs, reflection, raycast_reflections):
             np.append(_cube(inp.cubemap, _norm(R) * np.array([1, -1, 1], f32)), f32(1)) * refl_color
         )
     else:
-        R = _norm(R)
-        numsteps = _mix(f32(C.refl_steps_steep), f32(C.refl_steps_grazing), f32(1) - R[1])
-        R = (R * (f32(1) / numsteps)).astype(f32)
-        ry = inp.refl_world_y[..., None]
-        cp = world.copy()
-        cpo = cp.copy()
-        olddepth = f32(0)
-        depth = _tex2d(ry, *_texmat(M1, cp), False, False)[0]
-        noHit, rit = True, 0
-        fetches += 1
-        for _ in range(C.refl_loop_cap):
-            rit += 1
-            cpo = cp.copy()
-            cp = (cp + R).astype(f32)
-            s, t = _texmat(M1, cp)
-            if s < 0 or s > 1 or t < 0 or t > 1:
-                break
-            olddepth, depth = depth, _tex2d(ry, s, t, False, False)[0]
-            fetches += 1
-            if depth > cp[1]:
-                noHit = False
-                break
-            if cp[1] > f32(C.refl_height_cut):
-                break
-        if not noHit:
-            cpoy, cpy = cpo[1], cp[1]
-            with np.errstate(all="ignore"):
-                cp = _mix(cpo, cp, f32((cpoy - olddepth) / (cpoy - cpy + depth - olddepth)))
-            vReflection = (
-                np.append(_tex2d(inp.refl_texture, *_texmat(M1, cp), True, False), f32(1))
-                * refl_color
-            )
-        else:
-            vReflection = (
-                np.append(_cube(inp.cubemap, _norm(R) * np.array([1, -1, 1], f32)), f32(1))
-                * refl_color
-            )
-        diag.update(refl_iterations=rit, refl_hit=float(not noHit))
+        vReflection, rdiag, rfetches = _raycast_reflection(inp, C, world, R, refl_color)
+        diag.update(rdiag)
+        fetches += rfetches
     # [8]
     rLight = (f32(np.dot(f32(2) * vBumpTex, vLight)) * vBumpTex - vLight).astype(f32)
     c = _clamp(f32(np.dot(rLight, vEye)), 0, 1)
@@ -190,6 +155,49 @@ def _pixel(inp, C, world, eye, light, tcs, reflection, raycast_reflections):
     F = _tex2d(inp.fresnel_lut[None], NdotV, 0.5, False, False)
     diag["fetches"] = fetches + 2
     return (vReflection * F[1] + vRefraction * F[0])[:3].astype(f32), diag
+
+
+def _raycast_reflection(inp, C, world, R, refl_color):
+    """Block [7] of water_reflection for one pixel: the reflection ray ``R`` (unit, float32)
+    raycast against the bottom-up textures, the cube map where nothing is hit. Returns
+    ``(vReflection`` (4,) float32, diagnostics, texture fetches)."""
+    M1 = inp.tex_matrix1
+    R = _norm(R)
+    numsteps = _mix(f32(C.refl_steps_steep), f32(C.refl_steps_grazing), f32(1) - R[1])
+    R = (R * (f32(1) / numsteps)).astype(f32)
+    ry = inp.refl_world_y[..., None]
+    cp = world.copy()
+    cpo = cp.copy()
+    olddepth = f32(0)
+    depth = _tex2d(ry, *_texmat(M1, cp), False, False)[0]
+    noHit, rit = True, 0
+    fetches = 1
+    for _ in range(C.refl_loop_cap):
+        rit += 1
+        cpo = cp.copy()
+        cp = (cp + R).astype(f32)
+        s, t = _texmat(M1, cp)
+        if s < 0 or s > 1 or t < 0 or t > 1:
+            break
+        olddepth, depth = depth, _tex2d(ry, s, t, False, False)[0]
+        fetches += 1
+        if depth > cp[1]:
+            noHit = False
+            break
+        if cp[1] > f32(C.refl_height_cut):
+            break
+    if not noHit:
+        cpoy, cpy = cpo[1], cp[1]
+        with np.errstate(all="ignore"):
+            cp = _mix(cpo, cp, f32((cpoy - olddepth) / (cpoy - cpy + depth - olddepth)))
+        vReflection = (
+            np.append(_tex2d(inp.refl_texture, *_texmat(M1, cp), True, False), f32(1)) * refl_color
+        )
+    else:
+        vReflection = (
+            np.append(_cube(inp.cubemap, _norm(R) * np.array([1, -1, 1], f32)), f32(1)) * refl_color
+        )
+    return vReflection, {"refl_iterations": rit, "refl_hit": float(not noHit)}, fetches
 
 
 def render_reference(

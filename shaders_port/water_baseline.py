@@ -185,9 +185,52 @@ def _shade(m, P, S, C, flat: bool, planar: bool):
         vBumpTex = m.Array3f(mirrorNormal)
 
     # ---- [3] Planar refraction (seed 001) ----
+    groundPosition, refractedUV = planar_refraction(m, S, C, planar)
+    fetches += 1
+
+    # ---- [4] Normal-map distortion and chromatic dispersion (seed 003) ----
+    vRefraction = distorted_refraction(m, S, C, vBumpTex, refractedUV, flat)
+    fetches += 1 if flat else 3
+
+    # ---- [5] Depth tint ----
+    travelLength = dr.norm(groundPosition - P.varyingVecWorldPosition)
+    travelLength = clamp(travelLength / C.attenuation_distance, 0.0, 1.0)
+    vRefraction = mix(vRefraction, C.waterColor, travelLength)
+
+    # ---- [6] Planar reflection (seed 004), distorted by the wave normal (seed 002) ----
+    vReflection, vTextureReflection = planar_reflection(m, P, S, C, vBumpTex, mirrorNormal, flat)
+    fetches += 1
+
+    # ---- [7] Specular highlight ----
+    rLight = dr.dot(2.0 * vBumpTex, vLight) * vBumpTex - vLight
+    spec = gl_pow(clamp(dr.dot(rLight, vEye), 0.0, 1.0), C.specular_exponent)
+    specular = m.Array4f(
+        spec * P.lightcolor[0], spec * P.lightcolor[1], spec * P.lightcolor[2], 1.0
+    )
+    vReflection += specular * C.specular_strength
+
+    # ---- [8] Fresnel combine ----
+    NdotV = clamp(dr.dot(vEye, vBumpTex), 0.0, 1.0)
+    FresnelCoeffs = P.fresnelLookup.sample(m, NdotV, m.Float(0.5))
+    fetches += 1
+    gl_FragColor = vReflection * FresnelCoeffs[1] + vRefraction * FresnelCoeffs[0]
+
+    bad = nonfinite_any(vEye, vLight, vBumpTex, groundPosition)
+    if not flat:
+        bad |= ~(dr.isfinite(vTextureReflection[0]) & dr.isfinite(vTextureReflection[1]))
+    if planar:
+        bad |= ~(dr.isfinite(refractedUV[0]) & dr.isfinite(refractedUV[1]))
+    assert fetches + PASS_FETCHES == fetch_count(flat)  # the count below matches the code above
+    diagnostics = {"nonfinite": dr.select(bad, 1.0, 0.0)}
+    return gl_FragColor, diagnostics
+
+
+def planar_refraction(m, S, C, planar: bool):
+    """Block [3] (source 001): the depth-buffer point under the pixel and the screen coordinate
+    it is seen at through the flat water, applied backwards. Returns ``(groundPosition``
+    Array3f world, ``refractedUV`` pair of Float screen coordinates in [0, 1]); 1 fetch."""
     bumpUV = S.bumpUV
     sceneZ = S.sceneDepth.sample(m, bumpUV[0], bumpUV[1])[0]
-    fetches += 1
     groundClip = mat4_vec4(
         m, S.mvp_inverse, 2.0 * bumpUV[0] - 1.0, 2.0 * bumpUV[1] - 1.0, 2.0 * sceneZ - 1.0, 1.0
     )
@@ -205,8 +248,13 @@ def _shade(m, P, S, C, flat: bool, planar: bool):
         )
     else:
         refractedUV = bumpUV
+    return groundPosition, refractedUV
 
-    # ---- [4] Normal-map distortion and chromatic dispersion (seed 003) ----
+
+def distorted_refraction(m, S, C, vBumpTex, refractedUV, flat: bool):
+    """Block [4] (source 003): the scene colour at ``refractedUV`` moved by the normal map, each
+    channel at its own offset (chromatic dispersion). Returns ``vRefraction`` Array4f linear
+    RGB, alpha 1; 3 fetches (1 if ``flat``: no distortion)."""
     if not flat:
         bump = (vBumpTex.x, vBumpTex.z)
         newUV = (
@@ -221,18 +269,17 @@ def _shade(m, P, S, C, flat: bool, planar: bool):
             m, newUV[0] - C.chromatic_dispersion, newUV[1] - C.chromatic_dispersion
         )
         refractionColor = m.Array3f(red[0], green[1], blue[2])
-        fetches += 3
     else:
         refractionColor = m.Array3f(S.sceneColor.sample(m, refractedUV[0], refractedUV[1]))
-        fetches += 1
     vRefraction = m.Array4f(refractionColor.x, refractionColor.y, refractionColor.z, 1.0)
+    return vRefraction
 
-    # ---- [5] Depth tint ----
-    travelLength = dr.norm(groundPosition - P.varyingVecWorldPosition)
-    travelLength = clamp(travelLength / C.attenuation_distance, 0.0, 1.0)
-    vRefraction = mix(vRefraction, C.waterColor, travelLength)
 
-    # ---- [6] Planar reflection (seed 004), distorted by the wave normal (seed 002) ----
+def planar_reflection(m, P, S, C, vBumpTex, mirrorNormal, flat: bool):
+    """Block [6] (sources 004 and 002): the mirrored camera's texture at the surface point's
+    projective coordinate, offset by the projected flattened wave normal. Returns
+    ``(vReflection`` Array4f linear RGB times ``reflectColor``, ``vTextureReflection`` pair of
+    Float texture coordinates); 1 fetch."""
     wp = P.varyingVecWorldPosition
     vClipReflection = mat4_vec4(m, S.o2v_projection_reflection, wp.x, 0.0, wp.z, 1.0)
     vDeviceReflection = (
@@ -263,31 +310,8 @@ def _shade(m, P, S, C, flat: bool, planar: bool):
     reflectionTextureColor = S.reflection_sampler.sample(
         m, vTextureReflection[0], vTextureReflection[1]
     )
-    fetches += 1
     vReflection = m.Array4f(*reflectionTextureColor, 1.0) * C.reflectColor
-
-    # ---- [7] Specular highlight ----
-    rLight = dr.dot(2.0 * vBumpTex, vLight) * vBumpTex - vLight
-    spec = gl_pow(clamp(dr.dot(rLight, vEye), 0.0, 1.0), C.specular_exponent)
-    specular = m.Array4f(
-        spec * P.lightcolor[0], spec * P.lightcolor[1], spec * P.lightcolor[2], 1.0
-    )
-    vReflection += specular * C.specular_strength
-
-    # ---- [8] Fresnel combine ----
-    NdotV = clamp(dr.dot(vEye, vBumpTex), 0.0, 1.0)
-    FresnelCoeffs = P.fresnelLookup.sample(m, NdotV, m.Float(0.5))
-    fetches += 1
-    gl_FragColor = vReflection * FresnelCoeffs[1] + vRefraction * FresnelCoeffs[0]
-
-    bad = nonfinite_any(vEye, vLight, vBumpTex, groundPosition)
-    if not flat:
-        bad |= ~(dr.isfinite(vTextureReflection[0]) & dr.isfinite(vTextureReflection[1]))
-    if planar:
-        bad |= ~(dr.isfinite(refractedUV[0]) & dr.isfinite(refractedUV[1]))
-    assert fetches + PASS_FETCHES == fetch_count(flat)  # the count below matches the code above
-    diagnostics = {"nonfinite": dr.select(bad, 1.0, 0.0)}
-    return gl_FragColor, diagnostics
+    return vReflection, vTextureReflection
 
 
 def fetch_count(flat: bool) -> int:

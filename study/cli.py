@@ -52,6 +52,11 @@ def _sweep_common(p: argparse.ArgumentParser, experiments_help: str) -> None:
         help="override a key of every experiment (repeatable)",
     )
     _backend_arg(p, "llvm_ad_rgb", "of the workers")
+    _cluster_args(p)
+
+
+def _cluster_args(p: argparse.ArgumentParser) -> None:
+    """Where a sweep runs: a Dask scheduler, or a local cluster of ``--workers`` processes."""
     p.add_argument(
         "--scheduler",
         default=None,
@@ -109,6 +114,13 @@ def build_parser() -> argparse.ArgumentParser:
         help="recommend the cheapest point within this fraction of the best FLIP "
         "(default: tradeoff.tolerance, 0.02)",
     )
+    _add_stability(sub)
+    _add_failures(sub)
+    _add_export(sub)
+    return parser
+
+
+def _add_stability(sub) -> None:
     p = sub.add_parser(
         "stability",
         help="where the fit fails: solvers from many starts, which residual, "
@@ -138,6 +150,9 @@ def build_parser() -> argparse.ArgumentParser:
         choices=["reference", "texture"],
         help="which renders the noise phase varies",
     )
+
+
+def _add_failures(sub) -> None:
     p = sub.add_parser(
         "failures",
         help="classify every water pixel by where the shader's method "
@@ -163,18 +178,10 @@ def build_parser() -> argparse.ArgumentParser:
         help="constants JSON (e.g. a calibrate's "
         "constants.json); default: each experiment's start constants",
     )
-    p.add_argument(
-        "--scheduler",
-        default=None,
-        metavar="ADDRESS",
-        help="Dask scheduler address (default: $STUDY_SCHEDULER, else a local cluster)",
-    )
-    p.add_argument(
-        "--workers",
-        type=int,
-        default=None,
-        help="local cluster worker processes (default: one per core)",
-    )
+    _cluster_args(p)
+
+
+def _add_export(sub) -> None:
     p = sub.add_parser("export", help="write the shaders with constants from a JSON file")
     p.add_argument(
         "constants",
@@ -182,7 +189,6 @@ def build_parser() -> argparse.ArgumentParser:
         "object of constant name -> value",
     )
     p.add_argument("--out", required=True, help="output folder")
-    return parser
 
 
 def main(argv=None) -> int:

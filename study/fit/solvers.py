@@ -169,12 +169,7 @@ def fit(
     the start, after each step), ``at_bound`` (name -> ``'lower'``/``'upper'`` for ``clip``
     parameters on a bound at the end), ``restarts`` (how many KKT restarts ran).
     """
-    if solver not in SOLVERS:
-        raise ValueError(f"unknown solver {solver!r}; valid solvers: {', '.join(SOLVERS)}")
-    if max_steps < 1:
-        raise ValueError(f"max_steps must be >= 1, got {max_steps}")
-    if ftol is not None and not (ftol >= 0 and ftol_window >= 1):
-        raise ValueError(f"need ftol >= 0 and ftol_window >= 1, got {ftol}, {ftol_window}")
+    _check_settings(solver, max_steps, ftol, ftol_window)
     base = problem.start_values(x0)
     names = _free_names(problem, solver, free, treat_as_continuous)
     ps = [problem.params[n] for n in names]
@@ -185,72 +180,26 @@ def fit(
     try:
         loss0 = 0.5 * float(np.sum(res.value(u0) ** 2))
     except FloatingPointError as e:
-        return _result(
-            problem,
-            solver,
-            names,
-            base,
-            u0,
-            math.nan,
-            [],
-            0,
-            res,
-            0,
-            t0,
-            False,
-            f"start point rejected: {e}",
-        )
+        msg = f"start point rejected: {e}"
+        return _result(problem, solver, names, base, u0, math.nan, [], 0, res, 0, t0, False, msg)
     trace = Trace(t0, loss0)
     if ftol is not None and ftol_se:
         ftol = max(ftol, ftol_se / max(res.m - len(names), 1))
     u, iters, restarts, adam_losses = u0, 0, 0, []
+    settings = dict(rtol=rtol, atol=atol, lr=lr, patience=patience, nm_step=nm_step)
+    settings.update(ftol=ftol, ftol_window=ftol_window)
     while True:
-        left = max_steps - iters
-        if solver == "nelder_mead":
-            u, it, ok, msg = nelder_mead(res, u, left, rtol, atol, nm_step, trace)
-        elif solver == "adam":
-            u, it, ok, msg, ng, ls = adam(
-                problem,
-                res,
-                base,
-                names,
-                u,
-                left,
-                lr,
-                rtol,
-                atol,
-                patience,
-                trace,
-                ftol,
-                ftol_window,
-            )
-            n_grad += ng
-            adam_losses += ls
-        elif solver == "nelder_mead_optimistix":
-            u, it, ok, msg = optimistix_fit(res, solver, u, left, rtol, atol, nm_step)
-            trace.note(res.stats.best_loss)
-        else:
-            u, it, ok, msg = optimistix_stepped(
-                res, solver, u, left, rtol, atol, ftol, ftol_window, trace
-            )
-        iters += it
+        u, it, ok, msg, ng, ls = _run_solver(
+            solver, problem, res, base, names, u, max_steps - iters, trace, settings
+        )
+        n_grad, adam_losses, iters = n_grad + ng, adam_losses + ls, iters + it
         if not ok or restarts >= kkt_restarts or iters >= max_steps:
             break
         inward = _kkt_violations(problem, base, ps, u, res, ftol)
         if not inward:
             break
         restarts += 1
-        u = np.array(u, np.float64)
-        for j, side in inward.items():  # just inside the bound the loss falls inwards
-            p = ps[j]
-            step = 0.05 * p.typical
-            u[j] = float(
-                p.to_u(
-                    min(max(p.lo + step, p.lo), p.hi)
-                    if side == "lower"
-                    else max(min(p.hi - step, p.hi), p.lo)
-                )
-            )
+        u = _moved_inside(ps, u, inward)
         msg += f"; restarted from inside the bound for {[ps[j].name for j in inward]}"
     if restarts:
         msg += f" ({iters} steps in all)"
@@ -260,22 +209,9 @@ def fit(
         loss, ok, msg = math.nan, False, f"{msg}; final point non-finite: {e}"
     if res.stats.best_x is not None and res.stats.best_loss < loss and solver != "adam":
         u, loss = np.asarray(res.stats.best_x, np.float64), float(res.stats.best_loss)
-    out = _result(
-        problem,
-        solver,
-        names,
-        base,
-        u,
-        loss0,
-        adam_losses if solver == "adam" else list(res.stats.losses),
-        iters,
-        res,
-        n_grad,
-        t0,
-        ok,
-        msg,
-        loss,
-    )
+    losses = adam_losses if solver == "adam" else list(res.stats.losses)
+    out = _result(problem, solver, names, base, u, loss0, losses, iters, res, n_grad, t0, ok, msg)
+    out.loss = loss
     out.extra.update(
         {
             "step_losses": trace.losses,
@@ -285,6 +221,62 @@ def fit(
         }
     )
     return out
+
+
+def _check_settings(solver: str, max_steps: int, ftol, ftol_window: int) -> None:
+    if solver not in SOLVERS:
+        raise ValueError(f"unknown solver {solver!r}; valid solvers: {', '.join(SOLVERS)}")
+    if max_steps < 1:
+        raise ValueError(f"max_steps must be >= 1, got {max_steps}")
+    if ftol is not None and not (ftol >= 0 and ftol_window >= 1):
+        raise ValueError(f"need ftol >= 0 and ftol_window >= 1, got {ftol}, {ftol_window}")
+
+
+def _run_solver(solver, problem, res, base, names, u, left, trace, o: dict):
+    """One run of ``solver`` from ``u`` for at most ``left`` steps; ``o``: the settings of
+    :func:`fit`. Returns ``(u, steps, ok, message, gradient calls, Adam's losses)``."""
+    if solver == "nelder_mead":
+        return (*nelder_mead(res, u, left, o["rtol"], o["atol"], o["nm_step"], trace), 0, [])
+    if solver == "adam":
+        return adam(
+            problem,
+            res,
+            base,
+            names,
+            u,
+            left,
+            o["lr"],
+            o["rtol"],
+            o["atol"],
+            o["patience"],
+            trace,
+            o["ftol"],
+            o["ftol_window"],
+        )
+    if solver == "nelder_mead_optimistix":
+        out = optimistix_fit(res, solver, u, left, o["rtol"], o["atol"], o["nm_step"])
+        trace.note(res.stats.best_loss)
+        return (*out, 0, [])
+    out = optimistix_stepped(
+        res, solver, u, left, o["rtol"], o["atol"], o["ftol"], o["ftol_window"], trace
+    )
+    return (*out, 0, [])
+
+
+def _moved_inside(ps: list, u, inward: dict) -> np.ndarray:
+    """``u`` with each parameter ``inward`` names (index -> 'lower'/'upper') moved from its
+    bound to 5 % of its scale inside (where the loss falls inwards)."""
+    u = np.array(u, np.float64)
+    for j, side in inward.items():
+        p = ps[j]
+        step = 0.05 * p.typical
+        inside = (
+            min(max(p.lo + step, p.lo), p.hi)
+            if side == "lower"
+            else max(min(p.hi - step, p.hi), p.lo)
+        )
+        u[j] = float(p.to_u(inside))
+    return u
 
 
 def _kkt_violations(

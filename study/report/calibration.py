@@ -215,32 +215,10 @@ def identifiability_table(ident: dict) -> list[str]:
 
 def write_report(out: Path, summary: dict, figures: dict) -> Path:
     """``out/report.md`` from the calibration summary (the content of constants.json)."""
+    from .._io import write_text_atomic
+
     e = summary["error"]
-    ref = summary["reference"]
-    lines = [f"# Calibration: {summary['experiment']} ({summary['shader']})", ""]
-    lines += [
-        f"Reference: {ref['spp']} spp, measured noise {fmt(ref['noise'], 3)} (RMS standard error on "
-        f"water pixels, linear RGB). Fit at {summary['fit_resolution'][0]}x{summary['fit_resolution'][1]} "
-        f"with `{summary['solver']}`: {summary['iterations']} iterations, "
-        f"{'converged' if summary['converged'] else 'NOT converged'} ({summary['message']}).",
-        "",
-    ]
-    dec = summary.get("fit", {}).get("input_noise")
-    if dec:
-        moved = ", ".join(
-            f"{n} {fmt(a)} -> {fmt(b)}" for n, (a, b) in dec["shift"].items() if a != b
-        )
-        lines += [
-            f'Texture noise (`fit.input_noise = "decorrelate"`): the least-squares constants refined '
-            f"on the decorrelated loss over the refraction texture's two independent halves, "
-            f"{fmt(dec['loss_start'])} -> {fmt(dec['loss'])} in {dec['steps']} damped Newton steps: "
-            + (
-                f"{dec['message']}; {moved or 'nothing moved'}."
-                if dec["accepted"]
-                else f"refused ({dec['message']}), the least-squares constants kept."
-            ),
-            "",
-        ]
+    lines = _header_lines(summary) + _decorrelated_lines(summary.get("fit", {}))
     lines += [
         "| metric (water pixels) | default constants | fitted constants |",
         "|---|---|---|",
@@ -261,68 +239,110 @@ def write_report(out: Path, summary: dict, figures: dict) -> Path:
         "",
     ]
     lines += identifiability_table(summary["identifiability"]) + [""]
-    sw = summary.get("step_sweep")
-    if sw:
-        lines += [
-            "## Step schedule (sweep)",
-            "",
-            "Step counts change which step crosses the floor, so their effect is piecewise "
-            "constant: they are chosen from a grid of the loss at the fitted continuous "
-            f"constants, not by a gradient. Best: {sw['best']}.",
-            "",
-        ]
-        if len(sw["names"]) == 2:
-            a, b = sw["names"]
-            lines += [
-                f"| {a} \\ {b} | " + " | ".join(fmt(v) for v in sw["grid"][b]) + " |",
-                "|---|" + "---|" * len(sw["grid"][b]),
-            ]
-            for va, row in zip(sw["grid"][a], sw["loss"]):
-                lines.append(f"| {fmt(va)} | " + " | ".join(fmt(v) for v in row) + " |")
-        else:
-            (a,) = sw["names"]
-            lines += [f"| {a} | loss |", "|---|---|"]
-            lines += [f"| {fmt(v)} | {fmt(l)} |" for v, l in zip(sw["grid"][a], sw["loss"])]
-        lines.append("")
+    lines += _sweep_lines(summary.get("step_sweep"))
     if "loss" in figures:
         lines += ["## Convergence", "", f"![loss per iteration]({figures['loss']})", ""]
     if "diagnostics" in figures:
-        d = summary.get("diagnostics", {})
-        lines += [
-            "## Shader diagnostics (fitted constants)",
-            "",
-            f"Rays not crossing the floor within the loop cap: {fmt(d.get('not_crossed_fraction'))} "
-            f"of water pixels; non-finite pixels: {d.get('nonfinite_pixels', '-')}; mean loop "
-            f"iterations {fmt(d.get('iterations', {}).get('mean'))}, mean texture fetches "
-            f"{fmt(d.get('fetches', {}).get('mean'))} per pixel.",
-            "",
-            f"![diagnostics]({figures['diagnostics']})",
-            "",
-        ]
+        lines += _diagnostics_lines(summary.get("diagnostics", {}), figures["diagnostics"])
     t = summary["timings"]
     lines += ["## Timings (seconds)", "", "| stage | s |", "|---|---|"]
     lines += [f"| {k} | {fmt(v, 3)} |" for k, v in t.items()] + [""]
-    lines += [
-        "## Exported shaders",
-        "",
-        "`shaders/compat/` (GLSL 1.20, drop-in) and `shaders/core/` "
-        "(GLSL 330 core); every file compiled with glslangValidator"
-        + (
-            f"; the exported core shader on llvmpipe vs the port with the fitted constants: "
-            f"mean |diff| {fmt(summary['gl_check']['mean_abs'], 3)}, 99.9th percentile "
-            f"{fmt(summary['gl_check']['p999'], 3)}"
-            + (
-                "."
-                if summary["gl_check"].get("passed")
-                else " -- **MISMATCH: do not ship these shaders; see constants.json gl_check**."
-            )
-            if summary.get("gl_check")
-            else "."
-        ),
-        "",
-    ]
-    from .._io import write_text_atomic
-
+    lines += _export_lines(summary.get("gl_check"))
     path = out / "report.md"
     write_text_atomic(path, "\n".join(lines))
     return path
+
+
+def _header_lines(summary: dict) -> list[str]:
+    ref, res = summary["reference"], summary["fit_resolution"]
+    return [
+        f"# Calibration: {summary['experiment']} ({summary['shader']})",
+        "",
+        f"Reference: {ref['spp']} spp, measured noise {fmt(ref['noise'], 3)} (RMS standard error on "
+        f"water pixels, linear RGB). Fit at {res[0]}x{res[1]} "
+        f"with `{summary['solver']}`: {summary['iterations']} iterations, "
+        f"{'converged' if summary['converged'] else 'NOT converged'} ({summary['message']}).",
+        "",
+    ]
+
+
+def _decorrelated_lines(fit: dict) -> list[str]:
+    """The decorrelated refinement's paragraph (``fit.input_noise = "decorrelate"``), if any."""
+    dec = fit.get("input_noise")
+    if not dec:
+        return []
+    moved = ", ".join(f"{n} {fmt(a)} -> {fmt(b)}" for n, (a, b) in dec["shift"].items() if a != b)
+    return [
+        f'Texture noise (`fit.input_noise = "decorrelate"`): the least-squares constants refined '
+        f"on the decorrelated loss over the refraction texture's two independent halves, "
+        f"{fmt(dec['loss_start'])} -> {fmt(dec['loss'])} in {dec['steps']} damped Newton steps: "
+        + (
+            f"{dec['message']}; {moved or 'nothing moved'}."
+            if dec["accepted"]
+            else f"refused ({dec['message']}), the least-squares constants kept."
+        ),
+        "",
+    ]
+
+
+def _sweep_lines(sw: dict | None) -> list[str]:
+    """The step schedule's sweep: a 1-D or 2-D table of the loss over the integer grid."""
+    if not sw:
+        return []
+    lines = [
+        "## Step schedule (sweep)",
+        "",
+        "Step counts change which step crosses the floor, so their effect is piecewise "
+        "constant: they are chosen from a grid of the loss at the fitted continuous "
+        f"constants, not by a gradient. Best: {sw['best']}.",
+        "",
+    ]
+    if len(sw["names"]) == 2:
+        a, b = sw["names"]
+        lines += [
+            f"| {a} \\ {b} | " + " | ".join(fmt(v) for v in sw["grid"][b]) + " |",
+            "|---|" + "---|" * len(sw["grid"][b]),
+        ]
+        for va, row in zip(sw["grid"][a], sw["loss"]):
+            lines.append(f"| {fmt(va)} | " + " | ".join(fmt(v) for v in row) + " |")
+    else:
+        (a,) = sw["names"]
+        lines += [f"| {a} | loss |", "|---|---|"]
+        lines += [f"| {fmt(v)} | {fmt(l)} |" for v, l in zip(sw["grid"][a], sw["loss"])]
+    return lines + [""]
+
+
+def _diagnostics_lines(d: dict, figure: str) -> list[str]:
+    return [
+        "## Shader diagnostics (fitted constants)",
+        "",
+        f"Rays not crossing the floor within the loop cap: {fmt(d.get('not_crossed_fraction'))} "
+        f"of water pixels; non-finite pixels: {d.get('nonfinite_pixels', '-')}; mean loop "
+        f"iterations {fmt(d.get('iterations', {}).get('mean'))}, mean texture fetches "
+        f"{fmt(d.get('fetches', {}).get('mean'))} per pixel.",
+        "",
+        f"![diagnostics]({figure})",
+        "",
+    ]
+
+
+def _export_lines(gl: dict | None) -> list[str]:
+    """What was exported and how the GL check of the exported core shader went."""
+    check = "."
+    if gl:
+        check = (
+            f"; the exported core shader on llvmpipe vs the port with the fitted constants: "
+            f"mean |diff| {fmt(gl['mean_abs'], 3)}, 99.9th percentile {fmt(gl['p999'], 3)}"
+            + (
+                "."
+                if gl.get("passed")
+                else " -- **MISMATCH: do not ship these shaders; see constants.json gl_check**."
+            )
+        )
+    return [
+        "## Exported shaders",
+        "",
+        "`shaders/compat/` (GLSL 1.20, drop-in) and `shaders/core/` "
+        "(GLSL 330 core); every file compiled with glslangValidator" + check,
+        "",
+    ]

@@ -138,87 +138,101 @@ def tradeoff_report_text(summary: dict) -> str:
         "",
     ]
     for scene, f in summary["scenes"].items():
-        rec, seed = f["recommended"], f["seed"]
-        lines += [f"## {scene}", ""]
+        lines += _scene_lines(scene, f, summary)
+    lines += _closing_lines(summary)
+    return "\n".join(lines) + "\n"
+
+
+def _scene_lines(scene: str, f: dict, summary: dict) -> list[str]:
+    """One scene's section: its front, recommendation, parsimony, needs and halvings."""
+    lines = []
+    rec, seed = f["recommended"], f["seed"]
+    lines += [f"## {scene}", ""]
+    lines += [
+        "| configuration | fetches (mean) | fetches (p99) | GL ms 1080p (norm.) | port ms | FLIP | RMSE |",
+        "|---|---|---|---|---|---|---|",
+    ]
+    for r in f["front"]:
+        lines.append(
+            f"| {r['label']} | {fmt(r['fetches_mean'], 3)} | {fmt(r.get('fetches_p99'), 3)} | "
+            f"{fmt(r.get('gl_norm_ms_1080p'), 3)} | {fmt(r.get('port_ms_512'), 3)} | "
+            f"{fmt(r['flip'])} | {fmt(r['rmse'])} |"
+        )
+    lines.append("")
+    if rec:
+        lines.append(
+            f"**Recommended**: {rec['label']}: FLIP {fmt(rec['flip'])} at "
+            f"{fmt(rec['fetches_mean'], 3)} fetches per pixel."
+        )
+    if seed and rec:
+        lines.append(
+            f"The original shader's configuration (water_refraction (10, 3, 40), refitted): FLIP "
+            f"{fmt(seed['flip'])} at {fmt(seed['fetches_mean'], 3)} fetches "
+            f"({fmt(seed['fetches_mean'] / rec['fetches_mean'], 3)}x the recommended cost, "
+            f"FLIP {100 * (seed['flip'] / rec['flip'] - 1):+.2f} %)."
+        )
+    bw = f.get("best_within_seed_budget")
+    if seed and bw:
+        lines.append(
+            f"**Best within the original's fetch budget** ({fmt(seed['fetches_mean'], 3)} fetches): "
+            f"{bw['label']}: FLIP {fmt(bw['flip'])} at {fmt(bw['fetches_mean'], 3)} fetches "
+            f"(the fitted original: {fmt(seed['flip'])}, {100 * (bw['flip'] / seed['flip'] - 1):+.1f} %)."
+        )
+    if summary.get("images", {}).get(scene):
+        lines += ["", f"![{scene}: reference and shaders]({summary['images'][scene]})"]
+    pars = {v: d for v, d in f.get("parsimony", {}).items() if d.get("bic") is not None}
+    if pars:
+        b0 = min(d["bic"] for d in pars.values())
         lines += [
-            "| configuration | fetches (mean) | fetches (p99) | GL ms 1080p (norm.) | port ms | FLIP | RMSE |",
-            "|---|---|---|---|---|---|---|",
+            "",
+            "Each variant at the original's schedule (constants fitted or at a bound; BIC of the fit "
+            "residual, lower is better, relative to the lowest):",
+            "",
+            "| variant | constants | FLIP | BIC - min |",
+            "|---|---|---|---|",
         ]
-        for r in f["front"]:
-            lines.append(
-                f"| {r['label']} | {fmt(r['fetches_mean'], 3)} | {fmt(r.get('fetches_p99'), 3)} | "
-                f"{fmt(r.get('gl_norm_ms_1080p'), 3)} | {fmt(r.get('port_ms_512'), 3)} | "
-                f"{fmt(r['flip'])} | {fmt(r['rmse'])} |"
-            )
-        lines.append("")
-        if rec:
-            lines.append(
-                f"**Recommended**: {rec['label']}: FLIP {fmt(rec['flip'])} at "
-                f"{fmt(rec['fetches_mean'], 3)} fetches per pixel."
-            )
-        if seed and rec:
-            lines.append(
-                f"The original shader's configuration (water_refraction (10, 3, 40), refitted): FLIP "
-                f"{fmt(seed['flip'])} at {fmt(seed['fetches_mean'], 3)} fetches "
-                f"({fmt(seed['fetches_mean'] / rec['fetches_mean'], 3)}x the recommended cost, "
-                f"FLIP {100 * (seed['flip'] / rec['flip'] - 1):+.2f} %)."
-            )
-        bw = f.get("best_within_seed_budget")
-        if seed and bw:
-            lines.append(
-                f"**Best within the original's fetch budget** ({fmt(seed['fetches_mean'], 3)} fetches): "
-                f"{bw['label']}: FLIP {fmt(bw['flip'])} at {fmt(bw['fetches_mean'], 3)} fetches "
-                f"(the fitted original: {fmt(seed['flip'])}, {100 * (bw['flip'] / seed['flip'] - 1):+.1f} %)."
-            )
-        if summary.get("images", {}).get(scene):
-            lines += ["", f"![{scene}: reference and shaders]({summary['images'][scene]})"]
-        pars = {v: d for v, d in f.get("parsimony", {}).items() if d.get("bic") is not None}
-        if pars:
-            b0 = min(d["bic"] for d in pars.values())
-            lines += [
-                "",
-                "Each variant at the original's schedule (constants fitted or at a bound; BIC of the fit "
-                "residual, lower is better, relative to the lowest):",
-                "",
-                "| variant | constants | FLIP | BIC - min |",
-                "|---|---|---|---|",
-            ]
-            lines += [
-                f"| {v} | {d['n_fitted']} | {fmt(d['flip'])} | {d['bic'] - b0:.0f} |"
-                for v, d in sorted(pars.items(), key=lambda kv: kv[1]["bic"])
-            ]
-        lines += ["", "What the scene needs:", ""]
-        lines.append(
-            f"- simplest variant within tolerance: `{f['simplest_variant_within_tolerance']}`; "
-            "best FLIP per variant: "
-            + ", ".join(f"{v} {fmt(x)}" for v, x in f["best_flip_by_variant"].items())
+        lines += [
+            f"| {v} | {d['n_fitted']} | {fmt(d['flip'])} | {d['bic'] - b0:.0f} |"
+            for v, d in sorted(pars.items(), key=lambda kv: kv[1]["bic"])
+        ]
+    lines += ["", "What the scene needs:", ""]
+    lines.append(
+        f"- simplest variant within tolerance: `{f['simplest_variant_within_tolerance']}`; "
+        "best FLIP per variant: "
+        + ", ".join(f"{v} {fmt(x)}" for v, x in f["best_flip_by_variant"].items())
+    )
+    lines.append(
+        "- error floor (converged raymarch) per variant: "
+        + ", ".join(f"{v} {fmt(x)}" for v, x in f["error_floor_by_variant"].items())
+    )
+    lines.append(
+        "- smallest loop cap at which fewer than 1 % of rays miss the floor: "
+        + ", ".join(
+            f"{v} {x if x is not None else 'none in the grid'}"
+            for v, x in f["smallest_crossing_loop_cap"].items()
         )
-        lines.append(
-            "- error floor (converged raymarch) per variant: "
-            + ", ".join(f"{v} {fmt(x)}" for v, x in f["error_floor_by_variant"].items())
-        )
-        lines.append(
-            "- smallest loop cap at which fewer than 1 % of rays miss the floor: "
-            + ", ".join(
-                f"{v} {x if x is not None else 'none in the grid'}"
-                for v, x in f["smallest_crossing_loop_cap"].items()
+    )
+    if f["halvings"]:
+        lines += [
+            "",
+            "Each halving of the original's schedule (scaled family):",
+            "",
+            "| configuration | scale | fetches | GL ms 1080p (norm.) | FLIP | not crossed |",
+            "|---|---|---|---|---|---|",
+        ]
+        for r in f["halvings"]:
+            lines.append(
+                f"| {r['label']} | {fmt(r['scale'], 3)} | {fmt(r['fetches_mean'], 3)} | "
+                f"{fmt(r.get('gl_norm_ms_1080p'), 3)} | {fmt(r['flip'])} | "
+                f"{fmt(r.get('not_crossed'), 3)} |"
             )
-        )
-        if f["halvings"]:
-            lines += [
-                "",
-                "Each halving of the original's schedule (scaled family):",
-                "",
-                "| configuration | scale | fetches | GL ms 1080p (norm.) | FLIP | not crossed |",
-                "|---|---|---|---|---|---|",
-            ]
-            for r in f["halvings"]:
-                lines.append(
-                    f"| {r['label']} | {fmt(r['scale'], 3)} | {fmt(r['fetches_mean'], 3)} | "
-                    f"{fmt(r.get('gl_norm_ms_1080p'), 3)} | {fmt(r['flip'])} | "
-                    f"{fmt(r.get('not_crossed'), 3)} |"
-                )
-        lines.append("")
+    lines.append("")
+    return lines
+
+
+def _closing_lines(summary: dict) -> list[str]:
+    """The joint front, the exported shaders and the failed points."""
+    lines = []
     if "joint" in summary:
         j = summary["joint"]
         lines += [
@@ -247,4 +261,4 @@ def tradeoff_report_text(summary: dict) -> str:
             f"- {x['experiment']} {x['variant']} {x['schedule']}: {x['error_message']}"
             for x in summary["failures"]
         ]
-    return "\n".join(lines) + "\n"
+    return lines

@@ -303,6 +303,70 @@ def analyse_noise(rows: list[dict]) -> dict:
     return out
 
 
+def _check_arguments(phases, solvers, starts, noise_seeds, noise_inputs) -> None:
+    if not noise_inputs or any(w not in ("reference", "texture") for w in noise_inputs):
+        raise ValueError(
+            f"noise_inputs must be a non-empty subset of ('reference', 'texture'), got {noise_inputs}"
+        )
+    bad = [p for p in phases if p not in PHASES]
+    if bad:
+        raise ValueError(f"unknown phase(s) {bad}; choose from {PHASES}")
+    bad = [s for s in solvers if s not in SOLVERS]
+    if bad:
+        raise ValueError(f"unknown solver(s) {bad}; choose from {SOLVERS}")
+    if starts < 1 or noise_seeds < 1:
+        raise ValueError("need starts >= 1 and noise_seeds >= 1")
+
+
+def _multistart_phase(
+    client, out, specs, exps, starts, solvers, adam_lrs, max_steps, nm_steps, log
+) -> dict:
+    """The multi-start phase: its sweep (multistart.parquet), analysis and two figures."""
+    from ..report.stability import solver_figure, spread_figure
+    from ..sweep import run_sweep
+
+    jobs = plan_multistart(specs, exps, starts, solvers, adam_lrs, max_steps, nm_steps)
+    rows = run_sweep(
+        multistart_job,
+        jobs,
+        out / "multistart.parquet",
+        client=client,
+        label="stability: multi-start",
+        log=log,
+    )
+    ms = analyse_multistart(rows[: len(jobs)])
+    solver_figure(out / "solvers.png", ms)
+    spread_figure(out / "spread.png", ms)
+    return {
+        **ms,
+        "starts": starts,
+        "max_steps": max_steps,
+        "nm_steps": nm_steps,
+        "adam_lrs": list(adam_lrs),
+    }
+
+
+def _noise_phase(client, out, experiment, overrides, noise, log) -> dict:
+    """The noise phase on the first experiment: its sweep (noise.parquet), analysis, figure.
+    ``noise``: (spp list, fixed spp, seeds, resolution, inputs varied)."""
+    from ..report.stability import noise_figure
+    from ..sweep import run_sweep
+
+    spp, fixed_spp, seeds, resolution, inputs = noise
+    jobs = plan_noise(str(experiment), overrides, list(spp), fixed_spp, seeds, resolution, inputs)
+    rows = run_sweep(
+        noise_job, jobs, out / "noise.parquet", client=client, label="stability: noise", log=log
+    )
+    summary = {
+        **analyse_noise(rows[: len(jobs)]),
+        "fixed_spp": fixed_spp,
+        "seeds": seeds,
+        "resolution": resolution,
+    }
+    noise_figure(out / "noise.png", summary)
+    return summary
+
+
 def run_stability(
     experiments: list,
     out,
@@ -329,25 +393,9 @@ def run_stability(
     from ..scene.experiment import load_experiment
     from ..sweep import run_sweep, scene_spec
     from ..sweep.cluster import open_client
-    from ..report.stability import (
-        noise_figure,
-        solver_figure,
-        spread_figure,
-        write_stability_report,
-    )
+    from ..report.stability import write_stability_report
 
-    if not noise_inputs or any(w not in ("reference", "texture") for w in noise_inputs):
-        raise ValueError(
-            f"noise_inputs must be a non-empty subset of ('reference', 'texture'), got {noise_inputs}"
-        )
-    bad = [p for p in phases if p not in PHASES]
-    if bad:
-        raise ValueError(f"unknown phase(s) {bad}; choose from {PHASES}")
-    bad = [s for s in solvers if s not in SOLVERS]
-    if bad:
-        raise ValueError(f"unknown solver(s) {bad}; choose from {SOLVERS}")
-    if starts < 1 or noise_seeds < 1:
-        raise ValueError("need starts >= 1 and noise_seeds >= 1")
+    _check_arguments(phases, solvers, starts, noise_seeds, noise_inputs)
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     overrides = list(overrides or [])
@@ -371,50 +419,12 @@ def run_stability(
             )
             summary["loss"] = analyse_loss(rows[: len(jobs)])
         if "multistart" in phases:
-            jobs = plan_multistart(specs, exps, starts, solvers, adam_lrs, max_steps, nm_steps)
-            rows = run_sweep(
-                multistart_job,
-                jobs,
-                out / "multistart.parquet",
-                client=client,
-                label="stability: multi-start",
-                log=log,
+            summary["multistart"] = _multistart_phase(
+                client, out, specs, exps, starts, solvers, adam_lrs, max_steps, nm_steps, log
             )
-            ms = analyse_multistart(rows[: len(jobs)])
-            summary["multistart"] = {
-                **ms,
-                "starts": starts,
-                "max_steps": max_steps,
-                "nm_steps": nm_steps,
-                "adam_lrs": list(adam_lrs),
-            }
-            solver_figure(out / "solvers.png", ms)
-            spread_figure(out / "spread.png", ms)
         if "noise" in phases:
-            jobs = plan_noise(
-                str(experiments[0]),
-                overrides,
-                list(noise_spp),
-                noise_fixed_spp,
-                noise_seeds,
-                noise_resolution,
-                noise_inputs,
-            )
-            rows = run_sweep(
-                noise_job,
-                jobs,
-                out / "noise.parquet",
-                client=client,
-                label="stability: noise",
-                log=log,
-            )
-            summary["noise"] = {
-                **analyse_noise(rows[: len(jobs)]),
-                "fixed_spp": noise_fixed_spp,
-                "seeds": noise_seeds,
-                "resolution": noise_resolution,
-            }
-            noise_figure(out / "noise.png", summary["noise"])
+            noise = (noise_spp, noise_fixed_spp, noise_seeds, noise_resolution, noise_inputs)
+            summary["noise"] = _noise_phase(client, out, experiments[0], overrides, noise, log)
     write_json(out / "summary.json", summary)
     write_stability_report(out, summary)
     log(f"stability: wrote {out / 'stability.md'}")
