@@ -1,0 +1,325 @@
+"""The experiment keys of the study run on a scene: the reference render (``reference.*``), the
+fit (``fit.*``), the tradeoff sweep (``tradeoff.*``) and the start constants (``constants.*``,
+one per ``CONSTANT_SPECS`` entry): ``STUDY_KEYS``, in the docs' order."""
+
+from __future__ import annotations
+
+from shaders_port import CONSTANT_SPECS
+from shaders_port._variants import VARIANTS
+
+from .schema_scene import Field
+
+SHADERS = tuple(VARIANTS)
+SOLVERS = ("levenberg_marquardt", "gauss_newton", "dogleg", "bfgs", "nelder_mead", "adam")
+FIT_PARAMETERS = (
+    "attenuation_distance",
+    "bumptex_mult",
+    "steps_grazing",
+    "steps_steep",
+    "water_color",
+    "reflect_color",
+    "specular_strength",
+    "specular_exponent",
+    # read by shader variants only (a variant fits them in place of the seed's
+    # constants it replaces, see shaders_port._variants.Variant.replaces)
+    "absorption_r",
+    "absorption_g",
+    "absorption_b",
+    "specular_roughness",
+    # the baseline shader's (seeds 001-004)
+    "refraction_index",
+    "refraction_strength",
+    "chromatic_dispersion",
+    "reflect_distortion",
+)
+
+STUDY_KEYS: dict[str, Field] = {
+    "reference.spp": Field(
+        "int_or_auto",
+        128,
+        "Samples per pixel, or `auto` to reach "
+        "`reference.target_noise`. Zero-mean noise in the reference moves the fitted "
+        "constants at random, without bias: on the default scene, from 1024 samples "
+        "per fit pixel down to 256 (here 64 spp at 256x256 fitted at 128x128) the mean "
+        "fitted constants of three seeds stay within 1.3 % of those at 4096 (the "
+        "specular pair, set by a few glints; the others within 0.5 %; `study "
+        "stability --phases noise`, README). The FLIP the report prints is against "
+        "this reference, so its noise raises it: raise the spp for a final figure.",
+        "",
+        1,
+        65536,
+    ),
+    "reference.target_noise": Field(
+        "float",
+        0.01,
+        'Target RMS standard error on water pixels for `spp = "auto"`.',
+        "linear RGB",
+        1e-5,
+        1.0,
+    ),
+    "reference.max_spp": Field("int", 1024, "Upper bound of the automatic spp.", "", 4, 65536),
+    "reference.sampler": Field(
+        "str",
+        "multijitter",
+        "Sampler of the reference render: `multijitter` "
+        "(Kensler's correlated multi-jittered strata per pass), `independent`, or "
+        "`stratified` (kept to reproduce earlier references: its dimensions are "
+        "correlated and it renders deep chromatic water about 1 % too bright). Each "
+        "pass's spp is rounded up to the sampler's grid (128 spp: 4 x 35). At equal "
+        "samples the jittered passes have 2.8x less variance on the water and 5.5x "
+        "less on the sun's glitter than independent ones (measured on the default "
+        "scene, docs/fast-references.md), which is where the reference's noise moves "
+        "the fitted specular pair.",
+        choices=("multijitter", "independent", "stratified"),
+    ),
+    "reference.seed": Field(
+        "int",
+        0,
+        "Base sampler seed (the per-pass seeds derived from it stay "
+        "within Mitsuba's 32-bit seeds).",
+        "",
+        0,
+        2**28 - 1,
+    ),
+    "reference.max_depth": Field("int", 12, "Maximum path length.", "", 2, 256),
+    "reference.texture_size": Field(
+        "int", 256, "Resolution of the top-down shader textures.", "texels", 16, 4096
+    ),
+    "reference.texture_spp": Field(
+        "int",
+        32,
+        "Samples per texel of the top-down texture: of the "
+        'lighting render (`texture_method = "lighting"`, denoised by default: '
+        "32 is the measured sweet spot, see the README) or of the colour render "
+        '(`"colour"`: use 512 or more, its noise biases the fit).',
+        "",
+        1,
+        65536,
+    ),
+    "reference.texture_method": Field(
+        "str",
+        "lighting",
+        "How the top-down refraction texture "
+        "is rendered: `lighting` (the floor's lighting path traced at "
+        "`reference.lighting_size` texels over the pool, times its known "
+        "albedo at `reference.texture_size`; walls from a colour render "
+        "at `reference.wall_spp`) or `colour` (the colour path traced "
+        "at `reference.texture_size`).",
+        choices=("lighting", "colour"),
+    ),
+    "reference.lighting_size": Field(
+        "int",
+        128,
+        "Texels per side of the lighting render over the "
+        'pool (`texture_method = "lighting"`; at most `reference.texture_size`).',
+        "texels",
+        8,
+        4096,
+    ),
+    "reference.lighting_denoise": Field(
+        "str",
+        "oidn",
+        "Denoise the lighting render (`texture_method = "
+        '"lighting"`): `oidn` (Intel Open Image Denoise, guided by the floor '
+        "albedo, the texture's mean over the pool then matched per colour channel "
+        "to the raw mean of the same samples), `oidn_unmatched` (denoised, its "
+        "own brightness kept) or `none` (raw path tracing: raise "
+        "`reference.texture_spp` to 256 or more). Measured effect on the fitted "
+        "constants: docs/fast-references.md.",
+        choices=("none", "oidn", "oidn_unmatched"),
+    ),
+    "reference.lighting_direct": Field(
+        "str",
+        "traced",
+        "The floor's direct light through the waves "
+        '(`texture_method = "lighting"` under water): `traced` (ray traced '
+        "without the path tracer's noise: the sun from the sun, its caustics "
+        "sharp; the sky gathered at the floor; only the light that bounced path "
+        "traced and denoised; scattering water, `water.albedo` > 0, keeps "
+        "`path`) or `path` (all of it path traced and denoised, the caustics "
+        "smoothed). docs/fast-references.md.",
+        choices=("traced", "path"),
+    ),
+    "reference.sun_bounces": Field(
+        "str",
+        "path",
+        "The sun's light that bounced under water (off the "
+        "walls, the floor, the water's underside) with `lighting_direct = "
+        '"traced"`: `path` (path traced and denoised with the sky\'s: fireflies '
+        "that the denoiser darkens, 2-4 % in red at the feet of sunlit walls) or "
+        "`photons` (light traced from the sun with its direct light, the path tracer "
+        "then rendering the sky's bounced light alone: those bands within 1 %, "
+        "+2-3 s; the fitted constants move by less than 0.2 SE). README, Fast "
+        "references.",
+        choices=("path", "photons"),
+    ),
+    "reference.bounce_spp": Field(
+        "int",
+        16,
+        "Samples per texel of the path-traced lighting with "
+        '`lighting_direct = "traced"` (only the light that bounced is kept from '
+        "it; `texture_spp` otherwise).",
+        "",
+        1,
+        65536,
+    ),
+    "reference.sun_photons": Field(
+        "int",
+        16,
+        "Photons per texture texel for the traced sunlight "
+        '(`lighting_direct = "traced"`; about 2/3 of them land in the pool).',
+        "",
+        1,
+        65536,
+    ),
+    "reference.sky_directions": Field(
+        "int",
+        36,
+        "Directions per texture texel, in each of two "
+        "independent halves, for the traced skylight (`lighting_direct = "
+        '"traced"`; a square number).',
+        "",
+        1,
+        4096,
+    ),
+    "reference.wall_spp": Field(
+        "int",
+        16,
+        "Samples per pixel of the dry colour render used "
+        "outside the pool and for the floor albedo (`texture_method = "
+        '"lighting"`; multi-jittered, rounded up to its grid).',
+        "",
+        1,
+        65536,
+    ),
+    "reference.wall_denoise": Field(
+        "str",
+        "oidn",
+        "Denoise the dry render that the refraction texture "
+        'takes outside the pool (`texture_method = "lighting"`; `reference.wall_spp`): '
+        "`oidn` (Open Image Denoise guided by its albedo, its mean outside the pool "
+        "matched to the raw mean there) or `none` (raw: 5-8 % noise per texel at 16 "
+        "spp, which biases the fit). docs/fast-references.md.",
+        choices=("oidn", "none"),
+    ),
+    "reference.refraction_lighting": Field(
+        "str",
+        "underwater",
+        "How the top-down refraction "
+        "texture is lit: `underwater` (the floor as lit through the "
+        "water) or `dry` (no water, as the original shader's application does).",
+        choices=("underwater", "dry"),
+    ),
+    "reference.fresnel_transmission": Field(
+        "str",
+        "energy",
+        "Transmission channel of the shader's "
+        "Fresnel LUT: `energy` (1 - R, as usual) or `radiance` "
+        "((1 - R) / ior^2: radiance leaving the water is compressed "
+        "into Snell's window, which the shader otherwise omits).",
+        choices=("energy", "radiance"),
+    ),
+    "reference.water_mesh": Field(
+        "int",
+        384,
+        "Grid resolution of the displaced water surface mesh.",
+        "vertices per side",
+        8,
+        4096,
+    ),
+    "fit.shader": Field("str", "water_refraction", "Shader variant to fit.", choices=SHADERS),
+    "fit.parameters": Field(
+        "list_str",
+        ["attenuation_distance", "bumptex_mult", "water_color", "specular_strength"],
+        "Constants to fit (frozen automatically when the scene does not identify them).",
+        choices=FIT_PARAMETERS,
+    ),
+    "fit.solver": Field("str", "levenberg_marquardt", "Solver.", choices=SOLVERS),
+    "fit.max_steps": Field("int", 100, "Solver iteration cap.", "", 1, 100000),
+    "fit.resolution": Field(
+        "vec2",
+        [128, 128],
+        "Image size the fit runs at (the reference is "
+        "rendered at `resolution`, then box-downsampled when smaller).",
+        "pixels",
+        8,
+        4096,
+    ),
+    "fit.input_noise": Field(
+        "str",
+        "ignore",
+        "What the fit does about Monte Carlo noise in the "
+        "refraction texture, which biases least squares (errors in the inputs): "
+        "`ignore` (least squares on the texture as given) or `decorrelate` (then "
+        "damped Newton steps on the decorrelated loss over the texture's two "
+        "independent raw halves, which cancels their noise in expectation; the "
+        "least-squares start, and so the basin, comes from the texture as given, "
+        "denoised or not; needs "
+        '`reference.texture_method = "lighting"`).',
+        choices=("ignore", "decorrelate"),
+    ),
+    "tradeoff.variants": Field(
+        "list_str",
+        ["water_refraction_noreflection", "water_refraction", "water_reflection"],
+        "Shader variants `study tradeoff` compares.",
+        choices=SHADERS,
+    ),
+    "tradeoff.steps_grazing": Field(
+        "list_float",
+        [5.0, 20.0],
+        "`STEPS_GRAZING` values of the schedule grid (full grid with the next two keys).",
+        "steps",
+        0.5,
+        1000.0,
+    ),
+    "tradeoff.steps_steep": Field(
+        "list_float", [1.5, 6.0], "`STEPS_STEEP` values of the grid.", "steps", 0.5, 1000.0
+    ),
+    "tradeoff.loop_cap": Field(
+        "list_float", [20, 40], "`LOOP_CAP` values of the grid (integers).", "iterations", 1, 10000
+    ),
+    "tradeoff.scales": Field(
+        "list_float",
+        [0.25, 0.5, 1.0, 2.0, 4.0],
+        "Schedules added to the grid: the "
+        "original shader's (10, 3, 40) (and for `water_reflection` its reflection schedule) "
+        "times each factor, so every halving of the step count is measured.",
+        "",
+        0.01,
+        100.0,
+    ),
+    "tradeoff.converged_scale": Field(
+        "float",
+        16.0,
+        "Factor on the original shader's schedule of the converged "
+        "raymarch that measures each variant's error floor.",
+        "",
+        1.0,
+        1000.0,
+    ),
+    "tradeoff.tolerance": Field(
+        "float",
+        0.02,
+        "Recommend the cheapest configuration whose FLIP is within this fraction of the best FLIP.",
+        "",
+        0.0,
+        10.0,
+    ),
+    "tradeoff.gl_repeats": Field(
+        "int", 5, "Frames timed per GL measurement (median reported).", "", 3, 1000
+    ),
+}
+for _name, (_glsl, _kind, _default, (_lo, _hi)) in CONSTANT_SPECS.items():
+    if _kind.endswith("vec4"):
+        STUDY_KEYS[f"constants.{_name}"] = Field(
+            "vec4", list(_default), f"Start value of `{_glsl}`.", "linear RGBA", _lo, _hi
+        )
+    else:
+        STUDY_KEYS[f"constants.{_name}"] = Field(
+            "int" if _kind.endswith("int") else "float",
+            _default,
+            f"Start value of `{_glsl}`.",
+            "",
+            _lo,
+            _hi,
+        )
