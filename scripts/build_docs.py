@@ -7,6 +7,9 @@ Every table of results in ``docs/`` is written by this script, never by hand:
   else from its ``tradeoff.parquet`` (fronts, recommendations and findings recomputed by
   ``study.studies.tradeoff.analyse``; the run-time sections -- exported shaders, side-by-side
   images -- exist only in a run's own summary);
+* ``docs/results/failures/report.md``: from its ``failures.parquet`` (one row per scene and
+  failure class) and ``summary.json`` (the command that ran it);
+* ``docs/results/stability/<phase>/stability.md``: from the phase's ``summary.json``;
 * ``docs/experiment-keys.md``: the experiment file's key table, from the schema.
 
 Re-running a study into ``docs/results/<study>`` and then this script refreshes the pages::
@@ -28,6 +31,7 @@ REPO = Path(__file__).resolve().parent.parent
 DOCS = REPO / "docs"
 RESULTS = DOCS / "results"
 TRADEOFF_FAMILY = ("tradeoff", "variants", "variants/shipped", "baselines")
+STABILITY_PHASES = ("stability/multistart", "stability/noise")
 DEFAULT_TOLERANCE = 0.02
 
 KEYS_HEADER = """# Experiment keys
@@ -61,6 +65,7 @@ def _tradeoff_summary(folder: Path) -> dict:
 
 def generated() -> dict[Path, str]:
     """Every generated page: path -> its Markdown."""
+    from study.report.stability import stability_report_text
     from study.report.tradeoff import tradeoff_report_text
     from study.scene.experiment import schema_markdown
 
@@ -68,7 +73,28 @@ def generated() -> dict[Path, str]:
     for study in TRADEOFF_FAMILY:
         folder = RESULTS / study
         pages[folder / "report.md"] = tradeoff_report_text(_tradeoff_summary(folder))
+    pages[RESULTS / "failures" / "report.md"] = _failures_page(RESULTS / "failures")
+    for phase in STABILITY_PHASES:
+        folder = RESULTS / phase
+        pages[folder / "stability.md"] = stability_report_text(_json(folder / "summary.json"))
     return pages
+
+
+def _json(path: Path) -> dict:
+    if not path.is_file():
+        raise FileNotFoundError(f"{path} is missing: re-run the study into {path.parent}")
+    return json.loads(path.read_text())
+
+
+def _failures_page(folder: Path) -> str:
+    """The failure catalogue's report from its table and the command that ran it."""
+    from study.report.failures import failures_report_text, scenes_of
+    from study.studies.failures import CLASSES
+    from study.sweep import read_table
+
+    command = _json(folder / "summary.json")["command"]
+    rows = read_table(folder / "failures.parquet")
+    return failures_report_text(scenes_of(rows), list(CLASSES), command)
 
 
 def stale(pages: dict[Path, str]) -> list[Path]:

@@ -191,6 +191,13 @@ def _add_export(sub) -> None:
     p.add_argument("--out", required=True, help="output folder")
 
 
+def _command_line(argv) -> str:
+    """The command as a user would type it (``study ...``), for a report's "Reproduce" line."""
+    import shlex
+
+    return shlex.join(["study", *(sys.argv[1:] if argv is None else argv)])
+
+
 def main(argv=None) -> int:
     args = build_parser().parse_args(argv)
     from . import _jobs
@@ -246,6 +253,7 @@ def main(argv=None) -> int:
                 noise_seeds=args.noise_seeds,
                 noise_resolution=args.noise_resolution,
                 noise_inputs=args.noise_inputs,
+                command=_command_line(argv),
             )
         elif args.command == "failures":
             _jobs.run_failures(

@@ -91,10 +91,40 @@ def table_markdown(rows: list[dict]) -> str:
     return "\n".join(lines)
 
 
+def scenes_of(tidy: list[dict]) -> list[dict]:
+    """The report's scenes from the rows of ``failures.parquet`` (one per experiment and class,
+    each carrying its scene's figures), in the table's order: dicts with ``experiment``,
+    ``shader``, ``figure`` (relative path), ``rows``, ``flip``, ``spp``, ``noise``,
+    ``water_pixels``."""
+    scenes: dict[str, dict] = {}
+    for t in tidy:
+        s = scenes.setdefault(
+            t["experiment"],
+            {
+                "experiment": t["experiment"],
+                "shader": t["shader"],
+                "figure": t["figure"],
+                "rows": [],
+                "flip": t["scene_flip"],
+                "spp": t.get("reference_spp"),
+                "noise": t.get("reference_noise"),
+                "water_pixels": t["water_pixels"],
+            },
+        )
+        s["rows"].append(t)
+    return list(scenes.values())
+
+
 def write_failures_report(out: Path, scenes: list[dict], classes: list, command: str) -> Path:
-    """``report.md``: the class definitions, then per scene its figure and table.
-    ``scenes``: dicts with ``experiment``, ``shader``, ``figure`` (relative path), ``rows``,
-    ``flip``, ``water_pixels``; ``classes``: the catalogue's ``FailureClass`` entries."""
+    """``out/report.md`` of :func:`failures_report_text`."""
+    path = out / "report.md"
+    write_text_atomic(path, failures_report_text(scenes, classes, command))
+    return path
+
+
+def failures_report_text(scenes: list[dict], classes: list, command: str) -> str:
+    """The report's Markdown: the class definitions, then per scene its figure and table.
+    ``scenes``: :func:`scenes_of`; ``classes``: the catalogue's ``FailureClass`` entries."""
     lines = [
         "# Where the shader fails: the failure catalogue",
         "",
@@ -121,6 +151,4 @@ def write_failures_report(out: Path, scenes: list[dict], classes: list, command:
             table_markdown(s["rows"]),
             "",
         ]
-    path = out / "report.md"
-    write_text_atomic(path, "\n".join(lines))
-    return path
+    return "\n".join(lines)

@@ -122,98 +122,123 @@ def spread_table(ms: dict) -> list[str]:
 
 
 def write_stability_report(out: Path, summary: dict) -> Path:
-    lines = ["# Stability where methods fail", ""]
-    ms = summary.get("multistart")
-    if ms:
-        lines += [
-            "## Solvers from many starts",
-            "",
-            f"{ms['starts']} Latin-hypercube starts per scene and solver; success: final loss within "
-            f"0.1 % of the best loss of all runs on the scene; step cap {ms['max_steps']} "
-            f"(Nelder-Mead {ms['nm_steps']}); Adam at learning rates {ms['adam_lrs']}, reported at the "
-            f"best ({ms['best_adam']}).",
-            "",
-        ]
-        lines += solver_table(ms) + [
-            "",
-            "![success rate against median time](solvers.png)",
-            "",
-            "Relative spread of each fitted constant (std / |median| over the runs, "
-            "median over scenes):",
-            "",
-        ]
-        lines += spread_table(ms) + ["", "![spread](spread.png)", ""]
-        if any(k.startswith("adam") for k in ms["solvers"]):
-            lines += [
-                "Adam's learning-rate sweep:",
-                "",
-                "| learning rate | success rate | median time to stop (s) |",
-                "|---|---|---|",
-            ]
-            for k, s in ms["solvers"].items():
-                if k.startswith("adam"):
-                    lines.append(
-                        f"| {k} | {fmt(s['success_rate'], 3)} | {fmt(s['time_to_stop_median'], 3)} |"
-                    )
-            lines.append("")
-    ls = summary.get("loss")
-    if ls:
-        lines += [
-            "## Which residual",
-            "",
-            "FLIP (water pixels, full resolution) of each scene calibrated with the "
-            "linear-RGB residual and the log residual (`study.fit.losses`).",
-            "",
-            "| scene | FLIP linear | FLIP log | RMSE linear | RMSE log |",
-            "|---|---|---|---|---|",
-        ]
-        for scene, d in ls["per_scene"].items():
-            a, b = d.get("linear", {}), d.get("log", {})
-            lines.append(
-                f"| {scene} | {fmt(a.get('flip'))} | {fmt(b.get('flip'))} | {fmt(a.get('rmse'))} | "
-                f"{fmt(b.get('rmse'))} |"
-            )
-        lines += [
-            "",
-            f"Mean FLIP: linear {fmt(ls['mean_flip']['linear'])}, log {fmt(ls['mean_flip']['log'])}; "
-            f"scenes won: {ls['wins']}; lower mean FLIP: **{ls['winner']}**.",
-            "",
-        ]
-    nz = summary.get("noise")
-    if nz:
-        lines += [
-            "## Noise of the references and textures",
-            "",
-            f"{nz['seeds']} seeds per level at {nz['resolution']}x{nz['resolution']}; the other spp held at "
-            f"{nz['fixed_spp']}. Bias against the highest level +- its standard error (seeds).",
-            "",
-        ]
-        for which in ("reference", "texture"):
-            d = nz.get(which)
-            if not d:
-                continue
-            names = sorted({n for s in d["stats"].values() for n in s})
-            lines += [
-                f"### {which} spp (cheapest agreeing with {d['levels'][-1]} within one standard error: "
-                f"**{d['cheapest_agreeing']}**)",
-                "",
-                "| spp | " + " | ".join(f"`{n}`" for n in names) + " | all agree |",
-                "|---|" + "---|" * len(names) + "---|",
-            ]
-            for spp in d["levels"]:
-                cells = []
-                for n in names:
-                    st = d["stats"][spp].get(n, {})
-                    cells.append(
-                        f"{fmt(st.get('mean'))} ({fmt(st.get('bias'), 2)} +- {fmt(st.get('bias_se'), 2)})"
-                    )
-                lines.append(
-                    f"| {spp} | "
-                    + " | ".join(cells)
-                    + f" | {'yes' if d['agrees'][spp] else 'no'} |"
-                )
-            lines.append("")
-        lines += ["![bias against spp](noise.png)", ""]
+    """``out/stability.md`` of :func:`stability_report_text`."""
     path = Path(out) / "stability.md"
-    write_text_atomic(path, "\n".join(lines))
+    write_text_atomic(path, stability_report_text(summary))
     return path
+
+
+def stability_report_text(summary: dict) -> str:
+    """The Markdown of ``stability.md`` from the study's ``summary.json``: one section per phase
+    run, and the command that reproduces it."""
+    lines = ["# Stability where methods fail", ""]
+    if summary.get("command"):
+        lines += [f"Reproduce: `{summary['command']}`", ""]
+    lines += _multistart_lines(summary.get("multistart"))
+    lines += _loss_lines(summary.get("loss"))
+    lines += _noise_lines(summary.get("noise"))
+    return "\n".join(lines)
+
+
+def _multistart_lines(ms: dict | None) -> list[str]:
+    if not ms:
+        return []
+    lines = []
+    lines += [
+        "## Solvers from many starts",
+        "",
+        f"{ms['starts']} Latin-hypercube starts per scene and solver; success: final loss within "
+        f"0.1 % of the best loss of all runs on the scene; step cap {ms['max_steps']} "
+        f"(Nelder-Mead {ms['nm_steps']}); Adam at learning rates {ms['adam_lrs']}, reported at the "
+        f"best ({ms['best_adam']}).",
+        "",
+    ]
+    lines += solver_table(ms) + [
+        "",
+        "![success rate against median time](solvers.png)",
+        "",
+        "Relative spread of each fitted constant (std / |median| over the runs, "
+        "median over scenes):",
+        "",
+    ]
+    lines += spread_table(ms) + ["", "![spread](spread.png)", ""]
+    if any(k.startswith("adam") for k in ms["solvers"]):
+        lines += [
+            "Adam's learning-rate sweep:",
+            "",
+            "| learning rate | success rate | median time to stop (s) |",
+            "|---|---|---|",
+        ]
+        for k, s in ms["solvers"].items():
+            if k.startswith("adam"):
+                lines.append(
+                    f"| {k} | {fmt(s['success_rate'], 3)} | {fmt(s['time_to_stop_median'], 3)} |"
+                )
+        lines.append("")
+    return lines
+
+
+def _loss_lines(ls: dict | None) -> list[str]:
+    if not ls:
+        return []
+    lines = []
+    lines += [
+        "## Which residual",
+        "",
+        "FLIP (water pixels, full resolution) of each scene calibrated with the "
+        "linear-RGB residual and the log residual (`study.fit.losses`).",
+        "",
+        "| scene | FLIP linear | FLIP log | RMSE linear | RMSE log |",
+        "|---|---|---|---|---|",
+    ]
+    for scene, d in ls["per_scene"].items():
+        a, b = d.get("linear", {}), d.get("log", {})
+        lines.append(
+            f"| {scene} | {fmt(a.get('flip'))} | {fmt(b.get('flip'))} | {fmt(a.get('rmse'))} | "
+            f"{fmt(b.get('rmse'))} |"
+        )
+    lines += [
+        "",
+        f"Mean FLIP: linear {fmt(ls['mean_flip']['linear'])}, log {fmt(ls['mean_flip']['log'])}; "
+        f"scenes won: {ls['wins']}; lower mean FLIP: **{ls['winner']}**.",
+        "",
+    ]
+    return lines
+
+
+def _noise_lines(nz: dict | None) -> list[str]:
+    if not nz:
+        return []
+    lines = []
+    lines += [
+        "## Noise of the references and textures",
+        "",
+        f"{nz['seeds']} seeds per level at {nz['resolution']}x{nz['resolution']}; the other spp held at "
+        f"{nz['fixed_spp']}. Bias against the highest level +- its standard error (seeds).",
+        "",
+    ]
+    for which in ("reference", "texture"):
+        d = nz.get(which)
+        if not d:
+            continue
+        names = sorted({n for s in d["stats"].values() for n in s})
+        lines += [
+            f"### {which} spp (cheapest agreeing with {d['levels'][-1]} within one standard error: "
+            f"**{d['cheapest_agreeing']}**)",
+            "",
+            "| spp | " + " | ".join(f"`{n}`" for n in names) + " | all agree |",
+            "|---|" + "---|" * len(names) + "---|",
+        ]
+        for spp in d["levels"]:
+            cells = []
+            for n in names:
+                st = d["stats"][spp].get(n, {})
+                cells.append(
+                    f"{fmt(st.get('mean'))} ({fmt(st.get('bias'), 2)} +- {fmt(st.get('bias_se'), 2)})"
+                )
+            lines.append(
+                f"| {spp} | " + " | ".join(cells) + f" | {'yes' if d['agrees'][spp] else 'no'} |"
+            )
+        lines.append("")
+    lines += ["![bias against spp](noise.png)", ""]
+    return lines

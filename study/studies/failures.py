@@ -441,6 +441,12 @@ def tidy_rows(sweep_rows: list[dict]) -> list[dict]:
                 {
                     "experiment": row["experiment"],
                     "shader": row["shader"],
+                    # the scene's own figures, repeated on each of its rows (the report's text)
+                    "scene_flip": row["flip"],
+                    "water_pixels": row["water_pixels"],
+                    "reference_spp": row.get("reference_spp"),
+                    "reference_noise": row.get("reference_noise"),
+                    "figure": row["figure"],
                     "class": k,
                     **{
                         f: row[f"classes.{k}.{f}"]
@@ -476,7 +482,8 @@ def run_failures(
     import sys
     from pathlib import Path
 
-    from ..report.failures import write_failures_report
+    from .._io import write_json
+    from ..report.failures import scenes_of, write_failures_report
     from ..scene.experiment import load_experiments
     from ..sweep import run_sweep, scene_spec, write_table
 
@@ -517,29 +524,14 @@ def run_failures(
         raise RuntimeError(f"every experiment failed; first error: {bad[0][1]}")
     tidy = tidy_rows(rows)
     write_table(out / "failures.parquet", tidy)
-    scenes = []
-    for r in rows:
-        if r.get("status") != "ok":
-            continue
-        scene_rows = [t for t in tidy if t["experiment"] == r["experiment"]]
-        scenes.append(
-            {
-                "experiment": r["experiment"],
-                "shader": r["shader"],
-                "figure": r["figure"],
-                "rows": scene_rows,
-                "flip": r["flip"],
-                "spp": r.get("reference_spp"),
-                "noise": r.get("reference_noise"),
-                "water_pixels": r["water_pixels"],
-            }
-        )
     command = (
         "study failures "
         + " ".join(str(p) for p in experiments)
         + "".join(f" --set {o}" for o in overrides or [])
         + f" --out {out_arg}"
     )
+    write_json(out / "summary.json", {"command": command, "experiments": names})
+    scenes = scenes_of(tidy)
     write_failures_report(out, scenes, list(CLASSES), command)
     for s in scenes:
         log(

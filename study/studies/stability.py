@@ -387,8 +387,10 @@ def run_stability(
     workers=None,
     variant: str = "llvm_ad_rgb",
     log=_log,
+    command: str | None = None,
 ) -> dict:
-    """Run the study (see the module doc); returns the summary written to ``summary.json``."""
+    """Run the study (see the module doc); returns the summary written to ``summary.json``
+    (``command``: the command line that ran it, quoted in the report)."""
     from .._io import write_json
     from ..scene.experiment import load_experiment
     from ..sweep import run_sweep, scene_spec
@@ -406,6 +408,8 @@ def run_stability(
         "overrides": overrides,
         "phases": list(phases),
     }
+    if command:
+        summary["command"] = command
     with open_client(scheduler, workers, variant, log=log) as client:
         if "loss" in phases:
             jobs = plan_loss(specs, exps)
