@@ -126,8 +126,41 @@ def test_scene_hash_tracks_scene_keys_only():
     )  # seeds the textures too
 
 
-def test_readme_documents_every_key():
-    readme = (REPO / "experiments" / "README.md").read_text()
-    assert schema_markdown() in readme, "regenerate the table: python -m study.scene.experiment"
+def test_the_key_page_documents_every_key():
+    page = (REPO / "docs" / "experiment-keys.md").read_text()
+    assert schema_markdown() in page, "regenerate the docs: python scripts/build_docs.py"
     for key in SCHEMA:
-        assert re.search(rf"`{re.escape(key)}`", readme)
+        assert re.search(rf"`{re.escape(key)}`", page)
+    assert "docs/experiment-keys.md" in (REPO / "experiments" / "README.md").read_text()
+
+
+def test_fit_parameters_default_to_what_the_shader_reads(capfd):
+    """Unset, ``fit.parameters`` is every continuous constant the chosen shader reads (not its
+    step schedule); so ``--set fit.shader=...`` works with any shader of the registry."""
+    from shaders_port._variants import VARIANTS
+
+    for name, v in VARIANTS.items():
+        exp = validate({"fit": {"shader": name}})
+        reads = set(v.reads())
+        assert exp["fit.parameters"] and set(exp["fit.parameters"]) <= reads, name
+        assert not set(exp["fit.parameters"]) & set(v.schedule), name
+    base = validate({"fit": {"shader": "water_baseline"}})["fit.parameters"]
+    assert "refraction_strength" in base and "bumptex_mult" not in base
+    beer = validate({"fit": {"shader": "water_refraction_beer"}})["fit.parameters"]
+    assert {"absorption_r", "absorption_g", "absorption_b"} <= set(beer)
+    assert "attenuation_distance" not in beer  # the Beer-Lambert variant does not read it
+
+
+def test_a_listed_constant_the_shader_does_not_read_is_dropped_with_a_note(capfd):
+    from study.scene import experiment
+
+    experiment._NOTED.clear()  # the note is printed once per process and shader
+    exp = load_experiment(REPO / "experiments" / "default.toml", ['fit.shader="water_baseline"'])
+    listed = load_experiment(REPO / "experiments" / "default.toml")["fit.parameters"]
+    assert "bumptex_mult" in listed and "bumptex_mult" not in exp["fit.parameters"]
+    assert exp["fit.parameters"] == [p for p in listed if p != "bumptex_mult"]
+    assert "water_baseline does not read bumptex_mult; not fitted" in capfd.readouterr().err
+    with pytest.raises(ExperimentError, match="reads none of them"):
+        validate({"fit": {"shader": "water_baseline", "parameters": ["bumptex_mult"]}})
+    with pytest.raises(ExperimentError, match="unknown entry 'fresnel'"):  # still an error
+        validate({"fit": {"shader": "water_baseline", "parameters": ["fresnel"]}})

@@ -82,6 +82,37 @@ _LATER_KEYS = (
 )
 
 
+_NOTED: set = set()
+
+
+def fit_parameters(shader_name: str, listed: list | None) -> list[str]:
+    """The constants a fit of ``shader_name`` takes for ``fit.parameters = listed``: unset
+    (None), every ``FIT_PARAMETERS`` entry the shader reads outside its step schedule; else
+    the listed ones it reads, or that it replaces by constants of its own (e.g. the
+    Beer-Lambert absorptions for ``attenuation_distance``; the fit takes the replacements).
+    A listed constant it does not read is dropped with one note on stderr; none left is an
+    ExperimentError."""
+    shader = VARIANTS[shader_name]
+    reads = shader.reads()
+    readable = [p for p in FIT_PARAMETERS if p in reads and p not in shader.schedule]
+    if listed is None:
+        return readable
+    kept = [p for p in listed if p in reads or p in shader.replaces]
+    dropped = [p for p in listed if p not in kept]
+    if not kept:
+        raise ExperimentError(
+            f"fit.parameters {listed}: fit.shader = {shader_name!r} reads none of them (its "
+            f"GLSL declares no such constant); it reads: {', '.join(readable)} (or leave "
+            "fit.parameters unset to fit them all)"
+        )
+    if dropped and (shader_name, tuple(dropped)) not in _NOTED:
+        _NOTED.add((shader_name, tuple(dropped)))
+        from .._progress import log
+
+        log(f"experiment: {shader_name} does not read {', '.join(dropped)}; not fitted")
+    return kept
+
+
 def _unset_later_key(key: str, value) -> bool:
     return key in _LATER_KEYS and value == SCHEMA[key].default
 
@@ -348,17 +379,7 @@ def validate(raw: dict, overrides: list[str] | None = None, path: Path | None = 
             'independent halves, which only reference.texture_method = "lighting" '
             'renders; use that method or fit.input_noise = "ignore"'
         )
-    shader = VARIANTS[values["fit.shader"]]
-    reads = shader.reads()
-    # a constant the variant replaces (e.g. the Beer-Lambert absorptions for the attenuation
-    # distance) is accepted: the fit takes its replacements
-    unread = [p for p in values["fit.parameters"] if p not in reads and p not in shader.replaces]
-    if unread:
-        raise ExperimentError(
-            f"fit.parameters {unread} are not read by fit.shader = {values['fit.shader']!r} (its "
-            f"GLSL declares no such constant, so the fit could not move them); fit only constants "
-            f"it reads: {', '.join(p for p in FIT_PARAMETERS if p in reads)}"
-        )
+    values["fit.parameters"] = fit_parameters(values["fit.shader"], values["fit.parameters"])
     if values["camera.position"] == values["camera.target"]:
         raise ExperimentError("camera.position equals camera.target; move one of them")
     if values["camera.position"][1] <= 0.0:
@@ -400,7 +421,3 @@ def load_experiments(paths, overrides: list[str] | None = None) -> list[Experime
     if len(set(names)) != len(names):
         raise ExperimentError(f"experiment names must be distinct (they name the outputs): {names}")
     return exps
-
-
-if __name__ == "__main__":  # python -m study.scene.experiment > table (for experiments/README.md)
-    print(schema_markdown(), end="")

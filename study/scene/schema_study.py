@@ -230,8 +230,10 @@ STUDY_KEYS: dict[str, Field] = {
     "fit.shader": Field("str", "water_refraction", "Shader variant to fit.", choices=SHADERS),
     "fit.parameters": Field(
         "list_str",
-        ["attenuation_distance", "bumptex_mult", "water_color", "specular_strength"],
-        "Constants to fit (frozen automatically when the scene does not identify them).",
+        None,
+        "Constants to fit (frozen automatically when the scene does not identify them). Unset: "
+        "every continuous constant `fit.shader` reads (not its step schedule); a listed constant "
+        "it does not read is dropped with a note.",
         choices=FIT_PARAMETERS,
     ),
     "fit.solver": Field("str", "levenberg_marquardt", "Solver.", choices=SOLVERS),
