@@ -303,9 +303,11 @@ def planar_reflection(m, P, S, C, vBumpTex, mirrorNormal, flat: bool):
             dr.normalize(exy) * dr.norm(flatNormal) * C.reflect_distortion,
             m.Array2f(0.0, 0.0),
         )
+        # 004's mirrored camera is flipped in y (t = 1 - gl_FragCoord.y / height): 002's
+        # offset is in window coordinates, so its vertical part enters with the opposite sign
         vTextureReflection = (
             vTextureReflection[0] + reflectOffset.x,
-            vTextureReflection[1] + reflectOffset.y,
+            vTextureReflection[1] - reflectOffset.y,
         )
     reflectionTextureColor = S.reflection_sampler.sample(
         m, vTextureReflection[0], vTextureReflection[1]

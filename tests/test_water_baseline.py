@@ -333,3 +333,41 @@ def test_block_holds_the_defaults_and_round_trips(dialect):
     if shutil.which("glslangValidator"):
         for d in water_baseline.DEFINES:
             compile_check(with_define(src, d), "frag")
+
+
+def test_reflection_offset_moves_the_image_as_source_002_does():
+    """Source 004's mirrored camera is flipped in y: its projective coordinate is
+    ``(s, 1 - t)`` of the window coordinate ``(s, t) = gl_FragCoord.xy / screenSize`` on every
+    water pixel. Source 002 adds its offset in window coordinates, so the shader adds
+    ``(offset.x, -offset.y)`` to 004's coordinate: in window terms, the sample moves by +offset."""
+    import drjit as dr
+
+    from shaders_port._frame import resolve_constants
+    from shaders_port._raster import prepare
+    from shaders_port._texture import backend_types
+    from shaders_port.water_baseline import MIRROR_NORMAL, mat4_vec4, planar_reflection
+
+    inp = synthetic_baseline_inputs(64, 48)
+    m = backend_types("llvm")
+    P = prepare(inp, m)
+    S = water_baseline.screen_state(m, P, inp)
+    wp = P.varyingVecWorldPosition
+    clip = mat4_vec4(m, S.o2v_projection_reflection, wp.x, 0.0, wp.z, 1.0)
+    s_refl = (0.5 + 0.5 * clip.x / clip.w).numpy()
+    t_refl = (0.5 + 0.5 * clip.y / clip.w).numpy()
+    s_win, t_win = S.bumpUV[0].numpy(), S.bumpUV[1].numpy()
+    np.testing.assert_allclose(s_refl, s_win, atol=1e-6)
+    np.testing.assert_allclose(t_refl, 1.0 - t_win, atol=1e-6)
+    # a tilted wave normal: the window-space displacement of the sample is 002's offset
+    C = resolve_constants(m, Constants(reflect_distortion=0.1), "replay")
+    normal = dr.normalize(m.Array3f(0.3, 1.0, -0.2))
+    mirror = m.Array3f(*MIRROR_NORMAL)
+    _, (s_tex, t_tex) = planar_reflection(m, P, S, C, normal, mirror, False)
+    flat = normal - dr.dot(normal, mirror) * mirror
+    N = S.normal_matrix
+    eye = [sum(N[i][j] * flat[j] for j in range(3)) for i in range(2)]
+    length = dr.sqrt(eye[0] * eye[0] + eye[1] * eye[1])
+    offset = [float((e / length * dr.norm(flat) * 0.1).numpy()[0]) for e in eye]
+    np.testing.assert_allclose(s_tex.numpy() - s_win, offset[0], atol=1e-5)
+    np.testing.assert_allclose((1.0 - t_tex.numpy()) - t_win, offset[1], atol=1e-5)
+    assert abs(offset[1]) > 1e-3  # the vertical part is there to be checked

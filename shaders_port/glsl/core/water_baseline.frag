@@ -172,7 +172,9 @@ void main (void)
     //a flat normal must not deform the image: no offset where eyeNormal.xy is 0 (normalize(0) is NaN)
     vec2 reflectOffset = length(eyeNormal.xy) > 0.0 ?
         normalize (eyeNormal.xy) * length (flatNormal) * REFLECT_DISTORTION : vec2(0.0, 0.0);
-    vTextureReflection += reflectOffset;
+    //004's mirrored camera is flipped in y (t = 1 - gl_FragCoord.y / height): 002's offset is in
+    //window coordinates, so its vertical part enters this coordinate with the opposite sign
+    vTextureReflection += vec2(reflectOffset.x, -reflectOffset.y);
 #endif
     vec4 reflectionTextureColor = texture(reflection_sampler, vTextureReflection);
     // Framebuffer reflection can have alpha > 1
