@@ -99,9 +99,11 @@ def main() -> None:
             for n, p in y.items()
         }
     print(
-        f"\n# bench_decorrelated: {Path(args.experiment).stem}, {args.seeds} lighting seed(s), overrides "
+        f"\n# bench_decorrelated: {Path(args.experiment).stem}, {args.seeds} "
+        "lighting seed(s), overrides "
         f"{args.overrides or 'none'}, reference {ref.spp} spp; fit s (median): least squares "
-        f"{np.median(seconds['least squares']):.1f}, decorrelated {np.median(seconds['decorrelated']):.1f}\n"
+        f"{np.median(seconds['least squares']):.1f}, decorrelated "
+        f"{np.median(seconds['decorrelated']):.1f}\n"
     )
     head = "| constant | least squares, mean +- SD | decorrelated, mean +- SD |"
     if yard:

@@ -24,7 +24,8 @@ A third field, ``METHOD:SPP:SEED``, renders the texture with ``reference.seed = 
 samples: the spread from seed to seed shows what one row's distance means). Every row is fitted
 against the same image, the reference of the experiment as given.
 
-    .venv/bin/python benchmarks/bench_denoise.py [EXPERIMENT.toml] [--textures raw:2048 raw:256 oidn:32 ...]
+    .venv/bin/python benchmarks/bench_denoise.py [EXPERIMENT.toml] \
+[--textures raw:2048 raw:256 oidn:32 ...]
         [--cache DIR] [--set KEY=VALUE ...]
 """
 
@@ -86,7 +87,8 @@ def main() -> None:
             or not all(p.isdigit() for p in parts[1:])
         ):
             ap.error(
-                f"--textures {item!r}: expected raw:SPP, oidn:SPP, oidn_unmatched:SPP or METHOD:SPP:SEED"
+                f"--textures {item!r}: expected raw:SPP, oidn:SPP, "
+                "oidn_unmatched:SPP or METHOD:SPP:SEED"
             )
         settings.append((parts[0], int(parts[1]), int(parts[2]) if len(parts) == 3 else None))
     raws = [s for s in settings if s[0] == "raw"]
@@ -118,7 +120,8 @@ def main() -> None:
     inside = (np.abs(X) < hx) & (np.abs(Z) < hz) & (world_y < td.underwater_camera_height(base))
     sigma = 1.5 * size / min(base["reference.lighting_size"], size)
     print(
-        f"# {base['name']}: reference {base['reference.spp']} spp, lighting {base['reference.lighting_size']}^2 "
+        f"# {base['name']}: reference {base['reference.spp']} spp, lighting "
+        f"{base['reference.lighting_size']}^2 "
         f"texels, texture {size}^2; yardstick {best[0]}:{best[1]}",
         flush=True,
     )
@@ -187,7 +190,8 @@ def main() -> None:
 
     names = list(yard["params"])
     print(
-        "\n| texture | input build s | FLIP | RMSE | texture RMS rel. diff | detail kept | mean R / G / B vs "
+        "\n| texture | input build s | FLIP | RMSE | texture RMS rel. diff | detail kept "
+        "| mean R / G / B vs "
         "the yardstick's | " + " | ".join(names) + " |"
     )
     print("|---|---|---|---|---|---|---|" + "---|" * len(names))
@@ -207,7 +211,8 @@ def main() -> None:
                 + ("" if st == "fitted" else f" {st}")
             )
         print(
-            f"| {r['label']} | {_g(r['seconds'], 3) if r['seconds'] else 'cached'} | {r['flip']:.4f} | "
+            f"| {r['label']} | {_g(r['seconds'], 3) if r['seconds'] else 'cached'} "
+            f"| {r['flip']:.4f} | "
             f"{r['rmse']:.4f} | {r['rel_diff']:.3f} | {r['detail']:.2f} | "
             + " / ".join(f"{m:.3f}" for m in r["mean_ratio"])
             + " | "

@@ -18,7 +18,8 @@ The path tracer runs at ``--spp`` (default: the shipped lighting render's 32 spp
 estimators at the shipped settings (``reference.sun_photons``, ``reference.sky_directions``). Not
 a test: ratios, not thresholds.
 
-    .venv/bin/python benchmarks/bench_direct_light.py experiments/default.toml experiments/grazing.toml
+    .venv/bin/python benchmarks/bench_direct_light.py experiments/default.toml
+        experiments/grazing.toml
 """
 
 from __future__ import annotations
@@ -160,7 +161,8 @@ def main(argv=None) -> None:
     for path in args.experiments:
         for r in run(load_experiment(path), args.spp, args.estimates, args.repeats):
             print(
-                f"| {r['experiment']} | {r['term']} | {r['path']['seconds']:.2f} / {r['traced']['seconds']:.2f} | "
+                f"| {r['experiment']} | {r['term']} | {r['path']['seconds']:.2f} / "
+                f"{r['traced']['seconds']:.2f} | "
                 f"{f3(r['ratio'])} (+- {f3(r['ratio_se'])}) | {f3(r['path']['rel_se'])} | "
                 f"{f3(r['traced']['rel_se'])} | "
                 + " / ".join(f"{v:.0f}" for v in r["efficiency"])

@@ -97,7 +97,8 @@ def main() -> None:
 
     print(f"target loss: best of all solvers x 1.001 = {target:.6g}")
     print(
-        f"{'solver':>20} {'total s':>8} {'to target s':>11} {'iters':>6} {'values':>7} {'jacobians':>9} "
+        f"{'solver':>20} {'total s':>8} {'to target s':>11} {'iters':>6} "
+        f"{'values':>7} {'jacobians':>9} "
         f"{'final loss':>11} {'FLIP':>7}  converged / message"
     )
     times = {}
@@ -107,7 +108,8 @@ def main() -> None:
         print(
             f"{solver:>20} {res.seconds:8.2f} {('%.2f' % tt) if tt is not None else 'never':>11} "
             f"{res.iterations:6d} {res.n_value_calls:7d} {res.n_jac_calls:9d} {res.loss:11.6g} "
-            f"{flip_of({n: res.constants[n] for n in names}):7.4f}  {res.converged} / {res.message[:60]}",
+            f"{flip_of({n: res.constants[n] for n in names}):7.4f}  {res.converged} "
+            f"/ {res.message[:60]}",
             flush=True,
         )
     reached = {s: t for s, t in times.items() if t is not None and s != "adam"}

@@ -30,7 +30,8 @@ then the fitted constants of each path against the *baseline* (``--baseline``, b
 ``clean`` when run, else ``today``): the difference in the baseline's Gauss-Newton standard
 errors, each path's standard error from its reference's Monte Carlo noise alone
 (``rel_noise_error``), and FLIP (water pixels, full resolution) of each path's fitted shader
-against the baseline's reference (and against its own). With ``--seeds N`` the paths named by ``--seed-paths`` (default: the new one) run with
+against the baseline's reference (and against its own). With ``--seeds N`` the paths named by \
+``--seed-paths`` (default: the new one) run with
 ``reference.seed = 0 .. N-1`` (reference, texture, lighting and dry renders all reseeded): their
 constants are given as mean and standard deviation over the seeds, the difference from the
 baseline also in that standard deviation (what a user rerunning the scene would see move), and
@@ -75,7 +76,8 @@ TODAY = [
     'reference.sampler="independent"',
     "reference.max_spp=1024",
 ]
-# the texture_spp each shipped experiment used then (schema default 256; default and seed_lut set 1024)
+# the texture_spp each shipped experiment used then
+# (schema default 256; default and seed_lut set 1024)
 TODAY_TEXTURE_SPP = {"default": 1024, "seed_lut": 1024}
 CLEAN_TEXTURE_SPP = 2048  # the clean yardstick's colour texture
 # the new path with its traced texture's noise cut 4x in standard deviation (the schema's
@@ -344,7 +346,8 @@ def main() -> None:
     load = os.getloadavg()
     print(
         f"# bench_new_scene: {os.cpu_count()} cores, load average {load[0]:.1f} / {load[1]:.1f} / "
-        f"{load[2]:.1f} at start; {args.variant}; {args.repeats} repeat(s), {args.seeds} seed(s) of "
+        f"{load[2]:.1f} at start; {args.variant}; {args.repeats} repeat(s), "
+        f"{args.seeds} seed(s) of "
         f"{' and '.join(args.seed_paths)}, medians; wall s (CPU s)",
         flush=True,
     )
@@ -379,7 +382,8 @@ def main() -> None:
                     if seed == 0:
                         dirs[p] = str(d)
                     print(
-                        f"  {Path(e).stem} {p} run {r + 1} seed {seed}: {runs[p][-1]['wall']['total']:.1f} s wall",
+                        f"  {Path(e).stem} {p} run {r + 1} seed {seed}: "
+                        f"{runs[p][-1]['wall']['total']:.1f} s wall",
                         flush=True,
                     )
                     if args.json:  # after every run: a run cut short loses only itself
@@ -482,7 +486,8 @@ def _print(name: str, runs: dict, cross: dict, baseline: str | None) -> None:
     if baseline is None:
         for p in paths:
             print(
-                f"\n| constant | {p}: fitted (rel. SE) [status] | mean +- SD over seeds |\n|---|---|---|"
+                f"\n| constant | {p}: fitted (rel. SE) [status] | mean +- SD over "
+                "seeds |\n|---|---|---|"
             )
             for n, pa in first[p]["params"].items():
                 mean, sd, k = _seed_stats(runs[p], n)
@@ -499,7 +504,8 @@ def _print(name: str, runs: dict, cross: dict, baseline: str | None) -> None:
         print(
             f"\n| constant | {baseline}: mean +- SD over {nb} seeds (GN rel. SE of seed 0) | "
             + " | ".join(
-                f"{p}: mean +- SD over seeds | ({p} - {baseline}) / {baseline}'s seed SD (+- SE of the difference) "
+                f"{p}: mean +- SD over seeds | ({p} - {baseline}) / {baseline}'s seed SD (+- "
+                "SE of the difference) "
                 f"| in GN SE"
                 for p in others
             )
@@ -520,7 +526,8 @@ def _print(name: str, runs: dict, cross: dict, baseline: str | None) -> None:
                 sd_d = ((sb**2 / kb if sb else 0.0) + (sp**2 / kp if sp else 0.0)) ** 0.5
                 zd = f" (+- {_v(sd_d / sb, 2)})" if sb and sd_d else ""
                 cells.append(
-                    f"{_v(mp)} +- {_v(sp, 2)} ({kp}) | {_v(z, 2)}{zd} | {_v(d / se_abs if se_abs else None, 2)}"
+                    f"{_v(mp)} +- {_v(sp, 2)} ({kp}) | {_v(z, 2)}{zd} | "
+                    f"{_v(d / se_abs if se_abs else None, 2)}"
                 )
             print(
                 f"| {n} | {_v(mb)} +- {_v(sb, 2)} ({kb}) ({_v(pa['rel_se'])}) [{pa['status']}] | "
@@ -637,17 +644,16 @@ def _print_extrapolated(name: str, runs: dict, base: dict) -> None:
     """The path tracer's constants without texture noise, where ``today`` and ``clean`` ran the
     same seeds: texture noise biases a fit by about its variance, which falls as 1 / spp, so
     ``v(inf) = v(clean) + (v(clean) - v(today)) * (1 / s_clean) / (1 / s_today - 1 / s_clean)`` (the
-    per-seed shift today -> clean averaged over the common seeds); each other path's mean against it,
-    in the Gauss-Newton SE of the baseline's seed 0."""
+    per-seed shift today -> clean averaged over the common seeds); each other path's mean against
+    it, in the Gauss-Newton SE of the baseline's seed 0."""
     if "today" not in runs or "clean" not in runs:
         return
     s_today, s_clean = TODAY_TEXTURE_SPP.get(name, 256), CLEAN_TEXTURE_SPP
     w = (1.0 / s_clean) / (1.0 / s_today - 1.0 / s_clean)
     others = [p for p in runs if p not in ("today", "clean")]
     print(
-        f"\n| constant | path tracer without texture noise ({s_today} and {s_clean} spp in 1/spp) | "
-        + " | ".join(f"{p} - it, in GN SE" for p in others)
-        + " |"
+        f"\n| constant | path tracer without texture noise ({s_today} and "
+        f"{s_clean} spp in 1/spp) | " + " | ".join(f"{p} - it, in GN SE" for p in others) + " |"
     )
     print("|---|---|" + "---|" * len(others))
     for n, pa in base.items():

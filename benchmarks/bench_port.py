@@ -103,7 +103,8 @@ def main() -> None:
                 lambda: mod.render_with_jacobian(inputs, C, names), max(3, args.n // 2), 1
             )
             print(
-                f"{shader:<28}{k:>3}{1e3 * t:>13.1f}{t / fwd[(shader, refl)]:>16.2f}{1 + k / 2:>12.1f}"
+                f"{shader:<28}{k:>3}{1e3 * t:>13.1f}"
+                f"{t / fwd[(shader, refl)]:>16.2f}{1 + k / 2:>12.1f}"
             )
 
 

@@ -3,7 +3,8 @@
 Prints, in one run: render seconds and the measured noise (RMS standard error on water
 pixels, linear RGB, from 4 independent seeds) at 64 / 256 / 1024 spp, the noise x sqrt(spp)
 product (constant if the estimate is sound and the sampler independent; it falls with spp for the
-multi-jittered sampler, ``--set reference.sampler='"independent"'`` compares), and the spp the automatic
+multi-jittered sampler, ``--set reference.sampler='"independent"'`` compares), \
+and the spp the automatic
 choice picks. A jittered sampler's spp are rounded up to its grid per pass.
 
     .venv/bin/python benchmarks/bench_reference.py [EXPERIMENT.toml] [--set KEY=VALUE ...]
@@ -66,7 +67,8 @@ def main() -> None:
     print(
         f"auto spp for target noise {exp['reference.target_noise']}: {spp} "
         f"(predicted need {info['predicted_spp']:.0f}, capped: {info['capped']}, "
-        f"pilot {info['pilot_spp']} spp noise {info['pilot_noise']:.4g}, {time.perf_counter() - t0:.1f} s)"
+        f"pilot {info['pilot_spp']} spp noise {info['pilot_noise']:.4g}, "
+        f"{time.perf_counter() - t0:.1f} s)"
     )
 
 

@@ -60,11 +60,13 @@ def main() -> None:
         g = args.grey
         sets.append(f"water.sigma_t=[{g}, {g}, {g}]")
     print(
-        f"# bench_sampler: {base['name']}, {args.size}x{args.size}, {args.spp} spp, seeds 0-{args.seeds - 1}"
+        f"# bench_sampler: {base['name']}, {args.size}x{args.size}, {args.spp} spp, "
+        f"seeds 0-{args.seeds - 1}"
         f"{f', grey water (sigma_t {args.grey})' if args.grey is not None else ''}\n"
     )
     print(
-        "| sampler | dimension correlation (d, d+1) | water mean R / G / B | seed SD of the mean | RMS noise |"
+        "| sampler | dimension correlation (d, d+1) | water mean R / G / B | seed SD of "
+        "the mean | RMS noise |"
     )
     print("|---|---|---|---|---|")
     for sampler in SAMPLERS:
@@ -81,7 +83,8 @@ def main() -> None:
         sd = means.std(0, ddof=1) if len(means) > 1 else np.full(3, np.nan)
         print(
             f"| {sampler} | {dimension_correlation(mi, sampler)[0]:+.4f} | "
-            f"{' / '.join(f'{x:.5f}' for x in means.mean(0))} | {' / '.join(f'{x:.5f}' for x in sd)} | "
+            f"{' / '.join(f'{x:.5f}' for x in means.mean(0))} | "
+            f"{' / '.join(f'{x:.5f}' for x in sd)} | "
             f"{np.mean(noise):.4f} |",
             flush=True,
         )

@@ -92,8 +92,10 @@ def main() -> None:
         print(f"[{name}] ...", file=sys.stderr, flush=True)
         rows.append((name, run_one(path, ov)))
     print(
-        "\nper fit round; round 1 starts cold from the experiment's constants, a later round (a constant\n"
-        "frozen for its standard error) warm from the previous solution and stops after the 3-step stall\n"
+        "\nper fit round; round 1 starts cold from the experiment's constants, a "
+        "later round (a constant\n"
+        "frozen for its standard error) warm from the previous solution and stops "
+        "after the 3-step stall\n"
         "window, so it takes >= 4 steps even when it starts within 0.1 % of its final loss"
     )
     print(
@@ -113,7 +115,8 @@ def main() -> None:
             for n, p in r["params"].items()
         )
         print(
-            f"| {name} | {r['per_round']} | {r['to_0.1pct']} | {ratio:.2f} | {r['seconds']:.1f} | {st} |"
+            f"| {name} | {r['per_round']} | {r['to_0.1pct']} | {ratio:.2f} | "
+            f"{r['seconds']:.1f} | {st} |"
         )
 
 

@@ -114,7 +114,8 @@ def main() -> None:
     print("|---|---|---|---|---|---|---|")
     for r in rows:
         print(
-            f"| {r['workers']} | {r['startup_s']:.1f} | {r['jobs']} | {r['ok']} | {r['sweep_s']:.1f} | "
+            f"| {r['workers']} | {r['startup_s']:.1f} | {r['jobs']} | {r['ok']} | "
+            f"{r['sweep_s']:.1f} | "
             f"{r['jobs_per_min']:.1f} | {r['jobs_per_min'] / rows[0]['jobs_per_min']:.2f}x |"
         )
     if not args.skip_study:

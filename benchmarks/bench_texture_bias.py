@@ -17,7 +17,8 @@ estimate in standard errors, FLIP and RMSE against the full reference. The best 
 the texture-noise-free constants is the errors-in-variables extrapolation ``c(s) = c_inf + b / s``
 over the colour fits (noise in the texture biases the fit in proportion to its variance, 1 / s).
 
-    .venv/bin/python benchmarks/bench_texture_bias.py [--passes DIR] [--render-wet N] [--render-ref N]
+    .venv/bin/python benchmarks/bench_texture_bias.py [--passes DIR] [--render-wet N] \
+[--render-ref N]
         [--colour K ...] [--lighting N:K ...] [--ref J ...] [--ref-sets A:B ...] [--ref-passes J]
         [--set KEY=VALUE ...]
 
@@ -182,7 +183,8 @@ def main() -> None:
     wet, dry = _load(args.passes, "wet"), _load(args.passes, "dry").mean(0)
     refs = _load(args.passes, "ref")
     print(
-        f"# {exp['name']}: {len(wet)} wet passes, {len(refs)} reference passes of 64 spp; texture {size}^2"
+        f"# {exp['name']}: {len(wet)} wet passes, {len(refs)} reference passes of 64 "
+        f"spp; texture {size}^2"
     )
 
     orig = si.top_down_colour

@@ -255,7 +255,8 @@ def resolve_constants(m, constants: Constants, loop_ad: str = "replay") -> _Reso
 
 
 class evaluated_loops_if:
-    """Context manager: turn ``JitFlag.SymbolicLoops`` off while active if ``cond`` (restored after)."""
+    """Context manager: turn ``JitFlag.SymbolicLoops`` off while active if ``cond`` (restored
+    after)."""
 
     def __init__(self, cond: bool):
         self.cond = cond

@@ -50,7 +50,8 @@ _OPTIONAL_SAMPLERS = {
 
 
 def create_egl_context():
-    """A standalone moderngl context (OpenGL >= 3.3 core) through EGL; clear error if unavailable."""
+    """A standalone moderngl context (OpenGL >= 3.3 core) through EGL; clear error if
+    unavailable."""
     try:
         import moderngl
     except ImportError as exc:  # pragma: no cover - moderngl is a pinned dependency

@@ -3,9 +3,9 @@
 A *variant* is a name, one GLSL fragment shader (a file in ``glsl/`` and its Dr.Jit port module
 of the same name) and the preprocessor names it is compiled with. The port reads the same names
 through its one table ``DEFINES`` (``shaders_port._switches``), so GL, export and port take the
-same code path by construction. Everything above this layer (the fit, the sweeps, the tradeoff chart, export and the
-GL check) names a shader by its variant name only, so a new shader joins the study with one
-file pair and one :func:`register` call here.
+same code path by construction. Everything above this layer (the fit, the sweeps, the tradeoff
+chart, export and the GL check) names a shader by its variant name only, so a new shader joins the
+study with one file pair and one :func:`register` call here.
 
 ``VARIANTS`` maps names to :class:`Variant`, in registration order (the order of charts and
 tables). Shipped: 18 variants, registered below: ``water_refraction`` (the original shader,
@@ -130,7 +130,8 @@ def register(variant: Variant) -> Variant:
     """Add a variant; its name must be new and its shader a shipped file."""
     if variant.textures not in ("float", "game"):
         raise ValueError(
-            f"variant {variant.name!r}: textures must be 'float' or 'game', got {variant.textures!r}"
+            f"variant {variant.name!r}: textures must be 'float' or 'game', got "
+            f"{variant.textures!r}"
         )
     if variant.name in VARIANTS:
         raise ValueError(f"shader variant {variant.name!r} is already registered")
@@ -160,7 +161,10 @@ register(
         "water_refraction",
         "water_refraction",
         schedule=_RAYCAST,
-        description="the original shader (source 000, section 2): raycast refraction, cube-map sky reflection, Phong highlight",
+        description=(
+            "the original shader (source 000, section 2): raycast refraction, cube-map sky "
+            "reflection, Phong highlight"
+        ),
     )
 )
 register(
@@ -169,7 +173,9 @@ register(
         "water_refraction",
         defines=("NOREFLECTION",),
         schedule=_RAYCAST,
-        description="the original shader with NOREFLECTION: raycast refraction and highlight, no sky",
+        description=(
+            "the original shader with NOREFLECTION: raycast refraction and highlight, no sky"
+        ),
     )
 )
 register(

@@ -10,9 +10,9 @@ flat-water limit) and ``NO_PLANAR_REFRACTION`` (no 001).
 
 GLSL semantics as in ``water_refraction``: ``refract`` returns 0 on total internal reflection,
 ``normalize(0)`` is NaN (seed 002's ``normalize(eyeNormal.xy)`` is guarded: no offset where the
-projected flattened normal is 0, as on calm water), ``mix``/``clamp``/``pow`` as specified. ``gl_FragCoord`` is the pixel centre
-``(c + 0.5, H - r - 0.5)``. Non-finite pixels are set to 0, flagged in
-``diagnostics['nonfinite']`` and warned about.
+projected flattened normal is 0, as on calm water), ``mix``/``clamp``/``pow`` as specified.
+``gl_FragCoord`` is the pixel centre ``(c + 0.5, H - r - 0.5)``. Non-finite pixels are set to 0,
+flagged in ``diagnostics['nonfinite']`` and warned about.
 
 Inputs: :class:`ShaderInputs` with the optional fields ``scene_color``, ``scene_depth``,
 ``reflection_color`` and ``reflection_view_proj`` (see ``study.scene.baseline_inputs``);
@@ -335,7 +335,8 @@ def with_static_diagnostics(m, diag: dict, flat: bool) -> dict:
 
 
 def reads_with(defines=()) -> tuple[str, ...]:
-    """The constants the GLSL reads when compiled with ``defines`` (see ``_glsl.constants_read``)."""
+    """The constants the GLSL reads when compiled with ``defines`` (see
+    ``_glsl.constants_read``)."""
     from ._glsl import constants_read, read_source, with_define
 
     src = read_source("water_baseline", "frag", "core")

@@ -42,8 +42,8 @@ Loops and derivatives. The raycast loops are ``@dr.syntax`` while loops with a p
 
 Plain renders (no gradient) and ``'replay'`` Jacobians replay recorded kernels
 (``dr.freeze``; ``STUDY_FREEZE=0`` or ``shaders_port._frame.USE_FROZEN = False`` traces every
-call; see ``_frame.call_frozen``). Constants enter the kernels as opaque float32 values, so traced and replayed
-renders are bit-identical.
+call; see ``_frame.call_frozen``). Constants enter the kernels as opaque float32 values, so traced
+and replayed renders are bit-identical.
 """
 
 from __future__ import annotations

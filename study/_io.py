@@ -2,10 +2,10 @@
 JSON/text writers (a killed process never leaves a truncated file under the final name).
 
 Images are float32 ``(height, width, 3)`` linear RGB, row 0 at the top. Extra layers
-(e.g. the per-pixel standard error) are ``(height, width)`` or ``(height, width, 3)`` float32. Provenance is a JSON
-dictionary stored as the string attribute ``study_provenance``. Writes are atomic: the file
-is written under a temporary name in the same folder and renamed, so a killed process
-never leaves a truncated file under the final name.
+(e.g. the per-pixel standard error) are ``(height, width)`` or ``(height, width, 3)`` float32.
+Provenance is a JSON dictionary stored as the string attribute ``study_provenance``. Writes are
+atomic: the file is written under a temporary name in the same folder and renamed, so a killed
+process never leaves a truncated file under the final name.
 """
 
 from __future__ import annotations
@@ -61,7 +61,8 @@ def write_exr(
     provenance: dict | None = None,
     extra: dict[str, np.ndarray] | None = None,
 ) -> Path:
-    """Write ``rgb`` (H, W, 3) and optional extra (H, W) or (H, W, 3) layers atomically; return the path."""
+    """Write ``rgb`` (H, W, 3) and optional extra (H, W) or (H, W, 3) layers atomically; return the
+    path."""
     path = Path(path)
     rgb = np.ascontiguousarray(rgb, dtype=np.float32)
     if rgb.ndim != 3 or rgb.shape[2] != 3:
@@ -92,7 +93,8 @@ def write_exr(
 
 
 def read_exr(path) -> tuple[np.ndarray, dict, dict[str, np.ndarray]]:
-    """Read an EXR written by :func:`write_exr`: (rgb (H, W, 3) float32, provenance, extra channels)."""
+    """Read an EXR written by :func:`write_exr`: (rgb (H, W, 3) float32, provenance, extra
+    channels)."""
     path = Path(path)
     if not path.is_file():
         raise FileNotFoundError(f"no EXR file at {path}")

@@ -147,7 +147,8 @@ def run_preview(experiment, out, overrides=None, variant=None, cache=None) -> di
     }
     write_json(out / "preview.json", summary)
     _log(
-        f"preview: RMSE {err['rmse']:.4f}, FLIP {err['flip']:.4f} on {summary['water_pixels']} water "
+        f"preview: RMSE {err['rmse']:.4f}, FLIP {err['flip']:.4f} on "
+        f"{summary['water_pixels']} water "
         f"pixels; wrote {out}"
     )
     return summary
@@ -192,7 +193,8 @@ def run_stability(
 
 
 def run_export(constants_json, out) -> list:
-    """``study export``: the shipped shaders with the constants of a JSON file, in ``out/shaders``."""
+    """``study export``: the shipped shaders with the constants of a JSON file, in
+    ``out/shaders``."""
     from .report.export import export_shaders, load_constants_json
 
     constants = load_constants_json(constants_json)
@@ -232,7 +234,8 @@ def run_calibrate(experiment, out, overrides=None, variant=None, solver=None, ca
         check = halves or texture_half_models(exp, inputs, ref.image, backend=backend)
     _log(
         f"calibrate: fitting {exp['fit.parameters']} of {model.shader} with {solver} on "
-        f"{int(model.mask.sum())} water pixels at {exp['fit.resolution'][0]}x{exp['fit.resolution'][1]}"
+        f"{int(model.mask.sum())} water pixels at "
+        f"{exp['fit.resolution'][0]}x{exp['fit.resolution'][1]}"
     )
     with timed(timings, "fit_s"):
         cal = calibrate_model(
@@ -444,7 +447,8 @@ def run_calibrate_joint(
 
 
 def _joint_fit(scenes, variant, out: Path, solver):
-    """The joint fit of ``scenes``, exported into ``out``. Returns (summary, calibration, evaluate)."""
+    """The joint fit of ``scenes``, exported into ``out``. Returns (summary, calibration,
+    evaluate)."""
     from .fit.joint import JointModel, joint_calibrate
     from .fit.model import constants_from_experiment
     from .report.export import export_shaders

@@ -112,8 +112,9 @@ def _path_traced_direct(mi, exp, sky, size, spp, seeds, lighting_only=False, max
 
 
 def _wide_sun():
-    """(experiment, its sun map, the under-water camera's height, the pool's extent) with a 15-degree
-    sun, wide enough that the path tracer's estimate of its light converges in a test's time."""
+    """(experiment, its sun map, the under-water camera's height, the pool's extent) with a
+    15-degree sun, wide enough that the path tracer's estimate of its light converges in a test's
+    time."""
     exp = small_experiment(**{"sun.radius": "15.0"})
     return (
         exp,
@@ -262,7 +263,8 @@ def test_traced_texture_keeps_the_raw_mean_and_adds_up(mi):
         path[inside].mean(0),
         se,
     )
-    # the sun's bounced light traced from the sun instead of path traced with the sky's: the same light
+    # the sun's bounced light traced from the sun instead of path traced with the sky's:
+    # the same light
     assert info["sun_bounces"] == "path"
     photons, info_b, _ = lighting.lighting_colour(
         small_experiment(**base, **{"reference.sun_bounces": '"photons"'}),

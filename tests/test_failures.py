@@ -43,7 +43,8 @@ def pool(
     extent=(-2.0, -2.0, 2.0, 2.0),
     **kw,
 ) -> ShaderInputs:
-    """A pool with a flat floor at y = -depth (or ``world_y``), constant normal, a pinhole camera."""
+    """A pool with a flat floor at y = -depth (or ``world_y``), constant normal, a pinhole
+    camera."""
     n = np.asarray(normal, np.float64)
     n /= np.linalg.norm(n)
     args = dict(

@@ -90,7 +90,8 @@ def test_mask_matches_projected_quad(inputs):
 
 def _attenuation(renderer, base: Constants) -> np.ndarray:
     """Per-pixel attenuation a = clamp(travelLength / ATTENUATION_DISTANCE, 0, 1) from the
-    linearity of the NOREFLECTION output in waterColor: out = (1 - a) * vRefraction + a * waterColor."""
+    linearity of the NOREFLECTION output in waterColor:
+    out = (1 - a) * vRefraction + a * waterColor."""
     black, _ = renderer.render(base.replace(water_color=(0.0, 0.0, 0.0, 1.0)))
     white, _ = renderer.render(base.replace(water_color=(1.0, 1.0, 1.0, 1.0)))
     return white[..., :3] - black[..., :3]

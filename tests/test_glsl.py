@@ -102,7 +102,8 @@ def test_core_is_compat_through_substitution_table(name, stage):
     # no compatibility built-in survives in the core file
     assert not re.search(
         r"\bgl_(TexCoord|TextureMatrix|FragColor|Vertex|MultiTexCoord0|"
-        r"ModelViewProjectionMatrix|ModelViewProjectionMatrixInverse|NormalMatrix)\b|texture2D|textureCube|^varying",
+        r"ModelViewProjectionMatrix|ModelViewProjectionMatrixInverse|NormalMatrix)\b|"
+        r"texture2D|textureCube|^varying",
         core,
         re.M,
     )

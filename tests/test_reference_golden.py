@@ -1,4 +1,5 @@
-"""Small reference renders against golden EXRs (regenerate: python tests/golden/reference_scenes.py)."""
+"""Small reference renders against golden EXRs
+(regenerate: python tests/golden/reference_scenes.py)."""
 
 import numpy as np
 import pytest

@@ -28,7 +28,8 @@ SMALL = [
 
 @pytest.fixture(scope="module")
 def client(tmp_path_factory):
-    """One LocalCluster (2 spawned workers) for the module; workers see tests/ and a private cache."""
+    """One LocalCluster (2 spawned workers) for the module; workers see tests/ and a private
+    cache."""
     from study.sweep.cluster import open_client
 
     mp = pytest.MonkeyPatch()

@@ -275,7 +275,7 @@ def test_information_criteria():
         information_criteria(np.array([np.nan] * 10), 1)
 
 
-# ---- the reflection shader (seed section 3) shares blocks [2], [5], [6], [8] and their switches ----
+# ---- the reflection shader (seed section 3) shares blocks [2], [5], [6], [8] and their switches
 
 
 def test_reflection_variant_registered_matches_gl(inputs):
@@ -385,7 +385,8 @@ def test_wall_faces_port_matches_gl_where_it_acts(walled):
 
 
 def test_wall_faces_in_the_reflection_shader_match_gl(walled):
-    """water_reflection.frag shares block [6] and its WALL_FACES switch with the refraction shader."""
+    """water_reflection.frag shares block [6] and its WALL_FACES switch with the refraction
+    shader."""
     from shaders_port import water_reflection
     from shaders_port._gl import GLRenderer
 

@@ -113,7 +113,8 @@ def test_jacobian_matches_central_differences(small, jacobian, name):
     fp, fm = (p["color"] - base["color"]) / h, (base["color"] - m["color"]) / h
     noise = FD_NOISE / h
     water = base["mask"] > 0
-    # pixels whose one-sided slopes agree (no texel edge of a bilinear lookup or clamp in the stencil)
+    # pixels whose one-sided slopes agree
+    # (no texel edge of a bilinear lookup or clamp in the stencil)
     smooth = water & (np.abs(fp - fm) <= 0.2 * np.abs(fd) + 2 * noise).all(-1)
     assert smooth.sum() >= 0.8 * water.sum(), (
         f"{name}: only {smooth.sum()} of {water.sum()} comparable"

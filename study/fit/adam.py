@@ -27,7 +27,8 @@ def adam(
     window: int = FTOL_WINDOW,
 ):
     """The tutorial loop: Dr.Jit Adam on ``u``; gradient from ``dr.backward`` of ``loss_drjit``
-    or, without it, ``J^T r`` (forward-mode Jacobian). Returns (u, iters, ok, msg, n_grad, losses)."""
+    or, without it, ``J^T r`` (forward-mode Jacobian). Returns (u, iters, ok, msg, n_grad,
+    losses)."""
     import drjit as dr
     import drjit.opt  # noqa: F401  (registers dr.opt)
 

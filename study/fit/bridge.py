@@ -133,7 +133,8 @@ class DrJitResidual:
             self._fail(
                 NonFiniteResidualError(
                     f"{self.name}: {int(bad.sum())} of {self.m} residual entries are non-finite at "
-                    f"x={np.array2string(x, precision=6)}; the model produced NaN/inf there (check the "
+                    f"x={np.array2string(x, precision=6)}; the model produced "
+                    "NaN/inf there (check the "
                     "parameter bounds or the model's 'nonfinite' diagnostics)"
                 )
             )
@@ -188,8 +189,10 @@ class DrJitResidual:
             cols = sorted(set(np.nonzero(bad)[1].tolist()))
             self._fail(
                 NonFiniteResidualError(
-                    f"{self.name}: {int(bad.sum())} Jacobian entries are non-finite (columns {cols}) at "
-                    f"x={np.array2string(x, precision=6)}; a derivative of the model is undefined there"
+                    f"{self.name}: {int(bad.sum())} Jacobian entries are non-finite "
+                    f"(columns {cols}) at "
+                    f"x={np.array2string(x, precision=6)}; a derivative of the "
+                    "model is undefined there"
                 )
             )
         self._record(x, r, "j")

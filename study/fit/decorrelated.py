@@ -25,9 +25,9 @@ damping raised tenfold until the step lowers ``L`` and lowered after each accept
 least-squares solvers need one, and its BFGS would rebuild from the identity the curvature that
 ``H`` gives for free). It stops when a step lowers ``L`` by less than one standard error's worth
 (``FTOL_SE * L / (m - k)``, as ``study.fit.solvers``) and moves no ``u`` by more than ``XTOL``,
-or when no damping lowers ``L`` and the Newton decrement ``g^T H^-1 g`` is below twice that. The result
-is accepted only when it converged and ``H`` is positive definite there over the parameters not
-on a bound (a minimum of ``L``, not a saddle); otherwise the start is kept and the reason
+or when no damping lowers ``L`` and the Newton decrement ``g^T H^-1 g`` is below twice that. The
+result is accepted only when it converged and ``H`` is positive definite there over the parameters
+not on a bound (a minimum of ``L``, not a saddle); otherwise the start is kept and the reason
 returned. Each step costs two forward-mode Jacobian passes (one per half), each trial two renders.
 """
 

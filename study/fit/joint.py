@@ -35,7 +35,8 @@ Z_UNIVERSAL = 2.0
 
 class JointModel:
     """Stacked, equally weighted residuals of ``models`` (same ``shader``); the interface of a
-    :class:`ShaderModel` that the fit uses (``residual``, ``residual_and_jacobian``, ``loss_ad``)."""
+    :class:`ShaderModel` that the fit uses (``residual``, ``residual_and_jacobian``,
+    ``loss_ad``)."""
 
     def __init__(self, models: list, names: list[str] | None = None):
         if len(models) < 1:

@@ -30,7 +30,8 @@ class LogResidualModel:
         self.base, self.eps = model, float(eps)
         self.shader, self.mask, self.variant = model.shader, model.mask, model.variant
         self._ref = model.reference[model.mask].astype(np.float64).ravel()
-        # the reference's standard error carried through f to first order, sigma / (max(ref, 0) + eps)
+        # the reference's standard error carried through f to first order,
+        # sigma / (max(ref, 0) + eps)
         se = getattr(model, "reference_stderr", None)
         self.reference_stderr = (
             None

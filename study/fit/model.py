@@ -29,7 +29,8 @@ from .._metrics import downsample, downsample_stderr, erode
 
 
 def expand_parameters(names: list[str]) -> list[str]:
-    """['water_color', 'bumptex_mult'] -> ['water_color[0]', 'water_color[1]', 'water_color[2]', 'bumptex_mult']."""
+    """['water_color', 'bumptex_mult'] -> ['water_color[0]', 'water_color[1]', 'water_color[2]',
+    'bumptex_mult']."""
     out = []
     for n in names:
         if n not in CONSTANT_SPECS:
@@ -184,8 +185,8 @@ class ShaderModel:
     ) -> "ShaderModel":
         """The model at ``resolution`` (default ``fit.resolution``) against the box-downsampled
         ``reference_full`` (H, W, 3); ``stderr_full`` (H, W, 3), the reference's per-pixel Monte
-        Carlo standard error, is carried through the box filter (``study._metrics.downsample_stderr``)
-        for :func:`study.fit.calibrate.noise_errors`."""
+        Carlo standard error, is carried through the box filter
+        (``study._metrics.downsample_stderr``) for :func:`study.fit.calibrate.noise_errors`."""
         from ..scene.reference import water_mask
 
         w, h = resolution or exp["fit.resolution"]

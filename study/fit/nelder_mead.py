@@ -12,7 +12,8 @@ from .steps import Trace
 def nelder_mead(res: DrJitResidual, u0, max_steps, rtol, atol, nm_step, trace: Trace | None = None):
     """Nelder-Mead on ``0.5*||r(u)||^2`` (NumPy; values only). Converged when every vertex is
     within ``atol + rtol*|u_best|`` of the best (max norm) and every value within
-    ``atol + rtol*|f_best|`` of the best one (optimistix's criterion). Returns (u, steps, ok, msg)."""
+    ``atol + rtol*|f_best|`` of the best one (optimistix's criterion). Returns (u, steps, ok,
+    msg)."""
     k = len(u0)
     a_r, a_e, a_c, a_s = 1.0, 2.0, 0.5, 0.5
 

@@ -140,7 +140,8 @@ class Param:
         return (self._g(p) - self._g(np.float64(self.default))) / self._s
 
     def from_u(self, u, xp=np):
-        """Unconstrained ``u`` -> physical value; ``xp`` = ``numpy`` or ``drjit`` (differentiable)."""
+        """Unconstrained ``u`` -> physical value; ``xp`` = ``numpy`` or ``drjit``
+        (differentiable)."""
         return self._ginv(float(self._g(np.float64(self.default))) + self._s * u, xp)
 
     def at_bound(self, u) -> str | None:
@@ -153,7 +154,8 @@ class Param:
 
     def dp_du(self, u) -> np.ndarray:
         """Derivative of the physical value with respect to ``u`` (float64); computed from
-        ``z = g(default) + s*u`` so that it tends to 0, not NaN, where ``p`` saturates at a bound."""
+        ``z = g(default) + s*u`` so that it tends to 0, not NaN, where ``p`` saturates at a
+        bound."""
         z = float(self._g(np.float64(self.default))) + self._s * np.asarray(u, np.float64)
         k, lo, hi = self.kind, self.lo, self.hi
         if k == "linear":

@@ -19,8 +19,8 @@ SOLVERS = LEAST_SQUARES + MINIMISERS + ("adam",)
 DERIVATIVE_FREE = ("nelder_mead", "nelder_mead_optimistix")
 
 # default stopping rule of the gradient solvers (see ``solvers.fit``): the fit has stopped
-# improving when the lowest loss seen fell by less than max(FTOL, FTOL_SE / (m - k)) (relative) over the
-# last FTOL_WINDOW steps. FTOL_SE / (m - k): with m residuals and k parameters, moving one
+# improving when the lowest loss seen fell by less than max(FTOL, FTOL_SE / (m - k)) (relative) over
+# the last FTOL_WINDOW steps. FTOL_SE / (m - k): with m residuals and k parameters, moving one
 # parameter by d standard errors from the optimum raises the loss by about d^2 * loss / (m - k),
 # so an improvement below 1.0 * loss / (m - k) is worth less than one standard error
 FTOL, FTOL_SE, FTOL_WINDOW = 1e-6, 1.0, 3

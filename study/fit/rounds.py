@@ -281,13 +281,15 @@ def basin_restart(
             td = texture_delta(check[0], check[1], fitted, n, best["value"]) if check else None
             head = (
                 f"calibrate: {n}: a basin at {best['value']:.4g} is lower than the fit's "
-                f"({get_value(fitted, n):.4g}) by {-best['delta_loss']:.4g} (+- {best['noise_sd']:.2g} from the "
+                f"({get_value(fitted, n):.4g}) by {-best['delta_loss']:.4g} (+- "
+                f"{best['noise_sd']:.2g} from the "
                 "reference's noise"
             )
             if td is not None and td >= 0.0:
                 s["unconfirmed"].append({**best, "texture_delta": td})
                 _log(
-                    f"{head}), but higher by {td:.4g} in the decorrelated loss of the texture's independent "
+                    f"{head}), but higher by {td:.4g} in the decorrelated loss of the "
+                    "texture's independent "
                     "halves: the texture's noise or denoiser makes it lower; not refitted"
                 )
                 continue

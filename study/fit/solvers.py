@@ -20,8 +20,8 @@ one ``scale`` near the default, whatever the parameter's units. ``g`` (``transfo
   restarts the solver from just inside when the loss falls inwards, so a parameter clipped by
   an early, overshooting step is not left stranded there.
 
-so every ``u`` maps inside (``clip``: onto) the bounds. The chain rule is applied on the NumPy side, before
-JAX sees the Jacobian: ``dr/du = dr/dp * dp/du`` (a column scaling).
+so every ``u`` maps inside (``clip``: onto) the bounds. The chain rule is applied on the NumPy side,
+before JAX sees the Jacobian: ``dr/du = dr/dp * dp/du`` (a column scaling).
 
 Problem. A :class:`FitProblem` wraps two NumPy-level callables that run Dr.Jit:
 ``residual(values: dict name -> float) -> (m,)`` and
@@ -45,8 +45,8 @@ are held at their start by the gradient solvers and fitted only by Nelder-Mead.
 
 Failures (step cap, non-finite residual, solver error) never propagate: :func:`fit` returns
 a :class:`FitResult` with ``converged=False``, the reason in ``message`` and, for a crash,
-the best point evaluated. A start on a bound is moved inside by 1e-3 of the scale. Bad arguments (unknown solver or parameter, start outside the
-bounds) raise ValueError.
+the best point evaluated. A start on a bound is moved inside by 1e-3 of the scale. Bad arguments
+(unknown solver or parameter, start outside the bounds) raise ValueError.
 """
 
 from __future__ import annotations
@@ -155,12 +155,12 @@ def fit(
     run the solver to its cap). ``ftol_se`` (None: off) raises the tolerance to
     ``ftol_se / (m - k)`` when that is larger (an improvement worth less than
     ``sqrt(ftol_se)`` standard errors of one parameter, see :data:`FTOL_SE`). The calibration
-    uses ``ftol = FTOL = 1e-6``, ``ftol_se = FTOL_SE = 1`` over ``FTOL_WINDOW = 3`` steps. For Adam (the tutorial loop runs to the cap), with ``patience``
-    set, the run also stops (converged) when the best loss improved by less than
-    ``rtol*loss + atol`` over the last ``patience`` iterations; Adam returns the lowest-loss
-    iterate. ``lr``: Adam's learning rate in ``u`` units (one unit is about one ``scale``).
-    ``max_steps``: step cap (Adam: iterations; with restarts, over all of them).
-    ``nm_step``: edge of Nelder-Mead's start simplex in ``u`` units (vertices ``u0`` and
+    uses ``ftol = FTOL = 1e-6``, ``ftol_se = FTOL_SE = 1`` over ``FTOL_WINDOW = 3`` steps. For Adam
+    (the tutorial loop runs to the cap), with ``patience`` set, the run also stops (converged) when
+    the best loss improved by less than ``rtol*loss + atol`` over the last ``patience`` iterations;
+    Adam returns the lowest-loss iterate. ``lr``: Adam's learning rate in ``u`` units (one unit is
+    about one ``scale``). ``max_steps``: step cap (Adam: iterations; with restarts, over all of
+    them). ``nm_step``: edge of Nelder-Mead's start simplex in ``u`` units (vertices ``u0`` and
     ``u0 + nm_step*e_i``; optimistix's own default is 2.5e-4 at ``u = 0``, which stalled far
     from the minimum). ``kkt_restarts``: how many times a ``clip`` parameter the solver left on
     a bound may be moved back inside when the loss gradient there points inwards.

@@ -140,8 +140,10 @@ def basin_lines(parameters: dict) -> list[str]:
         r = b.get("restart")
         if r:
             lines.append(
-                f"`{name}`: the first fit stopped at {fmt(r['from'])}, with a basin at {fmt(r['to'])} lower "
-                "by more than the reference's noise explains (the loss is piecewise); refitted from there: "
+                f"`{name}`: the first fit stopped at {fmt(r['from'])}, with a basin at "
+                f"{fmt(r['to'])} lower "
+                "by more than the reference's noise explains (the loss is piecewise); "
+                "refitted from there: "
                 f"loss {fmt(r['loss_before'])} -> {fmt(r['loss_after'])}, "
                 + ("kept." if r["kept"] else "not lower, so the first solution is exported.")
             )
@@ -151,18 +153,23 @@ def basin_lines(parameters: dict) -> list[str]:
         for o in lower:
             if o["value"] in unconfirmed:
                 lines.append(
-                    f"`{name}`: a basin of the loss at {fmt(o['value'])} is lower than the fit's by "
-                    f"{fmt(-o['delta_loss'])} (+- {fmt(o['noise_sd'])} from the reference's noise) in "
+                    f"`{name}`: a basin of the loss at {fmt(o['value'])} is "
+                    "lower than the fit's by "
+                    f"{fmt(-o['delta_loss'])} (+- {fmt(o['noise_sd'])} from the "
+                    "reference's noise) in "
                     "this texture, but higher by "
-                    f"{fmt(unconfirmed[o['value']]['texture_delta'])} in the decorrelated loss of the "
-                    "texture's independent halves (unbiased for the noise-free texture): the texture's "
+                    f"{fmt(unconfirmed[o['value']]['texture_delta'])} in the "
+                    "decorrelated loss of the "
+                    "texture's independent halves (unbiased for the noise-free "
+                    "texture): the texture's "
                     "noise or its denoiser makes it lower, so it was not refitted."
                 )
                 continue
             lines.append(
                 f"`{name}`: a basin of the loss at {fmt(o['value'])} is lower than the fit's by "
                 f"{fmt(-o['delta_loss'])}, more than the reference's noise explains "
-                f"(+- {fmt(o['noise_sd'])}): the solver stopped short of it (the loss is piecewise)."
+                f"(+- {fmt(o['noise_sd'])}): the solver stopped short of it "
+                "(the loss is piecewise)."
             )
         for o in close:
             lines.append(
@@ -200,7 +207,8 @@ def identifiability_table(ident: dict) -> list[str]:
         se = fmt(sol["rel_std_error"][j]) if j is not None and sol.get("rel_std_error") else "-"
         ne = fmt(sol["rel_noise_error"][j]) if j is not None and sol.get("rel_noise_error") else "-"
         lines.append(
-            f"| `{name}` | {fmt(start['sensitivity'][i])} | {s1} | {se} | {ne} | {start['decision'][i]} |"
+            f"| `{name}` | {fmt(start['sensitivity'][i])} | {s1} | {se} | {ne} | "
+            f"{start['decision'][i]} |"
         )
     lines.append("")
     for label, d in (("start", start), ("solution", sol)):
@@ -235,7 +243,8 @@ def write_report(out: Path, summary: dict, figures: dict) -> Path:
         "",
         "Sensitivity: norm of the Jacobian column with respect to log(value) (a relative change), "
         "divided by the largest column norm. Standard error from the Gauss-Newton covariance "
-        "s^2 (J^T J)^-1 at the solution, s^2 = ||r||^2 / (m - k), as a relative error of the value.",
+        "s^2 (J^T J)^-1 at the solution, s^2 = ||r||^2 / (m - k), as a "
+        "relative error of the value.",
         "",
     ]
     lines += identifiability_table(summary["identifiability"]) + [""]
@@ -258,7 +267,8 @@ def _header_lines(summary: dict) -> list[str]:
     return [
         f"# Calibration: {summary['experiment']} ({summary['shader']})",
         "",
-        f"Reference: {ref['spp']} spp, measured noise {fmt(ref['noise'], 3)} (RMS standard error on "
+        f"Reference: {ref['spp']} spp, measured noise {fmt(ref['noise'], 3)} "
+        "(RMS standard error on "
         f"water pixels, linear RGB). Fit at {res[0]}x{res[1]} "
         f"with `{summary['solver']}`: {summary['iterations']} iterations, "
         f"{'converged' if summary['converged'] else 'NOT converged'} ({summary['message']}).",

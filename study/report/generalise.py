@@ -31,7 +31,8 @@ def joint_lines(summary: dict) -> list[str]:
         e = summary["error"][name]
         lines.append(
             f"| {name} | {fmt(summary['weights'][name], 3)} | {fmt(e['default']['rmse'])} | "
-            f"{fmt(e['fitted']['rmse'])} | {fmt(e['default']['flip'])} | {fmt(e['fitted']['flip'])} |"
+            f"{fmt(e['fitted']['rmse'])} | {fmt(e['default']['flip'])} | "
+            f"{fmt(e['fitted']['flip'])} |"
         )
     lines += ["", "## Constants", ""] + constants_table(summary["parameters"]) + [""]
     lines += (
@@ -56,16 +57,19 @@ def write_joint_report(out: Path, summary: dict) -> Path:
 
 
 def loso_table(rows: list[dict]) -> list[str]:
-    """FLIP (and RMSE) of each left-out scene under the seed's, the others' and its own constants."""
+    """FLIP (and RMSE) of each left-out scene under the seed's, the others' and its own
+    constants."""
     lines = [
-        "| left-out scene | FLIP original | FLIP others' fit | FLIP own fit | RMSE original | RMSE others' fit | "
+        "| left-out scene | FLIP original | FLIP others' fit | FLIP own fit | RMSE original "
+        "| RMSE others' fit | "
         "RMSE own fit |",
         "|---|---|---|---|---|---|---|",
     ]
     for r in rows:
         o = r.get("others") or {}
         lines.append(
-            f"| {r['scene']} | {fmt(r['seed']['flip'])} | {fmt(o.get('flip'))} | {fmt(r['own']['flip'])} | "
+            f"| {r['scene']} | {fmt(r['seed']['flip'])} | {fmt(o.get('flip'))} | "
+            f"{fmt(r['own']['flip'])} | "
             f"{fmt(r['seed']['rmse'])} | {fmt(o.get('rmse'))} | {fmt(r['own']['rmse'])} |"
         )
     return lines
@@ -107,7 +111,8 @@ def write_generalise_report(out: Path, summary: dict) -> Path:
         "",
         "Each scene's own fitted value +- its standard error (Gauss-Newton, a lower bound under "
         "correlated model error) against the joint value; universal when every scene fitted it and "
-        "lies within 2 standard errors of the joint value (|z| <= 2), scene-specific when some scene "
+        "lies within 2 standard errors of the joint value (|z| <= 2), "
+        "scene-specific when some scene "
         "lies further. A constant frozen or bound in a scene shows its status there.",
         "",
     ]

@@ -34,7 +34,8 @@ def solver_figure(path: Path, ms: dict) -> Path:
 
 
 def spread_figure(path: Path, ms: dict) -> Path:
-    """Relative spread (std / |median| over the runs, median over scenes) per constant and solver."""
+    """Relative spread (std / |median| over the runs, median over scenes) per constant and
+    solver."""
     import numpy as np
 
     plt = pyplot()
@@ -91,7 +92,8 @@ def noise_figure(path: Path, noise: dict) -> Path:
 
 def solver_table(ms: dict) -> list[str]:
     lines = [
-        "| solver | runs | success rate | time to target median / p90 (s) | time to stop median / p90 (s) "
+        "| solver | runs | success rate | time to target median / p90 (s) | time to "
+        "stop median / p90 (s) "
         "| median iterations | failures |",
         "|---|---|---|---|---|---|---|",
     ]
@@ -101,7 +103,8 @@ def solver_table(ms: dict) -> list[str]:
             ", ".join(f"{k} {v}" for k, v in sorted(s["classes"].items()) if k != "success") or "-"
         )
         lines.append(
-            f"| {label} | {s['runs']} | {fmt(s['success_rate'], 3)} | {fmt(s['time_to_target_median'], 3)}"
+            f"| {label} | {s['runs']} | {fmt(s['success_rate'], 3)} | "
+            f"{fmt(s['time_to_target_median'], 3)}"
             f" / {fmt(s['time_to_target_p90'], 3)} | {fmt(s['time_to_stop_median'], 3)} / "
             f"{fmt(s['time_to_stop_p90'], 3)} | {fmt(s['iterations_median'], 3)} | {fails} |"
         )
@@ -213,7 +216,8 @@ def _noise_lines(nz: dict | None) -> list[str]:
     lines += [
         "## Noise of the references and textures",
         "",
-        f"{nz['seeds']} seeds per level at {nz['resolution']}x{nz['resolution']}; the other spp held at "
+        f"{nz['seeds']} seeds per level at {nz['resolution']}x{nz['resolution']}; "
+        "the other spp held at "
         f"{nz['fixed_spp']}. Bias against the highest level +- its standard error (seeds).",
         "",
     ]
@@ -234,7 +238,8 @@ def _noise_lines(nz: dict | None) -> list[str]:
             for n in names:
                 st = d["stats"][spp].get(n, {})
                 cells.append(
-                    f"{fmt(st.get('mean'))} ({fmt(st.get('bias'), 2)} +- {fmt(st.get('bias_se'), 2)})"
+                    f"{fmt(st.get('mean'))} ({fmt(st.get('bias'), 2)} +- "
+                    f"{fmt(st.get('bias_se'), 2)})"
                 )
             lines.append(
                 f"| {spp} | " + " | ".join(cells) + f" | {'yes' if d['agrees'][spp] else 'no'} |"

@@ -1,7 +1,7 @@
 """The tradeoff report: ``pareto.png`` (error against each cost measure, every point drawn, the
-Pareto front, the original shader's schedule and the recommendation marked, one colour per variant, a row of
-panels per scene) and ``report.md`` (the fronts as tables, the recommendation, what each scene
-needs, each halving of the original's schedule)."""
+Pareto front, the original shader's schedule and the recommendation marked, one colour per variant,
+a row of panels per scene) and ``report.md`` (the fronts as tables, the recommendation, what each
+scene needs, each halving of the original's schedule)."""
 
 from __future__ import annotations
 
@@ -127,12 +127,17 @@ def tradeoff_report_text(summary: dict) -> str:
     lines = [
         "# Speed against accuracy",
         "",
-        f"{summary['n_points']} points, {summary['n_failed']} failed. Error: FLIP on the water pixels "
+        f"{summary['n_points']} points, {summary['n_failed']} failed. Error: FLIP "
+        "on the water pixels "
         "at full resolution against the reference; every point's continuous constants refitted for "
-        "its schedule. Cost: mean texture fetches per water pixel (machine-independent, used for the "
-        "recommendation), llvmpipe frame time at 1920x1080 normalised by a fixed reference shader timed "
-        f"in the same job (reference median {fmt(summary.get('gl_reference_ms_1080p'), 3)} ms), the "
-        f"port's frame time. Recommendation: the cheapest point within {100 * tol:g} % of the best FLIP.",
+        "its schedule. Cost: mean texture fetches per water pixel "
+        "(machine-independent, used for the "
+        "recommendation), llvmpipe frame time at 1920x1080 normalised by a fixed "
+        "reference shader timed "
+        "in the same job (reference median "
+        f"{fmt(summary.get('gl_reference_ms_1080p'), 3)} ms), the "
+        "port's frame time. Recommendation: the cheapest point within "
+        f"{100 * tol:g} % of the best FLIP.",
         "",
         "![error against cost, Pareto fronts](pareto.png)",
         "",
@@ -149,7 +154,8 @@ def _scene_lines(scene: str, f: dict, summary: dict) -> list[str]:
     rec, seed = f["recommended"], f["seed"]
     lines += [f"## {scene}", ""]
     lines += [
-        "| configuration | fetches (mean) | fetches (p99) | GL ms 1080p (norm.) | port ms | FLIP | RMSE |",
+        "| configuration | fetches (mean) | fetches (p99) | GL ms 1080p (norm.) | "
+        "port ms | FLIP | RMSE |",
         "|---|---|---|---|---|---|---|",
     ]
     for r in f["front"]:
@@ -174,9 +180,11 @@ def _scene_lines(scene: str, f: dict, summary: dict) -> list[str]:
     bw = f.get("best_within_seed_budget")
     if seed and bw:
         lines.append(
-            f"**Best within the original's fetch budget** ({fmt(seed['fetches_mean'], 3)} fetches): "
+            "**Best within the original's fetch budget** "
+            f"({fmt(seed['fetches_mean'], 3)} fetches): "
             f"{bw['label']}: FLIP {fmt(bw['flip'])} at {fmt(bw['fetches_mean'], 3)} fetches "
-            f"(the fitted original: {fmt(seed['flip'])}, {100 * (bw['flip'] / seed['flip'] - 1):+.1f} %)."
+            f"(the fitted original: {fmt(seed['flip'])}, "
+            f"{100 * (bw['flip'] / seed['flip'] - 1):+.1f} %)."
         )
     if summary.get("images", {}).get(scene):
         lines += ["", f"![{scene}: reference and shaders]({summary['images'][scene]})"]
@@ -185,7 +193,8 @@ def _scene_lines(scene: str, f: dict, summary: dict) -> list[str]:
         b0 = min(d["bic"] for d in pars.values())
         lines += [
             "",
-            "Each variant at the original's schedule (constants fitted or at a bound; BIC of the fit "
+            "Each variant at the original's schedule (constants fitted or at a "
+            "bound; BIC of the fit "
             "residual, lower is better, relative to the lowest):",
             "",
             "| variant | constants | FLIP | BIC - min |",

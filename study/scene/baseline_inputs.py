@@ -74,8 +74,9 @@ def _dry_scene(mi, exp: Experiment):
 
 
 def trace(mi, scene, origins: np.ndarray, dirs: np.ndarray, spp: int, seed: int):
-    """Path-traced radiance along given rays: ``(radiance (N, 3), hit (N,) bool, hit point (N, 3))``.
-    ``spp`` samples per ray (independent sampler), averaged."""
+    """Path-traced radiance along given rays:
+    ``(radiance (N, 3), hit (N,) bool, hit point (N, 3))``. ``spp`` samples per ray (independent
+    sampler), averaged."""
     n = len(origins)
     o = mi.Point3f(*(mi.Float(np.ascontiguousarray(origins[:, k], np.float32)) for k in range(3)))
     d = mi.Vector3f(*(mi.Float(np.ascontiguousarray(dirs[:, k], np.float32)) for k in range(3)))
@@ -158,7 +159,8 @@ def reflection_buffer(mi, exp: Experiment, rvp: np.ndarray, width: int, height: 
 
 
 def build_baseline_inputs(exp: Experiment, inputs: ShaderInputs) -> dict:
-    """The four optional ``ShaderInputs`` fields of the baseline shader at ``inputs``' resolution."""
+    """The four optional ``ShaderInputs`` fields of the baseline shader at ``inputs``'
+    resolution."""
     import mitsuba as mi
 
     w, h, spp = inputs.width, inputs.height, BASELINE_SPP

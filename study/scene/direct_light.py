@@ -132,10 +132,11 @@ def traced_direct(
     ``extent`` (GL order, linear RGB), zero outside the (size, size) bool ``inside``: (mean,
     its two independent halves (2, size, size, 3), per-texel standard error, a dict for the
     texture's info), float32. The sky from ``reference.sky_directions`` directions per texel and
-    half, times the texel ``albedo`` (size, size, 3), its mean denoised (``reference.lighting_denoise``)
-    and matched to the raw mean over the pool; the sun from ``reference.sun_photons`` photons per
-    texel in ``N_BATCHES`` batches, raw (halves: batches 0-1 and 2-3). ``scene``: a Mitsuba scene
-    of the experiment's geometry with the water (the lighting render's, :func:`.lighting.lighting_scene`)."""
+    half, times the texel ``albedo`` (size, size, 3), its mean denoised
+    (``reference.lighting_denoise``) and matched to the raw mean over the pool; the sun from
+    ``reference.sun_photons`` photons per texel in ``N_BATCHES`` batches, raw (halves: batches 0-1
+    and 2-3). ``scene``: a Mitsuba scene of the experiment's geometry with the water (the
+    lighting render's, :func:`.lighting.lighting_scene`)."""
     import mitsuba as mi
 
     from .denoise import denoise_gain, denoise_radiance

@@ -29,7 +29,8 @@ MAX_COMPONENTS = 64
 def wave_vector_bound(components: int) -> int:
     """Bound K of the integer wave-vector grid [-K, K]^2 the components are drawn from: 4 (as
     always) while its 40 directions up to sign suffice, else the smallest K whose
-    ((2K + 1)^2 - 1) / 2 directions hold ``components`` distinct ones (5 for 41..60, 6 for 61..84)."""
+    ((2K + 1)^2 - 1) / 2 directions hold ``components`` distinct ones (5 for 41..60, 6 for
+    61..84)."""
     k = 4
     while ((2 * k + 1) ** 2 - 1) // 2 < components:
         k += 1
@@ -139,7 +140,8 @@ def sky_radiance(
     sun_radius_deg=0.0,
     sun_radiance=(0.0, 0.0, 0.0),
 ) -> np.ndarray:
-    """Sky radiance (..., 3) in unit directions d (..., 3); the sun disc is included when sun_dir is given."""
+    """Sky radiance (..., 3) in unit directions d (..., 3); the sun disc is included when sun_dir is
+    given."""
     d = np.asarray(d, np.float64)
     y = d[..., 1:2]
     t = np.sqrt(np.clip(y, 0, 1))

@@ -271,8 +271,8 @@ def render_dry(
     exp: Experiment, extent, size: int, spp: int, seed: int
 ) -> tuple[np.ndarray, np.ndarray]:
     """(colour, albedo), each (size, size, 3) GL order: the dry scene (no water) seen from above,
-    path traced at :func:`dry_spp` multi-jittered spp, and the texel-mean albedo of the first surface
-    hit, from the same samples (one scene, one render)."""
+    path traced at :func:`dry_spp` multi-jittered spp, and the texel-mean albedo of the first
+    surface hit, from the same samples (one scene, one render)."""
     import mitsuba as mi
 
     from .topdown import ortho_sensor, to_gl_order

@@ -10,17 +10,19 @@ As the seed's application prepares them, but from the scene:
 * ``world_y``: world y of the first surface hit from above at each texel centre (ray cast,
   exact, no filtering), like ``WaterDrawTextureDepthRefractionTop``;
 * the bottom-up textures of the reflection shader: the geometry above the water is the
-  pool walls (and the user's mesh, ``topdown.mesh_reflection_textures``), whose bottom-up view (clipped at the water plane, looking up) shows their
-  top at ``wall_height``; so ``refl_world_y`` is the top-down ``world_y`` where it is above
-  the water and a sentinel -1e3 elsewhere, and ``refl_texture`` is the top-down colour there;
+  pool walls (and the user's mesh, ``topdown.mesh_reflection_textures``), whose bottom-up view
+  (clipped at the water plane, looking up) shows their top at ``wall_height``; so ``refl_world_y``
+  is the top-down ``world_y`` where it is above the water and a sentinel -1e3 elsewhere, and
+  ``refl_texture`` is the top-down colour there;
 * the normal map of the waves (``_geometry.Waves``) with its four offsets;
 * the sky cube map from the same sky function without the sun disc (the sun is the
   shader's light and specular highlight). The shader looks the cube map up with ``y``
   flipped (the seed's "probably a bug in my code"); the quirk is kept in the shader and the
   application side compensates, as the seed's application evidently did: texel of
   direction ``d`` stores the sky in direction ``d * (1, -1, 1)``;
-* the Fresnel LUT for the experiment's IOR (see :func:`shader_fresnel_lut`); the light at the sun's direction, 1000 world
-  units away, coloured as the normalised sun radiance; the camera of the experiment;
+* the Fresnel LUT for the experiment's IOR (see :func:`shader_fresnel_lut`); the light at the sun's
+  direction, 1000 world units away, coloured as the normalised sun radiance; the camera of the
+  experiment;
 * for the fit alone, with ``reference.texture_method = "lighting"``: ``refraction_halves``, the
   refraction texture's two independent halves (:func:`half_inputs`, ``fit.input_noise``).
 """
@@ -156,10 +158,10 @@ def build_shader_inputs(
     progress=None,
     info: dict | None = None,
 ) -> ShaderInputs:
-    """All shader inputs of ``exp`` at output resolution (width, height) (default: the experiment's).
-    ``progress``: a ``study._progress.Stages`` that times and reports each stage (default: quiet).
-    ``info``, if given, receives how the refraction texture was made (``texture``: method,
-    settings and, for ``lighting``, its measured noise)."""
+    """All shader inputs of ``exp`` at output resolution (width, height) (default: the
+    experiment's). ``progress``: a ``study._progress.Stages`` that times and reports each stage
+    (default: quiet). ``info``, if given, receives how the refraction texture was made (``texture``:
+    method, settings and, for ``lighting``, its measured noise)."""
     from .._progress import Stages
 
     st = progress or Stages(quiet=True)
@@ -247,7 +249,8 @@ def build_shader_inputs(
 
 def reflection_colour(world_y: np.ndarray, colour: np.ndarray) -> np.ndarray:
     """The reflection shader's bottom-up colour without a user mesh: the top-down ``colour``
-    (H, W, 3) where the geometry (``world_y`` (H, W)) rises above the water, 0 elsewhere; float32."""
+    (H, W, 3) where the geometry (``world_y`` (H, W)) rises above the water, 0 elsewhere;
+    float32."""
     return np.where((world_y > 0.0)[..., None], colour, 0.0).astype(np.float32)
 
 
@@ -340,7 +343,8 @@ def load_or_build_shader_inputs(
                 else ""
             )
             + (
-                f", sun {tex['sun_photons'] / 1e6:.2f} M photons ({tex['sun_photons_landed'] / 1e6:.2f} M landed)"
+                f", sun {tex['sun_photons'] / 1e6:.2f} M photons "
+                f"({tex['sun_photons_landed'] / 1e6:.2f} M landed)"
                 if tex.get("sun_photons")
                 else ""
             )
@@ -353,7 +357,8 @@ def load_or_build_shader_inputs(
         )
     what = "bounced light, " if tex.get("direct") == "traced" else ""
     log(
-        f"shader inputs: built ({tex['method']} texture, {what}{tex['spp']} spp{noise}) and cached at {path}"
+        f"shader inputs: built ({tex['method']} texture, {what}{tex['spp']} spp{noise}) "
+        f"and cached at {path}"
     )
     return inputs
 

@@ -72,7 +72,8 @@ def sun_cone(sun: np.ndarray) -> tuple[np.ndarray, float]:
 
 
 def _cone_directions(axis: np.ndarray, angle: float, u: np.ndarray, v: np.ndarray) -> np.ndarray:
-    """(N, 3) unit directions uniform in solid angle in the cone (axis, angle) from uniforms u, v."""
+    """(N, 3) unit directions uniform in solid angle in the cone (axis, angle) from
+    uniforms u, v."""
     cos_t = 1.0 - u * (1.0 - np.cos(angle))
     sin_t = np.sqrt(np.maximum(0.0, 1.0 - cos_t**2))
     phi = 2.0 * np.pi * v
@@ -124,10 +125,10 @@ def _splat(
 
 
 def _emit(mi, scene, exp: Experiment, sun: np.ndarray, n_photons: int, seeds, y_cam: float):
-    """The photons of the (H, 2H, 3) ``sun`` map in one batch per seed of ``seeds``, travelling down:
-    (origins (B N, 3) above the whole scene, unit directions (B N, 3), float64 numpy; power (B N, 3)
-    as Mitsuba's ``Color3f``, radiance x m^2 x sr; batch index (B N,) int), N the square number at
-    most ``n_photons``; or None when the sun is below the horizon."""
+    """The photons of the (H, 2H, 3) ``sun`` map in one batch per seed of ``seeds``, travelling
+    down: (origins (B N, 3) above the whole scene, unit directions (B N, 3), float64 numpy; power
+    (B N, 3) as Mitsuba's ``Color3f``, radiance x m^2 x sr; batch index (B N,) int), N the square
+    number at most ``n_photons``; or None when the sun is below the horizon."""
     import drjit as dr
 
     F = mi.Float

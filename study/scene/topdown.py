@@ -161,7 +161,8 @@ def render_top_down(
 
 
 def underwater_camera_height(exp: Experiment) -> float:
-    """Height of the under-water orthographic camera: below the lowest wave trough, above the floor."""
+    """Height of the under-water orthographic camera: below the lowest wave trough, above the
+    floor."""
     from .mitsuba_scene import floor_of
 
     y_cam = -exp["waves.amplitude"] - 0.02

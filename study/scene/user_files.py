@@ -60,7 +60,8 @@ def clip_text(text: str, limit: int = 80) -> str:
 
 
 def resolve(key: str, value: str, base: Path | None) -> str:
-    """Absolute path of a file key's value (relative to ``base``), or "" for none; checks it exists."""
+    """Absolute path of a file key's value (relative to ``base``), or "" for none; checks it
+    exists."""
     if value == "":
         return ""
     p = Path(value).expanduser()
@@ -191,7 +192,8 @@ def albedo_image(values: dict, key: str = "floor.albedo_image") -> np.ndarray:
 
 
 def envmap_file(values: dict) -> np.ndarray:
-    """(H, 2H, 3) float32 radiance of ``sky.envmap``, turned by ``sky.rotation``, times ``sky.scale``."""
+    """(H, 2H, 3) float32 radiance of ``sky.envmap``, turned by ``sky.rotation``, times
+    ``sky.scale``."""
     key, path = "sky.envmap", values["sky.envmap"]
     if Path(path).suffix.lower() != ".exr":
         raise _error(key, path, "an HDR sky must be an EXR file (linear radiance)")

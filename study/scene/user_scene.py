@@ -97,7 +97,8 @@ def reference_sky_parts(exp: Experiment) -> tuple[np.ndarray, np.ndarray]:
 
 
 def shader_sky(exp: Experiment, d: np.ndarray) -> np.ndarray:
-    """Sky radiance (..., 3) without the sun in unit directions d (..., 3) (the cube map's content)."""
+    """Sky radiance (..., 3) without the sun in unit directions d (..., 3) (the cube map's
+    content)."""
     if not has_file(exp, "sky.envmap"):
         return sky_radiance(
             d, zenith=exp["sky.zenith"], horizon=exp["sky.horizon"], ground=exp["sky.ground"]

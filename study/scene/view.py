@@ -45,6 +45,7 @@ def check_water_in_view(exp: Experiment) -> None:
         if water_pixel_count(exp, w, h) == 0:
             raise ExperimentError(
                 f"no water in view at {key} = [{w}, {h}]: the water rectangle (pool.half_extent = "
-                f"{exp['pool.half_extent']}) covers no pixel centre of the camera (camera.position, "
+                f"{exp['pool.half_extent']}) covers no pixel centre of the "
+                "camera (camera.position, "
                 "camera.target, camera.fov_y); aim the camera at the water or enlarge it"
             )

@@ -30,7 +30,8 @@ def pareto_front(points: list, cost: str, error: str) -> list:
 
 
 def recommend(points: list, cost: str, error: str, tolerance: float) -> dict | None:
-    """The cheapest point with ``error <= (1 + tolerance) * best error`` (None if no valid point)."""
+    """The cheapest point with ``error <= (1 + tolerance) * best error`` (None if no valid
+    point)."""
     valid = [p for p in points if _ok(p.get(cost)) and _ok(p.get(error))]
     if not valid:
         return None

@@ -306,7 +306,8 @@ def analyse_noise(rows: list[dict]) -> dict:
 def _check_arguments(phases, solvers, starts, noise_seeds, noise_inputs) -> None:
     if not noise_inputs or any(w not in ("reference", "texture") for w in noise_inputs):
         raise ValueError(
-            f"noise_inputs must be a non-empty subset of ('reference', 'texture'), got {noise_inputs}"
+            "noise_inputs must be a non-empty subset of ('reference', "
+            f"'texture'), got {noise_inputs}"
         )
     bad = [p for p in phases if p not in PHASES]
     if bad:

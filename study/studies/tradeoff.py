@@ -207,7 +207,10 @@ def config_label(rec: dict) -> str:
         return rec["variant"]
     sched = f"({s['steps_grazing']:g}, {s['steps_steep']:g}, {int(s['loop_cap'])})"
     if "refl_loop_cap" in s:
-        sched += f" refl ({s['refl_steps_steep']:g}, {s['refl_steps_grazing']:g}, {int(s['refl_loop_cap'])})"
+        sched += (
+            f" refl ({s['refl_steps_steep']:g}, {s['refl_steps_grazing']:g}, "
+            f"{int(s['refl_loop_cap'])})"
+        )
     return f"{rec['variant']} {sched}"
 
 
@@ -435,7 +438,8 @@ def side_by_side(exps, specs, summary: dict, rows: list, out: Path, variant: str
     """Per scene, ``images_<scene>.png``: the reference | the seed shader with the experiment's
     constants at the seed's schedule | the seed's configuration refitted | the best configuration
     within the seed's fetch budget | the recommendation (duplicates left out), each at the
-    experiment's resolution with its FLIP and RMSE on the water pixels. Returns {scene: file name}."""
+    experiment's resolution with its FLIP and RMSE on the water pixels. Returns
+    {scene: file name}."""
     from shaders_port import Constants
 
     from .._metrics import errors

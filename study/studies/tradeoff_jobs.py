@@ -15,12 +15,13 @@ Per experiment and variant (``[tradeoff]`` table of the experiment, ``experiment
 Each point is measured by :func:`point_job` in a worker: FLIP and RMSE on the water pixels at the
 experiment's full resolution; texture fetches and loop iterations per water pixel (mean, p99)
 from the port's diagnostics; frame time of the fitted shader on llvmpipe at 512x512 and
-1920x1080 (draw + glFinish, median of ``gl_repeats`` frames after one warm-up) measured between two runs of a fixed
-reference shader (the seed's ``water_refraction`` with its own constants) in the same job, so the
-ratio to it compares fairly on a loaded machine; and the port's frame time (Dr.Jit LLVM, 512x512,
-median of 5). The converged raymarch gets no frame times (it is the error floor, not a candidate).
-For parsimony each point also carries its count of fitted constants (``n_fitted``: fitted or at a
-bound) and the AIC / BIC of its fit residual at the fit resolution (``study._metrics``).
+1920x1080 (draw + glFinish, median of ``gl_repeats`` frames after one warm-up) measured between two
+runs of a fixed reference shader (the seed's ``water_refraction`` with its own constants) in the
+same job, so the ratio to it compares fairly on a loaded machine; and the port's frame time (Dr.Jit
+LLVM, 512x512, median of 5). The converged raymarch gets no frame times (it is the error floor, not
+a candidate). For parsimony each point also carries its count of fitted constants (``n_fitted``:
+fitted or at a bound) and the AIC / BIC of its fit residual at the fit resolution
+(``study._metrics``).
 """
 
 from __future__ import annotations
@@ -56,7 +57,8 @@ def _scaled(variant, factor: float) -> dict:
 
 def schedules(exp, variant_name: str) -> list[dict]:
     """The schedules of one variant: ``{"kind": grid|scale|converged, "scale": f|None,
-    "schedule": {constant: value}}``, distinct, in a stable order (the seed's one is ``scale 1``)."""
+    "schedule": {constant: value}}``, distinct, in a stable order (the seed's one is
+    ``scale 1``)."""
     from shaders_port._variants import get_variant
 
     variant = get_variant(variant_name)

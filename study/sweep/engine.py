@@ -89,7 +89,8 @@ class Progress:
         fail = f", {self.failed} failed" if self.failed else ""
         end = "\n" if self.done >= self.total else ""
         print(
-            f"\r{self.label} [{bar}] {self.done}/{self.total}{fail} {time.perf_counter() - self.t0:.0f} s",
+            f"\r{self.label} [{bar}] {self.done}/{self.total}{fail} "
+            f"{time.perf_counter() - self.t0:.0f} s",
             end=end,
             file=self.stream,
             flush=True,

@@ -37,7 +37,8 @@ def job_key(fn_name: str, job: dict) -> str:
 
 
 def flatten(d: dict, prefix: str = "") -> dict:
-    """``{"a": {"b": 1}, "c": [1, 2]}`` -> ``{"a.b": 1, "c": [1, 2]}`` with column-friendly values."""
+    """``{"a": {"b": 1}, "c": [1, 2]}`` -> ``{"a.b": 1, "c": [1, 2]}`` with column-friendly
+    values."""
     out = {}
     for k, v in d.items():
         name = f"{prefix}{k}"
