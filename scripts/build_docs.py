@@ -5,8 +5,8 @@ Every table of results in ``docs/`` is written by this script, never by hand:
 * ``docs/results/<study>/report.md`` of the tradeoff-family studies (``tradeoff``, ``variants``,
   ``variants/shipped``, ``baselines``): from the study's ``summary.json`` where it is committed,
   else from its ``tradeoff.parquet`` (fronts, recommendations and findings recomputed by
-  ``study.studies.tradeoff.analyse``; the run-time sections -- exported shaders, side-by-side
-  images -- exist only in a run's own summary);
+  ``study.studies.tradeoff_analysis.analyse``; the run-time sections -- exported shaders,
+  side-by-side images -- exist only in a run's own summary);
 * ``docs/results/failures/report.md``: from its ``failures.parquet`` (one row per scene and
   failure class) and ``summary.json`` (the command that ran it);
 * ``docs/results/stability/<phase>/stability.md``: from the phase's ``summary.json``;
@@ -49,7 +49,7 @@ and `schema_study.py`); `experiments/README.md` describes the shipped experiment
 
 def _tradeoff_summary(folder: Path) -> dict:
     """The study's summary: its committed ``summary.json``, else recomputed from its table."""
-    from study.studies.tradeoff import analyse
+    from study.studies.tradeoff_analysis import analyse
     from study.sweep import read_table
 
     summary_file = folder / "summary.json"

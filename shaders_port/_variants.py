@@ -21,6 +21,7 @@ from __future__ import annotations
 import importlib
 from dataclasses import dataclass, field
 
+from . import _space
 from ._glsl import read_source, switches_of, with_define
 
 
@@ -147,149 +148,26 @@ def register(variant: Variant) -> Variant:
 
 
 def get_variant(name: str) -> Variant:
-    """The registered variant ``name``; a ValueError lists the known names otherwise."""
-    try:
+    """The variant ``name``: a registered one, or any configuration of the shader space named
+    as :func:`shaders_port._space.name_of` names it (built and registered on first use, in
+    every process alike, so a sweep's workers resolve the names the driver planned). A
+    ValueError says why otherwise (unknown token, or a configuration no file realises)."""
+    if name in VARIANTS:
         return VARIANTS[name]
-    except KeyError:
-        raise ValueError(f"unknown shader variant {name!r}; known: {', '.join(VARIANTS)}") from None
+    try:
+        return register(from_space(_space.choices_of(name)))
+    except ValueError as exc:
+        raise ValueError(
+            f"unknown shader variant {name!r}: {exc}. Registered: {', '.join(VARIANTS)}"
+        ) from None
 
 
 _RAYCAST = ("steps_grazing", "steps_steep", "loop_cap")
-
-register(
-    Variant(
-        "water_refraction",
-        "water_refraction",
-        schedule=_RAYCAST,
-        description=(
-            "the original shader (source 000, section 2): raycast refraction, cube-map sky "
-            "reflection, Phong highlight"
-        ),
-    )
-)
-register(
-    Variant(
-        "water_refraction_noreflection",
-        "water_refraction",
-        defines=("NOREFLECTION",),
-        schedule=_RAYCAST,
-        description=(
-            "the original shader with NOREFLECTION: raycast refraction and highlight, no sky"
-        ),
-    )
-)
-register(
-    Variant(
-        "water_reflection",
-        "water_reflection",
-        schedule=_RAYCAST + ("refl_steps_steep", "refl_steps_grazing", "refl_loop_cap"),
-        description="source 000, section 3: refraction and reflection both raycast",
-    )
-)
-
-# ---- variants of the original refraction shader (one GLSL switch each, or a combination) -------
-# Each answers one limitation of the original (see shaders_port/README.md, "Variants").
+_REFLECTION_SCHEDULE = ("refl_steps_steep", "refl_steps_grazing", "refl_loop_cap")
+# constants a choice fits in place of the original's (Variant.replaces)
 _BEER = {"attenuation_distance": ("absorption_r", "absorption_g", "absorption_b")}
 _GGX = {"specular_exponent": ("specular_roughness",)}
 _NOSPEC = {"specular_strength": (), "specular_exponent": ()}
-_REFINE = _RAYCAST + ("refine_steps",)
-
-
-def _seed_variant(name, defines, description, schedule=_RAYCAST, replaces=None, textures="float"):
-    register(
-        Variant(
-            name,
-            "water_refraction",
-            defines=defines,
-            schedule=schedule,
-            description=description,
-            replaces=replaces or {},
-            textures=textures,
-        )
-    )
-
-
-_seed_variant(
-    "water_refraction_beer",
-    ("BEER_ATTENUATION",),
-    "original + Beer-Lambert attenuation per colour channel towards waterColor",
-    replaces=_BEER,
-)
-_seed_variant(
-    "water_refraction_ggx",
-    ("GGX_SPECULAR",),
-    "original + GGX microfacet highlight (Smith masking) in place of Phong",
-    replaces=_GGX,
-)
-_seed_variant(
-    "water_refraction_beer_ggx",
-    ("BEER_ATTENUATION", "GGX_SPECULAR"),
-    "original + Beer-Lambert attenuation + GGX highlight",
-    replaces={**_BEER, **_GGX},
-)
-_seed_variant(
-    "water_refraction_beer_walls",
-    ("BEER_ATTENUATION", "WALL_FACES"),
-    "original + Beer-Lambert attenuation + a crossing into a wall above the water shaded as "
-    "its submerged face (waterColor), not the wall's top",
-    replaces=_BEER,
-)
-_seed_variant(
-    "water_refraction_binary",
-    ("BINARY_REFINE",),
-    "original + REFINE_STEPS binary-search steps after the linear search (relief mapping)",
-    schedule=_REFINE,
-)
-_seed_variant(
-    "water_refraction_secant",
-    ("SECANT_REFINE",),
-    "original + REFINE_STEPS secant steps after the linear search (parallax occlusion mapping)",
-    schedule=_REFINE,
-)
-_seed_variant(
-    "water_refraction_2layers",
-    ("TWO_NORMAL_LAYERS",),
-    "original with two normal-map layers instead of four",
-)
-_seed_variant(
-    "water_refraction_1layer",
-    ("ONE_NORMAL_LAYER",),
-    "original with one normal-map layer instead of four",
-)
-_seed_variant(
-    "water_refraction_nospecular",
-    ("NO_SPECULAR",),
-    "original without the specular highlight",
-    replaces=_NOSPEC,
-)
-_seed_variant(
-    "water_refraction_game_textures",
-    (),
-    "original with 8-bit sRGB colour, 8-bit normal map and Fresnel LUT, half-float depth and sky",
-    textures="game",
-)
-register(
-    Variant(
-        "water_reflection_beer_ggx",
-        "water_reflection",
-        defines=("BEER_ATTENUATION", "GGX_SPECULAR"),
-        schedule=_RAYCAST + ("refl_steps_steep", "refl_steps_grazing", "refl_loop_cap"),
-        description="source 000, section 3 + Beer-Lambert attenuation + GGX highlight",
-        replaces={**_BEER, **_GGX},
-    )
-)
-register(
-    Variant(
-        "water_reflection_beer",
-        "water_reflection",
-        defines=("BEER_ATTENUATION",),
-        schedule=_RAYCAST + ("refl_steps_steep", "refl_steps_grazing", "refl_loop_cap"),
-        description="source 000, section 3 + Beer-Lambert attenuation",
-        replaces=_BEER,
-    )
-)
-
-# sources 001-004: the baseline game water shader (no raycast, so no step schedule)
 _BASELINE_INPUTS = ("scene_color", "scene_depth", "reflection_color", "reflection_view_proj")
 _BASELINE_FIT = (
     "refraction_index",
@@ -297,35 +175,109 @@ _BASELINE_FIT = (
     "chromatic_dispersion",
     "reflect_distortion",
 )
-register(
-    Variant(
-        "water_baseline",
-        "water_baseline",
-        inputs=_BASELINE_INPUTS,
-        fit_parameters=_BASELINE_FIT,
-        description="sources 001-004: planar refraction + normal-map distortion with dispersion "
-        "of the screen-space scene, planar reflection distorted by the wave normal",
+
+
+def from_space(choices: dict, description: str | None = None) -> Variant:
+    """The :class:`Variant` of a configuration of the shader space (``_space.AXES`` choices):
+    its file and defines (``_space.realise``), its step schedule, the constants its choices
+    fit in place of the original's, and the screen-space inputs of the baseline shader."""
+    c = _space.checked(choices)
+    shader, defines, textures = _space.realise(c)
+    name = _space.name_of(c)
+    if shader == "water_baseline":
+        return Variant(
+            name,
+            shader,
+            defines=defines,
+            inputs=_BASELINE_INPUTS,
+            fit_parameters=_BASELINE_FIT,
+            description=description or _space.describe(c),
+        )
+    schedule = _RAYCAST + (("refine_steps",) if c["refine"] != "linear" else ())
+    if c["reflection"] == "raycast":
+        schedule += _REFLECTION_SCHEDULE
+    replaces = {}
+    if c["attenuation"] == "beer":
+        replaces.update(_BEER)
+    if c["specular"] == "ggx":
+        replaces.update(_GGX)
+    elif c["specular"] == "none" and c["reflection"] != "none":
+        replaces.update(_NOSPEC)
+    return Variant(
+        name,
+        shader,
+        defines=defines,
+        schedule=schedule,
+        description=description or _space.describe(c),
+        replaces=replaces,
+        textures=textures,
     )
+
+
+def _shipped(name: str, description: str) -> None:
+    register(from_space(_space.choices_of(name), description))
+
+
+# the shipped variants, in chart order: the original two shaders (source 000), the study's
+# variants of the original (each answers one limitation; shaders_port/README.md, "Variants")
+# and the game-water baselines (sources 001-004); any other configuration of the space is
+# built on demand by get_variant
+_shipped(
+    "water_refraction",
+    "the original shader (source 000, section 2): raycast refraction, cube-map sky "
+    "reflection, Phong highlight",
 )
-register(
-    Variant(
-        "water_baseline_flat",
-        "water_baseline",
-        defines=("FLAT_WATER",),
-        inputs=_BASELINE_INPUTS,
-        fit_parameters=_BASELINE_FIT,
-        description="sources 001 + 004 (FLAT_WATER): planar refraction and planar reflection "
-        "of flat water, no waves",
-    )
+_shipped(
+    "water_refraction_noreflection",
+    "the original shader with NOREFLECTION: raycast refraction alone, no sky, no highlight",
 )
-register(
-    Variant(
-        "water_baseline_noplanar",
-        "water_baseline",
-        defines=("NO_PLANAR_REFRACTION",),
-        inputs=_BASELINE_INPUTS,
-        fit_parameters=_BASELINE_FIT,
-        description="sources 002-004 (NO_PLANAR_REFRACTION): the classic distorted "
-        "screen-space refraction and planar reflection, no 001",
-    )
+_shipped("water_reflection", "source 000, section 3: refraction and reflection both raycast")
+_shipped(
+    "water_refraction_beer",
+    "original + Beer-Lambert attenuation per colour channel towards waterColor",
+)
+_shipped(
+    "water_refraction_ggx",
+    "original + GGX microfacet highlight (Smith masking) in place of Phong",
+)
+_shipped("water_refraction_beer_ggx", "original + Beer-Lambert attenuation + GGX highlight")
+_shipped(
+    "water_refraction_beer_walls",
+    "original + Beer-Lambert attenuation + a crossing into a wall above the water shaded as "
+    "its submerged face (waterColor), not the wall's top",
+)
+_shipped(
+    "water_refraction_binary",
+    "original + REFINE_STEPS binary-search steps after the linear search (relief mapping)",
+)
+_shipped(
+    "water_refraction_secant",
+    "original + REFINE_STEPS secant steps after the linear search (parallax occlusion mapping)",
+)
+_shipped("water_refraction_2layers", "original with two normal-map layers instead of four")
+_shipped("water_refraction_1layer", "original with one normal-map layer instead of four")
+_shipped("water_refraction_nospecular", "original without the specular highlight")
+_shipped(
+    "water_refraction_game_textures",
+    "original with 8-bit sRGB colour, 8-bit normal map and Fresnel LUT, half-float depth and sky",
+)
+_shipped(
+    "water_reflection_beer_ggx",
+    "source 000, section 3 + Beer-Lambert attenuation + GGX highlight",
+)
+_shipped("water_reflection_beer", "source 000, section 3 + Beer-Lambert attenuation")
+_shipped(
+    "water_baseline",
+    "sources 001-004: planar refraction + normal-map distortion with dispersion of the "
+    "screen-space scene, planar reflection distorted by the wave normal",
+)
+_shipped(
+    "water_baseline_flat",
+    "sources 001 + 004 (FLAT_WATER): planar refraction and planar reflection of flat water, "
+    "no waves",
+)
+_shipped(
+    "water_baseline_noplanar",
+    "sources 002-004 (NO_PLANAR_REFRACTION): the classic distorted screen-space refraction "
+    "and planar reflection, no 001",
 )

@@ -155,7 +155,15 @@ def run_preview(experiment, out, overrides=None, variant=None, cache=None) -> di
 
 
 def run_tradeoff(
-    experiments, out, overrides=None, variant=None, tolerance=None, scheduler=None, workers=None
+    experiments,
+    out,
+    overrides=None,
+    variant=None,
+    tolerance=None,
+    scheduler=None,
+    workers=None,
+    search=None,
+    budget=None,
 ) -> dict:
     """``study tradeoff``: the speed-versus-accuracy study over ``experiments`` on the sweep engine
     (``study.studies.tradeoff``); tables, ``pareto.png``, ``report.md`` and shaders in ``out``."""
@@ -170,6 +178,8 @@ def run_tradeoff(
         tolerance=tolerance,
         variant=variant or "llvm_ad_rgb",
         log=_log,
+        search=search,
+        budget=budget,
     )
 
 

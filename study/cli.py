@@ -114,10 +114,40 @@ def build_parser() -> argparse.ArgumentParser:
         help="recommend the cheapest point within this fraction of the best FLIP "
         "(default: tradeoff.tolerance, 0.02)",
     )
+    p.add_argument(
+        "--search",
+        choices=("adaptive", "exhaustive"),
+        default=None,
+        help="adaptive: screen the shader space cheaply, measure the survivors in full; "
+        "exhaustive: every shader and schedule in full (default: tradeoff.search, adaptive)",
+    )
+    p.add_argument(
+        "--budget",
+        action="append",
+        default=[],
+        metavar="COST=LIMIT",
+        type=_budget_entry,
+        help="recommend the lowest FLIP within the limit (repeatable): fetches=N (texture "
+        "fetches per water pixel) or gl_ms=X (normalised llvmpipe ms at 1920x1080)",
+    )
     _add_stability(sub)
     _add_failures(sub)
     _add_export(sub)
     return parser
+
+
+def _budget_entry(text: str) -> tuple[str, float]:
+    """``fetches=17.1`` -> ("fetches", 17.1); argparse reports the ValueError's message."""
+    key, sep, value = text.partition("=")
+    try:
+        limit = float(value)
+    except ValueError:
+        limit = None
+    if not sep or key.strip() not in ("fetches", "gl_ms") or limit is None or not limit > 0:
+        raise argparse.ArgumentTypeError(
+            f"{text!r}: expected fetches=N or gl_ms=X with a positive number"
+        )
+    return key.strip(), limit
 
 
 def _add_stability(sub) -> None:
@@ -231,6 +261,8 @@ def main(argv=None) -> int:
                 tolerance=args.tolerance,
                 scheduler=args.scheduler,
                 workers=args.workers,
+                search=args.search,
+                budget=dict(args.budget),
             )
         elif args.command == "stability":
             from .studies.stability import SOLVERS

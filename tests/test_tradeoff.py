@@ -116,7 +116,7 @@ def _row(exp, variant, kind, scale, g, s, c, flip, fetches, ratio=1.0, crossed=0
 
 
 def test_analysis_of_a_table():
-    from study.studies.tradeoff import analyse
+    from study.studies.tradeoff_analysis import analyse
 
     rows = [
         _row("A", "water_refraction", "scale", 0.5, 5, 1.5, 20, 0.170, 12.0, crossed=0.02),
@@ -199,6 +199,8 @@ def test_tradeoff_cli_tiny(tmp_path):
         str(tmp_path),
         "--workers",
         "1",
+        "--search",
+        "exhaustive",
     ] + [a for s in small for a in ("--set", s)]
     assert main(args) == 0
     rows = read_table(tmp_path / "tradeoff.parquet")

@@ -18,7 +18,7 @@ from pathlib import Path
 
 import numpy as np
 
-from shaders_port._variants import VARIANTS
+from shaders_port._variants import get_variant
 
 from .errors import ExperimentError
 from .schema import (
@@ -85,6 +85,24 @@ _LATER_KEYS = (
 _NOTED: set = set()
 
 
+def _check_shaders(values: dict) -> None:
+    """``fit.shader`` and ``tradeoff.variants`` name shaders of the space, ``tradeoff.fix``
+    pins its axes (``shaders_port._space``)."""
+    from shaders_port._space import parse_fix
+
+    names = [("fit.shader", values["fit.shader"])]
+    names += [("tradeoff.variants", v) for v in values["tradeoff.variants"] or []]
+    for key, name in names:
+        try:
+            get_variant(name)
+        except ValueError as exc:
+            raise ExperimentError(f"{key}: {exc}") from None
+    try:
+        parse_fix(values["tradeoff.fix"])
+    except ValueError as exc:
+        raise ExperimentError(str(exc)) from None
+
+
 def fit_parameters(shader_name: str, listed: list | None) -> list[str]:
     """The constants a fit of ``shader_name`` takes for ``fit.parameters = listed``: unset
     (None), every ``FIT_PARAMETERS`` entry the shader reads outside its step schedule; else
@@ -92,7 +110,7 @@ def fit_parameters(shader_name: str, listed: list | None) -> list[str]:
     Beer-Lambert absorptions for ``attenuation_distance``; the fit takes the replacements).
     A listed constant it does not read is dropped with one note on stderr; none left is an
     ExperimentError."""
-    shader = VARIANTS[shader_name]
+    shader = get_variant(shader_name)
     reads = shader.reads()
     readable = [p for p in FIT_PARAMETERS if p in reads and p not in shader.schedule]
     if listed is None:
@@ -379,6 +397,7 @@ def validate(raw: dict, overrides: list[str] | None = None, path: Path | None = 
             'independent halves, which only reference.texture_method = "lighting" '
             'renders; use that method or fit.input_noise = "ignore"'
         )
+    _check_shaders(values)
     values["fit.parameters"] = fit_parameters(values["fit.shader"], values["fit.parameters"])
     if values["camera.position"] == values["camera.target"]:
         raise ExperimentError("camera.position equals camera.target; move one of them")

@@ -227,7 +227,12 @@ STUDY_KEYS: dict[str, Field] = {
         8,
         4096,
     ),
-    "fit.shader": Field("str", "water_refraction", "Shader variant to fit.", choices=SHADERS),
+    "fit.shader": Field(
+        "str",
+        "water_refraction",
+        "Shader to fit: a shipped variant or any configuration of the shader space, named as "
+        "`docs/shader-space.md` says (e.g. `water_reflection_beer_walls`).",
+    ),
     "fit.parameters": Field(
         "list_str",
         None,
@@ -260,11 +265,50 @@ STUDY_KEYS: dict[str, Field] = {
         '`reference.texture_method = "lighting"`).',
         choices=("ignore", "decorrelate"),
     ),
+    "tradeoff.search": Field(
+        "str",
+        "adaptive",
+        "How `study tradeoff` searches the shader space: `adaptive` (a cheap screen of the "
+        "configurations and schedules, then the survivors in full) or `exhaustive` (every "
+        "configuration and schedule in full, for checking).",
+        choices=("adaptive", "exhaustive"),
+    ),
     "tradeoff.variants": Field(
         "list_str",
-        ["water_refraction_noreflection", "water_refraction", "water_reflection"],
-        "Shader variants `study tradeoff` compares.",
-        choices=SHADERS,
+        None,
+        "The shaders `study tradeoff` compares (names of the shader space); unset: the whole "
+        "space, with the axes of `tradeoff.fix` pinned.",
+    ),
+    "tradeoff.fix": Field(
+        "list_str",
+        [],
+        'Axes of the shader space held at one choice, as `"axis=choice"` (e.g. '
+        '`"textures=float"`); see `docs/shader-space.md`.',
+    ),
+    "tradeoff.max_shaders": Field(
+        "int",
+        64,
+        "Configurations the adaptive search screens at most (its walk stops there).",
+        "",
+        1,
+        10000,
+    ),
+    "tradeoff.screen_factor": Field(
+        "int",
+        2,
+        "The adaptive search screens at `fit.resolution` divided by this factor.",
+        "",
+        1,
+        64,
+    ),
+    "tradeoff.noise_z": Field(
+        "float",
+        2.0,
+        "A point is dropped by the adaptive search when another costs no more and its FLIP "
+        "is lower by more than this many standard errors of the paired difference.",
+        "",
+        0.0,
+        100.0,
     ),
     "tradeoff.steps_grazing": Field(
         "list_float",

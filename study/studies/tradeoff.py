@@ -24,20 +24,13 @@ the best configuration within the seed's fetch budget and the recommendation), `
 
 from __future__ import annotations
 
-import statistics
+import time
 from pathlib import Path
 
-from .pareto import pareto_front, recommend
+from .tradeoff_analysis import COSTS, analyse, config_label, constants_of, is_seed, point_record
 from .tradeoff_jobs import SEED_SCHEDULE, anchor_job, point_job, schedules
 from .._progress import log as _log
 
-COST = "fetches_mean"
-COSTS = {
-    "fetches_mean": "texture fetches / water pixel (mean)",
-    "gl_norm_ms_1080p": "llvmpipe ms / frame at 1920x1080 (normalised)",
-    "port_ms_512": "Dr.Jit LLVM port ms / frame at 512x512",
-}
-ERROR = "flip"
 # [tradeoff] keys that choose the jobs, never what one job computes
 PLAN_KEYS = frozenset(
     {
@@ -48,22 +41,21 @@ PLAN_KEYS = frozenset(
         "tradeoff.scales",
         "tradeoff.converged_scale",
         "tradeoff.tolerance",
+        "tradeoff.search",
+        "tradeoff.fix",
+        "tradeoff.max_shaders",
+        "tradeoff.screen_factor",
+        "tradeoff.noise_z",
     }
 )
 
 
-def _constants_of(row: dict) -> dict:
-    return {
-        k[len("fitted.") :]: v for k, v in row.items() if k.startswith("fitted.") and v is not None
-    }
-
-
-def plan_points(exps, specs, anchors: dict) -> list[dict]:
+def plan_points(exps, specs, anchors: dict, variants: list) -> list[dict]:
     """Phase-2 jobs: every schedule of every variant of every experiment, started from the
     anchor's constants (``anchors[(scene index, variant)]``)."""
     jobs = []
     for i, (exp, spec) in enumerate(zip(exps, specs)):
-        for v in exp["tradeoff.variants"]:
+        for v in variants:
             for s in schedules(exp, v):
                 jobs.append(
                     {
@@ -88,12 +80,18 @@ def run_tradeoff(
     tolerance: float | None = None,
     variant: str = "llvm_ad_rgb",
     log=_log,
+    search: str | None = None,
+    budget: dict | None = None,
 ) -> dict:
-    """Run the study (see the module doc); returns the summary written to ``summary.json``."""
+    """Run the study (see the module doc); returns the summary written to ``summary.json``.
+    ``search``: 'adaptive' or 'exhaustive' (default: ``tradeoff.search``); ``budget``: cost
+    measure -> limit (``fetches_mean``, ``gl_norm_ms_1080p``): recommend the lowest FLIP
+    within it."""
+    from shaders_port._space import configurations, name_of, parse_fix
+
     from .._io import write_json
-    from ..fit.model import constants_from_experiment
     from ..scene.experiment import load_experiments
-    from ..sweep import run_sweep, scene_spec
+    from ..sweep import scene_spec
     from ..sweep.cluster import open_client
 
     exps = load_experiments(experiments, overrides)
@@ -101,6 +99,11 @@ def run_tradeoff(
     tol = exps[0]["tradeoff.tolerance"] if tolerance is None else float(tolerance)
     if tol < 0:
         raise ValueError(f"--tolerance must be >= 0, got {tol}")
+    budget = check_budget(budget)
+    mode = search or exps[0]["tradeoff.search"]
+    if mode not in ("adaptive", "exhaustive"):
+        raise ValueError(f"search must be 'adaptive' or 'exhaustive', got {mode!r}")
+    fix, chosen = parse_fix(exps[0]["tradeoff.fix"]), exps[0]["tradeoff.variants"]
     # the jobs' scenes leave out the keys that only shape the plan (which variants and schedules),
     # so that widening the plan resumes every point already measured
     specs = [
@@ -109,47 +112,20 @@ def run_tradeoff(
     ]
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
-    anchor_jobs = [
-        {
-            "scene": spec,
-            "experiment": exp["name"],
-            "variant": v,
-            "start": constants_from_experiment(exp).replace(**SEED_SCHEDULE).to_dict(),
-        }
-        for exp, spec in zip(exps, specs)
-        for v in exp["tradeoff.variants"]
-    ]
+    t0 = time.perf_counter()
     with open_client(scheduler, workers, variant, log=log) as client:
-        arows = run_sweep(
-            anchor_job,
-            anchor_jobs,
-            out / "anchors.parquet",
-            client=client,
-            label="tradeoff: anchor fits",
-            log=log,
-        )
-        anchors = {}
-        for job, row in zip(anchor_jobs, arows):
-            i = names.index(job["experiment"])
-            if row["status"] == "ok":
-                anchors[(i, job["variant"])] = {**job["start"], **_constants_of(row)}
-            else:
-                log(
-                    f"tradeoff: anchor fit of {job['variant']} on {job['experiment']} failed "
-                    f"({row['error']}); its points start from the experiment's constants"
-                )
-                anchors[(i, job["variant"])] = job["start"]
-        points = plan_points(exps, specs, anchors)
-        # rows of this plan only (a table written by an earlier plan keeps its other rows)
-        rows = run_sweep(
-            point_job,
-            points,
-            out / "tradeoff.parquet",
-            client=client,
-            label="tradeoff: points",
-            log=log,
-        )[: len(points)]
-    summary, recs = analyse(rows, names, tol)
+        if mode == "exhaustive":
+            shaders = chosen or [name_of(c) for c in configurations(fix)]
+            rows = _exhaustive(exps, specs, client, out, log, shaders)
+            searcher = None
+        else:
+            rows, searcher = _adaptive(exps, specs, client, out, log, fix, chosen)
+        summary, recs = analyse(rows, names, tol, budget)
+        summary["search"] = _search_summary(mode, searcher, rows, fix, time.perf_counter() - t0)
+        if searcher is not None:
+            for i, name in enumerate(names):
+                rec = summary["scenes"][name]["recommended"]
+                summary["scenes"][name]["marginals"] = searcher.marginals_of(i, rec) if rec else []
     summary["experiments"] = [str(p) for p in experiments]
     summary["exports"] = export_recommended(exps, specs, summary, rows, out, variant, log)
     summary["images"] = side_by_side(exps, specs, summary, rows, out, variant)
@@ -162,216 +138,105 @@ def run_tradeoff(
     return summary
 
 
-# ---- analysis ------------------------------------------------------------------------------
+BUDGETS = {"fetches": "fetches_mean", "gl_ms": "gl_norm_ms_1080p"}
 
 
-def point_record(row: dict) -> dict:
-    """The figures of one table row the analysis uses (flat dict)."""
-    rec = {
-        "experiment": row.get("job.experiment"),
-        "variant": row.get("job.variant"),
-        "kind": row.get("job.kind"),
-        "scale": row.get("job.scale"),
-        "schedule": {
-            k[len("job.schedule.") :]: row[k]
-            for k in row
-            if k.startswith("job.schedule.") and row[k] is not None
-        },
-        "status": row.get("status"),
-        "error_message": row.get("error"),
-    }
-    for k in (
-        "flip",
-        "rmse",
-        "fetches_mean",
-        "fetches_p99",
-        "iterations_mean",
-        "iterations_p99",
-        "not_crossed",
-        "n_fitted",
-        "bic",
-        "gl_ms_512",
-        "gl_ms_1080p",
-        "gl_ratio_512",
-        "gl_ratio_1080p",
-        "port_ms_512",
-        "gl_ref_ms_1080p",
-    ):
-        rec[k] = row.get(k)
-    return rec
-
-
-def config_label(rec: dict) -> str:
-    s = rec["schedule"]
-    if not s:
-        return rec["variant"]
-    sched = f"({s['steps_grazing']:g}, {s['steps_steep']:g}, {int(s['loop_cap'])})"
-    if "refl_loop_cap" in s:
-        sched += (
-            f" refl ({s['refl_steps_steep']:g}, {s['refl_steps_grazing']:g}, "
-            f"{int(s['refl_loop_cap'])})"
-        )
-    return f"{rec['variant']} {sched}"
-
-
-def _is_seed(rec: dict) -> bool:
-    return rec["kind"] == "scale" and rec["scale"] == 1.0
-
-
-def analyse(rows: list, names: list, tolerance: float) -> tuple[dict, list]:
-    """Fronts, recommendations and findings of a finished sweep (see the module doc): the summary
-    and the successful points (records with ``label`` and the normalised GL cost)."""
-    recs = [point_record(r) for r in rows if r.get("job.experiment") in names]
-    ok = [r for r in recs if r["status"] == "ok" and r["flip"] is not None]
-    ref_ms = [r["gl_ref_ms_1080p"] for r in ok if r.get("gl_ref_ms_1080p")]
-    norm = statistics.median(ref_ms) if ref_ms else None
-    for r in ok:
-        r["gl_norm_ms_1080p"] = (
-            r["gl_ratio_1080p"] * norm if norm and r.get("gl_ratio_1080p") else None
-        )
-        r["label"] = config_label(r)
-    scenes = {}
-    for name in names:
-        pts = [r for r in ok if r["experiment"] == name and r["kind"] != "converged"]
-        scenes[name] = scene_findings(pts, [r for r in ok if r["experiment"] == name], tolerance)
-    joint = joint_points(ok, names)
-    summary = {
-        "tolerance": tolerance,
-        "cost": COST,
-        "error": ERROR,
-        "n_points": len(recs),
-        "n_failed": sum(r["status"] != "ok" for r in recs),
-        "gl_reference_ms_1080p": norm,
-        "failures": [
-            {k: r[k] for k in ("experiment", "variant", "kind", "error_message")}
-            | {"schedule": r["schedule"]}
-            for r in recs
-            if r["status"] != "ok"
-        ],
-        "scenes": scenes,
-    }
-    if len(names) > 1:
-        summary["joint"] = {
-            "front": pareto_front(joint, COST, ERROR),
-            "recommended": recommend(joint, COST, ERROR, tolerance),
-        }
-    return summary, ok
-
-
-def joint_points(ok: list, names: list) -> list:
-    """Configurations measured on every scene, with error and costs averaged over the scenes."""
-    by = {}
-    for r in ok:
-        if r["kind"] != "converged":
-            by.setdefault(r["label"], []).append(r)
-    out = []
-    for label, rs in by.items():
-        if sorted(r["experiment"] for r in rs) != sorted(names):
-            continue
-        j = {
-            "label": label,
-            "variant": rs[0]["variant"],
-            "schedule": rs[0]["schedule"],
-            "kind": rs[0]["kind"],
-            "scale": rs[0]["scale"],
-        }
-        for k in ("flip", "rmse", *COSTS):
-            vals = [r.get(k) for r in rs]
-            j[k] = statistics.mean(vals) if all(v is not None for v in vals) else None
-        out.append(j)
+def check_budget(budget: dict | None) -> dict:
+    """``budget`` (``fetches`` / ``gl_ms`` or the cost names they stand for -> limit) with the
+    cost names of :data:`COSTS`; a ValueError names a bad entry."""
+    out = {}
+    for k, v in (budget or {}).items():
+        cost = BUDGETS.get(k, k)
+        if cost not in COSTS:
+            raise ValueError(f"--budget {k}: choose one of {', '.join(BUDGETS)}")
+        if not (isinstance(v, (int, float)) and v > 0 and v == v):
+            raise ValueError(f"--budget {k}={v}: the limit must be a positive number")
+        out[cost] = float(v)
     return out
 
 
-def scene_findings(pts: list, all_pts: list, tolerance: float) -> dict:
-    """Front, recommendation and what-the-scene-needs findings for one scene's points."""
+def _exhaustive(exps, specs, client, out, log, shaders: list) -> list[dict]:
+    """Every configuration of ``shaders`` and every schedule in full: anchor fits at the
+    original's schedule, then every point warm-started from its anchor."""
+    from ..fit.model import constants_from_experiment
+    from ..sweep import run_sweep
 
-    def brief(r):
-        return (
-            None
-            if r is None
-            else {
-                k: r.get(k)
-                for k in (
-                    "label",
-                    "variant",
-                    "schedule",
-                    "kind",
-                    "scale",
-                    "flip",
-                    "rmse",
-                    *COSTS,
-                    "fetches_p99",
-                    "gl_ms_1080p",
-                    "not_crossed",
-                )
-            }
-        )
-
-    rec = recommend(pts, COST, ERROR, tolerance)
-    seed = [r for r in pts if _is_seed(r) and r["variant"] == "water_refraction"]
-    variants = list(dict.fromkeys(r["variant"] for r in all_pts))
-    best_by_variant = {
-        v: min((r["flip"] for r in pts if r["variant"] == v), default=None) for v in variants
-    }
-    best = min((x for x in best_by_variant.values() if x is not None), default=None)
-    simplest = next(
-        (
-            v
-            for v in variants
-            if best_by_variant[v] is not None and best_by_variant[v] <= best * (1 + tolerance)
-        ),
-        None,
-    )
-    floor = {
-        v: next(
-            (r["flip"] for r in all_pts if r["variant"] == v and r["kind"] == "converged"), None
-        )
-        for v in variants
-    }
-    crossing = {}
-    for v in variants:
-        if not any(r["schedule"] for r in all_pts if r["variant"] == v):
-            crossing[v] = "no raymarch"  # a loopless shader (the baselines)
-            continue
-        caps = sorted(
-            {
-                int(r["schedule"]["loop_cap"])
-                for r in pts
-                if r["variant"] == v
-                and r["schedule"]
-                and r.get("not_crossed") is not None
-                and r["not_crossed"] < 0.01
-            }
-        )
-        crossing[v] = caps[0] if caps else None
-    halvings = sorted(
-        (r for r in pts if r["kind"] == "scale"), key=lambda r: (r["variant"], r["scale"])
-    )
-    # parsimony: constants and BIC per variant at its seed's schedule (same reference, mask and
-    # resolution within a scene, so BIC differences compare)
-    at_seed = {r["variant"]: r for r in pts if (_is_seed(r) or r["kind"] == "fixed")}
-    parsimony = {
-        v: {"n_fitted": r.get("n_fitted"), "bic": r.get("bic"), "flip": r["flip"]}
-        for v, r in at_seed.items()
-    }
-    budget = seed[0][COST] * (1 + 1e-3) if seed and seed[0].get(COST) is not None else None
-    within = [
-        r for r in pts if budget is not None and r.get(COST) is not None and r[COST] <= budget
+    names = [e["name"] for e in exps]
+    anchor_jobs = [
+        {
+            "scene": spec,
+            "experiment": exp["name"],
+            "variant": v,
+            "start": constants_from_experiment(exp).replace(**SEED_SCHEDULE).to_dict(),
+        }
+        for exp, spec in zip(exps, specs)
+        for v in shaders
     ]
-    best_within = min(within, key=lambda r: r[ERROR], default=None)
-    return {
-        "front": [brief(r) for r in pareto_front(pts, COST, ERROR)],
-        "fronts_by_cost": {c: [r["label"] for r in pareto_front(pts, c, ERROR)] for c in COSTS},
-        "recommended": brief(rec),
-        "seed": brief(seed[0]) if seed else None,
-        "best_within_seed_budget": brief(best_within),
-        "parsimony": parsimony,
-        "best_flip_by_variant": best_by_variant,
-        "simplest_variant_within_tolerance": simplest,
-        "error_floor_by_variant": floor,
-        "smallest_crossing_loop_cap": crossing,
-        "halvings": [brief(r) for r in halvings],
-    }
+    log(f"tradeoff: exhaustive over {len(shaders)} shaders x {len(exps)} scenes")
+    arows = run_sweep(
+        anchor_job,
+        anchor_jobs,
+        out / "anchors.parquet",
+        client=client,
+        label="tradeoff: anchor fits",
+        log=log,
+    )
+    anchors = {}
+    for job, row in zip(anchor_jobs, arows):
+        i = names.index(job["experiment"])
+        if row["status"] == "ok":
+            anchors[(i, job["variant"])] = {**job["start"], **constants_of(row)}
+        else:
+            log(
+                f"tradeoff: anchor fit of {job['variant']} on {job['experiment']} failed "
+                f"({row['error']}); its points start from the experiment's constants"
+            )
+            anchors[(i, job["variant"])] = job["start"]
+    points = plan_points(exps, specs, anchors, shaders)
+    # rows of this plan only (a table written by an earlier plan keeps its other rows)
+    return run_sweep(
+        point_job,
+        points,
+        out / "tradeoff.parquet",
+        client=client,
+        label="tradeoff: points",
+        log=log,
+    )[: len(points)]
+
+
+def _adaptive(exps, specs, client, out, log, fix: dict, chosen):
+    """The adaptive search (``study.studies.search``): walk, schedules, then the finalists in
+    full. Returns (the full rung's rows, the ``Search``)."""
+    from ..sweep import run_sweep
+    from .search import Search
+
+    searcher = Search(exps, specs, client, out, log, fix=fix, variants=chosen)
+    finalists = []
+    for i in range(len(exps)):
+        front = searcher.walk(i)
+        finalists += searcher.schedules(i, front)
+        # the original shader at its own schedule: what every finding compares with
+        finalists += [
+            r for r in searcher.ok(i) if r["variant"] == "water_refraction" and is_seed(r)
+        ]
+    jobs = searcher.full_jobs(finalists)
+    log(
+        f"tradeoff: {len(searcher.screen)} screen points, {len(jobs)} measured in full "
+        f"({len(finalists)} survivors)"
+    )
+    rows = run_sweep(
+        point_job, jobs, out / "tradeoff.parquet", client=client, label="tradeoff: full", log=log
+    )[: len(jobs)]
+    return rows, searcher
+
+
+def _search_summary(mode: str, searcher, rows: list, fix: dict, seconds: float) -> dict:
+    out = {"mode": mode, "fix": fix, "points_in_full": len(rows), "seconds": seconds}
+    if searcher is not None:
+        out["screened"] = len(searcher.screen)
+        out["shaders_screened"] = len({r["variant"] for r in searcher.screen})
+        out["rounds"] = searcher.rounds
+    return out
 
 
 def export_recommended(
@@ -401,7 +266,7 @@ def export_recommended(
             and config_label(point_record(r)) == rec["label"]
             and r.get("job.kind") != "converged"
         )
-        constants = Constants.from_dict(_constants_of(row))
+        constants = Constants.from_dict(constants_of(row))
         folder = out / "shaders" if len(exps) == 1 else out / "shaders" / exp["name"]
         export_shaders(constants, folder, [rec["variant"]])
         from ..scene.baseline_inputs import inputs_for_shader
@@ -469,7 +334,7 @@ def side_by_side(exps, specs, summary: dict, rows: list, out: Path, variant: str
                     (
                         f"{title}: {r['label']}",
                         r["variant"],
-                        Constants.from_dict(_constants_of(row)),
+                        Constants.from_dict(constants_of(row)),
                     )
                 )
         images, errs, mask = {}, {}, None

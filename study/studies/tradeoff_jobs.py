@@ -188,6 +188,64 @@ def point_job(job: dict) -> dict:
     return out
 
 
+SCREEN_BLOCK = 4  # pixels per side of the blocks the screen's FLIP map is averaged over
+
+
+def screen_job(job: dict) -> dict:
+    """One cheap point of the adaptive search: the continuous constants fitted from
+    ``job["start"]`` at ``job["schedule"]`` at the screen resolution (``fit.resolution`` /
+    ``job["factor"]``), scored there against the box-downsampled reference. Returns FLIP and
+    RMSE on the water pixels, texture fetches and loop iterations per water pixel, the share
+    of rays not crossing the floor, ``flip_blocks`` (the FLIP map averaged over
+    ``SCREEN_BLOCK`` x ``SCREEN_BLOCK`` pixel blocks, row-major, NaN where a block has no
+    water: the paired noise estimate of ``study.studies.search``) and the fitted constants."""
+    from shaders_port import Constants
+
+    from .._metrics import flip_map, rmse
+    from ..fit.calibrate import calibrate_experiment
+    from ..sweep import load_scene
+
+    exp, _, _ = load_scene(job["scene"], job.get("mitsuba_variant", "llvm_ad_rgb"))
+    w, h = exp["fit.resolution"]
+    f = int(job["factor"])
+    if w % f or h % f:
+        raise ValueError(f"fit.resolution {w}x{h} is not divisible by the screen factor {f}")
+    exp, ref, _, model = job_model(job, resolution=(w // f, h // f))
+    start = Constants.from_dict(job["start"]).replace(**job["schedule"])
+    t0 = time.perf_counter()
+    cal = calibrate_experiment(model, exp, start, _fit_names(exp, job["variant"]))
+    fit_s = time.perf_counter() - t0
+    img, diag = model.render(cal.fitted)
+    m = model.mask
+    fmap = np.where(m, flip_map(model.reference, img), np.nan)
+    out = {
+        "flip": float(np.nanmean(fmap)),
+        "rmse": rmse(model.reference, img, m),
+        "fit_seconds": fit_s,
+        "water_pixels": int(m.sum()),
+        "flip_blocks": block_means(fmap, SCREEN_BLOCK).ravel().tolist(),
+    }
+    for k in ("fetches", "iterations"):
+        if k in diag.maps:
+            out[f"{k}_mean"] = float(diag.maps[k][m].mean())
+    if "crossed" in diag.maps:
+        out["not_crossed"] = float(1.0 - diag.maps["crossed"][m].mean())
+    out["fitted"] = cal.fitted.to_dict()
+    return out
+
+
+def block_means(values: np.ndarray, block: int) -> np.ndarray:
+    """(H // block, W // block) means of the finite entries of ``values`` (H, W) over
+    ``block`` x ``block`` blocks; NaN where a block has none."""
+    h, w = values.shape[0] // block * block, values.shape[1] // block * block
+    v = values[:h, :w].reshape(h // block, block, w // block, block)
+    finite = np.isfinite(v)
+    n = finite.sum(axis=(1, 3))
+    total = np.where(finite, v, 0.0).sum(axis=(1, 3))
+    with np.errstate(invalid="ignore", divide="ignore"):
+        return np.where(n > 0, total / np.maximum(n, 1), np.nan)
+
+
 def frame_times(variant_name: str, inputs, constants, repeats: int) -> dict:
     """GL frame times (ms) of the variant at each ``GL_SIZES`` beside the fixed reference shader
     (run before and after it), their ratio, and the port's frame time at 512x512."""

@@ -2,11 +2,11 @@
 stored as Parquet (pyarrow), written atomically.
 
 Rows are flat dicts. Nested job inputs and results are flattened with dotted names
-(``{"scene": {"experiment": "a.toml"}}`` -> ``scene.experiment``); lists of numbers or of strings
-stay lists (Parquet list columns); anything else that is not a scalar is stored as its JSON
-text. Every row carries ``key`` (the job's identity, :func:`job_key`), ``status`` (``ok`` or
-``error``), ``error`` (the exception's type and message, clipped), ``seconds`` (wall time of the
-job in its worker) and ``worker``.
+(``{"scene": {"experiment": "a.toml"}}`` -> ``scene.experiment``); lists of numbers
+(non-finite entries as nulls) or of strings stay lists (Parquet list columns); anything else
+that is not a scalar is stored as its JSON text. Every row carries ``key`` (the job's
+identity, :func:`job_key`), ``status`` (``ok`` or ``error``), ``error`` (the exception's type
+and message, clipped), ``seconds`` (wall time of the job in its worker) and ``worker``.
 """
 
 from __future__ import annotations
@@ -63,8 +63,9 @@ def _cell(v):
         return float(x) if math.isfinite(float(x)) else None
     if isinstance(v, (list, tuple)):
         items = [_cell(x) for x in v]
-        if all(isinstance(x, (int, float)) and not isinstance(x, bool) for x in items) and items:
-            return [float(x) for x in items]
+        numbers = [x for x in items if x is not None]
+        if numbers and all(isinstance(x, (int, float)) and type(x) is not bool for x in numbers):
+            return [None if x is None else float(x) for x in items]  # non-finite -> null
         if all(isinstance(x, str) for x in items):
             return list(items)
     return json.dumps(v, sort_keys=True, default=str)

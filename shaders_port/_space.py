@@ -1,0 +1,299 @@
+"""The shader space: every technique of the five sources as one choice on an axis.
+
+A *configuration* is one choice per axis of :data:`AXES` (a dict axis -> choice). Each
+realisable configuration is one shader of the study: a GLSL file of ``glsl/`` and the
+``#define`` names it is compiled with (:func:`realise`), named by :func:`name_of` (the names of
+the shipped variants, ``water_refraction_beer_walls`` and so on, are names of this grammar, and
+:func:`choices_of` reads any such name back). A configuration the files cannot realise is
+refused with the reason (:class:`Unrealisable`), never silently mapped to another shader.
+
+The axes and where each choice comes from (``SOURCE``):
+
+* ``refraction``: ``raycast`` through the top-down textures (source 000), ``planar_distorted``
+  (001's planar refraction of the depth-buffer point, distorted by the normal map with
+  dispersion, 003), ``distorted`` (003 alone), ``planar`` (001 alone, flat water);
+* ``reflection``: ``cube`` (000's sky cube map), ``raycast`` (000 section 3, cube map where
+  nothing is hit), ``planar_distorted`` (004's mirrored camera distorted by the normal, 002),
+  ``planar`` (004 alone), ``none``;
+* ``attenuation``: ``linear`` (000's clamped mix) or ``beer`` (Beer-Lambert per channel);
+* ``specular``: ``phong`` (000), ``ggx``, ``none``;
+* ``refine``: the crossing after the linear search, ``linear`` (000), ``binary``, ``secant``;
+* ``walls``: ``off`` (000) or ``on`` (a crossing into a wall shaded as its submerged face);
+* ``layers``: normal-map layers averaged, 4 (000), 2 or 1;
+* ``textures``: ``float`` or ``game`` (8-bit colour, half-float depth).
+
+What the files realise: the raycast refraction with the cube-map, raycast or no reflection
+and every other axis free (``water_refraction.frag``, ``water_reflection.frag``); the
+screen-space refraction with the planar reflection and the other axes at the original's
+choices (``water_baseline.frag``). The raycast refraction with a planar reflection and the
+screen-space refraction with a cube map are not in the files yet, and are refused so.
+"""
+
+from __future__ import annotations
+
+import itertools
+
+AXES: dict[str, tuple] = {
+    "refraction": ("raycast", "planar_distorted", "distorted", "planar"),
+    "reflection": ("cube", "raycast", "planar_distorted", "planar", "none"),
+    "attenuation": ("linear", "beer"),
+    "specular": ("phong", "ggx", "none"),
+    "refine": ("linear", "binary", "secant"),
+    "walls": ("off", "on"),
+    "layers": (4, 2, 1),
+    "textures": ("float", "game"),
+}
+ORIGINAL = {axis: choices[0] for axis, choices in AXES.items()}
+
+# where each choice comes from: a source (000-004) or the study's own variants
+SOURCE = {
+    ("refraction", "raycast"): "000",
+    ("refraction", "planar_distorted"): "001 + 003",
+    ("refraction", "distorted"): "003",
+    ("refraction", "planar"): "001",
+    ("reflection", "cube"): "000",
+    ("reflection", "raycast"): "000 section 3",
+    ("reflection", "planar_distorted"): "004 + 002",
+    ("reflection", "planar"): "004",
+    ("reflection", "none"): "000 (NOREFLECTION)",
+}
+
+# the #define of each choice in the raycast files (the original's choices have none)
+_RAYCAST_DEFINES = {
+    ("attenuation", "beer"): "BEER_ATTENUATION",
+    ("specular", "ggx"): "GGX_SPECULAR",
+    ("specular", "none"): "NO_SPECULAR",
+    ("walls", "on"): "WALL_FACES",
+    ("refine", "binary"): "BINARY_REFINE",
+    ("refine", "secant"): "SECANT_REFINE",
+    ("layers", 2): "TWO_NORMAL_LAYERS",
+    ("layers", 1): "ONE_NORMAL_LAYER",
+}
+# name tokens, in name order (a name is the shader file then the tokens of its choices)
+_TOKENS = (
+    (("reflection", "none"), "noreflection"),
+    (("attenuation", "beer"), "beer"),
+    (("specular", "ggx"), "ggx"),
+    (("specular", "none"), "nospecular"),
+    (("walls", "on"), "walls"),
+    (("refine", "binary"), "binary"),
+    (("refine", "secant"), "secant"),
+    (("layers", 2), "2layers"),
+    (("layers", 1), "1layer"),
+    (("textures", "game"), "game_textures"),
+)
+_BASELINE = {
+    ("planar_distorted", "planar_distorted"): ("water_baseline", ()),
+    ("distorted", "planar_distorted"): ("water_baseline_noplanar", ("NO_PLANAR_REFRACTION",)),
+    ("planar", "planar"): ("water_baseline_flat", ("FLAT_WATER",)),
+}
+
+
+class Unrealisable(ValueError):
+    """A configuration no shader file realises; the message says why and what would."""
+
+
+def checked(choices: dict) -> dict:
+    """``choices`` completed with the original's choice on every axis it leaves out; a
+    ValueError names an unknown axis or choice."""
+    unknown = sorted(set(choices) - set(AXES))
+    if unknown:
+        raise ValueError(f"unknown axis {unknown}; the axes: {', '.join(AXES)}")
+    out = {**ORIGINAL, **choices}
+    for axis, c in out.items():
+        if c not in AXES[axis]:
+            raise ValueError(f"{axis} = {c!r}; the choices: {', '.join(map(str, AXES[axis]))}")
+    return out
+
+
+def realise(choices: dict) -> tuple[str, tuple[str, ...], str]:
+    """``(shader file, #define names, textures)`` of a configuration; :class:`Unrealisable`
+    (with the reason) when no file realises it."""
+    c = checked(choices)
+    if c["refraction"] != "raycast":
+        return _realise_screen_space(c)
+    if c["reflection"] in ("planar", "planar_distorted"):
+        raise Unrealisable(
+            f"reflection = {c['reflection']} (source 004) is in the screen-space shader only: "
+            "it needs refraction = planar_distorted, distorted or planar"
+        )
+    if c["reflection"] == "none" and c["specular"] != "none":
+        raise Unrealisable(
+            "reflection = none skips block [7], and the highlight is added to the reflection: "
+            "choose specular = none with it"
+        )
+    shader = "water_reflection" if c["reflection"] == "raycast" else "water_refraction"
+    defines = ["NOREFLECTION"] if c["reflection"] == "none" else []
+    defines += [
+        d
+        for (axis, choice), d in _RAYCAST_DEFINES.items()
+        if c[axis] == choice and not (c["reflection"] == "none" and axis == "specular")
+    ]
+    return shader, tuple(defines), c["textures"]
+
+
+def _realise_screen_space(c: dict) -> tuple[str, tuple[str, ...], str]:
+    fixed = [a for a in ("attenuation", "specular", "refine", "walls", "layers", "textures")]
+    off = [f"{a} = {c[a]}" for a in fixed if c[a] != ORIGINAL[a]]
+    if off:
+        raise Unrealisable(
+            f"the screen-space shader (water_baseline, refraction = {c['refraction']}) has the "
+            f"original's depth tint, Phong highlight, four layers and float textures only, "
+            f"not {', '.join(off)}"
+        )
+    key = (c["refraction"], c["reflection"])
+    if key not in _BASELINE:
+        allowed = ", ".join(f"refraction = {r} with reflection = {f}" for r, f in _BASELINE)
+        raise Unrealisable(
+            f"refraction = {c['refraction']} with reflection = {c['reflection']}: the "
+            f"screen-space shader distorts refraction and reflection by the same normal map "
+            f"(or neither); it realises {allowed}"
+        )
+    name, defines = _BASELINE[key]
+    return "water_baseline", defines, "float"
+
+
+def name_of(choices: dict) -> str:
+    """The configuration's name: its shader file then the tokens of its choices that differ
+    from the original (``water_refraction_beer_walls``); :class:`Unrealisable` if none."""
+    c = checked(choices)
+    shader, _, _ = realise(c)
+    if shader == "water_baseline":
+        return _BASELINE[(c["refraction"], c["reflection"])][0]
+    tokens = [t for (axis, choice), t in _TOKENS if c[axis] == choice]
+    if c["reflection"] == "none":
+        tokens = [t for t in tokens if t != "nospecular"]
+    return "_".join([shader, *tokens])
+
+
+def choices_of(name: str) -> dict:
+    """The configuration named ``name`` (the inverse of :func:`name_of`); a ValueError says
+    what part of the name is not a choice."""
+    for c in ((r, f) for r, f in _BASELINE):
+        if _BASELINE[c][0] == name:
+            return checked({"refraction": c[0], "reflection": c[1]})
+    for shader, reflection in (("water_reflection", "raycast"), ("water_refraction", "cube")):
+        if name == shader or name.startswith(shader + "_"):
+            rest = name[len(shader) + 1 :]
+            break
+    else:
+        if name.startswith("water_baseline"):
+            names = ", ".join(n for n, _ in _BASELINE.values())
+            raise ValueError(
+                f"{name!r}: the screen-space shaders are {names} (their other axes are the "
+                "original's choices)"
+            )
+        raise ValueError(
+            f"{name!r} is not a shader of the space: a name starts with water_refraction, "
+            "water_reflection or water_baseline"
+        )
+    choices = {"reflection": reflection}
+    for token in _split_tokens(rest, name):
+        (axis, choice) = next(k for k, t in _TOKENS if t == token)
+        if axis in choices and not (axis == "reflection" and choices[axis] == reflection):
+            raise ValueError(f"{name!r}: two choices of {axis}")
+        choices[axis] = choice
+    if choices.get("reflection") == "none":
+        if reflection != "cube":
+            raise ValueError(f"{name!r}: noreflection is a variant of water_refraction")
+        choices.setdefault("specular", "none")
+    c = checked(choices)
+    if name_of(c) != name:
+        raise ValueError(f"{name!r} is not in canonical form; the same shader is {name_of(c)!r}")
+    return c
+
+
+def _split_tokens(rest: str, name: str) -> list[str]:
+    known = [t for _, t in _TOKENS]
+    out, parts = [], rest.split("_") if rest else []
+    while parts:
+        two = "_".join(parts[:2])
+        if two in known:
+            out.append(two)
+            parts = parts[2:]
+        elif parts[0] in known:
+            out.append(parts.pop(0))
+        else:
+            raise ValueError(
+                f"{name!r}: {parts[0]!r} is not a choice; the name tokens: {', '.join(known)}"
+            )
+    return out
+
+
+def configurations(fix: dict | None = None) -> list[dict]:
+    """Every realisable configuration with the axes of ``fix`` pinned, in axis order."""
+    fix = checked(fix or {}) if fix else {}
+    axes = {a: ((fix[a],) if a in (fix or {}) else cs) for a, cs in AXES.items()}
+    out = []
+    for combo in itertools.product(*axes.values()):
+        c = dict(zip(axes, combo))
+        try:
+            realise(c)
+        except Unrealisable:
+            continue
+        out.append(c)
+    return out
+
+
+def neighbours(choices: dict, fix: dict | None = None) -> list[dict]:
+    """The realisable configurations that differ from ``choices`` on one axis (not an axis of
+    ``fix``), and on the coupled axis where one choice needs another (reflection = none
+    brings specular = none; a screen-space refraction brings its planar reflection)."""
+    c = checked(choices)
+    out = []
+    for axis, options in AXES.items():
+        if fix and axis in fix:
+            continue
+        for option in options:
+            if option == c[axis]:
+                continue
+            for n in _coupled({**c, axis: option}, axis):
+                try:
+                    realise(n)
+                except Unrealisable:
+                    continue
+                if n not in out:
+                    out.append(n)
+    return out
+
+
+def _coupled(c: dict, changed: str) -> list[dict]:
+    if changed == "reflection" and c["reflection"] == "none":
+        return [{**c, "specular": "none"}]
+    if changed == "refraction" and c["refraction"] != "raycast":
+        base = {**ORIGINAL, "refraction": c["refraction"]}
+        return [{**base, "reflection": f} for r, f in _BASELINE if r == c["refraction"]]
+    if changed == "refraction":  # back to the raycast: its cube map
+        return [{**c, "reflection": "cube"}]
+    return [c]
+
+
+def describe(choices: dict) -> str:
+    """One line for reports: the choices that differ from the original, with their sources."""
+    c = checked(choices)
+    parts = [
+        f"{a} {v}" + (f" ({SOURCE[(a, v)]})" if (a, v) in SOURCE else "")
+        for a, v in c.items()
+        if v != ORIGINAL[a]
+    ]
+    return "the original shader" + (" with " + ", ".join(parts) if parts else "")
+
+
+def parse_fix(entries: list[str]) -> dict:
+    """``["axis=choice", ...]`` (``tradeoff.fix``) as a dict, choices typed as in ``AXES``."""
+    out = {}
+    for e in entries:
+        axis, sep, choice = e.partition("=")
+        axis, choice = axis.strip(), choice.strip()
+        if not sep or axis not in AXES:
+            raise ValueError(
+                f"tradeoff.fix entry {e!r}: expected axis=choice with an axis of {', '.join(AXES)}"
+            )
+        typed = {str(c): c for c in AXES[axis]}
+        if choice not in typed:
+            raise ValueError(
+                f"tradeoff.fix entry {e!r}: {axis} has the choices "
+                f"{', '.join(map(str, AXES[axis]))}"
+            )
+        out[axis] = typed[choice]
+    return out

@@ -1,0 +1,337 @@
+"""The adaptive search of ``study tradeoff``: the shader space walked cheaply, then only what is
+not clearly beaten measured in full.
+
+Three rungs, each a sweep of :func:`~study.studies.tradeoff_jobs.screen_job` points at the
+screen resolution (``fit.resolution`` divided by ``tradeoff.screen_factor``) except the last:
+
+1. **Walk** (shader configurations, at the original schedule): start from the original shader,
+   one representative of every source and the original's one-axis neighbours
+   (``shaders_port._space.neighbours``); after each round keep the configurations no other
+   one clearly dominates (:func:`survivors`) and add their unseen neighbours; stop when a
+   round adds none or ``tradeoff.max_shaders`` have been screened. A shader-LOD system's greedy
+   walk along the front, with a noise margin.
+2. **Schedules**: every step schedule of ``tradeoff_jobs.schedules`` for each surviving
+   configuration with a raymarch, warm-started from its screen fit; the dominated
+   (configuration, schedule) points are dropped the same way.
+3. **Full**: the surviving points measured as the exhaustive study measures every point
+   (``point_job``: fit at ``fit.resolution``, FLIP at ``resolution``, GL frame times).
+
+"Clearly dominated": another point costs no more texture fetches per water pixel and its FLIP
+is lower by more than ``tradeoff.noise_z`` standard errors of the paired difference. The
+standard error comes from the two points' FLIP maps over the same pixels, averaged over
+4 x 4-pixel blocks (neighbouring pixels' errors are correlated; blocks are nearly
+independent): ``sd(d_b) / sqrt(n_b)`` over the blocks holding water in both.
+
+The marginal table (what each axis's choice buys at the recommendation) comes from screen points
+of the recommendation's one-axis neighbours at its schedule, measured if the walk did not.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from shaders_port import _space
+
+# representatives of every source's technique screened in the first round
+SOURCE_STARTS = (
+    {"reflection": "raycast"},  # 000 section 3
+    {"reflection": "none", "specular": "none"},  # 000's refraction alone
+    {"refraction": "planar_distorted", "reflection": "planar_distorted"},  # 001-004
+    {"refraction": "distorted", "reflection": "planar_distorted"},  # 002-004
+    {"refraction": "planar", "reflection": "planar"},  # 001 + 004
+)
+
+
+def paired_se(a: list, b: list) -> float:
+    """Standard error of mean(a) - mean(b) from block means ``a``, ``b`` of the same blocks
+    (NaN where a block holds no water); inf with fewer than 4 common blocks."""
+    a, b = np.asarray(a, np.float64), np.asarray(b, np.float64)
+    both = np.isfinite(a) & np.isfinite(b)
+    n = int(both.sum())
+    if n < 4:
+        return math.inf
+    d = a[both] - b[both]
+    return float(d.std(ddof=1) / math.sqrt(n))
+
+
+def clearly_dominates(y: dict, x: dict, z: float, cost: str = "fetches_mean") -> bool:
+    """``y`` costs no more than ``x`` and its FLIP is lower by more than ``z`` paired standard
+    errors (``flip_blocks`` of both: see the module doc)."""
+    if y is x or y.get(cost) is None or x.get(cost) is None:
+        return False
+    if y[cost] > x[cost] * (1 + 1e-9):
+        return False
+    gap = x["flip"] - y["flip"]
+    return gap > 0 and gap > z * paired_se(x["flip_blocks"], y["flip_blocks"])
+
+
+def survivors(points: list, z: float, cost: str = "fetches_mean") -> list:
+    """The points no other point clearly dominates, in their order."""
+    return [x for x in points if not any(clearly_dominates(y, x, z, cost) for y in points)]
+
+
+def first_round(fix: dict | None) -> list[dict]:
+    """The walk's first configurations: the original, each source's representative and the
+    original's one-axis neighbours, those realisable with ``fix`` (axis -> pinned choice)."""
+    start = _space.checked(fix or {})
+    out = [start]
+    for s in SOURCE_STARTS:
+        c = {**start, **s}
+        if any(fix and a in fix and c[a] != fix[a] for a in c):
+            continue
+        _try_add(out, c)
+    for n in _space.neighbours(start, fix):
+        _try_add(out, n)
+    return out
+
+
+def _try_add(out: list, c: dict) -> None:
+    try:
+        _space.realise(c)
+    except _space.Unrealisable:
+        return
+    c = _space.checked(c)
+    if c not in out:
+        out.append(c)
+
+
+def next_round(front: list[dict], seen: list[dict], fix: dict | None) -> list[dict]:
+    """The unseen one-axis neighbours of the configurations on the front."""
+    out = []
+    for c in front:
+        for n in _space.neighbours(c, fix):
+            if n not in seen and n not in out:
+                out.append(n)
+    return out
+
+
+def marginals(rec: dict, screen: list[dict]) -> list[dict]:
+    """What each axis's choice buys at the recommendation ``rec`` (a screen point with
+    ``choices`` and ``schedule``): for each one-axis neighbour screened at the same schedule,
+    its FLIP and fetches minus the recommendation's, at the screen resolution."""
+    base = rec["choices"]
+    out = []
+    for p in screen:
+        c = p["choices"]
+        diff = [a for a in _space.AXES if c[a] != base[a]]
+        if not diff or not _same_steps(p["schedule"], rec["schedule"]):
+            continue
+        coupled = set(diff) <= {"reflection", "specular"} or set(diff) >= {"refraction"}
+        if len(diff) > 1 and not coupled:
+            continue
+        axis = "refraction" if "refraction" in diff else diff[0]
+        out.append(
+            {
+                "axis": axis,
+                "choice": c[axis],
+                "variant": p["variant"],
+                "d_flip": p["flip"] - rec["flip"],
+                "d_fetches": (p.get("fetches_mean") or 0.0) - (rec.get("fetches_mean") or 0.0),
+                "se": paired_se(p["flip_blocks"], rec["flip_blocks"]),
+            }
+        )
+    return sorted(out, key=lambda r: (list(_space.AXES).index(r["axis"]), r["d_flip"]))
+
+
+def _same_steps(a: dict, b: dict) -> bool:
+    """Two schedules match for a comparison of techniques: the same refraction steps, or one of
+    the two shaders has no raymarch (its only schedule)."""
+    if not a or not b:
+        return True
+    return all(a.get(k) == b.get(k) for k in ("steps_grazing", "steps_steep", "loop_cap"))
+
+
+# ---- the driver ------------------------------------------------------------------------------
+
+
+def screen_record(job: dict, row: dict) -> dict:
+    """The figures of one screen row the search uses, with its configuration's choices."""
+    rec = {
+        "experiment": job["experiment"],
+        "variant": job["variant"],
+        "choices": _space.choices_of(job["variant"]),
+        "kind": job["kind"],
+        "scale": job["scale"],
+        "schedule": job["schedule"],
+        "status": row.get("status"),
+        "error_message": row.get("error"),
+    }
+    for k in ("flip", "rmse", "fetches_mean", "iterations_mean", "not_crossed", "flip_blocks"):
+        rec[k] = row.get(k)
+    rec["fitted"] = {
+        k[len("fitted.") :]: v for k, v in row.items() if k.startswith("fitted.") and v is not None
+    }
+    return rec
+
+
+class Search:
+    """The adaptive search over one sweep client (see the module doc): ``walk`` per experiment,
+    ``schedules`` for the survivors, ``full_jobs`` for the final rung, ``marginals_of`` for the
+    recommendation. Screen rows accumulate in ``out/screen.parquet`` (a re-run resumes)."""
+
+    def __init__(self, exps, specs, client, out, log, fix=None, variants=None):
+        from .tradeoff_jobs import SEED_SCHEDULE
+
+        from ..fit.model import constants_from_experiment
+
+        self.exps, self.specs, self.client, self.out, self.log = exps, specs, client, out, log
+        self.fix, self.variants = fix or {}, variants
+        self.start = [constants_from_experiment(e).replace(**SEED_SCHEDULE).to_dict() for e in exps]
+        self.screen: list[dict] = []
+        self.rounds: dict[str, int] = {}
+
+    def _run(self, jobs: list, label: str) -> list[dict]:
+        from ..sweep import run_sweep
+        from .tradeoff_jobs import screen_job
+
+        if not jobs:
+            return []
+        rows = run_sweep(
+            screen_job,
+            jobs,
+            self.out / "screen.parquet",
+            client=self.client,
+            label=label,
+            log=self.log,
+        )[: len(jobs)]
+        recs = [screen_record(j, r) for j, r in zip(jobs, rows)]
+        for r in recs:
+            if r["status"] != "ok":
+                self.log(f"tradeoff: screen of {r['variant']} failed: {r['error_message']}")
+        self.screen += recs
+        return recs
+
+    def _job(self, i: int, variant: str, sched: dict, start: dict) -> dict:
+        exp = self.exps[i]
+        return {
+            "scene": self.specs[i],
+            "experiment": exp["name"],
+            "variant": variant,
+            "kind": sched["kind"],
+            "scale": sched["scale"],
+            "schedule": sched["schedule"],
+            "start": start,
+            "factor": exp["tradeoff.screen_factor"],
+        }
+
+    def _seed_schedule(self, i: int, variant: str) -> dict:
+        from .tradeoff_jobs import schedules
+
+        return next(
+            s
+            for s in schedules(self.exps[i], variant)
+            if s["kind"] in ("fixed", "scale") and s["scale"] in (None, 1.0)
+        )
+
+    def ok(self, i: int) -> list[dict]:
+        name = self.exps[i]["name"]
+        return [
+            r
+            for r in self.screen
+            if r["experiment"] == name and r["status"] == "ok" and r["flip"] is not None
+        ]
+
+    def walk(self, i: int) -> list[dict]:
+        """Rung 1 on experiment ``i``: the surviving configurations' screen points."""
+        exp = self.exps[i]
+        z, cap = exp["tradeoff.noise_z"], exp["tradeoff.max_shaders"]
+        if self.variants:
+            todo = [_space.choices_of(v) for v in self.variants]
+        else:
+            todo = first_round(self.fix)
+        seen: list[dict] = []
+        for k in range(1, 100):
+            todo = todo[: max(cap - len(seen), 0)]
+            if not todo:
+                break
+            jobs = []
+            for c in todo:
+                v = _space.name_of(c)
+                jobs.append(self._job(i, v, self._seed_schedule(i, v), self.start[i]))
+            self._run(jobs, f"tradeoff: {exp['name']} screen round {k}")
+            seen += todo
+            self.rounds[exp["name"]] = k
+            front = survivors(self.ok(i), z)
+            if self.variants:
+                break
+            todo = next_round([r["choices"] for r in front], seen, self.fix)
+        return survivors(self.ok(i), z)
+
+    def schedules(self, i: int, front: list[dict]) -> list[dict]:
+        """Rung 2 on experiment ``i``: the step schedules of the front's raymarch shaders,
+        warm-started from their screen fits; returns the surviving screen points."""
+        from .tradeoff_jobs import schedules
+
+        exp = self.exps[i]
+        jobs = []
+        for r in front:
+            for s in schedules(exp, r["variant"]):
+                if s["kind"] in ("converged", "fixed") or s["schedule"] == r["schedule"]:
+                    continue
+                jobs.append(self._job(i, r["variant"], s, {**self.start[i], **r["fitted"]}))
+        self._run(jobs, f"tradeoff: {exp['name']} screen schedules")
+        return survivors(self.ok(i), exp["tradeoff.noise_z"])
+
+    def full_jobs(self, finalists: list[dict]) -> list[dict]:
+        """Rung 3: every finalist (variant, schedule) on every experiment, as ``point_job`` jobs
+        warm-started from that experiment's screen fit of it (or of its variant)."""
+        keys = []
+        for r in finalists:
+            key = (r["variant"], r["kind"], r["scale"], tuple(sorted(r["schedule"].items())))
+            if key not in keys:
+                keys.append(key)
+        jobs = []
+        for i, exp in enumerate(self.exps):
+            ok = self.ok(i)
+            for variant, kind, scale, sched in keys:
+                same = [r for r in ok if r["variant"] == variant]
+                exact = [r for r in same if tuple(sorted(r["schedule"].items())) == sched]
+                warm = (exact or same or [{"fitted": {}}])[0]["fitted"]
+                jobs.append(
+                    {
+                        "scene": self.specs[i],
+                        "experiment": exp["name"],
+                        "variant": variant,
+                        "kind": kind,
+                        "scale": scale,
+                        "schedule": dict(sched),
+                        "start": {**self.start[i], **warm},
+                    }
+                )
+        return jobs
+
+    def marginals_of(self, i: int, rec: dict) -> list[dict]:
+        """What each axis's choice buys at the full rung's recommendation ``rec`` on experiment
+        ``i`` (screen points of its one-axis neighbours at its schedule; measured if missing)."""
+        ok = self.ok(i)
+        here = [
+            r for r in ok if r["variant"] == rec["variant"] and r["schedule"] == rec["schedule"]
+        ]
+        if not here:
+            return []
+        base = here[0]
+        have = {(r["variant"], tuple(sorted(r["schedule"].items()))) for r in ok}
+        jobs = []
+        for c in _space.neighbours(base["choices"], self.fix):
+            v = _space.name_of(c)
+            sched = self._schedule_like(i, v, base)
+            if (v, tuple(sorted(sched["schedule"].items()))) in have:
+                continue
+            warm = next((r["fitted"] for r in ok if r["variant"] == v), base["fitted"])
+            jobs.append(self._job(i, v, sched, {**self.start[i], **warm}))
+        self._run(jobs, f"tradeoff: {self.exps[i]['name']} screen of the neighbours")
+        return marginals(base, self.ok(i))
+
+    def _schedule_like(self, i: int, variant: str, base: dict) -> dict:
+        """The schedule of ``variant`` closest to ``base``'s: the same steps where both raymarch
+        (its own reflection schedule kept), its only schedule where one of them does not."""
+        own = self._seed_schedule(i, variant)
+        if not base["schedule"] or not own["schedule"]:
+            return own
+        sched = {
+            **own["schedule"],
+            **{k: v for k, v in base["schedule"].items() if k in own["schedule"]},
+        }
+        return {"kind": base["kind"], "scale": base["scale"], "schedule": sched}

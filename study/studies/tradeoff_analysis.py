@@ -1,0 +1,241 @@
+"""The analysis of a ``study tradeoff`` table: the figures of each point, the Pareto fronts per
+scene and over the scenes, the recommendation (the cheapest point within the tolerance of the
+best FLIP, or the lowest FLIP within a budget) and what the scene needs (see
+``study.studies.tradeoff``)."""
+
+from __future__ import annotations
+
+import statistics
+
+from .pareto import pareto_front, recommend
+
+COST = "fetches_mean"
+COSTS = {
+    "fetches_mean": "texture fetches / water pixel (mean)",
+    "gl_norm_ms_1080p": "llvmpipe ms / frame at 1920x1080 (normalised)",
+    "port_ms_512": "Dr.Jit LLVM port ms / frame at 512x512",
+}
+ERROR = "flip"
+
+
+def constants_of(row: dict) -> dict:
+    return {
+        k[len("fitted.") :]: v for k, v in row.items() if k.startswith("fitted.") and v is not None
+    }
+
+
+def point_record(row: dict) -> dict:
+    """The figures of one table row the analysis uses (flat dict)."""
+    rec = {
+        "experiment": row.get("job.experiment"),
+        "variant": row.get("job.variant"),
+        "kind": row.get("job.kind"),
+        "scale": row.get("job.scale"),
+        "schedule": {
+            k[len("job.schedule.") :]: row[k]
+            for k in row
+            if k.startswith("job.schedule.") and row[k] is not None
+        },
+        "status": row.get("status"),
+        "error_message": row.get("error"),
+    }
+    for k in (
+        "flip",
+        "rmse",
+        "fetches_mean",
+        "fetches_p99",
+        "iterations_mean",
+        "iterations_p99",
+        "not_crossed",
+        "n_fitted",
+        "bic",
+        "gl_ms_512",
+        "gl_ms_1080p",
+        "gl_ratio_512",
+        "gl_ratio_1080p",
+        "port_ms_512",
+        "gl_ref_ms_1080p",
+    ):
+        rec[k] = row.get(k)
+    return rec
+
+
+def config_label(rec: dict) -> str:
+    s = rec["schedule"]
+    if not s:
+        return rec["variant"]
+    sched = f"({s['steps_grazing']:g}, {s['steps_steep']:g}, {int(s['loop_cap'])})"
+    if "refl_loop_cap" in s:
+        sched += (
+            f" refl ({s['refl_steps_steep']:g}, {s['refl_steps_grazing']:g}, "
+            f"{int(s['refl_loop_cap'])})"
+        )
+    return f"{rec['variant']} {sched}"
+
+
+def is_seed(rec: dict) -> bool:
+    return rec["kind"] == "scale" and rec["scale"] == 1.0
+
+
+def analyse(rows: list, names: list, tolerance: float, budget=None) -> tuple[dict, list]:
+    """Fronts, recommendations and findings of a finished sweep (see the module doc): the summary
+    and the successful points (records with ``label`` and the normalised GL cost)."""
+    recs = [point_record(r) for r in rows if r.get("job.experiment") in names]
+    ok = [r for r in recs if r["status"] == "ok" and r["flip"] is not None]
+    ref_ms = [r["gl_ref_ms_1080p"] for r in ok if r.get("gl_ref_ms_1080p")]
+    norm = statistics.median(ref_ms) if ref_ms else None
+    for r in ok:
+        r["gl_norm_ms_1080p"] = (
+            r["gl_ratio_1080p"] * norm if norm and r.get("gl_ratio_1080p") else None
+        )
+        r["label"] = config_label(r)
+    scenes = {}
+    for name in names:
+        pts = [r for r in ok if r["experiment"] == name and r["kind"] != "converged"]
+        scenes[name] = scene_findings(
+            pts, [r for r in ok if r["experiment"] == name], tolerance, budget
+        )
+    joint = joint_points(ok, names)
+    summary = {
+        "tolerance": tolerance,
+        "budget": dict(budget or {}),
+        "cost": COST,
+        "error": ERROR,
+        "n_points": len(recs),
+        "n_failed": sum(r["status"] != "ok" for r in recs),
+        "gl_reference_ms_1080p": norm,
+        "failures": [
+            {k: r[k] for k in ("experiment", "variant", "kind", "error_message")}
+            | {"schedule": r["schedule"]}
+            for r in recs
+            if r["status"] != "ok"
+        ],
+        "scenes": scenes,
+    }
+    if len(names) > 1:
+        summary["joint"] = {
+            "front": pareto_front(joint, COST, ERROR),
+            "recommended": recommend(joint, COST, ERROR, tolerance),
+        }
+    return summary, ok
+
+
+def joint_points(ok: list, names: list) -> list:
+    """Configurations measured on every scene, with error and costs averaged over the scenes."""
+    by = {}
+    for r in ok:
+        if r["kind"] != "converged":
+            by.setdefault(r["label"], []).append(r)
+    out = []
+    for label, rs in by.items():
+        if sorted(r["experiment"] for r in rs) != sorted(names):
+            continue
+        j = {
+            "label": label,
+            "variant": rs[0]["variant"],
+            "schedule": rs[0]["schedule"],
+            "kind": rs[0]["kind"],
+            "scale": rs[0]["scale"],
+        }
+        for k in ("flip", "rmse", *COSTS):
+            vals = [r.get(k) for r in rs]
+            j[k] = statistics.mean(vals) if all(v is not None for v in vals) else None
+        out.append(j)
+    return out
+
+
+def scene_findings(pts: list, all_pts: list, tolerance: float, budget=None) -> dict:
+    """Front, recommendation and what-the-scene-needs findings for one scene's points."""
+
+    def brief(r):
+        return (
+            None
+            if r is None
+            else {
+                k: r.get(k)
+                for k in (
+                    "label",
+                    "variant",
+                    "schedule",
+                    "kind",
+                    "scale",
+                    "flip",
+                    "rmse",
+                    *COSTS,
+                    "fetches_p99",
+                    "gl_ms_1080p",
+                    "not_crossed",
+                )
+            }
+        )
+
+    rec = recommend(pts, COST, ERROR, tolerance)
+    if budget:  # the lowest FLIP within every limit of the budget
+        fits = [
+            r for r in pts if all(r.get(c) is not None and r[c] <= v for c, v in budget.items())
+        ]
+        rec = min(fits, key=lambda r: r[ERROR], default=None)
+    seed = [r for r in pts if is_seed(r) and r["variant"] == "water_refraction"]
+    variants = list(dict.fromkeys(r["variant"] for r in all_pts))
+    best_by_variant = {
+        v: min((r["flip"] for r in pts if r["variant"] == v), default=None) for v in variants
+    }
+    best = min((x for x in best_by_variant.values() if x is not None), default=None)
+    simplest = next(
+        (
+            v
+            for v in variants
+            if best_by_variant[v] is not None and best_by_variant[v] <= best * (1 + tolerance)
+        ),
+        None,
+    )
+    floor = {
+        v: next(
+            (r["flip"] for r in all_pts if r["variant"] == v and r["kind"] == "converged"), None
+        )
+        for v in variants
+    }
+    crossing = {}
+    for v in variants:
+        if not any(r["schedule"] for r in all_pts if r["variant"] == v):
+            crossing[v] = "no raymarch"  # a loopless shader (the baselines)
+            continue
+        caps = sorted(
+            {
+                int(r["schedule"]["loop_cap"])
+                for r in pts
+                if r["variant"] == v
+                and r["schedule"]
+                and r.get("not_crossed") is not None
+                and r["not_crossed"] < 0.01
+            }
+        )
+        crossing[v] = caps[0] if caps else None
+    halvings = sorted(
+        (r for r in pts if r["kind"] == "scale"), key=lambda r: (r["variant"], r["scale"])
+    )
+    # parsimony: constants and BIC per variant at its seed's schedule (same reference, mask and
+    # resolution within a scene, so BIC differences compare)
+    at_seed = {r["variant"]: r for r in pts if (is_seed(r) or r["kind"] == "fixed")}
+    parsimony = {
+        v: {"n_fitted": r.get("n_fitted"), "bic": r.get("bic"), "flip": r["flip"]}
+        for v, r in at_seed.items()
+    }
+    budget = seed[0][COST] * (1 + 1e-3) if seed and seed[0].get(COST) is not None else None
+    within = [
+        r for r in pts if budget is not None and r.get(COST) is not None and r[COST] <= budget
+    ]
+    best_within = min(within, key=lambda r: r[ERROR], default=None)
+    return {
+        "front": [brief(r) for r in pareto_front(pts, COST, ERROR)],
+        "fronts_by_cost": {c: [r["label"] for r in pareto_front(pts, c, ERROR)] for c in COSTS},
+        "recommended": brief(rec),
+        "seed": brief(seed[0]) if seed else None,
+        "best_within_seed_budget": brief(best_within),
+        "parsimony": parsimony,
+        "best_flip_by_variant": best_by_variant,
+        "simplest_variant_within_tolerance": simplest,
+        "error_floor_by_variant": floor,
+        "smallest_crossing_loop_cap": crossing,
+        "halvings": [brief(r) for r in halvings],
+    }
