@@ -128,6 +128,33 @@ def specialize_constants(source: str) -> str:
     return "\n".join(out)
 
 
+def _varying_locations() -> dict[str, int]:
+    """Name -> location of each output of the core vertex shader, in declaration order: the one
+    numbering both stages use, so that stages link by location (HLSL semantics ``TEXCOORD<n>``,
+    Metal ``[[user(locn<n>)]]``, Vulkan) as they link by name in GLSL."""
+    from ._glsl import read_source
+
+    decl = re.compile(r"^out\s+\w+\s+([A-Za-z_]\w*)\s*;", re.M)
+    return {n: k for k, n in enumerate(decl.findall(read_source("water", "vert", "core")))}
+
+
+def link_locations(source: str, stage: str) -> str:
+    """``source`` with ``layout(location = n)`` on each varying (the vertex shader's ``out``, the
+    fragment shader's ``in`` lines) by :func:`_varying_locations`; ValueError for a varying the
+    vertex shader does not write."""
+    io = "out" if stage == "vert" else "in"
+    locs = _varying_locations()
+
+    def put(m: re.Match) -> str:
+        if m[1] not in locs:
+            raise ValueError(f"varying {m[1]!r} is not an output of the vertex shader water.vert")
+        return f"layout(location = {locs[m[1]]}) {m[0]}"
+
+    out = re.sub(rf"^{io}\s+\w+\s+([A-Za-z_]\w*)\s*;", put, source, flags=re.M)
+    first, _, rest = out.partition("\n")  # GLSL 330 takes varying locations with this extension
+    return f"{first}\n#extension GL_ARB_separate_shader_objects : require\n{rest}"
+
+
 def glsl_to_spirv(source: str, stage: str, label: str = "<source>") -> bytes:
     """SPIR-V of a GLSL source (``glslangValidator -G --aml --amb``), validated by spirv-val."""
     with tempfile.TemporaryDirectory(prefix="spirv.") as d:
@@ -180,7 +207,7 @@ def translate(core_source: str, stage: str, label: str = "<source>") -> dict:
     """The core GLSL ``core_source`` of one stage in every target of :data:`TARGET_ARGS`:
     ``{'spirv': bytes, 'gles300': str, 'hlsl': str, 'msl': str}`` (its constants block made
     specialization constants first, see :func:`specialize_constants`)."""
-    spv = glsl_to_spirv(specialize_constants(core_source), stage, label)
+    spv = glsl_to_spirv(link_locations(specialize_constants(core_source), stage), stage, label)
     out = {"spirv": spv}
     for target, args in TARGET_ARGS.items():
         if target != "spirv":
