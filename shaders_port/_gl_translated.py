@@ -14,7 +14,6 @@ from __future__ import annotations
 import numpy as np
 
 from ._gl import GLRenderer
-from ._spirv import hlsl_round_trip
 
 _MATRIX_SIZE = {"mat2": 2, "mat3": 3, "mat4": 4}
 
@@ -124,12 +123,3 @@ class TranslatedRenderer(GLRenderer):
                 f"its uniforms: {sorted(prog)}"
             )
         return uname
-
-
-def run_hlsl(variant, inputs, hlsl: str) -> tuple[np.ndarray, np.ndarray]:
-    """Render the HLSL fragment shader of ``variant`` (a ``shaders_port._variants.Variant``) on
-    OpenGL by way of glslang's HLSL front end and SPIRV-Cross: (rgba, mask) as
-    ``GLRenderer.render``."""
-    glsl, refl = hlsl_round_trip(hlsl, "frag", f"{variant.name} (HLSL)")
-    with TranslatedRenderer(variant.shader, variant.prepare_inputs(inputs), glsl, refl) as r:
-        return r.render(None)

@@ -12,7 +12,7 @@ import numpy as np
 from ._backend import init_backend
 from .scene.experiment import load_experiment
 from ._io import write_exr, write_json, write_png
-from .report.gl_check import gl_check
+from .report.gl_check import gl_check, target_checks
 
 
 def _log(msg: str) -> None:
@@ -195,15 +195,21 @@ def run_stability(
     )
 
 
-def run_export(constants_json, out) -> list:
-    """``study export``: the shipped shaders with the constants of a JSON file, in ``out/shaders``."""
+def run_export(constants_json, out, targets=None) -> list:
+    """``study export``: the shipped shaders with the constants of a JSON file, in ``out/shaders``;
+    ``targets``: engine targets, a comma-separated string or list, 'none', or None (every one
+    the installed tools can make)."""
     from .report.export import export_shaders, load_constants_json
 
+    if isinstance(targets, str):
+        targets = [] if targets == "none" else [t for t in targets.split(",") if t]
     constants = load_constants_json(constants_json)
     out = Path(out)
-    paths = export_shaders(constants, out / "shaders")
+    paths = export_shaders(constants, out / "shaders", targets=targets)
+    made = sorted(p.name for p in (out / "shaders").iterdir() if p.is_dir())
     _log(
-        f"export: wrote {len(paths)} shaders (compiled with glslangValidator) to {out / 'shaders'}"
+        f"export: wrote {len(paths)} files to {out / 'shaders'} ({', '.join(made)}; GLSL compiled "
+        "with glslangValidator, targets checked as listed in targets.json)"
     )
     return paths
 
@@ -270,10 +276,11 @@ def run_calibrate(experiment, out, overrides=None, variant=None, solver=None, ca
         }
     with timed(timings, "export_s"):
         _log(f"calibrate: exporting and compiling {model.shader} (and its vertex shader)")
-        export_shaders(cal.fitted, out / "shaders", [model.shader])
+        export_shaders(cal.fitted, out / "shaders", [model.shader], targets=None)
     with timed(timings, "gl_check_s"):
         _log("calibrate: running the exported shader on OpenGL (llvmpipe)")
         gl = gl_check(model.shader, inputs, cal.fitted, out / "shaders")
+        engine_targets = target_checks(model.shader, inputs, cal.fitted, out / "shaders")
     t_figures = time.perf_counter()
     figs = {"comparison": "comparison.png", "diagnostics": "diagnostics.png", "loss": "loss.png"}
     comparison_figure(
@@ -321,6 +328,7 @@ def run_calibrate(experiment, out, overrides=None, variant=None, solver=None, ca
         },
         "diagnostics": diag1.summary(full.mask),
         "gl_check": gl,
+        "engine_targets": engine_targets,
         "sun": _sun(exp),
         # constant count and information criteria at the fit resolution (study._metrics)
         "parsimony": parsimony,
@@ -456,8 +464,11 @@ def _joint_fit(scenes, variant, out: Path, solver):
         s["name"]: {"default": evaluate(i, start), "fitted": evaluate(i, cal.fitted)}
         for i, s in enumerate(scenes)
     }
-    export_shaders(cal.fitted, out / "shaders", [scenes[0]["model"].shader])
+    export_shaders(cal.fitted, out / "shaders", [scenes[0]["model"].shader], targets=None)
     gl = gl_check(scenes[0]["model"].shader, scenes[0]["inputs"], cal.fitted, out / "shaders")
+    engine_targets = target_checks(
+        scenes[0]["model"].shader, scenes[0]["inputs"], cal.fitted, out / "shaders"
+    )
     fs = cal.fit_summary
     weights = JointModel([s["model"] for s in scenes]).weights
     summary = {
@@ -478,6 +489,7 @@ def _joint_fit(scenes, variant, out: Path, solver):
         "identifiability": cal.identifiability,
         "timings": {"fit_s": fit_s},
         "gl_check": gl,
+        "engine_targets": engine_targets,
     }
     write_json(out / "constants.json", _jsonable(summary))
     write_joint_report(out, _jsonable(summary))

@@ -182,6 +182,12 @@ def build_parser() -> argparse.ArgumentParser:
         "object of constant name -> value",
     )
     p.add_argument("--out", required=True, help="output folder")
+    p.add_argument(
+        "--targets",
+        default=None,
+        help="engine targets besides GLSL, comma-separated: gles300,hlsl,msl,spirv, or 'none' "
+        "(default: every one the installed tools can make)",
+    )
     return parser
 
 
@@ -253,7 +259,7 @@ def main(argv=None) -> int:
                 workers=args.workers,
             )
         elif args.command == "export":
-            _jobs.run_export(args.constants, args.out)
+            _jobs.run_export(args.constants, args.out, args.targets)
     except (ExperimentError, BackendError, FileNotFoundError, ValueError) as exc:
         print(f"study {args.command}: error: {exc}", file=sys.stderr)
         return 2

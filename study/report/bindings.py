@@ -120,6 +120,10 @@ def _shader_section(path: str, refl: dict) -> list[str]:
             uni.append(
                 f"| `{m['name']}` | {m['type']} | {ubo['name']}, {layout} | {_meaning(m['name'])} |"
             )
+    uni += [
+        f"| `{u['name']}` | {u['type']} | by name | {_meaning(u['name'])} |"
+        for u in refl.get("loose_uniforms", [])
+    ]
     lines += _rows("Uniforms", "| name | type | where | meaning |", uni)
     io = [
         f"| {key[:-1]} | `{v['name']}` | {v['type']} | {v['location']} | {_meaning(v['name'])} |"

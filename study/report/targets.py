@@ -18,7 +18,8 @@ msl       ``msl/<name>.<stage>.metal``             none: no Metal compiler here 
 
 Beside them, per target, ``<name>.<stage>.reflect.json`` (``spirv-cross --reflect`` of the
 module the target is made from: for HLSL the one glslang makes of the HLSL, so its registers
-and its ``$Global`` offsets) and ``BINDINGS.md``, the binding sheet (``study.report.bindings``).
+and its ``$Global`` offsets; elsewhere with the plain uniforms added as ``loose_uniforms``, which
+the reflection of OpenGL SPIR-V leaves out) and ``BINDINGS.md``, the binding sheet (``study.report.bindings``).
 ``targets.json`` at the top of the export lists the files and the checks. The calibration's GL
 check runs the HLSL on llvmpipe too (``study.report.gl_check.hlsl_check``).
 """
@@ -65,24 +66,40 @@ def resolve_targets(targets) -> tuple[str, ...]:
     return targets
 
 
+def _loose_uniforms(spv: bytes, stage: str, label: str) -> list[dict]:
+    """The shader's plain (non-texture) uniforms, name and type: the reflection of OpenGL SPIR-V
+    does not list them, so they are read from the ``$Global`` block glslang makes of the HLSL."""
+    from shaders_port import _spirv as S
+
+    hlsl = S.cross(spv, S.TARGET_ARGS["hlsl"], label)
+    refl = S.reflect(S.hlsl_to_spirv(hlsl, stage, label), label)
+    return [
+        {"name": m["name"], "type": m["type"]}
+        for ubo in refl.get("ubos", [])
+        for m in refl["types"][ubo["type"]]["members"]
+    ]
+
+
 def _one_file(fname: str, text: str, targets) -> tuple[dict, dict, dict, dict]:
     """Translate and check one core file: (relative path -> bytes, relative path of each
-    reflection -> its JSON, target -> seconds, specialization constant id -> name)."""
+    reflection -> its JSON, target -> seconds, specialization constant id -> name). The
+    reflection of a target other than HLSL gets ``loose_uniforms`` (:func:`_loose_uniforms`)."""
     from shaders_port import _spirv as S
 
     stem, stage = fname.rsplit(".", 1)
     files, reflections, seconds = {}, {}, {}
     t0 = time.perf_counter()
-    spv = S.glsl_to_spirv(
-        S.link_locations(S.specialize_constants(text), stage), stage, f"core/{fname}"
-    )
-    spec = {c["id"]: c["name"] for c in S.reflect(spv).get("specialization_constants", [])}
+    label = f"core/{fname}"
+    spv = S.glsl_to_spirv(S.link_locations(S.specialize_constants(text), stage), stage, label)
+    base = S.reflect(spv, label)
+    spec = {c["id"]: c["name"] for c in base.get("specialization_constants", [])}
+    loose = _loose_uniforms(spv, stage, label) if set(targets) - {"hlsl"} else []
     base_s = time.perf_counter() - t0
     for target in targets:
         t = time.perf_counter()
-        label = f"{target_file(target, stem, stage)}"
+        label = target_file(target, stem, stage)
         if target == "spirv":
-            data, refl = spv, S.reflect(spv, label)
+            data, refl = spv, {**base, "loose_uniforms": loose}
         else:
             out = S.cross(spv, S.TARGET_ARGS[target], label)
             data = out.encode("utf-8")
@@ -91,8 +108,8 @@ def _one_file(fname: str, text: str, targets) -> tuple[dict, dict, dict, dict]:
             else:
                 if target == "gles300":
                     S.es_compile_check(out, stage, label)
-                refl = S.reflect(spv, label)
-        files[target_file(target, stem, stage)] = data
+                refl = {**base, "loose_uniforms": loose}
+        files[label] = data
         reflections[f"{target}/{stem}.{stage}.reflect.json"] = refl
         seconds[target] = base_s + time.perf_counter() - t
     return files, reflections, seconds, spec
