@@ -349,7 +349,7 @@ def engine_targets_section(targets: dict) -> list[str]:
         run = t.get("llvmpipe")
         if isinstance(run, dict):
             check += (
-                "; run on llvmpipe through SPIR-V and GLSL 330 vs the port: mean |diff| "
+                "; run on llvmpipe through SPIR-V and GLSL 330 vs the port: mean abs. difference "
                 f"{fmt(run['mean_abs'], 3)}, 99.9th percentile {fmt(run['p999'], 3)} "
                 + ("(passed)" if run["passed"] else "(**MISMATCH**)")
             )
