@@ -95,7 +95,8 @@ def export_shaders(constants: Constants, out_dir, shaders=None, targets=()) -> l
     targets = resolve_targets(targets)
     if targets:
         core = {f: t for (d, f), t in texts.items() if d == "core"}
-        extra, _ = translate_targets(core, targets, constants)
+        with disk_full(out_dir):  # the tools' scratch files (nothing reaches out_dir yet)
+            extra, _ = translate_targets(core, targets, constants)
     out_dir = Path(out_dir)
     out_dir.parent.mkdir(parents=True, exist_ok=True)
     tmp = Path(tempfile.mkdtemp(dir=out_dir.parent, prefix=f".{out_dir.name}."))
