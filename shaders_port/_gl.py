@@ -210,15 +210,15 @@ class GLRenderer:
             "lightpos": i.lightpos.astype(np.float32).tobytes(),
             "lightcolor": i.lightcolor.astype(np.float32).tobytes(),
         }
-        if "uModelViewProjectionMatrixInverse" in prog:
+        if self._reads(prog, "uModelViewProjectionMatrixInverse"):
             vals["uModelViewProjectionMatrixInverse"] = _mat_bytes(
                 np.linalg.inv(i.view_proj.astype(np.float64)).astype(np.float32)
             )
-        if "uNormalMatrix" in prog:
+        if self._reads(prog, "uNormalMatrix"):
             vals["uNormalMatrix"] = np.ascontiguousarray(normal_matrix(i.view_proj).T).tobytes()
-        if "screenSize" in prog:
+        if self._reads(prog, "screenSize"):
             vals["screenSize"] = np.array([i.width, i.height], np.float32).tobytes()
-        if "o2v_projection_reflection" in prog:
+        if self._reads(prog, "o2v_projection_reflection"):
             if i.reflection_view_proj is None:
                 raise ValueError(
                     f"{self.name} reads o2v_projection_reflection but "
@@ -228,18 +228,32 @@ class GLRenderer:
             vals["o2v_projection_reflection"] = _mat_bytes(i.reflection_view_proj)
         for k in range(4):
             vals[f"wave{k + 1}"] = i.waves[k].astype(np.float32).tobytes()
-        for uname, data in vals.items():
-            if uname in prog:
-                prog[uname].write(data)
+        self._write_uniforms(prog, vals)
         for sname, (unit, _, _) in _SAMPLERS.items():
-            if sname in prog:
+            uname = self._sampler_uniform(prog, sname)
+            if uname is not None:
                 if sname not in self._textures:
                     raise ValueError(
                         f"{self.name} reads the sampler {sname} but ShaderInputs."
                         f"{_OPTIONAL_SAMPLERS[sname]} is None; build the inputs with "
                         "study.scene.baseline_inputs.with_baseline_inputs"
                     )
-                prog[sname].value = unit
+                prog[uname].value = unit
+
+    # -- how a program names its inputs (overridden for shaders translated by SPIRV-Cross) ----
+    def _reads(self, prog, uname: str) -> bool:
+        """Whether ``prog`` reads the uniform ``uname`` (of the shipped core shaders' names)."""
+        return uname in prog
+
+    def _write_uniforms(self, prog, vals: dict) -> None:
+        """Write ``vals`` (uniform name -> GL bytes) into the uniforms ``prog`` reads."""
+        for uname, data in vals.items():
+            if uname in prog:
+                prog[uname].write(data)
+
+    def _sampler_uniform(self, prog, sname: str) -> str | None:
+        """The uniform of ``prog`` that samples texture ``sname`` (None: it reads none)."""
+        return sname if sname in prog else None
 
     def _frag_source(self, constants: Constants | None) -> str:
         src = self._source if constants is None else write_constants(self._source, constants)

@@ -10,7 +10,7 @@ import numpy as np
 from ._backend import init_backend
 from .scene.experiment import load_experiment
 from ._io import write_exr, write_json, write_png
-from .report.gl_check import gl_check
+from .report.gl_check import gl_check, target_checks
 from ._progress import log as _log
 from .fit.result import jsonable
 
@@ -202,16 +202,21 @@ def run_stability(
     )
 
 
-def run_export(constants_json, out) -> list:
+def run_export(constants_json, out, targets=None) -> list:
     """``study export``: the shipped shaders with the constants of a JSON file, in
-    ``out/shaders``."""
+    ``out/shaders``; ``targets``: engine targets, a comma-separated string or list, 'none', or
+    None (every one the installed tools can make)."""
     from .report.export import export_shaders, load_constants_json
 
+    if isinstance(targets, str):
+        targets = [] if targets == "none" else [t for t in targets.split(",") if t]
     constants = load_constants_json(constants_json)
     out = Path(out)
-    paths = export_shaders(constants, out / "shaders")
+    paths = export_shaders(constants, out / "shaders", targets=targets)
+    made = sorted(p.name for p in (out / "shaders").iterdir() if p.is_dir())
     _log(
-        f"export: wrote {len(paths)} shaders (compiled with glslangValidator) to {out / 'shaders'}"
+        f"export: wrote {len(paths)} files to {out / 'shaders'} ({', '.join(made)}; GLSL compiled "
+        "with glslangValidator, targets checked as listed in targets.json)"
     )
     return paths
 
@@ -263,14 +268,16 @@ def run_calibrate(experiment, out, overrides=None, variant=None, solver=None, ca
         ev = _evaluate_calibration(exp, inputs, ref, model, cal, backend)
     with timed(timings, "export_s"):
         _log(f"calibrate: exporting and compiling {model.shader} (and its vertex shader)")
-        export_shaders(cal.fitted, out / "shaders", [model.shader])
+        export_shaders(cal.fitted, out / "shaders", [model.shader], targets=None)
     with timed(timings, "gl_check_s"):
         _log("calibrate: running the exported shader on OpenGL (llvmpipe)")
         gl = gl_check(model.shader, inputs, cal.fitted, out / "shaders")
+        engine_targets = target_checks(model.shader, inputs, cal.fitted, out / "shaders")
     with timed(timings, "figures_s"):
         figs = _calibration_figures(out, exp, model, ref, ev, cal, solver)
     timings["total_s"] = time.perf_counter() - t_start  # up to the report (written last)
     result = _calibration_result(exp, variant, model, ref, cal, ev, solver, timings, gl)
+    result.engine_targets = engine_targets
     return _write_result(out, result, figs, ev)
 
 
@@ -485,8 +492,11 @@ def _joint_fit(scenes, variant, out: Path, solver):
         s["name"]: {"default": evaluate(i, start), "fitted": evaluate(i, cal.fitted)}
         for i, s in enumerate(scenes)
     }
-    export_shaders(cal.fitted, out / "shaders", [scenes[0]["model"].shader])
+    export_shaders(cal.fitted, out / "shaders", [scenes[0]["model"].shader], targets=None)
     gl = gl_check(scenes[0]["model"].shader, scenes[0]["inputs"], cal.fitted, out / "shaders")
+    engine_targets = target_checks(
+        scenes[0]["model"].shader, scenes[0]["inputs"], cal.fitted, out / "shaders"
+    )
     weights = JointModel([s["model"] for s in scenes]).weights
     result = CalibrationResult(
         shader=scenes[0]["model"].shader,
@@ -502,6 +512,7 @@ def _joint_fit(scenes, variant, out: Path, solver):
         experiments=[s["path"] for s in scenes],
         scenes=[s["name"] for s in scenes],
         weights={s["name"]: float(w) for s, w in zip(scenes, weights)},
+        engine_targets=engine_targets,
     )
     summary = result.to_json()
     write_json(out / "constants.json", summary)

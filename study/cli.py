@@ -219,6 +219,12 @@ def _add_export(sub) -> None:
         "object of constant name -> value",
     )
     p.add_argument("--out", required=True, help="output folder")
+    p.add_argument(
+        "--targets",
+        default=None,
+        help="engine targets besides GLSL, comma-separated: gles300,hlsl,msl,spirv, or 'none' "
+        "(default: every one the installed tools can make)",
+    )
 
 
 def _command_line(argv) -> str:
@@ -299,7 +305,7 @@ def main(argv=None) -> int:
                 workers=args.workers,
             )
         elif args.command == "export":
-            _jobs.run_export(args.constants, args.out)
+            _jobs.run_export(args.constants, args.out, args.targets)
     except (ExperimentError, BackendError, FileNotFoundError, ValueError) as exc:
         print(f"study {args.command}: error: {exc}", file=sys.stderr)
         return 2

@@ -264,3 +264,27 @@ def test_calibration_result_refuses_what_is_not_one():
 
     with pytest.raises(ValueError, match="not a calibration result: missing.*'shader'"):
         CalibrationResult.from_json({"constants": {}})
+
+
+def test_calibrate_writes_engine_targets_checked(runs):
+    """The calibrated shader in every engine target; the HLSL ran on llvmpipe and matched."""
+    root, _ = runs
+    out = root / "calibrate"
+    c = json.loads((out / "constants.json").read_text())
+    t = c["engine_targets"]
+    if not t:
+        pytest.skip("the engine targets' tools (glslang, spirv-val, spirv-cross) are absent")
+    assert sorted(t) == ["gles300", "hlsl", "msl", "spirv"]
+    assert (out / "shaders" / "hlsl" / f"{c['shader']}.frag.hlsl").is_file()
+    assert t["hlsl"]["llvmpipe"]["passed"], t["hlsl"]["llvmpipe"]
+    report = (out / "report.md").read_text()
+    assert "## Engine targets" in report and "no Metal compiler" in report
+    assert sorted(p.name for p in (root / "export" / "shaders").iterdir()) == [
+        "compat",
+        "core",
+        "gles300",
+        "hlsl",
+        "msl",
+        "spirv",
+        "targets.json",
+    ]

@@ -54,6 +54,8 @@ class CalibrationResult:
         port's diagnostics over the water), sun, parsimony (information criteria).
     Joint:
         experiments (paths), scenes (names), weights (scene -> weight of its residuals).
+    Both, when written: engine_targets (the HLSL, Metal, GLSL ES and SPIR-V exports and what
+    checked each, ``study.report.gl_check.target_checks``).
     """
 
     shader: str
@@ -77,6 +79,7 @@ class CalibrationResult:
     experiments: list | None = None
     scenes: list | None = None
     weights: dict | None = None
+    engine_targets: dict | None = None
     extra: dict = field(default_factory=dict)
 
     @property

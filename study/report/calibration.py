@@ -257,6 +257,7 @@ def write_report(out: Path, summary: dict, figures: dict) -> Path:
     lines += ["## Timings (seconds)", "", "| stage | s |", "|---|---|"]
     lines += [f"| {k} | {fmt(v, 3)} |" for k, v in t.items()] + [""]
     lines += _export_lines(summary.get("gl_check"))
+    lines += engine_targets_section(summary.get("engine_targets") or {})
     path = out / "report.md"
     write_text_atomic(path, "\n".join(lines))
     return path
@@ -356,3 +357,33 @@ def _export_lines(gl: dict | None) -> list[str]:
         "(GLSL 330 core); every file compiled with glslangValidator" + check,
         "",
     ]
+
+
+def engine_targets_section(targets: dict) -> list[str]:
+    """The report's "Engine targets" lines: each target written and what checked it."""
+    if not targets:
+        return []
+    lines = [
+        "## Engine targets",
+        "",
+        "Translated from the core shader by glslang and SPIRV-Cross, the fitted constants as "
+        "named specialization constants; the binding sheet of each is `shaders/<target>/"
+        "BINDINGS.md` (see docs/engine.md).",
+        "",
+        "| target | files | checked by |",
+        "|---|---|---|",
+    ]
+    for target, t in targets.items():
+        shaders = [f for f in t["files"] if not f.endswith((".json", ".md"))]
+        check = t["check"]
+        run = t.get("llvmpipe")
+        if isinstance(run, dict):
+            check += (
+                "; run on llvmpipe through SPIR-V and GLSL 330 vs the port: mean abs. difference "
+                f"{fmt(run['mean_abs'], 3)}, 99.9th percentile {fmt(run['p999'], 3)} "
+                + ("(passed)" if run["passed"] else "(**MISMATCH**)")
+            )
+        elif run:
+            check += f"; {run}"
+        lines.append(f"| {target} | {', '.join(f'`{f}`' for f in shaders)} | {check} |")
+    return lines + [""]

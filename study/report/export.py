@@ -11,6 +11,10 @@ with ``#define BEER_ATTENUATION``) also gets a file of its own name, ``<variant>
 shader file with the constants and the variant's ``#define`` lines right after ``#version``, so
 that file alone reproduces the variant (``study.report.gl_check`` runs exactly it; a variant
 with ``textures = 'game'`` needs the application to upload its textures at that precision).
+
+``targets`` adds the engine targets of ``study.report.targets`` (GLSL ES 3.00, HLSL, Metal,
+SPIR-V, each with its binding sheet), translated from the core files and checked in the same
+temporary folder, so they too are written all or not at all.
 """
 
 from __future__ import annotations
@@ -23,9 +27,10 @@ from pathlib import Path
 
 from shaders_port import CONSTANT_SPECS, Constants
 from shaders_port._glsl import compile_check, read_source, write_constants
-from shaders_port._variants import VARIANTS
+from shaders_port._variants import VARIANTS, get_variant
 
 from .._io import disk_full
+from .targets import resolve_targets, translate_targets
 
 # every fragment shader file a registered variant uses, in registration order
 FRAGMENT_SHADERS = tuple(dict.fromkeys(v.shader for v in VARIANTS.values()))
@@ -59,18 +64,20 @@ def load_constants_json(path) -> Constants:
         raise ValueError(f"{path}: {exc}") from exc
 
 
-def export_shaders(constants: Constants, out_dir, shaders=None) -> list[Path]:
+def export_shaders(constants: Constants, out_dir, shaders=None, targets=()) -> list[Path]:
     """Write ``out_dir/{compat,core}/water.vert`` and the fragment shaders of the registered
     variants named in ``shaders`` (default: every one -- ``water_refraction.frag``,
     ``water_reflection.frag``, ...) with ``constants``; return the written paths. Constants
-    are fitted for one shader, so a calibration exports that shader alone. Raises ValueError
-    on bad constants or an unknown name and RuntimeError if a shader does not compile (nothing
-    is written then)."""
+    are fitted for one shader, so a calibration exports that shader alone. ``targets``: engine
+    targets to add (``study.report.targets.TARGETS``; None: every one the installed tools can
+    make). Raises ValueError on bad constants or an unknown name and RuntimeError if a shader
+    does not compile or translate (nothing is written then)."""
     constants.validate()
     names = list(VARIANTS) if shaders is None else list(shaders)
-    unknown = [n for n in names if n not in VARIANTS]
-    if unknown or not names:
-        raise ValueError(f"export: unknown shader(s) {unknown or names}; known: {sorted(VARIANTS)}")
+    if not names:
+        raise ValueError("export: no shader named; name one of the space's shaders")
+    for n in names:
+        get_variant(n)  # a shader of the space is registered on first use; else a ValueError
     texts = {}
     for dialect in ("compat", "core"):
         texts[(dialect, "water.vert")] = read_source("water", "vert", dialect)
@@ -85,6 +92,12 @@ def export_shaders(constants: Constants, out_dir, shaders=None) -> list[Path]:
             texts[(dialect, f"{v.name}.frag")] = text
     for (dialect, fname), text in texts.items():
         compile_check(text, fname.rsplit(".", 1)[1])
+    extra = {}
+    targets = resolve_targets(targets)
+    if targets:
+        core = {f: t for (d, f), t in texts.items() if d == "core"}
+        with disk_full(out_dir):  # the tools' scratch files (nothing reaches out_dir yet)
+            extra, _ = translate_targets(core, targets, constants)
     out_dir = Path(out_dir)
     out_dir.parent.mkdir(parents=True, exist_ok=True)
     tmp = Path(tempfile.mkdtemp(dir=out_dir.parent, prefix=f".{out_dir.name}."))
@@ -93,6 +106,9 @@ def export_shaders(constants: Constants, out_dir, shaders=None) -> list[Path]:
             for (dialect, fname), text in texts.items():
                 (tmp / dialect).mkdir(exist_ok=True)
                 (tmp / dialect / fname).write_text(text, encoding="utf-8")
+            for rel, data in extra.items():
+                (tmp / rel).parent.mkdir(parents=True, exist_ok=True)
+                (tmp / rel).write_bytes(data)
         old = None
         if out_dir.exists():
             old = Path(tempfile.mkdtemp(dir=out_dir.parent, prefix=f".{out_dir.name}.old."))

@@ -1,4 +1,5 @@
-"""The exported core shader run on llvmpipe (Mesa, headless EGL) against the Dr.Jit port."""
+"""The exported core shader, and the exported HLSL by way of SPIR-V, run on llvmpipe (Mesa,
+headless EGL) against the Dr.Jit port."""
 
 from __future__ import annotations
 
@@ -21,6 +22,13 @@ def gl_check(shader: str, inputs, constants, shaders_dir: Path) -> dict:
     source = (shaders_dir / "core" / f"{variant.name}.frag").read_text()
     with GLRenderer(variant.shader, variant.prepare_inputs(inputs), source=source) as r:
         res = compare_port_gl(inputs, constants, shader, renderer=_OwnBlock(r))
+    return _verdict(res, "the exported shader")
+
+
+def _verdict(res: dict, what: str) -> dict:
+    """The figures of ``compare_port_gl`` kept in reports and ``passed`` by the GL check's
+    thresholds (mean |diff| <= 1e-3, 99.9th percentile <= 1e-2, no unexplained outlier, all
+    finite); a warning on stderr if it fails."""
     out = {
         k: res[k]
         for k in (
@@ -42,10 +50,28 @@ def gl_check(shader: str, inputs, constants, shaders_dir: Path) -> dict:
     )
     if not out["passed"]:
         print(
-            f"calibrate: WARNING: the exported shader on llvmpipe does not match the port: {out}",
+            f"calibrate: WARNING: {what} on llvmpipe does not match the port: {out}",
             file=sys.stderr,
         )
     return out
+
+
+def hlsl_check(shader: str, inputs, constants, shaders_dir: Path) -> dict:
+    """The exported HLSL of variant ``shader`` (``hlsl/<shader>.frag.hlsl``) compiled back by
+    glslang's HLSL front end, translated to GLSL 330 by SPIRV-Cross and run on llvmpipe, against
+    the port with ``constants``: the figures and verdict of :func:`gl_check`."""
+    from shaders_port._compare import compare_port_gl
+    from shaders_port._gl_translated import TranslatedRenderer
+    from shaders_port._spirv import hlsl_round_trip
+    from shaders_port._variants import get_variant
+
+    variant = get_variant(shader)
+    hlsl = (shaders_dir / "hlsl" / f"{variant.name}.frag.hlsl").read_text()
+    glsl, refl = hlsl_round_trip(hlsl, "frag", f"hlsl/{variant.name}.frag.hlsl")
+    prepared = variant.prepare_inputs(inputs)
+    with TranslatedRenderer(variant.shader, prepared, glsl, refl) as r:
+        res = compare_port_gl(inputs, constants, shader, renderer=_OwnBlock(r))
+    return _verdict(res, "the exported HLSL (through glslang -D and SPIRV-Cross)")
 
 
 class _OwnBlock:
@@ -56,3 +82,28 @@ class _OwnBlock:
 
     def render(self, constants):
         return self.r.render(None)
+
+
+GLES_NOTE = (
+    "not run: moderngl's EGL backend (glcontext) binds the desktop OpenGL API only, so no "
+    "GLES 3 context is made here; compiled by glslang's ES profile"
+)
+
+
+def target_checks(shader: str, inputs, constants, shaders_dir: Path) -> dict:
+    """What checked each engine target of an export (``targets.json``): the export's own check,
+    plus, for HLSL, the round trip on llvmpipe (:func:`hlsl_check`) and, for GLSL ES, why it did
+    not run. Empty when the export wrote no targets."""
+    import json
+
+    manifest = shaders_dir / "targets.json"
+    if not manifest.is_file():
+        return {}
+    out = {}
+    for target, entry in json.loads(manifest.read_text())["targets"].items():
+        out[target] = {"files": entry["files"], "check": entry["check"]}
+    if "hlsl" in out:
+        out["hlsl"]["llvmpipe"] = hlsl_check(shader, inputs, constants, shaders_dir)
+    if "gles300" in out:
+        out["gles300"]["llvmpipe"] = GLES_NOTE
+    return out

@@ -248,7 +248,7 @@ def export_recommended(
 
     from .._backend import init_backend
     from ..report.export import export_shaders
-    from ..report.gl_check import gl_check
+    from ..report.gl_check import gl_check, target_checks
     from ..sweep import load_scene
 
     init_backend(variant)
@@ -268,7 +268,7 @@ def export_recommended(
         )
         constants = Constants.from_dict(constants_of(row))
         folder = out / "shaders" if len(exps) == 1 else out / "shaders" / exp["name"]
-        export_shaders(constants, folder, [rec["variant"]])
+        export_shaders(constants, folder, [rec["variant"]], targets=None)
         from ..scene.baseline_inputs import inputs_for_shader
 
         exp_s, _, inputs = load_scene(spec, variant)
@@ -280,6 +280,7 @@ def export_recommended(
             "label": rec["label"],
             "constants": constants.to_dict(),
             "gl_check": gl,
+            "engine_targets": target_checks(rec["variant"], inputs, constants, folder),
         }
         log(
             f"tradeoff: {exp['name']}: exported {rec['label']} to {folder} (GL check "

@@ -1,0 +1,167 @@
+"""The binding sheet of one engine target: what the application must bind, and what it means.
+
+Built from ``spirv-cross --reflect`` of the shaders of the target (textures, samplers, uniforms,
+their blocks and offsets, stage inputs and outputs with their locations, specialization
+constants) and from :data:`MEANINGS`, the experiment's meaning and units of each name.
+"""
+
+from __future__ import annotations
+
+import re
+
+import numpy as np
+
+# name in the GLSL -> what the application binds there (units, conventions of the study)
+MEANINGS = {
+    "refractionTexture": "linear RGB of the ground under the water seen from straight above "
+    "(orthographic top-down render); bilinear, clamp to edge",
+    "worldYComponent": "world-space Y (height, world units) of the ground under the water, the "
+    "same top-down view (R32F); nearest, clamp to edge",
+    "normalMap": "world-space wave normals encoded 0.5 n + 0.5 (r = x, g = y, b = z) in the "
+    "water plane; bilinear, repeat",
+    "reflectionTexture": "sky cube map, linear RGB, GL face order +X -X +Y -Y +Z -Z; bilinear",
+    "fresnelLookup": "N x 1 Fresnel table indexed by cos(theta) in [0, 1]: r = transmission, "
+    "g = reflection; nearest, clamp",
+    "worldYComponentReflection": "world-space Y of the geometry above the water seen from below "
+    "(top-down, R32F; below the water plane where empty); nearest, clamp",
+    "reflectionBottom": "linear RGB of that geometry seen from below; bilinear, clamp",
+    "sceneColor": "linear RGB of the scene without the water, this camera (screen space)",
+    "sceneDepth": "window-space depth in [0, 1] of that view (the GL depth buffer)",
+    "reflection_sampler": "linear RGB of the scene above the water seen by the mirrored camera",
+    "uTextureMatrix0": "world (x, y, z, 1) -> (s, t) of refractionTexture and worldYComponent "
+    "(the top-down camera's texture matrix)",
+    "uTextureMatrix1": "world -> (s, t) of worldYComponentReflection and reflectionBottom",
+    "uModelViewProjectionMatrix": "object -> clip space of the camera (GL clip, z in [-w, w])",
+    "uModelViewProjectionMatrixInverse": "its inverse",
+    "uNormalMatrix": "normal matrix of the view (upper 3 x 3 of the view rotation)",
+    "o2v_projection_reflection": "world -> clip space of the mirrored camera (clip plane y = 0)",
+    "WaterTransformationMatrix": "object -> world of the water quad (must keep it in a plane "
+    "y = const: the depth comparisons assume a horizontal water plane)",
+    "viewpos": "camera position, world units",
+    "lightpos": "light (sun) position, world units",
+    "lightcolor": "linear RGB of the specular highlight",
+    "screenSize": "framebuffer width, height in pixels",
+    "wave1": "offset of normal-map layer 1 (texture units: the quad's texcoord is (x, z) / tile)",
+    "wave2": "offset of normal-map layer 2",
+    "wave3": "offset of normal-map layer 3",
+    "wave4": "offset of normal-map layer 4",
+    "aVertex": "vertex attribute: object-space position of the water quad (w = 1)",
+    "aMultiTexCoord0": "vertex attribute: normal-map texcoord, (x, z) / normal tile",
+    "vTexCoord0": "varying: normal-map coordinate of layer 1 (vertex -> fragment)",
+    "vTexCoord1": "varying: layer 2",
+    "vTexCoord2": "varying: layer 3",
+    "vTexCoord3": "varying: layer 4",
+    "varyingVecWorldPosition": "varying: world position on the water plane",
+    "varyingVecEye": "varying: vector to the camera, world space",
+    "varyingVecLight": "varying: vector to the light, world space",
+    "fragColor": "output: linear RGB (+ alpha) of the water",
+    "gl_Position": "output: clip-space position",
+}
+_NOTES = {
+    "hlsl": [
+        "Entry point `main`; stage inputs and outputs are `TEXCOORD<location>` semantics "
+        "(the vertex outputs and the pixel inputs share the numbering), the colour `SV_Target0`.",
+        "Each texture comes with a `SamplerState _<name>_sampler` in the same register number.",
+        "The loose uniforms form the `$Global` constant buffer (offsets below).",
+        "Matrices: the HLSL multiplies `mul(v, M)` with default (column_major) packing, so upload "
+        "each GL matrix by rows (its transpose in GL order). The HLSL round trip on llvmpipe "
+        "checks exactly this layout.",
+        "Constants: `#define SPIRV_CROSS_CONSTANT_ID_<id> <value>` before the source overrides "
+        "one.",
+    ],
+    "gles300": [
+        "`#version 300 es` (WebGL2); uniforms and samplers are bound by name "
+        "(`gl.getUniformLocation`).",
+        "Constants: `#define SPIRV_CROSS_CONSTANT_ID_<id> <value>` after `#version` overrides one.",
+    ],
+    "msl": [
+        "Entry points `main0` (vertex and fragment); argument indices `[[texture(n)]]`, "
+        "`[[sampler(n)]]`, `[[buffer(n)]]` as in the function signatures (read them there: "
+        "SPIRV-Cross numbers them in declaration order).",
+        "Varyings are `[[user(locn<location>)]]`, the same numbering in both stages.",
+        "Constants are function constants `[[function_constant(<id>)]]` with the fitted value as "
+        "fallback: set one with `MTLFunctionConstantValues` to override it.",
+        "No Metal compiler runs here: this target is generated and reflected only.",
+    ],
+    "spirv": [
+        "OpenGL-semantics SPIR-V (`glslangValidator -G`): bindings and locations as listed; "
+        "loose uniforms are set by location (`glUniform*`, GL_ARB_gl_spirv).",
+        "Constants are specialization constants (`VkSpecializationInfo` / "
+        "`glSpecializeShader` override one by its id); the defaults are the fitted values.",
+    ],
+}
+
+
+def _meaning(name: str) -> str:
+    base = name.rsplit(".", 1)[-1]
+    base = re.sub(r"^_(\w+)_sampler$", r"\1", base)
+    m = MEANINGS.get(base, "")
+    return f"sampler of {base}" if not m and base != name else m
+
+
+def _rows(title: str, header: str, rows: list[str]) -> list[str]:
+    if not rows:
+        return []
+    cols = header.count("|") - 1
+    return [f"**{title}**", "", header, "|" + "---|" * cols, *rows, ""]
+
+
+def _shader_section(path: str, refl: dict) -> list[str]:
+    """The tables of one shader file's reflection."""
+    lines = [f"### `{path.rsplit('/', 1)[-1].removesuffix('.reflect.json')}`", ""]
+    tex = [
+        f"| `{t['name']}` | {t['type']} | {t.get('binding', '')} | {_meaning(t['name'])} |"
+        for key in ("textures", "separate_images", "separate_samplers")
+        for t in refl.get(key, [])
+    ]
+    lines += _rows("Textures and samplers", "| name | type | binding | meaning |", tex)
+    uni = []
+    for ubo in refl.get("ubos", []):
+        for m in refl["types"][ubo["type"]]["members"]:
+            layout = f"offset {m['offset']}" + (", row-major" if m.get("row_major") else "")
+            uni.append(
+                f"| `{m['name']}` | {m['type']} | {ubo['name']}, {layout} | {_meaning(m['name'])} |"
+            )
+    uni += [
+        f"| `{u['name']}` | {u['type']} | by name | {_meaning(u['name'])} |"
+        for u in refl.get("loose_uniforms", [])
+    ]
+    lines += _rows("Uniforms", "| name | type | where | meaning |", uni)
+    io = [
+        f"| {key[:-1]} | `{v['name']}` | {v['type']} | {v['location']} | {_meaning(v['name'])} |"
+        for key in ("inputs", "outputs")
+        for v in refl.get(key, [])
+    ]
+    lines += _rows("Stage inputs and outputs", "| | name | type | location | meaning |", io)
+    return lines
+
+
+def _fmt(value) -> str:
+    """A constant as the shortest text that reads back as the same float32 (ints as ints)."""
+    if isinstance(value, (int, np.integer)):
+        return str(int(value))
+    return np.format_float_positional(np.float32(value), unique=True, trim="0")
+
+
+def binding_sheet(target: str, reflections: dict, spec: dict, constants) -> str:
+    """Markdown binding sheet of ``target`` from the reflections of its shaders (relative path
+    -> JSON), the specialization constants of the shaders (id -> name) and the exported
+    ``constants`` (a ``shaders_port.Constants``)."""
+    from shaders_port import CONSTANT_SPECS
+
+    out = [f"# Binding sheet: {target}", "", *[f"* {n}" for n in _NOTES[target]], ""]
+    if spec:
+        out += ["## Fitted constants (specialization constants)", ""]
+        out += ["| id | name | value |", "|---|---|---|"]
+        glsl_to_py = {g: py for py, (g, *_rest) in CONSTANT_SPECS.items()}
+        for sid, name in sorted(spec.items()):
+            base, comp = (name, "") if name in glsl_to_py else name.rsplit("_", 1)
+            value = getattr(constants, glsl_to_py[base])
+            if comp:
+                value = value["rgba".index(comp)]
+            out.append(f"| {sid} | `{name}` | {_fmt(value)} |")
+        out.append("")
+    out += ["## Per shader", ""]
+    for path, refl in sorted(reflections.items()):
+        out += _shader_section(path, refl)
+    return "\n".join(out).rstrip() + "\n"

@@ -1,0 +1,146 @@
+"""The exported shaders in the engines' languages: GLSL ES 3.00, HLSL 5.0, Metal and SPIR-V.
+
+Each core GLSL file of an export (``core/<name>.<vert|frag>``, constants already written) is
+translated with the real tools (``shaders_port._spirv``: glslang to SPIR-V, SPIRV-Cross to each
+target), the fitted constants carried as named specialization constants holding their values,
+and checked as far as this machine can:
+
+========  =======================================  =============================================
+target    file                                     check at export
+========  =======================================  =============================================
+spirv     ``spirv/<name>.<stage>.spv``             ``spirv-val``
+hlsl      ``hlsl/<name>.<stage>.hlsl``             glslang's HLSL front end (``-D -e main -V``)
+                                                   to SPIR-V, ``spirv-val``
+gles300   ``gles300/<name>.<stage>``               glslang's ES profile (``#version 300 es``)
+msl       ``msl/<name>.<stage>.metal``             none: no Metal compiler here (generated and
+                                                   reflected only)
+========  =======================================  =============================================
+
+Beside them, per target, ``<name>.<stage>.reflect.json`` (``spirv-cross --reflect`` of the
+module the target is made from: for HLSL the one glslang makes of the HLSL, so its registers
+and its ``$Global`` offsets; elsewhere with the plain uniforms added as ``loose_uniforms``, which
+the reflection of OpenGL SPIR-V leaves out) and ``BINDINGS.md``, the binding sheet
+(``study.report.bindings``).
+``targets.json`` at the top of the export lists the files and the checks. The calibration's GL
+check runs the HLSL on llvmpipe too (``study.report.gl_check.hlsl_check``).
+"""
+
+from __future__ import annotations
+
+import json
+import time
+
+TARGETS = ("gles300", "hlsl", "msl", "spirv")
+CHECKS = {
+    "spirv": "spirv-val",
+    "hlsl": "glslangValidator -D -e main -V (HLSL front end) to SPIR-V, spirv-val",
+    "gles300": "glslangValidator, ES profile (#version 300 es)",
+    "msl": "none: no Metal compiler here (generated and reflected only)",
+}
+_TOOLS = ("glslangValidator", "spirv-val", "spirv-cross")
+
+
+def target_file(target: str, stem: str, stage: str) -> str:
+    """Path of a translated shader inside the export, e.g. ``hlsl/water_refraction.frag.hlsl``."""
+    ext = {"gles300": "", "hlsl": ".hlsl", "msl": ".metal", "spirv": ".spv"}[target]
+    return f"{target}/{stem}.{stage}{ext}"
+
+
+def resolve_targets(targets) -> tuple[str, ...]:
+    """The targets to write: ``None`` -> every target when the tools are installed (none when
+    they are not); otherwise the names given, checked. ValueError for an unknown name,
+    RuntimeError naming the missing tools if targets are asked for and cannot be made."""
+    from shaders_port._spirv import missing_tools
+
+    if targets is None:
+        return () if missing_tools(_TOOLS) else TARGETS
+    targets = tuple(dict.fromkeys(targets))
+    unknown = [t for t in targets if t not in TARGETS]
+    if unknown:
+        raise ValueError(f"unknown target(s) {unknown}; known: {', '.join(TARGETS)}")
+    missing = missing_tools(_TOOLS) if targets else []
+    if missing:
+        raise RuntimeError(
+            f"the targets {list(targets)} need {', '.join(missing)}; run scripts/setup.sh, or "
+            "export without them (--targets none)"
+        )
+    return targets
+
+
+def _loose_uniforms(spv: bytes, stage: str, label: str) -> list[dict]:
+    """The shader's plain (non-texture) uniforms, name and type: the reflection of OpenGL SPIR-V
+    does not list them, so they are read from the ``$Global`` block glslang makes of the HLSL."""
+    from shaders_port import _spirv as S
+
+    hlsl = S.cross(spv, S.TARGET_ARGS["hlsl"], label)
+    refl = S.reflect(S.hlsl_to_spirv(hlsl, stage, label), label)
+    return [
+        {"name": m["name"], "type": m["type"]}
+        for ubo in refl.get("ubos", [])
+        for m in refl["types"][ubo["type"]]["members"]
+    ]
+
+
+def _one_file(fname: str, text: str, targets) -> tuple[dict, dict, dict, dict]:
+    """Translate and check one core file: (relative path -> bytes, relative path of each
+    reflection -> its JSON, target -> seconds, specialization constant id -> name). The
+    reflection of a target other than HLSL gets ``loose_uniforms`` (:func:`_loose_uniforms`)."""
+    from shaders_port import _spirv as S
+
+    stem, stage = fname.rsplit(".", 1)
+    files, reflections, seconds = {}, {}, {}
+    t0 = time.perf_counter()
+    label = f"core/{fname}"
+    spv = S.glsl_to_spirv(S.link_locations(S.specialize_constants(text), stage), stage, label)
+    base = S.reflect(spv, label)
+    spec = {c["id"]: c["name"] for c in base.get("specialization_constants", [])}
+    loose = _loose_uniforms(spv, stage, label) if set(targets) - {"hlsl"} else []
+    base_s = time.perf_counter() - t0
+    for target in targets:
+        t = time.perf_counter()
+        label = target_file(target, stem, stage)
+        if target == "spirv":
+            data, refl = spv, {**base, "loose_uniforms": loose}
+        else:
+            out = S.cross(spv, S.TARGET_ARGS[target], label)
+            data = out.encode("utf-8")
+            if target == "hlsl":
+                refl = S.reflect(S.hlsl_to_spirv(out, stage, label), label)
+            else:
+                if target == "gles300":
+                    S.es_compile_check(out, stage, label)
+                refl = {**base, "loose_uniforms": loose}
+        files[label] = data
+        reflections[f"{target}/{stem}.{stage}.reflect.json"] = refl
+        seconds[target] = base_s + time.perf_counter() - t
+    return files, reflections, seconds, spec
+
+
+def translate_targets(core_texts: dict, targets, constants) -> tuple[dict, dict]:
+    """Every core file of ``core_texts`` (file name -> GLSL) in every target: returns
+    (relative path -> bytes to write, the ``targets.json`` manifest). Raises RuntimeError with
+    the tool's log when a translation or a check fails (nothing is written then)."""
+    from .bindings import binding_sheet
+
+    files, manifest = {}, {"targets": {}, "seconds": {}}
+    reflections, spec = {}, {}
+    for fname, text in core_texts.items():
+        f, r, s, c = _one_file(fname, text, targets)
+        files.update(f)
+        reflections.update(r)
+        spec.update(c)
+        for t, sec in s.items():
+            manifest["seconds"][t] = manifest["seconds"].get(t, 0.0) + sec
+    for target in targets:
+        mine = {k: v for k, v in reflections.items() if k.startswith(f"{target}/")}
+        for path, refl in mine.items():
+            files[path] = (json.dumps(refl, indent=1) + "\n").encode("utf-8")
+        files[f"{target}/BINDINGS.md"] = binding_sheet(target, mine, spec, constants).encode(
+            "utf-8"
+        )
+        manifest["targets"][target] = {
+            "files": sorted(p for p in files if p.startswith(f"{target}/")),
+            "check": CHECKS[target],
+        }
+    files["targets.json"] = (json.dumps(manifest, indent=1) + "\n").encode("utf-8")
+    return files, manifest
