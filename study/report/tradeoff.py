@@ -139,13 +139,66 @@ def tradeoff_report_text(summary: dict) -> str:
         "port's frame time. Recommendation: the cheapest point within "
         f"{100 * tol:g} % of the best FLIP.",
         "",
-        "![error against cost, Pareto fronts](pareto.png)",
-        "",
     ]
+    lines += _search_lines(summary)
+    lines += ["![error against cost, Pareto fronts](pareto.png)", ""]
     for scene, f in summary["scenes"].items():
         lines += _scene_lines(scene, f, summary)
     lines += _closing_lines(summary)
     return "\n".join(lines) + "\n"
+
+
+def _search_lines(summary: dict) -> list[str]:
+    """How the points were chosen (adaptive or exhaustive) and the budget, when a run says."""
+    lines = []
+    budget = summary.get("budget")
+    if budget:
+        limits = ", ".join(f"{COST_NAMES.get(c, c)} <= {fmt(v, 4)}" for c, v in budget.items())
+        lines += [f"**Budget**: {limits}; the recommendation is the lowest FLIP within it.", ""]
+    s = summary.get("search")
+    if not s:
+        return lines
+    fixed = ", ".join(f"{a} = {c}" for a, c in s.get("fix", {}).items()) or "none"
+    if s["mode"] == "adaptive":
+        rounds = ", ".join(f"{k} {v}" for k, v in s.get("rounds", {}).items())
+        lines += [
+            f"Search: adaptive, {s['screened']} screen points of {s['shaders_screened']} shader "
+            f"configurations (walk rounds per scene: {rounds}), {s['points_in_full']} points "
+            f"measured in full, {fmt(s['seconds'], 3)} s; axes held: {fixed} "
+            "(`study.studies.search`).",
+            "",
+        ]
+    else:
+        lines += [
+            f"Search: exhaustive, {s['points_in_full']} points in full, {fmt(s['seconds'], 3)} "
+            f"s; axes held: {fixed}.",
+            "",
+        ]
+    return lines
+
+
+COST_NAMES = {"fetches_mean": "fetches per water pixel", "gl_norm_ms_1080p": "GL ms 1080p"}
+
+
+def _marginal_lines(rows: list) -> list[str]:
+    """What each axis's choice buys at the recommendation (screen points of its neighbours)."""
+    if not rows:
+        return []
+    lines = [
+        "",
+        "What each choice buys at the recommendation (its one-axis neighbours at its schedule, "
+        "at the screen resolution; FLIP difference +- the paired standard error; negative is "
+        "better or cheaper):",
+        "",
+        "| axis | choice | shader | FLIP difference | fetches difference |",
+        "|---|---|---|---|---|",
+    ]
+    for r in rows:
+        lines.append(
+            f"| {r['axis']} | {r['choice']} | `{r['variant']}` | {r['d_flip']:+.4f} +- "
+            f"{fmt(r['se'], 2)} | {r['d_fetches']:+.1f} |"
+        )
+    return lines
 
 
 def _scene_lines(scene: str, f: dict, summary: dict) -> list[str]:
@@ -186,6 +239,7 @@ def _scene_lines(scene: str, f: dict, summary: dict) -> list[str]:
             f"(the fitted original: {fmt(seed['flip'])}, "
             f"{100 * (bw['flip'] / seed['flip'] - 1):+.1f} %)."
         )
+    lines += _marginal_lines(f.get("marginals", []))
     if summary.get("images", {}).get(scene):
         lines += ["", f"![{scene}: reference and shaders]({summary['images'][scene]})"]
     pars = {v: d for v, d in f.get("parsimony", {}).items() if d.get("bic") is not None}

@@ -107,40 +107,26 @@ def next_round(front: list[dict], seen: list[dict], fix: dict | None) -> list[di
     return out
 
 
-def marginals(rec: dict, screen: list[dict]) -> list[dict]:
-    """What each axis's choice buys at the recommendation ``rec`` (a screen point with
-    ``choices`` and ``schedule``): for each one-axis neighbour screened at the same schedule,
-    its FLIP and fetches minus the recommendation's, at the screen resolution."""
-    base = rec["choices"]
+def marginals(base: dict, neighbours: list[dict]) -> list[dict]:
+    """What each axis's choice buys at ``base`` (a screen point with ``choices``): for each
+    screen point of a one-axis neighbour (at the matching schedule), its FLIP and fetches minus
+    ``base``'s with the paired standard error, at the screen resolution. The axis is the one
+    changed (refraction or reflection where a coupled axis moved with it)."""
     out = []
-    for p in screen:
-        c = p["choices"]
-        diff = [a for a in _space.AXES if c[a] != base[a]]
-        if not diff or not _same_steps(p["schedule"], rec["schedule"]):
-            continue
-        coupled = set(diff) <= {"reflection", "specular"} or set(diff) >= {"refraction"}
-        if len(diff) > 1 and not coupled:
-            continue
-        axis = "refraction" if "refraction" in diff else diff[0]
+    for p in neighbours:
+        diff = [a for a in _space.AXES if p["choices"][a] != base["choices"][a]]
+        axis = next((a for a in ("refraction", "reflection") if a in diff), diff[0])
         out.append(
             {
                 "axis": axis,
-                "choice": c[axis],
+                "choice": p["choices"][axis],
                 "variant": p["variant"],
-                "d_flip": p["flip"] - rec["flip"],
-                "d_fetches": (p.get("fetches_mean") or 0.0) - (rec.get("fetches_mean") or 0.0),
-                "se": paired_se(p["flip_blocks"], rec["flip_blocks"]),
+                "d_flip": p["flip"] - base["flip"],
+                "d_fetches": (p.get("fetches_mean") or 0.0) - (base.get("fetches_mean") or 0.0),
+                "se": paired_se(p["flip_blocks"], base["flip_blocks"]),
             }
         )
     return sorted(out, key=lambda r: (list(_space.AXES).index(r["axis"]), r["d_flip"]))
-
-
-def _same_steps(a: dict, b: dict) -> bool:
-    """Two schedules match for a comparison of techniques: the same refraction steps, or one of
-    the two shaders has no raymarch (its only schedule)."""
-    if not a or not b:
-        return True
-    return all(a.get(k) == b.get(k) for k in ("steps_grazing", "steps_steep", "loop_cap"))
 
 
 # ---- the driver ------------------------------------------------------------------------------
@@ -312,17 +298,25 @@ class Search:
         if not here:
             return []
         base = here[0]
-        have = {(r["variant"], tuple(sorted(r["schedule"].items()))) for r in ok}
-        jobs = []
+        wanted = {}
         for c in _space.neighbours(base["choices"], self.fix):
             v = _space.name_of(c)
-            sched = self._schedule_like(i, v, base)
-            if (v, tuple(sorted(sched["schedule"].items()))) in have:
-                continue
-            warm = next((r["fitted"] for r in ok if r["variant"] == v), base["fitted"])
-            jobs.append(self._job(i, v, sched, {**self.start[i], **warm}))
+            wanted[v] = self._schedule_like(i, v, base)
+        have = {(r["variant"], _key(r["schedule"])) for r in ok}
+        jobs = []
+        for v, sched in wanted.items():
+            if (v, _key(sched["schedule"])) not in have:
+                warm = next((r["fitted"] for r in ok if r["variant"] == v), base["fitted"])
+                jobs.append(self._job(i, v, sched, {**self.start[i], **warm}))
         self._run(jobs, f"tradeoff: {self.exps[i]['name']} screen of the neighbours")
-        return marginals(base, self.ok(i))
+        points = [
+            r
+            for r in self.ok(i)
+            if r["variant"] in wanted
+            and _key(r["schedule"]) == _key(wanted[r["variant"]]["schedule"])
+        ]
+        unique = {r["variant"]: r for r in points}  # one point per neighbour
+        return marginals(base, list(unique.values()))
 
     def _schedule_like(self, i: int, variant: str, base: dict) -> dict:
         """The schedule of ``variant`` closest to ``base``'s: the same steps where both raymarch
@@ -335,3 +329,7 @@ class Search:
             **{k: v for k, v in base["schedule"].items() if k in own["schedule"]},
         }
         return {"kind": base["kind"], "scale": base["scale"], "schedule": sched}
+
+
+def _key(schedule: dict) -> tuple:
+    return tuple(sorted(schedule.items()))

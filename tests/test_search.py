@@ -1,0 +1,118 @@
+"""The adaptive search: the paired noise estimate, dominance with a margin, the walk's rounds,
+the marginal table, and a tiny adaptive `study tradeoff` end to end."""
+
+import json
+import math
+
+import numpy as np
+import pytest
+
+from conftest import REPO
+from shaders_port import _space
+from study.studies import search
+
+
+def test_paired_se_is_the_standard_error_of_the_block_differences():
+    rng = np.random.default_rng(0)
+    a = rng.normal(0.3, 0.05, 400)
+    b = a - 0.01 + rng.normal(0, 0.02, 400)  # correlated with a: the pairing removes the shared
+    se = search.paired_se(a.tolist(), b.tolist())
+    assert se == pytest.approx(np.std(a - b, ddof=1) / 20, rel=1e-9)
+    assert se < np.std(a, ddof=1) / 20  # far below an unpaired estimate
+    a[:397] = np.nan  # fewer than 4 common blocks: no estimate
+    assert search.paired_se(a.tolist(), b.tolist()) == math.inf
+
+
+def _pt(name, fetches, flip, blocks):
+    return {"variant": name, "fetches_mean": fetches, "flip": flip, "flip_blocks": blocks}
+
+
+def test_dominance_needs_a_lower_cost_and_a_gap_beyond_the_noise():
+    rng = np.random.default_rng(1)
+    base = rng.normal(0.3, 0.05, 256)
+    noisy = base + rng.normal(0, 0.03, 256)
+    far = _pt("far", 10, float(base.mean()) - 0.05, (base - 0.05).tolist())
+    near = _pt("near", 10, float(noisy.mean()), noisy.tolist())
+    x = _pt("x", 12, float(base.mean()), base.tolist())
+    assert search.clearly_dominates(far, x, 2.0)  # cheaper and 0.05 better, noise-free
+    gap = x["flip"] - near["flip"]
+    se = search.paired_se(x["flip_blocks"], near["flip_blocks"])
+    assert search.clearly_dominates(near, x, 2.0) == (gap > 2 * se)
+    dear = _pt("dear", 20, far["flip"], far["flip_blocks"])
+    assert not search.clearly_dominates(dear, x, 2.0)  # better but costlier
+    # a tie costlier than "far" is kept (no gap beyond the noise); "x" is dropped
+    assert [p["variant"] for p in search.survivors([x, far, dear], 2.0)] == ["far", "dear"]
+
+
+def test_the_first_round_holds_the_original_every_source_and_the_neighbours():
+    names = [_space.name_of(c) for c in search.first_round(None)]
+    assert names[0] == "water_refraction"
+    for n in ("water_reflection", "water_baseline", "water_baseline_flat",
+              "water_baseline_noplanar", "water_refraction_noreflection",
+              "water_refraction_beer", "water_refraction_walls"):  # fmt: skip
+        assert n in names
+    assert len(names) == len(set(names))
+    pinned = search.first_round({"refraction": "raycast", "textures": "float"})
+    assert all(c["refraction"] == "raycast" and c["textures"] == "float" for c in pinned)
+    front = [_space.choices_of("water_refraction_beer")]
+    seen = search.first_round(None)
+    nxt = search.next_round(front, seen, None)
+    assert _space.choices_of("water_refraction_beer_walls") in nxt
+    assert not any(c in seen for c in nxt)
+
+
+def test_marginals_name_the_axis_changed():
+    blocks = [0.2] * 16
+    base = {"choices": _space.choices_of("water_refraction_beer"), "flip": 0.2,
+            "fetches_mean": 17.0, "flip_blocks": blocks}  # fmt: skip
+    pts = []
+    cases = (
+        ("water_refraction_beer_walls", 0.18),
+        ("water_refraction", 0.21),
+        ("water_baseline", 0.25),
+        ("water_refraction_noreflection_beer", 0.3),
+    )
+    for name, flip in cases:
+        pts.append({"variant": name, "choices": _space.choices_of(name), "flip": flip,
+                    "fetches_mean": 15.0, "flip_blocks": [flip] * 16})  # fmt: skip
+    rows = {r["variant"]: r for r in search.marginals(base, pts)}
+    assert rows["water_refraction_beer_walls"]["axis"] == "walls"
+    assert rows["water_refraction_beer_walls"]["d_flip"] == pytest.approx(-0.02)
+    assert rows["water_refraction"]["axis"] == "attenuation"
+    assert rows["water_baseline"]["axis"] == "refraction"
+    assert rows["water_refraction_noreflection_beer"]["axis"] == "reflection"
+    assert rows["water_refraction"]["d_fetches"] == pytest.approx(-2.0)
+
+
+def test_adaptive_tradeoff_tiny(tmp_path):
+    """Two shaders at 32x32 through the CLI: screened, one schedule each screened, the
+    survivors measured in full, the marginal table and the budget in the report."""
+    from study.cli import main
+    from study.sweep import read_table
+
+    from conftest import SMALL_OVERRIDES
+
+    small = SMALL_OVERRIDES + [
+        'tradeoff.variants=["water_refraction", "water_baseline_flat"]',
+        "tradeoff.steps_grazing=[5.0]",
+        "tradeoff.steps_steep=[3.0]",
+        "tradeoff.loop_cap=[20]",
+        "tradeoff.scales=[1.0]",
+        "tradeoff.gl_repeats=3",
+        "fit.max_steps=5",
+    ]
+    args = ["tradeoff", str(REPO / "experiments" / "default.toml"), "--out", str(tmp_path)]
+    args += ["--workers", "1", "--budget", "fetches=12"]
+    assert main(args + [a for s in small for a in ("--set", s)]) == 0
+    screen = read_table(tmp_path / "screen.parquet")
+    assert {r["job.variant"] for r in screen} >= {"water_refraction", "water_baseline_flat"}
+    assert all(r["status"] == "ok" and len(r["flip_blocks"]) == 16 for r in screen)
+    summary = json.loads((tmp_path / "summary.json").read_text())
+    assert summary["search"]["mode"] == "adaptive" and summary["budget"] == {"fetches_mean": 12.0}
+    rec = summary["scenes"]["default"]["recommended"]
+    assert rec["fetches_mean"] <= 12.0  # within the budget: the loopless baseline
+    full = read_table(tmp_path / "tradeoff.parquet")
+    assert any(r["job.variant"] == "water_refraction" for r in full)  # the original, always
+    report = (tmp_path / "report.md").read_text()
+    assert "Search: adaptive" in report and "**Budget**" in report
+    assert summary["exports"]["default"]["gl_check"]["passed"]

@@ -1,0 +1,144 @@
+"""The shader space: names, realisation, refusals, neighbours, and a sample of configurations
+nobody registered by hand against OpenGL."""
+
+import random
+
+import pytest
+
+from shaders_port import _space
+from shaders_port._glsl import read_source, switches_of
+from shaders_port._space import AXES, ORIGINAL, Unrealisable
+from shaders_port._switches import decode
+from shaders_port._variants import VARIANTS, get_variant
+from synthetic import synthetic_baseline_inputs, synthetic_inputs
+
+
+def _ports():
+    from shaders_port import water_baseline, water_reflection, water_refraction
+
+    return {
+        "water_refraction": water_refraction,
+        "water_reflection": water_reflection,
+        "water_baseline": water_baseline,
+    }
+
+
+def test_every_shipped_variant_is_a_configuration_of_the_space():
+    for name, v in VARIANTS.items():
+        c = _space.choices_of(name)
+        assert _space.name_of(c) == name
+        shader, defines, textures = _space.realise(c)
+        assert (shader, set(defines), textures) == (v.shader, set(v.defines), v.textures), name
+
+
+def test_every_configuration_compiles_to_names_its_file_and_port_know():
+    configs = _space.configurations()
+    assert len(configs) == 507  # 216 cube-map + 216 raycast + 72 refraction-only + 3 baselines
+    ports = _ports()
+    names = set()
+    for c in configs:
+        shader, defines, _ = _space.realise(c)
+        assert set(defines) <= set(switches_of(read_source(shader, "frag", "core")))
+        decode(shader, ports[shader].DEFINES, defines)  # the port implements every name
+        name = _space.name_of(c)
+        assert _space.choices_of(name) == c
+        names.add(name)
+    assert len(names) == len(configs)  # one name per configuration
+
+
+@pytest.mark.parametrize(
+    "choices,reason",
+    [
+        ({"reflection": "planar"}, "screen-space shader only"),
+        ({"reflection": "none"}, "choose specular = none"),
+        ({"refraction": "planar_distorted", "attenuation": "beer"}, "not attenuation = beer"),
+        ({"refraction": "planar", "reflection": "planar_distorted"}, "same normal map"),
+        ({"refraction": "distorted", "reflection": "cube"}, "same normal map"),
+    ],
+)
+def test_unrealisable_configurations_are_refused_with_the_reason(choices, reason):
+    with pytest.raises(Unrealisable, match=reason):
+        _space.realise(choices)
+
+
+def test_bad_names_and_axes_say_what_is_wrong():
+    with pytest.raises(ValueError, match="two choices of attenuation"):
+        _space.choices_of("water_refraction_beer_beer")
+    with pytest.raises(ValueError, match="canonical form.*water_refraction_beer_walls"):
+        _space.choices_of("water_refraction_walls_beer")
+    with pytest.raises(ValueError, match="'glossy' is not a choice"):
+        _space.choices_of("water_refraction_glossy")
+    with pytest.raises(ValueError, match="screen-space shaders are water_baseline"):
+        _space.choices_of("water_baseline_beer")
+    with pytest.raises(ValueError, match="unknown axis"):
+        _space.checked({"fog": "on"})
+    with pytest.raises(ValueError, match="layers = 3"):
+        _space.checked({"layers": 3})
+    with pytest.raises(ValueError, match="unknown shader variant.*choose specular = none"):
+        get_variant("water_refraction_noreflection_ggx")
+
+
+def test_neighbours_change_one_axis_or_its_coupled_one():
+    for c in random.Random(3).sample(_space.configurations(), 25) + [ORIGINAL]:
+        for n in _space.neighbours(c):
+            _space.realise(n)
+            diff = {a for a in AXES if n[a] != c[a]}
+            screen_space = "raycast" not in (n["refraction"], c["refraction"])
+            assert (
+                len(diff) == 1
+                or diff == {"reflection", "specular"}
+                or "refraction" in diff
+                or screen_space
+            ), (c, n)
+    near = {_space.name_of(n) for n in _space.neighbours(ORIGINAL)}
+    assert {"water_reflection", "water_refraction_beer", "water_baseline"} <= near
+    fixed = _space.neighbours(ORIGINAL, {"textures": "float", "refraction": "raycast"})
+    assert all(n["textures"] == "float" and n["refraction"] == "raycast" for n in fixed)
+
+
+def test_parse_fix():
+    assert _space.parse_fix(["layers=2", " textures = float "]) == {
+        "layers": 2,
+        "textures": "float",
+    }
+    with pytest.raises(ValueError, match="expected axis=choice"):
+        _space.parse_fix(["fog=on"])
+    with pytest.raises(ValueError, match="layers has the choices 4, 2, 1"):
+        _space.parse_fix(["layers=3"])
+
+
+def test_a_generated_configuration_is_a_full_variant():
+    v = get_variant("water_reflection_beer_ggx_walls_secant_2layers")
+    assert v.defines == (
+        "BEER_ATTENUATION",
+        "GGX_SPECULAR",
+        "WALL_FACES",
+        "SECANT_REFINE",
+        "TWO_NORMAL_LAYERS",
+    )
+    assert "refine_steps" in v.schedule and "refl_loop_cap" in v.schedule
+    assert set(v.replaces) == {"attenuation_distance", "specular_exponent"}
+    assert "absorption_r" in v.fit_names(["attenuation_distance"])
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_configurations_nobody_registered_match_opengl(seed):
+    """Four configurations drawn from the space (fixed seeds): port and llvmpipe agree within
+    the GL check's thresholds, and the configuration renders differently from the original."""
+    from test_gl_differential import _check, compare_or_skip
+    from test_variants import CUSTOM
+
+    c = random.Random(100 + seed).choice(_space.configurations({"refraction": "raycast"}))
+    name = _space.name_of(c)
+    inputs = synthetic_inputs(width=96, height=72)
+    res = compare_or_skip(inputs, CUSTOM, name)
+    _check(res, f"gl_space_{name}")
+
+
+def test_the_baseline_configurations_match_opengl():
+    from test_gl_differential import _check, compare_or_skip
+    from test_variants import CUSTOM
+
+    inputs = synthetic_baseline_inputs(64, 48)
+    for c in _space.configurations({"refraction": "planar"}):
+        _check(compare_or_skip(inputs, CUSTOM, _space.name_of(c)), "gl_space_planar")
