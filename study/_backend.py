@@ -10,6 +10,8 @@ Nothing here runs at import time: call :func:`init_backend` from the entry point
 
 from __future__ import annotations
 
+import contextlib
+import gc
 import glob
 import os
 import re
@@ -114,3 +116,26 @@ def init_backend(variant: str | None = None) -> str:
 def drjit_backend(variant: str) -> str:
     """The shader port's backend name ("llvm" or "cuda") for a Mitsuba variant."""
     return "cuda" if variant.startswith("cuda") else "llvm"
+
+
+@contextlib.contextmanager
+def collect_here():
+    """Python's cyclic garbage collector off while the block runs, then one collection in this
+    thread (and the collector restored).
+
+    Dr.Jit takes its state lock before it calls back into Python (a frozen function walking its
+    inputs, a log callback) and waits for the GIL there; a thread holding the GIL that frees a
+    Dr.Jit variable waits for the state lock (Dr.Jit issue 524's lock inversion). The collector
+    runs in whichever thread happens to allocate, so in a Dask worker it collected the Dr.Jit
+    garbage of a job on the worker's event-loop thread while the job's thread was inside a
+    frozen call: both threads waited for ever (seen in a 252-fit multi-start sweep, stuck 17
+    minutes at fit 91). With the collector off, Dr.Jit garbage is freed only by the thread
+    that drops it, or by the collection here, in the thread that ran the Dr.Jit work."""
+    was_enabled = gc.isenabled()
+    gc.disable()
+    try:
+        yield
+    finally:
+        gc.collect()
+        if was_enabled:
+            gc.enable()

@@ -38,3 +38,11 @@ def scene_job(job: dict) -> dict:
         "tex": inputs.refraction_texture.shape[0],
         "cache": str(Path(ref.path).parent),
     }
+
+
+def collector_state(job: dict) -> dict:
+    """Whether Python's cyclic collector runs while a job runs (it must not: see
+    ``study._backend.collect_here``)."""
+    import gc
+
+    return {"gc_enabled": gc.isenabled()}

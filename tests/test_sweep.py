@@ -174,3 +174,20 @@ def test_lock_of_a_killed_holder_is_recovered(tmp_path):
     with file_lock(lock, timeout=10):
         pass
     assert time.monotonic() - t0 < 10
+
+
+def test_jobs_run_with_the_cyclic_collector_off_and_collect_after(monkeypatch):
+    """A job's Dr.Jit garbage must not be freed by the collector on a worker's event-loop thread
+    (Dr.Jit's state lock against the GIL: a deadlock seen in a multi-start sweep). The job runs
+    with the collector off; afterwards one collection runs in the job's thread and the
+    collector is back on."""
+    import gc
+
+    from study.sweep.engine import _run_job
+
+    calls = []
+    monkeypatch.setattr(gc, "collect", lambda *a: calls.append(a) or 0)
+    assert gc.isenabled()
+    row = _run_job(sweep_jobs.collector_state, {}, "k")
+    assert row["status"] == "ok" and row["gc_enabled"] is False
+    assert calls and gc.isenabled()

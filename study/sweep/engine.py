@@ -30,6 +30,7 @@ import threading
 import time
 from pathlib import Path
 
+from .._backend import collect_here
 from .scenes import prepare_scene, spec_text
 from .table import clip_error, flatten, job_key, read_table, write_table
 
@@ -45,7 +46,11 @@ def _run_job(fn, job: dict, key: str, scene_ready=None) -> dict:
     row = {"key": key, "status": "ok", "error": None}
     captured = io.StringIO()
     try:
-        with contextlib.redirect_stdout(captured), contextlib.redirect_stderr(captured):
+        with (
+            collect_here(),  # no Dr.Jit garbage freed on the event loop's thread (see there)
+            contextlib.redirect_stdout(captured),
+            contextlib.redirect_stderr(captured),
+        ):
             if isinstance(scene_ready, dict) and scene_ready.get("error"):
                 raise RuntimeError(f"scene preparation failed: {scene_ready['error']}")
             out = fn(job)
@@ -64,7 +69,7 @@ def _run_job(fn, job: dict, key: str, scene_ready=None) -> dict:
 
 def _prepare(spec: dict, variant: str) -> dict:
     try:
-        with contextlib.redirect_stdout(io.StringIO()):
+        with collect_here(), contextlib.redirect_stdout(io.StringIO()):
             return prepare_scene(spec, variant)
     except Exception as exc:
         return {"error": clip_error(exc)}
