@@ -10,6 +10,8 @@ Every table of results in ``docs/`` is written by this script, never by hand:
 * ``docs/results/failures/report.md``: from its ``failures.parquet`` (one row per scene and
   failure class) and ``summary.json`` (the command that ran it);
 * ``docs/results/stability/<phase>/stability.md``: from the phase's ``summary.json``;
+* ``docs/results/search/report.md``: adaptive against exhaustive search, from the
+  ``bench.json`` that ``benchmarks/bench_search.py --json`` writes;
 * ``docs/experiment-keys.md``: the experiment file's key table, from the schema.
 
 Re-running a study into ``docs/results/<study>`` and then this script refreshes the pages::
@@ -74,6 +76,7 @@ def generated() -> dict[Path, str]:
         folder = RESULTS / study
         pages[folder / "report.md"] = tradeoff_report_text(_tradeoff_summary(folder))
     pages[RESULTS / "failures" / "report.md"] = _failures_page(RESULTS / "failures")
+    pages[RESULTS / "search" / "report.md"] = _search_page(_json(RESULTS / "search" / "bench.json"))
     for phase in STABILITY_PHASES:
         folder = RESULTS / phase
         pages[folder / "stability.md"] = stability_report_text(_json(folder / "summary.json"))
@@ -84,6 +87,44 @@ def _json(path: Path) -> dict:
     if not path.is_file():
         raise FileNotFoundError(f"{path} is missing: re-run the study into {path.parent}")
     return json.loads(path.read_text())
+
+
+def _search_page(bench: dict) -> str:
+    """The benchmark of the adaptive search against the exhaustive grid."""
+    yes = {True: "yes", False: "**no**"}
+    lines = [
+        "# Adaptive against exhaustive search",
+        "",
+        f"Reproduce: `{bench['command']}`",
+        "",
+        f"Shader space with {', '.join(bench['fix']) or 'no axis'} held; schedules: "
+        f"{'; '.join(bench['grid'])}. Both searches on the same local cluster, one after the "
+        "other, references and inputs cached.",
+        "",
+        "| search | seconds | screen points | points in full | scene | recommendation | FLIP "
+        "| fetches |",
+        "|---|---|---|---|---|---|---|---|",
+    ]
+    for r in bench["results"]:
+        for scene, s in r["scenes"].items():
+            lines.append(
+                f"| {r['mode']} | {r['seconds']:.0f} | {r['screen_points']} | "
+                f"{r['full_points']} | {scene} | {s['recommended']} | {s['flip']:.4f} | "
+                f"{s['fetches']:.1f} |"
+            )
+    lines += [
+        "",
+        f"Time of the adaptive search: {bench['time_ratio']:.3f} of the exhaustive one's.",
+        "",
+        "| scene | same shader | schedule within one grid step | FLIP within 1 % |",
+        "|---|---|---|---|",
+    ]
+    for scene, a in bench["agreement"].items():
+        lines.append(
+            f"| {scene} | {yes[a['same_shader']]} | {yes[a['schedule_within_a_step']]} | "
+            f"{yes[a['flip_within_1_percent']]} |"
+        )
+    return "\n".join(lines) + "\n"
 
 
 def _failures_page(folder: Path) -> str:

@@ -158,7 +158,7 @@ def get_variant(name: str) -> Variant:
         return register(from_space(_space.choices_of(name)))
     except ValueError as exc:
         raise ValueError(
-            f"unknown shader variant {name!r}: {exc}. Registered: {', '.join(VARIANTS)}"
+            f"unknown shader variant {name!r}: {exc} (the names: docs/shader-space.md)"
         ) from None
 
 

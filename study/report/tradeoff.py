@@ -239,6 +239,12 @@ def _scene_lines(scene: str, f: dict, summary: dict) -> list[str]:
             f"(the fitted original: {fmt(seed['flip'])}, "
             f"{100 * (bw['flip'] / seed['flip'] - 1):+.1f} %)."
         )
+    own = summary.get("panels", {}).get(scene, {}).get("seed shader, seed constants")
+    if own and bw:
+        lines.append(
+            f"Against the original shader at its own constants (FLIP {fmt(own['flip'])}): "
+            f"{fmt(bw['flip'] / own['flip'], 3)}x its error within its fetch budget."
+        )
     lines += _marginal_lines(f.get("marginals", []))
     if summary.get("images", {}).get(scene):
         lines += ["", f"![{scene}: reference and shaders]({summary['images'][scene]})"]

@@ -1,25 +1,33 @@
-"""``study tradeoff``: which shader variant and step schedule for a frame budget, and what each
-costs in error, over one or several experiments.
+"""``study tradeoff``: which shader and step schedule for a frame budget, and what each costs in
+error, over one or several experiments.
 
-:func:`run_tradeoff` plans the jobs (``tradeoff_jobs``), runs them on the sweep engine in two
-phases (anchors, then points warm-started from them), and analyses the table:
+:func:`run_tradeoff` chooses the points by one of two searches on the sweep engine:
+
+* ``adaptive`` (default): the shader space (``shaders_port._space``) screened cheaply and only the
+  survivors measured in full (``study.studies.search``);
+* ``exhaustive``: every shader of ``tradeoff.variants`` (unset: the space, with the axes of
+  ``tradeoff.fix`` pinned) at every schedule (``tradeoff_jobs``), in two phases (anchors at the
+  original schedule, then every point warm-started from them).
+
+Then it analyses the table (``tradeoff_analysis``):
 
 * a Pareto front of error (FLIP on water pixels) against each cost measure, per scene, and a
   joint front on the error averaged over the scenes (configurations measured on every scene);
 * the recommendation: the cheapest configuration (mean texture fetches per water pixel, the
-  machine-independent cost) whose FLIP is within ``tolerance`` of the best; per scene its
-  constants are exported like ``study calibrate`` exports (compile-checked, GL-checked);
-* the best configuration at no more fetches per pixel than the seed's (``water_refraction`` at
-  the seed's schedule), the budget a game replacing the seed's shader already pays;
-* what the scene needs: the simplest variant within tolerance (variants counted simplest first,
-  in the order of ``tradeoff.variants``), what the sky reflection and the reflection raycast add,
-  the smallest loop cap at which rays cross the floor, the error floor of each variant (its
-  converged raymarch), and what each halving of the seed's schedule costs.
+  machine-independent cost) whose FLIP is within ``tolerance`` of the best, or with a budget
+  the lowest FLIP within it; per scene its constants are exported like ``study calibrate``
+  exports (compile-checked, GL-checked, every engine target);
+* the best configuration at no more fetches per pixel than the original's (``water_refraction``
+  at its schedule), the budget a game replacing the original shader already pays;
+* what the scene needs (the simplest variant within tolerance, error floors, the smallest loop
+  cap at which rays cross the floor, each halving of the original schedule) and, for the
+  adaptive search, what each axis's choice buys at the recommendation.
 
-Outputs in ``out``: ``tradeoff.parquet`` (a row per point), ``anchors.parquet``, ``pareto.png``,
-``images_<scene>.png`` (the reference beside the seed shader with the seed's constants, fitted,
-the best configuration within the seed's fetch budget and the recommendation), ``report.md``,
-``summary.json``, ``shaders/`` (one experiment) or ``shaders/<name>/`` (several).
+Outputs in ``out``: ``tradeoff.parquet`` (a row per point measured in full), ``screen.parquet``
+(adaptive) or ``anchors.parquet`` (exhaustive), ``pareto.png``, ``images_<scene>.png`` (the
+reference beside the original shader at its own constants, fitted, the best configuration within
+its fetch budget and the recommendation), ``report.md``, ``summary.json``, ``shaders/`` (one
+experiment) or ``shaders/<name>/`` (several).
 """
 
 from __future__ import annotations
@@ -128,7 +136,7 @@ def run_tradeoff(
                 summary["scenes"][name]["marginals"] = searcher.marginals_of(i, rec) if rec else []
     summary["experiments"] = [str(p) for p in experiments]
     summary["exports"] = export_recommended(exps, specs, summary, rows, out, variant, log)
-    summary["images"] = side_by_side(exps, specs, summary, rows, out, variant)
+    summary["images"], summary["panels"] = side_by_side(exps, specs, summary, rows, out, variant)
     from ..report.tradeoff import pareto_figure, write_tradeoff_report
 
     pareto_figure(out / "pareto.png", recs, summary)
@@ -300,12 +308,13 @@ def _point_row(rows: list, scene: str, label: str) -> dict:
     )
 
 
-def side_by_side(exps, specs, summary: dict, rows: list, out: Path, variant: str) -> dict:
+def side_by_side(exps, specs, summary: dict, rows: list, out: Path, variant: str) -> tuple:
     """Per scene, ``images_<scene>.png``: the reference | the seed shader with the experiment's
     constants at the seed's schedule | the seed's configuration refitted | the best configuration
     within the seed's fetch budget | the recommendation (duplicates left out), each at the
-    experiment's resolution with its FLIP and RMSE on the water pixels. Returns
-    {scene: file name}."""
+    experiment's resolution with its FLIP and RMSE on the water pixels. Returns ({scene: file
+    name}, {scene: {panel title: {"flip", "rmse"}}}); the first panel's FLIP is the original
+    shader at its own constants, the baseline of every "halves the original's error" claim."""
     from shaders_port import Constants
 
     from .._metrics import errors
@@ -313,7 +322,7 @@ def side_by_side(exps, specs, summary: dict, rows: list, out: Path, variant: str
     from ..report.calibration import comparison_figure
     from .tradeoff_jobs import job_model
 
-    result = {}
+    result, panels = {}, {}
     for exp, spec in zip(exps, specs):
         f = summary["scenes"][exp["name"]]
         panels = [
@@ -352,4 +361,7 @@ def side_by_side(exps, specs, summary: dict, rows: list, out: Path, variant: str
         name = f"images_{exp['name']}.png"
         comparison_figure(out / name, images, errs, mask, title=exp["name"])
         result[exp["name"]] = name
-    return result
+        panels[exp["name"]] = {
+            t: {"flip": float(e["flip"]), "rmse": float(e["rmse"])} for t, e in errs.items()
+        }
+    return result, panels
