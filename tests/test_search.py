@@ -116,3 +116,17 @@ def test_adaptive_tradeoff_tiny(tmp_path):
     report = (tmp_path / "report.md").read_text()
     assert "Search: adaptive" in report and "**Budget**" in report
     assert summary["exports"]["default"]["gl_check"]["passed"]
+
+
+def test_the_cut_keeps_the_points_closest_to_the_front():
+    flat = [0.0] * 64  # noise-free blocks: the margin is the FLIP gap over a tiny floor
+
+    def pt(name, fetches, flip):
+        return _pt(name, fetches, flip, [flip + v for v in flat])
+
+    a, b, c, d = pt("a", 5, 0.30), pt("b", 10, 0.20), pt("c", 10, 0.21), pt("d", 20, 0.25)
+    assert search.margin(a, [a, b, c, d]) == math.inf  # nothing is cheaper
+    assert search.margin(b, [a, b, c, d]) > 0 > search.margin(d, [a, b, c, d])
+    kept = search.closest_to_front([a, b, c, d], 2)
+    assert [p["variant"] for p in kept] == ["a", "b"]  # in their order, the front's two
+    assert search.closest_to_front([a, b], 5) == [a, b]

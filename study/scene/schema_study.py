@@ -287,8 +287,26 @@ STUDY_KEYS: dict[str, Field] = {
     ),
     "tradeoff.max_shaders": Field(
         "int",
-        64,
+        40,
         "Configurations the adaptive search screens at most (its walk stops there).",
+        "",
+        1,
+        10000,
+    ),
+    "tradeoff.max_scheduled": Field(
+        "int",
+        6,
+        "Shader configurations whose step schedules the adaptive search screens at most: the "
+        "walk's survivors closest to the front.",
+        "",
+        1,
+        10000,
+    ),
+    "tradeoff.max_full": Field(
+        "int",
+        16,
+        "Screen points the adaptive search measures in full at most: the surviving points "
+        "closest to the screen's front.",
         "",
         1,
         10000,

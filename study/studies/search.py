@@ -9,10 +9,12 @@ screen resolution (``fit.resolution`` divided by ``tradeoff.screen_factor``) exc
    (``shaders_port._space.neighbours``); after each round keep the configurations no other
    one clearly dominates (:func:`survivors`) and add their unseen neighbours; stop when a
    round adds none or ``tradeoff.max_shaders`` have been screened. A shader-LOD system's greedy
-   walk along the front, with a noise margin.
+   walk along the front, with a noise margin; the ``tradeoff.max_scheduled`` survivors closest
+   to the front go on.
 2. **Schedules**: every step schedule of ``tradeoff_jobs.schedules`` for each surviving
    configuration with a raymarch, warm-started from its screen fit; the dominated
-   (configuration, schedule) points are dropped the same way.
+   (configuration, schedule) points are dropped the same way, and of the rest the
+   ``tradeoff.max_full`` closest to the front (:func:`margin`) go on.
 3. **Full**: the surviving points measured as the exhaustive study measures every point
    (``point_job``: fit at ``fit.resolution``, FLIP at ``resolution``, GL frame times).
 
@@ -70,6 +72,29 @@ def clearly_dominates(y: dict, x: dict, z: float, cost: str = "fetches_mean") ->
 def survivors(points: list, z: float, cost: str = "fetches_mean") -> list:
     """The points no other point clearly dominates, in their order."""
     return [x for x in points if not any(clearly_dominates(y, x, z, cost) for y in points)]
+
+
+def margin(x: dict, points: list, cost: str = "fetches_mean") -> float:
+    """How far ``x`` is from being dominated, in paired standard errors: the smallest
+    ``(flip_y - flip_x) / se`` over the points ``y`` costing no more (negative: some cheaper
+    point is better; a point on the front has a positive margin, inf if none is cheaper)."""
+    out = math.inf
+    for y in points:
+        if y is x or y.get(cost) is None or x.get(cost) is None:
+            continue
+        if y[cost] <= x[cost] * (1 + 1e-9):
+            se = paired_se(x["flip_blocks"], y["flip_blocks"])
+            out = min(out, (y["flip"] - x["flip"]) / max(se, 1e-12))
+    return out
+
+
+def closest_to_front(points: list, k: int, cost: str = "fetches_mean") -> list:
+    """The ``k`` points with the largest :func:`margin` (those on the front first), in their
+    order: the successive-halving cut between the screen and the full measurement."""
+    if len(points) <= k:
+        return list(points)
+    ranked = sorted(points, key=lambda x: -margin(x, points, cost))[:k]
+    return [p for p in points if any(p is r for r in ranked)]
 
 
 def first_round(fix: dict | None) -> list[dict]:
@@ -243,7 +268,7 @@ class Search:
             if self.variants:
                 break
             todo = next_round([r["choices"] for r in front], seen, self.fix)
-        return survivors(self.ok(i), z)
+        return closest_to_front(survivors(self.ok(i), z), exp["tradeoff.max_scheduled"])
 
     def schedules(self, i: int, front: list[dict]) -> list[dict]:
         """Rung 2 on experiment ``i``: the step schedules of the front's raymarch shaders,
@@ -258,7 +283,8 @@ class Search:
                     continue
                 jobs.append(self._job(i, r["variant"], s, {**self.start[i], **r["fitted"]}))
         self._run(jobs, f"tradeoff: {exp['name']} screen schedules")
-        return survivors(self.ok(i), exp["tradeoff.noise_z"])
+        kept = survivors(self.ok(i), exp["tradeoff.noise_z"])
+        return closest_to_front(kept, exp["tradeoff.max_full"])
 
     def full_jobs(self, finalists: list[dict]) -> list[dict]:
         """Rung 3: every finalist (variant, schedule) on every experiment, as ``point_job`` jobs

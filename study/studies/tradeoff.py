@@ -52,6 +52,8 @@ PLAN_KEYS = frozenset(
         "tradeoff.search",
         "tradeoff.fix",
         "tradeoff.max_shaders",
+        "tradeoff.max_full",
+        "tradeoff.max_scheduled",
         "tradeoff.screen_factor",
         "tradeoff.noise_z",
     }
@@ -322,7 +324,7 @@ def side_by_side(exps, specs, summary: dict, rows: list, out: Path, variant: str
     from ..report.calibration import comparison_figure
     from .tradeoff_jobs import job_model
 
-    result, panels = {}, {}
+    result, scores = {}, {}
     for exp, spec in zip(exps, specs):
         f = summary["scenes"][exp["name"]]
         panels = [
@@ -361,7 +363,7 @@ def side_by_side(exps, specs, summary: dict, rows: list, out: Path, variant: str
         name = f"images_{exp['name']}.png"
         comparison_figure(out / name, images, errs, mask, title=exp["name"])
         result[exp["name"]] = name
-        panels[exp["name"]] = {
+        scores[exp["name"]] = {
             t: {"flip": float(e["flip"]), "rmse": float(e["rmse"])} for t, e in errs.items()
         }
-    return result, panels
+    return result, scores
