@@ -222,8 +222,9 @@ def _split_tokens(rest: str, name: str) -> list[str]:
 
 def configurations(fix: dict | None = None) -> list[dict]:
     """Every realisable configuration with the axes of ``fix`` pinned, in axis order."""
-    fix = checked(fix or {}) if fix else {}
-    axes = {a: ((fix[a],) if a in (fix or {}) else cs) for a, cs in AXES.items()}
+    fix = dict(fix or {})
+    checked(fix)  # names an unknown axis or choice
+    axes = {a: ((fix[a],) if a in fix else cs) for a, cs in AXES.items()}
     out = []
     for combo in itertools.product(*axes.values()):
         c = dict(zip(axes, combo))

@@ -285,7 +285,7 @@ def export_recommended(
         inputs = inputs_for_shader(exp_s, inputs, rec["variant"], variant, log=log)
         gl = gl_check(rec["variant"], inputs, constants, folder)
         result[exp["name"]] = {
-            "folder": str(folder),
+            "folder": str(folder.relative_to(out)),  # the report lives in ``out``
             "variant": rec["variant"],
             "label": rec["label"],
             "constants": constants.to_dict(),
