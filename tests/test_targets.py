@@ -213,3 +213,19 @@ def test_uniform_initializers_become_specialization_constants():
         "const vec4 waterColor = vec4(waterColor_r, waterColor_g, waterColor_b, waterColor_a);"
         in out
     )
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_hlsl_round_trip_of_configurations_nobody_registered(tmp_path, inputs, seed):
+    """Shaders of the space drawn at random (fixed seeds): exported to every target, and the
+    HLSL round trip matches the port on llvmpipe as the registered variants' does."""
+    import random
+
+    from shaders_port import _space
+
+    c = random.Random(200 + seed).choice(_space.configurations({"refraction": "raycast"}))
+    name = _space.name_of(c)
+    out = tmp_path / "shaders"
+    export_shaders(FITTED, out, [name], targets=None)
+    res = _hlsl_check(out, name, inputs)
+    assert res["n_water"] > 500 and res["passed"], (name, res)

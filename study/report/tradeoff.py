@@ -268,17 +268,17 @@ def _scene_lines(scene: str, f: dict, summary: dict) -> list[str]:
     lines.append(
         f"- simplest variant within tolerance: `{f['simplest_variant_within_tolerance']}`; "
         "best FLIP per variant: "
-        + ", ".join(f"{v} {fmt(x)}" for v, x in f["best_flip_by_variant"].items())
+        + ", ".join(f"{v} {fmt(x)}" for v, x in sorted(f["best_flip_by_variant"].items()))
     )
     lines.append(
         "- error floor (converged raymarch) per variant: "
-        + ", ".join(f"{v} {fmt(x)}" for v, x in f["error_floor_by_variant"].items())
+        + ", ".join(f"{v} {fmt(x)}" for v, x in sorted(f["error_floor_by_variant"].items()))
     )
     lines.append(
         "- smallest loop cap at which fewer than 1 % of rays miss the floor: "
         + ", ".join(
             f"{v} {x if x is not None else 'none in the grid'}"
-            for v, x in f["smallest_crossing_loop_cap"].items()
+            for v, x in sorted(f["smallest_crossing_loop_cap"].items())
         )
     )
     if f["halvings"]:
