@@ -236,7 +236,7 @@ def _command_line(argv) -> str:
 
 def main(argv=None) -> int:
     args = build_parser().parse_args(argv)
-    from . import _jobs
+    from . import _jobs, _joint_jobs
     from ._backend import BackendError
     from ._io import DiskFullError
     from .scene.experiment import ExperimentError
@@ -251,11 +251,11 @@ def main(argv=None) -> int:
                 args.experiment[0], args.out, args.overrides, args.variant, solver=args.solver
             )
         elif args.command == "calibrate":
-            _jobs.run_calibrate_joint(
+            _joint_jobs.run_calibrate_joint(
                 args.experiment, args.out, args.overrides, args.variant, solver=args.solver
             )
         elif args.command == "generalise":
-            _jobs.run_generalise(
+            _joint_jobs.run_generalise(
                 args.experiment, args.out, args.overrides, args.variant, solver=args.solver
             )
         elif args.command == "tradeoff":

@@ -228,13 +228,15 @@ class Search:
         }
 
     def _seed_schedule(self, i: int, variant: str) -> dict:
-        from .tradeoff_jobs import schedules
+        """The original's schedule for ``variant`` (its only one if it has no raymarch)."""
+        from shaders_port._variants import get_variant
 
-        return next(
-            s
-            for s in schedules(self.exps[i], variant)
-            if s["kind"] in ("fixed", "scale") and s["scale"] in (None, 1.0)
-        )
+        from .tradeoff_jobs import scaled_schedule
+
+        v = get_variant(variant)
+        if not {"steps_grazing", "steps_steep", "loop_cap"} <= set(v.schedule):
+            return {"kind": "fixed", "scale": None, "schedule": {}}
+        return {"kind": "scale", "scale": 1.0, "schedule": scaled_schedule(v, 1.0)}
 
     def ok(self, i: int) -> list[dict]:
         name = self.exps[i]["name"]

@@ -38,7 +38,9 @@ GL_SIZES = {"512": (512, 512), "1080p": (1920, 1080)}
 REFERENCE_SHADER = "water_refraction"
 
 
-def _scaled(variant, factor: float) -> dict:
+def scaled_schedule(variant, factor: float) -> dict:
+    """The original shader's schedule times ``factor`` (its reflection schedule too where the
+    variant raymarches the reflection); step counts and caps kept at least 0.5 and 1."""
     s = {
         "steps_grazing": SEED_SCHEDULE["steps_grazing"] * factor,
         "steps_steep": max(0.5, SEED_SCHEDULE["steps_steep"] * factor),
@@ -73,7 +75,7 @@ def schedules(exp, variant_name: str) -> list[dict]:
             out.append({"kind": kind, "scale": scale, "schedule": sched})
 
     for f in sorted(exp["tradeoff.scales"]):
-        add("scale", f, _scaled(variant, f))
+        add("scale", f, scaled_schedule(variant, f))
     for g, s, c in itertools.product(
         exp["tradeoff.steps_grazing"], exp["tradeoff.steps_steep"], exp["tradeoff.loop_cap"]
     ):
@@ -84,7 +86,7 @@ def schedules(exp, variant_name: str) -> list[dict]:
     add(
         "converged",
         exp["tradeoff.converged_scale"],
-        _scaled(variant, exp["tradeoff.converged_scale"]),
+        scaled_schedule(variant, exp["tradeoff.converged_scale"]),
     )
     return out
 

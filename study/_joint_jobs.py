@@ -1,0 +1,196 @@
+"""The jobs over several experiments at once: ``study calibrate A.toml B.toml ...`` (one constants
+block fitted on all scenes) and ``study generalise`` (that joint fit plus leave-one-scene-out
+validation). Each writes its artifacts into one folder, as the one-scene jobs of ``study._jobs``
+do, and shares their set-up (``load_scene_data``)."""
+
+from __future__ import annotations
+
+import time
+from pathlib import Path
+
+from ._backend import init_backend
+from ._io import write_json
+from ._jobs import load_scene_data
+from ._progress import log as _log
+from .fit.result import jsonable
+from .report.gl_check import gl_check, target_checks
+from .scene.experiment import load_experiment
+
+
+def _scenes(experiments, overrides, variant, cache):
+    """Load every experiment (same overrides for all), its reference, inputs and fit model.
+    Returns (variant, list of dicts: name, exp, ref, inputs, model, frozen)."""
+    from ._backend import drjit_backend
+    from .fit.calibrate import scene_frozen
+    from .fit.model import ShaderModel
+
+    if not experiments:
+        raise ValueError("no experiment given")
+    exps = [load_experiment(e, overrides) for e in experiments]
+    variant = init_backend(variant or exps[0]["variant"])
+    scenes, seen = [], {}
+    for path, exp in zip(experiments, exps):
+        name = exp["name"]
+        seen[name] = seen.get(name, 0) + 1
+        if seen[name] > 1:
+            name = f"{name}#{seen[name]}"
+        ref, inputs, _ = load_scene_data(exp, variant, cache)
+        model = ShaderModel.from_experiment(exp, inputs, ref.image, backend=drjit_backend(variant))
+        scenes.append(
+            {
+                "name": name,
+                "path": str(path),
+                "exp": exp,
+                "ref": ref,
+                "inputs": inputs,
+                "model": model,
+                "frozen": scene_frozen(exp),
+            }
+        )
+    return variant, scenes
+
+
+def _evaluator(scenes, variant):
+    """evaluate(i, constants) -> RMSE and FLIP of scene i at its full resolution (water pixels)."""
+    from ._backend import drjit_backend
+    from ._metrics import errors
+    from .fit.model import ShaderModel
+
+    full = {}
+
+    def evaluate(i, constants):
+        s = scenes[i]
+        if i not in full:
+            full[i] = ShaderModel.from_experiment(
+                s["exp"],
+                s["inputs"],
+                s["ref"].image,
+                backend=drjit_backend(variant),
+                resolution=tuple(s["exp"]["resolution"]),
+            )
+        img, _ = full[i].render(constants)
+        e = errors(s["ref"].image, img, full[i].mask)
+        return {"rmse": float(e["rmse"]), "flip": float(e["flip"])}
+
+    return evaluate
+
+
+def run_calibrate_joint(
+    experiments, out, overrides=None, variant=None, solver=None, cache=None
+) -> dict:
+    """``study calibrate A.toml B.toml ...``: one constants block fitted on all scenes (each
+    weighted equally), exported and GL-checked like a single fit; constants.json and report.md
+    with every scene's error under the start and the joint constants. The first experiment
+    gives the start constants, ``fit.parameters``, ``fit.solver`` and ``fit.max_steps``."""
+    variant, scenes = _scenes(experiments, overrides, variant, cache)
+    return _joint_fit(scenes, variant, Path(out), solver)[0]
+
+
+def _joint_fit(scenes, variant, out: Path, solver):
+    """The joint fit of ``scenes``, exported into ``out``. Returns (summary, calibration,
+    evaluate)."""
+    from .fit.joint import JointModel, joint_calibrate
+    from .fit.model import constants_from_experiment
+    from .report.export import export_shaders
+    from .fit.result import CalibrationResult
+    from .report.generalise import write_joint_report
+
+    out.mkdir(parents=True, exist_ok=True)
+    first = scenes[0]["exp"]
+    solver = solver or first["fit.solver"]
+    start = constants_from_experiment(first)
+    t0 = time.perf_counter()
+    cal = joint_calibrate(
+        [s["model"] for s in scenes],
+        start,
+        first["fit.parameters"],
+        solver,
+        first["fit.max_steps"],
+        [s["frozen"] for s in scenes],
+        [s["name"] for s in scenes],
+    )
+    fit_s = time.perf_counter() - t0
+    evaluate = _evaluator(scenes, variant)
+    per_scene = {
+        s["name"]: {"default": evaluate(i, start), "fitted": evaluate(i, cal.fitted)}
+        for i, s in enumerate(scenes)
+    }
+    export_shaders(cal.fitted, out / "shaders", [scenes[0]["model"].shader], targets=None)
+    gl = gl_check(scenes[0]["model"].shader, scenes[0]["inputs"], cal.fitted, out / "shaders")
+    engine_targets = target_checks(
+        scenes[0]["model"].shader, scenes[0]["inputs"], cal.fitted, out / "shaders"
+    )
+    weights = JointModel([s["model"] for s in scenes]).weights
+    result = CalibrationResult(
+        shader=scenes[0]["model"].shader,
+        backend=variant,
+        parameters=cal.parameters,
+        constants=cal.fitted.to_dict(),
+        error=per_scene,
+        solver=solver,
+        fit=cal.fit_summary,
+        identifiability=cal.identifiability,
+        timings={"fit_s": fit_s},
+        gl_check=gl,
+        experiments=[s["path"] for s in scenes],
+        scenes=[s["name"] for s in scenes],
+        weights={s["name"]: float(w) for s, w in zip(scenes, weights)},
+        engine_targets=engine_targets,
+    )
+    summary = result.to_json()
+    write_json(out / "constants.json", summary)
+    write_joint_report(out, summary)
+    _log(f"calibrate (joint, {len(scenes)} scenes): wrote {out}")
+    return summary, cal, evaluate
+
+
+def run_generalise(experiments, out, overrides=None, variant=None, solver=None, cache=None) -> dict:
+    """``study generalise A.toml B.toml ...``: the joint fit (exported as by ``calibrate``) plus
+    leave-one-scene-out validation (each scene scored under the seed's constants, the constants
+    fitted on the other scenes and its own fit) and the universal/scene-specific verdict per
+    constant; generalise.json and generalise.md."""
+    from .fit.joint import leave_one_out, universality
+    from .fit.model import constants_from_experiment
+    from .report.generalise import write_generalise_report
+
+    if len(experiments) < 2:
+        raise ValueError("study generalise needs at least two experiments (leave-one-scene-out)")
+    variant, scenes = _scenes(experiments, overrides, variant, cache)
+    out = Path(out)
+    joint, cal, evaluate = _joint_fit(scenes, variant, out, solver)
+    first = scenes[0]["exp"]
+    rows = leave_one_out(
+        [s["model"] for s in scenes],
+        constants_from_experiment(first),
+        first["fit.parameters"],
+        joint["solver"],
+        first["fit.max_steps"],
+        evaluate,
+        [s["frozen"] for s in scenes],
+        [s["name"] for s in scenes],
+        log=_log,
+    )
+    uni = universality({r["scene"]: r["own_calibration"] for r in rows}, cal)
+    table = [
+        {
+            "scene": r["scene"],
+            "seed": r["seed"],
+            "others": r["others"],
+            "own": r["own"],
+            "own_constants": {n: p["fitted"] for n, p in r["own_calibration"].parameters.items()},
+            "own_status": {n: p["status"] for n, p in r["own_calibration"].parameters.items()},
+        }
+        for r in rows
+    ]
+    summary = {
+        "experiments": joint["experiments"],
+        "scenes": joint["scenes"],
+        "joint": joint,
+        "leave_one_out": table,
+        "universality": uni,
+    }
+    summary = jsonable(summary)
+    write_json(out / "generalise.json", summary)
+    write_generalise_report(out, summary)
+    _log(f"generalise: wrote {out / 'generalise.md'}")
+    return summary
