@@ -8,7 +8,8 @@ chart, export and the GL check) names a shader by its variant name only, so a ne
 study with one file pair and one :func:`register` call here.
 
 ``VARIANTS`` maps names to :class:`Variant`, in registration order (the order of charts and
-tables). Shipped: 18 variants, registered below: ``water_refraction`` (the original shader,
+tables): the shipped ones (``SHIPPED``) and any other shader of the space used so
+far. Shipped: 18 variants, registered below: ``water_refraction`` (the original shader,
 section 2), ``water_reflection`` (section 3: reflections raycast too), their ``#define`` variants
 (Beer-Lambert attenuation, wall faces, GGX, the crossing refinement, fewer normal-map layers,
 game-precision textures, no highlight, and ``water_refraction_noreflection``: ``#define
@@ -214,8 +215,12 @@ def from_space(choices: dict, description: str | None = None) -> Variant:
     )
 
 
+SHIPPED: list[str] = []  # the variants registered below, in chart order (VARIANTS grows on use)
+
+
 def _shipped(name: str, description: str) -> None:
     register(from_space(_space.choices_of(name), description))
+    SHIPPED.append(name)
 
 
 # the shipped variants, in chart order: the original two shaders (source 000), the study's

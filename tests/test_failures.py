@@ -110,7 +110,11 @@ def test_benign_pool_is_in_no_class():
 
 @pytest.mark.parametrize(
     "shader,kw",
-    [(water_refraction, {}), (water_refraction, {"reflection": False}), (water_reflection, {})],
+    [
+        (water_refraction, {}),
+        (water_refraction, {"defines": ("NOREFLECTION",)}),
+        (water_reflection, {}),
+    ],
 )
 def test_diagnostics_do_not_change_the_colour(shader, kw):
     inputs = synthetic_inputs(32, 24)

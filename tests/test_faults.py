@@ -198,6 +198,8 @@ def test_ctrl_c_in_a_sweep_keeps_a_valid_table_and_resumes(tmp_path):
             str(out),
             "--workers",
             "1",
+            "--search",
+            "exhaustive",
         ]
         + _sets(TINY_TRADEOFF)
     )
@@ -285,7 +287,8 @@ def test_real_cluster_survives_a_killed_worker(tmp_path):
                     stderr=subprocess.DEVNULL,
                 )
             )
-        args = ["tradeoff", str(REPO / "experiments" / "default.toml")] + _sets(TINY_TRADEOFF)
+        args = ["tradeoff", str(REPO / "experiments" / "default.toml"), "--search", "exhaustive"]
+        args += _sets(TINY_TRADEOFF)
         run = subprocess.Popen(
             STUDY
             + args

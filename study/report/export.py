@@ -27,13 +27,13 @@ from pathlib import Path
 
 from shaders_port import CONSTANT_SPECS, Constants
 from shaders_port._glsl import compile_check, read_source, write_constants
-from shaders_port._variants import VARIANTS, get_variant
+from shaders_port._variants import SHIPPED, VARIANTS, get_variant
 
 from .._io import disk_full
 from .targets import resolve_targets, translate_targets
 
 # every fragment shader file a registered variant uses, in registration order
-FRAGMENT_SHADERS = tuple(dict.fromkeys(v.shader for v in VARIANTS.values()))
+FRAGMENT_SHADERS = tuple(dict.fromkeys(VARIANTS[n].shader for n in SHIPPED))
 
 
 def load_constants_json(path) -> Constants:
@@ -65,15 +65,16 @@ def load_constants_json(path) -> Constants:
 
 
 def export_shaders(constants: Constants, out_dir, shaders=None, targets=()) -> list[Path]:
-    """Write ``out_dir/{compat,core}/water.vert`` and the fragment shaders of the registered
-    variants named in ``shaders`` (default: every one -- ``water_refraction.frag``,
-    ``water_reflection.frag``, ...) with ``constants``; return the written paths. Constants
+    """Write ``out_dir/{compat,core}/water.vert`` and the fragment shaders of the shaders named
+    in ``shaders`` (any of the shader space; default: every shipped one --
+    ``water_refraction.frag``, ``water_reflection.frag``, ...) with ``constants``; return the
+    written paths. Constants
     are fitted for one shader, so a calibration exports that shader alone. ``targets``: engine
     targets to add (``study.report.targets.TARGETS``; None: every one the installed tools can
     make). Raises ValueError on bad constants or an unknown name and RuntimeError if a shader
     does not compile or translate (nothing is written then)."""
     constants.validate()
-    names = list(VARIANTS) if shaders is None else list(shaders)
+    names = list(SHIPPED) if shaders is None else list(shaders)
     if not names:
         raise ValueError("export: no shader named; name one of the space's shaders")
     for n in names:

@@ -5,11 +5,11 @@ one per ``CONSTANT_SPECS`` entry): ``STUDY_KEYS``, in the docs' order."""
 from __future__ import annotations
 
 from shaders_port import CONSTANT_SPECS
-from shaders_port._variants import VARIANTS
+from shaders_port._variants import SHIPPED
 
 from .schema_scene import Field
 
-SHADERS = tuple(VARIANTS)
+SHADERS = tuple(SHIPPED)
 SOLVERS = ("levenberg_marquardt", "gauss_newton", "dogleg", "bfgs", "nelder_mead", "adam")
 FIT_PARAMETERS = (
     "attenuation_distance",
