@@ -233,16 +233,19 @@ def _noise_lines(nz: dict | None) -> list[str]:
             "| spp | " + " | ".join(f"`{n}`" for n in names) + " | all agree |",
             "|---|" + "---|" * len(names) + "---|",
         ]
+        # levels key the tables as numbers in a run and as strings once read from summary.json
+        stats = {str(k): v for k, v in d["stats"].items()}
+        agrees = {str(k): v for k, v in d["agrees"].items()}
         for spp in d["levels"]:
             cells = []
             for n in names:
-                st = d["stats"][spp].get(n, {})
+                st = stats[str(spp)].get(n, {})
                 cells.append(
                     f"{fmt(st.get('mean'))} ({fmt(st.get('bias'), 2)} +- "
                     f"{fmt(st.get('bias_se'), 2)})"
                 )
             lines.append(
-                f"| {spp} | " + " | ".join(cells) + f" | {'yes' if d['agrees'][spp] else 'no'} |"
+                f"| {spp} | " + " | ".join(cells) + f" | {'yes' if agrees[str(spp)] else 'no'} |"
             )
         lines.append("")
     lines += ["![bias against spp](noise.png)", ""]
