@@ -133,13 +133,13 @@ def realise(choices: dict) -> tuple[str, tuple[str, ...], str]:
 
 
 def _realise_screen_space(c: dict) -> tuple[str, tuple[str, ...], str]:
-    fixed = [a for a in ("attenuation", "specular", "refine", "walls", "layers", "textures")]
+    fixed = ("attenuation", "specular", "refine", "walls", "layers", "textures")
     off = [f"{a} = {c[a]}" for a in fixed if c[a] != ORIGINAL[a]]
     if off:
         raise Unrealisable(
             f"the screen-space shader (water_baseline, refraction = {c['refraction']}) has the "
-            f"original's depth tint, Phong highlight, four layers and float textures only, "
-            f"not {', '.join(off)}"
+            "original's choices on the other axes only (depth tint, Phong highlight, no "
+            f"refinement, no wall faces, four layers, float textures), not {', '.join(off)}"
         )
     key = (c["refraction"], c["reflection"])
     if key not in _BASELINE:
@@ -149,8 +149,7 @@ def _realise_screen_space(c: dict) -> tuple[str, tuple[str, ...], str]:
             f"screen-space shader distorts refraction and reflection by the same normal map "
             f"(or neither); it realises {allowed}"
         )
-    name, defines = _BASELINE[key]
-    return "water_baseline", defines, "float"
+    return "water_baseline", _BASELINE[key][1], "float"
 
 
 def name_of(choices: dict) -> str:
@@ -169,9 +168,9 @@ def name_of(choices: dict) -> str:
 def choices_of(name: str) -> dict:
     """The configuration named ``name`` (the inverse of :func:`name_of`); a ValueError says
     what part of the name is not a choice."""
-    for c in ((r, f) for r, f in _BASELINE):
-        if _BASELINE[c][0] == name:
-            return checked({"refraction": c[0], "reflection": c[1]})
+    for (refraction, reflection), (baseline, _) in _BASELINE.items():
+        if baseline == name:
+            return checked({"refraction": refraction, "reflection": reflection})
     for shader, reflection in (("water_reflection", "raycast"), ("water_refraction", "cube")):
         if name == shader or name.startswith(shader + "_"):
             rest = name[len(shader) + 1 :]
