@@ -128,9 +128,9 @@ def collect_here():
     Dr.Jit variable waits for the state lock (Dr.Jit issue 524's lock inversion). The collector
     runs in whichever thread happens to allocate, so in a Dask worker it collected the Dr.Jit
     garbage of a job on the worker's event-loop thread while the job's thread was inside a
-    frozen call: both threads waited for ever (seen in a 252-fit multi-start sweep, stuck 17
-    minutes at fit 91). With the collector off, Dr.Jit garbage is freed only by the thread
-    that drops it, or by the collection here, in the thread that ran the Dr.Jit work."""
+    frozen call, and both threads waited for ever (a multi-start sweep hung so). With the
+    collector off, Dr.Jit garbage is freed only by the thread that drops it, or by the
+    collection here, in the thread that ran the Dr.Jit work."""
     was_enabled = gc.isenabled()
     gc.disable()
     try:
