@@ -4,7 +4,7 @@ Runs both searches on the same experiments, the same shader space (``tradeoff.fi
 so that the exhaustive grid stays affordable) and the same schedule grid, one after the other
 on the same local cluster size, and prints one table; ``--json`` writes the figures (what
 ``scripts/build_docs.py`` turns into ``docs/results/search/report.md``). Agreement is the
-issue's test: the same shader configuration, a schedule within one grid step (each step count
+the test of agreement: the same shader configuration, a schedule within one grid step (each step count
 within a factor of 2), FLIP within 1 %.
 
     .venv/bin/python benchmarks/bench_search.py experiments/default.toml --out out/bench_search \\
