@@ -3,9 +3,9 @@
 Runs both searches on the same experiments, the same shader space (``tradeoff.fix`` pins axes
 so that the exhaustive grid stays affordable) and the same schedule grid, one after the other
 on the same local cluster size, and prints one table; ``--json`` writes the figures (what
-``scripts/build_docs.py`` turns into ``docs/results/search/report.md``). Agreement is the
-the test of agreement: the same shader configuration, a schedule within one grid step (each step count
-within a factor of 2), FLIP within 1 %.
+``scripts/build_docs.py`` turns into ``docs/results/search/report.md``). Agreement: the same
+shader configuration, a schedule within one grid step (each step count within a factor of 2),
+FLIP within 1 %.
 
     .venv/bin/python benchmarks/bench_search.py experiments/default.toml --out out/bench_search \\
         --json docs/results/search/bench.json
