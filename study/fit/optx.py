@@ -60,15 +60,7 @@ def optimistix_fit(res: DrJitResidual, solver: str, u0, max_steps, rtol, atol, n
     ok = bool(result == optx.RESULTS.successful)
     msg = "converged" if ok else optx.RESULTS[result]
     u = np.asarray(value, np.float64)
-    if not np.all(np.isfinite(u)):
-        best = res.stats.best_x if res.stats.best_x is not None else np.asarray(u0)
-        return (
-            np.asarray(best),
-            steps,
-            False,
-            "solver returned non-finite parameters; returning the best point evaluated",
-        )
-    return u, steps, ok, f"{msg} after {steps} steps"
+    return _finite_or_best(res, u, u0, steps, ok, f"{msg} after {steps} steps")
 
 
 def optimistix_stepped(
@@ -139,12 +131,18 @@ def optimistix_stepped(
     except Exception as e:
         return aborted(res, e, u0, steps)
     u = np.asarray(y, np.float64)
-    if not np.all(np.isfinite(u)):
-        best = res.stats.best_x if res.stats.best_x is not None else np.asarray(u0)
-        return (
-            np.asarray(best),
-            steps,
-            False,
-            "solver returned non-finite parameters; returning the best point evaluated",
-        )
-    return u, steps, ok, msg
+    return _finite_or_best(res, u, u0, steps, ok, msg)
+
+
+def _finite_or_best(res: DrJitResidual, u, u0, steps: int, ok: bool, msg: str):
+    """``(u, steps, ok, msg)``, or where the solver returned non-finite parameters the best
+    point evaluated (else the start), not converged."""
+    if np.all(np.isfinite(u)):
+        return u, steps, ok, msg
+    best = res.stats.best_x if res.stats.best_x is not None else np.asarray(u0)
+    return (
+        np.asarray(best),
+        steps,
+        False,
+        "solver returned non-finite parameters; returning the best point evaluated",
+    )

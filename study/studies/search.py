@@ -36,6 +36,8 @@ import numpy as np
 
 from shaders_port import _space
 
+from .tradeoff_jobs import SEED_SCHEDULE, original_schedule, schedules, screen_job
+
 # representatives of every source's technique screened in the first round
 SOURCE_STARTS = (
     {"reflection": "raycast"},  # 000 section 3
@@ -183,8 +185,6 @@ class Search:
     recommendation. Screen rows accumulate in ``out/screen.parquet`` (a re-run resumes)."""
 
     def __init__(self, exps, specs, client, out, log, fix=None, variants=None):
-        from .tradeoff_jobs import SEED_SCHEDULE
-
         from ..fit.model import constants_from_experiment
 
         self.exps, self.specs, self.client, self.out, self.log = exps, specs, client, out, log
@@ -195,7 +195,6 @@ class Search:
 
     def _run(self, jobs: list, label: str) -> list[dict]:
         from ..sweep import run_sweep
-        from .tradeoff_jobs import screen_job
 
         if not jobs:
             return []
@@ -227,17 +226,6 @@ class Search:
             "factor": exp["tradeoff.screen_factor"],
         }
 
-    def _seed_schedule(self, i: int, variant: str) -> dict:
-        """The original's schedule for ``variant`` (its only one if it has no raymarch)."""
-        from shaders_port._variants import get_variant
-
-        from .tradeoff_jobs import scaled_schedule
-
-        v = get_variant(variant)
-        if not {"steps_grazing", "steps_steep", "loop_cap"} <= set(v.schedule):
-            return {"kind": "fixed", "scale": None, "schedule": {}}
-        return {"kind": "scale", "scale": 1.0, "schedule": scaled_schedule(v, 1.0)}
-
     def ok(self, i: int) -> list[dict]:
         name = self.exps[i]["name"]
         return [
@@ -262,7 +250,7 @@ class Search:
             jobs = []
             for c in todo:
                 v = _space.name_of(c)
-                jobs.append(self._job(i, v, self._seed_schedule(i, v), self.start[i]))
+                jobs.append(self._job(i, v, original_schedule(v), self.start[i]))
             self._run(jobs, f"tradeoff: {exp['name']} screen round {k}")
             seen += todo
             self.rounds[exp["name"]] = k
@@ -275,8 +263,6 @@ class Search:
     def schedules(self, i: int, front: list[dict]) -> list[dict]:
         """Rung 2 on experiment ``i``: the step schedules of the front's raymarch shaders,
         warm-started from their screen fits; returns the surviving screen points."""
-        from .tradeoff_jobs import schedules
-
         exp = self.exps[i]
         jobs = []
         for r in front:
@@ -293,7 +279,7 @@ class Search:
         warm-started from that experiment's screen fit of it (or of its variant)."""
         keys = []
         for r in finalists:
-            key = (r["variant"], r["kind"], r["scale"], tuple(sorted(r["schedule"].items())))
+            key = (r["variant"], r["kind"], r["scale"], _key(r["schedule"]))
             if key not in keys:
                 keys.append(key)
         jobs = []
@@ -301,7 +287,7 @@ class Search:
             ok = self.ok(i)
             for variant, kind, scale, sched in keys:
                 same = [r for r in ok if r["variant"] == variant]
-                exact = [r for r in same if tuple(sorted(r["schedule"].items())) == sched]
+                exact = [r for r in same if _key(r["schedule"]) == sched]
                 warm = (exact or same or [{"fitted": {}}])[0]["fitted"]
                 jobs.append(
                     {
@@ -329,7 +315,7 @@ class Search:
         wanted = {}
         for c in _space.neighbours(base["choices"], self.fix):
             v = _space.name_of(c)
-            wanted[v] = self._schedule_like(i, v, base)
+            wanted[v] = _schedule_like(v, base)
         have = {(r["variant"], _key(r["schedule"])) for r in ok}
         jobs = []
         for v, sched in wanted.items():
@@ -346,17 +332,18 @@ class Search:
         unique = {r["variant"]: r for r in points}  # one point per neighbour
         return marginals(base, list(unique.values()))
 
-    def _schedule_like(self, i: int, variant: str, base: dict) -> dict:
-        """The schedule of ``variant`` closest to ``base``'s: the same steps where both raymarch
-        (its own reflection schedule kept), its only schedule where one of them does not."""
-        own = self._seed_schedule(i, variant)
-        if not base["schedule"] or not own["schedule"]:
-            return own
-        sched = {
-            **own["schedule"],
-            **{k: v for k, v in base["schedule"].items() if k in own["schedule"]},
-        }
-        return {"kind": base["kind"], "scale": base["scale"], "schedule": sched}
+
+def _schedule_like(variant: str, base: dict) -> dict:
+    """The schedule of ``variant`` closest to ``base``'s: the same steps where both raymarch
+    (its own reflection schedule kept), its only schedule where one of them does not."""
+    own = original_schedule(variant)
+    if not base["schedule"] or not own["schedule"]:
+        return own
+    sched = {
+        **own["schedule"],
+        **{k: v for k, v in base["schedule"].items() if k in own["schedule"]},
+    }
+    return {"kind": base["kind"], "scale": base["scale"], "schedule": sched}
 
 
 def _key(schedule: dict) -> tuple:

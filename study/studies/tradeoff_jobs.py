@@ -57,6 +57,20 @@ def scaled_schedule(variant, factor: float) -> dict:
     return s
 
 
+FIXED = {"kind": "fixed", "scale": None, "schedule": {}}  # a shader without a raymarch
+
+
+def original_schedule(variant_name: str) -> dict:
+    """The original shader's schedule for a variant, as :func:`schedules` lists it (``scale
+    1``; its only one, ``fixed``, if it has no raymarch)."""
+    from shaders_port._variants import get_variant
+
+    variant = get_variant(variant_name)
+    if not {"steps_grazing", "steps_steep", "loop_cap"} <= set(variant.schedule):
+        return dict(FIXED)
+    return {"kind": "scale", "scale": 1.0, "schedule": scaled_schedule(variant, 1.0)}
+
+
 def schedules(exp, variant_name: str) -> list[dict]:
     """The schedules of one variant: ``{"kind": grid|scale|converged, "scale": f|None,
     "schedule": {constant: value}}``, distinct, in a stable order (the seed's one is
@@ -64,8 +78,8 @@ def schedules(exp, variant_name: str) -> list[dict]:
     from shaders_port._variants import get_variant
 
     variant = get_variant(variant_name)
-    if not {"steps_grazing", "steps_steep", "loop_cap"} <= set(variant.schedule):
-        return [{"kind": "fixed", "scale": None, "schedule": {}}]
+    if original_schedule(variant_name)["kind"] == "fixed":
+        return [dict(FIXED)]
     out, seen = [], set()
 
     def add(kind, scale, sched):
