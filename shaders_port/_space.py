@@ -11,7 +11,8 @@ The axes and where each choice comes from (``SOURCE``):
 
 * ``refraction``: ``raycast`` through the top-down textures (source 000), ``planar_distorted``
   (001's planar refraction of the depth-buffer point, distorted by the normal map with
-  dispersion, 003), ``distorted`` (003 alone), ``planar`` (001 alone, flat water);
+  dispersion, 003), ``distorted`` (003 alone), ``planar`` (001 alone, flat water), ``none`` (no
+  refracted light: the water's own colour, as 002 and 004 alone);
 * ``reflection``: ``cube`` (000's sky cube map), ``raycast`` (000 section 3, cube map where
   nothing is hit), ``planar_distorted`` (004's mirrored camera distorted by the normal, 002),
   ``planar`` (004 alone), ``none``;
@@ -24,9 +25,12 @@ The axes and where each choice comes from (``SOURCE``):
 
 What the files realise: the raycast refraction with the cube-map, raycast or no reflection
 and every other axis free (``water_refraction.frag``, ``water_reflection.frag``); the
-screen-space refraction with the planar reflection and the other axes at the original's
-choices (``water_baseline.frag``). The raycast refraction with a planar reflection and the
-screen-space refraction with a cube map are not in the files yet, and are refused so.
+screen-space refractions and no refraction with the planar or cube-map reflection, the other
+axes at the original's choices (``water_baseline.frag``: nine pairs, :data:`_BASELINE`), so
+each source's technique alone is one shader (001: ``water_baseline_flat_cube``; 003:
+``water_baseline_noplanar_cube``; 004: ``water_baseline_flat_norefraction``; 002 on 004:
+``water_baseline_norefraction``). The raycast refraction with a planar reflection needs the
+mirrored camera's texture in the raycast files, which they do not read, and is refused so.
 """
 
 from __future__ import annotations
@@ -34,7 +38,7 @@ from __future__ import annotations
 import itertools
 
 AXES: dict[str, tuple] = {
-    "refraction": ("raycast", "planar_distorted", "distorted", "planar"),
+    "refraction": ("raycast", "planar_distorted", "distorted", "planar", "none"),
     "reflection": ("cube", "raycast", "planar_distorted", "planar", "none"),
     "attenuation": ("linear", "beer"),
     "specular": ("phong", "ggx", "none"),
@@ -51,11 +55,27 @@ SOURCE = {
     ("refraction", "planar_distorted"): "001 + 003",
     ("refraction", "distorted"): "003",
     ("refraction", "planar"): "001",
+    ("refraction", "none"): "002, 004 (no refraction)",
     ("reflection", "cube"): "000",
     ("reflection", "raycast"): "000 section 3",
     ("reflection", "planar_distorted"): "004 + 002",
     ("reflection", "planar"): "004",
     ("reflection", "none"): "000 (NOREFLECTION)",
+}
+
+# each source's technique alone (the original's choices elsewhere, the cube map where a source
+# has no reflection of its own) and the games' composition of 001-004: a row of every front
+ALONE = {
+    "000 (the original)": {},
+    "000 section 3 (raycast reflection)": {"reflection": "raycast"},
+    "001 (planar refraction, flat)": {"refraction": "planar", "reflection": "cube"},
+    "002 on 004 (distorted mirror)": {"refraction": "none", "reflection": "planar_distorted"},
+    "003 (distorted refraction)": {"refraction": "distorted", "reflection": "cube"},
+    "004 (mirror, flat)": {"refraction": "none", "reflection": "planar"},
+    "001-004 (the games' composition)": {
+        "refraction": "planar_distorted",
+        "reflection": "planar_distorted",
+    },
 }
 
 # the #define of each choice in the raycast files (the original's choices have none)
@@ -82,10 +102,22 @@ _TOKENS = (
     (("layers", 1), "1layer"),
     (("textures", "game"), "game_textures"),
 )
+# the screen-space file's (refraction, reflection) pairs: name and #defines. Planar refraction
+# (001) is flat water, so it goes with an undistorted reflection; a normal-mapped refraction
+# with the normal-mapped reflections
 _BASELINE = {
     ("planar_distorted", "planar_distorted"): ("water_baseline", ()),
     ("distorted", "planar_distorted"): ("water_baseline_noplanar", ("NO_PLANAR_REFRACTION",)),
     ("planar", "planar"): ("water_baseline_flat", ("FLAT_WATER",)),
+    ("planar_distorted", "cube"): ("water_baseline_cube", ("CUBE_REFLECTION",)),
+    ("distorted", "cube"): (
+        "water_baseline_noplanar_cube",
+        ("NO_PLANAR_REFRACTION", "CUBE_REFLECTION"),
+    ),
+    ("planar", "cube"): ("water_baseline_flat_cube", ("FLAT_WATER", "CUBE_REFLECTION")),
+    ("none", "planar_distorted"): ("water_baseline_norefraction", ("NO_REFRACTION",)),
+    ("none", "planar"): ("water_baseline_flat_norefraction", ("FLAT_WATER", "NO_REFRACTION")),
+    ("none", "cube"): ("water_baseline_norefraction_cube", ("NO_REFRACTION", "CUBE_REFLECTION")),
 }
 
 
@@ -114,8 +146,9 @@ def realise(choices: dict) -> tuple[str, tuple[str, ...], str]:
         return _realise_screen_space(c)
     if c["reflection"] in ("planar", "planar_distorted"):
         raise Unrealisable(
-            f"reflection = {c['reflection']} (source 004) is in the screen-space shader only: "
-            "it needs refraction = planar_distorted, distorted or planar"
+            f"reflection = {c['reflection']} (source 004) is in the screen-space shader only "
+            "(the raycast files do not read the mirrored camera's texture): it needs refraction "
+            "= planar_distorted, distorted, planar or none"
         )
     if c["reflection"] == "none" and c["specular"] != "none":
         raise Unrealisable(
@@ -146,8 +179,9 @@ def _realise_screen_space(c: dict) -> tuple[str, tuple[str, ...], str]:
         allowed = ", ".join(f"refraction = {r} with reflection = {f}" for r, f in _BASELINE)
         raise Unrealisable(
             f"refraction = {c['refraction']} with reflection = {c['reflection']}: the "
-            f"screen-space shader distorts refraction and reflection by the same normal map "
-            f"(or neither); it realises {allowed}"
+            "screen-space shader's planar refraction is flat water (undistorted reflections "
+            "only), its normal-mapped refractions go with the normal-mapped reflections, and "
+            f"it has no raycast reflection; it realises {allowed}"
         )
     return "water_baseline", _BASELINE[key][1], "float"
 

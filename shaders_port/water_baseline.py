@@ -6,7 +6,9 @@ scene texture, normal-map distortion with chromatic dispersion (003), planar ref
 the mirrored camera by projective texturing (004) offset by the projected flattened wave
 normal (002)), with seed 000's depth tint, Phong highlight and Fresnel LUT. Variants (GLSL
 defines, ``defines=`` here): ``FLAT_WATER`` (no normal map and no distortion: 001 + 004, the
-flat-water limit) and ``NO_PLANAR_REFRACTION`` (no 001).
+flat-water limit), ``NO_PLANAR_REFRACTION`` (no 001), ``NO_REFRACTION`` (no refracted light: the
+water colour, as 002 and 004 alone) and ``CUBE_REFLECTION`` (seed 000's sky cube map in place of
+004's mirrored camera).
 
 GLSL semantics as in ``water_refraction``: ``refract`` returns 0 on total internal reflection,
 ``normalize(0)`` is NaN (seed 002's ``normalize(eyeNormal.xy)`` is guarded: no offset where the
@@ -27,12 +29,14 @@ edges of the clamped bilinear lookups (kinks only), and the direction ``normaliz
 near a flat normal (its offset goes to 0 there, continuously, but its direction jumps).
 
 Diagnostics: ``fetches`` (texture reads per pixel: this shader's, plus :data:`PASS_FETCHES`
-for the mirrored camera's extra pass), ``iterations`` (0: no loop), ``nonfinite``.
+for the mirrored camera's extra pass, none with ``CUBE_REFLECTION``), ``iterations`` (0: no
+loop), ``nonfinite``.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import drjit as dr
 import numpy as np
@@ -50,16 +54,34 @@ from ._inputs import Constants, ShaderInputs, normal_matrix
 from ._raster import prepare
 from ._switches import decode
 from ._texture import CLAMP, LINEAR, NEAREST, Texture2D, backend_types, clamp, gl_pow, mix
-from .water_refraction import eye_and_light, refract
+from .water_refraction import cubemap_reflection, eye_and_light, reflect, refract
 
 __all__ = ["render", "render_with_jacobian", "ShaderOutput", "READS", "DEFINES", "PASS_FETCHES"]
 
 # the one table from the GLSL file's #define names to the port's options (see _switches)
-DEFINES = {"FLAT_WATER": {"flat": True}, "NO_PLANAR_REFRACTION": {"planar": False}}
+DEFINES = {
+    "FLAT_WATER": {"flat": True},
+    "NO_PLANAR_REFRACTION": {"planar": False},
+    "NO_REFRACTION": {"refraction": False},
+    "CUBE_REFLECTION": {"cube": True},
+}
 # texture reads per pixel attributed to the shader for the mirrored camera's pass (one surface
-# texture read per pixel of the reflection render); the scene colour/depth pass is the frame
-# the game renders anyway and is not counted
+# texture read per pixel of the reflection render; none with the cube map); the scene
+# colour/depth pass is the frame the game renders anyway and is not counted
 PASS_FETCHES = 1
+
+
+class Options(NamedTuple):
+    """The port's switches (see :data:`DEFINES`): no normal map (``flat``), 001's planar
+    refraction (``planar``), refracted light at all (``refraction``), the sky cube map in place of
+    the planar reflection (``cube``)."""
+
+    flat: bool = False
+    planar: bool = True
+    refraction: bool = True
+    cube: bool = False
+
+
 # the constants the GLSL declares; FLAT_WATER reads neither REFLECT_DISTORTION nor the 003 pair
 # (see reads_with)
 READS = (
@@ -94,13 +116,12 @@ def _mat(M) -> tuple:
     return tuple(tuple(float(v) for v in row) for row in np.asarray(M, np.float32))
 
 
-def screen_state(m, P, inputs: ShaderInputs) -> Screen:
-    """Upload the screen-space buffers and the per-lane window coordinate."""
-    missing = [
-        f
-        for f in ("scene_color", "scene_depth", "reflection_color", "reflection_view_proj")
-        if getattr(inputs, f) is None
-    ]
+def screen_state(m, P, inputs: ShaderInputs, o: Options = Options()) -> Screen:
+    """Upload the screen-space buffers the variant reads (the others are None) and the per-lane
+    window coordinate."""
+    need = ("scene_color", "scene_depth") if o.refraction else ()
+    need += () if o.cube else ("reflection_color", "reflection_view_proj")
+    missing = [f for f in need if getattr(inputs, f) is None]
     if missing:
         raise ValueError(
             f"water_baseline needs ShaderInputs.{', '.join(missing)}; build the inputs "
@@ -114,15 +135,19 @@ def screen_state(m, P, inputs: ShaderInputs) -> Screen:
     t = fy / np.float32(inputs.height)
     return Screen(
         bumpUV=(m.Float(s), m.Float(t)),
-        sceneColor=Texture2D.from_numpy(m, inputs.scene_color, LINEAR, CLAMP),
-        sceneDepth=Texture2D.from_numpy(m, inputs.scene_depth, NEAREST, CLAMP),
-        reflection_sampler=Texture2D.from_numpy(m, inputs.reflection_color, LINEAR, CLAMP),
+        sceneColor=_texture(m, inputs.scene_color, LINEAR, o.refraction),
+        sceneDepth=_texture(m, inputs.scene_depth, NEAREST, o.refraction),
+        reflection_sampler=_texture(m, inputs.reflection_color, LINEAR, not o.cube),
         mvp=_mat(inputs.view_proj),
         mvp_inverse=_mat(np.linalg.inv(inputs.view_proj.astype(np.float64))),
         normal_matrix=_mat(normal_matrix(inputs.view_proj)),
-        o2v_projection_reflection=_mat(inputs.reflection_view_proj),
+        o2v_projection_reflection=None if o.cube else _mat(inputs.reflection_view_proj),
         viewpos=tuple(float(v) for v in inputs.viewpos),
     )
+
+
+def _texture(m, image, filt, read: bool):
+    return Texture2D.from_numpy(m, image, filt, CLAMP) if read else None
 
 
 def mat4_vec4(m, M, x, y, z, w):
@@ -167,14 +192,14 @@ MIRROR_NORMAL = (0.0, 1.0, 0.0)
 # ---- the shader ---------------------------------------------------------------------------
 
 
-def _shade(m, P, S, C, flat: bool, planar: bool):
+def _shade(m, P, S, C, o: Options):
     # ---- [1] Eye and light vectors ----
     vEye, vLight = eye_and_light(m, P)
 
     # ---- [2] Normal map: average four layers ----
     fetches = 0
     mirrorNormal = m.Array3f(*MIRROR_NORMAL)
-    if not flat:
+    if not o.flat:
         vBumpTexA = m.Array3f(P.normalMap.sample(m, P.texcoord[0][0], P.texcoord[0][1]))
         vBumpTexB = m.Array3f(P.normalMap.sample(m, P.texcoord[1][0], P.texcoord[1][1]))
         vBumpTexC = m.Array3f(P.normalMap.sample(m, P.texcoord[2][0], P.texcoord[2][1]))
@@ -183,22 +208,41 @@ def _shade(m, P, S, C, flat: bool, planar: bool):
         fetches += 4
     else:
         vBumpTex = m.Array3f(mirrorNormal)
+    bad = nonfinite_any(vEye, vLight, vBumpTex)
 
-    # ---- [3] Planar refraction (seed 001) ----
-    groundPosition, refractedUV = planar_refraction(m, S, C, planar)
-    fetches += 1
+    if o.refraction:
+        # ---- [3] Planar refraction (seed 001) ----
+        groundPosition, refractedUV = planar_refraction(m, S, C, o.planar)
+        fetches += 1
 
-    # ---- [4] Normal-map distortion and chromatic dispersion (seed 003) ----
-    vRefraction = distorted_refraction(m, S, C, vBumpTex, refractedUV, flat)
-    fetches += 1 if flat else 3
+        # ---- [4] Normal-map distortion and chromatic dispersion (seed 003) ----
+        vRefraction = distorted_refraction(m, S, C, vBumpTex, refractedUV, o.flat)
+        fetches += 1 if o.flat else 3
 
-    # ---- [5] Depth tint ----
-    travelLength = dr.norm(groundPosition - P.varyingVecWorldPosition)
-    travelLength = clamp(travelLength / C.attenuation_distance, 0.0, 1.0)
-    vRefraction = mix(vRefraction, C.waterColor, travelLength)
+        # ---- [5] Depth tint ----
+        travelLength = dr.norm(groundPosition - P.varyingVecWorldPosition)
+        travelLength = clamp(travelLength / C.attenuation_distance, 0.0, 1.0)
+        vRefraction = mix(vRefraction, C.waterColor, travelLength)
+        bad |= nonfinite_any(groundPosition)
+        if o.planar:
+            bad |= ~(dr.isfinite(refractedUV[0]) & dr.isfinite(refractedUV[1]))
+    else:
+        # no refracted light: the water's own colour (the depth tint's limit)
+        vRefraction = m.Array4f(C.waterColor)
 
-    # ---- [6] Planar reflection (seed 004), distorted by the wave normal (seed 002) ----
-    vReflection, vTextureReflection = planar_reflection(m, P, S, C, vBumpTex, mirrorNormal, flat)
+    if o.cube:
+        # ---- [6] Sky cube-map reflection (seed 000) ----
+        R = dr.normalize(reflect(m, -vEye, vBumpTex))
+        R.y = dr.maximum(R.y, 0.001)
+        vReflection = cubemap_reflection(m, P, R) * C.reflectColor
+        bad |= nonfinite_any(R)
+    else:
+        # ---- [6] Planar reflection (seed 004), distorted by the wave normal (seed 002) ----
+        vReflection, vTextureReflection = planar_reflection(
+            m, P, S, C, vBumpTex, mirrorNormal, o.flat
+        )
+        if not o.flat:
+            bad |= ~(dr.isfinite(vTextureReflection[0]) & dr.isfinite(vTextureReflection[1]))
     fetches += 1
 
     # ---- [7] Specular highlight ----
@@ -215,12 +259,8 @@ def _shade(m, P, S, C, flat: bool, planar: bool):
     fetches += 1
     gl_FragColor = vReflection * FresnelCoeffs[1] + vRefraction * FresnelCoeffs[0]
 
-    bad = nonfinite_any(vEye, vLight, vBumpTex, groundPosition)
-    if not flat:
-        bad |= ~(dr.isfinite(vTextureReflection[0]) & dr.isfinite(vTextureReflection[1]))
-    if planar:
-        bad |= ~(dr.isfinite(refractedUV[0]) & dr.isfinite(refractedUV[1]))
-    assert fetches + PASS_FETCHES == fetch_count(flat)  # the count below matches the code above
+    # the count below matches the code above
+    assert fetches + (0 if o.cube else PASS_FETCHES) == fetch_count(o)
     diagnostics = {"nonfinite": dr.select(bad, 1.0, 0.0)}
     return gl_FragColor, diagnostics
 
@@ -316,20 +356,23 @@ def planar_reflection(m, P, S, C, vBumpTex, mirrorNormal, flat: bool):
     return vReflection, vTextureReflection
 
 
-def fetch_count(flat: bool) -> int:
+def fetch_count(o: Options = Options()) -> int:
     """Texture reads per pixel of the variant: [2] 4 normal-map layers (none if flat), [3] 1 depth,
-    [4] 3 scene reads (1 if flat), [6] 1 reflection, [8] 1 Fresnel LUT, plus ``PASS_FETCHES``."""
-    return (0 if flat else 4) + 1 + (1 if flat else 3) + 1 + 1 + PASS_FETCHES
+    [4] 3 scene reads (1 if flat; [3] and [4] none without refraction), [6] 1 reflection, [8] 1
+    Fresnel LUT, plus ``PASS_FETCHES`` for the mirrored camera (none with the cube map)."""
+    refraction = (1 + (1 if o.flat else 3)) if o.refraction else 0
+    passes = 0 if o.cube else PASS_FETCHES
+    return (0 if o.flat else 4) + refraction + 1 + 1 + passes
 
 
-def with_static_diagnostics(m, diag: dict, flat: bool) -> dict:
+def with_static_diagnostics(m, diag: dict, o: Options) -> dict:
     """``diag`` plus ``fetches`` and ``iterations`` (0): the same on every lane, so they are made
     here, outside the recorded kernels (a width baked into a frozen recording would be replayed
     at the wrong size)."""
     n = dr.width(diag["nonfinite"])
     return {
         "iterations": dr.zeros(m.Float, n),
-        "fetches": dr.full(m.Float, float(fetch_count(flat)), n),
+        "fetches": dr.full(m.Float, float(fetch_count(o)), n),
         **diag,
     }
 
@@ -345,18 +388,16 @@ def reads_with(defines=()) -> tuple[str, ...]:
     return tuple(constants_read(src))
 
 
-def _options(defines) -> tuple[bool, bool]:
-    """(flat, planar) of the port compiled with ``defines`` (``FLAT_WATER``: flat; no
-    ``NO_PLANAR_REFRACTION``: planar)."""
-    opts = {"flat": False, "planar": True, **decode("water_baseline", DEFINES, defines)}
-    return opts["flat"], opts["planar"]
+def _options(defines) -> Options:
+    """The port's :class:`Options` for ``defines`` (see :data:`DEFINES`)."""
+    return Options(**decode("water_baseline", DEFINES, defines))
 
 
-def _frozen_shade(m, P, S, C, flat, planar):
+def _frozen_shade(m, P, S, C, o: Options):
     # one frozen function per Python-level configuration (see _frame.frozen)
     return _frame.call_frozen(
-        ("water_baseline", flat, planar) + _frame.python_config(C),
-        lambda m, P, S, C: _shade(m, P, S, C, flat, planar),
+        ("water_baseline", *o) + _frame.python_config(C),
+        lambda m, P, S, C: _shade(m, P, S, C, o),
         m,
         P,
         S,
@@ -385,22 +426,22 @@ def render(
             "water_baseline has no failure diagnostics (they classify raycast failures); "
             "study failures applies to the raycast variants only"
         )
-    flat, planar = _options(defines)
+    o = _options(defines)
     m = backend_types(backend)
     P = prepare(inputs, m)
-    S = screen_state(m, P, inputs)
+    S = screen_state(m, P, inputs, o)
     C = resolve_constants(m, constants if constants is not None else Constants(), loop_ad)
     if _frame.USE_FROZEN and not C.differentiable:
-        color, diag = _frozen_shade(m, P.shading_state(), S, C, flat, planar)
+        color, diag = _frozen_shade(m, P.shading_state(), S, C, o)
     else:
-        color, diag = _shade(m, P, S, C, flat, planar)
-    return finish_output(m, P, color, with_static_diagnostics(m, diag, flat), "water_baseline")
+        color, diag = _shade(m, P, S, C, o)
+    return finish_output(m, P, color, with_static_diagnostics(m, diag, o), "water_baseline")
 
 
-def _frozen_tangents(m, P, S, C, params, flat, planar):
+def _frozen_tangents(m, P, S, C, params, o: Options):
     return _frame.call_frozen(
-        ("water_baseline.tangents", flat, planar) + _frame.python_config(C),
-        lambda m, P, S, C, params: tangents(m, *_shade(m, P, S, C, flat, planar), params),
+        ("water_baseline.tangents", *o) + _frame.python_config(C),
+        lambda m, P, S, C, params: tangents(m, *_shade(m, P, S, C, o), params),
         m,
         P,
         S,
@@ -421,7 +462,7 @@ def render_with_jacobian(
     """Render and return ``(ShaderOutput, J)``, ``J`` float32 (H, W, 3, len(names)): the
     forward-mode derivative of the linear-RGB colour with respect to each named scalar
     constant (``"water_color[i]"`` for colour components); zero off the water."""
-    flat, planar = _options(defines)
+    o = _options(defines)
     reads = reads_with(defines)
     unread = [n for n in names if n.split("[")[0] not in reads]
     if unread:
@@ -431,12 +472,12 @@ def render_with_jacobian(
         )
 
     def shade_tangents(m, P, C, params, frozen):
-        S = screen_state(m, prepare(inputs, m), inputs)
+        S = screen_state(m, prepare(inputs, m), inputs, o)
         if frozen:
-            color, diag, grads = _frozen_tangents(m, P, S, C, params, flat, planar)
+            color, diag, grads = _frozen_tangents(m, P, S, C, params, o)
         else:
-            color, diag, grads = tangents(m, *_shade(m, P, S, C, flat, planar), params)
-        return color, with_static_diagnostics(m, diag, flat), grads
+            color, diag, grads = tangents(m, *_shade(m, P, S, C, o), params)
+        return color, with_static_diagnostics(m, diag, o), grads
 
     return jacobian_passes(
         shade_tangents,

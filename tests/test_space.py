@@ -31,9 +31,23 @@ def test_every_shipped_variant_is_a_configuration_of_the_space():
         assert (shader, set(defines), textures) == (v.shader, set(v.defines), v.textures), name
 
 
+def test_each_source_technique_alone_is_a_shader_of_the_space():
+    alone = {
+        "water_baseline_flat_cube": ("planar", "cube"),  # 001's refraction, 000's sky
+        "water_baseline_noplanar_cube": ("distorted", "cube"),  # 003's refraction
+        "water_baseline_flat_norefraction": ("none", "planar"),  # 004's mirror
+        "water_baseline_norefraction": ("none", "planar_distorted"),  # 002 on 004
+    }
+    for name, (refraction, reflection) in alone.items():
+        c = _space.choices_of(name)
+        assert (c["refraction"], c["reflection"]) == (refraction, reflection)
+        assert get_variant(name).shader == "water_baseline"
+    assert "FLAT_WATER" in _space.realise({"refraction": "planar", "reflection": "cube"})[1]
+
+
 def test_pinned_axes_restrict_the_space():
     pinned = _space.configurations({"textures": "float", "layers": 4, "refine": "linear"})
-    assert len(pinned) == 12 + 12 + 4 + 3  # cube, raycast, none (specular none), baselines
+    assert len(pinned) == 12 + 12 + 4 + 9  # cube, raycast, none (specular none), screen space
     assert all(c["layers"] == 4 and c["textures"] == "float" for c in pinned)
     with pytest.raises(ValueError, match="unknown axis"):
         _space.configurations({"fog": "on"})
@@ -41,7 +55,7 @@ def test_pinned_axes_restrict_the_space():
 
 def test_every_configuration_compiles_to_names_its_file_and_port_know():
     configs = _space.configurations()
-    assert len(configs) == 507  # 216 cube-map + 216 raycast + 72 refraction-only + 3 baselines
+    assert len(configs) == 513  # 216 cube-map + 216 raycast + 72 refraction-only + 9 screen space
     ports = _ports()
     names = set()
     for c in configs:
@@ -60,8 +74,10 @@ def test_every_configuration_compiles_to_names_its_file_and_port_know():
         ({"reflection": "planar"}, "screen-space shader only"),
         ({"reflection": "none"}, "choose specular = none"),
         ({"refraction": "planar_distorted", "attenuation": "beer"}, "not attenuation = beer"),
-        ({"refraction": "planar", "reflection": "planar_distorted"}, "same normal map"),
-        ({"refraction": "distorted", "reflection": "cube"}, "same normal map"),
+        ({"refraction": "planar", "reflection": "planar_distorted"}, "is flat water"),
+        ({"refraction": "distorted", "reflection": "planar"}, "normal-mapped reflections"),
+        ({"refraction": "none", "reflection": "raycast"}, "no raycast reflection"),
+        ({"refraction": "raycast", "reflection": "planar"}, "do not read the mirrored"),
     ],
 )
 def test_unrealisable_configurations_are_refused_with_the_reason(choices, reason):
@@ -151,7 +167,10 @@ def test_the_baseline_configurations_match_opengl():
 
     inputs = synthetic_baseline_inputs(64, 48)
     planar = _space.configurations({"refraction": "planar"})
-    assert [_space.name_of(c) for c in planar] == ["water_baseline_flat"]
+    assert [_space.name_of(c) for c in planar] == [
+        "water_baseline_flat_cube",
+        "water_baseline_flat",
+    ]
     for c in _space.configurations({"attenuation": "linear", "specular": "phong", "walls": "off"}):
         if c["refraction"] == "raycast":
             continue

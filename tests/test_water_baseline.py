@@ -145,6 +145,29 @@ def test_flat_variant_refraction_index_derivative(small):
     assert np.mean(err <= 2 * FD_NOISE / h + FD_RTOL * scale) >= 0.9
 
 
+@pytest.mark.parametrize("name", ["reflect_color[1]", "water_color[2]", "specular_strength"])
+def test_cube_map_without_refraction_derivatives(small, name):
+    defines = ("NO_REFRACTION", "CUBE_REFLECTION")
+    out, J = water_baseline.render_with_jacobian(small, FD_CONSTANTS, [name], defines=defines)
+    cp, h = _perturbed(FD_CONSTANTS, name, FD_EPS[name])
+    cm, _ = _perturbed(FD_CONSTANTS, name, -FD_EPS[name])
+    r = lambda c: water_baseline.render(small, c, defines=defines).numpy()["color"]  # noqa: E731
+    fd = (r(cp) - r(cm)) / (2 * h)
+    water = out.numpy()["mask"] > 0
+    err = np.abs(J[..., 0] - fd).max(-1)[water]
+    scale = np.abs(fd).max(-1)[water]
+    assert scale.max() > 1e-2
+    # linear in these constants: no kink in the stencil
+    assert (err <= 2 * FD_NOISE / h + FD_RTOL * scale).all(), err.max()
+
+
+def test_no_refraction_reads_no_refraction_constant():
+    reads = set(get_variant("water_baseline_norefraction_cube").reads())
+    assert not reads & {"refraction_index", "refraction_strength", "chromatic_dispersion"}
+    assert not reads & {"attenuation_distance", "reflect_distortion"}
+    assert {"water_color", "reflect_color", "specular_strength"} <= reads
+
+
 def test_constants_not_read_are_rejected_by_the_jacobian(small):
     with pytest.raises(ValueError, match=r"does not read \['bumptex_mult'\]"):
         water_baseline.render_with_jacobian(
@@ -161,6 +184,14 @@ def test_diagnostics_count_fetches_and_no_iterations(small):
         "water_baseline_flat": 1 + 1 + 1 + 1,
         "water_baseline_noplanar": 4 + 1 + 3 + 1 + 1,
     }
+    # the cube map needs no mirrored-camera pass; without refraction no depth or scene reads
+    cube = {
+        "water_baseline_cube": 4 + 1 + 3 + 1 + 1,
+        "water_baseline_flat_cube": 1 + 1 + 1 + 1,
+        "water_baseline_norefraction_cube": 4 + 1 + 1,
+    }
+    expected.update({k: n - water_baseline.PASS_FETCHES for k, n in cube.items()})
+    expected["water_baseline_flat_norefraction"] = 1 + 1
     for name, n in expected.items():
         out = get_variant(name).render(small).numpy()
         water = out["mask"] > 0

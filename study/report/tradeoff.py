@@ -201,6 +201,28 @@ def _marginal_lines(rows: list) -> list[str]:
     return lines
 
 
+def _alone_lines(rows: list, front: list) -> list[str]:
+    """The table of each source's technique alone (full points at their own schedules)."""
+    if not rows:
+        return []
+    on_front = {r["label"] for r in front}
+    lines = [
+        "",
+        "Each source's technique alone, at its own schedule, constants refitted (the cube map "
+        "where a source has no reflection of its own):",
+        "",
+        "| source | shader | fetches (mean) | GL ms 1080p (norm.) | FLIP | on the front |",
+        "|---|---|---|---|---|---|",
+    ]
+    for r in rows:
+        lines.append(
+            f"| {r['source']} | `{r['variant']}` | {fmt(r['fetches_mean'], 3)} | "
+            f"{fmt(r.get('gl_norm_ms_1080p'), 3)} | {fmt(r['flip'])} | "
+            f"{'yes' if r['label'] in on_front else 'no'} |"
+        )
+    return lines
+
+
 def _scene_lines(scene: str, f: dict, summary: dict) -> list[str]:
     """One scene's section: its front, recommendation, parsimony, needs and halvings."""
     lines = []
@@ -246,6 +268,7 @@ def _scene_lines(scene: str, f: dict, summary: dict) -> list[str]:
             f"{fmt(bw['flip'] / own['flip'], 3)}x its error within its fetch budget."
         )
     lines += _marginal_lines(f.get("marginals", []))
+    lines += _alone_lines(f.get("sources_alone", []), f["front"])
     if summary.get("images", {}).get(scene):
         lines += ["", f"![{scene}: reference and shaders]({summary['images'][scene]})"]
     pars = {v: d for v, d in f.get("parsimony", {}).items() if d.get("bic") is not None}

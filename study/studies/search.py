@@ -38,13 +38,13 @@ from shaders_port import _space
 
 from .tradeoff_jobs import SEED_SCHEDULE, original_schedule, schedules, screen_job
 
-# representatives of every source's technique screened in the first round
+# representatives of every source's technique screened in the first round: each alone
+# (``_space.ALONE``), 000's refraction alone, 002-004 and 001 + 004 (flat water)
 SOURCE_STARTS = (
-    {"reflection": "raycast"},  # 000 section 3
-    {"reflection": "none", "specular": "none"},  # 000's refraction alone
-    {"refraction": "planar_distorted", "reflection": "planar_distorted"},  # 001-004
-    {"refraction": "distorted", "reflection": "planar_distorted"},  # 002-004
-    {"refraction": "planar", "reflection": "planar"},  # 001 + 004
+    *_space.ALONE.values(),
+    {"reflection": "none", "specular": "none"},
+    {"refraction": "distorted", "reflection": "planar_distorted"},
+    {"refraction": "planar", "reflection": "planar"},
 )
 
 
@@ -259,6 +259,24 @@ class Search:
                 break
             todo = next_round([r["choices"] for r in front], seen, self.fix)
         return closest_to_front(survivors(self.ok(i), z), exp["tradeoff.max_scheduled"])
+
+    def alone(self, i: int) -> list[dict]:
+        """The screen points of each source's technique alone (``_space.ALONE``) at its
+        original schedule on experiment ``i``: measured in full so every front has their rows."""
+        names = set()
+        for c in _space.ALONE.values():
+            if any(self.fix.get(a, v) != v for a, v in c.items()):
+                continue  # an axis the user pinned
+            try:
+                names.add(_space.name_of({**self.fix, **c}))
+            except _space.Unrealisable:
+                continue
+        return [
+            r
+            for r in self.ok(i)
+            if r["variant"] in names
+            and _key(r["schedule"]) == _key(original_schedule(r["variant"])["schedule"])
+        ]
 
     def schedules(self, i: int, front: list[dict]) -> list[dict]:
         """Rung 2 on experiment ``i``: the step schedules of the front's raymarch shaders,

@@ -35,7 +35,7 @@ from __future__ import annotations
 import time
 from pathlib import Path
 
-from .tradeoff_analysis import COSTS, analyse, config_label, constants_of, is_seed, point_record
+from .tradeoff_analysis import COSTS, analyse, config_label, constants_of, point_record
 from .tradeoff_jobs import SEED_SCHEDULE, anchor_job, point_job, schedules
 from .._progress import log as _log
 
@@ -225,10 +225,9 @@ def _adaptive(exps, specs, client, out, log, fix: dict, chosen):
     for i in range(len(exps)):
         front = searcher.walk(i)
         finalists += searcher.schedules(i, front)
-        # the original shader at its own schedule: what every finding compares with
-        finalists += [
-            r for r in searcher.ok(i) if r["variant"] == "water_refraction" and is_seed(r)
-        ]
+        # the original shader and each source's technique alone at its own schedule: what
+        # every finding compares with
+        finalists += searcher.alone(i)
     jobs = searcher.full_jobs(finalists)
     log(
         f"tradeoff: {len(searcher.screen)} screen points, {len(jobs)} measured in full "

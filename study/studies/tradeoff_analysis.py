@@ -144,6 +144,23 @@ def joint_points(ok: list, names: list) -> list:
     return out
 
 
+def sources_alone(pts: list, brief) -> list[dict]:
+    """Each source's technique alone (``shaders_port._space.ALONE``) among ``pts`` at its
+    original schedule: ``brief`` of the point plus ``source`` (its label there)."""
+    from shaders_port import _space
+
+    out = []
+    for source, choices in _space.ALONE.items():
+        try:
+            name = _space.name_of(choices)
+        except _space.Unrealisable:
+            continue
+        at = [r for r in pts if r["variant"] == name and (is_seed(r) or r["kind"] == "fixed")]
+        if at:
+            out.append({"source": source, **brief(at[0])})
+    return out
+
+
 def scene_findings(pts: list, all_pts: list, tolerance: float, budget=None) -> dict:
     """Front, recommendation and what-the-scene-needs findings for one scene's points."""
 
@@ -228,6 +245,7 @@ def scene_findings(pts: list, all_pts: list, tolerance: float, budget=None) -> d
     best_within = min(within, key=lambda r: r[ERROR], default=None)
     return {
         "front": [brief(r) for r in pareto_front(pts, COST, ERROR)],
+        "sources_alone": sources_alone(pts, brief),
         "fronts_by_cost": {c: [r["label"] for r in pareto_front(pts, c, ERROR)] for c in COSTS},
         "recommended": brief(rec),
         "seed": brief(seed[0]) if seed else None,

@@ -15,7 +15,9 @@ out vec4 fragColor;
 //   002 that reflection lookup offset by the projected, flattened wave normal;
 // plus the depth tint, Phong highlight and Fresnel LUT of seed 000 (the seeds have none).
 // Defines: FLAT_WATER (no normal map, no distortion: 001 + 004, the flat-water limit),
-//          NO_PLANAR_REFRACTION (no 001: the scene texture is read at the fragment itself).
+//          NO_PLANAR_REFRACTION (no 001: the scene texture is read at the fragment itself),
+//          NO_REFRACTION (no refracted light: the water is its own colour, as 002 and 004 alone),
+//          CUBE_REFLECTION (seed 000's sky cube map in place of 004's mirrored camera).
 // Fixes against the documented text are listed in shaders_port/README.md.
 
 // ---- BEGIN TUNABLE CONSTANTS (written by `study export`) ----
@@ -40,8 +42,13 @@ uniform vec4 reflectColor = vec4(1.0, 1.0, 1.0, 1.0);
 //the scene without the water, seen by this camera: color and window-space depth
 uniform sampler2D sceneColor;
 uniform sampler2D sceneDepth;
+#ifdef CUBE_REFLECTION
+//Reflection Texture, Cubemap containing skybox (seed 000)
+uniform samplerCube reflectionTexture;
+#else
 //the scene above the water seen by the mirrored camera (seed 004)
 uniform sampler2D reflection_sampler;
+#endif
 //Normal pertubation map, defined in water-plane
 uniform sampler2D normalMap;
 //Fresnel Lookup Texture, lookup from cos(theta) -> Transm. Coeff, Refr. Coeff
@@ -69,7 +76,7 @@ in vec3 varyingVecEye;
 //vector from varyingVecWorldPosition to worldspace Light Position
 in vec3 varyingVecLight;
 
-#ifndef NO_PLANAR_REFRACTION
+#if !defined(NO_PLANAR_REFRACTION) && !defined(NO_REFRACTION)
 //seed 001: the perceived position of a world position seen through the plane `surface`
 vec3 Refract(vec3 position, vec4 surface, float refractionIndex)
 {
@@ -125,6 +132,7 @@ void main (void)
     vec3 vBumpTex = mirrorNormal;
 #endif
 
+#ifndef NO_REFRACTION
     // ---- [3] Planar refraction (seed 001) ----
     //window coordinate of this fragment in [0,1]^2 (seed 003's bumpUV)
     vec2 bumpUV = vec2(gl_FragCoord.x / screenSize.x, gl_FragCoord.y / screenSize.y);
@@ -161,7 +169,20 @@ void main (void)
     float travelLength = length(groundPosition-varyingVecWorldPosition);
     travelLength = clamp( travelLength/ATTENUATION_DISTANCE, 0.0, 1.0);
     vRefraction=mix(vRefraction, waterColor, travelLength);
+#else
+    //no refracted light: the water's own colour (the depth tint's limit)
+    vec4 vRefraction = waterColor;
+#endif
 
+#ifdef CUBE_REFLECTION
+    // ---- [6] Sky cube-map reflection (seed 000) ----
+    //Calculate reflection Vector
+    vec3 R = normalize(reflect(-vEye, vBumpTex));
+    //clamp y to 0.0001, else reflection vector would go into water
+    R.y = max(R.y,0.001);
+    //Fetch from cubemap (its y flipped as in seed 000), modulate with reflectColor
+    vec4 vReflection = texture(reflectionTexture, normalize(R)*vec3(1,-1,1) )*reflectColor;
+#else
     // ---- [6] Planar reflection (seed 004), distorted by the wave normal (seed 002) ----
     vec4 vClipReflection = o2v_projection_reflection * vec4(varyingVecWorldPosition.x, 0.0, varyingVecWorldPosition.z, 1.0);
     vec2 vDeviceReflection = vClipReflection.st / vClipReflection.q;
@@ -180,6 +201,7 @@ void main (void)
     // Framebuffer reflection can have alpha > 1
     reflectionTextureColor.a = 1.0;
     vec4 vReflection = reflectionTextureColor*reflectColor;
+#endif
 
     // ---- [7] Specular highlight ----
     //Calculate specular Reflection vector
