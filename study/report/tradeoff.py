@@ -7,6 +7,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from shaders_port import _space
+
 from .calibration import fmt, pyplot
 
 COSTS = {
@@ -194,8 +196,11 @@ def _marginal_lines(rows: list) -> list[str]:
         "|---|---|---|---|---|",
     ]
     for r in rows:
+        choice = r["choice"]
+        if r["axis"] == "refraction":  # a refraction comes with the reflections its file has
+            choice = f"{choice}, reflection {_space.choices_of(r['variant'])['reflection']}"
         lines.append(
-            f"| {r['axis']} | {r['choice']} | `{r['variant']}` | {r['d_flip']:+.4f} +- "
+            f"| {r['axis']} | {choice} | `{r['variant']}` | {r['d_flip']:+.4f} +- "
             f"{fmt(r['se'], 2)} | {r['d_fetches']:+.1f} |"
         )
     return lines
