@@ -29,8 +29,9 @@ screen-space refractions and no refraction with the planar or cube-map reflectio
 axes at the original's choices (``water_baseline.frag``: nine pairs, :data:`_BASELINE`), so
 each source's technique alone is one shader (001: ``water_baseline_flat_cube``; 003:
 ``water_baseline_noplanar_cube``; 004: ``water_baseline_flat_norefraction``; 002 on 004:
-``water_baseline_norefraction``). The raycast refraction with a planar reflection needs the
-mirrored camera's texture in the raycast files, which they do not read, and is refused so.
+``water_baseline_norefraction``). The raycast refraction takes 004's mirror distorted by
+002 too (``water_refraction_mirror``, ``PLANAR_REFLECTION``); 004's undistorted mirror is that
+shader at ``reflect_distortion = 0``, so ``planar`` with the raycast is refused with that.
 """
 
 from __future__ import annotations
@@ -88,10 +89,12 @@ _RAYCAST_DEFINES = {
     ("refine", "secant"): "SECANT_REFINE",
     ("layers", 2): "TWO_NORMAL_LAYERS",
     ("layers", 1): "ONE_NORMAL_LAYER",
+    ("reflection", "planar_distorted"): "PLANAR_REFLECTION",
 }
 # name tokens, in name order (a name is the shader file then the tokens of its choices)
 _TOKENS = (
     (("reflection", "none"), "noreflection"),
+    (("reflection", "planar_distorted"), "mirror"),
     (("attenuation", "beer"), "beer"),
     (("specular", "ggx"), "ggx"),
     (("specular", "none"), "nospecular"),
@@ -144,11 +147,11 @@ def realise(choices: dict) -> tuple[str, tuple[str, ...], str]:
     c = checked(choices)
     if c["refraction"] != "raycast":
         return _realise_screen_space(c)
-    if c["reflection"] in ("planar", "planar_distorted"):
+    if c["reflection"] == "planar":
         raise Unrealisable(
-            f"reflection = {c['reflection']} (source 004) is in the screen-space shader only "
-            "(the raycast files do not read the mirrored camera's texture): it needs refraction "
-            "= planar_distorted, distorted, planar or none"
+            "reflection = planar (source 004 alone, a flat mirror) is in the screen-space "
+            "shader only: with refraction = raycast choose reflection = planar_distorted "
+            "(its reflect_distortion = 0 is the flat mirror)"
         )
     if c["reflection"] == "none" and c["specular"] != "none":
         raise Unrealisable(

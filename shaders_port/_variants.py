@@ -204,6 +204,7 @@ def from_space(choices: dict, description: str | None = None) -> Variant:
         replaces.update(_GGX)
     elif c["specular"] == "none" and c["reflection"] != "none":
         replaces.update(_NOSPEC)
+    mirror = c["reflection"] == "planar_distorted"  # 004's mirrored camera, 002's offset
     return Variant(
         name,
         shader,
@@ -212,6 +213,8 @@ def from_space(choices: dict, description: str | None = None) -> Variant:
         description=description or _space.describe(c),
         replaces=replaces,
         textures=textures,
+        inputs=_BASELINE_INPUTS if mirror else (),
+        fit_parameters=("reflect_distortion",) if mirror else (),
     )
 
 

@@ -51,6 +51,8 @@ from ._frame import (
     tangents,
 )
 from ._inputs import Constants, ShaderInputs, normal_matrix
+from ._planar import MIRROR_NORMAL, mat4_vec4, planar_reflection
+from ._planar import mat_tuple as _mat
 from ._raster import prepare
 from ._switches import decode
 from ._texture import CLAMP, LINEAR, NEAREST, Texture2D, backend_types, clamp, gl_pow, mix
@@ -112,10 +114,6 @@ class Screen:
     viewpos: tuple
 
 
-def _mat(M) -> tuple:
-    return tuple(tuple(float(v) for v in row) for row in np.asarray(M, np.float32))
-
-
 def screen_state(m, P, inputs: ShaderInputs, o: Options = Options()) -> Screen:
     """Upload the screen-space buffers the variant reads (the others are None) and the per-lane
     window coordinate."""
@@ -150,11 +148,6 @@ def _texture(m, image, filt, read: bool):
     return Texture2D.from_numpy(m, image, filt, CLAMP) if read else None
 
 
-def mat4_vec4(m, M, x, y, z, w):
-    """``M * vec4(x, y, z, w)`` -> Array4f (M: nested float tuples, row-major)."""
-    return m.Array4f(*(M[i][0] * x + M[i][1] * y + M[i][2] * z + M[i][3] * w for i in range(4)))
-
-
 # ---- seed 001 ----------------------------------------------------------------------------
 
 
@@ -186,7 +179,6 @@ def Refract(m, S, position, surface, refractionIndex):
 
 
 WATER_PLANE = (0.0, 1.0, 0.0, 0.0)
-MIRROR_NORMAL = (0.0, 1.0, 0.0)
 
 
 # ---- the shader ---------------------------------------------------------------------------
@@ -313,47 +305,6 @@ def distorted_refraction(m, S, C, vBumpTex, refractedUV, flat: bool):
         refractionColor = m.Array3f(S.sceneColor.sample(m, refractedUV[0], refractedUV[1]))
     vRefraction = m.Array4f(refractionColor.x, refractionColor.y, refractionColor.z, 1.0)
     return vRefraction
-
-
-def planar_reflection(m, P, S, C, vBumpTex, mirrorNormal, flat: bool):
-    """Block [6] (sources 004 and 002): the mirrored camera's texture at the surface point's
-    projective coordinate, offset by the projected flattened wave normal. Returns
-    ``(vReflection`` Array4f linear RGB times ``reflectColor``, ``vTextureReflection`` pair of
-    Float texture coordinates); 1 fetch."""
-    wp = P.varyingVecWorldPosition
-    vClipReflection = mat4_vec4(m, S.o2v_projection_reflection, wp.x, 0.0, wp.z, 1.0)
-    vDeviceReflection = (
-        vClipReflection.x / vClipReflection.w,
-        vClipReflection.y / vClipReflection.w,
-    )
-    vTextureReflection = (0.5 + 0.5 * vDeviceReflection[0], 0.5 + 0.5 * vDeviceReflection[1])
-    if not flat:
-        flatNormal = vBumpTex - dr.dot(vBumpTex, mirrorNormal) * mirrorNormal
-        N = S.normal_matrix
-        eyeNormal = m.Array3f(
-            *(
-                N[i][0] * flatNormal.x + N[i][1] * flatNormal.y + N[i][2] * flatNormal.z
-                for i in range(3)
-            )
-        )
-        exy = m.Array2f(eyeNormal.x, eyeNormal.y)
-        # a flat normal must not deform the image: no offset where eyeNormal.xy is 0
-        reflectOffset = dr.select(
-            dr.norm(exy) > 0.0,
-            dr.normalize(exy) * dr.norm(flatNormal) * C.reflect_distortion,
-            m.Array2f(0.0, 0.0),
-        )
-        # 004's mirrored camera is flipped in y (t = 1 - gl_FragCoord.y / height): 002's
-        # offset is in window coordinates, so its vertical part enters with the opposite sign
-        vTextureReflection = (
-            vTextureReflection[0] + reflectOffset.x,
-            vTextureReflection[1] - reflectOffset.y,
-        )
-    reflectionTextureColor = S.reflection_sampler.sample(
-        m, vTextureReflection[0], vTextureReflection[1]
-    )
-    vReflection = m.Array4f(*reflectionTextureColor, 1.0) * C.reflectColor
-    return vReflection, vTextureReflection
 
 
 def fetch_count(o: Options = Options()) -> int:

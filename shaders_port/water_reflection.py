@@ -52,7 +52,9 @@ from .water_refraction import (
 # the one table from the GLSL file's #define names to the port's options (see _switches): those
 # of water_refraction's blocks [2]-[6] and [8]; NOREFLECTION (block [7] skipped) is the
 # water_refraction_noreflection variant of the other shader, not a switch of this port
-DEFINES = {k: v for k, v in _REFRACTION_DEFINES.items() if k != "NOREFLECTION"}
+DEFINES = {
+    k: v for k, v in _REFRACTION_DEFINES.items() if k not in ("NOREFLECTION", "PLANAR_REFLECTION")
+}
 
 __all__ = ["render", "render_with_jacobian", "ShaderOutput"]
 

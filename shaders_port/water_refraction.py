@@ -64,6 +64,7 @@ from ._frame import (
     tangents,
 )
 from ._inputs import Constants, ShaderInputs
+from ._planar import MIRROR_NORMAL, mirror_state, planar_reflection
 from ._switches import decode
 from ._raster import prepare
 from ._texture import backend_types, clamp, gl_pow, mix, texmat_xy
@@ -86,6 +87,10 @@ class Options(NamedTuple):
     wall_faces: False (original) or True (``WALL_FACES``: a crossing into geometry that rises
         above the water plane, e.g. a pool wall, hit that geometry's vertical face under the
         water, which the top-down textures do not hold; it is shaded as ``waterColor``).
+    planar_reflection: False (original: the sky cube map) or True (``PLANAR_REFLECTION``:
+        block [7] reads seed 004's mirrored camera at the surface point, offset by the
+        projected flattened wave normal times ``REFLECT_DISTORTION`` (seed 002); needs
+        ``ShaderInputs.reflection_color`` and ``reflection_view_proj``).
     """
 
     reflection: bool = True
@@ -94,6 +99,7 @@ class Options(NamedTuple):
     attenuation: str = "linear"
     specular: str = "phong"
     wall_faces: bool = False
+    planar_reflection: bool = False
 
 
 # the one table from the GLSL file's #define names to the port's options (see _switches)
@@ -107,7 +113,11 @@ DEFINES = {
     "GGX_SPECULAR": {"specular": "ggx"},
     "NO_SPECULAR": {"specular": "none"},
     "WALL_FACES": {"wall_faces": True},
+    "PLANAR_REFLECTION": {"planar_reflection": True},
 }
+# texture reads per pixel attributed to PLANAR_REFLECTION for the mirrored camera's pass (as
+# water_baseline.PASS_FETCHES)
+PASS_FETCHES = 1
 
 
 def options_of(defines, shader: str = "water_refraction", table: dict = DEFINES) -> Options:
@@ -417,14 +427,23 @@ def refraction_blocks(m, P, C, opts: Options = Options()) -> Refracted:
     )
 
 
-def _shade(m, P, C, diagnose: bool = False, opts: Options = Options()):
+def _shade(m, P, C, diagnose: bool = False, opts: Options = Options(), Mi=None):
     f = refraction_blocks(m, P, C, opts)
     vEye, vLight, vBumpTex, vBumpTexMore = f.vEye, f.vLight, f.vBumpTex, f.vBumpTexMore
     R, current_position, vRefraction = f.R, f.current_position, f.vRefraction
     iterations, crossed, denominator = f.iterations, f.crossed, f.denominator
     fetches = opts.normal_layers + 1 + iterations + 1  # iterations include the refinement steps
     bad = nonfinite_any(vEye, vBumpTex, vBumpTexMore, R, current_position)
-    if opts.reflection:
+    if opts.reflection and opts.planar_reflection:
+        # ---- [7] Reflection (PLANAR_REFLECTION: sources 004 and 002) ----
+        vReflection, uv = planar_reflection(m, P, Mi, C, vBumpTex, m.Array3f(*MIRROR_NORMAL), False)
+        vReflection = specular_highlight(
+            m, P, vReflection, vBumpTex, vEye, vLight, C, opts.specular
+        )
+        gl_FragColor = fresnel_combine(m, P, vReflection, vRefraction, vEye, vBumpTex)
+        fetches = fetches + 2 + PASS_FETCHES
+        bad |= nonfinite_any(vLight) | ~(dr.isfinite(uv[0]) & dr.isfinite(uv[1]))
+    elif opts.reflection:
         # ---- [7] Reflection ----
         R = dr.normalize(reflect(m, -vEye, vBumpTexMore))
         R.y = dr.maximum(R.y, 0.001)
@@ -449,14 +468,22 @@ def _shade(m, P, C, diagnose: bool = False, opts: Options = Options()):
     return gl_FragColor, diagnostics
 
 
-def _frozen_shade(m, P, C, diagnose, opts):
+def _frozen_shade(m, P, C, diagnose, opts, Mi):
     return _frame.call_frozen(
         ("water_refraction", diagnose, opts) + _frame.python_config(C),
-        lambda m, P, C: _shade(m, P, C, diagnose, opts),
+        lambda m, P, C, Mi: _shade(m, P, C, diagnose, opts, Mi),
         m,
         P,
         C,
+        Mi,
     )
+
+
+def _mirror(m, inputs, opts: Options):
+    """The mirrored camera's state (``_planar.Mirror``) if ``opts`` reads it, else None."""
+    if opts.reflection and opts.planar_reflection:
+        return mirror_state(m, inputs, "water_refraction with PLANAR_REFLECTION")
+    return None
 
 
 def render(
@@ -485,23 +512,25 @@ def render(
     opts = options_of(defines)
     m = backend_types(backend)
     P = prepare(inputs, m)
+    Mi = _mirror(m, inputs, opts)
     C = resolve_constants(m, constants if constants is not None else Constants(), loop_ad)
     with evaluated_loops_if(C.differentiable and loop_ad == "evaluated"):
         if _frame.USE_FROZEN and not C.differentiable:
-            color, diag = _frozen_shade(m, P.shading_state(), C, diagnose, opts)
+            color, diag = _frozen_shade(m, P.shading_state(), C, diagnose, opts, Mi)
         else:
-            color, diag = _shade(m, P, C, diagnose, opts)
+            color, diag = _shade(m, P, C, diagnose, opts, Mi)
         return finish_output(m, P, color, diag, "water_refraction")
 
 
-def _frozen_tangents(m, P, C, params, opts):
+def _frozen_tangents(m, P, C, params, opts, Mi):
     return _frame.call_frozen(
         ("water_refraction.tangents", opts) + _frame.python_config(C),
-        lambda m, P, C, params: tangents(m, *_shade(m, P, C, False, opts), params),
+        lambda m, P, C, params, Mi: tangents(m, *_shade(m, P, C, False, opts, Mi), params),
         m,
         P,
         C,
         params,
+        Mi,
     )
 
 
@@ -525,9 +554,10 @@ def render_with_jacobian(
     opts = options_of(defines)
 
     def shade_tangents(m, P, C, params, frozen):
+        Mi = _mirror(m, inputs, opts)
         if frozen:
-            return _frozen_tangents(m, P, C, params, opts)
-        return tangents(m, *_shade(m, P, C, False, opts), params)
+            return _frozen_tangents(m, P, C, params, opts, Mi)
+        return tangents(m, *_shade(m, P, C, False, opts, Mi), params)
 
     return jacobian_passes(
         shade_tangents,

@@ -40,6 +40,7 @@ EXPORTED = Constants(
     absorption_b=0.05,
     specular_roughness=0.15,
     refine_steps=2,
+    reflect_distortion=0.07,
 )
 # the shader files, then one file per variant compiled with preprocessor names
 FILES = [

@@ -44,6 +44,7 @@ BANNERS = [
 ]
 REFL_ONLY = {"refl_steps_steep", "refl_steps_grazing", "refl_loop_cap", "refl_height_cut"}
 # constants only the baseline shader (seeds 001-004, tests/test_water_baseline.py) declares
+# (and water_refraction's PLANAR_REFLECTION variant its reflect_distortion)
 BASELINE_ONLY = {
     "reflect_distortion",
     "refraction_index",
@@ -158,6 +159,8 @@ def test_shipped_block_holds_the_defaults(name, dialect):
     expected = (
         set(CONSTANT_SPECS) - BASELINE_ONLY - (REFL_ONLY if name == "water_refraction" else set())
     )
+    if name == "water_refraction":  # PLANAR_REFLECTION's seed-002 distortion
+        expected.add("reflect_distortion")
     assert declared == expected
 
 

@@ -1,7 +1,8 @@
 #version 120
 // Refraction pixel shader of Lipp, "Physically correct perturbed planar
 // refractions & reflections in real time" (seed 000, section 2).
-// Compile with NOREFLECTION defined for the refraction-only variant.
+// Compile with NOREFLECTION defined for the refraction-only variant, with PLANAR_REFLECTION
+// for the reflection of seed 004's mirrored camera offset by the wave normal (seed 002).
 // Fixes against the documented text are listed in shaders_port/README.md.
 
 // ---- BEGIN TUNABLE CONSTANTS (written by `study export`) ----
@@ -23,6 +24,8 @@ const float ABSORPTION_B = 0.13333334;
 const float SPECULAR_ROUGHNESS = 0.2;
 //variants BINARY_REFINE / SECANT_REFINE: refinement steps after the linear search
 const int REFINE_STEPS = 3;
+//variant PLANAR_REFLECTION: scale of the reflection distortion (seed 002's "0.1 factor")
+const float REFLECT_DISTORTION = 0.1;
 //multiplier to enhance normal-perturbation. 0=max perturbation 1=normal perturbation
 uniform float BumptexMult = 1.0;
 //refractioncoefficient = c_air/c_water
@@ -46,6 +49,12 @@ uniform sampler2D fresnelLookup;
 
 //color of specular highlight
 uniform vec3 lightcolor;
+#ifdef PLANAR_REFLECTION
+//the scene above the water seen by the mirrored camera (seed 004)
+uniform sampler2D reflection_sampler;
+//Projection * ModelView of the mirrored camera (seed 004)
+uniform mat4 o2v_projection_reflection;
+#endif
 
 //vectors set up by the vertex shader
 //World space position of point on the water-plane
@@ -193,6 +202,20 @@ void main (void)
 #ifndef NOREFLECTION
 
     // ---- [7] Reflection ----
+#ifdef PLANAR_REFLECTION
+    //variant: seed 004's mirrored camera read by projective texturing at the surface point,
+    //offset by the projected, flattened wave normal (seed 002), as in water_baseline.frag
+    vec4 vClipReflection = o2v_projection_reflection * vec4(varyingVecWorldPosition.x, 0.0, varyingVecWorldPosition.z, 1.0);
+    vec2 vTextureReflection = vec2(0.5, 0.5) + 0.5 * vClipReflection.st / vClipReflection.q;
+    vec3 flatNormal = vBumpTex - dot (vBumpTex, vec3(0.0, 1.0, 0.0)) * vec3(0.0, 1.0, 0.0);
+    vec3 eyeNormal = gl_NormalMatrix * flatNormal;
+    //a flat normal must not deform the image: no offset where eyeNormal.xy is 0
+    vec2 reflectOffset = length(eyeNormal.xy) > 0.0 ?
+        normalize (eyeNormal.xy) * length (flatNormal) * REFLECT_DISTORTION : vec2(0.0, 0.0);
+    //the mirrored camera's texture is flipped in y: the offset's vertical part enters negated
+    vTextureReflection += vec2(reflectOffset.x, -reflectOffset.y);
+    vec4 vReflection = vec4(texture2D(reflection_sampler, vTextureReflection).rgb, 1.0)*reflectColor;
+#else
     //Calculate reflection Vector
     R = normalize(reflect(-vEye, vBumpTexMore));
     //clamp y to 0.0001, else reflection vector would go into water
@@ -201,6 +224,7 @@ void main (void)
     //Somehow y-component is inverted, so it is rescaled with -1.
     //probably a bug in my code.
     vec4 vReflection = textureCube(reflectionTexture, normalize(R)*vec3(1,-1,1) )*reflectColor;
+#endif
 
     // ---- [8] Specular highlight ----
     //Calculate specular reflection
