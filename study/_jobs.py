@@ -222,7 +222,9 @@ def run_export(constants_json, out, targets=None) -> list:
 
 def run_calibrate(experiment, out, overrides=None, variant=None, solver=None, cache=None) -> dict:
     """``study calibrate``: reference (cached), fit, export, GL check, figures, report.md and
-    constants.json (a ``CalibrationResult``) in ``out``. Returns the JSON object written."""
+    constants.json (a ``CalibrationResult``) in ``out``; an animated experiment
+    (``animation.frames`` > 1) is fitted on all its frames (``study._anim_jobs``). Returns the JSON
+    object written."""
     from ._backend import drjit_backend
     from .fit.calibrate import calibrate_model, scene_frozen, timed
     from .fit.decorrelated import half_models, texture_half_models
@@ -236,6 +238,12 @@ def run_calibrate(experiment, out, overrides=None, variant=None, solver=None, ca
     exp, variant, out = prepare(experiment, out, overrides, variant)
     setup_s = time.perf_counter() - t_start
     solver = solver or exp["fit.solver"]
+    from .scene.frames import is_animated
+
+    if is_animated(exp):
+        from ._anim_jobs import run_calibrate_animated
+
+        return run_calibrate_animated(exp, variant, out, solver, cache, setup_s)
     ref, inputs, timings = load_scene_data(exp, variant, cache)
     timings = {"setup_s": setup_s, **timings}
     backend = drjit_backend(variant)

@@ -150,13 +150,14 @@ def noise_of(passes: np.ndarray, mask: np.ndarray) -> tuple[np.ndarray, float]:
     return se, float(np.sqrt(np.mean(se[mask] ** 2)))
 
 
-def choose_spp(exp: Experiment, progress=None) -> tuple[int, dict]:
-    """Pick spp for ``reference.target_noise`` from a measured pilot; return (spp, info)."""
+def choose_spp(exp: Experiment, progress=None, scene=None) -> tuple[int, dict]:
+    """Pick spp for ``reference.target_noise`` from a measured pilot; return (spp, info).
+    ``scene``: the loaded scene of ``exp`` (default: built here)."""
     w, h = exp["resolution"]
     t0 = time.perf_counter()
     from .mitsuba_scene import build_scene, sampler_spp
 
-    scene = build_scene(exp)
+    scene = build_scene(exp) if scene is None else scene
     per_pass = sampler_spp(exp["reference.sampler"], PILOT_SPP)  # K passes of PILOT_SPP
     pilot = render_passes(
         exp, per_pass, N_SEEDS, seed0=10_000 + exp["reference.seed"], scene=scene, progress=progress
@@ -179,20 +180,22 @@ def choose_spp(exp: Experiment, progress=None) -> tuple[int, dict]:
 
 
 def render_reference(
-    exp: Experiment, variant: str, spp: int | None = None, progress=None
+    exp: Experiment, variant: str, spp: int | None = None, progress=None, scene=None
 ) -> Reference:
-    """Render the reference (no cache): ``N_SEEDS`` independent passes, mean and noise."""
+    """Render the reference (no cache): ``N_SEEDS`` independent passes, mean and noise.
+    ``scene``: the loaded scene of ``exp`` (:func:`~.mitsuba_scene.build_scene`, e.g. one
+    animation frame's scene moved to this frame's waves), default: built here."""
     info = {}
     if spp is None:
         spp, info = (
-            choose_spp(exp, progress)
+            choose_spp(exp, progress, scene)
             if exp["reference.spp"] == "auto"
             else (int(exp["reference.spp"]), {})
         )
     per_pass = pass_spp(exp, spp)
     from .mitsuba_scene import build_scene
 
-    scene = build_scene(exp)
+    scene = build_scene(exp) if scene is None else scene
     t0 = time.perf_counter()
     passes = render_passes(
         exp,
@@ -231,13 +234,19 @@ def render_reference(
 
 
 def load_or_render(
-    exp: Experiment, variant: str, cache: Path | None = None, progress=None, log=print
+    exp: Experiment,
+    variant: str,
+    cache: Path | None = None,
+    progress=None,
+    log=print,
+    scene=None,
 ) -> Reference:
     """The cached reference of ``exp`` if its key matches, else a fresh render written to the cache.
 
     Safe with concurrent callers (a sweep's workers): a miss takes the entry's lock, looks again
     (another process may have rendered it meanwhile) and only then renders, so one key is
-    rendered once."""
+    rendered once. ``scene``: a callable returning the loaded scene of ``exp``, called on a miss
+    only (an animation's frames share one scene, :class:`~.frames.FrameShared`)."""
     cache = (cache or cache_dir()) / "references"
     key = reference_key(exp, variant)
     path = cache / f"{key}.exr"
@@ -248,7 +257,9 @@ def load_or_render(
         ref = _cached_reference(exp, key, path, log)
         if ref is not None:
             return ref
-        ref = render_reference(exp, variant, progress=progress)
+        ref = render_reference(
+            exp, variant, progress=progress, scene=scene() if scene is not None else None
+        )
         write_exr(path, ref.image, ref.provenance, extra={"stderr": ref.stderr})
     ref.path = path
     log(
