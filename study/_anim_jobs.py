@@ -52,6 +52,7 @@ def load_frames(exp, variant: str, cache=None) -> dict:
                     progress=st.counter("  reference passes"),
                     log=_log,
                     scene=scene,
+                    keep_passes=True,
                 )
             )
         with st.stage("inputs_s", f"frame {k + 1}/{n}: shader inputs"):
@@ -86,7 +87,9 @@ def _score(frames, refs, inputs, backend, constants: dict) -> dict:
         per = [errors(r.image, img, m.mask) for r, img, m in zip(refs, imgs, full)]
         flips = np.array([p["flip"] for p in per])
         rmses = np.array([p["rmse"] for p in per])
-        t = temporal_errors([r.image for r in refs], imgs, mask, [r.stderr for r in refs])
+        t = temporal_errors(
+            [r.image for r in refs], imgs, mask, [r.stderr for r in refs], [r.passes for r in refs]
+        )
         out["images"][name] = imgs
         out["scores"][name] = {
             "flip": flips.tolist(),

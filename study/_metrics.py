@@ -121,7 +121,11 @@ def information_criteria(residual: np.ndarray, k: int) -> dict:
 
 
 def temporal_errors(
-    references: list, shaded: list, mask: np.ndarray, stderr: list | None = None
+    references: list,
+    shaded: list,
+    mask: np.ndarray,
+    stderr: list | None = None,
+    passes: list | None = None,
 ) -> dict:
     """The shader's frame-to-frame change against the reference's, on the masked pixels.
 
@@ -138,6 +142,11 @@ def temporal_errors(
       Monte Carlo noise if the frames' samples were independent (an upper bound here: the frames
       share their sampler seeds, so part of their noise cancels in ``dR``); a ``trmse`` near it
       is within the reference's noise;
+    * ``noise`` (with ``passes``: each frame's independent passes (P, H, W, 3), or None where not
+      kept): the RMS standard error of ``dR`` measured from the spread over the passes of the
+      passes' own differences (the frames' shared seeds included), over the pairs whose two frames
+      have passes (``noise_pairs`` of them); ``trmse_excess``: ``sqrt(max(trmse^2 - noise^2, 0))``,
+      the part of ``trmse`` the reference's noise does not explain;
     * ``maps``: (H, W) float32 maps of the RMS over pairs and channels of ``dS - dR``
       (``flicker``), ``dR`` (``reference``) and ``dS`` (``shader``), 0 outside ``mask``.
 
@@ -171,6 +180,16 @@ def temporal_errors(
     if stderr is not None:
         v = np.stack([np.square(np.asarray(s, np.float64)) for s in stderr])
         out["noise_floor"] = float(np.sqrt(np.mean((v[1:] + v[:-1])[:, mask])))
+    if passes is not None:
+        var = [
+            np.var(np.asarray(b, np.float64) - a, axis=0, ddof=1)[mask] / len(a)
+            for a, b in zip(passes[:-1], passes[1:])
+            if a is not None and b is not None
+        ]
+        if var:
+            out["noise"] = float(np.sqrt(np.mean(var)))
+            out["noise_pairs"] = len(var)
+            out["trmse_excess"] = float(np.sqrt(max(out["trmse"] ** 2 - out["noise"] ** 2, 0.0)))
 
     def rms_map(d):
         m = np.sqrt(np.mean(d**2, axis=(0, 3))).astype(np.float32)

@@ -3,6 +3,8 @@ share what does not move and are cached apart, and the temporal error measures w
 
 from __future__ import annotations
 
+import json
+
 import numpy as np
 import pytest
 
@@ -160,9 +162,82 @@ def test_temporal_error_of_known_motions():
     assert double["trmse"] == pytest.approx(double["reference_change"])
     assert double["change_ratio"] == pytest.approx(2.0)
     assert np.all(double["maps"]["flicker"][0] == 0.0)  # outside the mask
+    # passes whose noise is the same in every frame (shared seeds) leave dR without noise;
+    # independent noise of s.d. 0.1 per pass leaves sqrt(2) 0.1 / sqrt(8) in dR
+    noise = rng.normal(0.0, 0.1, (8, 6, 5, 3))
+    shared = [r + noise for r in refs]
+    own = [r + rng.normal(0.0, 0.1, (8, 6, 5, 3)) for r in refs]
+    t = temporal_errors([p.mean(0) for p in shared], refs, mask, passes=shared)
+    assert t["noise"] == pytest.approx(0.0, abs=1e-12) and t["noise_pairs"] == 3
+    t = temporal_errors([p.mean(0) for p in own], refs, mask, passes=own[:3] + [None])
+    assert t["noise"] == pytest.approx(np.sqrt(2) * 0.1 / np.sqrt(8), rel=0.15)
+    assert t["noise_pairs"] == 2
+    assert t["trmse_excess"] < t["trmse"]
     with pytest.raises(ValueError, match="animation.frames"):
         temporal_errors(refs[:1], refs[:1], mask)
     bad = [r.copy() for r in refs]
     bad[2][3, 3, 0] = np.nan
     with pytest.raises(ValueError, match="not finite"):
         temporal_errors(refs, bad, mask)
+
+
+TINY_ANIMATED = [
+    "resolution=[24,24]",
+    "fit.resolution=[24,24]",
+    "reference.spp=16",
+    "reference.water_mesh=48",
+    "reference.texture_size=32",
+    "reference.texture_spp=4",
+    "reference.lighting_size=16",
+    "reference.wall_spp=4",
+    "waves.normal_map_size=32",
+    "fit.max_steps=4",
+    "animation.frames=2",
+    "animation.time_step=0.2",
+]
+
+
+@pytest.mark.slow
+def test_calibrate_on_an_animated_experiment_end_to_end(tmp_path, capsys):
+    """``study calibrate`` on 2 frames: the per-frame and temporal record, the animation, the
+    exported shaders with the frames' wave uniforms (GL-checked per frame); a second run finds
+    every frame's reference (with its passes) and inputs in the cache."""
+    from PIL import Image
+
+    from conftest import REPO
+    from study.cli import main
+    from study.scene.frames import frame_offsets
+
+    exp = str(REPO / "experiments" / "default.toml")
+    sets = [a for kv in TINY_ANIMATED for a in ("--set", kv)]
+    assert main(["calibrate", exp, "--out", str(tmp_path / "a")] + sets) == 0
+    out = tmp_path / "a"
+    summary = json.loads((out / "constants.json").read_text())
+    a = summary["animation"]
+    for name in ("start", "single_frame", "all_frames"):
+        s = a["scores"][name]
+        assert len(s["flip"]) == 2 and all(np.isfinite(s["flip"]))
+        assert s["flip_mean"] == pytest.approx(np.mean(s["flip"]))
+        t = s["temporal"]
+        assert t["noise_pairs"] == 1 and np.isfinite([t["trmse"], t["noise"]]).all()
+    fitted, start = a["scores"]["all_frames"]["rmse_mean"], a["scores"]["start"]["rmse_mean"]
+    assert fitted < start
+    with Image.open(out / "animation.webp") as im:
+        assert im.n_frames == 2 and im.size == (72, 40)
+    offsets = json.loads((out / "shaders" / "animation.json").read_text())
+    from study.scene.experiment import load_experiment
+
+    e = load_experiment(exp, TINY_ANIMATED)
+    for k in range(2):
+        np.testing.assert_array_equal(offsets["frames"][k], frame_offsets(e, k))
+    assert "uniform vec2 wave1;" in (out / "shaders" / "core" / "water.vert").read_text()
+    assert summary["gl_check"]["passed"] and len(summary["gl_check"]["frames"]) == 2
+    report = (out / "report.md").read_text()
+    assert "## FLIP per frame" in report and "animation.webp" in report
+    capsys.readouterr()
+    assert main(["calibrate", exp, "--out", str(tmp_path / "b")] + sets) == 0
+    err = capsys.readouterr().err
+    assert err.count("reference: cached") == 2 and err.count("shader inputs: cached") == 2
+    again = json.loads((tmp_path / "b" / "constants.json").read_text())
+    assert again["constants"] == summary["constants"]
+    assert again["animation"]["scores"]["all_frames"]["temporal"]["noise_pairs"] == 1

@@ -54,12 +54,16 @@ class Reference:
         stderr: (H, W, 3) float32 per-pixel standard error of ``image``.
         provenance: dict (hash, spp, seeds, variant, versions, seconds, noise, ...).
         path: the cached EXR, if any.
+        passes: (N_SEEDS, H, W, 3) float32 the independent passes ``image`` is the mean of, when
+            kept (``keep_passes``: an animation's frames, whose frame-to-frame differences take
+            their noise from them); None otherwise.
     """
 
     image: np.ndarray
     stderr: np.ndarray
     provenance: dict
     path: Path | None = None
+    passes: np.ndarray | None = None
 
     @property
     def noise(self) -> float:
@@ -180,7 +184,12 @@ def choose_spp(exp: Experiment, progress=None, scene=None) -> tuple[int, dict]:
 
 
 def render_reference(
-    exp: Experiment, variant: str, spp: int | None = None, progress=None, scene=None
+    exp: Experiment,
+    variant: str,
+    spp: int | None = None,
+    progress=None,
+    scene=None,
+    keep_passes: bool = False,
 ) -> Reference:
     """Render the reference (no cache): ``N_SEEDS`` independent passes, mean and noise.
     ``scene``: the loaded scene of ``exp`` (:func:`~.mitsuba_scene.build_scene`, e.g. one
@@ -230,7 +239,7 @@ def render_reference(
         "auto_spp": info,
         "integrator": "volpath" if any(v > 0 for v in exp["water.sigma_t"]) else "path",
     }
-    return Reference(image.astype(np.float32), stderr, prov)
+    return Reference(image.astype(np.float32), stderr, prov, passes=passes if keep_passes else None)
 
 
 def load_or_render(
@@ -240,13 +249,16 @@ def load_or_render(
     progress=None,
     log=print,
     scene=None,
+    keep_passes: bool = False,
 ) -> Reference:
     """The cached reference of ``exp`` if its key matches, else a fresh render written to the cache.
 
     Safe with concurrent callers (a sweep's workers): a miss takes the entry's lock, looks again
     (another process may have rendered it meanwhile) and only then renders, so one key is
     rendered once. ``scene``: a callable returning the loaded scene of ``exp``, called on a miss
-    only (an animation's frames share one scene, :class:`~.frames.FrameShared`)."""
+    only (an animation's frames share one scene, :class:`~.frames.FrameShared`); ``keep_passes``:
+    a fresh render keeps its passes (``Reference.passes``, stored in the EXR as layers
+    ``pass0..``; a cached file has them when it was rendered so)."""
     cache = (cache or cache_dir()) / "references"
     key = reference_key(exp, variant)
     path = cache / f"{key}.exr"
@@ -258,9 +270,16 @@ def load_or_render(
         if ref is not None:
             return ref
         ref = render_reference(
-            exp, variant, progress=progress, scene=scene() if scene is not None else None
+            exp,
+            variant,
+            progress=progress,
+            scene=scene() if scene is not None else None,
+            keep_passes=keep_passes,
         )
-        write_exr(path, ref.image, ref.provenance, extra={"stderr": ref.stderr})
+        extra = {"stderr": ref.stderr}
+        if ref.passes is not None:
+            extra.update({f"pass{i}": p for i, p in enumerate(ref.passes)})
+        write_exr(path, ref.image, ref.provenance, extra=extra)
     ref.path = path
     log(
         f"reference: rendered {ref.spp} spp in {ref.provenance['render_seconds']:.1f} s, "
@@ -283,7 +302,9 @@ def _cached_reference(exp: Experiment, key: str, path: Path, log) -> Reference |
             and se.shape == rgb.shape
         ):
             log(f"reference: cached {path} (spp {prov['spp']}, noise {prov['noise']:.2e})")
-            return Reference(rgb, se, prov, path)
+            passes = [extra.get(f"pass{i}") for i in range(N_SEEDS)]
+            kept = np.stack(passes) if all(p is not None for p in passes) else None
+            return Reference(rgb, se, prov, path, passes=kept)
         log(f"reference: {path} does not match this experiment; re-rendering")
     except ValueError as exc:
         log(f"reference: unreadable cache file ({exc}); re-rendering")
