@@ -42,31 +42,25 @@ def animation_frames(references: list, fitted: list, mask: np.ndarray) -> list[n
     return out
 
 
+SHOWN_S = 0.125  # seconds each frame is shown, at least: 8 frames at 30 fps would flash by
+
+
+def shown_seconds(time_step: float) -> float:
+    """Seconds each frame is shown: the animation's own ``time_step``, slowed to ``SHOWN_S``."""
+    return max(float(time_step), SHOWN_S)
+
+
 def write_animation(folder: Path, frames: list[np.ndarray], time_step: float) -> dict:
-    """``animation.webp`` (lossless) and ``animation.gif`` of ``frames`` (uint8 RGB), looping,
-    each frame shown ``time_step`` seconds (at least 20 ms, GIF's finest step); returns
-    figure name -> file name."""
+    """``animation.webp`` (quality 90) and ``animation.gif`` of ``frames`` (uint8 RGB), looping,
+    each frame shown :func:`shown_seconds`; returns figure name -> file name."""
     from PIL import Image
 
     images = [Image.fromarray(f) for f in frames]
-    ms = max(20, int(round(1000 * time_step)))
+    ms = int(round(1000 * shown_seconds(time_step)))
     names = {"animation_webp": "animation.webp", "animation_gif": "animation.gif"}
-    images[0].save(
-        folder / names["animation_webp"],
-        save_all=True,
-        append_images=images[1:],
-        duration=ms,
-        loop=0,
-        lossless=True,
-    )
-    images[0].save(
-        folder / names["animation_gif"],
-        save_all=True,
-        append_images=images[1:],
-        duration=ms,
-        loop=0,
-        optimize=False,
-    )
+    common = {"save_all": True, "append_images": images[1:], "duration": ms, "loop": 0}
+    images[0].save(folder / names["animation_webp"], quality=90, method=6, **common)
+    images[0].save(folder / names["animation_gif"], optimize=False, **common)
     return names
 
 
@@ -164,6 +158,13 @@ def noise_sentence(t: dict) -> str:
 
 def write_animation_report(out: Path, summary: dict) -> Path:
     """``out/report.md`` of an animated calibration (the content of constants.json)."""
+    path = Path(out) / "report.md"
+    write_text_atomic(path, animation_report_text(summary))
+    return path
+
+
+def animation_report_text(summary: dict) -> str:
+    """The Markdown of :func:`write_animation_report` (also the docs' generated page)."""
     a = summary["animation"]
     sc, figs = a["scores"], a["figures"]
     n = a["frames"]
@@ -180,7 +181,10 @@ def write_animation_report(out: Path, summary: dict) -> Path:
         "",
         f"![reference | fitted | FLIP error, {n} frames]({figs['animation_webp']})",
         "",
-        f"(also as [GIF]({figs['animation_gif']}))",
+        f"Each frame shown {shown_seconds(a['time_step']):.3g} s"
+        + (" (slowed down)" if shown_seconds(a["time_step"]) > a["time_step"] else "")
+        + (f"; also as [GIF]({figs['animation_gif']})" if "animation_gif" in figs else "")
+        + ".",
         "",
         "## FLIP per frame",
         "",
@@ -219,10 +223,16 @@ def write_animation_report(out: Path, summary: dict) -> Path:
         "| stage | s |",
         "|---|---|",
     ]
-    lines += [f"| {k} | {fmt(v, 3)} |" for k, v in summary["timings"].items()] + [""]
-    path = Path(out) / "report.md"
-    write_text_atomic(path, "\n".join(lines))
-    return path
+    t = summary["timings"]
+    lines += [f"| {k} | {fmt(v, 3)} |" for k, v in t.items() if not k.startswith("frame")]
+    for what in ("reference_s", "inputs_s"):
+        per = [fmt(t[f"frame{k}.{what}"], 3) for k in range(n) if f"frame{k}.{what}" in t]
+        lines.append(f"| {what} per frame | {', '.join(per)} |")
+    refs = a.get("references") or []
+    if refs:
+        noise = np.mean([r["noise"] for r in refs])
+        lines += ["", f"References: {refs[0]['spp']} spp a frame, mean noise {fmt(noise, 3)}."]
+    return "\n".join(lines) + "\n"
 
 
 def _export_lines(summary: dict, a: dict) -> list[str]:
