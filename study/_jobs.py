@@ -14,14 +14,22 @@ from .report.gl_check import gl_check, target_checks
 from ._progress import log as _log
 
 
-def prepare(experiment, out, overrides=None, variant=None):
+def prepare(experiment, out, overrides=None, variant=None, frames: bool = False):
     """Load the experiment (its files validated), initialise the backend, check what needs it
-    (the mesh), create the output folder."""
+    (the mesh), create the output folder. ``frames``: the command handles every frame of an
+    animated experiment (else it says that it uses frame 0)."""
     from .scene.user_scene import check_scene
     from .scene.view import check_water_in_view
 
     exp = load_experiment(experiment, overrides)
     check_water_in_view(exp)
+    from .scene.frames import is_animated
+
+    if is_animated(exp) and not frames:
+        _log(
+            f"experiment: {exp['name']} has {exp['animation.frames']} frames; this command uses "
+            "frame 0 (study calibrate fits every frame)"
+        )
     variant = init_backend(variant or exp["variant"])
     check_scene(exp)
     out = Path(out)
@@ -168,6 +176,7 @@ def run_tradeoff(
     (``study.studies.tradeoff``); tables, ``pareto.png``, ``report.md`` and shaders in ``out``."""
     from .studies.tradeoff import run_tradeoff as run
 
+    _refuse_animated(experiments, overrides, "study tradeoff")
     return run(
         list(experiments),
         out,
@@ -189,6 +198,7 @@ def run_stability(
     (``study.studies.stability``); tables, charts and ``stability.md`` in ``out``."""
     from .studies.stability import run_stability as run
 
+    _refuse_animated(experiments, overrides, "study stability")
     return run(
         list(experiments),
         out,
@@ -199,6 +209,14 @@ def run_stability(
         log=_log,
         **options,
     )
+
+
+def _refuse_animated(experiments, overrides, command: str) -> None:
+    """ExperimentError if any of ``experiments`` is animated (``command`` takes still frames)."""
+    from .scene.frames import refuse_animated
+
+    for path in experiments:
+        refuse_animated(load_experiment(path, overrides), command)
 
 
 def run_export(constants_json, out, targets=None) -> list:
@@ -235,7 +253,7 @@ def run_calibrate(experiment, out, overrides=None, variant=None, solver=None, ca
     if solver is not None and solver not in SOLVERS:
         raise ValueError(f"unknown solver {solver!r}; choose one of {', '.join(SOLVERS)}")
     t_start = time.perf_counter()
-    exp, variant, out = prepare(experiment, out, overrides, variant)
+    exp, variant, out = prepare(experiment, out, overrides, variant, frames=True)
     setup_s = time.perf_counter() - t_start
     solver = solver or exp["fit.solver"]
     from .scene.frames import is_animated
@@ -416,6 +434,8 @@ def run_failures(
     ``report.md``."""
     from .report.export import load_constants_json
     from .studies.failures import run_failures as run
+
+    _refuse_animated(experiments, overrides, "study failures")
 
     constants = load_constants_json(constants_json) if constants_json else None
     return run(

@@ -99,6 +99,25 @@ def test_moved_scene_renders_as_one_built_for_the_frame(mi):
     assert not np.array_equal(a, c)  # the waves did move
 
 
+def test_still_only_commands_refuse_an_animated_experiment(tmp_path, capsys):
+    """tradeoff, failures, stability and a fit over several experiments say that they take still
+    frames and how to run them (exit code 2, nothing written)."""
+    from conftest import REPO
+    from study.cli import main
+
+    exp = str(REPO / "experiments" / "animated.toml")
+    for args in (
+        ["tradeoff", exp],
+        ["failures", exp],
+        ["stability", exp],
+        ["calibrate", exp, str(REPO / "experiments" / "default.toml")],
+    ):
+        assert main(args + ["--out", str(tmp_path / "x")]) == 2
+        err = capsys.readouterr().err
+        assert "animation.frames = 8" in err and "--set animation.frames=1" in err, err
+    assert not (tmp_path / "x").exists()
+
+
 def test_frames_are_still_experiments_with_their_own_keys():
     """Frame k's offsets follow wave_i(k) = offsets_i + k dt v_i; frame 0 is the experiment as a
     still (same reference and inputs keys); each frame has its own keys; the offsets-free key is

@@ -43,6 +43,18 @@ def is_animated(exp: Experiment) -> bool:
     return int(exp["animation.frames"]) > 1
 
 
+def refuse_animated(exp: Experiment, command: str) -> None:
+    """Raise ExperimentError when ``exp`` is animated: ``command`` works on still frames only."""
+    if is_animated(exp):
+        from .errors import ExperimentError
+
+        raise ExperimentError(
+            f"{command} works on one still frame, and {exp['name']!r} has animation.frames = "
+            f"{exp['animation.frames']}: run `study calibrate` on it alone (it fits every "
+            "frame), or pass --set animation.frames=1 to use its frame 0"
+        )
+
+
 def frame_offsets(exp: Experiment, k: int) -> np.ndarray:
     """(4, 2) float64 offsets wave1..wave4 of frame ``k`` (texture units; see module docstring)."""
     n = int(exp["animation.frames"])
