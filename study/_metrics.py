@@ -146,7 +146,9 @@ def temporal_errors(
       kept): the RMS standard error of ``dR`` measured from the spread over the passes of the
       passes' own differences (the frames' shared seeds included), over the pairs whose two frames
       have passes (``noise_pairs`` of them); ``trmse_excess``: ``sqrt(max(trmse^2 - noise^2, 0))``,
-      the part of ``trmse`` the reference's noise does not explain;
+      the part of ``trmse`` the reference's noise does not explain; ``reference_change_excess``:
+      ``sqrt(max(reference_change^2 - noise^2, 0))``, the reference's change without its noise,
+      and ``change_ratio_excess``: ``shader_change`` over it;
     * ``maps``: (H, W) float32 maps of the RMS over pairs and channels of ``dS - dR``
       (``flicker``), ``dR`` (``reference``) and ``dS`` (``shader``), 0 outside ``mask``.
 
@@ -190,6 +192,9 @@ def temporal_errors(
             out["noise"] = float(np.sqrt(np.mean(var)))
             out["noise_pairs"] = len(var)
             out["trmse_excess"] = float(np.sqrt(max(out["trmse"] ** 2 - out["noise"] ** 2, 0.0)))
+            rc = float(np.sqrt(max(ref_change**2 - out["noise"] ** 2, 0.0)))
+            out["reference_change_excess"] = rc
+            out["change_ratio_excess"] = out["shader_change"] / rc if rc > 0 else float("inf")
 
     def rms_map(d):
         m = np.sqrt(np.mean(d**2, axis=(0, 3))).astype(np.float32)

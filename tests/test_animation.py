@@ -192,6 +192,8 @@ def test_temporal_error_of_known_motions():
     assert t["noise"] == pytest.approx(np.sqrt(2) * 0.1 / np.sqrt(8), rel=0.15)
     assert t["noise_pairs"] == 2
     assert t["trmse_excess"] < t["trmse"]
+    assert t["reference_change_excess"] < t["reference_change"]
+    assert t["change_ratio_excess"] > t["change_ratio"]
     with pytest.raises(ValueError, match="animation.frames"):
         temporal_errors(refs[:1], refs[:1], mask)
     bad = [r.copy() for r in refs]

@@ -73,14 +73,15 @@ def temporal_figure(path: Path, maps: dict, mask: np.ndarray, title: str = "") -
         ("shader", "shader: RMS of S[k+1] - S[k]"),
         ("flicker", "RMS of (S[k+1] - S[k]) - (R[k+1] - R[k])"),
     ]
-    vmax = max(max(float(maps[k][mask].max()) for k, _ in keys), 1e-6)
+    # the 99.5th percentile: a few glint pixels would otherwise set the scale for all
+    vmax = max(max(float(np.percentile(maps[k][mask], 99.5)) for k, _ in keys), 1e-6)
     fig, axes = plt.subplots(1, 3, figsize=(10.5, 3.9))
     for ax, (k, label) in zip(axes, keys):
         im = ax.imshow(np.where(mask, maps[k], np.nan), cmap="magma", vmin=0, vmax=vmax)
         ax.set_title(label, fontsize=8)
         ax.set_xticks([])
         ax.set_yticks([])
-    fig.colorbar(im, ax=axes.tolist(), shrink=0.8, label="linear RGB")
+    fig.colorbar(im, ax=axes.tolist(), shrink=0.8, label="linear RGB (clipped at p99.5)")
     if title:
         fig.suptitle(title)
     fig.savefig(path, dpi=110, bbox_inches="tight")
@@ -128,15 +129,16 @@ def temporal_table(scores: dict) -> list[str]:
     """The temporal error of each constants block (``study._metrics.temporal_errors``)."""
     lines = [
         "| constants | temporal RMSE | beyond the noise | shader change | reference change | "
-        "change ratio | mean RMSE |",
-        "|---|---|---|---|---|---|---|",
+        "... without its noise | change ratio | ... to the noise-free change | mean RMSE |",
+        "|---|---|---|---|---|---|---|---|---|",
     ]
     for key, label in ROWS:
         t, s = scores[key]["temporal"], scores[key]
         lines.append(
             f"| {label} | {fmt(t['trmse'])} | {fmt(t.get('trmse_excess'))} | "
             f"{fmt(t['shader_change'])} | {fmt(t['reference_change'])} | "
-            f"{fmt(t['change_ratio'], 3)} | {fmt(s['rmse_mean'])} |"
+            f"{fmt(t.get('reference_change_excess'))} | {fmt(t['change_ratio'], 3)} | "
+            f"{fmt(t.get('change_ratio_excess'), 3)} | {fmt(s['rmse_mean'])} |"
         )
     return lines
 
@@ -149,7 +151,8 @@ def noise_sentence(t: dict) -> str:
             f" The reference's own noise in R[k+1] - R[k], measured from its passes over "
             f"{t['noise_pairs']} frame pair(s), is {fmt(t['noise'])} RMS (the frames share their "
             "sampler seeds, so part of it cancels); 'beyond the noise' is "
-            "sqrt(temporal RMSE^2 - noise^2)."
+            "sqrt(temporal RMSE^2 - noise^2), the reference's change without its noise "
+            "sqrt(change^2 - noise^2)."
         )
     if t.get("noise_floor") is not None:
         out += f" With independent frames it would be {fmt(t['noise_floor'])}."
