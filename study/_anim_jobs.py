@@ -138,6 +138,8 @@ def run_calibrate_animated(exp, variant: str, out: Path, solver: str, cache=None
     with timed(timings, "fit_single_s"):
         single = calibrate_model(models[0], start, params, solver, steps, frozen_by_scene=frozen[0])
     with timed(timings, "evaluate_s"):
+        blocks = {"start": start, "single_frame": single.fitted, "all_frames": joint.fitted}
+        losses = _losses(models, blocks)
         ev = _score(
             frames,
             refs,
@@ -160,7 +162,13 @@ def run_calibrate_animated(exp, variant: str, out: Path, solver: str, cache=None
     summary = _result(exp, variant, shader, joint, single, ev, solver, timings, gl_frames)
     summary["engine_targets"] = engine_targets
     summary["animation"].update(
-        {"offsets": offsets, "shared": data["shared"], "figures": figs, "references": _refs(refs)}
+        {
+            "offsets": offsets,
+            "shared": data["shared"],
+            "figures": figs,
+            "references": _refs(refs),
+            "losses": losses,
+        }
     )
     write_json(out / "constants.json", summary)
     write_animation_report(out, summary)
@@ -172,6 +180,22 @@ def run_calibrate_animated(exp, variant: str, out: Path, solver: str, cache=None
         f" wrote {out}"
     )
     return summary
+
+
+def _losses(models, blocks: dict) -> dict:
+    """The fit's own loss (0.5 |r|^2 at the fit resolution) of each constants block: on each
+    frame and over all frames (the joint fit's weighted sum, ``JointModel``)."""
+    from .fit.joint import JointModel
+
+    joint = JointModel(models)
+    out = {}
+    for name, c in blocks.items():
+        r = joint.residual(c)
+        out[name] = {
+            "all_frames": 0.5 * float(r @ r),
+            "per_frame": [0.5 * float(np.sum(m.residual(c) ** 2)) for m in models],
+        }
+    return out
 
 
 def _write_offsets(path: Path, exp, frames) -> dict:

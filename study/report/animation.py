@@ -206,6 +206,21 @@ def animation_report_text(summary: dict) -> str:
     lines += temporal_table(sc) + ["", f"![temporal error maps]({figs['temporal']})", ""]
     lines += ["## Constants (fitted on all frames)", ""]
     lines += constants_table(summary["parameters"]) + [""]
+    losses = a.get("losses")
+    if losses:
+        lines += [
+            "The fit's loss (0.5 |r|^2 at the fit resolution) of each block, over all frames and "
+            "on frames 1 and later (the frames frame 0's fit did not see):",
+            "",
+            "| constants | all frames | frames 1.. |",
+            "|---|---|---|",
+        ]
+        for key, label in ROWS:
+            lo = losses[key]
+            lines.append(
+                f"| {label} | {fmt(lo['all_frames'])} | {fmt(float(sum(lo['per_frame'][1:])))} |"
+            )
+        lines += [""]
     lines += ["| constant | frame 0 alone | all frames |", "|---|---|---|"]
     single = a["single_frame"]["parameters"]
     for name, p in summary["parameters"].items():
