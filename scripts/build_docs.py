@@ -81,7 +81,7 @@ def generated() -> dict[Path, str]:
     pages[RESULTS / "failures" / "report.md"] = _failures_page(RESULTS / "failures")
     pages[RESULTS / "search" / "report.md"] = _search_page(_json(RESULTS / "search" / "bench.json"))
     pages[RESULTS / "animation" / "report.md"] = animation_report_text(
-        _json(RESULTS / "animation" / "constants.json")
+        _json(RESULTS / "animation" / "constants.json"), gif=False
     )
     for phase in STABILITY_PHASES:
         folder = RESULTS / phase

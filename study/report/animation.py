@@ -166,8 +166,9 @@ def write_animation_report(out: Path, summary: dict) -> Path:
     return path
 
 
-def animation_report_text(summary: dict) -> str:
-    """The Markdown of :func:`write_animation_report` (also the docs' generated page)."""
+def animation_report_text(summary: dict, gif: bool = True) -> str:
+    """The Markdown of :func:`write_animation_report` (also the docs' generated page, which
+    leaves out the link to the GIF: ``gif = False``)."""
     a = summary["animation"]
     sc, figs = a["scores"], a["figures"]
     n = a["frames"]
@@ -186,7 +187,7 @@ def animation_report_text(summary: dict) -> str:
         "",
         f"Each frame shown {shown_seconds(a['time_step']):.3g} s"
         + (" (slowed down)" if shown_seconds(a["time_step"]) > a["time_step"] else "")
-        + (f"; also as [GIF]({figs['animation_gif']})" if "animation_gif" in figs else "")
+        + (f"; also as [GIF]({figs['animation_gif']})" if gif and "animation_gif" in figs else "")
         + ".",
         "",
         "## FLIP per frame",
