@@ -117,6 +117,14 @@ def run_calibrate_animated(exp, variant: str, out: Path, solver: str, cache=None
     from .report.animation import animation_figures, write_animation_report
     from .report.export import export_shaders
 
+    if exp["fit.input_noise"] != "ignore":
+        from .scene.errors import ExperimentError
+
+        raise ExperimentError(
+            f'fit.input_noise = "{exp["fit.input_noise"]}" is not built for an animated '
+            "experiment (its frames are fitted jointly by least squares); use fit.input_noise = "
+            '"ignore", or --set animation.frames=1 to fit its frame 0 that way'
+        )
     t_start = time.perf_counter() - setup_s
     data = load_frames(exp, variant, cache)
     frames, refs, inputs = data["frames"], data["refs"], data["inputs"]

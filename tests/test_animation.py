@@ -101,7 +101,8 @@ def test_moved_scene_renders_as_one_built_for_the_frame(mi):
 
 def test_still_only_commands_refuse_an_animated_experiment(tmp_path, capsys):
     """tradeoff, failures, stability and a fit over several experiments say that they take still
-    frames and how to run them (exit code 2, nothing written)."""
+    frames and how to run them (exit code 2, nothing written); so does calibrate for the texture
+    noise decorrelation, which it does not do over frames."""
     from conftest import REPO
     from study.cli import main
 
@@ -116,6 +117,10 @@ def test_still_only_commands_refuse_an_animated_experiment(tmp_path, capsys):
         err = capsys.readouterr().err
         assert "animation.frames = 8" in err and "--set animation.frames=1" in err, err
     assert not (tmp_path / "x").exists()
+    decorrelate = ["--set", 'fit.input_noise="decorrelate"']
+    assert main(["calibrate", exp, "--out", str(tmp_path / "y")] + decorrelate) == 2
+    err = capsys.readouterr().err
+    assert "not built for an animated experiment" in err and "--set animation.frames=1" in err
 
 
 def test_frames_are_still_experiments_with_their_own_keys():
