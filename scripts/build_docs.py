@@ -12,6 +12,8 @@ Every table of results in ``docs/`` is written by this script, never by hand:
 * ``docs/results/stability/<phase>/stability.md``: from the phase's ``summary.json``;
 * ``docs/results/search/report.md``: adaptive against exhaustive search, from the
   ``bench.json`` that ``benchmarks/bench_search.py --json`` writes;
+* ``docs/results/animation/report.md``: the animated calibration's report, from the
+  ``constants.json`` that ``study calibrate experiments/animated.toml`` writes;
 * ``docs/experiment-keys.md``: the experiment file's key table, from the schema.
 
 Re-running a study into ``docs/results/<study>`` and then this script refreshes the pages::
@@ -67,6 +69,7 @@ def _tradeoff_summary(folder: Path) -> dict:
 
 def generated() -> dict[Path, str]:
     """Every generated page: path -> its Markdown."""
+    from study.report.animation import animation_report_text
     from study.report.stability import stability_report_text
     from study.report.tradeoff import tradeoff_report_text
     from study.scene.experiment import schema_markdown
@@ -77,6 +80,9 @@ def generated() -> dict[Path, str]:
         pages[folder / "report.md"] = tradeoff_report_text(_tradeoff_summary(folder))
     pages[RESULTS / "failures" / "report.md"] = _failures_page(RESULTS / "failures")
     pages[RESULTS / "search" / "report.md"] = _search_page(_json(RESULTS / "search" / "bench.json"))
+    pages[RESULTS / "animation" / "report.md"] = animation_report_text(
+        _json(RESULTS / "animation" / "constants.json"), gif=False
+    )
     for phase in STABILITY_PHASES:
         folder = RESULTS / phase
         pages[folder / "stability.md"] = stability_report_text(_json(folder / "summary.json"))

@@ -14,14 +14,22 @@ from .report.gl_check import gl_check, target_checks
 from ._progress import log as _log
 
 
-def prepare(experiment, out, overrides=None, variant=None):
+def prepare(experiment, out, overrides=None, variant=None, frames: bool = False):
     """Load the experiment (its files validated), initialise the backend, check what needs it
-    (the mesh), create the output folder."""
+    (the mesh), create the output folder. ``frames``: the command handles every frame of an
+    animated experiment (else it says that it uses frame 0)."""
     from .scene.user_scene import check_scene
     from .scene.view import check_water_in_view
 
     exp = load_experiment(experiment, overrides)
     check_water_in_view(exp)
+    from .scene.frames import is_animated
+
+    if is_animated(exp) and not frames:
+        _log(
+            f"experiment: {exp['name']} has {exp['animation.frames']} frames; this command uses "
+            "frame 0 (study calibrate fits every frame)"
+        )
     variant = init_backend(variant or exp["variant"])
     check_scene(exp)
     out = Path(out)
@@ -168,6 +176,7 @@ def run_tradeoff(
     (``study.studies.tradeoff``); tables, ``pareto.png``, ``report.md`` and shaders in ``out``."""
     from .studies.tradeoff import run_tradeoff as run
 
+    _refuse_animated(experiments, overrides, "study tradeoff")
     return run(
         list(experiments),
         out,
@@ -189,6 +198,7 @@ def run_stability(
     (``study.studies.stability``); tables, charts and ``stability.md`` in ``out``."""
     from .studies.stability import run_stability as run
 
+    _refuse_animated(experiments, overrides, "study stability")
     return run(
         list(experiments),
         out,
@@ -199,6 +209,14 @@ def run_stability(
         log=_log,
         **options,
     )
+
+
+def _refuse_animated(experiments, overrides, command: str) -> None:
+    """ExperimentError if any of ``experiments`` is animated (``command`` takes still frames)."""
+    from .scene.frames import refuse_animated
+
+    for path in experiments:
+        refuse_animated(load_experiment(path, overrides), command)
 
 
 def run_export(constants_json, out, targets=None) -> list:
@@ -222,7 +240,9 @@ def run_export(constants_json, out, targets=None) -> list:
 
 def run_calibrate(experiment, out, overrides=None, variant=None, solver=None, cache=None) -> dict:
     """``study calibrate``: reference (cached), fit, export, GL check, figures, report.md and
-    constants.json (a ``CalibrationResult``) in ``out``. Returns the JSON object written."""
+    constants.json (a ``CalibrationResult``) in ``out``; an animated experiment
+    (``animation.frames`` > 1) is fitted on all its frames (``study._anim_jobs``). Returns the JSON
+    object written."""
     from ._backend import drjit_backend
     from .fit.calibrate import calibrate_model, scene_frozen, timed
     from .fit.decorrelated import half_models, texture_half_models
@@ -233,9 +253,15 @@ def run_calibrate(experiment, out, overrides=None, variant=None, solver=None, ca
     if solver is not None and solver not in SOLVERS:
         raise ValueError(f"unknown solver {solver!r}; choose one of {', '.join(SOLVERS)}")
     t_start = time.perf_counter()
-    exp, variant, out = prepare(experiment, out, overrides, variant)
+    exp, variant, out = prepare(experiment, out, overrides, variant, frames=True)
     setup_s = time.perf_counter() - t_start
     solver = solver or exp["fit.solver"]
+    from .scene.frames import is_animated
+
+    if is_animated(exp):
+        from ._anim_jobs import run_calibrate_animated
+
+        return run_calibrate_animated(exp, variant, out, solver, cache, setup_s)
     ref, inputs, timings = load_scene_data(exp, variant, cache)
     timings = {"setup_s": setup_s, **timings}
     backend = drjit_backend(variant)
@@ -408,6 +434,8 @@ def run_failures(
     ``report.md``."""
     from .report.export import load_constants_json
     from .studies.failures import run_failures as run
+
+    _refuse_animated(experiments, overrides, "study failures")
 
     constants = load_constants_json(constants_json) if constants_json else None
     return run(

@@ -27,6 +27,10 @@ def _scenes(experiments, overrides, variant, cache):
     if not experiments:
         raise ValueError("no experiment given")
     exps = [load_experiment(e, overrides) for e in experiments]
+    from .scene.frames import refuse_animated
+
+    for exp in exps:
+        refuse_animated(exp, "a fit over several experiments")
     variant = init_backend(variant or exps[0]["variant"])
     scenes, seen = [], {}
     for path, exp in zip(experiments, exps):

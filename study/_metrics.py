@@ -118,3 +118,87 @@ def information_criteria(residual: np.ndarray, k: int) -> dict:
         "aic": float(ll + 2 * k),
         "bic": float(ll + k * np.log(n)),
     }
+
+
+def temporal_errors(
+    references: list,
+    shaded: list,
+    mask: np.ndarray,
+    stderr: list | None = None,
+    passes: list | None = None,
+) -> dict:
+    """The shader's frame-to-frame change against the reference's, on the masked pixels.
+
+    ``references``, ``shaded``: the frames (n >= 2 of (H, W, 3) linear RGB each); ``mask``: (H, W)
+    bool, the pixels that are water in every frame; ``stderr``: the references' per-pixel
+    standard errors (optional). With ``dR_k = R_{k+1} - R_k`` and ``dS_k = S_{k+1} - S_k``:
+
+    * ``trmse``: RMS of ``dS - dR`` over pairs, pixels and channels (0: the shader changes from
+      frame to frame exactly as the reference does); ``per_pair``: the same for each pair;
+    * ``reference_change``, ``shader_change``: RMS of ``dR`` and of ``dS``; ``change_ratio``:
+      shader over reference (below 1 the shader moves less than the water, above 1 it flickers
+      more);
+    * ``noise_floor`` (with ``stderr``): ``sqrt(mean(se_k^2 + se_{k+1}^2))``, the RMS of ``dR``'s
+      Monte Carlo noise if the frames' samples were independent (an upper bound here: the frames
+      share their sampler seeds, so part of their noise cancels in ``dR``); a ``trmse`` near it
+      is within the reference's noise;
+    * ``noise`` (with ``passes``: each frame's independent passes (P, H, W, 3), or None where not
+      kept): the RMS standard error of ``dR`` measured from the spread over the passes of the
+      passes' own differences (the frames' shared seeds included), over the pairs whose two frames
+      have passes (``noise_pairs`` of them); ``trmse_excess``: ``sqrt(max(trmse^2 - noise^2, 0))``,
+      the part of ``trmse`` the reference's noise does not explain; ``reference_change_excess``:
+      ``sqrt(max(reference_change^2 - noise^2, 0))``, the reference's change without its noise,
+      and ``change_ratio_excess``: ``shader_change`` over it;
+    * ``maps``: (H, W) float32 maps of the RMS over pairs and channels of ``dS - dR``
+      (``flicker``), ``dR`` (``reference``) and ``dS`` (``shader``), 0 outside ``mask``.
+
+    Raises ValueError on fewer than two frames, mismatched shapes, an empty mask or non-finite
+    pixels in the mask."""
+    n = len(references)
+    if n < 2 or len(shaded) != n:
+        raise ValueError(
+            f"a temporal error needs two or more frames on both sides (got {n} references, "
+            f"{len(shaded)} shader frames); set animation.frames >= 2"
+        )
+    if not mask.any():
+        raise ValueError("temporal error: no pixel is water in every frame")
+    for i, (a, b) in enumerate(zip(references, shaded)):
+        if a.shape != b.shape or a.shape[:2] != mask.shape:
+            raise ValueError(f"temporal error: frame {i} shapes {a.shape}, {b.shape}, {mask.shape}")
+        check_finite(f"temporal error, reference frame {i}", a, mask)
+        check_finite(f"temporal error, shader frame {i}", b, mask)
+    R = np.stack([np.asarray(a, np.float64) for a in references])
+    S = np.stack([np.asarray(b, np.float64) for b in shaded])
+    dR, dS = np.diff(R, axis=0), np.diff(S, axis=0)
+    e = (dS - dR)[:, mask]  # (n - 1, m, 3)
+    out = {
+        "trmse": float(np.sqrt(np.mean(e**2))),
+        "per_pair": [float(np.sqrt(np.mean(p**2))) for p in e],
+        "reference_change": float(np.sqrt(np.mean(dR[:, mask] ** 2))),
+        "shader_change": float(np.sqrt(np.mean(dS[:, mask] ** 2))),
+    }
+    ref_change = out["reference_change"]
+    out["change_ratio"] = out["shader_change"] / ref_change if ref_change > 0 else float("inf")
+    if stderr is not None:
+        v = np.stack([np.square(np.asarray(s, np.float64)) for s in stderr])
+        out["noise_floor"] = float(np.sqrt(np.mean((v[1:] + v[:-1])[:, mask])))
+    if passes is not None:
+        var = [
+            np.var(np.asarray(b, np.float64) - a, axis=0, ddof=1)[mask] / len(a)
+            for a, b in zip(passes[:-1], passes[1:])
+            if a is not None and b is not None
+        ]
+        if var:
+            out["noise"] = float(np.sqrt(np.mean(var)))
+            out["noise_pairs"] = len(var)
+            out["trmse_excess"] = float(np.sqrt(max(out["trmse"] ** 2 - out["noise"] ** 2, 0.0)))
+            rc = float(np.sqrt(max(ref_change**2 - out["noise"] ** 2, 0.0)))
+            out["reference_change_excess"] = rc
+            out["change_ratio_excess"] = out["shader_change"] / rc if rc > 0 else float("inf")
+
+    def rms_map(d):
+        m = np.sqrt(np.mean(d**2, axis=(0, 3))).astype(np.float32)
+        return np.where(mask, m, 0.0).astype(np.float32)
+
+    out["maps"] = {"flicker": rms_map(dS - dR), "reference": rms_map(dR), "shader": rms_map(dS)}
+    return out

@@ -35,6 +35,9 @@ BAD = [
     ({"floor": {"depth": True}}, r"floor.depth: expected a number, got True"),
     ({"resolution": [256, 0]}, r"resolution: 0 is out of range"),
     ({"waves": {"offsets": [[0, 0]]}}, r"waves.offsets: expected 4 pairs"),
+    ({"animation": {"frames": 0}}, r"animation.frames: 0 is out of range"),
+    ({"animation": {"velocities": [[0, 0]]}}, r"animation.velocities: expected 4 pairs"),
+    ({"animation": {"time_step": -0.1}}, r"animation.time_step: -0.1 is out of range"),
     ({"fit": {"solver": "newton"}}, r"fit.solver: unknown value 'newton'.*levenberg_marquardt"),
     (
         {"fit": {"parameters": ["attenuation_distance", "fresnel"]}},

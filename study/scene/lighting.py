@@ -310,13 +310,17 @@ def denoise_dry(
 
 
 def lighting_colour(
-    exp: Experiment, extent, size: int, seed: int = 0, world_y=None, progress=None
+    exp: Experiment, extent, size: int, seed: int = 0, world_y=None, progress=None, shared=None
 ) -> tuple[np.ndarray, dict, np.ndarray]:
     """(size, size, 3) float32 linear RGB top-down colour over ``extent`` (GL order) by
     lighting x albedo inside the pool and the dry colour render outside; a dict with the
     measured noise (``noise``: RMS standard error of the colour over the pool texels) and the
     settings used; and the colour's two independent halves (2, size, size, 3) float32, each from
-    half of the lighting passes (the dry render outside the pool is shared by both)."""
+    half of the lighting passes (the dry render outside the pool is shared by both).
+    ``shared``: a :class:`~.frames.FrameShared` of an animation's frames, which then share the
+    lighting scene (its water moved to each frame's waves) and the dry render with its albedo."""
+    from .frames import shared_part
+    from .mitsuba_scene import set_waves
     from .topdown import top_down_world_y, underwater_camera_height
 
     wet = exp["reference.refraction_lighting"] == "underwater"
@@ -333,7 +337,15 @@ def lighting_colour(
     spp = exp["reference.bounce_spp"] if traced else exp["reference.texture_spp"]
     # sun_bounces: all the sun's light traced from the sun, so the path tracer sees the sky alone
     sun_bounces = traced and exp["reference.sun_bounces"] == "photons"
-    scene = lighting_scene(exp, wet, sky_only=sun_bounces)
+    if shared is None:
+        scene = lighting_scene(exp, wet, sky_only=sun_bounces)
+    else:
+        scene = shared.scene(
+            exp,
+            "lighting_scene",
+            lambda: lighting_scene(exp, wet, sky_only=sun_bounces),
+            lambda sc, e: set_waves(sc[0], e),
+        )
     lighting, lighting_se, halves = render_lighting(
         exp,
         n_light,
@@ -345,7 +357,6 @@ def lighting_colour(
         without_direct=traced,
         scene=scene,
     )
-    dry, albedo = render_dry(exp, extent, size, exp["reference.wall_spp"], seed)
     if world_y is None:
         world_y = top_down_world_y(exp, extent, size)
     X, Z = texel_centres(extent, size)
@@ -353,9 +364,14 @@ def lighting_colour(
     inside = (np.abs(X) < hx) & (np.abs(Z) < hz) & (world_y < y_cam)
     pool = pool_extent(exp)
 
-    wall_info = {}
-    if exp["reference.wall_denoise"] == "oidn" and not inside.all():
-        dry, wall_info = denoise_dry(dry, albedo, ~inside)
+    def dry_render():
+        dry, albedo = render_dry(exp, extent, size, exp["reference.wall_spp"], seed)
+        wall_info = {}
+        if exp["reference.wall_denoise"] == "oidn" and not inside.all():
+            dry, wall_info = denoise_dry(dry, albedo, ~inside)
+        return dry, albedo, wall_info
+
+    dry, albedo, wall_info = shared_part(shared, exp, "dry_render", dry_render)
 
     def compose(light):  # lighting x albedo inside the pool, the dry render outside
         return np.where(inside[..., None], interpolate(light, pool, X, Z) * albedo, dry)

@@ -305,6 +305,22 @@ def water_mesh(mi, exp: Experiment, y_bottom: float, medium=None, bsdf: dict | N
     return _mesh(mi, "water", pos, faces, normals=nor, outward=outward, **props)
 
 
+def set_waves(scene, exp: Experiment) -> None:
+    """Move the water surface of ``scene`` (a scene of :func:`build_scene` or of the top-down
+    renders, built for an experiment that differs from ``exp`` at most in ``waves.offsets``, a
+    frame of the same animation) to the waves of ``exp``: the vertex positions, normals and faces
+    :func:`water_mesh` builds for ``exp`` replace the shape ``water``'s, and the acceleration
+    structure is rebuilt. The scene then renders exactly as one built for ``exp``
+    (``tests/test_animation.py`` checks it bit for bit)."""
+    import mitsuba as mi
+
+    new = mi.traverse(water_mesh(mi, exp, floor_bottom(exp)))
+    params = mi.traverse(scene)
+    for name in ("vertex_positions", "vertex_normals", "faces"):
+        params[f"water.{name}"] = new[name]
+    params.update()
+
+
 def has_medium(exp: Experiment) -> bool:
     return any(v > 0 for v in exp["water.sigma_t"])
 

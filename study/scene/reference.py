@@ -54,12 +54,16 @@ class Reference:
         stderr: (H, W, 3) float32 per-pixel standard error of ``image``.
         provenance: dict (hash, spp, seeds, variant, versions, seconds, noise, ...).
         path: the cached EXR, if any.
+        passes: (N_SEEDS, H, W, 3) float32 the independent passes ``image`` is the mean of, when
+            kept (``keep_passes``: an animation's frames, whose frame-to-frame differences take
+            their noise from them); None otherwise.
     """
 
     image: np.ndarray
     stderr: np.ndarray
     provenance: dict
     path: Path | None = None
+    passes: np.ndarray | None = None
 
     @property
     def noise(self) -> float:
@@ -150,13 +154,14 @@ def noise_of(passes: np.ndarray, mask: np.ndarray) -> tuple[np.ndarray, float]:
     return se, float(np.sqrt(np.mean(se[mask] ** 2)))
 
 
-def choose_spp(exp: Experiment, progress=None) -> tuple[int, dict]:
-    """Pick spp for ``reference.target_noise`` from a measured pilot; return (spp, info)."""
+def choose_spp(exp: Experiment, progress=None, scene=None) -> tuple[int, dict]:
+    """Pick spp for ``reference.target_noise`` from a measured pilot; return (spp, info).
+    ``scene``: the loaded scene of ``exp`` (default: built here)."""
     w, h = exp["resolution"]
     t0 = time.perf_counter()
     from .mitsuba_scene import build_scene, sampler_spp
 
-    scene = build_scene(exp)
+    scene = build_scene(exp) if scene is None else scene
     per_pass = sampler_spp(exp["reference.sampler"], PILOT_SPP)  # K passes of PILOT_SPP
     pilot = render_passes(
         exp, per_pass, N_SEEDS, seed0=10_000 + exp["reference.seed"], scene=scene, progress=progress
@@ -179,20 +184,27 @@ def choose_spp(exp: Experiment, progress=None) -> tuple[int, dict]:
 
 
 def render_reference(
-    exp: Experiment, variant: str, spp: int | None = None, progress=None
+    exp: Experiment,
+    variant: str,
+    spp: int | None = None,
+    progress=None,
+    scene=None,
+    keep_passes: bool = False,
 ) -> Reference:
-    """Render the reference (no cache): ``N_SEEDS`` independent passes, mean and noise."""
+    """Render the reference (no cache): ``N_SEEDS`` independent passes, mean and noise.
+    ``scene``: the loaded scene of ``exp`` (:func:`~.mitsuba_scene.build_scene`, e.g. one
+    animation frame's scene moved to this frame's waves), default: built here."""
     info = {}
     if spp is None:
         spp, info = (
-            choose_spp(exp, progress)
+            choose_spp(exp, progress, scene)
             if exp["reference.spp"] == "auto"
             else (int(exp["reference.spp"]), {})
         )
     per_pass = pass_spp(exp, spp)
     from .mitsuba_scene import build_scene
 
-    scene = build_scene(exp)
+    scene = build_scene(exp) if scene is None else scene
     t0 = time.perf_counter()
     passes = render_passes(
         exp,
@@ -227,17 +239,26 @@ def render_reference(
         "auto_spp": info,
         "integrator": "volpath" if any(v > 0 for v in exp["water.sigma_t"]) else "path",
     }
-    return Reference(image.astype(np.float32), stderr, prov)
+    return Reference(image.astype(np.float32), stderr, prov, passes=passes if keep_passes else None)
 
 
 def load_or_render(
-    exp: Experiment, variant: str, cache: Path | None = None, progress=None, log=print
+    exp: Experiment,
+    variant: str,
+    cache: Path | None = None,
+    progress=None,
+    log=print,
+    scene=None,
+    keep_passes: bool = False,
 ) -> Reference:
     """The cached reference of ``exp`` if its key matches, else a fresh render written to the cache.
 
     Safe with concurrent callers (a sweep's workers): a miss takes the entry's lock, looks again
     (another process may have rendered it meanwhile) and only then renders, so one key is
-    rendered once."""
+    rendered once. ``scene``: a callable returning the loaded scene of ``exp``, called on a miss
+    only (an animation's frames share one scene, :class:`~.frames.FrameShared`); ``keep_passes``:
+    a fresh render keeps its passes (``Reference.passes``, stored in the EXR as layers
+    ``pass0..``; a cached file has them when it was rendered so)."""
     cache = (cache or cache_dir()) / "references"
     key = reference_key(exp, variant)
     path = cache / f"{key}.exr"
@@ -248,8 +269,17 @@ def load_or_render(
         ref = _cached_reference(exp, key, path, log)
         if ref is not None:
             return ref
-        ref = render_reference(exp, variant, progress=progress)
-        write_exr(path, ref.image, ref.provenance, extra={"stderr": ref.stderr})
+        ref = render_reference(
+            exp,
+            variant,
+            progress=progress,
+            scene=scene() if scene is not None else None,
+            keep_passes=keep_passes,
+        )
+        extra = {"stderr": ref.stderr}
+        if ref.passes is not None:
+            extra.update({f"pass{i}": p for i, p in enumerate(ref.passes)})
+        write_exr(path, ref.image, ref.provenance, extra=extra)
     ref.path = path
     log(
         f"reference: rendered {ref.spp} spp in {ref.provenance['render_seconds']:.1f} s, "
@@ -272,7 +302,9 @@ def _cached_reference(exp: Experiment, key: str, path: Path, log) -> Reference |
             and se.shape == rgb.shape
         ):
             log(f"reference: cached {path} (spp {prov['spp']}, noise {prov['noise']:.2e})")
-            return Reference(rgb, se, prov, path)
+            passes = [extra.get(f"pass{i}") for i in range(N_SEEDS)]
+            kept = np.stack(passes) if all(p is not None for p in passes) else None
+            return Reference(rgb, se, prov, path, passes=kept)
         log(f"reference: {path} does not match this experiment; re-rendering")
     except ValueError as exc:
         log(f"reference: unreadable cache file ({exc}); re-rendering")

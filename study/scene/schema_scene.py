@@ -1,6 +1,7 @@
-"""The experiment keys of the scene itself: image, camera, pool, floor, water, waves, sky, sun
-and mesh (``SCENE_KEYS``, in the docs' order), and :class:`Field`, the description of one key.
-``study.scene.schema`` joins them with the study's keys (``schema_study``)."""
+"""The experiment keys of the scene itself: image, camera, pool, floor, water, waves, the waves'
+animation, sky, sun and mesh (``SCENE_KEYS``, in the docs' order), and :class:`Field`, the
+description of one key. ``study.scene.schema`` joins them with the study's keys
+(``schema_study``)."""
 
 from __future__ import annotations
 
@@ -180,6 +181,26 @@ SCENE_KEYS: dict[str, Field] = {
         100.0,
     ),
     "waves.normal_map_size": Field("int", 256, "Normal-map resolution.", "texels", 8, 4096),
+    "animation.frames": Field(
+        "int",
+        1,
+        "Frames of an animated experiment (1 = a still frame). Frame k moves the four "
+        "normal-map layers to waves.offsets + k * time_step * velocities, on both sides: the "
+        "shader's wave1..wave4 and the reference's displaced surface.",
+        "",
+        1,
+        64,
+    ),
+    "animation.time_step": Field(
+        "float", 1.0 / 30.0, "Time between two frames.", "seconds", 1e-4, 10.0
+    ),
+    "animation.velocities": Field(
+        "vec2x4",
+        [[0.3, 0.0], [-0.21, 0.21], [0.0, 0.3], [0.21, 0.21]],
+        "Velocity of each normal-map layer wave1..wave4 (the application adds velocity * time "
+        "to the layer's offset every frame).",
+        "texture units per second",
+    ),
     "sky.zenith": Field(
         "vec3", [0.25, 0.45, 0.9], "Sky radiance at the zenith.", "linear RGB", 0.0, 1e4
     ),

@@ -157,12 +157,17 @@ def build_shader_inputs(
     height: int | None = None,
     progress=None,
     info: dict | None = None,
+    shared=None,
 ) -> ShaderInputs:
     """All shader inputs of ``exp`` at output resolution (width, height) (default: the
     experiment's). ``progress``: a ``study._progress.Stages`` that times and reports each stage
     (default: quiet). ``info``, if given, receives how the refraction texture was made (``texture``:
-    method, settings and, for ``lighting``, its measured noise)."""
+    method, settings and, for ``lighting``, its measured noise). ``shared``: a
+    :class:`~.frames.FrameShared` of an animation's frames: what does not depend on the wave
+    offsets (world y, the dry render and albedo, the lighting scene, the reflection textures of a
+    mesh, the normal map, the cube map, the LUT) is then built once for all frames."""
     from .._progress import Stages
+    from .frames import shared_part
 
     st = progress or Stages(quiet=True)
     width = width or exp["resolution"][0]
@@ -170,7 +175,7 @@ def build_shader_inputs(
     extent = texture_extent(exp)
     size = exp["reference.texture_size"]
     with st.stage("inputs.world_y_s", f"shader inputs: world-y ray cast ({size}x{size})"):
-        world_y = top_down_world_y(exp, extent, size)
+        world_y = shared_part(shared, exp, "world_y", lambda: top_down_world_y(exp, extent, size))
     if exp["reference.texture_method"] == "lighting":
         from .lighting import lighting_colour
 
@@ -184,6 +189,7 @@ def build_shader_inputs(
                 exp["reference.seed"],
                 world_y=world_y,
                 progress=st.counter("  passes"),
+                shared=shared,
             )
     else:
         colour = top_down_colour(
@@ -206,8 +212,13 @@ def build_shader_inputs(
         with st.stage(
             "inputs.mesh_reflection_s", "shader inputs: reflection textures with the mesh"
         ):
-            refl_y, refl_col, refl_extent = mesh_reflection_textures(
-                exp, extent, size, progress=st.counter("  passes")
+            refl_y, refl_col, refl_extent = shared_part(
+                shared,
+                exp,
+                "mesh_reflection",
+                lambda: mesh_reflection_textures(
+                    exp, extent, size, progress=st.counter("  passes")
+                ),
             )
         tm1 = ortho_tex_matrix(*refl_extent)
     else:
@@ -219,10 +230,15 @@ def build_shader_inputs(
     lightpos, lightcolor = light_of(exp)
     c = exp.section("camera")
     with st.stage("inputs.maps_s", "shader inputs: normal map, sky cube map, Fresnel LUT"):
-        normal_map, cubemap, lut = (
-            waves.normal_map(exp["waves.normal_map_size"]),
-            sky_cubemap(exp),
-            shader_fresnel_lut(exp),
+        normal_map, cubemap, lut = shared_part(
+            shared,
+            exp,
+            "maps",
+            lambda: (
+                waves.normal_map(exp["waves.normal_map_size"]),
+                sky_cubemap(exp),
+                shader_fresnel_lut(exp),
+            ),
         )
     return ShaderInputs(
         refraction_texture=colour,
@@ -279,13 +295,15 @@ def half_inputs(exp: Experiment, inputs: ShaderInputs) -> tuple[ShaderInputs, Sh
 
 
 def load_or_build_shader_inputs(
-    exp: Experiment, variant: str, cache=None, log=print, progress=None
+    exp: Experiment, variant: str, cache=None, log=print, progress=None, shared=None
 ) -> ShaderInputs:
     """The shader inputs of ``exp`` from ``<cache>/inputs/<key>.npz`` if present, else built
     and written there atomically. The key hashes every experiment value that affects them
     (``Experiment.inputs_hash``), the variant, ``SCENE_VERSION``, ``INPUTS_VERSION``, this
     module's sizes and the package versions. The file name is the key, and files are written
-    atomically, so a file under a key holds exactly what was built for it."""
+    atomically, so a file under a key holds exactly what was built for it. ``shared``: see
+    :func:`build_shader_inputs` (the parts it shares are built the same way, so the file is the
+    same)."""
     import hashlib
     import json
 
@@ -315,7 +333,7 @@ def load_or_build_shader_inputs(
         if inputs is not None:
             return inputs
         info: dict = {}
-        inputs = build_shader_inputs(exp, progress=progress, info=info)
+        inputs = build_shader_inputs(exp, progress=progress, info=info, shared=shared)
         path.parent.mkdir(parents=True, exist_ok=True)
         with disk_full(path.parent):
             inputs.save(path)

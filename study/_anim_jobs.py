@@ -1,0 +1,272 @@
+"""``study calibrate`` on an animated experiment (``animation.frames`` > 1): one constants block
+fitted on all frames, reported per frame and over time, exported with the wave offsets as the
+vertex shader's uniforms.
+
+Per frame ``k`` (``study.scene.frames.frame_experiment``): the reference and the shader inputs,
+each cached under the frame's own key; the parts that do not depend on the wave offsets are
+built once (``FrameShared``). The fit is the joint fit of ``study.fit.joint`` with one scene per
+frame (each frame weighted equally); beside it frame 0 is fitted alone the same way, and both
+constants blocks (and the start constants) are scored on every frame: FLIP and RMSE per frame,
+their mean and spread, and the temporal error (``study._metrics.temporal_errors``)."""
+
+from __future__ import annotations
+
+import time
+from pathlib import Path
+
+import numpy as np
+
+from ._io import write_exr, write_json
+from ._progress import Stages
+from ._progress import log as _log
+from .report.gl_check import gl_check, target_checks
+
+
+def load_frames(exp, variant: str, cache=None) -> dict:
+    """Every frame of ``exp``: ``frames`` (the frame experiments), ``refs`` (``Reference``),
+    ``inputs`` (``ShaderInputs``), ``timings`` (per frame and summed: ``reference_s``,
+    ``inputs_s``) and ``shared`` (the ``FrameShared`` record: what was built once, how often it
+    was reused)."""
+    from .scene.baseline_inputs import inputs_for_shader
+    from .scene.frames import FrameShared, frames_of
+    from .scene.mitsuba_scene import build_scene, set_waves
+    from .scene.reference import load_or_render
+    from .scene.shader_inputs import load_or_build_shader_inputs
+
+    shared = FrameShared()
+    frames = frames_of(exp)
+    n = len(frames)
+    refs, inputs, timings = [], [], {}
+    for k, e in enumerate(frames):
+        st = Stages(log=_log, prefix=f"frame{k}.")
+
+        def scene(e=e):
+            return shared.scene(e, "reference_scene", lambda: build_scene(e), set_waves)
+
+        with st.stage("reference_s", f"frame {k + 1}/{n}: reference"):
+            refs.append(
+                load_or_render(
+                    e,
+                    variant,
+                    cache=cache,
+                    progress=st.counter("  reference passes"),
+                    log=_log,
+                    scene=scene,
+                    keep_passes=True,
+                )
+            )
+        with st.stage("inputs_s", f"frame {k + 1}/{n}: shader inputs"):
+            i = load_or_build_shader_inputs(
+                e, variant, cache=cache, log=_log, progress=st, shared=shared
+            )
+            inputs.append(inputs_for_shader(e, i, e["fit.shader"], variant, cache=cache, log=_log))
+        timings.update(st.timings)
+    for what in ("reference_s", "inputs_s"):
+        timings[what] = sum(timings[f"frame{k}.{what}"] for k in range(n))
+    record = {"built_once": list(shared.built), "reused": dict(shared.reused)}
+    return {"frames": frames, "refs": refs, "inputs": inputs, "timings": timings, "shared": record}
+
+
+def _score(frames, refs, inputs, backend, constants: dict) -> dict:
+    """Each constants block (name -> Constants) on every frame at full resolution: per frame
+    RMSE and FLIP, their mean and spread (standard deviation over frames), the images, and the
+    temporal error on the pixels that are water in every frame."""
+    from ._metrics import errors, temporal_errors
+    from .fit.model import ShaderModel
+
+    full = [
+        ShaderModel.from_experiment(
+            e, i, r.image, backend=backend, resolution=tuple(e["resolution"])
+        )
+        for e, i, r in zip(frames, inputs, refs)
+    ]
+    mask = np.logical_and.reduce([m.mask for m in full])
+    out = {"mask": mask, "images": {}, "scores": {}}
+    for name, c in constants.items():
+        imgs = [m.render(c)[0] for m in full]
+        per = [errors(r.image, img, m.mask) for r, img, m in zip(refs, imgs, full)]
+        flips = np.array([p["flip"] for p in per])
+        rmses = np.array([p["rmse"] for p in per])
+        t = temporal_errors(
+            [r.image for r in refs], imgs, mask, [r.stderr for r in refs], [r.passes for r in refs]
+        )
+        out["images"][name] = imgs
+        out["scores"][name] = {
+            "flip": flips.tolist(),
+            "rmse": rmses.tolist(),
+            "flip_mean": float(flips.mean()),
+            "flip_spread": float(flips.std(ddof=1)),
+            "rmse_mean": float(rmses.mean()),
+            "rmse_spread": float(rmses.std(ddof=1)),
+            "temporal": {k: v for k, v in t.items() if k != "maps"},
+            "maps": t["maps"],
+        }
+    return out
+
+
+def run_calibrate_animated(exp, variant: str, out: Path, solver: str, cache=None, setup_s=0.0):
+    """The animated calibration of ``exp`` (backend initialised, ``out`` created): per-frame data,
+    the joint fit over all frames and the fit of frame 0 alone, scored on every frame; the
+    exported shaders (GL-checked on every frame with its own wave uniforms), ``animation.webp``
+    and ``.gif`` (reference | fitted | FLIP error), ``temporal.png``, ``constants.json`` and
+    ``report.md``. Returns the JSON object written."""
+    from ._backend import drjit_backend
+    from .fit.calibrate import calibrate_model, scene_frozen, timed
+    from .fit.joint import joint_calibrate
+    from .fit.model import ShaderModel, constants_from_experiment
+    from .report.animation import animation_figures, write_animation_report
+    from .report.export import export_shaders
+
+    if exp["fit.input_noise"] != "ignore":
+        from .scene.errors import ExperimentError
+
+        raise ExperimentError(
+            f'fit.input_noise = "{exp["fit.input_noise"]}" is not built for an animated '
+            "experiment (its frames are fitted jointly by least squares); use fit.input_noise = "
+            '"ignore", or --set animation.frames=1 to fit its frame 0 that way'
+        )
+    t_start = time.perf_counter() - setup_s
+    data = load_frames(exp, variant, cache)
+    frames, refs, inputs = data["frames"], data["refs"], data["inputs"]
+    timings = {"setup_s": setup_s, **data["timings"]}
+    backend = drjit_backend(variant)
+    start = constants_from_experiment(exp)
+    names = [f"frame{k}" for k in range(len(frames))]
+    with timed(timings, "model_s"):
+        models = [
+            ShaderModel.from_experiment(e, i, r.image, backend=backend, stderr_full=r.stderr)
+            for e, i, r in zip(frames, inputs, refs)
+        ]
+    frozen = [scene_frozen(e) for e in frames]
+    params, steps = exp["fit.parameters"], exp["fit.max_steps"]
+    _log(f"calibrate: fitting {params} of {models[0].shader} with {solver} on {len(frames)} frames")
+    with timed(timings, "fit_s"):
+        joint = joint_calibrate(models, start, params, solver, steps, frozen, names)
+    _log("calibrate: fitting frame 0 alone (the still frame's constants)")
+    with timed(timings, "fit_single_s"):
+        single = calibrate_model(models[0], start, params, solver, steps, frozen_by_scene=frozen[0])
+    with timed(timings, "evaluate_s"):
+        blocks = {"start": start, "single_frame": single.fitted, "all_frames": joint.fitted}
+        losses = _losses(models, blocks)
+        ev = _score(
+            frames,
+            refs,
+            inputs,
+            backend,
+            {"start": start, "single_frame": single.fitted, "all_frames": joint.fitted},
+        )
+    shader = models[0].shader
+    with timed(timings, "export_s"):
+        export_shaders(joint.fitted, out / "shaders", [shader], targets=None)
+        offsets = _write_offsets(out / "shaders" / "animation.json", exp, frames)
+    with timed(timings, "gl_check_s"):
+        _log(f"calibrate: running the exported shader on OpenGL, {len(frames)} frames")
+        gl_frames = [gl_check(shader, i, joint.fitted, out / "shaders") for i in inputs]
+        engine_targets = target_checks(shader, inputs[0], joint.fitted, out / "shaders")
+    with timed(timings, "figures_s"):
+        figs = animation_figures(out, refs, ev, exp["animation.time_step"])
+        write_exr(out / "fitted_frame0.exr", ev["images"]["all_frames"][0])
+    timings["total_s"] = time.perf_counter() - t_start
+    summary = _result(exp, variant, shader, joint, single, ev, solver, timings, gl_frames)
+    summary["engine_targets"] = engine_targets
+    summary["animation"].update(
+        {
+            "offsets": offsets,
+            "shared": data["shared"],
+            "figures": figs,
+            "references": _refs(refs),
+            "losses": losses,
+        }
+    )
+    write_json(out / "constants.json", summary)
+    write_animation_report(out, summary)
+    s = summary["animation"]["scores"]
+    _log(
+        f"calibrate: {len(frames)} frames, mean FLIP {s['start']['flip_mean']:.4f} -> "
+        f"{s['all_frames']['flip_mean']:.4f} (frame 0's fit: {s['single_frame']['flip_mean']:.4f})"
+        f", temporal RMSE {s['all_frames']['temporal']['trmse']:.4f}; {timings['total_s']:.0f} s;"
+        f" wrote {out}"
+    )
+    return summary
+
+
+def _losses(models, blocks: dict) -> dict:
+    """The fit's own loss (0.5 |r|^2 at the fit resolution) of each constants block: on each
+    frame and over all frames (the joint fit's weighted sum, ``JointModel``)."""
+    from .fit.joint import JointModel
+
+    joint = JointModel(models)
+    out = {}
+    for name, c in blocks.items():
+        r = joint.residual(c)
+        out[name] = {
+            "all_frames": 0.5 * float(r @ r),
+            "per_frame": [0.5 * float(np.sum(m.residual(c) ** 2)) for m in models],
+        }
+    return out
+
+
+def _write_offsets(path: Path, exp, frames) -> dict:
+    """``shaders/animation.json``: what the application sets as ``wave1..wave4`` per frame."""
+    data = {
+        "uniforms": ["wave1", "wave2", "wave3", "wave4"],
+        "rule": "wave_i(t) = offsets[i] + t * velocities[i], t in seconds, texture units",
+        "offsets": exp["waves.offsets"],
+        "velocities": exp["animation.velocities"],
+        "time_step": exp["animation.time_step"],
+        "frames": [e["waves.offsets"] for e in frames],
+    }
+    write_json(path, data)
+    return data
+
+
+def _refs(refs) -> list:
+    return [
+        {"spp": r.spp, "noise": r.noise, "key": r.provenance["key"], "path": str(r.path)}
+        for r in refs
+    ]
+
+
+def _result(exp, variant, shader, joint, single, ev, solver, timings, gl_frames) -> dict:
+    """The JSON object of ``constants.json``: a ``CalibrationResult`` of the all-frames fit (what
+    ``study export`` reads) with the per-frame and temporal record under ``animation``."""
+    from .fit.result import CalibrationResult
+
+    sc = ev["scores"]
+    gl = dict(gl_frames[0])
+    gl["passed"] = all(g.get("passed") for g in gl_frames)
+    gl["frames"] = [{k: g.get(k) for k in ("mean_abs", "p999", "passed")} for g in gl_frames]
+    result = CalibrationResult(
+        shader=shader,
+        backend=variant,
+        parameters=joint.parameters,
+        constants=joint.fitted.to_dict(),
+        error={
+            "rmse": {"default": sc["start"]["rmse_mean"], "fitted": sc["all_frames"]["rmse_mean"]},
+            "flip": {"default": sc["start"]["flip_mean"], "fitted": sc["all_frames"]["flip_mean"]},
+        },
+        solver=solver,
+        fit=joint.fit_summary,
+        identifiability=joint.identifiability,
+        timings=timings,
+        gl_check=gl,
+        experiment=exp["name"],
+        fit_resolution=exp["fit.resolution"],
+        resolution=exp["resolution"],
+    )
+    summary = result.to_json()
+    summary["animation"] = {
+        "frames": int(exp["animation.frames"]),
+        "time_step": exp["animation.time_step"],
+        "velocities": exp["animation.velocities"],
+        "single_frame": {
+            "constants": single.fitted.to_dict(),
+            "parameters": single.parameters,
+            "fit": single.fit_summary,
+        },
+        "scores": {n: {k: v for k, v in s.items() if k != "maps"} for n, s in sc.items()},
+        "mask_pixels": int(ev["mask"].sum()),
+    }
+    from .fit.result import jsonable
+
+    return jsonable(summary)
