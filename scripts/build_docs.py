@@ -13,7 +13,8 @@ Every table of results in ``docs/`` is written by this script, never by hand:
 * ``docs/results/search/report.md``: adaptive against exhaustive search, from the
   ``bench.json`` that ``benchmarks/bench_search.py --json`` writes;
 * ``docs/results/animation/report.md``: the animated calibration's report, from the
-  ``constants.json`` that ``study calibrate experiments/animated.toml`` writes;
+  ``constants.json`` that ``study calibrate experiments/animated.toml`` writes, and
+  ``schedules.md``, the same calibration at three step schedules (``schedules.json``);
 * ``docs/experiment-keys.md``: the experiment file's key table, from the schema.
 
 Re-running a study into ``docs/results/<study>`` and then this script refreshes the pages::
@@ -83,6 +84,9 @@ def generated() -> dict[Path, str]:
     pages[RESULTS / "animation" / "report.md"] = animation_report_text(
         _json(RESULTS / "animation" / "constants.json"), gif=False
     )
+    pages[RESULTS / "animation" / "schedules.md"] = _schedules_page(
+        _json(RESULTS / "animation" / "schedules.json")
+    )
     for phase in STABILITY_PHASES:
         folder = RESULTS / phase
         pages[folder / "stability.md"] = stability_report_text(_json(folder / "summary.json"))
@@ -93,6 +97,33 @@ def _json(path: Path) -> dict:
     if not path.is_file():
         raise FileNotFoundError(f"{path} is missing: re-run the study into {path.parent}")
     return json.loads(path.read_text())
+
+
+def _schedules_page(res: dict) -> str:
+    """The animated experiment's calibration at three step schedules (motion and banding)."""
+    lines = [
+        "# Step schedules in motion",
+        "",
+        f"`{res['shader']}` calibrated on `experiments/animated.toml` (8 frames, one constants "
+        "block) at each schedule; differences against the original schedule (10, 3, 40), paired "
+        "over the frames (FLIP) and the frame pairs (temporal RMSE), +- their standard error.",
+        "",
+        f"Reproduce: `{res['command']}`",
+        "",
+        "| schedule | mean FLIP | FLIP difference | temporal RMSE | temporal difference | "
+        "shader change | change ratio |",
+        "|---|---|---|---|---|---|---|",
+    ]
+    for r in res["schedules"]:
+        df, dt = r.get("flip_vs_original_schedule"), r.get("temporal_vs_original_schedule")
+        lines.append(
+            f"| ({', '.join(f'{v:g}' for v in r['schedule'])}) | {r['flip_mean']:.4f} | "
+            + (f"{df['mean']:+.4f} +- {df['se']:.5f}" if df else "-")
+            + f" | {r['temporal_rmse']:.5f} | "
+            + (f"{dt['mean']:+.6f} +- {dt['se']:.6f}" if dt else "-")
+            + f" | {r['shader_change']:.4f} | {r['change_ratio']:.3f} |"
+        )
+    return "\n".join(lines) + "\n"
 
 
 def _search_page(bench: dict) -> str:
