@@ -1,0 +1,286 @@
+"""Any GLSL water fragment shader rendered and differentiated through SPIR-V, without a port.
+
+The shader's core GLSL (``#version 330`` or later, linked with the study's ``water.vert``) is
+compiled by glslang to SPIR-V and executed on Dr.Jit types by ``_spirv_exec`` on the same
+per-pixel inputs the hand ports get (``_raster.prepare``): the result is a
+:class:`~shaders_port._frame.ShaderOutput` like a port's, and :func:`render_with_jacobian`
+runs the ports' forward-mode passes (``_frame.jacobian_passes``).
+
+Tunable constants. Each constant to set or differentiate is a declaration of the shader,
+``const float NAME = 7.5;`` or ``uniform float NAME = 7.5;`` (``float``, ``int``, ``vec3``,
+``vec4``), named in :class:`ShaderSpec` ``constants``; before compiling, each becomes a plain
+``uniform`` (its value no longer folded into the code), and the executor binds it to the
+value of the run. The study's own shaders declare the constants of ``CONSTANT_SPECS`` (their
+GLSL names); a user's shader declares its own (``study.fit.user_shader``).
+
+Bindings. The shader's inputs, uniforms and samplers are bound by name: the study's GLSL
+names (:data:`STUDY_INPUTS`, those of the shipped core shaders) bind themselves; a
+``ShaderSpec.bindings`` entry binds another name of the shader to one of them.
+
+Diagnostics: ``fetches`` and ``iterations`` per pixel, counted by the executor from the
+translated code (texture samples executed; loop bodies entered), and ``nonfinite``.
+"""
+
+from __future__ import annotations
+
+import re
+from dataclasses import dataclass, field
+
+import drjit as dr
+import numpy as np
+
+from . import _frame
+from ._frame import ShaderOutput, finish_output, jacobian_passes, resolve_constants, tangents
+from ._glsl import read_source
+from ._inputs import CONSTANT_SPECS, Constants, ShaderInputs, normal_matrix
+from ._raster import prepare
+from ._spirv_exec import Executor
+from ._spirv_module import Module, compile_fragment
+from ._texture import CLAMP, LINEAR, NEAREST, Texture2D, backend_types
+
+__all__ = ["ShaderSpec", "STUDY_INPUTS", "builtin_spec", "render", "render_with_jacobian"]
+
+# the study's inputs of a fragment shader, by the GLSL names of the shipped core shaders
+STUDY_INPUTS = {
+    "varyingVecWorldPosition": "varying vec3: world position on the water plane",
+    "varyingVecEye": "varying vec3: water point -> camera (world units)",
+    "varyingVecLight": "varying vec3: water point -> light (world units)",
+    "vTexCoord0": "varying vec4: normal-map layer 0 coordinate ((x, z)/tile + wave1, 0, 1)",
+    "vTexCoord1": "varying vec4: normal-map layer 1 coordinate",
+    "vTexCoord2": "varying vec4: normal-map layer 2 coordinate",
+    "vTexCoord3": "varying vec4: normal-map layer 3 coordinate",
+    "gl_FragCoord": "built-in: window coordinate of the pixel centre",
+    "refractionTexture": "sampler2D: top-down ground colour, linear RGB, bilinear, clamp",
+    "worldYComponent": "sampler2D: top-down ground world y (.r), nearest, clamp",
+    "normalMap": "sampler2D: wave normals 0.5 n + 0.5, bilinear, repeat",
+    "reflectionTexture": "samplerCube: sky, linear RGB, bilinear, clamp",
+    "fresnelLookup": "sampler2D: Fresnel LUT (N x 1; .r transmission, .g reflection), nearest",
+    "worldYComponentReflection": "sampler2D: world y of geometry above the water, nearest",
+    "reflectionBottom": "sampler2D: that geometry seen from below, bilinear, clamp",
+    "sceneColor": "sampler2D: screen-space scene without the water, bilinear, clamp",
+    "sceneDepth": "sampler2D: its window depth, nearest, clamp",
+    "reflection_sampler": "sampler2D: mirrored-camera reflection, bilinear, clamp",
+    "uTextureMatrix0": "mat4: world -> (s, t) of the top-down textures",
+    "uTextureMatrix1": "mat4: world -> (s, t) of the reflection textures",
+    "uModelViewProjectionMatrix": "mat4: world -> clip space of the camera",
+    "uModelViewProjectionMatrixInverse": "mat4: its inverse",
+    "uNormalMatrix": "mat3: the camera's rotation",
+    "o2v_projection_reflection": "mat4: world -> clip of the mirrored camera",
+    "screenSize": "vec2: output width, height in pixels",
+    "viewpos": "vec3: camera position",
+    "lightpos": "vec3: light position",
+    "lightcolor": "vec3: linear RGB of the highlight",
+}
+_DECL = r"^(?P<head>\s*(?:const|uniform)\s+(?P<type>float|int|vec3|vec4)\s+{name}\s*=\s*)"
+_DECL_TAIL = r"(?P<value>[^;]*)(?P<tail>;.*)$"
+
+
+@dataclass(frozen=True)
+class ShaderSpec:
+    """A fragment shader to execute: its core GLSL ``source``, a ``label`` (file name for
+    messages and debug lines), the preprocessor names ``defines``, ``constants``: GLSL name ->
+    ``CONSTANT_SPECS`` key or the user's name (each a declaration with an initializer, made a
+    uniform), and ``bindings``: shader name -> :data:`STUDY_INPUTS` name."""
+
+    source: str
+    label: str
+    defines: tuple = ()
+    constants: tuple = ()  # ((glsl name, key), ...)
+    bindings: tuple = ()  # ((shader name, study name), ...)
+    ints: tuple = field(default=())  # GLSL names of the integer constants
+
+    def prepared_source(self) -> str:
+        """The source with every declared constant a uniform without initializer (line for
+        line: the GLSL line numbers are kept)."""
+        src = self.source
+        for glsl, _ in self.constants:
+            pat = re.compile(_DECL.format(name=re.escape(glsl)) + _DECL_TAIL, re.M)
+            found = pat.search(src)
+            if found is None:
+                raise ValueError(
+                    f"{self.label}: no declaration `const|uniform <float|int|vec3|vec4> {glsl} "
+                    "= <value>;` of the constant to fit; declare it on one line"
+                )
+            decl = f"uniform {found['type']} {glsl}{found['tail']}"
+            indent = found["head"][: len(found["head"]) - len(found["head"].lstrip())]
+            src = src[: found.start()] + indent + decl + src[found.end() :]
+        return src
+
+
+_MODULES: dict = {}
+
+
+def module_of(spec: ShaderSpec) -> Module:
+    """The compiled, decoded module of ``spec`` (cached by source and defines)."""
+    key = (spec.prepared_source(), spec.defines, spec.label)
+    mod = _MODULES.get(key)
+    if mod is None:
+        mod = Module(compile_fragment(key[0], spec.label, spec.defines), label=spec.label)
+        if len(_MODULES) > 64:
+            _MODULES.clear()
+        _MODULES[key] = mod
+    return mod
+
+
+def builtin_spec(shader: str, defines: tuple = ()) -> ShaderSpec:
+    """The spec of a shipped shader (``water_refraction``, ``water_reflection``,
+    ``water_baseline``): its core file and the ``CONSTANT_SPECS`` it declares."""
+    from ._glsl import declared_constants
+
+    src = read_source(shader, "frag", "core")
+    names = declared_constants(src)
+    consts = tuple((CONSTANT_SPECS[n][0], n) for n in names)
+    return ShaderSpec(src, f"{shader}.frag", tuple(defines), consts)
+
+
+def _columns(M) -> list:
+    a = np.asarray(M, np.float32)
+    return [[float(a[i, j]) for i in range(a.shape[0])] for j in range(a.shape[1])]
+
+
+def study_bindings(m, P, inputs: ShaderInputs) -> dict:
+    """The values of :data:`STUDY_INPUTS` for one prepared frame."""
+    r = P.raster
+    b = {
+        "varyingVecWorldPosition": [P.varyingVecWorldPosition[i] for i in range(3)],
+        "varyingVecEye": [P.varyingVecEye[i] for i in range(3)],
+        "varyingVecLight": [P.varyingVecLight[i] for i in range(3)],
+        "refractionTexture": P.refractionTexture,
+        "worldYComponent": P.worldYComponent,
+        "normalMap": P.normalMap,
+        "reflectionTexture": P.reflectionTexture,
+        "fresnelLookup": P.fresnelLookup,
+        "worldYComponentReflection": P.worldYComponentReflection,
+        "reflectionBottom": P.reflectionBottom,
+        "uTextureMatrix0": _columns(inputs.tex_matrix0),
+        "uTextureMatrix1": _columns(inputs.tex_matrix1),
+        "uModelViewProjectionMatrix": _columns(inputs.view_proj),
+        "uModelViewProjectionMatrixInverse": _columns(
+            np.linalg.inv(inputs.view_proj.astype(np.float64))
+        ),
+        "screenSize": [float(np.float32(inputs.width)), float(np.float32(inputs.height))],
+        "viewpos": [float(v) for v in inputs.viewpos],
+        "lightpos": [float(v) for v in inputs.lightpos],
+        "lightcolor": [float(v) for v in inputs.lightcolor],
+    }
+    for k in range(4):
+        s, t = P.texcoord[k]
+        b[f"vTexCoord{k}"] = [s, t, 0.0, 1.0]
+    col = (r.index % r.width).astype(np.float32)
+    row = (r.index // r.width).astype(np.float32)
+    clip = np.c_[r.world.astype(np.float64), np.ones(len(r.index))] @ inputs.view_proj.T
+    b["gl_FragCoord"] = [
+        m.Float(col + np.float32(0.5)),
+        m.Float(np.float32(r.height) - row - np.float32(0.5)),
+        m.Float((0.5 * clip[:, 2] / clip[:, 3] + 0.5).astype(np.float32)),
+        m.Float((1.0 / clip[:, 3]).astype(np.float32)),
+    ]
+    try:
+        b["uNormalMatrix"] = _columns(normal_matrix(inputs.view_proj))
+    except ValueError:
+        pass  # a view_proj that is no perspective times a rigid view: a shader reading it fails
+    for name, field_, filt in (
+        ("sceneColor", "scene_color", LINEAR),
+        ("sceneDepth", "scene_depth", NEAREST),
+        ("reflection_sampler", "reflection_color", LINEAR),
+    ):
+        if getattr(inputs, field_) is not None:
+            b[name] = Texture2D.from_numpy(m, getattr(inputs, field_), filt, CLAMP)
+    if inputs.reflection_view_proj is not None:
+        b["o2v_projection_reflection"] = _columns(inputs.reflection_view_proj)
+    return b
+
+
+def constant_values(spec: ShaderSpec, C) -> dict:
+    """GLSL name -> executor value of each declared constant, from resolved constants ``C``
+    (``_frame.resolve_constants``, or any object with ``values`` keyed like ``spec``)."""
+    out = {}
+    for glsl, key in spec.constants:
+        v = C.values[key]
+        out[glsl] = list(v) if isinstance(v, tuple) else v
+    return out
+
+
+def shade(m, P, inputs, spec: ShaderSpec, C, differentiate: bool):
+    """Run the shader on one frame: (colour Array3f, diagnostics dict of per-lane Floats)."""
+    b = study_bindings(m, P, inputs)
+    for name, study in spec.bindings:
+        if study not in b:
+            raise ValueError(
+                f"{spec.label}: the binding {name} = {study!r} names no study input the frame "
+                f"has; the study's inputs: {', '.join(sorted(STUDY_INPUTS))}"
+            )
+        b[name] = b[study]
+    b.update(constant_values(spec, C))
+    ex = Executor(module_of(spec), m, b, differentiate=differentiate)
+    try:
+        outs, counts = ex.run(), dict(ex.counts)
+    finally:
+        ex.release()
+    color = [v for v in outs.values() if v is not None]
+    if len(color) != 1:
+        raise ValueError(f"{spec.label}: the shader must write exactly one vec4 output")
+    rgb = [c if isinstance(c, dr.ArrayBase) else m.Float(c) for c in color[0][:3]]
+    n = dr.width(P.varyingVecWorldPosition.x)
+    rgb = [c if dr.width(c) == n else c + dr.zeros(m.Float, n) for c in rgb]
+    color = m.Array3f(*rgb)
+
+    def lanes(v):
+        return v + dr.zeros(m.Float, n) if not isinstance(v, dr.ArrayBase) or dr.width(v) != n else v
+
+    diag = {
+        "iterations": lanes(counts["iterations"]),
+        "fetches": lanes(counts["fetches"]),
+        "nonfinite": dr.zeros(m.Float, n),
+    }
+    return color, diag
+
+
+def render(
+    inputs: ShaderInputs,
+    constants: Constants | None = None,
+    *,
+    spec: ShaderSpec,
+    backend: str = "llvm",
+    resolved=None,
+) -> ShaderOutput:
+    """Render ``spec`` on ``inputs`` with ``constants`` (the study's ``Constants``; or
+    ``resolved``: already resolved values, e.g. a user shader's). Returns a ShaderOutput:
+    ``color`` TensorXf (H, W, 3) linear RGB, ``mask``, ``diagnostics`` ``iterations``,
+    ``fetches``, ``nonfinite`` (H, W)."""
+    m = backend_types(backend)
+    P = prepare(inputs, m)
+    C = resolved if resolved is not None else resolve_constants(m, constants or Constants())
+    color, diag = shade(m, P, inputs, spec, C, differentiate=False)
+    return finish_output(m, P, color, diag, spec.label)
+
+
+def render_with_jacobian(
+    inputs: ShaderInputs,
+    constants: Constants | None,
+    names: list[str],
+    *,
+    spec: ShaderSpec,
+    backend: str = "llvm",
+):
+    """``(ShaderOutput, J)`` with ``J`` float32 (H, W, 3, len(names)): the forward-mode
+    derivatives of the colour in the ``CONSTANT_SPECS`` scalar names ``names`` (as the ports'
+    ``render_with_jacobian``), through the executed SPIR-V (lane-dependent loops unrolled)."""
+
+    def shade_tangents(m, P, C, params, frozen):
+        return tangents(m, *shade(m, P, inputs, spec, C, differentiate=True), params)
+
+    was = _frame.USE_FROZEN
+    try:
+        _frame.USE_FROZEN = False  # the executor reads the trip count back: not freezable
+        return jacobian_passes(
+            shade_tangents,
+            spec.label,
+            inputs,
+            constants if constants is not None else Constants(),
+            names,
+            backend,
+            "replay",
+        )
+    finally:
+        _frame.USE_FROZEN = was
