@@ -581,7 +581,7 @@ class Executor:
 
     def phi(self, ins, edges):
         masks = {label: k for label, k in edges}
-        pairs = [(self.get(v), p) for v, p in zip(ins.operands[::2], ins.operands[1::2])]
+        pairs = [(self.get(v), p) for v, p in ins.operands]
         live = [(v, masks[p]) for v, p in pairs if p in masks and masks[p].value is not False]
         if not live:
             raise self.unsupported(ins, "a phi whose incoming blocks did not run")
