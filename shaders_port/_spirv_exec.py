@@ -160,13 +160,24 @@ class Executor:
         name = self.M.name(vid)
         builtin = self.M.decorations.get(vid, {}).get("BuiltIn")
         key = f"gl_{builtin[0]}" if builtin else name
-        if key not in self.bindings:
-            raise UnboundVariable(
-                f"the shader reads {ins.operands[0]} variable {key!r} (declared at "
-                f"{ins.where()}) but nothing binds it: name a study input for it in the "
-                "shader's bindings (docs/user-shader.md)"
-            )
-        return self.bindings[key]
+        if key in self.bindings:
+            return self.bindings[key]
+        if len(ins.operands) > 1:  # a uniform's initializer: its value when nothing sets it
+            return self.constant(ins.operands[1])
+        use = next(
+            (
+                i
+                for b in self.blocks.values()
+                for i in b.body
+                if i.opname == "OpLoad" and self.root(i.operands[0]) == vid
+            ),
+            ins,
+        )
+        raise UnboundVariable(
+            f"the shader reads {ins.operands[0]} variable {key!r} (at {use.where()}) but "
+            "nothing binds it: bind it to one of the study's inputs in the shader's "
+            "declaration (docs/user-shader.md)"
+        )
 
     def load(self, ptr):
         _, vid, path = ptr
@@ -294,7 +305,10 @@ class Executor:
             return [(term.operands[0], bm)]
         if op == "OpBranchConditional":
             c = self.get(term.operands[0])
-            return [(term.operands[1], branch(bm, c, True)), (term.operands[2], branch(bm, c, False))]
+            return [
+                (term.operands[1], branch(bm, c, True)),
+                (term.operands[2], branch(bm, c, False)),
+            ]
         if op == "OpSwitch":
             sel, default = self.get(term.operands[0]), term.operands[1]
             out, rest = [], bm

@@ -226,7 +226,9 @@ def shade(m, P, inputs, spec: ShaderSpec, C, differentiate: bool):
     color = m.Array3f(*rgb)
 
     def lanes(v):
-        return v + dr.zeros(m.Float, n) if not isinstance(v, dr.ArrayBase) or dr.width(v) != n else v
+        return (
+            v + dr.zeros(m.Float, n) if not isinstance(v, dr.ArrayBase) or dr.width(v) != n else v
+        )
 
     diag = {
         "iterations": lanes(counts["iterations"]),

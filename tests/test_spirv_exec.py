@@ -1,0 +1,195 @@
+"""The SPIR-V executor (``shaders_port.spirv_port``): the study's GLSL files compiled by glslang
+and executed on Dr.Jit types, against the hand ports (images, costs, Jacobians), central
+differences and llvmpipe. The default run checks a representative subset; every shipped
+variant is checked in the slow tests."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from synthetic import synthetic_baseline_inputs, synthetic_inputs
+from shaders_port import Constants, spirv_port
+from shaders_port._spirv_exec import UnboundVariable, UnsupportedInstruction
+from shaders_port._spirv_module import Module, compile_fragment, grammar
+from shaders_port._variants import SHIPPED, VARIANTS
+from test_gl_differential import _check, compare_or_skip
+from test_water_refraction import FD_CONSTANTS, check_jacobian_column, save_failure
+
+CUSTOM = Constants(
+    attenuation_distance=3.0, steps_grazing=7.0, steps_steep=2.5, bumptex_mult=0.7,
+    specular_exponent=64.0, absorption_r=0.3, refine_steps=2,
+)  # fmt: skip
+DEFAULT_SET = ["water_refraction", "water_refraction_secant", "water_reflection_beer"]
+
+
+@pytest.fixture(scope="module")
+def small():
+    return synthetic_inputs(width=48, height=36)
+
+
+@pytest.fixture(scope="module")
+def baseline_small():
+    return synthetic_baseline_inputs(width=48, height=36)
+
+
+def _inputs_for(variant, small, baseline_small):
+    return variant.prepare_inputs(baseline_small if variant.inputs else small)
+
+
+def _executed(variant, inputs, constants):
+    spec = spirv_port.builtin_spec(variant.shader, variant.defines)
+    return spirv_port.render(inputs, constants, spec=spec).numpy()
+
+
+def _port_cost(out: dict) -> tuple:
+    iterations = out["iterations"] + out.get("refl_iterations", 0.0)
+    passes = 1.0 if "refraction_index" in out else 0.0
+    return iterations, out["fetches"] - passes
+
+
+def check_against_port(name: str, small, baseline_small, constants) -> None:
+    """Executor vs hand port: the colour (bit-identical for the raycast shaders, 1e-4 for the
+    baseline, whose matrix products the port writes row by row), loop iterations and texture
+    fetches per pixel."""
+    v = VARIANTS[name]
+    inputs = _inputs_for(v, small, baseline_small)
+    a, b = _executed(v, inputs, constants), v.render(inputs, constants).numpy()
+    tol = 1e-4 if v.shader == "water_baseline" else 0.0
+    if not np.abs(a["color"] - b["color"]).max() <= tol:
+        save_failure(f"spirv_{name}", a["color"], b["color"])
+    assert np.abs(a["color"] - b["color"]).max() <= tol, name
+    iterations, fetches = b["iterations"] + b.get("refl_iterations", 0.0), b["fetches"]
+    if v.shader == "water_baseline":  # the port adds the mirrored camera's pass
+        from shaders_port.water_baseline import PASS_FETCHES
+
+        fetches = np.where(b["mask"] > 0, fetches - PASS_FETCHES, 0.0)
+    assert np.array_equal(a["iterations"], iterations), name
+    assert np.array_equal(a["fetches"], fetches), name
+
+
+@pytest.mark.parametrize("name", DEFAULT_SET + ["water_baseline"])
+def test_executor_equals_port(name, small, baseline_small):
+    check_against_port(name, small, baseline_small, CUSTOM)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("name", SHIPPED)
+@pytest.mark.parametrize("which", ["default", "custom"])
+def test_every_variant_equals_port(name, which, small, baseline_small):
+    check_against_port(name, small, baseline_small, Constants() if which == "default" else CUSTOM)
+
+
+def check_against_gl(name: str, constants) -> None:
+    v = VARIANTS[name]
+    inputs = synthetic_baseline_inputs(96, 72) if v.inputs else synthetic_inputs(96, 72)
+    inputs = v.prepare_inputs(inputs)
+    # the decision diagnostics that explain GL outliers are the port's (the same code path:
+    # the colours are equal, see check_against_port); the colour is the executor's
+    out = v.render(inputs, constants).numpy()
+    out["color"] = _executed(v, inputs, constants)["color"]
+    _check(compare_or_skip(inputs, constants, name, output=out), f"spirv_gl_{name}")
+
+
+def test_executor_matches_gl():
+    pytest.importorskip("moderngl")
+    check_against_gl("water_refraction", CUSTOM)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("name", SHIPPED)
+def test_every_variant_matches_gl(name):
+    pytest.importorskip("moderngl")
+    check_against_gl(name, CUSTOM)
+
+
+JAC_NAMES = ["attenuation_distance", "steps_grazing", "bumptex_mult", "water_color[1]"]
+
+
+@pytest.fixture(scope="module")
+def jacobians(small):
+    v = VARIANTS["water_refraction_secant"]
+    spec = spirv_port.builtin_spec(v.shader, v.defines)
+    out, J = spirv_port.render_with_jacobian(small, FD_CONSTANTS, JAC_NAMES, spec=spec)
+    _, J_port = v.render_with_jacobian(small, FD_CONSTANTS, JAC_NAMES)
+    return spec, out.numpy(), J, J_port
+
+
+def test_jacobian_equals_port(jacobians):
+    spec, out, J, J_port = jacobians
+    scale = np.abs(J_port).max(axis=(0, 1, 2))
+    assert (scale > 0).all()
+    assert (np.abs(J - J_port).max(axis=(0, 1, 2)) <= 1e-4 * scale).all()
+
+
+@pytest.mark.parametrize("name", ["steps_grazing", "bumptex_mult"])
+def test_jacobian_matches_central_differences(jacobians, small, name):
+    spec, out, J, _ = jacobians
+    plain = spirv_port.render(small, FD_CONSTANTS, spec=spec).numpy()
+    assert np.array_equal(plain["color"], out["color"])  # unrolled loops compute the same
+    check_jacobian_column(
+        lambda c: spirv_port.render(small, c, spec=spec).numpy(),
+        out,
+        J[..., JAC_NAMES.index(name)],
+        FD_CONSTANTS,
+        name,
+        ("iterations",),
+    )
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("name", [n for n in SHIPPED if n != "water_refraction_game_textures"])
+def test_every_variant_jacobian_equals_port(name, small, baseline_small):
+    v = VARIANTS[name]
+    inputs = _inputs_for(v, small, baseline_small)
+    names = [n for n in ("bumptex_mult", "water_color[2]", "refraction_strength") if
+             n.split("[")[0] in v.reads()]  # fmt: skip
+    spec = spirv_port.builtin_spec(v.shader, v.defines)
+    _, J = spirv_port.render_with_jacobian(inputs, FD_CONSTANTS, names, spec=spec)
+    _, J_port = v.render_with_jacobian(inputs, FD_CONSTANTS, names)
+    scale = np.abs(J_port).max(axis=(0, 1, 2))
+    assert (np.abs(J - J_port).max(axis=(0, 1, 2)) <= 1e-4 * scale + 1e-7).all(), name
+
+
+# ---- the module, errors ----------------------------------------------------------------------
+
+_SHADER = """#version 330 core
+in vec3 varyingVecEye;
+out vec4 fragColor;
+uniform float GAIN = 2.0;
+void main(void)
+{
+    vec3 e = normalize(varyingVecEye);
+    fragColor = vec4(e * GAIN, 1.0);
+%s
+}
+"""
+
+
+def test_module_is_decoded_with_the_grammar():
+    mod = Module(compile_fragment(_SHADER % "", "tiny.frag"), label="tiny.frag")
+    ops = {i.opname for b in mod.functions[mod.entry].blocks.values() for i in b.body}
+    assert {"OpLoad", "OpExtInst", "OpStore"} <= ops
+    assert grammar()["glsl"][69] == "Normalize"
+    assert mod.name(mod.interface[0]) in ("varyingVecEye", "fragColor")
+
+
+def test_unsupported_instruction_names_opcode_and_line(small):
+    src = _SHADER % "    fragColor.x += dFdx(e.x);"
+    spec = spirv_port.ShaderSpec(src, "deriv.frag")
+    with pytest.raises(UnsupportedInstruction, match=r"OpDPdx.*deriv\.frag:9"):
+        spirv_port.render(small, None, spec=spec)
+
+
+def test_unbound_uniform_is_named(small):
+    src = (_SHADER % "    fragColor.y *= mystery;").replace(
+        "void main", "uniform float mystery;\nvoid main"
+    )
+    with pytest.raises(UnboundVariable, match=r"'mystery.*deriv\.frag:10"):
+        spirv_port.render(small, None, spec=spirv_port.ShaderSpec(src, "deriv.frag"))
+
+
+def test_missing_constant_declaration_is_named():
+    spec = spirv_port.ShaderSpec(_SHADER % "", "tiny.frag", constants=(("FOG", "fog"),))
+    with pytest.raises(ValueError, match="FOG"):
+        spec.prepared_source()
