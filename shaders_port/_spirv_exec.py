@@ -35,7 +35,7 @@ from collections import defaultdict
 import drjit as dr
 
 from . import _spirv_ops as ops
-from ._spirv_ops import FALSE, TRUE, Mask, both, branch, is_py, join, lift
+from ._spirv_ops import TRUE, Mask, both, branch, is_py, join, lift
 
 MAX_UNROLL = 4096  # iterations of a loop with lane-independent exits
 
