@@ -96,7 +96,7 @@ def test_jacobian_matches_central_differences(name, inputs):
         v = shader.with_scalars(shader.defaults(), {})
         b, _, idx = s.partition("[")
         x = v[b][int(idx[:-1])] if idx else v[b]
-        h = 1e-3 * abs(x)
+        h = 1e-3 * max(abs(x), 1.0)
         p = shader.render(inputs, shader.with_scalars(v, {s: x + h})).numpy()
         m = shader.render(inputs, shader.with_scalars(v, {s: x - h})).numpy()
         same = (p["iterations"] == m["iterations"]) & (base["iterations"] == p["iterations"])
