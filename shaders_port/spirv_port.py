@@ -36,6 +36,7 @@ from ._inputs import CONSTANT_SPECS, Constants, ShaderInputs, normal_matrix
 from ._raster import prepare
 from ._spirv_exec import Executor
 from ._spirv_module import Module, compile_fragment
+from ._spirv_ops import lift
 from ._texture import CLAMP, LINEAR, NEAREST, Texture2D, backend_types
 
 __all__ = ["ShaderSpec", "STUDY_INPUTS", "builtin_spec", "render", "render_with_jacobian"]
@@ -201,8 +202,18 @@ def constant_values(spec: ShaderSpec, C) -> dict:
     return out
 
 
-def shade(m, P, inputs, spec: ShaderSpec, C, differentiate: bool):
-    """Run the shader on one frame: (colour Array3f, diagnostics dict of per-lane Floats)."""
+_BINDINGS: dict = {}
+
+
+def frame_bindings(m, P, inputs, spec: ShaderSpec) -> dict:
+    """Every value the shader may read on this frame: the study's inputs, the spec's bindings
+    of other names to them (checked), but not the constants. One dict per uploaded frame and
+    bindings (a recorded kernel replays only for the same objects: measured, a new dict of
+    equal values records again)."""
+    key = (P.upload, m.__name__, spec.bindings)
+    hit = _BINDINGS.get(key)
+    if hit is not None:
+        return hit
     b = study_bindings(m, P, inputs)
     for name, study in spec.bindings:
         if study not in b:
@@ -211,31 +222,71 @@ def shade(m, P, inputs, spec: ShaderSpec, C, differentiate: bool):
                 f"has; the study's inputs: {', '.join(sorted(STUDY_INPUTS))}"
             )
         b[name] = b[study]
+    if len(_BINDINGS) >= 8:
+        _BINDINGS.pop(next(iter(_BINDINGS)))
+    _BINDINGS[key] = b
+    return b
+
+
+def shade_lanes(m, P, b: dict, spec: ShaderSpec, C, differentiate=False, trips=None):
+    """Run the shader on one frame's bindings ``b``: (colour Array3f, diagnostics dict of
+    per-lane Floats, passes: loop header -> per-lane passes of each symbolic loop). Shapes are
+    the frame's lanes; nothing here reads a value back, so it can be recorded (``dr.freeze``)
+    unless a lane-dependent loop is unrolled without its ``trips``."""
+    b = dict(b)
     b.update(constant_values(spec, C))
-    ex = Executor(module_of(spec), m, b, differentiate=differentiate)
+    ex = Executor(module_of(spec), m, b, differentiate=differentiate, trips=trips)
     try:
-        outs, counts = ex.run(), dict(ex.counts)
+        outs, counts, passes = ex.run(), dict(ex.counts), dict(ex.passes)
     finally:
         ex.release()
     color = [v for v in outs.values() if v is not None]
     if len(color) != 1:
         raise ValueError(f"{spec.label}: the shader must write exactly one vec4 output")
-    rgb = [c if isinstance(c, dr.ArrayBase) else m.Float(c) for c in color[0][:3]]
-    n = dr.width(P.varyingVecWorldPosition.x)
-    rgb = [c if dr.width(c) == n else c + dr.zeros(m.Float, n) for c in rgb]
-    color = m.Array3f(*rgb)
-
-    def lanes(v):
-        return (
-            v + dr.zeros(m.Float, n) if not isinstance(v, dr.ArrayBase) or dr.width(v) != n else v
-        )
-
+    color = m.Array3f(*(lift(m, c, "float") for c in color[0][:3]))
     diag = {
-        "iterations": lanes(counts["iterations"]),
-        "fetches": lanes(counts["fetches"]),
-        "nonfinite": dr.zeros(m.Float, n),
+        "iterations": lift(m, counts["iterations"], "float"),
+        "fetches": lift(m, counts["fetches"], "float"),
+        "nonfinite": m.Float(0.0),
     }
+    return color, diag, passes
+
+
+def _key(spec: ShaderSpec, C, *extra) -> tuple:
+    return ("spirv", spec.prepared_source(), spec.defines, spec.label, *extra) + (
+        _frame.python_config(C)
+    )
+
+
+def _recorded(key: tuple, fn, m, P, *args):
+    """``_frame.call_frozen``; a failure while recording (an unsupported instruction, an
+    unbound name: an error of the shader) is raised as itself by tracing the call."""
+    try:
+        return _frame.call_frozen(key, fn, m, P, *args)
+    except RuntimeError as exc:
+        if "frozen function" not in str(exc):
+            raise
+        return fn(m, P, *args)
+
+
+def shade(m, P, inputs, spec: ShaderSpec, C, differentiate: bool = False, trips=None):
+    """:func:`shade_lanes` on a prepared frame ``P`` (with its raster): (colour, diag)."""
+    color, diag, _ = shade_lanes(m, P, frame_bindings(m, P, inputs, spec), spec, C,
+                                 differentiate, trips)  # fmt: skip
     return color, diag
+
+
+def trip_counts(m, P, inputs, spec: ShaderSpec, C) -> dict:
+    """Loop header -> the largest number of passes through the loop's body over the frame's
+    lanes, from a plain (recorded) run with constants ``C``."""
+
+    def fn(m, P, C, b):
+        return shade_lanes(m, P, b, spec, C)[2]
+
+    b = frame_bindings(m, P, inputs, spec)
+    with dr.suspend_grad():
+        passes = _recorded(_key(spec, C, "passes"), fn, m, P.shading_state(), C, b)
+    return {k: int(dr.max(v)[0]) if dr.width(v) else 0 for k, v in passes.items()}
 
 
 def render(
@@ -249,11 +300,16 @@ def render(
     """Render ``spec`` on ``inputs`` with ``constants`` (the study's ``Constants``; or
     ``resolved``: already resolved values, e.g. a user shader's). Returns a ShaderOutput:
     ``color`` TensorXf (H, W, 3) linear RGB, ``mask``, ``diagnostics`` ``iterations``,
-    ``fetches``, ``nonfinite`` (H, W)."""
+    ``fetches``, ``nonfinite`` (H, W). Replayed from a recording (``_frame.call_frozen``)."""
     m = backend_types(backend)
     P = prepare(inputs, m)
     C = resolved if resolved is not None else resolve_constants(m, constants or Constants())
-    color, diag = shade(m, P, inputs, spec, C, differentiate=False)
+    b = frame_bindings(m, P, inputs, spec)
+
+    def fn(m, P, C, b):
+        return shade_lanes(m, P, b, spec, C)[:2]
+
+    color, diag = _recorded(_key(spec, C), fn, m, P.shading_state(), C, b)
     return finish_output(m, P, color, diag, spec.label)
 
 
@@ -267,22 +323,23 @@ def render_with_jacobian(
 ):
     """``(ShaderOutput, J)`` with ``J`` float32 (H, W, 3, len(names)): the forward-mode
     derivatives of the colour in the ``CONSTANT_SPECS`` scalar names ``names`` (as the ports'
-    ``render_with_jacobian``), through the executed SPIR-V (lane-dependent loops unrolled)."""
+    ``render_with_jacobian``), through the executed SPIR-V: a plain run finds each
+    lane-dependent loop's largest trip count, then the shader runs with those loops unrolled
+    (both recorded, ``_frame.call_frozen``)."""
+    constants = constants if constants is not None else Constants()
+    m = backend_types(backend)
+    P = prepare(inputs, m)
+    trips = trip_counts(m, P, inputs, spec, resolve_constants(m, constants))
+    b = frame_bindings(m, P, inputs, spec)
+    config = ("trips", tuple(sorted(trips.items())))
+
+    def fn(m, P, C, params, b):
+        color, diag, _ = shade_lanes(m, P, b, spec, C, True, trips)
+        return tangents(m, color, diag, params)
 
     def shade_tangents(m, P, C, params, frozen):
-        return tangents(m, *shade(m, P, inputs, spec, C, differentiate=True), params)
+        if frozen:
+            return _recorded(_key(spec, C, config), fn, m, P, C, params, b)
+        return fn(m, P, C, params, b)
 
-    was = _frame.USE_FROZEN
-    try:
-        _frame.USE_FROZEN = False  # the executor reads the trip count back: not freezable
-        return jacobian_passes(
-            shade_tangents,
-            spec.label,
-            inputs,
-            constants if constants is not None else Constants(),
-            names,
-            backend,
-            "replay",
-        )
-    finally:
-        _frame.USE_FROZEN = was
+    return jacobian_passes(shade_tangents, spec.label, inputs, constants, names, backend, "replay")
