@@ -52,7 +52,7 @@ def main() -> None:
     base = synthetic_baseline_inputs(width=args.size, height=args.size)
     c = Constants()
     print(f"{args.size}x{args.size} pixels, median of {args.n} (ms)")
-    print(f"| variant | port frame | SPIR-V frame | ratio | port J(4) | SPIR-V J(4) | ratio |")
+    print("| variant | port frame | SPIR-V frame | ratio | port J(4) | SPIR-V J(4) | ratio |")
     print("|---|---|---|---|---|---|---|")
     for name, names in CASES.items():
         v = VARIANTS[name]
