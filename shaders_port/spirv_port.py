@@ -23,6 +23,7 @@ translated code (texture samples executed; loop bodies entered), and ``nonfinite
 
 from __future__ import annotations
 
+import functools
 import re
 from dataclasses import dataclass, field
 
@@ -93,19 +94,25 @@ class ShaderSpec:
     def prepared_source(self) -> str:
         """The source with every declared constant a uniform without initializer (line for
         line: the GLSL line numbers are kept)."""
-        src = self.source
-        for glsl, _ in self.constants:
-            pat = re.compile(_DECL.format(name=re.escape(glsl)) + _DECL_TAIL, re.M)
-            found = pat.search(src)
-            if found is None:
-                raise ValueError(
-                    f"{self.label}: no declaration `const|uniform <float|int|vec3|vec4> {glsl} "
-                    "= <value>;` of the constant to fit; declare it on one line"
-                )
-            decl = f"uniform {found['type']} {glsl}{found['tail']}"
-            indent = found["head"][: len(found["head"]) - len(found["head"].lstrip())]
-            src = src[: found.start()] + indent + decl + src[found.end() :]
-        return src
+        return _prepared(self.source, self.label, self.constants)
+
+
+@functools.lru_cache(maxsize=64)
+def _prepared(source: str, label: str, constants: tuple) -> str:
+    """:meth:`ShaderSpec.prepared_source` (remembered: it is on every call's key)."""
+    src = source
+    for glsl, _ in constants:
+        pat = re.compile(_DECL.format(name=re.escape(glsl)) + _DECL_TAIL, re.M)
+        found = pat.search(src)
+        if found is None:
+            raise ValueError(
+                f"{label}: no declaration `const|uniform <float|int|vec3|vec4> {glsl} "
+                "= <value>;` of the constant to fit; declare it on one line"
+            )
+        decl = f"uniform {found['type']} {glsl}{found['tail']}"
+        indent = found["head"][: len(found["head"]) - len(found["head"].lstrip())]
+        src = src[: found.start()] + indent + decl + src[found.end() :]
+    return src
 
 
 _MODULES: dict = {}

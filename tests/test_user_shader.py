@@ -136,3 +136,56 @@ def test_unbound_sampler_is_refused_at_render(inputs):
     )
     with pytest.raises(ValueError, match="'waveNormals'.*bind it"):
         UserShader(src, "a.frag").render(inputs)
+
+
+# ---- fit.shader = a user's file: experiment validation and `study calibrate` --------------
+
+TINY = [
+    "resolution=[24,24]",
+    "fit.resolution=[24,24]",
+    "reference.spp=16",
+    "reference.water_mesh=48",
+    "reference.texture_size=32",
+    "reference.texture_spp=4",
+    "waves.normal_map_size=32",
+    "fit.max_steps=8",
+]
+MY_WATER = Path(__file__).parent.parent / "experiments" / "my_water.toml"
+
+
+def test_experiment_refuses_a_bad_user_declaration(tmp_path):
+    from study import load_experiment
+    from study.scene.errors import ExperimentError
+
+    with pytest.raises(ExperimentError, match="leave fit.parameters unset"):
+        load_experiment(MY_WATER, ['fit.parameters=["bumptex_mult"]'])
+    with pytest.raises(ExperimentError, match="fit.declare.*constant NAME LOW HIGH"):
+        load_experiment(MY_WATER, ['fit.declare=["constant F0 0.0"]'])
+    with pytest.raises(ExperimentError, match="no file"):
+        load_experiment(MY_WATER, [f'fit.shader="{tmp_path / "none.frag"}"'])
+    with pytest.raises(ExperimentError, match="names no study input"):
+        load_experiment(MY_WATER, ['fit.declare=["bind waveNormals normal_map"]'])
+    exp = load_experiment(MY_WATER)
+    assert Path(exp["fit.shader"]).is_file() and exp["fit.parameters"] is None
+
+
+def test_study_calibrate_fits_writes_back_and_gl_checks(tmp_path, monkeypatch):
+    import json
+
+    from study.cli import main
+
+    monkeypatch.setenv("STUDY_CACHE", str(tmp_path / "cache"))
+    sets = [a for kv in TINY for a in ("--set", kv)]
+    assert main(["calibrate", str(MY_WATER), "--out", str(tmp_path / "c")] + sets) == 0
+    res = json.loads((tmp_path / "c" / "constants.json").read_text())
+    assert res["rmse"] < res["rmse_start"]
+    assert res["cost"]["fetches"] == 5.0 and res["cost"]["iterations"] == 0.0
+    if res["gl_check"]["ran"]:
+        assert res["gl_check"]["passed"], res["gl_check"]
+    written = (tmp_path / "c" / "shaders" / "my_water.frag").read_text()
+    fitted = UserShader(written, "my_water.frag", {"constants": {"F0": [0.0, 0.2]}}).defaults()
+    for name, v in res["constants"].items():
+        want = tuple(np.float32(v)) if isinstance(v, list) else np.float32(v)
+        got = tuple(np.float32(fitted[name])) if isinstance(v, list) else np.float32(fitted[name])
+        assert got == want, name
+    assert "RMSE" in (tmp_path / "c" / "report.md").read_text()

@@ -26,6 +26,8 @@ class UserFit:
 
     values: dict
     scalars: dict
+    mask: np.ndarray  # (H, W) bool: the scored water pixels
+    pixels: int
     rmse_start: float
     rmse: float
     iterations: int
@@ -40,10 +42,12 @@ def calibrate(
     start: dict | None = None,
     max_iterations: int = 30,
     tolerance: float = 1e-10,
+    reference_mask: np.ndarray | None = None,
 ) -> UserFit:
     """Fit the scalar ``names`` (default: all of the declaration) of ``shader`` so that its
     render of ``inputs`` matches ``reference`` ((H, W, 3) float32 linear RGB at the inputs'
-    resolution) on the water pixels (the shader's coverage eroded by one pixel)."""
+    resolution) on the water pixels (the shader's coverage, and ``reference_mask`` (H, W) bool
+    when given, eroded by one pixel)."""
     names = list(names or shader.scalar_names())
     reference = np.asarray(reference, np.float32)
     if reference.shape != (inputs.height, inputs.width, 3):
@@ -73,7 +77,8 @@ def calibrate(
 
     x = scalars(values)
     o, J = residual(x, True)
-    mask = erode(o["mask"] > 0.5, 1)
+    cover = o["mask"] > 0.5
+    mask = erode(cover & reference_mask if reference_mask is not None else cover, 1)
     if not mask.any():
         raise ValueError("no water pixel in view: check the camera and the water quad")
     if not np.isfinite(reference[mask]).all():
@@ -108,5 +113,12 @@ def calibrate(
     n = int(mask.sum()) * 3
     fitted = shader.with_scalars(values, dict(zip(names, map(float, x))))
     return UserFit(
-        fitted, dict(zip(names, map(float, x))), (cost0 / n) ** 0.5, (cost / n) ** 0.5, it, reason
+        fitted,
+        dict(zip(names, map(float, x))),
+        mask,
+        int(mask.sum()),
+        (cost0 / n) ** 0.5,
+        (cost / n) ** 0.5,
+        it,
+        reason,
     )

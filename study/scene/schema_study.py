@@ -231,7 +231,16 @@ STUDY_KEYS: dict[str, Field] = {
         "str",
         "water_refraction",
         "Shader to fit: a shipped variant or any configuration of the shader space, named as "
-        "`docs/shader-space.md` says (e.g. `water_reflection_beer_walls`).",
+        "`docs/shader-space.md` says (e.g. `water_reflection_beer_walls`); or the path of your "
+        "own GLSL fragment shader (`.frag`, relative to the experiment file), calibrated "
+        "through SPIR-V (`docs/user-shader.md`).",
+    ),
+    "fit.declare": Field(
+        "list_str",
+        None,
+        "Declaration of your own `fit.shader` besides its `// @study` pragmas, one line each: "
+        "`constant NAME LOW HIGH` (a constant to fit and its range) or `bind NAME INPUT` (the "
+        "shader's sampler or uniform NAME is the study's INPUT).",
     ),
     "fit.parameters": Field(
         "list_str",
