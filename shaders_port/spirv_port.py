@@ -350,3 +350,24 @@ def render_with_jacobian(
         return fn(m, P, C, params, b)
 
     return jacobian_passes(shade_tangents, spec.label, inputs, constants, names, backend, "replay")
+
+
+class Translated:
+    """A shader variant (``shaders_port._variants.Variant``) whose ``render`` and
+    ``render_with_jacobian`` execute its GLSL file through SPIR-V in place of its hand port;
+    everything else (name, defines, constants it reads, ...) is the variant's."""
+
+    def __init__(self, variant):
+        self._variant = variant
+        self._spec = builtin_spec(variant.shader, variant.defines)
+
+    def __getattr__(self, name):
+        return getattr(self._variant, name)
+
+    def render(self, inputs, constants=None, backend: str = "llvm", **kw):
+        inputs = self._variant.prepare_inputs(inputs)
+        return render(inputs, constants, spec=self._spec, backend=backend)
+
+    def render_with_jacobian(self, inputs, constants, names, backend: str = "llvm", **kw):
+        inputs = self._variant.prepare_inputs(inputs)
+        return render_with_jacobian(inputs, constants, names, spec=self._spec, backend=backend)

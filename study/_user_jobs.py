@@ -7,7 +7,8 @@ shader's coverage and the reference's water, eroded by one pixel) by
 ``study.fit.user_shader.calibrate``, written back into a copy of its file with the fitted
 constants in place of the initializers (every other byte kept), and that file run on OpenGL
 (llvmpipe) against the executor with the GL check's thresholds. Writes ``shaders/<file>``,
-``constants.json``, ``report.md``, ``fit.png``, ``reference.exr`` and ``fitted.exr``.
+``constants.json``, ``report.md``, ``fit.png``, ``reference.exr`` and ``fitted.exr``; with
+``fit.write_back = "file"`` the fitted constants also go into the user's file itself.
 """
 
 from __future__ import annotations
@@ -115,6 +116,12 @@ def calibrate_user_shader(exp, variant, out: Path, ref, inputs, timings: dict) -
     start = shader.render(small).numpy()
     gl = _gl_compare(shader, small, fit.values, ours)
     timings["gl_check_s"] = time.perf_counter() - t0
+    if exp["fit.write_back"] == "file":
+        if gl["passed"] is False:
+            _log(f"calibrate: {shader.label} not written back: the GL check failed")
+        else:
+            Path(exp["fit.shader"]).write_text(written.read_text(encoding="utf-8"), "utf-8")
+            _log(f"calibrate: wrote the fitted constants into {exp['fit.shader']}")
     mask = fit.mask
     err = errors(target, ours["color"], mask)
     cost = {k: float(ours[k][mask].mean()) for k in ("fetches", "iterations")}

@@ -193,3 +193,33 @@ def test_missing_constant_declaration_is_named():
     spec = spirv_port.ShaderSpec(_SHADER % "", "tiny.frag", constants=(("FOG", "fog"),))
     with pytest.raises(ValueError, match="FOG"):
         spec.prepared_source()
+
+
+# ---- the fit through SPIR-V -----------------------------------------------------------------
+
+
+@pytest.mark.slow
+def test_default_experiment_fits_the_same_constants(tmp_path, monkeypatch):
+    """``study calibrate``'s fit of the default experiment with the shader executed through
+    SPIR-V (``ShaderModel(translated=True)``) gives the hand port's fitted constants within
+    1e-3 relative."""
+    from conftest import REPO
+    from study._backend import init_backend
+    from study._jobs import load_scene_data
+    from study.fit.calibrate import calibrate_experiment
+    from study.fit.model import ShaderModel, expand_parameters, get_value
+    from study.scene.experiment import load_experiment
+
+    monkeypatch.setenv("STUDY_CACHE", str(tmp_path))
+    exp = load_experiment(REPO / "experiments" / "default.toml")
+    variant = init_backend(exp["variant"])
+    ref, inputs, _ = load_scene_data(exp, variant)
+    fits = {}
+    for translated in (False, True):
+        model = ShaderModel.from_experiment(
+            exp, inputs, ref.image, stderr_full=ref.stderr, translated=translated
+        )
+        fits[translated] = calibrate_experiment(model, exp).fitted
+    for name in expand_parameters(exp["fit.parameters"]):
+        a, b = get_value(fits[False], name), get_value(fits[True], name)
+        assert abs(a - b) <= 1e-3 * abs(a), (name, a, b)

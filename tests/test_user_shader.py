@@ -148,7 +148,9 @@ TINY = [
     "reference.texture_size=32",
     "reference.texture_spp=4",
     "waves.normal_map_size=32",
-    "fit.max_steps=8",
+    "reference.lighting_size=32",
+    "reference.wall_spp=8",
+    "fit.max_steps=5",
 ]
 MY_WATER = Path(__file__).parent.parent / "experiments" / "my_water.toml"
 
@@ -169,23 +171,53 @@ def test_experiment_refuses_a_bad_user_declaration(tmp_path):
     assert Path(exp["fit.shader"]).is_file() and exp["fit.parameters"] is None
 
 
-def test_study_calibrate_fits_writes_back_and_gl_checks(tmp_path, monkeypatch):
-    import json
+@pytest.fixture(scope="module")
+def user_run(tmp_path_factory):
+    """``study calibrate experiments/my_water.toml`` on a copy of its shader, with
+    ``fit.write_back = "file"``: (output folder, the copy, its text before)."""
+    import shutil
 
     from study.cli import main
 
-    monkeypatch.setenv("STUDY_CACHE", str(tmp_path / "cache"))
+    root = tmp_path_factory.mktemp("user")
+    mine = root / "my_water.frag"
+    shutil.copy(MY_WATER.parent / "files" / "my_water.frag", mine)
+    before = mine.read_text()
     sets = [a for kv in TINY for a in ("--set", kv)]
-    assert main(["calibrate", str(MY_WATER), "--out", str(tmp_path / "c")] + sets) == 0
-    res = json.loads((tmp_path / "c" / "constants.json").read_text())
+    sets += ["--set", f'fit.shader="{mine}"', "--set", 'fit.write_back="file"']
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setenv("STUDY_CACHE", str(root / "cache"))
+        assert main(["calibrate", str(MY_WATER), "--out", str(root / "c")] + sets) == 0
+    return root / "c", mine, before
+
+
+def test_study_calibrate_fits_and_gl_checks(user_run):
+    import json
+
+    out, mine, _ = user_run
+    res = json.loads((out / "constants.json").read_text())
     assert res["rmse"] < res["rmse_start"]
     assert res["cost"]["fetches"] == 5.0 and res["cost"]["iterations"] == 0.0
     if res["gl_check"]["ran"]:
         assert res["gl_check"]["passed"], res["gl_check"]
-    written = (tmp_path / "c" / "shaders" / "my_water.frag").read_text()
+    assert "RMSE" in (out / "report.md").read_text() and (out / "fit.png").is_file()
+    written = (out / "shaders" / "my_water.frag").read_text()
     fitted = UserShader(written, "my_water.frag", {"constants": {"F0": [0.0, 0.2]}}).defaults()
     for name, v in res["constants"].items():
         want = tuple(np.float32(v)) if isinstance(v, list) else np.float32(v)
         got = tuple(np.float32(fitted[name])) if isinstance(v, list) else np.float32(fitted[name])
         assert got == want, name
-    assert "RMSE" in (tmp_path / "c" / "report.md").read_text()
+
+
+def test_write_back_into_the_users_own_file(user_run):
+    """``fit.write_back = "file"``: the user's file itself gets the fitted constants, every
+    other byte the same."""
+    import json
+
+    out, mine, before = user_run
+    res = json.loads((out / "constants.json").read_text())
+    after = mine.read_text()
+    assert after == (out / "shaders" / "my_water.frag").read_text()
+    assert after != before and len(after.split("\n")) == len(before.split("\n"))
+    changed = [a for a, b in zip(after.split("\n"), before.split("\n")) if a != b]
+    assert changed and all(any(f" {n} = " in ln for n in res["constants"]) for ln in changed)

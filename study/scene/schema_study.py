@@ -242,6 +242,14 @@ STUDY_KEYS: dict[str, Field] = {
         "`constant NAME LOW HIGH` (a constant to fit and its range) or `bind NAME INPUT` (the "
         "shader's sampler or uniform NAME is the study's INPUT).",
     ),
+    "fit.write_back": Field(
+        "str",
+        "copy",
+        "Where the fitted constants of your own `fit.shader` go: `copy` (into "
+        "`shaders/<file>` of the output folder) or `file` (also into your file itself, the "
+        "initializers replaced and every other byte kept, once the GL check has passed).",
+        choices=("copy", "file"),
+    ),
     "fit.parameters": Field(
         "list_str",
         None,
