@@ -365,9 +365,19 @@ class Translated:
         return getattr(self._variant, name)
 
     def render(self, inputs, constants=None, backend: str = "llvm", **kw):
+        _no_port_options(kw)
         inputs = self._variant.prepare_inputs(inputs)
         return render(inputs, constants, spec=self._spec, backend=backend)
 
     def render_with_jacobian(self, inputs, constants, names, backend: str = "llvm", **kw):
+        _no_port_options(kw)
         inputs = self._variant.prepare_inputs(inputs)
         return render_with_jacobian(inputs, constants, names, spec=self._spec, backend=backend)
+
+
+def _no_port_options(kw: dict) -> None:
+    if kw:
+        raise ValueError(
+            f"{', '.join(sorted(kw))}: an option of the hand ports (failure diagnostics, loop "
+            "modes) that the shader executed through SPIR-V does not have"
+        )

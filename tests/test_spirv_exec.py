@@ -223,3 +223,21 @@ def test_default_experiment_fits_the_same_constants(tmp_path, monkeypatch):
     for name in expand_parameters(exp["fit.parameters"]):
         a, b = get_value(fits[False], name), get_value(fits[True], name)
         assert abs(a - b) <= 1e-3 * abs(a), (name, a, b)
+
+
+def test_translated_model_equals_the_port_model(small):
+    """``ShaderModel(translated=True)``: the fit's renders and Jacobians through SPIR-V equal
+    the hand port's."""
+    from study.fit.model import ShaderModel
+
+    ref = np.zeros((small.height, small.width, 3), np.float32)
+    names = ["attenuation_distance", "water_color[1]"]
+    port = ShaderModel("water_refraction", small, ref)
+    spirv = ShaderModel("water_refraction", small, ref, translated=True)
+    c = Constants(attenuation_distance=2.0)
+    assert np.array_equal(port.render(c)[0], spirv.render(c)[0])
+    (r_p, J_p), (r_s, J_s) = (mod.residual_and_jacobian(c, names) for mod in (port, spirv))
+    assert np.array_equal(r_p, r_s)
+    assert np.abs(J_p - J_s).max() <= 1e-5 * np.abs(J_p).max()
+    with pytest.raises(ValueError, match="diagnose"):
+        spirv.variant.render(small, c, diagnose=True)

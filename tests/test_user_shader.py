@@ -181,7 +181,7 @@ def user_run(tmp_path_factory):
 
     root = tmp_path_factory.mktemp("user")
     mine = root / "my_water.frag"
-    shutil.copy(MY_WATER.parent / "files" / "my_water.frag", mine)
+    shutil.copy(MY_WATER.parent / "shaders" / "my_water.frag", mine)
     before = mine.read_text()
     sets = [a for kv in TINY for a in ("--set", kv)]
     sets += ["--set", f'fit.shader="{mine}"', "--set", 'fit.write_back="file"']
