@@ -56,6 +56,8 @@ class Executor(LoopRunner):
         self.M, self.m, self.bindings = module, m, bindings
         self.differentiate, self.trips = differentiate, trips
         self.passes: dict = {}  # loop header -> per-lane passes through its body (plain runs)
+        self.probe = self.replay = None  # see _spirv_loops.LoopRunner.replay_ok / replayed_loop
+        self.unrolled = False  # a lane-dependent loop was unrolled (it needed its trip count)
         self.env: dict = {}  # SSA id -> value
         self.vars: dict = {}  # variable id -> value (function variables and outputs)
         self.base = TRUE  # lanes the current straight-line code runs for
@@ -213,6 +215,7 @@ class Executor(LoopRunner):
             return out
 
         self.vars[vid] = put(old, ptype, list(path))
+        self.store_hook(vid, value, eff)
 
     def count(self, key: str, mask: Mask):
         eff = both(self.base, mask)

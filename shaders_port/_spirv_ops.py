@@ -47,6 +47,20 @@ def detach(x):
     return dr.detach(x) if isinstance(x, dr.ArrayBase) and dr.is_diff_v(x) else x
 
 
+def any_grad(x) -> bool:
+    """Whether a value (or a component of it) carries AD derivatives."""
+    if isinstance(x, list):
+        return any(any_grad(v) for v in x)
+    return isinstance(x, dr.ArrayBase) and dr.grad_enabled(x)
+
+
+def tangent_part(x):
+    """``x - detach(x)``: the value 0 carrying ``x``'s derivative (0 for a plain value)."""
+    if isinstance(x, dr.ArrayBase) and dr.grad_enabled(x):
+        return x - dr.detach(x)
+    return 0.0
+
+
 def cw(f, *args):
     """``f`` applied component by component to values of one shape (lists are vectors)."""
     if isinstance(args[0], list):

@@ -235,16 +235,19 @@ def frame_bindings(m, P, inputs, spec: ShaderSpec) -> dict:
     return b
 
 
-def shade_lanes(m, P, b: dict, spec: ShaderSpec, C, differentiate=False, trips=None):
+def shade_lanes(m, P, b: dict, spec: ShaderSpec, C, differentiate=False, trips=None, info=None):
     """Run the shader on one frame's bindings ``b``: (colour Array3f, diagnostics dict of
     per-lane Floats, passes: loop header -> per-lane passes of each symbolic loop). Shapes are
     the frame's lanes; nothing here reads a value back, so it can be recorded (``dr.freeze``)
-    unless a lane-dependent loop is unrolled without its ``trips``."""
+    unless a lane-dependent loop is unrolled without its ``trips``. ``info`` (a dict) gets
+    ``unrolled``: whether a loop was unrolled for AD (it needed its trip count)."""
     b = dict(b)
     b.update(constant_values(spec, C))
     ex = Executor(module_of(spec), m, b, differentiate=differentiate, trips=trips)
     try:
         outs, counts, passes = ex.run(), dict(ex.counts), dict(ex.passes)
+        if info is not None:
+            info["unrolled"] = ex.unrolled
     finally:
         ex.release()
     color = [v for v in outs.values() if v is not None]
@@ -320,6 +323,11 @@ def render(
     return finish_output(m, P, color, diag, spec.label)
 
 
+# configuration -> whether its Jacobian unrolls a loop (then a plain run first finds the trip
+# counts; a loop replayed on detached values needs none)
+_NEEDS_TRIPS: dict = {}
+
+
 def render_with_jacobian(
     inputs: ShaderInputs,
     constants: Constants | None,
@@ -330,18 +338,24 @@ def render_with_jacobian(
 ):
     """``(ShaderOutput, J)`` with ``J`` float32 (H, W, 3, len(names)): the forward-mode
     derivatives of the colour in the ``CONSTANT_SPECS`` scalar names ``names`` (as the ports'
-    ``render_with_jacobian``), through the executed SPIR-V: a plain run finds each
-    lane-dependent loop's largest trip count, then the shader runs with those loops unrolled
-    (both recorded, ``_frame.call_frozen``)."""
+    ``render_with_jacobian``), through the executed SPIR-V. A lane-dependent loop whose
+    differentiable state is affine (``v = v + X``, copies of such ``v``) runs on detached
+    values with the derivatives attached after it (``_spirv_loops``: the ports' 'replay');
+    any other such loop is unrolled its largest trip count over the frame, found by a plain
+    run first. Both recorded (``_frame.call_frozen``)."""
     constants = constants if constants is not None else Constants()
     m = backend_types(backend)
     P = prepare(inputs, m)
-    trips = trip_counts(m, P, inputs, spec, resolve_constants(m, constants))
+    plain = resolve_constants(m, constants)
+    needs = _NEEDS_TRIPS.get(_key(spec, plain), True)
+    trips = trip_counts(m, P, inputs, spec, plain) if needs else {}
     b = frame_bindings(m, P, inputs, spec)
     config = ("trips", tuple(sorted(trips.items())))
 
     def fn(m, P, C, params, b):
-        color, diag, _ = shade_lanes(m, P, b, spec, C, True, trips)
+        info: dict = {}
+        color, diag, _ = shade_lanes(m, P, b, spec, C, True, trips, info)
+        _NEEDS_TRIPS[_key(spec, plain)] = info["unrolled"]
         return tangents(m, color, diag, params)
 
     def shade_tangents(m, P, C, params, frozen):

@@ -241,3 +241,103 @@ def test_translated_model_equals_the_port_model(small):
     assert np.abs(J_p - J_s).max() <= 1e-5 * np.abs(J_p).max()
     with pytest.raises(ValueError, match="diagnose"):
         spirv.variant.render(small, c, diagnose=True)
+
+
+# ---- loops: replayed (affine state) and unrolled (anything else) for derivatives ------------
+
+_DECAY = """#version 330 core
+uniform mat4 uTextureMatrix0;
+in vec4 vTexCoord0;
+in vec3 varyingVecWorldPosition;
+out vec4 fragColor;
+uniform sampler2D normalMap;
+uniform sampler2D worldYComponent;
+const float DECAY = 0.8;
+const float STRIDE = 0.05;
+void main(void)
+{
+    vec2 uv = vTexCoord0.xy;
+    float acc = 0.0;
+    int i = 0;
+    while (i < 24)
+    {
+        acc = acc * DECAY + texture(normalMap, uv).x;
+        uv += vec2(STRIDE, 0.5 * STRIDE);
+        vec2 st = (uTextureMatrix0 * vec4(varyingVecWorldPosition + vec3(uv.x, 0.0, 0.0), 1.0)).xy;
+        if (texture(worldYComponent, st).r > -0.9 + 0.02 * float(i))
+        {
+            break;
+        }
+        i++;
+    }
+    fragColor = vec4(acc, uv, 1.0);
+}
+"""
+
+
+def _ran(spec, inputs, shader=None):
+    """An executor run with derivatives of ``spec`` (a user ``shader``'s: its start values)."""
+    import drjit.llvm.ad as m
+
+    from shaders_port._frame import resolve_constants
+    from shaders_port._raster import prepare
+    from shaders_port._spirv_exec import Executor
+
+    P = prepare(inputs, m)
+    b = dict(spirv_port.frame_bindings(m, P, inputs, spec))
+    C = resolve_constants(m, Constants()) if shader is None else shader._resolved(m, {})
+    if shader is not None:
+        C.values.update(shader._resolved(m, shader.defaults()).values)
+    import drjit as dr
+
+    for v in C.values.values():  # every constant differentiated
+        for x in v if isinstance(v, tuple) else (v,):
+            if isinstance(x, dr.ArrayBase):
+                dr.enable_grad(x)
+    b.update(spirv_port.constant_values(spec, C))
+    ex = Executor(spirv_port.module_of(spec), m, b, differentiate=True)
+    ex.run()
+    return ex
+
+
+def test_replayed_loop_equals_unrolled_loop(small, monkeypatch):
+    from shaders_port import _spirv_loops
+
+    spec = spirv_port.builtin_spec("water_refraction", ())
+    assert not _ran(spec, small).unrolled  # the raycast's state is affine: replayed
+    names = ["bumptex_mult", "steps_grazing"]
+    out, J = spirv_port.render_with_jacobian(small, FD_CONSTANTS, names, spec=spec)
+    monkeypatch.setattr(_spirv_loops.LoopRunner, "replay_plan", lambda *a: None)
+    monkeypatch.setattr(spirv_port, "_NEEDS_TRIPS", {})
+    key = spirv_port._key
+    monkeypatch.setattr(spirv_port, "_key", lambda *a: ("unrolled",) + key(*a))
+    assert _ran(spec, small).unrolled
+    out_u, J_u = spirv_port.render_with_jacobian(small, FD_CONSTANTS, names, spec=spec)
+    assert np.array_equal(out.numpy()["color"], out_u.numpy()["color"])
+    assert np.abs(J - J_u).max() <= 1e-5 * np.abs(J).max()
+
+
+def test_loop_with_non_affine_state_is_unrolled_and_differentiated(small):
+    from shaders_port.user_shader import UserShader
+
+    shader = UserShader(
+        _DECAY, "decay.frag", {"constants": {"DECAY": [0.1, 0.99], "STRIDE": [0.001, 0.5]}}
+    )
+    assert _ran(shader.spec(), small, shader).unrolled  # acc = acc * DECAY + ...: not affine
+    names = ["DECAY", "STRIDE"]
+    base = shader.render(small).numpy()
+    out, J = shader.render_with_jacobian(small, None, names)
+    assert np.array_equal(out.numpy()["color"], base["color"])
+    for j, name in enumerate(names):
+        x = shader.defaults()[name]
+        h = 1e-3 * x
+        p = shader.render(small, {name: x + h}).numpy()
+        m = shader.render(small, {name: x - h}).numpy()
+        same = (p["iterations"] == m["iterations"]) & (base["mask"] > 0)
+        fd = (p["color"] - m["color"]) / (2 * h)
+        fp, fm = (p["color"] - base["color"]) / h, (base["color"] - m["color"]) / h
+        smooth = same & (np.abs(fp - fm) <= 0.2 * np.abs(fd) + 2e-6 / h).all(-1)
+        assert smooth.sum() >= 0.8 * (base["mask"] > 0).sum(), name
+        assert np.abs(fd[smooth]).max() > 1e-3, name
+        err = np.abs(J[..., j] - fd)
+        assert (err[smooth] <= 8e-6 / h + 0.1 * np.abs(fd[smooth])).all(), (name, err.max())
