@@ -10,12 +10,13 @@ shader is traced into one kernel, as a hand port is. Control flow:
 * a loop (``OpLoopMerge``) whose exits are the same for every lane (a loop over an integer
   constant, e.g. ``for (j = 0; j < REFINE_STEPS; j++)``) is unrolled; any other loop is a
   Dr.Jit symbolic loop (``dr.while_loop``) over the function variables it stores, with a lane
-  mask for ``break``. With ``differentiate=True`` such a loop first runs symbolically on
-  detached values to find the largest trip count ``n`` of the frame, then is unrolled ``n``
-  times under lane masks, so that forward-mode AD sees straight-line code: forward mode
-  through a symbolic loop with texture fetches is not trusted (``water_refraction``'s
-  docstring) and is never used. Values are the same either way (masked code computes what
-  the loop computes); derivatives are checked against central differences in the tests.
+  mask for ``break`` (``_spirv_loops``). With ``differentiate=True`` such a loop either runs
+  on detached values with the derivatives of its affine state attached after it (the ports'
+  'replay', when only variables updated as ``v = v + X`` and their copies carry
+  derivatives), or is unrolled its largest trip count over the frame under lane masks, so
+  that forward-mode AD sees straight-line code: forward mode through a symbolic loop with
+  texture fetches is not trusted (``water_refraction``'s docstring) and is never used. Values
+  are the same either way; derivatives are checked against central differences in the tests.
 
 Variables of the ``Input`` and ``UniformConstant`` storage classes are bound by their GLSL
 names through ``bindings`` (name -> value: a sampler object of ``_texture``, a list of
