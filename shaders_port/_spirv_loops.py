@@ -7,9 +7,13 @@ A structured loop (``OpLoopMerge``) is run by :meth:`LoopRunner.loop`:
 * otherwise it is a Dr.Jit symbolic loop (``dr.while_loop``) whose state is the function
   variables its blocks store, the cost counters and a lane mask (``break`` clears it); the
   number of passes through its body is kept per lane (``passes``, by loop header);
-* with ``differentiate``, the loop is unrolled that many times (``trips``: the largest number
-  of passes of each loop over the frame, from a plain run; or found by a symbolic run on
-  detached values) under lane masks, so that forward-mode AD sees straight-line code.
+* with ``differentiate``: when only variables updated as ``v = v + X`` (``X`` the same on
+  every pass) and copies of them carry derivatives (two probing passes with AD say so), the
+  loop runs symbolically on detached values counting each variable's adds, and the
+  derivative parts of ``v0 + n X`` are attached after it (:meth:`LoopRunner.replayed_loop`,
+  the ports' 'replay'); otherwise it is unrolled its largest trip count (``trips``: over the
+  frame, from a plain run; or found by a symbolic run on detached values) under lane masks,
+  so that forward-mode AD sees straight-line code.
 """
 
 from __future__ import annotations
