@@ -5,7 +5,7 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
-SYSTEM_PACKAGES=(libllvm19 libegl1 libegl-mesa0 libgl1-mesa-dri glslang-tools spirv-tools spirv-cross)
+SYSTEM_PACKAGES=(libllvm19 libegl1 libegl-mesa0 libgl1-mesa-dri glslang-tools spirv-tools spirv-cross spirv-headers)
 missing=()
 for p in "${SYSTEM_PACKAGES[@]}"; do
     dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing+=("$p")

@@ -52,6 +52,7 @@ def compare_port_gl(
     shader: str,
     *,
     renderer=None,
+    output: dict | None = None,
 ) -> dict:
     """Render ``shader`` with the port (LLVM) and with the core GLSL on OpenGL and compare.
 
@@ -59,6 +60,8 @@ def compare_port_gl(
         inputs, constants: the frame (constants None = defaults).
         shader: a shader variant name (``shaders_port._variants.VARIANTS``).
         renderer: an open ``GLRenderer`` for these inputs to reuse (else one is made).
+        output: the ``ShaderOutput.numpy()`` dict to compare in place of the port's (e.g. the
+            SPIR-V executor's, ``shaders_port.spirv_port``); None renders the port.
 
     Returns a dict: ``mean_abs`` and ``p999`` (99.9th percentile) and ``max_abs`` of the
     per-pixel max-over-channel |port - GL| on common water pixels (linear RGB);
@@ -70,7 +73,7 @@ def compare_port_gl(
 
     variant = get_variant(shader)
     constants = constants if constants is not None else Constants()
-    out = variant.render(inputs, constants).numpy()
+    out = variant.render(inputs, constants).numpy() if output is None else output
     own = renderer is None
     if own:
         renderer = variant.gl_renderer(inputs)

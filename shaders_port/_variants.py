@@ -155,6 +155,11 @@ def get_variant(name: str) -> Variant:
     ValueError says why otherwise (unknown token, or a configuration no file realises)."""
     if name in VARIANTS:
         return VARIANTS[name]
+    if str(name).endswith(".frag"):
+        raise ValueError(
+            f"{name}: your own GLSL shader is calibrated by `study calibrate` (through SPIR-V, "
+            "docs/user-shader.md); this command takes the study's shaders"
+        )
     try:
         return register(from_space(_space.choices_of(name)))
     except ValueError as exc:

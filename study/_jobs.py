@@ -8,7 +8,7 @@ from pathlib import Path
 import numpy as np
 
 from ._backend import init_backend
-from .scene.experiment import load_experiment
+from .scene.experiment import is_user_shader, load_experiment
 from ._io import write_exr, write_json, write_png
 from .report.gl_check import gl_check, target_checks
 from ._progress import log as _log
@@ -97,7 +97,10 @@ def load_scene_data(exp, variant, cache=None):
         )
     with st.stage("inputs_s", "shader inputs"):
         inputs = load_or_build_shader_inputs(exp, variant, cache=cache, log=_log, progress=st)
-        inputs = inputs_for_shader(exp, inputs, exp["fit.shader"], variant, cache=cache, log=_log)
+        if not is_user_shader(exp["fit.shader"]):  # a user's shader reads the study's inputs
+            inputs = inputs_for_shader(
+                exp, inputs, exp["fit.shader"], variant, cache=cache, log=_log
+            )
     return ref, inputs, st.timings
 
 
@@ -255,6 +258,13 @@ def run_calibrate(experiment, out, overrides=None, variant=None, solver=None, ca
     t_start = time.perf_counter()
     exp, variant, out = prepare(experiment, out, overrides, variant, frames=True)
     setup_s = time.perf_counter() - t_start
+    if is_user_shader(exp["fit.shader"]):
+        from ._user_jobs import calibrate_user_shader
+
+        ref, inputs, timings = load_scene_data(exp, variant, cache)
+        return calibrate_user_shader(
+            exp, variant, out, ref, inputs, {"setup_s": setup_s, **timings}
+        )
     solver = solver or exp["fit.solver"]
     from .scene.frames import is_animated
 

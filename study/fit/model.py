@@ -136,7 +136,8 @@ def _thread_handoff(fn):
 
 class ShaderModel:
     """The port of the shader variant ``shader`` (a name in ``shaders_port._variants.VARIANTS``)
-    on ``inputs`` compared against ``reference`` (same size)."""
+    on ``inputs`` compared against ``reference`` (same size); ``translated``: the variant's
+    GLSL executed through SPIR-V (``shaders_port.spirv_port``) in place of its port."""
 
     def __init__(
         self,
@@ -146,9 +147,14 @@ class ShaderModel:
         backend: str = "llvm",
         reference_mask: np.ndarray | None = None,
         reference_stderr: np.ndarray | None = None,
+        translated: bool = False,
     ):
         self.shader, self.inputs, self.backend = shader, inputs, backend
         self.variant = get_variant(shader)
+        if translated:  # its GLSL file executed through SPIR-V in place of the hand port
+            from shaders_port.spirv_port import Translated
+
+            self.variant = Translated(self.variant)
         if reference.shape != (inputs.height, inputs.width, 3):
             raise ValueError(
                 f"reference is {reference.shape}, inputs are {inputs.height}x{inputs.width}"
@@ -182,6 +188,7 @@ class ShaderModel:
         backend: str = "llvm",
         resolution: tuple[int, int] | None = None,
         stderr_full: np.ndarray | None = None,
+        translated: bool = False,
     ) -> "ShaderModel":
         """The model at ``resolution`` (default ``fit.resolution``) against the box-downsampled
         ``reference_full`` (H, W, 3); ``stderr_full`` (H, W, 3), the reference's per-pixel Monte
@@ -202,6 +209,7 @@ class ShaderModel:
             backend,
             reference_mask=water_mask(exp, w, h),
             reference_stderr=se,
+            translated=translated,
         )
 
     @_thread_handoff

@@ -90,7 +90,7 @@ def _check_shaders(values: dict) -> None:
     pins its axes (``shaders_port._space``)."""
     from shaders_port._space import parse_fix
 
-    names = [("fit.shader", values["fit.shader"])]
+    names = [] if is_user_shader(values["fit.shader"]) else [("fit.shader", values["fit.shader"])]
     names += [("tradeoff.variants", v) for v in values["tradeoff.variants"] or []]
     for key, name in names:
         try:
@@ -101,6 +101,53 @@ def _check_shaders(values: dict) -> None:
         parse_fix(values["tradeoff.fix"])
     except ValueError as exc:
         raise ExperimentError(str(exc)) from None
+
+
+def is_user_shader(name: str) -> bool:
+    """Whether ``fit.shader`` names a GLSL file of the user's (not a shader of the space)."""
+    return str(name).endswith(".frag")
+
+
+def user_declaration(lines: list | None) -> dict:
+    """``fit.declare`` lines as a ``shaders_port.user_shader.UserShader`` declaration table."""
+    decl: dict = {"constants": {}, "bindings": {}}
+    for line in lines or []:
+        parts = str(line).split()
+        try:
+            if parts[0] == "constant" and len(parts) == 4:
+                decl["constants"][parts[1]] = [float(parts[2]), float(parts[3])]
+                continue
+            if parts[0] == "bind" and len(parts) == 3:
+                decl["bindings"][parts[1]] = parts[2]
+                continue
+        except (IndexError, ValueError):
+            pass
+        raise ExperimentError(
+            f"fit.declare: {_clip(line)}: write `constant NAME LOW HIGH` or `bind NAME INPUT`"
+        )
+    return decl
+
+
+def load_user_shader(values: dict):
+    """The ``UserShader`` of ``fit.shader`` (a resolved path) and ``fit.declare``;
+    ExperimentError naming the problem."""
+    from shaders_port.user_shader import UserShader
+
+    try:
+        return UserShader.from_file(values["fit.shader"], user_declaration(values["fit.declare"]))
+    except ValueError as exc:
+        raise ExperimentError(f"fit.shader: {exc}") from None
+
+
+def _check_user_shader(values: dict, base) -> None:
+    p = Path(values["fit.shader"]).expanduser()
+    values["fit.shader"] = str((p if p.is_absolute() else (base or Path.cwd()) / p).resolve())
+    if values["fit.parameters"] is not None:
+        raise ExperimentError(
+            "fit.parameters: your own fit.shader fits the constants its declaration names "
+            "(`// @study constant ...` or fit.declare); leave fit.parameters unset"
+        )
+    load_user_shader(values)
 
 
 def fit_parameters(shader_name: str, listed: list | None) -> list[str]:
@@ -397,8 +444,16 @@ def validate(raw: dict, overrides: list[str] | None = None, path: Path | None = 
             'independent halves, which only reference.texture_method = "lighting" '
             'renders; use that method or fit.input_noise = "ignore"'
         )
+    if is_user_shader(values["fit.shader"]):
+        _check_user_shader(values, base.get("fit.shader"))
+    elif values["fit.declare"] is not None:
+        raise ExperimentError(
+            "fit.declare declares your own fit.shader (a .frag file); "
+            "remove it, or set fit.shader to the file"
+        )
     _check_shaders(values)
-    values["fit.parameters"] = fit_parameters(values["fit.shader"], values["fit.parameters"])
+    if not is_user_shader(values["fit.shader"]):
+        values["fit.parameters"] = fit_parameters(values["fit.shader"], values["fit.parameters"])
     if values["camera.position"] == values["camera.target"]:
         raise ExperimentError("camera.position equals camera.target; move one of them")
     if values["camera.position"][1] <= 0.0:

@@ -231,7 +231,24 @@ STUDY_KEYS: dict[str, Field] = {
         "str",
         "water_refraction",
         "Shader to fit: a shipped variant or any configuration of the shader space, named as "
-        "`docs/shader-space.md` says (e.g. `water_reflection_beer_walls`).",
+        "`docs/shader-space.md` says (e.g. `water_reflection_beer_walls`); or the path of your "
+        "own GLSL fragment shader (`.frag`, relative to the experiment file), calibrated "
+        "through SPIR-V (`docs/user-shader.md`).",
+    ),
+    "fit.declare": Field(
+        "list_str",
+        None,
+        "Declaration of your own `fit.shader` besides its `// @study` pragmas, one line each: "
+        "`constant NAME LOW HIGH` (a constant to fit and its range) or `bind NAME INPUT` (the "
+        "shader's sampler or uniform NAME is the study's INPUT).",
+    ),
+    "fit.write_back": Field(
+        "str",
+        "copy",
+        "Where the fitted constants of your own `fit.shader` go: `copy` (into "
+        "`shaders/<file>` of the output folder) or `file` (also into your file itself, the "
+        "initializers replaced and every other byte kept, once the GL check has passed).",
+        choices=("copy", "file"),
     ),
     "fit.parameters": Field(
         "list_str",

@@ -1,0 +1,75 @@
+"""The SPIR-V executor against the hand ports: frame time and Jacobian time.
+
+Run: ``.venv/bin/python benchmarks/bench_spirv.py [--size 128] [--n 5]``. On the
+tests/synthetic.py scene at size x size pixels, prints a table of median milliseconds (after
+warm-up) for each shader variant: the hand port's render and the executor's (``spirv_port``:
+tracing the SPIR-V included, kernels cached by Dr.Jit), and ``render_with_jacobian`` in four
+constants both ways, with the ratios executor / port against the goal 1.5.
+"""
+
+from __future__ import annotations
+
+import argparse
+import statistics
+import sys
+import time
+import warnings
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parent.parent
+sys.path[:0] = [str(ROOT), str(ROOT / "tests")]
+
+from synthetic import synthetic_baseline_inputs, synthetic_inputs  # noqa: E402
+from shaders_port import Constants, spirv_port  # noqa: E402
+from shaders_port._variants import VARIANTS  # noqa: E402
+
+_RAYCAST = ["attenuation_distance", "bumptex_mult", "steps_grazing", "refr_coeff"]
+CASES = {
+    "water_refraction": _RAYCAST,
+    "water_refraction_secant": _RAYCAST,
+    "water_reflection": [
+        "attenuation_distance", "bumptex_mult", "refl_steps_grazing", "refr_coeff"
+    ],
+    "water_baseline": [
+        "refraction_strength", "chromatic_dispersion", "reflect_distortion", "refraction_index"
+    ],
+}  # fmt: skip
+
+
+def median_ms(fn, n: int) -> float:
+    fn()
+    fn()
+    times = []
+    for _ in range(n):
+        t0 = time.perf_counter()
+        fn()
+        times.append(time.perf_counter() - t0)
+    return 1e3 * statistics.median(times)
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--size", type=int, default=128)
+    ap.add_argument("--n", type=int, default=5)
+    args = ap.parse_args()
+    warnings.simplefilter("ignore", RuntimeWarning)
+    plain = synthetic_inputs(width=args.size, height=args.size)
+    base = synthetic_baseline_inputs(width=args.size, height=args.size)
+    c = Constants()
+    print(f"{args.size}x{args.size} pixels, median of {args.n} (ms)")
+    print("| variant | port frame | SPIR-V frame | ratio | port J(4) | SPIR-V J(4) | ratio |")
+    print("|---|---|---|---|---|---|---|")
+    for name, names in CASES.items():
+        v = VARIANTS[name]
+        inputs = base if v.inputs else plain
+        spec = spirv_port.builtin_spec(v.shader, v.defines)
+        pf = median_ms(lambda: v.render(inputs, c).color.numpy(), args.n)
+        sf = median_ms(lambda: spirv_port.render(inputs, c, spec=spec).color.numpy(), args.n)
+        pj = median_ms(lambda: v.render_with_jacobian(inputs, c, names), args.n)
+        sj = median_ms(lambda: spirv_port.render_with_jacobian(inputs, c, names, spec=spec), args.n)
+        cells = [f"{pf:.1f}", f"{sf:.1f}", f"{sf / pf:.2f}", f"{pj:.1f}", f"{sj:.1f}"]
+        print(f"| {name} | " + " | ".join(cells) + f" | {sj / pj:.2f} |")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,397 @@
+"""Any GLSL water fragment shader rendered and differentiated through SPIR-V, without a port.
+
+The shader's core GLSL (``#version 330`` or later, linked with the study's ``water.vert``) is
+compiled by glslang to SPIR-V and executed on Dr.Jit types by ``_spirv_exec`` on the same
+per-pixel inputs the hand ports get (``_raster.prepare``): the result is a
+:class:`~shaders_port._frame.ShaderOutput` like a port's, and :func:`render_with_jacobian`
+runs the ports' forward-mode passes (``_frame.jacobian_passes``).
+
+Tunable constants. Each constant to set or differentiate is a declaration of the shader,
+``const float NAME = 7.5;`` or ``uniform float NAME = 7.5;`` (``float``, ``int``, ``vec3``,
+``vec4``), named in :class:`ShaderSpec` ``constants``; before compiling, each becomes a plain
+``uniform`` (its value no longer folded into the code), and the executor binds it to the
+value of the run. The study's own shaders declare the constants of ``CONSTANT_SPECS`` (their
+GLSL names); a user's shader declares its own (``study.fit.user_shader``).
+
+Bindings. The shader's inputs, uniforms and samplers are bound by name: the study's GLSL
+names (:data:`STUDY_INPUTS`, those of the shipped core shaders) bind themselves; a
+``ShaderSpec.bindings`` entry binds another name of the shader to one of them.
+
+Diagnostics: ``fetches`` and ``iterations`` per pixel, counted by the executor from the
+translated code (texture samples executed; loop bodies entered), and ``nonfinite``.
+"""
+
+from __future__ import annotations
+
+import functools
+import re
+from dataclasses import dataclass, field
+
+import drjit as dr
+import numpy as np
+
+from . import _frame
+from ._frame import ShaderOutput, finish_output, jacobian_passes, resolve_constants, tangents
+from ._glsl import read_source
+from ._inputs import CONSTANT_SPECS, Constants, ShaderInputs, normal_matrix
+from ._raster import prepare
+from ._spirv_exec import Executor
+from ._spirv_module import Module, compile_fragment
+from ._spirv_ops import lift
+from ._texture import CLAMP, LINEAR, NEAREST, Texture2D, backend_types
+
+__all__ = ["ShaderSpec", "STUDY_INPUTS", "builtin_spec", "render", "render_with_jacobian"]
+
+# the study's inputs of a fragment shader, by the GLSL names of the shipped core shaders
+STUDY_INPUTS = {
+    "varyingVecWorldPosition": "varying vec3: world position on the water plane",
+    "varyingVecEye": "varying vec3: water point -> camera (world units)",
+    "varyingVecLight": "varying vec3: water point -> light (world units)",
+    "vTexCoord0": "varying vec4: normal-map layer 0 coordinate ((x, z)/tile + wave1, 0, 1)",
+    "vTexCoord1": "varying vec4: normal-map layer 1 coordinate",
+    "vTexCoord2": "varying vec4: normal-map layer 2 coordinate",
+    "vTexCoord3": "varying vec4: normal-map layer 3 coordinate",
+    "gl_FragCoord": "built-in: window coordinate of the pixel centre",
+    "refractionTexture": "sampler2D: top-down ground colour, linear RGB, bilinear, clamp",
+    "worldYComponent": "sampler2D: top-down ground world y (.r), nearest, clamp",
+    "normalMap": "sampler2D: wave normals 0.5 n + 0.5, bilinear, repeat",
+    "reflectionTexture": "samplerCube: sky, linear RGB, bilinear, clamp",
+    "fresnelLookup": "sampler2D: Fresnel LUT (N x 1; .r transmission, .g reflection), nearest",
+    "worldYComponentReflection": "sampler2D: world y of geometry above the water, nearest",
+    "reflectionBottom": "sampler2D: that geometry seen from below, bilinear, clamp",
+    "sceneColor": "sampler2D: screen-space scene without the water, bilinear, clamp",
+    "sceneDepth": "sampler2D: its window depth, nearest, clamp",
+    "reflection_sampler": "sampler2D: mirrored-camera reflection, bilinear, clamp",
+    "uTextureMatrix0": "mat4: world -> (s, t) of the top-down textures",
+    "uTextureMatrix1": "mat4: world -> (s, t) of the reflection textures",
+    "uModelViewProjectionMatrix": "mat4: world -> clip space of the camera",
+    "uModelViewProjectionMatrixInverse": "mat4: its inverse",
+    "uNormalMatrix": "mat3: the camera's rotation",
+    "o2v_projection_reflection": "mat4: world -> clip of the mirrored camera",
+    "screenSize": "vec2: output width, height in pixels",
+    "viewpos": "vec3: camera position",
+    "lightpos": "vec3: light position",
+    "lightcolor": "vec3: linear RGB of the highlight",
+}
+_DECL = r"^(?P<head>\s*(?:const|uniform)\s+(?P<type>float|int|vec3|vec4)\s+{name}\s*=\s*)"
+_DECL_TAIL = r"(?P<value>[^;]*)(?P<tail>;.*)$"
+
+
+@dataclass(frozen=True)
+class ShaderSpec:
+    """A fragment shader to execute: its core GLSL ``source``, a ``label`` (file name for
+    messages and debug lines), the preprocessor names ``defines``, ``constants``: GLSL name ->
+    ``CONSTANT_SPECS`` key or the user's name (each a declaration with an initializer, made a
+    uniform), and ``bindings``: shader name -> :data:`STUDY_INPUTS` name."""
+
+    source: str
+    label: str
+    defines: tuple = ()
+    constants: tuple = ()  # ((glsl name, key), ...)
+    bindings: tuple = ()  # ((shader name, study name), ...)
+    ints: tuple = field(default=())  # GLSL names of the integer constants
+
+    def prepared_source(self) -> str:
+        """The source with every declared constant a uniform without initializer (line for
+        line: the GLSL line numbers are kept)."""
+        return _prepared(self.source, self.label, self.constants)
+
+
+@functools.lru_cache(maxsize=64)
+def _prepared(source: str, label: str, constants: tuple) -> str:
+    """:meth:`ShaderSpec.prepared_source` (remembered: it is on every call's key)."""
+    src = source
+    for glsl, _ in constants:
+        pat = re.compile(_DECL.format(name=re.escape(glsl)) + _DECL_TAIL, re.M)
+        found = pat.search(src)
+        if found is None:
+            raise ValueError(
+                f"{label}: no declaration `const|uniform <float|int|vec3|vec4> {glsl} "
+                "= <value>;` of the constant to fit; declare it on one line"
+            )
+        decl = f"uniform {found['type']} {glsl}{found['tail']}"
+        indent = found["head"][: len(found["head"]) - len(found["head"].lstrip())]
+        src = src[: found.start()] + indent + decl + src[found.end() :]
+    return src
+
+
+_MODULES: dict = {}
+
+
+def module_of(spec: ShaderSpec) -> Module:
+    """The compiled, decoded module of ``spec`` (cached by source and defines)."""
+    key = (spec.prepared_source(), spec.defines, spec.label)
+    mod = _MODULES.get(key)
+    if mod is None:
+        mod = Module(compile_fragment(key[0], spec.label, spec.defines), label=spec.label)
+        if len(_MODULES) > 64:
+            _MODULES.clear()
+        _MODULES[key] = mod
+    return mod
+
+
+def builtin_spec(shader: str, defines: tuple = ()) -> ShaderSpec:
+    """The spec of a shipped shader (``water_refraction``, ``water_reflection``,
+    ``water_baseline``): its core file and the ``CONSTANT_SPECS`` it declares."""
+    from ._glsl import declared_constants
+
+    src = read_source(shader, "frag", "core")
+    names = declared_constants(src)
+    consts = tuple((CONSTANT_SPECS[n][0], n) for n in names)
+    return ShaderSpec(src, f"{shader}.frag", tuple(defines), consts)
+
+
+def _columns(M) -> list:
+    a = np.asarray(M, np.float32)
+    return [[float(a[i, j]) for i in range(a.shape[0])] for j in range(a.shape[1])]
+
+
+def study_bindings(m, P, inputs: ShaderInputs) -> dict:
+    """The values of :data:`STUDY_INPUTS` for one prepared frame."""
+    r = P.raster
+    b = {
+        "varyingVecWorldPosition": [P.varyingVecWorldPosition[i] for i in range(3)],
+        "varyingVecEye": [P.varyingVecEye[i] for i in range(3)],
+        "varyingVecLight": [P.varyingVecLight[i] for i in range(3)],
+        "refractionTexture": P.refractionTexture,
+        "worldYComponent": P.worldYComponent,
+        "normalMap": P.normalMap,
+        "reflectionTexture": P.reflectionTexture,
+        "fresnelLookup": P.fresnelLookup,
+        "worldYComponentReflection": P.worldYComponentReflection,
+        "reflectionBottom": P.reflectionBottom,
+        "uTextureMatrix0": _columns(inputs.tex_matrix0),
+        "uTextureMatrix1": _columns(inputs.tex_matrix1),
+        "uModelViewProjectionMatrix": _columns(inputs.view_proj),
+        "uModelViewProjectionMatrixInverse": _columns(
+            np.linalg.inv(inputs.view_proj.astype(np.float64))
+        ),
+        "screenSize": [float(np.float32(inputs.width)), float(np.float32(inputs.height))],
+        "viewpos": [float(v) for v in inputs.viewpos],
+        "lightpos": [float(v) for v in inputs.lightpos],
+        "lightcolor": [float(v) for v in inputs.lightcolor],
+    }
+    for k in range(4):
+        s, t = P.texcoord[k]
+        b[f"vTexCoord{k}"] = [s, t, 0.0, 1.0]
+    col = (r.index % r.width).astype(np.float32)
+    row = (r.index // r.width).astype(np.float32)
+    clip = np.c_[r.world.astype(np.float64), np.ones(len(r.index))] @ inputs.view_proj.T
+    b["gl_FragCoord"] = [
+        m.Float(col + np.float32(0.5)),
+        m.Float(np.float32(r.height) - row - np.float32(0.5)),
+        m.Float((0.5 * clip[:, 2] / clip[:, 3] + 0.5).astype(np.float32)),
+        m.Float((1.0 / clip[:, 3]).astype(np.float32)),
+    ]
+    try:
+        b["uNormalMatrix"] = _columns(normal_matrix(inputs.view_proj))
+    except ValueError:
+        pass  # a view_proj that is no perspective times a rigid view: a shader reading it fails
+    for name, field_, filt in (
+        ("sceneColor", "scene_color", LINEAR),
+        ("sceneDepth", "scene_depth", NEAREST),
+        ("reflection_sampler", "reflection_color", LINEAR),
+    ):
+        if getattr(inputs, field_) is not None:
+            b[name] = Texture2D.from_numpy(m, getattr(inputs, field_), filt, CLAMP)
+    if inputs.reflection_view_proj is not None:
+        b["o2v_projection_reflection"] = _columns(inputs.reflection_view_proj)
+    return b
+
+
+def constant_values(spec: ShaderSpec, C) -> dict:
+    """GLSL name -> executor value of each declared constant, from resolved constants ``C``
+    (``_frame.resolve_constants``, or any object with ``values`` keyed like ``spec``)."""
+    out = {}
+    for glsl, key in spec.constants:
+        v = C.values[key]
+        out[glsl] = list(v) if isinstance(v, tuple) else v
+    return out
+
+
+_BINDINGS: dict = {}
+
+
+def frame_bindings(m, P, inputs, spec: ShaderSpec) -> dict:
+    """Every value the shader may read on this frame: the study's inputs, the spec's bindings
+    of other names to them (checked), but not the constants. One dict per uploaded frame and
+    bindings (a recorded kernel replays only for the same objects: measured, a new dict of
+    equal values records again)."""
+    key = (P.upload, m.__name__, spec.bindings)
+    hit = _BINDINGS.get(key)
+    if hit is not None:
+        return hit
+    b = study_bindings(m, P, inputs)
+    for name, study in spec.bindings:
+        if study not in b:
+            raise ValueError(
+                f"{spec.label}: the binding {name} = {study!r} names no study input the frame "
+                f"has; the study's inputs: {', '.join(sorted(STUDY_INPUTS))}"
+            )
+        b[name] = b[study]
+    if len(_BINDINGS) >= 8:
+        _BINDINGS.pop(next(iter(_BINDINGS)))
+    _BINDINGS[key] = b
+    return b
+
+
+def shade_lanes(m, P, b: dict, spec: ShaderSpec, C, differentiate=False, trips=None, info=None):
+    """Run the shader on one frame's bindings ``b``: (colour Array3f, diagnostics dict of
+    per-lane Floats, passes: loop header -> per-lane passes of each symbolic loop). Shapes are
+    the frame's lanes; nothing here reads a value back, so it can be recorded (``dr.freeze``)
+    unless a lane-dependent loop is unrolled without its ``trips``. ``info`` (a dict) gets
+    ``unrolled``: whether a loop was unrolled for AD (it needed its trip count)."""
+    b = dict(b)
+    b.update(constant_values(spec, C))
+    ex = Executor(module_of(spec), m, b, differentiate=differentiate, trips=trips)
+    try:
+        outs, counts, passes = ex.run(), dict(ex.counts), dict(ex.passes)
+        if info is not None:
+            info["unrolled"] = ex.unrolled
+    finally:
+        ex.release()
+    color = [v for v in outs.values() if v is not None]
+    if len(color) != 1:
+        raise ValueError(f"{spec.label}: the shader must write exactly one vec4 output")
+    color = m.Array3f(*(lift(m, c, "float") for c in color[0][:3]))
+    diag = {
+        "iterations": lift(m, counts["iterations"], "float"),
+        "fetches": lift(m, counts["fetches"], "float"),
+        "nonfinite": m.Float(0.0),
+    }
+    return color, diag, passes
+
+
+def _key(spec: ShaderSpec, C, *extra) -> tuple:
+    return ("spirv", spec.prepared_source(), spec.defines, spec.label, *extra) + (
+        _frame.python_config(C)
+    )
+
+
+def _recorded(key: tuple, fn, m, P, *args):
+    """``_frame.call_frozen``; a failure while recording (an unsupported instruction, an
+    unbound name: an error of the shader) is raised as itself by tracing the call."""
+    try:
+        return _frame.call_frozen(key, fn, m, P, *args)
+    except RuntimeError as exc:
+        if "frozen function" not in str(exc):
+            raise
+        return fn(m, P, *args)
+
+
+def shade(m, P, inputs, spec: ShaderSpec, C, differentiate: bool = False, trips=None):
+    """:func:`shade_lanes` on a prepared frame ``P`` (with its raster): (colour, diag)."""
+    color, diag, _ = shade_lanes(m, P, frame_bindings(m, P, inputs, spec), spec, C,
+                                 differentiate, trips)  # fmt: skip
+    return color, diag
+
+
+def trip_counts(m, P, inputs, spec: ShaderSpec, C) -> dict:
+    """Loop header -> the largest number of passes through the loop's body over the frame's
+    lanes, from a plain (recorded) run with constants ``C``."""
+
+    def fn(m, P, C, b):
+        return shade_lanes(m, P, b, spec, C)[2]
+
+    b = frame_bindings(m, P, inputs, spec)
+    with dr.suspend_grad():
+        passes = _recorded(_key(spec, C, "passes"), fn, m, P.shading_state(), C, b)
+    return {k: int(dr.max(v)[0]) if dr.width(v) else 0 for k, v in passes.items()}
+
+
+def render(
+    inputs: ShaderInputs,
+    constants: Constants | None = None,
+    *,
+    spec: ShaderSpec,
+    backend: str = "llvm",
+    resolved=None,
+) -> ShaderOutput:
+    """Render ``spec`` on ``inputs`` with ``constants`` (the study's ``Constants``; or
+    ``resolved``: already resolved values, e.g. a user shader's). Returns a ShaderOutput:
+    ``color`` TensorXf (H, W, 3) linear RGB, ``mask``, ``diagnostics`` ``iterations``,
+    ``fetches``, ``nonfinite`` (H, W). Replayed from a recording (``_frame.call_frozen``)."""
+    m = backend_types(backend)
+    P = prepare(inputs, m)
+    C = resolved if resolved is not None else resolve_constants(m, constants or Constants())
+    b = frame_bindings(m, P, inputs, spec)
+
+    def fn(m, P, C, b):
+        return shade_lanes(m, P, b, spec, C)[:2]
+
+    color, diag = _recorded(_key(spec, C), fn, m, P.shading_state(), C, b)
+    return finish_output(m, P, color, diag, spec.label)
+
+
+# configuration -> whether its Jacobian unrolls a loop (then a plain run first finds the trip
+# counts; a loop replayed on detached values needs none)
+_NEEDS_TRIPS: dict = {}
+
+
+def render_with_jacobian(
+    inputs: ShaderInputs,
+    constants: Constants | None,
+    names: list[str],
+    *,
+    spec: ShaderSpec,
+    backend: str = "llvm",
+):
+    """``(ShaderOutput, J)`` with ``J`` float32 (H, W, 3, len(names)): the forward-mode
+    derivatives of the colour in the ``CONSTANT_SPECS`` scalar names ``names`` (as the ports'
+    ``render_with_jacobian``), through the executed SPIR-V. A lane-dependent loop whose
+    differentiable state is affine (``v = v + X``, copies of such ``v``) runs on detached
+    values with the derivatives attached after it (``_spirv_loops``: the ports' 'replay');
+    any other such loop is unrolled its largest trip count over the frame, found by a plain
+    run first. Both recorded (``_frame.call_frozen``)."""
+    constants = constants if constants is not None else Constants()
+    m = backend_types(backend)
+    P = prepare(inputs, m)
+    plain = resolve_constants(m, constants)
+    needs = _NEEDS_TRIPS.get(_key(spec, plain), True)
+    trips = trip_counts(m, P, inputs, spec, plain) if needs else {}
+    b = frame_bindings(m, P, inputs, spec)
+    config = ("trips", tuple(sorted(trips.items())))
+
+    def fn(m, P, C, params, b):
+        info: dict = {}
+        color, diag, _ = shade_lanes(m, P, b, spec, C, True, trips, info)
+        _NEEDS_TRIPS[_key(spec, plain)] = info["unrolled"]
+        return tangents(m, color, diag, params)
+
+    def shade_tangents(m, P, C, params, frozen):
+        if frozen:
+            return _recorded(_key(spec, C, config), fn, m, P, C, params, b)
+        return fn(m, P, C, params, b)
+
+    return jacobian_passes(shade_tangents, spec.label, inputs, constants, names, backend, "replay")
+
+
+class Translated:
+    """A shader variant (``shaders_port._variants.Variant``) whose ``render`` and
+    ``render_with_jacobian`` execute its GLSL file through SPIR-V in place of its hand port;
+    everything else (name, defines, constants it reads, ...) is the variant's."""
+
+    def __init__(self, variant):
+        self._variant = variant
+        self._spec = builtin_spec(variant.shader, variant.defines)
+
+    def __getattr__(self, name):
+        return getattr(self._variant, name)
+
+    def render(self, inputs, constants=None, backend: str = "llvm", **kw):
+        _no_port_options(kw)
+        inputs = self._variant.prepare_inputs(inputs)
+        return render(inputs, constants, spec=self._spec, backend=backend)
+
+    def render_with_jacobian(self, inputs, constants, names, backend: str = "llvm", **kw):
+        _no_port_options(kw)
+        inputs = self._variant.prepare_inputs(inputs)
+        return render_with_jacobian(inputs, constants, names, spec=self._spec, backend=backend)
+
+
+def _no_port_options(kw: dict) -> None:
+    if kw:
+        raise ValueError(
+            f"{', '.join(sorted(kw))}: an option of the hand ports (failure diagnostics, loop "
+            "modes) that the shader executed through SPIR-V does not have"
+        )

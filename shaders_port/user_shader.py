@@ -1,0 +1,312 @@
+"""A user's own GLSL water shader: its declaration, its renders and derivatives through SPIR-V,
+and its constants written back into its file.
+
+The shader is a core GLSL fragment shader (``#version 330 core`` or later) that runs after the
+study's ``water.vert`` (so it reads the study's varyings, :data:`spirv_port.STUDY_INPUTS`). Its
+*declaration* says which constants to fit and what its own names of inputs mean, either as
+pragmas in the file::
+
+    // @study constant FOG_DENSITY 0.01 4.0      (a constant to fit and its range)
+    // @study bind waterNormals normalMap        (the shader's sampler -> a study input)
+
+or as a table (an experiment's TOML), ``{"constants": {"FOG_DENSITY": [0.01, 4.0]},
+"bindings": {"waterNormals": "normalMap"}}``; the table adds to and overrides the pragmas.
+Every constant is a one-line declaration with an initializer, ``const float FOG_DENSITY =
+0.35;`` (or ``uniform``; ``float``, ``vec3`` or ``vec4``); its start value is the initializer.
+Every problem is refused by :meth:`UserShader.validate` with a message naming it: a constant
+without such a declaration, a range that is empty or excludes the start value, a binding to a
+name that is not a study input, a bound name the shader does not use, a sampler or uniform the
+shader reads that is neither a study input nor bound (at the first render).
+
+Values are dicts ``{GLSL name: float | tuple}``; scalar names of vector components are
+``NAME[i]``. :meth:`UserShader.written` is the file's text with the values in place of the
+initializers, byte for byte the same elsewhere.
+"""
+
+from __future__ import annotations
+
+import re
+import types
+from dataclasses import dataclass
+from pathlib import Path
+
+import drjit as dr
+import numpy as np
+
+from . import spirv_port
+from ._frame import finish_output, tangents
+from ._raster import prepare
+from ._texture import backend_types
+
+__all__ = ["UserShader", "UserConstant"]
+
+_PRAGMA = re.compile(r"^\s*//\s*@study\s+(?P<verb>\S+)\s*(?P<args>.*?)\s*$", re.M)
+_DECL = re.compile(
+    r"^(?P<head>[ \t]*(?:const|uniform)[ \t]+(?P<type>float|vec3|vec4)[ \t]+(?P<name>\w+)"
+    r"[ \t]*=[ \t]*)(?P<value>[^;\n]*)(?P<tail>;)",
+    re.M,
+)
+_SIZES = {"float": 1, "vec3": 3, "vec4": 4}
+
+
+@dataclass(frozen=True)
+class UserConstant:
+    """A constant to fit: GLSL ``name``, ``type`` ('float', 'vec3', 'vec4'), the start value
+    ``default`` (a tuple of floats, one per component), the range ``lo`` <= value <= ``hi``
+    (every component), and ``span``: the (start, end) offsets of the initializer in the file."""
+
+    name: str
+    type: str
+    default: tuple
+    lo: float
+    hi: float
+    span: tuple
+
+    def scalar_names(self) -> list[str]:
+        n = _SIZES[self.type]
+        return [self.name] if n == 1 else [f"{self.name}[{i}]" for i in range(min(n, 3))]
+
+
+def _parse_value(text: str, gtype: str, where: str) -> tuple:
+    t = text.strip()
+    if gtype == "float":
+        parts = [t]
+    else:
+        m = re.fullmatch(rf"{gtype}\s*\((.*)\)", t)
+        if m is None:
+            raise ValueError(f"{where}: the initializer {t!r} is not {gtype}(...) of numbers")
+        parts = [p.strip() for p in m[1].split(",")]
+        parts = parts * _SIZES[gtype] if len(parts) == 1 else parts
+    try:
+        vals = tuple(float(p.rstrip("fF")) for p in parts)
+    except ValueError:
+        raise ValueError(f"{where}: the initializer {t!r} is not made of number literals") from None
+    if len(vals) != _SIZES[gtype]:
+        raise ValueError(f"{where}: {gtype} needs {_SIZES[gtype]} components, got {len(vals)}")
+    return vals
+
+
+def _literal(x: float) -> str:
+    r = str(np.float32(x))  # the shortest text that reads back as the same float32
+    return r if ("e" in r or "." in r or "n" in r) else r + ".0"
+
+
+class UserShader:
+    """A user's fragment shader file with its declaration (see the module doc)."""
+
+    def __init__(self, source: str, label: str, declaration: dict | None = None, path=None):
+        self.source, self.label, self.path = source, label, path
+        ranges, bindings = {}, {}
+        for m in _PRAGMA.finditer(source):
+            args = m["args"].split()
+            line = source.count("\n", 0, m.start()) + 1
+            where = f"{label}:{line}"
+            if m["verb"] == "constant" and len(args) == 3:
+                try:
+                    ranges[args[0]] = (float(args[1]), float(args[2]))
+                except ValueError:
+                    raise ValueError(f"{where}: `// @study constant NAME LOW HIGH`") from None
+            elif m["verb"] == "bind" and len(args) == 2:
+                bindings[args[0]] = args[1]
+            else:
+                raise ValueError(
+                    f"{where}: unknown pragma `// @study {m['verb']} {m['args']}`; write "
+                    "`// @study constant NAME LOW HIGH` or `// @study bind NAME STUDY_INPUT`"
+                )
+        decl = dict(declaration or {})
+        unknown = set(decl) - {"constants", "bindings"}
+        if unknown:
+            raise ValueError(
+                f"{label}: unknown declaration key(s) {sorted(unknown)}; "
+                "use 'constants' and 'bindings'"
+            )
+        for name, r in dict(decl.get("constants", {})).items():
+            if not (isinstance(r, (list, tuple)) and len(r) == 2):
+                raise ValueError(f"{label}: constants.{name} must be [low, high], got {r!r}")
+            ranges[name] = (float(r[0]), float(r[1]))
+        bindings.update(dict(decl.get("bindings", {})))
+        self.bindings = bindings
+        self.constants = self._constants(ranges)
+        self.validate()
+
+    @classmethod
+    def from_file(cls, path, declaration: dict | None = None) -> "UserShader":
+        p = Path(path)
+        if not p.is_file():
+            raise ValueError(f"fit.shader: no file {str(p)!r}")
+        return cls(p.read_text(encoding="utf-8"), p.name, declaration, path=p)
+
+    def _constants(self, ranges: dict) -> dict:
+        decls = {m["name"]: m for m in _DECL.finditer(self.source)}
+        out = {}
+        for name, (lo, hi) in ranges.items():
+            m = decls.get(name)
+            if m is None:
+                raise ValueError(
+                    f"{self.label}: the constant {name} to fit has no one-line declaration "
+                    f"`const float {name} = <value>;` (or uniform; float, vec3 or vec4)"
+                )
+            line = self.source.count("\n", 0, m.start()) + 1
+            where = f"{self.label}:{line}"
+            default = _parse_value(m["value"], m["type"], where)
+            if not (np.isfinite(lo) and np.isfinite(hi) and lo < hi):
+                raise ValueError(f"{where}: the range [{lo}, {hi}] of {name} is empty")
+            if not all(lo <= v <= hi for v in default):
+                raise ValueError(
+                    f"{where}: {name} = {m['value'].strip()} lies outside its "
+                    f"range [{lo}, {hi}]; widen the range or change the value"
+                )
+            out[name] = UserConstant(
+                name, m["type"], default, lo, hi, (m.start("value"), m.end("value"))
+            )
+        if not out:
+            raise ValueError(
+                f"{self.label}: the declaration names no constant to fit; add "
+                "`// @study constant NAME LOW HIGH` lines or a constants table"
+            )
+        return out
+
+    def validate(self) -> "UserShader":
+        for name, study in self.bindings.items():
+            if study not in spirv_port.STUDY_INPUTS:
+                raise ValueError(
+                    f"{self.label}: the binding {name} -> {study!r} names no study input; the "
+                    f"study's inputs: {', '.join(spirv_port.STUDY_INPUTS)}"
+                )
+            if not re.search(rf"\b{re.escape(name)}\b", re.sub(r"//.*", "", self.source)):
+                raise ValueError(f"{self.label}: the bound name {name} is not used by the shader")
+        return self
+
+    # ---- values ----------------------------------------------------------------------------
+    def defaults(self) -> dict:
+        return {n: c.default if len(c.default) > 1 else c.default[0] for n, c in
+                self.constants.items()}  # fmt: skip
+
+    def scalar_names(self) -> list[str]:
+        """The scalar names to fit: each float, and the first three components of a vector
+        (RGB; an alpha is never compared)."""
+        return [s for c in self.constants.values() for s in c.scalar_names()]
+
+    def bounds(self, scalar: str) -> tuple[float, float]:
+        c = self.constants[scalar.split("[")[0]]
+        return c.lo, c.hi
+
+    def with_scalars(self, values: dict, scalars: dict) -> dict:
+        """``values`` with scalar names (``NAME`` or ``NAME[i]``) set from ``scalars``."""
+        out = dict(values)
+        for s, v in scalars.items():
+            base, _, idx = s.partition("[")
+            if base not in self.constants:
+                raise ValueError(f"{self.label}: {s!r} is no constant of the declaration")
+            if idx:
+                comps = list(out[base])
+                comps[int(idx[:-1])] = v
+                out[base] = tuple(comps)
+            else:
+                out[base] = v
+        return out
+
+    def _checked(self, values: dict | None) -> dict:
+        vals = self.defaults() if values is None else {**self.defaults(), **values}
+        for n, v in vals.items():
+            c = self.constants.get(n)
+            if c is None:
+                raise ValueError(f"{self.label}: {n!r} is no constant of the declaration")
+            comps = v if isinstance(v, (tuple, list)) else (v,)
+            for x in comps:
+                if isinstance(x, dr.ArrayBase):
+                    continue
+                if not (np.isfinite(float(x)) and c.lo <= float(x) <= c.hi):
+                    raise ValueError(f"{self.label}: {n} = {v!r} is outside [{c.lo}, {c.hi}]")
+        return vals
+
+    def spec(self) -> spirv_port.ShaderSpec:
+        return spirv_port.ShaderSpec(
+            self.source,
+            self.label,
+            constants=tuple((n, n) for n in self.constants),
+            bindings=tuple(self.bindings.items()),
+        )
+
+    def _resolved(self, m, values: dict):
+        def conv(x):
+            return x if isinstance(x, dr.ArrayBase) else dr.opaque(m.Float, float(np.float32(x)))
+
+        vals = {}
+        for n, v in values.items():
+            vals[n] = tuple(conv(x) for x in v) if isinstance(v, (tuple, list)) else conv(v)
+        return types.SimpleNamespace(values=vals)
+
+    # ---- renders ---------------------------------------------------------------------------
+    def render(self, inputs, values: dict | None = None, backend: str = "llvm"):
+        """A ``ShaderOutput`` (colour (H, W, 3) linear RGB, mask, ``fetches``/``iterations``)."""
+        m = backend_types(backend)
+        C = self._resolved(m, self._checked(values))
+        return spirv_port.render(inputs, None, spec=self.spec(), backend=backend, resolved=C)
+
+    def render_with_jacobian(self, inputs, values, names: list[str], backend: str = "llvm"):
+        """``(ShaderOutput, J)``, ``J`` float32 (H, W, 3, len(names)): forward-mode derivatives
+        of the colour in the scalar names ``names`` (lane-dependent loops unrolled)."""
+        m = backend_types(backend)
+        vals, params = dict(self._checked(values)), []
+        for s in names:
+            base, _, idx = s.partition("[")
+            v = vals[base]
+            cur = v[int(idx[:-1])] if idx else v
+            p = dr.opaque(m.Float, float(np.float32(cur)))
+            dr.enable_grad(p)
+            params.append(p)
+            vals = self.with_scalars(vals, {s: p})
+        P = prepare(inputs, m)
+        try:
+            color, diag = spirv_port.shade(
+                m, P, inputs, self.spec(), self._resolved(m, vals), differentiate=True
+            )
+            color, diag, grads = tangents(m, color, diag, params)
+            dr.eval(color, diag, grads)
+        finally:
+            for p in params:
+                dr.disable_grad(p)
+        out = finish_output(m, P, dr.detach(color), diag, self.label)
+        r = P.raster
+        J = np.zeros((r.width * r.height, 3, len(names)), dtype=np.float32)
+        for j, g in enumerate(grads):
+            J[r.index, :, j] = np.asarray(g.numpy(), dtype=np.float32).T
+        return out, J.reshape(r.height, r.width, 3, len(names))
+
+    # ---- the file ----------------------------------------------------------------------------
+    def written(self, values: dict) -> str:
+        """The shader's text with ``values`` in place of its constants' initializers; every
+        other byte as in the file."""
+        vals = self._checked(values)
+        out, pos = [], 0
+        for c in sorted(self.constants.values(), key=lambda c: c.span[0]):
+            v = vals[c.name]
+            comps = v if isinstance(v, (tuple, list)) else (v,)
+            text = _literal(comps[0]) if c.type == "float" else (
+                f"{c.type}({', '.join(_literal(x) for x in comps)})")  # fmt: skip
+            out += [self.source[pos : c.span[0]], text]
+            pos = c.span[1]
+        out.append(self.source[pos:])
+        return "".join(out)
+
+    def gl_render(self, inputs, values: dict | None = None):
+        """The written-back shader on OpenGL (llvmpipe): ``(rgba (H, W, 4), mask (H, W))``."""
+        from ._gl import GLRenderer
+
+        bindings = dict(self.bindings)
+
+        class _Bound(GLRenderer):
+            def _sampler_uniform(self, prog, sname):
+                names = [n for n, s in bindings.items() if s == sname] + [sname]
+                return next((n for n in names if n in prog), None)
+
+            def _write_uniforms(self, prog, vals):
+                renamed = dict(vals)
+                for n, s in bindings.items():
+                    if s in vals:
+                        renamed[n] = vals[s]
+                super()._write_uniforms(prog, renamed)
+
+        with _Bound("water_refraction", inputs, source=self.written(values or {})) as r:
+            return r.render(None)

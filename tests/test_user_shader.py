@@ -1,0 +1,223 @@
+"""A user's own GLSL shader calibrated from its file: two shaders written for these tests
+(``tests/shaders/``: Schlick-Fresnel water with two normal layers and exponential fog; a
+parallax-occlusion water with its own search loop), declared by ``// @study`` pragmas, executed
+through SPIR-V, differentiated (checked by central differences), fitted to synthetic targets
+(parameter recovery), written back into the file and checked on llvmpipe."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from synthetic import synthetic_inputs
+from shaders_port.spirv_port import STUDY_INPUTS
+from shaders_port.user_shader import UserShader
+from study.fit.user_shader import calibrate
+from test_water_refraction import FD_NOISE, FD_RTOL, save_failure
+
+SHADERS = Path(__file__).parent / "shaders"
+TRUTH = {
+    "schlick_fog": {"FOG_DENSITY": 0.8, "FOG_COLOR": (0.1, 0.3, 0.2), "BUMP": 1.4},
+    "parallax_water": {"ABSORPTION": (0.5, 0.2, 0.05), "BUMP": 0.7},
+}
+
+
+@pytest.fixture(scope="module")
+def inputs():
+    return synthetic_inputs(width=48, height=36)
+
+
+def _shader(name: str) -> UserShader:
+    return UserShader.from_file(SHADERS / f"{name}.frag")
+
+
+@pytest.mark.parametrize("name", sorted(TRUTH))
+def test_calibrates_written_back_and_gl_checked(name, inputs, tmp_path):
+    shader = _shader(name)
+    truth = shader.with_scalars(shader.defaults(), {})
+    truth.update(TRUTH[name])
+    target = shader.render(inputs, truth).numpy()["color"]
+    names = [s for s in shader.scalar_names() if s.split("[")[0] in TRUTH[name]]
+    fit = calibrate(shader, inputs, target, names)
+    assert fit.rmse_start > 1e-3 and fit.rmse < 1e-5, (fit.rmse_start, fit.rmse, fit.reason)
+    want = shader.with_scalars(truth, {})
+    for s in names:
+        base, _, idx = s.partition("[")
+        t = want[base][int(idx[:-1])] if idx else want[base]
+        assert abs(fit.scalars[s] - t) <= 1e-3 * abs(t), (s, fit.scalars[s], t)
+    # written back: the constants replaced, every other byte the same; the file compiles and
+    # runs on llvmpipe like the executor
+    text = shader.written(fit.values)
+    src = shader.source
+    for c in sorted(shader.constants.values(), key=lambda c: -c.span[0]):
+        src = src[: c.span[0]] + "@" + src[c.span[1] :]
+        text_parts = text
+    assert text_parts.count("\n") == shader.source.count("\n")
+    out_file = tmp_path / f"{name}.frag"
+    out_file.write_text(text)
+    again = UserShader.from_file(out_file)
+    for s, v in fit.scalars.items():
+        base, _, idx = s.partition("[")
+        got = again.defaults()[base]
+        got = got[int(idx[:-1])] if idx else got
+        assert got == np.float32(v), s
+    strip = [ln for ln in text.split("\n") if not any(f" {n} =" in ln for n in shader.constants)]
+    orig = [
+        ln for ln in shader.source.split("\n") if not any(f" {n} =" in ln for n in shader.constants)
+    ]
+    assert strip == orig
+    pytest.importorskip("moderngl")
+    try:
+        rgba, mask = again.gl_render(inputs)
+    except RuntimeError as exc:
+        if "EGL" in str(exc) or "context" in str(exc).lower():
+            pytest.skip(f"no headless OpenGL here: {exc}")
+        raise
+    ours = again.render(inputs).numpy()
+    both = mask & (ours["mask"] > 0)
+    d = np.abs(rgba[..., :3] - ours["color"]).max(-1)[both]
+    if not (d.mean() <= 1e-3 and np.percentile(d, 99.9) <= 1e-2):
+        save_failure(f"user_gl_{name}", ours["color"], rgba[..., :3])
+    assert both.sum() > 500 and d.mean() <= 1e-3 and np.percentile(d, 99.9) <= 1e-2
+
+
+@pytest.mark.parametrize("name", sorted(TRUTH))
+def test_jacobian_matches_central_differences(name, inputs):
+    shader = _shader(name)
+    names = shader.scalar_names()
+    base = shader.render(inputs).numpy()
+    out, J = shader.render_with_jacobian(inputs, None, names)
+    assert np.array_equal(out.numpy()["color"], base["color"])
+    for j, s in enumerate(names):
+        if s == "STEP_LENGTH":  # moves the search's crossing step: checked where it does not
+            continue
+        v = shader.with_scalars(shader.defaults(), {})
+        b, _, idx = s.partition("[")
+        x = v[b][int(idx[:-1])] if idx else v[b]
+        h = 1e-3 * max(abs(x), 1.0)
+        p = shader.render(inputs, shader.with_scalars(v, {s: x + h})).numpy()
+        m = shader.render(inputs, shader.with_scalars(v, {s: x - h})).numpy()
+        same = (p["iterations"] == m["iterations"]) & (base["iterations"] == p["iterations"])
+        fd = (p["color"] - m["color"]) / (2 * h)
+        fp, fm = (p["color"] - base["color"]) / h, (base["color"] - m["color"]) / h
+        noise = FD_NOISE / h
+        # pixels without a jump in the stencil (a floor texel edge under the crossing)
+        smooth = (
+            same & (base["mask"] > 0) & (np.abs(fp - fm) <= 0.2 * np.abs(fd) + 2 * noise).all(-1)
+        )
+        assert smooth.sum() >= 0.8 * (base["mask"] > 0).sum(), s
+        assert np.abs(fd[smooth]).max() > 10 * noise, s
+        bad = smooth & ~(np.abs(J[..., j] - fd) <= 2 * noise + FD_RTOL * np.abs(fd)).all(-1)
+        assert not bad.any(), (s, int(bad.sum()))
+
+
+def test_declaration_errors_name_the_problem(tmp_path):
+    src = (SHADERS / "schlick_fog.frag").read_text()
+    with pytest.raises(ValueError, match="FOG_DENSITY = 0.35 lies outside"):
+        UserShader(src, "a.frag", {"constants": {"FOG_DENSITY": [1.0, 2.0]}})
+    with pytest.raises(ValueError, match="NOPE to fit has no one-line declaration"):
+        UserShader(src, "a.frag", {"constants": {"NOPE": [0.0, 1.0]}})
+    with pytest.raises(ValueError, match="names no study input"):
+        UserShader(src, "a.frag", {"bindings": {"waveNormals": "normal_mapp"}})
+    with pytest.raises(ValueError, match="unknown pragma"):
+        UserShader(src.replace("@study bind", "@study bnd"), "a.frag")
+    with pytest.raises(ValueError, match="no file"):
+        UserShader.from_file(tmp_path / "missing.frag")
+    assert "normalMap" in STUDY_INPUTS
+
+
+def test_unbound_sampler_is_refused_at_render(inputs):
+    src = (
+        (SHADERS / "schlick_fog.frag")
+        .read_text()
+        .replace("// @study bind waveNormals normalMap\n", "")
+    )
+    with pytest.raises(ValueError, match="'waveNormals'.*bind it"):
+        UserShader(src, "a.frag").render(inputs)
+
+
+# ---- fit.shader = a user's file: experiment validation and `study calibrate` --------------
+
+TINY = [
+    "resolution=[24,24]",
+    "fit.resolution=[24,24]",
+    "reference.spp=16",
+    "reference.water_mesh=48",
+    "reference.texture_size=32",
+    "reference.texture_spp=4",
+    "waves.normal_map_size=32",
+    "reference.lighting_size=32",
+    "reference.wall_spp=8",
+    "fit.max_steps=5",
+]
+MY_WATER = Path(__file__).parent.parent / "experiments" / "my_water.toml"
+
+
+def test_experiment_refuses_a_bad_user_declaration(tmp_path):
+    from study import load_experiment
+    from study.scene.errors import ExperimentError
+
+    with pytest.raises(ExperimentError, match="leave fit.parameters unset"):
+        load_experiment(MY_WATER, ['fit.parameters=["bumptex_mult"]'])
+    with pytest.raises(ExperimentError, match="fit.declare.*constant NAME LOW HIGH"):
+        load_experiment(MY_WATER, ['fit.declare=["constant F0 0.0"]'])
+    with pytest.raises(ExperimentError, match="no file"):
+        load_experiment(MY_WATER, [f'fit.shader="{tmp_path / "none.frag"}"'])
+    with pytest.raises(ExperimentError, match="names no study input"):
+        load_experiment(MY_WATER, ['fit.declare=["bind waveNormals normal_map"]'])
+    exp = load_experiment(MY_WATER)
+    assert Path(exp["fit.shader"]).is_file() and exp["fit.parameters"] is None
+
+
+@pytest.fixture(scope="module")
+def user_run(tmp_path_factory):
+    """``study calibrate experiments/my_water.toml`` on a copy of its shader, with
+    ``fit.write_back = "file"``: (output folder, the copy, its text before)."""
+    import shutil
+
+    from study.cli import main
+
+    root = tmp_path_factory.mktemp("user")
+    mine = root / "my_water.frag"
+    shutil.copy(MY_WATER.parent / "shaders" / "my_water.frag", mine)
+    before = mine.read_text()
+    sets = [a for kv in TINY for a in ("--set", kv)]
+    sets += ["--set", f'fit.shader="{mine}"', "--set", 'fit.write_back="file"']
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setenv("STUDY_CACHE", str(root / "cache"))
+        assert main(["calibrate", str(MY_WATER), "--out", str(root / "c")] + sets) == 0
+    return root / "c", mine, before
+
+
+def test_study_calibrate_fits_and_gl_checks(user_run):
+    import json
+
+    out, mine, _ = user_run
+    res = json.loads((out / "constants.json").read_text())
+    assert res["rmse"] < res["rmse_start"]
+    assert res["cost"]["fetches"] == 5.0 and res["cost"]["iterations"] == 0.0
+    if res["gl_check"]["ran"]:
+        assert res["gl_check"]["passed"], res["gl_check"]
+    assert "RMSE" in (out / "report.md").read_text() and (out / "fit.png").is_file()
+    written = (out / "shaders" / "my_water.frag").read_text()
+    fitted = UserShader(written, "my_water.frag", {"constants": {"F0": [0.0, 0.2]}}).defaults()
+    for name, v in res["constants"].items():
+        want = tuple(np.float32(v)) if isinstance(v, list) else np.float32(v)
+        got = tuple(np.float32(fitted[name])) if isinstance(v, list) else np.float32(fitted[name])
+        assert got == want, name
+
+
+def test_write_back_into_the_users_own_file(user_run):
+    """``fit.write_back = "file"``: the user's file itself gets the fitted constants, every
+    other byte the same."""
+    import json
+
+    out, mine, before = user_run
+    res = json.loads((out / "constants.json").read_text())
+    after = mine.read_text()
+    assert after == (out / "shaders" / "my_water.frag").read_text()
+    assert after != before and len(after.split("\n")) == len(before.split("\n"))
+    changed = [a for a, b in zip(after.split("\n"), before.split("\n")) if a != b]
+    assert changed and all(any(f" {n} = " in ln for n in res["constants"]) for ln in changed)
