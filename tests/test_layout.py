@@ -101,3 +101,19 @@ def test_no_private_name_crosses_a_module_line():
     # a package's own face may hand on a private module's names (shaders_port/__init__)
     crossing = [(a, b, n) for a, b, n in private if not a.endswith("__init__") and "." in a]
     assert crossing == [], crossing
+
+
+def test_modules_and_functions_stay_readable():
+    # the house rules: a module of at most 600 lines, a function of at most 100
+    long = []
+    for pkg in PACKAGES:
+        for path in sorted((REPO / pkg).rglob("*.py")):
+            text = path.read_text()
+            if len(text.splitlines()) > 600:
+                long.append(f"{path.relative_to(REPO)}: {len(text.splitlines())} lines")
+            for node in ast.walk(ast.parse(text)):
+                if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef)):
+                    n = node.end_lineno - node.lineno + 1
+                    if n > 100:
+                        long.append(f"{path.relative_to(REPO)}:{node.lineno} {node.name}: {n}")
+    assert not long, "split these: " + "; ".join(long)

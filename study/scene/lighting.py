@@ -309,6 +309,25 @@ def denoise_dry(
     return (den / np.where(g > 0.0, g, 1.0)).astype(np.float32), {"wall_denoise_gain": ratio}
 
 
+def _match_denoiser(exp, colour, colour_halves, se, inside, n_light: int, info: dict):
+    """The denoiser's brightness against the raw mean of its own samples, as the shader sees it
+    (albedo-weighted, on the texture; the lighting grid's texels taken as independent), recorded
+    in ``info``; with ``oidn`` the colour divided by it (the path tracer's brightness, the
+    denoiser's detail). Returns the colour, (size, size, 3) linear RGB."""
+    gain, gain_se = denoise_gain(
+        colour[inside],
+        colour_halves.mean(0)[inside],
+        se[inside],
+        n_independent=n_light**2 * float(inside.mean()),
+    )
+    info["denoise_gain"], info["denoise_gain_se"] = gain, gain_se
+    if exp["reference.lighting_denoise"] == "oidn":
+        g = np.asarray(gain, np.float32)
+        colour = np.where(inside[..., None], colour / np.where(g > 0.0, g, 1.0), colour)
+        info["denoise_matched"] = True
+    return colour
+
+
 def lighting_colour(
     exp: Experiment, extent, size: int, seed: int = 0, world_y=None, progress=None, shared=None
 ) -> tuple[np.ndarray, dict, np.ndarray]:
@@ -391,21 +410,7 @@ def lighting_colour(
         **wall_info,
     }
     if exp["reference.lighting_denoise"] != "none" and inside.any():
-        # the denoiser's brightness against the raw mean of its own samples, as the shader sees it
-        # (albedo-weighted, on the texture; the lighting grid's texels taken as independent)
-        gain, gain_se = denoise_gain(
-            colour[inside],
-            colour_halves.mean(0)[inside],
-            se[inside],
-            n_independent=n_light**2 * float(inside.mean()),
-        )
-        info["denoise_gain"], info["denoise_gain_se"] = gain, gain_se
-        if (
-            exp["reference.lighting_denoise"] == "oidn"
-        ):  # the path tracer's brightness, the denoiser's detail
-            g = np.asarray(gain, np.float32)
-            colour = np.where(inside[..., None], colour / np.where(g > 0.0, g, 1.0), colour)
-            info["denoise_matched"] = True
+        colour = _match_denoiser(exp, colour, colour_halves, se, inside, n_light, info)
     if traced:  # the direct sky- and sunlight, ray traced on the texture's texels
         from .direct_light import traced_direct
 

@@ -206,25 +206,7 @@ def build_shader_inputs(
     if info is not None:
         info["texture"] = tex_info
     tm = ortho_tex_matrix(*extent)
-    if exp["mesh.file"]:
-        from .topdown import mesh_reflection_textures
-
-        with st.stage(
-            "inputs.mesh_reflection_s", "shader inputs: reflection textures with the mesh"
-        ):
-            refl_y, refl_col, refl_extent = shared_part(
-                shared,
-                exp,
-                "mesh_reflection",
-                lambda: mesh_reflection_textures(
-                    exp, extent, size, progress=st.counter("  passes")
-                ),
-            )
-        tm1 = ortho_tex_matrix(*refl_extent)
-    else:
-        refl_y = np.where(world_y > 0.0, world_y, NO_GEOMETRY).astype(np.float32)
-        refl_col = reflection_colour(world_y, colour)
-        tm1 = tm
+    refl_y, refl_col, tm1 = _reflection_textures(exp, extent, size, world_y, colour, st, shared)
     hx, hz = exp["pool.half_extent"]
     waves = waves_of(exp)
     lightpos, lightcolor = light_of(exp)
@@ -261,6 +243,27 @@ def build_shader_inputs(
         height=height,
         refraction_halves=halves,
     )
+
+
+def _reflection_textures(exp, extent, size: int, world_y, colour, st, shared):
+    """The reflection shader's top-down textures: (world y (size, size) float32, colour
+    (size, size, 3) float32 linear RGB, their 4x4 texture matrix), from the mesh when there is
+    one (built once for an animation's frames), else from the refraction textures."""
+    from .frames import shared_part
+
+    if not exp["mesh.file"]:
+        refl_y = np.where(world_y > 0.0, world_y, NO_GEOMETRY).astype(np.float32)
+        return refl_y, reflection_colour(world_y, colour), ortho_tex_matrix(*extent)
+    from .topdown import mesh_reflection_textures
+
+    with st.stage("inputs.mesh_reflection_s", "shader inputs: reflection textures with the mesh"):
+        refl_y, refl_col, refl_extent = shared_part(
+            shared,
+            exp,
+            "mesh_reflection",
+            lambda: mesh_reflection_textures(exp, extent, size, progress=st.counter("  passes")),
+        )
+    return refl_y, refl_col, ortho_tex_matrix(*refl_extent)
 
 
 def reflection_colour(world_y: np.ndarray, colour: np.ndarray) -> np.ndarray:
