@@ -61,6 +61,17 @@ def test_the_first_round_holds_the_original_every_source_and_the_neighbours():
     assert not any(c in seen for c in nxt)
 
 
+def test_the_walk_expands_the_best_shaders_first():
+    # the max_shaders cut keeps the neighbours of the lowest-FLIP survivors
+    worse = {"choices": _space.choices_of("water_baseline_flat"), "flip": 0.30}
+    better = {"choices": _space.choices_of("water_refraction_beer"), "flip": 0.15}
+    front = search.best_first([worse, better])
+    assert front == [better, worse]
+    nxt = search.next_round([r["choices"] for r in front], search.first_round(None), None)
+    first = _space.name_of(nxt[0])
+    assert "beer" in first, first  # a neighbour of the better one
+
+
 def test_marginals_name_the_axis_changed():
     blocks = [0.2] * 16
     base = {"choices": _space.choices_of("water_refraction_beer"), "flip": 0.2,

@@ -7,8 +7,9 @@ screen resolution (``fit.resolution`` divided by ``tradeoff.screen_factor``) exc
 1. **Walk** (shader configurations, at the original schedule): start from the original shader,
    one representative of every source and the original's one-axis neighbours
    (``shaders_port._space.neighbours``); after each round keep the configurations no other
-   one clearly dominates (:func:`survivors`) and add their unseen neighbours; stop when a
-   round adds none or ``tradeoff.max_shaders`` have been screened. A shader-LOD system's greedy
+   one clearly dominates (:func:`survivors`) and add their unseen neighbours, the lowest-FLIP
+   survivors' first (:func:`best_first`); stop when a round adds none or
+   ``tradeoff.max_shaders`` have been screened (the cut drops the worst survivors' neighbours). A shader-LOD system's greedy
    walk along the front, with a noise margin; the ``tradeoff.max_scheduled`` survivors closest
    to the front go on.
 2. **Schedules**: every step schedule of ``tradeoff_jobs.schedules`` for each surviving
@@ -124,8 +125,15 @@ def _try_add(out: list, c: dict) -> None:
         out.append(c)
 
 
+def best_first(points: list[dict]) -> list[dict]:
+    """``points`` by FLIP, lowest first: the walk expands the best shaders' neighbours first, so
+    the ``tradeoff.max_shaders`` cut drops the neighbours of the worst."""
+    return sorted(points, key=lambda r: r["flip"])
+
+
 def next_round(front: list[dict], seen: list[dict], fix: dict | None) -> list[dict]:
-    """The unseen one-axis neighbours of the configurations on the front."""
+    """The unseen one-axis neighbours of the configurations on the front, in the front's
+    order."""
     out = []
     for c in front:
         for n in _space.neighbours(c, fix):
@@ -254,7 +262,7 @@ class Search:
             self._run(jobs, f"tradeoff: {exp['name']} screen round {k}")
             seen += todo
             self.rounds[exp["name"]] = k
-            front = survivors(self.ok(i), z)
+            front = best_first(survivors(self.ok(i), z))
             if self.variants:
                 break
             todo = next_round([r["choices"] for r in front], seen, self.fix)
