@@ -9,9 +9,9 @@ screen resolution (``fit.resolution`` divided by ``tradeoff.screen_factor``) exc
    (``shaders_port._space.neighbours``); after each round keep the configurations no other
    one clearly dominates (:func:`survivors`) and add their unseen neighbours, the lowest-FLIP
    survivors' first (:func:`best_first`); stop when a round adds none or
-   ``tradeoff.max_shaders`` have been screened (the cut drops the worst survivors' neighbours). A shader-LOD system's greedy
-   walk along the front, with a noise margin; the ``tradeoff.max_scheduled`` survivors closest
-   to the front go on.
+   ``tradeoff.max_shaders`` have been screened (the cut drops the worst survivors'
+   neighbours). A shader-LOD system's greedy walk along the front, with a noise margin; the
+   ``tradeoff.max_scheduled`` survivors closest to the front go on.
 2. **Schedules**: every step schedule of ``tradeoff_jobs.schedules`` for each surviving
    configuration with a raymarch, warm-started from its screen fit; the dominated
    (configuration, schedule) points are dropped the same way, and of the rest the
