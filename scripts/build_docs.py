@@ -81,6 +81,9 @@ def generated() -> dict[Path, str]:
         pages[folder / "report.md"] = tradeoff_report_text(_tradeoff_summary(folder))
     pages[RESULTS / "failures" / "report.md"] = _failures_page(RESULTS / "failures")
     pages[RESULTS / "search" / "report.md"] = _search_page(_json(RESULTS / "search" / "bench.json"))
+    pages[RESULTS / "search" / "scenes.md"] = _search_page(
+        _json(RESULTS / "search" / "bench_scenes.json"), "four scenes in one study"
+    )
     pages[RESULTS / "animation" / "report.md"] = animation_report_text(
         _json(RESULTS / "animation" / "constants.json"), gif=False
     )
@@ -126,11 +129,11 @@ def _schedules_page(res: dict) -> str:
     return "\n".join(lines) + "\n"
 
 
-def _search_page(bench: dict) -> str:
-    """The benchmark of the adaptive search against the exhaustive grid."""
+def _search_page(bench: dict, what: str = "") -> str:
+    """The benchmark of the adaptive search against the exhaustive grid (``what``: a subtitle)."""
     yes = {True: "yes", False: "**no**"}
     lines = [
-        "# Adaptive against exhaustive search",
+        "# Adaptive against exhaustive search" + (f": {what}" if what else ""),
         "",
         f"Reproduce: `{bench['command']}`",
         "",
