@@ -87,6 +87,16 @@ def _string(words: list, i: int) -> tuple[str, int]:
     return text.decode("utf-8"), i + len(text) // 4 + 1
 
 
+def _enumerant_parameters(e: dict, words, i: int) -> tuple[list, int]:
+    """The operands an enumerant ``e`` of the grammar takes, read from ``words[i:]``; returns
+    (their values, the index after them)."""
+    params = []
+    for p in e.get("parameters", []):
+        v, i = _operand(p["kind"], words, i)
+        params.append(v)
+    return params, i
+
+
 def _operand(kind: str, words: list, i: int):
     """Decode one operand of ``kind`` at ``words[i]``: (value, next index)."""
     info = grammar()["kinds"][kind]
@@ -110,10 +120,7 @@ def _operand(kind: str, words: list, i: int):
         e = info["by_value"].get(value)
         if e is None:
             raise ValueError(f"SPIR-V: unknown {kind} value {value}")
-        params = []
-        for p in e.get("parameters", []):
-            v, i = _operand(p["kind"], words, i)
-            params.append(v)
+        params, i = _enumerant_parameters(e, words, i)
         return (e["enumerant"], *params) if params else e["enumerant"], i
     out = []  # BitEnum: each set bit in ascending order, with its parameters
     for bit in range(32):
@@ -121,10 +128,7 @@ def _operand(kind: str, words: list, i: int):
             e = info["by_value"].get(1 << bit)
             if e is None:
                 raise ValueError(f"SPIR-V: unknown {kind} bit {1 << bit:#x}")
-            params = []
-            for p in e.get("parameters", []):
-                v, i = _operand(p["kind"], words, i)
-                params.append(v)
+            params, i = _enumerant_parameters(e, words, i)
             out.append((e["enumerant"], tuple(params)))
     return tuple(out), i
 

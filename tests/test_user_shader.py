@@ -12,6 +12,7 @@ import numpy as np
 import pytest
 
 from synthetic import synthetic_inputs
+from test_cli import TINY as CLI_TINY
 from shaders_port.spirv_port import STUDY_INPUTS
 from shaders_port.user_shader import UserShader
 from study.fit.user_shader import calibrate
@@ -140,18 +141,7 @@ def test_unbound_sampler_is_refused_at_render(inputs):
 
 # ---- fit.shader = a user's file: experiment validation and `study calibrate` --------------
 
-TINY = [
-    "resolution=[24,24]",
-    "fit.resolution=[24,24]",
-    "reference.spp=16",
-    "reference.water_mesh=48",
-    "reference.texture_size=32",
-    "reference.texture_spp=4",
-    "waves.normal_map_size=32",
-    "reference.lighting_size=32",
-    "reference.wall_spp=8",
-    "fit.max_steps=5",
-]
+TINY = CLI_TINY + ["reference.lighting_size=32", "reference.wall_spp=8", "fit.max_steps=5"]
 MY_WATER = Path(__file__).parent.parent / "experiments" / "my_water.toml"
 
 
