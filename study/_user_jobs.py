@@ -53,11 +53,14 @@ def _fmt(v) -> str:
 
 def _report(exp, shader, fit, gl: dict, cost: dict, err: dict, timings: dict) -> str:
     rows = []
-    for name, c in shader.constants.items():
-        start = c.default if len(c.default) > 1 else c.default[0]
+    for name, p in fit.parameters.items():
+        lo, hi = shader.bounds(name)
+        se = p["rel_std_error"]
         rows.append(
-            f"| `{name}` | {_fmt(start)} | {_fmt(fit.values[name])} | [{c.lo:g}, {c.hi:g}] |"
+            f"| `{name}` | {_fmt(p['start'])} | {_fmt(p['value'])} | [{lo:g}, {hi:g}] | "
+            f"{p['status']} | {'-' if se is None else f'{100 * se:.2g} %'} |"
         )
+    held = [f"`{n}`: {p['reason']}" for n, p in fit.parameters.items() if p["status"] != "fitted"]
     gl_line = (
         f"mean |diff| {gl['mean_abs']:.2e}, 99.9th percentile {gl['p999']:.2e} on "
         f"{gl['pixels']} pixels: {'passed' if gl['passed'] else 'FAILED'}"
@@ -68,17 +71,18 @@ def _report(exp, shader, fit, gl: dict, cost: dict, err: dict, timings: dict) ->
         [
             f"# {exp['name']}: {shader.label} calibrated",
             "",
-            f"Fitted through SPIR-V on {fit.pixels} water pixels at "
+            f"Fitted through SPIR-V by {fit.solver} on {fit.pixels} water pixels at "
             f"{exp['fit.resolution'][0]}x{exp['fit.resolution'][1]}: {fit.iterations} "
             f"iterations, stopped: {fit.reason}.",
             "",
             f"RMSE (linear RGB): start {fit.rmse_start:.5f}, fitted {fit.rmse:.5f}; FLIP of the "
             f"fitted shader {err['flip']:.4f}.",
             "",
-            "| constant | start | fitted | range |",
-            "|---|---|---|---|",
+            "| constant | start | fitted | range | status | standard error |",
+            "|---|---|---|---|---|---|",
             *rows,
             "",
+            *([f"On a bound or held: {'; '.join(held)}.", ""] if held else []),
             f"Cost per water pixel (counted from the translated code): {cost['fetches']:.2f} "
             f"texture fetches, {cost['iterations']:.2f} loop iterations on average.",
             "",
@@ -106,7 +110,7 @@ def calibrate_user_shader(exp, variant, out: Path, ref, inputs, timings: dict) -
     _log(f"calibrate: fitting {', '.join(shader.scalar_names())} of {shader.label} (SPIR-V)")
     t0 = time.perf_counter()
     fit = calibrate(shader, small, target, reference_mask=water_mask(exp, w, h),
-                    max_iterations=exp["fit.max_steps"])  # fmt: skip
+                    max_iterations=exp["fit.max_steps"], solver=exp["fit.solver"])  # fmt: skip
     timings["fit_s"] = time.perf_counter() - t0
     (out / "shaders").mkdir(exist_ok=True)
     written = out / "shaders" / shader.label
@@ -146,6 +150,9 @@ def calibrate_user_shader(exp, variant, out: Path, ref, inputs, timings: dict) -
         "flip": float(err["flip"]),
         "iterations": fit.iterations,
         "stopped": fit.reason,
+        "solver": fit.solver,
+        "parameters": fit.parameters,
+        "identifiability": fit.identifiability,
         "cost": cost,
         "gl_check": gl,
         "timings": timings,

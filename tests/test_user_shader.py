@@ -114,6 +114,27 @@ def test_jacobian_matches_central_differences(name, inputs):
         assert not bad.any(), (s, int(bad.sum()))
 
 
+def test_confounded_constant_is_frozen_and_the_rest_recovered(inputs):
+    """Two constants that only act as a product (``exp(-FOG_DENSITY * FOG_SCALE * t)``): the
+    identifiability analysis holds one at its start value, the other takes up the product."""
+    src = (SHADERS / "schlick_fog.frag").read_text()
+    src = src.replace("const float F0", "const float FOG_SCALE = 1.0;\nconst float F0")
+    src = src.replace("exp(-FOG_DENSITY * t)", "exp(-FOG_DENSITY * FOG_SCALE * t)")
+    src = src.replace(
+        "// @study constant BUMP", "// @study constant FOG_SCALE 0.25 4.0\n// @study constant BUMP"
+    )
+    shader = UserShader(src, "confounded.frag")
+    target = shader.render(inputs, {"FOG_DENSITY": 0.8}).numpy()["color"]
+    fit = calibrate(shader, inputs, target, ["FOG_DENSITY", "FOG_SCALE", "BUMP"])
+    p = fit.parameters
+    frozen = [n for n in ("FOG_DENSITY", "FOG_SCALE") if p[n]["status"] == "frozen"]
+    assert len(frozen) == 1 and "null space" in p[frozen[0]]["reason"], p
+    assert p[frozen[0]]["value"] == p[frozen[0]]["start"]
+    product = fit.scalars["FOG_DENSITY"] * fit.scalars["FOG_SCALE"]
+    assert abs(product - 0.8) <= 1e-3 * 0.8 and fit.rmse < 1e-5, (product, fit.rmse)
+    assert p["BUMP"]["status"] == "fitted" and p["BUMP"]["rel_std_error"] is not None
+
+
 def test_declaration_errors_name_the_problem(tmp_path):
     src = (SHADERS / "schlick_fog.frag").read_text()
     with pytest.raises(ValueError, match="FOG_DENSITY = 0.35 lies outside"):
