@@ -290,8 +290,10 @@ class UserShader:
         out.append(self.source[pos:])
         return "".join(out)
 
-    def gl_render(self, inputs, values: dict | None = None):
-        """The written-back shader on OpenGL (llvmpipe): ``(rgba (H, W, 4), mask (H, W))``."""
+    def gl_renderer(self, inputs, values: dict | None = None):
+        """A ``GLRenderer`` (OpenGL, llvmpipe) drawing the written-back shader with ``values``
+        (its samplers and uniforms bound to the study's inputs by the declaration); use it as
+        a context manager, ``render(None)`` / ``time_frames(None, n, warmup)``."""
         from ._gl import GLRenderer
 
         bindings = dict(self.bindings)
@@ -308,5 +310,9 @@ class UserShader:
                         renamed[n] = vals[s]
                 super()._write_uniforms(prog, renamed)
 
-        with _Bound("water_refraction", inputs, source=self.written(values or {})) as r:
+        return _Bound("water_refraction", inputs, source=self.written(values or {}))
+
+    def gl_render(self, inputs, values: dict | None = None):
+        """The written-back shader on OpenGL (llvmpipe): ``(rgba (H, W, 4), mask (H, W))``."""
+        with self.gl_renderer(inputs, values) as r:
             return r.render(None)

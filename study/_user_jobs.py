@@ -16,33 +16,12 @@ from __future__ import annotations
 import time
 from pathlib import Path
 
-import numpy as np
 
 from ._io import write_exr, write_json
 from ._metrics import downsample, errors
 from ._progress import log as _log
+from .report.gl_check import gl_check_user
 from .scene.experiment import load_user_shader
-
-GL_MEAN, GL_P999 = 1e-3, 1e-2  # the GL check's thresholds (study.report.gl_check)
-
-
-def _gl_compare(shader, inputs, values, ours: dict) -> dict:
-    """The written-back file on llvmpipe against the executor: mean and 99.9th percentile of
-    the per-pixel max-over-channel |difference| on the pixels both cover."""
-    try:
-        rgba, mask = shader.gl_render(inputs, values)
-    except RuntimeError as exc:
-        return {"ran": False, "why": str(exc).splitlines()[0], "passed": None}
-    both = mask & (ours["mask"] > 0.5)
-    d = np.abs(rgba[..., :3] - ours["color"]).max(-1)[both]
-    mean, p999 = float(d.mean()), float(np.percentile(d, 99.9))
-    return {
-        "ran": True,
-        "pixels": int(both.sum()),
-        "mean_abs": mean,
-        "p999": p999,
-        "passed": bool(mean <= GL_MEAN and p999 <= GL_P999),
-    }
 
 
 def _fmt(v) -> str:
@@ -118,7 +97,7 @@ def calibrate_user_shader(exp, variant, out: Path, ref, inputs, timings: dict) -
     t0 = time.perf_counter()
     ours = shader.render(small, fit.values).numpy()
     start = shader.render(small).numpy()
-    gl = _gl_compare(shader, small, fit.values, ours)
+    gl = gl_check_user(shader, small, fit.values, ours)
     timings["gl_check_s"] = time.perf_counter() - t0
     if exp["fit.write_back"] == "file":
         if gl["passed"] is False:

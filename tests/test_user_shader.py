@@ -232,3 +232,68 @@ def test_write_back_into_the_users_own_file(user_run):
     assert after != before and len(after.split("\n")) == len(before.split("\n"))
     changed = [a for a, b in zip(after.split("\n"), before.split("\n")) if a != b]
     assert changed and all(any(f" {n} = " in ln for n in res["constants"]) for ln in changed)
+
+
+def test_study_tradeoff_charts_the_users_shader(user_run):
+    """``study tradeoff`` on a user's shader: it is measured in full beside the study's points,
+    placed on the front by the same rule, drawn, exported with its fitted constants; an edited
+    shader is measured again, not read back from the table."""
+    import json
+
+    from study.cli import main
+    from study.sweep import read_table
+
+    import shutil
+
+    out, fitted, _ = user_run
+    root = out.parent
+    (root / "edit").mkdir()
+    mine = root / "edit" / "my_water.frag"  # a copy of its own: the file is edited below
+    shutil.copy(fitted, mine)
+    plan = [
+        'tradeoff.variants=["water_refraction"]',
+        "tradeoff.steps_grazing=[10.0]",
+        "tradeoff.steps_steep=[3.0]",
+        "tradeoff.loop_cap=[40]",
+        "tradeoff.scales=[1.0]",
+        "tradeoff.gl_repeats=3",
+    ]
+    sets = [a for kv in TINY + plan + [f'fit.shader="{mine}"'] for a in ("--set", kv)]
+    args = ["tradeoff", str(MY_WATER), "--out", str(root / "t"), "--workers", "1"]
+    args += ["--search", "exhaustive"] + sets
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setenv("STUDY_CACHE", str(root / "cache"))
+        assert main(args) == 0
+        (user,) = read_table(root / "t" / "user.parquet")
+        assert user["status"] == "ok", user.get("error")
+        assert user["fetches_mean"] == 5.0 and 0 < user["flip"] < 1 and user["gl_ms_512"] > 0
+        summary = json.loads((root / "t" / "summary.json").read_text())
+        scene = summary["scenes"]["my_water"]
+        (place,) = scene["user"]
+        assert place["label"] == "user:my_water.frag" and place["flip"] == user["flip"]
+        ours = [
+            r for r in read_table(root / "t" / "tradeoff.parquet") if r["job.kind"] != "converged"
+        ]
+        beaten = [
+            r
+            for r in ours
+            if r["fetches_mean"] <= user["fetches_mean"] and r["flip"] < user["flip"]
+        ]
+        assert place["on_front"] == (not beaten)
+        assert place["on_front"] == (place["label"] in {r["label"] for r in scene["front"]})
+        report = (root / "t" / "report.md").read_text()
+        assert "**Your shader**, `my_water.frag`" in report
+        assert "your shader: user:my_water.frag" in summary["panels"]["my_water"]
+        written = UserShader.from_file(root / "t" / "shaders" / "my_water.frag").defaults()
+        for s in ("FOG_DENSITY", "BUMP"):
+            assert np.float32(written[s]) == np.float32(user[f"fitted.{s}"]), s
+        if summary["user_exports"]["my_water"]["gl_check"]["ran"]:
+            assert summary["user_exports"]["my_water"]["gl_check"]["passed"]
+        # an edited shader (its fog twice as dense at the start) is fitted and measured again
+        mine.write_text(mine.read_text().replace("exp(-FOG_DENSITY", "exp(-2.0 * FOG_DENSITY"))
+        assert main(args) == 0
+        again = [r for r in read_table(root / "t" / "user.parquet") if r["key"] != user["key"]]
+        assert len(again) == 1 and again[0]["status"] == "ok", again
+        assert again[0]["fitted.FOG_DENSITY"] != user["fitted.FOG_DENSITY"]
+        summary = json.loads((root / "t" / "summary.json").read_text())
+        assert summary["scenes"]["my_water"]["user"][0]["flip"] == again[0]["flip"]

@@ -107,3 +107,28 @@ def target_checks(shader: str, inputs, constants, shaders_dir: Path) -> dict:
     if "gles300" in out:
         out["gles300"]["llvmpipe"] = GLES_NOTE
     return out
+
+
+GL_MEAN, GL_P999 = 1e-3, 1e-2  # the thresholds of :func:`_verdict` (mean, 99.9th percentile)
+
+
+def gl_check_user(shader, inputs, values: dict, ours: dict) -> dict:
+    """A user's shader (``shaders_port.user_shader.UserShader``) written back with ``values`` and
+    run on OpenGL (llvmpipe) against the executor's render ``ours`` (``ShaderOutput.numpy()``):
+    mean and 99.9th percentile of the per-pixel max-over-channel |difference| on the pixels both
+    cover, passed within ``GL_MEAN`` / ``GL_P999``; ``ran`` False (with ``why``) without a
+    headless OpenGL."""
+    try:
+        rgba, mask = shader.gl_render(inputs, values)
+    except RuntimeError as exc:
+        return {"ran": False, "why": str(exc).splitlines()[0], "passed": None}
+    both = mask & (ours["mask"] > 0.5)
+    d = np.abs(rgba[..., :3] - ours["color"]).max(-1)[both]
+    mean, p999 = float(d.mean()), float(np.percentile(d, 99.9))
+    return {
+        "ran": True,
+        "pixels": int(both.sum()),
+        "mean_abs": mean,
+        "p999": p999,
+        "passed": bool(mean <= GL_MEAN and p999 <= GL_P999),
+    }

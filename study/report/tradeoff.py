@@ -1,7 +1,8 @@
 """The tradeoff report: ``pareto.png`` (error against each cost measure, every point drawn, the
 Pareto front, the original shader's schedule and the recommendation marked, one colour per variant,
-a row of panels per scene) and ``report.md`` (the fronts as tables, the recommendation, what each
-scene needs, each halving of the original's schedule)."""
+a row of panels per scene, a user's own shader a labelled diamond) and ``report.md`` (the fronts
+as tables, the recommendation, where a user's shader stands, what each scene needs, each halving
+of the original's schedule)."""
 
 from __future__ import annotations
 
@@ -92,6 +93,21 @@ def pareto_figure(path: Path, recs: list, summary: dict) -> Path:
                     ax.scatter(
                         r[cost], r["flip"], marker="x", s=120, color="red", label="recommended"
                     )
+            for r in cands:
+                if r["variant"].startswith("user:") and r.get(cost) is not None:
+                    name = r["variant"].split(":", 1)[1]
+                    ax.scatter(
+                        r[cost],
+                        r["flip"],
+                        marker="D",
+                        s=90,
+                        facecolors="none",
+                        edgecolors="k",
+                        linewidths=1.5,
+                        label=f"your shader ({name})",
+                    )
+                    ax.annotate(name, (r[cost], r["flip"]), textcoords="offset points",
+                                xytext=(6, 6), fontsize=8)  # fmt: skip
             ax.set_xscale("log")
             ax.set_xlabel(label, fontsize=9)
             ax.set_ylabel("FLIP on water pixels" if j == 0 else "")
@@ -206,6 +222,43 @@ def _marginal_lines(rows: list) -> list[str]:
     return lines
 
 
+def _user_lines(places: list, export: dict | None) -> list[str]:
+    """Where the user's own shader stands (``tradeoff_analysis.placement``) and its file."""
+    lines = []
+    for p in places:
+        where = (
+            "**on the Pareto front**: no point costs no more and errs less"
+            if p["on_front"]
+            else f"dominated by {len(p['dominated_by'])} point(s); the cheapest of them: "
+            f"{p['dominated_by'][0]['label']}, FLIP {fmt(p['dominated_by'][0]['flip'])} at "
+            f"{fmt(p['dominated_by'][0]['fetches_mean'], 3)} fetches"
+        )
+        bw = p["best_within"]
+        lines += [
+            "",
+            f"**Your shader**, `{p['label'].split(':', 1)[1]}` (constants fitted, measured like "
+            f"every point): FLIP {fmt(p['flip'])} at {fmt(p['fetches_mean'], 3)} fetches per "
+            f"water pixel, FLIP rank {p['rank']} of {p['of']}; {where}."
+            + (
+                f" Best within its fetches: {bw['label']}, FLIP {fmt(bw['flip'])} "
+                f"({100 * (bw['flip'] / p['flip'] - 1):+.1f} %)."
+                if bw and bw["flip"] < p["flip"]
+                else ""
+            ),
+        ]
+        if export:
+            gl = export["gl_check"]
+            check = (
+                f"mean |diff| {fmt(gl['mean_abs'], 3)}, p99.9 {fmt(gl['p999'], 3)}: "
+                + ("passed" if gl["passed"] else "**FAILED**")
+                if gl.get("ran")
+                else f"not run ({gl.get('why')})"
+            )
+            lines.append(f"Its file with the fitted constants: `{export['file']}` (llvmpipe "
+                         f"against the executor: {check}).")  # fmt: skip
+    return lines
+
+
 def _alone_lines(rows: list, front: list) -> list[str]:
     """The table of each source's technique alone (full points at their own schedules)."""
     if not rows:
@@ -272,6 +325,7 @@ def _scene_lines(scene: str, f: dict, summary: dict) -> list[str]:
             f"Against the original shader at its own constants (FLIP {fmt(own['flip'])}): "
             f"{fmt(bw['flip'] / own['flip'], 3)}x its error within its fetch budget."
         )
+    lines += _user_lines(f.get("user") or [], summary.get("user_exports", {}).get(scene))
     lines += _marginal_lines(f.get("marginals", []))
     lines += _alone_lines(f.get("sources_alone", []), f["front"])
     if summary.get("images", {}).get(scene):
@@ -348,7 +402,8 @@ def _closing_lines(summary: dict) -> list[str]:
             gl = e["gl_check"]
             lines.append(
                 f"- {scene}: `{e['folder']}` ({e['label']}), compiled with glslangValidator; "
-                f"llvmpipe vs port mean |diff| {fmt(gl['mean_abs'], 3)}, p99.9 {fmt(gl['p999'], 3)}"
+                f"llvmpipe vs port mean |diff| {fmt(gl.get('mean_abs'), 3)}, p99.9 "
+                f"{fmt(gl.get('p999'), 3)}"
                 + ("" if gl["passed"] else " -- **MISMATCH: do not ship**")
             )
         lines.append("")

@@ -21,13 +21,16 @@ Then it analyses the table (``tradeoff_analysis``):
   at its schedule), the budget a game replacing the original shader already pays;
 * what the scene needs (the simplest variant within tolerance, error floors, the smallest loop
   cap at which rays cross the floor, each halving of the original schedule) and, for the
-  adaptive search, what each axis's choice buys at the recommendation.
+  adaptive search, what each axis's choice buys at the recommendation;
+* with ``fit.shader`` a GLSL file, the user's own shader measured in full beside the search's
+  points (``tradeoff_user``), on the chart and the front like them, and where it stands.
 
 Outputs in ``out``: ``tradeoff.parquet`` (a row per point measured in full), ``screen.parquet``
-(adaptive) or ``anchors.parquet`` (exhaustive), ``pareto.png``, ``images_<scene>.png`` (the
-reference beside the original shader at its own constants, fitted, the best configuration within
-its fetch budget and the recommendation), ``report.md``, ``summary.json``, ``shaders/`` (one
-experiment) or ``shaders/<name>/`` (several).
+(adaptive) or ``anchors.parquet`` (exhaustive), ``user.parquet`` (a user's shader),
+``pareto.png``, ``images_<scene>.png`` (the reference beside the original shader at its own
+constants, fitted, the best configuration within its fetch budget, the recommendation and the
+user's shader), ``report.md``, ``summary.json``,
+``shaders/`` (one experiment) or ``shaders/<name>/`` (several), with the user's file fitted.
 """
 
 from __future__ import annotations
@@ -35,8 +38,9 @@ from __future__ import annotations
 import time
 from pathlib import Path
 
-from .tradeoff_analysis import COSTS, analyse, config_label, constants_of, point_record
+from .tradeoff_analysis import COSTS, analyse, config_label, constants_of, is_user, point_record
 from .tradeoff_jobs import SEED_SCHEDULE, anchor_job, point_job, schedules
+from .tradeoff_user import export_user, user_image, user_jobs, user_point_job
 from .._progress import log as _log
 
 # [tradeoff] keys that choose the jobs, never what one job computes
@@ -130,14 +134,22 @@ def run_tradeoff(
             searcher = None
         else:
             rows, searcher = _adaptive(exps, specs, client, out, log, fix, chosen)
+        rows = rows + _user_points(exps, specs, client, out, log)
         summary, recs = analyse(rows, names, tol, budget)
         summary["search"] = _search_summary(mode, searcher, rows, fix, time.perf_counter() - t0)
         if searcher is not None:
             for i, name in enumerate(names):
                 rec = summary["scenes"][name]["recommended"]
-                summary["scenes"][name]["marginals"] = searcher.marginals_of(i, rec) if rec else []
+                ours = rec and not is_user(rec["variant"])
+                summary["scenes"][name]["marginals"] = searcher.marginals_of(i, rec) if ours else []
     summary["experiments"] = [str(p) for p in experiments]
     summary["exports"] = export_recommended(exps, specs, summary, rows, out, variant, log)
+    # after the study's exports, which rewrite ``shaders/``
+    summary["user_exports"] = export_user(exps, specs, rows, out, variant, log)
+    for name, mine in summary["user_exports"].items():
+        rec = summary["scenes"][name]["recommended"]
+        if rec and is_user(rec["variant"]):  # the recommendation is the user's file
+            summary["exports"][name] = {**mine, "folder": str(Path(mine["file"]).parent)}
     summary["images"], summary["panels"] = side_by_side(exps, specs, summary, rows, out, variant)
     from ..report.tradeoff import pareto_figure, write_tradeoff_report
 
@@ -239,6 +251,21 @@ def _adaptive(exps, specs, client, out, log, fix: dict, chosen):
     return rows, searcher
 
 
+def _user_points(exps, specs, client, out: Path, log) -> list[dict]:
+    """The user's own shader of each experiment that has one, measured in full
+    (``tradeoff_user``); no rows when none has."""
+    from ..sweep import run_sweep
+
+    jobs = user_jobs(exps, specs)
+    if not jobs:
+        return []
+    log(f"tradeoff: your shader, fitted and measured on {len(jobs)} scene(s)")
+    return run_sweep(
+        user_point_job, jobs, out / "user.parquet", client=client, label="tradeoff: your shader",
+        log=log,
+    )[: len(jobs)]  # fmt: skip
+
+
 def _search_summary(mode: str, searcher, rows: list, fix: dict, seconds: float) -> dict:
     out = {"mode": mode, "fix": fix, "points_in_full": len(rows), "seconds": seconds}
     if searcher is not None:
@@ -266,6 +293,9 @@ def export_recommended(
         rec = summary["scenes"][exp["name"]]["recommended"]
         if rec is None:
             log(f"tradeoff: no successful point on {exp['name']}; nothing exported")
+            continue
+        if is_user(rec["variant"]):  # its file is written by ``tradeoff_user.export_user``
+            log(f"tradeoff: {exp['name']}: the recommendation is your shader")
             continue
         row = next(
             r
@@ -312,15 +342,17 @@ def _point_row(rows: list, scene: str, label: str) -> dict:
 def side_by_side(exps, specs, summary: dict, rows: list, out: Path, variant: str) -> tuple:
     """Per scene, ``images_<scene>.png``: the reference | the seed shader with the experiment's
     constants at the seed's schedule | the seed's configuration refitted | the best configuration
-    within the seed's fetch budget | the recommendation (duplicates left out), each at the
-    experiment's resolution with its FLIP and RMSE on the water pixels. Returns ({scene: file
-    name}, {scene: {panel title: {"flip", "rmse"}}}); the first panel's FLIP is the original
-    shader at its own constants, the baseline of every "halves the original's error" claim."""
+    within the seed's fetch budget | the recommendation | the user's shader (duplicates left
+    out), each at the experiment's resolution with its FLIP and RMSE on the water pixels.
+    Returns ({scene: file name}, {scene: {panel title: {"flip", "rmse"}}}); the first panel's
+    FLIP is the original shader at its own constants, the baseline of every "halves the
+    original's error" claim."""
     from shaders_port import Constants
 
     from .._metrics import errors
     from ..fit.model import constants_from_experiment
     from ..report.calibration import comparison_figure
+    from ..sweep import load_scene
     from .tradeoff_jobs import job_model
 
     result, scores = {}, {}
@@ -341,24 +373,28 @@ def side_by_side(exps, specs, summary: dict, rows: list, out: Path, variant: str
             r = f.get(key)
             if r and r["label"] not in [p[0].split(": ", 1)[-1] for p in panels]:
                 row = _point_row(rows, exp["name"], r["label"])
-                panels.append(
-                    (
-                        f"{title}: {r['label']}",
-                        r["variant"],
-                        Constants.from_dict(constants_of(row)),
-                    )
-                )
+                panels.append((f"{title}: {r['label']}", r["variant"], row))
+        for p in f.get("user") or []:
+            if p["label"] not in [q[0].split(": ", 1)[-1] for q in panels]:
+                panels.append((f"your shader: {p['label']}", p["label"], _point_row(
+                    rows, exp["name"], p["label"])))  # fmt: skip
         images, errs, mask = {}, {}, None
-        for title, shader, constants in panels:
-            _, ref, _, model = job_model(
-                {"scene": spec, "variant": shader, "mitsuba_variant": variant},
-                resolution=tuple(exp["resolution"]),
-            )
+        for title, shader, what in panels:
+            if is_user(shader):
+                exp_s, ref, inputs = load_scene(spec, variant)
+                img, m = user_image(exp_s, inputs, what)
+            else:
+                _, ref, _, model = job_model(
+                    {"scene": spec, "variant": shader, "mitsuba_variant": variant},
+                    resolution=tuple(exp["resolution"]),
+                )
+                c = what if isinstance(what, Constants) else Constants.from_dict(constants_of(what))
+                img, _ = model.render(c)
+                m = model.mask
             images.setdefault("reference", ref.image)
-            img, _ = model.render(constants)
             images[title] = img
-            errs[title] = errors(ref.image, img, model.mask)
-            mask = model.mask
+            errs[title] = errors(ref.image, img, m)
+            mask = m
         name = f"images_{exp['name']}.png"
         comparison_figure(out / name, images, errs, mask, title=exp["name"])
         result[exp["name"]] = name

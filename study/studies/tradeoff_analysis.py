@@ -16,6 +16,12 @@ COSTS = {
     "port_ms_512": "Dr.Jit LLVM port ms / frame at 512x512",
 }
 ERROR = "flip"
+USER = "user:"  # the variant name of a user's own shader: USER + its file name
+
+
+def is_user(variant) -> bool:
+    """True for the variant name of a user's own shader (``study.studies.tradeoff_user``)."""
+    return str(variant).startswith(USER)
 
 
 def constants_of(row: dict) -> dict:
@@ -214,6 +220,9 @@ def scene_findings(pts: list, all_pts: list, tolerance: float, budget=None) -> d
     }
     crossing = {}
     for v in variants:
+        if is_user(v):
+            crossing[v] = "its own loops (not swept)"
+            continue
         if not any(r["schedule"] for r in all_pts if r["variant"] == v):
             crossing[v] = "no raymarch"  # a loopless shader (the baselines)
             continue
@@ -256,4 +265,34 @@ def scene_findings(pts: list, all_pts: list, tolerance: float, budget=None) -> d
         "error_floor_by_variant": floor,
         "smallest_crossing_loop_cap": crossing,
         "halvings": [brief(r) for r in halvings],
+        "user": [placement(pts, r["label"]) for r in pts if is_user(r["variant"])],
+    }
+
+
+def placement(pts: list, label: str, cost: str = "fetches_mean") -> dict | None:
+    """Where the point ``label`` stands among a scene's candidate points ``pts`` (records with
+    ``label``, ``flip`` and ``cost``): ``on_front`` (no other point costs no more and errs less),
+    ``dominated_by`` (those that do, cheapest first, with their FLIP and cost), ``best_within``
+    (the lowest FLIP at no more than its cost, itself excluded) and ``rank`` (1 + the number of
+    points with a lower FLIP); None when the point is not among them."""
+    me = next((r for r in pts if r["label"] == label), None)
+    if me is None or me.get(cost) is None:
+        return None
+    others = [r for r in pts if r is not me and r.get(cost) is not None]
+    within = [r for r in others if r[cost] <= me[cost] * (1 + 1e-9)]
+    better = sorted((r for r in within if r["flip"] < me["flip"]), key=lambda r: r[cost])
+
+    def brief(r):
+        return {"label": r["label"], "flip": r["flip"], cost: r[cost]}
+
+    best = min(within, key=lambda r: r["flip"], default=None)
+    return {
+        "label": label,
+        "flip": me["flip"],
+        cost: me[cost],
+        "on_front": not better,
+        "dominated_by": [brief(r) for r in better],
+        "best_within": brief(best) if best else None,
+        "rank": 1 + sum(r["flip"] < me["flip"] for r in others),
+        "of": len(pts),
     }

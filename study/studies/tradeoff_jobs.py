@@ -109,12 +109,18 @@ def schedules(exp, variant_name: str) -> list[dict]:
 
 
 def _fit_names(exp, variant_name: str) -> list[str]:
-    """``fit.parameters`` the variant reads, without its schedule constants (the sweep sets
-    those), plus the variant's own ``fit_parameters`` (e.g. the baseline's distortions)."""
+    """``fit.parameters`` the variant reads (unset, as beside a user's own shader: all it
+    reads), without its schedule constants (the sweep sets those), plus the variant's own
+    ``fit_parameters`` (e.g. the baseline's distortions)."""
     from shaders_port._variants import get_variant
 
+    from ..scene.experiment import fit_parameters
+
     v = get_variant(variant_name)
-    names = [n for n in v.fit_names(exp["fit.parameters"]) if n not in v.schedule]
+    listed = exp["fit.parameters"]
+    if listed is None:  # an experiment of a user's own shader: the study's shaders fit their own
+        listed = fit_parameters(variant_name, None)
+    names = [n for n in v.fit_names(listed) if n not in v.schedule]
     reads = set(v.reads())
     return names + [n for n in v.fit_parameters if n in reads and n not in names]
 
@@ -265,17 +271,34 @@ def block_means(values: np.ndarray, block: int) -> np.ndarray:
 def frame_times(variant_name: str, inputs, constants, repeats: int) -> dict:
     """GL frame times (ms) of the variant at each ``GL_SIZES`` beside the fixed reference shader
     (run before and after it), their ratio, and the port's frame time at 512x512."""
+    from shaders_port._variants import get_variant
+
+    variant = get_variant(variant_name)
+    return timed_frames(
+        lambda frame: variant.gl_renderer(frame),
+        constants,
+        lambda frame: variant.render(frame, constants),
+        inputs,
+        repeats,
+    )
+
+
+def timed_frames(gl_renderer, constants, render, inputs, repeats: int) -> dict:
+    """What :func:`frame_times` measures, of any shader: ``gl_renderer(inputs)`` a
+    ``GLRenderer`` drawing it with ``constants`` (None: its source as written), ``render(inputs)``
+    its Dr.Jit render (a ``ShaderOutput``)."""
     from shaders_port import Constants
     from shaders_port._variants import get_variant
 
-    variant, refv = get_variant(variant_name), get_variant(REFERENCE_SHADER)
+    refv = get_variant(REFERENCE_SHADER)
     out = {}
     for label, (w, h) in GL_SIZES.items():
         frame = inputs.with_resolution(w, h)
         ref_ms = []
-        for block in ("ref", "variant", "ref"):
-            v, c = (refv, Constants()) if block == "ref" else (variant, constants)
-            with v.gl_renderer(frame) as r:
+        for block in ("ref", "shader", "ref"):
+            r, c = (refv.gl_renderer(frame), Constants()) if block == "ref" else (
+                gl_renderer(frame), constants)  # fmt: skip
+            with r:
                 ms = 1e3 * statistics.median(r.time_frames(c, n=repeats, warmup=1))
             if block == "ref":
                 ref_ms.append(ms)
@@ -284,11 +307,11 @@ def frame_times(variant_name: str, inputs, constants, repeats: int) -> dict:
         out[f"gl_ref_ms_{label}"] = statistics.mean(ref_ms)
         out[f"gl_ratio_{label}"] = out[f"gl_ms_{label}"] / out[f"gl_ref_ms_{label}"]
     frame = inputs.with_resolution(512, 512)
-    variant.render(frame, constants)  # compile / record the kernels
+    render(frame)  # compile / record the kernels
     times = []
     for _ in range(5):
         t0 = time.perf_counter()
-        variant.render(frame, constants).numpy()
+        render(frame).numpy()
         times.append(time.perf_counter() - t0)
     out["port_ms_512"] = 1e3 * statistics.median(times)
     return out

@@ -1,0 +1,172 @@
+"""The user's own shader in ``study tradeoff`` (``fit.shader = "my_water.frag"``): charted, placed
+and recommended like the study's shaders.
+
+Beside the points the search measures, each experiment whose ``fit.shader`` is a GLSL file gets
+one more point measured in full, as :func:`~.tradeoff_jobs.point_job` measures the study's
+shaders: the declared constants fitted at ``fit.resolution`` by the experiment's solver
+(``study.fit.user_shader.calibrate``), FLIP and RMSE on the water pixels at ``resolution``,
+texture fetches and loop iterations per water pixel counted from the translated code, the GL
+frame times of the written-back file beside the fixed reference shader, and the executor's own
+frame time at 512x512. Its variant name is ``user:<file name>``; it is one point (``kind``
+``fixed``: the loops it has are its own, their counts are measured, not swept), on the front and
+a candidate for the recommendation like any other. Its job carries the SHA-256 of the shader's
+text and declaration, so an edited shader is measured again, never read back from the table.
+
+:func:`~.tradeoff_analysis.placement` says where it stands among the points of its scene;
+:func:`export_user` writes its file with the fitted constants into the study's ``shaders/`` folder
+and checks it on OpenGL.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import time
+from pathlib import Path
+
+import numpy as np
+
+from .tradeoff_analysis import USER, constants_of, is_user
+from .tradeoff_jobs import timed_frames
+
+__all__ = ["user_jobs", "user_point_job", "user_image", "export_user", "is_user"]
+
+
+def _shader_of(exp):
+    from ..scene.experiment import is_user_shader, load_user_shader
+
+    return load_user_shader(exp.values) if is_user_shader(exp["fit.shader"]) else None
+
+
+def user_jobs(exps, specs) -> list[dict]:
+    """One job per experiment whose ``fit.shader`` is a GLSL file (see the module doc)."""
+    jobs = []
+    for exp, spec in zip(exps, specs):
+        shader = _shader_of(exp)
+        if shader is None:
+            continue
+        decl = json.dumps({"bindings": shader.bindings, "constants": {
+            n: [c.lo, c.hi] for n, c in shader.constants.items()}}, sort_keys=True)  # fmt: skip
+        sha = hashlib.sha256((shader.source + "\0" + decl).encode()).hexdigest()
+        jobs.append(
+            {
+                "scene": spec,
+                "experiment": exp["name"],
+                "variant": USER + shader.label,
+                "kind": "fixed",
+                "scale": None,
+                "schedule": {},
+                "shader_sha256": sha,
+            }
+        )
+    return jobs
+
+
+def _scored_mask(exp, shader, inputs, values) -> np.ndarray:
+    """(H, W) bool at the inputs' size: the shader's coverage and the reference's water, eroded
+    by one pixel (the mask ``study.fit.model.ShaderModel`` scores the study's shaders on)."""
+    from .._metrics import erode
+    from ..scene.reference import water_mask
+
+    cover = shader.render(inputs, values).numpy()["mask"] > 0.5
+    return erode(cover & water_mask(exp, inputs.width, inputs.height), 1)
+
+
+def user_point_job(job: dict) -> dict:
+    """The user's shader fitted and measured (module doc); flat figures, ``fitted`` (scalar name
+    -> value) and ``status_of`` (scalar name -> fitted | bound | frozen)."""
+    from .._metrics import downsample, errors, information_criteria
+    from ..fit.user_shader import calibrate
+    from ..scene.reference import water_mask
+    from ..sweep import load_scene
+
+    exp, ref, inputs = load_scene(job["scene"], job.get("mitsuba_variant", "llvm_ad_rgb"))
+    shader = _shader_of(exp)
+    w, h = exp["fit.resolution"]
+    fy, fx = ref.image.shape[0] // h, ref.image.shape[1] // w
+    target = downsample(ref.image, fy, fx) if (fy, fx) != (1, 1) else ref.image
+    small = inputs.with_resolution(w, h)
+    t0 = time.perf_counter()
+    fit = calibrate(shader, small, target, reference_mask=water_mask(exp, w, h),
+                    max_iterations=exp["fit.max_steps"], solver=exp["fit.solver"])  # fmt: skip
+    fit_s = time.perf_counter() - t0
+    r = (shader.render(small, fit.values).numpy()["color"] - target)[fit.mask].ravel()
+    fitted = [n for n, p in fit.parameters.items() if p["status"] in ("fitted", "bound")]
+    ic = information_criteria(r.astype(np.float64), len(fitted))
+    out_full = shader.render(inputs, fit.values).numpy()
+    mask = _scored_mask(exp, shader, inputs, fit.values)
+    err = errors(ref.image, out_full["color"], mask)
+    out = {
+        "flip": err["flip"],
+        "rmse": err["rmse"],
+        "fit_seconds": fit_s,
+        "fit_iterations": fit.iterations,
+        "water_pixels": int(mask.sum()),
+        "n_fitted": len(fitted),
+        "aic": ic["aic"],
+        "bic": ic["bic"],
+        "nonfinite_pixels": int((~np.isfinite(out_full["color"][mask])).any(-1).sum()),
+    }
+    for k in ("fetches", "iterations"):
+        v = out_full[k][mask]
+        out[f"{k}_mean"], out[f"{k}_p99"] = float(v.mean()), float(np.percentile(v, 99))
+    out.update(
+        timed_frames(
+            lambda frame: shader.gl_renderer(frame, fit.values),
+            None,
+            lambda frame: shader.render(frame, fit.values),
+            inputs,
+            exp["tradeoff.gl_repeats"],
+        )
+    )
+    out["fitted"] = dict(fit.scalars)
+    out["status_of"] = {n: p["status"] for n, p in fit.parameters.items()}
+    return out
+
+
+def _values(shader, row: dict) -> dict:
+    return shader.with_scalars(shader.defaults(), constants_of(row))
+
+
+def user_image(exp, inputs, row: dict) -> tuple[np.ndarray, np.ndarray]:
+    """The user's shader with a row's fitted constants at the inputs' size: (image (H, W, 3)
+    float32 linear RGB, the scored mask (H, W) bool)."""
+    shader = _shader_of(exp)
+    values = _values(shader, row)
+    return shader.render(inputs, values).numpy()["color"], _scored_mask(exp, shader, inputs, values)
+
+
+def export_user(exps, specs, rows: list, out: Path, variant: str, log) -> dict:
+    """Per experiment with a user's shader: its file with the fitted constants in ``shaders/``
+    (one experiment) or ``shaders/<name>/``, every other byte as the user wrote it, and that
+    file on OpenGL against the executor at ``resolution`` (``gl_check_user``). Returns
+    {experiment: {"file", "variant", "label", "constants", "gl_check"}}."""
+    from .._io import write_text_atomic
+    from ..report.gl_check import gl_check_user
+    from ..sweep import load_scene
+
+    result = {}
+    for exp, spec in zip(exps, specs):
+        shader = _shader_of(exp)
+        row = next(
+            (r for r in rows if r.get("job.experiment") == exp["name"]
+             and is_user(r.get("job.variant")) and r["status"] == "ok"), None)  # fmt: skip
+        if shader is None or row is None:
+            continue
+        values = _values(shader, row)
+        folder = out / "shaders" if len(exps) == 1 else out / "shaders" / exp["name"]
+        folder.mkdir(parents=True, exist_ok=True)
+        path = folder / shader.label
+        write_text_atomic(path, shader.written(values))
+        _, _, inputs = load_scene(spec, variant)
+        gl = gl_check_user(shader, inputs, values, shader.render(inputs, values).numpy())
+        result[exp["name"]] = {
+            "file": str(path.relative_to(out)),
+            "variant": USER + shader.label,
+            "label": USER + shader.label,
+            "constants": constants_of(row),
+            "gl_check": gl,
+        }
+        verdict = "not run" if not gl["ran"] else ("passed" if gl["passed"] else "FAILED")
+        log(f"tradeoff: {exp['name']}: wrote your shader, fitted, to {path} (GL check {verdict})")
+    return result
