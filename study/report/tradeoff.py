@@ -126,6 +126,17 @@ def pareto_figure(path: Path, recs: list, summary: dict) -> Path:
     return path
 
 
+def _mark_user(ax, cands: list, cost: str) -> None:
+    """A user's own shader (variant ``user:<file>``): a labelled diamond."""
+    for r in cands:
+        if r["variant"].startswith("user:") and r.get(cost) is not None:
+            name = r["variant"].split(":", 1)[1]
+            ax.scatter(r[cost], r["flip"], marker="D", s=90, facecolors="none",
+                       edgecolors="k", linewidths=1.5, label=f"your shader ({name})")
+            ax.annotate(name, (r[cost], r["flip"]), textcoords="offset points",
+                        xytext=(6, 6), fontsize=8)  # fmt: skip
+
+
 def _sched(rec) -> str:
     return rec["label"] if rec else "-"
 
