@@ -93,21 +93,7 @@ def pareto_figure(path: Path, recs: list, summary: dict) -> Path:
                     ax.scatter(
                         r[cost], r["flip"], marker="x", s=120, color="red", label="recommended"
                     )
-            for r in cands:
-                if r["variant"].startswith("user:") and r.get(cost) is not None:
-                    name = r["variant"].split(":", 1)[1]
-                    ax.scatter(
-                        r[cost],
-                        r["flip"],
-                        marker="D",
-                        s=90,
-                        facecolors="none",
-                        edgecolors="k",
-                        linewidths=1.5,
-                        label=f"your shader ({name})",
-                    )
-                    ax.annotate(name, (r[cost], r["flip"]), textcoords="offset points",
-                                xytext=(6, 6), fontsize=8)  # fmt: skip
+            _mark_user(ax, cands, cost)
             ax.set_xscale("log")
             ax.set_xlabel(label, fontsize=9)
             ax.set_ylabel("FLIP on water pixels" if j == 0 else "")
@@ -131,8 +117,16 @@ def _mark_user(ax, cands: list, cost: str) -> None:
     for r in cands:
         if r["variant"].startswith("user:") and r.get(cost) is not None:
             name = r["variant"].split(":", 1)[1]
-            ax.scatter(r[cost], r["flip"], marker="D", s=90, facecolors="none",
-                       edgecolors="k", linewidths=1.5, label=f"your shader ({name})")
+            ax.scatter(
+                r[cost],
+                r["flip"],
+                marker="D",
+                s=90,
+                facecolors="none",
+                edgecolors="k",
+                linewidths=1.5,
+                label=f"your shader ({name})",
+            )
             ax.annotate(name, (r[cost], r["flip"]), textcoords="offset points",
                         xytext=(6, 6), fontsize=8)  # fmt: skip
 
