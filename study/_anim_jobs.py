@@ -17,54 +17,8 @@ from pathlib import Path
 import numpy as np
 
 from ._io import write_exr, write_json
-from ._progress import Stages
 from ._progress import log as _log
 from .report.gl_check import gl_check, target_checks
-
-
-def load_frames(exp, variant: str, cache=None) -> dict:
-    """Every frame of ``exp``: ``frames`` (the frame experiments), ``refs`` (``Reference``),
-    ``inputs`` (``ShaderInputs``), ``timings`` (per frame and summed: ``reference_s``,
-    ``inputs_s``) and ``shared`` (the ``FrameShared`` record: what was built once, how often it
-    was reused)."""
-    from .scene.baseline_inputs import inputs_for_shader
-    from .scene.frames import FrameShared, frames_of
-    from .scene.mitsuba_scene import build_scene, set_waves
-    from .scene.reference import load_or_render
-    from .scene.shader_inputs import load_or_build_shader_inputs
-
-    shared = FrameShared()
-    frames = frames_of(exp)
-    n = len(frames)
-    refs, inputs, timings = [], [], {}
-    for k, e in enumerate(frames):
-        st = Stages(log=_log, prefix=f"frame{k}.")
-
-        def scene(e=e):
-            return shared.scene(e, "reference_scene", lambda: build_scene(e), set_waves)
-
-        with st.stage("reference_s", f"frame {k + 1}/{n}: reference"):
-            refs.append(
-                load_or_render(
-                    e,
-                    variant,
-                    cache=cache,
-                    progress=st.counter("  reference passes"),
-                    log=_log,
-                    scene=scene,
-                    keep_passes=True,
-                )
-            )
-        with st.stage("inputs_s", f"frame {k + 1}/{n}: shader inputs"):
-            i = load_or_build_shader_inputs(
-                e, variant, cache=cache, log=_log, progress=st, shared=shared
-            )
-            inputs.append(inputs_for_shader(e, i, e["fit.shader"], variant, cache=cache, log=_log))
-        timings.update(st.timings)
-    for what in ("reference_s", "inputs_s"):
-        timings[what] = sum(timings[f"frame{k}.{what}"] for k in range(n))
-    record = {"built_once": list(shared.built), "reused": dict(shared.reused)}
-    return {"frames": frames, "refs": refs, "inputs": inputs, "timings": timings, "shared": record}
 
 
 def _score(frames, refs, inputs, backend, constants: dict) -> dict:
@@ -115,6 +69,7 @@ def run_calibrate_animated(exp, variant: str, out: Path, solver: str, cache=None
     from .fit.joint import joint_calibrate
     from .fit.model import ShaderModel, constants_from_experiment
     from .report.animation import animation_figures, write_animation_report
+    from .scene.frame_data import load_frames
     from .report.export import export_shaders
 
     if exp["fit.input_noise"] != "ignore":

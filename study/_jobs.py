@@ -179,7 +179,6 @@ def run_tradeoff(
     (``study.studies.tradeoff``); tables, ``pareto.png``, ``report.md`` and shaders in ``out``."""
     from .studies.tradeoff import run_tradeoff as run
 
-    _refuse_animated(experiments, overrides, "study tradeoff")
     return run(
         list(experiments),
         out,

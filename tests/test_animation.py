@@ -100,7 +100,7 @@ def test_moved_scene_renders_as_one_built_for_the_frame(mi):
 
 
 def test_still_only_commands_refuse_an_animated_experiment(tmp_path, capsys):
-    """tradeoff, failures, stability and a fit over several experiments say that they take still
+    """failures, stability and a fit over several experiments say that they take still
     frames and how to run them (exit code 2, nothing written); so does calibrate for the texture
     noise decorrelation, which it does not do over frames."""
     from conftest import REPO
@@ -108,7 +108,6 @@ def test_still_only_commands_refuse_an_animated_experiment(tmp_path, capsys):
 
     exp = str(REPO / "experiments" / "animated.toml")
     for args in (
-        ["tradeoff", exp],
         ["failures", exp],
         ["stability", exp],
         ["calibrate", exp, str(REPO / "experiments" / "default.toml")],

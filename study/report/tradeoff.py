@@ -11,6 +11,7 @@ from pathlib import Path
 from shaders_port import _space
 
 from .calibration import fmt, pyplot
+from .tradeoff_motion import motion_lines
 
 COSTS = {
     "fetches_mean": "texture fetches / water pixel (mean)",
@@ -331,6 +332,7 @@ def _scene_lines(scene: str, f: dict, summary: dict) -> list[str]:
             f"{fmt(bw['flip'] / own['flip'], 3)}x its error within its fetch budget."
         )
     lines += _user_lines(f.get("user") or [], summary.get("user_exports", {}).get(scene))
+    lines += motion_lines(f.get("motion"))
     lines += _marginal_lines(f.get("marginals", []))
     lines += _alone_lines(f.get("sources_alone", []), f["front"])
     if summary.get("images", {}).get(scene):

@@ -23,14 +23,18 @@ Then it analyses the table (``tradeoff_analysis``):
   cap at which rays cross the floor, each halving of the original schedule) and, for the
   adaptive search, what each axis's choice buys at the recommendation;
 * with ``fit.shader`` a GLSL file, the user's own shader measured in full beside the search's
-  points (``tradeoff_user``), on the chart and the front like them, and where it stands.
+  points (``tradeoff_user``), on the chart and the front like them, and where it stands;
+* on an animated experiment, the search and the fits on frame 0, then every point measured in
+  full scored on every frame and on the temporal error, and whether motion changes the
+  recommendation (``tradeoff_motion``).
 
 Outputs in ``out``: ``tradeoff.parquet`` (a row per point measured in full), ``screen.parquet``
 (adaptive) or ``anchors.parquet`` (exhaustive), ``user.parquet`` (a user's shader),
+``frames.parquet``, ``motion.parquet`` and ``motion.png`` (an animated experiment),
 ``pareto.png``, ``images_<scene>.png`` (the reference beside the original shader at its own
 constants, fitted, the best configuration within its fetch budget, the recommendation and the
-user's shader), ``report.md``, ``summary.json``,
-``shaders/`` (one experiment) or ``shaders/<name>/`` (several), with the user's file fitted.
+user's shader), ``report.md``, ``summary.json``, ``shaders/`` (one experiment) or
+``shaders/<name>/`` (several), with the user's file fitted.
 """
 
 from __future__ import annotations
@@ -40,6 +44,7 @@ from pathlib import Path
 
 from .tradeoff_analysis import COSTS, analyse, config_label, constants_of, is_user, point_record
 from .tradeoff_jobs import SEED_SCHEDULE, anchor_job, point_job, schedules
+from .tradeoff_motion import run_motion, still_overrides
 from .tradeoff_user import export_user, user_image, user_jobs, user_point_job
 from .._progress import log as _log
 
@@ -105,6 +110,7 @@ def run_tradeoff(
 
     from .._io import write_json
     from ..scene.experiment import load_experiments
+    from ..scene.frames import is_animated
     from ..sweep import scene_spec
     from ..sweep.cluster import open_client
 
@@ -120,9 +126,11 @@ def run_tradeoff(
     fix, chosen = parse_fix(exps[0]["tradeoff.fix"]), exps[0]["tradeoff.variants"]
     # the jobs' scenes leave out the keys that only shape the plan (which variants and schedules),
     # so that widening the plan resumes every point already measured
+    # (an animated experiment's frame 0 as a still: the search and the fits run there)
+    plain = [o for o in overrides or [] if o.split("=", 1)[0].strip() not in PLAN_KEYS]
     specs = [
-        scene_spec(p, [o for o in overrides or [] if o.split("=", 1)[0].strip() not in PLAN_KEYS])
-        for p in experiments
+        scene_spec(p, still_overrides(plain) if is_animated(e) else plain)
+        for p, e in zip(experiments, exps)
     ]
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
@@ -136,6 +144,7 @@ def run_tradeoff(
             rows, searcher = _adaptive(exps, specs, client, out, log, fix, chosen)
         rows = rows + _user_points(exps, specs, client, out, log)
         summary, recs = analyse(rows, names, tol, budget)
+        run_motion(exps, experiments, plain, rows, recs, summary, client, out, log)
         summary["search"] = _search_summary(mode, searcher, rows, fix, time.perf_counter() - t0)
         if searcher is not None:
             for i, name in enumerate(names):
@@ -152,8 +161,10 @@ def run_tradeoff(
             summary["exports"][name] = {**mine, "folder": str(Path(mine["file"]).parent)}
     summary["images"], summary["panels"] = side_by_side(exps, specs, summary, rows, out, variant)
     from ..report.tradeoff import pareto_figure, write_tradeoff_report
+    from ..report.tradeoff_motion import motion_figure
 
     pareto_figure(out / "pareto.png", recs, summary)
+    motion_figure(out / "motion.png", summary)
     write_tradeoff_report(out, summary)
     write_json(out / "summary.json", summary)
     log(f"tradeoff: {summary['n_points']} points ({summary['n_failed']} failed); wrote {out}")
@@ -382,7 +393,7 @@ def side_by_side(exps, specs, summary: dict, rows: list, out: Path, variant: str
         for title, shader, what in panels:
             if is_user(shader):
                 exp_s, ref, inputs = load_scene(spec, variant)
-                img, m = user_image(exp_s, inputs, what)
+                img, m = user_image(exp_s, inputs, constants_of(what))
             else:
                 _, ref, _, model = job_model(
                     {"scene": spec, "variant": shader, "mitsuba_variant": variant},

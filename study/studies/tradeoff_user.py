@@ -128,11 +128,11 @@ def _values(shader, row: dict) -> dict:
     return shader.with_scalars(shader.defaults(), constants_of(row))
 
 
-def user_image(exp, inputs, row: dict) -> tuple[np.ndarray, np.ndarray]:
-    """The user's shader with a row's fitted constants at the inputs' size: (image (H, W, 3)
-    float32 linear RGB, the scored mask (H, W) bool)."""
+def user_image(exp, inputs, constants: dict) -> tuple[np.ndarray, np.ndarray]:
+    """The user's shader with fitted ``constants`` (scalar name -> value, a row's ``fitted``) at
+    the inputs' size: (image (H, W, 3) float32 linear RGB, the scored mask (H, W) bool)."""
     shader = _shader_of(exp)
-    values = _values(shader, row)
+    values = shader.with_scalars(shader.defaults(), constants)
     return shader.render(inputs, values).numpy()["color"], _scored_mask(exp, shader, inputs, values)
 
 

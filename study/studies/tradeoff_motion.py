@@ -1,0 +1,258 @@
+"""``study tradeoff`` on an animated experiment (``animation.frames`` > 1): every point measured in
+full is scored on every frame and on the temporal error, and the report says whether motion
+changes the recommendation.
+
+The search and the full points run on frame 0 (the still experiment: the constants are fitted
+there, as on any still scene). Then, for each point measured in full (the converged raymarch
+included), :func:`motion_job` renders its constants on every frame at ``resolution`` against
+that frame's reference (``study.scene.frame_data``: references and inputs cached per frame,
+built once by :func:`prepare_frames_job` before the points run) and measures:
+
+* FLIP per frame, their mean (``flip_frames_mean``) and spread (``flip_frames_spread``, the
+  standard deviation over frames);
+* the temporal error of ``study._metrics.temporal_errors`` on the pixels that are water in every
+  frame: ``trmse`` (RMS of the shader's frame-to-frame change minus the reference's),
+  ``trmse_excess`` (beyond the reference's own noise), ``change_ratio``, and the per-pair mean
+  squares ``pair_ms`` that paired comparisons take their standard error from.
+
+:func:`motion_findings` then ranks the points on motion: the recommendation by the same rule on
+the error over time (the cheapest point whose mean FLIP over the frames and whose temporal RMSE
+are both within the tolerance of the best), against the still recommendation; and for every
+shader with a raymarch, each schedule's temporal error against its converged raymarch's (the
+same shader without step artefacts), paired over the frame pairs: a schedule whose temporal
+error exceeds it by more than ``tradeoff.noise_z`` standard errors *bands in motion*.
+"""
+
+from __future__ import annotations
+
+import functools
+import json
+import math
+
+import numpy as np
+
+from .tradeoff_analysis import COST, is_user
+
+MOTION = "animation.frames"
+
+
+def still_overrides(overrides) -> list[str]:
+    """``overrides`` with frame 0 as a still experiment (``animation.frames = 1``)."""
+    return [*(overrides or []), f"{MOTION}=1"]
+
+
+def prepare_frames_job(job: dict) -> dict:
+    """Render (or find cached) every frame's reference and shader inputs of the animated
+    ``job["scene"]``, and each frame's extra buffers for the shaders of ``job["variants"]``;
+    returns the seconds spent."""
+    from ..scene.baseline_inputs import inputs_for_shader
+
+    mv = job.get("mitsuba_variant", "llvm_ad_rgb")
+    _, data = _frames(json.dumps(job["scene"], sort_keys=True), mv)
+    for v in job["variants"]:
+        if not is_user(v):
+            for e, base in zip(data["frames"], data["base"]):
+                inputs_for_shader(e, base, v, mv, log=lambda m: None)
+    return {"frames": len(data["frames"]), **data["timings"]}
+
+
+@functools.lru_cache(maxsize=1)
+def _frames(text: str, mv: str):
+    from ..scene.experiment import load_experiment
+    from ..scene.frame_data import load_frames
+
+    spec = json.loads(text)
+    exp = load_experiment(spec["experiment"], spec.get("overrides") or [])
+    return exp, load_frames(exp, mv)
+
+
+def _render_frames(job: dict, data: dict, mv: str) -> tuple[list, list]:
+    """The point's constants on every frame at ``resolution``: (images, scored masks)."""
+    from shaders_port import Constants
+
+    from .._backend import drjit_backend
+    from ..fit.model import ShaderModel
+    from ..scene.baseline_inputs import inputs_for_shader
+    from .tradeoff_user import user_image
+
+    images, masks = [], []
+    for e, base, ref in zip(data["frames"], data["base"], data["refs"]):
+        if is_user(job["variant"]):
+            img, m = user_image(e, base, job["constants"])
+        else:
+            inputs = inputs_for_shader(e, base, job["variant"], mv, log=lambda m: None)
+            model = ShaderModel.from_experiment(
+                e, inputs, ref.image, shader=job["variant"], backend=drjit_backend(mv),
+                resolution=tuple(e["resolution"]),
+            )  # fmt: skip
+            img, _ = model.render(Constants.from_dict(job["constants"]))
+            m = model.mask
+        images.append(img)
+        masks.append(m)
+    return images, masks
+
+
+def motion_job(job: dict) -> dict:
+    """One point on every frame (module doc): ``job`` has the animated ``scene``, the
+    ``variant`` and its fitted ``constants``. Returns flat figures and per-frame lists."""
+    from .._metrics import errors, temporal_errors
+
+    mv = job.get("mitsuba_variant", "llvm_ad_rgb")
+    _, data = _frames(json.dumps(job["scene"], sort_keys=True), mv)
+    refs = data["refs"]
+    images, masks = _render_frames(job, data, mv)
+    flips = np.array([errors(r.image, i, m)["flip"] for r, i, m in zip(refs, images, masks)])
+    mask = np.logical_and.reduce(masks)
+    t = temporal_errors(
+        [r.image for r in refs], images, mask, [r.stderr for r in refs], [r.passes for r in refs]
+    )
+    return {
+        "frames": len(refs),
+        "flip_frames": flips.tolist(),
+        "flip_frames_mean": float(flips.mean()),
+        "flip_frames_spread": float(flips.std(ddof=1)),
+        "trmse": t["trmse"],
+        "trmse_excess": t.get("trmse_excess"),
+        "noise": t.get("noise"),
+        "change_ratio": t["change_ratio"],
+        "shader_change": t["shader_change"],
+        "reference_change_excess": t.get("reference_change_excess"),
+        "pair_ms": [p * p for p in t["per_pair"]],
+        "mask_pixels": int(mask.sum()),
+    }
+
+
+def paired(a: list, b: list) -> tuple[float, float]:
+    """Mean and standard error of the per-pair differences ``a - b`` (mean squares of the same
+    frame pairs); the standard error is inf with fewer than two pairs."""
+    d = np.asarray(a, np.float64) - np.asarray(b, np.float64)
+    if d.size < 2:
+        return float(d.mean()) if d.size else math.nan, math.inf
+    return float(d.mean()), float(d.std(ddof=1) / math.sqrt(d.size))
+
+
+def _banding(pts: list, z: float) -> list[dict]:
+    """Each raymarch schedule's temporal error against its shader's converged raymarch."""
+    out = []
+    for v in dict.fromkeys(r["variant"] for r in pts):
+        floor = next((r for r in pts if r["variant"] == v and r["kind"] == "converged"), None)
+        if floor is None:
+            continue
+        for r in sorted((r for r in pts if r["variant"] == v and r is not floor),
+                        key=lambda r: r.get(COST) or 0.0):  # fmt: skip
+            d, se = paired(r["pair_ms"], floor["pair_ms"])
+            out.append(
+                {
+                    "label": r["label"],
+                    "variant": v,
+                    COST: r.get(COST),
+                    "trmse": r["trmse"],
+                    "floor_trmse": floor["trmse"],
+                    "d_ms": d,
+                    "se_ms": se,
+                    "bands": bool(d > 0 and d > z * se),
+                }
+            )
+    return out
+
+
+def motion_findings(pts: list, still_rec: dict | None, tolerance: float, z: float) -> dict:
+    """What motion says of one scene's points (records with ``label``, ``variant``, ``kind``,
+    the cost and the :func:`motion_job` figures): ``points`` (each, cheapest first),
+    ``recommended`` (module doc), ``still`` (the still recommendation's label), ``changes``
+    (whether they differ), ``banding`` (:func:`_banding`) and ``why`` (a sentence)."""
+    keys = ("label", "variant", "kind", COST, "flip", "flip_frames_mean", "flip_frames_spread",
+            "trmse", "trmse_excess", "change_ratio", "noise")  # fmt: skip
+    scored = [r for r in pts if r.get("trmse") is not None]
+    cands = [r for r in scored if r["kind"] != "converged" and r.get(COST) is not None]
+    rec = None
+    if cands:
+        best_f = min(r["flip_frames_mean"] for r in cands)
+        best_t = min(r["trmse"] for r in cands)
+        within = [r for r in cands if r["flip_frames_mean"] <= best_f * (1 + tolerance)
+                  and r["trmse"] <= best_t * (1 + tolerance)]  # fmt: skip
+        rec = min(within, key=lambda r: (r[COST], r["flip_frames_mean"]), default=None)
+    banding = _banding(scored, z)
+    still = still_rec["label"] if still_rec else None
+    changes = rec is not None and still is not None and rec["label"] != still
+    bands = [b for b in banding if b["bands"]]
+    if rec is None:
+        why = "no point was scored on every frame"
+    elif not changes:
+        why = "motion does not change the recommendation"
+    else:
+        s = next(r for r in cands if r["label"] == still) if any(
+            r["label"] == still for r in cands) else None  # fmt: skip
+        why = (
+            f"motion changes the recommendation: {still} has mean FLIP "
+            f"{s['flip_frames_mean']:.4f} and temporal RMSE {s['trmse']:.5f} over the frames, "
+            f"{rec['label']} {rec['flip_frames_mean']:.4f} and {rec['trmse']:.5f}"
+            if s
+            else f"motion changes the recommendation to {rec['label']}"
+        )
+    return {
+        "points": [
+            {k: r.get(k) for k in keys}
+            for r in sorted(scored, key=lambda r: (r.get(COST) is None, r.get(COST) or 0.0))
+        ],  # fmt: skip
+        "recommended": {k: rec.get(k) for k in keys} if rec else None,
+        "still": still,
+        "changes": changes,
+        "banding": banding,
+        "bands": [b["label"] for b in bands],
+        "why": why,
+        "frames": scored[0]["frames"] if scored else None,
+    }
+
+
+def run_motion(exps, experiments, overrides, rows, recs, summary, client, out, log) -> None:
+    """The motion rung of ``run_tradeoff`` for each animated experiment (module doc): its
+    frames prepared, every successful full point scored on them (``motion.parquet``), and
+    ``summary["scenes"][name]["motion"]`` (:func:`motion_findings`) and ``summary["motion"]``
+    (frames, seconds) set. Nothing for still experiments."""
+    import time
+
+    from ..scene.frames import is_animated
+    from ..sweep import run_sweep, scene_spec
+    from .tradeoff_analysis import config_label, constants_of, point_record
+
+    animated = [(e, scene_spec(p, overrides)) for e, p in zip(exps, experiments) if is_animated(e)]
+    if not animated:
+        return
+    t0 = time.perf_counter()
+    ok = [r for r in rows if r["status"] == "ok"]
+    prep = [{"scene": spec, "variants": sorted({r["job.variant"] for r in ok
+             if r["job.experiment"] == e["name"]})} for e, spec in animated]  # fmt: skip
+    log(f"tradeoff: motion: the frames of {len(prep)} animated scene(s)")
+    run_sweep(prepare_frames_job, prep, out / "frames.parquet", client=client,
+              label="tradeoff: frames", log=log)  # fmt: skip
+    jobs = [
+        {"scene": spec, "experiment": e["name"], "variant": r["job.variant"],
+         "kind": r["job.kind"], "label": config_label(point_record(r)),
+         "constants": constants_of(r)}
+        for e, spec in animated for r in ok if r["job.experiment"] == e["name"]
+    ]  # fmt: skip
+    mrows = run_sweep(motion_job, jobs, out / "motion.parquet", client=client,
+                      label="tradeoff: motion", log=log)[: len(jobs)]  # fmt: skip
+    by = {(m["job.experiment"], m["job.label"], m["job.kind"]): m for m in mrows
+          if m["status"] == "ok"}  # fmt: skip
+    fields = ("frames", "flip_frames", "flip_frames_mean", "flip_frames_spread", "trmse",
+              "trmse_excess", "noise", "change_ratio", "pair_ms")  # fmt: skip
+    for e, _ in animated:
+        pts = []
+        for r in recs:
+            m = by.get((r["experiment"], r["label"], r["kind"]))
+            if r["experiment"] == e["name"] and m is not None:
+                pts.append({**r, **{k: m.get(k) for k in fields}})
+        scene = summary["scenes"][e["name"]]
+        scene["motion"] = motion_findings(
+            pts, scene["recommended"], summary["tolerance"], e["tradeoff.noise_z"]
+        )
+        log(f"tradeoff: {e['name']} in motion ({e['animation.frames']} frames): "
+            f"{scene['motion']['why']}")  # fmt: skip
+    failed = [m for m in mrows if m["status"] != "ok"]
+    summary["motion"] = {
+        "seconds": time.perf_counter() - t0,
+        "points": len(mrows),
+        "failed": [f"{m['job.label']}: {m.get('error')}" for m in failed],
+    }
