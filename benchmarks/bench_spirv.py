@@ -1,6 +1,6 @@
 """The SPIR-V executor against the hand ports: frame time and Jacobian time.
 
-Run: ``.venv/bin/python benchmarks/bench_spirv.py [--size 128] [--n 5]``. On the
+Run: ``.venv/bin/python benchmarks/bench_spirv.py [--size 128] [--n 5] [--threads 1]``. On the
 tests/synthetic.py scene at size x size pixels, prints a table of median milliseconds (after
 warm-up; port and executor timed in turn, so both see the same load) for each shader variant:
 the hand port's render and the executor's (``spirv_port``: tracing the SPIR-V included,
@@ -16,6 +16,8 @@ import sys
 import time
 import warnings
 from pathlib import Path
+
+import drjit as dr
 
 ROOT = Path(__file__).resolve().parent.parent
 sys.path[:0] = [str(ROOT), str(ROOT / "tests")]
@@ -55,12 +57,19 @@ def main() -> None:
     ap = argparse.ArgumentParser()
     ap.add_argument("--size", type=int, default=128)
     ap.add_argument("--n", type=int, default=5)
+    ap.add_argument(
+        "--threads", type=int, default=0,
+        help="Dr.Jit LLVM worker threads (0: its default); 1 steadies times on a shared machine",
+    )  # fmt: skip
     args = ap.parse_args()
+    if args.threads:
+        dr.set_thread_count(args.threads)
     warnings.simplefilter("ignore", RuntimeWarning)
     plain = synthetic_inputs(width=args.size, height=args.size)
     base = synthetic_baseline_inputs(width=args.size, height=args.size)
     c = Constants()
-    print(f"{args.size}x{args.size} pixels, median of {args.n} (ms)")
+    threads = f", {args.threads} thread(s)" if args.threads else ""
+    print(f"{args.size}x{args.size} pixels, median of {args.n} (ms){threads}")
     print("| variant | port frame | SPIR-V frame | ratio | port J(4) | SPIR-V J(4) | ratio |")
     print("|---|---|---|---|---|---|---|")
     for name, names in CASES.items():
