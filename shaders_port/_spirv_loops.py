@@ -8,7 +8,8 @@ A structured loop (``OpLoopMerge``) is run by :meth:`LoopRunner.loop`:
   variables its blocks store, the cost counters and a lane mask (``break`` clears it); the
   number of passes through its body is kept per lane (``passes``, by loop header);
 * with ``differentiate``: when only variables updated as ``v = v + X`` (``X`` the same on
-  every pass) and copies of them carry derivatives (two probing passes with AD say so), the
+  every pass), copies of them and temporaries of one pass (:meth:`LoopRunner.pass_locals`)
+  carry derivatives (two probing passes with AD say so), the
   loop runs symbolically on detached values counting each variable's adds, and the
   derivative parts of ``v0 + n X`` are attached after it (:meth:`LoopRunner.replayed_loop`,
   the ports' 'replay'); otherwise it is unrolled its largest trip count (``trips``: over the
@@ -117,8 +118,8 @@ class LoopRunner:
         """Variables the loop stores that are temporaries of one pass (a variable declared in
         the loop's body): function variables loaded nowhere outside the loop, stored whole in a
         block that every pass runs through before any other access to them in that pass (so
-        no value reaches them from an earlier pass). They are no loop state, and carry no
-        derivative out of the loop."""
+        no value reaches them from an earlier pass). No value, and so no derivative, leaves
+        the loop or passes from one pass to the next through them."""
         order = self.order(header, members, header, merge)
         preds: dict = {label: set() for label in order}
         for label in order:
