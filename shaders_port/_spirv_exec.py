@@ -159,9 +159,7 @@ class Executor(LoopRunner):
     def global_value(self, vid: int):
         """The bound value of an Input / UniformConstant variable."""
         ins = self.M.defs[vid]
-        name = self.M.name(vid)
-        builtin = self.M.decorations.get(vid, {}).get("BuiltIn")
-        key = f"gl_{builtin[0]}" if builtin else name
+        key = self.M.binding_name(vid)
         if key in self.bindings:
             return self.bindings[key]
         if len(ins.operands) > 1:  # a uniform's initializer: its value when nothing sets it

@@ -8,7 +8,8 @@ A structured loop (``OpLoopMerge``) is run by :meth:`LoopRunner.loop`:
   variables its blocks store, the cost counters and a lane mask (``break`` clears it); the
   number of passes through its body is kept per lane (``passes``, by loop header);
 * with ``differentiate``: when only variables updated as ``v = v + X`` (``X`` the same on
-  every pass) and copies of them carry derivatives (two probing passes with AD say so), the
+  every pass), copies of them and temporaries of one pass (:meth:`LoopRunner.pass_locals`)
+  carry derivatives (two probing passes with AD say so), the
   loop runs symbolically on detached values counting each variable's adds, and the
   derivative parts of ``v0 + n X`` are attached after it (:meth:`LoopRunner.replayed_loop`,
   the ports' 'replay'); otherwise it is unrolled its largest trip count (``trips``: over the
@@ -113,6 +114,50 @@ class LoopRunner:
                         out.append(vid)
         return sorted(out)
 
+    def pass_locals(self, header: int, members, merge) -> set:
+        """Variables the loop stores that are temporaries of one pass (a variable declared in
+        the loop's body): function variables loaded nowhere outside the loop, stored whole in a
+        block that every pass runs through before any other access to them in that pass (so
+        no value reaches them from an earlier pass). No value, and so no derivative, leaves
+        the loop or passes from one pass to the next through them."""
+        order = self.order(header, members, header, merge)
+        preds: dict = {label: set() for label in order}
+        for label in order:
+            b = self.blocks[label]
+            nested = b.merge is not None and b.merge.opname == "OpLoopMerge" and label != header
+            for s in [b.merge.operands[0]] if nested else b.successors():
+                if s in preds and s != header:
+                    preds[s].add(label)
+        dom: dict = {}
+        for label in order:  # reverse post-order of a DAG: one pass
+            ps = [dom[p] for p in preds[label] if p in dom]
+            dom[label] = (set.intersection(*ps) if ps else set()) | {label}
+        accesses: dict = {}  # variable -> [(block, index, whole store?)] inside the loop
+        outside = set()
+        for label, b in self.blocks.items():
+            for k, ins in enumerate(b.body):
+                if ins.opname not in ("OpLoad", "OpStore"):
+                    continue
+                vid = self.root(ins.operands[0])
+                if label not in members:
+                    if ins.opname == "OpLoad":
+                        outside.add(vid)
+                    continue
+                whole = ins.opname == "OpStore" and ins.operands[0] == vid
+                accesses.setdefault(vid, []).append((label, k, whole))
+        out = set()
+        for vid in self.written(members):
+            acc = accesses.get(vid, [])
+            if vid in self.M.defs or vid in outside or any(a[0] not in dom for a in acc):
+                continue  # a global (an output), read after the loop, or in a nested loop
+            first = min((a for a in acc if a[2]), key=lambda a: order.index(a[0]), default=None)
+            if first is not None and all(
+                a == first or (first[0] in dom[a[0]] and (a[0] != first[0] or a[1] > first[1]))
+                for a in acc
+            ):
+                out.add(vid)
+        return out
+
     def _state(self, vids):
         """Loop state: the variables lifted to Dr.Jit, and the counters."""
         vals = []
@@ -176,11 +221,12 @@ class LoopRunner:
         """Each variable the loop stores, by how: ``('affine', where)`` (``v = v + X``, ``X``
         the same on every pass: ``('id', X)`` defined outside the loop or ``('var', u)`` a
         load of a variable the loop does not store), ``('copy', u)`` (``w = u``, ``u``
-        affine) or
-        ``('other',)``. None when a variable is stored twice or in part, or the loop holds
-        another loop."""
+        affine), ``('local',)`` (a temporary of one pass, :meth:`pass_locals`: no derivative
+        leaves the loop through it) or ``('other',)``. None when another variable is stored
+        twice or in part, or the loop holds another loop."""
         defined = {i.result for b in members for i in self.blocks[b].body if i.result}
         written = set(self.written(members))
+        temps = self.pass_locals(header, members, self.blocks[header].merge.operands[0])
 
         def invariant(x):
             """('id', x) for a value defined outside the loop, ('var', v) for a load inside it
@@ -201,6 +247,8 @@ class LoopRunner:
                 if ins.opname != "OpStore":
                     continue
                 ptr, vid = ins.operands[0], self.root(ins.operands[0])
+                if vid in temps:
+                    continue
                 if vid in plan or ptr != vid:
                     return None
                 src, kind = self._defining(ins.operands[1]), ("other",)
@@ -220,6 +268,7 @@ class LoopRunner:
         for vid, kind in plan.items():
             if kind[0] == "copy" and plan.get(kind[1], ("other",))[0] != "affine":
                 plan[vid] = ("other",)
+        plan.update((vid, ("local",)) for vid in temps)
         return plan
 
     def replay_ok(self, hdr, members, merge, counter, plan) -> bool:

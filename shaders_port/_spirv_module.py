@@ -269,6 +269,23 @@ class Module:
     def name(self, id_: int) -> str:
         return self.names.get(id_, f"%{id_}")
 
+    def binding_name(self, vid: int) -> str:
+        """The name a global variable is bound by: ``gl_<BuiltIn>`` for a built-in, else its
+        GLSL name."""
+        builtin = self.decorations.get(vid, {}).get("BuiltIn")
+        return f"gl_{builtin[0]}" if builtin else self.name(vid)
+
+    @functools.cached_property
+    def bound_names(self) -> frozenset:
+        """The binding names of the module's ``Input``, ``UniformConstant`` and ``Uniform``
+        variables: what a run may read from its bindings."""
+        return frozenset(
+            self.binding_name(vid)
+            for vid, ins in self.defs.items()
+            if ins.opname == "OpVariable"
+            and ins.operands[0] in ("Input", "UniformConstant", "Uniform")
+        )
+
 
 def compile_fragment(source: str, label: str, defines: tuple = ()) -> bytes:
     """SPIR-V of a core GLSL fragment shader ``source`` compiled with the preprocessor names

@@ -23,6 +23,7 @@ translated code (texture samples executed; loop bodies entered), and ``nonfinite
 
 from __future__ import annotations
 
+import dataclasses
 import functools
 import re
 from dataclasses import dataclass, field
@@ -213,11 +214,14 @@ _BINDINGS: dict = {}
 
 
 def frame_bindings(m, P, inputs, spec: ShaderSpec) -> dict:
-    """Every value the shader may read on this frame: the study's inputs, the spec's bindings
-    of other names to them (checked), but not the constants. One dict per uploaded frame and
-    bindings (a recorded kernel replays only for the same objects: measured, a new dict of
-    equal values records again)."""
-    key = (P.upload, m.__name__, spec.bindings)
+    """Every value the shader may read on this frame: those of the study's inputs, and of the
+    spec's bindings of other names to them (checked), that the module declares; not the
+    constants. One dict per uploaded frame, module and bindings (a recorded kernel replays only
+    for the same objects: measured, a new dict of equal values records again); nothing the
+    module does not read (each Python number of a recording's arguments is checked on every
+    replay)."""
+    mod = module_of(spec)
+    key = (P.upload, m.__name__, spec.bindings, mod.bound_names)
     hit = _BINDINGS.get(key)
     if hit is not None:
         return hit
@@ -229,6 +233,7 @@ def frame_bindings(m, P, inputs, spec: ShaderSpec) -> dict:
                 f"has; the study's inputs: {', '.join(sorted(STUDY_INPUTS))}"
             )
         b[name] = b[study]
+    b = {k: v for k, v in b.items() if k in mod.bound_names}
     if len(_BINDINGS) >= 8:
         _BINDINGS.pop(next(iter(_BINDINGS)))
     _BINDINGS[key] = b
@@ -260,6 +265,16 @@ def shade_lanes(m, P, b: dict, spec: ShaderSpec, C, differentiate=False, trips=N
         "nonfinite": m.Float(0.0),
     }
     return color, diag, passes
+
+
+def _lanes(P):
+    """What a recorded run gets of the prepared frame ``P``: its lanes and upload number, the
+    rest left out (the shader reads its bindings; every argument of a recording is traversed
+    on each replay)."""
+    keep = ("varyingVecWorldPosition", "upload")
+    return dataclasses.replace(
+        P, **{f.name: None for f in dataclasses.fields(P) if f.name not in keep}
+    )
 
 
 def _key(spec: ShaderSpec, C, *extra) -> tuple:
@@ -295,7 +310,7 @@ def trip_counts(m, P, inputs, spec: ShaderSpec, C) -> dict:
 
     b = frame_bindings(m, P, inputs, spec)
     with dr.suspend_grad():
-        passes = _recorded(_key(spec, C, "passes"), fn, m, P.shading_state(), C, b)
+        passes = _recorded(_key(spec, C, "passes"), fn, m, _lanes(P), C, b)
     return {k: int(dr.max(v)[0]) if dr.width(v) else 0 for k, v in passes.items()}
 
 
@@ -319,12 +334,13 @@ def render(
     def fn(m, P, C, b):
         return shade_lanes(m, P, b, spec, C)[:2]
 
-    color, diag = _recorded(_key(spec, C), fn, m, P.shading_state(), C, b)
+    color, diag = _recorded(_key(spec, C), fn, m, _lanes(P), C, b)
     return finish_output(m, P, color, diag, spec.label)
 
 
-# configuration -> whether its Jacobian unrolls a loop (then a plain run first finds the trip
-# counts; a loop replayed on detached values needs none)
+# configuration of a Jacobian (the constants it differentiates included) -> whether it unrolls
+# a loop (then a plain run first finds the trip counts; a loop replayed on detached values
+# needs none)
 _NEEDS_TRIPS: dict = {}
 
 
@@ -346,22 +362,24 @@ def render_with_jacobian(
     constants = constants if constants is not None else Constants()
     m = backend_types(backend)
     P = prepare(inputs, m)
-    plain = resolve_constants(m, constants)
-    needs = _NEEDS_TRIPS.get(_key(spec, plain), True)
-    trips = trip_counts(m, P, inputs, spec, plain) if needs else {}
     b = frame_bindings(m, P, inputs, spec)
-    config = ("trips", tuple(sorted(trips.items())))
 
-    def fn(m, P, C, params, b):
-        info: dict = {}
-        color, diag, _ = shade_lanes(m, P, b, spec, C, True, trips, info)
-        _NEEDS_TRIPS[_key(spec, plain)] = info["unrolled"]
-        return tangents(m, color, diag, params)
+    def shade_tangents(m, P_, C, params, frozen):
+        needs_key = _key(spec, C)
+        trips = {}
+        if _NEEDS_TRIPS.get(needs_key, True):
+            trips = trip_counts(m, P, inputs, spec, resolve_constants(m, constants))
+        config = ("trips", tuple(sorted(trips.items())))
 
-    def shade_tangents(m, P, C, params, frozen):
+        def fn(m, P, C, params, b):
+            info: dict = {}
+            color, diag, _ = shade_lanes(m, P, b, spec, C, True, trips, info)
+            _NEEDS_TRIPS[needs_key] = info["unrolled"]
+            return tangents(m, color, diag, params)
+
         if frozen:
-            return _recorded(_key(spec, C, config), fn, m, P, C, params, b)
-        return fn(m, P, C, params, b)
+            return _recorded(_key(spec, C, config), fn, m, _lanes(P_), C, params, b)
+        return fn(m, P_, C, params, b)
 
     return jacobian_passes(shade_tangents, spec.label, inputs, constants, names, backend, "replay")
 

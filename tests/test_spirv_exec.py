@@ -300,12 +300,18 @@ def _ran(spec, inputs, shader=None):
     return ex
 
 
-def test_replayed_loop_equals_unrolled_loop(small, monkeypatch):
+@pytest.mark.parametrize(
+    "shader, names",
+    [
+        ("water_refraction", ["bumptex_mult", "steps_grazing"]),
+        ("water_reflection", ["bumptex_mult", "refl_steps_grazing"]),  # with a pass's temporary
+    ],
+)
+def test_replayed_loop_equals_unrolled_loop(small, monkeypatch, shader, names):
     from shaders_port import _spirv_loops
 
-    spec = spirv_port.builtin_spec("water_refraction", ())
-    assert not _ran(spec, small).unrolled  # the raycast's state is affine: replayed
-    names = ["bumptex_mult", "steps_grazing"]
+    spec = spirv_port.builtin_spec(shader, ())
+    assert not _ran(spec, small).unrolled  # the raycasts' state is affine: replayed
     out, J = spirv_port.render_with_jacobian(small, FD_CONSTANTS, names, spec=spec)
     monkeypatch.setattr(_spirv_loops.LoopRunner, "replay_plan", lambda *a: None)
     monkeypatch.setattr(spirv_port, "_NEEDS_TRIPS", {})
@@ -315,6 +321,22 @@ def test_replayed_loop_equals_unrolled_loop(small, monkeypatch):
     out_u, J_u = spirv_port.render_with_jacobian(small, FD_CONSTANTS, names, spec=spec)
     assert np.array_equal(out.numpy()["color"], out_u.numpy()["color"])
     assert np.abs(J - J_u).max() <= 1e-5 * np.abs(J).max()
+
+
+def test_temporaries_of_one_pass_are_found():
+    """``st`` (declared in the body, stored before it is read) is a temporary of one pass;
+    ``uv`` and ``acc`` (read after the loop, carried from pass to pass) and ``i`` are not."""
+    import drjit.llvm.ad as m
+
+    from shaders_port._spirv_exec import Executor
+
+    mod = Module(compile_fragment(_DECAY, "decay.frag"), label="decay.frag")
+    ex = Executor(mod, m, {})
+    (header,) = [b for b in ex.blocks.values() if b.merge and b.merge.opname == "OpLoopMerge"]
+    merge = header.merge.operands[0]
+    members = ex.loop_members(header.label, merge)
+    assert {mod.name(v) for v in ex.written(members)} == {"acc", "uv", "st", "i"}
+    assert {mod.name(v) for v in ex.pass_locals(header.label, members, merge)} == {"st"}
 
 
 def test_loop_with_non_affine_state_is_unrolled_and_differentiated(small):
