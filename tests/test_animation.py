@@ -266,3 +266,46 @@ def test_calibrate_on_an_animated_experiment_end_to_end(tmp_path, capsys):
     again = json.loads((tmp_path / "b" / "constants.json").read_text())
     assert again["constants"] == summary["constants"]
     assert again["animation"]["scores"]["all_frames"]["temporal"]["noise_pairs"] == 1
+
+
+@pytest.mark.slow
+def test_tradeoff_on_an_animated_experiment_scores_motion(tmp_path):
+    """``study tradeoff`` on 2 frames: the search and fits on frame 0, then every full point
+    scored on both frames; frame 0 of the motion scores is the still point itself (same
+    constants, same reference, same FLIP); the report has the motion section and its chart."""
+    from conftest import REPO
+    from study.cli import main
+    from study.sweep import read_table
+
+    exp = str(REPO / "experiments" / "default.toml")
+    plan = [
+        'tradeoff.variants=["water_refraction"]',
+        "tradeoff.steps_grazing=[10.0]",
+        "tradeoff.steps_steep=[3.0]",
+        "tradeoff.loop_cap=[40]",
+        "tradeoff.scales=[0.5,1.0]",
+        "tradeoff.converged_scale=4.0",
+        "tradeoff.gl_repeats=3",
+    ]
+    sets = [a for kv in TINY_ANIMATED + plan for a in ("--set", kv)]
+    out = tmp_path / "t"
+    args = ["tradeoff", exp, "--out", str(out), "--workers", "1", "--search", "exhaustive"]
+    assert main(args + sets) == 0
+    full = {r["key"]: r for r in read_table(out / "tradeoff.parquet")}
+    motion = read_table(out / "motion.parquet")
+    assert len(motion) == len(full) == 3 and all(m["status"] == "ok" for m in motion)
+    still = {(r["job.kind"], r["flip"]) for r in full.values()}
+    for m in motion:
+        assert len(m["flip_frames"]) == 2 and len(m["pair_ms"]) == 1
+        assert (m["job.kind"], m["flip_frames"][0]) in still  # frame 0 is the still point
+        assert m["trmse"] == pytest.approx(m["pair_ms"][0] ** 0.5)
+    summary = json.loads((out / "summary.json").read_text())
+    mo = summary["scenes"]["default"]["motion"]
+    assert mo["frames"] == 2 and mo["still"] == summary["scenes"]["default"]["recommended"]["label"]
+    assert {b["label"] for b in mo["banding"]} == {
+        "water_refraction (5, 1.5, 20)",
+        "water_refraction (10, 3, 40)",
+    }
+    report = (out / "report.md").read_text()
+    assert "### In motion (2 frames)" in report and "motion.png" in report
+    assert (out / "motion.png").stat().st_size > 10_000

@@ -228,3 +228,34 @@ def test_tradeoff_cli_tiny(tmp_path):
     assert main(wider) == 0
     after = {r["key"]: r["seconds"] for r in read_table(tmp_path / "tradeoff.parquet")}
     assert len(after) == 5 and {k: after[k] for k in before} == before
+
+
+def test_motion_findings_hand_checked():
+    """A cheap schedule whose temporal error exceeds its converged raymarch's in every frame
+    pair bands; within the FLIP tolerance it is the still recommendation, and motion moves the
+    recommendation to the cheapest point that moves like the water."""
+    from study.studies.tradeoff_motion import motion_findings, paired
+
+    def pt(label, kind, fetches, flip, trmse, pair_ms):
+        return {"label": label, "variant": "water_refraction", "kind": kind,
+                "fetches_mean": fetches, "flip": flip, "flip_frames_mean": flip,
+                "flip_frames_spread": 0.001, "trmse": trmse, "trmse_excess": None,
+                "change_ratio": 1.0, "noise": None, "frames": 4, "pair_ms": pair_ms}  # fmt: skip
+
+    floor = [1.0e-3, 1.1e-3, 0.9e-3]
+    pts = [
+        pt("cheap", "grid", 5.0, 0.100, 0.040, [m + 5e-4 for m in floor]),
+        pt(
+            "mid", "scale", 10.0, 0.100, 0.0316, [m + 1e-6 * (-1) ** i for i, m in enumerate(floor)]
+        ),
+        pt("floor", "converged", 40.0, 0.099, 0.0316, floor),
+    ]
+    f = motion_findings(pts, {"label": "cheap"}, tolerance=0.02, z=2.0)
+    assert f["bands"] == ["cheap"] and f["recommended"]["label"] == "mid" and f["changes"]
+    assert f["why"].startswith("motion changes the recommendation: cheap")
+    d, se = paired(pts[0]["pair_ms"], floor)
+    assert d == pytest.approx(5e-4) and se == pytest.approx(0.0, abs=1e-12)
+    same = motion_findings(pts, {"label": "mid"}, tolerance=0.02, z=2.0)
+    assert not same["changes"] and same["why"] == "motion does not change the recommendation"
+    # a paired difference within its noise does not band
+    assert [b["bands"] for b in f["banding"]] == [True, False]

@@ -94,9 +94,10 @@ def motion_lines(m: dict | None) -> list[str]:
             "|---|---|---|---|---|---|",
         ]
         for b in m["banding"]:
+            se = "-" if b["se_ms"] is None else f"{b['se_ms']:.1e}"
             lines.append(
                 f"| {b['label']} | {fmt(b.get(COST), 3)} | {fmt(b['trmse'])} | "
-                f"{fmt(b['floor_trmse'])} | {b['d_ms']:+.2e} +- {b['se_ms']:.1e} | "
+                f"{fmt(b['floor_trmse'])} | {b['d_ms']:+.2e} +- {se} | "
                 f"{'**yes**' if b['bands'] else 'no'} |"
             )
     rec = m["recommended"]

@@ -149,7 +149,7 @@ def _banding(pts: list, z: float) -> list[dict]:
                     "trmse": r["trmse"],
                     "floor_trmse": floor["trmse"],
                     "d_ms": d,
-                    "se_ms": se,
+                    "se_ms": se if math.isfinite(se) else None,  # None: one frame pair
                     "bands": bool(d > 0 and d > z * se),
                 }
             )
