@@ -299,6 +299,8 @@ def test_tradeoff_on_an_animated_experiment_scores_motion(tmp_path):
         assert len(m["flip_frames"]) == 2 and len(m["pair_ms"]) == 1
         assert (m["job.kind"], m["flip_frames"][0]) in still  # frame 0 is the still point
         assert m["trmse"] == pytest.approx(m["pair_ms"][0] ** 0.5)
+        # the raymarch converged with the point's own constants, beside each schedule
+        assert (m["job.kind"] == "converged") == (m.get("converged_trmse") is None)
     summary = json.loads((out / "summary.json").read_text())
     mo = summary["scenes"]["default"]["motion"]
     assert mo["frames"] == 2 and mo["still"] == summary["scenes"]["default"]["recommended"]["label"]

@@ -85,10 +85,10 @@ def motion_lines(m: dict | None) -> list[str]:
     if m["banding"]:
         lines += [
             "",
-            "Each schedule against its shader's converged raymarch (the same shader without "
-            "step artefacts), paired over the frame pairs: the difference of the mean squared "
-            "temporal error +- its standard error; *bands* when it is larger by more than "
-            "the search's noise margin:",
+            "Each schedule against its own constants with the raymarch converged (the same "
+            "shader without step artefacts), paired over the frame pairs: the difference of "
+            "the mean squared temporal error +- its standard error; *bands* when it is larger "
+            "by more than the search's noise margin:",
             "",
             "| configuration | fetches | temporal RMSE | converged | difference (MS) | bands |",
             "|---|---|---|---|---|---|",

@@ -18,9 +18,10 @@ built once by :func:`prepare_frames_job` before the points run) and measures:
 :func:`motion_findings` then ranks the points on motion: the recommendation by the same rule on
 the error over time (the cheapest point whose mean FLIP over the frames and whose temporal RMSE
 are both within the tolerance of the best), against the still recommendation; and for every
-shader with a raymarch, each schedule's temporal error against its converged raymarch's (the
-same shader without step artefacts), paired over the frame pairs: a schedule whose temporal
-error exceeds it by more than ``tradeoff.noise_z`` standard errors *bands in motion*.
+point with a raymarch, its temporal error against the same constants rendered with the raymarch
+converged (``tradeoff.converged_scale`` times the original's schedule: the same shader without
+step artefacts), paired over the frame pairs: a schedule whose temporal error exceeds that by
+more than ``tradeoff.noise_z`` standard errors *bands in motion*.
 """
 
 from __future__ import annotations
@@ -66,8 +67,9 @@ def _frames(text: str, mv: str):
     return exp, load_frames(exp, mv)
 
 
-def _render_frames(job: dict, data: dict, mv: str) -> tuple[list, list]:
-    """The point's constants on every frame at ``resolution``: (images, scored masks)."""
+def _render_frames(job: dict, data: dict, mv: str, schedule: dict | None = None) -> tuple:
+    """The point's constants (at ``schedule`` in place of its own, when given) on every frame
+    at ``resolution``: (images, scored masks)."""
     from shaders_port import Constants
 
     from .._backend import drjit_backend
@@ -85,7 +87,7 @@ def _render_frames(job: dict, data: dict, mv: str) -> tuple[list, list]:
                 e, inputs, ref.image, shader=job["variant"], backend=drjit_backend(mv),
                 resolution=tuple(e["resolution"]),
             )  # fmt: skip
-            img, _ = model.render(Constants.from_dict(job["constants"]))
+            img, _ = model.render(Constants.from_dict(job["constants"]).replace(**(schedule or {})))
             m = model.mask
         images.append(img)
         masks.append(m)
@@ -106,7 +108,7 @@ def motion_job(job: dict) -> dict:
     t = temporal_errors(
         [r.image for r in refs], images, mask, [r.stderr for r in refs], [r.passes for r in refs]
     )
-    return {
+    out = {
         "frames": len(refs),
         "flip_frames": flips.tolist(),
         "flip_frames_mean": float(flips.mean()),
@@ -120,6 +122,15 @@ def motion_job(job: dict) -> dict:
         "pair_ms": [p * p for p in t["per_pair"]],
         "mask_pixels": int(mask.sum()),
     }
+    if job.get("converged_schedule"):  # the same constants, the raymarch converged
+        conv, cmasks = _render_frames(job, data, mv, job["converged_schedule"])
+        both = mask & np.logical_and.reduce(cmasks)
+        c = temporal_errors([r.image for r in refs], conv, both)
+        s = temporal_errors([r.image for r in refs], images, both)
+        out["converged_trmse"] = c["trmse"]
+        out["converged_pair_ms"] = [p * p for p in c["per_pair"]]
+        out["pair_ms_on_converged_mask"] = [p * p for p in s["per_pair"]]
+    return out
 
 
 def paired(a: list, b: list) -> tuple[float, float]:
@@ -132,27 +143,25 @@ def paired(a: list, b: list) -> tuple[float, float]:
 
 
 def _banding(pts: list, z: float) -> list[dict]:
-    """Each raymarch schedule's temporal error against its shader's converged raymarch."""
+    """Each raymarch schedule's temporal error against the same constants with the raymarch
+    converged (``converged_schedule`` of :func:`motion_job`), paired over the frame pairs."""
     out = []
-    for v in dict.fromkeys(r["variant"] for r in pts):
-        floor = next((r for r in pts if r["variant"] == v and r["kind"] == "converged"), None)
-        if floor is None:
+    for r in sorted(pts, key=lambda r: (r["variant"], r.get(COST) or 0.0)):
+        if not r.get("converged_pair_ms"):
             continue
-        for r in sorted((r for r in pts if r["variant"] == v and r is not floor),
-                        key=lambda r: r.get(COST) or 0.0):  # fmt: skip
-            d, se = paired(r["pair_ms"], floor["pair_ms"])
-            out.append(
-                {
-                    "label": r["label"],
-                    "variant": v,
-                    COST: r.get(COST),
-                    "trmse": r["trmse"],
-                    "floor_trmse": floor["trmse"],
-                    "d_ms": d,
-                    "se_ms": se if math.isfinite(se) else None,  # None: one frame pair
-                    "bands": bool(d > 0 and d > z * se),
-                }
-            )
+        d, se = paired(r["pair_ms_on_converged_mask"], r["converged_pair_ms"])
+        out.append(
+            {
+                "label": r["label"],
+                "variant": r["variant"],
+                COST: r.get(COST),
+                "trmse": r["trmse"],
+                "floor_trmse": r["converged_trmse"],
+                "d_ms": d,
+                "se_ms": se if math.isfinite(se) else None,  # None: one frame pair
+                "bands": bool(d > 0 and d > z * se),
+            }
+        )
     return out
 
 
@@ -205,6 +214,20 @@ def motion_findings(pts: list, still_rec: dict | None, tolerance: float, z: floa
     }
 
 
+def _converged(exp, row: dict) -> dict | None:
+    """The converged raymarch's schedule (``tradeoff.converged_scale`` times the original's) for
+    a full point of a shader with a raymarch; None for a loopless shader, a user's shader and
+    the converged point itself."""
+    from shaders_port._variants import get_variant
+
+    from .tradeoff_jobs import original_schedule, scaled_schedule
+
+    v = row["job.variant"]
+    if is_user(v) or row["job.kind"] == "converged" or original_schedule(v)["kind"] == "fixed":
+        return None
+    return scaled_schedule(get_variant(v), exp["tradeoff.converged_scale"])
+
+
 def run_motion(exps, experiments, overrides, rows, recs, summary, client, out, log) -> None:
     """The motion rung of ``run_tradeoff`` for each animated experiment (module doc): its
     frames prepared, every successful full point scored on them (``motion.parquet``), and
@@ -229,7 +252,7 @@ def run_motion(exps, experiments, overrides, rows, recs, summary, client, out, l
     jobs = [
         {"scene": spec, "experiment": e["name"], "variant": r["job.variant"],
          "kind": r["job.kind"], "label": config_label(point_record(r)),
-         "constants": constants_of(r)}
+         "constants": constants_of(r), "converged_schedule": _converged(e, r)}
         for e, spec in animated for r in ok if r["job.experiment"] == e["name"]
     ]  # fmt: skip
     mrows = run_sweep(motion_job, jobs, out / "motion.parquet", client=client,
@@ -237,7 +260,8 @@ def run_motion(exps, experiments, overrides, rows, recs, summary, client, out, l
     by = {(m["job.experiment"], m["job.label"], m["job.kind"]): m for m in mrows
           if m["status"] == "ok"}  # fmt: skip
     fields = ("frames", "flip_frames", "flip_frames_mean", "flip_frames_spread", "trmse",
-              "trmse_excess", "noise", "change_ratio", "pair_ms")  # fmt: skip
+              "trmse_excess", "noise", "change_ratio", "pair_ms", "converged_trmse",
+              "converged_pair_ms", "pair_ms_on_converged_mask")  # fmt: skip
     for e, _ in animated:
         pts = []
         for r in recs:
