@@ -269,3 +269,7 @@ def test_motion_findings_hand_checked():
     assert not same["changes"] and same["why"] == "motion does not change the recommendation"
     # a paired difference within its noise does not band; the converged point is not compared
     assert [(b["label"], b["bands"]) for b in f["banding"]] == [("cheap", True), ("mid", False)]
+    # nor does one the pairs detect but below the tolerance (cheap: +22 % temporal RMSE)
+    assert f["banding"][0]["rel"] == pytest.approx((1.5e-3 / 1.0e-3) ** 0.5 - 1)
+    loose = motion_findings(pts, {"label": "cheap"}, tolerance=0.25, z=2.0)
+    assert loose["bands"] == []

@@ -87,17 +87,19 @@ def motion_lines(m: dict | None) -> list[str]:
             "",
             "Each schedule against its own constants with the raymarch converged (the same "
             "shader without step artefacts), paired over the frame pairs: the difference of "
-            "the mean squared temporal error +- its standard error; *bands* when it is larger "
-            "by more than the search's noise margin:",
+            "the mean squared temporal error +- its standard error, and of the temporal RMSE "
+            "(relative); *bands* when it is larger by more than the search's noise margin and "
+            "by more than the tolerance:",
             "",
-            "| configuration | fetches | temporal RMSE | converged | difference (MS) | bands |",
-            "|---|---|---|---|---|---|",
+            "| configuration | fetches | temporal RMSE | converged | difference (MS) | "
+            "relative | bands |",
+            "|---|---|---|---|---|---|---|",
         ]
         for b in m["banding"]:
             se = "-" if b["se_ms"] is None else f"{b['se_ms']:.1e}"
             lines.append(
                 f"| {b['label']} | {fmt(b.get(COST), 3)} | {fmt(b['trmse'])} | "
-                f"{fmt(b['floor_trmse'])} | {b['d_ms']:+.2e} +- {se} | "
+                f"{fmt(b['floor_trmse'])} | {b['d_ms']:+.2e} +- {se} | {100 * b['rel']:+.2f} % | "
                 f"{'**yes**' if b['bands'] else 'no'} |"
             )
     rec = m["recommended"]

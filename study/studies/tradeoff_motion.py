@@ -21,7 +21,7 @@ are both within the tolerance of the best), against the still recommendation; an
 point with a raymarch, its temporal error against the same constants rendered with the raymarch
 converged (``tradeoff.converged_scale`` times the original's schedule: the same shader without
 step artefacts), paired over the frame pairs: a schedule whose temporal error exceeds that by
-more than ``tradeoff.noise_z`` standard errors *bands in motion*.
+more than ``tradeoff.noise_z`` standard errors and by more than the tolerance *bands in motion*.
 """
 
 from __future__ import annotations
@@ -142,14 +142,20 @@ def paired(a: list, b: list) -> tuple[float, float]:
     return float(d.mean()), float(d.std(ddof=1) / math.sqrt(d.size))
 
 
-def _banding(pts: list, z: float) -> list[dict]:
+def _banding(pts: list, z: float, tolerance: float) -> list[dict]:
     """Each raymarch schedule's temporal error against the same constants with the raymarch
-    converged (``converged_schedule`` of :func:`motion_job`), paired over the frame pairs."""
+    converged (``converged_schedule`` of :func:`motion_job`), paired over the frame pairs:
+    ``d_ms`` +- ``se_ms`` (mean squares), ``rel`` (its temporal RMSE over the converged one's,
+    minus 1) and ``bands``: larger by more than ``z`` standard errors *and* by more than
+    ``tolerance`` (relative; a difference the paired test detects but no one would see does not
+    band)."""
     out = []
     for r in sorted(pts, key=lambda r: (r["variant"], r.get(COST) or 0.0)):
         if not r.get("converged_pair_ms"):
             continue
-        d, se = paired(r["pair_ms_on_converged_mask"], r["converged_pair_ms"])
+        mine, conv = r["pair_ms_on_converged_mask"], r["converged_pair_ms"]
+        d, se = paired(mine, conv)
+        rel = math.sqrt(float(np.mean(mine)) / float(np.mean(conv))) - 1.0
         out.append(
             {
                 "label": r["label"],
@@ -159,7 +165,8 @@ def _banding(pts: list, z: float) -> list[dict]:
                 "floor_trmse": r["converged_trmse"],
                 "d_ms": d,
                 "se_ms": se if math.isfinite(se) else None,  # None: one frame pair
-                "bands": bool(d > 0 and d > z * se),
+                "rel": rel,
+                "bands": bool(d > 0 and d > z * se and rel > tolerance),
             }
         )
     return out
@@ -181,7 +188,7 @@ def motion_findings(pts: list, still_rec: dict | None, tolerance: float, z: floa
         within = [r for r in cands if r["flip_frames_mean"] <= best_f * (1 + tolerance)
                   and r["trmse"] <= best_t * (1 + tolerance)]  # fmt: skip
         rec = min(within, key=lambda r: (r[COST], r["flip_frames_mean"]), default=None)
-    banding = _banding(scored, z)
+    banding = _banding(scored, z, tolerance)
     still = still_rec["label"] if still_rec else None
     changes = rec is not None and still is not None and rec["label"] != still
     bands = [b for b in banding if b["bands"]]
