@@ -3,7 +3,8 @@
 Every table of results in ``docs/`` is written by this script, never by hand:
 
 * ``docs/results/<study>/report.md`` of the tradeoff-family studies (``tradeoff``, ``variants``,
-  ``variants/shipped``, ``baselines``): from the study's ``summary.json`` where it is committed,
+  ``variants/shipped``, ``baselines``, ``animation/tradeoff``: the tradeoff in motion,
+  ``user-shader/tradeoff``: a user's own shader charted): from the study's ``summary.json`` where it is committed,
   else from its ``tradeoff.parquet`` (fronts, recommendations and findings recomputed by
   ``study.studies.tradeoff_analysis.analyse``; the run-time sections -- exported shaders,
   side-by-side images -- exist only in a run's own summary);
@@ -35,7 +36,14 @@ from pathlib import Path
 REPO = Path(__file__).resolve().parent.parent
 DOCS = REPO / "docs"
 RESULTS = DOCS / "results"
-TRADEOFF_FAMILY = ("tradeoff", "variants", "variants/shipped", "baselines")
+TRADEOFF_FAMILY = (
+    "tradeoff",
+    "variants",
+    "variants/shipped",
+    "baselines",
+    "animation/tradeoff",
+    "user-shader/tradeoff",
+)
 STABILITY_PHASES = ("stability/multistart", "stability/noise")
 DEFAULT_TOLERANCE = 0.02
 

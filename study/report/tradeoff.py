@@ -29,7 +29,7 @@ def pareto_figure(path: Path, recs: list, summary: dict) -> Path:
     plt = pyplot()
     scenes = list(summary["scenes"])
     variants = list(dict.fromkeys(r["variant"] for r in recs))
-    colours = {v: plt.cm.tab10(i % 10) for i, v in enumerate(variants)}
+    colours = {v: plt.cm.tab20(i % 20) for i, v in enumerate(variants)}
     fig, axes = plt.subplots(
         len(scenes), len(COSTS), figsize=(5.2 * len(COSTS), 4.2 * len(scenes)), squeeze=False
     )
@@ -106,9 +106,12 @@ def pareto_figure(path: Path, recs: list, summary: dict) -> Path:
                 ax.scatter(
                     [], [], marker="*", color="gray", s=60, label="converged raymarch (floor)"
                 )
-                ax.legend(fontsize=7, loc="upper right")
+                handles, labels = ax.get_legend_handles_labels()
+                # beside the last panel, where it hides no point
+                axes[0, -1].legend(handles, labels, fontsize=7, loc="upper left",
+                                   bbox_to_anchor=(1.02, 1.0), borderaxespad=0.0)  # fmt: skip
     fig.tight_layout()
-    fig.savefig(path, dpi=110)
+    fig.savefig(path, dpi=110, bbox_inches="tight")
     plt.close(fig)
     return path
 
@@ -228,29 +231,36 @@ def _marginal_lines(rows: list) -> list[str]:
     return lines
 
 
-def _user_lines(places: list, export: dict | None) -> list[str]:
+def _user_lines(places: list, export: dict | None, tolerance: float) -> list[str]:
     """Where the user's own shader stands (``tradeoff_analysis.placement``) and its file."""
     lines = []
     for p in places:
-        where = (
-            "**on the Pareto front**: no point costs no more and errs less"
-            if p["on_front"]
-            else f"dominated by {len(p['dominated_by'])} point(s); the cheapest of them: "
-            f"{p['dominated_by'][0]['label']}, FLIP {fmt(p['dominated_by'][0]['flip'])} at "
-            f"{fmt(p['dominated_by'][0]['fetches_mean'], 3)} fetches"
-        )
         bw = p["best_within"]
+        gain = bw["flip"] / p["flip"] - 1 if bw else 0.0
+        if p["on_front"]:
+            where = "**on the Pareto front**: no point costs no more and errs less"
+        else:
+            d = p["dominated_by"][0]
+            where = (
+                f"dominated by {len(p['dominated_by'])} point(s); the cheapest of them: "
+                f"{d['label']}, FLIP {fmt(d['flip'])} at {fmt(d['fetches_mean'], 3)} fetches"
+            )
+        if bw and gain < 0:
+            where += (
+                f". The best within its fetches: {bw['label']}, FLIP {fmt(bw['flip'])} "
+                f"({100 * gain:+.2f} %"
+                + (
+                    f", within the {100 * tolerance:g} % tolerance: no clearly better shader "
+                    "at its cost)"
+                    if gain >= -tolerance
+                    else ")"
+                )  # fmt: skip
+            )
         lines += [
             "",
             f"**Your shader**, `{p['label'].split(':', 1)[1]}` (constants fitted, measured like "
             f"every point): FLIP {fmt(p['flip'])} at {fmt(p['fetches_mean'], 3)} fetches per "
-            f"water pixel, FLIP rank {p['rank']} of {p['of']}; {where}."
-            + (
-                f" Best within its fetches: {bw['label']}, FLIP {fmt(bw['flip'])} "
-                f"({100 * (bw['flip'] / p['flip'] - 1):+.1f} %)."
-                if bw and bw["flip"] < p["flip"]
-                else ""
-            ),
+            f"water pixel, FLIP rank {p['rank']} of {p['of']}; {where}.",
         ]
         if export:
             gl = export["gl_check"]
@@ -284,6 +294,28 @@ def _alone_lines(rows: list, front: list) -> list[str]:
             f"{fmt(r.get('gl_norm_ms_1080p'), 3)} | {fmt(r['flip'])} | "
             f"{'yes' if r['label'] in on_front else 'no'} |"
         )
+    return lines
+
+
+def _parsimony_lines(parsimony: dict) -> list[str]:
+    """Each variant at the original's schedule: its fitted constants, FLIP and BIC."""
+    pars = {v: d for v, d in parsimony.items() if d.get("bic") is not None}
+    lines = []
+    if pars:
+        b0 = min(d["bic"] for d in pars.values())
+        lines += [
+            "",
+            "Each variant at the original's schedule (constants fitted or at a "
+            "bound; BIC of the fit "
+            "residual, lower is better, relative to the lowest):",
+            "",
+            "| variant | constants | FLIP | BIC - min |",
+            "|---|---|---|---|",
+        ]
+        lines += [
+            f"| {v} | {d['n_fitted']} | {fmt(d['flip'])} | {d['bic'] - b0:.0f} |"
+            for v, d in sorted(pars.items(), key=lambda kv: kv[1]["bic"])
+        ]
     return lines
 
 
@@ -331,28 +363,15 @@ def _scene_lines(scene: str, f: dict, summary: dict) -> list[str]:
             f"Against the original shader at its own constants (FLIP {fmt(own['flip'])}): "
             f"{fmt(bw['flip'] / own['flip'], 3)}x its error within its fetch budget."
         )
-    lines += _user_lines(f.get("user") or [], summary.get("user_exports", {}).get(scene))
+    lines += _user_lines(
+        f.get("user") or [], summary.get("user_exports", {}).get(scene), summary["tolerance"]
+    )
     lines += motion_lines(f.get("motion"))
     lines += _marginal_lines(f.get("marginals", []))
     lines += _alone_lines(f.get("sources_alone", []), f["front"])
     if summary.get("images", {}).get(scene):
         lines += ["", f"![{scene}: reference and shaders]({summary['images'][scene]})"]
-    pars = {v: d for v, d in f.get("parsimony", {}).items() if d.get("bic") is not None}
-    if pars:
-        b0 = min(d["bic"] for d in pars.values())
-        lines += [
-            "",
-            "Each variant at the original's schedule (constants fitted or at a "
-            "bound; BIC of the fit "
-            "residual, lower is better, relative to the lowest):",
-            "",
-            "| variant | constants | FLIP | BIC - min |",
-            "|---|---|---|---|",
-        ]
-        lines += [
-            f"| {v} | {d['n_fitted']} | {fmt(d['flip'])} | {d['bic'] - b0:.0f} |"
-            for v, d in sorted(pars.items(), key=lambda kv: kv[1]["bic"])
-        ]
+    lines += _parsimony_lines(f.get("parsimony", {}))
     lines += ["", "What the scene needs:", ""]
     lines.append(
         f"- simplest variant within tolerance: `{f['simplest_variant_within_tolerance']}`; "

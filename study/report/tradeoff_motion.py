@@ -20,11 +20,11 @@ def motion_figure(path: Path, summary: dict) -> Path | None:
     if not scenes:
         return None
     plt = pyplot()
-    fig, axes = plt.subplots(len(scenes), 2, figsize=(11, 4.2 * len(scenes)), squeeze=False)
+    fig, axes = plt.subplots(len(scenes), 2, figsize=(14, 4.6 * len(scenes)), squeeze=False)
     for i, (name, m) in enumerate(scenes):
         pts = [p for p in m["points"] if p.get(COST) is not None]
         variants = list(dict.fromkeys(p["variant"] for p in pts))
-        colours = {v: plt.cm.tab10(k % 10) for k, v in enumerate(variants)}
+        colours = {v: plt.cm.tab20(k % 20) for k, v in enumerate(variants)}
         for j, (key, label) in enumerate(
             (("flip_frames_mean", "FLIP on water pixels, mean over the frames"),
              ("trmse", "temporal RMSE (frame-to-frame change)"))
@@ -48,9 +48,10 @@ def motion_figure(path: Path, summary: dict) -> Path | None:
             ax.set_title(f"{name} ({m['frames']} frames)" if j == 0 else "", loc="left",
                          fontsize=10)  # fmt: skip
             ax.grid(alpha=0.3, which="both")
-            handles, labels = ax.get_legend_handles_labels()
-            seen = dict(zip(labels, handles))
-            ax.legend(seen.values(), seen.keys(), fontsize=7)
+        handles, labels = axes[i, 0].get_legend_handles_labels()
+        seen = dict(zip(labels, handles))
+        axes[i, 1].legend(seen.values(), seen.keys(), fontsize=7, loc="upper left",
+                          bbox_to_anchor=(1.02, 1.0), borderaxespad=0.0)  # fmt: skip
     fig.tight_layout()
     fig.savefig(path, dpi=110)
     plt.close(fig)
