@@ -65,6 +65,8 @@ def sky_direct(
     else on the way (that light bounced, and is path traced)."""
     import drjit as dr
 
+    from .._backend import jit_input
+
     F = mi.Float
     water = shape_named(scene, "water")
     emitter = mi.load_dict(
@@ -86,14 +88,10 @@ def sky_direct(
     u, v = (kd % side + rng.random(n)) / side, (kd // side + rng.random(n)) / side
     del row, col, k, kd
 
-    o = mi.Point3f(
-        F(px.astype(np.float32)), F(np.full(n, y_cam, np.float32)), F(pz.astype(np.float32))
-    )
+    o = mi.Point3f(jit_input(F, px), jit_input(F, np.full(n, y_cam)), jit_input(F, pz))
     si = scene.ray_intersect(mi.Ray3f(o, mi.Vector3f(0.0, -1.0, 0.0)))
     ok = si.is_valid() & (si.shape != mi.ShapePtr(water))
-    wo_local = mi.warp.square_to_cosine_hemisphere(
-        mi.Point2f(F(u.astype(np.float32)), F(v.astype(np.float32)))
-    )
+    wo_local = mi.warp.square_to_cosine_hemisphere(mi.Point2f(jit_input(F, u), jit_input(F, v)))
     frame = mi.Frame3f(dr.select(si.n.y < 0, -si.n, si.n))
     si2 = scene.ray_intersect(si.spawn_ray(frame.to_world(wo_local)), ok)
     ok &= si2.is_valid() & (si2.shape == mi.ShapePtr(water)) & (mi.Frame3f.cos_theta(si2.wi) < 0)
