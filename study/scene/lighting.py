@@ -165,6 +165,7 @@ def render_lighting(
     progress=None,
     without_direct: bool = False,
     scene=None,
+    world_y=None,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Lighting ``radiance / albedo`` (size, size, 3) over the pool (GL order), corrected for the
     absorption of the camera's own vertical ray as ``top_down_colour`` does, and its per-texel
@@ -176,7 +177,8 @@ def render_lighting(
     ``without_direct``: leave the direct light through the water's top out (it is ray traced,
     :mod:`.direct_light`): each pass is rendered again with ``max_depth = 3``, the same envmap and
     the same seed, which follows the full pass's paths sample for sample, and is subtracted.
-    ``scene``: (scene, medium) from :func:`lighting_scene` (default: built here)."""
+    ``scene``: (scene, medium) from :func:`lighting_scene` (default: built here); ``world_y``:
+    :func:`~.topdown.top_down_world_y` over the pool at ``size`` (default: cast here)."""
     import mitsuba as mi
 
     from .topdown import ortho_sensor, to_gl_order, top_down_world_y
@@ -226,7 +228,8 @@ def render_lighting(
         albedo = np.mean(albedos, axis=0)
         lighting = denoise_radiance(np.mean(radiances, axis=0), albedo) / albedo
     if water:
-        world_y = top_down_world_y(exp, extent, size)
+        if world_y is None:
+            world_y = top_down_world_y(exp, extent, size)
         from .topdown import MAX_OPTICAL_DEPTH, camera_ray_optical_depth
 
         optical = camera_ray_optical_depth(exp, y_cam, world_y)
@@ -337,7 +340,8 @@ def lighting_colour(
     settings used; and the colour's two independent halves (2, size, size, 3) float32, each from
     half of the lighting passes (the dry render outside the pool is shared by both).
     ``shared``: a :class:`~.frames.FrameShared` of an animation's frames, which then share the
-    lighting scene (its water moved to each frame's waves) and the dry render with its albedo."""
+    lighting scene (its water moved to each frame's waves), the dry render with its albedo and
+    the lighting grid's world y."""
     from .frames import shared_part
     from .mitsuba_scene import set_waves
     from .topdown import top_down_world_y, underwater_camera_height
@@ -365,6 +369,11 @@ def lighting_colour(
             lambda: lighting_scene(exp, wet, sky_only=sun_bounces),
             lambda sc, e: set_waves(sc[0], e),
         )
+    pool_y = None
+    if wet:  # the first hit from above on the lighting grid does not move with the waves
+        pool_y = shared_part(
+            shared, exp, "pool_world_y", lambda: top_down_world_y(exp, pool_extent(exp), n_light)
+        )
     lighting, lighting_se, halves = render_lighting(
         exp,
         n_light,
@@ -375,6 +384,7 @@ def lighting_colour(
         progress=progress,
         without_direct=traced,
         scene=scene,
+        world_y=pool_y,
     )
     if world_y is None:
         world_y = top_down_world_y(exp, extent, size)
