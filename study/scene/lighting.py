@@ -425,7 +425,16 @@ def lighting_colour(
         from .direct_light import traced_direct
 
         d_mean, d_halves, d_se, d_info = traced_direct(
-            exp, extent, size, seed, y_cam, albedo, inside, scene=scene[0], sun_bounces=sun_bounces
+            exp,
+            extent,
+            size,
+            seed,
+            y_cam,
+            albedo,
+            inside,
+            scene=scene[0],
+            sun_bounces=sun_bounces,
+            shared=shared,
         )
         colour, colour_halves = colour + d_mean, colour_halves + d_halves
         if inside.any():

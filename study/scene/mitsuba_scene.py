@@ -328,13 +328,23 @@ def set_waves(scene, exp: Experiment) -> None:
     making a mesh (with its dielectric) to take them from."""
     import mitsuba as mi
 
-    pos, faces, nor, outward = _water_arrays(exp, floor_bottom(exp))
-    pos = np.asarray(pos, np.float32)
+    key = exp.scene_hash()
+    if key not in _MOVED:  # a frame's scenes (reference, lighting) move to the same arrays
+        pos, faces, nor, outward = _water_arrays(exp, floor_bottom(exp))
+        pos = np.asarray(pos, np.float32)
+        _MOVED.clear()
+        _MOVED[key] = (
+            pos.ravel(),
+            np.asarray(nor, np.float32).ravel(),
+            _oriented(pos, faces, outward).ravel(),
+        )
     params = mi.traverse(scene)
-    params["water.vertex_positions"] = pos.ravel()
-    params["water.vertex_normals"] = np.asarray(nor, np.float32).ravel()
-    params["water.faces"] = _oriented(pos, faces, outward).ravel()
+    for name, value in zip(("vertex_positions", "vertex_normals", "faces"), _MOVED[key]):
+        params[f"water.{name}"] = value
     params.update()
+
+
+_MOVED: dict = {}  # scene hash -> the water arrays set_waves set last (one frame's)
 
 
 def has_medium(exp: Experiment) -> bool:
