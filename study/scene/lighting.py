@@ -331,6 +331,17 @@ def _match_denoiser(exp, colour, colour_halves, se, inside, n_light: int, info: 
     return colour
 
 
+def _pool_world_y(exp: Experiment, size: int, shared) -> np.ndarray:
+    """World y of the first hit from above on the lighting grid (``size`` texels over the pool),
+    built once for an animation's frames (it does not move with the waves)."""
+    from .frames import shared_part
+    from .topdown import top_down_world_y
+
+    return shared_part(
+        shared, exp, "pool_world_y", lambda: top_down_world_y(exp, pool_extent(exp), size)
+    )
+
+
 def lighting_colour(
     exp: Experiment, extent, size: int, seed: int = 0, world_y=None, progress=None, shared=None
 ) -> tuple[np.ndarray, dict, np.ndarray]:
@@ -369,11 +380,6 @@ def lighting_colour(
             lambda: lighting_scene(exp, wet, sky_only=sun_bounces),
             lambda sc, e: set_waves(sc[0], e),
         )
-    pool_y = None
-    if wet:  # the first hit from above on the lighting grid does not move with the waves
-        pool_y = shared_part(
-            shared, exp, "pool_world_y", lambda: top_down_world_y(exp, pool_extent(exp), n_light)
-        )
     lighting, lighting_se, halves = render_lighting(
         exp,
         n_light,
@@ -384,7 +390,7 @@ def lighting_colour(
         progress=progress,
         without_direct=traced,
         scene=scene,
-        world_y=pool_y,
+        world_y=_pool_world_y(exp, n_light, shared) if wet else None,
     )
     if world_y is None:
         world_y = top_down_world_y(exp, extent, size)
@@ -424,17 +430,9 @@ def lighting_colour(
     if traced:  # the direct sky- and sunlight, ray traced on the texture's texels
         from .direct_light import traced_direct
 
+        args = (exp, extent, size, seed, y_cam, albedo, inside)
         d_mean, d_halves, d_se, d_info = traced_direct(
-            exp,
-            extent,
-            size,
-            seed,
-            y_cam,
-            albedo,
-            inside,
-            scene=scene[0],
-            sun_bounces=sun_bounces,
-            shared=shared,
+            *args, scene=scene[0], sun_bounces=sun_bounces, shared=shared
         )
         colour, colour_halves = colour + d_mean, colour_halves + d_halves
         if inside.any():
