@@ -139,3 +139,27 @@ def collect_here():
         gc.collect()
         if was_enabled:
             gc.enable()
+
+
+JIT_INPUT_ALIGN = 64  # bytes: an 8-wide float32 vector load needs 32, a cache line is 64
+
+
+def jit_input(cls, values, dtype=None):
+    """``cls(values)`` (a flat Dr.Jit array type such as ``mi.Float``) read from a copy of the
+    flattened NumPy ``values`` (cast to ``dtype``, default float32) in memory aligned to
+    :data:`JIT_INPUT_ALIGN` bytes.
+
+    Dr.Jit's LLVM backend maps a NumPy array's memory instead of copying it, and a kernel that
+    reads it declares its vector loads aligned only when that memory is 32-byte aligned. NumPy's
+    allocations are aligned to 16 bytes, sometimes 32, by chance: the same computation on an
+    array built the same way then compiles to one of several kernels, each missing the kernel
+    cache (in memory and on disk) and compiling anew. An animation's frames built the traced
+    skylight and sunlight kernels again on every frame so (0.6 and 0.8 s of LLVM time each)."""
+    import numpy as np
+
+    a = np.asarray(values, np.float32 if dtype is None else dtype).ravel()
+    buf = np.empty(a.nbytes + JIT_INPUT_ALIGN, np.uint8)
+    start = -buf.ctypes.data % JIT_INPUT_ALIGN
+    out = buf[start : start + a.nbytes].view(a.dtype)
+    out[:] = a
+    return cls(out)

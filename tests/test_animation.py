@@ -146,13 +146,22 @@ def test_frames_are_still_experiments_with_their_own_keys():
 
 
 def test_shared_parts_are_built_once_and_give_the_fresh_inputs(mi, animated):
-    """The frames build world y, the dry render, the lighting scene and the maps once; frame 1's
-    inputs built through them equal frame 1's inputs built alone, array for array, and the frames'
-    refraction textures differ (the light through the moving waves moves)."""
+    """The frames build world y (of the texture and of the lighting grid), the dry render, the
+    lighting scene, the skylight's two sample patterns and the maps once; frame 1's inputs built
+    through them equal frame 1's inputs built alone, array for array, and the frames' refraction
+    textures differ (the light through the moving waves moves)."""
     from study.scene.shader_inputs import build_shader_inputs
 
     shared = animated["shared"]
-    assert sorted(shared.built) == ["dry_render", "lighting_scene", "maps", "world_y"]
+    assert sorted(shared.built) == [
+        "dry_render",
+        "lighting_scene",
+        "maps",
+        "pool_world_y",
+        "sky_samples0",
+        "sky_samples1",
+        "world_y",
+    ]
     assert all(shared.reused[n] == 2 for n in shared.built)
     fresh = build_shader_inputs(animated["frames"][1])
     got = animated["inputs"][1]

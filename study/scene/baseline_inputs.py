@@ -77,9 +77,11 @@ def trace(mi, scene, origins: np.ndarray, dirs: np.ndarray, spp: int, seed: int)
     """Path-traced radiance along given rays:
     ``(radiance (N, 3), hit (N,) bool, hit point (N, 3))``. ``spp`` samples per ray (independent
     sampler), averaged."""
+    from .._backend import jit_input
+
     n = len(origins)
-    o = mi.Point3f(*(mi.Float(np.ascontiguousarray(origins[:, k], np.float32)) for k in range(3)))
-    d = mi.Vector3f(*(mi.Float(np.ascontiguousarray(dirs[:, k], np.float32)) for k in range(3)))
+    o = mi.Point3f(*(jit_input(mi.Float, origins[:, k]) for k in range(3)))
+    d = mi.Vector3f(*(jit_input(mi.Float, dirs[:, k]) for k in range(3)))
     ray = mi.Ray3f(o, d)
     si = scene.ray_intersect(ray)
     hit = np.array(si.is_valid(), dtype=bool)

@@ -46,30 +46,14 @@ from .experiment import Experiment
 from .sun_photons import N_BATCHES, shape_named, sun_direct, sun_walk
 
 
-def sky_direct(
-    mi,
-    scene,
-    exp: Experiment,
-    sky: np.ndarray,
-    extent,
-    size: int,
-    n_dirs: int,
-    seed: int,
-    y_cam: float,
-) -> np.ndarray:
-    """Direct skylight ``E / pi`` (size, size, 3) float32 (the texel's lighting: multiply by its
-    albedo for its radiance) on the surfaces the under-water camera at ``y_cam`` sees, over
-    ``extent``, GL order, linear RGB: per texel ``n_dirs`` (a square number) jittered points and
-    as many cosine-weighted directions, stratified, up through one refraction at the water's top to
-    the (H, 2H, 3) ``sky`` map, with the water's transmittance; zero where the ray meets anything
-    else on the way (that light bounced, and is path traced)."""
-    import drjit as dr
+def sky_samples(mi, extent, size: int, n_dirs: int, seed: int, y_cam: float):
+    """The sample pattern of :func:`sky_direct`: (points (size^2 n_dirs) ``mi.Point3f`` at height
+    ``y_cam``, n_dirs jittered strata per texel of ``extent``; their ``mi.Point2f`` uniforms for
+    the directions, strata permuted per texel), texel-major, from ``seed``. It depends on nothing
+    that moves with the waves: an animation's frames draw it once."""
+    from .._backend import jit_input
 
     F = mi.Float
-    water = shape_named(scene, "water")
-    emitter = mi.load_dict(
-        {"type": "envmap", "bitmap": mi.Bitmap(np.ascontiguousarray(sky, np.float32))}
-    )
     side = int(round(np.sqrt(n_dirs)))
     if side * side != n_dirs:
         raise ValueError(
@@ -85,15 +69,45 @@ def sky_direct(
     kd = rng.permuted(np.tile(np.arange(n_dirs), (size * size, 1)), axis=1).ravel()
     u, v = (kd % side + rng.random(n)) / side, (kd // side + rng.random(n)) / side
     del row, col, k, kd
+    o = mi.Point3f(jit_input(F, px), jit_input(F, np.full(n, y_cam)), jit_input(F, pz))
+    uv = mi.Point2f(jit_input(F, u), jit_input(F, v))
+    import drjit as dr
 
-    o = mi.Point3f(
-        F(px.astype(np.float32)), F(np.full(n, y_cam, np.float32)), F(pz.astype(np.float32))
+    dr.eval(o, uv)
+    return o, uv
+
+
+def sky_direct(
+    mi,
+    scene,
+    exp: Experiment,
+    sky: np.ndarray,
+    extent,
+    size: int,
+    n_dirs: int,
+    seed: int,
+    y_cam: float,
+    samples=None,
+) -> np.ndarray:
+    """Direct skylight ``E / pi`` (size, size, 3) float32 (the texel's lighting: multiply by its
+    albedo for its radiance) on the surfaces the under-water camera at ``y_cam`` sees, over
+    ``extent``, GL order, linear RGB: per texel ``n_dirs`` (a square number) jittered points and
+    as many cosine-weighted directions, stratified, up through one refraction at the water's top to
+    the (H, 2H, 3) ``sky`` map, with the water's transmittance; zero where the ray meets anything
+    else on the way (that light bounced, and is path traced). ``samples``: the pattern of
+    :func:`sky_samples` for these arguments (default: drawn here)."""
+    import drjit as dr
+
+    F = mi.Float
+    water = shape_named(scene, "water")
+    o, uv = samples if samples is not None else sky_samples(mi, extent, size, n_dirs, seed, y_cam)
+    emitter = mi.load_dict(
+        {"type": "envmap", "bitmap": mi.Bitmap(np.ascontiguousarray(sky, np.float32))}
     )
+    n = size * size * n_dirs
     si = scene.ray_intersect(mi.Ray3f(o, mi.Vector3f(0.0, -1.0, 0.0)))
     ok = si.is_valid() & (si.shape != mi.ShapePtr(water))
-    wo_local = mi.warp.square_to_cosine_hemisphere(
-        mi.Point2f(F(u.astype(np.float32)), F(v.astype(np.float32)))
-    )
+    wo_local = mi.warp.square_to_cosine_hemisphere(uv)
     frame = mi.Frame3f(dr.select(si.n.y < 0, -si.n, si.n))
     si2 = scene.ray_intersect(si.spawn_ray(frame.to_world(wo_local)), ok)
     ok &= si2.is_valid() & (si2.shape == mi.ShapePtr(water)) & (mi.Frame3f.cos_theta(si2.wi) < 0)
@@ -126,6 +140,7 @@ def traced_direct(
     inside: np.ndarray,
     scene,
     sun_bounces: bool = False,
+    shared=None,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, dict]:
     """The direct sky- and sunlight's radiance (with ``sun_bounces``, all the sunlight's,
     :func:`.sun_photons.sun_walk`) on the texture's (size, size) texels over
@@ -136,18 +151,30 @@ def traced_direct(
     (``reference.lighting_denoise``) and matched to the raw mean over the pool; the sun from
     ``reference.sun_photons`` photons per texel in ``N_BATCHES`` batches, raw (halves: batches 0-1
     and 2-3). ``scene``: a Mitsuba scene of the experiment's geometry with the water (the
-    lighting render's, :func:`.lighting.lighting_scene`)."""
+    lighting render's, :func:`.lighting.lighting_scene`); ``shared``: a
+    :class:`~.frames.FrameShared` of an animation's frames, which then share the skylight's
+    sample patterns (:func:`sky_samples`)."""
     import mitsuba as mi
 
     from .denoise import denoise_gain, denoise_radiance
     from .user_scene import reference_sky_parts
 
+    from .frames import shared_part
+
     sky, sun = reference_sky_parts(exp)
     mask = inside[..., None]
     nd = exp["reference.sky_directions"]
-    sky_h = np.stack(
-        [sky_direct(mi, scene, exp, sky, extent, size, nd, 2 * seed + h, y_cam) for h in range(2)]
-    )
+
+    def half(h: int) -> np.ndarray:
+        samples = shared_part(
+            shared,
+            exp,
+            f"sky_samples{h}",
+            lambda: sky_samples(mi, extent, size, nd, 2 * seed + h, y_cam),
+        )
+        return sky_direct(mi, scene, exp, sky, extent, size, nd, 2 * seed + h, y_cam, samples)
+
+    sky_h = np.stack([half(h) for h in range(2)])
     sky_h = np.where(mask, sky_h * albedo, 0.0)
     sky_raw = sky_h.mean(0)
     sky_se = np.abs(sky_h[0] - sky_h[1]) / 2.0

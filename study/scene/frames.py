@@ -18,9 +18,10 @@ A frame experiment is a still experiment (``animation.*`` at their defaults, whi
 reads): its reference and shader inputs are cached under the keys a still experiment with those
 offsets has, so each frame is cached on its own and frame 0 is the still experiment itself.
 What does not depend on the offsets (the Mitsuba scenes, whose water surface is moved from frame
-to frame by :func:`~.mitsuba_scene.set_waves`, the world-y ray cast, the dry render and floor
-albedo, the normal map, the sky cube map and the Fresnel LUT) is built once per animation and
-held by a :class:`FrameShared`.
+to frame by :func:`~.mitsuba_scene.set_waves`, the world-y ray casts of the texture and of the
+lighting grid, the dry render and floor albedo, the traced skylight's sample patterns, the normal
+map, the sky cube map and the Fresnel LUT) is built once per animation and held by a
+:class:`FrameShared`.
 """
 
 from __future__ import annotations

@@ -165,6 +165,7 @@ def render_lighting(
     progress=None,
     without_direct: bool = False,
     scene=None,
+    world_y=None,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Lighting ``radiance / albedo`` (size, size, 3) over the pool (GL order), corrected for the
     absorption of the camera's own vertical ray as ``top_down_colour`` does, and its per-texel
@@ -176,7 +177,8 @@ def render_lighting(
     ``without_direct``: leave the direct light through the water's top out (it is ray traced,
     :mod:`.direct_light`): each pass is rendered again with ``max_depth = 3``, the same envmap and
     the same seed, which follows the full pass's paths sample for sample, and is subtracted.
-    ``scene``: (scene, medium) from :func:`lighting_scene` (default: built here)."""
+    ``scene``: (scene, medium) from :func:`lighting_scene` (default: built here); ``world_y``:
+    :func:`~.topdown.top_down_world_y` over the pool at ``size`` (default: cast here)."""
     import mitsuba as mi
 
     from .topdown import ortho_sensor, to_gl_order, top_down_world_y
@@ -226,7 +228,8 @@ def render_lighting(
         albedo = np.mean(albedos, axis=0)
         lighting = denoise_radiance(np.mean(radiances, axis=0), albedo) / albedo
     if water:
-        world_y = top_down_world_y(exp, extent, size)
+        if world_y is None:
+            world_y = top_down_world_y(exp, extent, size)
         from .topdown import MAX_OPTICAL_DEPTH, camera_ray_optical_depth
 
         optical = camera_ray_optical_depth(exp, y_cam, world_y)
@@ -328,6 +331,17 @@ def _match_denoiser(exp, colour, colour_halves, se, inside, n_light: int, info: 
     return colour
 
 
+def _pool_world_y(exp: Experiment, size: int, shared) -> np.ndarray:
+    """World y of the first hit from above on the lighting grid (``size`` texels over the pool),
+    built once for an animation's frames (it does not move with the waves)."""
+    from .frames import shared_part
+    from .topdown import top_down_world_y
+
+    return shared_part(
+        shared, exp, "pool_world_y", lambda: top_down_world_y(exp, pool_extent(exp), size)
+    )
+
+
 def lighting_colour(
     exp: Experiment, extent, size: int, seed: int = 0, world_y=None, progress=None, shared=None
 ) -> tuple[np.ndarray, dict, np.ndarray]:
@@ -337,7 +351,8 @@ def lighting_colour(
     settings used; and the colour's two independent halves (2, size, size, 3) float32, each from
     half of the lighting passes (the dry render outside the pool is shared by both).
     ``shared``: a :class:`~.frames.FrameShared` of an animation's frames, which then share the
-    lighting scene (its water moved to each frame's waves) and the dry render with its albedo."""
+    lighting scene (its water moved to each frame's waves), the dry render with its albedo and
+    the lighting grid's world y."""
     from .frames import shared_part
     from .mitsuba_scene import set_waves
     from .topdown import top_down_world_y, underwater_camera_height
@@ -375,6 +390,7 @@ def lighting_colour(
         progress=progress,
         without_direct=traced,
         scene=scene,
+        world_y=_pool_world_y(exp, n_light, shared) if wet else None,
     )
     if world_y is None:
         world_y = top_down_world_y(exp, extent, size)
@@ -414,8 +430,9 @@ def lighting_colour(
     if traced:  # the direct sky- and sunlight, ray traced on the texture's texels
         from .direct_light import traced_direct
 
+        args = (exp, extent, size, seed, y_cam, albedo, inside)
         d_mean, d_halves, d_se, d_info = traced_direct(
-            exp, extent, size, seed, y_cam, albedo, inside, scene=scene[0], sun_bounces=sun_bounces
+            *args, scene=scene[0], sun_bounces=sun_bounces, shared=shared
         )
         colour, colour_halves = colour + d_mean, colour_halves + d_halves
         if inside.any():

@@ -85,13 +85,7 @@ def _mesh(mi, name, positions, faces, normals=None, uv=None, outward=None, **pro
     """A Mitsuba mesh from (V, 3) positions and (F, 3) faces; faces whose geometric normal
     points against ``outward`` (a (F, 3) array or a callable of centroids) are flipped."""
     positions = np.asarray(positions, np.float32)
-    faces = np.asarray(faces, np.uint32).copy()
-    if outward is not None:
-        p = positions[faces]
-        n = np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0])
-        want = outward(p.mean(1)) if callable(outward) else outward
-        flip = (n * want).sum(-1) < 0
-        faces[flip] = faces[flip][:, [0, 2, 1]]
+    faces = _oriented(positions, faces, outward)
     props = mi.Properties()
     for k, v in props_in.items():
         props[k] = v
@@ -112,6 +106,19 @@ def _mesh(mi, name, positions, faces, normals=None, uv=None, outward=None, **pro
         params["vertex_texcoords"] = np.asarray(uv, np.float32).ravel()
     params.update()
     return m
+
+
+def _oriented(positions: np.ndarray, faces, outward) -> np.ndarray:
+    """(F, 3) uint32 ``faces`` of the float32 ``positions``, those whose geometric normal points
+    against ``outward`` (a (F, 3) array or a callable of centroids; None: none) flipped."""
+    faces = np.asarray(faces, np.uint32).copy()
+    if outward is not None:
+        p = positions[faces]
+        n = np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0])
+        want = outward(p.mean(1)) if callable(outward) else outward
+        flip = (n * want).sum(-1) < 0
+        faces[flip] = faces[flip][:, [0, 2, 1]]
+    return faces
 
 
 def _grid_faces(nx: int, nz: int) -> np.ndarray:
@@ -247,6 +254,20 @@ def water_mesh(mi, exp: Experiment, y_bottom: float, medium=None, bsdf: dict | N
     properties of its ``dielectric`` (e.g. ``specular_transmittance = 0`` keeps the reflected
     light only, ``specular_reflectance = 0`` the transmitted: the terms of the shader's Fresnel
     combine, ``benchmarks/bench_grazing.py``)."""
+    pos, faces, nor, outward = _water_arrays(exp, y_bottom)
+    props = {
+        "bsdf": mi.load_dict(
+            {"type": "dielectric", "int_ior": exp["water.ior"], "ext_ior": 1.0, **(bsdf or {})}
+        )
+    }
+    if medium is not None:
+        props["interior"] = medium
+    return _mesh(mi, "water", pos, faces, normals=nor, outward=outward, **props)
+
+
+def _water_arrays(exp: Experiment, y_bottom: float):
+    """(positions (V, 3), faces (F, 3), vertex normals (V, 3), outward normals (F, 3)) of the
+    water volume of :func:`water_mesh`, float64 NumPy, faces not yet oriented."""
     hx, hz = exp["pool.half_extent"]
     hx, hz = hx - WATER_INSET, hz - WATER_INSET
     n = exp["reference.water_mesh"]
@@ -294,15 +315,7 @@ def water_mesh(mi, exp: Experiment, y_bottom: float, medium=None, bsdf: dict | N
     outward = np.concatenate(
         [np.tile([0.0, 1.0, 0.0], (nt, 1)), side_n, side_n, np.tile([0.0, -1.0, 0.0], (m, 1))]
     )
-
-    props = {
-        "bsdf": mi.load_dict(
-            {"type": "dielectric", "int_ior": exp["water.ior"], "ext_ior": 1.0, **(bsdf or {})}
-        )
-    }
-    if medium is not None:
-        props["interior"] = medium
-    return _mesh(mi, "water", pos, faces, normals=nor, outward=outward, **props)
+    return pos, faces, nor, outward
 
 
 def set_waves(scene, exp: Experiment) -> None:
@@ -311,14 +324,27 @@ def set_waves(scene, exp: Experiment) -> None:
     frame of the same animation) to the waves of ``exp``: the vertex positions, normals and faces
     :func:`water_mesh` builds for ``exp`` replace the shape ``water``'s, and the acceleration
     structure is rebuilt. The scene then renders exactly as one built for ``exp``
-    (``tests/test_animation.py`` checks it bit for bit)."""
+    (``tests/test_animation.py`` checks it bit for bit). The arrays are set directly, without
+    making a mesh (with its dielectric) to take them from."""
     import mitsuba as mi
 
-    new = mi.traverse(water_mesh(mi, exp, floor_bottom(exp)))
+    key = exp.scene_hash()
+    if key not in _MOVED:  # a frame's scenes (reference, lighting) move to the same arrays
+        pos, faces, nor, outward = _water_arrays(exp, floor_bottom(exp))
+        pos = np.asarray(pos, np.float32)
+        _MOVED.clear()
+        _MOVED[key] = (
+            pos.ravel(),
+            np.asarray(nor, np.float32).ravel(),
+            _oriented(pos, faces, outward).ravel(),
+        )
     params = mi.traverse(scene)
-    for name in ("vertex_positions", "vertex_normals", "faces"):
-        params[f"water.{name}"] = new[name]
+    for name, value in zip(("vertex_positions", "vertex_normals", "faces"), _MOVED[key]):
+        params[f"water.{name}"] = value
     params.update()
+
+
+_MOVED: dict = {}  # scene hash -> the water arrays set_waves set last (one frame's)
 
 
 def has_medium(exp: Experiment) -> bool:

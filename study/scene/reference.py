@@ -124,6 +124,7 @@ def water_mask(exp: Experiment, width: int, height: int, scene=None) -> np.ndarr
     import drjit as dr
     import mitsuba as mi
 
+    from .._backend import jit_input
     from .mitsuba_scene import build_scene
 
     memo = (exp.scene_hash(), SCENE_VERSION, width, height)
@@ -134,8 +135,8 @@ def water_mask(exp: Experiment, width: int, height: int, scene=None) -> np.ndarr
     sensor = scene.sensors()[0]
     j, i = np.meshgrid(np.arange(height), np.arange(width), indexing="ij")
     uv = mi.Point2f(
-        mi.Float(((i.ravel() + 0.5) / width).astype(np.float32)),
-        mi.Float(((j.ravel() + 0.5) / height).astype(np.float32)),
+        jit_input(mi.Float, ((i.ravel() + 0.5) / width).astype(np.float32)),
+        jit_input(mi.Float, ((j.ravel() + 0.5) / height).astype(np.float32)),
     )
     ray, _ = sensor.sample_ray(0.0, 0.0, uv, mi.Point2f(0.5, 0.5))
     si = scene.ray_intersect(ray)

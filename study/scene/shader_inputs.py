@@ -164,8 +164,9 @@ def build_shader_inputs(
     (default: quiet). ``info``, if given, receives how the refraction texture was made (``texture``:
     method, settings and, for ``lighting``, its measured noise). ``shared``: a
     :class:`~.frames.FrameShared` of an animation's frames: what does not depend on the wave
-    offsets (world y, the dry render and albedo, the lighting scene, the reflection textures of a
-    mesh, the normal map, the cube map, the LUT) is then built once for all frames."""
+    offsets (world y, the dry render and albedo, the lighting scene, the lighting grid's world y,
+    the skylight's sample patterns, the reflection textures of a mesh, the normal map, the cube
+    map, the LUT) is then built once for all frames."""
     from .._progress import Stages
     from .frames import shared_part
 

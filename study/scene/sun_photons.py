@@ -96,7 +96,9 @@ def shape_named(scene, name: str):
 
 
 def _vec(mi, a: np.ndarray):
-    return [mi.Float(np.ascontiguousarray(a[:, k], np.float32)) for k in range(3)]
+    from .._backend import jit_input
+
+    return [jit_input(mi.Float, a[:, k]) for k in range(3)]
 
 
 def _splat(
@@ -130,6 +132,8 @@ def _emit(mi, scene, exp: Experiment, sun: np.ndarray, n_photons: int, seeds, y_
     (B N, 3) as Mitsuba's ``Color3f``, radiance x m^2 x sr; batch index (B N,) int), N the square
     number at most ``n_photons``; or None when the sun is below the horizon."""
     import drjit as dr
+
+    from .._backend import jit_input
 
     F = mi.Float
     water = shape_named(scene, "water")
@@ -170,11 +174,7 @@ def _emit(mi, scene, exp: Experiment, sun: np.ndarray, n_photons: int, seeds, y_
     emitter = mi.load_dict(
         {"type": "envmap", "bitmap": mi.Bitmap(np.ascontiguousarray(sun, np.float32))}
     )
-    power = (
-        emitter.eval(si_e)
-        * F(np.abs(dirs[:, 1]).astype(np.float32))
-        * dr.opaque(F, omega * area / n)
-    )
+    power = emitter.eval(si_e) * jit_input(F, np.abs(dirs[:, 1])) * dr.opaque(F, omega * area / n)
     return o, dirs, power, np.repeat(np.arange(len(seeds)), n)
 
 
@@ -258,6 +258,8 @@ def sun_walk(
     scatters (``water.albedo`` > 0) is not modelled here: the caller keeps it path traced."""
     import drjit as dr
 
+    from .._backend import jit_input
+
     F, U = mi.Float, mi.UInt32
     emitted = _emit(mi, scene, exp, sun, n_photons, seeds, y_cam)
     if emitted is None:
@@ -275,7 +277,7 @@ def sun_walk(
     )  # the k-th surface: a path of depth k + 1
     ctx = mi.BSDFContext(mi.TransportMode.Importance)
     texels = dr.zeros(F, len(seeds) * size * size * 3)
-    first = U(np.ascontiguousarray(batch * size * size, np.uint32))  # each batch's first texel
+    first = jit_input(U, batch * size * size, np.uint32)  # each batch's first texel
     rng = mi.PCG32(n, dr.opaque(mi.UInt64, seeds[0]), dr.arange(mi.UInt64, n))
 
     def cond(ray, p, inside, k, landed, active, rng):

@@ -104,6 +104,8 @@ def top_down_world_y(exp: Experiment, extent, size: int, mesh: bool = False) -> 
     the user's mesh above the water is left out unless ``mesh``."""
     import mitsuba as mi
 
+    from .._backend import jit_input
+
     scene = mi.load_dict({"type": "scene", **build_geometry(mi, exp, water=False, mesh=mesh)})
     x0, z0, x1, z1 = extent
     c = (np.arange(size) + 0.5) / size
@@ -112,9 +114,9 @@ def top_down_world_y(exp: Experiment, extent, size: int, mesh: bool = False) -> 
 
     def cast(dx: float, dz: float):
         o = mi.Point3f(
-            mi.Float((X.ravel() + dx).astype(np.float32)),
-            mi.Float(np.full(n, 100.0, np.float32)),
-            mi.Float((Z.ravel() + dz).astype(np.float32)),
+            jit_input(mi.Float, (X.ravel() + dx).astype(np.float32)),
+            jit_input(mi.Float, np.full(n, 100.0)),
+            jit_input(mi.Float, (Z.ravel() + dz).astype(np.float32)),
         )
         si = scene.ray_intersect(mi.Ray3f(o, mi.Vector3f(0.0, -1.0, 0.0)))
         return np.array(si.is_valid()), np.array(si.p.y, dtype=np.float32)
