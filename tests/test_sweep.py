@@ -191,3 +191,27 @@ def test_jobs_run_with_the_cyclic_collector_off_and_collect_after(monkeypatch):
     row = _run_job(sweep_jobs.collector_state, {}, "k")
     assert row["status"] == "ok" and row["gc_enabled"] is False
     assert calls and gc.isenabled()
+
+
+def test_a_worker_slow_to_exit_at_close_keeps_the_sweeps_outcome(monkeypatch):
+    """A nanny that waits longer than its 5 s for its worker to exit raises TimeoutError from the
+    cluster's close (as on a loaded machine after Ctrl-C); the sweep's own outcome, here an
+    interrupt, is what the caller sees, and the worker processes are gone."""
+    from distributed import LocalCluster
+
+    from study.sweep.cluster import _gone, open_client
+
+    real_close = LocalCluster.close
+
+    def close_then_time_out(self, timeout=None):
+        real_close(self, timeout)
+        raise TimeoutError  # what distributed's Nanny.kill raises when join() outlasts 5 s
+
+    monkeypatch.setattr(LocalCluster, "close", close_then_time_out)
+    said, pids = [], []
+    with pytest.raises(KeyboardInterrupt):
+        with open_client(workers=1, log=said.append) as c:
+            pids += list(c.run(os.getpid).values())
+            raise KeyboardInterrupt
+    assert len(pids) == 1 and all(_gone(p) for p in pids)
+    assert any("took longer than the cluster's 5 s to exit" in m for m in said), said

@@ -126,4 +126,50 @@ def open_client(
         finally:
             client.close()
             if cluster is not None:
-                cluster.close()
+                close_cluster(cluster, log)
+
+
+def _gone(pid: int) -> bool:
+    """True when process ``pid`` has exited (it may be a zombie not yet reaped)."""
+    try:
+        with open(f"/proc/{pid}/stat") as f:
+            return f.read().rsplit(")", 1)[-1].split()[0] in ("Z", "X")
+    except FileNotFoundError:
+        return True
+    except OSError:  # no /proc: ask the kernel
+        try:
+            os.kill(pid, 0)
+        except ProcessLookupError:
+            return True
+        return False
+
+
+def close_cluster(cluster, log=None, wait_s: float = 120.0) -> None:
+    """Close an embedded ``LocalCluster`` without raising when its worker processes are slow to
+    exit. A nanny waits 5 s (``distributed``'s fixed default) for its worker to exit after asking
+    it to and then killing it, and raises TimeoutError when a loaded machine takes longer; that
+    error would replace a sweep's own outcome (its result, or the interrupt of Ctrl-C). Here the
+    worker processes are killed and waited for up to ``wait_s`` seconds instead."""
+    import signal
+    import time
+
+    pids = []
+    for w in list(cluster.workers.values()):
+        proc = getattr(getattr(w, "process", None), "process", None)
+        if proc is not None and proc.pid is not None:
+            pids.append(proc.pid)
+    try:
+        cluster.close()
+    except TimeoutError:
+        for pid in pids:
+            with contextlib.suppress(ProcessLookupError):
+                os.kill(pid, signal.SIGKILL)
+        deadline = time.monotonic() + wait_s
+        while time.monotonic() < deadline and not all(_gone(p) for p in pids):
+            time.sleep(0.1)
+        alive = [p for p in pids if not _gone(p)]
+        if log:
+            log(
+                "sweep: a worker process took longer than the cluster's 5 s to exit; killed"
+                + (f" (still alive: {alive})" if alive else "")
+            )
