@@ -45,7 +45,7 @@ def still_overrides(overrides) -> list[str]:
 def prepare_frames_job(job: dict) -> dict:
     """Render (or find cached) every frame's reference and shader inputs of the animated
     ``job["scene"]``, and each frame's extra buffers for the shaders of ``job["variants"]``;
-    returns the seconds spent."""
+    returns the frame count and the stage seconds of ``load_frames``."""
     from ..scene.baseline_inputs import inputs_for_shader
 
     mv = job.get("mitsuba_variant", "llvm_ad_rgb")
@@ -282,6 +282,8 @@ def run_motion(exps, experiments, overrides, rows, recs, summary, client, out, l
         log(f"tradeoff: {e['name']} in motion ({e['animation.frames']} frames): "
             f"{scene['motion']['why']}")  # fmt: skip
     failed = [m for m in mrows if m["status"] != "ok"]
+    for m in failed:
+        log(f"tradeoff: motion of {m['job.label']} on {m['job.experiment']} failed: {m['error']}")
     summary["motion"] = {
         "seconds": time.perf_counter() - t0,
         "points": len(mrows),
