@@ -4,10 +4,10 @@ Every table of results in ``docs/`` is written by this script, never by hand:
 
 * ``docs/results/<study>/report.md`` of the tradeoff-family studies (``tradeoff``, ``variants``,
   ``variants/shipped``, ``baselines``, ``animation/tradeoff``: the tradeoff in motion,
-  ``user-shader/tradeoff``: a user's own shader charted): from the study's ``summary.json`` where it is committed,
-  else from its ``tradeoff.parquet`` (fronts, recommendations and findings recomputed by
-  ``study.studies.tradeoff_analysis.analyse``; the run-time sections -- exported shaders,
-  side-by-side images -- exist only in a run's own summary);
+  ``user-shader/tradeoff``: a user's own shader charted): from the study's ``summary.json``
+  where it is committed, else from its ``tradeoff.parquet`` (fronts, recommendations and
+  findings recomputed by ``study.studies.tradeoff_analysis.analyse``; the run-time sections --
+  exported shaders, side-by-side images -- exist only in a run's own summary);
 * ``docs/results/failures/report.md``: from its ``failures.parquet`` (one row per scene and
   failure class) and ``summary.json`` (the command that ran it);
 * ``docs/results/stability/<phase>/stability.md``: from the phase's ``summary.json``;
