@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 
 from conftest import small_experiment
+from test_cli import TINY as CLI_TINY
 
 # 0.2 s a frame: the layers move 0.06 texture units (0.12 world units) from frame to frame
 ANIMATED = {"animation.frames": 3, "animation.time_step": 0.2}
@@ -215,16 +216,9 @@ def test_temporal_error_of_known_motions():
         temporal_errors(refs, bad, mask)
 
 
-TINY_ANIMATED = [
-    "resolution=[24,24]",
-    "fit.resolution=[24,24]",
-    "reference.spp=16",
-    "reference.water_mesh=48",
-    "reference.texture_size=32",
-    "reference.texture_spp=4",
+TINY_ANIMATED = CLI_TINY + [
     "reference.lighting_size=16",
     "reference.wall_spp=4",
-    "waves.normal_map_size=32",
     "fit.max_steps=4",
     "animation.frames=2",
     "animation.time_step=0.2",

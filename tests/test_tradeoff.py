@@ -244,7 +244,7 @@ def test_motion_findings_hand_checked():
                 "fetches_mean": fetches, "flip": flip, "flip_frames_mean": flip,
                 "flip_frames_spread": 0.001, "trmse": trmse, "trmse_excess": None,
                 "change_ratio": 1.0, "noise": None, "frames": 4, "pair_ms": pair_ms,
-                "pair_ms_on_converged_mask": pair_ms, "converged_pair_ms": converged,
+                "converged_pair_ms": converged,
                 "converged_trmse": 0.0316 if converged else None}  # fmt: skip
 
     pts = [

@@ -37,8 +37,8 @@ class UserFit:
     ``scalars`` (the fitted scalar names -> value), ``rmse_start`` / ``rmse`` (linear RGB over
     the scored water pixels), ``iterations`` and ``reason`` (why the solver stopped),
     ``parameters`` (scalar name -> {"start", "value", "status": fitted | bound | frozen,
-    "reason", "rel_std_error"}) and ``identifiability`` (at the start: singular values,
-    condition number, each constant's relative sensitivity)."""
+    "reason", "rel_std_error"}), ``identifiability`` (at the start: singular values,
+    condition number, each constant's relative sensitivity) and ``residual`` (at the fit)."""
 
     values: dict
     scalars: dict
@@ -51,6 +51,7 @@ class UserFit:
     solver: str = "levenberg_marquardt"
     parameters: dict = field(default_factory=dict)
     identifiability: dict = field(default_factory=dict)
+    residual: np.ndarray | None = None  # (M,) float64: fitted - reference on ``mask``, RGB
 
 
 class _Residual:
@@ -78,7 +79,12 @@ class _Residual:
     def residual_and_jacobian(self, scalars: dict, names: list[str]):
         vals = self.shader.with_scalars(self.values, scalars)
         out, J = self.shader.render_with_jacobian(self.inputs, vals, names)
-        r = self._check(out.numpy())
+        return self.masked(out.numpy(), J, names)
+
+    def masked(self, out: dict, J: np.ndarray, names: list[str]):
+        """(residual (M,), Jacobian (M, k)) on the mask from a render ``out`` and its image
+        Jacobian ``J`` (H, W, 3, k)."""
+        r = self._check(out)
         J = J[self.mask].reshape(-1, len(names)).astype(np.float64)
         if not np.isfinite(J).all():
             raise FloatingPointError(f"{self.shader.label}: non-finite derivatives in {names}")
@@ -110,9 +116,9 @@ def _scalars(shader, values: dict, names: list[str]) -> dict:
     return out
 
 
-def _water(shader, inputs, reference, values, reference_mask) -> np.ndarray:
-    """The scored pixels: the shader's coverage (and ``reference_mask``) eroded by one pixel."""
-    cover = shader.render(inputs, values).numpy()["mask"] > 0.5
+def _water(cover: np.ndarray, reference, reference_mask) -> np.ndarray:
+    """The scored pixels: the shader's coverage ``cover`` (H, W) bool (and ``reference_mask``)
+    eroded by one pixel."""
     mask = erode(cover & reference_mask if reference_mask is not None else cover, 1)
     if not mask.any():
         raise ValueError("no water pixel in view: check the camera and the water quad")
@@ -180,11 +186,13 @@ def calibrate(
             f"reference is {reference.shape}, the inputs are {inputs.height}x{inputs.width}"
         )
     values = dict(shader.defaults() if start is None else {**shader.defaults(), **start})
-    mask = _water(shader, inputs, reference, values, reference_mask)
+    out0, J_img = shader.render_with_jacobian(inputs, values, names)
+    out0 = out0.numpy()
+    mask = _water(out0["mask"] > 0.5, reference, reference_mask)
     res = _Residual(shader, inputs, reference, mask, values)
     x0 = _scalars(shader, values, names)
     problem = user_problem(shader, res, names, x0)
-    r0, J0 = res.residual_and_jacobian(x0, names)
+    r0, J0 = res.masked(out0, J_img, names)
     scales = [problem.params[n].typical for n in names]
     id0 = identify(J0, names, scales=scales)
     free = [n for n in names if not id0.freeze[n]]
@@ -225,4 +233,5 @@ def calibrate(
             "condition": id0.condition if np.isfinite(id0.condition) else None,
             "sensitivity": [id0.sensitivity[n] for n in names],
         },
+        r1,
     )

@@ -67,9 +67,10 @@ def _frames(text: str, mv: str):
     return exp, load_frames(exp, mv)
 
 
-def _render_frames(job: dict, data: dict, mv: str, schedule: dict | None = None) -> tuple:
-    """The point's constants (at ``schedule`` in place of its own, when given) on every frame
-    at ``resolution``: (images, scored masks)."""
+def _render_frames(job: dict, data: dict, mv: str, schedules: tuple = (None,)) -> tuple:
+    """The point's constants on every frame at ``resolution``, once per entry of ``schedules``
+    (None: its own schedule; else a schedule in place of it), each frame's model built once:
+    ([images per frame] per schedule, [scored mask per frame])."""
     from shaders_port import Constants
 
     from .._backend import drjit_backend
@@ -77,19 +78,22 @@ def _render_frames(job: dict, data: dict, mv: str, schedule: dict | None = None)
     from ..scene.baseline_inputs import inputs_for_shader
     from .tradeoff_user import user_image
 
-    images, masks = [], []
+    images, masks = [[] for _ in schedules], []
     for e, base, ref in zip(data["frames"], data["base"], data["refs"]):
-        if is_user(job["variant"]):
+        if is_user(job["variant"]):  # a user's shader has no schedule of the study's
             img, m = user_image(e, base, job["constants"])
+            for out in images:
+                out.append(img)
         else:
             inputs = inputs_for_shader(e, base, job["variant"], mv, log=lambda m: None)
             model = ShaderModel.from_experiment(
                 e, inputs, ref.image, shader=job["variant"], backend=drjit_backend(mv),
                 resolution=tuple(e["resolution"]),
             )  # fmt: skip
-            img, _ = model.render(Constants.from_dict(job["constants"]).replace(**(schedule or {})))
+            c = Constants.from_dict(job["constants"])
+            for out, sched in zip(images, schedules):
+                out.append(model.render(c.replace(**(sched or {})))[0])
             m = model.mask
-        images.append(img)
         masks.append(m)
     return images, masks
 
@@ -102,7 +106,10 @@ def motion_job(job: dict) -> dict:
     mv = job.get("mitsuba_variant", "llvm_ad_rgb")
     _, data = _frames(json.dumps(job["scene"], sort_keys=True), mv)
     refs = data["refs"]
-    images, masks = _render_frames(job, data, mv)
+    conv_schedule = job.get("converged_schedule")  # the same constants, the raymarch converged
+    schedules = (None, conv_schedule) if conv_schedule else (None,)
+    renders, masks = _render_frames(job, data, mv, schedules)
+    images = renders[0]
     flips = np.array([errors(r.image, i, m)["flip"] for r, i, m in zip(refs, images, masks)])
     mask = np.logical_and.reduce(masks)
     t = temporal_errors(
@@ -122,14 +129,10 @@ def motion_job(job: dict) -> dict:
         "pair_ms": [p * p for p in t["per_pair"]],
         "mask_pixels": int(mask.sum()),
     }
-    if job.get("converged_schedule"):  # the same constants, the raymarch converged
-        conv, cmasks = _render_frames(job, data, mv, job["converged_schedule"])
-        both = mask & np.logical_and.reduce(cmasks)
-        c = temporal_errors([r.image for r in refs], conv, both)
-        s = temporal_errors([r.image for r in refs], images, both)
+    if conv_schedule:
+        c = temporal_errors([r.image for r in refs], renders[1], mask)
         out["converged_trmse"] = c["trmse"]
-        out["converged_pair_ms"] = [p * p for p in c["per_pair"]]
-        out["pair_ms_on_converged_mask"] = [p * p for p in s["per_pair"]]
+        out["converged_pair_ms"] = [p * p for p in c["per_pair"]]  # on the same pixels
     return out
 
 
@@ -153,7 +156,7 @@ def _banding(pts: list, z: float, tolerance: float) -> list[dict]:
     for r in sorted(pts, key=lambda r: (r["variant"], r.get(COST) or 0.0)):
         if not r.get("converged_pair_ms"):
             continue
-        mine, conv = r["pair_ms_on_converged_mask"], r["converged_pair_ms"]
+        mine, conv = r["pair_ms"], r["converged_pair_ms"]
         d, se = paired(mine, conv)
         rel = math.sqrt(float(np.mean(mine)) / float(np.mean(conv))) - 1.0
         out.append(
@@ -268,7 +271,7 @@ def run_motion(exps, experiments, overrides, rows, recs, summary, client, out, l
           if m["status"] == "ok"}  # fmt: skip
     fields = ("frames", "flip_frames", "flip_frames_mean", "flip_frames_spread", "trmse",
               "trmse_excess", "noise", "change_ratio", "pair_ms", "converged_trmse",
-              "converged_pair_ms", "pair_ms_on_converged_mask")  # fmt: skip
+              "converged_pair_ms")  # fmt: skip
     for e, _ in animated:
         pts = []
         for r in recs:

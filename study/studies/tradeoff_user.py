@@ -62,14 +62,15 @@ def user_jobs(exps, specs) -> list[dict]:
     return jobs
 
 
-def _scored_mask(exp, shader, inputs, values) -> np.ndarray:
-    """(H, W) bool at the inputs' size: the shader's coverage and the reference's water, eroded
-    by one pixel (the mask ``study.fit.model.ShaderModel`` scores the study's shaders on)."""
+def _scored_mask(exp, out: dict) -> np.ndarray:
+    """(H, W) bool at the size of the render ``out`` (``ShaderOutput.numpy()``): the shader's
+    coverage and the reference's water, eroded by one pixel (the mask
+    ``study.fit.model.ShaderModel`` scores the study's shaders on)."""
     from .._metrics import erode
     from ..scene.reference import water_mask
 
-    cover = shader.render(inputs, values).numpy()["mask"] > 0.5
-    return erode(cover & water_mask(exp, inputs.width, inputs.height), 1)
+    cover = out["mask"] > 0.5
+    return erode(cover & water_mask(exp, cover.shape[1], cover.shape[0]), 1)
 
 
 def user_point_job(job: dict) -> dict:
@@ -90,11 +91,10 @@ def user_point_job(job: dict) -> dict:
     fit = calibrate(shader, small, target, reference_mask=water_mask(exp, w, h),
                     max_iterations=exp["fit.max_steps"], solver=exp["fit.solver"])  # fmt: skip
     fit_s = time.perf_counter() - t0
-    r = (shader.render(small, fit.values).numpy()["color"] - target)[fit.mask].ravel()
     fitted = [n for n, p in fit.parameters.items() if p["status"] in ("fitted", "bound")]
-    ic = information_criteria(r.astype(np.float64), len(fitted))
+    ic = information_criteria(fit.residual, len(fitted))
     out_full = shader.render(inputs, fit.values).numpy()
-    mask = _scored_mask(exp, shader, inputs, fit.values)
+    mask = _scored_mask(exp, out_full)
     err = errors(ref.image, out_full["color"], mask)
     out = {
         "flip": err["flip"],
@@ -133,7 +133,8 @@ def user_image(exp, inputs, constants: dict) -> tuple[np.ndarray, np.ndarray]:
     the inputs' size: (image (H, W, 3) float32 linear RGB, the scored mask (H, W) bool)."""
     shader = _shader_of(exp)
     values = shader.with_scalars(shader.defaults(), constants)
-    return shader.render(inputs, values).numpy()["color"], _scored_mask(exp, shader, inputs, values)
+    out = shader.render(inputs, values).numpy()
+    return out["color"], _scored_mask(exp, out)
 
 
 def export_user(exps, specs, rows: list, out: Path, variant: str, log) -> dict:
