@@ -177,6 +177,13 @@ class UserShader:
                 raise ValueError(f"{self.label}: the bound name {name} is not used by the shader")
         return self
 
+    def study_inputs(self) -> set[str]:
+        """The study's inputs (:data:`spirv_port.STUDY_INPUTS`) the shader reads: by their own
+        names in its code (comments left out), or through a binding."""
+        code = re.sub(r"//.*|/\*.*?\*/", "", self.source, flags=re.S)
+        named = {n for n in spirv_port.STUDY_INPUTS if re.search(rf"\b{re.escape(n)}\b", code)}
+        return named | set(self.bindings.values())
+
     # ---- values ----------------------------------------------------------------------------
     def defaults(self) -> dict:
         return {n: c.default if len(c.default) > 1 else c.default[0] for n, c in

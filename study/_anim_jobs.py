@@ -18,7 +18,7 @@ import numpy as np
 
 from ._io import write_exr, write_json
 from ._progress import log as _log
-from .report.gl_check import gl_check, target_checks
+from .fit.model import constants_json
 
 
 def _score(frames, refs, inputs, backend, constants: dict) -> dict:
@@ -26,12 +26,10 @@ def _score(frames, refs, inputs, backend, constants: dict) -> dict:
     RMSE and FLIP, their mean and spread (standard deviation over frames), the images, and the
     temporal error on the pixels that are water in every frame."""
     from ._metrics import errors, temporal_errors
-    from .fit.model import ShaderModel
+    from .fit.build import build_model
 
     full = [
-        ShaderModel.from_experiment(
-            e, i, r.image, backend=backend, resolution=tuple(e["resolution"])
-        )
+        build_model(e, i, r.image, backend=backend, resolution=tuple(e["resolution"]))
         for e, i, r in zip(frames, inputs, refs)
     ]
     mask = np.logical_and.reduce([m.mask for m in full])
@@ -66,11 +64,11 @@ def run_calibrate_animated(exp, variant: str, out: Path, solver: str, cache=None
     ``report.md``. Returns the JSON object written."""
     from ._backend import drjit_backend
     from .fit.calibrate import calibrate_model, scene_frozen, timed
+    from ._jobs import export_calibration
+    from .fit.build import build_model
     from .fit.joint import joint_calibrate
-    from .fit.model import ShaderModel, constants_from_experiment
     from .report.animation import animation_figures, write_animation_report
     from .scene.frame_data import load_frames
-    from .report.export import export_shaders
 
     if exp["fit.input_noise"] != "ignore":
         from .scene.errors import ExperimentError
@@ -85,16 +83,16 @@ def run_calibrate_animated(exp, variant: str, out: Path, solver: str, cache=None
     frames, refs, inputs = data["frames"], data["refs"], data["inputs"]
     timings = {"setup_s": setup_s, **data["timings"]}
     backend = drjit_backend(variant)
-    start = constants_from_experiment(exp)
     names = [f"frame{k}" for k in range(len(frames))]
     with timed(timings, "model_s"):
         models = [
-            ShaderModel.from_experiment(e, i, r.image, backend=backend, stderr_full=r.stderr)
+            build_model(e, i, r.image, backend=backend, stderr_full=r.stderr)
             for e, i, r in zip(frames, inputs, refs)
         ]
+    start = models[0].start_constants(exp)
     frozen = [scene_frozen(e) for e in frames]
     params, steps = exp["fit.parameters"], exp["fit.max_steps"]
-    _log(f"calibrate: fitting {params} of {models[0].shader} with {solver} on {len(frames)} frames")
+    _log(f"calibrate: fitting {params} of {models[0].label} with {solver} on {len(frames)} frames")
     with timed(timings, "fit_s"):
         joint = joint_calibrate(models, start, params, solver, steps, frozen, names)
     _log("calibrate: fitting frame 0 alone (the still frame's constants)")
@@ -110,20 +108,18 @@ def run_calibrate_animated(exp, variant: str, out: Path, solver: str, cache=None
             backend,
             {"start": start, "single_frame": single.fitted, "all_frames": joint.fitted},
         )
-    shader = models[0].shader
-    with timed(timings, "export_s"):
-        export_shaders(joint.fitted, out / "shaders", [shader], targets=None)
-        offsets = _write_offsets(out / "shaders" / "animation.json", exp, frames)
-    with timed(timings, "gl_check_s"):
-        _log(f"calibrate: running the exported shader on OpenGL, {len(frames)} frames")
-        gl_frames = [gl_check(shader, i, joint.fitted, out / "shaders") for i in inputs]
-        engine_targets = target_checks(shader, inputs[0], joint.fitted, out / "shaders")
+    shader = models[0].label
+    gl_frames, engine_targets, extra = export_calibration(
+        exp, models[0], inputs, joint.fitted, out, timings
+    )
+    offsets = _write_offsets(out / "shaders" / "animation.json", exp, frames)
     with timed(timings, "figures_s"):
         figs = animation_figures(out, refs, ev, exp["animation.time_step"])
         write_exr(out / "fitted_frame0.exr", ev["images"]["all_frames"][0])
     timings["total_s"] = time.perf_counter() - t_start
     summary = _result(exp, variant, shader, joint, single, ev, solver, timings, gl_frames)
     summary["engine_targets"] = engine_targets
+    summary.update(extra)
     summary["animation"].update(
         {
             "offsets": offsets,
@@ -195,7 +191,7 @@ def _result(exp, variant, shader, joint, single, ev, solver, timings, gl_frames)
         shader=shader,
         backend=variant,
         parameters=joint.parameters,
-        constants=joint.fitted.to_dict(),
+        constants=constants_json(joint.fitted),
         error={
             "rmse": {"default": sc["start"]["rmse_mean"], "fitted": sc["all_frames"]["rmse_mean"]},
             "flip": {"default": sc["start"]["flip_mean"], "fitted": sc["all_frames"]["flip_mean"]},
@@ -215,7 +211,7 @@ def _result(exp, variant, shader, joint, single, ev, solver, timings, gl_frames)
         "time_step": exp["animation.time_step"],
         "velocities": exp["animation.velocities"],
         "single_frame": {
-            "constants": single.fitted.to_dict(),
+            "constants": constants_json(single.fitted),
             "parameters": single.parameters,
             "fit": single.fit_summary,
         },

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import hashlib
 import time
 from pathlib import Path
 
@@ -10,7 +11,8 @@ import numpy as np
 from ._backend import init_backend
 from .scene.experiment import is_user_shader, load_experiment
 from ._io import write_exr, write_json, write_png
-from .report.gl_check import gl_check, target_checks
+from .fit.model import constants_json
+from .report.gl_check import gl_check, gl_check_user, manifest_checks, target_checks
 from ._progress import log as _log
 
 
@@ -97,10 +99,7 @@ def load_scene_data(exp, variant, cache=None):
         )
     with st.stage("inputs_s", "shader inputs"):
         inputs = load_or_build_shader_inputs(exp, variant, cache=cache, log=_log, progress=st)
-        if not is_user_shader(exp["fit.shader"]):  # a user's shader reads the study's inputs
-            inputs = inputs_for_shader(
-                exp, inputs, exp["fit.shader"], variant, cache=cache, log=_log
-            )
+        inputs = inputs_for_shader(exp, inputs, exp["fit.shader"], variant, cache=cache, log=_log)
     return ref, inputs, st.timings
 
 
@@ -223,15 +222,25 @@ def _refuse_animated(experiments, overrides, command: str) -> None:
 
 def run_export(constants_json, out, targets=None) -> list:
     """``study export``: the shipped shaders with the constants of a JSON file, in
-    ``out/shaders``; ``targets``: engine targets, a comma-separated string or list, 'none', or
-    None (every one the installed tools can make)."""
-    from .report.export import export_shaders, load_constants_json
+    ``out/shaders`` (a user's shader's ``constants.json``: its file with them); ``targets``:
+    engine targets, a comma-separated string or list, 'none', or None (every one the installed
+    tools can make)."""
+    from .report.export import (
+        export_shaders,
+        export_user_shader,
+        load_constants_json,
+        user_shader_of,
+    )
 
     if isinstance(targets, str):
         targets = [] if targets == "none" else [t for t in targets.split(",") if t]
     constants = load_constants_json(constants_json)
     out = Path(out)
-    paths = export_shaders(constants, out / "shaders", targets=targets)
+    user = user_shader_of(constants_json)
+    if user is None:
+        paths = export_shaders(constants, out / "shaders", targets=targets)
+    else:
+        paths = export_user_shader(user, constants, out / "shaders", targets=targets)
     made = sorted(p.name for p in (out / "shaders").iterdir() if p.is_dir())
     _log(
         f"export: wrote {len(paths)} files to {out / 'shaders'} ({', '.join(made)}; GLSL compiled "
@@ -242,28 +251,21 @@ def run_export(constants_json, out, targets=None) -> list:
 
 def run_calibrate(experiment, out, overrides=None, variant=None, solver=None, cache=None) -> dict:
     """``study calibrate``: reference (cached), fit, export, GL check, figures, report.md and
-    constants.json (a ``CalibrationResult``) in ``out``; an animated experiment
+    constants.json (a ``CalibrationResult``) in ``out``, for a shader of the study's space or a
+    user's GLSL file alike (``study.fit.build.build_model``); an animated experiment
     (``animation.frames`` > 1) is fitted on all its frames (``study._anim_jobs``). Returns the JSON
     object written."""
     from ._backend import drjit_backend
+    from .fit.build import build_model
     from .fit.calibrate import calibrate_model, scene_frozen, timed
     from .fit.decorrelated import half_models, texture_half_models
-    from .fit.model import ShaderModel, constants_from_experiment
     from .fit.solvers import SOLVERS
-    from .report.export import export_shaders
 
     if solver is not None and solver not in SOLVERS:
         raise ValueError(f"unknown solver {solver!r}; choose one of {', '.join(SOLVERS)}")
     t_start = time.perf_counter()
     exp, variant, out = prepare(experiment, out, overrides, variant, frames=True)
     setup_s = time.perf_counter() - t_start
-    if is_user_shader(exp["fit.shader"]):
-        from ._user_jobs import calibrate_user_shader
-
-        ref, inputs, timings = load_scene_data(exp, variant, cache)
-        return calibrate_user_shader(
-            exp, variant, out, ref, inputs, {"setup_s": setup_s, **timings}
-        )
     solver = solver or exp["fit.solver"]
     from .scene.frames import is_animated
 
@@ -274,15 +276,14 @@ def run_calibrate(experiment, out, overrides=None, variant=None, solver=None, ca
     ref, inputs, timings = load_scene_data(exp, variant, cache)
     timings = {"setup_s": setup_s, **timings}
     backend = drjit_backend(variant)
-    start = constants_from_experiment(exp)
     with timed(timings, "model_s"):
-        model = ShaderModel.from_experiment(
-            exp, inputs, ref.image, backend=backend, stderr_full=ref.stderr
-        )
+        model = build_model(exp, inputs, ref.image, backend=backend, stderr_full=ref.stderr)
+        start = model.start_constants(exp)
         halves = half_models(exp, inputs, ref.image, backend=backend)
         check = halves or texture_half_models(exp, inputs, ref.image, backend=backend)
+    names = model.parameter_names(exp["fit.parameters"])
     _log(
-        f"calibrate: fitting {exp['fit.parameters']} of {model.shader} with {solver} on "
+        f"calibrate: fitting {', '.join(names)} of {model.label} with {solver} on "
         f"{int(model.mask.sum())} water pixels at "
         f"{exp['fit.resolution'][0]}x{exp['fit.resolution'][1]}"
     )
@@ -300,19 +301,58 @@ def run_calibrate(experiment, out, overrides=None, variant=None, solver=None, ca
         )
     with timed(timings, "evaluate_s"):
         ev = _evaluate_calibration(exp, inputs, ref, model, cal, backend)
-    with timed(timings, "export_s"):
-        _log(f"calibrate: exporting and compiling {model.shader} (and its vertex shader)")
-        export_shaders(cal.fitted, out / "shaders", [model.shader], targets=None)
-    with timed(timings, "gl_check_s"):
-        _log("calibrate: running the exported shader on OpenGL (llvmpipe)")
-        gl = gl_check(model.shader, inputs, cal.fitted, out / "shaders")
-        engine_targets = target_checks(model.shader, inputs, cal.fitted, out / "shaders")
+    (gl,), engine_targets, extra = export_calibration(
+        exp, model, [inputs], cal.fitted, out, timings
+    )
     with timed(timings, "figures_s"):
         figs = _calibration_figures(out, exp, model, ref, ev, cal, solver)
     timings["total_s"] = time.perf_counter() - t_start  # up to the report (written last)
     result = _calibration_result(exp, variant, model, ref, cal, ev, solver, timings, gl)
     result.engine_targets = engine_targets
+    result.extra.update(extra)
     return _write_result(out, result, figs, ev)
+
+
+def export_calibration(exp, model, frames: list, fitted, out: Path, timings: dict):
+    """The fitted shader exported into ``out/shaders``: a variant's core and compatibility GLSL,
+    or a copy of a user's file with the fitted constants in place (``fit.write_back = "file"``:
+    the file itself too, once the GL check passed); every engine target the installed tools
+    make. Then run on OpenGL (llvmpipe) against the Dr.Jit shader on each of ``frames`` (shader
+    inputs at the experiment's resolution), and the engine targets' checks. Returns (a GL check
+    per frame, engine targets, what the result adds for a user's file)."""
+    from .fit.calibrate import timed
+    from .report.export import export_shaders, export_user_shader
+
+    shaders = out / "shaders"
+    user = getattr(model, "user_shader", None)
+    with timed(timings, "export_s"):
+        _log(f"calibrate: exporting and compiling {model.label} (and its vertex shader)")
+        if user is None:
+            export_shaders(fitted, shaders, [model.shader], targets=None)
+        else:
+            export_user_shader(user, fitted, shaders, targets=None)
+    with timed(timings, "gl_check_s"):
+        _log(f"calibrate: running the exported shader on OpenGL (llvmpipe), {len(frames)} frame(s)")
+        if user is None:
+            gl = [gl_check(model.shader, i, fitted, shaders) for i in frames]
+            return gl, target_checks(model.shader, frames[0], fitted, shaders), {}
+        gl = [gl_check_user(user, i, fitted, user.render(i, fitted).numpy()) for i in frames]
+    if exp["fit.write_back"] == "file":
+        if not all(g["passed"] is not False for g in gl):
+            _log(f"calibrate: {user.label} not written back: the GL check failed")
+        else:
+            text = (shaders / "core" / user.label).read_text(encoding="utf-8")
+            Path(exp["fit.shader"]).write_text(text, "utf-8")
+            _log(f"calibrate: wrote the fitted constants into {exp['fit.shader']}")
+    extra = {
+        "shader_file": str(exp["fit.shader"]),
+        "shader_sha256": hashlib.sha256(user.source.encode("utf-8")).hexdigest(),
+        "declaration": {
+            "constants": {n: [c.lo, c.hi] for n, c in user.constants.items()},
+            "bindings": dict(user.bindings),
+        },
+    }
+    return gl, manifest_checks(shaders), extra
 
 
 def _evaluate_calibration(exp, inputs, ref, model, cal, backend) -> dict:
@@ -321,17 +361,18 @@ def _evaluate_calibration(exp, inputs, ref, model, cal, backend) -> dict:
     on the water pixels), the fitted render's diagnostics ``diag1`` and the ``parsimony`` of the
     fit at the fit resolution (information criteria)."""
     from ._metrics import errors, information_criteria
-    from .fit.model import ShaderModel
+    from .fit.build import build_model
 
     w, h = exp["resolution"]
-    full = ShaderModel.from_experiment(exp, inputs, ref.image, backend=backend, resolution=(w, h))
+    full = build_model(exp, inputs, ref.image, shader=_shader_of(exp, model), backend=backend,
+                       resolution=(w, h))  # fmt: skip
     img0, _ = full.render(cal.start)
     img1, diag1 = full.render(cal.fitted)
     fitted_names = [n for n, p in cal.parameters.items() if p["status"] in ("fitted", "bound")]
     parsimony = {
         **information_criteria(model.residual(cal.fitted), len(fitted_names)),
         "fitted": fitted_names,
-        "defines": list(model.variant.defines),
+        "defines": list(model.defines),
     }
     return {
         "full": full,
@@ -342,6 +383,11 @@ def _evaluate_calibration(exp, inputs, ref, model, cal, backend) -> dict:
         "e1": errors(ref.image, img1, full.mask),
         "parsimony": parsimony,
     }
+
+
+def _shader_of(exp, model) -> str:
+    """What ``fit.shader`` names for ``model``: a variant's name, or the user's file's path."""
+    return str(exp["fit.shader"]) if is_user_shader(exp["fit.shader"]) else model.shader
 
 
 def _calibration_figures(out, exp, model, ref, ev, cal, solver) -> dict:
@@ -362,8 +408,8 @@ def _calibration_figures(out, exp, model, ref, ev, cal, solver) -> dict:
         out / figs["diagnostics"], ev["diag1"].maps, mask, title="diagnostics, fitted constants"
     )
     loss_figure(out / figs["loss"], {solver: cal.losses}, title="loss at each evaluation")
-    write_exr(out / "fitted.exr", ev["img1"], {"constants": cal.fitted.to_dict()})
-    write_exr(out / "default.exr", ev["img0"], {"constants": cal.start.to_dict()})
+    write_exr(out / "fitted.exr", ev["img1"], {"constants": constants_json(cal.fitted)})
+    write_exr(out / "default.exr", ev["img0"], {"constants": constants_json(cal.start)})
     write_exr(out / "reference.exr", ref.image, ref.provenance)
     return figs
 
@@ -377,7 +423,7 @@ def _calibration_result(exp, variant, model, ref, cal, ev, solver, timings, gl):
         shader=model.shader,
         backend=variant,
         parameters=cal.parameters,
-        constants=cal.fitted.to_dict(),
+        constants=constants_json(cal.fitted),
         error={
             "rmse": {"default": e0["rmse"], "fitted": e1["rmse"]},
             "flip": {"default": e0["flip"], "fitted": e1["flip"]},

@@ -10,10 +10,10 @@ from pathlib import Path
 
 from ._backend import init_backend
 from ._io import write_json
-from ._jobs import load_scene_data
+from ._jobs import export_calibration, load_scene_data
 from ._progress import log as _log
 from .fit.result import jsonable
-from .report.gl_check import gl_check, target_checks
+from .fit.model import constants_json
 from .scene.experiment import load_experiment
 
 
@@ -21,8 +21,8 @@ def _scenes(experiments, overrides, variant, cache):
     """Load every experiment (same overrides for all), its reference, inputs and fit model.
     Returns (variant, list of dicts: name, exp, ref, inputs, model, frozen)."""
     from ._backend import drjit_backend
+    from .fit.build import build_model
     from .fit.calibrate import scene_frozen
-    from .fit.model import ShaderModel
 
     if not experiments:
         raise ValueError("no experiment given")
@@ -39,7 +39,7 @@ def _scenes(experiments, overrides, variant, cache):
         if seen[name] > 1:
             name = f"{name}#{seen[name]}"
         ref, inputs, _ = load_scene_data(exp, variant, cache)
-        model = ShaderModel.from_experiment(exp, inputs, ref.image, backend=drjit_backend(variant))
+        model = build_model(exp, inputs, ref.image, backend=drjit_backend(variant))
         scenes.append(
             {
                 "name": name,
@@ -58,14 +58,14 @@ def _evaluator(scenes, variant):
     """evaluate(i, constants) -> RMSE and FLIP of scene i at its full resolution (water pixels)."""
     from ._backend import drjit_backend
     from ._metrics import errors
-    from .fit.model import ShaderModel
+    from .fit.build import build_model
 
     full = {}
 
     def evaluate(i, constants):
         s = scenes[i]
         if i not in full:
-            full[i] = ShaderModel.from_experiment(
+            full[i] = build_model(
                 s["exp"],
                 s["inputs"],
                 s["ref"].image,
@@ -94,15 +94,13 @@ def _joint_fit(scenes, variant, out: Path, solver):
     """The joint fit of ``scenes``, exported into ``out``. Returns (summary, calibration,
     evaluate)."""
     from .fit.joint import JointModel, joint_calibrate
-    from .fit.model import constants_from_experiment
-    from .report.export import export_shaders
     from .fit.result import CalibrationResult
     from .report.generalise import write_joint_report
 
     out.mkdir(parents=True, exist_ok=True)
-    first = scenes[0]["exp"]
+    first, model = scenes[0]["exp"], scenes[0]["model"]
     solver = solver or first["fit.solver"]
-    start = constants_from_experiment(first)
+    start = model.start_constants(first)
     t0 = time.perf_counter()
     cal = joint_calibrate(
         [s["model"] for s in scenes],
@@ -119,27 +117,27 @@ def _joint_fit(scenes, variant, out: Path, solver):
         s["name"]: {"default": evaluate(i, start), "fitted": evaluate(i, cal.fitted)}
         for i, s in enumerate(scenes)
     }
-    export_shaders(cal.fitted, out / "shaders", [scenes[0]["model"].shader], targets=None)
-    gl = gl_check(scenes[0]["model"].shader, scenes[0]["inputs"], cal.fitted, out / "shaders")
-    engine_targets = target_checks(
-        scenes[0]["model"].shader, scenes[0]["inputs"], cal.fitted, out / "shaders"
+    timings = {"fit_s": fit_s}
+    (gl,), engine_targets, extra = export_calibration(
+        first, model, [scenes[0]["inputs"]], cal.fitted, out, timings
     )
     weights = JointModel([s["model"] for s in scenes]).weights
     result = CalibrationResult(
-        shader=scenes[0]["model"].shader,
+        shader=model.label,
         backend=variant,
         parameters=cal.parameters,
-        constants=cal.fitted.to_dict(),
+        constants=constants_json(cal.fitted),
         error=per_scene,
         solver=solver,
         fit=cal.fit_summary,
         identifiability=cal.identifiability,
-        timings={"fit_s": fit_s},
+        timings=timings,
         gl_check=gl,
         experiments=[s["path"] for s in scenes],
         scenes=[s["name"] for s in scenes],
         weights={s["name"]: float(w) for s, w in zip(scenes, weights)},
         engine_targets=engine_targets,
+        extra=extra,
     )
     summary = result.to_json()
     write_json(out / "constants.json", summary)
@@ -154,7 +152,6 @@ def run_generalise(experiments, out, overrides=None, variant=None, solver=None, 
     fitted on the other scenes and its own fit) and the universal/scene-specific verdict per
     constant; generalise.json and generalise.md."""
     from .fit.joint import leave_one_out, universality
-    from .fit.model import constants_from_experiment
     from .report.generalise import write_generalise_report
 
     if len(experiments) < 2:
@@ -165,7 +162,7 @@ def run_generalise(experiments, out, overrides=None, variant=None, solver=None, 
     first = scenes[0]["exp"]
     rows = leave_one_out(
         [s["model"] for s in scenes],
-        constants_from_experiment(first),
+        scenes[0]["model"].start_constants(first),
         first["fit.parameters"],
         joint["solver"],
         first["fit.max_steps"],

@@ -15,7 +15,9 @@ from synthetic import synthetic_inputs
 from test_cli import TINY as CLI_TINY
 from shaders_port.spirv_port import STUDY_INPUTS
 from shaders_port.user_shader import UserShader
-from study.fit.user_shader import calibrate
+from study.fit.calibrate import calibrate_model
+from study.fit.model import get_value
+from study.fit.spirv_model import SpirvModel
 from test_water_refraction import FD_NOISE, FD_RTOL, save_failure
 
 SHADERS = Path(__file__).parent / "shaders"
@@ -34,6 +36,16 @@ def _shader(name: str) -> UserShader:
     return UserShader.from_file(SHADERS / f"{name}.frag")
 
 
+def _calibrate(shader: UserShader, inputs, target: np.ndarray, constants: list[str]):
+    """The study's one calibration (``calibrate_model``) of ``shader``'s ``constants`` against
+    ``target`` on its coverage: (Calibration, RMSE at the start, RMSE fitted)."""
+    model = SpirvModel(shader, inputs, target)
+    start = model.start_constants()
+    cal = calibrate_model(model, start, constants, "levenberg_marquardt", 30)
+    r0, r1 = model.residual(start), model.residual(cal.fitted)
+    return cal, float(np.sqrt(np.mean(r0**2))), float(np.sqrt(np.mean(r1**2)))
+
+
 @pytest.mark.parametrize("name", sorted(TRUTH))
 def test_calibrates_written_back_and_gl_checked(name, inputs, tmp_path):
     shader = _shader(name)
@@ -41,16 +53,18 @@ def test_calibrates_written_back_and_gl_checked(name, inputs, tmp_path):
     truth.update(TRUTH[name])
     target = shader.render(inputs, truth).numpy()["color"]
     names = [s for s in shader.scalar_names() if s.split("[")[0] in TRUTH[name]]
-    fit = calibrate(shader, inputs, target, names)
-    assert fit.rmse_start > 1e-3 and fit.rmse < 1e-5, (fit.rmse_start, fit.rmse, fit.reason)
+    cal, rmse_start, rmse = _calibrate(shader, inputs, target, sorted(TRUTH[name]))
+    assert sorted(cal.parameters) == sorted(names)
+    assert rmse_start > 1e-3 and rmse < 1e-5, (rmse_start, rmse, cal.fit_summary["message"])
     want = shader.with_scalars(truth, {})
     for s in names:
         base, _, idx = s.partition("[")
         t = want[base][int(idx[:-1])] if idx else want[base]
-        assert abs(fit.scalars[s] - t) <= 1e-3 * abs(t), (s, fit.scalars[s], t)
+        got = get_value(cal.fitted, s)
+        assert abs(got - t) <= 1e-3 * abs(t), (s, got, t)
     # written back: the constants replaced, every other byte the same; the file compiles and
     # runs on llvmpipe like the executor
-    text = shader.written(fit.values)
+    text = shader.written(cal.fitted)
     src = shader.source
     for c in sorted(shader.constants.values(), key=lambda c: -c.span[0]):
         src = src[: c.span[0]] + "@" + src[c.span[1] :]
@@ -59,7 +73,8 @@ def test_calibrates_written_back_and_gl_checked(name, inputs, tmp_path):
     out_file = tmp_path / f"{name}.frag"
     out_file.write_text(text)
     again = UserShader.from_file(out_file)
-    for s, v in fit.scalars.items():
+    for s in names:
+        v = get_value(cal.fitted, s)
         base, _, idx = s.partition("[")
         got = again.defaults()[base]
         got = got[int(idx[:-1])] if idx else got
@@ -125,13 +140,13 @@ def test_confounded_constant_is_frozen_and_the_rest_recovered(inputs):
     )
     shader = UserShader(src, "confounded.frag")
     target = shader.render(inputs, {"FOG_DENSITY": 0.8}).numpy()["color"]
-    fit = calibrate(shader, inputs, target, ["FOG_DENSITY", "FOG_SCALE", "BUMP"])
-    p = fit.parameters
+    cal, _, rmse = _calibrate(shader, inputs, target, ["FOG_DENSITY", "FOG_SCALE", "BUMP"])
+    p = cal.parameters
     frozen = [n for n in ("FOG_DENSITY", "FOG_SCALE") if p[n]["status"] == "frozen"]
     assert len(frozen) == 1 and "null space" in p[frozen[0]]["reason"], p
-    assert p[frozen[0]]["value"] == p[frozen[0]]["start"]
-    product = fit.scalars["FOG_DENSITY"] * fit.scalars["FOG_SCALE"]
-    assert abs(product - 0.8) <= 1e-3 * 0.8 and fit.rmse < 1e-5, (product, fit.rmse)
+    assert get_value(cal.fitted, frozen[0]) == p[frozen[0]]["default"]
+    product = get_value(cal.fitted, "FOG_DENSITY") * get_value(cal.fitted, "FOG_SCALE")
+    assert abs(product - 0.8) <= 1e-3 * 0.8 and rmse < 1e-5, (product, rmse)
     assert p["BUMP"]["status"] == "fitted" and p["BUMP"]["rel_std_error"] is not None
 
 
@@ -170,8 +185,6 @@ def test_experiment_refuses_a_bad_user_declaration(tmp_path):
     from study import load_experiment
     from study.scene.errors import ExperimentError
 
-    with pytest.raises(ExperimentError, match="leave fit.parameters unset"):
-        load_experiment(MY_WATER, ['fit.parameters=["bumptex_mult"]'])
     with pytest.raises(ExperimentError, match="fit.declare.*constant NAME LOW HIGH"):
         load_experiment(MY_WATER, ['fit.declare=["constant F0 0.0"]'])
     with pytest.raises(ExperimentError, match="no file"):
@@ -180,6 +193,9 @@ def test_experiment_refuses_a_bad_user_declaration(tmp_path):
         load_experiment(MY_WATER, ['fit.declare=["bind waveNormals normal_map"]'])
     exp = load_experiment(MY_WATER)
     assert Path(exp["fit.shader"]).is_file() and exp["fit.parameters"] is None
+    # fit.parameters names the study's constants (a shipped experiment's list): a user's
+    # shader fits those of its declaration
+    assert load_experiment(MY_WATER, ['fit.parameters=["bumptex_mult"]'])["fit.parameters"] is None
 
 
 @pytest.fixture(scope="module")
@@ -207,12 +223,26 @@ def test_study_calibrate_fits_and_gl_checks(user_run):
 
     out, mine, _ = user_run
     res = json.loads((out / "constants.json").read_text())
-    assert res["rmse"] < res["rmse_start"]
-    assert res["cost"]["fetches"] == 5.0 and res["cost"]["iterations"] == 0.0
+    # the layout of every calibration: start and fitted errors, statuses, diagnostics
+    for metric in ("rmse", "flip"):
+        assert res["error"][metric]["fitted"] < res["error"][metric]["default"], res["error"]
+    assert {p["status"] for p in res["parameters"].values()} <= {"fitted", "bound", "frozen"}
+    assert res["shader"] == "my_water.frag" and res["shader_file"] == str(mine)
+    d = res["diagnostics"]
+    assert d["fetches"]["mean"] == 5.0 and d["iterations"]["mean"] == 0.0
     if res["gl_check"]["ran"]:
         assert res["gl_check"]["passed"], res["gl_check"]
-    assert "RMSE" in (out / "report.md").read_text() and (out / "fit.png").is_file()
-    written = (out / "shaders" / "my_water.frag").read_text()
+    # the engine targets, translated from the written file and checked as the study's shaders'
+    from study.report.targets import resolve_targets
+
+    targets = res["engine_targets"]
+    assert set(targets) == set(resolve_targets(None)) and targets, targets
+    for target, t in targets.items():
+        assert t["files"] and all((out / "shaders" / f).is_file() for f in t["files"]), target
+    report = (out / "report.md").read_text()
+    assert "FLIP" in report and "`shaders/core/my_water.frag`" in report
+    assert (out / "comparison.png").is_file()
+    written = (out / "shaders" / "core" / "my_water.frag").read_text()
     fitted = UserShader(written, "my_water.frag", {"constants": {"F0": [0.0, 0.2]}}).defaults()
     for name, v in res["constants"].items():
         want = tuple(np.float32(v)) if isinstance(v, list) else np.float32(v)
@@ -228,7 +258,7 @@ def test_write_back_into_the_users_own_file(user_run):
     out, mine, before = user_run
     res = json.loads((out / "constants.json").read_text())
     after = mine.read_text()
-    assert after == (out / "shaders" / "my_water.frag").read_text()
+    assert after == (out / "shaders" / "core" / "my_water.frag").read_text()
     assert after != before and len(after.split("\n")) == len(before.split("\n"))
     changed = [a for a, b in zip(after.split("\n"), before.split("\n")) if a != b]
     assert changed and all(any(f" {n} = " in ln for n in res["constants"]) for ln in changed)

@@ -37,7 +37,7 @@ import numpy as np
 
 from shaders_port import Constants
 
-from .model import bounds, get_value, with_values
+from .model import get_value, with_values
 
 BASIN_PARAMETERS = ("bumptex_mult",)
 SPAN, POINTS = 0.12, 49  # grid: +- 12 % of the fitted value in 49 points (0.5 % apart)
@@ -95,7 +95,7 @@ def scan(
             f"points must be odd and at least 3 (the fitted value in the middle), got {points}"
         )
     v0 = get_value(at, name)
-    lo, hi = bounds(name)
+    lo, hi = model.bounds(name)
     grid = np.clip(v0 * (1.0 + np.linspace(-span, span, points)), lo, hi)
     res = [np.asarray(model.residual(with_values(at, {name: float(g)})), np.float64) for g in grid]
     loss = np.array([0.5 * float(r @ r) if np.all(np.isfinite(r)) else np.nan for r in res])

@@ -53,7 +53,8 @@ from shaders_port import Constants
 
 from .solvers import FTOL, FTOL_SE, FTOL_WINDOW, FitProblem, Param
 from .identify import identify, sweep_1d, sweep_2d
-from .model import ShaderModel, bounds, expand_parameters, get_value, with_values
+from .model import get_value, with_values
+from .protocol import CalibrationModel
 from .._progress import log as _log
 from .rounds import (
     REL_SE_MAX,
@@ -72,14 +73,16 @@ STEP_GRID = {
 
 
 def make_problem(
-    model: ShaderModel, start: Constants, names: list[str], progress: bool = True
+    model: CalibrationModel, start, names: list[str], progress: bool = True
 ) -> FitProblem:
-    """The fit problem over scalar constant ``names`` (e.g. 'water_color[1]') of ``model``."""
+    """The fit problem over scalar constant ``names`` (e.g. 'water_color[1]') of ``model``, each
+    kept in the model's range for it: a logistic transform, or ``clip`` (linear inside the box)
+    for a range from 0 (a best value of 0 must be reachable) or a start on a bound."""
     params = []
     for n in names:
-        lo, hi = bounds(n)
+        lo, hi = model.bounds(n)
         v = get_value(start, n)
-        clip = lo == 0.0 and n not in DISCRETE  # a best value of 0 must be reachable
+        clip = (lo == 0.0 or not lo < v < hi) and n not in DISCRETE
         params.append(
             Param(
                 n,
@@ -136,8 +139,14 @@ def _ident_dict(rep, names, J=None, r=None, values=None) -> dict:
 
 @dataclass
 class Calibration:
-    start: Constants
-    fitted: Constants
+    """The result of :func:`calibrate_model` for every model: ``start`` and ``fitted`` constants
+    (the model's kind: ``Constants`` or a dict of GLSL names), ``parameters`` (scalar name ->
+    default, fitted, status fitted | bound | frozen | swept, reason, sensitivities, standard
+    errors, basins), ``identifiability`` (at the start and at the solution), ``fit_summary``
+    (the solver's), ``losses`` (per evaluation) and the step ``sweep`` (or None)."""
+
+    start: Constants | dict
+    fitted: Constants | dict
     parameters: dict
     identifiability: dict
     fit_summary: dict
@@ -240,9 +249,9 @@ def _fit_summary(sol, fits, refined, solver) -> dict:
 
 
 def calibrate_model(
-    model: ShaderModel,
-    start: Constants,
-    requested: list[str],
+    model: CalibrationModel,
+    start: Constants | dict,
+    requested: list[str] | None,
     solver: str,
     max_steps: int,
     frozen_by_scene: dict | None = None,
@@ -265,9 +274,10 @@ def calibrate_model(
     (``study.fit.decorrelated.texture_half_models``); when given, a lower basin is refitted only
     if their decorrelated loss puts it lower too (``study.fit.basins.texture_delta``); one it
     does not is recorded as ``unconfirmed`` and reported.
-    ``requested`` names the seed's constants; a variant fits its own in their place
-    (``Variant.fit_names``, e.g. the Beer-Lambert absorptions for ``attenuation_distance``)."""
-    names = expand_parameters(model.variant.fit_names(requested))
+    ``requested`` names the constants to fit (``model.parameter_names`` turns them into scalar
+    names: a variant fits its own in place of the seed's, e.g. the Beer-Lambert absorptions for
+    ``attenuation_distance``; a user's shader, every declared constant when None)."""
+    names = model.parameter_names(requested)
     pre = {n: why for n, why in (frozen_by_scene or {}).items() if n in names}
     continuous = [n for n in names if n not in DISCRETE and n not in pre]
     discrete = [n for n in names if n in DISCRETE]
@@ -325,21 +335,20 @@ def calibrate_model(
 
 
 def calibrate_experiment(
-    model: ShaderModel,
+    model: CalibrationModel,
     exp,
-    start: Constants | None = None,
+    start: Constants | dict | None = None,
     requested: list[str] | None = None,
     halves: tuple | None = None,
 ) -> Calibration:
     """:func:`calibrate_model` with the experiment's fit settings (``fit.parameters``,
     ``fit.solver``, ``fit.max_steps``, the scene's own frozen constants), from ``start`` (default:
-    the experiment's start constants) over ``requested`` (default: ``fit.parameters``);
-    ``halves`` as there (``fit.input_noise``: ``study.fit.decorrelated.half_models``)."""
-    from .model import constants_from_experiment
-
+    the model's start constants for the experiment) over ``requested`` (default:
+    ``fit.parameters``); ``halves`` as there (``fit.input_noise``:
+    ``study.fit.decorrelated.half_models``)."""
     return calibrate_model(
         model,
-        constants_from_experiment(exp) if start is None else start,
+        model.start_constants(exp) if start is None else start,
         exp["fit.parameters"] if requested is None else requested,
         exp["fit.solver"],
         exp["fit.max_steps"],

@@ -201,8 +201,6 @@ def texture_half_models(exp, inputs, reference: np.ndarray, **kwargs) -> tuple |
 
 def _models_on_halves(exp, inputs, reference: np.ndarray, **kwargs) -> tuple:
     from ..scene.shader_inputs import half_inputs
-    from .model import ShaderModel
+    from .build import build_model
 
-    return tuple(
-        ShaderModel.from_experiment(exp, h, reference, **kwargs) for h in half_inputs(exp, inputs)
-    )
+    return tuple(build_model(exp, h, reference, **kwargs) for h in half_inputs(exp, inputs))

@@ -34,9 +34,9 @@ Z_UNIVERSAL = 2.0
 
 
 class JointModel:
-    """Stacked, equally weighted residuals of ``models`` (same ``shader``); the interface of a
-    :class:`ShaderModel` that the fit uses (``residual``, ``residual_and_jacobian``,
-    ``loss_ad``)."""
+    """Stacked, equally weighted residuals of ``models`` (same ``shader``: hand ports or a
+    user's shader through SPIR-V), a :class:`~study.fit.protocol.CalibrationModel`: the
+    parameters, their ranges and start constants are the first model's."""
 
     def __init__(self, models: list, names: list[str] | None = None):
         if len(models) < 1:
@@ -50,10 +50,30 @@ class JointModel:
         self.models = list(models)
         self.names = list(names) if names else [f"scene{i}" for i in range(len(models))]
         self.shader = models[0].shader
-        self.variant = models[0].variant
         sizes = np.array([3 * int(m.mask.sum()) for m in models], np.float64)
         self.sizes = sizes.astype(int).tolist()
         self.weights = np.sqrt(sizes.mean() / sizes)
+
+    @property
+    def label(self) -> str:
+        return self.models[0].label
+
+    @property
+    def defines(self) -> list[str]:
+        return self.models[0].defines
+
+    @property
+    def reference_stderr(self):
+        return None  # the scenes' noise is not stacked: no noise errors for a joint fit
+
+    def parameter_names(self, requested):
+        return self.models[0].parameter_names(requested)
+
+    def bounds(self, name: str) -> tuple[float, float]:
+        return self.models[0].bounds(name)
+
+    def start_constants(self, exp=None):
+        return self.models[0].start_constants(exp)
 
     def residual(self, constants: Constants) -> np.ndarray:
         """(sum m_i,) float64: each scene's residual times its weight."""

@@ -10,9 +10,9 @@ its residual is ``f(port) - f(reference)`` per water pixel and channel:
   error above ~0.02, which compresses glints and weighs dark water as the eye does; the
   Jacobian by the chain rule, ``J_f = f'(port) J``.
 
-The wrapper has the interface the fit uses (``residual``, ``residual_and_jacobian``, ``mask``,
-``shader``, ``variant``, ``reference_stderr`` carried through ``f`` to first order); ``loss_ad``
-(Adam's reverse mode) exists only for ``linear``.
+The wrapper is a :class:`~study.fit.protocol.CalibrationModel` (the model's parameters, ranges,
+start constants and renders; ``reference_stderr`` carried through ``f`` to first order);
+``loss_ad`` (Adam's reverse mode) exists only for ``linear``.
 """
 
 from __future__ import annotations
@@ -28,7 +28,7 @@ class LogResidualModel:
 
     def __init__(self, model, eps: float = LOG_EPS):
         self.base, self.eps = model, float(eps)
-        self.shader, self.mask, self.variant = model.shader, model.mask, model.variant
+        self.shader, self.mask = model.shader, model.mask
         self._ref = model.reference[model.mask].astype(np.float64).ravel()
         # the reference's standard error carried through f to first order,
         # sigma / (max(ref, 0) + eps)
@@ -38,6 +38,13 @@ class LogResidualModel:
             if se is None
             else (se / (np.maximum(model.reference, 0.0) + self.eps)).astype(np.float32)
         )
+
+    def __getattr__(self, name):
+        # the parameters, ranges, start constants, label and renders are the model's own
+        if name in ("label", "defines", "parameter_names", "bounds", "start_constants",
+                    "render", "reference", "inputs", "variant", "user_shader"):  # fmt: skip
+            return getattr(self.base, name)
+        raise AttributeError(name)
 
     def _f(self, x):
         return np.log(np.maximum(x, 0.0) + self.eps)

@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import threading
 import warnings
+from collections.abc import Mapping
 from dataclasses import dataclass
 
 import numpy as np
@@ -54,24 +55,39 @@ def split_name(name: str) -> tuple[str, int | None]:
     return name, None
 
 
-def get_value(c: Constants, name: str) -> float:
+def _component(c, base: str):
+    return c[base] if isinstance(c, Mapping) else getattr(c, base)
+
+
+def get_value(c: Constants | Mapping, name: str) -> float:
+    """The scalar ``name`` of ``c``: a hand port's ``Constants`` or a SPIR-V shader's values
+    ``{GLSL name: float | tuple}``."""
     base, idx = split_name(name)
-    v = getattr(c, base)
+    v = _component(c, base)
     return float(v[idx] if idx is not None else v)
 
 
-def with_values(c: Constants, values: dict) -> Constants:
-    """``c`` with scalar names set to ``values`` (floats, or Dr.Jit scalars for AD)."""
+def with_values(c: Constants | Mapping, values: dict) -> Constants | dict:
+    """``c`` (``Constants``, or a dict ``{GLSL name: float | tuple}``) with scalar names set to
+    ``values`` (floats, or Dr.Jit scalars for AD); a new object of the same kind."""
     changes: dict = {}
     for name, v in values.items():
         base, idx = split_name(name)
         if idx is None:
             changes[base] = v
         else:
-            comps = list(changes.get(base, getattr(c, base)))
+            comps = list(changes.get(base, _component(c, base)))
             comps[idx] = v
             changes[base] = tuple(comps)
-    return c.replace(**changes)
+    return {**c, **changes} if isinstance(c, Mapping) else c.replace(**changes)
+
+
+def constants_json(c: Constants | Mapping) -> dict:
+    """``c`` as a JSON object: ``Constants.to_dict()``, or ``{GLSL name: float | list}``."""
+    if isinstance(c, Mapping):
+        return {k: [float(x) for x in v] if isinstance(v, (tuple, list)) else float(v)
+                for k, v in c.items()}  # fmt: skip
+    return c.to_dict()
 
 
 def bounds(name: str) -> tuple[float, float]:
@@ -85,6 +101,29 @@ def constants_from_experiment(exp: Experiment) -> Constants:
     c = exp.section("constants")
     kw = {k: tuple(v) if isinstance(v, list) else v for k, v in c.items() if k in CONSTANT_SPECS}
     return Constants(**kw).validate()
+
+
+def at_resolution(
+    exp: Experiment,
+    inputs_full: ShaderInputs,
+    reference_full: np.ndarray,
+    resolution: tuple[int, int] | None = None,
+    stderr_full: np.ndarray | None = None,
+):
+    """What a model of ``exp`` is built from at ``resolution`` (width, height; default
+    ``fit.resolution``): (the inputs at that size, ``reference_full`` (H, W, 3) linear RGB
+    box-downsampled to it, ``stderr_full`` (the reference's per-pixel Monte Carlo standard
+    error) carried through the box filter (``study._metrics.downsample_stderr``) or None, the
+    reference scene's water mask (H, W) bool)."""
+    from ..scene.reference import water_mask
+
+    w, h = resolution or exp["fit.resolution"]
+    fy, fx = reference_full.shape[0] // h, reference_full.shape[1] // w
+    ref = downsample(reference_full, fy, fx) if (fy, fx) != (1, 1) else reference_full
+    se = None
+    if stderr_full is not None:
+        se = downsample_stderr(stderr_full, fy, fx) if (fy, fx) != (1, 1) else stderr_full
+    return inputs_full.with_resolution(w, h), ref, se, water_mask(exp, w, h)
 
 
 @dataclass
@@ -112,7 +151,7 @@ class Diagnostics:
 _DRJIT_LOCK = threading.RLock()
 
 
-def _thread_handoff(fn):
+def thread_handoff(fn):
     """Model methods run on whatever thread calls them, including a solver's callback threads
     (``jax.pure_callback``), which XLA may run concurrently. Dr.Jit must not be entered by
     two threads at once (measured: a segmentation fault inside the Jacobian pass), and arrays
@@ -134,10 +173,127 @@ def _thread_handoff(fn):
     return wrapper
 
 
-class ShaderModel:
+class ReferenceModel:
+    """A shader's renders of ``inputs`` against ``reference`` ((H, W, 3) float32 linear RGB, the
+    inputs' size): the scored mask, residuals, Jacobians and the reverse-mode loss; the
+    shader itself is two hooks, :meth:`_shade` (a ``ShaderOutput`` at given constants) and
+    :meth:`_shade_with_jacobian` (with the image Jacobian (H, W, 3, k)). ``reference_mask``:
+    (H, W) bool, the reference scene's water (the scored mask is the shader's coverage and it,
+    eroded by one pixel); ``reference_stderr``: (H, W, 3) float32, the reference's Monte Carlo
+    standard error per pixel, or None."""
+
+    #: what non-finite water pixels are called in errors
+    what = "the port"
+
+    def __init__(self, inputs, reference, backend="llvm", reference_mask=None,
+                 reference_stderr=None):  # fmt: skip
+        self.inputs, self.backend = inputs, backend
+        if reference.shape != (inputs.height, inputs.width, 3):
+            raise ValueError(
+                f"reference is {reference.shape}, inputs are {inputs.height}x{inputs.width}"
+            )
+        if reference_stderr is not None and reference_stderr.shape != reference.shape:
+            raise ValueError(
+                f"reference_stderr is {reference_stderr.shape}, the reference {reference.shape}"
+            )
+        self.reference = np.asarray(reference, np.float32)
+        self.reference_stderr = (
+            None if reference_stderr is None else np.asarray(reference_stderr, np.float32)
+        )
+        out = self._shade(self.start_constants()).numpy()
+        mask = out["mask"] > 0.5
+        if reference_mask is not None:
+            mask &= reference_mask
+        self.mask = erode(mask, 1)
+        if not self.mask.any():
+            raise ValueError("no water pixel in view: check the camera and pool.half_extent")
+        if not np.isfinite(self.reference[self.mask]).all():
+            raise ValueError("the reference has non-finite water pixels; render it again")
+        self.n_renders = 0
+        self.n_jacobians = 0
+
+    def _shade(self, constants):
+        raise NotImplementedError
+
+    def _shade_with_jacobian(self, constants, names: list[str]):
+        raise NotImplementedError
+
+    def start_constants(self, exp: Experiment | None = None):
+        raise NotImplementedError
+
+    @thread_handoff
+    def render(self, constants) -> tuple[np.ndarray, Diagnostics]:
+        """The shader's image (H, W, 3) float32 linear RGB and its diagnostics."""
+        with warnings.catch_warnings():
+            warnings.simplefilter(
+                "ignore", RuntimeWarning
+            )  # non-finite pixels are in the diagnostics
+            out = self._shade(constants).numpy()
+        self.n_renders += 1
+        return out["color"], Diagnostics(
+            {k: v for k, v in out.items() if k not in ("color", "mask")}
+        )
+
+    @thread_handoff
+    def residual(self, constants) -> np.ndarray:
+        """(M,) float64 shader - reference over water pixels and RGB channels."""
+        img, diag = self.render(constants)
+        self._check(diag)
+        return (img[self.mask] - self.reference[self.mask]).astype(np.float64).ravel()
+
+    @thread_handoff
+    def residual_and_jacobian(self, constants, names: list[str]) -> tuple[np.ndarray, np.ndarray]:
+        """(residual (M,), J (M, k)) with J the derivative w.r.t. the named scalar constants."""
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", RuntimeWarning)
+            out, jac = self._shade_with_jacobian(constants, names)
+        o = out.numpy()
+        self.n_jacobians += 1
+        self._check(Diagnostics({k: v for k, v in o.items() if k not in ("color", "mask")}))
+        r = (o["color"][self.mask] - self.reference[self.mask]).astype(np.float64).ravel()
+        J = np.asarray(jac)[self.mask].reshape(-1, len(names)).astype(np.float64)
+        if not np.all(np.isfinite(J)):
+            raise FloatingPointError(f"{self.label}: non-finite Jacobian entries for {names}")
+        return r, J
+
+    @thread_handoff
+    def loss_ad(self, constants):
+        """Dr.Jit loss ``0.5 * sum over water pixels and channels of (shader - reference)^2``
+        with the AD graph of any gradient-enabled constant attached (for reverse mode)."""
+        import drjit as dr
+
+        from shaders_port._texture import backend_types
+
+        m = backend_types(self.backend)
+        if not hasattr(self, "_ref_t"):
+            self._ref_t = m.TensorXf(self.reference)
+            self._mask_t = m.TensorXf(np.repeat(self.mask[..., None], 3, -1).astype(np.float32))
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", RuntimeWarning)
+            out = self._shade(constants)
+        self.n_renders += 1
+        bad = out.diagnostics.get("nonfinite")
+        if bad is not None and float(dr.sum(bad * self._mask_t[..., 0], axis=None).array[0]) > 0:
+            raise FloatingPointError(
+                f"{self.what} produced non-finite water pixels; see the 'nonfinite' diagnostic"
+            )
+        d = (out.color - self._ref_t) * self._mask_t
+        return (0.5 * dr.sum(d * d, axis=None)).array  # a size-1 Float
+
+    def _check(self, diag: Diagnostics) -> None:
+        bad = diag.maps.get("nonfinite")
+        if bad is not None and bad[self.mask].any():
+            raise FloatingPointError(
+                f"{self.what} produced {int(bad[self.mask].sum())} non-finite water "
+                "pixels; see the 'nonfinite' diagnostic"
+            )
+
+
+class ShaderModel(ReferenceModel):
     """The port of the shader variant ``shader`` (a name in ``shaders_port._variants.VARIANTS``)
-    on ``inputs`` compared against ``reference`` (same size); ``translated``: the variant's
-    GLSL executed through SPIR-V (``shaders_port.spirv_port``) in place of its port."""
+    on ``inputs`` compared against ``reference`` (same size; :class:`ReferenceModel`);
+    ``translated``: the variant's GLSL executed through SPIR-V (``shaders_port.spirv_port``) in
+    place of its port. Constants are ``shaders_port.Constants``."""
 
     def __init__(
         self,
@@ -149,34 +305,13 @@ class ShaderModel:
         reference_stderr: np.ndarray | None = None,
         translated: bool = False,
     ):
-        self.shader, self.inputs, self.backend = shader, inputs, backend
+        self.shader = shader
         self.variant = get_variant(shader)
         if translated:  # its GLSL file executed through SPIR-V in place of the hand port
             from shaders_port.spirv_port import Translated
 
             self.variant = Translated(self.variant)
-        if reference.shape != (inputs.height, inputs.width, 3):
-            raise ValueError(
-                f"reference is {reference.shape}, inputs are {inputs.height}x{inputs.width}"
-            )
-        if reference_stderr is not None and reference_stderr.shape != reference.shape:
-            raise ValueError(
-                f"reference_stderr is {reference_stderr.shape}, the reference {reference.shape}"
-            )
-        self.reference = np.asarray(reference, np.float32)
-        # (H, W, 3) float32 Monte Carlo standard error of each reference pixel (linear RGB), or None
-        self.reference_stderr = (
-            None if reference_stderr is None else np.asarray(reference_stderr, np.float32)
-        )
-        out = self.variant.render(inputs, Constants(), backend=backend).numpy()
-        mask = out["mask"] > 0.5
-        if reference_mask is not None:
-            mask &= reference_mask
-        self.mask = erode(mask, 1)
-        if not self.mask.any():
-            raise ValueError("no water pixel in view: check the camera and pool.half_extent")
-        self.n_renders = 0
-        self.n_jacobians = 0
+        super().__init__(inputs, reference, backend, reference_mask, reference_stderr)
 
     @classmethod
     def from_experiment(
@@ -191,94 +326,50 @@ class ShaderModel:
         translated: bool = False,
     ) -> "ShaderModel":
         """The model at ``resolution`` (default ``fit.resolution``) against the box-downsampled
-        ``reference_full`` (H, W, 3); ``stderr_full`` (H, W, 3), the reference's per-pixel Monte
-        Carlo standard error, is carried through the box filter
-        (``study._metrics.downsample_stderr``) for :func:`study.fit.calibrate.noise_errors`."""
-        from ..scene.reference import water_mask
-
-        w, h = resolution or exp["fit.resolution"]
-        fy, fx = reference_full.shape[0] // h, reference_full.shape[1] // w
-        ref = downsample(reference_full, fy, fx) if (fy, fx) != (1, 1) else reference_full
-        se = None
-        if stderr_full is not None:
-            se = downsample_stderr(stderr_full, fy, fx) if (fy, fx) != (1, 1) else stderr_full
+        ``reference_full`` (:func:`at_resolution`)."""
+        inputs, ref, se, water = at_resolution(
+            exp, inputs_full, reference_full, resolution, stderr_full
+        )
         return cls(
             shader or exp["fit.shader"],
-            inputs_full.with_resolution(w, h),
+            inputs,
             ref,
             backend,
-            reference_mask=water_mask(exp, w, h),
+            reference_mask=water,
             reference_stderr=se,
             translated=translated,
         )
 
-    @_thread_handoff
-    def render(self, constants: Constants) -> tuple[np.ndarray, Diagnostics]:
-        """Port image (H, W, 3) float32 linear RGB and its diagnostics."""
-        with warnings.catch_warnings():
-            warnings.simplefilter(
-                "ignore", RuntimeWarning
-            )  # non-finite pixels are in the diagnostics
-            out = self.variant.render(self.inputs, constants, backend=self.backend).numpy()
-        self.n_renders += 1
-        return out["color"], Diagnostics(
-            {k: v for k, v in out.items() if k not in ("color", "mask")}
+    # ---- the parameters (``study.fit.protocol.CalibrationModel``) ----------------------------
+    @property
+    def label(self) -> str:
+        """The variant's name, as reports and exports call the shader."""
+        return self.shader
+
+    @property
+    def defines(self) -> list[str]:
+        """The variant's ``#define`` switches."""
+        return list(self.variant.defines)
+
+    def parameter_names(self, requested: list[str]) -> list[str]:
+        """The scalar names fitted for the seed's constants ``requested``: a variant fits its
+        own in their place (``Variant.fit_names``, e.g. the Beer-Lambert absorptions for
+        ``attenuation_distance``); colours expand to RGB."""
+        return expand_parameters(self.variant.fit_names(requested))
+
+    def bounds(self, name: str) -> tuple[float, float]:
+        """The range of the scalar ``name`` (that of its constant in ``CONSTANT_SPECS``)."""
+        return bounds(name)
+
+    def start_constants(self, exp: Experiment | None = None) -> Constants:
+        """The start constants: the experiment's ``[constants]`` table, else the seed's."""
+        return Constants() if exp is None else constants_from_experiment(exp)
+
+    # ---- the shader ------------------------------------------------------------------------
+    def _shade(self, constants: Constants):
+        return self.variant.render(self.inputs, constants, backend=self.backend)
+
+    def _shade_with_jacobian(self, constants: Constants, names: list[str]):
+        return self.variant.render_with_jacobian(
+            self.inputs, constants, names, backend=self.backend
         )
-
-    @_thread_handoff
-    def residual(self, constants: Constants) -> np.ndarray:
-        """(M,) float64 port - reference over water pixels and RGB channels."""
-        img, diag = self.render(constants)
-        self._check(diag)
-        return (img[self.mask] - self.reference[self.mask]).astype(np.float64).ravel()
-
-    @_thread_handoff
-    def residual_and_jacobian(
-        self, constants: Constants, names: list[str]
-    ) -> tuple[np.ndarray, np.ndarray]:
-        """(residual (M,), J (M, k)) with J the derivative w.r.t. the named scalar constants."""
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore", RuntimeWarning)
-            out, jac = self.variant.render_with_jacobian(
-                self.inputs, constants, names, backend=self.backend
-            )
-        o = out.numpy()
-        self.n_jacobians += 1
-        self._check(Diagnostics({k: v for k, v in o.items() if k not in ("color", "mask")}))
-        r = (o["color"][self.mask] - self.reference[self.mask]).astype(np.float64).ravel()
-        J = np.asarray(jac)[self.mask].reshape(-1, len(names)).astype(np.float64)
-        if not np.all(np.isfinite(J)):
-            raise FloatingPointError(f"non-finite Jacobian entries for {names}")
-        return r, J
-
-    @_thread_handoff
-    def loss_ad(self, constants: Constants):
-        """Dr.Jit loss ``0.5 * sum over water pixels and channels of (port - reference)^2`` with
-        the AD graph of any gradient-enabled constant attached (for reverse mode)."""
-        import drjit as dr
-
-        from shaders_port._texture import backend_types
-
-        m = backend_types(self.backend)
-        if not hasattr(self, "_ref_t"):
-            self._ref_t = m.TensorXf(self.reference)
-            self._mask_t = m.TensorXf(np.repeat(self.mask[..., None], 3, -1).astype(np.float32))
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore", RuntimeWarning)
-            out = self.variant.render(self.inputs, constants, backend=self.backend)
-        self.n_renders += 1
-        bad = out.diagnostics.get("nonfinite")
-        if bad is not None and float(dr.sum(bad * self._mask_t[..., 0], axis=None).array[0]) > 0:
-            raise FloatingPointError(
-                "the port produced non-finite water pixels; see the 'nonfinite' diagnostic"
-            )
-        d = (out.color - self._ref_t) * self._mask_t
-        return (0.5 * dr.sum(d * d, axis=None)).array  # a size-1 Float
-
-    def _check(self, diag: Diagnostics) -> None:
-        bad = diag.maps.get("nonfinite")
-        if bad is not None and bad[self.mask].any():
-            raise FloatingPointError(
-                f"the port produced {int(bad[self.mask].sum())} non-finite water "
-                "pixels; see the 'nonfinite' diagnostic"
-            )

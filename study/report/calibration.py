@@ -256,8 +256,10 @@ def write_report(out: Path, summary: dict, figures: dict) -> Path:
     t = summary["timings"]
     lines += ["## Timings (seconds)", "", "| stage | s |", "|---|---|"]
     lines += [f"| {k} | {fmt(v, 3)} |" for k, v in t.items()] + [""]
-    lines += _export_lines(summary.get("gl_check"))
-    lines += engine_targets_section(summary.get("engine_targets") or {})
+    lines += _export_lines(summary.get("gl_check"), summary.get("shader_file"))
+    lines += engine_targets_section(
+        summary.get("engine_targets") or {}, user=bool(summary.get("shader_file"))
+    )
     path = out / "report.md"
     write_text_atomic(path, "\n".join(lines))
     return path
@@ -337,38 +339,53 @@ def _diagnostics_lines(d: dict, figure: str) -> list[str]:
     ]
 
 
-def _export_lines(gl: dict | None) -> list[str]:
-    """What was exported and how the GL check of the exported core shader went."""
+def _export_lines(gl: dict | None, user_file: str | None = None) -> list[str]:
+    """What was exported and how the GL check of the exported core shader went; ``user_file``:
+    the path of a user's shader (its copy with the fitted constants was exported)."""
     check = "."
-    if gl:
+    if gl and gl.get("ran", True) is False:
+        check = f"; not run on OpenGL ({gl['why']})."
+    elif gl:
         check = (
-            f"; the exported core shader on llvmpipe vs the port with the fitted constants: "
-            f"mean |diff| {fmt(gl['mean_abs'], 3)}, 99.9th percentile {fmt(gl['p999'], 3)}"
+            f"; the exported core shader on llvmpipe vs the Dr.Jit shader with the fitted "
+            f"constants: mean |diff| {fmt(gl['mean_abs'], 3)}, 99.9th percentile "
+            f"{fmt(gl['p999'], 3)}"
             + (
                 "."
                 if gl.get("passed")
                 else " -- **MISMATCH: do not ship these shaders; see constants.json gl_check**."
             )
         )
-    return [
-        "## Exported shaders",
-        "",
-        "`shaders/compat/` (GLSL 1.20, drop-in) and `shaders/core/` "
-        "(GLSL 330 core); every file compiled with glslangValidator" + check,
-        "",
-    ]
+    if user_file:
+        name = Path(user_file).name
+        what = (
+            f"`shaders/core/{name}` (your `{user_file}` with the fitted constants in place of "
+            "their initializers, every other byte as in your file) and `shaders/core/water.vert` "
+            "(the study's vertex shader it runs after); compiled with glslangValidator"
+        )
+    else:
+        what = (
+            "`shaders/compat/` (GLSL 1.20, drop-in) and `shaders/core/` "
+            "(GLSL 330 core); every file compiled with glslangValidator"
+        )
+    return ["## Exported shaders", "", what + check, ""]
 
 
-def engine_targets_section(targets: dict) -> list[str]:
-    """The report's "Engine targets" lines: each target written and what checked it."""
+def engine_targets_section(targets: dict, user: bool = False) -> list[str]:
+    """The report's "Engine targets" lines: each target written and what checked it; ``user``:
+    the export of a user's file (its constants stay as written, not specialization constants)."""
     if not targets:
         return []
+    how = (
+        "the fitted constants as written in the file"
+        if user
+        else "the fitted constants as named specialization constants"
+    )
     lines = [
         "## Engine targets",
         "",
-        "Translated from the core shader by glslang and SPIRV-Cross, the fitted constants as "
-        "named specialization constants; the binding sheet of each is `shaders/<target>/"
-        "BINDINGS.md` (see docs/engine.md).",
+        f"Translated from the core shader by glslang and SPIRV-Cross, {how}; the binding sheet "
+        "of each is `shaders/<target>/BINDINGS.md` (see docs/engine.md).",
         "",
         "| target | files | checked by |",
         "|---|---|---|",

@@ -36,9 +36,66 @@ from .targets import resolve_targets, translate_targets
 FRAGMENT_SHADERS = tuple(dict.fromkeys(VARIANTS[n].shader for n in SHIPPED))
 
 
-def load_constants_json(path) -> Constants:
+def load_constants_json(path) -> Constants | dict:
     """Constants from ``constants.json`` of ``study calibrate`` (its ``constants`` table) or from a
-    flat JSON object ``{name: value}`` with names of ``CONSTANT_SPECS``."""
+    flat JSON object ``{name: value}`` with names of ``CONSTANT_SPECS``; for the calibration of a
+    user's shader (its ``shader_file``), the dict ``{GLSL name: float | tuple}`` of its declared
+    constants (:func:`user_shader_of` reads the shader)."""
+    data = _read_json(path)
+    table = data.get("constants", data)
+    if not isinstance(table, dict):
+        raise ValueError(f"{path}: 'constants' must be an object of name -> value")
+    if "shader_file" in data:
+        shader = user_shader_of(path)
+        values = {k: tuple(v) if isinstance(v, list) else v for k, v in table.items()}
+        unknown = sorted(set(values) - set(shader.constants))
+        if unknown:
+            raise ValueError(
+                f"{path}: {', '.join(unknown)} is no constant that {shader.label} declares "
+                f"({', '.join(shader.constants)})"
+            )
+        return values
+    unknown = sorted(set(table) - set(CONSTANT_SPECS))
+    if unknown:
+        names = ", ".join(repr(u) if len(u) <= 80 else repr(u[:80]) + "..." for u in unknown[:5])
+        more = f" and {len(unknown) - 5} more" if len(unknown) > 5 else ""
+        raise ValueError(
+            f"{path}: unknown constant(s) {names}{more}; known: {sorted(CONSTANT_SPECS)} (the "
+            "study's shaders); a calibration of your own shader names its file as shader_file"
+        )
+    try:
+        return Constants.from_dict(table)
+    except (TypeError, ValueError) as exc:
+        raise ValueError(f"{path}: {exc}") from exc
+
+
+def user_shader_of(path):
+    """The ``UserShader`` a user shader's ``constants.json`` was fitted on (its ``shader_file``
+    and ``declaration``), or None for a calibration of the study's shaders. A file changed since
+    the calibration (its SHA-256 differs from ``shader_sha256``) is read as it is now, with a
+    note on stderr: the fitted values replace its constants' initializers."""
+    import hashlib
+    import sys
+
+    from shaders_port.user_shader import UserShader
+
+    data = _read_json(path)
+    if "shader_file" not in data:
+        return None
+    file = Path(data["shader_file"])
+    if not file.is_file():
+        raise ValueError(
+            f"{path}: the calibrated shader {file} is gone; put it back at that path or edit "
+            "shader_file"
+        )
+    shader = UserShader.from_file(file, data.get("declaration"))
+    sha = hashlib.sha256(shader.source.encode("utf-8")).hexdigest()
+    if data.get("shader_sha256") not in (None, sha):
+        print(f"export: {file} has changed since it was calibrated", file=sys.stderr)
+    return shader
+
+
+def _read_json(path) -> dict:
     path = Path(path)
     if not path.is_file():
         raise FileNotFoundError(f"constants file {path} does not exist")
@@ -48,20 +105,7 @@ def load_constants_json(path) -> Constants:
         raise ValueError(f"{path} is not valid JSON ({exc})") from exc
     if not isinstance(data, dict):
         raise ValueError(f"{path}: expected a JSON object of constants, got {type(data).__name__}")
-    table = data.get("constants", data)
-    if not isinstance(table, dict):
-        raise ValueError(f"{path}: 'constants' must be an object of name -> value")
-    unknown = sorted(set(table) - set(CONSTANT_SPECS))
-    if unknown:
-        names = ", ".join(repr(u) if len(u) <= 80 else repr(u[:80]) + "..." for u in unknown[:5])
-        more = f" and {len(unknown) - 5} more" if len(unknown) > 5 else ""
-        raise ValueError(
-            f"{path}: unknown constant(s) {names}{more}; known: {sorted(CONSTANT_SPECS)}"
-        )
-    try:
-        return Constants.from_dict(table)
-    except (TypeError, ValueError) as exc:
-        raise ValueError(f"{path}: {exc}") from exc
+    return data
 
 
 def export_shaders(constants: Constants, out_dir, shaders=None, targets=()) -> list[Path]:
@@ -91,6 +135,25 @@ def export_shaders(constants: Constants, out_dir, shaders=None, targets=()) -> l
                 bases[v.shader] if v.name == v.shader else v.source(dialect, text=bases[v.shader])
             )
             texts[(dialect, f"{v.name}.frag")] = text
+    return _write_checked(texts, out_dir, targets, constants)
+
+
+def export_user_shader(shader, values: dict, out_dir, targets=()) -> list[Path]:
+    """Write a user's shader (``shaders_port.user_shader.UserShader``) with ``values`` (GLSL
+    name -> float | tuple) in place of its constants' initializers, ``out_dir/core/<file>``,
+    beside the study's vertex shader it runs after, ``out_dir/core/water.vert``; ``targets``
+    as :func:`export_shaders` (translated from those two files). Compile-checked and written
+    all or not at all, as there; returns the written paths."""
+    texts = {
+        ("core", "water.vert"): read_source("water", "vert", "core"),
+        ("core", shader.label): shader.written(values),
+    }
+    return _write_checked(texts, out_dir, targets, values)
+
+
+def _write_checked(texts: dict, out_dir, targets, constants) -> list[Path]:
+    """Compile every text of ``texts`` ((dialect, file name) -> GLSL), translate the core ones
+    to ``targets``, write them into a temporary folder beside ``out_dir`` and swap it in."""
     for (dialect, fname), text in texts.items():
         compile_check(text, fname.rsplit(".", 1)[1])
     extra = {}

@@ -91,9 +91,18 @@ GLES_NOTE = (
 
 
 def target_checks(shader: str, inputs, constants, shaders_dir: Path) -> dict:
+    """What checked each engine target of an export of variant ``shader``
+    (:func:`manifest_checks`), with the HLSL round trip on llvmpipe against the port with
+    ``constants`` (:func:`hlsl_check`)."""
+    out = manifest_checks(shaders_dir)
+    if "hlsl" in out:
+        out["hlsl"]["llvmpipe"] = hlsl_check(shader, inputs, constants, shaders_dir)
+    return out
+
+
+def manifest_checks(shaders_dir: Path) -> dict:
     """What checked each engine target of an export (``targets.json``): the export's own check,
-    plus, for HLSL, the round trip on llvmpipe (:func:`hlsl_check`) and, for GLSL ES, why it did
-    not run. Empty when the export wrote no targets."""
+    and, for GLSL ES, why it did not run on llvmpipe. Empty when the export wrote no targets."""
     import json
 
     manifest = shaders_dir / "targets.json"
@@ -102,8 +111,6 @@ def target_checks(shader: str, inputs, constants, shaders_dir: Path) -> dict:
     out = {}
     for target, entry in json.loads(manifest.read_text())["targets"].items():
         out[target] = {"files": entry["files"], "check": entry["check"]}
-    if "hlsl" in out:
-        out["hlsl"]["llvmpipe"] = hlsl_check(shader, inputs, constants, shaders_dir)
     if "gles300" in out:
         out["gles300"]["llvmpipe"] = GLES_NOTE
     return out

@@ -241,13 +241,27 @@ def with_baseline_inputs(
     return dataclasses.replace(inputs, **fields)
 
 
+# the study's inputs a shader reads (``shaders_port.spirv_port.STUDY_INPUTS``) that only the
+# baseline's buffers hold
+SCREEN_INPUTS = ("sceneColor", "sceneDepth", "reflection_sampler", "o2v_projection_reflection")
+
+
 def inputs_for_shader(
     exp: Experiment, inputs: ShaderInputs, shader: str, variant: str, cache=None, log=print
 ) -> ShaderInputs:
-    """``inputs`` with whatever optional fields the shader variant ``shader`` reads (its
-    ``Variant.inputs``; today only the baseline's buffers), else ``inputs`` unchanged."""
+    """``inputs`` with whatever optional fields the shader ``shader`` reads: a variant's
+    ``Variant.inputs``, or, for a user's file (``*.frag``, with ``fit.declare``), the screen
+    buffers when it reads one of :data:`SCREEN_INPUTS` (by name or through a binding); else
+    ``inputs`` unchanged."""
     from shaders_port._variants import get_variant
 
-    if get_variant(shader).inputs:
+    from .experiment import is_user_shader, load_user_shader
+
+    if is_user_shader(shader):
+        reads = load_user_shader({**exp.values, "fit.shader": shader}).study_inputs()
+        needs = any(n in reads for n in SCREEN_INPUTS)
+    else:
+        needs = bool(get_variant(shader).inputs)
+    if needs:
         return with_baseline_inputs(exp, inputs, variant, cache=cache, log=log)
     return inputs

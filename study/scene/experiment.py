@@ -20,6 +20,8 @@ import numpy as np
 
 from shaders_port._variants import get_variant
 
+from .._progress import log
+
 from .errors import ExperimentError
 from .schema import (
     FIT_PARAMETERS,
@@ -142,12 +144,13 @@ def load_user_shader(values: dict):
 def _check_user_shader(values: dict, base) -> None:
     p = Path(values["fit.shader"]).expanduser()
     values["fit.shader"] = str((p if p.is_absolute() else (base or Path.cwd()) / p).resolve())
-    if values["fit.parameters"] is not None:
-        raise ExperimentError(
-            "fit.parameters: your own fit.shader fits the constants its declaration names "
-            "(`// @study constant ...` or fit.declare); leave fit.parameters unset"
+    shader = load_user_shader(values)
+    if values["fit.parameters"] is not None:  # e.g. a shipped experiment's list
+        log(
+            f"experiment: fit.parameters names the study's constants; {shader.label} fits the "
+            f"constants its declaration names ({', '.join(shader.constants)})"
         )
-    load_user_shader(values)
+        values["fit.parameters"] = None
 
 
 def fit_parameters(shader_name: str, listed: list | None) -> list[str]:
@@ -172,8 +175,6 @@ def fit_parameters(shader_name: str, listed: list | None) -> list[str]:
         )
     if dropped and (shader_name, tuple(dropped)) not in _NOTED:
         _NOTED.add((shader_name, tuple(dropped)))
-        from .._progress import log
-
         log(f"experiment: {shader_name} does not read {', '.join(dropped)}; not fitted")
     return kept
 

@@ -16,7 +16,6 @@ def load_frames(exp, variant: str, cache=None) -> dict:
     ``inputs_s``) and ``shared`` (the ``FrameShared`` record: what was built once, how often it
     was reused)."""
     from .baseline_inputs import inputs_for_shader
-    from .experiment import is_user_shader
     from .mitsuba_scene import build_scene, set_waves
     from .reference import load_or_render
     from .shader_inputs import load_or_build_shader_inputs
@@ -48,8 +47,7 @@ def load_frames(exp, variant: str, cache=None) -> dict:
                 e, variant, cache=cache, log=_log, progress=st, shared=shared
             )
             base.append(i)
-            if not is_user_shader(e["fit.shader"]):
-                i = inputs_for_shader(e, i, e["fit.shader"], variant, cache=cache, log=_log)
+            i = inputs_for_shader(e, i, e["fit.shader"], variant, cache=cache, log=_log)
             inputs.append(i)
         timings.update(st.timings)
     for what in ("reference_s", "inputs_s"):

@@ -331,15 +331,18 @@ def catalogue_scene(
     from shaders_port._raster import rasterize_water
 
     from .._metrics import flip_map
-    from ..fit.model import ShaderModel
+    from ..fit.build import build_model
 
     w, h = exp["resolution"]
-    model = ShaderModel.from_experiment(
-        exp, inputs, reference, shader=shader, backend=backend, resolution=(w, h)
-    )
+    model = build_model(exp, inputs, reference, shader=shader, backend=backend, resolution=(w, h))
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", RuntimeWarning)  # non-finite pixels are a class here
-        out = model.variant.render(model.inputs, constants, backend=backend, diagnose=True).numpy()
+        if hasattr(model, "user_shader"):
+            out = _user_maps(exp, model, constants, backend)
+        else:
+            out = model.variant.render(
+                model.inputs, constants, backend=backend, diagnose=True
+            ).numpy()
     water = out["mask"] > 0.5
     hidden = None
     if depth_complexity:
@@ -357,6 +360,8 @@ def catalogue_scene(
         refl_missed[r.index] = reflection_would_hit(model.inputs, r.world, dirs)
         refl_missed = refl_missed.reshape(h, w)
     classes = classify(out, water, hidden=hidden, refl_missed=refl_missed)
+    if hasattr(model, "user_shader"):  # what the study's refracted ray and the scene can tell
+        classes = {k: v for k, v in classes.items() if k in USER_CLASSES}
     fmap = flip_map(model.reference, out["color"])
     rows = failure_table(classes, fmap, model.mask)
     return SceneCatalogue(
@@ -370,6 +375,30 @@ def catalogue_scene(
         model.mask,
         rows,
     )
+
+
+# the classes of a user's shader: the scene's (the study's refracted ray through the scene's
+# waves meets a hidden floor, or grazes) and the shader's own non-finite pixels; the others are
+# steps of the seed's raycast that a user's code need not have
+USER_CLASSES = ("invalid_refraction", "depth_complexity", "grazing")
+
+
+def _user_maps(exp, model, constants: dict, backend: str) -> dict:
+    """The maps :func:`classify` reads, for a user's shader (a ``SpirvModel``): its render's
+    colour, coverage and non-finite pixels with ``constants``, and the refracted ray of the
+    study's ``water_refraction`` port at the experiment's start constants (the scene's waves
+    and refraction index): ``refract_k``, ``cos_eye_normal``, ``refr_dir_*``."""
+    from shaders_port._variants import get_variant
+
+    from ..fit.model import constants_from_experiment
+
+    mine = model.user_shader.render(model.inputs, constants, backend=backend).numpy()
+    study = get_variant("water_refraction").render(
+        model.inputs, constants_from_experiment(exp), backend=backend, diagnose=True
+    ).numpy()
+    out = dict(study)
+    out.update(color=mine["color"], mask=mine["mask"], nonfinite=mine["nonfinite"])
+    return out
 
 
 # ---- the study on the sweep engine: one job per experiment ---------------------------------
@@ -387,14 +416,18 @@ def failures_job(job: dict) -> dict:
     from .._backend import drjit_backend
     from ..fit.model import constants_from_experiment
     from ..report.failures import failures_figure
+    from ..scene.experiment import is_user_shader, load_user_shader
     from ..sweep import load_scene
 
     exp, ref, inputs = load_scene(job["scene"], job["variant"])
-    constants = (
-        Constants.from_dict(job["constants"])
-        if job.get("constants")
-        else constants_from_experiment(exp)
-    )
+    name = job.get("shader") or exp["fit.shader"]
+    if is_user_shader(name):
+        shader = load_user_shader({**exp.values, "fit.shader": name})
+        constants = {**shader.defaults(), **(job.get("constants") or {})}
+    elif job.get("constants"):
+        constants = Constants.from_dict(job["constants"])
+    else:
+        constants = constants_from_experiment(exp)
     cat = catalogue_scene(
         exp,
         ref.image,
@@ -483,14 +516,15 @@ def run_failures(
     from pathlib import Path
 
     from .._io import write_json
+    from ..fit.model import constants_json
     from ..report.failures import scenes_of, write_failures_report
-    from ..scene.experiment import load_experiments
+    from ..scene.experiment import is_user_shader, load_experiments
     from ..sweep import run_sweep, scene_spec, write_table
 
     log = log or (lambda m: print(m, file=sys.stderr, flush=True))
     exps = load_experiments(experiments, overrides)
     names = [e["name"] for e in exps]
-    if shader is not None:
+    if shader is not None and not is_user_shader(shader):
         from shaders_port._variants import get_variant
 
         get_variant(shader)
@@ -501,7 +535,7 @@ def run_failures(
             "scene": scene_spec(p, overrides or []),
             "variant": variant,
             "shader": shader,
-            "constants": constants.to_dict() if constants is not None else None,
+            "constants": constants_json(constants) if constants is not None else None,
             "out": str(out),
         }
         for p in experiments

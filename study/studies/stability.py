@@ -36,7 +36,14 @@ import math
 import statistics
 from pathlib import Path
 
-from .stability_jobs import latin_hypercube, loss_job, multistart_job, noise_job, quantile
+from .stability_jobs import (
+    latin_hypercube,
+    loss_job,
+    multistart_job,
+    noise_job,
+    quantile,
+    start_boxes,
+)
 from .._progress import log as _log
 
 SOLVERS = ("levenberg_marquardt", "gauss_newton", "dogleg", "bfgs", "nelder_mead", "adam")
@@ -54,18 +61,11 @@ def plan_multistart(
     nm_steps: int,
     seed: int = 0,
 ) -> list[dict]:
-    from ..fit.calibrate import DISCRETE, scene_frozen
-    from ..fit.model import expand_parameters
-
     jobs = []
     for spec, exp in zip(specs, exps):
-        frozen = scene_frozen(exp)
-        names = [
-            n
-            for n in expand_parameters(exp["fit.parameters"])
-            if n not in DISCRETE and n not in frozen
-        ]
-        pts = latin_hypercube(names, starts, seed)
+        boxes = start_boxes(exp)
+        names = list(boxes)
+        pts = latin_hypercube(names, starts, seed, boxes)
         for solver in solvers:
             for lr in adam_lrs if solver == "adam" else [None]:
                 for i, p in enumerate(pts):

@@ -44,20 +44,48 @@ BOX = {
 }
 
 
-def latin_hypercube(names: list[str], n: int, seed: int = 0) -> list[dict]:
-    """``n`` starts (dicts name -> value): one point per stratum of each parameter's box, strata
-    paired at random (scipy's ``qmc.LatinHypercube``), log-uniform where the box says so."""
-    from scipy.stats import qmc
+def start_boxes(exp) -> dict:
+    """The multistart's boxes of ``exp``'s fit, scalar name -> (lo, hi, log-uniform): the study's
+    :data:`BOX` for its own constants (``fit.parameters``, without the step counts and what the
+    scene freezes); for a user's shader, each declared constant's range, sampled log-uniformly
+    when it starts above 0 and spans two decades or more."""
+    from ..fit.calibrate import DISCRETE, scene_frozen
+    from ..fit.model import expand_parameters
+    from ..scene.experiment import is_user_shader, load_user_shader
 
+    if is_user_shader(exp["fit.shader"]):
+        shader = load_user_shader(exp.values)
+        return {
+            n: (lo, hi, bool(lo > 0 and hi / lo >= 100))
+            for n in shader.scalar_names()
+            for lo, hi in [shader.bounds(n)]
+        }
+    frozen = scene_frozen(exp)
+    names = [
+        n for n in expand_parameters(exp["fit.parameters"]) if n not in DISCRETE and n not in frozen
+    ]
     unknown = [k for k in names if k not in BOX]
     if unknown:
         raise ValueError(f"no start box for {unknown}; known: {sorted(BOX)}")
+    return {n: BOX[n] for n in names}
+
+
+def latin_hypercube(names: list[str], n: int, seed: int = 0, boxes: dict | None = None) -> list:
+    """``n`` starts (dicts name -> value): one point per stratum of each parameter's box
+    (``boxes``, name -> (lo, hi, log); default :data:`BOX`), strata paired at random (scipy's
+    ``qmc.LatinHypercube``), log-uniform where the box says so."""
+    from scipy.stats import qmc
+
+    boxes = BOX if boxes is None else boxes
+    unknown = [k for k in names if k not in boxes]
+    if unknown:
+        raise ValueError(f"no start box for {unknown}; known: {sorted(boxes)}")
     u = qmc.LatinHypercube(d=len(names), seed=seed).random(n)
     out = []
     for row in u:
         d = {}
         for k, q in zip(names, row):
-            lo, hi, log = BOX[k]
+            lo, hi, log = boxes[k]
             d[k] = (
                 float(math.exp(math.log(lo) + q * (math.log(hi) - math.log(lo))))
                 if log
@@ -80,15 +108,13 @@ def failure_class(converged: bool, message: str, iterations: int, max_steps: int
 
 def _model(job, resolution=None, loss: str = "linear"):
     from .._backend import drjit_backend
+    from ..fit.build import build_model
     from ..fit.losses import transformed
-    from ..fit.model import ShaderModel
     from ..sweep import load_scene
 
     mv = job.get("mitsuba_variant", "llvm_ad_rgb")
     exp, ref, inputs = load_scene(job["scene"], mv)
-    model = ShaderModel.from_experiment(
-        exp, inputs, ref.image, backend=drjit_backend(mv), resolution=resolution
-    )
+    model = build_model(exp, inputs, ref.image, backend=drjit_backend(mv), resolution=resolution)
     return exp, ref, inputs, transformed(model, loss)
 
 
@@ -96,11 +122,10 @@ def multistart_job(job: dict) -> dict:
     """One fit: ``job = {"scene", "solver", "start": {name: value}, "names", "max_steps",
     "lr" (Adam), "start_index"}``."""
     from ..fit.calibrate import make_problem
-    from ..fit.model import constants_from_experiment
     from ..fit.solvers import FTOL, FTOL_SE, FTOL_WINDOW, fit
 
     exp, _, _, model = _model(job)
-    start = constants_from_experiment(exp)
+    start = model.start_constants(exp)
     problem = make_problem(model, start, job["names"], progress=False)
     kw = {"lr": job["lr"]} if job["solver"] == "adam" else {}
     t0 = time.perf_counter()
@@ -137,12 +162,12 @@ def noise_job(job: dict) -> dict:
     """The calibration against the job's scene (its spp, texture spp and seed are in the scene's
     overrides): constants, statuses and relative standard errors."""
     from ..fit.calibrate import calibrate_experiment
-    from ..fit.model import expand_parameters, get_value
+    from ..fit.model import get_value
 
     exp, ref, _, model = _model(job)
     t0 = time.perf_counter()
     cal = calibrate_experiment(model, exp)
-    names = expand_parameters(exp["fit.parameters"])
+    names = model.parameter_names(exp["fit.parameters"])
     return {
         "fit_seconds": time.perf_counter() - t0,
         "reference_noise": float(ref.noise or float("nan")),
@@ -156,7 +181,7 @@ def loss_job(job: dict) -> dict:
     """The calibration with residual ``job["loss"]``, scored at full resolution."""
     from .._metrics import errors
     from ..fit.calibrate import calibrate_experiment
-    from ..fit.model import expand_parameters, get_value
+    from ..fit.model import get_value
 
     exp, ref, inputs, model = _model(job, loss=job["loss"])
     t0 = time.perf_counter()
@@ -165,7 +190,7 @@ def loss_job(job: dict) -> dict:
     _, _, _, full = _model(job, resolution=tuple(exp["resolution"]))
     img, _ = full.render(cal.fitted)
     err = errors(ref.image, img, full.base.mask)
-    names = expand_parameters(exp["fit.parameters"])
+    names = model.parameter_names(exp["fit.parameters"])
     return {
         "flip": float(err["flip"]),
         "rmse": float(err["rmse"]),

@@ -1,16 +1,17 @@
 """The user's own shader in ``study tradeoff`` (``fit.shader = "my_water.frag"``): charted, placed
 and recommended like the study's shaders.
 
-Beside the points the search measures, each experiment whose ``fit.shader`` is a GLSL file gets
-one more point measured in full, as :func:`~.tradeoff_jobs.point_job` measures the study's
-shaders: the declared constants fitted at ``fit.resolution`` by the experiment's solver
-(``study.fit.user_shader.calibrate``), FLIP and RMSE on the water pixels at ``resolution``,
-texture fetches and loop iterations per water pixel counted from the translated code, the GL
-frame times of the written-back file beside the fixed reference shader, and the executor's own
-frame time at 512x512. Its variant name is ``user:<file name>``; it is one point (``kind``
-``fixed``: the loops it has are its own, their counts are measured, not swept), on the front and
-a candidate for the recommendation like any other. Its job carries the SHA-256 of the shader's
-text and declaration, so an edited shader is measured again, never read back from the table.
+Beside the points the search measures, each experiment whose ``fit.shader`` is a GLSL file gets one
+more point measured in full, as :func:`~.tradeoff_jobs.point_job` measures the study's shaders: the
+declared constants fitted at ``fit.resolution`` by the experiment's solver (the study's one
+calibration, ``study.fit.calibrate.calibrate_experiment``, of a ``SpirvModel``), FLIP and RMSE on
+the water pixels at ``resolution``, texture fetches and loop iterations per water pixel counted
+from the translated code, the GL frame times of the written-back file beside the fixed reference
+shader, and the executor's own frame time at 512x512. Its variant name is ``user:<file name>``; it
+is one point (``kind`` ``fixed``: the loops it has are its own, their counts are measured, not
+swept), on the front and a candidate for the recommendation like any other. Its job carries the
+SHA-256 of the shader's text and declaration, so an edited shader is measured again, never read
+back from the table.
 
 :func:`~.tradeoff_analysis.placement` says where it stands among the points of its scene;
 :func:`export_user` writes its file with the fitted constants into the study's ``shaders/`` folder
@@ -76,51 +77,49 @@ def _scored_mask(exp, out: dict) -> np.ndarray:
 def user_point_job(job: dict) -> dict:
     """The user's shader fitted and measured (module doc); flat figures, ``fitted`` (scalar name
     -> value) and ``status_of`` (scalar name -> fitted | bound | frozen)."""
-    from .._metrics import downsample, errors, information_criteria
-    from ..fit.user_shader import calibrate
-    from ..scene.reference import water_mask
+    from .._metrics import errors, information_criteria
+    from ..fit.build import build_model
+    from ..fit.calibrate import calibrate_experiment
+    from ..fit.model import get_value
     from ..sweep import load_scene
 
     exp, ref, inputs = load_scene(job["scene"], job.get("mitsuba_variant", "llvm_ad_rgb"))
-    shader = _shader_of(exp)
-    w, h = exp["fit.resolution"]
-    fy, fx = ref.image.shape[0] // h, ref.image.shape[1] // w
-    target = downsample(ref.image, fy, fx) if (fy, fx) != (1, 1) else ref.image
-    small = inputs.with_resolution(w, h)
+    model = build_model(exp, inputs, ref.image)
     t0 = time.perf_counter()
-    fit = calibrate(shader, small, target, reference_mask=water_mask(exp, w, h),
-                    max_iterations=exp["fit.max_steps"], solver=exp["fit.solver"])  # fmt: skip
+    cal = calibrate_experiment(model, exp)
     fit_s = time.perf_counter() - t0
-    fitted = [n for n, p in fit.parameters.items() if p["status"] in ("fitted", "bound")]
-    ic = information_criteria(fit.residual, len(fitted))
-    out_full = shader.render(inputs, fit.values).numpy()
-    mask = _scored_mask(exp, out_full)
-    err = errors(ref.image, out_full["color"], mask)
+    fitted = [n for n, p in cal.parameters.items() if p["status"] in ("fitted", "bound")]
+    ic = information_criteria(model.residual(cal.fitted), len(fitted))
+    full = build_model(exp, inputs, ref.image, resolution=tuple(exp["resolution"]))
+    img, diag = full.render(cal.fitted)
+    mask = full.mask
+    err = errors(ref.image, img, mask)
     out = {
         "flip": err["flip"],
         "rmse": err["rmse"],
         "fit_seconds": fit_s,
-        "fit_iterations": fit.iterations,
+        "fit_iterations": int(cal.fit_summary["iterations"]),
         "water_pixels": int(mask.sum()),
         "n_fitted": len(fitted),
         "aic": ic["aic"],
         "bic": ic["bic"],
-        "nonfinite_pixels": int((~np.isfinite(out_full["color"][mask])).any(-1).sum()),
+        "nonfinite_pixels": int(diag.maps["nonfinite"][mask].sum()),
     }
     for k in ("fetches", "iterations"):
-        v = out_full[k][mask]
+        v = diag.maps[k][mask]
         out[f"{k}_mean"], out[f"{k}_p99"] = float(v.mean()), float(np.percentile(v, 99))
+    shader = model.user_shader
     out.update(
         timed_frames(
-            lambda frame: shader.gl_renderer(frame, fit.values),
+            lambda frame: shader.gl_renderer(frame, cal.fitted),
             None,
-            lambda frame: shader.render(frame, fit.values),
+            lambda frame: shader.render(frame, cal.fitted),
             inputs,
             exp["tradeoff.gl_repeats"],
         )
     )
-    out["fitted"] = dict(fit.scalars)
-    out["status_of"] = {n: p["status"] for n, p in fit.parameters.items()}
+    out["fitted"] = {n: get_value(cal.fitted, n) for n in cal.parameters}
+    out["status_of"] = {n: p["status"] for n, p in cal.parameters.items()}
     return out
 
 

@@ -1,0 +1,101 @@
+"""A user's own GLSL shader against a reference: the fit's model of a shader executed through
+SPIR-V.
+
+:class:`SpirvModel` is a :class:`~study.fit.model.ReferenceModel` (the scored mask, residuals,
+Jacobians, non-finite checks) whose shader is a ``shaders_port.user_shader.UserShader``: its
+renders and forward-mode derivatives come from the SPIR-V executor, its constants are a dict
+``{GLSL name: float | tuple}`` (scalar names ``NAME`` and ``NAME[i]``), its parameters and their
+ranges are those its declaration names (``// @study constant NAME LOW HIGH`` or
+``fit.declare``). :func:`study.fit.calibrate.calibrate_model` fits it as it fits a hand port.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..scene.experiment import Experiment, load_user_shader
+from .model import ReferenceModel, at_resolution
+
+
+class SpirvModel(ReferenceModel):
+    """``shader`` (a ``UserShader``) on ``inputs`` (``shaders_port.ShaderInputs``) against
+    ``reference`` ((H, W, 3) float32 linear RGB at the inputs' size); the rest as
+    :class:`~study.fit.model.ReferenceModel`."""
+
+    what = "the shader"
+
+    def __init__(self, shader, inputs, reference: np.ndarray, backend: str = "llvm",
+                 reference_mask=None, reference_stderr=None):  # fmt: skip
+        self.user_shader = shader
+        super().__init__(inputs, reference, backend, reference_mask, reference_stderr)
+
+    @classmethod
+    def from_experiment(
+        cls,
+        exp: Experiment,
+        inputs_full,
+        reference_full: np.ndarray,
+        backend: str = "llvm",
+        resolution: tuple[int, int] | None = None,
+        stderr_full: np.ndarray | None = None,
+        shader=None,
+    ) -> "SpirvModel":
+        """The model of ``shader`` (default: ``fit.shader`` with ``fit.declare``) at
+        ``resolution`` (default ``fit.resolution``) against the box-downsampled
+        ``reference_full`` (``study.fit.model.at_resolution``)."""
+        inputs, ref, se, water = at_resolution(
+            exp, inputs_full, reference_full, resolution, stderr_full
+        )
+        shader = shader or load_user_shader(exp.values)
+        return cls(shader, inputs, ref, backend, reference_mask=water, reference_stderr=se)
+
+    # ---- the parameters (``study.fit.protocol.CalibrationModel``) ----------------------------
+    @property
+    def label(self) -> str:
+        """The shader's file name."""
+        return self.user_shader.label
+
+    @property
+    def shader(self) -> str:
+        return self.user_shader.label
+
+    defines: list = []
+
+    def parameter_names(self, requested: list[str] | None) -> list[str]:
+        """The scalar names of the declared constants ``requested`` (every declared one when
+        None): each float, and a vector's first three components (RGB; an alpha is never
+        compared)."""
+        constants = self.user_shader.constants
+        if requested is None:
+            return self.user_shader.scalar_names()
+        unknown = [n for n in requested if n not in constants]
+        if unknown:
+            raise ValueError(
+                f"{self.label}: {', '.join(unknown)} is no constant of its declaration; it "
+                f"declares {', '.join(constants)}"
+            )
+        return [s for n in requested for s in constants[n].scalar_names()]
+
+    def bounds(self, name: str) -> tuple[float, float]:
+        """The declared range of the scalar ``name``."""
+        return self.user_shader.bounds(name)
+
+    def start_constants(self, exp: Experiment | None = None) -> dict:
+        """The declaration's start values: each constant's initializer in the file."""
+        return self.user_shader.defaults()
+
+    # ---- the shader ------------------------------------------------------------------------
+    def _shade(self, constants: dict):
+        return self.user_shader.render(self.inputs, constants, backend=self.backend)
+
+    def _shade_with_jacobian(self, constants: dict, names: list[str]):
+        return self.user_shader.render_with_jacobian(
+            self.inputs, constants, names, backend=self.backend
+        )
+
+    def loss_ad(self, constants):
+        raise NotImplementedError(
+            f"{self.label}: a shader executed through SPIR-V has forward-mode derivatives only; "
+            "fit it with a least-squares solver (fit.solver = levenberg_marquardt, dogleg, ...), "
+            "not Adam"
+        )
