@@ -61,7 +61,7 @@ def main() -> None:
     from study.fit.calibrate import calibrate_experiment
     from study.fit.decorrelated import half_models
     from study.fit.model import ShaderModel, get_value
-    from study.scene.experiment import load_experiment
+    from study.config.experiment import load_experiment
     from study.scene.reference import load_or_render
     from study.scene.shader_inputs import load_or_build_shader_inputs
 

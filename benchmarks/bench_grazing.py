@@ -100,7 +100,7 @@ def reference_terms(exp_path, overrides, rows, spp: int) -> dict:
     'reflected', 'reflected, no sun', 'transmitted', 'both' (see the module doc)."""
     import mitsuba as mi
 
-    from study.scene.experiment import load_experiment
+    from study.config.experiment import load_experiment
     from study.scene.mitsuba_scene import build_scene
 
     out = {}
@@ -144,10 +144,10 @@ def main(argv=None) -> None:
     from shaders_port._inputs import Constants
     from shaders_port._variants import get_variant
     from study._backend import init_backend
-    from study._jobs import load_scene_data
+    from study.commands.steps import load_scene_data
     from study._metrics import flip_map
     from study.fit.model import ShaderModel
-    from study.scene.experiment import load_experiment
+    from study.config.experiment import load_experiment
 
     exp = load_experiment(a.experiment, a.set)
     variant_name = init_backend(exp["variant"])

@@ -171,11 +171,10 @@ def worker(
     w_start, c_start = time.perf_counter(), time.process_time()
     import drjit as dr
 
-    from study import _jobs
     from study._backend import init_backend
-    from study.fit import calibrate
-    from study.report import export
-    from study.scene import experiment as exp_mod
+    from study.commands import calibrate as calibrate_command
+    from study.commands import outputs
+    from study.config import experiment as exp_mod
     from study.scene import direct_light, lighting, mitsuba_scene, reference, shader_inputs
 
     init_backend(variant)
@@ -198,12 +197,12 @@ def worker(
     for fn in ("render_lighting", "render_dry"):
         t.wrap(lighting, fn, "texture renders")
     t.wrap(direct_light, "traced_direct", "texture renders")
-    t.wrap(calibrate, "calibrate_model", "fit")
-    t.wrap(export, "export_shaders", "export")
-    t.wrap(_jobs, "gl_check", "GL check")
-    t.wrap(_jobs, "run_calibrate", "rest")
+    t.wrap(calibrate_command, "calibrate_model", "fit")
+    t.wrap(outputs, "export_shaders", "export")
+    t.wrap(outputs, "gl_check", "GL check")
+    t.wrap(calibrate_command, "run_calibrate", "rest")
     w0, c0 = time.perf_counter(), time.process_time()
-    summary = _jobs.run_calibrate(experiment, out, sets, variant, cache=out / "cache")
+    summary = calibrate_command.run_calibrate(experiment, out, sets, variant, cache=out / "cache")
     t.wall["total"] = t.wall["startup"] + time.perf_counter() - w0
     t.cpu["total"] = t.cpu["startup"] + time.process_time() - c0
     params = {
@@ -244,7 +243,7 @@ def cross_flip(
     from study._metrics import errors
     from study.fit.model import ShaderModel
     from study.report.export import load_constants_json
-    from study.scene.experiment import load_experiment
+    from study.config.experiment import load_experiment
     from study.scene.reference import load_or_render
     from study.scene.shader_inputs import load_or_build_shader_inputs
 

@@ -43,7 +43,7 @@ def main() -> None:
     args = ap.parse_args()
 
     from study._backend import init_backend
-    from study.scene.experiment import load_experiment
+    from study.config.experiment import load_experiment
     from study.scene.mitsuba_scene import dimension_correlation
     from study.scene.reference import render_reference, water_mask
 

@@ -25,7 +25,7 @@ DEFAULT = REPO / "experiments" / "default.toml"
 
 def scaling(n_jobs: int) -> list[dict]:
     from study.fit.model import constants_from_experiment
-    from study.scene.experiment import load_experiment
+    from study.config.experiment import load_experiment
     from study.studies.tradeoff_jobs import point_job, schedules
     from study.sweep import run_sweep, scene_spec
     from study.sweep.cluster import open_client

@@ -297,18 +297,25 @@ class UserShader:
         out.append(self.source[pos:])
         return "".join(out)
 
-    def gl_renderer(self, inputs, values: dict | None = None):
+    def gl_renderer(self, inputs, values: dict | None = None, source=None, reflection=None):
         """A ``GLRenderer`` (OpenGL, llvmpipe) drawing the written-back shader with ``values``
-        (its samplers and uniforms bound to the study's inputs by the declaration); use it as
-        a context manager, ``render(None)`` / ``time_frames(None, n, warmup)``."""
+        (its samplers and uniforms bound to the study's inputs by the declaration); or, given
+        ``source`` and its ``reflection`` (``_spirv.hlsl_round_trip`` of the exported HLSL), that
+        GLSL through a ``TranslatedRenderer``. Use it as a context manager, ``render(None)`` /
+        ``time_frames(None, n, warmup)``."""
         from ._gl import GLRenderer
+        from ._gl_translated import TranslatedRenderer
 
         bindings = dict(self.bindings)
+        base = GLRenderer if reflection is None else TranslatedRenderer
 
-        class _Bound(GLRenderer):
+        class _Bound(base):
             def _sampler_uniform(self, prog, sname):
-                names = [n for n, s in bindings.items() if s == sname] + [sname]
-                return next((n for n in names if n in prog), None)
+                for name in [n for n, s in bindings.items() if s == sname] + [sname]:
+                    found = super()._sampler_uniform(prog, name)
+                    if found is not None:
+                        return found
+                return None
 
             def _write_uniforms(self, prog, vals):
                 renamed = dict(vals)
@@ -317,7 +324,9 @@ class UserShader:
                         renamed[n] = vals[s]
                 super()._write_uniforms(prog, renamed)
 
-        return _Bound("water_refraction", inputs, source=self.written(values or {}))
+        if reflection is None:
+            return _Bound("water_refraction", inputs, source=self.written(values or {}))
+        return _Bound("water_refraction", inputs, source, reflection)
 
     def gl_render(self, inputs, values: dict | None = None):
         """The written-back shader on OpenGL (llvmpipe): ``(rgba (H, W, 4), mask (H, W))``."""

@@ -3,8 +3,9 @@ the fit of the shader's constants, export and reports.
 
 No Mitsuba variant is set on import; the entry points call ``init_backend``.
 
-Jobs (what the CLI runs): ``run_render``, ``run_preview``, ``run_calibrate``, ``run_tradeoff``,
-``run_export``. Sweeps: ``study.sweep`` (``run_sweep`` on Dask).
+Commands (what the CLI runs, ``study.commands``): ``run_render``, ``run_preview``,
+``run_calibrate``, ``run_tradeoff``, ``run_export``. Sweeps: ``study.sweep`` (``run_sweep`` on
+Dask).
 Building blocks: experiments (``load_experiment``), references (``load_or_render``), shader
 inputs (``build_shader_inputs``), the port against a reference (``ShaderModel``), the fit
 (``FitProblem``, ``Param``, ``fit``, ``identify``, ``make_jax_residual``), export
@@ -13,12 +14,12 @@ inputs (``build_shader_inputs``), the port against a reference (``ShaderModel``)
 
 from ._backend import BackendError, init_backend
 from .fit.bridge import DrJitResidual, NonFiniteResidualError, make_jax_residual
-from .scene.experiment import Experiment, ExperimentError, load_experiment, validate
+from .config.experiment import Experiment, ExperimentError, load_experiment, validate
 from .report.export import export_shaders, load_constants_json
 from ._io import read_exr, write_exr, write_png
 from .fit.solvers import SOLVERS, FitProblem, FitResult, Param, fit
 from .fit.identify import IdentifyReport, identify, probe_gradient_solver, sweep_1d, sweep_2d
-from ._jobs import run_calibrate, run_export, run_preview, run_render, run_tradeoff
+from .commands import run_calibrate, run_export, run_preview, run_render, run_tradeoff
 from ._metrics import flip, rmse
 from .fit.model import ShaderModel, constants_from_experiment
 from .scene.reference import Reference, load_or_render

@@ -1,4 +1,5 @@
-"""Command line: ``study <command> ...``. Argument parsing only; the work is in ``study._jobs``."""
+"""Command line: ``study <command> ...``. Argument parsing only; the work is in
+``study.commands``."""
 
 from __future__ import annotations
 
@@ -236,30 +237,26 @@ def _command_line(argv) -> str:
 
 def main(argv=None) -> int:
     args = build_parser().parse_args(argv)
-    from . import _jobs, _joint_jobs
+    from . import commands
     from ._backend import BackendError
     from ._io import DiskFullError
-    from .scene.experiment import ExperimentError
+    from .config.experiment import ExperimentError
 
     try:
         if args.command == "render":
-            _jobs.run_render(args.experiment, args.out, args.overrides, args.variant)
+            commands.run_render(args.experiment, args.out, args.overrides, args.variant)
         elif args.command == "preview":
-            _jobs.run_preview(args.experiment, args.out, args.overrides, args.variant)
-        elif args.command == "calibrate" and len(args.experiment) == 1:
-            _jobs.run_calibrate(
-                args.experiment[0], args.out, args.overrides, args.variant, solver=args.solver
-            )
+            commands.run_preview(args.experiment, args.out, args.overrides, args.variant)
         elif args.command == "calibrate":
-            _joint_jobs.run_calibrate_joint(
+            commands.run_calibrate(
                 args.experiment, args.out, args.overrides, args.variant, solver=args.solver
             )
         elif args.command == "generalise":
-            _joint_jobs.run_generalise(
+            commands.run_generalise(
                 args.experiment, args.out, args.overrides, args.variant, solver=args.solver
             )
         elif args.command == "tradeoff":
-            _jobs.run_tradeoff(
+            commands.run_tradeoff(
                 args.experiments,
                 args.out,
                 args.overrides,
@@ -273,7 +270,7 @@ def main(argv=None) -> int:
         elif args.command == "stability":
             from .studies.stability import SOLVERS
 
-            _jobs.run_stability(
+            commands.run_stability(
                 args.experiments,
                 args.out,
                 args.overrides,
@@ -294,7 +291,7 @@ def main(argv=None) -> int:
                 command=_command_line(argv),
             )
         elif args.command == "failures":
-            _jobs.run_failures(
+            commands.run_failures(
                 args.experiments,
                 args.out,
                 args.overrides,
@@ -305,7 +302,7 @@ def main(argv=None) -> int:
                 workers=args.workers,
             )
         elif args.command == "export":
-            _jobs.run_export(args.constants, args.out, args.targets)
+            commands.run_export(args.constants, args.out, args.targets)
     except (ExperimentError, BackendError, FileNotFoundError, ValueError) as exc:
         print(f"study {args.command}: error: {exc}", file=sys.stderr)
         return 2

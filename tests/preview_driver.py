@@ -37,8 +37,8 @@ def main() -> int:
     import io
 
     from study._backend import BackendError
-    from study._jobs import run_preview
-    from study.scene.experiment import ExperimentError
+    from study.commands import run_preview
+    from study.config.experiment import ExperimentError
 
     cases = json.loads(Path(sys.argv[1]).read_text())
     out = Path(sys.argv[2])

@@ -253,7 +253,7 @@ def test_calibrate_on_an_animated_experiment_end_to_end(tmp_path, capsys):
     with Image.open(out / "animation.webp") as im:
         assert im.n_frames == 2 and im.size == (72, 40)
     offsets = json.loads((out / "shaders" / "animation.json").read_text())
-    from study.scene.experiment import load_experiment
+    from study.config.experiment import load_experiment
 
     e = load_experiment(exp, TINY_ANIMATED)
     for k in range(2):

@@ -160,7 +160,7 @@ def test_decorrelated_refinement_may_end_on_a_bound():
 
 def test_decorrelate_needs_the_lighting_texture():
     from conftest import small_experiment
-    from study.scene.experiment import ExperimentError
+    from study.config.experiment import ExperimentError
     from study.scene.shader_inputs import half_inputs
 
     with pytest.raises(ExperimentError, match='texture_method = "lighting"'):

@@ -193,7 +193,7 @@ def test_traced_skylight_matches_the_path_tracers_direct_sky(mi):
     assert t_se < 0.5 * p_se
     with pytest.raises(ValueError, match="square number"):
         direct_light.sky_direct(mi, scene, exp, sky, extent, size, 10, 0, y_cam)
-    from study.scene.experiment import ExperimentError
+    from study.config.experiment import ExperimentError
 
     with pytest.raises(ExperimentError, match="reference.sky_directions = 30: .*square number"):
         small_experiment(**{"reference.sky_directions": "30"})

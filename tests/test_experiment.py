@@ -6,7 +6,7 @@ from pathlib import Path
 import pytest
 
 from study import ExperimentError, load_experiment, validate
-from study.scene.experiment import SCHEMA, schema_markdown
+from study.config.experiment import SCHEMA, schema_markdown
 
 REPO = Path(__file__).resolve().parent.parent
 
@@ -155,7 +155,7 @@ def test_fit_parameters_default_to_what_the_shader_reads(capfd):
 
 
 def test_a_listed_constant_the_shader_does_not_read_is_dropped_with_a_note(capfd):
-    from study.scene import experiment
+    from study.config import experiment
 
     experiment._NOTED.clear()  # the note is printed once per process and shader
     exp = load_experiment(REPO / "experiments" / "default.toml", ['fit.shader="water_baseline"'])

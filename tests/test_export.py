@@ -14,7 +14,7 @@ from synthetic import synthetic_inputs
 from shaders_port import CONSTANT_SPECS, Constants, compile_check, read_constants, read_source
 from shaders_port._glsl import BEGIN_MARKER, END_MARKER, declared_constants
 from study.report.export import export_shaders, load_constants_json
-from study._jobs import run_export
+from study.commands import run_export
 from study.report.gl_check import gl_check
 from shaders_port._variants import VARIANTS, get_variant
 

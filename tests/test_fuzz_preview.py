@@ -19,7 +19,7 @@ import numpy as np
 import pytest
 
 from conftest import REPO
-from study.scene.experiment import SCHEMA
+from study.config.experiment import SCHEMA
 
 CASE_SECONDS = 120  # per case, tiny sizes, 2 shared cores (the first one compiles the kernels)
 COST_KEYS = {
@@ -179,7 +179,7 @@ def test_random_combinations_of_ends_complete_or_stop_clearly(tmp_path):
 def test_same_experiment_same_constants_bit_identical(tmp_path, monkeypatch):
     """Two previews from empty caches (reference, shader inputs and port all recomputed)."""
     from study._io import read_exr
-    from study._jobs import run_preview
+    from study.commands import run_preview
 
     sets = [
         "resolution=[16,16]",

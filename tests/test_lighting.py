@@ -82,7 +82,7 @@ def test_zero_floor_albedo_is_a_clear_error(mi):
             "reference.texture_spp": "4",
         }
     )
-    from study.scene.experiment import ExperimentError  # reported by the CLI as one line
+    from study.config.experiment import ExperimentError  # reported by the CLI as one line
 
     with pytest.raises(ExperimentError, match="zero floor albedo.*floor.tile_albedo"):
         lighting.lighting_colour(exp, texture_extent(exp), 16, seed=0)

@@ -106,7 +106,7 @@ def test_reference_sampler_draws_uncorrelated_dimensions(mi):
     dimension) breaks it, which biased the volumetric reference (deep chromatic water about 1 %
     too bright). The stratified sampler is the positive control: the same measurement finds its
     correlation (about -0.01 at 36 spp)."""
-    from study.scene.experiment import SCHEMA
+    from study.config.experiment import SCHEMA
     from study.scene.mitsuba_scene import dimension_correlation
 
     default = SCHEMA["reference.sampler"].default

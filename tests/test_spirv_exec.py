@@ -205,10 +205,10 @@ def test_default_experiment_fits_the_same_constants(tmp_path, monkeypatch):
     1e-3 relative."""
     from conftest import REPO
     from study._backend import init_backend
-    from study._jobs import load_scene_data
+    from study.commands.steps import load_scene_data
     from study.fit.calibrate import calibrate_experiment
     from study.fit.model import ShaderModel, expand_parameters, get_value
-    from study.scene.experiment import load_experiment
+    from study.config.experiment import load_experiment
 
     monkeypatch.setenv("STUDY_CACHE", str(tmp_path))
     exp = load_experiment(REPO / "experiments" / "default.toml")

@@ -14,8 +14,8 @@ import pytest
 from PIL import Image
 
 from conftest import REPO
-from study.scene.experiment import ExperimentError, load_experiment, validate
-from study.scene import user_files as uf
+from study.config.experiment import ExperimentError, load_experiment, validate
+from study.config import files as uf
 
 FILES = REPO / "experiments" / "files"
 USER = REPO / "experiments" / "user_files.toml"

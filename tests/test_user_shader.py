@@ -183,7 +183,7 @@ MY_WATER = Path(__file__).parent.parent / "experiments" / "my_water.toml"
 
 def test_experiment_refuses_a_bad_user_declaration(tmp_path):
     from study import load_experiment
-    from study.scene.errors import ExperimentError
+    from study.config.errors import ExperimentError
 
     with pytest.raises(ExperimentError, match="fit.declare.*constant NAME LOW HIGH"):
         load_experiment(MY_WATER, ['fit.declare=["constant F0 0.0"]'])
@@ -239,6 +239,10 @@ def test_study_calibrate_fits_and_gl_checks(user_run):
     assert set(targets) == set(resolve_targets(None)) and targets, targets
     for target, t in targets.items():
         assert t["files"] and all((out / "shaders" / f).is_file() for f in t["files"]), target
+    # the HLSL back through glslang and SPIRV-Cross, run on llvmpipe like the GLSL
+    hlsl = targets["hlsl"]["llvmpipe"]
+    if hlsl["ran"]:
+        assert hlsl["passed"] and hlsl["pixels"] > 100, hlsl
     report = (out / "report.md").read_text()
     assert "FLIP" in report and "`shaders/core/my_water.frag`" in report
     assert (out / "comparison.png").is_file()

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..scene.experiment import Experiment, is_user_shader, load_user_shader
+from ..config.experiment import Experiment, is_user_shader, load_user_shader
 from .model import ShaderModel
 from .protocol import ImageModel
 from .spirv_model import SpirvModel
@@ -30,7 +30,7 @@ def build_model(
     box-downsampled ``reference_full`` ((H, W, 3) float32 linear RGB at the experiment's
     resolution); ``stderr_full``: its per-pixel standard error; ``translated``: a hand port's
     GLSL executed through SPIR-V in its place."""
-    shader = shader or exp["fit.shader"]
+    shader = shader or exp.fit.shader
     if is_user_shader(shader):
         user = load_user_shader({**exp.values, "fit.shader": shader})
         return SpirvModel.from_experiment(

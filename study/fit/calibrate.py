@@ -349,9 +349,9 @@ def calibrate_experiment(
     return calibrate_model(
         model,
         model.start_constants(exp) if start is None else start,
-        exp["fit.parameters"] if requested is None else requested,
-        exp["fit.solver"],
-        exp["fit.max_steps"],
+        exp.fit.parameters if requested is None else requested,
+        exp.fit.solver,
+        exp.fit.max_steps,
         frozen_by_scene=scene_frozen(exp),
         halves=halves,
     )

@@ -185,7 +185,7 @@ def half_models(exp, inputs, reference: np.ndarray, **kwargs) -> tuple | None:
     (``study.scene.shader_inputs.half_inputs``, which raises ExperimentError without them) when
     ``fit.input_noise = "decorrelate"``, else None. ``kwargs`` go to
     ``ShaderModel.from_experiment`` (``backend``, ``shader``...)."""
-    if exp["fit.input_noise"] != "decorrelate":
+    if exp.fit.input_noise != "decorrelate":
         return None
     return _models_on_halves(exp, inputs, reference, **kwargs)
 

@@ -21,7 +21,7 @@ import numpy as np
 from shaders_port import CONSTANT_SPECS, Constants, ShaderInputs
 from shaders_port._variants import get_variant
 
-from ..scene.experiment import Experiment
+from ..config.experiment import Experiment
 from .._metrics import downsample, downsample_stderr, erode
 
 
@@ -117,7 +117,7 @@ def at_resolution(
     reference scene's water mask (H, W) bool)."""
     from ..scene.reference import water_mask
 
-    w, h = resolution or exp["fit.resolution"]
+    w, h = resolution or exp.fit.resolution
     fy, fx = reference_full.shape[0] // h, reference_full.shape[1] // w
     ref = downsample(reference_full, fy, fx) if (fy, fx) != (1, 1) else reference_full
     se = None
@@ -331,7 +331,7 @@ class ShaderModel(ReferenceModel):
             exp, inputs_full, reference_full, resolution, stderr_full
         )
         return cls(
-            shader or exp["fit.shader"],
+            shader or exp.fit.shader,
             inputs,
             ref,
             backend,

@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..scene.experiment import Experiment, load_user_shader
+from ..config.experiment import Experiment, load_user_shader
 from .model import ReferenceModel, at_resolution
 
 

@@ -1,5 +1,5 @@
-"""The report of an animated calibration (``study._anim_jobs``): the animation a person watches,
-the temporal error maps and ``report.md`` with the per-frame and temporal tables.
+"""The report of an animated calibration (``study.commands.animated``): the animation a person
+watches, the temporal error maps and ``report.md`` with the per-frame and temporal tables.
 
 Images are linear RGB (H, W, 3) float; the animation shows them sRGB-encoded and clipped to
 [0, 1] (no tone mapping, as FLIP's LDR variant scores them), the error panel the LDR-FLIP map

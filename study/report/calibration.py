@@ -326,11 +326,16 @@ def _sweep_lines(sw: dict | None) -> list[str]:
 
 
 def _diagnostics_lines(d: dict, figure: str) -> list[str]:
+    crossing = (
+        f"Rays not crossing the floor within the loop cap: {fmt(d['not_crossed_fraction'])} "
+        "of water pixels; "
+        if "not_crossed_fraction" in d  # the seed's raycast (a user's shader may have none)
+        else ""
+    )
     return [
         "## Shader diagnostics (fitted constants)",
         "",
-        f"Rays not crossing the floor within the loop cap: {fmt(d.get('not_crossed_fraction'))} "
-        f"of water pixels; non-finite pixels: {d.get('nonfinite_pixels', '-')}; mean loop "
+        f"{crossing}non-finite pixels: {d.get('nonfinite_pixels', '-')}; mean loop "
         f"iterations {fmt(d.get('iterations', {}).get('mean'))}, mean texture fetches "
         f"{fmt(d.get('fetches', {}).get('mean'))} per pixel.",
         "",
@@ -394,9 +399,12 @@ def engine_targets_section(targets: dict, user: bool = False) -> list[str]:
         shaders = [f for f in t["files"] if not f.endswith((".json", ".md"))]
         check = t["check"]
         run = t.get("llvmpipe")
-        if isinstance(run, dict):
+        if isinstance(run, dict) and run.get("ran", True) is False:
+            check += f"; not run on llvmpipe ({run['why']})"
+        elif isinstance(run, dict):
             check += (
-                "; run on llvmpipe through SPIR-V and GLSL 330 vs the port: mean abs. difference "
+                "; run on llvmpipe through SPIR-V and GLSL 330 vs the Dr.Jit shader: mean abs. "
+                "difference "
                 f"{fmt(run['mean_abs'], 3)}, 99.9th percentile {fmt(run['p999'], 3)} "
                 + ("(passed)" if run["passed"] else "(**MISMATCH**)")
             )

@@ -1,6 +1,6 @@
 """Reports of the joint (multi-scene) fit and of leave-one-scene-out validation (Markdown).
 
-Inputs are the JSON-able summaries written by ``study._joint_jobs.run_calibrate_joint`` /
+Inputs are the JSON-able summaries written by ``study.commands.joint.run_calibrate_joint`` /
 ``run_generalise`` (constants.json / generalise.json); errors are on water pixels at each
 experiment's full resolution (RMSE in linear RGB, mean FLIP).
 """

@@ -129,6 +129,27 @@ def gl_check_user(shader, inputs, values: dict, ours: dict) -> dict:
         rgba, mask = shader.gl_render(inputs, values)
     except RuntimeError as exc:
         return {"ran": False, "why": str(exc).splitlines()[0], "passed": None}
+    return _user_verdict(rgba, mask, ours)
+
+
+def hlsl_check_user(shader, inputs, values: dict, ours: dict, shaders_dir: Path) -> dict:
+    """A user's shader's exported HLSL (``hlsl/<stem>.frag.hlsl`` of ``shaders_dir``) compiled
+    back by glslang's HLSL front end, translated to GLSL 330 by SPIRV-Cross and run on llvmpipe
+    against the executor's render ``ours``, as :func:`gl_check_user` judges it."""
+    from shaders_port._spirv import hlsl_round_trip
+
+    stem = shader.label.rsplit(".", 1)[0]
+    hlsl = (shaders_dir / "hlsl" / f"{stem}.frag.hlsl").read_text()
+    try:
+        glsl, refl = hlsl_round_trip(hlsl, "frag", f"hlsl/{stem}.frag.hlsl")
+        with shader.gl_renderer(inputs, values, source=glsl, reflection=refl) as r:
+            rgba, mask = r.render(None)
+    except RuntimeError as exc:
+        return {"ran": False, "why": str(exc).splitlines()[0], "passed": None}
+    return _user_verdict(rgba, mask, ours)
+
+
+def _user_verdict(rgba: np.ndarray, mask: np.ndarray, ours: dict) -> dict:
     both = mask & (ours["mask"] > 0.5)
     d = np.abs(rgba[..., :3] - ours["color"]).max(-1)[both]
     mean, p999 = float(d.mean()), float(np.percentile(d, 99.9))

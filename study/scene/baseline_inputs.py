@@ -34,7 +34,7 @@ from shaders_port import ShaderInputs
 from shaders_port._inputs import mirrored_view_proj
 
 from .._io import disk_full
-from .experiment import Experiment
+from ..config.experiment import Experiment
 from .geometry import envmap_image, sky_radiance
 from .mitsuba_scene import build_geometry, sky_params
 
@@ -68,7 +68,7 @@ def _dry_scene(mi, exp: Experiment):
         "type": "scene",
         **build_geometry(mi, exp, water=False),
         "sky": {"type": "envmap", "bitmap": mi.Bitmap(envmap_image(512, **sky_params(exp)))},
-        "integrator": {"type": "path", "max_depth": exp["reference.max_depth"]},
+        "integrator": {"type": "path", "max_depth": exp.reference.max_depth},
     }
     return mi.load_dict(d)
 
@@ -116,7 +116,7 @@ def camera_buffers(mi, exp: Experiment, inputs: ShaderInputs, width: int, height
     """``(scene_color (H, W, 3), scene_depth (H, W))`` of the camera's view without the water."""
     scene = _dry_scene(mi, exp)
     o, d = pixel_rays(inputs.view_proj, width, height)
-    rad, hit, p = trace(mi, scene, o.reshape(-1, 3), d.reshape(-1, 3), spp, exp["reference.seed"])
+    rad, hit, p = trace(mi, scene, o.reshape(-1, 3), d.reshape(-1, 3), spp, exp.reference.seed)
     vp = inputs.view_proj.astype(np.float64)
     clip = np.concatenate([p, np.ones_like(p[:, :1])], -1) @ vp.T
     depth = np.where(hit, 0.5 * clip[:, 2] / clip[:, 3] + 0.5, 1.0)
@@ -129,7 +129,7 @@ def camera_buffers(mi, exp: Experiment, inputs: ShaderInputs, width: int, height
     hy, wx = wy.shape
     i = np.clip(np.floor(st[:, 0] * wx).astype(int), 0, wx - 1)
     j = np.clip(np.floor(st[:, 1] * hy).astype(int), 0, hy - 1)
-    hx, hz = exp["pool.half_extent"]
+    hx, hz = exp.pool.half_extent
     under = (
         hit
         & (p[:, 1] < 0.0)
@@ -154,7 +154,7 @@ def reflection_buffer(mi, exp: Experiment, rvp: np.ndarray, width: int, height: 
     up = d[:, 1] > 1e-6
     t = np.where(up, -o[:, 1] / np.where(up, d[:, 1], 1.0), 0.0)
     start = o + np.maximum(t, 0.0)[:, None] * d + np.array([0.0, 1e-4, 0.0])  # on the clip plane
-    rad, hit, _ = trace(mi, scene, start, d, spp, exp["reference.seed"] + 1)
+    rad, hit, _ = trace(mi, scene, start, d, spp, exp.reference.seed + 1)
     sky = sky_radiance(d, **sky_params(exp, with_sun=False))
     colour = np.where((up & hit)[:, None], rad, sky)
     return colour.reshape(height, width, 3).astype(np.float32)
@@ -255,7 +255,7 @@ def inputs_for_shader(
     ``inputs`` unchanged."""
     from shaders_port._variants import get_variant
 
-    from .experiment import is_user_shader, load_user_shader
+    from ..config.experiment import is_user_shader, load_user_shader
 
     if is_user_shader(shader):
         reads = load_user_shader({**exp.values, "fit.shader": shader}).study_inputs()

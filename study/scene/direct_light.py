@@ -42,7 +42,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .experiment import Experiment
+from ..config.experiment import Experiment
 from .sun_photons import N_BATCHES, shape_named, sun_direct, sun_walk
 
 
@@ -111,11 +111,11 @@ def sky_direct(
     frame = mi.Frame3f(dr.select(si.n.y < 0, -si.n, si.n))
     si2 = scene.ray_intersect(si.spawn_ray(frame.to_world(wo_local)), ok)
     ok &= si2.is_valid() & (si2.shape == mi.ShapePtr(water)) & (mi.Frame3f.cos_theta(si2.wi) < 0)
-    r, cos_t, _, eta_ti = mi.fresnel(mi.Frame3f.cos_theta(si2.wi), dr.opaque(F, exp["water.ior"]))
+    r, cos_t, _, eta_ti = mi.fresnel(mi.Frame3f.cos_theta(si2.wi), dr.opaque(F, exp.water.ior))
     ok &= cos_t != 0  # total internal reflection: no skylight this way
     wo = si2.to_world(mi.refract(si2.wi, cos_t, eta_ti))
     ok &= ~scene.ray_test(si2.spawn_ray(wo), ok)
-    sigma = mi.Color3f(*[dr.opaque(F, float(v)) for v in exp["water.sigma_t"]])
+    sigma = mi.Color3f(*[dr.opaque(F, float(v)) for v in exp.water.sigma_t])
     si_e = dr.zeros(mi.SurfaceInteraction3f, n)
     si_e.wi = -wo
     value = dr.select(
@@ -126,7 +126,7 @@ def sky_direct(
         np.stack([np.array(value[c]) for c in range(3)], -1).reshape(size * size, n_dirs, 3).mean(1)
     )
     if not np.all(np.isfinite(out)):
-        raise RuntimeError(f"the traced skylight of {exp['name']!r} has non-finite texels")
+        raise RuntimeError(f"the traced skylight of {exp.name!r} has non-finite texels")
     return out.reshape(size, size, 3).astype(np.float32)
 
 
@@ -163,7 +163,7 @@ def traced_direct(
 
     sky, sun = reference_sky_parts(exp)
     mask = inside[..., None]
-    nd = exp["reference.sky_directions"]
+    nd = exp.reference.sky_directions
 
     def half(h: int) -> np.ndarray:
         samples = shared_part(
@@ -180,16 +180,16 @@ def traced_direct(
     sky_se = np.abs(sky_h[0] - sky_h[1]) / 2.0
     info = {"direct": "traced", "sky_directions": 2 * nd}
     sky_mean = sky_raw
-    if exp["reference.lighting_denoise"] != "none" and inside.any():
+    if exp.reference.lighting_denoise != "none" and inside.any():
         sky_mean = np.where(mask, denoise_radiance(sky_raw, np.maximum(albedo, 1e-3)), 0.0)
         gain, gain_se = denoise_gain(sky_mean[inside], sky_raw[inside], sky_se[inside])
         info["sky_denoise_gain"], info["sky_denoise_gain_se"] = gain, gain_se
-        if exp["reference.lighting_denoise"] == "oidn":
+        if exp.reference.lighting_denoise == "oidn":
             sky_mean = sky_mean / np.asarray(gain, np.float32)
 
     sun_mean, sun_h, sun_se = np.zeros_like(sky_raw), np.zeros_like(sky_h), np.zeros_like(sky_raw)
     if sun.max() > 0.0:
-        per_batch = exp["reference.sun_photons"] * size * size // N_BATCHES
+        per_batch = exp.reference.sun_photons * size * size // N_BATCHES
         trace = sun_walk if sun_bounces else sun_direct
         batches, landed = trace(
             mi,

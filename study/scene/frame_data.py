@@ -47,7 +47,7 @@ def load_frames(exp, variant: str, cache=None) -> dict:
                 e, variant, cache=cache, log=_log, progress=st, shared=shared
             )
             base.append(i)
-            i = inputs_for_shader(e, i, e["fit.shader"], variant, cache=cache, log=_log)
+            i = inputs_for_shader(e, i, e.fit.shader, variant, cache=cache, log=_log)
             inputs.append(i)
         timings.update(st.timings)
     for what in ("reference_s", "inputs_s"):

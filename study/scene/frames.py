@@ -33,37 +33,37 @@ from typing import Callable
 
 import numpy as np
 
-from .experiment import Experiment
-from .schema import SCHEMA
+from ..config.experiment import Experiment
+from ..config.schema import SCHEMA
 
 ANIMATION_KEYS = ("animation.frames", "animation.time_step", "animation.velocities")
 
 
 def is_animated(exp: Experiment) -> bool:
     """True when ``exp`` has more than one frame."""
-    return int(exp["animation.frames"]) > 1
+    return int(exp.animation.frames) > 1
 
 
 def refuse_animated(exp: Experiment, command: str) -> None:
     """Raise ExperimentError when ``exp`` is animated: ``command`` works on still frames only."""
     if is_animated(exp):
-        from .errors import ExperimentError
+        from ..config.errors import ExperimentError
 
         raise ExperimentError(
-            f"{command} works on one still frame, and {exp['name']!r} has animation.frames = "
-            f"{exp['animation.frames']}: run `study calibrate` on it alone (it fits every "
+            f"{command} works on one still frame, and {exp.name!r} has animation.frames = "
+            f"{exp.animation.frames}: run `study calibrate` on it alone (it fits every "
             "frame), or pass --set animation.frames=1 to use its frame 0"
         )
 
 
 def frame_offsets(exp: Experiment, k: int) -> np.ndarray:
     """(4, 2) float64 offsets wave1..wave4 of frame ``k`` (texture units; see module docstring)."""
-    n = int(exp["animation.frames"])
+    n = int(exp.animation.frames)
     if not 0 <= k < n:
         raise ValueError(f"frame {k} of an animation of {n} frames (animation.frames)")
-    base = np.asarray(exp["waves.offsets"], np.float64)
-    vel = np.asarray(exp["animation.velocities"], np.float64)
-    return base + (k * float(exp["animation.time_step"])) * vel
+    base = np.asarray(exp.waves.offsets, np.float64)
+    vel = np.asarray(exp.animation.velocities, np.float64)
+    return base + (k * float(exp.animation.time_step)) * vel
 
 
 def frame_experiment(exp: Experiment, k: int) -> Experiment:
@@ -78,7 +78,7 @@ def frame_experiment(exp: Experiment, k: int) -> Experiment:
 
 def frames_of(exp: Experiment) -> list[Experiment]:
     """The ``animation.frames`` frame experiments of ``exp`` (one for a still experiment)."""
-    return [frame_experiment(exp, k) for k in range(int(exp["animation.frames"]))]
+    return [frame_experiment(exp, k) for k in range(int(exp.animation.frames))]
 
 
 def offsets_free_key(exp: Experiment) -> str:
@@ -121,10 +121,10 @@ class FrameShared:
         """The Mitsuba scene ``name`` (``build()`` the first time) with its water surface at the
         waves of ``exp``: a scene built for another frame is moved by ``move(scene, exp)``
         (:func:`~.mitsuba_scene.set_waves`) when its offsets differ from ``exp``'s."""
-        part = self.get(exp, name, lambda: [build(), exp["waves.offsets"]])
-        if part[1] != exp["waves.offsets"]:
+        part = self.get(exp, name, lambda: [build(), exp.waves.offsets])
+        if part[1] != exp.waves.offsets:
             move(part[0], exp)
-            part[1] = copy.deepcopy(exp["waves.offsets"])
+            part[1] = copy.deepcopy(exp.waves.offsets)
         return part[0]
 
 

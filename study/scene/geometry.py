@@ -2,7 +2,8 @@
 
 World units throughout, ``+y`` up, water plane at ``y = 0``. Colours are linear RGB.
 
-* the pool floor height ``y = floor_height(x, z)``;
+* the pool floor height ``y = floor_height(x, z)`` (``study.config.floor``, where the
+  experiment's floor keys are checked);
 * the waves: one tiling height field ``h0(u, v)`` (a sum of sines with distinct integer
   wave vectors on the unit torus, drawn from [-4, 4]^2, or a larger grid beyond its 40
   directions: :func:`wave_vector_bound`) sampled at four offsets ``wave1..wave4``, exactly as the
@@ -99,30 +100,6 @@ class Waves:
         n = np.stack([-s * hu, np.ones_like(hu), -s * hv], -1)
         n /= np.linalg.norm(n, axis=-1, keepdims=True)
         return (0.5 * n + 0.5).astype(np.float32)
-
-
-def floor_height(
-    shape: str, depth: float, relief: float, steps: int, seed: int, half_extent, x, z
-) -> np.ndarray:
-    """World y of the pool floor at (x, z); mean depth ``depth`` below the water plane."""
-    x, z = np.asarray(x, np.float64), np.asarray(z, np.float64)
-    hx, hz = half_extent
-    if shape == "flat":
-        return np.full_like(x, -depth)
-    if shape == "slope":
-        return -depth + 0.5 * relief * np.clip(x / hx, -1, 1)
-    if shape == "steps":
-        t = np.clip((x + hx) / (2 * hx), 0, 1 - 1e-9)
-        k = np.floor(t * steps)
-        return -depth + relief * (k / max(steps - 1, 1) - 0.5)
-    if shape == "terrain":
-        rng = np.random.default_rng(seed)
-        y = np.zeros_like(x)
-        for _ in range(6):
-            kx, kz = rng.uniform(0.3, 1.2, 2) * rng.choice([-1, 1], 2)
-            y += np.sin(kx * x + kz * z + rng.uniform(0, 2 * np.pi)) / 6
-        return -depth + 0.5 * relief * y
-    raise ValueError(f"unknown floor shape {shape!r}")
 
 
 def sun_direction(elevation_deg: float, azimuth_deg: float) -> np.ndarray:

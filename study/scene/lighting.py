@@ -68,7 +68,7 @@ from __future__ import annotations
 import numpy as np
 
 from .denoise import denoise_gain, denoise_radiance
-from .experiment import Experiment
+from ..config.experiment import Experiment
 
 N_SEEDS = 4  # independent lighting renders (noise estimate from their spread)
 ALBEDO_SPP = 16  # least samples per texel of the dry render that also gives the albedo
@@ -77,7 +77,7 @@ DRY_SAMPLER = "multijitter"  # its sampler (strata without the stratified sample
 
 def pool_extent(exp: Experiment) -> tuple[float, float, float, float]:
     """World rectangle (x0, z0, x1, z1) of the pool floor (the lighting render's extent)."""
-    hx, hz = exp["pool.half_extent"]
+    hx, hz = exp.pool.half_extent
     return (-hx, -hz, hx, hz)
 
 
@@ -117,7 +117,7 @@ def _transport(exp: Experiment, water: bool) -> dict:
 
     return {
         "type": "volpath" if water and has_medium(exp) else "path",
-        "max_depth": exp["reference.max_depth"],
+        "max_depth": exp.reference.max_depth,
     }
 
 
@@ -208,7 +208,7 @@ def render_lighting(
             _check_lockstep(radiance, img[..., :3], exp)
             radiance = np.maximum(radiance, 0.0)
         if np.any(albedo <= 0.0):
-            from .errors import ExperimentError
+            from ..config.errors import ExperimentError
 
             raise ExperimentError(
                 "the lighting render found texels of zero floor albedo (floor.tile_albedo, "
@@ -224,7 +224,7 @@ def render_lighting(
     lighting = passes.mean(0)
     halves = np.stack([passes[: N_SEEDS // 2].mean(0), passes[N_SEEDS // 2 :].mean(0)])
     stderr = np.sqrt(passes.var(0, ddof=1) / N_SEEDS)
-    if exp["reference.lighting_denoise"] != "none":
+    if exp.reference.lighting_denoise != "none":
         albedo = np.mean(albedos, axis=0)
         lighting = denoise_radiance(np.mean(radiances, axis=0), albedo) / albedo
     if water:
@@ -234,7 +234,7 @@ def render_lighting(
 
         optical = camera_ray_optical_depth(exp, y_cam, world_y)
         if optical.max() > MAX_OPTICAL_DEPTH:
-            from .errors import ExperimentError
+            from ..config.errors import ExperimentError
 
             raise ExperimentError(
                 f"water.sigma_t: the floor's light through the water is lost (optical depth "
@@ -245,7 +245,7 @@ def render_lighting(
         gain = np.exp(optical)
         lighting, stderr, halves = lighting * gain, stderr * gain, halves * gain
     if not np.all(np.isfinite(lighting)):
-        raise RuntimeError(f"the lighting render of {exp['name']!r} has non-finite texels")
+        raise RuntimeError(f"the lighting render of {exp.name!r} has non-finite texels")
     return lighting.astype(np.float32), stderr.astype(np.float32), halves.astype(np.float32)
 
 
@@ -256,7 +256,7 @@ def _check_lockstep(rest: np.ndarray, full: np.ndarray, exp: Experiment) -> None
     floor = -1e-4 * max(float(full.max()), 1e-6)
     if rest.min() < floor:
         raise RuntimeError(
-            f"the lighting render of {exp['name']!r}: the direct pass is brighter than the full "
+            f"the lighting render of {exp.name!r}: the direct pass is brighter than the full "
             f"pass in some texels (min {rest.min():.3g}): the two renders did not follow the same "
             'paths; use reference.lighting_direct = "path"'
         )
@@ -324,7 +324,7 @@ def _match_denoiser(exp, colour, colour_halves, se, inside, n_light: int, info: 
         n_independent=n_light**2 * float(inside.mean()),
     )
     info["denoise_gain"], info["denoise_gain_se"] = gain, gain_se
-    if exp["reference.lighting_denoise"] == "oidn":
+    if exp.reference.lighting_denoise == "oidn":
         g = np.asarray(gain, np.float32)
         colour = np.where(inside[..., None], colour / np.where(g > 0.0, g, 1.0), colour)
         info["denoise_matched"] = True
@@ -357,20 +357,20 @@ def lighting_colour(
     from .mitsuba_scene import set_waves
     from .topdown import top_down_world_y, underwater_camera_height
 
-    wet = exp["reference.refraction_lighting"] == "underwater"
+    wet = exp.reference.refraction_lighting == "underwater"
     y_cam = underwater_camera_height(exp) if wet else 100.0
-    n_light = min(exp["reference.lighting_size"], size)  # never finer than the texture
+    n_light = min(exp.reference.lighting_size, size)  # never finer than the texture
     # traced: under water, paths long enough to hold the direct term, and water that only absorbs
     # (in scattering water the max_depth-3 pass also holds light scattered on the camera's own ray)
     traced = (
         wet
-        and exp["reference.lighting_direct"] == "traced"
-        and exp["reference.max_depth"] >= 3
-        and max(exp["water.albedo"]) == 0.0
+        and exp.reference.lighting_direct == "traced"
+        and exp.reference.max_depth >= 3
+        and max(exp.water.albedo) == 0.0
     )
-    spp = exp["reference.bounce_spp"] if traced else exp["reference.texture_spp"]
+    spp = exp.reference.bounce_spp if traced else exp.reference.texture_spp
     # sun_bounces: all the sun's light traced from the sun, so the path tracer sees the sky alone
-    sun_bounces = traced and exp["reference.sun_bounces"] == "photons"
+    sun_bounces = traced and exp.reference.sun_bounces == "photons"
     if shared is None:
         scene = lighting_scene(exp, wet, sky_only=sun_bounces)
     else:
@@ -395,14 +395,14 @@ def lighting_colour(
     if world_y is None:
         world_y = top_down_world_y(exp, extent, size)
     X, Z = texel_centres(extent, size)
-    hx, hz = exp["pool.half_extent"]
+    hx, hz = exp.pool.half_extent
     inside = (np.abs(X) < hx) & (np.abs(Z) < hz) & (world_y < y_cam)
     pool = pool_extent(exp)
 
     def dry_render():
-        dry, albedo = render_dry(exp, extent, size, exp["reference.wall_spp"], seed)
+        dry, albedo = render_dry(exp, extent, size, exp.reference.wall_spp, seed)
         wall_info = {}
-        if exp["reference.wall_denoise"] == "oidn" and not inside.all():
+        if exp.reference.wall_denoise == "oidn" and not inside.all():
             dry, wall_info = denoise_dry(dry, albedo, ~inside)
         return dry, albedo, wall_info
 
@@ -418,14 +418,14 @@ def lighting_colour(
         "method": "lighting",
         "lighting_size": n_light,
         "spp": spp,
-        "wall_spp": dry_spp(exp["reference.wall_spp"]),
+        "wall_spp": dry_spp(exp.reference.wall_spp),
         "noise": noise,
         "n_seeds": N_SEEDS,
-        "denoise": exp["reference.lighting_denoise"],
+        "denoise": exp.reference.lighting_denoise,
         "direct": "traced" if traced else "path",
         **wall_info,
     }
-    if exp["reference.lighting_denoise"] != "none" and inside.any():
+    if exp.reference.lighting_denoise != "none" and inside.any():
         colour = _match_denoiser(exp, colour, colour_halves, se, inside, n_light, info)
     if traced:  # the direct sky- and sunlight, ray traced on the texture's texels
         from .direct_light import traced_direct

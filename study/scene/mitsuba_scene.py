@@ -11,8 +11,8 @@
   lies inside the medium. The waves are geometry, not a normal-mapped flat BSDF, because
   a normal map on a dielectric bounding a medium breaks reciprocity and does not move
   the interface; the displaced mesh refracts exactly where the real surface is.
-* Mesh above the water: the user's OBJ/PLY (``mesh.file``, see ``user_files``), diffuse.
-* Floor from files: ``floor.heightmap`` and ``floor.albedo_image`` (see ``user_files``).
+* Mesh above the water: the user's OBJ/PLY (``mesh.file``, see ``study.config.files``), diffuse.
+* Floor from files: ``floor.heightmap`` and ``floor.albedo_image`` (see ``study.config.files``).
 * Sky and sun: one lat-long ``envmap`` (gradient sky, ground, sun disc; or the user's HDR
   map, ``user_scene.reference_sky``). The sun is an
   area of the environment, not a delta light: a delta light never reaches the floor
@@ -31,8 +31,9 @@ import numpy as np
 
 from shaders_port import perspective_view_proj
 
-from .experiment import Experiment
-from .geometry import Waves, floor_height, sun_direction
+from ..config.experiment import Experiment
+from ..config.floor import floor_height
+from .geometry import Waves, sun_direction
 
 WATER_INSET = 1e-3  # the water volume stays this far inside the walls (no coincident faces)
 LEDGE_GAP = 0.02  # the ends of an under-water ledge stay this far from the walls (and the
@@ -49,21 +50,21 @@ def waves_of(exp: Experiment) -> Waves:
 def floor_of(exp: Experiment, x, z) -> np.ndarray:
     f = exp.section("floor")
     if f["shape"] == "heightmap":
-        from .user_files import heightmap_floor
+        from ..config.files import heightmap_floor
 
         return heightmap_floor(exp.values, x, z)
     return floor_height(
-        f["shape"], f["depth"], f["relief"], f["steps"], f["seed"], exp["pool.half_extent"], x, z
+        f["shape"], f["depth"], f["relief"], f["steps"], f["seed"], exp.pool.half_extent, x, z
     )
 
 
 def sky_params(exp: Experiment, with_sun: bool = True) -> dict:
-    p = dict(zenith=exp["sky.zenith"], horizon=exp["sky.horizon"], ground=exp["sky.ground"])
+    p = dict(zenith=exp.sky.zenith, horizon=exp.sky.horizon, ground=exp.sky.ground)
     if with_sun:
         p.update(
-            sun_dir=sun_direction(exp["sun.elevation"], exp["sun.azimuth"]),
-            sun_radius_deg=exp["sun.radius"],
-            sun_radiance=exp["sun.radiance"],
+            sun_dir=sun_direction(exp.sun.elevation, exp.sun.azimuth),
+            sun_radius_deg=exp.sun.radius,
+            sun_radiance=exp.sun.radiance,
         )
     return p
 
@@ -76,7 +77,7 @@ def camera_view_proj(exp: Experiment, width: int, height: int) -> np.ndarray:
 
 
 def floor_bottom(exp: Experiment) -> float:
-    hx, hz = exp["pool.half_extent"]
+    hx, hz = exp.pool.half_extent
     x, z = np.meshgrid(np.linspace(-hx, hx, 129), np.linspace(-hz, hz, 129))
     return float(floor_of(exp, x, z).min()) - 0.1
 
@@ -133,10 +134,10 @@ def tile_texture(exp: Experiment, px_per_tile: int = 32) -> np.ndarray:
     the tiles, or ``floor.albedo_image`` resampled."""
     f = exp.section("floor")
     if f["albedo_image"]:
-        from .user_files import albedo_over_pool
+        from ..config.files import albedo_over_pool
 
         return albedo_over_pool(exp.values)
-    hx, hz = exp["pool.half_extent"]
+    hx, hz = exp.pool.half_extent
     nx = max(8, int(round(2 * hx / f["tile_size"] * px_per_tile)))
     nz = max(8, int(round(2 * hz / f["tile_size"] * px_per_tile)))
     nx, nz = min(nx, 2048), min(nz, 2048)
@@ -163,8 +164,8 @@ def build_geometry(
     ``medium``: the water's medium object (default: a new one from :func:`water_medium`);
     ``mesh``: include the user's mesh above the water (``mesh.file``), if any; ``water_bsdf``:
     extra properties of the water's dielectric (see :func:`water_mesh`)."""
-    hx, hz = exp["pool.half_extent"]
-    res = exp["reference.water_mesh"]
+    hx, hz = exp.pool.half_extent
+    res = exp.reference.water_mesh
     yb = floor_bottom(exp)
     out = {}
     # ---- floor
@@ -192,10 +193,10 @@ def build_geometry(
         bsdf=mi.load_dict({"type": "diffuse", "reflectance": tex}),
     )
     # ---- walls
-    w, top = exp["pool.wall_width"], exp["pool.wall_height"]
+    w, top = exp.pool.wall_width, exp.pool.wall_height
     wall_bsdf = {
         "type": "diffuse",
-        "reflectance": {"type": "rgb", "value": exp["pool.wall_albedo"]},
+        "reflectance": {"type": "rgb", "value": exp.pool.wall_albedo},
     }
     boxes = {
         "wall_px": ((hx, hx + w), (-hz - w, hz + w)),
@@ -211,7 +212,7 @@ def build_geometry(
             "to_world": T().translate([(x0 + x1) / 2, (yb + top) / 2, (z0 + z1) / 2])
             @ T().scale([(x1 - x0) / 2, (top - yb) / 2, (z1 - z0) / 2]),
         }
-    x_min, x_max, top, thick = exp["floor.ledge"]
+    x_min, x_max, top, thick = exp.floor.ledge
     if thick > 0.0:  # an under-water slab across the pool in z (see floor.ledge)
         zl = hz - LEDGE_GAP
         out["ledge"] = {
@@ -220,7 +221,7 @@ def build_geometry(
             "to_world": T().translate([(x_min + x_max) / 2, top - thick / 2, 0.0])
             @ T().scale([(x_max - x_min) / 2, thick / 2, zl]),
         }
-    if mesh and exp["mesh.file"]:
+    if mesh and exp.mesh.file:
         from .user_scene import mesh_bounds, mesh_shape
 
         mesh_bounds(mi, exp)  # loadable and above the water
@@ -238,13 +239,13 @@ def water_medium(mi, exp: Experiment):
         return None
     # sigma_t enters as an RGB in [0, 1] times a scalar scale (Mitsuba's RGB volume
     # values are reflectance-like and must lie in [0, 1])
-    scale = max(exp["water.sigma_t"])
+    scale = max(exp.water.sigma_t)
     return mi.load_dict(
         {
             "type": "homogeneous",
             "scale": scale,
-            "sigma_t": {"type": "rgb", "value": [v / scale for v in exp["water.sigma_t"]]},
-            "albedo": {"type": "rgb", "value": exp["water.albedo"]},
+            "sigma_t": {"type": "rgb", "value": [v / scale for v in exp.water.sigma_t]},
+            "albedo": {"type": "rgb", "value": exp.water.albedo},
         }
     )
 
@@ -257,7 +258,7 @@ def water_mesh(mi, exp: Experiment, y_bottom: float, medium=None, bsdf: dict | N
     pos, faces, nor, outward = _water_arrays(exp, y_bottom)
     props = {
         "bsdf": mi.load_dict(
-            {"type": "dielectric", "int_ior": exp["water.ior"], "ext_ior": 1.0, **(bsdf or {})}
+            {"type": "dielectric", "int_ior": exp.water.ior, "ext_ior": 1.0, **(bsdf or {})}
         )
     }
     if medium is not None:
@@ -268,9 +269,9 @@ def water_mesh(mi, exp: Experiment, y_bottom: float, medium=None, bsdf: dict | N
 def _water_arrays(exp: Experiment, y_bottom: float):
     """(positions (V, 3), faces (F, 3), vertex normals (V, 3), outward normals (F, 3)) of the
     water volume of :func:`water_mesh`, float64 NumPy, faces not yet oriented."""
-    hx, hz = exp["pool.half_extent"]
+    hx, hz = exp.pool.half_extent
     hx, hz = hx - WATER_INSET, hz - WATER_INSET
-    n = exp["reference.water_mesh"]
+    n = exp.reference.water_mesh
     waves = waves_of(exp)
     x, z = np.meshgrid(np.linspace(-hx, hx, n), np.linspace(-hz, hz, n))
     h, gx, gz = waves.height_and_gradient(x, z)
@@ -348,7 +349,7 @@ _MOVED: dict = {}  # scene hash -> the water arrays set_waves set last (one fram
 
 
 def has_medium(exp: Experiment) -> bool:
-    return any(v > 0 for v in exp["water.sigma_t"])
+    return any(v > 0 for v in exp.water.sigma_t)
 
 
 def sampler_spp(sampler: str, spp: int) -> int:
@@ -396,8 +397,8 @@ def build_scene(
     render only image rows ``[r0, r1)`` (a film crop; row 0 at the top)."""
     import mitsuba as mi
 
-    width = width or exp["resolution"][0]
-    height = height or exp["resolution"][1]
+    width = width or exp.resolution[0]
+    height = height or exp.resolution[1]
     c = exp.section("camera")
     d = {"type": "scene", **build_geometry(mi, exp, water=True, water_bsdf=water_bsdf)}
     from .user_scene import reference_sky
@@ -410,7 +411,7 @@ def build_scene(
         "to_world": mi.ScalarTransform4f().look_at(
             origin=c["position"], target=c["target"], up=[0, 1, 0]
         ),
-        "sampler": {"type": exp["reference.sampler"], "seed": seed},
+        "sampler": {"type": exp.reference.sampler, "seed": seed},
         "film": {
             "type": "hdrfilm",
             "width": width,
@@ -431,6 +432,6 @@ def build_scene(
     }
     d["integrator"] = {
         "type": "volpath" if has_medium(exp) else "path",
-        "max_depth": exp["reference.max_depth"],
+        "max_depth": exp.reference.max_depth,
     }
     return mi.load_dict(d)

@@ -39,7 +39,7 @@ import numpy as np
 
 from .._io import file_lock, read_exr, write_exr
 from .cache import SCENE_VERSION, cache_dir, versions
-from .experiment import Experiment
+from ..config.experiment import Experiment
 
 N_SEEDS = 4
 PILOT_SPP = 8
@@ -91,7 +91,7 @@ def pass_spp(exp: Experiment, spp: int) -> int:
     128 spp are 4 passes of 35 for ``multijitter``, of 36 for ``stratified``)."""
     from .mitsuba_scene import sampler_spp
 
-    return sampler_spp(exp["reference.sampler"], max(1, math.ceil(spp / N_SEEDS)))
+    return sampler_spp(exp.reference.sampler, max(1, math.ceil(spp / N_SEEDS)))
 
 
 def render_passes(
@@ -158,27 +158,27 @@ def noise_of(passes: np.ndarray, mask: np.ndarray) -> tuple[np.ndarray, float]:
 def choose_spp(exp: Experiment, progress=None, scene=None) -> tuple[int, dict]:
     """Pick spp for ``reference.target_noise`` from a measured pilot; return (spp, info).
     ``scene``: the loaded scene of ``exp`` (default: built here)."""
-    w, h = exp["resolution"]
+    w, h = exp.resolution
     t0 = time.perf_counter()
     from .mitsuba_scene import build_scene, sampler_spp
 
     scene = build_scene(exp) if scene is None else scene
-    per_pass = sampler_spp(exp["reference.sampler"], PILOT_SPP)  # K passes of PILOT_SPP
+    per_pass = sampler_spp(exp.reference.sampler, PILOT_SPP)  # K passes of PILOT_SPP
     pilot = render_passes(
-        exp, per_pass, N_SEEDS, seed0=10_000 + exp["reference.seed"], scene=scene, progress=progress
+        exp, per_pass, N_SEEDS, seed0=10_000 + exp.reference.seed, scene=scene, progress=progress
     )
     _, pilot_noise = noise_of(pilot, water_mask(exp, w, h, scene=scene))
     total_pilot = per_pass * N_SEEDS
     per_sample_var = pilot_noise**2 * total_pilot  # noise^2 = var / spp_total
-    target = exp["reference.target_noise"]
+    target = exp.reference.target_noise
     need = per_sample_var / target**2
     spp = 2 ** max(2, math.ceil(math.log2(max(need, 1.0))))
-    spp = max(N_SEEDS, min(spp, exp["reference.max_spp"]))
+    spp = max(N_SEEDS, min(spp, exp.reference.max_spp))
     info = {
         "pilot_spp": total_pilot,
         "pilot_noise": pilot_noise,
         "predicted_spp": need,
-        "capped": bool(need > exp["reference.max_spp"]),
+        "capped": bool(need > exp.reference.max_spp),
         "pilot_seconds": time.perf_counter() - t0,
     }
     return spp, info
@@ -199,8 +199,8 @@ def render_reference(
     if spp is None:
         spp, info = (
             choose_spp(exp, progress, scene)
-            if exp["reference.spp"] == "auto"
-            else (int(exp["reference.spp"]), {})
+            if exp.reference.spp == "auto"
+            else (int(exp.reference.spp), {})
         )
     per_pass = pass_spp(exp, spp)
     from .mitsuba_scene import build_scene
@@ -211,34 +211,34 @@ def render_reference(
         exp,
         per_pass,
         N_SEEDS,
-        seed0=exp["reference.seed"] * N_SEEDS,
+        seed0=exp.reference.seed * N_SEEDS,
         progress=progress,
         scene=scene,
     )
     seconds = time.perf_counter() - t0
-    w, h = exp["resolution"]
+    w, h = exp.resolution
     mask = water_mask(exp, w, h, scene=scene)
     stderr, noise = noise_of(passes, mask)
     image = passes.mean(0)
     if not np.all(np.isfinite(image)):
         raise RuntimeError(
-            f"the reference render of {exp['name']!r} has non-finite pixels; "
+            f"the reference render of {exp.name!r} has non-finite pixels; "
             "check the scene (e.g. degenerate geometry)"
         )
     prov = {
         "key": reference_key(exp, variant),
         "scene_hash": exp.scene_hash(),
-        "experiment": exp["name"],
+        "experiment": exp.name,
         "spp": per_pass * N_SEEDS,
         "n_seeds": N_SEEDS,
-        "seed": exp["reference.seed"],
+        "seed": exp.reference.seed,
         "variant": variant,
         "versions": versions(),
         "scene_version": SCENE_VERSION,
         "render_seconds": seconds,
         "noise": noise,
         "auto_spp": info,
-        "integrator": "volpath" if any(v > 0 for v in exp["water.sigma_t"]) else "path",
+        "integrator": "volpath" if any(v > 0 for v in exp.water.sigma_t) else "path",
     }
     return Reference(image.astype(np.float32), stderr, prov, passes=passes if keep_passes else None)
 
@@ -298,7 +298,7 @@ def _cached_reference(exp: Experiment, key: str, path: Path, log) -> Reference |
         se = extra.get("stderr")
         if (
             prov.get("key") == key
-            and rgb.shape[:2] == tuple(exp["resolution"][::-1])
+            and rgb.shape[:2] == tuple(exp.resolution[::-1])
             and se is not None
             and se.shape == rgb.shape
         ):

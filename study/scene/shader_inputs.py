@@ -35,7 +35,7 @@ import numpy as np
 
 from shaders_port import ShaderInputs, fresnel_lut, ortho_tex_matrix
 
-from .experiment import Experiment
+from ..config.experiment import Experiment
 from .mitsuba_scene import camera_view_proj, waves_of
 from .topdown import (
     MAX_OPTICAL_DEPTH,
@@ -90,7 +90,7 @@ def top_down_colour(
             y_cam=dry_camera_height(mi, exp, extent),
             progress=st.counter("  passes"),
         )
-    if exp["reference.refraction_lighting"] == "dry":
+    if exp.reference.refraction_lighting == "dry":
         return dry
     y_cam = underwater_camera_height(exp)
     label = f"shader inputs: top-down render through the water ({size}x{size}, {spp} spp)"
@@ -118,7 +118,7 @@ def top_down_colour(
     x0, z0, x1, z1 = extent
     c = (np.arange(size) + 0.5) / size
     X, Z = np.meshgrid(x0 + c * (x1 - x0), z0 + c * (z1 - z0))
-    hx, hz = exp["pool.half_extent"]
+    hx, hz = exp.pool.half_extent
     inside = (np.abs(X) < hx) & (np.abs(Z) < hz) & (world_y < y_cam)
     return np.where(inside[..., None], wet, dry).astype(np.float32)
 
@@ -136,9 +136,9 @@ def shader_fresnel_lut(exp: Experiment) -> np.ndarray:
     ``reference.fresnel_transmission = "radiance"`` the transmission is divided by ior^2:
     radiance crossing from water (n) into air (1) scales by T / n^2 (the n^2 law of radiance),
     which the shader's ``vRefraction * FresnelCoeffs.r`` otherwise leaves out."""
-    lut = fresnel_lut(exp["water.ior"], FRESNEL_SIZE)
-    if exp["reference.fresnel_transmission"] == "radiance":
-        lut[:, 0] /= exp["water.ior"] ** 2
+    lut = fresnel_lut(exp.water.ior, FRESNEL_SIZE)
+    if exp.reference.fresnel_transmission == "radiance":
+        lut[:, 0] /= exp.water.ior**2
     return lut
 
 
@@ -171,13 +171,13 @@ def build_shader_inputs(
     from .frames import shared_part
 
     st = progress or Stages(quiet=True)
-    width = width or exp["resolution"][0]
-    height = height or exp["resolution"][1]
+    width = width or exp.resolution[0]
+    height = height or exp.resolution[1]
     extent = texture_extent(exp)
-    size = exp["reference.texture_size"]
+    size = exp.reference.texture_size
     with st.stage("inputs.world_y_s", f"shader inputs: world-y ray cast ({size}x{size})"):
         world_y = shared_part(shared, exp, "world_y", lambda: top_down_world_y(exp, extent, size))
-    if exp["reference.texture_method"] == "lighting":
+    if exp.reference.texture_method == "lighting":
         from .lighting import lighting_colour
 
         with st.stage(
@@ -187,7 +187,7 @@ def build_shader_inputs(
                 exp,
                 extent,
                 size,
-                exp["reference.seed"],
+                exp.reference.seed,
                 world_y=world_y,
                 progress=st.counter("  passes"),
                 shared=shared,
@@ -197,18 +197,18 @@ def build_shader_inputs(
             exp,
             extent,
             size,
-            exp["reference.texture_spp"],
-            exp["reference.seed"],
+            exp.reference.texture_spp,
+            exp.reference.seed,
             world_y=world_y,
             stages=st,
         )
-        tex_info = {"method": "colour", "spp": exp["reference.texture_spp"], "noise": None}
+        tex_info = {"method": "colour", "spp": exp.reference.texture_spp, "noise": None}
         halves = None
     if info is not None:
         info["texture"] = tex_info
     tm = ortho_tex_matrix(*extent)
     refl_y, refl_col, tm1 = _reflection_textures(exp, extent, size, world_y, colour, st, shared)
-    hx, hz = exp["pool.half_extent"]
+    hx, hz = exp.pool.half_extent
     waves = waves_of(exp)
     lightpos, lightcolor = light_of(exp)
     c = exp.section("camera")
@@ -218,7 +218,7 @@ def build_shader_inputs(
             exp,
             "maps",
             lambda: (
-                waves.normal_map(exp["waves.normal_map_size"]),
+                waves.normal_map(exp.waves.normal_map_size),
                 sky_cubemap(exp),
                 shader_fresnel_lut(exp),
             ),
@@ -234,8 +234,8 @@ def build_shader_inputs(
         refl_texture=refl_col,
         tex_matrix1=tm1,
         water_rect=(-hx, -hz, hx, hz),
-        normal_tile=exp["waves.normal_tile"],
-        waves=np.asarray(exp["waves.offsets"]),
+        normal_tile=exp.waves.normal_tile,
+        waves=np.asarray(exp.waves.offsets),
         view_proj=camera_view_proj(exp, width, height),
         viewpos=np.asarray(c["position"]),
         lightpos=lightpos,
@@ -252,7 +252,7 @@ def _reflection_textures(exp, extent, size: int, world_y, colour, st, shared):
     one (built once for an animation's frames), else from the refraction textures."""
     from .frames import shared_part
 
-    if not exp["mesh.file"]:
+    if not exp.mesh.file:
         refl_y = np.where(world_y > 0.0, world_y, NO_GEOMETRY).astype(np.float32)
         return refl_y, reflection_colour(world_y, colour), ortho_tex_matrix(*extent)
     from .topdown import mesh_reflection_textures
@@ -280,7 +280,7 @@ def half_inputs(exp: Experiment, inputs: ShaderInputs) -> tuple[ShaderInputs, Sh
     refraction texture (no ``mesh.file``). Raises ExperimentError when the inputs have no halves
     (``reference.texture_method = "colour"``)."""
     if inputs.refraction_halves is None:
-        from .errors import ExperimentError
+        from ..config.errors import ExperimentError
 
         raise ExperimentError(
             'fit.input_noise = "decorrelate" needs two independent halves of the '
@@ -289,7 +289,7 @@ def half_inputs(exp: Experiment, inputs: ShaderInputs) -> tuple[ShaderInputs, Sh
         )
     out = []
     for half in inputs.refraction_halves:
-        refl = inputs.refl_texture if exp["mesh.file"] else reflection_colour(inputs.world_y, half)
+        refl = inputs.refl_texture if exp.mesh.file else reflection_colour(inputs.world_y, half)
         out.append(
             dataclasses.replace(
                 inputs, refraction_texture=half, refl_texture=refl, refraction_halves=None

@@ -43,7 +43,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .experiment import Experiment
+from ..config.experiment import Experiment
 
 CONE_MARGIN_TEXELS = 2.0  # the cone around the sun's texels, grown by this many map texels
 # (the envmap interpolates bilinearly: its disc is one texel wider)
@@ -146,7 +146,7 @@ def _emit(mi, scene, exp: Experiment, sun: np.ndarray, n_photons: int, seeds, y_
     # plane and the camera (which is below the lowest wave trough)
     cos_low = max(np.cos(np.arccos(min(1.0, axis[1])) + angle), 1e-3)
     reach = (y_plane - y_cam) * np.sqrt(max(0.0, 1.0 - cos_low**2)) / cos_low
-    hx, hz = exp["pool.half_extent"]
+    hx, hz = exp.pool.half_extent
     rx0, rx1, rz0, rz1 = -hx - reach, hx + reach, -hz - reach, hz + reach
     area = (rx1 - rx0) * (rz1 - rz0)
     omega = 2.0 * np.pi * (1.0 - np.cos(angle))
@@ -223,19 +223,19 @@ def sun_direct(
     water = shape_named(scene, "water")
     si = scene.ray_intersect(mi.Ray3f(mi.Point3f(*_vec(mi, o)), mi.Vector3f(*_vec(mi, dirs))))
     ok = si.is_valid() & (si.shape == mi.ShapePtr(water)) & (mi.Frame3f.cos_theta(si.wi) > 0)
-    r, cos_t, _, eta_ti = mi.fresnel(mi.Frame3f.cos_theta(si.wi), dr.opaque(F, exp["water.ior"]))
+    r, cos_t, _, eta_ti = mi.fresnel(mi.Frame3f.cos_theta(si.wi), dr.opaque(F, exp.water.ior))
     power = power * (1.0 - r)
     si2 = scene.ray_intersect(si.spawn_ray(si.to_world(mi.refract(si.wi, cos_t, eta_ti))), ok)
     ok &= si2.is_valid() & (si2.shape != mi.ShapePtr(water))
     ok = _seen_from_above(mi, scene, si2, ok, y_cam)
-    sigma = mi.Color3f(*[dr.opaque(F, float(v)) for v in exp["water.sigma_t"]])
+    sigma = mi.Color3f(*[dr.opaque(F, float(v)) for v in exp.water.sigma_t])
     albedo = si2.bsdf().eval_diffuse_reflectance(si2, ok)
     value = (
         power * dr.exp(-sigma * si2.t) * albedo * dr.abs(si2.n.y) * _texel_scale(mi, extent, size)
     )
     out, landed = _splat(mi, ok, si2.p, value, extent, size, batch, len(seeds))
     if not np.all(np.isfinite(out)):
-        raise RuntimeError(f"the light-traced sunlight of {exp['name']!r} has non-finite texels")
+        raise RuntimeError(f"the light-traced sunlight of {exp.name!r} has non-finite texels")
     return out.astype(np.float32), landed
 
 
@@ -267,13 +267,13 @@ def sun_walk(
     o, d, power, batch = emitted
     n = len(o)
     water = mi.ShapePtr(shape_named(scene, "water"))
-    sigma = mi.Color3f(*[dr.opaque(F, float(v)) for v in exp["water.sigma_t"]])
+    sigma = mi.Color3f(*[dr.opaque(F, float(v)) for v in exp.water.sigma_t])
     scale = _texel_scale(mi, extent, size)
     x0, z0, x1, z1 = extent
     sx, sz = dr.opaque(F, size / (x1 - x0)), dr.opaque(F, size / (z1 - z0))
     ox, oz, n_side = dr.opaque(F, x0), dr.opaque(F, z0), dr.opaque(mi.Int32, size)
     max_surfaces = dr.opaque(
-        U, exp["reference.max_depth"] - 1
+        U, exp.reference.max_depth - 1
     )  # the k-th surface: a path of depth k + 1
     ctx = mi.BSDFContext(mi.TransportMode.Importance)
     texels = dr.zeros(F, len(seeds) * size * size * 3)
@@ -324,5 +324,5 @@ def sun_walk(
     dr.eval(texels, landed)
     out = np.array(texels, np.float64).reshape(len(seeds), size, size, 3)
     if not np.all(np.isfinite(out)):
-        raise RuntimeError(f"the light-traced sunlight of {exp['name']!r} has non-finite texels")
+        raise RuntimeError(f"the light-traced sunlight of {exp.name!r} has non-finite texels")
     return out.astype(np.float32), int(np.array(landed, np.int64).sum())

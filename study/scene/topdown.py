@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .experiment import Experiment
+from ..config.experiment import Experiment
 from .mitsuba_scene import build_geometry
 from .user_scene import reflection_extent
 
@@ -19,8 +19,8 @@ ORTHO_NEAR_CLIP = 1e-2  # the top-down camera's rays start this far below it (Mi
 
 def texture_extent(exp: Experiment) -> tuple[float, float, float, float]:
     """World rectangle (x0, z0, x1, z1) covered by the top-down textures: the pool and its walls."""
-    hx, hz = exp["pool.half_extent"]
-    b = exp["pool.wall_width"]
+    hx, hz = exp.pool.half_extent
+    b = exp.pool.wall_width
     return (-hx - b, -hz - b, hx + b, hz + b)
 
 
@@ -69,7 +69,7 @@ def camera_ray_optical_depth(exp: Experiment, y_cam: float, world_y: np.ndarray)
     """(..., 3) optical depth ``sigma_t (y_top - world_y)`` of the under-water camera's own vertical
     ray, from where it starts (:func:`camera_ray_top`) down to the surface at ``world_y`` (...);
     ``exp`` of it divides that ray's absorption out of a top-down render."""
-    sigma = np.asarray(exp["water.sigma_t"], np.float64)
+    sigma = np.asarray(exp.water.sigma_t, np.float64)
     return sigma * np.maximum(camera_ray_top(y_cam) - world_y, 0.0)[..., None]
 
 
@@ -151,7 +151,7 @@ def render_top_down(
         "sky": {"type": "envmap", "bitmap": mi.Bitmap(reference_sky(exp))},
         "integrator": {
             "type": "volpath" if water and has_medium(exp) else "path",
-            "max_depth": exp["reference.max_depth"],
+            "max_depth": exp.reference.max_depth,
         },
     }
     scene = mi.load_dict(d)
@@ -167,8 +167,8 @@ def underwater_camera_height(exp: Experiment) -> float:
     floor."""
     from .mitsuba_scene import floor_of
 
-    y_cam = -exp["waves.amplitude"] - 0.02
-    hx, hz = exp["pool.half_extent"]
+    y_cam = -exp.waves.amplitude - 0.02
+    hx, hz = exp.pool.half_extent
     x, z = np.meshgrid(np.linspace(-hx, hx, 129), np.linspace(-hz, hz, 129))
     top = float(floor_of(exp, x, z).max())
     if top >= y_cam - 0.01:
@@ -195,8 +195,8 @@ def mesh_reflection_textures(exp: Experiment, extent, size: int, progress=None):
         exp,
         ext,
         size,
-        exp["reference.texture_spp"],
-        exp["reference.seed"],
+        exp.reference.texture_spp,
+        exp.reference.seed,
         water=False,
         progress=progress,
     )

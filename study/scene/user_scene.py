@@ -1,6 +1,6 @@
 """Scene content from the user's files for the reference and the shader inputs.
 
-The file formats and their validation are in :mod:`study.scene.user_files`; this module
+The file formats and their validation are in :mod:`study.config.files`; this module
 turns them into what the Mitsuba scene and the shader inputs use:
 
 * the sky: :func:`reference_sky` (the lat-long map the reference's ``envmap`` emits: the
@@ -23,9 +23,9 @@ import math
 
 import numpy as np
 
-from . import user_files as uf
-from .errors import ExperimentError
-from .experiment import Experiment
+from ..config import files as uf
+from ..config.errors import ExperimentError
+from ..config.experiment import Experiment
 from .geometry import envmap_image, sky_radiance, sun_direction
 
 SKY_HEIGHT = 512  # rows of the built-in gradient sky's lat-long map (0.35 degree texels)
@@ -42,9 +42,9 @@ def has_file(exp: Experiment, key: str) -> bool:
 
 def _explicit_sun(exp: Experiment) -> dict:
     return dict(
-        sun_dir=sun_direction(exp["sun.elevation"], exp["sun.azimuth"]),
-        sun_radius_deg=exp["sun.radius"],
-        sun_radiance=exp["sun.radiance"],
+        sun_dir=sun_direction(exp.sun.elevation, exp.sun.azimuth),
+        sun_radius_deg=exp.sun.radius,
+        sun_radiance=exp.sun.radiance,
     )
 
 
@@ -61,17 +61,17 @@ def _file_sky(path: str, sha: str, rotation: float, scale: float) -> tuple[np.nd
 
 def file_sky(exp: Experiment) -> tuple[np.ndarray, dict | None]:
     return _file_sky(
-        exp["sky.envmap"], exp.digests.get("sky.envmap", ""), exp["sky.rotation"], exp["sky.scale"]
+        exp.sky.envmap, exp.digests.get("sky.envmap", ""), exp.sky.rotation, exp.sky.scale
     )
 
 
 def reference_sky(exp: Experiment) -> np.ndarray:
     """(H, 2H, 3) float32 lat-long radiance for the reference's ``envmap`` (sun included)."""
     if not has_file(exp, "sky.envmap"):
-        p = dict(zenith=exp["sky.zenith"], horizon=exp["sky.horizon"], ground=exp["sky.ground"])
+        p = dict(zenith=exp.sky.zenith, horizon=exp.sky.horizon, ground=exp.sky.ground)
         return envmap_image(SKY_HEIGHT, **p, **_explicit_sun(exp))
     sky, _ = file_sky(exp)
-    if exp["sun.source"] == "explicit" and max(exp["sun.radiance"]) > 0:
+    if exp.sun.source == "explicit" and max(exp.sun.radiance) > 0:
         s = _explicit_sun(exp)
         d, _ = uf.latlong_directions(sky.shape[0])
         inside = (d @ s["sun_dir"]) >= math.cos(math.radians(s["sun_radius_deg"]))
@@ -86,11 +86,11 @@ def reference_sky_parts(exp: Experiment) -> tuple[np.ndarray, np.ndarray]:
     sun region filled from its surroundings); zero everywhere when there is no sun."""
     ref = reference_sky(exp)
     if not has_file(exp, "sky.envmap"):
-        p = dict(zenith=exp["sky.zenith"], horizon=exp["sky.horizon"], ground=exp["sky.ground"])
+        p = dict(zenith=exp.sky.zenith, horizon=exp.sky.horizon, ground=exp.sky.ground)
         sky = envmap_image(SKY_HEIGHT, **p)
     else:
         sky, sun = file_sky(exp)
-        if exp["sun.source"] == "envmap" and sun is not None:
+        if exp.sun.source == "envmap" and sun is not None:
             sky = uf.fill_region(sky, sun["mask"])
     sun = np.maximum(ref - np.asarray(sky, np.float32), 0.0).astype(np.float32)
     return (ref - sun).astype(np.float32), sun
@@ -101,10 +101,10 @@ def shader_sky(exp: Experiment, d: np.ndarray) -> np.ndarray:
     content)."""
     if not has_file(exp, "sky.envmap"):
         return sky_radiance(
-            d, zenith=exp["sky.zenith"], horizon=exp["sky.horizon"], ground=exp["sky.ground"]
+            d, zenith=exp.sky.zenith, horizon=exp.sky.horizon, ground=exp.sky.ground
         )
     sky, sun = file_sky(exp)
-    if exp["sun.source"] == "envmap":
+    if exp.sun.source == "envmap":
         sky = uf.fill_region(sky, sun["mask"])
     return uf.latlong_lookup(sky, d)
 
@@ -126,11 +126,11 @@ def shader_cubemap(exp: Experiment, size: int) -> np.ndarray:
 
 def sun_of(exp: Experiment) -> tuple[np.ndarray, np.ndarray]:
     """(direction (3,), radiance (3,)) of the sun: explicit, or the sky file's brightest region."""
-    if exp["sun.source"] == "envmap":
+    if exp.sun.source == "envmap":
         _, sun = file_sky(exp)
         if sun is None:
             raise ExperimentError(
-                f'sky.envmap: no sun found in {exp["sky.envmap"]}; set sun.source = "explicit"'
+                f'sky.envmap: no sun found in {exp.sky.envmap}; set sun.source = "explicit"'
             )
         return np.asarray(sun["direction"]), np.asarray(sun["radiance"], np.float64)
     s = _explicit_sun(exp)
@@ -141,13 +141,13 @@ def sun_summary(exp: Experiment) -> dict:
     """JSON-able description of the sun the shader gets (for reports)."""
     d, rad = sun_of(exp)
     out = {
-        "source": exp["sun.source"],
+        "source": exp.sun.source,
         "direction": [float(v) for v in d],
         "elevation_deg": math.degrees(math.asin(max(-1.0, min(1.0, float(d[1]))))),
         "azimuth_deg": math.degrees(math.atan2(float(d[2]), float(d[0]))),
         "radiance": [float(v) for v in rad],
     }
-    if exp["sun.source"] == "envmap":
+    if exp.sun.source == "envmap":
         _, sun = file_sky(exp)
         out.update(solid_angle_sr=sun["solid_angle"], radius_deg=sun["radius_deg"])
     return out
@@ -158,12 +158,12 @@ def sun_summary(exp: Experiment) -> dict:
 
 def mesh_shape(mi, exp: Experiment) -> dict:
     """The mesh as a Mitsuba shape dict (``obj`` or ``ply`` plugin), diffuse."""
-    path = exp["mesh.file"]
+    path = exp.mesh.file
     T = mi.ScalarTransform4f
     to_world = (
-        T().translate(list(exp["mesh.position"]))
-        @ T().rotate([0.0, 1.0, 0.0], -exp["mesh.rotation"])  # Mitsuba turns +x towards -z
-        @ T().scale(exp["mesh.scale"])
+        T().translate(list(exp.mesh.position))
+        @ T().rotate([0.0, 1.0, 0.0], -exp.mesh.rotation)  # Mitsuba turns +x towards -z
+        @ T().scale(exp.mesh.scale)
     )
     if has_file(exp, "mesh.texture"):
         tex = {
@@ -176,7 +176,7 @@ def mesh_shape(mi, exp: Experiment) -> dict:
     else:
         bsdf = {
             "type": "diffuse",
-            "reflectance": {"type": "rgb", "value": list(exp["mesh.albedo"])},
+            "reflectance": {"type": "rgb", "value": list(exp.mesh.albedo)},
         }
     return {
         "type": path.rsplit(".", 1)[1].lower(),
@@ -192,8 +192,7 @@ def _load_mesh(mi, exp: Experiment):
         return mi.load_dict(d)
     except Exception as exc:  # Mitsuba raises RuntimeError with its own message
         raise ExperimentError(
-            f"mesh.file: Mitsuba cannot load it ({uf.clip_text(exc, 300)}) "
-            f"(file {exp['mesh.file']})"
+            f"mesh.file: Mitsuba cannot load it ({uf.clip_text(exc, 300)}) (file {exp.mesh.file})"
         ) from exc
 
 
@@ -201,35 +200,33 @@ def mesh_bounds(mi, exp: Experiment) -> tuple[np.ndarray, np.ndarray]:
     """World bounding box (min (3,), max (3,)) of the placed mesh, checked: loadable, texture
     coordinates when ``mesh.texture`` is given, entirely above the water's highest crest."""
     key = (
-        exp["mesh.file"],
+        exp.mesh.file,
         exp.digests.get("mesh.file"),
         exp.digests.get("mesh.texture"),
-        tuple(exp["mesh.position"]),
-        exp["mesh.scale"],
-        exp["mesh.rotation"],
-        exp["waves.amplitude"],
+        tuple(exp.mesh.position),
+        exp.mesh.scale,
+        exp.mesh.rotation,
+        exp.waves.amplitude,
     )
     if key in _BOUNDS:
         return _BOUNDS[key]
     shape = _load_mesh(mi, exp)
     if has_file(exp, "mesh.texture") and not shape.has_vertex_texcoords():
         raise ExperimentError(
-            f"mesh.texture needs texture coordinates, and mesh.file {exp['mesh.file']} "
+            f"mesh.texture needs texture coordinates, and mesh.file {exp.mesh.file} "
             "has none; give mesh.albedo instead"
         )
     bb = shape.bbox()
     lo = np.array([bb.min.x, bb.min.y, bb.min.z], np.float64).ravel()
     hi = np.array([bb.max.x, bb.max.y, bb.max.z], np.float64).ravel()
     if not (np.all(np.isfinite(lo)) and np.all(np.isfinite(hi))) or shape.face_count() == 0:
-        raise ExperimentError(
-            f"mesh.file: no faces or non-finite vertices (file {exp['mesh.file']})"
-        )
-    crest = exp["waves.amplitude"] + MESH_CLEARANCE
+        raise ExperimentError(f"mesh.file: no faces or non-finite vertices (file {exp.mesh.file})")
+    crest = exp.waves.amplitude + MESH_CLEARANCE
     if lo[1] < crest:
         raise ExperimentError(
             f"mesh.file: the placed mesh reaches down to y = {lo[1]:.4g}, into the water "
             f"(it must stay above y = {crest:.4g}, the highest wave crest plus "
-            f"{MESH_CLEARANCE}); raise mesh.position (file {exp['mesh.file']})"
+            f"{MESH_CLEARANCE}); raise mesh.position (file {exp.mesh.file})"
         )
     _BOUNDS[key] = (lo, hi)
     return lo, hi
@@ -251,14 +248,14 @@ def dry_camera_height(mi, exp: Experiment, extent) -> float:
     lo, hi = mesh_bounds(mi, exp)
     if not _overlaps(lo, hi, extent):
         return 100.0
-    top = exp["pool.wall_height"]
+    top = exp.pool.wall_height
     y = lo[1] - 0.015  # the orthographic sensor's near clip is 0.01
     if y < top + 0.005:
         raise ExperimentError(
             f"mesh.file: over the pool and its walls the mesh must stay above the "
             f"wall tops (pool.wall_height = {top:g}) so that it does not hide them from "
             f"the top-down refraction texture; it reaches down to y = {lo[1]:.4g} "
-            f"(file {exp['mesh.file']})"
+            f"(file {exp.mesh.file})"
         )
     return float(y)
 

@@ -10,8 +10,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from .errors import ExperimentError
-from .experiment import Experiment
+from ..config.errors import ExperimentError
+from ..config.experiment import Experiment
 from .mitsuba_scene import camera_view_proj
 
 
@@ -32,7 +32,7 @@ def water_pixel_count(exp: Experiment, width: int, height: int) -> int:
     with np.errstate(divide="ignore", invalid="ignore"):
         t = -near[:, 1] / d[:, 1]
         p = near + t[:, None] * d
-    hx, hz = exp["pool.half_extent"]
+    hx, hz = exp.pool.half_extent
     hit = (t > 0) & np.isfinite(t) & (np.abs(p[:, 0]) <= hx) & (np.abs(p[:, 2]) <= hz)
     return int(hit.sum())
 
@@ -45,7 +45,7 @@ def check_water_in_view(exp: Experiment) -> None:
         if water_pixel_count(exp, w, h) == 0:
             raise ExperimentError(
                 f"no water in view at {key} = [{w}, {h}]: the water rectangle (pool.half_extent = "
-                f"{exp['pool.half_extent']}) covers no pixel centre of the "
+                f"{exp.pool.half_extent}) covers no pixel centre of the "
                 "camera (camera.position, "
                 "camera.target, camera.fov_y); aim the camera at the water or enlarge it"
             )

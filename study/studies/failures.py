@@ -333,7 +333,7 @@ def catalogue_scene(
     from .._metrics import flip_map
     from ..fit.build import build_model
 
-    w, h = exp["resolution"]
+    w, h = exp.resolution
     model = build_model(exp, inputs, reference, shader=shader, backend=backend, resolution=(w, h))
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", RuntimeWarning)  # non-finite pixels are a class here
@@ -365,7 +365,7 @@ def catalogue_scene(
     fmap = flip_map(model.reference, out["color"])
     rows = failure_table(classes, fmap, model.mask)
     return SceneCatalogue(
-        exp["name"],
+        exp.name,
         model.shader,
         model.reference,
         out["color"],
@@ -393,9 +393,11 @@ def _user_maps(exp, model, constants: dict, backend: str) -> dict:
     from ..fit.model import constants_from_experiment
 
     mine = model.user_shader.render(model.inputs, constants, backend=backend).numpy()
-    study = get_variant("water_refraction").render(
-        model.inputs, constants_from_experiment(exp), backend=backend, diagnose=True
-    ).numpy()
+    study = (
+        get_variant("water_refraction")
+        .render(model.inputs, constants_from_experiment(exp), backend=backend, diagnose=True)
+        .numpy()
+    )
     out = dict(study)
     out.update(color=mine["color"], mask=mine["mask"], nonfinite=mine["nonfinite"])
     return out
@@ -416,11 +418,11 @@ def failures_job(job: dict) -> dict:
     from .._backend import drjit_backend
     from ..fit.model import constants_from_experiment
     from ..report.failures import failures_figure
-    from ..scene.experiment import is_user_shader, load_user_shader
+    from ..config.experiment import is_user_shader, load_user_shader
     from ..sweep import load_scene
 
     exp, ref, inputs = load_scene(job["scene"], job["variant"])
-    name = job.get("shader") or exp["fit.shader"]
+    name = job.get("shader") or exp.fit.shader
     if is_user_shader(name):
         shader = load_user_shader({**exp.values, "fit.shader": name})
         constants = {**shader.defaults(), **(job.get("constants") or {})}
@@ -436,7 +438,7 @@ def failures_job(job: dict) -> dict:
         shader=job.get("shader"),
         backend=drjit_backend(job["variant"]),
     )
-    folder = Path(job["out"]) / exp["name"]
+    folder = Path(job["out"]) / exp.name
     folder.mkdir(parents=True, exist_ok=True)
     failures_figure(
         folder / "failures.png",
@@ -446,13 +448,13 @@ def failures_job(job: dict) -> dict:
         cat.flip,
         cat.scored,
         list(CLASS_KEYS),
-        title=f"{exp['name']}: {cat.shader}",
+        title=f"{exp.name}: {cat.shader}",
     )
     fields = ("pixels", "pixel_share", "flip_share", "flip_inside", "flip_outside")
     return {
-        "experiment": exp["name"],
+        "experiment": exp.name,
         "shader": cat.shader,
-        "figure": f"{exp['name']}/failures.png",
+        "figure": f"{exp.name}/failures.png",
         "flip": float(cat.flip[cat.scored].mean()),
         "water_pixels": int(cat.scored.sum()),
         "reference_spp": ref.spp,
@@ -518,12 +520,12 @@ def run_failures(
     from .._io import write_json
     from ..fit.model import constants_json
     from ..report.failures import scenes_of, write_failures_report
-    from ..scene.experiment import is_user_shader, load_experiments
+    from ..config.experiment import is_user_shader, load_experiments
     from ..sweep import run_sweep, scene_spec, write_table
 
     log = log or (lambda m: print(m, file=sys.stderr, flush=True))
     exps = load_experiments(experiments, overrides)
-    names = [e["name"] for e in exps]
+    names = [e.name for e in exps]
     if shader is not None and not is_user_shader(shader):
         from shaders_port._variants import get_variant
 

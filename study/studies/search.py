@@ -225,17 +225,17 @@ class Search:
         exp = self.exps[i]
         return {
             "scene": self.specs[i],
-            "experiment": exp["name"],
+            "experiment": exp.name,
             "variant": variant,
             "kind": sched["kind"],
             "scale": sched["scale"],
             "schedule": sched["schedule"],
             "start": start,
-            "factor": exp["tradeoff.screen_factor"],
+            "factor": exp.tradeoff.screen_factor,
         }
 
     def ok(self, i: int) -> list[dict]:
-        name = self.exps[i]["name"]
+        name = self.exps[i].name
         return [
             r
             for r in self.screen
@@ -245,7 +245,7 @@ class Search:
     def walk(self, i: int) -> list[dict]:
         """Rung 1 on experiment ``i``: the surviving configurations' screen points."""
         exp = self.exps[i]
-        z, cap = exp["tradeoff.noise_z"], exp["tradeoff.max_shaders"]
+        z, cap = exp.tradeoff.noise_z, exp.tradeoff.max_shaders
         if self.variants:
             todo = [_space.choices_of(v) for v in self.variants]
         else:
@@ -259,14 +259,14 @@ class Search:
             for c in todo:
                 v = _space.name_of(c)
                 jobs.append(self._job(i, v, original_schedule(v), self.start[i]))
-            self._run(jobs, f"tradeoff: {exp['name']} screen round {k}")
+            self._run(jobs, f"tradeoff: {exp.name} screen round {k}")
             seen += todo
-            self.rounds[exp["name"]] = k
+            self.rounds[exp.name] = k
             front = best_first(survivors(self.ok(i), z))
             if self.variants:
                 break
             todo = next_round([r["choices"] for r in front], seen, self.fix)
-        return closest_to_front(survivors(self.ok(i), z), exp["tradeoff.max_scheduled"])
+        return closest_to_front(survivors(self.ok(i), z), exp.tradeoff.max_scheduled)
 
     def alone(self, i: int) -> list[dict]:
         """The screen points of each source's technique alone (``_space.ALONE``) at its
@@ -296,9 +296,9 @@ class Search:
                 if s["kind"] in ("converged", "fixed") or s["schedule"] == r["schedule"]:
                     continue
                 jobs.append(self._job(i, r["variant"], s, {**self.start[i], **r["fitted"]}))
-        self._run(jobs, f"tradeoff: {exp['name']} screen schedules")
-        kept = survivors(self.ok(i), exp["tradeoff.noise_z"])
-        return closest_to_front(kept, exp["tradeoff.max_full"])
+        self._run(jobs, f"tradeoff: {exp.name} screen schedules")
+        kept = survivors(self.ok(i), exp.tradeoff.noise_z)
+        return closest_to_front(kept, exp.tradeoff.max_full)
 
     def full_jobs(self, finalists: list[dict]) -> list[dict]:
         """Rung 3: every finalist (variant, schedule) on every experiment, as ``point_job`` jobs
@@ -318,7 +318,7 @@ class Search:
                 jobs.append(
                     {
                         "scene": self.specs[i],
-                        "experiment": exp["name"],
+                        "experiment": exp.name,
                         "variant": variant,
                         "kind": kind,
                         "scale": scale,
@@ -348,7 +348,7 @@ class Search:
             if (v, _key(sched["schedule"])) not in have:
                 warm = next((r["fitted"] for r in ok if r["variant"] == v), base["fitted"])
                 jobs.append(self._job(i, v, sched, {**self.start[i], **warm}))
-        self._run(jobs, f"tradeoff: {self.exps[i]['name']} screen of the neighbours")
+        self._run(jobs, f"tradeoff: {self.exps[i].name} screen of the neighbours")
         points = [
             r
             for r in self.ok(i)

@@ -72,7 +72,7 @@ def plan_multistart(
                     jobs.append(
                         {
                             "scene": spec,
-                            "experiment": exp["name"],
+                            "experiment": exp.name,
                             "solver": solver,
                             "lr": lr,
                             "start_index": i,
@@ -186,7 +186,7 @@ def _solver_stats(rs: list[dict]) -> dict:
 
 def plan_loss(specs, exps) -> list[dict]:
     return [
-        {"scene": s, "experiment": e["name"], "loss": loss}
+        {"scene": s, "experiment": e.name, "loss": loss}
         for s, e in zip(specs, exps)
         for loss in ("linear", "log")
     ]
@@ -393,7 +393,7 @@ def run_stability(
     """Run the study (see the module doc); returns the summary written to ``summary.json``
     (``command``: the command line that ran it, quoted in the report)."""
     from .._io import write_json
-    from ..scene.experiment import load_experiment
+    from ..config.experiment import load_experiment
     from ..sweep import run_sweep, scene_spec
     from ..sweep.cluster import open_client
     from ..report.stability import write_stability_report

@@ -51,9 +51,9 @@ def start_boxes(exp) -> dict:
     when it starts above 0 and spans two decades or more."""
     from ..fit.calibrate import DISCRETE, scene_frozen
     from ..fit.model import expand_parameters
-    from ..scene.experiment import is_user_shader, load_user_shader
+    from ..config.experiment import is_user_shader, load_user_shader
 
-    if is_user_shader(exp["fit.shader"]):
+    if is_user_shader(exp.fit.shader):
         shader = load_user_shader(exp.values)
         return {
             n: (lo, hi, bool(lo > 0 and hi / lo >= 100))
@@ -62,7 +62,7 @@ def start_boxes(exp) -> dict:
         }
     frozen = scene_frozen(exp)
     names = [
-        n for n in expand_parameters(exp["fit.parameters"]) if n not in DISCRETE and n not in frozen
+        n for n in expand_parameters(exp.fit.parameters) if n not in DISCRETE and n not in frozen
     ]
     unknown = [k for k in names if k not in BOX]
     if unknown:
@@ -167,7 +167,7 @@ def noise_job(job: dict) -> dict:
     exp, ref, _, model = _model(job)
     t0 = time.perf_counter()
     cal = calibrate_experiment(model, exp)
-    names = model.parameter_names(exp["fit.parameters"])
+    names = model.parameter_names(exp.fit.parameters)
     return {
         "fit_seconds": time.perf_counter() - t0,
         "reference_noise": float(ref.noise or float("nan")),
@@ -187,10 +187,10 @@ def loss_job(job: dict) -> dict:
     t0 = time.perf_counter()
     cal = calibrate_experiment(model, exp)
     fit_s = time.perf_counter() - t0
-    _, _, _, full = _model(job, resolution=tuple(exp["resolution"]))
+    _, _, _, full = _model(job, resolution=tuple(exp.resolution))
     img, _ = full.render(cal.fitted)
     err = errors(ref.image, img, full.base.mask)
-    names = model.parameter_names(exp["fit.parameters"])
+    names = model.parameter_names(exp.fit.parameters)
     return {
         "flip": float(err["flip"]),
         "rmse": float(err["rmse"]),

@@ -79,7 +79,7 @@ def plan_points(exps, specs, anchors: dict, variants: list) -> list[dict]:
                 jobs.append(
                     {
                         "scene": spec,
-                        "experiment": exp["name"],
+                        "experiment": exp.name,
                         "variant": v,
                         "kind": s["kind"],
                         "scale": s["scale"],
@@ -109,21 +109,21 @@ def run_tradeoff(
     from shaders_port._space import configurations, name_of, parse_fix
 
     from .._io import write_json
-    from ..scene.experiment import load_experiments
+    from ..config.experiment import load_experiments
     from ..scene.frames import is_animated
     from ..sweep import scene_spec
     from ..sweep.cluster import open_client
 
     exps = load_experiments(experiments, overrides)
-    names = [e["name"] for e in exps]
-    tol = exps[0]["tradeoff.tolerance"] if tolerance is None else float(tolerance)
+    names = [e.name for e in exps]
+    tol = exps[0].tradeoff.tolerance if tolerance is None else float(tolerance)
     if tol < 0:
         raise ValueError(f"--tolerance must be >= 0, got {tol}")
     budget = check_budget(budget)
-    mode = search or exps[0]["tradeoff.search"]
+    mode = search or exps[0].tradeoff.search
     if mode not in ("adaptive", "exhaustive"):
         raise ValueError(f"search must be 'adaptive' or 'exhaustive', got {mode!r}")
-    fix, chosen = parse_fix(exps[0]["tradeoff.fix"]), exps[0]["tradeoff.variants"]
+    fix, chosen = parse_fix(exps[0].tradeoff.fix), exps[0].tradeoff.variants
     # the jobs' scenes leave out the keys that only shape the plan (which variants and schedules),
     # so that widening the plan resumes every point already measured
     # (an animated experiment's frame 0 as a still: the search and the fits run there)
@@ -194,11 +194,11 @@ def _exhaustive(exps, specs, client, out, log, shaders: list) -> list[dict]:
     from ..fit.model import constants_from_experiment
     from ..sweep import run_sweep
 
-    names = [e["name"] for e in exps]
+    names = [e.name for e in exps]
     anchor_jobs = [
         {
             "scene": spec,
-            "experiment": exp["name"],
+            "experiment": exp.name,
             "variant": v,
             "start": constants_from_experiment(exp).replace(**SEED_SCHEDULE).to_dict(),
         }
@@ -301,30 +301,30 @@ def export_recommended(
     init_backend(variant)
     result = {}
     for exp, spec in zip(exps, specs):
-        rec = summary["scenes"][exp["name"]]["recommended"]
+        rec = summary["scenes"][exp.name]["recommended"]
         if rec is None:
-            log(f"tradeoff: no successful point on {exp['name']}; nothing exported")
+            log(f"tradeoff: no successful point on {exp.name}; nothing exported")
             continue
         if is_user(rec["variant"]):  # its file is written by ``tradeoff_user.export_user``
-            log(f"tradeoff: {exp['name']}: the recommendation is your shader")
+            log(f"tradeoff: {exp.name}: the recommendation is your shader")
             continue
         row = next(
             r
             for r in rows
-            if r.get("job.experiment") == exp["name"]
+            if r.get("job.experiment") == exp.name
             and r["status"] == "ok"
             and config_label(point_record(r)) == rec["label"]
             and r.get("job.kind") != "converged"
         )
         constants = Constants.from_dict(constants_of(row))
-        folder = out / "shaders" if len(exps) == 1 else out / "shaders" / exp["name"]
+        folder = out / "shaders" if len(exps) == 1 else out / "shaders" / exp.name
         export_shaders(constants, folder, [rec["variant"]], targets=None)
         from ..scene.baseline_inputs import inputs_for_shader
 
         exp_s, _, inputs = load_scene(spec, variant)
         inputs = inputs_for_shader(exp_s, inputs, rec["variant"], variant, log=log)
         gl = gl_check(rec["variant"], inputs, constants, folder)
-        result[exp["name"]] = {
+        result[exp.name] = {
             "folder": str(folder.relative_to(out)),  # the report lives in ``out``
             "variant": rec["variant"],
             "label": rec["label"],
@@ -333,7 +333,7 @@ def export_recommended(
             "engine_targets": target_checks(rec["variant"], inputs, constants, folder),
         }
         log(
-            f"tradeoff: {exp['name']}: exported {rec['label']} to {folder} (GL check "
+            f"tradeoff: {exp.name}: exported {rec['label']} to {folder} (GL check "
             f"{'passed' if gl['passed'] else 'FAILED'})"
         )
     return result
@@ -368,7 +368,7 @@ def side_by_side(exps, specs, summary: dict, rows: list, out: Path, variant: str
 
     result, scores = {}, {}
     for exp, spec in zip(exps, specs):
-        f = summary["scenes"][exp["name"]]
+        f = summary["scenes"][exp.name]
         panels = [
             (
                 "seed shader, seed constants",
@@ -383,12 +383,12 @@ def side_by_side(exps, specs, summary: dict, rows: list, out: Path, variant: str
         ):
             r = f.get(key)
             if r and r["label"] not in [p[0].split(": ", 1)[-1] for p in panels]:
-                row = _point_row(rows, exp["name"], r["label"])
+                row = _point_row(rows, exp.name, r["label"])
                 panels.append((f"{title}: {r['label']}", r["variant"], row))
         for p in f.get("user") or []:
             if p["label"] not in [q[0].split(": ", 1)[-1] for q in panels]:
                 panels.append((f"your shader: {p['label']}", p["label"], _point_row(
-                    rows, exp["name"], p["label"])))  # fmt: skip
+                    rows, exp.name, p["label"])))  # fmt: skip
         images, errs, mask = {}, {}, None
         for title, shader, what in panels:
             if is_user(shader):
@@ -397,7 +397,7 @@ def side_by_side(exps, specs, summary: dict, rows: list, out: Path, variant: str
             else:
                 _, ref, _, model = job_model(
                     {"scene": spec, "variant": shader, "mitsuba_variant": variant},
-                    resolution=tuple(exp["resolution"]),
+                    resolution=tuple(exp.resolution),
                 )
                 c = what if isinstance(what, Constants) else Constants.from_dict(constants_of(what))
                 img, _ = model.render(c)
@@ -406,10 +406,10 @@ def side_by_side(exps, specs, summary: dict, rows: list, out: Path, variant: str
             images[title] = img
             errs[title] = errors(ref.image, img, m)
             mask = m
-        name = f"images_{exp['name']}.png"
-        comparison_figure(out / name, images, errs, mask, title=exp["name"])
-        result[exp["name"]] = name
-        scores[exp["name"]] = {
+        name = f"images_{exp.name}.png"
+        comparison_figure(out / name, images, errs, mask, title=exp.name)
+        result[exp.name] = name
+        scores[exp.name] = {
             t: {"flip": float(e["flip"]), "rmse": float(e["rmse"])} for t, e in errs.items()
         }
     return result, scores

@@ -88,10 +88,10 @@ def schedules(exp, variant_name: str) -> list[dict]:
             seen.add(k)
             out.append({"kind": kind, "scale": scale, "schedule": sched})
 
-    for f in sorted(exp["tradeoff.scales"]):
+    for f in sorted(exp.tradeoff.scales):
         add("scale", f, scaled_schedule(variant, f))
     for g, s, c in itertools.product(
-        exp["tradeoff.steps_grazing"], exp["tradeoff.steps_steep"], exp["tradeoff.loop_cap"]
+        exp.tradeoff.steps_grazing, exp.tradeoff.steps_steep, exp.tradeoff.loop_cap
     ):
         sched = {"steps_grazing": float(g), "steps_steep": float(s), "loop_cap": int(round(c))}
         if "refl_loop_cap" in variant.schedule:
@@ -99,8 +99,8 @@ def schedules(exp, variant_name: str) -> list[dict]:
         add("grid", None, sched)
     add(
         "converged",
-        exp["tradeoff.converged_scale"],
-        scaled_schedule(variant, exp["tradeoff.converged_scale"]),
+        exp.tradeoff.converged_scale,
+        scaled_schedule(variant, exp.tradeoff.converged_scale),
     )
     return out
 
@@ -114,10 +114,10 @@ def _fit_names(exp, variant_name: str) -> list[str]:
     ``fit_parameters`` (e.g. the baseline's distortions)."""
     from shaders_port._variants import get_variant
 
-    from ..scene.experiment import fit_parameters
+    from ..config.experiment import fit_parameters
 
     v = get_variant(variant_name)
-    listed = exp["fit.parameters"]
+    listed = exp.fit.parameters
     if listed is None:  # an experiment of a user's own shader: the study's shaders fit their own
         listed = fit_parameters(variant_name, None)
     names = [n for n in v.fit_names(listed) if n not in v.schedule]
@@ -181,7 +181,7 @@ def point_job(job: dict) -> dict:
 
     fitted_names = [n for n, p in cal.parameters.items() if p["status"] in ("fitted", "bound")]
     ic = information_criteria(model.residual(cal.fitted), len(fitted_names))
-    _, _, _, full = job_model(job, resolution=tuple(exp["resolution"]))
+    _, _, _, full = job_model(job, resolution=tuple(exp.resolution))
     img, diag = full.render(cal.fitted)
     err = errors(ref.image, img, full.mask)
     m = full.mask
@@ -205,7 +205,7 @@ def point_job(job: dict) -> dict:
         int(diag.maps["nonfinite"][m].sum()) if "nonfinite" in diag.maps else 0
     )
     if job["kind"] != "converged":  # the error floor is not a candidate: its frame time is moot
-        out.update(frame_times(job["variant"], inputs, cal.fitted, exp["tradeoff.gl_repeats"]))
+        out.update(frame_times(job["variant"], inputs, cal.fitted, exp.tradeoff.gl_repeats))
     out["fitted"] = cal.fitted.to_dict()
     return out
 
@@ -228,7 +228,7 @@ def screen_job(job: dict) -> dict:
     from ..sweep import load_scene
 
     exp, _, _ = load_scene(job["scene"], job.get("mitsuba_variant", "llvm_ad_rgb"))
-    w, h = exp["fit.resolution"]
+    w, h = exp.fit.resolution
     f = int(job["factor"])
     if w % f or h % f:
         raise ValueError(f"fit.resolution {w}x{h} is not divisible by the screen factor {f}")

@@ -59,7 +59,7 @@ def prepare_frames_job(job: dict) -> dict:
 
 @functools.lru_cache(maxsize=1)
 def _frames(text: str, mv: str):
-    from ..scene.experiment import load_experiment
+    from ..config.experiment import load_experiment
     from ..scene.frame_data import load_frames
 
     spec = json.loads(text)
@@ -88,7 +88,7 @@ def _render_frames(job: dict, data: dict, mv: str, schedules: tuple = (None,)) -
             inputs = inputs_for_shader(e, base, job["variant"], mv, log=lambda m: None)
             model = ShaderModel.from_experiment(
                 e, inputs, ref.image, shader=job["variant"], backend=drjit_backend(mv),
-                resolution=tuple(e["resolution"]),
+                resolution=tuple(e.resolution),
             )  # fmt: skip
             c = Constants.from_dict(job["constants"])
             for out, sched in zip(images, schedules):
@@ -235,7 +235,7 @@ def _converged(exp, row: dict) -> dict | None:
     v = row["job.variant"]
     if is_user(v) or row["job.kind"] == "converged" or original_schedule(v)["kind"] == "fixed":
         return None
-    return scaled_schedule(get_variant(v), exp["tradeoff.converged_scale"])
+    return scaled_schedule(get_variant(v), exp.tradeoff.converged_scale)
 
 
 def run_motion(exps, experiments, overrides, rows, recs, summary, client, out, log) -> None:
@@ -255,15 +255,15 @@ def run_motion(exps, experiments, overrides, rows, recs, summary, client, out, l
     t0 = time.perf_counter()
     ok = [r for r in rows if r["status"] == "ok"]
     prep = [{"scene": spec, "variants": sorted({r["job.variant"] for r in ok
-             if r["job.experiment"] == e["name"]})} for e, spec in animated]  # fmt: skip
+             if r["job.experiment"] == e.name})} for e, spec in animated]  # fmt: skip
     log(f"tradeoff: motion: the frames of {len(prep)} animated scene(s)")
     run_sweep(prepare_frames_job, prep, out / "frames.parquet", client=client,
               label="tradeoff: frames", log=log)  # fmt: skip
     jobs = [
-        {"scene": spec, "experiment": e["name"], "variant": r["job.variant"],
+        {"scene": spec, "experiment": e.name, "variant": r["job.variant"],
          "kind": r["job.kind"], "label": config_label(point_record(r)),
          "constants": constants_of(r), "converged_schedule": _converged(e, r)}
-        for e, spec in animated for r in ok if r["job.experiment"] == e["name"]
+        for e, spec in animated for r in ok if r["job.experiment"] == e.name
     ]  # fmt: skip
     mrows = run_sweep(motion_job, jobs, out / "motion.parquet", client=client,
                       label="tradeoff: motion", log=log)[: len(jobs)]  # fmt: skip
@@ -276,13 +276,13 @@ def run_motion(exps, experiments, overrides, rows, recs, summary, client, out, l
         pts = []
         for r in recs:
             m = by.get((r["experiment"], r["label"], r["kind"]))
-            if r["experiment"] == e["name"] and m is not None:
+            if r["experiment"] == e.name and m is not None:
                 pts.append({**r, **{k: m.get(k) for k in fields}})
-        scene = summary["scenes"][e["name"]]
+        scene = summary["scenes"][e.name]
         scene["motion"] = motion_findings(
-            pts, scene["recommended"], summary["tolerance"], e["tradeoff.noise_z"]
+            pts, scene["recommended"], summary["tolerance"], e.tradeoff.noise_z
         )
-        log(f"tradeoff: {e['name']} in motion ({e['animation.frames']} frames): "
+        log(f"tradeoff: {e.name} in motion ({e.animation.frames} frames): "
             f"{scene['motion']['why']}")  # fmt: skip
     failed = [m for m in mrows if m["status"] != "ok"]
     for m in failed:

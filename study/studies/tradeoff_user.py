@@ -34,9 +34,9 @@ __all__ = ["user_jobs", "user_point_job", "user_image", "export_user", "is_user"
 
 
 def _shader_of(exp):
-    from ..scene.experiment import is_user_shader, load_user_shader
+    from ..config.experiment import is_user_shader, load_user_shader
 
-    return load_user_shader(exp.values) if is_user_shader(exp["fit.shader"]) else None
+    return load_user_shader(exp.values) if is_user_shader(exp.fit.shader) else None
 
 
 def user_jobs(exps, specs) -> list[dict]:
@@ -52,7 +52,7 @@ def user_jobs(exps, specs) -> list[dict]:
         jobs.append(
             {
                 "scene": spec,
-                "experiment": exp["name"],
+                "experiment": exp.name,
                 "variant": USER + shader.label,
                 "kind": "fixed",
                 "scale": None,
@@ -90,7 +90,7 @@ def user_point_job(job: dict) -> dict:
     fit_s = time.perf_counter() - t0
     fitted = [n for n, p in cal.parameters.items() if p["status"] in ("fitted", "bound")]
     ic = information_criteria(model.residual(cal.fitted), len(fitted))
-    full = build_model(exp, inputs, ref.image, resolution=tuple(exp["resolution"]))
+    full = build_model(exp, inputs, ref.image, resolution=tuple(exp.resolution))
     img, diag = full.render(cal.fitted)
     mask = full.mask
     err = errors(ref.image, img, mask)
@@ -115,7 +115,7 @@ def user_point_job(job: dict) -> dict:
             None,
             lambda frame: shader.render(frame, cal.fitted),
             inputs,
-            exp["tradeoff.gl_repeats"],
+            exp.tradeoff.gl_repeats,
         )
     )
     out["fitted"] = {n: get_value(cal.fitted, n) for n in cal.parameters}
@@ -149,18 +149,18 @@ def export_user(exps, specs, rows: list, out: Path, variant: str, log) -> dict:
     for exp, spec in zip(exps, specs):
         shader = _shader_of(exp)
         row = next(
-            (r for r in rows if r.get("job.experiment") == exp["name"]
+            (r for r in rows if r.get("job.experiment") == exp.name
              and is_user(r.get("job.variant")) and r["status"] == "ok"), None)  # fmt: skip
         if shader is None or row is None:
             continue
         values = _values(shader, row)
-        folder = out / "shaders" if len(exps) == 1 else out / "shaders" / exp["name"]
+        folder = out / "shaders" if len(exps) == 1 else out / "shaders" / exp.name
         folder.mkdir(parents=True, exist_ok=True)
         path = folder / shader.label
         write_text_atomic(path, shader.written(values))
         _, _, inputs = load_scene(spec, variant)
         gl = gl_check_user(shader, inputs, values, shader.render(inputs, values).numpy())
-        result[exp["name"]] = {
+        result[exp.name] = {
             "file": str(path.relative_to(out)),
             "variant": USER + shader.label,
             "label": USER + shader.label,
@@ -168,5 +168,5 @@ def export_user(exps, specs, rows: list, out: Path, variant: str, log) -> dict:
             "gl_check": gl,
         }
         verdict = "not run" if not gl["ran"] else ("passed" if gl["passed"] else "FAILED")
-        log(f"tradeoff: {exp['name']}: wrote your shader, fitted, to {path} (GL check {verdict})")
+        log(f"tradeoff: {exp.name}: wrote your shader, fitted, to {path} (GL check {verdict})")
     return result

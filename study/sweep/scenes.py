@@ -35,13 +35,13 @@ def prepare_scene(spec: dict, variant: str = "llvm_ad_rgb") -> dict:
         "reference_key": ref.provenance.get("key"),
         "spp": ref.spp,
         "noise": ref.noise,
-        "experiment": exp["name"],
+        "experiment": exp.name,
     }
 
 
 @functools.lru_cache(maxsize=4)
 def _load(text: str, variant: str):
-    from ..scene.experiment import load_experiment
+    from ..config.experiment import load_experiment
     from ..scene.reference import load_or_render
     from ..scene.shader_inputs import load_or_build_shader_inputs
 

@@ -21,8 +21,10 @@ import numpy as np
 from shaders_port._variants import get_variant
 
 from .._progress import log
-
+from . import files as user_files
 from .errors import ExperimentError
+from .files import clip_text, heightmap_floor
+from .floor import floor_height
 from .schema import (
     FIT_PARAMETERS,
     FLOOR_SHAPES,
@@ -34,6 +36,7 @@ from .schema import (
     Field,
     schema_markdown,
 )
+from .sections import SECTIONS, TOP_LEVEL, section_of
 
 __all__ = [
     "Experiment",
@@ -58,8 +61,6 @@ _VEC_LEN = {"vec2": 2, "vec3": 3, "vec4": 4}
 
 def _clip(v, limit: int = 80) -> str:
     """``repr(v)`` cut to a readable length (an echoed bad value must not flood the message)."""
-    from .user_files import clip_text
-
     return clip_text(repr(v), limit)
 
 
@@ -188,7 +189,6 @@ def _check_ledge(values: dict) -> None:
     x_min, x_max, top, thick = values["floor.ledge"]
     if thick == 0.0:
         return
-    from .geometry import floor_height
 
     hx, hz = values["pool.half_extent"]
     key = "floor.ledge = [x_min, x_max, top, thickness]"
@@ -207,8 +207,6 @@ def _check_ledge(values: dict) -> None:
     x, z = np.meshgrid(np.linspace(x_min, x_max, 65), np.linspace(-hz, hz, 65))
     f = {k[len("floor.") :]: values[k] for k in values if k.startswith("floor.")}
     if f["shape"] == "heightmap":
-        from .user_files import heightmap_floor
-
         floor_top = float(heightmap_floor(values, x, z).max())
     else:
         floor_top = float(
@@ -323,11 +321,22 @@ def _parse_value(text: str):
 
 @dataclass
 class Experiment:
-    """A validated experiment: ``values`` maps every dotted key of SCHEMA to its value."""
+    """A validated experiment: ``values`` maps every dotted key of SCHEMA to its value; read
+    them typed, a section at a time (``exp.water.sigma_t``, ``exp.fit.shader``, ``exp.name``:
+    ``study.config.sections``)."""
 
     values: dict
     path: Path | None = None
     digests: dict = field(default_factory=dict)  # file key -> SHA-256 of the file's contents
+
+    def __getattr__(self, name: str):
+        values = self.__dict__.get("values")
+        if values is not None and not name.startswith("_"):
+            if name in SECTIONS:
+                return section_of(values, name)
+            if name in TOP_LEVEL:
+                return values[name]
+        raise AttributeError(f"{type(self).__name__} has no section or key {name!r}")
 
     def __getitem__(self, key: str):
         return self.values[key]
@@ -459,7 +468,6 @@ def validate(raw: dict, overrides: list[str] | None = None, path: Path | None = 
         raise ExperimentError("camera.position equals camera.target; move one of them")
     if values["camera.position"][1] <= 0.0:
         raise ExperimentError("camera.position: the camera must be above the water plane (y > 0)")
-    from . import user_files
 
     for key in user_files.FILE_KEYS:
         values[key] = user_files.resolve(key, values[key], base.get(key))

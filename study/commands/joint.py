@@ -1,40 +1,40 @@
-"""The jobs over several experiments at once: ``study calibrate A.toml B.toml ...`` (one constants
-block fitted on all scenes) and ``study generalise`` (that joint fit plus leave-one-scene-out
-validation). Each writes its artifacts into one folder, as the one-scene jobs of ``study._jobs``
-do, and shares their set-up (``load_scene_data``)."""
+"""Calibrations over several experiments at once: ``study calibrate A.toml B.toml ...`` (one
+constants block fitted on all scenes) and ``study generalise`` (that joint fit plus
+leave-one-scene-out validation), for a shader of the study's or a user's alike."""
 
 from __future__ import annotations
 
 import time
 from pathlib import Path
 
-from ._backend import init_backend
-from ._io import write_json
-from ._jobs import export_calibration, load_scene_data
-from ._progress import log as _log
-from .fit.result import jsonable
-from .fit.model import constants_json
-from .scene.experiment import load_experiment
+from .._backend import drjit_backend, init_backend
+from .._io import write_json
+from .._metrics import errors
+from .._progress import log as _log
+from ..fit.build import build_model
+from ..fit.calibrate import scene_frozen
+from ..fit.joint import JointModel, joint_calibrate, leave_one_out, universality
+from ..fit.model import constants_json
+from ..fit.result import CalibrationResult, jsonable
+from ..report.generalise import write_generalise_report, write_joint_report
+from ..config.experiment import load_experiment
+from ..scene.frames import refuse_animated
+from .steps import export_calibration, load_scene_data
 
 
-def _scenes(experiments, overrides, variant, cache):
+def load_scenes(experiments, overrides, variant, cache):
     """Load every experiment (same overrides for all), its reference, inputs and fit model.
     Returns (variant, list of dicts: name, exp, ref, inputs, model, frozen)."""
-    from ._backend import drjit_backend
-    from .fit.build import build_model
-    from .fit.calibrate import scene_frozen
-
     if not experiments:
         raise ValueError("no experiment given")
     exps = [load_experiment(e, overrides) for e in experiments]
-    from .scene.frames import refuse_animated
 
     for exp in exps:
         refuse_animated(exp, "a fit over several experiments")
-    variant = init_backend(variant or exps[0]["variant"])
+    variant = init_backend(variant or exps[0].variant)
     scenes, seen = [], {}
     for path, exp in zip(experiments, exps):
-        name = exp["name"]
+        name = exp.name
         seen[name] = seen.get(name, 0) + 1
         if seen[name] > 1:
             name = f"{name}#{seen[name]}"
@@ -54,12 +54,8 @@ def _scenes(experiments, overrides, variant, cache):
     return variant, scenes
 
 
-def _evaluator(scenes, variant):
+def evaluator(scenes, variant):
     """evaluate(i, constants) -> RMSE and FLIP of scene i at its full resolution (water pixels)."""
-    from ._backend import drjit_backend
-    from ._metrics import errors
-    from .fit.build import build_model
-
     full = {}
 
     def evaluate(i, constants):
@@ -70,7 +66,7 @@ def _evaluator(scenes, variant):
                 s["inputs"],
                 s["ref"].image,
                 backend=drjit_backend(variant),
-                resolution=tuple(s["exp"]["resolution"]),
+                resolution=tuple(s["exp"].resolution),
             )
         img, _ = full[i].render(constants)
         e = errors(s["ref"].image, img, full[i].mask)
@@ -86,33 +82,29 @@ def run_calibrate_joint(
     weighted equally), exported and GL-checked like a single fit; constants.json and report.md
     with every scene's error under the start and the joint constants. The first experiment
     gives the start constants, ``fit.parameters``, ``fit.solver`` and ``fit.max_steps``."""
-    variant, scenes = _scenes(experiments, overrides, variant, cache)
-    return _joint_fit(scenes, variant, Path(out), solver)[0]
+    variant, scenes = load_scenes(experiments, overrides, variant, cache)
+    return joint_fit(scenes, variant, Path(out), solver)[0]
 
 
-def _joint_fit(scenes, variant, out: Path, solver):
+def joint_fit(scenes, variant, out: Path, solver):
     """The joint fit of ``scenes``, exported into ``out``. Returns (summary, calibration,
     evaluate)."""
-    from .fit.joint import JointModel, joint_calibrate
-    from .fit.result import CalibrationResult
-    from .report.generalise import write_joint_report
-
     out.mkdir(parents=True, exist_ok=True)
     first, model = scenes[0]["exp"], scenes[0]["model"]
-    solver = solver or first["fit.solver"]
+    solver = solver or first.fit.solver
     start = model.start_constants(first)
     t0 = time.perf_counter()
     cal = joint_calibrate(
         [s["model"] for s in scenes],
         start,
-        first["fit.parameters"],
+        first.fit.parameters,
         solver,
-        first["fit.max_steps"],
+        first.fit.max_steps,
         [s["frozen"] for s in scenes],
         [s["name"] for s in scenes],
     )
     fit_s = time.perf_counter() - t0
-    evaluate = _evaluator(scenes, variant)
+    evaluate = evaluator(scenes, variant)
     per_scene = {
         s["name"]: {"default": evaluate(i, start), "fitted": evaluate(i, cal.fitted)}
         for i, s in enumerate(scenes)
@@ -151,21 +143,18 @@ def run_generalise(experiments, out, overrides=None, variant=None, solver=None, 
     leave-one-scene-out validation (each scene scored under the seed's constants, the constants
     fitted on the other scenes and its own fit) and the universal/scene-specific verdict per
     constant; generalise.json and generalise.md."""
-    from .fit.joint import leave_one_out, universality
-    from .report.generalise import write_generalise_report
-
     if len(experiments) < 2:
         raise ValueError("study generalise needs at least two experiments (leave-one-scene-out)")
-    variant, scenes = _scenes(experiments, overrides, variant, cache)
+    variant, scenes = load_scenes(experiments, overrides, variant, cache)
     out = Path(out)
-    joint, cal, evaluate = _joint_fit(scenes, variant, out, solver)
+    joint, cal, evaluate = joint_fit(scenes, variant, out, solver)
     first = scenes[0]["exp"]
     rows = leave_one_out(
         [s["model"] for s in scenes],
         scenes[0]["model"].start_constants(first),
-        first["fit.parameters"],
+        first.fit.parameters,
         joint["solver"],
-        first["fit.max_steps"],
+        first.fit.max_steps,
         evaluate,
         [s["frozen"] for s in scenes],
         [s["name"] for s in scenes],

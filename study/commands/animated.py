@@ -16,20 +16,27 @@ from pathlib import Path
 
 import numpy as np
 
-from ._io import write_exr, write_json
-from ._progress import log as _log
-from .fit.model import constants_json
+from .._backend import drjit_backend
+from .._io import write_exr, write_json
+from .._metrics import errors, temporal_errors
+from .._progress import log as _log
+from ..fit.build import build_model
+from ..fit.calibrate import calibrate_model, scene_frozen, timed
+from ..fit.joint import JointModel, joint_calibrate
+from ..fit.model import constants_json
+from ..fit.result import CalibrationResult, jsonable
+from ..report.animation import animation_figures, write_animation_report
+from ..config.errors import ExperimentError
+from ..scene.frame_data import load_frames
+from .steps import export_calibration
 
 
 def _score(frames, refs, inputs, backend, constants: dict) -> dict:
     """Each constants block (name -> Constants) on every frame at full resolution: per frame
     RMSE and FLIP, their mean and spread (standard deviation over frames), the images, and the
     temporal error on the pixels that are water in every frame."""
-    from ._metrics import errors, temporal_errors
-    from .fit.build import build_model
-
     full = [
-        build_model(e, i, r.image, backend=backend, resolution=tuple(e["resolution"]))
+        build_model(e, i, r.image, backend=backend, resolution=tuple(e.resolution))
         for e, i, r in zip(frames, inputs, refs)
     ]
     mask = np.logical_and.reduce([m.mask for m in full])
@@ -62,19 +69,9 @@ def run_calibrate_animated(exp, variant: str, out: Path, solver: str, cache=None
     exported shaders (GL-checked on every frame with its own wave uniforms), ``animation.webp``
     and ``.gif`` (reference | fitted | FLIP error), ``temporal.png``, ``constants.json`` and
     ``report.md``. Returns the JSON object written."""
-    from ._backend import drjit_backend
-    from .fit.calibrate import calibrate_model, scene_frozen, timed
-    from ._jobs import export_calibration
-    from .fit.build import build_model
-    from .fit.joint import joint_calibrate
-    from .report.animation import animation_figures, write_animation_report
-    from .scene.frame_data import load_frames
-
-    if exp["fit.input_noise"] != "ignore":
-        from .scene.errors import ExperimentError
-
+    if exp.fit.input_noise != "ignore":
         raise ExperimentError(
-            f'fit.input_noise = "{exp["fit.input_noise"]}" is not built for an animated '
+            f'fit.input_noise = "{exp.fit.input_noise}" is not built for an animated '
             "experiment (its frames are fitted jointly by least squares); use fit.input_noise = "
             '"ignore", or --set animation.frames=1 to fit its frame 0 that way'
         )
@@ -91,7 +88,7 @@ def run_calibrate_animated(exp, variant: str, out: Path, solver: str, cache=None
         ]
     start = models[0].start_constants(exp)
     frozen = [scene_frozen(e) for e in frames]
-    params, steps = exp["fit.parameters"], exp["fit.max_steps"]
+    params, steps = exp.fit.parameters, exp.fit.max_steps
     _log(f"calibrate: fitting {params} of {models[0].label} with {solver} on {len(frames)} frames")
     with timed(timings, "fit_s"):
         joint = joint_calibrate(models, start, params, solver, steps, frozen, names)
@@ -114,7 +111,7 @@ def run_calibrate_animated(exp, variant: str, out: Path, solver: str, cache=None
     )
     offsets = _write_offsets(out / "shaders" / "animation.json", exp, frames)
     with timed(timings, "figures_s"):
-        figs = animation_figures(out, refs, ev, exp["animation.time_step"])
+        figs = animation_figures(out, refs, ev, exp.animation.time_step)
         write_exr(out / "fitted_frame0.exr", ev["images"]["all_frames"][0])
     timings["total_s"] = time.perf_counter() - t_start
     summary = _result(exp, variant, shader, joint, single, ev, solver, timings, gl_frames)
@@ -144,8 +141,6 @@ def run_calibrate_animated(exp, variant: str, out: Path, solver: str, cache=None
 def _losses(models, blocks: dict) -> dict:
     """The fit's own loss (0.5 |r|^2 at the fit resolution) of each constants block: on each
     frame and over all frames (the joint fit's weighted sum, ``JointModel``)."""
-    from .fit.joint import JointModel
-
     joint = JointModel(models)
     out = {}
     for name, c in blocks.items():
@@ -162,10 +157,10 @@ def _write_offsets(path: Path, exp, frames) -> dict:
     data = {
         "uniforms": ["wave1", "wave2", "wave3", "wave4"],
         "rule": "wave_i(t) = offsets[i] + t * velocities[i], t in seconds, texture units",
-        "offsets": exp["waves.offsets"],
-        "velocities": exp["animation.velocities"],
-        "time_step": exp["animation.time_step"],
-        "frames": [e["waves.offsets"] for e in frames],
+        "offsets": exp.waves.offsets,
+        "velocities": exp.animation.velocities,
+        "time_step": exp.animation.time_step,
+        "frames": [e.waves.offsets for e in frames],
     }
     write_json(path, data)
     return data
@@ -181,8 +176,6 @@ def _refs(refs) -> list:
 def _result(exp, variant, shader, joint, single, ev, solver, timings, gl_frames) -> dict:
     """The JSON object of ``constants.json``: a ``CalibrationResult`` of the all-frames fit (what
     ``study export`` reads) with the per-frame and temporal record under ``animation``."""
-    from .fit.result import CalibrationResult
-
     sc = ev["scores"]
     gl = dict(gl_frames[0])
     gl["passed"] = all(g.get("passed") for g in gl_frames)
@@ -201,15 +194,15 @@ def _result(exp, variant, shader, joint, single, ev, solver, timings, gl_frames)
         identifiability=joint.identifiability,
         timings=timings,
         gl_check=gl,
-        experiment=exp["name"],
-        fit_resolution=exp["fit.resolution"],
-        resolution=exp["resolution"],
+        experiment=exp.name,
+        fit_resolution=exp.fit.resolution,
+        resolution=exp.resolution,
     )
     summary = result.to_json()
     summary["animation"] = {
-        "frames": int(exp["animation.frames"]),
-        "time_step": exp["animation.time_step"],
-        "velocities": exp["animation.velocities"],
+        "frames": int(exp.animation.frames),
+        "time_step": exp.animation.time_step,
+        "velocities": exp.animation.velocities,
         "single_frame": {
             "constants": constants_json(single.fitted),
             "parameters": single.parameters,
@@ -218,6 +211,5 @@ def _result(exp, variant, shader, joint, single, ev, solver, timings, gl_frames)
         "scores": {n: {k: v for k, v in s.items() if k != "maps"} for n, s in sc.items()},
         "mask_pixels": int(ev["mask"].sum()),
     }
-    from .fit.result import jsonable
 
     return jsonable(summary)

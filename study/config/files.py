@@ -25,7 +25,7 @@ Files and conventions (world units, ``+y`` up, water plane at ``y = 0``):
   then ``mesh.position``; diffuse with ``mesh.albedo`` or the image ``mesh.texture``
   (needs texture coordinates). It must lie entirely above the water.
 
-Errors are :class:`~study.scene.experiment.ExperimentError` naming the key and the file.
+Errors are :class:`~study.config.experiment.ExperimentError` naming the key and the file.
 """
 
 from __future__ import annotations
@@ -37,6 +37,8 @@ from pathlib import Path
 
 import numpy as np
 
+from .errors import ExperimentError
+
 FILE_KEYS = ("floor.heightmap", "floor.albedo_image", "sky.envmap", "mesh.file", "mesh.texture")
 IMAGE_EXT = (".exr", ".png", ".jpg", ".jpeg")
 MESH_EXT = (".obj", ".ply")
@@ -46,7 +48,6 @@ SUN_CONTRAST = 20.0  # ... whose brightest texel is this many times the median, 
 
 
 def _error(key: str, path, msg: str):
-    from .errors import ExperimentError
 
     return ExperimentError(f"{key}: {msg} (file {path})")
 
@@ -129,8 +130,6 @@ def _read_image(key: str, path: str, sha: str) -> np.ndarray:
                     img = img[..., None]
                 img = img.reshape(img.shape[0], img.shape[1], -1)
     except Exception as exc:
-        from .errors import ExperimentError
-
         if isinstance(exc, ExperimentError):
             raise
         raise _error(key, path, f"not a readable image ({clip_text(exc)})") from exc
@@ -364,8 +363,6 @@ def _covers(key: str, path, extent, values) -> None:
 def check_files(values: dict) -> dict:
     """Validate every file key of a validated experiment's ``values`` (paths already resolved by
     :func:`resolve`) and the keys that go with them; return ``{key: sha256}`` of the files given."""
-    from .errors import ExperimentError
-
     has = {k: values[k] != "" for k in FILE_KEYS}
     if values["floor.shape"] == "heightmap" and not has["floor.heightmap"]:
         raise ExperimentError(

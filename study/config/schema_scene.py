@@ -1,6 +1,6 @@
 """The experiment keys of the scene itself: image, camera, pool, floor, water, waves, the waves'
 animation, sky, sun and mesh (``SCENE_KEYS``, in the docs' order), and :class:`Field`, the
-description of one key. ``study.scene.schema`` joins them with the study's keys
+description of one key. ``study.config.schema`` joins them with the study's keys
 (``schema_study``)."""
 
 from __future__ import annotations

@@ -1,0 +1,92 @@
+"""``study render`` and ``study preview``: the reference and the shader inputs of an experiment,
+and its shader with the start constants beside the reference."""
+
+from __future__ import annotations
+
+import time
+
+from .._backend import drjit_backend
+from .._io import write_exr, write_json, write_png
+from .._metrics import errors
+from .._progress import log as _log
+from ..fit.build import build_model
+from ..fit.model import constants_json
+from ..report.calibration import comparison_figure, diagnostics_figure
+from .steps import load_scene_data, prepare, save_shader_inputs, sun_of
+
+
+def run_render(experiment, out, overrides=None, variant=None, cache=None) -> dict:
+    """``study render``: reference.exr (+ PNG), shader inputs (.npz and EXRs), summary.json."""
+    t0 = time.perf_counter()
+    exp, variant, out = prepare(experiment, out, overrides, variant)
+    setup_s = time.perf_counter() - t0
+    ref, inputs, timings = load_scene_data(exp, variant, cache)
+    timings = {"setup_s": setup_s, **timings}
+    write_exr(out / "reference.exr", ref.image, ref.provenance)
+    write_png(out / "reference.png", ref.image)
+    save_shader_inputs(inputs, out / "inputs")
+    summary = {
+        "experiment": exp.name,
+        "variant": variant,
+        "reference": ref.provenance,
+        "timings": timings,
+        "outputs": sorted(str(p.relative_to(out)) for p in out.rglob("*") if p.is_file()),
+    }
+    write_json(out / "summary.json", summary)
+    _log(f"render: wrote {out}")
+    return summary
+
+
+def run_preview(experiment, out, overrides=None, variant=None, cache=None) -> dict:
+    """``study preview``: the port with the experiment's start constants next to the reference,
+    error map, diagnostics (PNG) and error figures on water pixels (preview.json)."""
+    t_start = time.perf_counter()
+    exp, variant, out = prepare(experiment, out, overrides, variant)
+    setup_s = time.perf_counter() - t_start
+    ref, inputs, timings = load_scene_data(exp, variant, cache)
+    timings = {"setup_s": setup_s, **timings}
+    w, h = exp.resolution
+    t0 = time.perf_counter()
+    model = build_model(exp, inputs, ref.image, backend=drjit_backend(variant), resolution=(w, h))
+    constants = model.start_constants(exp)
+    timings["model_s"] = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    img, diag = model.render(constants)
+    timings["port_s"] = time.perf_counter() - t0
+    err = errors(ref.image, img, model.mask)
+    t0 = time.perf_counter()
+    write_exr(out / "reference.exr", ref.image, ref.provenance)
+    write_exr(
+        out / "port.exr", img, {"shader": model.label, "constants": constants_json(constants)}
+    )
+    write_png(out / "reference.png", ref.image)
+    write_png(out / "port.png", img)
+    comparison_figure(
+        out / "preview.png",
+        {"reference": ref.image, "port (start constants)": img},
+        {"port (start constants)": err},
+        model.mask,
+        title=f"{exp.name}: {model.label}",
+    )
+    diagnostics_figure(out / "diagnostics.png", diag.maps, model.mask, title="port diagnostics")
+    timings["figures_s"] = time.perf_counter() - t0
+    timings["total_s"] = time.perf_counter() - t_start
+    summary = {
+        "experiment": exp.name,
+        "shader": model.label,
+        "variant": variant,
+        "constants": constants_json(constants),
+        "error": err,
+        "water_pixels": int(model.mask.sum()),
+        "reference": {"spp": ref.spp, "noise": ref.noise, "path": str(ref.path)},
+        "diagnostics": diag.summary(model.mask),
+        "timings": timings,
+        "sun": sun_of(exp),
+    }
+    write_json(out / "preview.json", summary)
+    _log(
+        f"preview: RMSE {err['rmse']:.4f}, FLIP {err['flip']:.4f} on "
+        f"{summary['water_pixels']} water "
+        f"pixels; wrote {out}"
+    )
+    return summary

@@ -1,0 +1,250 @@
+"""The steps every command shares, written once. First: load and check the experiment,
+initialise the backend, make the output folder; the reference and the shader inputs of a still
+scene (with whatever the shader reads beyond the study's inputs); the sun the shader is lit by.
+Last, for every calibration: the fitted shader exported (GLSL, or a user's file, and the engine
+targets) and checked on OpenGL, the start and fitted constants scored at full resolution, the
+figures, ``constants.json`` and ``report.md``."""
+
+from __future__ import annotations
+
+import hashlib
+from pathlib import Path
+
+import numpy as np
+
+from .._backend import init_backend
+from .._io import write_exr, write_json
+from .._metrics import errors, information_criteria
+from .._progress import Stages
+from .._progress import log as _log
+from ..fit.build import build_model
+from ..fit.calibrate import timed
+from ..fit.model import constants_json
+from ..fit.result import CalibrationResult
+from ..report.calibration import comparison_figure, diagnostics_figure, loss_figure, write_report
+from ..report.export import export_shaders, export_user_shader
+from ..report.gl_check import (
+    gl_check,
+    gl_check_user,
+    hlsl_check_user,
+    manifest_checks,
+    target_checks,
+)
+from ..scene.baseline_inputs import inputs_for_shader
+from ..config.experiment import is_user_shader, load_experiment
+from ..scene.frames import is_animated, refuse_animated
+from ..scene.reference import load_or_render
+from ..scene.shader_inputs import load_or_build_shader_inputs
+from ..scene.user_scene import check_scene, sun_summary
+from ..scene.view import check_water_in_view
+
+
+def prepare(experiment, out, overrides=None, variant=None, frames: bool = False):
+    """Load the experiment (its files validated), initialise the backend, check what needs it
+    (the mesh), create the output folder. ``frames``: the command handles every frame of an
+    animated experiment (else it says that it uses frame 0)."""
+    exp = load_experiment(experiment, overrides)
+    check_water_in_view(exp)
+
+    if is_animated(exp) and not frames:
+        _log(
+            f"experiment: {exp.name} has {exp.animation.frames} frames; this command uses "
+            "frame 0 (study calibrate fits every frame)"
+        )
+    variant = init_backend(variant or exp.variant)
+    check_scene(exp)
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    return exp, variant, out
+
+
+def load_scene_data(exp, variant, cache=None):
+    """Reference (cached) and shader inputs at the experiment's resolution."""
+    st = Stages(log=_log)
+    spp = exp.reference.spp
+    with st.stage(
+        "reference_s",
+        f"reference: {exp.resolution[0]}x{exp.resolution[1]}, "
+        + ("automatic spp (pilot, then final passes)" if spp == "auto" else f"{spp} spp"),
+    ):
+        ref = load_or_render(
+            exp, variant, cache=cache, progress=st.counter("  reference passes"), log=_log
+        )
+    with st.stage("inputs_s", "shader inputs"):
+        inputs = load_or_build_shader_inputs(exp, variant, cache=cache, log=_log, progress=st)
+        inputs = inputs_for_shader(exp, inputs, exp.fit.shader, variant, cache=cache, log=_log)
+    return ref, inputs, st.timings
+
+
+def save_shader_inputs(inputs, folder: Path) -> None:
+    """All shader inputs as one .npz plus EXRs of the image-like ones (GL row order)."""
+    folder.mkdir(parents=True, exist_ok=True)
+    inputs.save(folder / "shader_inputs.npz")
+    write_exr(folder / "refraction_texture.exr", inputs.refraction_texture)
+    write_exr(folder / "world_y.exr", np.repeat(inputs.world_y[..., None], 3, -1))
+    write_exr(folder / "normal_map.exr", inputs.normal_map)
+    write_exr(folder / "refl_world_y.exr", np.repeat(inputs.refl_world_y[..., None], 3, -1))
+    write_exr(folder / "refl_texture.exr", inputs.refl_texture)
+    f = inputs.cubemap.shape[1]
+    write_exr(
+        folder / "cubemap_cross.exr", inputs.cubemap.transpose(1, 0, 2, 3).reshape(f, 6 * f, 3)
+    )
+    lut = np.zeros((1, len(inputs.fresnel_lut), 3), np.float32)
+    lut[0, :, :2] = inputs.fresnel_lut
+    write_exr(folder / "fresnel_lut.exr", lut)
+
+
+def refuse_animated_all(experiments, overrides, command: str) -> None:
+    """ExperimentError if any of ``experiments`` is animated (``command`` takes still frames)."""
+    for path in experiments:
+        refuse_animated(load_experiment(path, overrides), command)
+
+
+def sun_of(exp) -> dict:
+    """The shader's sun (explicit, or found in the sky file: direction, solid angle, radiance)."""
+    return sun_summary(exp)
+
+
+def export_calibration(exp, model, frames: list, fitted, out: Path, timings: dict):
+    """The fitted shader exported into ``out/shaders``: a variant's core and compatibility GLSL,
+    or a copy of a user's file with the fitted constants in place (``fit.write_back = "file"``:
+    the file itself too, once the GL check passed); every engine target the installed tools
+    make. Then run on OpenGL (llvmpipe) against the Dr.Jit shader on each of ``frames`` (shader
+    inputs at the experiment's resolution), and the engine targets' checks. Returns (a GL check
+    per frame, engine targets, what the result adds for a user's file)."""
+    shaders = out / "shaders"
+    user = getattr(model, "user_shader", None)
+    with timed(timings, "export_s"):
+        _log(f"calibrate: exporting and compiling {model.label} (and its vertex shader)")
+        if user is None:
+            export_shaders(fitted, shaders, [model.shader], targets=None)
+        else:
+            export_user_shader(user, fitted, shaders, targets=None)
+    with timed(timings, "gl_check_s"):
+        _log(f"calibrate: running the exported shader on OpenGL (llvmpipe), {len(frames)} frame(s)")
+        if user is None:
+            gl = [gl_check(model.shader, i, fitted, shaders) for i in frames]
+            return gl, target_checks(model.shader, frames[0], fitted, shaders), {}
+        ours = [user.render(i, fitted).numpy() for i in frames]
+        gl = [gl_check_user(user, i, fitted, o) for i, o in zip(frames, ours)]
+        engine_targets = manifest_checks(shaders)
+        if "hlsl" in engine_targets:
+            engine_targets["hlsl"]["llvmpipe"] = hlsl_check_user(
+                user, frames[0], fitted, ours[0], shaders
+            )
+    if exp.fit.write_back == "file":
+        if not all(g["passed"] is not False for g in gl):
+            _log(f"calibrate: {user.label} not written back: the GL check failed")
+        else:
+            text = (shaders / "core" / user.label).read_text(encoding="utf-8")
+            Path(exp.fit.shader).write_text(text, "utf-8")
+            _log(f"calibrate: wrote the fitted constants into {exp.fit.shader}")
+    extra = {
+        "shader_file": str(exp.fit.shader),
+        "shader_sha256": hashlib.sha256(user.source.encode("utf-8")).hexdigest(),
+        "declaration": {
+            "constants": {n: [c.lo, c.hi] for n, c in user.constants.items()},
+            "bindings": dict(user.bindings),
+        },
+    }
+    return gl, engine_targets, extra
+
+
+def evaluate_calibration(exp, inputs, ref, model, cal, backend) -> dict:
+    """The start and fitted constants at the experiment's full resolution: the model ``full``,
+    images ``img0`` / ``img1`` ((H, W, 3) linear RGB), their errors ``e0`` / ``e1`` (rmse, flip
+    on the water pixels), the fitted render's diagnostics ``diag1`` and the ``parsimony`` of the
+    fit at the fit resolution (information criteria)."""
+    w, h = exp.resolution
+    full = build_model(exp, inputs, ref.image, shader=shader_of(exp, model), backend=backend,
+                       resolution=(w, h))  # fmt: skip
+    img0, _ = full.render(cal.start)
+    img1, diag1 = full.render(cal.fitted)
+    fitted_names = [n for n, p in cal.parameters.items() if p["status"] in ("fitted", "bound")]
+    parsimony = {
+        **information_criteria(model.residual(cal.fitted), len(fitted_names)),
+        "fitted": fitted_names,
+        "defines": list(model.defines),
+    }
+    return {
+        "full": full,
+        "img0": img0,
+        "img1": img1,
+        "diag1": diag1,
+        "e0": errors(ref.image, img0, full.mask),
+        "e1": errors(ref.image, img1, full.mask),
+        "parsimony": parsimony,
+    }
+
+
+def shader_of(exp, model) -> str:
+    """What ``fit.shader`` names for ``model``: a variant's name, or the user's file's path."""
+    return str(exp.fit.shader) if is_user_shader(exp.fit.shader) else model.shader
+
+
+def calibration_figures(out, exp, model, ref, ev, cal, solver) -> dict:
+    """comparison.png, diagnostics.png, loss.png and the three EXRs (reference, default,
+    fitted) in ``out``; returns figure name -> file name for the report."""
+    figs = {"comparison": "comparison.png", "diagnostics": "diagnostics.png", "loss": "loss.png"}
+    mask = ev["full"].mask
+    comparison_figure(
+        out / figs["comparison"],
+        {"reference": ref.image, "default": ev["img0"], "fitted": ev["img1"]},
+        {"default": ev["e0"], "fitted": ev["e1"]},
+        mask,
+        title=f"{exp.name}: {model.label}",
+    )
+    diagnostics_figure(
+        out / figs["diagnostics"], ev["diag1"].maps, mask, title="diagnostics, fitted constants"
+    )
+    loss_figure(out / figs["loss"], {solver: cal.losses}, title="loss at each evaluation")
+    write_exr(out / "fitted.exr", ev["img1"], {"constants": constants_json(cal.fitted)})
+    write_exr(out / "default.exr", ev["img0"], {"constants": constants_json(cal.start)})
+    write_exr(out / "reference.exr", ref.image, ref.provenance)
+    return figs
+
+
+def calibration_result(exp, variant, model, ref, cal, ev, solver, timings, gl):
+    """The ``CalibrationResult`` of one scene's calibration."""
+    e0, e1 = ev["e0"], ev["e1"]
+    return CalibrationResult(
+        shader=model.label,
+        backend=variant,
+        parameters=cal.parameters,
+        constants=constants_json(cal.fitted),
+        error={
+            "rmse": {"default": e0["rmse"], "fitted": e1["rmse"]},
+            "flip": {"default": e0["flip"], "fitted": e1["flip"]},
+        },
+        solver=solver,
+        fit=cal.fit_summary,
+        identifiability=cal.identifiability,
+        timings=timings,
+        gl_check=gl,
+        experiment=exp.name,
+        fit_resolution=exp.fit.resolution,
+        resolution=exp.resolution,
+        step_sweep=cal.sweep,
+        reference={
+            "spp": ref.spp,
+            "noise": ref.noise,
+            "path": str(ref.path),
+            "key": ref.provenance["key"],
+        },
+        diagnostics=ev["diag1"].summary(ev["full"].mask),
+        sun=sun_of(exp),
+        parsimony=ev["parsimony"],
+    )
+
+
+def write_result(out, result, figs, ev) -> dict:
+    """constants.json and report.md of ``result`` in ``out``; returns the JSON object."""
+    summary = result.to_json()
+    write_json(out / "constants.json", summary)
+    write_report(out, summary, figs)
+    e0, e1 = ev["e0"], ev["e1"]
+    _log(
+        f"calibrate: RMSE {e0['rmse']:.4f} -> {e1['rmse']:.4f}, FLIP {e0['flip']:.4f} -> "
+        f"{e1['flip']:.4f}; wrote {out}"
+    )
+    return summary
