@@ -1,6 +1,6 @@
 """``study calibrate`` of the user's own GLSL shader (``fit.shader = "my_water.frag"``).
 
-The shader (``shaders_port.user_shader.UserShader``, declared by ``// @study`` pragmas and
+The shader (``shaders_port.spirv.user_shader.UserShader``, declared by ``// @study`` pragmas and
 ``fit.declare``) is executed through SPIR-V on the experiment's shader inputs at
 ``fit.resolution``, fitted to the box-downsampled reference on the scored water pixels (the
 shader's coverage and the reference's water, eroded by one pixel) by

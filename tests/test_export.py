@@ -12,11 +12,11 @@ import pytest
 
 from synthetic import synthetic_inputs
 from shaders_port import CONSTANT_SPECS, Constants, compile_check, read_constants, read_source
-from shaders_port._glsl import BEGIN_MARKER, END_MARKER, declared_constants
+from shaders_port.glsl_text import BEGIN_MARKER, END_MARKER, declared_constants
 from study.report.export import export_shaders, load_constants_json
 from study._jobs import run_export
 from study.report.gl_check import gl_check
-from shaders_port._variants import VARIANTS, get_variant
+from shaders_port.variants import VARIANTS, get_variant
 
 # every constant away from its default; 0.1, 0.3, 0.7, 0.76 and the fitted-looking
 # attenuation are not exact in float32
@@ -177,8 +177,8 @@ def test_gl_check_sees_constants_that_differ(exported):
 
 def test_gl_renderer_on_exported_text_matches_port(exported):
     """The same comparison by hand: GLRenderer(source=exported text).render(None) vs the port."""
-    from shaders_port import water_refraction
-    from shaders_port._gl import GLRenderer
+    from shaders_port.ports import water_refraction
+    from shaders_port.gl.renderer import GLRenderer
 
     out, _ = exported
     inputs = synthetic_inputs(width=48, height=36)

@@ -45,7 +45,7 @@ def _graph():
                     break
             if (
                 mod in modules and mod != name
-            ):  # a private module (``_frame``) is plumbing, not a name
+            ):  # a private module (``pipeline.frame``) is plumbing, not a name
                 private += [
                     (name, mod, n)
                     for n in names

@@ -13,8 +13,8 @@ import pytest
 
 from synthetic import synthetic_inputs
 from test_cli import TINY as CLI_TINY
-from shaders_port.spirv_port import STUDY_INPUTS
-from shaders_port.user_shader import UserShader
+from shaders_port.spirv.translated import STUDY_INPUTS
+from shaders_port.spirv.user_shader import UserShader
 from study.fit.user_shader import calibrate
 from test_water_refraction import FD_NOISE, FD_RTOL, save_failure
 

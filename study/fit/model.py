@@ -18,7 +18,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from shaders_port import CONSTANT_SPECS, Constants, ShaderInputs
-from shaders_port._variants import get_variant
+from shaders_port.variants import get_variant
 
 from ..scene.experiment import Experiment
 from .._metrics import downsample, downsample_stderr, erode
@@ -135,9 +135,9 @@ def _thread_handoff(fn):
 
 
 class ShaderModel:
-    """The port of the shader variant ``shader`` (a name in ``shaders_port._variants.VARIANTS``)
+    """The port of the shader variant ``shader`` (a name in ``shaders_port.variants.VARIANTS``)
     on ``inputs`` compared against ``reference`` (same size); ``translated``: the variant's
-    GLSL executed through SPIR-V (``shaders_port.spirv_port``) in place of its port."""
+    GLSL executed through SPIR-V (``shaders_port.spirv.translated``) in place of its port."""
 
     def __init__(
         self,
@@ -152,7 +152,7 @@ class ShaderModel:
         self.shader, self.inputs, self.backend = shader, inputs, backend
         self.variant = get_variant(shader)
         if translated:  # its GLSL file executed through SPIR-V in place of the hand port
-            from shaders_port.spirv_port import Translated
+            from shaders_port.spirv.translated import Translated
 
             self.variant = Translated(self.variant)
         if reference.shape != (inputs.height, inputs.width, 3):
@@ -257,7 +257,7 @@ class ShaderModel:
         the AD graph of any gradient-enabled constant attached (for reverse mode)."""
         import drjit as dr
 
-        from shaders_port._texture import backend_types
+        from shaders_port.pipeline.texture import backend_types
 
         m = backend_types(self.backend)
         if not hasattr(self, "_ref_t"):

@@ -38,7 +38,7 @@ class CalibrationResult:
     """One calibration, as written to ``constants.json``.
 
     Shared:
-        shader: the shader variant fitted (``shaders_port._variants``).
+        shader: the shader variant fitted (``shaders_port.variants``).
         backend: the Mitsuba variant the reference was rendered with (e.g. ``llvm_ad_rgb``).
         parameters: constant -> {"status", "value", "start", ...} (``study.fit.calibrate``).
         constants: the fitted constants, ``Constants.to_dict()`` (what ``study export`` reads).

@@ -1,17 +1,17 @@
-"""Calibrating a user's own GLSL shader (``shaders_port.user_shader``) against a reference.
+"""Calibrating a user's own GLSL shader (``shaders_port.spirv.user_shader``) against a reference.
 
-:func:`calibrate` fits the declared constants of a :class:`~shaders_port.user_shader.UserShader`
-as the built-in calibration fits the study's shaders (``study.fit.calibrate``): the residual
-shader - reference over the water pixels is a :class:`~study.fit.problem.FitProblem` whose
-Jacobian is the shader's forward-mode derivative executed through SPIR-V; the constants the
-image does not identify at the start (insensitive, or confounded with others:
-``study.fit.identify``) are frozen at their start values; the rest are fitted by the
-experiment's solver (``study.fit.solvers.fit``, optimistix) in the transformed coordinates that
-keep each in its declared range, with the study's stopping rule; at the solution each constant
-is ``fitted`` (with its relative standard error), ``bound`` (the loss still falls beyond its
-range) or ``frozen`` (not identified at the start, or a relative standard error above
-``study.fit.rounds.REL_SE_MAX`` at the fit: held at its start value and the rest refitted, at
-most ``SE_ROUNDS`` times). :meth:`UserShader.written` writes the fitted values back into the file.
+:func:`calibrate` fits the declared constants of a
+:class:`~shaders_port.spirv.user_shader.UserShader` as the built-in calibration fits the study's
+shaders (``study.fit.calibrate``): the residual shader - reference over the water pixels is a
+:class:`~study.fit.problem.FitProblem` whose Jacobian is the shader's forward-mode derivative
+executed through SPIR-V; the constants the image does not identify at the start (insensitive, or
+confounded with others: ``study.fit.identify``) are frozen at their start values; the rest are
+fitted by the experiment's solver (``study.fit.solvers.fit``, optimistix) in the transformed
+coordinates that keep each in its declared range, with the study's stopping rule; at the solution
+each constant is ``fitted`` (with its relative standard error), ``bound`` (the loss still falls
+beyond its range) or ``frozen`` (not identified at the start, or a relative standard error above
+``study.fit.rounds.REL_SE_MAX`` at the fit: held at its start value and the rest refitted, at most
+``SE_ROUNDS`` times). :meth:`UserShader.written` writes the fitted values back into the file.
 """
 
 from __future__ import annotations

@@ -26,8 +26,8 @@ import tempfile
 from pathlib import Path
 
 from shaders_port import CONSTANT_SPECS, Constants
-from shaders_port._glsl import compile_check, read_source, write_constants
-from shaders_port._variants import SHIPPED, VARIANTS, get_variant
+from shaders_port.glsl_text import compile_check, read_source, write_constants
+from shaders_port.variants import SHIPPED, VARIANTS, get_variant
 
 from .._io import disk_full
 from .targets import resolve_targets, translate_targets

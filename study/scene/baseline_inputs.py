@@ -31,7 +31,7 @@ import dataclasses
 import numpy as np
 
 from shaders_port import ShaderInputs
-from shaders_port._inputs import mirrored_view_proj
+from shaders_port.inputs import mirrored_view_proj
 
 from .._io import disk_full
 from .experiment import Experiment
@@ -246,7 +246,7 @@ def inputs_for_shader(
 ) -> ShaderInputs:
     """``inputs`` with whatever optional fields the shader variant ``shader`` reads (its
     ``Variant.inputs``; today only the baseline's buffers), else ``inputs`` unchanged."""
-    from shaders_port._variants import get_variant
+    from shaders_port.variants import get_variant
 
     if get_variant(shader).inputs:
         return with_baseline_inputs(exp, inputs, variant, cache=cache, log=log)

@@ -2,7 +2,7 @@
 and its constants written back into its file.
 
 The shader is a core GLSL fragment shader (``#version 330 core`` or later) that runs after the
-study's ``water.vert`` (so it reads the study's varyings, :data:`spirv_port.STUDY_INPUTS`). Its
+study's ``water.vert`` (so it reads the study's varyings, :data:`translated.STUDY_INPUTS`). Its
 *declaration* says which constants to fit and what its own names of inputs mean, either as
 pragmas in the file::
 
@@ -33,10 +33,10 @@ from pathlib import Path
 import drjit as dr
 import numpy as np
 
-from . import spirv_port
-from ._frame import finish_output, tangents
-from ._raster import prepare
-from ._texture import backend_types
+from . import translated as spirv_port
+from ..pipeline.frame import finish_output, tangents
+from ..pipeline.raster import prepare
+from ..pipeline.texture import backend_types
 
 __all__ = ["UserShader", "UserConstant"]
 
@@ -294,7 +294,7 @@ class UserShader:
         """A ``GLRenderer`` (OpenGL, llvmpipe) drawing the written-back shader with ``values``
         (its samplers and uniforms bound to the study's inputs by the declaration); use it as
         a context manager, ``render(None)`` / ``time_frames(None, n, warmup)``."""
-        from ._gl import GLRenderer
+        from ..gl.renderer import GLRenderer
 
         bindings = dict(self.bindings)
 
