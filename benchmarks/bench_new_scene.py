@@ -174,7 +174,7 @@ def worker(
     from study import _jobs
     from study._backend import init_backend
     from study.fit import calibrate
-    from study.report import export
+    from study.export import shaders as export
     from study.scene import experiment as exp_mod
     from study.scene import direct_light, lighting, mitsuba_scene, reference, shader_inputs
 
@@ -243,7 +243,7 @@ def cross_flip(
     from study._backend import drjit_backend, init_backend
     from study._metrics import errors
     from study.fit.model import ShaderModel
-    from study.report.export import load_constants_json
+    from study.export.shaders import load_constants_json
     from study.scene.experiment import load_experiment
     from study.scene.reference import load_or_render
     from study.scene.shader_inputs import load_or_build_shader_inputs

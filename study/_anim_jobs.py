@@ -18,7 +18,7 @@ import numpy as np
 
 from ._io import write_exr, write_json
 from ._progress import log as _log
-from .report.gl_check import gl_check, target_checks
+from .export.gl_check import gl_check, target_checks
 
 
 def _score(frames, refs, inputs, backend, constants: dict) -> dict:
@@ -70,7 +70,7 @@ def run_calibrate_animated(exp, variant: str, out: Path, solver: str, cache=None
     from .fit.model import ShaderModel, constants_from_experiment
     from .report.animation import animation_figures, write_animation_report
     from .scene.frame_data import load_frames
-    from .report.export import export_shaders
+    from .export.shaders import export_shaders
 
     if exp["fit.input_noise"] != "ignore":
         from .scene.errors import ExperimentError

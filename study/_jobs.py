@@ -10,7 +10,7 @@ import numpy as np
 from ._backend import init_backend
 from .scene.experiment import is_user_shader, load_experiment
 from ._io import write_exr, write_json, write_png
-from .report.gl_check import gl_check, target_checks
+from .export.gl_check import gl_check, target_checks
 from ._progress import log as _log
 
 
@@ -225,7 +225,7 @@ def run_export(constants_json, out, targets=None) -> list:
     """``study export``: the shipped shaders with the constants of a JSON file, in
     ``out/shaders``; ``targets``: engine targets, a comma-separated string or list, 'none', or
     None (every one the installed tools can make)."""
-    from .report.export import export_shaders, load_constants_json
+    from .export.shaders import export_shaders, load_constants_json
 
     if isinstance(targets, str):
         targets = [] if targets == "none" else [t for t in targets.split(",") if t]
@@ -250,7 +250,7 @@ def run_calibrate(experiment, out, overrides=None, variant=None, solver=None, ca
     from .fit.decorrelated import half_models, texture_half_models
     from .fit.model import ShaderModel, constants_from_experiment
     from .fit.solvers import SOLVERS
-    from .report.export import export_shaders
+    from .export.shaders import export_shaders
 
     if solver is not None and solver not in SOLVERS:
         raise ValueError(f"unknown solver {solver!r}; choose one of {', '.join(SOLVERS)}")
@@ -441,7 +441,7 @@ def run_failures(
     """``study failures``: the failure catalogue of each experiment, one sweep job per experiment
     (``study.studies.failures``): ``<out>/<name>/failures.png``, ``failures.parquet``,
     ``report.md``."""
-    from .report.export import load_constants_json
+    from .export.shaders import load_constants_json
     from .studies.failures import run_failures as run
 
     _refuse_animated(experiments, overrides, "study failures")

@@ -13,7 +13,7 @@ from ._io import write_json
 from ._jobs import load_scene_data
 from ._progress import log as _log
 from .fit.result import jsonable
-from .report.gl_check import gl_check, target_checks
+from .export.gl_check import gl_check, target_checks
 from .scene.experiment import load_experiment
 
 
@@ -95,7 +95,7 @@ def _joint_fit(scenes, variant, out: Path, solver):
     evaluate)."""
     from .fit.joint import JointModel, joint_calibrate
     from .fit.model import constants_from_experiment
-    from .report.export import export_shaders
+    from .export.shaders import export_shaders
     from .fit.result import CalibrationResult
     from .report.generalise import write_joint_report
 

@@ -20,7 +20,7 @@ from pathlib import Path
 from ._io import write_exr, write_json
 from ._metrics import downsample, errors
 from ._progress import log as _log
-from .report.gl_check import gl_check_user
+from .export.gl_check import gl_check_user
 from .scene.experiment import load_user_shader
 
 

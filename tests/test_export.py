@@ -13,9 +13,9 @@ import pytest
 from synthetic import synthetic_inputs
 from shaders_port import CONSTANT_SPECS, Constants, compile_check, read_constants, read_source
 from shaders_port.glsl_text import BEGIN_MARKER, END_MARKER, declared_constants
-from study.report.export import export_shaders, load_constants_json
+from study.export.shaders import export_shaders, load_constants_json
 from study._jobs import run_export
-from study.report.gl_check import gl_check
+from study.export.gl_check import gl_check
 from shaders_port.variants import VARIANTS, get_variant
 
 # every constant away from its default; 0.1, 0.3, 0.7, 0.76 and the fitted-looking
@@ -308,7 +308,7 @@ def test_failed_export_keeps_existing_export(tmp_path, monkeypatch):
         run_export(_write(tmp_path, '{"attenuation_distance": [1.0, 2.0]}', "bad2.json"), out)
     assert _snapshot(out) == before
     # a shader that does not compile, the fifth of six
-    import study.report.export as ex
+    import study.export.shaders as ex
 
     calls = {"n": 0}
     real = ex.compile_check

@@ -17,8 +17,8 @@ from shaders_port import CONSTANT_SPECS, Constants
 from shaders_port.glsl_text import constants_read, read_source, write_constants
 from shaders_port.spirv.tools import missing_tools
 from shaders_port.variants import SHIPPED, VARIANTS
-from study.report.export import export_shaders
-from study.report.targets import TARGETS, resolve_targets, target_file
+from study.export.shaders import export_shaders
+from study.export.targets import TARGETS, resolve_targets, target_file
 from synthetic import synthetic_baseline_inputs, synthetic_inputs
 
 MISSING = missing_tools()
@@ -140,7 +140,7 @@ def test_binding_sheets_and_manifest(export):
 
 
 def _hlsl_check(export, variant, inputs):
-    from study.report.gl_check import hlsl_check
+    from study.export.gl_check import hlsl_check
 
     try:
         return hlsl_check(variant, inputs, FITTED, export)

@@ -294,8 +294,8 @@ def export_recommended(
     from shaders_port import Constants
 
     from .._backend import init_backend
-    from ..report.export import export_shaders
-    from ..report.gl_check import gl_check, target_checks
+    from ..export.shaders import export_shaders
+    from ..export.gl_check import gl_check, target_checks
     from ..sweep import load_scene
 
     init_backend(variant)

@@ -20,9 +20,9 @@ Beside them, per target, ``<name>.<stage>.reflect.json`` (``spirv-cross --reflec
 module the target is made from: for HLSL the one glslang makes of the HLSL, so its registers
 and its ``$Global`` offsets; elsewhere with the plain uniforms added as ``loose_uniforms``, which
 the reflection of OpenGL SPIR-V leaves out) and ``BINDINGS.md``, the binding sheet
-(``study.report.bindings``).
+(``study.export.bindings``).
 ``targets.json`` at the top of the export lists the files and the checks. The calibration's GL
-check runs the HLSL on llvmpipe too (``study.report.gl_check.hlsl_check``).
+check runs the HLSL on llvmpipe too (``study.export.gl_check.hlsl_check``).
 """
 
 from __future__ import annotations
