@@ -1,11 +1,11 @@
 """The registry of shader variants: one entry per shader the study can fit, time and chart.
 
-A *variant* is a name, one GLSL fragment shader (a file in ``glsl/`` and its Dr.Jit port module
-of the same name) and the preprocessor names it is compiled with. The port reads the same names
-through its one table ``DEFINES`` (``shaders_port.ports.switches``), so GL, export and port take the
-same code path by construction. Everything above this layer (the fit, the sweeps, the tradeoff
-chart, export and the GL check) names a shader by its variant name only, so a new shader joins the
-study with one file pair and one :func:`register` call here.
+A *variant* is a name, one GLSL fragment shader (a file in ``glsl/`` and its Dr.Jit port module of
+the same name in ``ports/``) and the preprocessor names it is compiled with. The port reads the same
+names through its one table ``DEFINES`` (``shaders_port.ports.switches``), so GL, export and port
+take the same code path by construction. Everything above this layer (the fit, the sweeps, the
+tradeoff chart, export and the GL check) names a shader by its variant name only, so a new shader
+joins the study with one file pair and one :func:`register` call here.
 
 ``VARIANTS`` maps names to :class:`Variant`, in registration order (the order of charts and
 tables): the shipped ones (``SHIPPED``) and any other shader of the space used so
@@ -32,7 +32,7 @@ class Variant:
 
     Attributes:
         name: registry key; also the file stem of an exported variant.
-        shader: GLSL file stem under ``glsl/`` and port module under ``shaders_port``.
+        shader: GLSL file stem under ``glsl/`` and port module under ``shaders_port.ports``.
         defines: preprocessor names inserted after ``#version`` (GL and export) and decoded by
             the port's ``DEFINES`` table (``render(..., defines=...)``).
         schedule: names of the integer-valued step-schedule constants the variant reads (swept by
