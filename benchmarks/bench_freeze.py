@@ -1,7 +1,7 @@
 """What ``dr.freeze`` buys: the default experiment's fit and its renders, frozen and traced.
 
 Runs the same calibration (``calibrate_experiment`` on the cached reference) and a loop of
-plain renders / Jacobian passes with ``shaders_port._frame.USE_FROZEN`` on and off, in one
+plain renders / Jacobian passes with ``shaders_port.pipeline.frame.USE_FROZEN`` on and off, in one
 process, interleaved ``--repeats`` times, and prints median seconds and the ratio. The
 reference and shader inputs must be cached (``make run`` first)::
 
@@ -32,7 +32,7 @@ def main() -> None:
     from study import init_backend, load_experiment
 
     init_backend("llvm_ad_rgb")
-    from shaders_port import _frame
+    from shaders_port.pipeline import frame as _frame
     from study.commands.steps import load_scene_data
     from study.fit.calibrate import calibrate_experiment
     from study.fit.model import ShaderModel, constants_from_experiment

@@ -52,10 +52,10 @@ def shader_terms(variant, inputs, constants) -> dict:
     (see the module doc) and the port's colour; 0 off the water."""
     import drjit as dr
 
-    from shaders_port import water_refraction as wr
-    from shaders_port._frame import resolve_constants
-    from shaders_port._raster import prepare
-    from shaders_port._texture import backend_types, clamp
+    from shaders_port.ports import water_refraction as wr
+    from shaders_port.pipeline.frame import resolve_constants
+    from shaders_port.pipeline.raster import prepare
+    from shaders_port.pipeline.texture import backend_types, clamp
 
     opts = wr.options_of(variant.defines) if variant.shader == "water_refraction" else None
     if opts is None or not opts.reflection:
@@ -141,8 +141,8 @@ def main(argv=None) -> None:
     ap.add_argument("--set", action="append", default=[], metavar="KEY=VALUE")
     a = ap.parse_args(argv)
 
-    from shaders_port._inputs import Constants
-    from shaders_port._variants import get_variant
+    from shaders_port.inputs import Constants
+    from shaders_port.variants import get_variant
     from study._backend import init_backend
     from study.commands.steps import load_scene_data
     from study._metrics import flip_map

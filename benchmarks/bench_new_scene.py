@@ -242,7 +242,7 @@ def cross_flip(
     from study._backend import drjit_backend, init_backend
     from study._metrics import errors
     from study.fit.model import ShaderModel
-    from study.report.export import load_constants_json
+    from study.export.shaders import load_constants_json
     from study.config.experiment import load_experiment
     from study.scene.reference import load_or_render
     from study.scene.shader_inputs import load_or_build_shader_inputs

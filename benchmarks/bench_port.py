@@ -22,7 +22,8 @@ sys.path[:0] = [str(ROOT), str(ROOT / "tests")]
 import drjit as dr  # noqa: E402
 
 from synthetic import synthetic_inputs  # noqa: E402
-from shaders_port import Constants, water_reflection, water_refraction  # noqa: E402
+from shaders_port import Constants  # noqa: E402
+from shaders_port.ports import water_reflection, water_refraction  # noqa: E402
 
 JAC_NAMES = {
     2: ["attenuation_distance", "bumptex_mult"],
@@ -80,7 +81,7 @@ def main() -> None:
         t_port = median_time(port_frame, args.n)
         fwd[(shader, refl)] = t_port
         try:
-            from shaders_port._gl import GLRenderer
+            from shaders_port.gl.renderer import GLRenderer
 
             with GLRenderer(shader, inputs, defines=defines) as g:
                 t_gl = statistics.median(g.time_frames(C, n=args.n, warmup=2))

@@ -3,7 +3,7 @@
 Run: ``.venv/bin/python benchmarks/bench_spirv.py [--size 128] [--n 5] [--threads 1]``. On the
 tests/synthetic.py scene at size x size pixels, prints a table of median milliseconds (after
 warm-up; port and executor timed in turn, so both see the same load) for each shader variant:
-the hand port's render and the executor's (``spirv_port``: tracing the SPIR-V included,
+the hand port's render and the executor's (``spirv.translated``: tracing the SPIR-V included,
 kernels cached by Dr.Jit), and ``render_with_jacobian`` in four constants both ways, with the
 ratios executor / port against the goal 1.5.
 """
@@ -23,8 +23,9 @@ ROOT = Path(__file__).resolve().parent.parent
 sys.path[:0] = [str(ROOT), str(ROOT / "tests")]
 
 from synthetic import synthetic_baseline_inputs, synthetic_inputs  # noqa: E402
-from shaders_port import Constants, spirv_port  # noqa: E402
-from shaders_port._variants import VARIANTS  # noqa: E402
+from shaders_port import Constants  # noqa: E402
+from shaders_port.spirv import translated as spirv_port  # noqa: E402
+from shaders_port.variants import VARIANTS  # noqa: E402
 
 _RAYCAST = ["attenuation_distance", "bumptex_mult", "steps_grazing", "refr_coeff"]
 CASES = {

@@ -15,7 +15,7 @@ inputs (``build_shader_inputs``), the port against a reference (``ShaderModel``)
 from ._backend import BackendError, init_backend
 from .fit.bridge import DrJitResidual, NonFiniteResidualError, make_jax_residual
 from .config.experiment import Experiment, ExperimentError, load_experiment, validate
-from .report.export import export_shaders, load_constants_json
+from .export.shaders import export_shaders, load_constants_json
 from ._io import read_exr, write_exr, write_png
 from .fit.solvers import SOLVERS, FitProblem, FitResult, Param, fit
 from .fit.identify import IdentifyReport, identify, probe_gradient_solver, sweep_1d, sweep_2d

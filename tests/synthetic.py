@@ -94,7 +94,7 @@ def synthetic_baseline_inputs(width: int = 64, height: int = 48, seed: int = 0) 
     mirrored camera's view above y = 0 (a wall at x < -1.7 up to y = 0.6, gradient sky)."""
     import dataclasses
 
-    from shaders_port._inputs import mirrored_view_proj
+    from shaders_port.inputs import mirrored_view_proj
 
     base = synthetic_inputs(width, height, seed=seed)
     vp = base.view_proj.astype(np.float64)

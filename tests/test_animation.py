@@ -46,9 +46,9 @@ def _reference_normals(mi, scene, xz: np.ndarray) -> np.ndarray:
 def _port_normals(inputs) -> tuple[np.ndarray, np.ndarray]:
     """The port's bumped normal (``normal_map_block``, the shader's four layers at the inputs'
     ``wave1..wave4``, ``BumptexMult = 1``) on its water pixels: ((N, 2) world x, z, (N, 3))."""
-    from shaders_port._raster import prepare
-    from shaders_port._texture import backend_types
-    from shaders_port.water_refraction import normal_map_block
+    from shaders_port.pipeline.raster import prepare
+    from shaders_port.pipeline.texture import backend_types
+    from shaders_port.ports.water_refraction import normal_map_block
 
     m = backend_types("llvm")
     P = prepare(inputs, m)

@@ -8,7 +8,7 @@ import pytest
 from conftest import save_failure, small_experiment
 
 from shaders_port import Constants
-from shaders_port._inputs import mirrored_view_proj, perspective_view_proj
+from shaders_port.inputs import mirrored_view_proj, perspective_view_proj
 
 
 def test_mirrored_view_proj_is_the_mirror_image():
@@ -85,7 +85,7 @@ def test_depth_reconstructs_the_floor(scene):
 @pytest.mark.parametrize("variant", ["water_baseline", "water_baseline_flat"])
 def test_port_matches_gl_on_scene_buffers(scene, variant):
     pytest.importorskip("moderngl")
-    from shaders_port._compare import compare_port_gl
+    from shaders_port.gl.compare import compare_port_gl
 
     _, inputs, _, _ = scene
     inputs = inputs.with_resolution(32, 32)

@@ -12,7 +12,8 @@ import numpy as np
 import pytest
 
 from synthetic import synthetic_inputs
-from shaders_port import Constants, water_refraction
+from shaders_port import Constants
+from shaders_port.ports import water_refraction
 from study.fit.basins import NOISE_Z, POINTS, local_minima, loss_difference_sd, scan
 from study.fit.calibrate import calibrate_model
 from study.fit.model import ShaderModel, get_value

@@ -17,7 +17,7 @@ import pytest
 
 from synthetic import synthetic_inputs
 from shaders_port import Constants
-from shaders_port import water_refraction
+from shaders_port.ports import water_refraction
 from study.fit.calibrate import STEP_GRID, calibrate_model, make_problem, step_sweep
 from study.fit.solvers import fit
 from study.fit.identify import probe_gradient_solver

@@ -14,7 +14,8 @@ import numpy as np
 import pytest
 
 from synthetic import synthetic_inputs
-from shaders_port import Constants, water_refraction
+from shaders_port import Constants
+from shaders_port.ports import water_refraction
 from study.fit.calibrate import calibrate_model, make_problem, steps_to_within
 from study.fit.model import ShaderModel
 from study.fit.solvers import Param, fit

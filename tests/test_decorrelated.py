@@ -17,7 +17,8 @@ import numpy as np
 import pytest
 
 from synthetic import synthetic_inputs
-from shaders_port import Constants, water_reflection, water_refraction
+from shaders_port import Constants
+from shaders_port.ports import water_reflection, water_refraction
 from study.fit.calibrate import calibrate_model
 from study.fit.decorrelated import decorrelated_loss, loss_grad_hessian
 from study.fit.model import ShaderModel, get_value, with_values

@@ -140,7 +140,7 @@ def test_the_key_page_documents_every_key():
 def test_fit_parameters_default_to_what_the_shader_reads(capfd):
     """Unset, ``fit.parameters`` is every continuous constant the chosen shader reads (not its
     step schedule); so ``--set fit.shader=...`` works with any shader of the registry."""
-    from shaders_port._variants import VARIANTS
+    from shaders_port.variants import VARIANTS
 
     for name, v in VARIANTS.items():
         exp = validate({"fit": {"shader": name}})

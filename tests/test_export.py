@@ -12,11 +12,11 @@ import pytest
 
 from synthetic import synthetic_inputs
 from shaders_port import CONSTANT_SPECS, Constants, compile_check, read_constants, read_source
-from shaders_port._glsl import BEGIN_MARKER, END_MARKER, declared_constants
-from study.report.export import export_shaders, load_constants_json
+from shaders_port.glsl_text import BEGIN_MARKER, END_MARKER, declared_constants
+from study.export.shaders import export_shaders, load_constants_json
 from study.commands import run_export
-from study.report.gl_check import gl_check
-from shaders_port._variants import VARIANTS, get_variant
+from study.export.gl_check import gl_check
+from shaders_port.variants import VARIANTS, get_variant
 
 # every constant away from its default; 0.1, 0.3, 0.7, 0.76 and the fitted-looking
 # attenuation are not exact in float32
@@ -177,8 +177,8 @@ def test_gl_check_sees_constants_that_differ(exported):
 
 def test_gl_renderer_on_exported_text_matches_port(exported):
     """The same comparison by hand: GLRenderer(source=exported text).render(None) vs the port."""
-    from shaders_port import water_refraction
-    from shaders_port._gl import GLRenderer
+    from shaders_port.ports import water_refraction
+    from shaders_port.gl.renderer import GLRenderer
 
     out, _ = exported
     inputs = synthetic_inputs(width=48, height=36)
@@ -308,7 +308,7 @@ def test_failed_export_keeps_existing_export(tmp_path, monkeypatch):
         run_export(_write(tmp_path, '{"attenuation_distance": [1.0, 2.0]}', "bad2.json"), out)
     assert _snapshot(out) == before
     # a shader that does not compile, the fifth of six
-    import study.report.export as ex
+    import study.export.shaders as ex
 
     calls = {"n": 0}
     real = ex.compile_check

@@ -19,7 +19,7 @@ from shaders_port import (
     ortho_tex_matrix,
     perspective_view_proj,
 )
-from shaders_port import water_reflection, water_refraction
+from shaders_port.ports import water_reflection, water_refraction
 from study.studies.failures import (
     CLASS_KEYS,
     DENOMINATOR_EPS,
@@ -79,7 +79,7 @@ def diagnose(inputs, constants=None, shader=water_refraction, **kw):
     assert water.any()
     extra = {}
     if "refl_exit" in out:
-        from shaders_port._raster import rasterize_water
+        from shaders_port.pipeline.raster import rasterize_water
         from study.studies.failures import reflection_would_hit
 
         r = rasterize_water(inputs)
@@ -131,7 +131,7 @@ def test_no_crossing_within_loop_cap():
 
 
 def test_nonfinite_vector_is_invalid_refraction():
-    from shaders_port._raster import rasterize_water
+    from shaders_port.pipeline.raster import rasterize_water
 
     r = rasterize_water(BENIGN)
     k = len(r.index) // 2
@@ -169,7 +169,7 @@ def test_lookups_outside_the_textures():
     eye = (0.0, 6.0, 0.0)
     inputs = pool(eye=eye, fov=25.0, extent=(-0.5, -0.5, 0.5, 0.5), size=16)
     out, water, c = diagnose(inputs)
-    from shaders_port._raster import rasterize_water
+    from shaders_port.pipeline.raster import rasterize_water
 
     r = rasterize_water(inputs)
     start_outside = np.zeros(inputs.width * inputs.height, bool)
@@ -334,9 +334,9 @@ def test_ledge_is_validated():
     "shader,kw,cap", [(water_refraction, {}, "loop_cap"), (water_reflection, {}, "refl_loop_cap")]
 )
 def test_frozen_renders_follow_the_loop_cap(shader, kw, cap, monkeypatch):
-    """Measured on Dr.Jit 1.5.0 before shaders_port._frame.frozen: loop_cap 3 after 2 replayed
-    the 2-step recording (iterations stayed 2)."""
-    from shaders_port import _frame
+    """Measured on Dr.Jit 1.5.0 before shaders_port.pipeline.frame.frozen: loop_cap 3 after 2
+    replayed the 2-step recording (iterations stayed 2)."""
+    from shaders_port.pipeline import frame as _frame
 
     inputs = synthetic_inputs(32, 24)
     key = "iterations" if cap == "loop_cap" else "refl_iterations"

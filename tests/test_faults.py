@@ -106,7 +106,8 @@ _RENDER_PORT = textwrap.dedent("""
     sys.path.insert(0, {tests!r})
     import numpy as np
     from synthetic import synthetic_inputs
-    from shaders_port import Constants, water_refraction
+    from shaders_port import Constants
+    from shaders_port.ports import water_refraction
     out = water_refraction.render(synthetic_inputs(40, 30), Constants(bumptex_mult=0.8)).numpy()
     np.save({out!r}, out["color"])
 """)

@@ -14,7 +14,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from shaders_port import CONSTANT_SPECS
-from study.report.export import load_constants_json
+from study.export.shaders import load_constants_json
 from study.config.experiment import SCHEMA, Experiment, ExperimentError, validate
 
 MAX_MESSAGE = 1200  # characters: an error message stays readable

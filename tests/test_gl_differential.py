@@ -2,7 +2,7 @@
 
 On water pixels (covered by both): mean |diff| <= 1e-3 and 99.9th percentile <= 1e-2 in
 linear RGB (max over channels); every pixel beyond 1e-2 must be explained by the port's
-diagnostics (see shaders_port._compare) and their number stays below 0.1 % of the water.
+diagnostics (see shaders_port.gl.compare) and their number stays below 0.1 % of the water.
 Measured on these inputs: max |diff| ~3e-5 (llvmpipe filters float textures with float
 weights), no pixel beyond 1e-2, coverage identical.
 """
@@ -15,8 +15,8 @@ from synthetic import synthetic_inputs
 from shaders_port import Constants
 from test_water_refraction import CUSTOM, save_failure
 
-_gl = pytest.importorskip("shaders_port._gl")
-from shaders_port._compare import compare_port_gl  # noqa: E402
+_gl = pytest.importorskip("shaders_port.gl.renderer")
+from shaders_port.gl.compare import compare_port_gl  # noqa: E402
 
 CASES = ["water_refraction", "water_refraction_noreflection", "water_reflection"]
 

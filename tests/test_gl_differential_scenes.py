@@ -8,7 +8,7 @@ import pytest
 from conftest import REPO, save_failure
 
 from shaders_port import Constants
-from shaders_port._compare import compare_port_gl
+from shaders_port.gl.compare import compare_port_gl
 
 EXPERIMENTS = ("default", "murky", "grazing")
 NON_DEFAULT = Constants(
@@ -66,6 +66,6 @@ def test_port_matches_gl_on_scene_inputs(scene_inputs, name, which, shader):
     assert r["mean_abs"] <= 1e-3, r["mean_abs"]
     assert r["p999"] <= 1e-2, r["p999"]
     assert r["unexplained"] == 0 and r["n_nonfinite"] == 0, (r["n_outliers"], r["explained"])
-    # the measured level (float32 rounding only, see shaders_port/_compare.py) is far below the
+    # the measured level (float32 rounding only, see shaders_port/gl/compare.py) is far below the
     # contract bounds above; a systematic difference 30x larger than measured must not pass
     assert r["mean_abs"] <= 1e-4 and r["p999"] <= 1e-3, (r["mean_abs"], r["p999"])

@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 
 from shaders_port import Constants
-from shaders_port._gl import GLRenderer, create_egl_context, run_glsl, time_glsl
-from shaders_port._glsl import read_source, write_constants
+from shaders_port.gl.renderer import GLRenderer, create_egl_context, run_glsl, time_glsl
+from shaders_port.glsl_text import read_source, write_constants
 from synthetic import synthetic_inputs
 
 FAILURES = Path(__file__).parent / "_failures"
@@ -238,7 +238,7 @@ def test_renderer_keeps_a_bounded_number_of_programs():
     """Many constant sets through one renderer: compiled programs are released beyond the cap,
     and a constant set seen before still renders the same after its program was dropped."""
     from shaders_port import Constants
-    from shaders_port._gl import GLRenderer
+    from shaders_port.gl.renderer import GLRenderer
     from synthetic import synthetic_inputs
 
     inputs = synthetic_inputs(24, 16)

@@ -10,8 +10,8 @@ import numpy as np
 import pytest
 
 from shaders_port import CONSTANT_SPECS, Constants
-from shaders_port import _glsl
-from shaders_port._glsl import (
+from shaders_port import glsl_text as _glsl
+from shaders_port.glsl_text import (
     BEGIN_MARKER,
     END_MARKER,
     compat_to_core,

@@ -1,14 +1,36 @@
-"""The house: ``study/`` imports point one way (no module imports one that imports it back,
-function-local imports included), and no private name crosses a module line."""
+"""The house: imports point one way (no module imports one that imports it back, and none
+imports a stage above its own, function-local imports included), a module imported from
+outside its package has a public name, and no private name crosses a module line."""
 
 from __future__ import annotations
 
 import ast
+from fnmatch import fnmatchcase
 from pathlib import Path
 
 from conftest import REPO
 
 PACKAGES = ("study", "shaders_port")
+
+# The stages, bottom to top: a module may import its own layer and those below, never one above.
+# ``pkg.*`` is everything under ``pkg``; a module in no layer fails the test (place it).
+LAYERS = (
+    ("shaders_port", "shaders_port.*"),
+    # helpers of every stage
+    ("study._backend", "study._io", "study._metrics", "study._progress"),
+    # the experiment: its keys and their checks, its files, read typed by section
+    ("study.config", "study.config.*"),
+    ("study.scene", "study.scene.*"),
+    # report writers and the export, used by the fit, the studies and the jobs
+    ("study.report", "study.report.*", "study.export", "study.export.*"),
+    ("study.fit", "study.fit.*"),
+    ("study.sweep", "study.sweep.*"),
+    ("study.studies", "study.studies.*"),
+    # the commands the command line runs, and the steps they share
+    ("study.commands", "study.commands.*"),
+    # the command line and the package's face (study/__init__.py)
+    ("study.cli", "study"),
+)
 
 
 def _module_name(path: Path) -> str:
@@ -34,18 +56,20 @@ def _imports(path: Path, name: str):
 
 
 def _graph():
+    """(edges: module -> the modules it imports, private: (importer, module, private name))."""
     modules = {_module_name(p): p for pkg in PACKAGES for p in (REPO / pkg).rglob("*.py")}
     edges, private = {}, []
     for name, path in modules.items():
         out = set()
         for mod, names in _imports(path, name):
-            for target in [f"{mod}.{n}" for n in names] + [mod]:
-                if target in modules and target != name:
-                    out.add(target)
-                    break
+            # ``from pkg import a, b``: the submodules named, and ``pkg`` for any other name
+            subs = [f"{mod}.{n}" for n in names if f"{mod}.{n}" in modules]
+            if mod in modules and (not names or len(subs) < len(names)):
+                subs.append(mod)
+            out.update(t for t in subs if t != name)
             if (
                 mod in modules and mod != name
-            ):  # a private module (``_frame``) is plumbing, not a name
+            ):  # a private module (``study._io``) is plumbing, not a name
                 private += [
                     (name, mod, n)
                     for n in names
@@ -117,3 +141,72 @@ def test_modules_and_functions_stay_readable():
                     if n > 100:
                         long.append(f"{path.relative_to(REPO)}:{node.lineno} {node.name}: {n}")
     assert not long, "split these: " + "; ".join(long)
+
+
+def _layer(module: str, layers=LAYERS) -> int | None:
+    for i, patterns in enumerate(layers):
+        if any(fnmatchcase(module, p) for p in patterns):
+            return i
+    return None
+
+
+def _upward(edges: dict, layers=LAYERS) -> list[str]:
+    """Every import of a module in a higher layer than the importer's, named."""
+    found = []
+    for a, outs in sorted(edges.items()):
+        for b in sorted(outs):
+            la, lb = _layer(a, layers), _layer(b, layers)
+            if la is not None and lb is not None and lb > la:
+                found.append(f"{a} imports {b} (layer {layers[lb][0]} is above {layers[la][0]})")
+    return found
+
+
+def _private_from_outside(edges: dict) -> list[str]:
+    """Every import of a module whose own name is private from outside that module's package."""
+    found = []
+    for a, outs in sorted(edges.items()):
+        for b in sorted(outs):
+            package, _, own = b.rpartition(".")
+            if own.startswith("_") and not (a == package or a.startswith(package + ".")):
+                found.append(f"{a} imports {b}")
+    return found
+
+
+def test_every_module_has_a_layer():
+    edges, _ = _graph()
+    assert [m for m in sorted(edges) if _layer(m) is None] == []
+
+
+def test_no_import_points_up_the_stages():
+    edges, _ = _graph()
+    assert _upward(edges) == []
+
+
+def test_the_layer_check_finds_an_upward_import():
+    # a scene module that imports the fit is named with both layers
+    planted = {
+        "study.config.experiment": {"study.fit.model", "study._io"},
+        "study.fit.model": set(),
+    }
+    assert _upward(planted) == [
+        "study.config.experiment imports study.fit.model (layer study.fit is above study.config)"
+    ]
+
+
+def test_an_import_inside_a_function_is_an_edge(tmp_path):
+    module = tmp_path / "m.py"
+    module.write_text("def f():\n    from .fit import model\n")
+    assert list(_imports(module, "study.m")) == [("study.fit", ["model"])]
+
+
+def test_a_module_imported_from_outside_its_package_has_a_public_name():
+    edges, _ = _graph()
+    assert _private_from_outside(edges) == []
+
+
+def test_the_public_name_check_finds_a_private_module_used_outside():
+    planted = {
+        "study.fit.model": {"shaders_port._hidden", "study._io"},
+        "shaders_port.ports.planar": {"shaders_port._hidden"},
+    }
+    assert _private_from_outside(planted) == ["study.fit.model imports shaders_port._hidden"]

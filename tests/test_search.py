@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from conftest import REPO
-from shaders_port import _space
+from shaders_port import space as _space
 from study.studies import search
 
 

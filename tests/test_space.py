@@ -7,16 +7,16 @@ import numpy as np
 
 import pytest
 
-from shaders_port import _space
-from shaders_port._glsl import read_source, switches_of
-from shaders_port._space import AXES, ORIGINAL, Unrealisable
-from shaders_port._switches import decode
-from shaders_port._variants import VARIANTS, get_variant
+from shaders_port import space as _space
+from shaders_port.glsl_text import read_source, switches_of
+from shaders_port.space import AXES, ORIGINAL, Unrealisable
+from shaders_port.ports.switches import decode
+from shaders_port.variants import VARIANTS, get_variant
 from synthetic import synthetic_baseline_inputs, synthetic_inputs
 
 
 def _ports():
-    from shaders_port import water_baseline, water_reflection, water_refraction
+    from shaders_port.ports import water_baseline, water_reflection, water_refraction
 
     return {
         "water_refraction": water_refraction,

@@ -1,5 +1,5 @@
-"""The SPIR-V executor (``shaders_port.spirv_port``): the study's GLSL files compiled by glslang
-and executed on Dr.Jit types, against the hand ports (images, costs, Jacobians), central
+"""The SPIR-V executor (``shaders_port.spirv.translated``): the study's GLSL files compiled by
+glslang and executed on Dr.Jit types, against the hand ports (images, costs, Jacobians), central
 differences and llvmpipe. The default run checks a representative subset; every shipped
 variant is checked in the slow tests."""
 
@@ -9,10 +9,11 @@ import numpy as np
 import pytest
 
 from synthetic import synthetic_baseline_inputs, synthetic_inputs
-from shaders_port import Constants, spirv_port
-from shaders_port._spirv_exec import UnboundVariable, UnsupportedInstruction
-from shaders_port._spirv_module import Module, compile_fragment, grammar
-from shaders_port._variants import SHIPPED, VARIANTS
+from shaders_port import Constants
+from shaders_port.spirv import translated as spirv_port
+from shaders_port.spirv.execute import UnboundVariable, UnsupportedInstruction
+from shaders_port.spirv.module import Module, compile_fragment, grammar
+from shaders_port.variants import SHIPPED, VARIANTS
 from test_gl_differential import _check, compare_or_skip
 from test_water_refraction import FD_CONSTANTS, check_jacobian_column, save_failure
 
@@ -61,7 +62,7 @@ def check_against_port(name: str, small, baseline_small, constants) -> None:
     assert np.abs(a["color"] - b["color"]).max() <= tol, name
     iterations, fetches = b["iterations"] + b.get("refl_iterations", 0.0), b["fetches"]
     if v.shader == "water_baseline":  # the port adds the mirrored camera's pass
-        from shaders_port.water_baseline import PASS_FETCHES
+        from shaders_port.ports.water_baseline import PASS_FETCHES
 
         fetches = np.where(b["mask"] > 0, fetches - PASS_FETCHES, 0.0)
     assert np.array_equal(a["iterations"], iterations), name
@@ -279,9 +280,9 @@ def _ran(spec, inputs, shader=None):
     """An executor run with derivatives of ``spec`` (a user ``shader``'s: its start values)."""
     import drjit.llvm.ad as m
 
-    from shaders_port._frame import resolve_constants
-    from shaders_port._raster import prepare
-    from shaders_port._spirv_exec import Executor
+    from shaders_port.pipeline.frame import resolve_constants
+    from shaders_port.pipeline.raster import prepare
+    from shaders_port.spirv.execute import Executor
 
     P = prepare(inputs, m)
     b = dict(spirv_port.frame_bindings(m, P, inputs, spec))
@@ -308,7 +309,7 @@ def _ran(spec, inputs, shader=None):
     ],
 )
 def test_replayed_loop_equals_unrolled_loop(small, monkeypatch, shader, names):
-    from shaders_port import _spirv_loops
+    from shaders_port.spirv import loops as _spirv_loops
 
     spec = spirv_port.builtin_spec(shader, ())
     assert not _ran(spec, small).unrolled  # the raycasts' state is affine: replayed
@@ -328,7 +329,7 @@ def test_temporaries_of_one_pass_are_found():
     ``uv`` and ``acc`` (read after the loop, carried from pass to pass) and ``i`` are not."""
     import drjit.llvm.ad as m
 
-    from shaders_port._spirv_exec import Executor
+    from shaders_port.spirv.execute import Executor
 
     mod = Module(compile_fragment(_DECAY, "decay.frag"), label="decay.frag")
     ex = Executor(mod, m, {})
@@ -340,7 +341,7 @@ def test_temporaries_of_one_pass_are_found():
 
 
 def test_loop_with_non_affine_state_is_unrolled_and_differentiated(small):
-    from shaders_port.user_shader import UserShader
+    from shaders_port.spirv.user_shader import UserShader
 
     shader = UserShader(
         _DECAY, "decay.frag", {"constants": {"DECAY": [0.1, 0.99], "STRIDE": [0.001, 0.5]}}

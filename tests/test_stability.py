@@ -142,7 +142,8 @@ def test_analyse_loss_picks_lower_mean_flip():
 
 def test_log_residual_jacobian_matches_central_differences():
     from synthetic import synthetic_inputs
-    from shaders_port import Constants, water_refraction
+    from shaders_port import Constants
+    from shaders_port.ports import water_refraction
     from study.fit.losses import transformed
     from study.fit.model import ShaderModel, with_values
 
@@ -170,7 +171,8 @@ def test_log_loss_calibration_recovers_a_synthetic_target():
     (it reads the model's variant and reference standard error through the wrapper) and
     recovers the constants a synthetic target was rendered with."""
     from synthetic import synthetic_inputs
-    from shaders_port import Constants, water_refraction
+    from shaders_port import Constants
+    from shaders_port.ports import water_refraction
     from study import load_experiment
     from study.fit.calibrate import calibrate_experiment
     from study.fit.losses import transformed

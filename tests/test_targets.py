@@ -14,11 +14,11 @@ import numpy as np
 import pytest
 
 from shaders_port import CONSTANT_SPECS, Constants
-from shaders_port._glsl import constants_read, read_source, write_constants
-from shaders_port._spirv import missing_tools
-from shaders_port._variants import SHIPPED, VARIANTS
-from study.report.export import export_shaders
-from study.report.targets import TARGETS, resolve_targets, target_file
+from shaders_port.glsl_text import constants_read, read_source, write_constants
+from shaders_port.spirv.tools import missing_tools
+from shaders_port.variants import SHIPPED, VARIANTS
+from study.export.shaders import export_shaders
+from study.export.targets import TARGETS, resolve_targets, target_file
 from synthetic import synthetic_baseline_inputs, synthetic_inputs
 
 MISSING = missing_tools()
@@ -140,7 +140,7 @@ def test_binding_sheets_and_manifest(export):
 
 
 def _hlsl_check(export, variant, inputs):
-    from study.report.gl_check import hlsl_check
+    from study.export.gl_check import hlsl_check
 
     try:
         return hlsl_check(variant, inputs, FITTED, export)
@@ -172,7 +172,7 @@ def test_hlsl_round_trip_matches_the_port_on_llvmpipe(export, inputs, baseline_i
 
 
 def test_a_failed_translation_writes_nothing(tmp_path, monkeypatch):
-    import shaders_port._spirv as S
+    import shaders_port.spirv.tools as S
 
     out = tmp_path / "shaders"
     export_shaders(Constants(), out, ["water_refraction"])
@@ -201,7 +201,7 @@ def test_resolve_targets(monkeypatch):
 
 
 def test_uniform_initializers_become_specialization_constants():
-    from shaders_port._spirv import SPEC_IDS, specialize_constants
+    from shaders_port.spirv.tools import SPEC_IDS, specialize_constants
 
     src = write_constants(read_source("water_refraction", "frag", "core"), FITTED)
     out = specialize_constants(src)
@@ -221,7 +221,7 @@ def test_hlsl_round_trip_of_configurations_nobody_registered(tmp_path, inputs, s
     HLSL round trip matches the port on llvmpipe as the registered variants' does."""
     import random
 
-    from shaders_port import _space
+    from shaders_port import space as _space
 
     c = random.Random(200 + seed).choice(_space.configurations({"refraction": "raycast"}))
     name = _space.name_of(c)

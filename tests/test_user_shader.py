@@ -13,8 +13,8 @@ import pytest
 
 from synthetic import synthetic_inputs
 from test_cli import TINY as CLI_TINY
-from shaders_port.spirv_port import STUDY_INPUTS
-from shaders_port.user_shader import UserShader
+from shaders_port.spirv.translated import STUDY_INPUTS
+from shaders_port.spirv.user_shader import UserShader
 from study.fit.calibrate import calibrate_model
 from study.fit.model import get_value
 from study.fit.spirv_model import SpirvModel
@@ -233,7 +233,7 @@ def test_study_calibrate_fits_and_gl_checks(user_run):
     if res["gl_check"]["ran"]:
         assert res["gl_check"]["passed"], res["gl_check"]
     # the engine targets, translated from the written file and checked as the study's shaders'
-    from study.report.targets import resolve_targets
+    from study.export.targets import resolve_targets
 
     targets = res["engine_targets"]
     assert set(targets) == set(resolve_targets(None)) and targets, targets

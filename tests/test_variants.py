@@ -1,4 +1,4 @@
-"""The variants of the seed's refraction shader (shaders_port._variants): each GLSL switch
+"""The variants of the seed's refraction shader (shaders_port.variants): each GLSL switch
 against its Dr.Jit option on llvmpipe (the thresholds of test_gl_differential), the diagnostics
 count what each variant does, central differences of every constant a variant adds, and the
 fit substitutes a variant's constants for the seed's it replaces."""
@@ -10,8 +10,9 @@ import pytest
 
 import test_water_refraction as twr
 from synthetic import synthetic_inputs
-from shaders_port import Constants, water_refraction
-from shaders_port._variants import VARIANTS, get_variant
+from shaders_port import Constants
+from shaders_port.ports import water_refraction
+from shaders_port.variants import VARIANTS, get_variant
 
 SEED = "water_refraction"
 NEW = [
@@ -136,10 +137,10 @@ def test_each_port_decodes_exactly_the_names_its_glsl_tests():
     """One table per port (``DEFINES``) holds every switch of its GLSL file and nothing else
     (water_reflection leaves out NOREFLECTION, the other shader's variant), and every registered
     variant's names decode in its port; the registry refuses a name the file does not test."""
-    from shaders_port import water_baseline, water_reflection
-    from shaders_port._glsl import read_source, switches_of
-    from shaders_port._switches import decode
-    from shaders_port._variants import Variant, register
+    from shaders_port.ports import water_baseline, water_reflection
+    from shaders_port.glsl_text import read_source, switches_of
+    from shaders_port.ports.switches import decode
+    from shaders_port.variants import Variant, register
 
     ports = {"water_refraction": water_refraction, "water_reflection": water_reflection}
     ports["water_baseline"] = water_baseline
@@ -280,7 +281,7 @@ def test_information_criteria():
 
 def test_reflection_variant_registered_matches_gl(inputs):
     from test_gl_differential import _check
-    from shaders_port._compare import compare_port_gl
+    from shaders_port.gl.compare import compare_port_gl
 
     res = compare_port_gl(inputs, CUSTOM, "water_reflection_beer_ggx")
     _check(res, "gl_water_reflection_beer_ggx_custom")
@@ -301,8 +302,8 @@ def test_reflection_shader_switches_match_gl(inputs, defines, options):
     """The other switches in water_reflection.frag against the reflection port compiled with the
     same names (the registry ships only its Beer and Beer + GGX variants); the port's table
     decodes them to the expected options."""
-    from shaders_port import water_reflection
-    from shaders_port._gl import GLRenderer
+    from shaders_port.ports import water_reflection
+    from shaders_port.gl.renderer import GLRenderer
 
     decoded = water_reflection.options_of(defines, "water_reflection", water_reflection.DEFINES)
     assert {k: getattr(decoded, k) for k in options} == options
@@ -387,8 +388,8 @@ def test_wall_faces_port_matches_gl_where_it_acts(walled):
 def test_wall_faces_in_the_reflection_shader_match_gl(walled):
     """water_reflection.frag shares block [6] and its WALL_FACES switch with the refraction
     shader."""
-    from shaders_port import water_reflection
-    from shaders_port._gl import GLRenderer
+    from shaders_port.ports import water_reflection
+    from shaders_port.gl.renderer import GLRenderer
 
     defines = ("BEER_ATTENUATION", "WALL_FACES")
     out = water_reflection.render(walled, CUSTOM, defines=defines).numpy()

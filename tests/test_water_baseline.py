@@ -9,8 +9,8 @@ import pytest
 
 from synthetic import synthetic_baseline_inputs, synthetic_inputs
 from shaders_port import Constants
-from shaders_port import water_baseline
-from shaders_port._variants import VARIANTS, get_variant
+from shaders_port.ports import water_baseline
+from shaders_port.variants import VARIANTS, get_variant
 from test_water_refraction import FD_NOISE, FD_RTOL, _perturbed
 
 BASELINES = ("water_baseline", "water_baseline_flat", "water_baseline_noplanar")
@@ -74,7 +74,7 @@ def test_port_matches_gl(inputs, variant, which):
 
 def test_compat_source_runs_like_core(inputs):
     pytest.importorskip("moderngl")
-    from shaders_port._gl import GLRenderer
+    from shaders_port.gl.renderer import GLRenderer
 
     try:
         with (
@@ -202,7 +202,7 @@ def test_diagnostics_count_fetches_and_no_iterations(small):
 
 def test_frozen_replay_at_another_resolution(small, monkeypatch):
     # a recorded kernel replayed for another lane count must not reuse the old sizes
-    from shaders_port import _frame
+    from shaders_port.pipeline import frame as _frame
 
     monkeypatch.setattr(_frame, "USE_FROZEN", True)
     for (w, h), d in (
@@ -309,7 +309,7 @@ BANNERS = [
 
 def test_banners_in_order_in_glsl_and_port():
     import inspect
-    from shaders_port._glsl import read_source
+    from shaders_port.glsl_text import read_source
 
     for text in (read_source("water_baseline"), inspect.getsource(water_baseline)):
         pos = [text.find(f"[{i}] {t}") for i, t in enumerate(BANNERS, 1)]
@@ -317,7 +317,7 @@ def test_banners_in_order_in_glsl_and_port():
 
 
 def test_seed_code_kept():
-    from shaders_port._glsl import read_source
+    from shaders_port.glsl_text import read_source
 
     code = "\n".join(ln.split("//")[0] for ln in read_source("water_baseline").split("\n"))
     # 001 (float3 -> vec3, _WorldSpaceCameraPos -> viewpos)
@@ -345,7 +345,7 @@ def test_seed_code_kept():
 
 @pytest.mark.parametrize("dialect", ["compat", "core"])
 def test_block_holds_the_defaults_and_round_trips(dialect):
-    from shaders_port._glsl import (
+    from shaders_port.glsl_text import (
         compile_check,
         declared_constants,
         read_constants,
@@ -374,10 +374,10 @@ def test_reflection_offset_moves_the_image_as_source_002_does():
     ``(offset.x, -offset.y)`` to 004's coordinate: in window terms, the sample moves by +offset."""
     import drjit as dr
 
-    from shaders_port._frame import resolve_constants
-    from shaders_port._raster import prepare
-    from shaders_port._texture import backend_types
-    from shaders_port.water_baseline import MIRROR_NORMAL, mat4_vec4, planar_reflection
+    from shaders_port.pipeline.frame import resolve_constants
+    from shaders_port.pipeline.raster import prepare
+    from shaders_port.pipeline.texture import backend_types
+    from shaders_port.ports.water_baseline import MIRROR_NORMAL, mat4_vec4, planar_reflection
 
     inp = synthetic_baseline_inputs(64, 48)
     m = backend_types("llvm")

@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 
 from shaders_port import Constants
-from shaders_port import water_reflection
-from shaders_port._numpy_ref import render_reference
+from shaders_port.ports import water_reflection
+from shaders_port.ports.numpy_ref import render_reference
 from test_water_refraction import (
     CUSTOM,
     FD_CONSTANTS,

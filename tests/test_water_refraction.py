@@ -17,8 +17,8 @@ from shaders_port import (
     ortho_tex_matrix,
     perspective_view_proj,
 )
-from shaders_port import water_refraction
-from shaders_port._numpy_ref import render_reference
+from shaders_port.ports import water_refraction
+from shaders_port.ports.numpy_ref import render_reference
 
 from regenerate import CUSTOM, SCENES, read_exr, render_scene, write_exr
 
@@ -187,7 +187,7 @@ def test_frozen_replay_equals_traced_render(monkeypatch):
         (inputs, Constants()),
     ]
     frozen = [water_refraction.render(i, c).numpy() for i, c in cases]
-    from shaders_port import _frame
+    from shaders_port.pipeline import frame as _frame
 
     monkeypatch.setattr(_frame, "USE_FROZEN", False)
     for (i, c), f in zip(cases, frozen):
@@ -272,7 +272,7 @@ def test_diagnostics_loop_cap_reached():
 def degenerate_light_inputs():
     """Light placed exactly on the surface point of one water pixel: varyingVecLight = 0 there,
     so vLight = normalize(0) is NaN (no constant within its valid range can force a NaN)."""
-    from shaders_port._raster import rasterize_water
+    from shaders_port.pipeline.raster import rasterize_water
 
     base = flat_pool(0.9)
     r = rasterize_water(base)

@@ -5,7 +5,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from .._progress import log as _log
-from ..report.export import export_shaders, export_user_shader, load_constants_json, user_shader_of
+from ..export.shaders import export_shaders, export_user_shader, load_constants_json, user_shader_of
 
 
 def run_export(constants_json, out, targets=None) -> list:

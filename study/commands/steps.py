@@ -22,8 +22,8 @@ from ..fit.calibrate import timed
 from ..fit.model import constants_json
 from ..fit.result import CalibrationResult
 from ..report.calibration import comparison_figure, diagnostics_figure, loss_figure, write_report
-from ..report.export import export_shaders, export_user_shader
-from ..report.gl_check import (
+from ..export.shaders import export_shaders, export_user_shader
+from ..export.gl_check import (
     gl_check,
     gl_check_user,
     hlsl_check_user,

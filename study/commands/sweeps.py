@@ -4,7 +4,7 @@
 from __future__ import annotations
 
 from .._progress import log as _log
-from ..report.export import load_constants_json
+from ..export.shaders import load_constants_json
 from ..studies import failures, stability, tradeoff
 from .steps import refuse_animated_all
 

@@ -18,7 +18,7 @@ from pathlib import Path
 
 import numpy as np
 
-from shaders_port._variants import get_variant
+from shaders_port.variants import get_variant
 
 from .._progress import log
 from . import files as user_files
@@ -90,8 +90,8 @@ _NOTED: set = set()
 
 def _check_shaders(values: dict) -> None:
     """``fit.shader`` and ``tradeoff.variants`` name shaders of the space, ``tradeoff.fix``
-    pins its axes (``shaders_port._space``)."""
-    from shaders_port._space import parse_fix
+    pins its axes (``shaders_port.space``)."""
+    from shaders_port.space import parse_fix
 
     names = [] if is_user_shader(values["fit.shader"]) else [("fit.shader", values["fit.shader"])]
     names += [("tradeoff.variants", v) for v in values["tradeoff.variants"] or []]
@@ -112,7 +112,8 @@ def is_user_shader(name: str) -> bool:
 
 
 def user_declaration(lines: list | None) -> dict:
-    """``fit.declare`` lines as a ``shaders_port.user_shader.UserShader`` declaration table."""
+    """``fit.declare`` lines as a declaration table of
+    ``shaders_port.spirv.user_shader.UserShader``."""
     decl: dict = {"constants": {}, "bindings": {}}
     for line in lines or []:
         parts = str(line).split()
@@ -134,7 +135,7 @@ def user_declaration(lines: list | None) -> dict:
 def load_user_shader(values: dict):
     """The ``UserShader`` of ``fit.shader`` (a resolved path) and ``fit.declare``;
     ExperimentError naming the problem."""
-    from shaders_port.user_shader import UserShader
+    from shaders_port.spirv.user_shader import UserShader
 
     try:
         return UserShader.from_file(values["fit.shader"], user_declaration(values["fit.declare"]))

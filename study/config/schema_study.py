@@ -5,7 +5,7 @@ one per ``CONSTANT_SPECS`` entry): ``STUDY_KEYS``, in the docs' order."""
 from __future__ import annotations
 
 from shaders_port import CONSTANT_SPECS
-from shaders_port._variants import SHIPPED
+from shaders_port.variants import SHIPPED
 
 from .schema_scene import Field
 
@@ -21,7 +21,7 @@ FIT_PARAMETERS = (
     "specular_strength",
     "specular_exponent",
     # read by shader variants only (a variant fits them in place of the seed's
-    # constants it replaces, see shaders_port._variants.Variant.replaces)
+    # constants it replaces, see shaders_port.variants.Variant.replaces)
     "absorption_r",
     "absorption_g",
     "absorption_b",

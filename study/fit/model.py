@@ -19,7 +19,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from shaders_port import CONSTANT_SPECS, Constants, ShaderInputs
-from shaders_port._variants import get_variant
+from shaders_port.variants import get_variant
 
 from ..config.experiment import Experiment
 from .._metrics import downsample, downsample_stderr, erode
@@ -262,7 +262,7 @@ class ReferenceModel:
         with the AD graph of any gradient-enabled constant attached (for reverse mode)."""
         import drjit as dr
 
-        from shaders_port._texture import backend_types
+        from shaders_port.pipeline.texture import backend_types
 
         m = backend_types(self.backend)
         if not hasattr(self, "_ref_t"):
@@ -290,10 +290,11 @@ class ReferenceModel:
 
 
 class ShaderModel(ReferenceModel):
-    """The port of the shader variant ``shader`` (a name in ``shaders_port._variants.VARIANTS``)
+    """The port of the shader variant ``shader`` (a name in ``shaders_port.variants.VARIANTS``)
     on ``inputs`` compared against ``reference`` (same size; :class:`ReferenceModel`);
-    ``translated``: the variant's GLSL executed through SPIR-V (``shaders_port.spirv_port``) in
-    place of its port. Constants are ``shaders_port.Constants``."""
+    ``translated``: the variant's GLSL executed through SPIR-V
+    (``shaders_port.spirv.translated``) in place of its port. Constants are
+    ``shaders_port.Constants``."""
 
     def __init__(
         self,
@@ -308,7 +309,7 @@ class ShaderModel(ReferenceModel):
         self.shader = shader
         self.variant = get_variant(shader)
         if translated:  # its GLSL file executed through SPIR-V in place of the hand port
-            from shaders_port.spirv_port import Translated
+            from shaders_port.spirv.translated import Translated
 
             self.variant = Translated(self.variant)
         super().__init__(inputs, reference, backend, reference_mask, reference_stderr)

@@ -38,7 +38,7 @@ class CalibrationResult:
     """One calibration, as written to ``constants.json``.
 
     Shared:
-        shader: the shader variant fitted (``shaders_port._variants``).
+        shader: the shader variant fitted (``shaders_port.variants``).
         backend: the Mitsuba variant the reference was rendered with (e.g. ``llvm_ad_rgb``).
         parameters: constant -> {"status", "value", "start", ...} (``study.fit.calibrate``).
         constants: the fitted constants, ``Constants.to_dict()`` (what ``study export`` reads).
@@ -47,7 +47,7 @@ class CalibrationResult:
         solver: the solver's name; fit: its summary (iterations, converged, message, steps).
         identifiability: the identifiability analysis at the fitted constants.
         timings: stage -> seconds.
-        gl_check: the exported shader on OpenGL against the port (``study.report.gl_check``).
+        gl_check: the exported shader on OpenGL against the port (``study.export.gl_check``).
     One scene:
         experiment, fit_resolution / resolution ([width, height] pixels), step_sweep (the
         integer step schedule's sweep), reference (spp, noise, path, key), diagnostics (the
@@ -55,7 +55,7 @@ class CalibrationResult:
     Joint:
         experiments (paths), scenes (names), weights (scene -> weight of its residuals).
     Both, when written: engine_targets (the HLSL, Metal, GLSL ES and SPIR-V exports and what
-    checked each, ``study.report.gl_check.target_checks``).
+    checked each, ``study.export.gl_check.target_checks``).
     """
 
     shader: str

@@ -2,7 +2,7 @@
 SPIR-V.
 
 :class:`SpirvModel` is a :class:`~study.fit.model.ReferenceModel` (the scored mask, residuals,
-Jacobians, non-finite checks) whose shader is a ``shaders_port.user_shader.UserShader``: its
+Jacobians, non-finite checks) whose shader is a ``shaders_port.spirv.user_shader.UserShader``: its
 renders and forward-mode derivatives come from the SPIR-V executor, its constants are a dict
 ``{GLSL name: float | tuple}`` (scalar names ``NAME`` and ``NAME[i]``), its parameters and their
 ranges are those its declaration names (``// @study constant NAME LOW HIGH`` or

@@ -1,2 +1,2 @@
-"""The report stage: figures and report writers, GLSL export, and the exported shader checked on
-llvmpipe."""
+"""The report stage: figures and report writers (``report.md`` and its images) of each study.
+Export and its checks are ``study.export``."""

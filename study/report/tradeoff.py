@@ -8,7 +8,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from shaders_port import _space
+from shaders_port import space as _space
 
 from .calibration import fmt, pyplot
 from .tradeoff_motion import motion_lines

@@ -31,7 +31,7 @@ import dataclasses
 import numpy as np
 
 from shaders_port import ShaderInputs
-from shaders_port._inputs import mirrored_view_proj
+from shaders_port.inputs import mirrored_view_proj
 
 from .._io import disk_full
 from ..config.experiment import Experiment
@@ -241,7 +241,7 @@ def with_baseline_inputs(
     return dataclasses.replace(inputs, **fields)
 
 
-# the study's inputs a shader reads (``shaders_port.spirv_port.STUDY_INPUTS``) that only the
+# the study's inputs a shader reads (``shaders_port.spirv.translated.STUDY_INPUTS``) that only the
 # baseline's buffers hold
 SCREEN_INPUTS = ("sceneColor", "sceneDepth", "reflection_sampler", "o2v_projection_reflection")
 
@@ -253,7 +253,7 @@ def inputs_for_shader(
     ``Variant.inputs``, or, for a user's file (``*.frag``, with ``fit.declare``), the screen
     buffers when it reads one of :data:`SCREEN_INPUTS` (by name or through a binding); else
     ``inputs`` unchanged."""
-    from shaders_port._variants import get_variant
+    from shaders_port.variants import get_variant
 
     from ..config.experiment import is_user_shader, load_user_shader
 

@@ -29,7 +29,7 @@ shown in the class map):
 ``outside_textures``: a top-down lookup fell outside the textures' [0, 1]^2 (the start, a loop
     step, or the interpolated point; clamp-to-edge returns the border texel). Exact.
 ``small_denominator``: ``|cpoy - cpy + depth - olddepth| < DENOMINATOR_EPS`` (1e-3 world units),
-    the threshold the port-vs-GL check uses (``shaders_port._compare``): the port and GL differ by
+    the threshold the port-vs-GL check uses (``shaders_port.gl.compare``): the port and GL differ by
     ~3e-5 in positions and depths (float32 rasteriser interpolation), which over a denominator
     of 1e-3 moves the interpolation weight by ~3 %, and without a crossing the weight is
     unbounded.
@@ -328,7 +328,7 @@ def catalogue_scene(
     ``reference`` (H, W, 3) linear RGB. ``depth_complexity=False`` skips the Mitsuba queries."""
     import warnings
 
-    from shaders_port._raster import rasterize_water
+    from shaders_port.pipeline.raster import rasterize_water
 
     from .._metrics import flip_map
     from ..fit.build import build_model
@@ -388,7 +388,7 @@ def _user_maps(exp, model, constants: dict, backend: str) -> dict:
     colour, coverage and non-finite pixels with ``constants``, and the refracted ray of the
     study's ``water_refraction`` port at the experiment's start constants (the scene's waves
     and refraction index): ``refract_k``, ``cos_eye_normal``, ``refr_dir_*``."""
-    from shaders_port._variants import get_variant
+    from shaders_port.variants import get_variant
 
     from ..fit.model import constants_from_experiment
 
@@ -527,7 +527,7 @@ def run_failures(
     exps = load_experiments(experiments, overrides)
     names = [e.name for e in exps]
     if shader is not None and not is_user_shader(shader):
-        from shaders_port._variants import get_variant
+        from shaders_port.variants import get_variant
 
         get_variant(shader)
     out_arg, out = str(out), Path(out).resolve()

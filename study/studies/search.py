@@ -6,7 +6,7 @@ screen resolution (``fit.resolution`` divided by ``tradeoff.screen_factor``) exc
 
 1. **Walk** (shader configurations, at the original schedule): start from the original shader,
    one representative of every source and the original's one-axis neighbours
-   (``shaders_port._space.neighbours``); after each round keep the configurations no other
+   (``shaders_port.space.neighbours``); after each round keep the configurations no other
    one clearly dominates (:func:`survivors`) and add their unseen neighbours, the lowest-FLIP
    survivors' first (:func:`best_first`); stop when a round adds none or
    ``tradeoff.max_shaders`` have been screened (the cut drops the worst survivors'
@@ -35,12 +35,12 @@ import math
 
 import numpy as np
 
-from shaders_port import _space
+from shaders_port import space as _space
 
 from .tradeoff_jobs import SEED_SCHEDULE, original_schedule, schedules, screen_job
 
 # representatives of every source's technique screened in the first round: each alone
-# (``_space.ALONE``), 000's refraction alone, 002-004 and 001 + 004 (flat water)
+# (``space.ALONE``), 000's refraction alone, 002-004 and 001 + 004 (flat water)
 SOURCE_STARTS = (
     *_space.ALONE.values(),
     {"reflection": "none", "specular": "none"},
@@ -269,7 +269,7 @@ class Search:
         return closest_to_front(survivors(self.ok(i), z), exp.tradeoff.max_scheduled)
 
     def alone(self, i: int) -> list[dict]:
-        """The screen points of each source's technique alone (``_space.ALONE``) at its
+        """The screen points of each source's technique alone (``space.ALONE``) at its
         original schedule on experiment ``i``: measured in full so every front has their rows."""
         names = set()
         for c in _space.ALONE.values():

@@ -3,7 +3,7 @@ error, over one or several experiments.
 
 :func:`run_tradeoff` chooses the points by one of two searches on the sweep engine:
 
-* ``adaptive`` (default): the shader space (``shaders_port._space``) screened cheaply and only the
+* ``adaptive`` (default): the shader space (``shaders_port.space``) screened cheaply and only the
   survivors measured in full (``study.studies.search``);
 * ``exhaustive``: every shader of ``tradeoff.variants`` (unset: the space, with the axes of
   ``tradeoff.fix`` pinned) at every schedule (``tradeoff_jobs``), in two phases (anchors at the
@@ -106,7 +106,7 @@ def run_tradeoff(
     ``search``: 'adaptive' or 'exhaustive' (default: ``tradeoff.search``); ``budget``: cost
     measure -> limit (``fetches_mean``, ``gl_norm_ms_1080p``): recommend the lowest FLIP
     within it."""
-    from shaders_port._space import configurations, name_of, parse_fix
+    from shaders_port.space import configurations, name_of, parse_fix
 
     from .._io import write_json
     from ..config.experiment import load_experiments
@@ -294,8 +294,8 @@ def export_recommended(
     from shaders_port import Constants
 
     from .._backend import init_backend
-    from ..report.export import export_shaders
-    from ..report.gl_check import gl_check, target_checks
+    from ..export.shaders import export_shaders
+    from ..export.gl_check import gl_check, target_checks
     from ..sweep import load_scene
 
     init_backend(variant)

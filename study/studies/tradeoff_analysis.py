@@ -151,9 +151,9 @@ def joint_points(ok: list, names: list) -> list:
 
 
 def sources_alone(pts: list, brief) -> list[dict]:
-    """Each source's technique alone (``shaders_port._space.ALONE``) among ``pts`` at its
+    """Each source's technique alone (``shaders_port.space.ALONE``) among ``pts`` at its
     original schedule: ``brief`` of the point plus ``source`` (its label there)."""
-    from shaders_port import _space
+    from shaders_port import space as _space
 
     out = []
     for source, choices in _space.ALONE.items():

@@ -63,7 +63,7 @@ FIXED = {"kind": "fixed", "scale": None, "schedule": {}}  # a shader without a r
 def original_schedule(variant_name: str) -> dict:
     """The original shader's schedule for a variant, as :func:`schedules` lists it (``scale
     1``; its only one, ``fixed``, if it has no raymarch)."""
-    from shaders_port._variants import get_variant
+    from shaders_port.variants import get_variant
 
     variant = get_variant(variant_name)
     if not {"steps_grazing", "steps_steep", "loop_cap"} <= set(variant.schedule):
@@ -75,7 +75,7 @@ def schedules(exp, variant_name: str) -> list[dict]:
     """The schedules of one variant: ``{"kind": grid|scale|converged, "scale": f|None,
     "schedule": {constant: value}}``, distinct, in a stable order (the seed's one is
     ``scale 1``)."""
-    from shaders_port._variants import get_variant
+    from shaders_port.variants import get_variant
 
     variant = get_variant(variant_name)
     if original_schedule(variant_name)["kind"] == "fixed":
@@ -112,7 +112,7 @@ def _fit_names(exp, variant_name: str) -> list[str]:
     """``fit.parameters`` the variant reads (unset, as beside a user's own shader: all it
     reads), without its schedule constants (the sweep sets those), plus the variant's own
     ``fit_parameters`` (e.g. the baseline's distortions)."""
-    from shaders_port._variants import get_variant
+    from shaders_port.variants import get_variant
 
     from ..config.experiment import fit_parameters
 
@@ -271,7 +271,7 @@ def block_means(values: np.ndarray, block: int) -> np.ndarray:
 def frame_times(variant_name: str, inputs, constants, repeats: int) -> dict:
     """GL frame times (ms) of the variant at each ``GL_SIZES`` beside the fixed reference shader
     (run before and after it), their ratio, and the port's frame time at 512x512."""
-    from shaders_port._variants import get_variant
+    from shaders_port.variants import get_variant
 
     variant = get_variant(variant_name)
     return timed_frames(
@@ -288,7 +288,7 @@ def timed_frames(gl_renderer, constants, render, inputs, repeats: int) -> dict:
     ``GLRenderer`` drawing it with ``constants`` (None: its source as written), ``render(inputs)``
     its Dr.Jit render (a ``ShaderOutput``)."""
     from shaders_port import Constants
-    from shaders_port._variants import get_variant
+    from shaders_port.variants import get_variant
 
     refv = get_variant(REFERENCE_SHADER)
     out = {}

@@ -228,7 +228,7 @@ def _converged(exp, row: dict) -> dict | None:
     """The converged raymarch's schedule (``tradeoff.converged_scale`` times the original's) for
     a full point of a shader with a raymarch; None for a loopless shader, a user's shader and
     the converged point itself."""
-    from shaders_port._variants import get_variant
+    from shaders_port.variants import get_variant
 
     from .tradeoff_jobs import original_schedule, scaled_schedule
 

@@ -142,7 +142,7 @@ def export_user(exps, specs, rows: list, out: Path, variant: str, log) -> dict:
     file on OpenGL against the executor at ``resolution`` (``gl_check_user``). Returns
     {experiment: {"file", "variant", "label", "constants", "gl_check"}}."""
     from .._io import write_text_atomic
-    from ..report.gl_check import gl_check_user
+    from ..export.gl_check import gl_check_user
     from ..sweep import load_scene
 
     result = {}

@@ -1,7 +1,7 @@
 """The variant switches: how a port reads the GLSL ``#define`` names a variant is compiled with.
 
 A shader variant is a name, a shader file and its preprocessor names
-(``shaders_port._variants.Variant``). Each port module holds one table ``DEFINES`` mapping every
+(``shaders_port.variants.Variant``). Each port module holds one table ``DEFINES`` mapping every
 name its GLSL file understands to the port options that take the same code path, e.g.
 ``{"BEER_ATTENUATION": {"attenuation": "beer"}}``. :func:`decode` turns a variant's names into
 the port's options; it is the only place a port's options are made from names, so the GLSL,

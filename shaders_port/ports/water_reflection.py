@@ -21,11 +21,11 @@ from __future__ import annotations
 
 import drjit as dr
 
-from ._inputs import Constants, ShaderInputs
-from ._raster import prepare
-from ._texture import backend_types, mix, texmat_xy
-from . import _frame
-from ._frame import (
+from ..inputs import Constants, ShaderInputs
+from ..pipeline.raster import prepare
+from ..pipeline.texture import backend_types, mix, texmat_xy
+from ..pipeline import frame as _frame
+from ..pipeline.frame import (
     ShaderOutput,
     evaluated_loops_if,
     finish_output,
@@ -49,7 +49,7 @@ from .water_refraction import (
     specular_highlight,
 )
 
-# the one table from the GLSL file's #define names to the port's options (see _switches): those
+# the one table from the GLSL file's #define names to the port's options (see ports.switches): those
 # of water_refraction's blocks [2]-[6] and [8]; NOREFLECTION (block [7] skipped) is the
 # water_refraction_noreflection variant of the other shader, not a switch of this port
 DEFINES = {

@@ -32,8 +32,8 @@ import subprocess
 import tempfile
 from pathlib import Path
 
-from ._glsl import BEGIN_MARKER, END_MARKER
-from ._inputs import CONSTANT_SPECS
+from ..glsl_text import BEGIN_MARKER, END_MARKER
+from ..inputs import CONSTANT_SPECS
 
 # program -> Debian package that ships it
 TOOLS = {
@@ -131,7 +131,7 @@ def _varying_locations() -> dict[str, int]:
     """Name -> location of each output of the core vertex shader, in declaration order: the one
     numbering both stages use, so that stages link by location (HLSL semantics ``TEXCOORD<n>``,
     Metal ``[[user(locn<n>)]]``, Vulkan) as they link by name in GLSL."""
-    from ._glsl import read_source
+    from ..glsl_text import read_source
 
     decl = re.compile(r"^out\s+\w+\s+([A-Za-z_]\w*)\s*;", re.M)
     return {n: k for k, n in enumerate(decl.findall(read_source("water", "vert", "core")))}

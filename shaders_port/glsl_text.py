@@ -24,7 +24,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ._inputs import CONSTANT_SPECS, Constants
+from .inputs import CONSTANT_SPECS, Constants
 
 GLSL_DIR = Path(__file__).parent / "glsl"
 SHADER_NAMES = ("water", "water_refraction", "water_reflection", "water_baseline")

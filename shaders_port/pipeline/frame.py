@@ -21,9 +21,9 @@ from dataclasses import dataclass
 import drjit as dr
 import numpy as np
 
-from ._inputs import CONSTANT_SPECS, Constants, ShaderInputs
-from ._raster import prepare
-from ._texture import backend_types
+from ..inputs import CONSTANT_SPECS, Constants, ShaderInputs
+from .raster import prepare
+from .texture import backend_types
 
 # Plain renders and 'replay' Jacobians replay recorded kernels instead of re-tracing the shader
 # (``dr.freeze``): on the default experiment a fit is 1.25x faster, renders 3.1x, Jacobians of

@@ -5,12 +5,12 @@ integer constants, literals) or a Dr.Jit ``Float`` / ``Int32`` / ``UInt32`` / ``
 lane per pixel -- or a Python list of values (a vector's components, a matrix's columns, an
 array's or a struct's members). Python floats are float32 numbers: folded arithmetic rounds to
 float32 like the GPU. The GLSL.std.450 instructions follow the GLSL specification and the
-hand ports' definitions (``shaders_port._texture``: ``mix``, ``clamp``, ``pow``), so the
+hand ports' definitions (``shaders_port.pipeline.texture``: ``mix``, ``clamp``, ``pow``), so the
 executor computes what the ports compute, operation for operation.
 
 :class:`Mask` is a lane mask (a Python bool when the same for every lane) that remembers how it
 was made, so that the two edges of a selection join back into exactly the mask before it (a
-loop whose exits do not depend on the lanes is then unrolled, see ``_spirv_exec``).
+loop whose exits do not depend on the lanes is then unrolled, see ``spirv.execute``).
 """
 
 from __future__ import annotations
@@ -20,7 +20,7 @@ import math
 import drjit as dr
 import numpy as np
 
-from ._texture import clamp, gl_pow, mix
+from ..pipeline.texture import clamp, gl_pow, mix
 
 
 def is_py(x) -> bool:

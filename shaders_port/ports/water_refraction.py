@@ -41,9 +41,9 @@ Loops and derivatives. The raycast loops are ``@dr.syntax`` while loops with a p
   not trusted. Slower (one kernel per iteration).
 
 Plain renders (no gradient) and ``'replay'`` Jacobians replay recorded kernels
-(``dr.freeze``; ``STUDY_FREEZE=0`` or ``shaders_port._frame.USE_FROZEN = False`` traces every
-call; see ``_frame.call_frozen``). Constants enter the kernels as opaque float32 values, so traced
-and replayed renders are bit-identical.
+(``dr.freeze``; ``STUDY_FREEZE=0`` or ``shaders_port.pipeline.frame.USE_FROZEN = False``
+traces every call; see ``pipeline.frame.call_frozen``). Constants enter the kernels as opaque
+float32 values, so traced and replayed renders are bit-identical.
 """
 
 from __future__ import annotations
@@ -53,8 +53,8 @@ from typing import NamedTuple
 
 import drjit as dr
 
-from . import _frame
-from ._frame import (
+from ..pipeline import frame as _frame
+from ..pipeline.frame import (
     ShaderOutput,
     evaluated_loops_if,
     finish_output,
@@ -63,11 +63,11 @@ from ._frame import (
     resolve_constants,
     tangents,
 )
-from ._inputs import Constants, ShaderInputs
-from ._planar import MIRROR_NORMAL, mirror_state, planar_reflection
-from ._switches import decode
-from ._raster import prepare
-from ._texture import backend_types, clamp, gl_pow, mix, texmat_xy
+from ..inputs import Constants, ShaderInputs
+from .planar import MIRROR_NORMAL, mirror_state, planar_reflection
+from .switches import decode
+from ..pipeline.raster import prepare
+from ..pipeline.texture import backend_types, clamp, gl_pow, mix, texmat_xy
 
 __all__ = ["render", "render_with_jacobian", "ShaderOutput", "Options", "DEFINES"]
 
@@ -102,7 +102,7 @@ class Options(NamedTuple):
     planar_reflection: bool = False
 
 
-# the one table from the GLSL file's #define names to the port's options (see _switches)
+# the one table from the GLSL file's #define names to the port's options (see ports.switches)
 DEFINES = {
     "NOREFLECTION": {"reflection": False},
     "TWO_NORMAL_LAYERS": {"normal_layers": 2},
@@ -480,7 +480,7 @@ def _frozen_shade(m, P, C, diagnose, opts, Mi):
 
 
 def _mirror(m, inputs, opts: Options):
-    """The mirrored camera's state (``_planar.Mirror``) if ``opts`` reads it, else None."""
+    """The mirrored camera's state (``ports.planar.Mirror``) if ``opts`` reads it, else None."""
     if opts.reflection and opts.planar_reflection:
         return mirror_state(m, inputs, "water_refraction with PLANAR_REFLECTION")
     return None

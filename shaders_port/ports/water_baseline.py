@@ -41,8 +41,8 @@ from typing import NamedTuple
 import drjit as dr
 import numpy as np
 
-from . import _frame
-from ._frame import (
+from ..pipeline import frame as _frame
+from ..pipeline.frame import (
     ShaderOutput,
     finish_output,
     jacobian_passes,
@@ -50,17 +50,17 @@ from ._frame import (
     resolve_constants,
     tangents,
 )
-from ._inputs import Constants, ShaderInputs, normal_matrix
-from ._planar import MIRROR_NORMAL, mat4_vec4, planar_reflection
-from ._planar import mat_tuple as _mat
-from ._raster import prepare
-from ._switches import decode
-from ._texture import CLAMP, LINEAR, NEAREST, Texture2D, backend_types, clamp, gl_pow, mix
+from ..inputs import Constants, ShaderInputs, normal_matrix
+from .planar import MIRROR_NORMAL, mat4_vec4, planar_reflection
+from .planar import mat_tuple as _mat
+from ..pipeline.raster import prepare
+from .switches import decode
+from ..pipeline.texture import CLAMP, LINEAR, NEAREST, Texture2D, backend_types, clamp, gl_pow, mix
 from .water_refraction import cubemap_reflection, eye_and_light, reflect, refract
 
 __all__ = ["render", "render_with_jacobian", "ShaderOutput", "READS", "DEFINES", "PASS_FETCHES"]
 
-# the one table from the GLSL file's #define names to the port's options (see _switches)
+# the one table from the GLSL file's #define names to the port's options (see ports.switches)
 DEFINES = {
     "FLAT_WATER": {"flat": True},
     "NO_PLANAR_REFRACTION": {"planar": False},
@@ -330,8 +330,8 @@ def with_static_diagnostics(m, diag: dict, o: Options) -> dict:
 
 def reads_with(defines=()) -> tuple[str, ...]:
     """The constants the GLSL reads when compiled with ``defines`` (see
-    ``_glsl.constants_read``)."""
-    from ._glsl import constants_read, read_source, with_define
+    ``glsl_text.constants_read``)."""
+    from ..glsl_text import constants_read, read_source, with_define
 
     src = read_source("water_baseline", "frag", "core")
     for d in defines:
@@ -345,7 +345,7 @@ def _options(defines) -> Options:
 
 
 def _frozen_shade(m, P, S, C, o: Options):
-    # one frozen function per Python-level configuration (see _frame.frozen)
+    # one frozen function per Python-level configuration (see pipeline.frame.frozen)
     return _frame.call_frozen(
         ("water_baseline", *o) + _frame.python_config(C),
         lambda m, P, S, C: _shade(m, P, S, C, o),

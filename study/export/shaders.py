@@ -9,10 +9,10 @@ export leaves no half-written shaders and the previous export in place.
 Every variant named otherwise than its shader file (e.g. ``water_refraction_beer``, compiled
 with ``#define BEER_ATTENUATION``) also gets a file of its own name, ``<variant>.frag``: the
 shader file with the constants and the variant's ``#define`` lines right after ``#version``, so
-that file alone reproduces the variant (``study.report.gl_check`` runs exactly it; a variant
+that file alone reproduces the variant (``study.export.gl_check`` runs exactly it; a variant
 with ``textures = 'game'`` needs the application to upload its textures at that precision).
 
-``targets`` adds the engine targets of ``study.report.targets`` (GLSL ES 3.00, HLSL, Metal,
+``targets`` adds the engine targets of ``study.export.targets`` (GLSL ES 3.00, HLSL, Metal,
 SPIR-V, each with its binding sheet), translated from the core files and checked in the same
 temporary folder, so they too are written all or not at all.
 """
@@ -26,8 +26,8 @@ import tempfile
 from pathlib import Path
 
 from shaders_port import CONSTANT_SPECS, Constants
-from shaders_port._glsl import compile_check, read_source, write_constants
-from shaders_port._variants import SHIPPED, VARIANTS, get_variant
+from shaders_port.glsl_text import compile_check, read_source, write_constants
+from shaders_port.variants import SHIPPED, VARIANTS, get_variant
 
 from .._io import disk_full
 from .targets import resolve_targets, translate_targets
@@ -77,7 +77,7 @@ def user_shader_of(path):
     import hashlib
     import sys
 
-    from shaders_port.user_shader import UserShader
+    from shaders_port.spirv.user_shader import UserShader
 
     data = _read_json(path)
     if "shader_file" not in data:
@@ -114,7 +114,7 @@ def export_shaders(constants: Constants, out_dir, shaders=None, targets=()) -> l
     ``water_refraction.frag``, ``water_reflection.frag``, ...) with ``constants``; return the
     written paths. Constants
     are fitted for one shader, so a calibration exports that shader alone. ``targets``: engine
-    targets to add (``study.report.targets.TARGETS``; None: every one the installed tools can
+    targets to add (``study.export.targets.TARGETS``; None: every one the installed tools can
     make). Raises ValueError on bad constants or an unknown name and RuntimeError if a shader
     does not compile or translate (nothing is written then)."""
     constants.validate()
@@ -139,7 +139,7 @@ def export_shaders(constants: Constants, out_dir, shaders=None, targets=()) -> l
 
 
 def export_user_shader(shader, values: dict, out_dir, targets=()) -> list[Path]:
-    """Write a user's shader (``shaders_port.user_shader.UserShader``) with ``values`` (GLSL
+    """Write a user's shader (``shaders_port.spirv.user_shader.UserShader``) with ``values`` (GLSL
     name -> float | tuple) in place of its constants' initializers, ``out_dir/core/<file>``,
     beside the study's vertex shader it runs after, ``out_dir/core/water.vert``; ``targets``
     as :func:`export_shaders` (translated from those two files). Compile-checked and written

@@ -230,7 +230,7 @@ CONSTANT_SPECS: dict[str, tuple[str, str, object, tuple[float, float]]] = {
     "refr_coeff": ("refrCoeff", "uniform float", 1.0 / IOR_WATER, (0.1, 1.0)),
     "water_color": ("waterColor", "uniform vec4", (0.05, 0.25, 0.3, 1.0), (0.0, 100.0)),
     "reflect_color": ("reflectColor", "uniform vec4", (1.0, 1.0, 1.0, 1.0), (0.0, 100.0)),
-    # read only by the variants of shaders_port._variants (their defaults leave the seed unchanged:
+    # read only by the variants of shaders_port.variants (their defaults leave the seed unchanged:
     # the seed's code path never reads them)
     "absorption_r": ("ABSORPTION_R", "const float", 1.0 / 7.5, (1e-4, 100.0)),
     "absorption_g": ("ABSORPTION_G", "const float", 1.0 / 7.5, (1e-4, 100.0)),

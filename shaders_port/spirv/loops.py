@@ -1,4 +1,4 @@
-"""Loops of the SPIR-V executor (``_spirv_exec``): unrolled, symbolic, or unrolled for AD.
+"""Loops of the SPIR-V executor (``spirv.execute``): unrolled, symbolic, or unrolled for AD.
 
 A structured loop (``OpLoopMerge``) is run by :meth:`LoopRunner.loop`:
 
@@ -21,8 +21,8 @@ from __future__ import annotations
 
 import drjit as dr
 
-from . import _spirv_ops as ops
-from ._spirv_ops import TRUE, Mask, both, lift
+from . import ops
+from .ops import TRUE, Mask, both, lift
 
 MAX_UNROLL = 4096  # iterations of a loop with lane-independent exits
 
@@ -32,7 +32,7 @@ class UnsupportedInstruction(NotImplementedError):
 
 
 class LoopRunner:
-    """The loop methods of ``_spirv_exec.Executor`` (a mixin: it uses the executor's
+    """The loop methods of ``spirv.execute.Executor`` (a mixin: it uses the executor's
     ``blocks``, ``vars``, ``counts``, ``base``, ``region`` and ``unsupported``)."""
 
     def loop_members(self, header: int, merge: int) -> set:

@@ -2,7 +2,7 @@
 
 Written independently of the Dr.Jit port from the GLSL text and the OpenGL texture rules:
 one Python loop iteration per covered pixel, float32 arithmetic (``np.float32`` vectors),
-``break`` statements as in the GLSL. Uses the same rasterisation (``_raster``) as the port.
+``break`` statements as in the GLSL. Uses the same rasterisation (``pipeline.raster``) as the port.
 Returns ``(color (H, W, 3) float32, diagnostics dict of (H, W) float32)``; non-finite colours
 are returned as they are (not zeroed) so that tests can see them.
 """
@@ -13,8 +13,8 @@ import math
 
 import numpy as np
 
-from ._inputs import Constants, ShaderInputs
-from ._raster import rasterize_water
+from ..inputs import Constants, ShaderInputs
+from ..pipeline.raster import rasterize_water
 
 f32 = np.float32
 

@@ -3,9 +3,9 @@
 SPIRV-Cross renames what it translates: the HLSL's loose uniforms arrive in one std140 uniform
 block (``$Global``), each texture and its sampler become one combined sampler
 (``SPIRV_Cross_Combined<texture><sampler>``), and matrices may be stored row-major.
-:class:`TranslatedRenderer` is a :class:`~shaders_port._gl.GLRenderer` that sets the same
+:class:`TranslatedRenderer` is a :class:`~shaders_port.gl.renderer.GLRenderer` that sets the same
 inputs through those names, all read from the reflection of the SPIR-V
-(:func:`shaders_port._spirv.hlsl_round_trip`): the members' offsets, strides and layouts of the
+(:func:`shaders_port.spirv.tools.hlsl_round_trip`): the members' offsets, strides and layouts of the
 block, and the texture/sampler pairs with their registers. Nothing is guessed from the text.
 """
 
@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ._gl import GLRenderer
+from .renderer import GLRenderer
 
 _MATRIX_SIZE = {"mat2": 2, "mat3": 3, "mat4": 4}
 
@@ -24,7 +24,7 @@ class TranslatedRenderer(GLRenderer):
     Args:
         name: the shader file ('water_refraction', 'water_reflection', 'water_baseline').
         inputs: the ``ShaderInputs`` (as the variant's application uploads them).
-        source: the GLSL 330 text from :func:`shaders_port._spirv.hlsl_round_trip`.
+        source: the GLSL 330 text from :func:`shaders_port.spirv.tools.hlsl_round_trip`.
         reflection: the reflection JSON returned with it.
     """
 

@@ -1,11 +1,11 @@
 """The registry of shader variants: one entry per shader the study can fit, time and chart.
 
-A *variant* is a name, one GLSL fragment shader (a file in ``glsl/`` and its Dr.Jit port module
-of the same name) and the preprocessor names it is compiled with. The port reads the same names
-through its one table ``DEFINES`` (``shaders_port._switches``), so GL, export and port take the
-same code path by construction. Everything above this layer (the fit, the sweeps, the tradeoff
-chart, export and the GL check) names a shader by its variant name only, so a new shader joins the
-study with one file pair and one :func:`register` call here.
+A *variant* is a name, one GLSL fragment shader (a file in ``glsl/`` and its Dr.Jit port module of
+the same name in ``ports/``) and the preprocessor names it is compiled with. The port reads the same
+names through its one table ``DEFINES`` (``shaders_port.ports.switches``), so GL, export and port
+take the same code path by construction. Everything above this layer (the fit, the sweeps, the
+tradeoff chart, export and the GL check) names a shader by its variant name only, so a new shader
+joins the study with one file pair and one :func:`register` call here.
 
 ``VARIANTS`` maps names to :class:`Variant`, in registration order (the order of charts and
 tables): the shipped ones (``SHIPPED``) and any other shader of the space used so
@@ -22,8 +22,8 @@ from __future__ import annotations
 import importlib
 from dataclasses import dataclass, field
 
-from . import _space
-from ._glsl import read_source, switches_of, with_define
+from . import space as _space
+from .glsl_text import read_source, switches_of, with_define
 
 
 @dataclass(frozen=True)
@@ -32,7 +32,7 @@ class Variant:
 
     Attributes:
         name: registry key; also the file stem of an exported variant.
-        shader: GLSL file stem under ``glsl/`` and port module under ``shaders_port``.
+        shader: GLSL file stem under ``glsl/`` and port module under ``shaders_port.ports``.
         defines: preprocessor names inserted after ``#version`` (GL and export) and decoded by
             the port's ``DEFINES`` table (``render(..., defines=...)``).
         schedule: names of the integer-valued step-schedule constants the variant reads (swept by
@@ -42,7 +42,7 @@ class Variant:
             Beer-Lambert variant fits ``absorption_r/g/b`` where the seed fits
             ``attenuation_distance``; ``()``: the variant does not read it). See :meth:`fit_names`.
         textures: 'float' (float32 textures, the study's default) or 'game' (the application
-            uploads 8-bit colour and half-float depth, ``shaders_port._inputs.game_precision``;
+            uploads 8-bit colour and half-float depth, ``shaders_port.inputs.game_precision``;
             the port and GL both get the quantised arrays, the GLSL is unchanged).
         inputs: optional ``ShaderInputs`` fields the variant reads (built on demand by the
             study, e.g. the baseline's screen-space buffers).
@@ -63,7 +63,7 @@ class Variant:
     def prepare_inputs(self, inputs):
         """The inputs as this variant's application uploads them (see ``textures``)."""
         if self.textures == "game":
-            from ._inputs import game_precision
+            from .inputs import game_precision
 
             return game_precision(inputs)
         return inputs
@@ -83,13 +83,13 @@ class Variant:
     def reads(self) -> tuple[str, ...]:
         """``CONSTANT_SPECS`` names the variant's GLSL declares and uses with its defines (the only
         constants a fit of it may name)."""
-        from ._glsl import constants_read
+        from .glsl_text import constants_read
 
         return tuple(constants_read(self.source()))
 
     def port(self):
         """The port module (imports Dr.Jit)."""
-        return importlib.import_module(f"shaders_port.{self.shader}")
+        return importlib.import_module(f"shaders_port.ports.{self.shader}")
 
     def render(self, inputs, constants=None, **kw):
         """``port.render`` compiled with this variant's defines: a ``ShaderOutput``."""
@@ -114,7 +114,7 @@ class Variant:
     def gl_renderer(self, inputs, source: str | None = None, dialect: str = "core"):
         """A ``GLRenderer`` drawing this variant (``source``: the shader file's text without the
         variant's defines, e.g. an export; the renderer adds them)."""
-        from ._gl import GLRenderer
+        from .gl.renderer import GLRenderer
 
         return GLRenderer(
             self.shader,
@@ -150,7 +150,7 @@ def register(variant: Variant) -> Variant:
 
 def get_variant(name: str) -> Variant:
     """The variant ``name``: a registered one, or any configuration of the shader space named
-    as :func:`shaders_port._space.name_of` names it (built and registered on first use, in
+    as :func:`shaders_port.space.name_of` names it (built and registered on first use, in
     every process alike, so a sweep's workers resolve the names the driver planned). A
     ValueError says why otherwise (unknown token, or a configuration no file realises)."""
     if name in VARIANTS:
@@ -184,8 +184,8 @@ _BASELINE_FIT = (
 
 
 def from_space(choices: dict, description: str | None = None) -> Variant:
-    """The :class:`Variant` of a configuration of the shader space (``_space.AXES`` choices):
-    its file and defines (``_space.realise``), its step schedule, the constants its choices
+    """The :class:`Variant` of a configuration of the shader space (``space.AXES`` choices):
+    its file and defines (``space.realise``), its step schedule, the constants its choices
     fit in place of the original's, and the screen-space inputs of the baseline shader."""
     c = _space.checked(choices)
     shader, defines, textures = _space.realise(c)

@@ -1,10 +1,10 @@
 """Any GLSL water fragment shader rendered and differentiated through SPIR-V, without a port.
 
 The shader's core GLSL (``#version 330`` or later, linked with the study's ``water.vert``) is
-compiled by glslang to SPIR-V and executed on Dr.Jit types by ``_spirv_exec`` on the same
-per-pixel inputs the hand ports get (``_raster.prepare``): the result is a
-:class:`~shaders_port._frame.ShaderOutput` like a port's, and :func:`render_with_jacobian`
-runs the ports' forward-mode passes (``_frame.jacobian_passes``).
+compiled by glslang to SPIR-V and executed on Dr.Jit types by ``spirv.execute`` on the same
+per-pixel inputs the hand ports get (``pipeline.raster.prepare``): the result is a
+:class:`~shaders_port.pipeline.frame.ShaderOutput` like a port's, and :func:`render_with_jacobian`
+runs the ports' forward-mode passes (``pipeline.frame.jacobian_passes``).
 
 Tunable constants. Each constant to set or differentiate is a declaration of the shader,
 ``const float NAME = 7.5;`` or ``uniform float NAME = 7.5;`` (``float``, ``int``, ``vec3``,
@@ -31,15 +31,21 @@ from dataclasses import dataclass, field
 import drjit as dr
 import numpy as np
 
-from . import _frame
-from ._frame import ShaderOutput, finish_output, jacobian_passes, resolve_constants, tangents
-from ._glsl import read_source
-from ._inputs import CONSTANT_SPECS, Constants, ShaderInputs, normal_matrix
-from ._raster import prepare
-from ._spirv_exec import Executor
-from ._spirv_module import Module, compile_fragment
-from ._spirv_ops import lift
-from ._texture import CLAMP, LINEAR, NEAREST, Texture2D, backend_types
+from ..pipeline import frame as _frame
+from ..pipeline.frame import (
+    ShaderOutput,
+    finish_output,
+    jacobian_passes,
+    resolve_constants,
+    tangents,
+)
+from ..glsl_text import read_source
+from ..inputs import CONSTANT_SPECS, Constants, ShaderInputs, normal_matrix
+from ..pipeline.raster import prepare
+from .execute import Executor
+from .module import Module, compile_fragment
+from .ops import lift
+from ..pipeline.texture import CLAMP, LINEAR, NEAREST, Texture2D, backend_types
 
 __all__ = ["ShaderSpec", "STUDY_INPUTS", "builtin_spec", "render", "render_with_jacobian"]
 
@@ -134,7 +140,7 @@ def module_of(spec: ShaderSpec) -> Module:
 def builtin_spec(shader: str, defines: tuple = ()) -> ShaderSpec:
     """The spec of a shipped shader (``water_refraction``, ``water_reflection``,
     ``water_baseline``): its core file and the ``CONSTANT_SPECS`` it declares."""
-    from ._glsl import declared_constants
+    from ..glsl_text import declared_constants
 
     src = read_source(shader, "frag", "core")
     names = declared_constants(src)
@@ -202,7 +208,7 @@ def study_bindings(m, P, inputs: ShaderInputs) -> dict:
 
 def constant_values(spec: ShaderSpec, C) -> dict:
     """GLSL name -> executor value of each declared constant, from resolved constants ``C``
-    (``_frame.resolve_constants``, or any object with ``values`` keyed like ``spec``)."""
+    (``pipeline.frame.resolve_constants``, or any object with ``values`` keyed like ``spec``)."""
     out = {}
     for glsl, key in spec.constants:
         v = C.values[key]
@@ -284,7 +290,7 @@ def _key(spec: ShaderSpec, C, *extra) -> tuple:
 
 
 def _recorded(key: tuple, fn, m, P, *args):
-    """``_frame.call_frozen``; a failure while recording (an unsupported instruction, an
+    """``pipeline.frame.call_frozen``; a failure while recording (an unsupported instruction, an
     unbound name: an error of the shader) is raised as itself by tracing the call."""
     try:
         return _frame.call_frozen(key, fn, m, P, *args)
@@ -325,7 +331,8 @@ def render(
     """Render ``spec`` on ``inputs`` with ``constants`` (the study's ``Constants``; or
     ``resolved``: already resolved values, e.g. a user shader's). Returns a ShaderOutput:
     ``color`` TensorXf (H, W, 3) linear RGB, ``mask``, ``diagnostics`` ``iterations``,
-    ``fetches``, ``nonfinite`` (H, W). Replayed from a recording (``_frame.call_frozen``)."""
+    ``fetches``, ``nonfinite`` (H, W). Replayed from a recording
+    (``pipeline.frame.call_frozen``)."""
     m = backend_types(backend)
     P = prepare(inputs, m)
     C = resolved if resolved is not None else resolve_constants(m, constants or Constants())
@@ -356,9 +363,9 @@ def render_with_jacobian(
     derivatives of the colour in the ``CONSTANT_SPECS`` scalar names ``names`` (as the ports'
     ``render_with_jacobian``), through the executed SPIR-V. A lane-dependent loop whose
     differentiable state is affine (``v = v + X``, copies of such ``v``) runs on detached
-    values with the derivatives attached after it (``_spirv_loops``: the ports' 'replay');
+    values with the derivatives attached after it (``spirv.loops``: the ports' 'replay');
     any other such loop is unrolled its largest trip count over the frame, found by a plain
-    run first. Both recorded (``_frame.call_frozen``)."""
+    run first. Both recorded (``pipeline.frame.call_frozen``)."""
     constants = constants if constants is not None else Constants()
     m = backend_types(backend)
     P = prepare(inputs, m)
@@ -385,7 +392,7 @@ def render_with_jacobian(
 
 
 class Translated:
-    """A shader variant (``shaders_port._variants.Variant``) whose ``render`` and
+    """A shader variant (``shaders_port.variants.Variant``) whose ``render`` and
     ``render_with_jacobian`` execute its GLSL file through SPIR-V in place of its hand port;
     everything else (name, defines, constants it reads, ...) is the variant's."""
 

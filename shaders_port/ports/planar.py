@@ -16,8 +16,8 @@ from dataclasses import dataclass
 import drjit as dr
 import numpy as np
 
-from ._inputs import ShaderInputs, normal_matrix
-from ._texture import CLAMP, LINEAR, Texture2D
+from ..inputs import ShaderInputs, normal_matrix
+from ..pipeline.texture import CLAMP, LINEAR, Texture2D
 
 MIRROR_NORMAL = (0.0, 1.0, 0.0)  # the undeformed mirror's normal (seed 002)
 

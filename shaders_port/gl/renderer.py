@@ -18,8 +18,8 @@ import time
 
 import numpy as np
 
-from ._glsl import compat_to_core, read_source, with_define, write_constants
-from ._inputs import CONSTANT_SPECS, Constants, ShaderInputs, normal_matrix
+from ..glsl_text import compat_to_core, read_source, with_define, write_constants
+from ..inputs import CONSTANT_SPECS, Constants, ShaderInputs, normal_matrix
 
 _GL_TEXTURE_CUBE_MAP_SEAMLESS = 0x884F
 _FRAG_NAMES = ("water_refraction", "water_reflection", "water_baseline")
@@ -81,7 +81,7 @@ class GLRenderer:
         dialect: dialect of ``source`` (and of the shipped file when ``source`` is None):
             'core' runs as is; 'compat' (GLSL 1.20) runs through ``compat_to_core``.
         source: fragment shader text to run instead of the shipped file (e.g. an export).
-        defines: preprocessor names to define (a shader variant, ``shaders_port._variants``),
+        defines: preprocessor names to define (a shader variant, ``shaders_port.variants``),
             each inserted after ``#version`` unless the source already has that ``#define``
             line (an exported variant file carries its own).
     """

@@ -28,7 +28,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ._inputs import ShaderInputs
+from ..inputs import ShaderInputs
 
 
 @dataclass
@@ -114,7 +114,7 @@ class Prepared:
     """Dr.Jit copies of one frame's inputs (textures, varyings of the covered pixels).
 
     Lanes are the covered pixels in ``raster.index`` order. ``varyingVec*`` are Array3f;
-    ``texcoord[k]`` is ``(s, t)`` Float pairs; samplers are ``_texture`` objects named
+    ``texcoord[k]`` is ``(s, t)`` Float pairs; samplers are ``pipeline.texture`` objects named
     like the GLSL uniforms; ``tex_matrix0/1`` are nested tuples of the float32 entries and
     ``lightcolor`` a tuple (hashable: :meth:`shading_state` is a ``dr.freeze`` argument).
     """
@@ -135,9 +135,8 @@ class Prepared:
     tex_matrix0: tuple
     tex_matrix1: tuple
     lightcolor: tuple
-    upload: int = (
-        0  # a number of its own per call of prepare() that uploaded (see _frame.call_frozen)
-    )
+    # a number of its own per call of prepare() that uploaded (see pipeline.frame.call_frozen)
+    upload: int = 0
 
     def shading_state(self) -> "Prepared":
         """A copy without the NumPy-holding ``raster`` / ``inputs`` (what the shader reads)."""
@@ -157,7 +156,7 @@ def _mat_tuple(M: np.ndarray) -> tuple:
 def prepare(inputs: ShaderInputs, m) -> Prepared:
     """Rasterise and upload ``inputs`` for the Dr.Jit type module ``m`` (cached per inputs object,
     the last eight kept; the cache entry is not used when any array of ``inputs`` is replaced)."""
-    from ._texture import CLAMP, LINEAR, NEAREST, REPEAT, CubeMap, Texture2D
+    from .texture import CLAMP, LINEAR, NEAREST, REPEAT, CubeMap, Texture2D
 
     if not isinstance(inputs, ShaderInputs):
         raise TypeError(f"expected ShaderInputs, got {type(inputs).__name__}")

@@ -1,16 +1,16 @@
 """Executes a SPIR-V fragment shader on Dr.Jit types, all pixels at once (one lane each).
 
-The module (``_spirv_module.Module``, calls already inlined) is run instruction by instruction
-in Python; every instruction becomes the Dr.Jit operations of ``_spirv_ops``, so the whole
+The module (``spirv.module.Module``, calls already inlined) is run instruction by instruction
+in Python; every instruction becomes the Dr.Jit operations of ``spirv.ops``, so the whole
 shader is traced into one kernel, as a hand port is. Control flow:
 
 * a selection (``OpSelectionMerge``) runs both sides, each under the lane mask of its edge
-  (``_spirv_ops.Mask``); a store under a mask is a ``select``; an ``OpPhi`` selects by the
+  (``spirv.ops.Mask``); a store under a mask is a ``select``; an ``OpPhi`` selects by the
   masks of its incoming edges; texture fetches are masked;
 * a loop (``OpLoopMerge``) whose exits are the same for every lane (a loop over an integer
   constant, e.g. ``for (j = 0; j < REFINE_STEPS; j++)``) is unrolled; any other loop is a
   Dr.Jit symbolic loop (``dr.while_loop``) over the function variables it stores, with a lane
-  mask for ``break`` (``_spirv_loops``). With ``differentiate=True`` such a loop either runs
+  mask for ``break`` (``spirv.loops``). With ``differentiate=True`` such a loop either runs
   on detached values with the derivatives of its affine state attached after it (the ports'
   'replay', when only variables updated as ``v = v + X`` and their copies carry
   derivatives), or is unrolled its largest trip count over the frame under lane masks, so
@@ -19,7 +19,7 @@ shader is traced into one kernel, as a hand port is. Control flow:
   are the same either way; derivatives are checked against central differences in the tests.
 
 Variables of the ``Input`` and ``UniformConstant`` storage classes are bound by their GLSL
-names through ``bindings`` (name -> value: a sampler object of ``_texture``, a list of
+names through ``bindings`` (name -> value: a sampler object of ``pipeline.texture``, a list of
 per-lane values for an input, Python floats or lists for a uniform); a name without a binding
 is an error naming the variable and its declaration line. An instruction the executor does not
 implement raises :class:`UnsupportedInstruction` naming the opcode and the GLSL line.
@@ -35,9 +35,9 @@ from collections import defaultdict
 
 import drjit as dr
 
-from . import _spirv_ops as ops
-from ._spirv_loops import LoopRunner, UnsupportedInstruction
-from ._spirv_ops import TRUE, Mask, both, branch, is_py, join, lift
+from . import ops
+from .loops import LoopRunner, UnsupportedInstruction
+from .ops import TRUE, Mask, both, branch, is_py, join, lift
 
 
 class UnboundVariable(ValueError):
@@ -57,7 +57,7 @@ class Executor(LoopRunner):
         self.M, self.m, self.bindings = module, m, bindings
         self.differentiate, self.trips = differentiate, trips
         self.passes: dict = {}  # loop header -> per-lane passes through its body (plain runs)
-        self.probe = self.replay = None  # see _spirv_loops.LoopRunner.replay_ok / replayed_loop
+        self.probe = self.replay = None  # see spirv.loops.LoopRunner.replay_ok / replayed_loop
         self.unrolled = False  # a lane-dependent loop was unrolled (it needed its trip count)
         self.env: dict = {}  # SSA id -> value
         self.vars: dict = {}  # variable id -> value (function variables and outputs)
@@ -375,7 +375,7 @@ class Executor(LoopRunner):
         if op == "OpExtInst":
             if self.M.ext_sets.get(o[0]) != "GLSL.std.450":
                 raise self.unsupported(ins, f"extended set {self.M.ext_sets.get(o[0])}")
-            from ._spirv_module import grammar
+            from .module import grammar
 
             name = grammar()["glsl"].get(o[1], str(o[1]))
             out = ops.std450(m, name, [self.get(a) for a in o[2:]], None)

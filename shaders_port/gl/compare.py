@@ -25,7 +25,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ._inputs import Constants, ShaderInputs
+from ..inputs import Constants, ShaderInputs
 
 OUTLIER = 1e-2
 
@@ -58,10 +58,10 @@ def compare_port_gl(
 
     Args:
         inputs, constants: the frame (constants None = defaults).
-        shader: a shader variant name (``shaders_port._variants.VARIANTS``).
+        shader: a shader variant name (``shaders_port.variants.VARIANTS``).
         renderer: an open ``GLRenderer`` for these inputs to reuse (else one is made).
         output: the ``ShaderOutput.numpy()`` dict to compare in place of the port's (e.g. the
-            SPIR-V executor's, ``shaders_port.spirv_port``); None renders the port.
+            SPIR-V executor's, ``shaders_port.spirv.translated``); None renders the port.
 
     Returns a dict: ``mean_abs`` and ``p999`` (99.9th percentile) and ``max_abs`` of the
     per-pixel max-over-channel |port - GL| on common water pixels (linear RGB);
@@ -69,7 +69,7 @@ def compare_port_gl(
     (pixels over 1e-2); ``explained`` dict reason -> count; ``unexplained`` count;
     ``diff`` (H, W) float32 map (0 off the common water pixels); ``port`` / ``gl`` colours.
     """
-    from ._variants import get_variant
+    from ..variants import get_variant
 
     variant = get_variant(shader)
     constants = constants if constants is not None else Constants()

@@ -2,8 +2,8 @@
 and its constants written back into its file.
 
 The shader is a core GLSL fragment shader (``#version 330 core`` or later) that runs after the
-study's ``water.vert`` (so it reads the study's varyings, :data:`spirv_port.STUDY_INPUTS`). Its
-*declaration* says which constants to fit and what its own names of inputs mean, either as
+study's ``water.vert`` (so it reads the study's varyings, :data:`spirv.translated.STUDY_INPUTS`).
+Its *declaration* says which constants to fit and what its own names of inputs mean, either as
 pragmas in the file::
 
     // @study constant FOG_DENSITY 0.01 4.0      (a constant to fit and its range)
@@ -33,10 +33,10 @@ from pathlib import Path
 import drjit as dr
 import numpy as np
 
-from . import spirv_port
-from ._frame import finish_output, tangents
-from ._raster import prepare
-from ._texture import backend_types
+from . import translated as spirv_port
+from ..pipeline.frame import finish_output, tangents
+from ..pipeline.raster import prepare
+from ..pipeline.texture import backend_types
 
 __all__ = ["UserShader", "UserConstant"]
 
@@ -178,7 +178,7 @@ class UserShader:
         return self
 
     def study_inputs(self) -> set[str]:
-        """The study's inputs (:data:`spirv_port.STUDY_INPUTS`) the shader reads: by their own
+        """The study's inputs (:data:`spirv.translated.STUDY_INPUTS`) the shader reads: by their own
         names in its code (comments left out), or through a binding."""
         code = re.sub(r"//.*|/\*.*?\*/", "", self.source, flags=re.S)
         named = {n for n in spirv_port.STUDY_INPUTS if re.search(rf"\b{re.escape(n)}\b", code)}
@@ -298,13 +298,13 @@ class UserShader:
         return "".join(out)
 
     def gl_renderer(self, inputs, values: dict | None = None, source=None, reflection=None):
-        """A ``GLRenderer`` (OpenGL, llvmpipe) drawing the written-back shader with ``values``
-        (its samplers and uniforms bound to the study's inputs by the declaration); or, given
-        ``source`` and its ``reflection`` (``_spirv.hlsl_round_trip`` of the exported HLSL), that
-        GLSL through a ``TranslatedRenderer``. Use it as a context manager, ``render(None)`` /
-        ``time_frames(None, n, warmup)``."""
-        from ._gl import GLRenderer
-        from ._gl_translated import TranslatedRenderer
+        """A ``GLRenderer`` (OpenGL, llvmpipe) drawing the written-back shader with ``values`` (its
+        samplers and uniforms bound to the study's inputs by the declaration); or, given
+        ``source`` and its ``reflection`` (``spirv.tools.hlsl_round_trip`` of the exported
+        HLSL), that GLSL through a ``TranslatedRenderer``. Use it as a context manager,
+        ``render(None)`` / ``time_frames(None, n, warmup)``."""
+        from ..gl.renderer import GLRenderer
+        from ..gl.round_trip import TranslatedRenderer
 
         bindings = dict(self.bindings)
         base = GLRenderer if reflection is None else TranslatedRenderer

@@ -1,7 +1,7 @@
 """The exported shaders in the engines' languages: GLSL ES 3.00, HLSL 5.0, Metal and SPIR-V.
 
 Each core GLSL file of an export (``core/<name>.<vert|frag>``, constants already written) is
-translated with the real tools (``shaders_port._spirv``: glslang to SPIR-V, SPIRV-Cross to each
+translated with the real tools (``shaders_port.spirv.tools``: glslang to SPIR-V, SPIRV-Cross to each
 target), the fitted constants carried as named specialization constants holding their values,
 and checked as far as this machine can:
 
@@ -20,9 +20,9 @@ Beside them, per target, ``<name>.<stage>.reflect.json`` (``spirv-cross --reflec
 module the target is made from: for HLSL the one glslang makes of the HLSL, so its registers
 and its ``$Global`` offsets; elsewhere with the plain uniforms added as ``loose_uniforms``, which
 the reflection of OpenGL SPIR-V leaves out) and ``BINDINGS.md``, the binding sheet
-(``study.report.bindings``).
+(``study.export.bindings``).
 ``targets.json`` at the top of the export lists the files and the checks. The calibration's GL
-check runs the HLSL on llvmpipe too (``study.report.gl_check.hlsl_check``).
+check runs the HLSL on llvmpipe too (``study.export.gl_check.hlsl_check``).
 """
 
 from __future__ import annotations
@@ -50,7 +50,7 @@ def resolve_targets(targets) -> tuple[str, ...]:
     """The targets to write: ``None`` -> every target when the tools are installed (none when
     they are not); otherwise the names given, checked. ValueError for an unknown name,
     RuntimeError naming the missing tools if targets are asked for and cannot be made."""
-    from shaders_port._spirv import missing_tools
+    from shaders_port.spirv.tools import missing_tools
 
     if targets is None:
         return () if missing_tools(_TOOLS) else TARGETS
@@ -70,7 +70,7 @@ def resolve_targets(targets) -> tuple[str, ...]:
 def _loose_uniforms(spv: bytes, stage: str, label: str) -> list[dict]:
     """The shader's plain (non-texture) uniforms, name and type: the reflection of OpenGL SPIR-V
     does not list them, so they are read from the ``$Global`` block glslang makes of the HLSL."""
-    from shaders_port import _spirv as S
+    from shaders_port.spirv import tools as S
 
     hlsl = S.cross(spv, S.TARGET_ARGS["hlsl"], label)
     refl = S.reflect(S.hlsl_to_spirv(hlsl, stage, label), label)
@@ -85,7 +85,7 @@ def _one_file(fname: str, text: str, targets) -> tuple[dict, dict, dict, dict]:
     """Translate and check one core file: (relative path -> bytes, relative path of each
     reflection -> its JSON, target -> seconds, specialization constant id -> name). The
     reflection of a target other than HLSL gets ``loose_uniforms`` (:func:`_loose_uniforms`)."""
-    from shaders_port import _spirv as S
+    from shaders_port.spirv import tools as S
 
     stem, stage = fname.rsplit(".", 1)
     files, reflections, seconds = {}, {}, {}

@@ -14,9 +14,9 @@ def gl_check(shader: str, inputs, constants, shaders_dir: Path) -> dict:
     written (its own constants block and ``#define`` lines, nothing added) on llvmpipe and
     compare it with the port of the variant with ``constants`` on the water pixels. Returns the
     figures of ``compare_port_gl`` and ``passed``."""
-    from shaders_port._compare import compare_port_gl
-    from shaders_port._gl import GLRenderer
-    from shaders_port._variants import get_variant
+    from shaders_port.gl.compare import compare_port_gl
+    from shaders_port.gl.renderer import GLRenderer
+    from shaders_port.variants import get_variant
 
     variant = get_variant(shader)
     source = (shaders_dir / "core" / f"{variant.name}.frag").read_text()
@@ -60,10 +60,10 @@ def hlsl_check(shader: str, inputs, constants, shaders_dir: Path) -> dict:
     """The exported HLSL of variant ``shader`` (``hlsl/<shader>.frag.hlsl``) compiled back by
     glslang's HLSL front end, translated to GLSL 330 by SPIRV-Cross and run on llvmpipe, against
     the port with ``constants``: the figures and verdict of :func:`gl_check`."""
-    from shaders_port._compare import compare_port_gl
-    from shaders_port._gl_translated import TranslatedRenderer
-    from shaders_port._spirv import hlsl_round_trip
-    from shaders_port._variants import get_variant
+    from shaders_port.gl.compare import compare_port_gl
+    from shaders_port.gl.round_trip import TranslatedRenderer
+    from shaders_port.spirv.tools import hlsl_round_trip
+    from shaders_port.variants import get_variant
 
     variant = get_variant(shader)
     hlsl = (shaders_dir / "hlsl" / f"{variant.name}.frag.hlsl").read_text()
@@ -120,11 +120,11 @@ GL_MEAN, GL_P999 = 1e-3, 1e-2  # the thresholds of :func:`_verdict` (mean, 99.9t
 
 
 def gl_check_user(shader, inputs, values: dict, ours: dict) -> dict:
-    """A user's shader (``shaders_port.user_shader.UserShader``) written back with ``values`` and
-    run on OpenGL (llvmpipe) against the executor's render ``ours`` (``ShaderOutput.numpy()``):
+    """A user's shader (``shaders_port.spirv.user_shader.UserShader``) written back with ``values``
+    and run on OpenGL (llvmpipe) against the executor's render ``ours`` (``ShaderOutput.numpy()``):
     mean and 99.9th percentile of the per-pixel max-over-channel |difference| on the pixels both
-    cover, passed within ``GL_MEAN`` / ``GL_P999``; ``ran`` False (with ``why``) without a
-    headless OpenGL."""
+    cover, passed within ``GL_MEAN`` / ``GL_P999``; ``ran`` False (with ``why``) without a headless
+    OpenGL."""
     try:
         rgba, mask = shader.gl_render(inputs, values)
     except RuntimeError as exc:
@@ -136,7 +136,7 @@ def hlsl_check_user(shader, inputs, values: dict, ours: dict, shaders_dir: Path)
     """A user's shader's exported HLSL (``hlsl/<stem>.frag.hlsl`` of ``shaders_dir``) compiled
     back by glslang's HLSL front end, translated to GLSL 330 by SPIRV-Cross and run on llvmpipe
     against the executor's render ``ours``, as :func:`gl_check_user` judges it."""
-    from shaders_port._spirv import hlsl_round_trip
+    from shaders_port.spirv.tools import hlsl_round_trip
 
     stem = shader.label.rsplit(".", 1)[0]
     hlsl = (shaders_dir / "hlsl" / f"{stem}.frag.hlsl").read_text()
