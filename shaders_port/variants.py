@@ -23,7 +23,9 @@ import importlib
 from dataclasses import dataclass, field
 
 from . import space as _space
-from .glsl_text import read_source, switches_of, with_define
+from .gl.renderer import GLRenderer
+from .glsl_text import constants_read, read_source, switches_of, with_define
+from .inputs import game_precision
 
 
 @dataclass(frozen=True)
@@ -63,8 +65,6 @@ class Variant:
     def prepare_inputs(self, inputs):
         """The inputs as this variant's application uploads them (see ``textures``)."""
         if self.textures == "game":
-            from .inputs import game_precision
-
             return game_precision(inputs)
         return inputs
 
@@ -83,7 +83,6 @@ class Variant:
     def reads(self) -> tuple[str, ...]:
         """``CONSTANT_SPECS`` names the variant's GLSL declares and uses with its defines (the only
         constants a fit of it may name)."""
-        from .glsl_text import constants_read
 
         return tuple(constants_read(self.source()))
 
@@ -114,7 +113,6 @@ class Variant:
     def gl_renderer(self, inputs, source: str | None = None, dialect: str = "core"):
         """A ``GLRenderer`` drawing this variant (``source``: the shader file's text without the
         variant's defines, e.g. an export; the renderer adds them)."""
-        from .gl.renderer import GLRenderer
 
         return GLRenderer(
             self.shader,

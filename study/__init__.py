@@ -13,15 +13,15 @@ inputs (``build_shader_inputs``), the port against a reference (``ShaderModel``)
 """
 
 from ._backend import BackendError, init_backend
-from .fit.bridge import DrJitResidual, NonFiniteResidualError, make_jax_residual
+from ._io import read_exr, write_exr, write_png
+from ._metrics import flip, rmse
+from .commands import run_calibrate, run_export, run_preview, run_render, run_tradeoff
 from .config.experiment import Experiment, ExperimentError, load_experiment, validate
 from .export.shaders import export_shaders, load_constants_json
-from ._io import read_exr, write_exr, write_png
-from .fit.solvers import SOLVERS, FitProblem, FitResult, Param, fit
+from .fit.bridge import DrJitResidual, NonFiniteResidualError, make_jax_residual
 from .fit.identify import IdentifyReport, identify, probe_gradient_solver, sweep_1d, sweep_2d
-from .commands import run_calibrate, run_export, run_preview, run_render, run_tradeoff
-from ._metrics import flip, rmse
 from .fit.model import ShaderModel, constants_from_experiment
+from .fit.solvers import SOLVERS, FitProblem, FitResult, Param, fit
 from .scene.reference import Reference, load_or_render
 from .scene.shader_inputs import build_shader_inputs
 

@@ -6,6 +6,12 @@ from __future__ import annotations
 import argparse
 import sys
 
+from . import commands
+from ._backend import BackendError
+from ._io import DiskFullError
+from .config.experiment import ExperimentError
+from .studies.stability import SOLVERS
+
 
 def _backend_arg(p: argparse.ArgumentParser, default: str | None, what: str) -> None:
     """``--backend`` (the Mitsuba / Dr.Jit variant; ``--variant`` is its old name)."""
@@ -237,10 +243,6 @@ def _command_line(argv) -> str:
 
 def main(argv=None) -> int:
     args = build_parser().parse_args(argv)
-    from . import commands
-    from ._backend import BackendError
-    from ._io import DiskFullError
-    from .config.experiment import ExperimentError
 
     try:
         if args.command == "render":
@@ -268,8 +270,6 @@ def main(argv=None) -> int:
                 budget=dict(args.budget),
             )
         elif args.command == "stability":
-            from .studies.stability import SOLVERS
-
             commands.run_stability(
                 args.experiments,
                 args.out,

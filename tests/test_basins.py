@@ -127,7 +127,7 @@ def test_restart_from_a_lower_basin_keeps_the_lower_solution(noisy_model, monkey
     """A scan that reports a basin lower beyond the noise (here made up at 0.9, the truth being
     0.7) makes the calibration refit from there once; whichever of the two solutions has the
     lower loss is exported, and the restart is recorded and reported."""
-    from study.fit import basins
+    from study.fit import basins, rounds  # the rounds call the scan: patched where they look
     from study.report.calibration import basin_lines
 
     real_scan = basins.scan
@@ -143,7 +143,7 @@ def test_restart_from_a_lower_basin_keeps_the_lower_solution(noisy_model, monkey
         calls.append(name)
         return out
 
-    monkeypatch.setattr(basins, "scan", fake_scan)
+    monkeypatch.setattr(rounds, "scan", fake_scan)
     requested = ["attenuation_distance", "bumptex_mult", "water_color"]
     first = calibrate_model(noisy_model, Constants(), requested, "levenberg_marquardt", 100)
     cal = calibrate_model(
@@ -215,7 +215,7 @@ def test_a_lower_basin_the_texture_halves_do_not_confirm_is_reported_not_refitte
     """The made-up lower basin at 0.9 (truth 0.7) of the restart test, with the texture's halves
     given: their decorrelated loss puts 0.9 higher, so the fit is not restarted, the basin is
     recorded as unconfirmed and the report says why; with halves that confirm it, it restarts."""
-    from study.fit import basins
+    from study.fit import basins, rounds  # the rounds call the scan: patched where they look
     from study.report.calibration import basin_lines
 
     real_scan = basins.scan
@@ -228,7 +228,7 @@ def test_a_lower_basin_the_texture_halves_do_not_confirm_is_reported_not_refitte
         out["lower"] = [0.9]
         return out
 
-    monkeypatch.setattr(basins, "scan", fake_scan)
+    monkeypatch.setattr(rounds, "scan", fake_scan)
     requested = ["attenuation_distance", "bumptex_mult", "water_color"]
     halves = _half_models(noisy_model, 0.1, 7)
     first = calibrate_model(noisy_model, Constants(), requested, "levenberg_marquardt", 100)
@@ -249,7 +249,7 @@ def test_a_lower_basin_the_texture_halves_do_not_confirm_is_reported_not_refitte
     ] > 0
     text = "\n".join(basin_lines(cal.parameters))
     assert "not refitted" in text and "stopped short" not in text
-    monkeypatch.setattr(basins, "texture_delta", lambda *a, **k: -0.5)  # halves that agree
+    monkeypatch.setattr(rounds, "texture_delta", lambda *a, **k: -0.5)  # halves that agree
     cal = calibrate_model(
         noisy_model,
         Constants(),

@@ -1,10 +1,13 @@
 """The house: imports point one way (no module imports one that imports it back, and none
-imports a stage above its own, function-local imports included), a module imported from
-outside its package has a public name, and no private name crosses a module line."""
+imports a stage above its own, function-local imports included), the project's imports sit at
+the top of their modules (the few that cannot say why), a module imported from outside its
+package has a public name, no private name crosses a module line, the experiment is read typed
+outside its package, and every process-wide cache is listed in docs/process-state.md."""
 
 from __future__ import annotations
 
 import ast
+import re
 from fnmatch import fnmatchcase
 from pathlib import Path
 
@@ -210,3 +213,88 @@ def test_the_public_name_check_finds_a_private_module_used_outside():
         "shaders_port.ports.planar": {"shaders_port._hidden"},
     }
     assert _private_from_outside(planted) == ["study.fit.model imports shaders_port._hidden"]
+
+
+def _local_imports(text: str) -> list[tuple[int, str]]:
+    """(line, the import's source) of every import of the project's own modules inside a
+    function of ``text``."""
+    tree, out = ast.parse(text), []
+    for fn in ast.walk(tree):
+        if not isinstance(fn, (ast.FunctionDef, ast.AsyncFunctionDef)):
+            continue
+        for node in ast.walk(fn):
+            own = isinstance(node, ast.ImportFrom) and (
+                node.level > 0 or (node.module or "").split(".")[0] in PACKAGES
+            )
+            own |= isinstance(node, ast.Import) and any(
+                a.name.split(".")[0] in PACKAGES for a in node.names
+            )
+            if own:
+                out.append((node.lineno, ast.get_source_segment(text, node)))
+    return sorted(set(out))
+
+
+def test_the_projects_imports_are_at_the_top():
+    # an import of the project's own modules inside a function only where importing it at the
+    # top costs what most users of the module never need (each says why in a `# local:`
+    # comment on the line above it): at most 20
+    found, unjustified = 0, []
+    for pkg in PACKAGES:
+        for path in sorted((REPO / pkg).rglob("*.py")):
+            text = path.read_text()
+            lines = text.splitlines()
+            for line, _ in _local_imports(text):
+                found += 1
+                if not lines[line - 2].strip().startswith("# local:"):
+                    unjustified.append(f"{path.relative_to(REPO)}:{line}")
+    assert not unjustified, "import these at the top, or say why not: " + ", ".join(unjustified)
+    assert found <= 20, found
+
+
+def test_the_local_import_finder_finds_one():
+    text = "import numpy\n\ndef f():\n    import numpy\n    from .fit import model\n"
+    assert _local_imports(text) == [(5, "from .fit import model")]
+
+
+def test_the_experiment_is_read_typed_outside_its_package():
+    # `exp.fit.shader`, not `exp["fit.shader"]`: the keys' strings stay in study/config
+    reads = [
+        f"{path.relative_to(REPO)}:{i}"
+        for pkg in PACKAGES
+        for path in sorted((REPO / pkg).rglob("*.py"))
+        if "config" not in path.relative_to(REPO).parts
+        for i, line in enumerate(path.read_text().splitlines(), 1)
+        if re.search(r"\bexp\[[\"']", line)
+    ]
+    assert reads == [], reads
+
+
+def _process_state() -> set[str]:
+    """``module.name`` of every module-level cache, registry or lock (an empty dict, set or
+    ordered dict, or a lock, bound at the top of a module) and every ``lru_cache`` function."""
+    kinds = {"set", "dict", "OrderedDict", "RLock", "Lock"}
+    found = set()
+    for pkg in PACKAGES:
+        for path in sorted((REPO / pkg).rglob("*.py")):
+            module = _module_name(path)
+            for node in ast.parse(path.read_text()).body:
+                if isinstance(node, (ast.Assign, ast.AnnAssign)):
+                    target = node.targets[0] if isinstance(node, ast.Assign) else node.target
+                    v = node.value
+                    empty = isinstance(v, ast.Dict) and not v.keys
+                    empty |= isinstance(v, ast.Set) and not v.elts
+                    call = isinstance(v, ast.Call) and not v.args
+                    call = call and getattr(v.func, "id", getattr(v.func, "attr", "")) in kinds
+                    if isinstance(target, ast.Name) and (empty or call):
+                        found.add(f"{module}.{target.id}")
+                elif isinstance(node, ast.FunctionDef):
+                    if any("cache" in ast.unparse(d) for d in node.decorator_list):
+                        found.add(f"{module}.{node.name}")
+    return found
+
+
+def test_every_process_wide_state_is_listed():
+    # docs/process-state.md lists what a process keeps between calls, why and how it is keyed
+    page = (REPO / "docs" / "process-state.md").read_text()
+    listed = set(re.findall(r"^\| `([\w.]+)` \|", page, re.M))
+    assert _process_state() == listed

@@ -26,6 +26,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..inputs import Constants, ShaderInputs
+from ..variants import get_variant
 
 OUTLIER = 1e-2
 
@@ -69,8 +70,6 @@ def compare_port_gl(
     (pixels over 1e-2); ``explained`` dict reason -> count; ``unexplained`` count;
     ``diff`` (H, W) float32 map (0 off the common water pixels); ``port`` / ``gl`` colours.
     """
-    from ..variants import get_variant
-
     variant = get_variant(shader)
     constants = constants if constants is not None else Constants()
     out = variant.render(inputs, constants).numpy() if output is None else output

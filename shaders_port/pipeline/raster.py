@@ -29,6 +29,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..inputs import ShaderInputs
+from .texture import CLAMP, LINEAR, NEAREST, REPEAT, CubeMap, Texture2D
 
 
 @dataclass
@@ -156,8 +157,6 @@ def _mat_tuple(M: np.ndarray) -> tuple:
 def prepare(inputs: ShaderInputs, m) -> Prepared:
     """Rasterise and upload ``inputs`` for the Dr.Jit type module ``m`` (cached per inputs object,
     the last eight kept; the cache entry is not used when any array of ``inputs`` is replaced)."""
-    from .texture import CLAMP, LINEAR, NEAREST, REPEAT, CubeMap, Texture2D
-
     if not isinstance(inputs, ShaderInputs):
         raise TypeError(f"expected ShaderInputs, got {type(inputs).__name__}")
     key = (id(inputs), m.__name__)

@@ -41,6 +41,8 @@ from typing import NamedTuple
 import drjit as dr
 import numpy as np
 
+from ..glsl_text import constants_read, read_source, with_define
+from ..inputs import Constants, ShaderInputs, normal_matrix
 from ..pipeline import frame as _frame
 from ..pipeline.frame import (
     ShaderOutput,
@@ -50,12 +52,11 @@ from ..pipeline.frame import (
     resolve_constants,
     tangents,
 )
-from ..inputs import Constants, ShaderInputs, normal_matrix
+from ..pipeline.raster import prepare
+from ..pipeline.texture import CLAMP, LINEAR, NEAREST, Texture2D, backend_types, clamp, gl_pow, mix
 from .planar import MIRROR_NORMAL, mat4_vec4, planar_reflection
 from .planar import mat_tuple as _mat
-from ..pipeline.raster import prepare
 from .switches import decode
-from ..pipeline.texture import CLAMP, LINEAR, NEAREST, Texture2D, backend_types, clamp, gl_pow, mix
 from .water_refraction import cubemap_reflection, eye_and_light, reflect, refract
 
 __all__ = ["render", "render_with_jacobian", "ShaderOutput", "READS", "DEFINES", "PASS_FETCHES"]
@@ -331,8 +332,6 @@ def with_static_diagnostics(m, diag: dict, o: Options) -> dict:
 def reads_with(defines=()) -> tuple[str, ...]:
     """The constants the GLSL reads when compiled with ``defines`` (see
     ``glsl_text.constants_read``)."""
-    from ..glsl_text import constants_read, read_source, with_define
-
     src = read_source("water_baseline", "frag", "core")
     for d in defines:
         src = with_define(src, d)

@@ -22,8 +22,6 @@ from __future__ import annotations
 import drjit as dr
 
 from ..inputs import Constants, ShaderInputs
-from ..pipeline.raster import prepare
-from ..pipeline.texture import backend_types, mix, texmat_xy
 from ..pipeline import frame as _frame
 from ..pipeline.frame import (
     ShaderOutput,
@@ -34,6 +32,8 @@ from ..pipeline.frame import (
     resolve_constants,
     tangents,
 )
+from ..pipeline.raster import prepare
+from ..pipeline.texture import backend_types, mix, texmat_xy
 from .water_refraction import DEFINES as _REFRACTION_DEFINES
 from .water_refraction import (
     Options,

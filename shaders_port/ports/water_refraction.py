@@ -53,6 +53,7 @@ from typing import NamedTuple
 
 import drjit as dr
 
+from ..inputs import Constants, ShaderInputs
 from ..pipeline import frame as _frame
 from ..pipeline.frame import (
     ShaderOutput,
@@ -63,11 +64,10 @@ from ..pipeline.frame import (
     resolve_constants,
     tangents,
 )
-from ..inputs import Constants, ShaderInputs
-from .planar import MIRROR_NORMAL, mirror_state, planar_reflection
-from .switches import decode
 from ..pipeline.raster import prepare
 from ..pipeline.texture import backend_types, clamp, gl_pow, mix, texmat_xy
+from .planar import MIRROR_NORMAL, mirror_state, planar_reflection
+from .switches import decode
 
 __all__ = ["render", "render_with_jacobian", "ShaderOutput", "Options", "DEFINES"]
 

@@ -37,6 +37,7 @@ import drjit as dr
 
 from . import ops
 from .loops import LoopRunner, UnsupportedInstruction
+from .module import grammar
 from .ops import TRUE, Mask, both, branch, is_py, join, lift
 
 
@@ -375,7 +376,6 @@ class Executor(LoopRunner):
         if op == "OpExtInst":
             if self.M.ext_sets.get(o[0]) != "GLSL.std.450":
                 raise self.unsupported(ins, f"extended set {self.M.ext_sets.get(o[0])}")
-            from .module import grammar
 
             name = grammar()["glsl"].get(o[1], str(o[1]))
             out = ops.std450(m, name, [self.get(a) for a in o[2:]], None)

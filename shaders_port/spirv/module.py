@@ -25,7 +25,6 @@ import tempfile
 from dataclasses import dataclass, field
 from pathlib import Path
 
-
 GRAMMAR_DIR = Path("/usr/include/spirv/unified1")
 CORE_GRAMMAR = GRAMMAR_DIR / "spirv.core.grammar.json"
 GLSL_GRAMMAR = GRAMMAR_DIR / "extinst.glsl.std.450.grammar.json"

@@ -32,7 +32,7 @@ import subprocess
 import tempfile
 from pathlib import Path
 
-from ..glsl_text import BEGIN_MARKER, END_MARKER
+from ..glsl_text import BEGIN_MARKER, END_MARKER, read_source
 from ..inputs import CONSTANT_SPECS
 
 # program -> Debian package that ships it
@@ -131,8 +131,6 @@ def _varying_locations() -> dict[str, int]:
     """Name -> location of each output of the core vertex shader, in declaration order: the one
     numbering both stages use, so that stages link by location (HLSL semantics ``TEXCOORD<n>``,
     Metal ``[[user(locn<n>)]]``, Vulkan) as they link by name in GLSL."""
-    from ..glsl_text import read_source
-
     decl = re.compile(r"^out\s+\w+\s+([A-Za-z_]\w*)\s*;", re.M)
     return {n: k for k, n in enumerate(decl.findall(read_source("water", "vert", "core")))}
 

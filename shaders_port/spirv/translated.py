@@ -31,6 +31,8 @@ from dataclasses import dataclass, field
 import drjit as dr
 import numpy as np
 
+from ..glsl_text import declared_constants, read_source
+from ..inputs import CONSTANT_SPECS, Constants, ShaderInputs, normal_matrix
 from ..pipeline import frame as _frame
 from ..pipeline.frame import (
     ShaderOutput,
@@ -39,13 +41,11 @@ from ..pipeline.frame import (
     resolve_constants,
     tangents,
 )
-from ..glsl_text import read_source
-from ..inputs import CONSTANT_SPECS, Constants, ShaderInputs, normal_matrix
 from ..pipeline.raster import prepare
+from ..pipeline.texture import CLAMP, LINEAR, NEAREST, Texture2D, backend_types
 from .execute import Executor
 from .module import Module, compile_fragment
 from .ops import lift
-from ..pipeline.texture import CLAMP, LINEAR, NEAREST, Texture2D, backend_types
 
 __all__ = ["ShaderSpec", "STUDY_INPUTS", "builtin_spec", "render", "render_with_jacobian"]
 
@@ -140,8 +140,6 @@ def module_of(spec: ShaderSpec) -> Module:
 def builtin_spec(shader: str, defines: tuple = ()) -> ShaderSpec:
     """The spec of a shipped shader (``water_refraction``, ``water_reflection``,
     ``water_baseline``): its core file and the ``CONSTANT_SPECS`` it declares."""
-    from ..glsl_text import declared_constants
-
     src = read_source(shader, "frag", "core")
     names = declared_constants(src)
     consts = tuple((CONSTANT_SPECS[n][0], n) for n in names)

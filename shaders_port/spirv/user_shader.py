@@ -33,10 +33,12 @@ from pathlib import Path
 import drjit as dr
 import numpy as np
 
-from . import translated as spirv_port
+from ..gl.renderer import GLRenderer
+from ..gl.round_trip import TranslatedRenderer
 from ..pipeline.frame import finish_output, tangents
 from ..pipeline.raster import prepare
 from ..pipeline.texture import backend_types
+from . import translated as spirv_port
 
 __all__ = ["UserShader", "UserConstant"]
 
@@ -303,8 +305,6 @@ class UserShader:
         ``source`` and its ``reflection`` (``spirv.tools.hlsl_round_trip`` of the exported
         HLSL), that GLSL through a ``TranslatedRenderer``. Use it as a context manager,
         ``render(None)`` / ``time_frames(None, n, warmup)``."""
-        from ..gl.renderer import GLRenderer
-        from ..gl.round_trip import TranslatedRenderer
 
         bindings = dict(self.bindings)
         base = GLRenderer if reflection is None else TranslatedRenderer

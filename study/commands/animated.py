@@ -20,13 +20,13 @@ from .._backend import drjit_backend
 from .._io import write_exr, write_json
 from .._metrics import errors, temporal_errors
 from .._progress import log as _log
+from ..config.errors import ExperimentError
 from ..fit.build import build_model
 from ..fit.calibrate import calibrate_model, scene_frozen, timed
 from ..fit.joint import JointModel, joint_calibrate
 from ..fit.model import constants_json
 from ..fit.result import CalibrationResult, jsonable
 from ..report.animation import animation_figures, write_animation_report
-from ..config.errors import ExperimentError
 from ..scene.frame_data import load_frames
 from .steps import export_calibration
 

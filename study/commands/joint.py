@@ -11,13 +11,13 @@ from .._backend import drjit_backend, init_backend
 from .._io import write_json
 from .._metrics import errors
 from .._progress import log as _log
+from ..config.experiment import load_experiment
 from ..fit.build import build_model
 from ..fit.calibrate import scene_frozen
 from ..fit.joint import JointModel, joint_calibrate, leave_one_out, universality
 from ..fit.model import constants_json
 from ..fit.result import CalibrationResult, jsonable
 from ..report.generalise import write_generalise_report, write_joint_report
-from ..config.experiment import load_experiment
 from ..scene.frames import refuse_animated
 from .steps import export_calibration, load_scene_data
 

@@ -17,12 +17,7 @@ from .._io import write_exr, write_json
 from .._metrics import errors, information_criteria
 from .._progress import Stages
 from .._progress import log as _log
-from ..fit.build import build_model
-from ..fit.calibrate import timed
-from ..fit.model import constants_json
-from ..fit.result import CalibrationResult
-from ..report.calibration import comparison_figure, diagnostics_figure, loss_figure, write_report
-from ..export.shaders import export_shaders, export_user_shader
+from ..config.experiment import is_user_shader, load_experiment
 from ..export.gl_check import (
     gl_check,
     gl_check_user,
@@ -30,8 +25,13 @@ from ..export.gl_check import (
     manifest_checks,
     target_checks,
 )
+from ..export.shaders import export_shaders, export_user_shader
+from ..fit.build import build_model
+from ..fit.calibrate import timed
+from ..fit.model import constants_json
+from ..fit.result import CalibrationResult
+from ..report.calibration import comparison_figure, diagnostics_figure, loss_figure, write_report
 from ..scene.baseline_inputs import inputs_for_shader
-from ..config.experiment import is_user_shader, load_experiment
 from ..scene.frames import is_animated, refuse_animated
 from ..scene.reference import load_or_render
 from ..scene.shader_inputs import load_or_build_shader_inputs

@@ -18,6 +18,8 @@ from pathlib import Path
 
 import numpy as np
 
+from shaders_port.space import parse_fix
+from shaders_port.spirv.user_shader import UserShader
 from shaders_port.variants import get_variant
 
 from .._progress import log
@@ -91,8 +93,6 @@ _NOTED: set = set()
 def _check_shaders(values: dict) -> None:
     """``fit.shader`` and ``tradeoff.variants`` name shaders of the space, ``tradeoff.fix``
     pins its axes (``shaders_port.space``)."""
-    from shaders_port.space import parse_fix
-
     names = [] if is_user_shader(values["fit.shader"]) else [("fit.shader", values["fit.shader"])]
     names += [("tradeoff.variants", v) for v in values["tradeoff.variants"] or []]
     for key, name in names:
@@ -135,8 +135,6 @@ def user_declaration(lines: list | None) -> dict:
 def load_user_shader(values: dict):
     """The ``UserShader`` of ``fit.shader`` (a resolved path) and ``fit.declare``;
     ExperimentError naming the problem."""
-    from shaders_port.spirv.user_shader import UserShader
-
     try:
         return UserShader.from_file(values["fit.shader"], user_declaration(values["fit.declare"]))
     except ValueError as exc:

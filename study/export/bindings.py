@@ -11,6 +11,8 @@ import re
 
 import numpy as np
 
+from shaders_port import CONSTANT_SPECS
+
 # name in the GLSL -> what the application binds there (units, conventions of the study)
 MEANINGS = {
     "refractionTexture": "linear RGB of the ground under the water seen from straight above "
@@ -147,8 +149,6 @@ def binding_sheet(target: str, reflections: dict, spec: dict, constants) -> str:
     """Markdown binding sheet of ``target`` from the reflections of its shaders (relative path
     -> JSON), the specialization constants of the shaders (id -> name) and the exported
     ``constants`` (a ``shaders_port.Constants``)."""
-    from shaders_port import CONSTANT_SPECS
-
     out = [f"# Binding sheet: {target}", "", *[f"* {n}" for n in _NOTES[target]], ""]
     if spec:
         out += ["## Fitted constants (specialization constants)", ""]

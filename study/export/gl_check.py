@@ -8,16 +8,18 @@ from pathlib import Path
 
 import numpy as np
 
+from shaders_port.gl.compare import compare_port_gl
+from shaders_port.gl.renderer import GLRenderer
+from shaders_port.gl.round_trip import TranslatedRenderer
+from shaders_port.spirv.tools import hlsl_round_trip
+from shaders_port.variants import get_variant
+
 
 def gl_check(shader: str, inputs, constants, shaders_dir: Path) -> dict:
     """Run the exported core file of variant ``shader``, ``core/<shader>.frag``, exactly as
     written (its own constants block and ``#define`` lines, nothing added) on llvmpipe and
     compare it with the port of the variant with ``constants`` on the water pixels. Returns the
     figures of ``compare_port_gl`` and ``passed``."""
-    from shaders_port.gl.compare import compare_port_gl
-    from shaders_port.gl.renderer import GLRenderer
-    from shaders_port.variants import get_variant
-
     variant = get_variant(shader)
     source = (shaders_dir / "core" / f"{variant.name}.frag").read_text()
     with GLRenderer(variant.shader, variant.prepare_inputs(inputs), source=source) as r:
@@ -60,11 +62,6 @@ def hlsl_check(shader: str, inputs, constants, shaders_dir: Path) -> dict:
     """The exported HLSL of variant ``shader`` (``hlsl/<shader>.frag.hlsl``) compiled back by
     glslang's HLSL front end, translated to GLSL 330 by SPIRV-Cross and run on llvmpipe, against
     the port with ``constants``: the figures and verdict of :func:`gl_check`."""
-    from shaders_port.gl.compare import compare_port_gl
-    from shaders_port.gl.round_trip import TranslatedRenderer
-    from shaders_port.spirv.tools import hlsl_round_trip
-    from shaders_port.variants import get_variant
-
     variant = get_variant(shader)
     hlsl = (shaders_dir / "hlsl" / f"{variant.name}.frag.hlsl").read_text()
     glsl, refl = hlsl_round_trip(hlsl, "frag", f"hlsl/{variant.name}.frag.hlsl")
@@ -136,8 +133,6 @@ def hlsl_check_user(shader, inputs, values: dict, ours: dict, shaders_dir: Path)
     """A user's shader's exported HLSL (``hlsl/<stem>.frag.hlsl`` of ``shaders_dir``) compiled
     back by glslang's HLSL front end, translated to GLSL 330 by SPIRV-Cross and run on llvmpipe
     against the executor's render ``ours``, as :func:`gl_check_user` judges it."""
-    from shaders_port.spirv.tools import hlsl_round_trip
-
     stem = shader.label.rsplit(".", 1)[0]
     hlsl = (shaders_dir / "hlsl" / f"{stem}.frag.hlsl").read_text()
     try:

@@ -27,6 +27,7 @@ from pathlib import Path
 
 from shaders_port import CONSTANT_SPECS, Constants
 from shaders_port.glsl_text import compile_check, read_source, write_constants
+from shaders_port.spirv.user_shader import UserShader
 from shaders_port.variants import SHIPPED, VARIANTS, get_variant
 
 from .._io import disk_full
@@ -76,8 +77,6 @@ def user_shader_of(path):
     note on stderr: the fitted values replace its constants' initializers."""
     import hashlib
     import sys
-
-    from shaders_port.spirv.user_shader import UserShader
 
     data = _read_json(path)
     if "shader_file" not in data:

@@ -30,6 +30,11 @@ from __future__ import annotations
 import json
 import time
 
+from shaders_port.spirv import tools as S
+from shaders_port.spirv.tools import missing_tools
+
+from .bindings import binding_sheet
+
 TARGETS = ("gles300", "hlsl", "msl", "spirv")
 CHECKS = {
     "spirv": "spirv-val",
@@ -50,8 +55,6 @@ def resolve_targets(targets) -> tuple[str, ...]:
     """The targets to write: ``None`` -> every target when the tools are installed (none when
     they are not); otherwise the names given, checked. ValueError for an unknown name,
     RuntimeError naming the missing tools if targets are asked for and cannot be made."""
-    from shaders_port.spirv.tools import missing_tools
-
     if targets is None:
         return () if missing_tools(_TOOLS) else TARGETS
     targets = tuple(dict.fromkeys(targets))
@@ -70,8 +73,6 @@ def resolve_targets(targets) -> tuple[str, ...]:
 def _loose_uniforms(spv: bytes, stage: str, label: str) -> list[dict]:
     """The shader's plain (non-texture) uniforms, name and type: the reflection of OpenGL SPIR-V
     does not list them, so they are read from the ``$Global`` block glslang makes of the HLSL."""
-    from shaders_port.spirv import tools as S
-
     hlsl = S.cross(spv, S.TARGET_ARGS["hlsl"], label)
     refl = S.reflect(S.hlsl_to_spirv(hlsl, stage, label), label)
     return [
@@ -85,8 +86,6 @@ def _one_file(fname: str, text: str, targets) -> tuple[dict, dict, dict, dict]:
     """Translate and check one core file: (relative path -> bytes, relative path of each
     reflection -> its JSON, target -> seconds, specialization constant id -> name). The
     reflection of a target other than HLSL gets ``loose_uniforms`` (:func:`_loose_uniforms`)."""
-    from shaders_port.spirv import tools as S
-
     stem, stage = fname.rsplit(".", 1)
     files, reflections, seconds = {}, {}, {}
     t0 = time.perf_counter()
@@ -120,8 +119,6 @@ def translate_targets(core_texts: dict, targets, constants) -> tuple[dict, dict]
     """Every core file of ``core_texts`` (file name -> GLSL) in every target: returns
     (relative path -> bytes to write, the ``targets.json`` manifest). Raises RuntimeError with
     the tool's log when a translation or a check fails (nothing is written then)."""
-    from .bindings import binding_sheet
-
     files, manifest = {}, {"targets": {}, "seconds": {}}
     reflections, spec = {}, {}
     for fname, text in core_texts.items():

@@ -51,11 +51,11 @@ import numpy as np
 
 from shaders_port import Constants
 
-from .solvers import FTOL, FTOL_SE, FTOL_WINDOW, FitProblem, Param
+from .._progress import log as _log
+from ..scene.mitsuba_scene import has_medium
 from .identify import identify, sweep_1d, sweep_2d
 from .model import get_value, with_values
 from .protocol import CalibrationModel
-from .._progress import log as _log
 from .rounds import (
     REL_SE_MAX,
     basin_scans,
@@ -64,6 +64,7 @@ from .rounds import (
     refine_decorrelated,
     std_errors,
 )
+from .solvers import FTOL, FTOL_SE, FTOL_WINDOW, FitProblem, Param
 
 DISCRETE = ("steps_grazing", "steps_steep")
 STEP_GRID = {
@@ -158,8 +159,6 @@ def scene_frozen(exp) -> dict:
     """Constants the scene's physics cannot identify whatever the Jacobian says: clear water
     (``water.sigma_t = 0``) has no attenuation, so the shader's attenuation there could only be
     a blend towards a mean colour that happens to lower the error, not a distance."""
-    from ..scene.mitsuba_scene import has_medium
-
     if has_medium(exp):
         return {}
     why = (

@@ -39,6 +39,8 @@ import numpy as np
 
 from shaders_port import Constants
 
+from ..scene.shader_inputs import half_inputs
+from .build import build_model
 from .model import get_value, with_values
 from .solvers import FTOL_SE
 
@@ -200,7 +202,5 @@ def texture_half_models(exp, inputs, reference: np.ndarray, **kwargs) -> tuple |
 
 
 def _models_on_halves(exp, inputs, reference: np.ndarray, **kwargs) -> tuple:
-    from ..scene.shader_inputs import half_inputs
-    from .build import build_model
 
     return tuple(build_model(exp, h, reference, **kwargs) for h in half_inputs(exp, inputs))

@@ -19,11 +19,13 @@ from dataclasses import dataclass
 import numpy as np
 
 from shaders_port import CONSTANT_SPECS, Constants, ShaderInputs
+from shaders_port.pipeline.texture import backend_types
+from shaders_port.spirv.translated import Translated
 from shaders_port.variants import get_variant
 
-from ..config.experiment import Experiment
 from .._metrics import downsample, downsample_stderr, erode
-
+from ..config.experiment import Experiment
+from ..scene.reference import water_mask
 
 # ---- scalar names of constants: 'bumptex_mult', 'water_color[2]' (colours expand to RGB;
 # alpha is not fitted since the shader's output alpha is not compared) ----
@@ -115,8 +117,6 @@ def at_resolution(
     box-downsampled to it, ``stderr_full`` (the reference's per-pixel Monte Carlo standard
     error) carried through the box filter (``study._metrics.downsample_stderr``) or None, the
     reference scene's water mask (H, W) bool)."""
-    from ..scene.reference import water_mask
-
     w, h = resolution or exp.fit.resolution
     fy, fx = reference_full.shape[0] // h, reference_full.shape[1] // w
     ref = downsample(reference_full, fy, fx) if (fy, fx) != (1, 1) else reference_full
@@ -262,8 +262,6 @@ class ReferenceModel:
         with the AD graph of any gradient-enabled constant attached (for reverse mode)."""
         import drjit as dr
 
-        from shaders_port.pipeline.texture import backend_types
-
         m = backend_types(self.backend)
         if not hasattr(self, "_ref_t"):
             self._ref_t = m.TensorXf(self.reference)
@@ -309,8 +307,6 @@ class ShaderModel(ReferenceModel):
         self.shader = shader
         self.variant = get_variant(shader)
         if translated:  # its GLSL file executed through SPIR-V in place of the hand port
-            from shaders_port.spirv.translated import Translated
-
             self.variant = Translated(self.variant)
         super().__init__(inputs, reference, backend, reference_mask, reference_stderr)
 

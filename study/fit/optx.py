@@ -3,7 +3,6 @@ whole or one step at a time under the study's stopping rule."""
 
 from __future__ import annotations
 
-
 import numpy as np
 
 from .bridge import DrJitResidual

@@ -7,7 +7,6 @@ from dataclasses import dataclass
 
 import numpy as np
 
-
 TRANSFORMS = ("auto", "linear", "log", "neglog", "logit", "log_logit", "clip")
 
 

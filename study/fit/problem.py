@@ -12,7 +12,6 @@ import numpy as np
 from .bridge import DrJitResidual, make_jax_residual
 from .params import Param
 
-
 LEAST_SQUARES = ("levenberg_marquardt", "gauss_newton", "dogleg")
 MINIMISERS = ("bfgs", "nelder_mead", "nelder_mead_optimistix")
 SOLVERS = LEAST_SQUARES + MINIMISERS + ("adam",)

@@ -12,10 +12,12 @@ import numpy as np
 
 from shaders_port import Constants
 
+from .._progress import log as _log
+from .basins import BASIN_PARAMETERS, scan, texture_delta
+from .decorrelated import refine
 from .identify import identify
 from .model import get_value, with_values
 from .solvers import FTOL, FTOL_SE, FTOL_WINDOW, fit
-from .._progress import log as _log
 
 # solver stopping tolerances (on u = transformed parameters, where one unit is about a 50 %
 # change, and on the loss): 1e-6 is far below the parameters' standard errors
@@ -201,8 +203,6 @@ def fit_rounds(
 def refine_decorrelated(model, halves, problem, sol: Solution):
     """Step 5 with ``fit.input_noise``: the live constants refined on the decorrelated loss of
     the texture's two halves; ``sol`` updated in place when the refinement is accepted."""
-    from .decorrelated import refine
-
     refined = refine(halves[0], halves[1], problem.params, sol.fitted, sol.live_names)
     _log(
         f"calibrate: decorrelated loss {refined.loss_start:.6g} -> {refined.loss:.6g} in "
@@ -224,8 +224,6 @@ def refine_decorrelated(model, halves, problem, sol: Solution):
 def basin_scans(model, fitted, live_names, sigma_m, scanned, restart) -> dict:
     """The loss scanned along each fitted constant of ``BASIN_PARAMETERS`` at the solution
     (reusing a scan made at the same constants), with what it found logged."""
-    from .basins import BASIN_PARAMETERS, scan
-
     scans = {}
     for n in BASIN_PARAMETERS:
         if n not in live_names:
@@ -267,8 +265,6 @@ def basin_restart(
     ``from``, ``to``, ``loss_before``, ``texture_delta``), or None. Each scan goes into
     ``scanned`` (name -> (``fitted``, scan)), so that the report reuses it when the solution does
     not move; a lower basin the halves do not confirm is added to the scan's ``unconfirmed``."""
-    from .basins import BASIN_PARAMETERS, scan, texture_delta
-
     for n in BASIN_PARAMETERS:
         if n not in live or sigma_m is None:
             continue

@@ -56,8 +56,8 @@ import time
 
 import numpy as np
 
-from .bridge import DrJitResidual
 from .adam import adam
+from .bridge import DrJitResidual
 from .nelder_mead import nelder_mead
 from .optx import optimistix_fit, optimistix_stepped
 from .params import TRANSFORMS, Param

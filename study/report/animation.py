@@ -13,6 +13,7 @@ from pathlib import Path
 import numpy as np
 
 from .._io import to_srgb, write_text_atomic
+from .._metrics import flip_map
 from .calibration import constants_table, fmt, identifiability_table, pyplot
 
 PANELS = ("reference", "fitted (all frames)", "FLIP error")
@@ -22,8 +23,6 @@ def animation_frames(references: list, fitted: list, mask: np.ndarray) -> list[n
     """One (H + 16, 3 W, 3) uint8 sRGB frame per animation frame: reference | fitted | the FLIP
     map of fitted against reference (magma, 0 outside ``mask``), each panel captioned."""
     from PIL import Image, ImageDraw
-
-    from .._metrics import flip_map
 
     cmap = pyplot().get_cmap("magma")
     out = []

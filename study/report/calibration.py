@@ -10,7 +10,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .._io import to_srgb
+from .._io import to_srgb, write_text_atomic
 
 
 def pyplot():
@@ -223,8 +223,6 @@ def identifiability_table(ident: dict) -> list[str]:
 
 def write_report(out: Path, summary: dict, figures: dict) -> Path:
     """``out/report.md`` from the calibration summary (the content of constants.json)."""
-    from .._io import write_text_atomic
-
     e = summary["error"]
     lines = _header_lines(summary) + _decorrelated_lines(summary.get("fit", {}))
     lines += [

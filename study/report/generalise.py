@@ -10,7 +10,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from .._io import write_text_atomic
-from .calibration import fmt, constants_table, identifiability_table
+from .calibration import constants_table, fmt, identifiability_table
 
 
 def joint_lines(summary: dict) -> list[str]:

@@ -10,6 +10,7 @@ from pathlib import Path
 
 from shaders_port import space as _space
 
+from .._io import write_text_atomic
 from .calibration import fmt, pyplot
 from .tradeoff_motion import motion_lines
 
@@ -141,8 +142,6 @@ def _sched(rec) -> str:
 
 def write_tradeoff_report(out: Path, summary: dict) -> Path:
     """``out/report.md`` from the tradeoff summary (the content of summary.json)."""
-    from .._io import write_text_atomic
-
     path = out / "report.md"
     write_text_atomic(path, tradeoff_report_text(summary))
     return path

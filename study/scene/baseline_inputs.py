@@ -32,11 +32,15 @@ import numpy as np
 
 from shaders_port import ShaderInputs
 from shaders_port.inputs import mirrored_view_proj
+from shaders_port.variants import get_variant
 
+from .._backend import jit_input
 from .._io import disk_full
-from ..config.experiment import Experiment
+from ..config.experiment import Experiment, is_user_shader, load_user_shader
+from .cache import SCENE_VERSION, cache_dir, versions
 from .geometry import envmap_image, sky_radiance
 from .mitsuba_scene import build_geometry, sky_params
+from .shader_inputs import INPUTS_VERSION
 
 BASELINE_INPUTS_VERSION = 1  # bump whenever the construction below changes
 # path-traced samples per pixel of the two views (only the dry walls and their shading are
@@ -77,8 +81,6 @@ def trace(mi, scene, origins: np.ndarray, dirs: np.ndarray, spp: int, seed: int)
     """Path-traced radiance along given rays:
     ``(radiance (N, 3), hit (N,) bool, hit point (N, 3))``. ``spp`` samples per ray (independent
     sampler), averaged."""
-    from .._backend import jit_input
-
     n = len(origins)
     o = mi.Point3f(*(jit_input(mi.Float, origins[:, k]) for k in range(3)))
     d = mi.Vector3f(*(jit_input(mi.Float, dirs[:, k]) for k in range(3)))
@@ -189,9 +191,6 @@ def with_baseline_inputs(
     import os
     import tempfile
 
-    from .cache import SCENE_VERSION, cache_dir, versions
-    from .shader_inputs import INPUTS_VERSION
-
     key = hashlib.sha256(
         json.dumps(
             {
@@ -253,9 +252,6 @@ def inputs_for_shader(
     ``Variant.inputs``, or, for a user's file (``*.frag``, with ``fit.declare``), the screen
     buffers when it reads one of :data:`SCREEN_INPUTS` (by name or through a binding); else
     ``inputs`` unchanged."""
-    from shaders_port.variants import get_variant
-
-    from ..config.experiment import is_user_shader, load_user_shader
 
     if is_user_shader(shader):
         reads = load_user_shader({**exp.values, "fit.shader": shader}).study_inputs()

@@ -42,8 +42,12 @@ from __future__ import annotations
 
 import numpy as np
 
+from .._backend import jit_input
 from ..config.experiment import Experiment
+from .denoise import denoise_gain, denoise_radiance
+from .frames import shared_part
 from .sun_photons import N_BATCHES, shape_named, sun_direct, sun_walk
+from .user_scene import reference_sky_parts
 
 
 def sky_samples(mi, extent, size: int, n_dirs: int, seed: int, y_cam: float):
@@ -51,8 +55,6 @@ def sky_samples(mi, extent, size: int, n_dirs: int, seed: int, y_cam: float):
     ``y_cam``, n_dirs jittered strata per texel of ``extent``; their ``mi.Point2f`` uniforms for
     the directions, strata permuted per texel), texel-major, from ``seed``. It depends on nothing
     that moves with the waves: an animation's frames draw it once."""
-    from .._backend import jit_input
-
     F = mi.Float
     side = int(round(np.sqrt(n_dirs)))
     if side * side != n_dirs:
@@ -155,11 +157,6 @@ def traced_direct(
     :class:`~.frames.FrameShared` of an animation's frames, which then share the skylight's
     sample patterns (:func:`sky_samples`)."""
     import mitsuba as mi
-
-    from .denoise import denoise_gain, denoise_radiance
-    from .user_scene import reference_sky_parts
-
-    from .frames import shared_part
 
     sky, sun = reference_sky_parts(exp)
     mask = inside[..., None]

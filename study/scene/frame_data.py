@@ -5,7 +5,11 @@ from __future__ import annotations
 
 from .._progress import Stages
 from .._progress import log as _log
+from .baseline_inputs import inputs_for_shader
 from .frames import FrameShared, frames_of
+from .mitsuba_scene import build_scene, set_waves
+from .reference import load_or_render
+from .shader_inputs import load_or_build_shader_inputs
 
 
 def load_frames(exp, variant: str, cache=None) -> dict:
@@ -15,11 +19,6 @@ def load_frames(exp, variant: str, cache=None) -> dict:
     for another shader), ``timings`` (per frame and summed: ``reference_s``,
     ``inputs_s``) and ``shared`` (the ``FrameShared`` record: what was built once, how often it
     was reused)."""
-    from .baseline_inputs import inputs_for_shader
-    from .mitsuba_scene import build_scene, set_waves
-    from .reference import load_or_render
-    from .shader_inputs import load_or_build_shader_inputs
-
     shared = FrameShared()
     frames = frames_of(exp)
     n = len(frames)

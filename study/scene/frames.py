@@ -33,6 +33,7 @@ from typing import Callable
 
 import numpy as np
 
+from ..config.errors import ExperimentError
 from ..config.experiment import Experiment
 from ..config.schema import SCHEMA
 
@@ -47,8 +48,6 @@ def is_animated(exp: Experiment) -> bool:
 def refuse_animated(exp: Experiment, command: str) -> None:
     """Raise ExperimentError when ``exp`` is animated: ``command`` works on still frames only."""
     if is_animated(exp):
-        from ..config.errors import ExperimentError
-
         raise ExperimentError(
             f"{command} works on one still frame, and {exp.name!r} has animation.frames = "
             f"{exp.animation.frames}: run `study calibrate` on it alone (it fits every "

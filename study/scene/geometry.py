@@ -23,7 +23,6 @@ import math
 
 import numpy as np
 
-
 MAX_COMPONENTS = 64
 
 

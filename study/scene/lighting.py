@@ -67,8 +67,21 @@ from __future__ import annotations
 
 import numpy as np
 
-from .denoise import denoise_gain, denoise_radiance
+from ..config.errors import ExperimentError
 from ..config.experiment import Experiment
+from .denoise import denoise_gain, denoise_radiance
+from .direct_light import traced_direct
+from .frames import shared_part
+from .mitsuba_scene import build_geometry, has_medium, sampler_spp, set_waves, water_medium
+from .topdown import (
+    MAX_OPTICAL_DEPTH,
+    camera_ray_optical_depth,
+    ortho_sensor,
+    to_gl_order,
+    top_down_world_y,
+    underwater_camera_height,
+)
+from .user_scene import dry_camera_height, reference_sky, reference_sky_parts
 
 N_SEEDS = 4  # independent lighting renders (noise estimate from their spread)
 ALBEDO_SPP = 16  # least samples per texel of the dry render that also gives the albedo
@@ -84,9 +97,6 @@ def pool_extent(exp: Experiment) -> tuple[float, float, float, float]:
 def _top_down_scene(mi, exp: Experiment, *, water: bool, integrator: dict, sky=None, medium=None):
     """(scene, the water's medium) lit by ``sky`` ((H, 2H, 3) lat-long; default: the reference's
     envmap); ``medium``: reuse this medium object (default: a new one)."""
-    from .mitsuba_scene import build_geometry, water_medium
-    from .user_scene import reference_sky
-
     if medium is None:
         medium = water_medium(mi, exp) if water else None
     d = {
@@ -106,14 +116,11 @@ def lighting_scene(exp: Experiment, water: bool, sky_only: bool = False):
 
     sky = None
     if sky_only:
-        from .user_scene import reference_sky_parts
-
         sky = reference_sky_parts(exp)[0]
     return _top_down_scene(mi, exp, water=water, integrator=_albedo_aov(exp, water), sky=sky)
 
 
 def _transport(exp: Experiment, water: bool) -> dict:
-    from .mitsuba_scene import has_medium
 
     return {
         "type": "volpath" if water and has_medium(exp) else "path",
@@ -181,8 +188,6 @@ def render_lighting(
     :func:`~.topdown.top_down_world_y` over the pool at ``size`` (default: cast here)."""
     import mitsuba as mi
 
-    from .topdown import ortho_sensor, to_gl_order, top_down_world_y
-
     extent = pool_extent(exp)
     scene, medium = scene if scene is not None else lighting_scene(exp, water)
     direct = None
@@ -208,8 +213,6 @@ def render_lighting(
             _check_lockstep(radiance, img[..., :3], exp)
             radiance = np.maximum(radiance, 0.0)
         if np.any(albedo <= 0.0):
-            from ..config.errors import ExperimentError
-
             raise ExperimentError(
                 "the lighting render found texels of zero floor albedo (floor.tile_albedo, "
                 'floor.albedo_image); use reference.texture_method = "colour" for such '
@@ -230,12 +233,9 @@ def render_lighting(
     if water:
         if world_y is None:
             world_y = top_down_world_y(exp, extent, size)
-        from .topdown import MAX_OPTICAL_DEPTH, camera_ray_optical_depth
 
         optical = camera_ray_optical_depth(exp, y_cam, world_y)
         if optical.max() > MAX_OPTICAL_DEPTH:
-            from ..config.errors import ExperimentError
-
             raise ExperimentError(
                 f"water.sigma_t: the floor's light through the water is lost (optical depth "
                 f"{optical.max():.3g} above the floor, more than {MAX_OPTICAL_DEPTH:g}); the "
@@ -265,8 +265,6 @@ def _check_lockstep(rest: np.ndarray, full: np.ndarray, exp: Experiment) -> None
 def dry_spp(spp: int) -> int:
     """Samples per texel of the dry render for ``reference.wall_spp = spp``: at least
     ``ALBEDO_SPP``, rounded up to the multi-jittered sampler's grid."""
-    from .mitsuba_scene import sampler_spp
-
     return sampler_spp(DRY_SAMPLER, max(spp, ALBEDO_SPP))
 
 
@@ -277,10 +275,6 @@ def render_dry(
     path traced at :func:`dry_spp` multi-jittered spp, and the texel-mean albedo of the first
     surface hit, from the same samples (one scene, one render)."""
     import mitsuba as mi
-
-    from .topdown import ortho_sensor, to_gl_order
-
-    from .user_scene import dry_camera_height
 
     spp = dry_spp(spp)
     scene, _ = _top_down_scene(mi, exp, water=False, integrator=_albedo_aov(exp, False))
@@ -334,9 +328,6 @@ def _match_denoiser(exp, colour, colour_halves, se, inside, n_light: int, info: 
 def _pool_world_y(exp: Experiment, size: int, shared) -> np.ndarray:
     """World y of the first hit from above on the lighting grid (``size`` texels over the pool),
     built once for an animation's frames (it does not move with the waves)."""
-    from .frames import shared_part
-    from .topdown import top_down_world_y
-
     return shared_part(
         shared, exp, "pool_world_y", lambda: top_down_world_y(exp, pool_extent(exp), size)
     )
@@ -353,10 +344,6 @@ def lighting_colour(
     ``shared``: a :class:`~.frames.FrameShared` of an animation's frames, which then share the
     lighting scene (its water moved to each frame's waves), the dry render with its albedo and
     the lighting grid's world y."""
-    from .frames import shared_part
-    from .mitsuba_scene import set_waves
-    from .topdown import top_down_world_y, underwater_camera_height
-
     wet = exp.reference.refraction_lighting == "underwater"
     y_cam = underwater_camera_height(exp) if wet else 100.0
     n_light = min(exp.reference.lighting_size, size)  # never finer than the texture
@@ -428,8 +415,6 @@ def lighting_colour(
     if exp.reference.lighting_denoise != "none" and inside.any():
         colour = _match_denoiser(exp, colour, colour_halves, se, inside, n_light, info)
     if traced:  # the direct sky- and sunlight, ray traced on the texture's texels
-        from .direct_light import traced_direct
-
         args = (exp, extent, size, seed, y_cam, albedo, inside)
         d_mean, d_halves, d_se, d_info = traced_direct(
             *args, scene=scene[0], sun_bounces=sun_bounces, shared=shared

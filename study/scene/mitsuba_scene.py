@@ -32,8 +32,10 @@ import numpy as np
 from shaders_port import perspective_view_proj
 
 from ..config.experiment import Experiment
+from ..config.files import albedo_over_pool, heightmap_floor
 from ..config.floor import floor_height
 from .geometry import Waves, sun_direction
+from .user_scene import mesh_bounds, mesh_shape, reference_sky
 
 WATER_INSET = 1e-3  # the water volume stays this far inside the walls (no coincident faces)
 LEDGE_GAP = 0.02  # the ends of an under-water ledge stay this far from the walls (and the
@@ -50,8 +52,6 @@ def waves_of(exp: Experiment) -> Waves:
 def floor_of(exp: Experiment, x, z) -> np.ndarray:
     f = exp.section("floor")
     if f["shape"] == "heightmap":
-        from ..config.files import heightmap_floor
-
         return heightmap_floor(exp.values, x, z)
     return floor_height(
         f["shape"], f["depth"], f["relief"], f["steps"], f["seed"], exp.pool.half_extent, x, z
@@ -134,8 +134,6 @@ def tile_texture(exp: Experiment, px_per_tile: int = 32) -> np.ndarray:
     the tiles, or ``floor.albedo_image`` resampled."""
     f = exp.section("floor")
     if f["albedo_image"]:
-        from ..config.files import albedo_over_pool
-
         return albedo_over_pool(exp.values)
     hx, hz = exp.pool.half_extent
     nx = max(8, int(round(2 * hx / f["tile_size"] * px_per_tile)))
@@ -222,8 +220,6 @@ def build_geometry(
             @ T().scale([(x_max - x_min) / 2, thick / 2, zl]),
         }
     if mesh and exp.mesh.file:
-        from .user_scene import mesh_bounds, mesh_shape
-
         mesh_bounds(mi, exp)  # loadable and above the water
         out["mesh"] = mesh_shape(mi, exp)
     if water:
@@ -401,7 +397,6 @@ def build_scene(
     height = height or exp.resolution[1]
     c = exp.section("camera")
     d = {"type": "scene", **build_geometry(mi, exp, water=True, water_bsdf=water_bsdf)}
-    from .user_scene import reference_sky
 
     d["sky"] = {"type": "envmap", "bitmap": mi.Bitmap(reference_sky(exp))}
     d["sensor"] = {

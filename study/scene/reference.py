@@ -37,9 +37,11 @@ from pathlib import Path
 
 import numpy as np
 
+from .._backend import jit_input
 from .._io import file_lock, read_exr, write_exr
-from .cache import SCENE_VERSION, cache_dir, versions
 from ..config.experiment import Experiment
+from .cache import SCENE_VERSION, cache_dir, versions
+from .mitsuba_scene import build_scene, sampler_spp
 
 N_SEEDS = 4
 PILOT_SPP = 8
@@ -89,8 +91,6 @@ def pass_spp(exp: Experiment, spp: int) -> int:
     """Samples per pixel of one of ``N_SEEDS`` passes that together take at least ``spp``,
     rounded up to a count ``reference.sampler`` can stratify (:func:`~.mitsuba_scene.sampler_spp`:
     128 spp are 4 passes of 35 for ``multijitter``, of 36 for ``stratified``)."""
-    from .mitsuba_scene import sampler_spp
-
     return sampler_spp(exp.reference.sampler, max(1, math.ceil(spp / N_SEEDS)))
 
 
@@ -100,8 +100,6 @@ def render_passes(
     """(n_passes, H, W, 3) float32 renders with independent seeds ``seed0 + i``
     (of ``scene``, default: ``build_scene(exp)``)."""
     import mitsuba as mi
-
-    from .mitsuba_scene import build_scene
 
     scene = scene if scene is not None else build_scene(exp)
     out = []
@@ -123,9 +121,6 @@ def water_mask(exp: Experiment, width: int, height: int, scene=None) -> np.ndarr
     the scene hash and the size, so a changed scene is cast again)."""
     import drjit as dr
     import mitsuba as mi
-
-    from .._backend import jit_input
-    from .mitsuba_scene import build_scene
 
     memo = (exp.scene_hash(), SCENE_VERSION, width, height)
     if memo in _MASKS:
@@ -160,7 +155,6 @@ def choose_spp(exp: Experiment, progress=None, scene=None) -> tuple[int, dict]:
     ``scene``: the loaded scene of ``exp`` (default: built here)."""
     w, h = exp.resolution
     t0 = time.perf_counter()
-    from .mitsuba_scene import build_scene, sampler_spp
 
     scene = build_scene(exp) if scene is None else scene
     per_pass = sampler_spp(exp.reference.sampler, PILOT_SPP)  # K passes of PILOT_SPP
@@ -203,7 +197,6 @@ def render_reference(
             else (int(exp.reference.spp), {})
         )
     per_pass = pass_spp(exp, spp)
-    from .mitsuba_scene import build_scene
 
     scene = build_scene(exp) if scene is None else scene
     t0 = time.perf_counter()

@@ -35,17 +35,25 @@ import numpy as np
 
 from shaders_port import ShaderInputs, fresnel_lut, ortho_tex_matrix
 
+from .._io import disk_full, file_lock
+from .._progress import Stages
+from ..config.errors import ExperimentError
 from ..config.experiment import Experiment
+from .cache import SCENE_VERSION, cache_dir, versions
+from .frames import shared_part
+from .lighting import lighting_colour
 from .mitsuba_scene import camera_view_proj, waves_of
 from .topdown import (
     MAX_OPTICAL_DEPTH,
     NO_GEOMETRY,
     camera_ray_optical_depth,
+    mesh_reflection_textures,
     render_top_down,
     texture_extent,
     top_down_world_y,
     underwater_camera_height,
 )
+from .user_scene import dry_camera_height, shader_cubemap, sun_of
 
 INPUTS_VERSION = 12  # bump whenever the construction of the inputs below changes
 CUBEMAP_SIZE = 64
@@ -72,9 +80,6 @@ def top_down_colour(
       absorption along the view path only.
     """
     import mitsuba as mi
-
-    from .._progress import Stages
-    from .user_scene import dry_camera_height
 
     st = stages or Stages(quiet=True)
     label = f"shader inputs: top-down render without water ({size}x{size}, {spp} spp)"
@@ -126,8 +131,6 @@ def top_down_colour(
 def sky_cubemap(exp: Experiment, size: int = CUBEMAP_SIZE) -> np.ndarray:
     """(6, size, size, 3) float32 cube map of the sky without the sun, stored y-flipped
     to compensate the shader's ``* vec3(1, -1, 1)`` lookup."""
-    from .user_scene import shader_cubemap
-
     return shader_cubemap(exp, size)
 
 
@@ -144,8 +147,6 @@ def shader_fresnel_lut(exp: Experiment) -> np.ndarray:
 
 def light_of(exp: Experiment) -> tuple[np.ndarray, np.ndarray]:
     """(lightpos (3,), lightcolor (3,)): the sun far away, colour = sun radiance / its max."""
-    from .user_scene import sun_of
-
     sun_dir, rad = sun_of(exp)
     colour = rad / rad.max() if rad.max() > 0 else np.zeros(3)
     return LIGHT_DISTANCE * sun_dir, colour
@@ -167,9 +168,6 @@ def build_shader_inputs(
     offsets (world y, the dry render and albedo, the lighting scene, the lighting grid's world y,
     the skylight's sample patterns, the reflection textures of a mesh, the normal map, the cube
     map, the LUT) is then built once for all frames."""
-    from .._progress import Stages
-    from .frames import shared_part
-
     st = progress or Stages(quiet=True)
     width = width or exp.resolution[0]
     height = height or exp.resolution[1]
@@ -178,8 +176,6 @@ def build_shader_inputs(
     with st.stage("inputs.world_y_s", f"shader inputs: world-y ray cast ({size}x{size})"):
         world_y = shared_part(shared, exp, "world_y", lambda: top_down_world_y(exp, extent, size))
     if exp.reference.texture_method == "lighting":
-        from .lighting import lighting_colour
-
         with st.stage(
             "inputs.lighting_s", f"shader inputs: lighting x albedo texture ({size}x{size})"
         ):
@@ -250,12 +246,9 @@ def _reflection_textures(exp, extent, size: int, world_y, colour, st, shared):
     """The reflection shader's top-down textures: (world y (size, size) float32, colour
     (size, size, 3) float32 linear RGB, their 4x4 texture matrix), from the mesh when there is
     one (built once for an animation's frames), else from the refraction textures."""
-    from .frames import shared_part
-
     if not exp.mesh.file:
         refl_y = np.where(world_y > 0.0, world_y, NO_GEOMETRY).astype(np.float32)
         return refl_y, reflection_colour(world_y, colour), ortho_tex_matrix(*extent)
-    from .topdown import mesh_reflection_textures
 
     with st.stage("inputs.mesh_reflection_s", "shader inputs: reflection textures with the mesh"):
         refl_y, refl_col, refl_extent = shared_part(
@@ -280,8 +273,6 @@ def half_inputs(exp: Experiment, inputs: ShaderInputs) -> tuple[ShaderInputs, Sh
     refraction texture (no ``mesh.file``). Raises ExperimentError when the inputs have no halves
     (``reference.texture_method = "colour"``)."""
     if inputs.refraction_halves is None:
-        from ..config.errors import ExperimentError
-
         raise ExperimentError(
             'fit.input_noise = "decorrelate" needs two independent halves of the '
             'refraction texture, which only reference.texture_method = "lighting" '
@@ -311,8 +302,6 @@ def load_or_build_shader_inputs(
     import hashlib
     import json
 
-    from .cache import SCENE_VERSION, cache_dir, versions
-
     key = hashlib.sha256(
         json.dumps(
             {
@@ -330,7 +319,6 @@ def load_or_build_shader_inputs(
     inputs = _cached_inputs(path, log)
     if inputs is not None:
         return inputs
-    from .._io import disk_full, file_lock
 
     with file_lock(path.with_suffix(".lock"), "shader inputs", log):
         inputs = _cached_inputs(path, log)  # another process may have built them meanwhile

@@ -43,6 +43,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from .._backend import jit_input
 from ..config.experiment import Experiment
 
 CONE_MARGIN_TEXELS = 2.0  # the cone around the sun's texels, grown by this many map texels
@@ -96,7 +97,6 @@ def shape_named(scene, name: str):
 
 
 def _vec(mi, a: np.ndarray):
-    from .._backend import jit_input
 
     return [jit_input(mi.Float, a[:, k]) for k in range(3)]
 
@@ -132,8 +132,6 @@ def _emit(mi, scene, exp: Experiment, sun: np.ndarray, n_photons: int, seeds, y_
     (B N, 3) as Mitsuba's ``Color3f``, radiance x m^2 x sr; batch index (B N,) int), N the square
     number at most ``n_photons``; or None when the sun is below the horizon."""
     import drjit as dr
-
-    from .._backend import jit_input
 
     F = mi.Float
     water = shape_named(scene, "water")
@@ -257,8 +255,6 @@ def sun_walk(
     loop (one kernel), its landings scattered into the texels as they happen. Water that
     scatters (``water.albedo`` > 0) is not modelled here: the caller keeps it path traced."""
     import drjit as dr
-
-    from .._backend import jit_input
 
     F, U = mi.Float, mi.UInt32
     emitted = _emit(mi, scene, exp, sun, n_photons, seeds, y_cam)

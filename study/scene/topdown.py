@@ -8,9 +8,11 @@ from __future__ import annotations
 
 import numpy as np
 
+from .._backend import jit_input
+from .._progress import render_in_passes
 from ..config.experiment import Experiment
-from .mitsuba_scene import build_geometry
-from .user_scene import reflection_extent
+from .mitsuba_scene import build_geometry, floor_of, has_medium, water_medium
+from .user_scene import reference_sky, reflection_extent
 
 NO_GEOMETRY = -1e3  # world y of a texel with nothing below it (the shaders' sentinel)
 MAX_OPTICAL_DEPTH = 40.0  # exp(40) = 2e17: beyond it the under-water render holds no floor light
@@ -104,8 +106,6 @@ def top_down_world_y(exp: Experiment, extent, size: int, mesh: bool = False) -> 
     the user's mesh above the water is left out unless ``mesh``."""
     import mitsuba as mi
 
-    from .._backend import jit_input
-
     scene = mi.load_dict({"type": "scene", **build_geometry(mi, exp, water=False, mesh=mesh)})
     x0, z0, x1, z1 = extent
     c = (np.arange(size) + 0.5) / size
@@ -141,8 +141,6 @@ def render_top_down(
     y_cam: float = 100.0,
     progress=None,
 ) -> np.ndarray:
-    from .mitsuba_scene import has_medium, water_medium
-    from .user_scene import reference_sky
 
     medium = water_medium(mi, exp) if water else None
     d = {
@@ -156,7 +154,6 @@ def render_top_down(
     }
     scene = mi.load_dict(d)
     sensor = ortho_sensor(mi, extent, size, spp, seed, y_cam=y_cam, medium=medium)
-    from .._progress import render_in_passes
 
     img = render_in_passes(mi, scene, sensor, spp, seed, progress)
     return to_gl_order(mi, sensor, img, extent)
@@ -165,8 +162,6 @@ def render_top_down(
 def underwater_camera_height(exp: Experiment) -> float:
     """Height of the under-water orthographic camera: below the lowest wave trough, above the
     floor."""
-    from .mitsuba_scene import floor_of
-
     y_cam = -exp.waves.amplitude - 0.02
     hx, hz = exp.pool.half_extent
     x, z = np.meshgrid(np.linspace(-hx, hx, 129), np.linspace(-hz, hz, 129))

@@ -26,7 +26,7 @@ import numpy as np
 from ..config import files as uf
 from ..config.errors import ExperimentError
 from ..config.experiment import Experiment
-from .geometry import envmap_image, sky_radiance, sun_direction
+from .geometry import cubemap_directions, envmap_image, sky_radiance, sun_direction
 
 SKY_HEIGHT = 512  # rows of the built-in gradient sky's lat-long map (0.35 degree texels)
 CUBE_SUPERSAMPLE = 4  # lookups per cube-map texel side when resampling a sky file
@@ -113,8 +113,6 @@ def shader_cubemap(exp: Experiment, size: int) -> np.ndarray:
     """(6, size, size, 3) float32 cube map of the sky without the sun, stored y-flipped for the
     shader's ``* vec3(1, -1, 1)`` lookup. A sky file is averaged over CUBE_SUPERSAMPLE^2
     directions per texel (the map is usually finer than the cube map)."""
-    from .geometry import cubemap_directions
-
     if not has_file(exp, "sky.envmap"):
         d = cubemap_directions(size) * np.array([1.0, -1.0, 1.0])
         return shader_sky(exp, d).astype(np.float32)

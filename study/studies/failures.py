@@ -61,6 +61,20 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from shaders_port import Constants
+from shaders_port.pipeline.raster import rasterize_water
+from shaders_port.variants import get_variant
+
+from .._backend import drjit_backend
+from .._io import write_json
+from .._metrics import flip_map
+from ..config.experiment import is_user_shader, load_experiments, load_user_shader
+from ..fit.build import build_model
+from ..fit.model import constants_from_experiment, constants_json
+from ..report.failures import failures_figure, scenes_of, write_failures_report
+from ..scene.mitsuba_scene import build_geometry
+from ..sweep import load_scene, run_sweep, scene_spec, write_table
+
 GRAZING_RY = 0.25
 DENOMINATOR_EPS = 1e-3
 HIDDEN_OFFSET = 1e-3
@@ -269,8 +283,6 @@ def hidden_from_top_down(exp, origins: np.ndarray, directions: np.ndarray) -> np
     (``study._backend.init_backend``)."""
     import mitsuba as mi
 
-    from ..scene.mitsuba_scene import build_geometry
-
     o = np.asarray(origins, np.float64)
     d = np.asarray(directions, np.float64)
     ok = np.isfinite(d).all(1) & (d[:, 1] < 0)
@@ -328,11 +340,6 @@ def catalogue_scene(
     ``reference`` (H, W, 3) linear RGB. ``depth_complexity=False`` skips the Mitsuba queries."""
     import warnings
 
-    from shaders_port.pipeline.raster import rasterize_water
-
-    from .._metrics import flip_map
-    from ..fit.build import build_model
-
     w, h = exp.resolution
     model = build_model(exp, inputs, reference, shader=shader, backend=backend, resolution=(w, h))
     with warnings.catch_warnings():
@@ -388,9 +395,6 @@ def _user_maps(exp, model, constants: dict, backend: str) -> dict:
     colour, coverage and non-finite pixels with ``constants``, and the refracted ray of the
     study's ``water_refraction`` port at the experiment's start constants (the scene's waves
     and refraction index): ``refract_k``, ``cos_eye_normal``, ``refr_dir_*``."""
-    from shaders_port.variants import get_variant
-
-    from ..fit.model import constants_from_experiment
 
     mine = model.user_shader.render(model.inputs, constants, backend=backend).numpy()
     study = (
@@ -412,14 +416,6 @@ def failures_job(job: dict) -> dict:
     ``Constants.to_dict()`` or None: the experiment's start constants), ``out`` (folder). Writes
     ``<out>/<name>/failures.png``; returns the scene's figures and per class its table row."""
     from pathlib import Path
-
-    from shaders_port import Constants
-
-    from .._backend import drjit_backend
-    from ..fit.model import constants_from_experiment
-    from ..report.failures import failures_figure
-    from ..config.experiment import is_user_shader, load_user_shader
-    from ..sweep import load_scene
 
     exp, ref, inputs = load_scene(job["scene"], job["variant"])
     name = job.get("shader") or exp.fit.shader
@@ -517,18 +513,10 @@ def run_failures(
     import sys
     from pathlib import Path
 
-    from .._io import write_json
-    from ..fit.model import constants_json
-    from ..report.failures import scenes_of, write_failures_report
-    from ..config.experiment import is_user_shader, load_experiments
-    from ..sweep import run_sweep, scene_spec, write_table
-
     log = log or (lambda m: print(m, file=sys.stderr, flush=True))
     exps = load_experiments(experiments, overrides)
     names = [e.name for e in exps]
     if shader is not None and not is_user_shader(shader):
-        from shaders_port.variants import get_variant
-
         get_variant(shader)
     out_arg, out = str(out), Path(out).resolve()
     out.mkdir(parents=True, exist_ok=True)

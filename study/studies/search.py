@@ -37,6 +37,8 @@ import numpy as np
 
 from shaders_port import space as _space
 
+from ..fit.model import constants_from_experiment
+from ..sweep import run_sweep
 from .tradeoff_jobs import SEED_SCHEDULE, original_schedule, schedules, screen_job
 
 # representatives of every source's technique screened in the first round: each alone
@@ -193,7 +195,6 @@ class Search:
     recommendation. Screen rows accumulate in ``out/screen.parquet`` (a re-run resumes)."""
 
     def __init__(self, exps, specs, client, out, log, fix=None, variants=None):
-        from ..fit.model import constants_from_experiment
 
         self.exps, self.specs, self.client, self.out, self.log = exps, specs, client, out, log
         self.fix, self.variants = fix or {}, variants
@@ -202,7 +203,6 @@ class Search:
         self.rounds: dict[str, int] = {}
 
     def _run(self, jobs: list, label: str) -> list[dict]:
-        from ..sweep import run_sweep
 
         if not jobs:
             return []

@@ -36,6 +36,11 @@ import math
 import statistics
 from pathlib import Path
 
+from .._io import write_json
+from .._progress import log as _log
+from ..config.experiment import load_experiment
+from ..report.stability import noise_figure, solver_figure, spread_figure, write_stability_report
+from ..sweep import run_sweep, scene_spec
 from .stability_jobs import (
     latin_hypercube,
     loss_job,
@@ -44,7 +49,6 @@ from .stability_jobs import (
     quantile,
     start_boxes,
 )
-from .._progress import log as _log
 
 SOLVERS = ("levenberg_marquardt", "gauss_newton", "dogleg", "bfgs", "nelder_mead", "adam")
 SUCCESS = 1e-3
@@ -230,7 +234,6 @@ def plan_noise(
     resolution: int,
     inputs=("reference", "texture"),
 ) -> list[dict]:
-    from ..sweep import scene_spec
 
     res = [f"resolution=[{resolution},{resolution}]", f"fit.resolution=[{resolution},{resolution}]"]
     jobs = []
@@ -323,9 +326,6 @@ def _multistart_phase(
     client, out, specs, exps, starts, solvers, adam_lrs, max_steps, nm_steps, log
 ) -> dict:
     """The multi-start phase: its sweep (multistart.parquet), analysis and two figures."""
-    from ..report.stability import solver_figure, spread_figure
-    from ..sweep import run_sweep
-
     jobs = plan_multistart(specs, exps, starts, solvers, adam_lrs, max_steps, nm_steps)
     rows = run_sweep(
         multistart_job,
@@ -350,9 +350,6 @@ def _multistart_phase(
 def _noise_phase(client, out, experiment, overrides, noise, log) -> dict:
     """The noise phase on the first experiment: its sweep (noise.parquet), analysis, figure.
     ``noise``: (spp list, fixed spp, seeds, resolution, inputs varied)."""
-    from ..report.stability import noise_figure
-    from ..sweep import run_sweep
-
     spp, fixed_spp, seeds, resolution, inputs = noise
     jobs = plan_noise(str(experiment), overrides, list(spp), fixed_spp, seeds, resolution, inputs)
     rows = run_sweep(
@@ -392,12 +389,6 @@ def run_stability(
 ) -> dict:
     """Run the study (see the module doc); returns the summary written to ``summary.json``
     (``command``: the command line that ran it, quoted in the report)."""
-    from .._io import write_json
-    from ..config.experiment import load_experiment
-    from ..sweep import run_sweep, scene_spec
-    from ..sweep.cluster import open_client
-    from ..report.stability import write_stability_report
-
     _check_arguments(phases, solvers, starts, noise_seeds, noise_inputs)
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
@@ -411,6 +402,9 @@ def run_stability(
     }
     if command:
         summary["command"] = command
+    # local: distributed takes 0.65 s to import, paid only when a sweep runs
+    from ..sweep.cluster import open_client
+
     with open_client(scheduler, workers, variant, log=log) as client:
         if "loss" in phases:
             jobs = plan_loss(specs, exps)

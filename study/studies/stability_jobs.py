@@ -28,6 +28,16 @@ import time
 
 import numpy as np
 
+from .._backend import drjit_backend
+from .._metrics import errors
+from ..config.experiment import is_user_shader, load_user_shader
+from ..fit.build import build_model
+from ..fit.calibrate import DISCRETE, calibrate_experiment, make_problem, scene_frozen
+from ..fit.losses import transformed
+from ..fit.model import expand_parameters, get_value
+from ..fit.solvers import FTOL, FTOL_SE, FTOL_WINDOW, fit
+from ..sweep import load_scene
+
 # Start box per constant (physical units) and whether to sample it log-uniformly. Wide enough
 # to hold every value fitted on the shipped scenes, narrow enough to stay physically plausible.
 BOX = {
@@ -49,10 +59,6 @@ def start_boxes(exp) -> dict:
     :data:`BOX` for its own constants (``fit.parameters``, without the step counts and what the
     scene freezes); for a user's shader, each declared constant's range, sampled log-uniformly
     when it starts above 0 and spans two decades or more."""
-    from ..fit.calibrate import DISCRETE, scene_frozen
-    from ..fit.model import expand_parameters
-    from ..config.experiment import is_user_shader, load_user_shader
-
     if is_user_shader(exp.fit.shader):
         shader = load_user_shader(exp.values)
         return {
@@ -107,10 +113,6 @@ def failure_class(converged: bool, message: str, iterations: int, max_steps: int
 
 
 def _model(job, resolution=None, loss: str = "linear"):
-    from .._backend import drjit_backend
-    from ..fit.build import build_model
-    from ..fit.losses import transformed
-    from ..sweep import load_scene
 
     mv = job.get("mitsuba_variant", "llvm_ad_rgb")
     exp, ref, inputs = load_scene(job["scene"], mv)
@@ -121,9 +123,6 @@ def _model(job, resolution=None, loss: str = "linear"):
 def multistart_job(job: dict) -> dict:
     """One fit: ``job = {"scene", "solver", "start": {name: value}, "names", "max_steps",
     "lr" (Adam), "start_index"}``."""
-    from ..fit.calibrate import make_problem
-    from ..fit.solvers import FTOL, FTOL_SE, FTOL_WINDOW, fit
-
     exp, _, _, model = _model(job)
     start = model.start_constants(exp)
     problem = make_problem(model, start, job["names"], progress=False)
@@ -161,9 +160,6 @@ def multistart_job(job: dict) -> dict:
 def noise_job(job: dict) -> dict:
     """The calibration against the job's scene (its spp, texture spp and seed are in the scene's
     overrides): constants, statuses and relative standard errors."""
-    from ..fit.calibrate import calibrate_experiment
-    from ..fit.model import get_value
-
     exp, ref, _, model = _model(job)
     t0 = time.perf_counter()
     cal = calibrate_experiment(model, exp)
@@ -179,10 +175,6 @@ def noise_job(job: dict) -> dict:
 
 def loss_job(job: dict) -> dict:
     """The calibration with residual ``job["loss"]``, scored at full resolution."""
-    from .._metrics import errors
-    from ..fit.calibrate import calibrate_experiment
-    from ..fit.model import get_value
-
     exp, ref, inputs, model = _model(job, loss=job["loss"])
     t0 = time.perf_counter()
     cal = calibrate_experiment(model, exp)

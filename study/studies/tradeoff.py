@@ -42,11 +42,28 @@ from __future__ import annotations
 import time
 from pathlib import Path
 
+from shaders_port import Constants
+from shaders_port.space import configurations, name_of, parse_fix
+
+from .._backend import init_backend
+from .._io import write_json
+from .._metrics import errors
+from .._progress import log as _log
+from ..config.experiment import load_experiments
+from ..export.gl_check import gl_check, target_checks
+from ..export.shaders import export_shaders
+from ..fit.model import constants_from_experiment
+from ..report.calibration import comparison_figure
+from ..report.tradeoff import pareto_figure, write_tradeoff_report
+from ..report.tradeoff_motion import motion_figure
+from ..scene.baseline_inputs import inputs_for_shader
+from ..scene.frames import is_animated
+from ..sweep import load_scene, run_sweep, scene_spec
+from .search import Search
 from .tradeoff_analysis import COSTS, analyse, config_label, constants_of, is_user, point_record
-from .tradeoff_jobs import SEED_SCHEDULE, anchor_job, point_job, schedules
+from .tradeoff_jobs import SEED_SCHEDULE, anchor_job, job_model, point_job, schedules
 from .tradeoff_motion import run_motion, still_overrides
 from .tradeoff_user import export_user, user_image, user_jobs, user_point_job
-from .._progress import log as _log
 
 # [tradeoff] keys that choose the jobs, never what one job computes
 PLAN_KEYS = frozenset(
@@ -106,13 +123,6 @@ def run_tradeoff(
     ``search``: 'adaptive' or 'exhaustive' (default: ``tradeoff.search``); ``budget``: cost
     measure -> limit (``fetches_mean``, ``gl_norm_ms_1080p``): recommend the lowest FLIP
     within it."""
-    from shaders_port.space import configurations, name_of, parse_fix
-
-    from .._io import write_json
-    from ..config.experiment import load_experiments
-    from ..scene.frames import is_animated
-    from ..sweep import scene_spec
-    from ..sweep.cluster import open_client
 
     exps = load_experiments(experiments, overrides)
     names = [e.name for e in exps]
@@ -135,6 +145,9 @@ def run_tradeoff(
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     t0 = time.perf_counter()
+    # local: distributed takes 0.65 s to import, paid only when a sweep runs
+    from ..sweep.cluster import open_client
+
     with open_client(scheduler, workers, variant, log=log) as client:
         if mode == "exhaustive":
             shaders = chosen or [name_of(c) for c in configurations(fix)]
@@ -160,8 +173,6 @@ def run_tradeoff(
         if rec and is_user(rec["variant"]):  # the recommendation is the user's file
             summary["exports"][name] = {**mine, "folder": str(Path(mine["file"]).parent)}
     summary["images"], summary["panels"] = side_by_side(exps, specs, summary, rows, out, variant)
-    from ..report.tradeoff import pareto_figure, write_tradeoff_report
-    from ..report.tradeoff_motion import motion_figure
 
     pareto_figure(out / "pareto.png", recs, summary)
     motion_figure(out / "motion.png", summary)
@@ -191,9 +202,6 @@ def check_budget(budget: dict | None) -> dict:
 def _exhaustive(exps, specs, client, out, log, shaders: list) -> list[dict]:
     """Every configuration of ``shaders`` and every schedule in full: anchor fits at the
     original's schedule, then every point warm-started from its anchor."""
-    from ..fit.model import constants_from_experiment
-    from ..sweep import run_sweep
-
     names = [e.name for e in exps]
     anchor_jobs = [
         {
@@ -240,9 +248,6 @@ def _exhaustive(exps, specs, client, out, log, shaders: list) -> list[dict]:
 def _adaptive(exps, specs, client, out, log, fix: dict, chosen):
     """The adaptive search (``study.studies.search``): walk, schedules, then the finalists in
     full. Returns (the full rung's rows, the ``Search``)."""
-    from ..sweep import run_sweep
-    from .search import Search
-
     searcher = Search(exps, specs, client, out, log, fix=fix, variants=chosen)
     finalists = []
     for i in range(len(exps)):
@@ -265,8 +270,6 @@ def _adaptive(exps, specs, client, out, log, fix: dict, chosen):
 def _user_points(exps, specs, client, out: Path, log) -> list[dict]:
     """The user's own shader of each experiment that has one, measured in full
     (``tradeoff_user``); no rows when none has."""
-    from ..sweep import run_sweep
-
     jobs = user_jobs(exps, specs)
     if not jobs:
         return []
@@ -291,12 +294,6 @@ def export_recommended(
 ) -> dict:
     """Export each scene's recommended constants (``shaders/`` or ``shaders/<name>/``) and check
     the export on llvmpipe against the port."""
-    from shaders_port import Constants
-
-    from .._backend import init_backend
-    from ..export.shaders import export_shaders
-    from ..export.gl_check import gl_check, target_checks
-    from ..sweep import load_scene
 
     init_backend(variant)
     result = {}
@@ -319,7 +316,6 @@ def export_recommended(
         constants = Constants.from_dict(constants_of(row))
         folder = out / "shaders" if len(exps) == 1 else out / "shaders" / exp.name
         export_shaders(constants, folder, [rec["variant"]], targets=None)
-        from ..scene.baseline_inputs import inputs_for_shader
 
         exp_s, _, inputs = load_scene(spec, variant)
         inputs = inputs_for_shader(exp_s, inputs, rec["variant"], variant, log=log)
@@ -358,13 +354,6 @@ def side_by_side(exps, specs, summary: dict, rows: list, out: Path, variant: str
     Returns ({scene: file name}, {scene: {panel title: {"flip", "rmse"}}}); the first panel's
     FLIP is the original shader at its own constants, the baseline of every "halves the
     original's error" claim."""
-    from shaders_port import Constants
-
-    from .._metrics import errors
-    from ..fit.model import constants_from_experiment
-    from ..report.calibration import comparison_figure
-    from ..sweep import load_scene
-    from .tradeoff_jobs import job_model
 
     result, scores = {}, {}
     for exp, spec in zip(exps, specs):

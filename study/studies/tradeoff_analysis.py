@@ -7,6 +7,8 @@ from __future__ import annotations
 
 import statistics
 
+from shaders_port import space as _space
+
 from .pareto import pareto_front, recommend
 
 COST = "fetches_mean"
@@ -153,8 +155,6 @@ def joint_points(ok: list, names: list) -> list:
 def sources_alone(pts: list, brief) -> list[dict]:
     """Each source's technique alone (``shaders_port.space.ALONE``) among ``pts`` at its
     original schedule: ``brief`` of the point plus ``source`` (its label there)."""
-    from shaders_port import space as _space
-
     out = []
     for source, choices in _space.ALONE.items():
         try:

@@ -32,6 +32,17 @@ import time
 
 import numpy as np
 
+from shaders_port import Constants
+from shaders_port.variants import get_variant
+
+from .._backend import drjit_backend
+from .._metrics import errors, flip_map, information_criteria, rmse
+from ..config.experiment import fit_parameters
+from ..fit.calibrate import calibrate_experiment
+from ..fit.model import ShaderModel
+from ..scene.baseline_inputs import inputs_for_shader
+from ..sweep import load_scene
+
 SEED_SCHEDULE = {"steps_grazing": 10.0, "steps_steep": 3.0, "loop_cap": 40}
 SEED_REFL_SCHEDULE = {"refl_steps_steep": 0.5, "refl_steps_grazing": 4.0, "refl_loop_cap": 60}
 GL_SIZES = {"512": (512, 512), "1080p": (1920, 1080)}
@@ -63,8 +74,6 @@ FIXED = {"kind": "fixed", "scale": None, "schedule": {}}  # a shader without a r
 def original_schedule(variant_name: str) -> dict:
     """The original shader's schedule for a variant, as :func:`schedules` lists it (``scale
     1``; its only one, ``fixed``, if it has no raymarch)."""
-    from shaders_port.variants import get_variant
-
     variant = get_variant(variant_name)
     if not {"steps_grazing", "steps_steep", "loop_cap"} <= set(variant.schedule):
         return dict(FIXED)
@@ -75,8 +84,6 @@ def schedules(exp, variant_name: str) -> list[dict]:
     """The schedules of one variant: ``{"kind": grid|scale|converged, "scale": f|None,
     "schedule": {constant: value}}``, distinct, in a stable order (the seed's one is
     ``scale 1``)."""
-    from shaders_port.variants import get_variant
-
     variant = get_variant(variant_name)
     if original_schedule(variant_name)["kind"] == "fixed":
         return [dict(FIXED)]
@@ -112,9 +119,6 @@ def _fit_names(exp, variant_name: str) -> list[str]:
     """``fit.parameters`` the variant reads (unset, as beside a user's own shader: all it
     reads), without its schedule constants (the sweep sets those), plus the variant's own
     ``fit_parameters`` (e.g. the baseline's distortions)."""
-    from shaders_port.variants import get_variant
-
-    from ..config.experiment import fit_parameters
 
     v = get_variant(variant_name)
     listed = exp.fit.parameters
@@ -126,11 +130,6 @@ def _fit_names(exp, variant_name: str) -> list[str]:
 
 
 def job_model(job, resolution=None):
-    from .._backend import drjit_backend
-    from ..fit.model import ShaderModel
-    from ..sweep import load_scene
-
-    from ..scene.baseline_inputs import inputs_for_shader
 
     mv = job.get("mitsuba_variant", "llvm_ad_rgb")
     exp, ref, inputs = load_scene(job["scene"], mv)
@@ -148,9 +147,6 @@ def job_model(job, resolution=None):
 
 def anchor_job(job: dict) -> dict:
     """Phase 1: fit the continuous constants at the seed's schedule; returns them and the fit."""
-    from shaders_port import Constants
-
-    from ..fit.calibrate import calibrate_experiment
 
     exp, _, _, model = job_model(job)
     start = Constants.from_dict(job["start"])
@@ -167,17 +163,12 @@ def anchor_job(job: dict) -> dict:
 def point_job(job: dict) -> dict:
     """Phase 2: one (scene, variant, schedule) point, refitted warm from the anchor and measured
     (see the module doc). Returns flat figures plus the fitted constants."""
-    from shaders_port import Constants
-
-    from .._metrics import errors
-    from ..fit.calibrate import calibrate_experiment
 
     exp, ref, inputs, model = job_model(job)
     start = Constants.from_dict(job["start"]).replace(**job["schedule"])
     t0 = time.perf_counter()
     cal = calibrate_experiment(model, exp, start, _fit_names(exp, job["variant"]))
     fit_s = time.perf_counter() - t0
-    from .._metrics import information_criteria
 
     fitted_names = [n for n, p in cal.parameters.items() if p["status"] in ("fitted", "bound")]
     ic = information_criteria(model.residual(cal.fitted), len(fitted_names))
@@ -221,11 +212,6 @@ def screen_job(job: dict) -> dict:
     of rays not crossing the floor, ``flip_blocks`` (the FLIP map averaged over
     ``SCREEN_BLOCK`` x ``SCREEN_BLOCK`` pixel blocks, row-major, NaN where a block has no
     water: the paired noise estimate of ``study.studies.search``) and the fitted constants."""
-    from shaders_port import Constants
-
-    from .._metrics import flip_map, rmse
-    from ..fit.calibrate import calibrate_experiment
-    from ..sweep import load_scene
 
     exp, _, _ = load_scene(job["scene"], job.get("mitsuba_variant", "llvm_ad_rgb"))
     w, h = exp.fit.resolution
@@ -271,8 +257,6 @@ def block_means(values: np.ndarray, block: int) -> np.ndarray:
 def frame_times(variant_name: str, inputs, constants, repeats: int) -> dict:
     """GL frame times (ms) of the variant at each ``GL_SIZES`` beside the fixed reference shader
     (run before and after it), their ratio, and the port's frame time at 512x512."""
-    from shaders_port.variants import get_variant
-
     variant = get_variant(variant_name)
     return timed_frames(
         lambda frame: variant.gl_renderer(frame),
@@ -287,9 +271,6 @@ def timed_frames(gl_renderer, constants, render, inputs, repeats: int) -> dict:
     """What :func:`frame_times` measures, of any shader: ``gl_renderer(inputs)`` a
     ``GLRenderer`` drawing it with ``constants`` (None: its source as written), ``render(inputs)``
     its Dr.Jit render (a ``ShaderOutput``)."""
-    from shaders_port import Constants
-    from shaders_port.variants import get_variant
-
     refv = get_variant(REFERENCE_SHADER)
     out = {}
     for label, (w, h) in GL_SIZES.items():

@@ -32,7 +32,20 @@ import math
 
 import numpy as np
 
-from .tradeoff_analysis import COST, is_user
+from shaders_port import Constants
+from shaders_port.variants import get_variant
+
+from .._backend import drjit_backend
+from .._metrics import errors, temporal_errors
+from ..config.experiment import load_experiment
+from ..fit.model import ShaderModel
+from ..scene.baseline_inputs import inputs_for_shader
+from ..scene.frame_data import load_frames
+from ..scene.frames import is_animated
+from ..sweep import run_sweep, scene_spec
+from .tradeoff_analysis import COST, config_label, constants_of, is_user, point_record
+from .tradeoff_jobs import original_schedule, scaled_schedule
+from .tradeoff_user import user_image
 
 MOTION = "animation.frames"
 
@@ -46,8 +59,6 @@ def prepare_frames_job(job: dict) -> dict:
     """Render (or find cached) every frame's reference and shader inputs of the animated
     ``job["scene"]``, and each frame's extra buffers for the shaders of ``job["variants"]``;
     returns the frame count and the stage seconds of ``load_frames``."""
-    from ..scene.baseline_inputs import inputs_for_shader
-
     mv = job.get("mitsuba_variant", "llvm_ad_rgb")
     _, data = _frames(json.dumps(job["scene"], sort_keys=True), mv)
     for v in job["variants"]:
@@ -59,8 +70,6 @@ def prepare_frames_job(job: dict) -> dict:
 
 @functools.lru_cache(maxsize=1)
 def _frames(text: str, mv: str):
-    from ..config.experiment import load_experiment
-    from ..scene.frame_data import load_frames
 
     spec = json.loads(text)
     exp = load_experiment(spec["experiment"], spec.get("overrides") or [])
@@ -71,12 +80,6 @@ def _render_frames(job: dict, data: dict, mv: str, schedules: tuple = (None,)) -
     """The point's constants on every frame at ``resolution``, once per entry of ``schedules``
     (None: its own schedule; else a schedule in place of it), each frame's model built once:
     ([images per frame] per schedule, [scored mask per frame])."""
-    from shaders_port import Constants
-
-    from .._backend import drjit_backend
-    from ..fit.model import ShaderModel
-    from ..scene.baseline_inputs import inputs_for_shader
-    from .tradeoff_user import user_image
 
     images, masks = [[] for _ in schedules], []
     for e, base, ref in zip(data["frames"], data["base"], data["refs"]):
@@ -101,8 +104,6 @@ def _render_frames(job: dict, data: dict, mv: str, schedules: tuple = (None,)) -
 def motion_job(job: dict) -> dict:
     """One point on every frame (module doc): ``job`` has the animated ``scene``, the
     ``variant`` and its fitted ``constants``. Returns flat figures and per-frame lists."""
-    from .._metrics import errors, temporal_errors
-
     mv = job.get("mitsuba_variant", "llvm_ad_rgb")
     _, data = _frames(json.dumps(job["scene"], sort_keys=True), mv)
     refs = data["refs"]
@@ -228,9 +229,6 @@ def _converged(exp, row: dict) -> dict | None:
     """The converged raymarch's schedule (``tradeoff.converged_scale`` times the original's) for
     a full point of a shader with a raymarch; None for a loopless shader, a user's shader and
     the converged point itself."""
-    from shaders_port.variants import get_variant
-
-    from .tradeoff_jobs import original_schedule, scaled_schedule
 
     v = row["job.variant"]
     if is_user(v) or row["job.kind"] == "converged" or original_schedule(v)["kind"] == "fixed":
@@ -244,10 +242,6 @@ def run_motion(exps, experiments, overrides, rows, recs, summary, client, out, l
     ``summary["scenes"][name]["motion"]`` (:func:`motion_findings`) and ``summary["motion"]``
     (frames, seconds) set. Nothing for still experiments."""
     import time
-
-    from ..scene.frames import is_animated
-    from ..sweep import run_sweep, scene_spec
-    from .tradeoff_analysis import config_label, constants_of, point_record
 
     animated = [(e, scene_spec(p, overrides)) for e, p in zip(exps, experiments) if is_animated(e)]
     if not animated:

@@ -27,6 +27,15 @@ from pathlib import Path
 
 import numpy as np
 
+from .._io import write_text_atomic
+from .._metrics import erode, errors, information_criteria
+from ..config.experiment import is_user_shader, load_user_shader
+from ..export.gl_check import gl_check_user
+from ..fit.build import build_model
+from ..fit.calibrate import calibrate_experiment
+from ..fit.model import get_value
+from ..scene.reference import water_mask
+from ..sweep import load_scene
 from .tradeoff_analysis import USER, constants_of, is_user
 from .tradeoff_jobs import timed_frames
 
@@ -34,7 +43,6 @@ __all__ = ["user_jobs", "user_point_job", "user_image", "export_user", "is_user"
 
 
 def _shader_of(exp):
-    from ..config.experiment import is_user_shader, load_user_shader
 
     return load_user_shader(exp.values) if is_user_shader(exp.fit.shader) else None
 
@@ -67,9 +75,6 @@ def _scored_mask(exp, out: dict) -> np.ndarray:
     """(H, W) bool at the size of the render ``out`` (``ShaderOutput.numpy()``): the shader's
     coverage and the reference's water, eroded by one pixel (the mask
     ``study.fit.model.ShaderModel`` scores the study's shaders on)."""
-    from .._metrics import erode
-    from ..scene.reference import water_mask
-
     cover = out["mask"] > 0.5
     return erode(cover & water_mask(exp, cover.shape[1], cover.shape[0]), 1)
 
@@ -77,12 +82,6 @@ def _scored_mask(exp, out: dict) -> np.ndarray:
 def user_point_job(job: dict) -> dict:
     """The user's shader fitted and measured (module doc); flat figures, ``fitted`` (scalar name
     -> value) and ``status_of`` (scalar name -> fitted | bound | frozen)."""
-    from .._metrics import errors, information_criteria
-    from ..fit.build import build_model
-    from ..fit.calibrate import calibrate_experiment
-    from ..fit.model import get_value
-    from ..sweep import load_scene
-
     exp, ref, inputs = load_scene(job["scene"], job.get("mitsuba_variant", "llvm_ad_rgb"))
     model = build_model(exp, inputs, ref.image)
     t0 = time.perf_counter()
@@ -141,10 +140,6 @@ def export_user(exps, specs, rows: list, out: Path, variant: str, log) -> dict:
     (one experiment) or ``shaders/<name>/``, every other byte as the user wrote it, and that
     file on OpenGL against the executor at ``resolution`` (``gl_check_user``). Returns
     {experiment: {"file", "variant", "label", "constants", "gl_check"}}."""
-    from .._io import write_text_atomic
-    from ..export.gl_check import gl_check_user
-    from ..sweep import load_scene
-
     result = {}
     for exp, spec in zip(exps, specs):
         shader = _shader_of(exp)

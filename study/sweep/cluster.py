@@ -26,6 +26,8 @@ import os
 
 from distributed.diagnostics.plugin import WorkerPlugin
 
+from .._backend import init_backend
+
 SCHEDULER_ENV = "STUDY_SCHEDULER"
 
 
@@ -48,7 +50,6 @@ class BackendPlugin(WorkerPlugin):
         self.variant, self.threads = variant, int(threads)
 
     def setup(self, worker=None):
-        from .._backend import init_backend
 
         init_backend(self.variant)
         import drjit as dr

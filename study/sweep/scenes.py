@@ -12,7 +12,11 @@ from __future__ import annotations
 import functools
 import json
 import os
+
 from .._progress import log as _log
+from ..config.experiment import load_experiment
+from ..scene.reference import load_or_render
+from ..scene.shader_inputs import load_or_build_shader_inputs
 
 
 def scene_spec(experiment, overrides=()) -> dict:
@@ -41,9 +45,6 @@ def prepare_scene(spec: dict, variant: str = "llvm_ad_rgb") -> dict:
 
 @functools.lru_cache(maxsize=4)
 def _load(text: str, variant: str):
-    from ..config.experiment import load_experiment
-    from ..scene.reference import load_or_render
-    from ..scene.shader_inputs import load_or_build_shader_inputs
 
     spec = json.loads(text)
     exp = load_experiment(spec["experiment"], spec.get("overrides") or [])
