@@ -48,7 +48,6 @@ SUN_CONTRAST = 20.0  # ... whose brightest texel is this many times the median, 
 
 
 def _error(key: str, path, msg: str):
-
     return ExperimentError(f"{key}: {msg} (file {path})")
 
 

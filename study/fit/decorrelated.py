@@ -202,5 +202,4 @@ def texture_half_models(exp, inputs, reference: np.ndarray, **kwargs) -> tuple |
 
 
 def _models_on_halves(exp, inputs, reference: np.ndarray, **kwargs) -> tuple:
-
     return tuple(build_model(exp, h, reference, **kwargs) for h in half_inputs(exp, inputs))

@@ -121,7 +121,6 @@ def lighting_scene(exp: Experiment, water: bool, sky_only: bool = False):
 
 
 def _transport(exp: Experiment, water: bool) -> dict:
-
     return {
         "type": "volpath" if water and has_medium(exp) else "path",
         "max_depth": exp.reference.max_depth,

@@ -97,7 +97,6 @@ def shape_named(scene, name: str):
 
 
 def _vec(mi, a: np.ndarray):
-
     return [jit_input(mi.Float, a[:, k]) for k in range(3)]
 
 

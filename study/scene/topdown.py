@@ -141,7 +141,6 @@ def render_top_down(
     y_cam: float = 100.0,
     progress=None,
 ) -> np.ndarray:
-
     medium = water_medium(mi, exp) if water else None
     d = {
         "type": "scene",

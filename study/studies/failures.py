@@ -72,6 +72,7 @@ from ..config.experiment import is_user_shader, load_experiments, load_user_shad
 from ..fit.build import build_model
 from ..fit.model import constants_from_experiment, constants_json
 from ..report.failures import failures_figure, scenes_of, write_failures_report
+from ..scene.baseline_inputs import inputs_for_shader
 from ..scene.mitsuba_scene import build_geometry
 from ..sweep import load_scene, run_sweep, scene_spec, write_table
 
@@ -419,6 +420,7 @@ def failures_job(job: dict) -> dict:
 
     exp, ref, inputs = load_scene(job["scene"], job["variant"])
     name = job.get("shader") or exp.fit.shader
+    inputs = inputs_for_shader(exp, inputs, name, job["variant"], log=lambda m: None)
     if is_user_shader(name):
         shader = load_user_shader({**exp.values, "fit.shader": name})
         constants = {**shader.defaults(), **(job.get("constants") or {})}

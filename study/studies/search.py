@@ -195,7 +195,6 @@ class Search:
     recommendation. Screen rows accumulate in ``out/screen.parquet`` (a re-run resumes)."""
 
     def __init__(self, exps, specs, client, out, log, fix=None, variants=None):
-
         self.exps, self.specs, self.client, self.out, self.log = exps, specs, client, out, log
         self.fix, self.variants = fix or {}, variants
         self.start = [constants_from_experiment(e).replace(**SEED_SCHEDULE).to_dict() for e in exps]
@@ -203,7 +202,6 @@ class Search:
         self.rounds: dict[str, int] = {}
 
     def _run(self, jobs: list, label: str) -> list[dict]:
-
         if not jobs:
             return []
         rows = run_sweep(

@@ -234,7 +234,6 @@ def plan_noise(
     resolution: int,
     inputs=("reference", "texture"),
 ) -> list[dict]:
-
     res = [f"resolution=[{resolution},{resolution}]", f"fit.resolution=[{resolution},{resolution}]"]
     jobs = []
     for which in inputs:

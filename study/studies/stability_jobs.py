@@ -36,6 +36,7 @@ from ..fit.calibrate import DISCRETE, calibrate_experiment, make_problem, scene_
 from ..fit.losses import transformed
 from ..fit.model import expand_parameters, get_value
 from ..fit.solvers import FTOL, FTOL_SE, FTOL_WINDOW, fit
+from ..scene.baseline_inputs import inputs_for_shader
 from ..sweep import load_scene
 
 # Start box per constant (physical units) and whether to sample it log-uniformly. Wide enough
@@ -113,9 +114,11 @@ def failure_class(converged: bool, message: str, iterations: int, max_steps: int
 
 
 def _model(job, resolution=None, loss: str = "linear"):
-
+    """(experiment, reference, the inputs with what ``fit.shader`` reads, its model seen
+    through the residual ``loss``) of the job's scene."""
     mv = job.get("mitsuba_variant", "llvm_ad_rgb")
     exp, ref, inputs = load_scene(job["scene"], mv)
+    inputs = inputs_for_shader(exp, inputs, exp.fit.shader, mv, log=lambda m: None)
     model = build_model(exp, inputs, ref.image, backend=drjit_backend(mv), resolution=resolution)
     return exp, ref, inputs, transformed(model, loss)
 

@@ -130,7 +130,6 @@ def _fit_names(exp, variant_name: str) -> list[str]:
 
 
 def job_model(job, resolution=None):
-
     mv = job.get("mitsuba_variant", "llvm_ad_rgb")
     exp, ref, inputs = load_scene(job["scene"], mv)
     inputs = inputs_for_shader(exp, inputs, job["variant"], mv, log=lambda m: None)

@@ -70,7 +70,6 @@ def prepare_frames_job(job: dict) -> dict:
 
 @functools.lru_cache(maxsize=1)
 def _frames(text: str, mv: str):
-
     spec = json.loads(text)
     exp = load_experiment(spec["experiment"], spec.get("overrides") or [])
     return exp, load_frames(exp, mv)

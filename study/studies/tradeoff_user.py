@@ -43,7 +43,6 @@ __all__ = ["user_jobs", "user_point_job", "user_image", "export_user", "is_user"
 
 
 def _shader_of(exp):
-
     return load_user_shader(exp.values) if is_user_shader(exp.fit.shader) else None
 
 

@@ -50,7 +50,6 @@ class BackendPlugin(WorkerPlugin):
         self.variant, self.threads = variant, int(threads)
 
     def setup(self, worker=None):
-
         init_backend(self.variant)
         import drjit as dr
 

@@ -45,7 +45,6 @@ def prepare_scene(spec: dict, variant: str = "llvm_ad_rgb") -> dict:
 
 @functools.lru_cache(maxsize=4)
 def _load(text: str, variant: str):
-
     spec = json.loads(text)
     exp = load_experiment(spec["experiment"], spec.get("overrides") or [])
     ref = load_or_render(exp, variant, log=_log)
