@@ -16,7 +16,7 @@ import json
 import numpy as np
 import pytest
 
-from synthetic import synthetic_inputs
+from helpers.synthetic import synthetic_inputs
 from shaders_port import Constants, water_reflection, water_refraction
 from study.fit.calibrate import calibrate_model
 from study.fit.decorrelated import decorrelated_loss, loss_grad_hessian
@@ -159,7 +159,7 @@ def test_decorrelated_refinement_may_end_on_a_bound():
 
 
 def test_decorrelate_needs_the_lighting_texture():
-    from conftest import small_experiment
+    from helpers.experiments import small_experiment
     from study.scene.experiment import ExperimentError
     from study.scene.shader_inputs import half_inputs
 

@@ -15,7 +15,7 @@ import drjit as dr
 import numpy as np
 import pytest
 
-from synthetic import synthetic_inputs
+from helpers.synthetic import synthetic_inputs
 from shaders_port import Constants, _frame, water_reflection, water_refraction
 from shaders_port._texture import backend_types
 

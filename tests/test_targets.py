@@ -19,7 +19,7 @@ from shaders_port._spirv import missing_tools
 from shaders_port._variants import SHIPPED, VARIANTS
 from study.report.export import export_shaders
 from study.report.targets import TARGETS, resolve_targets, target_file
-from synthetic import synthetic_baseline_inputs, synthetic_inputs
+from helpers.synthetic import synthetic_baseline_inputs, synthetic_inputs
 
 MISSING = missing_tools()
 pytestmark = pytest.mark.skipif(

@@ -11,12 +11,13 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from synthetic import synthetic_inputs
-from test_cli import TINY as CLI_TINY
+from helpers.synthetic import synthetic_inputs
+from helpers.experiments import TINY as CLI_TINY
 from shaders_port.spirv_port import STUDY_INPUTS
 from shaders_port.user_shader import UserShader
 from study.fit.user_shader import calibrate
-from test_water_refraction import FD_NOISE, FD_RTOL, save_failure
+from helpers.images import save_comparison
+from helpers.port_checks import FD_NOISE, FD_RTOL
 
 SHADERS = Path(__file__).parent / "shaders"
 TRUTH = {
@@ -80,7 +81,7 @@ def test_calibrates_written_back_and_gl_checked(name, inputs, tmp_path):
     both = mask & (ours["mask"] > 0)
     d = np.abs(rgba[..., :3] - ours["color"]).max(-1)[both]
     if not (d.mean() <= 1e-3 and np.percentile(d, 99.9) <= 1e-2):
-        save_failure(f"user_gl_{name}", ours["color"], rgba[..., :3])
+        save_comparison(f"user_gl_{name}", ours["color"], rgba[..., :3])
     assert both.sum() > 500 and d.mean() <= 1e-3 and np.percentile(d, 99.9) <= 1e-2
 
 
