@@ -9,7 +9,8 @@ import numpy as np
 import pytest
 
 from helpers.gl import check_gl_match, compare_or_skip
-from helpers.port_checks import FD_CONSTANTS, FD_EPS, VARIANT_CUSTOM, check_jacobian_column
+from helpers.port_checks import FD_CONSTANTS, FD_EPS, check_jacobian_column
+from helpers.port_checks import VARIANT_CUSTOM as CUSTOM
 from helpers.synthetic import synthetic_inputs
 from shaders_port import Constants, water_refraction
 from shaders_port._variants import VARIANTS, get_variant
@@ -20,8 +21,6 @@ NEW = [
     for n, v in VARIANTS.items()
     if v.shader == SEED and n not in (SEED, "water_refraction_noreflection")
 ]
-# every constant away from the seed's defaults, the variants' own ones too
-CUSTOM = VARIANT_CUSTOM
 
 
 @pytest.fixture(scope="module")

@@ -9,10 +9,6 @@ import drjit as dr
 import numpy as np
 import pytest
 
-from helpers.synthetic import synthetic_inputs
-from shaders_port import Constants, water_refraction
-from shaders_port._numpy_ref import render_reference
-
 from golden.regenerate import CUSTOM, SCENES, read_exr, render_scene
 from helpers.images import save_comparison
 from helpers.port_checks import (
@@ -24,6 +20,9 @@ from helpers.port_checks import (
     flat_pool,
     small_inputs,
 )
+from helpers.synthetic import synthetic_inputs
+from shaders_port import Constants, water_refraction
+from shaders_port._numpy_ref import render_reference
 
 
 def _defines(reflection: bool) -> tuple:
