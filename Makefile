@@ -13,8 +13,11 @@ run: setup
 tradeoff: setup
 	.venv/bin/study tradeoff experiments/default.toml experiments/deep_steps.toml --out out/tradeoff
 
+# the suite on TEST_WORKERS processes (pytest-xdist), whole test files per process: a file's
+# module fixtures (a shared reference, a CLI run) are built once; PYTEST_ARGS adds options
+TEST_WORKERS ?= 2
 test: setup lint
-	.venv/bin/python -m pytest -q
+	.venv/bin/python -m pytest -q -n $(TEST_WORKERS) --dist loadfile $(PYTEST_ARGS)
 
 lint: setup
 	.venv/bin/ruff check .

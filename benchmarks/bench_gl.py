@@ -18,7 +18,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
 
 from shaders_port import Constants  # noqa: E402
 from shaders_port.gl.renderer import GLRenderer, time_glsl  # noqa: E402,F401
-from synthetic import synthetic_inputs  # noqa: E402
+from helpers.synthetic import synthetic_inputs  # noqa: E402
 
 VARIANTS = [("water_refraction", False), ("water_refraction", True), ("water_reflection", True)]
 SCHEDULES = {

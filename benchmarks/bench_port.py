@@ -21,7 +21,7 @@ sys.path[:0] = [str(ROOT), str(ROOT / "tests")]
 
 import drjit as dr  # noqa: E402
 
-from synthetic import synthetic_inputs  # noqa: E402
+from helpers.synthetic import synthetic_inputs  # noqa: E402
 from shaders_port import Constants  # noqa: E402
 from shaders_port.ports import water_reflection, water_refraction  # noqa: E402
 

@@ -22,7 +22,7 @@ import drjit as dr
 ROOT = Path(__file__).resolve().parent.parent
 sys.path[:0] = [str(ROOT), str(ROOT / "tests")]
 
-from synthetic import synthetic_baseline_inputs, synthetic_inputs  # noqa: E402
+from helpers.synthetic import synthetic_baseline_inputs, synthetic_inputs  # noqa: E402
 from shaders_port import Constants  # noqa: E402
 from shaders_port.spirv import translated as spirv_port  # noqa: E402
 from shaders_port.variants import VARIANTS  # noqa: E402

@@ -1,9 +1,6 @@
-from pathlib import Path
+"""Fixtures and hooks only; what tests share otherwise is in ``helpers/``."""
 
 import pytest
-
-REPO = Path(__file__).resolve().parent.parent
-FAILURES = Path(__file__).parent / "_failures"
 
 
 @pytest.fixture(scope="session")
@@ -40,46 +37,33 @@ def _private_cache(tmp_path_factory, monkeypatch, _module_cache):
     monkeypatch.setenv("STUDY_CACHE", str(tmp_path_factory.mktemp("cache")))
 
 
-# the default experiment shrunk for tests, as ``--set`` overrides
-SMALL_OVERRIDES = [
-    "resolution=[32, 32]",
-    "fit.resolution=[32, 32]",
-    "reference.spp=16",
-    "reference.water_mesh=96",
-    "reference.texture_size=64",
-    "reference.texture_spp=8",
-    "reference.lighting_size=32",
-    "reference.wall_spp=8",
-    "waves.normal_map_size=64",
-]
+# pytest-xdist: the files each worker ran, in order (on the controller; empty without xdist)
+_WORKER_FILES: dict[str, list[str]] = {}
 
 
-def small_experiment(**overrides):
-    """The default experiment, shrunk for tests: 32x32, few spp, coarse meshes and textures."""
-    from study import load_experiment
-
-    base = dict(o.split("=", 1) for o in SMALL_OVERRIDES)
-    base.update({k: str(v) for k, v in overrides.items()})
-    return load_experiment(
-        REPO / "experiments" / "default.toml", [f"{k}={v}" for k, v in base.items()]
-    )
-
-
-def save_failure(name: str, **images) -> Path:
-    """Write actual / expected / error images of a failed comparison to tests/_failures/."""
-    from study import write_exr
-
-    FAILURES.mkdir(exist_ok=True)
-    for key, img in images.items():
-        write_exr(FAILURES / f"{name}.{key}.exr", img)
-    return FAILURES
+def pytest_runtest_logreport(report):
+    node = getattr(report, "node", None)  # set by pytest-xdist on the controller's reports
+    if node is not None and report.when == "setup":
+        files = _WORKER_FILES.setdefault(node.gateway.id, [])
+        path = report.nodeid.split("::", 1)[0]
+        if path not in files:
+            files.append(path)
 
 
 def pytest_terminal_summary(terminalreporter, exitstatus, config):
-    """The random order's seed, also under ``-q``: a failure's order can be replayed."""
+    """The random order's seed, also under ``-q``: a failure's order can be replayed. The order
+    is a sort by a hash of the seed and each name, so a subset of the files keeps its relative
+    order: under pytest-xdist (``--dist loadfile``: whole files per worker), a failed run also
+    prints each worker's files, and the replay of one worker's share runs them as it did."""
     seed = getattr(config.option, "randomly_seed", None)
     if seed is not None and config.pluginmanager.has_plugin("randomly"):
         terminalreporter.write_line(
             f"test order: pytest-randomly seed {seed} "
             f"(replay with -p randomly --randomly-seed={seed})"
         )
+        if exitstatus != 0:
+            for worker, files in sorted(_WORKER_FILES.items()):
+                terminalreporter.write_line(
+                    f"{worker} ran, in order (replay in one process: python -m pytest "
+                    f"-p randomly --randomly-seed={seed} FILES): {' '.join(files)}"
+                )

@@ -8,8 +8,8 @@ import json
 import numpy as np
 import pytest
 
-from conftest import small_experiment
-from test_cli import TINY as CLI_TINY
+from helpers.experiments import small_experiment
+from helpers.experiments import TINY as CLI_TINY
 
 # 0.2 s a frame: the layers move 0.06 texture units (0.12 world units) from frame to frame
 ANIMATED = {"animation.frames": 3, "animation.time_step": 0.2}
@@ -104,7 +104,7 @@ def test_still_only_commands_refuse_an_animated_experiment(tmp_path, capsys):
     """failures, stability and a fit over several experiments say that they take still
     frames and how to run them (exit code 2, nothing written); so does calibrate for the texture
     noise decorrelation, which it does not do over frames."""
-    from conftest import REPO
+    from helpers import REPO
     from study.cli import main
 
     exp = str(REPO / "experiments" / "animated.toml")
@@ -232,7 +232,7 @@ def test_calibrate_on_an_animated_experiment_end_to_end(tmp_path, capsys):
     every frame's reference (with its passes) and inputs in the cache."""
     from PIL import Image
 
-    from conftest import REPO
+    from helpers import REPO
     from study.cli import main
     from study.scene.frames import frame_offsets
 
@@ -276,7 +276,7 @@ def test_tradeoff_on_an_animated_experiment_scores_motion(tmp_path):
     """``study tradeoff`` on 2 frames: the search and fits on frame 0, then every full point
     scored on both frames; frame 0 of the motion scores is the still point itself (same
     constants, same reference, same FLIP); the report has the motion section and its chart."""
-    from conftest import REPO
+    from helpers import REPO
     from study.cli import main
     from study.sweep import read_table
 

@@ -5,7 +5,8 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from conftest import save_failure, small_experiment
+from helpers.experiments import small_experiment
+from helpers.images import save_failure
 
 from shaders_port import Constants
 from shaders_port.inputs import mirrored_view_proj, perspective_view_proj
@@ -109,7 +110,7 @@ def test_tradeoff_tiny_with_baselines(tmp_path):
     """The baselines as variants of `study tradeoff`: one fixed point each beside raycast points,
     with fetches from their diagnostics, llvmpipe frame times and their own constants fitted
     (about 6 min on 2 loaded cores)."""
-    from conftest import REPO
+    from helpers import REPO
     from study.cli import main
     from study.sweep import read_table
 

@@ -11,7 +11,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from synthetic import synthetic_inputs
+from helpers.synthetic import synthetic_inputs
 from shaders_port import Constants
 from shaders_port.ports import water_refraction
 from study.fit.basins import NOISE_Z, POINTS, local_minima, loss_difference_sd, scan

@@ -7,7 +7,7 @@ import pytest
 jax = pytest.importorskip("jax")
 import jax.numpy as jnp  # noqa: E402
 
-from drjit_toy import TRUTH, ToyModel  # noqa: E402
+from helpers.drjit_toy import TRUTH, ToyModel  # noqa: E402
 from study.fit.bridge import NonFiniteParameterError, NonFiniteResidualError, make_jax_residual  # noqa: E402
 
 NAMES = ["amp", "rate", "shift"]

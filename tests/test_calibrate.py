@@ -15,7 +15,7 @@ import dataclasses
 import numpy as np
 import pytest
 
-from synthetic import synthetic_inputs
+from helpers.synthetic import synthetic_inputs
 from shaders_port import Constants
 from shaders_port.ports import water_refraction
 from study.fit.calibrate import STEP_GRID, calibrate_model, make_problem, step_sweep
@@ -245,7 +245,7 @@ def test_black_light_freezes_specular_strength():
 def test_calm_experiment_freezes_bumptex_mult(mi):
     """The same through the scene: ``waves.amplitude = 0`` gives a flat normal map from
     ``build_shader_inputs``, and the calibration freezes BumptexMult."""
-    from conftest import small_experiment
+    from helpers.experiments import small_experiment
     from study.scene.shader_inputs import build_shader_inputs
 
     inputs = build_shader_inputs(small_experiment(**{"waves.amplitude": 0})).with_resolution(32, 32)
@@ -326,7 +326,7 @@ def test_step_sweep_returns_grid_minimum(step_problem):
 def test_clear_water_freezes_attenuation_distance():
     """Clear water (sigma_t = 0) cannot identify an attenuation distance, whatever the Jacobian
     says: it is frozen before the fit, with the scene's reason, and never claimed as fitted."""
-    from conftest import small_experiment
+    from helpers.experiments import small_experiment
 
     from study.fit.calibrate import scene_frozen
 

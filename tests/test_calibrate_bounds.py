@@ -13,7 +13,7 @@ import math
 import numpy as np
 import pytest
 
-from synthetic import synthetic_inputs
+from helpers.synthetic import synthetic_inputs
 from shaders_port import Constants
 from shaders_port.ports import water_refraction
 from study.fit.calibrate import calibrate_model, make_problem, steps_to_within

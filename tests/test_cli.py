@@ -11,24 +11,12 @@ import subprocess
 import numpy as np
 import pytest
 
-from conftest import REPO
+from helpers import REPO
+from helpers.experiments import TINY, sets
 from study.cli import main
 
 EXPERIMENT = str(REPO / "experiments" / "default.toml")
-TINY = [
-    "resolution=[24,24]",
-    "fit.resolution=[24,24]",
-    "reference.spp=16",
-    "reference.water_mesh=48",
-    "reference.texture_size=32",
-    "reference.texture_spp=4",
-    "waves.normal_map_size=32",
-]
 MAX_STEPS = 5
-
-
-def _sets(items):
-    return [a for kv in items for a in ("--set", kv)]
 
 
 def test_help_lists_commands():
@@ -110,15 +98,15 @@ def runs(tmp_path_factory):
     with pytest.MonkeyPatch.context() as mp:
         mp.setenv("STUDY_CACHE", str(root / "cache"))
         rc = {
-            "render": main(["render", EXPERIMENT, "--out", str(root / "render")] + _sets(TINY)),
-            "preview": main(["preview", EXPERIMENT, "--out", str(root / "preview")] + _sets(TINY)),
+            "render": main(["render", EXPERIMENT, "--out", str(root / "render")] + sets(TINY)),
+            "preview": main(["preview", EXPERIMENT, "--out", str(root / "preview")] + sets(TINY)),
             "calibrate": main(
                 ["calibrate", EXPERIMENT, "--out", str(root / "calibrate")]
-                + _sets(TINY + [f"fit.max_steps={MAX_STEPS}"])
+                + sets(TINY + [f"fit.max_steps={MAX_STEPS}"])
             ),
             "decorrelated": main(
                 ["calibrate", EXPERIMENT, "--out", str(root / "decorrelated")]
-                + _sets(TINY + [f"fit.max_steps={MAX_STEPS}", 'fit.input_noise="decorrelate"'])
+                + sets(TINY + [f"fit.max_steps={MAX_STEPS}", 'fit.input_noise="decorrelate"'])
             ),
         }
         rc["export"] = main(

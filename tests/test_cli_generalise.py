@@ -7,31 +7,23 @@ import json
 
 import pytest
 
-from conftest import REPO
+from helpers import REPO, experiments
+from helpers.experiments import replaced, sets
 from study.cli import main
 
-TINY = [
-    "resolution=[24,24]",
-    "fit.resolution=[24,24]",
+TINY = replaced(
+    experiments.TINY,
     "reference.spp=8",
-    "reference.water_mesh=48",
-    "reference.texture_size=32",
-    "reference.texture_spp=4",
-    "waves.normal_map_size=32",
     "fit.max_steps=8",
     'fit.parameters=["attenuation_distance","water_color"]',
-]
+)
 EXPS = [str(REPO / "experiments" / "default.toml"), str(REPO / "experiments" / "murky.toml")]
-
-
-def _sets(items):
-    return [a for kv in items for a in ("--set", kv)]
 
 
 @pytest.mark.slow
 def test_generalise_writes_joint_constants_and_loso_table(tmp_path):
     out = tmp_path / "gen"
-    assert main(["generalise", *EXPS, "--out", str(out), *_sets(TINY)]) == 0
+    assert main(["generalise", *EXPS, "--out", str(out), *sets(TINY)]) == 0
     joint = json.loads((out / "constants.json").read_text())
     assert joint["joint"] and joint["scenes"] == ["default", "murky"]
     assert set(joint["error"]) == {"default", "murky"}
@@ -51,7 +43,7 @@ def test_generalise_writes_joint_constants_and_loso_table(tmp_path):
 @pytest.mark.slow
 def test_joint_calibrate_through_cli(tmp_path):
     out = tmp_path / "joint"
-    assert main(["calibrate", *EXPS, "--out", str(out), *_sets(TINY)]) == 0
+    assert main(["calibrate", *EXPS, "--out", str(out), *sets(TINY)]) == 0
     joint = json.loads((out / "constants.json").read_text())
     assert joint["joint"] and len(joint["weights"]) == 2
     from study.fit.result import CalibrationResult

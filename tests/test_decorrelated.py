@@ -16,7 +16,7 @@ import json
 import numpy as np
 import pytest
 
-from synthetic import synthetic_inputs
+from helpers.synthetic import synthetic_inputs
 from shaders_port import Constants
 from shaders_port.ports import water_reflection, water_refraction
 from study.fit.calibrate import calibrate_model
@@ -160,7 +160,7 @@ def test_decorrelated_refinement_may_end_on_a_bound():
 
 
 def test_decorrelate_needs_the_lighting_texture():
-    from conftest import small_experiment
+    from helpers.experiments import small_experiment
     from study.config.experiment import ExperimentError
     from study.scene.shader_inputs import half_inputs
 

@@ -19,7 +19,8 @@ import textwrap
 import numpy as np
 import pytest
 
-from conftest import REPO, SMALL_OVERRIDES
+from helpers import REPO
+from helpers.experiments import SMALL_OVERRIDES
 
 _RENDER = textwrap.dedent("""
     import sys

@@ -3,7 +3,8 @@ estimate of the same terms, and the sample-for-sample subtraction the split reli
 
 import numpy as np
 import pytest
-from conftest import save_failure, small_experiment
+from helpers.experiments import small_experiment
+from helpers.images import save_failure
 
 from study.scene import direct_light, lighting, sun_photons
 from study.scene.topdown import ortho_sensor, to_gl_order, underwater_camera_height

@@ -10,7 +10,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from synthetic import synthetic_inputs
+from helpers.synthetic import synthetic_inputs
 from shaders_port import CONSTANT_SPECS, Constants, compile_check, read_constants, read_source
 from shaders_port.glsl_text import BEGIN_MARKER, END_MARKER, declared_constants
 from study.export.shaders import export_shaders, load_constants_json
@@ -191,7 +191,7 @@ def test_gl_renderer_on_exported_text_matches_port(exported):
     d = np.abs(rgba[..., :3] - port["color"]).max(-1)[both]
     assert both.sum() > 500
     if not (d.mean() <= 1e-3 and np.percentile(d, 99.9) <= 1e-2):
-        from conftest import save_failure
+        from helpers.images import save_failure
 
         save_failure(
             "export_gl_vs_port",

@@ -28,7 +28,7 @@ from study.studies.failures import (
     failure_table,
     primary_class,
 )
-from synthetic import synthetic_inputs
+from helpers.synthetic import synthetic_inputs
 
 
 def pool(
@@ -265,7 +265,7 @@ def test_classify_refuses_plain_diagnostics():
 
 
 def ledge_experiment(ledge):
-    from conftest import REPO
+    from helpers import REPO
     from study import load_experiment
 
     return load_experiment(
@@ -363,7 +363,7 @@ def test_frozen_renders_follow_the_loop_cap(shader, kw, cap, monkeypatch):
 def test_failures_cli_tiny(tmp_path):
     """Two tiny scenes through ``study failures``: per-scene figure, tidy table, report; the
     ledge scene shows depth complexity, the capped-loop scene no-crossing rays."""
-    from conftest import REPO
+    from helpers import REPO
     from study.cli import main
     from study.sweep import read_table
 

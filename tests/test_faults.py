@@ -22,14 +22,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from conftest import REPO, SMALL_OVERRIDES
+from helpers import REPO
+from helpers.experiments import SMALL_OVERRIDES, sets
 
 TESTS = Path(__file__).parent
 STUDY = [sys.executable, "-m", "study.cli"]
-
-
-def _sets(overrides):
-    return [a for s in overrides for a in ("--set", s)]
 
 
 def _constants_file(tmp_path) -> Path:
@@ -105,7 +102,7 @@ _RENDER_PORT = textwrap.dedent("""
     import sys
     sys.path.insert(0, {tests!r})
     import numpy as np
-    from synthetic import synthetic_inputs
+    from helpers.synthetic import synthetic_inputs
     from shaders_port import Constants
     from shaders_port.ports import water_refraction
     out = water_refraction.render(synthetic_inputs(40, 30), Constants(bumptex_mult=0.8)).numpy()
@@ -145,7 +142,7 @@ def test_corrupt_kernel_cache_is_rebuilt(tmp_path):
 
 def test_two_calibrations_of_one_new_scene(tmp_path):
     env = {**os.environ, "STUDY_CACHE": str(tmp_path / "cache")}
-    args = [str(REPO / "experiments" / "default.toml")] + _sets(
+    args = [str(REPO / "experiments" / "default.toml")] + sets(
         SMALL_OVERRIDES + ["fit.max_steps=8"]
     )
     procs = [
@@ -202,7 +199,7 @@ def test_ctrl_c_in_a_sweep_keeps_a_valid_table_and_resumes(tmp_path):
             "--search",
             "exhaustive",
         ]
-        + _sets(TINY_TRADEOFF)
+        + sets(TINY_TRADEOFF)
     )
     # the sweep installs its own SIGINT handler, so this holds where a background shell (nohup,
     # make under CI) starts the process with SIGINT ignored, as well as for a terminal's Ctrl-C
@@ -289,7 +286,7 @@ def test_real_cluster_survives_a_killed_worker(tmp_path):
                 )
             )
         args = ["tradeoff", str(REPO / "experiments" / "default.toml"), "--search", "exhaustive"]
-        args += _sets(TINY_TRADEOFF)
+        args += sets(TINY_TRADEOFF)
         run = subprocess.Popen(
             STUDY
             + args

@@ -7,7 +7,7 @@ import math
 import numpy as np
 import pytest
 
-from drjit_toy import TRUTH, ToyModel
+from helpers.drjit_toy import TRUTH, ToyModel
 from study.fit.solvers import SOLVERS, Param, fit
 from study.fit.identify import identify, identify_problem, probe_gradient_solver, sweep_1d
 

@@ -1,6 +1,6 @@
-"""Frozen kernels (``dr.freeze``, opt-in through ``shaders_port.pipeline.frame.USE_FROZEN``): a
-replay never returns a wrong shape, each configuration records a bounded number of times, and
-replays equal traces.
+"""Frozen kernels (``dr.freeze``, opt-in through ``pipeline.frame.USE_FROZEN``): a replay never
+returns a wrong shape, each configuration records a bounded number of times, and replays equal
+traces.
 
 The reduction of the defect: a frozen function whose body builds a value of width
 ``dr.width(x)`` (a Python int, baked into the recording) replays it at the recorded width when
@@ -16,7 +16,7 @@ import drjit as dr
 import numpy as np
 import pytest
 
-from synthetic import synthetic_inputs
+from helpers.synthetic import synthetic_inputs
 from shaders_port import Constants
 from shaders_port.pipeline import frame as _frame
 from shaders_port.ports import water_reflection, water_refraction

@@ -18,7 +18,7 @@ import sys
 import numpy as np
 import pytest
 
-from conftest import REPO
+from helpers import REPO
 from study.config.experiment import SCHEMA
 
 CASE_SECONDS = 120  # per case, tiny sizes, 2 shared cores (the first one compiles the kernels)
@@ -128,7 +128,7 @@ def run_cases(cases, tmp_path):
     (tmp_path / "cases.json").write_text(json.dumps(cases))
     cmd = [
         sys.executable,
-        str(REPO / "tests" / "preview_driver.py"),
+        str(REPO / "tests" / "helpers" / "preview_driver.py"),
         str(tmp_path / "cases.json"),
         str(tmp_path / "out"),
     ]

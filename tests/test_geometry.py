@@ -6,7 +6,7 @@ import sys
 import numpy as np
 import pytest
 
-from conftest import REPO
+from helpers import REPO
 from study.scene.geometry import MAX_COMPONENTS, Waves, wave_vector_bound
 
 OFFSETS = [[0, 0], [0.31, 0.17], [0.53, 0.71], [0.13, 0.47]]

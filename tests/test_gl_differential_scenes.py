@@ -5,7 +5,8 @@ constants, both shaders. Bounds on water pixels: mean |diff| <= 1e-3, 99.9th per
 
 import numpy as np
 import pytest
-from conftest import REPO, save_failure
+from helpers import REPO
+from helpers.images import save_failure
 
 from shaders_port import Constants
 from shaders_port.gl.compare import compare_port_gl

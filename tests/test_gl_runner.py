@@ -2,17 +2,15 @@
 
 from __future__ import annotations
 
-from pathlib import Path
-
 import numpy as np
 import pytest
 
 from shaders_port import Constants
 from shaders_port.gl.renderer import GLRenderer, create_egl_context, run_glsl, time_glsl
 from shaders_port.glsl_text import read_source, write_constants
-from synthetic import synthetic_inputs
+from helpers.images import FAILURES, save_comparison
+from helpers.synthetic import synthetic_inputs
 
-FAILURES = Path(__file__).parent / "_failures"
 VARIANTS = [
     ("water_refraction", ()),
     ("water_refraction", ("NOREFLECTION",)),
@@ -29,21 +27,10 @@ def inputs():
     return synthetic_inputs(width=64, height=48)
 
 
-def save_failure(tag: str, actual: np.ndarray, expected: np.ndarray | None = None) -> None:
-    """Write the actual image (and |error| against ``expected``) to tests/_failures/."""
-    import matplotlib.pyplot as plt
-
-    FAILURES.mkdir(exist_ok=True)
-    plt.imsave(FAILURES / f"{tag}_actual.png", np.clip(actual[..., :3], 0, 1))
-    if expected is not None:
-        err = np.abs(actual[..., :3] - expected[..., :3]).max(-1)
-        plt.imsave(FAILURES / f"{tag}_error.png", err, cmap="magma")
-
-
 def assert_images_close(tag, actual, expected, atol):
     err = np.abs(actual - expected).max()
     if not err <= atol:
-        save_failure(tag, actual, expected)
+        save_comparison(tag, actual[..., :3], expected[..., :3])
     assert err <= atol, f"{tag}: max |difference| {err} > {atol}; images in {FAILURES}"
 
 
@@ -239,7 +226,7 @@ def test_renderer_keeps_a_bounded_number_of_programs():
     and a constant set seen before still renders the same after its program was dropped."""
     from shaders_port import Constants
     from shaders_port.gl.renderer import GLRenderer
-    from synthetic import synthetic_inputs
+    from helpers.synthetic import synthetic_inputs
 
     inputs = synthetic_inputs(24, 16)
     with GLRenderer("water_refraction", inputs) as r:

@@ -12,7 +12,7 @@ import dataclasses
 import numpy as np
 import pytest
 
-from synthetic import synthetic_inputs
+from helpers.synthetic import synthetic_inputs
 from shaders_port import Constants, perspective_view_proj
 from shaders_port.ports import water_refraction
 from study.fit.joint import JointModel, joint_calibrate, joint_frozen, leave_one_out, universality

@@ -11,7 +11,7 @@ import re
 from fnmatch import fnmatchcase
 from pathlib import Path
 
-from conftest import REPO
+from helpers import REPO
 
 PACKAGES = ("study", "shaders_port")
 

@@ -2,7 +2,8 @@
 
 import numpy as np
 import pytest
-from conftest import save_failure, small_experiment
+from helpers.experiments import small_experiment
+from helpers.images import save_failure
 
 from study.scene import lighting
 from study.scene.shader_inputs import top_down_colour

@@ -6,7 +6,7 @@ import math
 
 import numpy as np
 import pytest
-from conftest import small_experiment
+from helpers.experiments import small_experiment
 
 from shaders_port import fresnel_unpolarized
 from study.scene.mitsuba_scene import build_scene, camera_view_proj

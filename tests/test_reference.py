@@ -3,7 +3,7 @@ noise measured from independent passes."""
 
 import numpy as np
 import pytest
-from conftest import small_experiment
+from helpers.experiments import small_experiment
 
 from study import read_exr
 from study.scene.reference import load_or_render, noise_of, reference_key

@@ -3,9 +3,9 @@
 
 import numpy as np
 import pytest
-from conftest import save_failure
+from helpers.images import save_failure
 
-import reference_scenes as G
+from golden import reference_scenes as G
 
 from study import read_exr  # noqa: E402
 

@@ -2,7 +2,7 @@
 
 import numpy as np
 import pytest
-from conftest import small_experiment
+from helpers.experiments import small_experiment
 
 from study.scene.geometry import cubemap_directions, envmap_image, sky_radiance
 from study.scene.mitsuba_scene import build_scene, camera_view_proj, sky_params

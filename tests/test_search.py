@@ -7,7 +7,7 @@ import math
 import numpy as np
 import pytest
 
-from conftest import REPO
+from helpers import REPO
 from shaders_port import space as _space
 from study.studies import search
 
@@ -101,7 +101,7 @@ def test_adaptive_tradeoff_tiny(tmp_path):
     from study.cli import main
     from study.sweep import read_table
 
-    from conftest import SMALL_OVERRIDES
+    from helpers.experiments import SMALL_OVERRIDES
 
     small = SMALL_OVERRIDES + [
         'tradeoff.variants=["water_refraction", "water_baseline_flat"]',

@@ -12,7 +12,9 @@ from shaders_port.glsl_text import read_source, switches_of
 from shaders_port.space import AXES, ORIGINAL, Unrealisable
 from shaders_port.ports.switches import decode
 from shaders_port.variants import VARIANTS, get_variant
-from synthetic import synthetic_baseline_inputs, synthetic_inputs
+from helpers.gl import check_gl_match, compare_or_skip
+from helpers.port_checks import VARIANT_CUSTOM as CUSTOM
+from helpers.synthetic import synthetic_baseline_inputs, synthetic_inputs
 
 
 def _ports():
@@ -151,8 +153,6 @@ def test_a_generated_configuration_is_a_full_variant():
 def test_configurations_nobody_registered_match_opengl(seed):
     """Four configurations drawn from the space (fixed seeds): port and llvmpipe agree within
     the GL check's thresholds, and the configuration renders differently from the original."""
-    from test_gl_differential import _check, compare_or_skip
-    from test_variants import CUSTOM
 
     raycast = _space.configurations({"refraction": "raycast"})
     assert len(raycast) == 720
@@ -160,12 +160,10 @@ def test_configurations_nobody_registered_match_opengl(seed):
     name = _space.name_of(c)
     inputs = (synthetic_baseline_inputs if get_variant(name).inputs else synthetic_inputs)(96, 72)
     res = compare_or_skip(inputs, CUSTOM, name)
-    _check(res, f"gl_space_{name}")
+    check_gl_match(res, f"gl_space_{name}")
 
 
 def test_the_baseline_configurations_match_opengl():
-    from test_gl_differential import _check, compare_or_skip
-    from test_variants import CUSTOM
 
     inputs = synthetic_baseline_inputs(64, 48)
     planar = _space.configurations({"refraction": "planar"})
@@ -176,25 +174,22 @@ def test_the_baseline_configurations_match_opengl():
     for c in _space.configurations({"attenuation": "linear", "specular": "phong", "walls": "off"}):
         if c["refraction"] == "raycast":
             continue
-        _check(compare_or_skip(inputs, CUSTOM, _space.name_of(c)), "gl_space_planar")
+        check_gl_match(compare_or_skip(inputs, CUSTOM, _space.name_of(c)), "gl_space_planar")
 
 
 @pytest.mark.parametrize(
     "name", ["water_refraction_mirror", "water_refraction_mirror_beer_ggx_walls_2layers"]
 )
 def test_the_raycast_with_the_mirror_matches_opengl(name):
-    from test_gl_differential import _check, compare_or_skip
-    from test_variants import CUSTOM
 
     v = get_variant(name)
     assert "PLANAR_REFLECTION" in v.defines and "reflect_distortion" in v.reads()
     res = compare_or_skip(synthetic_baseline_inputs(64, 48), CUSTOM, name)
-    _check(res, f"gl_space_{name}")
+    check_gl_match(res, f"gl_space_{name}")
     assert res["n_nonfinite"] == 0
 
 
 def test_the_mirror_derivatives_match_central_differences():
-    from test_variants import CUSTOM
 
     v = get_variant("water_refraction_mirror")
     inputs = synthetic_baseline_inputs(48, 36)

@@ -1,21 +1,22 @@
 """The SPIR-V executor (``shaders_port.spirv.translated``): the study's GLSL files compiled by
 glslang and executed on Dr.Jit types, against the hand ports (images, costs, Jacobians), central
-differences and llvmpipe. The default run checks a representative subset; every shipped
-variant is checked in the slow tests."""
+differences and llvmpipe. The default run checks a representative subset; every shipped variant
+is checked in the slow tests."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
-from synthetic import synthetic_baseline_inputs, synthetic_inputs
+from helpers.synthetic import synthetic_baseline_inputs, synthetic_inputs
 from shaders_port import Constants
 from shaders_port.spirv import translated as spirv_port
 from shaders_port.spirv.execute import UnboundVariable, UnsupportedInstruction
 from shaders_port.spirv.module import Module, compile_fragment, grammar
 from shaders_port.variants import SHIPPED, VARIANTS
-from test_gl_differential import _check, compare_or_skip
-from test_water_refraction import FD_CONSTANTS, check_jacobian_column, save_failure
+from helpers.gl import check_gl_match, compare_or_skip
+from helpers.images import save_comparison
+from helpers.port_checks import FD_CONSTANTS, check_jacobian_column
 
 CUSTOM = Constants(
     attenuation_distance=3.0, steps_grazing=7.0, steps_steep=2.5, bumptex_mult=0.7,
@@ -58,7 +59,7 @@ def check_against_port(name: str, small, baseline_small, constants) -> None:
     a, b = _executed(v, inputs, constants), v.render(inputs, constants).numpy()
     tol = 1e-4 if v.shader == "water_baseline" else 0.0
     if not np.abs(a["color"] - b["color"]).max() <= tol:
-        save_failure(f"spirv_{name}", a["color"], b["color"])
+        save_comparison(f"spirv_{name}", a["color"], b["color"])
     assert np.abs(a["color"] - b["color"]).max() <= tol, name
     iterations, fetches = b["iterations"] + b.get("refl_iterations", 0.0), b["fetches"]
     if v.shader == "water_baseline":  # the port adds the mirrored camera's pass
@@ -89,7 +90,7 @@ def check_against_gl(name: str, constants) -> None:
     # the colours are equal, see check_against_port); the colour is the executor's
     out = v.render(inputs, constants).numpy()
     out["color"] = _executed(v, inputs, constants)["color"]
-    _check(compare_or_skip(inputs, constants, name, output=out), f"spirv_gl_{name}")
+    check_gl_match(compare_or_skip(inputs, constants, name, output=out), f"spirv_gl_{name}")
 
 
 def test_executor_matches_gl():
@@ -204,7 +205,7 @@ def test_default_experiment_fits_the_same_constants(tmp_path, monkeypatch):
     """``study calibrate``'s fit of the default experiment with the shader executed through
     SPIR-V (``ShaderModel(translated=True)``) gives the hand port's fitted constants within
     1e-3 relative."""
-    from conftest import REPO
+    from helpers import REPO
     from study._backend import init_backend
     from study.commands.steps import load_scene_data
     from study.fit.calibrate import calibrate_experiment

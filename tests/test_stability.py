@@ -10,7 +10,8 @@ import math
 import numpy as np
 import pytest
 
-from conftest import REPO
+from helpers import REPO, experiments
+from helpers.experiments import replaced, sets
 from study.studies.stability import analyse_loss, analyse_multistart, analyse_noise
 from study.studies.stability_jobs import BOX, failure_class, latin_hypercube
 
@@ -141,7 +142,7 @@ def test_analyse_loss_picks_lower_mean_flip():
 
 
 def test_log_residual_jacobian_matches_central_differences():
-    from synthetic import synthetic_inputs
+    from helpers.synthetic import synthetic_inputs
     from shaders_port import Constants
     from shaders_port.ports import water_refraction
     from study.fit.losses import transformed
@@ -170,7 +171,7 @@ def test_log_loss_calibration_recovers_a_synthetic_target():
     """``calibrate_experiment`` on the log-residual model (``fit.loss = "log"``) runs end to end
     (it reads the model's variant and reference standard error through the wrapper) and
     recovers the constants a synthetic target was rendered with."""
-    from synthetic import synthetic_inputs
+    from helpers.synthetic import synthetic_inputs
     from shaders_port import Constants
     from shaders_port.ports import water_refraction
     from study import load_experiment
@@ -197,15 +198,7 @@ def test_log_loss_calibration_recovers_a_synthetic_target():
     assert p["water_color[2]"]["fitted"] == pytest.approx(0.3, rel=1e-2)
 
 
-TINY = [
-    "resolution=[24,24]",
-    "fit.resolution=[24,24]",
-    "reference.spp=8",
-    "reference.water_mesh=48",
-    "reference.texture_size=32",
-    "reference.texture_spp=4",
-    "waves.normal_map_size=32",
-]
+TINY = replaced(experiments.TINY, "reference.spp=8")
 
 
 @pytest.mark.slow
@@ -218,7 +211,7 @@ def test_stability_cli_tiny(tmp_path):
         str(REPO / "experiments" / "default.toml"),
         "--out",
         str(out),
-        *[a for kv in TINY for a in ("--set", kv)],
+        *sets(TINY),
         "--starts",
         "2",
         "--solvers",

@@ -11,19 +11,8 @@ from pathlib import Path
 
 import pytest
 
-import sweep_jobs
-from conftest import REPO
-
-TESTS = Path(__file__).parent
-SMALL = [
-    "resolution=[32,32]",
-    "fit.resolution=[32,32]",
-    "reference.spp=16",
-    "reference.water_mesh=96",
-    "reference.texture_size=64",
-    "reference.texture_spp=8",
-    "waves.normal_map_size=64",
-]
+from helpers import REPO, TESTS, sweep_jobs
+from helpers.experiments import SMALL_OVERRIDES as SMALL
 
 
 @pytest.fixture(scope="module")

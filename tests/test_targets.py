@@ -19,7 +19,7 @@ from shaders_port.spirv.tools import missing_tools
 from shaders_port.variants import SHIPPED, VARIANTS
 from study.export.shaders import export_shaders
 from study.export.targets import TARGETS, resolve_targets, target_file
-from synthetic import synthetic_baseline_inputs, synthetic_inputs
+from helpers.synthetic import synthetic_baseline_inputs, synthetic_inputs
 
 MISSING = missing_tools()
 pytestmark = pytest.mark.skipif(

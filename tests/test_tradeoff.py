@@ -6,7 +6,7 @@ import json
 import numpy as np
 import pytest
 
-from conftest import REPO
+from helpers import REPO
 from study.studies.pareto import pareto_front, recommend
 
 

@@ -11,24 +11,15 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from helpers import REPO
+from helpers.experiments import TINY, replaced, sets
 from study.cli import main
 
-REPO = Path(__file__).resolve().parent.parent
 EXPERIMENTS = REPO / "experiments"
 MY_WATER = EXPERIMENTS / "shaders" / "my_water.frag"
 MIRROR = Path(__file__).parent / "shaders" / "mirror_water.frag"
-TINY = [
-    "resolution=[24,24]",
-    "fit.resolution=[24,24]",
-    "reference.spp=16",
-    "reference.water_mesh=48",
-    "reference.texture_size=32",
-    "reference.texture_spp=4",
-    "reference.lighting_size=32",
-    "reference.wall_spp=8",
-    "waves.normal_map_size=32",
-    "fit.max_steps=8",
-]
+# the CLI runs' tiny scene, with the lighting texture's and walls' samples of a fit's
+OVERRIDES = replaced(TINY, "reference.lighting_size=32", "reference.wall_spp=8", "fit.max_steps=8")
 
 
 @pytest.fixture(scope="module")
@@ -37,10 +28,9 @@ def cache(tmp_path_factory):
 
 
 def _run(args: list, cache: Path, shader: Path, extra=()) -> None:
-    sets = [a for kv in TINY + [f'fit.shader="{shader}"', *extra] for a in ("--set", kv)]
     with pytest.MonkeyPatch.context() as mp:
         mp.setenv("STUDY_CACHE", str(cache))
-        assert main(args + sets) == 0
+        assert main(args + sets([*OVERRIDES, f'fit.shader="{shader}"', *extra])) == 0
 
 
 def _falls(error: dict) -> None:

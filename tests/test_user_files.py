@@ -13,21 +13,14 @@ import numpy as np
 import pytest
 from PIL import Image
 
-from conftest import REPO
+from helpers import REPO, experiments
+from helpers.experiments import replaced
 from study.config.experiment import ExperimentError, load_experiment, validate
 from study.config import files as uf
 
 FILES = REPO / "experiments" / "files"
 USER = REPO / "experiments" / "user_files.toml"
-TINY = {
-    "resolution": "[24, 24]",
-    "fit.resolution": "[24, 24]",
-    "reference.spp": "8",
-    "reference.water_mesh": "48",
-    "reference.texture_size": "32",
-    "reference.texture_spp": "4",
-    "waves.normal_map_size": "32",
-}
+TINY = replaced(experiments.TINY, "reference.spp=8")
 
 
 def _exr(path, channels):
@@ -305,7 +298,7 @@ def test_mesh_is_in_the_reference_and_the_reflection_textures(mi):
     from study.scene.mitsuba_scene import build_scene
     from study.scene.shader_inputs import build_shader_inputs
 
-    exp = load_experiment(USER, [f"{k}={v}" for k, v in TINY.items()])
+    exp = load_experiment(USER, TINY)
     scene = build_scene(exp)
     ray = mi.Ray3f(mi.Point3f(0.0, 5.0, -5.3), mi.Vector3f(0.0, -1.0, 0.0))
     si = scene.ray_intersect(ray)
@@ -348,8 +341,8 @@ def test_user_files_experiment_calibrates_end_to_end(tmp_path):
     mesh, fit of water_reflection, export and GL check, report."""
     from study.cli import main
 
-    sets = [a for k, v in {**TINY, "fit.max_steps": "3"}.items() for a in ("--set", f"{k}={v}")]
-    assert main(["calibrate", str(USER), "--out", str(tmp_path), *sets]) == 0
+    tiny = replaced(TINY, "fit.max_steps=3")
+    assert main(["calibrate", str(USER), "--out", str(tmp_path), *experiments.sets(tiny)]) == 0
     summary = __import__("json").loads((tmp_path / "constants.json").read_text())
     assert summary["shader"] == "water_reflection"
     assert (

@@ -11,14 +11,15 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from synthetic import synthetic_inputs
-from test_cli import TINY as CLI_TINY
+from helpers.experiments import TINY as CLI_TINY
+from helpers.images import save_comparison
+from helpers.port_checks import FD_NOISE, FD_RTOL
+from helpers.synthetic import synthetic_inputs
 from shaders_port.spirv.translated import STUDY_INPUTS
 from shaders_port.spirv.user_shader import UserShader
 from study.fit.calibrate import calibrate_model
 from study.fit.model import get_value
 from study.fit.spirv_model import SpirvModel
-from test_water_refraction import FD_NOISE, FD_RTOL, save_failure
 
 SHADERS = Path(__file__).parent / "shaders"
 TRUTH = {
@@ -95,7 +96,7 @@ def test_calibrates_written_back_and_gl_checked(name, inputs, tmp_path):
     both = mask & (ours["mask"] > 0)
     d = np.abs(rgba[..., :3] - ours["color"]).max(-1)[both]
     if not (d.mean() <= 1e-3 and np.percentile(d, 99.9) <= 1e-2):
-        save_failure(f"user_gl_{name}", ours["color"], rgba[..., :3])
+        save_comparison(f"user_gl_{name}", ours["color"], rgba[..., :3])
     assert both.sum() > 500 and d.mean() <= 1e-3 and np.percentile(d, 99.9) <= 1e-2
 
 

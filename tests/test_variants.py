@@ -8,8 +8,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-import test_water_refraction as twr
-from synthetic import synthetic_inputs
+from helpers.gl import check_gl_match, compare_or_skip
+from helpers.port_checks import FD_CONSTANTS, FD_EPS, check_jacobian_column
+from helpers.port_checks import VARIANT_CUSTOM as CUSTOM
+from helpers.synthetic import synthetic_inputs
 from shaders_port import Constants
 from shaders_port.ports import water_refraction
 from shaders_port.variants import VARIANTS, get_variant
@@ -20,10 +22,6 @@ NEW = [
     for n, v in VARIANTS.items()
     if v.shader == SEED and n not in (SEED, "water_refraction_noreflection")
 ]
-# every constant away from the seed's defaults, the variants' own ones too
-CUSTOM = twr.CUSTOM.replace(
-    absorption_r=0.45, absorption_g=0.12, absorption_b=0.08, specular_roughness=0.12, refine_steps=4
-)
 
 
 @pytest.fixture(scope="module")
@@ -56,10 +54,9 @@ def test_registered_variants():
 
 @pytest.mark.parametrize("name", NEW)
 def test_variant_port_matches_gl(inputs, seed_out, name):
-    from test_gl_differential import _check, compare_or_skip
 
     res = compare_or_skip(inputs, CUSTOM, name)
-    _check(res, f"gl_{name}_custom")
+    check_gl_match(res, f"gl_{name}_custom")
     # the switch does something: the variant's image is not the seed's
     water = seed_out["mask"] > 0
     assert np.abs(res["port"] - seed_out["color"]).max(-1)[water].mean() > 1e-3, name
@@ -178,7 +175,7 @@ FD_CASES = [
     ("water_refraction_binary", "steps_steep", 3e-4),
     ("water_refraction_secant", "bumptex_mult", 3e-4),
 ]
-FD_AT = twr.FD_CONSTANTS.replace(
+FD_AT = FD_CONSTANTS.replace(
     absorption_r=0.6,
     absorption_g=0.25,
     absorption_b=0.15,
@@ -199,21 +196,19 @@ def variant_jacobians():
 
 
 @pytest.mark.parametrize("name,param,eps", FD_CASES, ids=[f"{n[17:]}-{p}" for n, p, _ in FD_CASES])
-def test_variant_jacobian_matches_central_differences(
-    variant_jacobians, monkeypatch, name, param, eps
-):
+def test_variant_jacobian_matches_central_differences(variant_jacobians, name, param, eps):
     inp, jac = variant_jacobians
     base, J, names = jac[name]
     v = get_variant(name)
     assert np.array_equal(v.render(inp, FD_AT).numpy()["color"], base["color"])
-    monkeypatch.setitem(twr.FD_EPS, param, eps)
-    twr.check_jacobian_column(
+    check_jacobian_column(
         lambda c: v.render(inp, c).numpy(),
         base,
         J[..., names.index(param)],
         FD_AT,
         param,
         ("iterations",),
+        eps=eps,
     )
 
 
@@ -280,11 +275,10 @@ def test_information_criteria():
 
 
 def test_reflection_variant_registered_matches_gl(inputs):
-    from test_gl_differential import _check
     from shaders_port.gl.compare import compare_port_gl
 
     res = compare_port_gl(inputs, CUSTOM, "water_reflection_beer_ggx")
-    _check(res, "gl_water_reflection_beer_ggx_custom")
+    check_gl_match(res, "gl_water_reflection_beer_ggx_custom")
 
 
 @pytest.mark.parametrize(
@@ -374,10 +368,9 @@ def test_wall_faces_shade_the_submerged_face_as_water(walled):
 
 
 def test_wall_faces_port_matches_gl_where_it_acts(walled):
-    from test_gl_differential import _check, compare_or_skip
 
     res = compare_or_skip(walled, CUSTOM, "water_refraction_beer_walls")
-    _check(res, "gl_water_refraction_beer_walls_walled")
+    check_gl_match(res, "gl_water_refraction_beer_walls_walled")
     beer = get_variant("water_refraction_beer").render(walled, CUSTOM).numpy()
     water = beer["mask"] > 0
     assert (
@@ -406,7 +399,7 @@ def test_wall_faces_in_the_reflection_shader_match_gl(walled):
 @pytest.mark.parametrize(
     "param", ["water_color[1]", "water_color[2]", "absorption_g", "bumptex_mult"]
 )
-def test_wall_faces_jacobian_matches_central_differences(monkeypatch, param):
+def test_wall_faces_jacobian_matches_central_differences(param):
     """waterColor now also enters where the switch acts (derivative F_T there); the others are
     those of the Beer-Lambert variant, the select carrying none."""
     inp = walled_inputs(width=48, height=36)
@@ -414,9 +407,14 @@ def test_wall_faces_jacobian_matches_central_differences(monkeypatch, param):
     base, J = v.render_with_jacobian(inp, FD_AT, [param])
     base = base.numpy()
     assert _wall_lanes_at(base, inp).sum() > 20
-    monkeypatch.setitem(twr.FD_EPS, param, twr.FD_EPS.get(param, 1e-3))
-    twr.check_jacobian_column(
-        lambda c: v.render(inp, c).numpy(), base, J[..., 0], FD_AT, param, ("iterations",)
+    check_jacobian_column(
+        lambda c: v.render(inp, c).numpy(),
+        base,
+        J[..., 0],
+        FD_AT,
+        param,
+        ("iterations",),
+        eps=FD_EPS.get(param, 1e-3),
     )
 
 

@@ -7,11 +7,12 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from synthetic import synthetic_baseline_inputs, synthetic_inputs
+from helpers.synthetic import synthetic_baseline_inputs, synthetic_inputs
 from shaders_port import Constants
 from shaders_port.ports import water_baseline
 from shaders_port.variants import VARIANTS, get_variant
-from test_water_refraction import FD_NOISE, FD_RTOL, _perturbed
+from helpers.gl import check_gl_match, compare_or_skip
+from helpers.port_checks import FD_NOISE, FD_RTOL, perturbed
 
 BASELINES = ("water_baseline", "water_baseline_flat", "water_baseline_noplanar")
 CUSTOM = Constants(
@@ -62,11 +63,10 @@ def small():
 @pytest.mark.parametrize("variant", BASELINES)
 def test_port_matches_gl(inputs, variant, which):
     pytest.importorskip("moderngl")
-    from test_gl_differential import _check, compare_or_skip
 
     constants = Constants() if which == "default" else CUSTOM
     res = compare_or_skip(inputs, constants, variant)
-    _check(res, f"gl_{variant}_{which}")
+    check_gl_match(res, f"gl_{variant}_{which}")
     assert res["n_nonfinite"] == 0
     # measured: max |diff| ~1e-5 (float32 rounding); a systematic difference must not pass
     assert res["mean_abs"] <= 1e-4 and res["p999"] <= 1e-3, (res["mean_abs"], res["p999"])
@@ -106,8 +106,8 @@ def test_jacobian_matches_central_differences(small, jacobian, name):
     base, J = jacobian
     render = lambda c: water_baseline.render(small, c).numpy()  # noqa: E731
     assert np.array_equal(render(FD_CONSTANTS)["color"], base["color"])
-    cp, h = _perturbed(FD_CONSTANTS, name, FD_EPS[name])
-    cm, _ = _perturbed(FD_CONSTANTS, name, -FD_EPS[name])
+    cp, h = perturbed(FD_CONSTANTS, name, FD_EPS[name])
+    cm, _ = perturbed(FD_CONSTANTS, name, -FD_EPS[name])
     p, m = render(cp), render(cm)
     fd = (p["color"] - m["color"]) / (2 * h)
     fp, fm = (p["color"] - base["color"]) / h, (base["color"] - m["color"]) / h
@@ -133,8 +133,8 @@ def test_flat_variant_refraction_index_derivative(small):
     out, J = water_baseline.render_with_jacobian(
         small, FD_CONSTANTS, ["refraction_index"], defines=("FLAT_WATER",)
     )
-    cp, h = _perturbed(FD_CONSTANTS, "refraction_index", 3e-4)
-    cm, _ = _perturbed(FD_CONSTANTS, "refraction_index", -3e-4)
+    cp, h = perturbed(FD_CONSTANTS, "refraction_index", 3e-4)
+    cm, _ = perturbed(FD_CONSTANTS, "refraction_index", -3e-4)
     r = lambda c: water_baseline.render(small, c, defines=("FLAT_WATER",)).numpy()["color"]  # noqa: E731
     fd = (r(cp) - r(cm)) / (2 * h)
     water = out.numpy()["mask"] > 0
@@ -149,8 +149,8 @@ def test_flat_variant_refraction_index_derivative(small):
 def test_cube_map_without_refraction_derivatives(small, name):
     defines = ("NO_REFRACTION", "CUBE_REFLECTION")
     out, J = water_baseline.render_with_jacobian(small, FD_CONSTANTS, [name], defines=defines)
-    cp, h = _perturbed(FD_CONSTANTS, name, FD_EPS[name])
-    cm, _ = _perturbed(FD_CONSTANTS, name, -FD_EPS[name])
+    cp, h = perturbed(FD_CONSTANTS, name, FD_EPS[name])
+    cm, _ = perturbed(FD_CONSTANTS, name, -FD_EPS[name])
     r = lambda c: water_baseline.render(small, c, defines=defines).numpy()["color"]  # noqa: E731
     fd = (r(cp) - r(cm)) / (2 * h)
     water = out.numpy()["mask"] > 0

@@ -10,25 +10,22 @@ import pytest
 from shaders_port import Constants
 from shaders_port.ports import water_reflection
 from shaders_port.ports.numpy_ref import render_reference
-from test_water_refraction import (
-    CUSTOM,
+from golden.regenerate import CUSTOM, SCENES, read_exr, render_scene
+from helpers.images import save_comparison
+from helpers.port_checks import (
     FD_CONSTANTS,
     FD_EPS,
-    SCENES,
-    _small,
     assert_matches_reference,
     check_jacobian_column,
     degenerate_light_inputs,
     flat_pool,
-    read_exr,
-    render_scene,
-    save_failure,
+    small_inputs,
 )
 
 
 @pytest.mark.parametrize("which", ["default", "custom"])
 def test_port_matches_numpy_reference(which):
-    inputs = _small()
+    inputs = small_inputs()
     constants = Constants() if which == "default" else CUSTOM
     out = water_reflection.render(inputs, constants).numpy()
     ref, ref_diag = render_reference("water_reflection", inputs, constants)
@@ -44,7 +41,7 @@ _FD_NAMES = list(FD_EPS)
 
 @pytest.fixture(scope="module")
 def jacobian():
-    inputs = _small()
+    inputs = small_inputs()
     out, J = water_reflection.render_with_jacobian(inputs, FD_CONSTANTS, _FD_NAMES)
     return inputs, out.numpy(), J
 
@@ -122,7 +119,7 @@ def test_golden(scene):
     _, _, _, max_tol, mean_tol = SCENES[scene]
     err = np.abs(actual - expected)
     if not (err.max() <= max_tol and err.mean() <= mean_tol):
-        save_failure(scene, actual, expected)
+        save_comparison(scene, actual, expected)
     assert err.max() <= max_tol and err.mean() <= mean_tol, (
         f"{scene}: max {err.max():.3g} (<= {max_tol}), mean {err.mean():.3g} (<= {mean_tol})"
     )

@@ -9,111 +9,26 @@ import drjit as dr
 import numpy as np
 import pytest
 
-from synthetic import synthetic_inputs
-from shaders_port import (
-    Constants,
-    ShaderInputs,
-    fresnel_lut,
-    ortho_tex_matrix,
-    perspective_view_proj,
+from golden.regenerate import CUSTOM, SCENES, read_exr, render_scene
+from helpers.images import save_comparison
+from helpers.port_checks import (
+    FD_CONSTANTS,
+    FD_EPS,
+    assert_matches_reference,
+    check_jacobian_column,
+    degenerate_light_inputs,
+    flat_pool,
+    small_inputs,
 )
+from helpers.synthetic import synthetic_inputs
+from shaders_port import Constants
 from shaders_port.ports import water_refraction
 from shaders_port.ports.numpy_ref import render_reference
-
-from regenerate import CUSTOM, SCENES, read_exr, render_scene, write_exr
 
 
 def _defines(reflection: bool) -> tuple:
     """The ``#define`` names of water_refraction with (True) or without its sky reflection."""
     return () if reflection else ("NOREFLECTION",)
-
-
-FAILURES = Path(__file__).parent / "_failures"
-PRIMAL_ATOL = 5e-5  # port vs NumPy reference, linear RGB (both float32)
-FD_RTOL, FD_NOISE = 0.1, 4e-6  # finite differences: relative truncation, float32 colour noise
-FD_EPS = {  # relative step of the central differences
-    "attenuation_distance": 1e-3,
-    "bumptex_mult": 3e-4,
-    "water_color[1]": 1e-3,
-    "water_color[2]": 1e-3,
-    "reflect_color[0]": 1e-3,
-    "reflect_color[2]": 1e-3,
-    "specular_strength": 1e-3,
-    "specular_exponent": 1e-3,
-    "refr_coeff": 3e-4,
-    "steps_grazing": 3e-4,
-    "steps_steep": 3e-4,
-}
-FD_CONSTANTS = Constants(attenuation_distance=2.0, specular_exponent=32.0)
-
-
-def _small():
-    return synthetic_inputs(width=48, height=36)
-
-
-def save_failure(name: str, actual: np.ndarray, expected: np.ndarray) -> None:
-    """Write the actual image and |actual - expected| to tests/_failures/ as EXR."""
-    FAILURES.mkdir(exist_ok=True)
-    write_exr(FAILURES / f"{name}_actual.exr", actual)
-    write_exr(FAILURES / f"{name}_error.exr", np.abs(actual - expected))
-
-
-def assert_matches_reference(shader: str, out: dict, ref, ref_diag, tag: str) -> None:
-    err = np.abs(out["color"] - ref).max(-1)
-    if not err.max() <= PRIMAL_ATOL:
-        save_failure(tag, out["color"], ref)
-    assert err.max() <= PRIMAL_ATOL, f"{tag}: max |port - reference| = {err.max():.3g}"
-    for k, v in ref_diag.items():
-        tol = 1e-6 if k == "denominator" else 0.0
-        bad = np.abs(out[k] - v) > tol
-        assert not bad.any(), f"{tag}: diagnostic {k} differs at {bad.sum()} pixels"
-
-
-def _perturbed(constants: Constants, name: str, delta: float) -> tuple[Constants, float]:
-    if name.endswith("]"):
-        base, i = name[:-1].split("[")
-        comps = list(getattr(constants, base))
-        x = comps[int(i)]
-        comps[int(i)] = x + delta * max(1.0, abs(x))
-        return constants.replace(**{base: tuple(comps)}), delta * max(1.0, abs(x))
-    x = getattr(constants, name)
-    h = delta * max(1.0, abs(x))
-    return constants.replace(**{name: x + h}), h
-
-
-def check_jacobian_column(
-    render,
-    base: dict,
-    J: np.ndarray,
-    constants: Constants,
-    name: str,
-    decision_keys: tuple[str, ...],
-) -> None:
-    """Central differences of ``render`` vs the forward-mode column ``J`` for ``name``.
-
-    Compared on water pixels whose decision diagnostics (crossing step index, ...) are equal
-    at -eps, 0 and +eps and whose one-sided slopes agree (no other jump, e.g. a depth texel
-    boundary under the crossing, lies within the stencil)."""
-    cp, h = _perturbed(constants, name, FD_EPS[name])
-    cm, _ = _perturbed(constants, name, -FD_EPS[name])
-    p, m = render(cp), render(cm)
-    same = base["mask"] > 0
-    for k in decision_keys:
-        same &= (p[k] == m[k]) & (p[k] == base[k])
-    fd = (p["color"] - m["color"]) / (2 * h)
-    fp, fm = (p["color"] - base["color"]) / h, (base["color"] - m["color"]) / h
-    noise = FD_NOISE / h
-    smooth = same & (np.abs(fp - fm) <= 0.2 * np.abs(fd) + 2 * noise).all(-1)
-    assert smooth.sum() >= 0.8 * (base["mask"] > 0).sum(), (
-        f"{name}: only {smooth.sum()} of {(base['mask'] > 0).sum()} water pixels are comparable"
-    )
-    err = np.abs(J - fd)
-    bad = smooth & ~(err <= 2 * noise + FD_RTOL * np.abs(fd)).all(-1)
-    assert np.abs(fd[smooth]).max() > 10 * noise, f"{name}: colour does not depend on it here"
-    assert not bad.any(), (
-        f"{name}: forward-mode derivative differs from central differences at "
-        f"{bad.sum()} pixels (worst |err| {err.max(-1)[bad].max():.3g})"
-    )
 
 
 # ---- port vs the per-pixel NumPy reference ---------------------------------------------------
@@ -122,7 +37,7 @@ def check_jacobian_column(
 @pytest.mark.parametrize("reflection", [True, False], ids=["reflection", "noreflection"])
 @pytest.mark.parametrize("which", ["default", "custom"])
 def test_port_matches_numpy_reference(reflection, which):
-    inputs = _small()
+    inputs = small_inputs()
     constants = Constants() if which == "default" else CUSTOM
     out = water_refraction.render(inputs, constants, defines=_defines(reflection)).numpy()
     ref, ref_diag = render_reference("water_refraction", inputs, constants, reflection=reflection)
@@ -139,7 +54,7 @@ _FD_NAMES = list(FD_EPS)
 
 @pytest.fixture(scope="module")
 def jacobian():
-    inputs = _small()
+    inputs = small_inputs()
     out, J = water_refraction.render_with_jacobian(inputs, FD_CONSTANTS, _FD_NAMES)
     return inputs, out.numpy(), J
 
@@ -178,7 +93,7 @@ def test_replay_jacobian_equals_evaluated_loop_ad(jacobian, reflection):
 def test_frozen_replay_equals_traced_render(monkeypatch):
     # plain renders replay recorded kernels (dr.freeze); a change of constants, of the loop cap
     # and of the inputs must give exactly what a freshly traced render gives
-    inputs, other = _small(), synthetic_inputs(width=40, height=30, seed=1)
+    inputs, other = small_inputs(), synthetic_inputs(width=40, height=30, seed=1)
     cases = [
         (inputs, Constants()),
         (inputs, CUSTOM),
@@ -198,48 +113,18 @@ def test_frozen_replay_equals_traced_render(monkeypatch):
 
 def test_jacobian_rejects_unknown_and_integer_names():
     with pytest.raises(ValueError, match="loop_cap"):
-        water_refraction.render_with_jacobian(_small(), None, ["loop_cap"])
+        water_refraction.render_with_jacobian(small_inputs(), None, ["loop_cap"])
     with pytest.raises(ValueError, match="water_color\\[4\\]"):
-        water_refraction.render_with_jacobian(_small(), None, ["water_color[4]"])
+        water_refraction.render_with_jacobian(small_inputs(), None, ["water_color[4]"])
 
 
 def test_symbolic_loop_flag_restored_after_jacobian():
     before = dr.flag(dr.JitFlag.SymbolicLoops)
-    water_refraction.render_with_jacobian(_small(), None, ["attenuation_distance"])
+    water_refraction.render_with_jacobian(small_inputs(), None, ["attenuation_distance"])
     assert dr.flag(dr.JitFlag.SymbolicLoops) == before
 
 
 # ---- diagnostics on hand-checked cases --------------------------------------------------
-
-
-def flat_pool(depth: float, normal=(0.0, 1.0, 0.0), size: int = 9, **kw) -> ShaderInputs:
-    """A flat floor at y = -depth of constant colour, camera 3 units straight above it."""
-    tex = 32
-    x0, z0, x1, z1 = -2.0, -2.0, 2.0, 2.0
-    n = np.asarray(normal, np.float32)
-    nm = np.broadcast_to(0.5 * n + 0.5, (8, 8, 3)).copy()
-    args = dict(
-        refraction_texture=np.full((tex, tex, 3), (0.2, 0.4, 0.6), np.float32),
-        world_y=np.full((tex, tex), -depth, np.float32),
-        tex_matrix0=ortho_tex_matrix(x0, z0, x1, z1),
-        normal_map=nm,
-        cubemap=np.full((6, 4, 4, 3), 0.5, np.float32),
-        fresnel_lut=fresnel_lut(),
-        refl_world_y=np.full((tex, tex), -1e3, np.float32),
-        refl_texture=np.zeros((tex, tex, 3), np.float32),
-        tex_matrix1=ortho_tex_matrix(x0, z0, x1, z1),
-        water_rect=(-1.0, -1.0, 1.0, 1.0),
-        normal_tile=1.0,
-        waves=np.zeros((4, 2)),
-        view_proj=perspective_view_proj((0, 3, 0), (0, 0, 0), up=(0, 0, -1), fov_y_deg=2.0),
-        viewpos=np.array([0.0, 3.0, 0.0]),
-        lightpos=np.array([0.0, 10.0, 5.0]),
-        lightcolor=np.array([1.0, 1.0, 1.0]),
-        width=size,
-        height=size,
-    )
-    args.update(kw)
-    return ShaderInputs(**args)
 
 
 def test_diagnostics_flat_floor_straight_down():
@@ -269,19 +154,6 @@ def test_diagnostics_loop_cap_reached():
     assert np.all(np.isfinite(out["color"]))
 
 
-def degenerate_light_inputs():
-    """Light placed exactly on the surface point of one water pixel: varyingVecLight = 0 there,
-    so vLight = normalize(0) is NaN (no constant within its valid range can force a NaN)."""
-    from shaders_port.pipeline.raster import rasterize_water
-
-    base = flat_pool(0.9)
-    r = rasterize_water(base)
-    k = len(r.index) // 2
-    inputs = flat_pool(0.9, lightpos=r.world[k].astype(np.float64))
-    assert np.array_equal(rasterize_water(inputs).world[k], r.world[k])
-    return inputs, divmod(int(r.index[k]), inputs.width)
-
-
 def test_nonfinite_is_flagged_not_passed_on():
     inputs, (row, col) = degenerate_light_inputs()
     with pytest.warns(RuntimeWarning, match="1 water pixel"):
@@ -299,7 +171,7 @@ def test_nonfinite_is_flagged_not_passed_on():
 def test_no_warning_and_no_nonfinite_on_normal_input():
     with warnings.catch_warnings():
         warnings.simplefilter("error", RuntimeWarning)
-        out = water_refraction.render(_small(), Constants()).numpy()
+        out = water_refraction.render(small_inputs(), Constants()).numpy()
     assert out["nonfinite"].sum() == 0
 
 
@@ -307,11 +179,11 @@ def test_bad_constants_are_rejected_with_the_name():
     import drjit.llvm.ad as m
 
     with pytest.raises(ValueError, match="attenuation_distance"):
-        water_refraction.render(_small(), Constants(attenuation_distance=float("nan")))
+        water_refraction.render(small_inputs(), Constants(attenuation_distance=float("nan")))
     with pytest.raises(ValueError, match="refr_coeff"):
-        water_refraction.render(_small(), Constants(refr_coeff=m.Float(5.0)))
+        water_refraction.render(small_inputs(), Constants(refr_coeff=m.Float(5.0)))
     with pytest.raises(ValueError, match="backend"):
-        water_refraction.render(_small(), Constants(), backend="metal")
+        water_refraction.render(small_inputs(), Constants(), backend="metal")
 
 
 # ---- golden images ----------------------------------------------------------------------
@@ -326,7 +198,7 @@ def test_golden(scene):
     _, _, _, max_tol, mean_tol = SCENES[scene]
     err = np.abs(actual - expected)
     if not (err.max() <= max_tol and err.mean() <= mean_tol):
-        save_failure(scene, actual, expected)
+        save_comparison(scene, actual, expected)
     assert err.max() <= max_tol and err.mean() <= mean_tol, (
         f"{scene}: max {err.max():.3g} (<= {max_tol}), mean {err.mean():.3g} (<= {mean_tol})"
     )

@@ -57,7 +57,7 @@ SCENES = {
 
 def render_scene(scene: str) -> np.ndarray:
     """(HEIGHT, WIDTH, 3) float32 colour of ``scene`` rendered by the port."""
-    from synthetic import synthetic_inputs
+    from helpers.synthetic import synthetic_inputs
     from shaders_port.ports import water_reflection, water_refraction
 
     shader, reflection, constants, _, _ = SCENES[scene]

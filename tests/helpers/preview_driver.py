@@ -1,6 +1,6 @@
 """Run ``study preview`` on many experiments in one process (tests/test_fuzz_preview.py).
 
-    python tests/preview_driver.py CASES.json OUT_DIR
+    python tests/helpers/preview_driver.py CASES.json OUT_DIR
 
 ``CASES.json`` is a list of ``[name, [KEY=VALUE, ...]]``; each case is the default experiment
 at tiny sizes with those overrides. One JSON line per case goes to stdout as soon as it
@@ -18,7 +18,7 @@ import time
 import traceback
 from pathlib import Path
 
-ROOT = Path(__file__).resolve().parent.parent
+ROOT = Path(__file__).resolve().parents[2]
 sys.path.insert(0, str(ROOT))
 
 TINY = [

@@ -1,0 +1,150 @@
+"""The Dr.Jit port's shared checks: tolerances and constants of the central differences, the
+NumPy reference comparison, and hand-made inputs (a flat pool, a degenerate light)."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from golden.regenerate import CUSTOM
+from helpers.images import save_comparison
+from helpers.synthetic import synthetic_inputs
+from shaders_port import (
+    Constants,
+    ShaderInputs,
+    fresnel_lut,
+    ortho_tex_matrix,
+    perspective_view_proj,
+)
+
+PRIMAL_ATOL = 5e-5  # port vs NumPy reference, linear RGB (both float32)
+FD_RTOL, FD_NOISE = 0.1, 4e-6  # finite differences: relative truncation, float32 colour noise
+FD_EPS = {  # relative step of the central differences
+    "attenuation_distance": 1e-3,
+    "bumptex_mult": 3e-4,
+    "water_color[1]": 1e-3,
+    "water_color[2]": 1e-3,
+    "reflect_color[0]": 1e-3,
+    "reflect_color[2]": 1e-3,
+    "specular_strength": 1e-3,
+    "specular_exponent": 1e-3,
+    "refr_coeff": 3e-4,
+    "steps_grazing": 3e-4,
+    "steps_steep": 3e-4,
+}
+FD_CONSTANTS = Constants(attenuation_distance=2.0, specular_exponent=32.0)
+
+# every constant away from the seed's defaults, the variants' own ones too
+VARIANT_CUSTOM = CUSTOM.replace(
+    absorption_r=0.45, absorption_g=0.12, absorption_b=0.08, specular_roughness=0.12, refine_steps=4
+)
+
+
+def small_inputs():
+    """The synthetic scene at 48x36."""
+    return synthetic_inputs(width=48, height=36)
+
+
+def assert_matches_reference(shader: str, out: dict, ref, ref_diag, tag: str) -> None:
+    err = np.abs(out["color"] - ref).max(-1)
+    if not err.max() <= PRIMAL_ATOL:
+        save_comparison(tag, out["color"], ref)
+    assert err.max() <= PRIMAL_ATOL, f"{tag}: max |port - reference| = {err.max():.3g}"
+    for k, v in ref_diag.items():
+        tol = 1e-6 if k == "denominator" else 0.0
+        bad = np.abs(out[k] - v) > tol
+        assert not bad.any(), f"{tag}: diagnostic {k} differs at {bad.sum()} pixels"
+
+
+def perturbed(constants: Constants, name: str, delta: float) -> tuple[Constants, float]:
+    """``constants`` with ``name`` (``key`` or ``key[i]``) moved by ``delta`` relative (at least
+    ``delta`` absolute), and the step taken."""
+    if name.endswith("]"):
+        base, i = name[:-1].split("[")
+        comps = list(getattr(constants, base))
+        x = comps[int(i)]
+        comps[int(i)] = x + delta * max(1.0, abs(x))
+        return constants.replace(**{base: tuple(comps)}), delta * max(1.0, abs(x))
+    x = getattr(constants, name)
+    h = delta * max(1.0, abs(x))
+    return constants.replace(**{name: x + h}), h
+
+
+def check_jacobian_column(
+    render,
+    base: dict,
+    J: np.ndarray,
+    constants: Constants,
+    name: str,
+    decision_keys: tuple[str, ...],
+    eps: float | None = None,
+) -> None:
+    """Central differences of ``render`` vs the forward-mode column ``J`` for ``name``.
+
+    Compared on water pixels whose decision diagnostics (crossing step index, ...) are equal
+    at -eps, 0 and +eps and whose one-sided slopes agree (no other jump, e.g. a depth texel
+    boundary under the crossing, lies within the stencil). The relative step is ``eps``, by
+    default ``FD_EPS[name]``."""
+    eps = FD_EPS[name] if eps is None else eps
+    cp, h = perturbed(constants, name, eps)
+    cm, _ = perturbed(constants, name, -eps)
+    p, m = render(cp), render(cm)
+    same = base["mask"] > 0
+    for k in decision_keys:
+        same &= (p[k] == m[k]) & (p[k] == base[k])
+    fd = (p["color"] - m["color"]) / (2 * h)
+    fp, fm = (p["color"] - base["color"]) / h, (base["color"] - m["color"]) / h
+    noise = FD_NOISE / h
+    smooth = same & (np.abs(fp - fm) <= 0.2 * np.abs(fd) + 2 * noise).all(-1)
+    assert smooth.sum() >= 0.8 * (base["mask"] > 0).sum(), (
+        f"{name}: only {smooth.sum()} of {(base['mask'] > 0).sum()} water pixels are comparable"
+    )
+    err = np.abs(J - fd)
+    bad = smooth & ~(err <= 2 * noise + FD_RTOL * np.abs(fd)).all(-1)
+    assert np.abs(fd[smooth]).max() > 10 * noise, f"{name}: colour does not depend on it here"
+    assert not bad.any(), (
+        f"{name}: forward-mode derivative differs from central differences at "
+        f"{bad.sum()} pixels (worst |err| {err.max(-1)[bad].max():.3g})"
+    )
+
+
+def flat_pool(depth: float, normal=(0.0, 1.0, 0.0), size: int = 9, **kw) -> ShaderInputs:
+    """A flat floor at y = -depth of constant colour, camera 3 units straight above it."""
+    tex = 32
+    x0, z0, x1, z1 = -2.0, -2.0, 2.0, 2.0
+    n = np.asarray(normal, np.float32)
+    nm = np.broadcast_to(0.5 * n + 0.5, (8, 8, 3)).copy()
+    args = dict(
+        refraction_texture=np.full((tex, tex, 3), (0.2, 0.4, 0.6), np.float32),
+        world_y=np.full((tex, tex), -depth, np.float32),
+        tex_matrix0=ortho_tex_matrix(x0, z0, x1, z1),
+        normal_map=nm,
+        cubemap=np.full((6, 4, 4, 3), 0.5, np.float32),
+        fresnel_lut=fresnel_lut(),
+        refl_world_y=np.full((tex, tex), -1e3, np.float32),
+        refl_texture=np.zeros((tex, tex, 3), np.float32),
+        tex_matrix1=ortho_tex_matrix(x0, z0, x1, z1),
+        water_rect=(-1.0, -1.0, 1.0, 1.0),
+        normal_tile=1.0,
+        waves=np.zeros((4, 2)),
+        view_proj=perspective_view_proj((0, 3, 0), (0, 0, 0), up=(0, 0, -1), fov_y_deg=2.0),
+        viewpos=np.array([0.0, 3.0, 0.0]),
+        lightpos=np.array([0.0, 10.0, 5.0]),
+        lightcolor=np.array([1.0, 1.0, 1.0]),
+        width=size,
+        height=size,
+    )
+    args.update(kw)
+    return ShaderInputs(**args)
+
+
+def degenerate_light_inputs():
+    """Light placed exactly on the surface point of one water pixel: varyingVecLight = 0 there,
+    so vLight = normalize(0) is NaN (no constant within its valid range can force a NaN)."""
+    from shaders_port.pipeline.raster import rasterize_water
+
+    base = flat_pool(0.9)
+    r = rasterize_water(base)
+    k = len(r.index) // 2
+    inputs = flat_pool(0.9, lightpos=r.world[k].astype(np.float64))
+    assert np.array_equal(rasterize_water(inputs).world[k], r.world[k])
+    return inputs, divmod(int(r.index[k]), inputs.width)
