@@ -89,6 +89,10 @@ def test_joint_calibration_and_generalise(cache, tmp_path):
     assert set(summary["universality"]) <= set(joint["parameters"])
     assert (out / "shaders" / "core" / "my_water.frag").is_file()
     assert "my_water.frag" in (out / "generalise.md").read_text()
+    # the joint calibration's own result, as `study calibrate A.toml B.toml` writes it
+    written = json.loads((out / "constants.json").read_text())
+    assert written["joint"] and written["scenes"] == joint["scenes"]
+    assert {p["status"] for p in written["parameters"].values()} <= {"fitted", "bound", "frozen"}
 
 
 def test_animated_calibration(cache, tmp_path):

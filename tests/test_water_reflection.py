@@ -9,7 +9,7 @@ import pytest
 
 from shaders_port import Constants
 from shaders_port.ports import water_reflection
-from shaders_port.ports.numpy_ref import render_reference
+from helpers.numpy_ref import render_reference
 from golden.regenerate import CUSTOM, SCENES, read_exr, render_scene
 from helpers.images import save_comparison
 from helpers.port_checks import (

@@ -23,7 +23,7 @@ from helpers.port_checks import (
 from helpers.synthetic import synthetic_inputs
 from shaders_port import Constants
 from shaders_port.ports import water_refraction
-from shaders_port.ports.numpy_ref import render_reference
+from helpers.numpy_ref import render_reference
 
 
 def _defines(reflection: bool) -> tuple:

@@ -132,6 +132,7 @@ def export_calibration(exp, model, frames: list, fitted, out: Path, timings: dic
             engine_targets["hlsl"]["llvmpipe"] = hlsl_check_user(
                 user, frames[0], fitted, ours[0], shaders
             )
+    text = user.source  # the file's text as the calibration leaves it
     if exp.fit.write_back == "file":
         if not all(g["passed"] is not False for g in gl):
             _log(f"calibrate: {user.label} not written back: the GL check failed")
@@ -141,7 +142,7 @@ def export_calibration(exp, model, frames: list, fitted, out: Path, timings: dic
             _log(f"calibrate: wrote the fitted constants into {exp.fit.shader}")
     extra = {
         "shader_file": str(exp.fit.shader),
-        "shader_sha256": hashlib.sha256(user.source.encode("utf-8")).hexdigest(),
+        "shader_sha256": hashlib.sha256(text.encode("utf-8")).hexdigest(),
         "declaration": {
             "constants": {n: [c.lo, c.hi] for n, c in user.constants.items()},
             "bindings": dict(user.bindings),

@@ -1,4 +1,4 @@
-"""Slow per-pixel NumPy reference of the two water shaders (tests only).
+"""Slow per-pixel NumPy reference of the two water shaders (the tests' own, not installed).
 
 Written independently of the Dr.Jit port from the GLSL text and the OpenGL texture rules:
 one Python loop iteration per covered pixel, float32 arithmetic (``np.float32`` vectors),
@@ -13,8 +13,8 @@ import math
 
 import numpy as np
 
-from ..inputs import Constants, ShaderInputs
-from ..pipeline.raster import rasterize_water
+from shaders_port.inputs import Constants, ShaderInputs
+from shaders_port.pipeline.raster import rasterize_water
 
 f32 = np.float32
 
