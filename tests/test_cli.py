@@ -247,6 +247,40 @@ def test_export_of_calibrate_output_reproduces_its_shaders(runs):
             ).read_bytes(), (dialect, f)
 
 
+def test_calibrate_ships_the_textures_its_constants_assume(runs):
+    """The Fresnel LUT and the normal map the constants were fitted with go with the shaders as
+    float EXR, exactly (the GL check runs them from those files), with what an engine must know:
+    the LUT's law in constants.json, at the top of every binding sheet and in the report; study
+    export carries them on."""
+    from shaders_port import ShaderInputs
+    from study import read_exr
+
+    root, rc = runs
+    assert rc["calibrate"] == 0 and rc["export"] == 0
+    inputs = ShaderInputs.load(root / "render" / "inputs" / "shader_inputs.npz")
+    for out in (root / "calibrate", root / "export"):
+        folder = out / "shaders" / "textures"
+        lut, _, _ = read_exr(folder / "fresnel_lut.exr")
+        normals, _, _ = read_exr(folder / "normal_map.exr")
+        assert np.array_equal(lut[0, :, :2], inputs.fresnel_lut) and not lut[..., 2].any(), out
+        assert np.array_equal(normals, inputs.normal_map), out
+        assert (
+            json.loads((folder / "textures.json").read_text())["fresnel_lut"]["law"] == "radiance"
+        )
+    res = json.loads((root / "calibrate" / "constants.json").read_text())
+    lut = res["textures"]["fresnel_lut"]
+    # experiments/default.toml bakes the n^2 law of radiance into the transmission channel
+    assert lut["law"] == "radiance" and lut["transmission"] == "(1 - R) / n^2", lut
+    sheets = sorted((root / "calibrate" / "shaders").glob("*/BINDINGS.md"))
+    assert sheets
+    for sheet in sheets:
+        text = sheet.read_text()
+        assert text.splitlines()[2] == "## What this shader expects", sheet
+        assert "(1 - R) / n^2" in text and "fresnel_lut.exr" in text, sheet
+    report = (root / "calibrate" / "report.md").read_text()
+    assert "## What this shader expects" in report and "1.78x too bright" in report
+
+
 def test_calibration_result_refuses_what_is_not_one():
     from study.fit.result import CalibrationResult
 
@@ -275,4 +309,5 @@ def test_calibrate_writes_engine_targets_checked(runs):
         "msl",
         "spirv",
         "targets.json",
+        "textures",
     ]

@@ -204,3 +204,18 @@ def test_a_worker_slow_to_exit_at_close_keeps_the_sweeps_outcome(monkeypatch):
             raise KeyboardInterrupt
     assert len(pids) == 1 and all(_gone(p) for p in pids)
     assert any("took longer than the cluster's 5 s to exit" in m for m in said), said
+
+
+def test_progress_writes_to_the_stderr_of_its_sweep(monkeypatch):
+    """The progress line goes to ``sys.stderr`` as it is when the sweep runs, not as it was when
+    the engine was imported (a capture closed since: "I/O operation on closed file")."""
+    import io
+
+    from study.sweep.engine import Progress
+
+    now = io.StringIO()
+    monkeypatch.setattr(sys, "stderr", now)
+    p = Progress("screen", 2)
+    p.update(True)
+    p.update(False)
+    assert "screen [" in now.getvalue() and "2/2, 1 failed" in now.getvalue()

@@ -84,5 +84,6 @@ def run_calibrate(experiment, out, overrides=None, variant=None, solver=None, ca
     timings["total_s"] = time.perf_counter() - t_start  # up to the report (written last)
     result = calibration_result(exp, variant, model, ref, cal, ev, solver, timings, gl)
     result.engine_targets = engine_targets
+    result.textures = extra.pop("textures")
     result.extra.update(extra)
     return write_result(out, result, figs, ev)

@@ -2,29 +2,52 @@
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
 
 from .._progress import log as _log
 from ..export.shaders import export_shaders, export_user_shader, load_constants_json, user_shader_of
+from ..export.textures import copy_textures, read_texture_record
 
 
 def run_export(constants_json, out, targets=None) -> list:
     """``study export``: the shipped shaders with the constants of a JSON file, in
-    ``out/shaders`` (a user's shader's ``constants.json``: its file with them); ``targets``:
-    engine targets, a comma-separated string or list, 'none', or None (every one the installed
-    tools can make)."""
+    ``out/shaders`` (a user's shader's ``constants.json``: its file with them), with the textures
+    the constants assume (``shaders/textures/`` beside the JSON, when the calibration wrote
+    them); ``targets``: engine targets, a comma-separated string or list, 'none', or None (every
+    one the installed tools can make)."""
     if isinstance(targets, str):
         targets = [] if targets == "none" else [t for t in targets.split(",") if t]
     constants = load_constants_json(constants_json)
     out = Path(out)
     user = user_shader_of(constants_json)
+    src = Path(constants_json).parent / "shaders"  # the calibration's own export
+    record = read_texture_record(src)
+    textures = None
+    if record is None and _is_calibration(constants_json):  # one written before the textures
+        _log(
+            f"export: no textures beside {constants_json} (shaders/textures/): the Fresnel LUT "
+            "and normal map the constants assume are not exported; calibrate again to get them"
+        )
+    elif record is not None:
+        textures = (record, lambda folder: copy_textures(src, folder))
     if user is None:
-        paths = export_shaders(constants, out / "shaders", targets=targets)
+        paths = export_shaders(constants, out / "shaders", targets=targets, textures=textures)
     else:
-        paths = export_user_shader(user, constants, out / "shaders", targets=targets)
+        paths = export_user_shader(
+            user, constants, out / "shaders", targets=targets, textures=textures
+        )
     made = sorted(p.name for p in (out / "shaders").iterdir() if p.is_dir())
     _log(
         f"export: wrote {len(paths)} files to {out / 'shaders'} ({', '.join(made)}; GLSL compiled "
         "with glslangValidator, targets checked as listed in targets.json)"
     )
     return paths
+
+
+def _is_calibration(path) -> bool:
+    """Whether the JSON file is a calibration's ``constants.json`` (not a table of constants)."""
+    try:
+        return "parameters" in json.loads(Path(path).read_text())
+    except (OSError, ValueError):
+        return False

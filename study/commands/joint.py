@@ -129,6 +129,7 @@ def joint_fit(scenes, variant, out: Path, solver):
         scenes=[s["name"] for s in scenes],
         weights={s["name"]: float(w) for s, w in zip(scenes, weights)},
         engine_targets=engine_targets,
+        textures=extra.pop("textures"),
         extra=extra,
     )
     summary = result.to_json()

@@ -26,6 +26,7 @@ from ..export.gl_check import (
     target_checks,
 )
 from ..export.shaders import export_shaders, export_user_shader
+from ..export.textures import texture_record, with_exported_textures, write_textures
 from ..fit.build import build_model
 from ..fit.calibrate import timed
 from ..fit.model import constants_json
@@ -109,22 +110,30 @@ def export_calibration(exp, model, frames: list, fitted, out: Path, timings: dic
     """The fitted shader exported into ``out/shaders``: a variant's core and compatibility GLSL,
     or a copy of a user's file with the fitted constants in place (``fit.write_back = "file"``:
     the file itself too, once the GL check passed); every engine target the installed tools
-    make. Then run on OpenGL (llvmpipe) against the Dr.Jit shader on each of ``frames`` (shader
-    inputs at the experiment's resolution), and the engine targets' checks. Returns (a GL check
-    per frame, engine targets, what the result adds for a user's file)."""
+    make; the Fresnel LUT and normal map the constants assume, in ``shaders/textures/``
+    (``study.export.textures``). Then run on OpenGL (llvmpipe), with those textures read back
+    from their files, against the Dr.Jit shader on each of ``frames`` (shader inputs at the
+    experiment's resolution), and the engine targets' checks. Returns (a GL check per frame,
+    engine targets, what the result adds: the textures' record and, for a user's file, the
+    file, its SHA-256 and declaration)."""
     shaders = out / "shaders"
     user = getattr(model, "user_shader", None)
+    record = texture_record(exp, frames[0])
+    textures = (record, lambda folder: write_textures(record, frames[0], folder))
     with timed(timings, "export_s"):
         _log(f"calibrate: exporting and compiling {model.label} (and its vertex shader)")
         if user is None:
-            export_shaders(fitted, shaders, [model.shader], targets=None)
+            export_shaders(fitted, shaders, [model.shader], targets=None, textures=textures)
         else:
-            export_user_shader(user, fitted, shaders, targets=None)
+            export_user_shader(user, fitted, shaders, targets=None, textures=textures)
+    # the GL check runs the textures that ship: read back from the exported files
+    frames = [with_exported_textures(i, shaders) for i in frames]
     with timed(timings, "gl_check_s"):
         _log(f"calibrate: running the exported shader on OpenGL (llvmpipe), {len(frames)} frame(s)")
         if user is None:
             gl = [gl_check(model.shader, i, fitted, shaders) for i in frames]
-            return gl, target_checks(model.shader, frames[0], fitted, shaders), {}
+            targets = target_checks(model.shader, frames[0], fitted, shaders)
+            return gl, targets, {"textures": record}
         ours = [user.render(i, fitted).numpy() for i in frames]
         gl = [gl_check_user(user, i, fitted, o) for i, o in zip(frames, ours)]
         engine_targets = manifest_checks(shaders)
@@ -141,6 +150,7 @@ def export_calibration(exp, model, frames: list, fitted, out: Path, timings: dic
             Path(exp.fit.shader).write_text(text, "utf-8")
             _log(f"calibrate: wrote the fitted constants into {exp.fit.shader}")
     extra = {
+        "textures": record,
         "shader_file": str(exp.fit.shader),
         "shader_sha256": hashlib.sha256(text.encode("utf-8")).hexdigest(),
         "declaration": {

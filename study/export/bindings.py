@@ -145,11 +145,13 @@ def _fmt(value) -> str:
     return np.format_float_positional(np.float32(value), unique=True, trim="0")
 
 
-def binding_sheet(target: str, reflections: dict, spec: dict, constants) -> str:
+def binding_sheet(target: str, reflections: dict, spec: dict, constants, expects=()) -> str:
     """Markdown binding sheet of ``target`` from the reflections of its shaders (relative path
     -> JSON), the specialization constants of the shaders (id -> name) and the exported
-    ``constants`` (a ``shaders_port.Constants``)."""
-    out = [f"# Binding sheet: {target}", "", *[f"* {n}" for n in _NOTES[target]], ""]
+    ``constants`` (a ``shaders_port.Constants``); ``expects``: the lines of what the shader
+    expects (``study.export.textures.expects_lines``), first."""
+    out = [f"# Binding sheet: {target}", "", *expects]
+    out += [*[f"* {n}" for n in _NOTES[target]], ""]
     if spec:
         out += ["## Fitted constants (specialization constants)", ""]
         out += ["| id | name | value |", "|---|---|---|"]

@@ -32,6 +32,7 @@ from shaders_port.variants import SHIPPED, VARIANTS, get_variant
 
 from .._io import disk_full
 from .targets import resolve_targets, translate_targets
+from .textures import expects_lines
 
 # every fragment shader file a registered variant uses, in registration order
 FRAGMENT_SHADERS = tuple(dict.fromkeys(VARIANTS[n].shader for n in SHIPPED))
@@ -107,15 +108,20 @@ def _read_json(path) -> dict:
     return data
 
 
-def export_shaders(constants: Constants, out_dir, shaders=None, targets=()) -> list[Path]:
+def export_shaders(
+    constants: Constants, out_dir, shaders=None, targets=(), textures=None
+) -> list[Path]:
     """Write ``out_dir/{compat,core}/water.vert`` and the fragment shaders of the shaders named
     in ``shaders`` (any of the shader space; default: every shipped one --
     ``water_refraction.frag``, ``water_reflection.frag``, ...) with ``constants``; return the
     written paths. Constants
     are fitted for one shader, so a calibration exports that shader alone. ``targets``: engine
     targets to add (``study.export.targets.TARGETS``; None: every one the installed tools can
-    make). Raises ValueError on bad constants or an unknown name and RuntimeError if a shader
-    does not compile or translate (nothing is written then)."""
+    make). ``textures``: (record, writer) of what the constants assume ships with them
+    (``study.export.textures``): ``writer(folder)`` writes them into ``out_dir/textures/`` and
+    every binding sheet opens with what the record says the shader expects. Raises ValueError on
+    bad constants or an unknown name and RuntimeError if a shader does not compile or translate
+    (nothing is written then)."""
     constants.validate()
     names = list(SHIPPED) if shaders is None else list(shaders)
     if not names:
@@ -134,33 +140,35 @@ def export_shaders(constants: Constants, out_dir, shaders=None, targets=()) -> l
                 bases[v.shader] if v.name == v.shader else v.source(dialect, text=bases[v.shader])
             )
             texts[(dialect, f"{v.name}.frag")] = text
-    return _write_checked(texts, out_dir, targets, constants)
+    return _write_checked(texts, out_dir, targets, constants, textures)
 
 
-def export_user_shader(shader, values: dict, out_dir, targets=()) -> list[Path]:
+def export_user_shader(shader, values: dict, out_dir, targets=(), textures=None) -> list[Path]:
     """Write a user's shader (``shaders_port.spirv.user_shader.UserShader``) with ``values`` (GLSL
     name -> float | tuple) in place of its constants' initializers, ``out_dir/core/<file>``,
     beside the study's vertex shader it runs after, ``out_dir/core/water.vert``; ``targets``
-    as :func:`export_shaders` (translated from those two files). Compile-checked and written
-    all or not at all, as there; returns the written paths."""
+    and ``textures`` as :func:`export_shaders` (translated from those two files). Compile-checked
+    and written all or not at all, as there; returns the written paths."""
     texts = {
         ("core", "water.vert"): read_source("water", "vert", "core"),
         ("core", shader.label): shader.written(values),
     }
-    return _write_checked(texts, out_dir, targets, values)
+    return _write_checked(texts, out_dir, targets, values, textures)
 
 
-def _write_checked(texts: dict, out_dir, targets, constants) -> list[Path]:
+def _write_checked(texts: dict, out_dir, targets, constants, textures=None) -> list[Path]:
     """Compile every text of ``texts`` ((dialect, file name) -> GLSL), translate the core ones
-    to ``targets``, write them into a temporary folder beside ``out_dir`` and swap it in."""
+    to ``targets``, write them and the ``textures`` into a temporary folder beside ``out_dir``
+    and swap it in."""
     for (dialect, fname), text in texts.items():
         compile_check(text, fname.rsplit(".", 1)[1])
     extra = {}
     targets = resolve_targets(targets)
+    expects = expects_lines(textures[0]) if textures else []
     if targets:
         core = {f: t for (d, f), t in texts.items() if d == "core"}
         with disk_full(out_dir):  # the tools' scratch files (nothing reaches out_dir yet)
-            extra, _ = translate_targets(core, targets, constants)
+            extra, _ = translate_targets(core, targets, constants, expects)
     out_dir = Path(out_dir)
     out_dir.parent.mkdir(parents=True, exist_ok=True)
     tmp = Path(tempfile.mkdtemp(dir=out_dir.parent, prefix=f".{out_dir.name}."))
@@ -172,6 +180,8 @@ def _write_checked(texts: dict, out_dir, targets, constants) -> list[Path]:
             for rel, data in extra.items():
                 (tmp / rel).parent.mkdir(parents=True, exist_ok=True)
                 (tmp / rel).write_bytes(data)
+            if textures:
+                textures[1](tmp)
         old = None
         if out_dir.exists():
             old = Path(tempfile.mkdtemp(dir=out_dir.parent, prefix=f".{out_dir.name}.old."))

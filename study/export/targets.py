@@ -115,7 +115,7 @@ def _one_file(fname: str, text: str, targets) -> tuple[dict, dict, dict, dict]:
     return files, reflections, seconds, spec
 
 
-def translate_targets(core_texts: dict, targets, constants) -> tuple[dict, dict]:
+def translate_targets(core_texts: dict, targets, constants, expects=()) -> tuple[dict, dict]:
     """Every core file of ``core_texts`` (file name -> GLSL) in every target: returns
     (relative path -> bytes to write, the ``targets.json`` manifest). Raises RuntimeError with
     the tool's log when a translation or a check fails (nothing is written then)."""
@@ -132,9 +132,8 @@ def translate_targets(core_texts: dict, targets, constants) -> tuple[dict, dict]
         mine = {k: v for k, v in reflections.items() if k.startswith(f"{target}/")}
         for path, refl in mine.items():
             files[path] = (json.dumps(refl, indent=1) + "\n").encode("utf-8")
-        files[f"{target}/BINDINGS.md"] = binding_sheet(target, mine, spec, constants).encode(
-            "utf-8"
-        )
+        sheet = binding_sheet(target, mine, spec, constants, expects)
+        files[f"{target}/BINDINGS.md"] = sheet.encode("utf-8")
         manifest["targets"][target] = {
             "files": sorted(p for p in files if p.startswith(f"{target}/")),
             "check": CHECKS[target],

@@ -55,7 +55,8 @@ class CalibrationResult:
     Joint:
         experiments (paths), scenes (names), weights (scene -> weight of its residuals).
     Both, when written: engine_targets (the HLSL, Metal, GLSL ES and SPIR-V exports and what
-    checked each, ``study.export.gl_check.target_checks``).
+    checked each, ``study.export.gl_check.target_checks``); textures (the Fresnel LUT and the
+    normal map the constants assume, exported beside them: ``study.export.textures``).
     """
 
     shader: str
@@ -80,6 +81,7 @@ class CalibrationResult:
     scenes: list | None = None
     weights: dict | None = None
     engine_targets: dict | None = None
+    textures: dict | None = None
     extra: dict = field(default_factory=dict)
 
     @property

@@ -14,6 +14,7 @@ import numpy as np
 
 from .._io import to_srgb, write_text_atomic
 from .._metrics import flip_map
+from ..export.textures import expects_lines
 from .calibration import constants_table, fmt, identifiability_table, pyplot
 
 PANELS = ("reference", "fitted (all frames)", "FLIP error")
@@ -230,6 +231,7 @@ def animation_report_text(summary: dict, gif: bool = True) -> str:
     lines += ["", "## Identifiability (all frames)", ""]
     lines += identifiability_table(summary["identifiability"]) + [""]
     lines += _export_lines(summary, a)
+    lines += expects_lines(summary.get("textures"))
     sh = a["shared"]
     lines += [
         "## Timings (seconds)",

@@ -11,6 +11,7 @@ from pathlib import Path
 import numpy as np
 
 from .._io import to_srgb, write_text_atomic
+from ..export.textures import expects_lines
 
 
 def pyplot():
@@ -255,6 +256,7 @@ def write_report(out: Path, summary: dict, figures: dict) -> Path:
     lines += ["## Timings (seconds)", "", "| stage | s |", "|---|---|"]
     lines += [f"| {k} | {fmt(v, 3)} |" for k, v in t.items()] + [""]
     lines += _export_lines(summary.get("gl_check"), summary.get("shader_file"))
+    lines += expects_lines(summary.get("textures"))
     lines += engine_targets_section(
         summary.get("engine_targets") or {}, user=bool(summary.get("shader_file"))
     )

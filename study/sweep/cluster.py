@@ -113,7 +113,7 @@ def open_client(
                 n_workers=n,
                 threads_per_worker=1,
                 processes=True,
-                dashboard_address=None,
+                dashboard_address=":0",  # no dashboard wanted: a free port, never 8787
                 silence_logs=40,
             )
             client = Client(cluster)

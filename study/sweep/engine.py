@@ -78,7 +78,10 @@ def _prepare(spec: dict, variant: str) -> dict:
 class Progress:
     """One status line on stderr: ``label [#####.....] done/total (n failed) elapsed``."""
 
-    def __init__(self, label: str, total: int, stream=sys.stderr, width: int = 30):
+    def __init__(self, label: str, total: int, stream=None, width: int = 30):
+        # the stream at the time of the sweep (a default bound at import would keep whatever
+        # sys.stderr was then, e.g. a capture that is closed since)
+        stream = sys.stderr if stream is None else stream
         self.label, self.total, self.stream, self.width = label, total, stream, width
         self.done = self.failed = 0
         self.t0 = time.perf_counter()
