@@ -222,8 +222,8 @@ def _add_export(sub) -> None:
     p = sub.add_parser("export", help="write the shaders with constants from a JSON file")
     p.add_argument(
         "constants",
-        help="constants.json written by `study calibrate`, or a flat JSON "
-        "object of constant name -> value",
+        help="constants.json written by `study calibrate` or `study tradeoff` (in its "
+        "shaders/), or a flat JSON object of constant name -> value",
     )
     p.add_argument("--out", required=True, help="output folder")
     p.add_argument(
@@ -231,6 +231,12 @@ def _add_export(sub) -> None:
         default=None,
         help="engine targets besides GLSL, comma-separated: gles300,hlsl,msl,spirv, or 'none' "
         "(default: every one the installed tools can make)",
+    )
+    p.add_argument(
+        "--shaders",
+        default=None,
+        help="shaders of the space to write, comma-separated (default: the one the constants "
+        "were fitted for; every shipped one for a flat JSON)",
     )
 
 
@@ -302,7 +308,7 @@ def main(argv=None) -> int:
                 workers=args.workers,
             )
         elif args.command == "export":
-            commands.run_export(args.constants, args.out, args.targets)
+            commands.run_export(args.constants, args.out, args.targets, args.shaders)
     except (ExperimentError, BackendError, FileNotFoundError, ValueError) as exc:
         print(f"study {args.command}: error: {exc}", file=sys.stderr)
         return 2

@@ -214,6 +214,13 @@ def test_tradeoff_cli_tiny(tmp_path):
     assert rec["label"] in {r["label"] for r in summary["scenes"]["default"]["front"]}
     assert summary["exports"]["default"]["gl_check"]["passed"]
     assert (tmp_path / "shaders" / "core" / "water_refraction.frag").is_file()
+    # the recommendation exported again from its constants.json: the same shader and textures
+    saved = json.loads((tmp_path / "shaders" / "constants.json").read_text())
+    assert saved["shader"] == rec["variant"] and saved["textures"]["fresnel_lut"]["law"]
+    again = tmp_path / "again"
+    assert main(["export", str(tmp_path / "shaders" / "constants.json"), "--out", str(again)]) == 0
+    for rel in (f"core/{rec['variant']}.frag", "textures/fresnel_lut.exr"):
+        assert (again / "shaders" / rel).read_bytes() == (tmp_path / "shaders" / rel).read_bytes()
     assert (tmp_path / "pareto.png").stat().st_size > 10_000
     assert "Recommended" in (tmp_path / "report.md").read_text()
     # the reference beside the seed shader (seed constants, fitted) and the recommendation

@@ -10,18 +10,22 @@ from ..export.shaders import export_shaders, export_user_shader, load_constants_
 from ..export.textures import copy_textures, read_texture_record
 
 
-def run_export(constants_json, out, targets=None) -> list:
+def run_export(constants_json, out, targets=None, shaders=None) -> list:
     """``study export``: the shipped shaders with the constants of a JSON file, in
     ``out/shaders`` (a user's shader's ``constants.json``: its file with them), with the textures
-    the constants assume (``shaders/textures/`` beside the JSON, when the calibration wrote
-    them); ``targets``: engine targets, a comma-separated string or list, 'none', or None (every
-    one the installed tools can make)."""
+    the constants assume (``shaders/textures/`` beside the JSON, or ``textures/`` with it, when
+    the calibration or tradeoff wrote them). ``shaders``: the shaders of the space to write, a
+    comma-separated string or list (default: the one the JSON says the constants were fitted
+    for, else every shipped one); ``targets``: engine targets, a comma-separated string or list,
+    'none', or None (every one the installed tools can make)."""
     if isinstance(targets, str):
         targets = [] if targets == "none" else [t for t in targets.split(",") if t]
     constants = load_constants_json(constants_json)
     out = Path(out)
     user = user_shader_of(constants_json)
-    src = Path(constants_json).parent / "shaders"  # the calibration's own export
+    src = Path(constants_json).parent / "shaders"  # a calibration's own export
+    if read_texture_record(src) is None:
+        src = Path(constants_json).parent  # a tradeoff's: the JSON inside its export
     record = read_texture_record(src)
     textures = None
     if record is None and _is_calibration(constants_json):  # one written before the textures
@@ -32,7 +36,8 @@ def run_export(constants_json, out, targets=None) -> list:
     elif record is not None:
         textures = (record, lambda folder: copy_textures(src, folder))
     if user is None:
-        paths = export_shaders(constants, out / "shaders", targets=targets, textures=textures)
+        names = _shaders(constants_json, shaders)
+        paths = export_shaders(constants, out / "shaders", names, targets, textures)
     else:
         paths = export_user_shader(
             user, constants, out / "shaders", targets=targets, textures=textures
@@ -51,3 +56,17 @@ def _is_calibration(path) -> bool:
         return "parameters" in json.loads(Path(path).read_text())
     except (OSError, ValueError):
         return False
+
+
+def _shaders(constants_json, shaders) -> list[str] | None:
+    """The shaders to export: those named (``shaders``), else the one the JSON's ``shader``
+    says the constants were fitted for, else None (every shipped one)."""
+    if isinstance(shaders, str):
+        shaders = [n for n in shaders.split(",") if n]
+    if shaders:
+        return list(shaders)
+    try:
+        fitted = json.loads(Path(constants_json).read_text()).get("shader")
+    except (OSError, ValueError, AttributeError):
+        fitted = None
+    return [fitted] if isinstance(fitted, str) and fitted else None

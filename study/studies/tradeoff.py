@@ -52,6 +52,7 @@ from .._progress import log as _log
 from ..config.experiment import load_experiments
 from ..export.gl_check import gl_check, target_checks
 from ..export.shaders import export_shaders
+from ..export.textures import texture_record, with_exported_textures, write_textures
 from ..fit.model import constants_from_experiment
 from ..report.calibration import comparison_figure
 from ..report.tradeoff import pareto_figure, write_tradeoff_report
@@ -315,11 +316,20 @@ def export_recommended(
         )
         constants = Constants.from_dict(constants_of(row))
         folder = out / "shaders" if len(exps) == 1 else out / "shaders" / exp.name
-        export_shaders(constants, folder, [rec["variant"]], targets=None)
-
         exp_s, _, inputs = load_scene(spec, variant)
         inputs = inputs_for_shader(exp_s, inputs, rec["variant"], variant, log=log)
+        record = texture_record(exp_s, inputs)
+        textures = (record, lambda d: write_textures(record, inputs, d))
+        export_shaders(constants, folder, [rec["variant"]], targets=None, textures=textures)
+        inputs = with_exported_textures(inputs, folder)  # the GL check runs what ships
         gl = gl_check(rec["variant"], inputs, constants, folder)
+        # what `study export` takes back: the recommendation's shader and constants
+        write_json(
+            folder / "constants.json",
+            {"shader": rec["variant"], "label": rec["label"], "experiment": exp.name,
+             "source": "study tradeoff (the recommended point)",
+             "constants": constants.to_dict(), "textures": record},
+        )  # fmt: skip
         result[exp.name] = {
             "folder": str(folder.relative_to(out)),  # the report lives in ``out``
             "variant": rec["variant"],
