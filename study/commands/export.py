@@ -1,4 +1,5 @@
-"""``study export``: a calibration's constants written into the shaders again."""
+"""``study export``: a calibration's or a tradeoff's constants written into their shader again,
+with the textures they assume."""
 
 from __future__ import annotations
 
@@ -11,7 +12,7 @@ from ..export.textures import copy_textures, read_texture_record
 
 
 def run_export(constants_json, out, targets=None, shaders=None) -> list:
-    """``study export``: the shipped shaders with the constants of a JSON file, in
+    """``study export``: the constants of a JSON file written into their shader, in
     ``out/shaders`` (a user's shader's ``constants.json``: its file with them), with the textures
     the constants assume (``shaders/textures/`` beside the JSON, or ``textures/`` with it, when
     the calibration or tradeoff wrote them). ``shaders``: the shaders of the space to write, a
