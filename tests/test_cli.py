@@ -315,3 +315,25 @@ def test_calibrate_writes_engine_targets_checked(runs):
         "targets.json",
         "textures",
     ]
+
+
+def test_the_report_counts_steps_over_rounds_and_gives_each_final_status():
+    """The header's step count is the total over the fit's rounds and says so (the last round's
+    reason counts its own steps); the identifiability table's decision is the start's, and the
+    status beside it the one the Constants table gives."""
+    from study.report.calibration import fit_steps_line, identifiability_table
+
+    summary = {"iterations": 46, "converged": True, "message": "converged after 6 steps",
+               "fit": {"iterations_per_round": [40, 6]}}  # fmt: skip
+    line = fit_steps_line(summary)
+    assert line.startswith("46 solver steps in 2 rounds (40 + 6: ")
+    assert "the last round stopped as converged after 6 steps" in line
+    one = fit_steps_line({**summary, "iterations": 6, "fit": {"iterations_per_round": [6]}})
+    assert one == "6 solver steps, converged (converged after 6 steps)."
+    ident = {
+        "start": {"names": ["a"], "sensitivity": [0.1], "decision": ["identified (0.1)"]},
+        "solution": {"names": [], "sensitivity": []},
+    }
+    rows = identifiability_table(ident, {"a": {"status": "bound"}})
+    assert "decision at the start | status |" in rows[0]
+    assert rows[2].endswith("| identified (0.1) | bound |"), rows[2]

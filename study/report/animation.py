@@ -15,7 +15,7 @@ import numpy as np
 from .._io import to_srgb, write_text_atomic
 from .._metrics import flip_map
 from ..export.textures import expects_lines
-from .calibration import constants_table, fmt, identifiability_table, pyplot
+from .calibration import constants_table, fit_steps_line, fmt, identifiability_table, pyplot
 
 PANELS = ("reference", "fitted (all frames)", "FLIP error")
 
@@ -172,16 +172,14 @@ def animation_report_text(summary: dict, gif: bool = True) -> str:
     a = summary["animation"]
     sc, figs = a["scores"], a["figures"]
     n = a["frames"]
-    fs = summary.get("fit", {})
     lines = [
         f"# Animated calibration: {summary['experiment']} ({summary['shader']}), {n} frames",
         "",
         f"{n} frames {a['time_step']:.4g} s apart; the four normal-map layers move at "
         f"{a['velocities']} texture units per second, the reference's surface with them. One "
         f"constants block fitted on all frames (joint fit, each frame weighted equally), solver "
-        f"`{summary['solver']}`: {fs.get('iterations')} iterations, "
-        f"{'converged' if fs.get('converged') else 'NOT converged'}. Frame 0 fitted alone the same "
-        "way, for comparison. Errors on the water pixels at full resolution.",
+        f"`{summary['solver']}`: {fit_steps_line(summary)} Frame 0 fitted alone the same way, "
+        "for comparison. Errors on the water pixels at full resolution.",
         "",
         f"![reference | fitted | FLIP error, {n} frames]({figs['animation_webp']})",
         "",
@@ -229,7 +227,7 @@ def animation_report_text(summary: dict, gif: bool = True) -> str:
             f"| {name} | {fmt(single.get(name, {}).get('fitted'))} | {fmt(p.get('fitted'))} |"
         )
     lines += ["", "## Identifiability (all frames)", ""]
-    lines += identifiability_table(summary["identifiability"]) + [""]
+    lines += identifiability_table(summary["identifiability"], summary["parameters"]) + [""]
     lines += _export_lines(summary, a)
     lines += expects_lines(summary.get("textures"))
     sh = a["shared"]

@@ -194,12 +194,16 @@ def basin_lines(parameters: dict) -> list[str]:
     return lines + [""] if lines else []
 
 
-def identifiability_table(ident: dict) -> list[str]:
+def identifiability_table(ident: dict, parameters: dict | None = None) -> list[str]:
+    """The identifiability table: per constant its sensitivities, standard errors, the decision
+    at the start and, given the ``parameters`` table, its status at the end (the one the
+    Constants table gives)."""
     lines = [
         "| parameter | rel. sensitivity at start | at solution | rel. std. error at solution | "
-        "rel. error from reference noise | decision |",
-        "|---|---|---|---|---|---|",
+        "rel. error from reference noise | decision at the start | status |",
+        "|---|---|---|---|---|---|---|",
     ]
+    parameters = parameters or {}
     start, sol = ident.get("start", {}), ident.get("solution", {})
     for name in start.get("names", []):
         i = start["names"].index(name)
@@ -207,9 +211,10 @@ def identifiability_table(ident: dict) -> list[str]:
         s1 = fmt(sol["sensitivity"][j]) if j is not None else "-"
         se = fmt(sol["rel_std_error"][j]) if j is not None and sol.get("rel_std_error") else "-"
         ne = fmt(sol["rel_noise_error"][j]) if j is not None and sol.get("rel_noise_error") else "-"
+        status = parameters.get(name, {}).get("status", "-")
         lines.append(
             f"| `{name}` | {fmt(start['sensitivity'][i])} | {s1} | {se} | {ne} | "
-            f"{start['decision'][i]} |"
+            f"{start['decision'][i]} | {status} |"
         )
     lines.append("")
     for label, d in (("start", start), ("solution", sol)):
@@ -246,7 +251,7 @@ def write_report(out: Path, summary: dict, figures: dict) -> Path:
         "relative error of the value.",
         "",
     ]
-    lines += identifiability_table(summary["identifiability"]) + [""]
+    lines += identifiability_table(summary["identifiability"], summary["parameters"]) + [""]
     lines += _sweep_lines(summary.get("step_sweep"))
     if "loss" in figures:
         lines += ["## Convergence", "", f"![loss per iteration]({figures['loss']})", ""]
@@ -273,10 +278,26 @@ def _header_lines(summary: dict) -> list[str]:
         f"Reference: {ref['spp']} spp, measured noise {fmt(ref['noise'], 3)} "
         "(RMS standard error on "
         f"water pixels, linear RGB). Fit at {res[0]}x{res[1]} "
-        f"with `{summary['solver']}`: {summary['iterations']} iterations, "
-        f"{'converged' if summary['converged'] else 'NOT converged'} ({summary['message']}).",
+        f"with `{summary['solver']}`: {fit_steps_line(summary)}",
         "",
     ]
+
+
+def fit_steps_line(summary: dict) -> str:
+    """The solver's steps in one sentence: their total, and, when constants were frozen at the
+    solution and the rest refitted, the steps of each round; the last round's stopping reason
+    (its own steps, which a total over rounds would contradict)."""
+    fit = summary.get("fit", {})
+    per = fit.get("iterations_per_round") or []
+    state = "converged" if summary["converged"] else "NOT converged"
+    if len(per) > 1:
+        rounds = " + ".join(str(n) for n in per)
+        return (
+            f"{summary['iterations']} solver steps in {len(per)} rounds ({rounds}: a constant "
+            f"not identified at the solution is frozen and the rest refitted), {state}; the "
+            f"last round stopped as {summary['message']}."
+        )
+    return f"{summary['iterations']} solver steps, {state} ({summary['message']})."
 
 
 def _decorrelated_lines(fit: dict) -> list[str]:

@@ -10,19 +10,16 @@ from __future__ import annotations
 from pathlib import Path
 
 from .._io import write_text_atomic
-from .calibration import constants_table, fmt, identifiability_table
+from .calibration import constants_table, fit_steps_line, fmt, identifiability_table
 
 
 def joint_lines(summary: dict) -> list[str]:
-    fs = summary.get("fit", {})
     lines = [
         f"# Joint calibration over {len(summary['scenes'])} scenes ({summary['shader']})",
         "",
         "One constants block fitted on every scene at once; residuals stacked, each scene weighted "
         "equally (its residual times sqrt(mean size / its size)). Solver "
-        f"`{summary['solver']}`: {summary['iterations']} iterations, "
-        f"{'converged' if summary['converged'] else 'NOT converged'} ({summary['message']}); "
-        f"{fs.get('rounds', 1)} fit round(s).",
+        f"`{summary['solver']}`: {fit_steps_line(summary)}",
         "",
         "| scene | weight | RMSE start | RMSE joint | FLIP start | FLIP joint |",
         "|---|---|---|---|---|---|",
@@ -37,7 +34,7 @@ def joint_lines(summary: dict) -> list[str]:
     lines += ["", "## Constants", ""] + constants_table(summary["parameters"]) + [""]
     lines += (
         ["## Identifiability (joint Jacobian)", ""]
-        + identifiability_table(summary["identifiability"])
+        + identifiability_table(summary["identifiability"], summary["parameters"])
         + [""]
     )
     gl = summary.get("gl_check")
