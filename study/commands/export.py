@@ -21,15 +21,16 @@ def run_export(constants_json, out, targets=None, shaders=None) -> list:
     'none', or None (every one the installed tools can make)."""
     if isinstance(targets, str):
         targets = [] if targets == "none" else [t for t in targets.split(",") if t]
-    constants = load_constants_json(constants_json)
-    out = Path(out)
     user = user_shader_of(constants_json)
+    constants = load_constants_json(constants_json, user)
+    data = json.loads(Path(constants_json).read_text())  # read and checked by the loader above
+    out = Path(out)
     src = Path(constants_json).parent / "shaders"  # a calibration's own export
     if read_texture_record(src) is None:
         src = Path(constants_json).parent  # a tradeoff's: the JSON inside its export
     record = read_texture_record(src)
     textures = None
-    if record is None and _is_calibration(constants_json):  # one written before the textures
+    if record is None and "parameters" in data:  # a calibration's, written before the textures
         _log(
             f"export: no textures beside {constants_json} (shaders/textures/): the Fresnel LUT "
             "and normal map the constants assume are not exported; calibrate again to get them"
@@ -37,7 +38,7 @@ def run_export(constants_json, out, targets=None, shaders=None) -> list:
     elif record is not None:
         textures = (record, lambda folder: copy_textures(src, folder))
     if user is None:
-        names = _shaders(constants_json, shaders)
+        names = _shaders(data, shaders)
         paths = export_shaders(constants, out / "shaders", names, targets, textures)
     else:
         paths = export_user_shader(
@@ -51,23 +52,12 @@ def run_export(constants_json, out, targets=None, shaders=None) -> list:
     return paths
 
 
-def _is_calibration(path) -> bool:
-    """Whether the JSON file is a calibration's ``constants.json`` (not a table of constants)."""
-    try:
-        return "parameters" in json.loads(Path(path).read_text())
-    except (OSError, ValueError):
-        return False
-
-
-def _shaders(constants_json, shaders) -> list[str] | None:
-    """The shaders to export: those named (``shaders``), else the one the JSON's ``shader``
-    says the constants were fitted for, else None (every shipped one)."""
+def _shaders(data: dict, shaders) -> list[str] | None:
+    """The shaders to export: those named (``shaders``), else the one the JSON object ``data``
+    says the constants were fitted for (``shader``), else None (every shipped one)."""
     if isinstance(shaders, str):
         shaders = [n for n in shaders.split(",") if n]
     if shaders:
         return list(shaders)
-    try:
-        fitted = json.loads(Path(constants_json).read_text()).get("shader")
-    except (OSError, ValueError, AttributeError):
-        fitted = None
+    fitted = data.get("shader")
     return [fitted] if isinstance(fitted, str) and fitted else None

@@ -12,7 +12,8 @@ from .._progress import log as _log
 from ..fit.build import build_model
 from ..fit.model import constants_json
 from ..report.calibration import comparison_figure, diagnostics_figure
-from .steps import load_scene_data, prepare, save_shader_inputs, sun_of
+from ..scene.user_scene import sun_summary
+from .steps import load_scene_data, prepare, save_shader_inputs
 
 
 def run_render(experiment, out, overrides=None, variant=None, cache=None) -> dict:
@@ -81,7 +82,7 @@ def run_preview(experiment, out, overrides=None, variant=None, cache=None) -> di
         "reference": {"spp": ref.spp, "noise": ref.noise, "path": str(ref.path)},
         "diagnostics": diag.summary(model.mask),
         "timings": timings,
-        "sun": sun_of(exp),
+        "sun": sun_summary(exp),
     }
     write_json(out / "preview.json", summary)
     _log(

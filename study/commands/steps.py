@@ -17,7 +17,7 @@ from .._io import write_exr, write_json
 from .._metrics import errors, information_criteria
 from .._progress import Stages
 from .._progress import log as _log
-from ..config.experiment import is_user_shader, load_experiment
+from ..config.experiment import load_experiment
 from ..export.gl_check import (
     gl_check,
     gl_check_user,
@@ -26,7 +26,7 @@ from ..export.gl_check import (
     target_checks,
 )
 from ..export.shaders import export_shaders, export_user_shader
-from ..export.textures import texture_record, with_exported_textures, write_textures
+from ..export.textures import lut_image, texture_record, with_exported_textures, write_textures
 from ..fit.build import build_model
 from ..fit.calibrate import timed
 from ..fit.model import constants_json
@@ -46,7 +46,6 @@ def prepare(experiment, out, overrides=None, variant=None, frames: bool = False)
     animated experiment (else it says that it uses frame 0)."""
     exp = load_experiment(experiment, overrides)
     check_water_in_view(exp)
-
     if is_animated(exp) and not frames:
         _log(
             f"experiment: {exp.name} has {exp.animation.frames} frames; this command uses "
@@ -90,20 +89,13 @@ def save_shader_inputs(inputs, folder: Path) -> None:
     write_exr(
         folder / "cubemap_cross.exr", inputs.cubemap.transpose(1, 0, 2, 3).reshape(f, 6 * f, 3)
     )
-    lut = np.zeros((1, len(inputs.fresnel_lut), 3), np.float32)
-    lut[0, :, :2] = inputs.fresnel_lut
-    write_exr(folder / "fresnel_lut.exr", lut)
+    write_exr(folder / "fresnel_lut.exr", lut_image(inputs.fresnel_lut))
 
 
 def refuse_animated_all(experiments, overrides, command: str) -> None:
     """ExperimentError if any of ``experiments`` is animated (``command`` takes still frames)."""
     for path in experiments:
         refuse_animated(load_experiment(path, overrides), command)
-
-
-def sun_of(exp) -> dict:
-    """The shader's sun (explicit, or found in the sky file: direction, solid angle, radiance)."""
-    return sun_summary(exp)
 
 
 def export_calibration(exp, model, frames: list, fitted, out: Path, timings: dict):
@@ -134,7 +126,7 @@ def export_calibration(exp, model, frames: list, fitted, out: Path, timings: dic
             gl = [gl_check(model.shader, i, fitted, shaders) for i in frames]
             targets = target_checks(model.shader, frames[0], fitted, shaders)
             return gl, targets, {"textures": record}
-        ours = [user.render(i, fitted).numpy() for i in frames]
+        ours = [user.render(i, fitted, backend=model.backend).numpy() for i in frames]
         gl = [gl_check_user(user, i, fitted, o) for i, o in zip(frames, ours)]
         engine_targets = manifest_checks(shaders)
         if "hlsl" in engine_targets:
@@ -167,8 +159,7 @@ def evaluate_calibration(exp, inputs, ref, model, cal, backend) -> dict:
     on the water pixels), the fitted render's diagnostics ``diag1`` and the ``parsimony`` of the
     fit at the fit resolution (information criteria)."""
     w, h = exp.resolution
-    full = build_model(exp, inputs, ref.image, shader=shader_of(exp, model), backend=backend,
-                       resolution=(w, h))  # fmt: skip
+    full = build_model(exp, inputs, ref.image, backend=backend, resolution=(w, h))
     img0, _ = full.render(cal.start)
     img1, diag1 = full.render(cal.fitted)
     fitted_names = [n for n, p in cal.parameters.items() if p["status"] in ("fitted", "bound")]
@@ -186,11 +177,6 @@ def evaluate_calibration(exp, inputs, ref, model, cal, backend) -> dict:
         "e1": errors(ref.image, img1, full.mask),
         "parsimony": parsimony,
     }
-
-
-def shader_of(exp, model) -> str:
-    """What ``fit.shader`` names for ``model``: a variant's name, or the user's file's path."""
-    return str(exp.fit.shader) if is_user_shader(exp.fit.shader) else model.shader
 
 
 def calibration_figures(out, exp, model, ref, ev, cal, solver) -> dict:
@@ -243,7 +229,7 @@ def calibration_result(exp, variant, model, ref, cal, ev, solver, timings, gl):
             "key": ref.provenance["key"],
         },
         diagnostics=ev["diag1"].summary(ev["full"].mask),
-        sun=sun_of(exp),
+        sun=sun_summary(exp),
         parsimony=ev["parsimony"],
     )
 

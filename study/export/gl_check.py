@@ -135,8 +135,10 @@ def hlsl_check_user(shader, inputs, values: dict, ours: dict, shaders_dir: Path)
     against the executor's render ``ours``, as :func:`gl_check_user` judges it."""
     stem = shader.label.rsplit(".", 1)[0]
     hlsl = (shaders_dir / "hlsl" / f"{stem}.frag.hlsl").read_text()
+    # a round trip that fails is the HLSL's failure (an error, as for the study's shaders); only
+    # a missing headless OpenGL is "not run"
+    glsl, refl = hlsl_round_trip(hlsl, "frag", f"hlsl/{stem}.frag.hlsl")
     try:
-        glsl, refl = hlsl_round_trip(hlsl, "frag", f"hlsl/{stem}.frag.hlsl")
         with shader.gl_renderer(inputs, values, source=glsl, reflection=refl) as r:
             rgba, mask = r.render(None)
     except RuntimeError as exc:

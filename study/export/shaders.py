@@ -19,9 +19,11 @@ temporary folder, so they too are written all or not at all.
 
 from __future__ import annotations
 
+import hashlib
 import json
 import os
 import shutil
+import sys
 import tempfile
 from pathlib import Path
 
@@ -38,17 +40,17 @@ from .textures import expects_lines
 FRAGMENT_SHADERS = tuple(dict.fromkeys(VARIANTS[n].shader for n in SHIPPED))
 
 
-def load_constants_json(path) -> Constants | dict:
+def load_constants_json(path, shader=None) -> Constants | dict:
     """Constants from ``constants.json`` of ``study calibrate`` (its ``constants`` table) or from a
     flat JSON object ``{name: value}`` with names of ``CONSTANT_SPECS``; for the calibration of a
     user's shader (its ``shader_file``), the dict ``{GLSL name: float | tuple}`` of its declared
-    constants (:func:`user_shader_of` reads the shader)."""
+    constants, checked against ``shader`` (default: :func:`user_shader_of` reads it)."""
     data = _read_json(path)
     table = data.get("constants", data)
     if not isinstance(table, dict):
         raise ValueError(f"{path}: 'constants' must be an object of name -> value")
     if "shader_file" in data:
-        shader = user_shader_of(path)
+        shader = shader or user_shader_of(path)
         values = {k: tuple(v) if isinstance(v, list) else v for k, v in table.items()}
         unknown = sorted(set(values) - set(shader.constants))
         if unknown:
@@ -76,9 +78,6 @@ def user_shader_of(path):
     and ``declaration``), or None for a calibration of the study's shaders. A file changed since
     the calibration (its SHA-256 differs from ``shader_sha256``) is read as it is now, with a
     note on stderr: the fitted values replace its constants' initializers."""
-    import hashlib
-    import sys
-
     data = _read_json(path)
     if "shader_file" not in data:
         return None

@@ -31,6 +31,7 @@ __all__ = [
     "FOLDER",
     "copy_textures",
     "expects_lines",
+    "lut_image",
     "read_texture_record",
     "texture_record",
     "with_exported_textures",
@@ -71,13 +72,20 @@ def texture_record(exp, inputs) -> dict:
     }
 
 
+def lut_image(fresnel_lut: np.ndarray) -> np.ndarray:
+    """The (N, 2) LUT [transmission, reflection] as the (1, N, 3) float32 image an engine uploads:
+    R transmission, G reflection, B 0."""
+    img = np.zeros((1, len(fresnel_lut), 3), np.float32)
+    img[0, :, :2] = fresnel_lut
+    return img
+
+
 def write_textures(record: dict, inputs, shaders_dir: Path) -> Path:
     """``shaders_dir/textures/``: the LUT and the normal map of ``inputs`` as float32 EXR and
     ``textures.json`` (``record``). Returns the folder."""
     folder = Path(shaders_dir) / FOLDER
     folder.mkdir(parents=True, exist_ok=True)
-    lut = np.zeros((1, len(inputs.fresnel_lut), 3), np.float32)
-    lut[0, :, :2] = inputs.fresnel_lut
+    lut = lut_image(inputs.fresnel_lut)
     write_exr(folder / record["fresnel_lut"]["file"], lut, {"texture": record["fresnel_lut"]})
     write_exr(
         folder / record["normal_map"]["file"], inputs.normal_map, {"texture": record["normal_map"]}

@@ -151,7 +151,7 @@ class Diagnostics:
 _DRJIT_LOCK = threading.RLock()
 
 
-def thread_handoff(fn):
+def _thread_handoff(fn):
     """Model methods run on whatever thread calls them, including a solver's callback threads
     (``jax.pure_callback``), which XLA may run concurrently. Dr.Jit must not be entered by
     two threads at once (measured: a segmentation fault inside the Jacobian pass), and arrays
@@ -221,7 +221,7 @@ class ReferenceModel:
     def start_constants(self, exp: Experiment | None = None):
         raise NotImplementedError
 
-    @thread_handoff
+    @_thread_handoff
     def render(self, constants) -> tuple[np.ndarray, Diagnostics]:
         """The shader's image (H, W, 3) float32 linear RGB and its diagnostics."""
         with warnings.catch_warnings():
@@ -234,14 +234,14 @@ class ReferenceModel:
             {k: v for k, v in out.items() if k not in ("color", "mask")}
         )
 
-    @thread_handoff
+    @_thread_handoff
     def residual(self, constants) -> np.ndarray:
         """(M,) float64 shader - reference over water pixels and RGB channels."""
         img, diag = self.render(constants)
         self._check(diag)
         return (img[self.mask] - self.reference[self.mask]).astype(np.float64).ravel()
 
-    @thread_handoff
+    @_thread_handoff
     def residual_and_jacobian(self, constants, names: list[str]) -> tuple[np.ndarray, np.ndarray]:
         """(residual (M,), J (M, k)) with J the derivative w.r.t. the named scalar constants."""
         with warnings.catch_warnings():
@@ -256,7 +256,7 @@ class ReferenceModel:
             raise FloatingPointError(f"{self.label}: non-finite Jacobian entries for {names}")
         return r, J
 
-    @thread_handoff
+    @_thread_handoff
     def loss_ad(self, constants):
         """Dr.Jit loss ``0.5 * sum over water pixels and channels of (shader - reference)^2``
         with the AD graph of any gradient-enabled constant attached (for reverse mode)."""
