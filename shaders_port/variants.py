@@ -146,6 +146,10 @@ def register(variant: Variant) -> Variant:
     return variant
 
 
+# the longest name a shader of the space can have, quoted (its longest is 74 characters today)
+MAX_NAME = 120
+
+
 def get_variant(name: str) -> Variant:
     """The variant ``name``: a registered one, or any configuration of the shader space named
     as :func:`shaders_port.space.name_of` names it (built and registered on first use, in
@@ -157,6 +161,12 @@ def get_variant(name: str) -> Variant:
         raise ValueError(
             f"{name}: your own GLSL shader is calibrated by `study calibrate` (through SPIR-V, "
             "docs/user-shader.md); this command takes the study's shaders"
+        )
+    shown = repr(name)
+    if len(shown) > MAX_NAME:  # no name of the space is this long: not echoed whole (nor twice)
+        raise ValueError(
+            f"unknown shader variant {shown[:60]}... ({len(str(name))} characters: no name of the "
+            "shader space is that long; the names: docs/shader-space.md)"
         )
     try:
         return register(from_space(_space.choices_of(name)))

@@ -215,3 +215,15 @@ def test_the_mirror_derivatives_match_central_differences():
     fetches = out.numpy()["fetches"][water]
     plain = get_variant("water_refraction").render(inputs, CUSTOM).numpy()["fetches"][water]
     assert np.array_equal(fetches, plain + 1)  # the mirrored camera's pass
+
+
+def test_an_overlong_name_is_refused_in_a_short_message():
+    """A name no shader of the space can have (longer than any, quoted) is refused without
+    echoing it whole: a pasted file or binary garbage must not flood the error."""
+    from shaders_port.space import configurations, name_of
+    from shaders_port.variants import MAX_NAME, get_variant
+
+    assert max(len(repr(name_of(c))) for c in configurations()) <= MAX_NAME
+    with pytest.raises(ValueError, match="no name of the shader space is that long") as err:
+        get_variant("abé\n\x00\"'" * 500)
+    assert len(str(err.value)) < 300
