@@ -28,24 +28,30 @@ from .glsl_text import (
 )
 from .inputs import (
     CONSTANT_SPECS,
+    GLSL_NAMES,
     IOR_WATER,
     Constants,
     ShaderInputs,
     fresnel_lut,
     fresnel_unpolarized,
+    glsl_scalar,
     ortho_tex_matrix,
     perspective_view_proj,
+    study_scalar,
 )
 
 __all__ = [
     "CONSTANT_SPECS",
+    "GLSL_NAMES",
     "IOR_WATER",
     "Constants",
     "ShaderInputs",
     "fresnel_lut",
     "fresnel_unpolarized",
+    "glsl_scalar",
     "ortho_tex_matrix",
     "perspective_view_proj",
+    "study_scalar",
     "compat_to_core",
     "compile_check",
     "glsl_path",

@@ -254,6 +254,28 @@ CONSTANT_SPECS: dict[str, tuple[str, str, object, tuple[float, float]]] = {
     ),  # 003: none given
 }
 
+# GLSL name <-> the study's descriptive name of each constant
+GLSL_NAMES = {py: spec[0] for py, spec in CONSTANT_SPECS.items()}
+STUDY_NAMES = {glsl: py for py, glsl in GLSL_NAMES.items()}
+
+
+def _rename(name: str, table: dict) -> str:
+    base, sep, rest = name.partition("[")
+    return table.get(base, base) + sep + rest
+
+
+def glsl_scalar(name: str) -> str:
+    """A constant or one of its components as the shader's GLSL names it: ``'water_color[1]'``
+    -> ``'waterColor[1]'``, ``'bumptex_mult'`` -> ``'BumptexMult'``; a name that is no study
+    constant's (a user's shader's own) is returned as it is."""
+    return _rename(name, GLSL_NAMES)
+
+
+def study_scalar(name: str) -> str:
+    """The inverse of :func:`glsl_scalar`: ``'waterColor[1]'`` -> ``'water_color[1]'``; a
+    study name or a user's shader's own name is returned as it is."""
+    return _rename(name, STUDY_NAMES)
+
 
 def _default(name):
     v = CONSTANT_SPECS[name][2]
@@ -341,8 +363,20 @@ class Constants:
             )
         return out
 
+    def to_glsl_dict(self) -> dict:
+        """:meth:`to_dict` keyed by the GLSL names (``{'ATTENUATION_DISTANCE': 7.5, ...}``)."""
+        return {GLSL_NAMES[k]: v for k, v in self.to_dict().items()}
+
     @classmethod
     def from_dict(cls, d: dict) -> "Constants":
+        """From ``{name: value}``, each name the study's (``attenuation_distance``) or the
+        GLSL's (``ATTENUATION_DISTANCE``); ValueError for an unknown name or one given twice."""
+        both = [k for k in d if k in STUDY_NAMES and STUDY_NAMES[k] in d]
+        if both:
+            raise ValueError(
+                f"{both[0]} and {STUDY_NAMES[both[0]]} are two names of one constant: give one"
+            )
+        d = {STUDY_NAMES.get(k, k): v for k, v in d.items()}
         unknown = set(d) - set(CONSTANT_SPECS)
         if unknown:
             names = ", ".join(_clip(u) for u in sorted(map(str, unknown))[:5])

@@ -152,7 +152,8 @@ def test_preview_writes_finite_errors(runs):
 
 
 def test_calibrate_writes_constants_json(runs):
-    from shaders_port import CONSTANT_SPECS
+    from shaders_port import CONSTANT_SPECS, glsl_scalar
+    from shaders_port.variants import get_variant
 
     root, rc = runs
     assert rc["calibrate"] == 0
@@ -167,13 +168,22 @@ def test_calibrate_writes_constants_json(runs):
     from study.fit.model import expand_parameters
 
     requested = load_experiment(REPO / "experiments" / "default.toml")["fit.parameters"]
-    assert set(params) == set(expand_parameters(requested))
+    # named as the GLSL names them, the study's name beside
+    assert set(params) == {glsl_scalar(n) for n in expand_parameters(requested)}
+    assert {p["name"] for p in params.values()} == set(expand_parameters(requested))
+    # constants: what water_refraction reads; the rest of the block apart, labelled
+    reads = {CONSTANT_SPECS[n][0] for n in get_variant("water_refraction").reads()}
+    assert set(c["constants"]) == reads and "ATTENUATION_DISTANCE" in reads
+    rest = c["constants_not_read"]
+    assert set(rest["values"]) == {g for g, *_ in CONSTANT_SPECS.values()} - reads
+    assert "read by no line of water_refraction" in rest["why"]
+    assert c["constant_names"]["BumptexMult"] == "bumptex_mult"
     for name, p in params.items():
         assert {"default", "fitted", "frozen", "sensitivity"} <= set(p), (name, p)
         assert isinstance(p["frozen"], bool) and _finite(p["default"]) and _finite(p["sensitivity"])
         assert (p["fitted"] is None) == p["frozen"], (name, p)
         if not p["frozen"]:
-            base = name.split("[")[0]
+            base = p["name"].split("[")[0]
             lo, hi = CONSTANT_SPECS[base][3]
             assert _finite(p["fitted"]) and lo <= p["fitted"] <= hi
     assert any(not p["frozen"] for p in params.values())
@@ -227,12 +237,15 @@ def test_calibrate_writes_shaders_with_fitted_constants_and_report(runs):
         for name, p in c["parameters"].items():
             if p["frozen"]:
                 continue
-            base, _, idx = name.partition("[")
+            base, _, idx = p["name"].partition("[")  # the study's name beside the GLSL's
             v = getattr(got, base)
             v = v[int(idx[:-1])] if idx else v
             assert np.float32(v) == np.float32(p["fitted"]), name
     report = (out / "report.md").read_text()
-    assert "levenberg_marquardt" in report and "attenuation_distance" in report
+    assert "levenberg_marquardt" in report
+    # each constant by its GLSL name, the study's name beside it
+    assert "| `ATTENUATION_DISTANCE` | attenuation_distance |" in report
+    assert "| `waterColor[1]` | water_color[1] |" in report
     for fig in ("comparison.png", "diagnostics.png", "loss.png"):
         assert (out / fig).is_file() and fig in report
 
@@ -278,8 +291,11 @@ def test_calibrate_ships_the_textures_its_constants_assume(runs):
     sheets = sorted((root / "calibrate" / "shaders").glob("*/BINDINGS.md"))
     assert sheets
     for sheet in sheets:
-        text = sheet.read_text()
-        assert text.splitlines()[2] == "## What this shader expects", sheet
+        lines = sheet.read_text().splitlines()
+        # the short sheet: what the shader expects before what to bind, the full one beside it
+        assert lines.index("## What this shader expects") < lines.index("## What to bind"), sheet
+        assert len(lines) < 80 and (sheet.parent / "BINDINGS_FULL.md").is_file(), sheet
+        text = "\n".join(lines)
         assert "(1 - R) / n^2" in text and "fresnel_lut.exr" in text, sheet
     report = (root / "calibrate" / "report.md").read_text()
     assert "## What this shader expects" in report and "1.78x too bright" in report
@@ -327,9 +343,13 @@ def test_the_report_counts_steps_over_rounds_and_gives_each_final_status():
                "fit": {"iterations_per_round": [40, 6]}}  # fmt: skip
     line = fit_steps_line(summary)
     assert line.startswith("46 solver steps in 2 rounds (40 + 6: ")
-    assert "the last round stopped as converged after 6 steps" in line
+    assert line.endswith("refitted); the last round converged after 6 steps.")
     one = fit_steps_line({**summary, "iterations": 6, "fit": {"iterations_per_round": [6]}})
-    assert one == "6 solver steps, converged (converged after 6 steps)."
+    assert one == "6 solver steps, converged after 6 steps."  # "converged" said once
+    capped = {**summary, "converged": False, "message": "maximum number of steps reached"}
+    assert fit_steps_line(capped).endswith(
+        ", NOT converged; the last round stopped: maximum number of steps reached."
+    )
     ident = {
         "start": {"names": ["a"], "sensitivity": [0.1], "decision": ["identified (0.1)"]},
         "solution": {"names": [], "sensitivity": []},

@@ -139,6 +139,25 @@ def test_binding_sheets_and_manifest(export):
     assert "register" in (export / "hlsl" / "BINDINGS.md").read_text()
 
 
+def test_the_short_sheet_marks_what_was_fitted(tmp_path):
+    """One shader's export: its sheet lists the constants it reads, the fitted ones in bold with
+    their status, those it never reads apart; the full reflection is the second sheet."""
+    status = {"BumptexMult": "fitted", "waterColor[0]": "bound", "waterColor[1]": "frozen"}
+    export_shaders(FITTED, tmp_path, ["water_refraction"], ["gles300"], status=status)
+    sheet = (tmp_path / "gles300" / "BINDINGS.md").read_text()
+    assert "| 10 | `BumptexMult` | **0.9797** | fitted |" in sheet
+    assert "| 12 | `waterColor_r` | **0.0612** | fitted, at its range's bound |" in sheet
+    assert "| 13 | `waterColor_g` | 0.2391 | held: not identified by the reference |" in sheet
+    assert "| 0 | `ATTENUATION_DISTANCE` | 5.4321 | held at the experiment's value" in sheet
+    assert "The 2 fitted are in bold." in sheet
+    # water_refraction never reads the absorption of the Beer variants: apart, not in the table
+    table, _, rest = sheet.partition("Declared but read by no line of this shader")
+    assert "ABSORPTION_R" not in table and "`ABSORPTION_R` (20)" in rest
+    full = (tmp_path / "gles300" / "BINDINGS_FULL.md").read_text()
+    assert "**Stage inputs and outputs**" in full and "varyingVecEye" in full
+    assert "varyingVecEye" not in sheet  # a varying links the stages: nothing to bind
+
+
 def _hlsl_check(export, variant, inputs):
     from study.export.gl_check import hlsl_check
 

@@ -25,7 +25,7 @@ from ..fit.build import build_model
 from ..fit.calibrate import calibrate_model, scene_frozen, timed
 from ..fit.joint import JointModel, joint_calibrate
 from ..fit.model import constants_json
-from ..fit.result import CalibrationResult, jsonable
+from ..fit.result import CalibrationResult
 from ..report.animation import animation_figures, write_animation_report
 from ..scene.frame_data import load_frames
 from .steps import export_calibration
@@ -107,25 +107,22 @@ def run_calibrate_animated(exp, variant: str, out: Path, solver: str, cache=None
         )
     shader = models[0].label
     gl_frames, engine_targets, extra = export_calibration(
-        exp, models[0], inputs, joint.fitted, out, timings
+        exp, models[0], inputs, joint, out, timings
     )
     offsets = _write_offsets(out / "shaders" / "animation.json", exp, frames)
     with timed(timings, "figures_s"):
         figs = animation_figures(out, refs, ev, exp.animation.time_step)
         write_exr(out / "fitted_frame0.exr", ev["images"]["all_frames"][0])
     timings["total_s"] = time.perf_counter() - t_start
-    summary = _result(exp, variant, shader, joint, single, ev, solver, timings, gl_frames)
-    summary["engine_targets"] = engine_targets
-    summary.update(extra)
-    summary["animation"].update(
-        {
-            "offsets": offsets,
-            "shared": data["shared"],
-            "figures": figs,
-            "references": _refs(refs),
-            "losses": losses,
-        }
-    )
+    more = {
+        "offsets": offsets,
+        "shared": data["shared"],
+        "figures": figs,
+        "references": _refs(refs),
+        "losses": losses,
+    }
+    summary = _result(exp, variant, shader, (joint, single), ev, solver, timings, gl_frames,
+                      {"engine_targets": engine_targets, **extra}, more)  # fmt: skip
     write_json(out / "constants.json", summary)
     write_animation_report(out, summary)
     s = summary["animation"]["scores"]
@@ -173,9 +170,12 @@ def _refs(refs) -> list:
     ]
 
 
-def _result(exp, variant, shader, joint, single, ev, solver, timings, gl_frames) -> dict:
+def _result(exp, variant, shader, fits, ev, solver, timings, gl_frames, extra, more) -> dict:
     """The JSON object of ``constants.json``: a ``CalibrationResult`` of the all-frames fit (what
-    ``study export`` reads) with the per-frame and temporal record under ``animation``."""
+    ``study export`` reads; ``fits``: it and frame 0's alone) with ``extra`` (the engine
+    targets, the textures, a user's file) and the per-frame and temporal record under
+    ``animation`` (``more`` added to it)."""
+    joint, single = fits
     sc = ev["scores"]
     gl = dict(gl_frames[0])
     gl["passed"] = all(g.get("passed") for g in gl_frames)
@@ -197,9 +197,11 @@ def _result(exp, variant, shader, joint, single, ev, solver, timings, gl_frames)
         experiment=exp.name,
         fit_resolution=exp.fit.resolution,
         resolution=exp.resolution,
+        engine_targets=extra.pop("engine_targets"),
+        textures=extra.pop("textures", None),
+        extra=extra,
     )
-    summary = result.to_json()
-    summary["animation"] = {
+    result.extra["animation"] = {
         "frames": int(exp.animation.frames),
         "time_step": exp.animation.time_step,
         "velocities": exp.animation.velocities,
@@ -210,6 +212,6 @@ def _result(exp, variant, shader, joint, single, ev, solver, timings, gl_frames)
         },
         "scores": {n: {k: v for k, v in s.items() if k != "maps"} for n, s in sc.items()},
         "mask_pixels": int(ev["mask"].sum()),
+        **more,
     }
-
-    return jsonable(summary)
+    return result.to_json()

@@ -76,9 +76,7 @@ def run_calibrate(experiment, out, overrides=None, variant=None, solver=None, ca
         )
     with timed(timings, "evaluate_s"):
         ev = evaluate_calibration(exp, inputs, ref, model, cal, backend)
-    (gl,), engine_targets, extra = export_calibration(
-        exp, model, [inputs], cal.fitted, out, timings
-    )
+    (gl,), engine_targets, extra = export_calibration(exp, model, [inputs], cal, out, timings)
     with timed(timings, "figures_s"):
         figs = calibration_figures(out, exp, model, ref, ev, cal, solver)
     timings["total_s"] = time.perf_counter() - t_start  # up to the report (written last)

@@ -6,6 +6,8 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
+from shaders_port import glsl_scalar
+
 from .._progress import log as _log
 from ..export.shaders import export_shaders, export_user_shader, load_constants_json, user_shader_of
 from ..export.textures import copy_textures, read_texture_record
@@ -37,13 +39,13 @@ def run_export(constants_json, out, targets=None, shaders=None) -> list:
         )
     elif record is not None:
         textures = (record, lambda folder: copy_textures(src, folder))
+    params = data.get("parameters") if isinstance(data.get("parameters"), dict) else {}
+    status = {glsl_scalar(n): p.get("status") for n, p in params.items() if isinstance(p, dict)}
     if user is None:
         names = _shaders(data, shaders)
-        paths = export_shaders(constants, out / "shaders", names, targets, textures)
+        paths = export_shaders(constants, out / "shaders", names, targets, textures, status)
     else:
-        paths = export_user_shader(
-            user, constants, out / "shaders", targets=targets, textures=textures
-        )
+        paths = export_user_shader(user, constants, out / "shaders", targets, textures, status)
     made = sorted(p.name for p in (out / "shaders").iterdir() if p.is_dir())
     _log(
         f"export: wrote {len(paths)} files to {out / 'shaders'} ({', '.join(made)}; GLSL compiled "

@@ -111,7 +111,7 @@ def joint_fit(scenes, variant, out: Path, solver):
     }
     timings = {"fit_s": fit_s}
     (gl,), engine_targets, extra = export_calibration(
-        first, model, [scenes[0]["inputs"]], cal.fitted, out, timings
+        first, model, [scenes[0]["inputs"]], cal, out, timings
     )
     weights = JointModel([s["model"] for s in scenes]).weights
     result = CalibrationResult(

@@ -12,6 +12,8 @@ from pathlib import Path
 
 import numpy as np
 
+from shaders_port import glsl_scalar
+
 from .._backend import init_backend
 from .._io import write_exr, write_json
 from .._metrics import errors, information_criteria
@@ -98,8 +100,9 @@ def refuse_animated_all(experiments, overrides, command: str) -> None:
         refuse_animated(load_experiment(path, overrides), command)
 
 
-def export_calibration(exp, model, frames: list, fitted, out: Path, timings: dict):
-    """The fitted shader exported into ``out/shaders``: a variant's core and compatibility GLSL,
+def export_calibration(exp, model, frames: list, cal, out: Path, timings: dict):
+    """The fitted shader (``cal.fitted``; the binding sheets mark what ``cal.parameters`` says
+    was fitted) exported into ``out/shaders``: a variant's core and compatibility GLSL,
     or a copy of a user's file with the fitted constants in place (``fit.write_back = "file"``:
     the file itself too, once the GL check passed); every engine target the installed tools
     make; the Fresnel LUT and normal map the constants assume, in ``shaders/textures/``
@@ -108,16 +111,17 @@ def export_calibration(exp, model, frames: list, fitted, out: Path, timings: dic
     experiment's resolution), and the engine targets' checks. Returns (a GL check per frame,
     engine targets, what the result adds: the textures' record and, for a user's file, the
     file, its SHA-256 and declaration)."""
-    shaders = out / "shaders"
+    shaders, fitted = out / "shaders", cal.fitted
     user = getattr(model, "user_shader", None)
     record = texture_record(exp, frames[0])
     textures = (record, lambda folder: write_textures(record, frames[0], folder))
+    status = {glsl_scalar(n): p["status"] for n, p in cal.parameters.items()}
     with timed(timings, "export_s"):
         _log(f"calibrate: exporting and compiling {model.label} (and its vertex shader)")
         if user is None:
-            export_shaders(fitted, shaders, [model.shader], targets=None, textures=textures)
+            export_shaders(fitted, shaders, [model.shader], None, textures, status)
         else:
-            export_user_shader(user, fitted, shaders, targets=None, textures=textures)
+            export_user_shader(user, fitted, shaders, None, textures, status)
     # the GL check runs the textures that ship: read back from the exported files
     frames = [with_exported_textures(i, shaders) for i in frames]
     with timed(timings, "gl_check_s"):

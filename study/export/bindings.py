@@ -11,8 +11,6 @@ import re
 
 import numpy as np
 
-from shaders_port import CONSTANT_SPECS
-
 # name in the GLSL -> what the application binds there (units, conventions of the study)
 MEANINGS = {
     "refractionTexture": "linear RGB of the ground under the water seen from straight above "
@@ -20,10 +18,10 @@ MEANINGS = {
     "worldYComponent": "world-space Y (height, world units) of the ground under the water, the "
     "same top-down view (R32F); nearest, clamp to edge",
     "normalMap": "world-space wave normals encoded 0.5 n + 0.5 (r = x, g = y, b = z) in the "
-    "water plane; bilinear, repeat",
+    "water plane; bilinear, repeat; ship `textures/normal_map.exr`",
     "reflectionTexture": "sky cube map, linear RGB, GL face order +X -X +Y -Y +Z -Z; bilinear",
     "fresnelLookup": "N x 1 Fresnel table indexed by cos(theta) in [0, 1]: r = transmission, "
-    "g = reflection; nearest, clamp",
+    "g = reflection; nearest, clamp; ship `textures/fresnel_lut.exr`",
     "worldYComponentReflection": "world-space Y of the geometry above the water seen from below "
     "(top-down, R32F; below the water plane where empty); nearest, clamp",
     "reflectionBottom": "linear RGB of that geometry seen from below; bilinear, clamp",
@@ -64,7 +62,7 @@ _NOTES = {
         "Entry point `main`; stage inputs and outputs are `TEXCOORD<location>` semantics "
         "(the vertex outputs and the pixel inputs share the numbering), the colour `SV_Target0`.",
         "Each texture comes with a `SamplerState _<name>_sampler` in the same register number.",
-        "The loose uniforms form the `$Global` constant buffer (offsets below).",
+        "The loose uniforms form each stage's `$Global` constant buffer (offsets above).",
         "Matrices: the HLSL multiplies `mul(v, M)` with default (column_major) packing, so upload "
         "each GL matrix by rows (its transpose in GL order). The HLSL round trip on llvmpipe "
         "checks exactly this layout.",
@@ -145,25 +143,125 @@ def _fmt(value) -> str:
     return np.format_float_positional(np.float32(value), unique=True, trim="0")
 
 
-def binding_sheet(target: str, reflections: dict, spec: dict, constants, expects=()) -> str:
-    """Markdown binding sheet of ``target`` from the reflections of its shaders (relative path
-    -> JSON), the specialization constants of the shaders (id -> name) and the exported
-    ``constants`` (a ``shaders_port.Constants``); ``expects``: the lines of what the shader
-    expects (``study.export.textures.expects_lines``), first."""
-    out = [f"# Binding sheet: {target}", "", *expects]
-    out += [*[f"* {n}" for n in _NOTES[target]], ""]
-    if spec:
-        out += ["## Fitted constants (specialization constants)", ""]
-        out += ["| id | name | value |", "|---|---|---|"]
-        glsl_to_py = {g: py for py, (g, *_rest) in CONSTANT_SPECS.items()}
-        for sid, name in sorted(spec.items()):
-            base, comp = (name, "") if name in glsl_to_py else name.rsplit("_", 1)
-            value = getattr(constants, glsl_to_py[base])
-            if comp:
-                value = value["rgba".index(comp)]
-            out.append(f"| {sid} | `{name}` | {_fmt(value)} |")
-        out.append("")
-    out += ["## Per shader", ""]
+STATUS_WORDS = {
+    "fitted": "fitted",
+    "bound": "fitted, at its range's bound",
+    "frozen": "held: not identified by the reference",
+    None: "held at the experiment's value (not fitted)",
+}
+
+
+def _spec_scalar(name: str, values: dict) -> tuple[str, object]:
+    """A specialization constant's name (``waterColor_g``) -> (its GLSL scalar name
+    ``waterColor[1]``, its value in ``values``, ``{GLSL name: value}``)."""
+    if name in values:
+        return name, values[name]
+    base, comp = name.rsplit("_", 1)
+    i = "rgba".index(comp)
+    return f"{base}[{i}]", values[base][i]
+
+
+def constants_lines(spec: dict, constants, fit: dict | None) -> list[str]:
+    """The constants section: each specialization constant the shader reads (id -> name in
+    ``spec``) with its value and whether it was fitted; ``fit``: {"status": {GLSL scalar name:
+    status of ``study.fit.calibrate``}, "reads": GLSL names the shaders read (None: all)}."""
+    if not spec:
+        return []
+    fit = fit or {}
+    status, reads = fit.get("status") or {}, fit.get("reads")
+    values = constants if isinstance(constants, dict) else constants.to_glsl_dict()
+    rows, unread = [], []
+    for sid, name in sorted(spec.items()):
+        scalar, value = _spec_scalar(name, values)
+        if reads is not None and scalar.split("[")[0] not in reads:
+            unread.append(f"`{name}` ({sid})")
+            continue
+        word = STATUS_WORDS.get(status.get(scalar), status.get(scalar))
+        mark = "**" if status.get(scalar) in ("fitted", "bound") else ""
+        rows.append(f"| {sid} | `{name}` | {mark}{_fmt(value)}{mark} | {word} |")
+    n_fit = sum(1 for s in status.values() if s in ("fitted", "bound"))
+    lines = [
+        "## Constants",
+        "",
+        "Already in the source, as the defaults of specialization constants: nothing to set. "
+        + (f"The {n_fit} fitted are in bold." if status else ""),
+        "",
+        "| id | name | value | |",
+        "|---|---|---|---|",
+        *rows,
+        "",
+    ]
+    if unread:
+        lines += [
+            "Declared but read by no line of this shader (leave them): " + ", ".join(unread) + ".",
+            "",
+        ]
+    return lines
+
+
+def _bind_rows(reflections: dict) -> list[str]:
+    """What the application binds, over every stage: textures, uniforms (a member of a stage's
+    constant buffer once per stage) and the vertex attributes."""
+    rows, seen = [], set()
+
+    def add(name, kind, gtype, where):
+        if (name, where) not in seen:  # a block member once per stage, at its offset there
+            seen.add((name, where))
+            rows.append(f"| `{name}` | {kind} | {gtype} | {where} | {_meaning(name)} |")
+
+    ordered = sorted(reflections.items(), key=lambda kv: ".vert." not in kv[0])
+    for path, refl in ordered:
+        for key in ("textures", "separate_images"):
+            for t in refl.get(key, []):
+                add(t["name"], "texture", t["type"], f"binding {t.get('binding', '')}")
+    for path, refl in ordered:
+        stage = "vertex" if ".vert." in path else "fragment"
+        for ubo in refl.get("ubos", []):
+            for m in refl["types"][ubo["type"]]["members"]:
+                where = f"{stage} {ubo['name']}, offset {m['offset']}"
+                add(
+                    m["name"],
+                    "uniform",
+                    m["type"],
+                    where + (", row-major" * bool(m.get("row_major"))),
+                )
+        for u in refl.get("loose_uniforms", []):
+            add(u["name"], "uniform", u["type"], "by name")
+        if stage == "vertex":
+            for v in refl.get("inputs", []):
+                add(v["name"].rsplit(".", 1)[-1], "vertex attribute", v["type"],
+                    f"location {v['location']}")  # fmt: skip
+    return rows
+
+
+def binding_sheet(
+    target: str, reflections: dict, spec: dict, constants, expects=(), fit=None
+) -> tuple[str, str]:
+    """The binding sheets of ``target``: (``BINDINGS.md``, the short one: what the shader
+    expects, what to bind, the constants, the target's conventions; ``BINDINGS_FULL.md``: every
+    shader's reflection as tables). From the reflections of its shaders (relative path ->
+    JSON), the specialization constants (id -> name), the exported ``constants`` (a
+    ``shaders_port.Constants`` or ``{GLSL name: value}``), ``expects`` (the lines of
+    ``study.export.textures.expects_lines``) and ``fit`` (:func:`constants_lines`)."""
+    files = sorted(p.removesuffix(".reflect.json") for p in reflections)
+    out = [
+        f"# Binding sheet: {target}",
+        "",
+        "Shaders: " + ", ".join(f"`{f.split('/', 1)[-1]}`" for f in files) + ". This is the short "
+        "sheet; every stage input and output, with block offsets, is in `BINDINGS_FULL.md`, and "
+        "the raw reflection in `*.reflect.json`, beside it.",
+        "",
+        *expects,
+        "## What to bind",
+        "",
+        "| name | kind | type | where | meaning |",
+        "|---|---|---|---|---|",
+        *_bind_rows(reflections),
+        "",
+    ]
+    out += constants_lines(spec, constants, fit)
+    out += [f"## Conventions of {target}", "", *[f"* {n}" for n in _NOTES[target]], ""]
+    full = [f"# Binding sheet, in full: {target}", "", "The short sheet is `BINDINGS.md`.", ""]
     for path, refl in sorted(reflections.items()):
-        out += _shader_section(path, refl)
-    return "\n".join(out).rstrip() + "\n"
+        full += _shader_section(path, refl)
+    return "\n".join(out).rstrip() + "\n", "\n".join(full).rstrip() + "\n"

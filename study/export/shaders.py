@@ -27,7 +27,7 @@ import sys
 import tempfile
 from pathlib import Path
 
-from shaders_port import CONSTANT_SPECS, Constants
+from shaders_port import CONSTANT_SPECS, GLSL_NAMES, Constants
 from shaders_port.glsl_text import compile_check, read_source, write_constants
 from shaders_port.spirv.user_shader import UserShader
 from shaders_port.variants import SHIPPED, VARIANTS, get_variant
@@ -49,6 +49,8 @@ def load_constants_json(path, shader=None) -> Constants | dict:
     table = data.get("constants", data)
     if not isinstance(table, dict):
         raise ValueError(f"{path}: 'constants' must be an object of name -> value")
+    rest = (data.get("constants_not_read") or {}).get("values", {}) if "constants" in data else {}
+    table = {**rest, **table}
     if "shader_file" in data:
         shader = shader or user_shader_of(path)
         values = {k: tuple(v) if isinstance(v, list) else v for k, v in table.items()}
@@ -59,13 +61,15 @@ def load_constants_json(path, shader=None) -> Constants | dict:
                 f"({', '.join(shader.constants)})"
             )
         return values
-    unknown = sorted(set(table) - set(CONSTANT_SPECS))
+    unknown = sorted(set(table) - set(CONSTANT_SPECS) - set(GLSL_NAMES.values()))
     if unknown:
         names = ", ".join(repr(u) if len(u) <= 80 else repr(u[:80]) + "..." for u in unknown[:5])
         more = f" and {len(unknown) - 5} more" if len(unknown) > 5 else ""
         raise ValueError(
-            f"{path}: unknown constant(s) {names}{more}; known: {sorted(CONSTANT_SPECS)} (the "
-            "study's shaders); a calibration of your own shader names its file as shader_file"
+            f"{path}: unknown constant(s) {names}{more}; known: the GLSL names "
+            f"{sorted(GLSL_NAMES.values())} of the study's shaders (or their descriptive names "
+            "in files older versions wrote); a calibration of your own shader names its file as "
+            "shader_file"
         )
     try:
         return Constants.from_dict(table)
@@ -108,7 +112,7 @@ def _read_json(path) -> dict:
 
 
 def export_shaders(
-    constants: Constants, out_dir, shaders=None, targets=(), textures=None
+    constants: Constants, out_dir, shaders=None, targets=(), textures=None, status=None
 ) -> list[Path]:
     """Write ``out_dir/{compat,core}/water.vert`` and the fragment shaders of the shaders named
     in ``shaders`` (any of the shader space; default: every shipped one --
@@ -118,9 +122,10 @@ def export_shaders(
     targets to add (``study.export.targets.TARGETS``; None: every one the installed tools can
     make). ``textures``: (record, writer) of what the constants assume ships with them
     (``study.export.textures``): ``writer(folder)`` writes them into ``out_dir/textures/`` and
-    every binding sheet opens with what the record says the shader expects. Raises ValueError on
-    bad constants or an unknown name and RuntimeError if a shader does not compile or translate
-    (nothing is written then)."""
+    every binding sheet opens with what the record says the shader expects. ``status``: {GLSL
+    scalar name: status of the fit} (``constants.json``'s ``parameters``), which the binding
+    sheets mark. Raises ValueError on bad constants or an unknown name and RuntimeError if a
+    shader does not compile or translate (nothing is written then)."""
     constants.validate()
     names = list(SHIPPED) if shaders is None else list(shaders)
     if not names:
@@ -139,23 +144,28 @@ def export_shaders(
                 bases[v.shader] if v.name == v.shader else v.source(dialect, text=bases[v.shader])
             )
             texts[(dialect, f"{v.name}.frag")] = text
-    return _write_checked(texts, out_dir, targets, constants, textures)
+    reads = {GLSL_NAMES[c] for n in names for c in VARIANTS[n].reads()}
+    fit = {"status": status or {}, "reads": reads}
+    return _write_checked(texts, out_dir, targets, constants, textures, fit)
 
 
-def export_user_shader(shader, values: dict, out_dir, targets=(), textures=None) -> list[Path]:
+def export_user_shader(
+    shader, values: dict, out_dir, targets=(), textures=None, status=None
+) -> list[Path]:
     """Write a user's shader (``shaders_port.spirv.user_shader.UserShader``) with ``values`` (GLSL
     name -> float | tuple) in place of its constants' initializers, ``out_dir/core/<file>``,
     beside the study's vertex shader it runs after, ``out_dir/core/water.vert``; ``targets``
-    and ``textures`` as :func:`export_shaders` (translated from those two files). Compile-checked
-    and written all or not at all, as there; returns the written paths."""
+    ``textures`` and ``status`` as :func:`export_shaders` (translated from those two files).
+    Compile-checked and written all or not at all, as there; returns the written paths."""
     texts = {
         ("core", "water.vert"): read_source("water", "vert", "core"),
         ("core", shader.label): shader.written(values),
     }
-    return _write_checked(texts, out_dir, targets, values, textures)
+    fit = {"status": status or {}, "reads": None}
+    return _write_checked(texts, out_dir, targets, values, textures, fit)
 
 
-def _write_checked(texts: dict, out_dir, targets, constants, textures=None) -> list[Path]:
+def _write_checked(texts: dict, out_dir, targets, constants, textures=None, fit=None) -> list[Path]:
     """Compile every text of ``texts`` ((dialect, file name) -> GLSL), translate the core ones
     to ``targets``, write them and the ``textures`` into a temporary folder beside ``out_dir``
     and swap it in."""
@@ -167,7 +177,7 @@ def _write_checked(texts: dict, out_dir, targets, constants, textures=None) -> l
     if targets:
         core = {f: t for (d, f), t in texts.items() if d == "core"}
         with disk_full(out_dir):  # the tools' scratch files (nothing reaches out_dir yet)
-            extra, _ = translate_targets(core, targets, constants, expects)
+            extra, _ = translate_targets(core, targets, constants, expects, fit)
     out_dir = Path(out_dir)
     out_dir.parent.mkdir(parents=True, exist_ok=True)
     tmp = Path(tempfile.mkdtemp(dir=out_dir.parent, prefix=f".{out_dir.name}."))

@@ -19,8 +19,8 @@ msl       ``msl/<name>.<stage>.metal``             none: no Metal compiler here 
 Beside them, per target, ``<name>.<stage>.reflect.json`` (``spirv-cross --reflect`` of the
 module the target is made from: for HLSL the one glslang makes of the HLSL, so its registers
 and its ``$Global`` offsets; elsewhere with the plain uniforms added as ``loose_uniforms``, which
-the reflection of OpenGL SPIR-V leaves out) and ``BINDINGS.md``, the binding sheet
-(``study.export.bindings``).
+the reflection of OpenGL SPIR-V leaves out), ``BINDINGS.md``, the short binding sheet, and
+``BINDINGS_FULL.md``, every shader's reflection as tables (``study.export.bindings``).
 ``targets.json`` at the top of the export lists the files and the checks. The calibration's GL
 check runs the HLSL on llvmpipe too (``study.export.gl_check.hlsl_check``).
 """
@@ -115,10 +115,13 @@ def _one_file(fname: str, text: str, targets) -> tuple[dict, dict, dict, dict]:
     return files, reflections, seconds, spec
 
 
-def translate_targets(core_texts: dict, targets, constants, expects=()) -> tuple[dict, dict]:
+def translate_targets(
+    core_texts: dict, targets, constants, expects=(), fit=None
+) -> tuple[dict, dict]:
     """Every core file of ``core_texts`` (file name -> GLSL) in every target: returns
-    (relative path -> bytes to write, the ``targets.json`` manifest). Raises RuntimeError with
-    the tool's log when a translation or a check fails (nothing is written then)."""
+    (relative path -> bytes to write, the ``targets.json`` manifest); ``expects`` and ``fit``
+    go to the binding sheets (``study.export.bindings.binding_sheet``). Raises RuntimeError
+    with the tool's log when a translation or a check fails (nothing is written then)."""
     files, manifest = {}, {"targets": {}, "seconds": {}}
     reflections, spec = {}, {}
     for fname, text in core_texts.items():
@@ -132,8 +135,9 @@ def translate_targets(core_texts: dict, targets, constants, expects=()) -> tuple
         mine = {k: v for k, v in reflections.items() if k.startswith(f"{target}/")}
         for path, refl in mine.items():
             files[path] = (json.dumps(refl, indent=1) + "\n").encode("utf-8")
-        sheet = binding_sheet(target, mine, spec, constants, expects)
+        sheet, full = binding_sheet(target, mine, spec, constants, expects, fit)
         files[f"{target}/BINDINGS.md"] = sheet.encode("utf-8")
+        files[f"{target}/BINDINGS_FULL.md"] = full.encode("utf-8")
         manifest["targets"][target] = {
             "files": sorted(p for p in files if p.startswith(f"{target}/")),
             "check": CHECKS[target],

@@ -14,6 +14,9 @@ from dataclasses import MISSING, asdict, dataclass, field, fields
 
 import numpy as np
 
+from shaders_port import GLSL_NAMES, glsl_scalar, study_scalar
+from shaders_port.variants import get_variant
+
 
 def jsonable(x):
     """``x`` with numpy scalars and arrays turned into Python numbers and lists, tuples into
@@ -35,7 +38,8 @@ def jsonable(x):
 
 @dataclass
 class CalibrationResult:
-    """One calibration, as written to ``constants.json``.
+    """One calibration, as written to ``constants.json``, every constant named as the shader's
+    GLSL names it (:func:`glsl_named`).
 
     Shared:
         shader: the shader variant fitted (``shaders_port.variants``).
@@ -100,16 +104,59 @@ class CalibrationResult:
         if self.joint:
             d["joint"] = True
         d.update(self.extra)
-        return jsonable(d)
+        d = jsonable(d)
+        return d if "shader_file" in d else glsl_named(d)
 
     @classmethod
     def from_json(cls, data: dict) -> "CalibrationResult":
         """The record of a ``constants.json`` object (keys not of this class kept in ``extra``)."""
         names = {f.name for f in fields(cls)} - {"extra"}
-        derived = {"iterations", "converged", "message", "joint"}
+        derived = {"iterations", "converged", "message", "joint", "constant_names"}
+        derived |= {"constants_not_read"}  # merged back into ``constants``: to_json splits them
+        if isinstance(data.get("constants"), dict):
+            rest = (data.get("constants_not_read") or {}).get("values", {})
+            data = {**data, "constants": {**rest, **data["constants"]}}
         required = [f.name for f in fields(cls) if f.default is MISSING and f.name != "extra"]
         missing = [n for n in required if n not in data]
         if missing:
             raise ValueError(f"not a calibration result: missing {missing}")
         extra = {k: v for k, v in data.items() if k not in names | derived}
         return cls(**{k: v for k, v in data.items() if k in names}, extra=extra)
+
+
+def _renamed(x):
+    """``x`` with every dict key and every string that is a study constant's name (or one of
+    its components) renamed to the GLSL's name."""
+    if isinstance(x, dict):
+        return {glsl_scalar(k): _renamed(v) for k, v in x.items()}
+    if isinstance(x, list):
+        return [_renamed(v) for v in x]
+    return glsl_scalar(x) if isinstance(x, str) else x
+
+
+def glsl_named(d: dict) -> dict:
+    """A calibration of one of the study's shaders as its JSON names it: every constant by its
+    GLSL name (``ATTENUATION_DISTANCE``, ``waterColor[1]``; ``parameters[...]["name"]`` and
+    ``constant_names`` give the study's descriptive name beside it); ``constants`` holds what
+    the shader reads, ``constants_not_read`` the rest of the constants block (exported at those
+    values, read by no line of this shader). Idempotent: a record already so named is unchanged."""
+    out = _renamed({k: v for k, v in d.items() if k not in ("constants", "constants_not_read")})
+    values = {glsl_scalar(k): v for k, v in d["constants"].items()}
+    values.update((d.get("constants_not_read") or {}).get("values", {}))
+    try:
+        reads = {GLSL_NAMES[n] for n in get_variant(d["shader"]).reads()}
+    except (KeyError, ValueError):
+        reads = set(values)
+    out["constants"] = {k: v for k, v in values.items() if k in reads}
+    rest = {k: v for k, v in values.items() if k not in reads}
+    if rest:
+        out["constants_not_read"] = {
+            "why": f"declared in the constants block but read by no line of {d['shader']}: "
+            "exported at these values, which change nothing",
+            "values": rest,
+        }
+    out["constant_names"] = {k: study_scalar(k) for k in values}
+    out["parameters"] = {
+        k: {**p, "name": study_scalar(k)} for k, p in out.get("parameters", {}).items()
+    }
+    return out

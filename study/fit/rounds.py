@@ -102,7 +102,7 @@ def solve_round(model, problem, start, x0, free, solver, max_steps) -> Solution:
     fitted = with_values(start, {n: result.constants[n] for n in free})
     _log(
         f"calibrate: {solver}: loss {result.loss_start:.6g} -> {result.loss:.6g} "
-        f"in {result.iterations} iterations ({result.message})"
+        f"in {result.iterations} steps: {result.message.removeprefix('converged: ')}"
     )
     bound = {
         n: (

@@ -10,6 +10,8 @@ from pathlib import Path
 
 import numpy as np
 
+from shaders_port import CONSTANT_SPECS, study_scalar
+
 from .._io import to_srgb, write_text_atomic
 from ..export.textures import expects_lines
 
@@ -120,12 +122,19 @@ def fmt(x, digits: int = 4) -> str:
 
 
 def constants_table(parameters: dict) -> list[str]:
-    lines = ["| constant | default | exported | status | why |", "|---|---|---|---|---|"]
+    """Each constant by its GLSL name (the study's descriptive name beside it, where the record
+    gives one that differs): its default (the fit's start), exported value, status and why."""
+    named = any(p.get("name", n) != n for n, p in parameters.items())
+    cols = ["constant (GLSL)", "study name"] if named else ["constant (GLSL)"]
+    cols += ["default", "exported", "status", "why"]
+    lines = ["| " + " | ".join(cols) + " |", "|" + "---|" * len(cols)]
     for name, p in parameters.items():
         shown = p["fitted"] if p["fitted"] is not None else p["default"]
+        study = [p.get("name", name)] if named else []
         lines.append(
-            f"| `{name}` | {fmt(p['default'])} | {fmt(shown)} | {p.get('status', '')} | "
-            f"{p.get('reason', '')} |"
+            "| "
+            + " | ".join([f"`{name}`", *study, fmt(p["default"]), fmt(shown)])
+            + f" | {p.get('status', '')} | {p.get('reason', '')} |"
         )
     return lines
 
@@ -170,7 +179,7 @@ def basin_lines(parameters: dict) -> list[str]:
                 f"`{name}`: a basin of the loss at {fmt(o['value'])} is lower than the fit's by "
                 f"{fmt(-o['delta_loss'])}, more than the reference's noise explains "
                 f"(+- {fmt(o['noise_sd'])}): the solver stopped short of it "
-                "(the loss is piecewise)."
+                "(the loss is piecewise). " + _start_there(name, p, o["value"])
             )
         for o in close:
             lines.append(
@@ -192,6 +201,20 @@ def basin_lines(parameters: dict) -> list[str]:
         if rest or not b["basins"]:
             lines.append(f"`{name}`: {what} (The other constants held at the solution.)")
     return lines + [""] if lines else []
+
+
+def _start_there(name: str, p: dict, value: float) -> str:
+    """What to run to fit from a lower basin at ``value`` of the constant ``name``."""
+    study = p.get("name") or study_scalar(name)  # records before names: the study's own
+    if study.split("[")[0] in CONSTANT_SPECS:  # the study's shader: the [constants] table
+        return (
+            f"To fit from there, run the same command with `--set constants.{study}={value:.4g}`"
+            " (the fit then starts in that basin)."
+        )
+    return (
+        f"To fit from there, set the initializer of `{name}` in your shader to {value:.4g} and "
+        "run the same command (the fit starts from the shader's own values)."
+    )
 
 
 def identifiability_table(ident: dict, parameters: dict | None = None) -> list[str]:
@@ -289,15 +312,22 @@ def fit_steps_line(summary: dict) -> str:
     (its own steps, which a total over rounds would contradict)."""
     fit = summary.get("fit", {})
     per = fit.get("iterations_per_round") or []
-    state = "converged" if summary["converged"] else "NOT converged"
+    msg = summary["message"]
+    said = summary["converged"] and msg.startswith("converged")  # the message says it already
     if len(per) > 1:
         rounds = " + ".join(str(n) for n in per)
-        return (
+        head = (
             f"{summary['iterations']} solver steps in {len(per)} rounds ({rounds}: a constant "
-            f"not identified at the solution is frozen and the rest refitted), {state}; the "
-            f"last round stopped as {summary['message']}."
+            "not identified at the solution is frozen and the rest refitted)"
         )
-    return f"{summary['iterations']} solver steps, {state} ({summary['message']})."
+        if said:
+            return f"{head}; the last round {msg}."
+        state = "converged" if summary["converged"] else "NOT converged"
+        return f"{head}, {state}; the last round stopped: {msg}."
+    if said:
+        return f"{summary['iterations']} solver steps, {msg}."
+    state = "converged" if summary["converged"] else "NOT converged"
+    return f"{summary['iterations']} solver steps, {state}: {msg}."
 
 
 def _decorrelated_lines(fit: dict) -> list[str]:

@@ -54,6 +54,7 @@ from ..export.gl_check import gl_check, target_checks
 from ..export.shaders import export_shaders
 from ..export.textures import texture_record, with_exported_textures, write_textures
 from ..fit.model import constants_from_experiment
+from ..fit.result import glsl_named
 from ..report.calibration import comparison_figure
 from ..report.tradeoff import pareto_figure, write_tradeoff_report
 from ..report.tradeoff_motion import motion_figure
@@ -326,9 +327,9 @@ def export_recommended(
         # what `study export` takes back: the recommendation's shader and constants
         write_json(
             folder / "constants.json",
-            {"shader": rec["variant"], "label": rec["label"], "experiment": exp.name,
-             "source": "study tradeoff (the recommended point)",
-             "constants": constants.to_dict(), "textures": record},
+            glsl_named({"shader": rec["variant"], "label": rec["label"], "experiment": exp.name,
+                        "source": "study tradeoff (the recommended point)",
+                        "constants": constants.to_dict(), "textures": record}),
         )  # fmt: skip
         result[exp.name] = {
             "folder": str(folder.relative_to(out)),  # the report lives in ``out``
