@@ -118,6 +118,13 @@ def test_report_says_what_the_scan_found():
         and "stopped short" in text
         and "other local minim" not in text
     )
+    # what to run: start the fit in that basin (the experiment's [constants] table by the
+    # study's name; a user's shader: its own initializer)
+    assert "`--set constants.bumptex_mult=0.96`" in text
+    named = {"BumptexMult": {**params["bumptex_mult"], "name": "bumptex_mult"}}
+    assert "`--set constants.bumptex_mult=0.96`" in "\n".join(basin_lines(named))
+    user = {"uBump": params["bumptex_mult"]}
+    assert "set the initializer of `uBump` in your shader to 0.96" in "\n".join(basin_lines(user))
     params["bumptex_mult"]["basins"]["basins"] = []
     assert "no other basin" in "\n".join(basin_lines(params))
     assert basin_lines({"a": {}}) == []

@@ -221,6 +221,23 @@ def test_load_calibrate_style_file(tmp_path):
     assert c.to_dict() == EXPORTED.to_dict()
 
 
+def test_load_reads_the_glsl_named_file_and_the_older_layout(tmp_path):
+    """constants.json names constants as the GLSL does, what the shader reads apart from the rest
+    of the block; files older versions wrote (the study's names, all in one table) still load."""
+    from study.fit.result import glsl_named
+
+    new = glsl_named({"shader": "water_refraction", "constants": EXPORTED.to_dict()})
+    assert "ATTENUATION_DISTANCE" in new["constants"] and "ABSORPTION_R" not in new["constants"]
+    assert "ABSORPTION_R" in new["constants_not_read"]["values"]
+    assert glsl_named(new) == new  # idempotent
+    for data in (new, {"shader": "water_refraction", "constants": EXPORTED.to_dict()}):
+        c = load_constants_json(_write(tmp_path, json.dumps(data)))
+        assert c.to_dict() == EXPORTED.to_dict()
+    both = {"constants": {"bumptex_mult": 0.9, "BumptexMult": 0.8}}
+    with pytest.raises(ValueError, match="BumptexMult and bumptex_mult are two names of one"):
+        load_constants_json(_write(tmp_path, json.dumps(both)))
+
+
 def test_load_flat_file(tmp_path):
     c = load_constants_json(
         _write(
