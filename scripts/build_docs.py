@@ -101,6 +101,7 @@ def generated() -> dict[Path, str]:
     for phase in STABILITY_PHASES:
         folder = RESULTS / phase
         pages[folder / "stability.md"] = stability_report_text(_json(folder / "summary.json"))
+    pages.update(_default_run_pages(RESULTS / "default"))
     return pages
 
 
@@ -190,6 +191,26 @@ def stale(pages: dict[Path, str]) -> list[Path]:
     """The pages whose committed text differs from ``pages``."""
     return [p for p, text in pages.items() if not p.is_file() or p.read_text() != text]
 
+
+
+def _default_run_pages(folder: Path) -> dict:
+    """``make run``'s calibration as the docs show it: its report (without the run's figures)
+    and the short binding sheets of HLSL and GLSL ES, written again from the run's files in
+    ``folder`` (``constants.json``, ``shaders/<target>/*.reflect.json``,
+    ``shaders/textures/textures.json``) exactly as the run wrote them."""
+    from study.export.targets import sheets_of_export
+    from study.report.calibration import report_text
+
+    calibration = _json(folder / "constants.json")
+    sheets = sheets_of_export(folder / "shaders", calibration)
+    head = (
+        "*Written by `scripts/build_docs.py` from the files `make run` wrote "
+        "(`out/default/`), committed in `docs/results/default/`.*\n\n"
+    )
+    pages = {folder / "report.md": head + report_text(calibration, {})}
+    for target in ("hlsl", "gles300"):
+        pages[folder / f"BINDINGS-{target}.md"] = head + sheets[f"{target}/BINDINGS.md"]
+    return pages
 
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(

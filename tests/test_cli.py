@@ -301,6 +301,21 @@ def test_calibrate_ships_the_textures_its_constants_assume(runs):
     assert "## What this shader expects" in report and "1.78x too bright" in report
 
 
+def test_the_binding_sheets_are_written_again_from_the_export_alone(runs):
+    """What the docs show of a real run: the sheets rebuilt from the export's reflections,
+    textures.json and constants.json are the sheets the calibration and study export wrote."""
+    from study.export.targets import sheets_of_export
+
+    root, _ = runs
+    for out in (root / "calibrate", root / "export"):
+        c = json.loads((root / "calibrate" / "constants.json").read_text())
+        again = sheets_of_export(out / "shaders", c)
+        assert len(again) == 8 and "hlsl/BINDINGS_FULL.md" in again, sorted(again)
+        for rel, text in again.items():
+            assert (out / "shaders" / rel).read_text() == text, (out, rel)
+        assert "**" in again["hlsl/BINDINGS.md"]  # the fitted constants marked
+
+
 def test_calibration_result_refuses_what_is_not_one():
     from study.fit.result import CalibrationResult
 

@@ -40,6 +40,22 @@ def test_a_hand_edited_number_is_caught(tmp_path, monkeypatch):
     assert edited[page] != pages[page] and mod.stale(edited) == [page]
 
 
+def test_the_readme_quotes_make_runs_committed_result():
+    """The README's and the docs' figures of ``make run`` are those of the run committed in
+    docs/results/default (re-run ``make run``, copy its files there, run build_docs)."""
+    import json
+
+    c = json.loads((REPO / "docs" / "results" / "default" / "constants.json").read_text())
+    e = c["error"]
+    quoted = (
+        f"RMSE {e['rmse']['default']:.4f} -> {e['rmse']['fitted']:.4f}, FLIP\n  "
+        f"{e['flip']['default']:.4f} -> {e['flip']['fitted']:.4f} (`make run`)"
+    )
+    assert quoted in (REPO / "README.md").read_text(), quoted
+    fast = (REPO / "docs" / "fast-references.md").read_text()
+    assert f"({e['flip']['fitted']:.4f} on `make run`)" in fast
+
+
 def test_mkdocs_build_strict(tmp_path):
     mkdocs = shutil.which("mkdocs", path=str(REPO / ".venv" / "bin")) or shutil.which("mkdocs")
     if mkdocs is None:

@@ -29,11 +29,13 @@ from __future__ import annotations
 
 import json
 import time
+from pathlib import Path
 
 from shaders_port.spirv import tools as S
 from shaders_port.spirv.tools import missing_tools
 
 from .bindings import binding_sheet
+from .textures import expects_lines, read_texture_record
 
 TARGETS = ("gles300", "hlsl", "msl", "spirv")
 CHECKS = {
@@ -144,3 +146,38 @@ def translate_targets(
         }
     files["targets.json"] = (json.dumps(manifest, indent=1) + "\n").encode("utf-8")
     return files, manifest
+
+
+def sheets_of_export(folder, calibration: dict) -> dict:
+    """The binding sheets of an export folder (``shaders/``) written again from its files: each
+    target's ``*.reflect.json``, the specialization constants of the SPIR-V or GLSL ES
+    reflection, ``textures/textures.json`` and ``calibration``, the ``constants.json`` object
+    the export was made from (its values, what was fitted, what the shader reads). Returns
+    {relative path: Markdown}, the ``BINDINGS.md`` and ``BINDINGS_FULL.md`` of every target
+    found: what the export wrote, for a page that shows them without running the tools."""
+    folder = Path(folder)
+    refl = {
+        p.relative_to(folder).as_posix(): json.loads(p.read_text())
+        for p in sorted(folder.glob("*/*.reflect.json"))
+    }
+    spec = {
+        c["id"]: c["name"]
+        for path, r in refl.items()
+        if path.split("/")[0] in ("spirv", "gles300")
+        for c in r.get("specialization_constants", [])
+    }
+    values = {**(calibration.get("constants_not_read") or {}).get("values", {})}
+    values.update(calibration["constants"])
+    fit = {
+        "status": {n: p.get("status") for n, p in calibration.get("parameters", {}).items()},
+        "reads": None if "shader_file" in calibration else set(calibration["constants"]),
+    }
+    record = read_texture_record(folder)
+    expects = expects_lines(record) if record else []
+    out = {}
+    for target in TARGETS:
+        mine = {k: v for k, v in refl.items() if k.startswith(f"{target}/")}
+        if mine:
+            short, full = binding_sheet(target, mine, spec, values, expects, fit)
+            out[f"{target}/BINDINGS.md"], out[f"{target}/BINDINGS_FULL.md"] = short, full
+    return out

@@ -252,6 +252,13 @@ def identifiability_table(ident: dict, parameters: dict | None = None) -> list[s
 
 def write_report(out: Path, summary: dict, figures: dict) -> Path:
     """``out/report.md`` from the calibration summary (the content of constants.json)."""
+    path = out / "report.md"
+    write_text_atomic(path, report_text(summary, figures))
+    return path
+
+
+def report_text(summary: dict, figures: dict) -> str:
+    """The Markdown of :func:`write_report` (``figures``: figure name -> file, those drawn)."""
     e = summary["error"]
     lines = _header_lines(summary) + _decorrelated_lines(summary.get("fit", {}))
     lines += [
@@ -265,6 +272,7 @@ def write_report(out: Path, summary: dict, figures: dict) -> Path:
         lines += [f"![reference | default | fitted, with error maps]({figures['comparison']})", ""]
     lines += ["## Constants", ""] + constants_table(summary["parameters"]) + [""]
     lines += basin_lines(summary["parameters"])
+    lines += expects_lines(summary.get("textures"))
     lines += [
         "## Identifiability",
         "",
@@ -284,13 +292,10 @@ def write_report(out: Path, summary: dict, figures: dict) -> Path:
     lines += ["## Timings (seconds)", "", "| stage | s |", "|---|---|"]
     lines += [f"| {k} | {fmt(v, 3)} |" for k, v in t.items()] + [""]
     lines += _export_lines(summary.get("gl_check"), summary.get("shader_file"))
-    lines += expects_lines(summary.get("textures"))
     lines += engine_targets_section(
         summary.get("engine_targets") or {}, user=bool(summary.get("shader_file"))
     )
-    path = out / "report.md"
-    write_text_atomic(path, "\n".join(lines))
-    return path
+    return "\n".join(lines)
 
 
 def _header_lines(summary: dict) -> list[str]:
