@@ -192,7 +192,6 @@ def stale(pages: dict[Path, str]) -> list[Path]:
     return [p for p, text in pages.items() if not p.is_file() or p.read_text() != text]
 
 
-
 def _default_run_pages(folder: Path) -> dict:
     """``make run``'s calibration as the docs show it: its report (without the run's figures)
     and the short binding sheets of HLSL and GLSL ES, written again from the run's files in
@@ -211,6 +210,7 @@ def _default_run_pages(folder: Path) -> dict:
     for target in ("hlsl", "gles300"):
         pages[folder / f"BINDINGS-{target}.md"] = head + sheets[f"{target}/BINDINGS.md"]
     return pages
+
 
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(
