@@ -144,14 +144,17 @@ def is_user_variant(variant: str) -> bool:
 
 def _plain_log_ticks(ax, xs: list) -> None:
     """Plain-number labels (``5``, ``10``, ``20``) on a log x axis, major ticks only, as many per
-    decade as the span leaves room for (1-2-5, 1-3 or 1), minor ticks unlabelled."""
+    decade as the span leaves room for (1-2-3-5, 1-2-5, 1-3 or 1), minor ticks unlabelled."""
     from matplotlib.ticker import FuncFormatter, LogLocator, NullFormatter
 
     xs = [x for x in xs if x is not None and x > 0]
     if not xs:
         return
     decades = np.log10(max(xs)) - np.log10(min(xs))
-    subs = (1.0, 2.0, 5.0) if decades <= 1.5 else (1.0, 3.0) if decades <= 3 else (1.0,)
+    if decades <= 1.0:
+        subs = (1.0, 2.0, 3.0, 5.0)
+    else:
+        subs = (1.0, 2.0, 5.0) if decades <= 1.5 else (1.0, 3.0) if decades <= 3 else (1.0,)
     ax.xaxis.set_major_locator(LogLocator(base=10, subs=subs))
     ax.xaxis.set_major_formatter(FuncFormatter(lambda x, _: f"{x:g}"))
     ax.xaxis.set_minor_formatter(NullFormatter())
