@@ -16,12 +16,23 @@ Every table of results in ``docs/`` is written by this script, never by hand:
 * ``docs/results/animation/report.md``: the animated calibration's report, from the
   ``constants.json`` that ``study calibrate experiments/animated.toml`` writes, and
   ``schedules.md``, the same calibration at three step schedules (``schedules.json``);
-* ``docs/experiment-keys.md``: the experiment file's key table, from the schema.
+* ``docs/experiment-keys.md``: the experiment file's key table, from the schema;
+* ``docs/file-formats.md``: the files a user gives and the files the tool writes, its tables
+  from the schema, the file readers and the committed result files (``docs_file_formats.py``).
+
+and every figure it can draw from those files (:func:`figures`): the Pareto chart of a
+tradeoff-family study whose ``tradeoff.parquet`` is committed, a study's ``motion.png``, the
+stability figures, and each side-by-side of renders whose panels a run saved as data
+(``images_<scene>.exr`` and ``.json``). ``docs/results/figures.json`` records, per figure, the
+SHA-256 of each file it was drawn from, and lists every other figure under ``docs/results``
+with why it is not redrawn here (renders no committed file holds, or points not committed).
 
 Re-running a study into ``docs/results/<study>`` and then this script refreshes the pages::
 
-    .venv/bin/python scripts/build_docs.py           # write the pages
-    .venv/bin/python scripts/build_docs.py --check   # exit 1 if a committed page differs
+    .venv/bin/python scripts/build_docs.py           # write the pages, draw the figures
+    .venv/bin/python scripts/build_docs.py --check   # exit 1 if a committed page differs, a
+                                                     # figure is missing or a result file is not
+                                                     # the one its figure was drawn from
 
 ``tests/test_docs.py`` runs the check, so a number in the docs cannot go stale by hand.
 """
@@ -83,7 +94,11 @@ def generated() -> dict[Path, str]:
     from study.report.tradeoff import tradeoff_report_text
     from study.config.experiment import schema_markdown
 
+    sys.path.insert(0, str(Path(__file__).resolve().parent))
+    from docs_file_formats import file_formats_page
+
     pages = {DOCS / "experiment-keys.md": KEYS_HEADER + schema_markdown()}
+    pages[DOCS / "file-formats.md"] = file_formats_page()
     for study in TRADEOFF_FAMILY:
         folder = RESULTS / study
         pages[folder / "report.md"] = tradeoff_report_text(_tradeoff_summary(folder))
@@ -187,6 +202,151 @@ def _failures_page(folder: Path) -> str:
     return failures_report_text(scenes_of(rows), list(CLASSES), command)
 
 
+LEDGER = RESULTS / "figures.json"
+# figures made of renders that no committed file holds (why, per file name)
+RENDERS = {
+    "failures.png": "renders of each failure class; the failure study does not save them as data",
+    "temporal.png": "renders of the animated calibration; `study calibrate` does not save them "
+    "as data",
+    "animation.webp": "renders of every frame of the animated calibration; `study calibrate` "
+    "does not save them as data",
+}
+
+
+def figures() -> dict[Path, tuple[list[Path], object]]:
+    """Every figure this script draws: path -> (the result files it is drawn from, a function
+    drawing it into a path). Drawn: the Pareto chart of a tradeoff-family study whose
+    ``tradeoff.parquet`` is committed, the motion chart of one whose summary has a scene in
+    motion, the stability figures, and every side-by-side whose panels are committed as data
+    (``images_<scene>.exr`` and ``.json``, ``study.report.panels``)."""
+    from study.report.panels import panels_figure
+    from study.report.stability import noise_figure, solver_figure, spread_figure
+    from study.report.tradeoff_motion import motion_figure
+
+    out = {}
+    for study in TRADEOFF_FAMILY:
+        folder = RESULTS / study
+        table, summary = folder / "tradeoff.parquet", folder / "summary.json"
+        sources = [p for p in (table, folder / "user.parquet", summary) if p.is_file()]
+        if table.is_file():
+            out[folder / "pareto.png"] = (sources, lambda p, f=folder: _pareto(p, f))
+        if summary.is_file() and any(
+            f.get("motion") for f in _json(summary)["scenes"].values()
+        ):  # fmt: skip
+            out[folder / "motion.png"] = (
+                [summary],
+                lambda p, f=summary: motion_figure(p, _json(f)),
+            )
+        for data in sorted(folder.glob("images_*.exr")):
+            png = data.with_suffix(".png")
+            out[png] = ([data, data.with_suffix(".json")], panels_figure)
+    ms = RESULTS / "stability" / "multistart" / "summary.json"
+    out[ms.parent / "solvers.png"] = ([ms], lambda p: solver_figure(p, _json(ms)["multistart"]))
+    out[ms.parent / "spread.png"] = ([ms], lambda p: spread_figure(p, _json(ms)["multistart"]))
+    noise = RESULTS / "stability" / "noise" / "summary.json"
+    out[noise.parent / "noise.png"] = ([noise], lambda p: noise_figure(p, _json(noise)["noise"]))
+    return out
+
+
+def _pareto(path: Path, folder: Path) -> Path:
+    """The study's ``pareto.png`` from its points (``tradeoff.parquet``, ``user.parquet``) and
+    summary (committed, else recomputed from the points)."""
+    from study.report.tradeoff import pareto_figure
+    from study.studies.tradeoff_analysis import analyse
+    from study.sweep import read_table
+
+    rows = read_table(folder / "tradeoff.parquet")
+    if (folder / "user.parquet").is_file():
+        rows += read_table(folder / "user.parquet")
+    summary = _tradeoff_summary(folder)
+    names = list(summary["scenes"])
+    _, recs = analyse(rows, names, summary["tolerance"], summary.get("budget") or None)
+    return pareto_figure(path, recs, summary)
+
+
+def sha256(path: Path) -> str:
+    import hashlib
+
+    h = hashlib.sha256()
+    with open(path, "rb") as f:
+        for block in iter(lambda: f.read(1 << 20), b""):
+            h.update(block)
+    return h.hexdigest()
+
+
+def _rel(path: Path) -> str:
+    return path.relative_to(REPO).as_posix()
+
+
+def ledger(figs: dict | None = None) -> dict:
+    """``docs/results/figures.json`` as the files on disk give it: ``drawn`` (figure -> {result
+    file: SHA-256 of its bytes}) for every figure of :func:`figures`, and ``not_redrawn``
+    (figure -> why) for every other figure under ``docs/results`` (PNG, WebP)."""
+    figs = figures() if figs is None else figs
+    drawn = {_rel(p): {_rel(s): sha256(s) for s in sources} for p, (sources, _) in figs.items()}
+    others = {}
+    for p in sorted([*RESULTS.rglob("*.png"), *RESULTS.rglob("*.webp")]):
+        if _rel(p) in drawn:
+            continue
+        if p.name in RENDERS:
+            why = RENDERS[p.name]
+        elif p.name.startswith("images_"):
+            why = (
+                "renders of the shaders beside the reference; drawn by a run that did not keep "
+                "its panels as data (images_<scene>.exr): re-run the study to redraw it"
+            )
+        else:
+            why = "drawn by the study's run; the points it is drawn from are not committed"
+        others[_rel(p)] = why
+    return {
+        "about": "Written by scripts/build_docs.py: each figure it draws, with the SHA-256 of "
+        "the result files it was drawn from, and the figures it cannot redraw, with why.",
+        "drawn": drawn,
+        "not_redrawn": others,
+    }
+
+
+def ledger_problems(committed: dict | None = None) -> list[str]:
+    """What makes the committed ledger wrong: a figure missing, a result file whose hash differs
+    from the ledger's, a figure drawn or left out that the ledger does not list as such."""
+    now = ledger()
+    if committed is None:
+        if not LEDGER.is_file():
+            return [f"{_rel(LEDGER)} is missing"]
+        committed = json.loads(LEDGER.read_text())
+    problems = []
+    for fig, sources in committed.get("drawn", {}).items():
+        if not (REPO / fig).is_file():
+            problems.append(f"{fig}: the figure is missing")
+        for src, digest in sources.items():
+            if not (REPO / src).is_file():
+                problems.append(f"{fig}: its result file {src} is missing")
+            elif sha256(REPO / src) != digest:
+                problems.append(f"{fig}: {src} is not the file it was drawn from (SHA-256)")
+        if now["drawn"].get(fig, sources).keys() != sources.keys():
+            problems.append(f"{fig}: drawn from other files than the ledger lists")
+    for fig in committed.get("not_redrawn", {}):
+        if not (REPO / fig).is_file():
+            problems.append(f"{fig}: the figure is missing")
+    for fig in committed.get("drawn", {}).keys() - now["drawn"].keys():
+        problems.append(f"{fig}: listed as drawn, but this script does not draw it")
+    for section in ("drawn", "not_redrawn"):
+        for fig in now[section].keys() - committed.get(section, {}).keys():
+            problems.append(f"{fig}: not listed under {section!r} in {_rel(LEDGER)}")
+    return problems
+
+
+def draw_figures() -> list[Path]:
+    """Draw every figure of :func:`figures` and write the ledger; returns the figures."""
+    from study._io import write_json
+
+    figs = figures()
+    for path, (_, draw) in figs.items():
+        draw(path)
+    write_json(LEDGER, ledger(figs))
+    return list(figs)
+
+
 def stale(pages: dict[Path, str]) -> list[Path]:
     """The pages whose committed text differs from ``pages``."""
     return [p for p, text in pages.items() if not p.is_file() or p.read_text() != text]
@@ -216,7 +376,13 @@ def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(
         description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
     )
-    ap.add_argument("--check", action="store_true", help="compare, write nothing; exit 1 if stale")
+    ap.add_argument(
+        "--check",
+        action="store_true",
+        help="compare, write nothing; exit 1 if a page is stale, a figure is missing or a result "
+        "file differs from the one its figure was drawn from",
+    )
+    ap.add_argument("--no-figures", action="store_true", help="write the pages only")
     args = ap.parse_args(argv)
     sys.path.insert(0, str(REPO))
     from study._io import write_text_atomic
@@ -226,10 +392,17 @@ def main(argv: list[str] | None = None) -> int:
     if args.check:
         for p in bad:
             print(f"stale: {p.relative_to(REPO)} (run scripts/build_docs.py)", file=sys.stderr)
-        return 1 if bad else 0
+        problems = ledger_problems()
+        for line in problems:
+            print(f"figures: {line} (run scripts/build_docs.py)", file=sys.stderr)
+        return 1 if bad or problems else 0
     for p in bad:
         write_text_atomic(p, pages[p])
         print(f"wrote {p.relative_to(REPO)}")
+    if not args.no_figures:
+        for p in draw_figures():
+            print(f"drew {p.relative_to(REPO)}")
+        print(f"wrote {LEDGER.relative_to(REPO)}")
     return 0
 
 

@@ -351,13 +351,15 @@ def test_calibrate_writes_engine_targets_checked(runs):
 def test_the_report_says_why_the_reference_has_more_samples_than_asked():
     from study.report.calibration import _header_lines
 
-    ref = {"spp": 140, "spp_asked": 128, "passes": 4, "sampler": "multijitter", "noise": 0.02}
+    ref = {"spp": 140, "spp_asked": 128, "spp_per_pass": 35, "n_seeds": 4,
+           "sampler": "multijitter", "noise": 0.02}  # fmt: skip
     summary = {"experiment": "e", "shader": "s", "reference": ref, "fit_resolution": [8, 8],
-               "solver": "lm", "iterations": 1, "converged": True, "message": "converged"}  # fmt: skip
+               "solver": "lm", "iterations": 1, "converged": True,
+               "message": "converged"}  # fmt: skip
     head = _header_lines(summary)[2]
     assert head.startswith(
-        "Reference: 140 spp (128 asked, rounded up to 4 independent passes of 35, a count the "
-        "multijitter sampler stratifies), measured noise 0.02"
+        "Reference: 140 spp (128 asked, rounded up to 4 passes of 35 for the multijitter "
+        "sampler), measured noise 0.02"
     )
     same = _header_lines({**summary, "reference": {**ref, "spp": 128, "spp_asked": 128}})[2]
     assert same.startswith("Reference: 128 spp, measured")

@@ -34,6 +34,9 @@ def test_generalise_writes_joint_constants_and_loso_table(tmp_path):
     for r in rows:
         for k in ("seed", "others", "own"):
             assert 0 <= r[k]["flip"] <= 1 and r[k]["rmse"] >= 0
+    # every constant by its GLSL name, in the joint record and in the validation alike
+    assert "ATTENUATION_DISTANCE" in rows[0]["own_constants"]
+    assert set(gen["universality"]) <= set(joint["parameters"])
     md = (out / "generalise.md").read_text()
     assert "| left-out scene |" in md and "verdict" in md
     # the exported constants load back through `study export`
@@ -50,5 +53,5 @@ def test_joint_calibrate_through_cli(tmp_path):
 
     result = CalibrationResult.from_json(joint)
     assert result.joint and result.to_json() == joint and result.experiment is None
-    assert joint["constants"]["attenuation_distance"] > 0
+    assert joint["constants"]["ATTENUATION_DISTANCE"] > 0  # named as the GLSL names it
     assert "Joint calibration over 2 scenes" in (out / "report.md").read_text()

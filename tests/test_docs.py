@@ -1,10 +1,14 @@
-"""The documentation: generated pages equal what their result files give, and the site builds
-with ``mkdocs build --strict`` (a broken link, a missing page or an image that is not there
-fails)."""
+"""The documentation: generated pages equal what their result files give, every figure the
+docs script draws is there with the SHA-256 of the result files it was drawn from, and the site
+builds with ``mkdocs build --strict`` (a broken link, a missing page or an image that is not
+there fails)."""
 
 from __future__ import annotations
 
+import copy
+import hashlib
 import importlib.util
+import json
 import os
 import shutil
 import subprocess
@@ -43,8 +47,6 @@ def test_a_hand_edited_number_is_caught(tmp_path, monkeypatch):
 def test_the_readme_quotes_make_runs_committed_result():
     """The README's and the docs' figures of ``make run`` are those of the run committed in
     docs/results/default (re-run ``make run``, copy its files there, run build_docs)."""
-    import json
-
     c = json.loads((REPO / "docs" / "results" / "default" / "constants.json").read_text())
     e = c["error"]
     quoted = (
@@ -54,6 +56,43 @@ def test_the_readme_quotes_make_runs_committed_result():
     assert quoted in (REPO / "README.md").read_text(), quoted
     fast = (REPO / "docs" / "fast-references.md").read_text()
     assert f"({e['flip']['fitted']:.4f} on `make run`)" in fast
+
+
+def test_figure_ledger_hashes_recomputed():
+    """Each figure of ``docs/results/figures.json`` is there, and each result file it lists has
+    the SHA-256 the ledger gives (recomputed here, not by the script)."""
+    ledger = json.loads((REPO / "docs" / "results" / "figures.json").read_text())
+    assert ledger["drawn"] and "docs/results/tradeoff/images_default.png" in ledger["drawn"]
+    for fig, sources in ledger["drawn"].items():
+        assert (REPO / fig).is_file(), fig
+        assert sources, f"{fig}: drawn from no file"
+        for src, digest in sources.items():
+            assert hashlib.sha256((REPO / src).read_bytes()).hexdigest() == digest, (fig, src)
+    for fig, why in ledger["not_redrawn"].items():
+        assert (REPO / fig).is_file() and why, fig
+
+
+def test_figure_ledger_is_current():
+    """Every figure under docs/results is listed, drawn or not, and the script would write the
+    ledger as committed."""
+    problems = _build_docs().ledger_problems()
+    assert not problems, problems
+
+
+def test_a_changed_result_file_or_a_missing_figure_is_caught():
+    mod = _build_docs()
+    committed = json.loads(mod.LEDGER.read_text())
+    edited = copy.deepcopy(committed)
+    fig = "docs/results/tradeoff/pareto.png"
+    src = next(iter(edited["drawn"][fig]))
+    edited["drawn"][fig][src] = "0" * 64
+    assert any(src in p and "SHA-256" in p for p in mod.ledger_problems(edited))
+    edited = copy.deepcopy(committed)
+    edited["drawn"]["docs/results/tradeoff/nowhere.png"] = edited["drawn"][fig]
+    assert any("nowhere.png: the figure is missing" in p for p in mod.ledger_problems(edited))
+    edited = copy.deepcopy(committed)
+    del edited["not_redrawn"]["docs/results/variants/pareto.png"]
+    assert any("variants/pareto.png: not listed" in p for p in mod.ledger_problems(edited))
 
 
 def test_mkdocs_build_strict(tmp_path):

@@ -17,6 +17,8 @@ def test_cache_hit_miss_and_provenance(mi, tmp_path):
     rgb, prov, extra = read_exr(a.path)
     assert prov["key"] == reference_key(exp, "llvm_ad_rgb") and prov["spp"] == 16
     assert {"versions", "render_seconds", "noise", "scene_hash", "variant", "seed"} <= set(prov)
+    assert prov["spp_asked"] == 16 and prov["spp_per_pass"] * prov["n_seeds"] == prov["spp"]
+    assert "reference: rendered 16 spp in" in logs[-1]  # as asked: no note
     assert prov["noise"] > 0 and np.isfinite(rgb).all()
     b = load_or_render(exp, "llvm_ad_rgb", cache=tmp_path, log=logs.append)
     assert "cached" in logs[-1]
@@ -86,6 +88,19 @@ def test_pass_spp_rounds_to_the_samplers_grid():
     assert [pass_spp(mj, s) for s in counts] == [1, 4, 16, 35, 256]  # a x b, b = floor(sqrt)
     assert [pass_spp(strat, s) for s in counts] == [1, 4, 16, 36, 256]
     assert [pass_spp(ind, s) for s in counts] == [1, 4, 16, 32, 256]
+
+
+def test_spp_text_says_why_a_count_was_rounded_up():
+    from study.scene.reference import spp_text
+
+    prov = {"spp": 140, "spp_asked": 128, "spp_per_pass": 35, "n_seeds": 4}
+    assert spp_text({**prov, "sampler": "multijitter"}) == (
+        "140 spp (128 asked, rounded up to 4 passes of 35 for the multijitter sampler)"
+    )
+    assert spp_text({**prov, "spp": 128, "spp_per_pass": 32, "sampler": "independent"}) == (
+        "128 spp"
+    )
+    assert spp_text({"spp": 140}) == "140 spp"  # a reference rendered before spp_asked
 
 
 @pytest.mark.parametrize("sampler", ["multijitter", "stratified", "independent"])

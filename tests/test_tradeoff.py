@@ -227,6 +227,12 @@ def test_tradeoff_cli_tiny(tmp_path):
     assert summary["images"]["default"] == "images_default.png"
     assert (tmp_path / "images_default.png").stat().st_size > 10_000
     assert "images_default.png" in (tmp_path / "report.md").read_text()
+    # its panels kept as data (the figure can be drawn again from them alone)
+    from study.report.panels import read_panels
+
+    images, errs, mask, title = read_panels(tmp_path / "images_default.png")
+    assert list(images)[0] == "reference" and mask.any() and title == "default"
+    assert errs == summary["panels"]["default"]
     before = {r["key"]: r["seconds"] for r in rows}
     assert main(args) == 0  # resumes: nothing re-run
     assert {r["key"]: r["seconds"] for r in read_table(tmp_path / "tradeoff.parquet")} == before

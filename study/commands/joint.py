@@ -16,7 +16,7 @@ from ..fit.build import build_model
 from ..fit.calibrate import scene_frozen
 from ..fit.joint import JointModel, joint_calibrate, leave_one_out, universality
 from ..fit.model import constants_json
-from ..fit.result import CalibrationResult, jsonable
+from ..fit.result import CalibrationResult, glsl_renamed, jsonable
 from ..report.generalise import write_generalise_report, write_joint_report
 from ..scene.frames import refuse_animated
 from .steps import export_calibration, load_scene_data
@@ -181,6 +181,8 @@ def run_generalise(experiments, out, overrides=None, variant=None, solver=None, 
         "universality": uni,
     }
     summary = jsonable(summary)
+    if "shader_file" not in joint:  # the study's shader: its constants by their GLSL names
+        summary = glsl_renamed(summary)
     write_json(out / "generalise.json", summary)
     write_generalise_report(out, summary)
     _log(f"generalise: wrote {out / 'generalise.md'}")

@@ -36,7 +36,7 @@ from ..fit.result import CalibrationResult
 from ..report.calibration import comparison_figure, diagnostics_figure, loss_figure, write_report
 from ..scene.baseline_inputs import inputs_for_shader
 from ..scene.frames import is_animated, refuse_animated
-from ..scene.reference import N_SEEDS, load_or_render
+from ..scene.reference import load_or_render
 from ..scene.shader_inputs import load_or_build_shader_inputs
 from ..scene.user_scene import check_scene, sun_summary
 from ..scene.view import check_water_in_view
@@ -228,9 +228,8 @@ def calibration_result(exp, variant, model, ref, cal, ev, solver, timings, gl):
         step_sweep=cal.sweep,
         reference={
             "spp": ref.spp,
-            "spp_asked": exp.reference.spp,  # an int, or "auto" (reference.target_noise)
-            "sampler": exp.reference.sampler,
-            "passes": N_SEEDS,  # independent passes, spp // passes samples each
+            **{k: ref.provenance.get(k) for k in ("spp_asked", "spp_per_pass", "n_seeds")},
+            "sampler": ref.provenance.get("sampler"),
             "noise": ref.noise,
             "path": str(ref.path),
             "key": ref.provenance["key"],

@@ -124,13 +124,13 @@ class CalibrationResult:
         return cls(**{k: v for k, v in data.items() if k in names}, extra=extra)
 
 
-def _renamed(x):
-    """``x`` with every dict key and every string that is a study constant's name (or one of
-    its components) renamed to the GLSL's name."""
+def glsl_renamed(x):
+    """``x`` (JSON-able) with every dict key and every string that is a study constant's name
+    (or one of its components) renamed to the GLSL's name."""
     if isinstance(x, dict):
-        return {glsl_scalar(k): _renamed(v) for k, v in x.items()}
+        return {glsl_scalar(k): glsl_renamed(v) for k, v in x.items()}
     if isinstance(x, list):
-        return [_renamed(v) for v in x]
+        return [glsl_renamed(v) for v in x]
     return glsl_scalar(x) if isinstance(x, str) else x
 
 
@@ -140,7 +140,7 @@ def glsl_named(d: dict) -> dict:
     ``constant_names`` give the study's descriptive name beside it); ``constants`` holds what
     the shader reads, ``constants_not_read`` the rest of the constants block (exported at those
     values, read by no line of this shader). Idempotent: a record already so named is unchanged."""
-    out = _renamed({k: v for k, v in d.items() if k not in ("constants", "constants_not_read")})
+    out = glsl_renamed({k: v for k, v in d.items() if k not in ("constants", "constants_not_read")})
     values = {glsl_scalar(k): v for k, v in d["constants"].items()}
     values.update((d.get("constants_not_read") or {}).get("values", {}))
     try:

@@ -14,6 +14,7 @@ from shaders_port import CONSTANT_SPECS, study_scalar
 
 from .._io import to_srgb, write_text_atomic
 from ..export.textures import expects_lines
+from ..scene.reference import spp_text
 
 
 def pyplot():
@@ -303,25 +304,12 @@ def _header_lines(summary: dict) -> list[str]:
     return [
         f"# Calibration: {summary['experiment']} ({summary['shader']})",
         "",
-        f"Reference: {ref['spp']} spp{_spp_why(ref)}, measured noise {fmt(ref['noise'], 3)} "
+        f"Reference: {spp_text(ref)}, measured noise {fmt(ref['noise'], 3)} "
         "(RMS standard error on "
         f"water pixels, linear RGB). Fit at {res[0]}x{res[1]} "
         f"with `{summary['solver']}`: {fit_steps_line(summary)}",
         "",
     ]
-
-
-def _spp_why(ref: dict) -> str:
-    """Why the reference has the spp it has, when that is not the number asked for."""
-    asked, spp, k = ref.get("spp_asked"), ref["spp"], ref.get("passes")
-    if asked == "auto":
-        return " (`auto`: enough for `reference.target_noise`)"
-    if not isinstance(asked, int) or asked == spp or not k:
-        return ""
-    return (
-        f" ({asked} asked, rounded up to {k} independent passes of {spp // k}, a count the "
-        f"{ref.get('sampler', 'reference')} sampler stratifies)"
-    )
 
 
 def fit_steps_line(summary: dict) -> str:

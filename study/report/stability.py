@@ -67,14 +67,16 @@ def noise_figure(path: Path, noise: dict) -> Path:
     )
     for ax, which in zip(axes[0], whichs):
         d = noise[which]
-        names = sorted({n for s in d["stats"].values() for n in s})
+        # spp -> stats; keyed by str once the summary has been through JSON
+        stats = {int(k): v for k, v in d["stats"].items()}
+        names = sorted({n for s in stats.values() for n in s})
         for n in names:
             xs, ys, es = [], [], []
             for spp in d["levels"]:
-                st = d["stats"][spp].get(n)
+                st = stats[spp].get(n)
                 if st is None or "bias" not in st:
                     continue
-                scale = abs(d["stats"][d["levels"][-1]][n]["mean"]) or 1.0
+                scale = abs(stats[d["levels"][-1]][n]["mean"]) or 1.0
                 xs.append(spp)
                 ys.append(st["bias"] / scale)
                 es.append((st.get("bias_se") or 0.0) / scale)

@@ -1,13 +1,14 @@
 """The tradeoff report: ``pareto.png`` (error against each cost measure, every point drawn, the
-Pareto front, the original shader's schedule and the recommendation marked, one colour per variant,
-a row of panels per scene, a user's own shader a labelled diamond) and ``report.md`` (the fronts
-as tables, the recommendation, where a user's shader stands, what each scene needs, each halving
-of the original's schedule)."""
+Pareto front, the original shader's schedule and the recommendation marked, one colour per
+variant, a row of panels per scene, a user's own shader a labelled diamond, a budget a dashed
+line) and ``report.md`` (the fronts as tables, the recommendation, where a user's shader stands,
+what each scene needs, each halving of the original's schedule)."""
 
 from __future__ import annotations
 
 from pathlib import Path
 
+import numpy as np
 from shaders_port import space as _space
 
 from .._io import write_text_atomic
@@ -23,10 +24,23 @@ MARKERS = {"grid": "o", "scale": "s", "converged": "*", "fixed": "D"}
 
 
 def pareto_figure(path: Path, recs: list, summary: dict) -> Path:
-    """See the module doc. ``recs``: the successful points (``experiment``, ``variant``, ``kind``,
-    ``scale``, ``label``, ``flip`` and the cost measures); the fronts are
-    ``summary["scenes"][scene]["fronts_by_cost"]`` (labels, cheapest first). The converged
-    raymarch (star) is drawn but is not a candidate."""
+    """Draw :func:`pareto_chart` into ``path`` (PNG, 110 dpi)."""
+    plt = pyplot()
+    fig = pareto_chart(recs, summary)
+    fig.savefig(path, dpi=110, bbox_inches="tight")
+    plt.close(fig)
+    return path
+
+
+def pareto_chart(recs: list, summary: dict):
+    """The chart of the module doc as a matplotlib figure: a row of panels per scene, a column
+    per cost measure of :data:`COSTS` (log x, plain-number ticks), FLIP on y. ``recs``: the
+    successful points (``experiment``, ``variant``, ``kind``, ``scale``, ``label``, ``flip`` and
+    the cost measures); the fronts are ``summary["scenes"][scene]["fronts_by_cost"]`` (labels,
+    cheapest first); ``summary["budget"]`` (cost -> limit), when set, a dashed vertical line on
+    its panel. The converged raymarch (star) is drawn but is not a candidate. One legend, beside
+    the first row's last panel, lists what is drawn and nothing else; every drawn artist
+    carries its legend entry as its ``gid``."""
     plt = pyplot()
     scenes = list(summary["scenes"])
     variants = list(dict.fromkeys(r["variant"] for r in recs))
@@ -34,106 +48,116 @@ def pareto_figure(path: Path, recs: list, summary: dict) -> Path:
     fig, axes = plt.subplots(
         len(scenes), len(COSTS), figsize=(5.2 * len(COSTS), 4.2 * len(scenes)), squeeze=False
     )
+    legend: dict[str, object] = {}  # entry -> its proxy handle, in the order first drawn
     for i, scene in enumerate(scenes):
         pts = [r for r in recs if r["experiment"] == scene]
-        cands = [r for r in pts if r["kind"] != "converged"]
-        rec = summary["scenes"][scene]["recommended"]
         for j, (cost, label) in enumerate(COSTS.items()):
             ax = axes[i, j]
-            for r in pts:
-                if r.get(cost) is None:
-                    continue
-                ax.scatter(
-                    r[cost],
-                    r["flip"],
-                    color=colours[r["variant"]],
-                    marker=MARKERS.get(r["kind"], "o"),
-                    s=60 if r["kind"] == "converged" else 22,
-                    alpha=0.8,
-                    edgecolors="none",
-                )
-            on = summary["scenes"][scene]["fronts_by_cost"][cost]
-            front = sorted(
-                (r for r in cands if r["label"] in on and r.get(cost) is not None),
-                key=lambda r: r[cost],
-            )
-            if front:
-                ax.step(
-                    [r[cost] for r in front],
-                    [r["flip"] for r in front],
-                    where="post",
-                    color="k",
-                    lw=1.0,
-                    label="Pareto front",
-                )
-            seed = [
-                r
-                for r in cands
-                if r["kind"] == "scale" and r["scale"] == 1.0 and r.get(cost) is not None
-            ]
-            for r in seed:
-                ax.scatter(
-                    r[cost],
-                    r["flip"],
-                    s=120,
-                    facecolors="none",
-                    edgecolors=colours[r["variant"]],
-                    linewidths=1.5,
-                )
-            if seed:
-                ax.scatter(
-                    [],
-                    [],
-                    s=120,
-                    facecolors="none",
-                    edgecolors="k",
-                    label="original schedule (10, 3, 40)",
-                )
-            if rec is not None:
-                match = [r for r in cands if r["label"] == rec["label"] and r.get(cost) is not None]
-                for r in match:
-                    ax.scatter(
-                        r[cost], r["flip"], marker="x", s=120, color="red", label="recommended"
-                    )
-            _mark_user(ax, cands, cost)
+            _draw_panel(ax, pts, summary, scene, cost, colours, legend)
+            xs = [r[cost] for r in pts if r.get(cost) is not None]
+            limit = (summary.get("budget") or {}).get(cost)
+            if limit is not None:
+                entry = f"budget: {COST_NAMES.get(cost, cost)} <= {fmt(limit, 4)}"
+                ax.axvline(limit, color="tab:red", ls="--", lw=1.2, gid=entry)
+                legend.setdefault(entry, plt.Line2D([], [], color="tab:red", ls="--", lw=1.2))
+                xs.append(limit)
             ax.set_xscale("log")
+            _plain_log_ticks(ax, xs)
             ax.set_xlabel(label, fontsize=9)
             ax.set_ylabel("FLIP on water pixels" if j == 0 else "")
             ax.set_title(scene if j == 0 else "", fontsize=10, loc="left")
             ax.grid(alpha=0.3, which="both")
-            if i == 0 and j == 0:
-                for v in variants:
-                    ax.scatter([], [], color=colours[v], label=v)
-                ax.scatter(
-                    [], [], marker="*", color="gray", s=60, label="converged raymarch (floor)"
-                )
-                handles, labels = ax.get_legend_handles_labels()
-                # beside the last panel, where it hides no point
-                axes[0, -1].legend(handles, labels, fontsize=7, loc="upper left",
-                                   bbox_to_anchor=(1.02, 1.0), borderaxespad=0.0)  # fmt: skip
+    if legend:
+        # outside the panels, to the right of the first row: it covers no point
+        axes[0, -1].legend(list(legend.values()), list(legend), fontsize=7, loc="upper left",
+                           bbox_to_anchor=(1.02, 1.0), borderaxespad=0.0)  # fmt: skip
     fig.tight_layout()
-    fig.savefig(path, dpi=110, bbox_inches="tight")
-    plt.close(fig)
-    return path
+    return fig
 
 
-def _mark_user(ax, cands: list, cost: str) -> None:
-    """A user's own shader (variant ``user:<file>``): a labelled diamond."""
+def _draw_panel(ax, pts: list, summary: dict, scene: str, cost: str, colours, legend) -> None:
+    """One scene's points against one cost: every point, the front, the original schedule's
+    points ringed, the recommendation, the user's shader; each drawn artist's legend entry is
+    added to ``legend`` (entry -> proxy handle) and set as its ``gid``."""
+    plt = pyplot()
+    cands = [r for r in pts if r["kind"] != "converged"]
+    for r in pts:
+        if r.get(cost) is None:
+            continue
+        # a converged point (a star in its variant's colour) stands for the floor in the legend
+        conv = r["kind"] == "converged"
+        entry = FLOOR if conv else r["variant"]
+        ax.scatter(r[cost], r["flip"], color=colours[r["variant"]],
+                   marker=MARKERS.get(r["kind"], "o"), s=60 if conv else 22, alpha=0.8,
+                   edgecolors="none", gid=entry)  # fmt: skip
+        legend.setdefault(
+            entry,
+            plt.Line2D(
+                [],
+                [],
+                ls="",
+                marker="*" if conv else "o",
+                ms=9 if conv else 6,
+                color="gray" if conv else colours[r["variant"]],
+            ),
+        )
+    on = summary["scenes"][scene]["fronts_by_cost"][cost]
+    front = sorted(
+        (r for r in cands if r["label"] in on and r.get(cost) is not None), key=lambda r: r[cost]
+    )
+    if front:
+        ax.step([r[cost] for r in front], [r["flip"] for r in front], where="post", color="k",
+                lw=1.0, gid="Pareto front")  # fmt: skip
+        legend.setdefault("Pareto front", plt.Line2D([], [], color="k", lw=1.0))
     for r in cands:
-        if r["variant"].startswith("user:") and r.get(cost) is not None:
+        if r["kind"] == "scale" and r["scale"] == 1.0 and r.get(cost) is not None:
+            ax.scatter(r[cost], r["flip"], s=120, facecolors="none",
+                       edgecolors=colours[r["variant"]], linewidths=1.5, gid=SEED)  # fmt: skip
+            legend.setdefault(SEED, plt.Line2D([], [], ls="", marker="o", ms=10, mfc="none",
+                                               mec="k", mew=1.5))  # fmt: skip
+    rec = summary["scenes"][scene]["recommended"]
+    for r in cands:
+        if rec is not None and r["label"] == rec["label"] and r.get(cost) is not None:
+            ax.scatter(r[cost], r["flip"], marker="x", s=120, color="red", gid="recommended")
+            legend.setdefault("recommended", plt.Line2D([], [], ls="", marker="x", ms=10,
+                                                        color="red", mew=1.5))  # fmt: skip
+    for r in cands:
+        if is_user_variant(r["variant"]) and r.get(cost) is not None:
             name = r["variant"].split(":", 1)[1]
-            ax.scatter(
-                r[cost],
-                r["flip"],
-                marker="D",
-                s=90,
-                facecolors="none",
-                edgecolors="k",
-                linewidths=1.5,
-                label=f"your shader ({name})",
-            )
+            entry = f"your shader ({name})"
+            ax.scatter(r[cost], r["flip"], marker="D", s=90, facecolors="none", edgecolors="k",
+                       linewidths=1.5, gid=entry)  # fmt: skip
             ax.annotate(name, (r[cost], r["flip"]), textcoords="offset points",
                         xytext=(6, 6), fontsize=8)  # fmt: skip
+            legend.setdefault(entry, plt.Line2D([], [], ls="", marker="D", ms=8, mfc="none",
+                                                mec="k", mew=1.5))  # fmt: skip
+
+
+FLOOR = "converged raymarch (floor)"
+SEED = "original schedule (10, 3, 40)"
+
+
+def is_user_variant(variant: str) -> bool:
+    """A user's own shader on the chart (variant ``user:<file>``)."""
+    return variant.startswith("user:")
+
+
+def _plain_log_ticks(ax, xs: list) -> None:
+    """Plain-number labels (``5``, ``10``, ``20``) on a log x axis, major ticks only, as many per
+    decade as the span leaves room for (1-2-3-5, 1-2-5, 1-3 or 1), minor ticks unlabelled."""
+    from matplotlib.ticker import FuncFormatter, LogLocator, NullFormatter
+
+    xs = [x for x in xs if x is not None and x > 0]
+    if not xs:
+        return
+    decades = np.log10(max(xs)) - np.log10(min(xs))
+    if decades <= 1.0:
+        subs = (1.0, 2.0, 3.0, 5.0)
+    else:
+        subs = (1.0, 2.0, 5.0) if decades <= 1.5 else (1.0, 3.0) if decades <= 3 else (1.0,)
+    ax.xaxis.set_major_locator(LogLocator(base=10, subs=subs))
+    ax.xaxis.set_major_formatter(FuncFormatter(lambda x, _: f"{x:g}"))
+    ax.xaxis.set_minor_formatter(NullFormatter())
 
 
 def _sched(rec) -> str:
@@ -165,6 +189,7 @@ def tradeoff_report_text(summary: dict) -> str:
         "port's frame time. Recommendation: the cheapest point within "
         f"{100 * tol:g} % of the best FLIP.",
         "",
+        *_schedule_note(summary),
     ]
     lines += _search_lines(summary)
     lines += ["![error against cost, Pareto fronts](pareto.png)", ""]
@@ -172,6 +197,28 @@ def tradeoff_report_text(summary: dict) -> str:
         lines += _scene_lines(scene, f, summary)
     lines += _closing_lines(summary)
     return "\n".join(lines) + "\n"
+
+
+SCHEDULE_NOTE = (
+    "A configuration is a shader and its step schedule, written `shader (a, b, c)`: the "
+    "schedule is (steps at grazing angles, steps at steep angles, loop cap), the shader's "
+    "`STEPS_GRAZING`, `STEPS_STEEP` and `LOOP_CAP`: the refraction raymarch takes a steps per "
+    "world unit of ray when the refracted ray is grazing and b when it points straight down "
+    "(interpolated between by its slope), and stops after c steps. A shader named without a "
+    "schedule has no raymarch."
+)
+REFL_NOTE = (
+    "`refl (d, e, f)` after it is the reflection march's schedule, in the order (steps at steep "
+    "angles, steps at grazing angles, loop cap): `REFL_STEPS_STEEP`, `REFL_STEPS_GRAZING`, "
+    "`REFL_LOOP_CAP`."
+)
+SCHEDULE_HEAD = "shader (schedule)"
+
+
+def _schedule_note(summary: dict) -> list[str]:
+    """What the numbers after a shader's name are, said once."""
+    refl = any(" refl (" in r["label"] for f in summary["scenes"].values() for r in f["front"])
+    return [SCHEDULE_NOTE + (" " + REFL_NOTE if refl else ""), ""]
 
 
 def _search_lines(summary: dict) -> list[str]:
@@ -324,7 +371,7 @@ def _scene_lines(scene: str, f: dict, summary: dict) -> list[str]:
     rec, seed = f["recommended"], f["seed"]
     lines += [f"## {scene}", ""]
     lines += [
-        "| configuration | fetches (mean) | fetches (p99) | GL ms 1080p (norm.) | "
+        f"| {SCHEDULE_HEAD} | fetches (mean) | fetches (p99) | GL ms 1080p (norm.) | "
         "port ms | FLIP | RMSE |",
         "|---|---|---|---|---|---|---|",
     ]
@@ -372,15 +419,17 @@ def _scene_lines(scene: str, f: dict, summary: dict) -> list[str]:
         lines += ["", f"![{scene}: reference and shaders]({summary['images'][scene]})"]
     lines += _parsimony_lines(f.get("parsimony", {}))
     lines += ["", "What the scene needs:", ""]
+    best = sorted((v, x) for v, x in f["best_flip_by_variant"].items() if x is not None)
     lines.append(
         f"- simplest variant within tolerance: `{f['simplest_variant_within_tolerance']}`; "
-        "best FLIP per variant: "
-        + ", ".join(f"{v} {fmt(x)}" for v, x in sorted(f["best_flip_by_variant"].items()))
+        "best FLIP per variant: " + ", ".join(f"{v} {fmt(x)}" for v, x in best)
     )
-    lines.append(
-        "- error floor (converged raymarch) per variant: "
-        + ", ".join(f"{v} {fmt(x)}" for v, x in sorted(f["error_floor_by_variant"].items()))
-    )
+    floors = sorted((v, x) for v, x in f["error_floor_by_variant"].items() if x is not None)
+    if floors:  # only the variants a converged raymarch was measured for
+        lines.append(
+            "- error floor (converged raymarch) per variant: "
+            + ", ".join(f"{v} {fmt(x)}" for v, x in floors)
+        )
     lines.append(
         "- smallest loop cap at which fewer than 1 % of rays miss the floor: "
         + ", ".join(
@@ -393,7 +442,7 @@ def _scene_lines(scene: str, f: dict, summary: dict) -> list[str]:
             "",
             "Each halving of the original's schedule (scaled family):",
             "",
-            "| configuration | scale | fetches | GL ms 1080p (norm.) | FLIP | not crossed |",
+            f"| {SCHEDULE_HEAD} | scale | fetches | GL ms 1080p (norm.) | FLIP | not crossed |",
             "|---|---|---|---|---|---|",
         ]
         for r in f["halvings"]:
@@ -414,7 +463,7 @@ def _closing_lines(summary: dict) -> list[str]:
         lines += [
             "## Joint front (error averaged over the scenes)",
             "",
-            "| configuration | fetches (mean) | FLIP (mean) |",
+            f"| {SCHEDULE_HEAD} | fetches (mean) | FLIP (mean) |",
             "|---|---|---|",
         ]
         lines += [

@@ -72,7 +72,7 @@ def motion_lines(m: dict | None) -> list[str]:
         "the shader's frame-to-frame change minus the reference's; beyond the reference's own "
         "noise; the change ratio: the shader's change over the water's).",
         "",
-        "| configuration | fetches | FLIP frame 0 | FLIP mean (spread) | temporal RMSE | "
+        "| shader (schedule) | fetches | FLIP frame 0 | FLIP mean (spread) | temporal RMSE | "
         "beyond noise | change ratio |",
         "|---|---|---|---|---|---|---|",
     ]
@@ -92,7 +92,7 @@ def motion_lines(m: dict | None) -> list[str]:
             "(relative); *bands* when it is larger by more than the search's noise margin and "
             "by more than the tolerance:",
             "",
-            "| configuration | fetches | temporal RMSE | converged | difference (MS) | "
+            "| shader (schedule) | fetches | temporal RMSE | converged | difference (MS) | "
             "relative | bands |",
             "|---|---|---|---|---|---|---|",
         ]

@@ -94,6 +94,20 @@ def pass_spp(exp: Experiment, spp: int) -> int:
     return sampler_spp(exp.reference.sampler, max(1, math.ceil(spp / N_SEEDS)))
 
 
+def spp_text(provenance: dict) -> str:
+    """The samples per pixel of a reference, with why they differ from those asked for when they
+    do: ``"140 spp (128 asked, rounded up to 4 passes of 35 for the multijitter sampler)"``
+    (``provenance``: a :class:`Reference`'s; one rendered before ``spp_asked`` was recorded gives
+    ``"140 spp"``)."""
+    spp, asked = int(provenance["spp"]), provenance.get("spp_asked")
+    if asked is None or int(asked) == spp:
+        return f"{spp} spp"
+    return (
+        f"{spp} spp ({int(asked)} asked, rounded up to {provenance['n_seeds']} passes of "
+        f"{provenance['spp_per_pass']} for the {provenance['sampler']} sampler)"
+    )
+
+
 def render_passes(
     exp: Experiment, spp_per_pass: int, n_passes: int, seed0: int, progress=None, scene=None
 ) -> np.ndarray:
@@ -223,6 +237,9 @@ def render_reference(
         "scene_hash": exp.scene_hash(),
         "experiment": exp.name,
         "spp": per_pass * N_SEEDS,
+        "spp_asked": int(spp),
+        "spp_per_pass": per_pass,
+        "sampler": exp.reference.sampler,
         "n_seeds": N_SEEDS,
         "seed": exp.reference.seed,
         "variant": variant,
@@ -276,7 +293,8 @@ def load_or_render(
         write_exr(path, ref.image, ref.provenance, extra=extra)
     ref.path = path
     log(
-        f"reference: rendered {ref.spp} spp in {ref.provenance['render_seconds']:.1f} s, "
+        f"reference: rendered {spp_text(ref.provenance)} in "
+        f"{ref.provenance['render_seconds']:.1f} s, "
         f"noise {ref.noise:.2e}; cached at {path}"
     )
     return ref
@@ -295,7 +313,7 @@ def _cached_reference(exp: Experiment, key: str, path: Path, log) -> Reference |
             and se is not None
             and se.shape == rgb.shape
         ):
-            log(f"reference: cached {path} (spp {prov['spp']}, noise {prov['noise']:.2e})")
+            log(f"reference: cached {path} ({spp_text(prov)}, noise {prov['noise']:.2e})")
             passes = [extra.get(f"pass{i}") for i in range(N_SEEDS)]
             kept = np.stack(passes) if all(p is not None for p in passes) else None
             return Reference(rgb, se, prov, path, passes=kept)

@@ -33,7 +33,8 @@ Outputs in ``out``: ``tradeoff.parquet`` (a row per point measured in full), ``s
 ``frames.parquet``, ``motion.parquet`` and ``motion.png`` (an animated experiment),
 ``pareto.png``, ``images_<scene>.png`` (the reference beside the original shader at its own
 constants, fitted, the best configuration within its fetch budget, the recommendation and the
-user's shader), ``report.md``, ``summary.json``, ``shaders/`` (one experiment) or
+user's shader; its panels kept as data in ``images_<scene>.exr`` and ``.json``,
+``study.report.panels``), ``report.md``, ``summary.json``, ``shaders/`` (one experiment) or
 ``shaders/<name>/`` (several), with the user's file fitted.
 """
 
@@ -55,7 +56,7 @@ from ..export.shaders import export_shaders
 from ..export.textures import texture_record, with_exported_textures, write_textures
 from ..fit.model import constants_from_experiment
 from ..fit.result import glsl_named
-from ..report.calibration import comparison_figure
+from ..report.panels import panels_figure, write_panels
 from ..report.tradeoff import pareto_figure, write_tradeoff_report
 from ..report.tradeoff_motion import motion_figure
 from ..scene.baseline_inputs import inputs_for_shader
@@ -407,7 +408,9 @@ def side_by_side(exps, specs, summary: dict, rows: list, out: Path, variant: str
             errs[title] = errors(ref.image, img, m)
             mask = m
         name = f"images_{exp.name}.png"
-        comparison_figure(out / name, images, errs, mask, title=exp.name)
+        # the panels kept as data (``images_<scene>.exr``/``.json``), the figure drawn from them
+        write_panels(out / name, images, errs, mask, title=exp.name)
+        panels_figure(out / name)
         result[exp.name] = name
         scores[exp.name] = {
             t: {"flip": float(e["flip"]), "rmse": float(e["rmse"])} for t, e in errs.items()
