@@ -214,9 +214,9 @@ def _glslang(text: str, label: str, args: list[str], include_paths, what: str) -
 
 
 def _line_directive(next_line: int, version: int, es: bool) -> str:
-    """A ``#line`` after which the next line is ``next_line`` (GLSL before 330 / ES 300 numbers
-    the directive's own line)."""
-    sets_next = version >= 300 if es else version >= 330
+    """A ``#line`` after which the next line is ``next_line`` (glslang: desktop GLSL before
+    330 numbers the directive's own line)."""
+    sets_next = es or version >= 330
     return f"#line {next_line if sets_next else next_line - 1}"
 
 

@@ -265,6 +265,13 @@ class UserShader:
         (RGB; an alpha is never compared)."""
         return [s for c in self.constants.values() for s in c.scalar_names()]
 
+    def declared_range(self, name: str) -> list:
+        """``[low, high]`` of constant ``name``, with its start value (a float or a list) for a
+        uniform without initializer: the declaration table's entry."""
+        c = self.constants[name]
+        start = list(c.default) if len(c.default) > 1 else c.default[0]
+        return [c.lo, c.hi, start] if c.bare else [c.lo, c.hi]
+
     def bounds(self, scalar: str) -> tuple[float, float]:
         c = self.constants[scalar.split("[")[0]]
         return c.lo, c.hi

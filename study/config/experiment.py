@@ -119,8 +119,8 @@ def user_declaration(lines: list | None) -> dict:
     for line in lines or []:
         parts = str(line).split()
         try:
-            if parts[0] == "constant" and len(parts) == 4:
-                decl["constants"][parts[1]] = [float(parts[2]), float(parts[3])]
+            if parts[0] == "constant" and len(parts) in (4, 5):
+                decl["constants"][parts[1]] = [float(parts[2]), float(parts[3]), *parts[4:]]
                 continue
             if parts[0] == "bind" and len(parts) == 3:
                 decl["bindings"][parts[1]] = parts[2]
@@ -128,7 +128,8 @@ def user_declaration(lines: list | None) -> dict:
         except (IndexError, ValueError):
             pass
         raise ExperimentError(
-            f"fit.declare: {_clip(line)}: write `constant NAME LOW HIGH` or `bind NAME INPUT`"
+            f"fit.declare: {_clip(line)}: write `constant NAME LOW HIGH [START]` or "
+            "`bind NAME INPUT`"
         )
     return decl
 

@@ -239,7 +239,8 @@ STUDY_KEYS: dict[str, Field] = {
         "list_str",
         None,
         "Declaration of your own `fit.shader` besides its `// @study` pragmas, one line each: "
-        "`constant NAME LOW HIGH` (a constant to fit and its range) or `bind NAME INPUT` (the "
+        "`constant NAME LOW HIGH` (a constant to fit and its range; `constant NAME LOW HIGH "
+        "START` for a uniform without initializer) or `bind NAME INPUT` (the "
         "shader's sampler or uniform NAME is the study's INPUT).",
     ),
     "fit.include_paths": Field(
