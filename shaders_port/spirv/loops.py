@@ -6,7 +6,9 @@ A structured loop (``OpLoopMerge``) is run by :meth:`LoopRunner.loop`:
   value: a loop over an integer constant), the loop is unrolled in Python;
 * otherwise it is a Dr.Jit symbolic loop (``dr.while_loop``) whose state is the function
   variables its blocks store, the cost counters and a lane mask (``break`` clears it); the
-  number of passes through its body is kept per lane (``passes``, by loop header);
+  number of passes through its body is kept per lane (``passes``, by loop header); a lane
+  still in the loop after :data:`MAX_PASSES` passes is stopped there with ``MAX_PASSES + 1``
+  passes, which :func:`check_passes` reports as an error naming the loop's line;
 * with ``differentiate``: when only variables updated as ``v = v + X`` (``X`` the same on
   every pass), copies of them and temporaries of one pass (:meth:`LoopRunner.pass_locals`)
   carry derivatives (two probing passes with AD say so), the
@@ -22,13 +24,33 @@ from __future__ import annotations
 import drjit as dr
 
 from . import ops
+from .dialects import ShaderError
 from .ops import TRUE, Mask, both, lift
 
 MAX_UNROLL = 4096  # iterations of a loop with lane-independent exits
+MAX_PASSES = 4096  # passes of one lane through a symbolic loop's body before it is stopped
 
 
-class UnsupportedInstruction(NotImplementedError):
+class UnsupportedInstruction(ShaderError, NotImplementedError):
     """The shader uses an instruction (or a form of one) the executor does not implement."""
+
+
+def check_passes(module, passes: dict, label: str) -> None:
+    """ShaderError if a symbolic loop was stopped at :data:`MAX_PASSES` for some lane
+    (``passes``: loop header -> per-lane passes, ``MAX_PASSES + 1`` where stopped), naming the
+    loop's GLSL line and how many pixels it did not leave."""
+    for header, p in passes.items():
+        if not dr.width(p) or int(dr.max(p)[0]) <= MAX_PASSES:
+            continue
+        n = int(dr.count(p > MAX_PASSES)[0])
+        merge = next(
+            (f.blocks[header].merge for f in module.functions.values() if header in f.blocks), None
+        )
+        where = merge.where() if merge is not None else label
+        raise ShaderError(
+            f"{where}: a loop did not end within {MAX_PASSES} passes for {n} pixel(s) (a loop "
+            "that never ends for them?); bound it, e.g. `for (int i = 0; i < N && cond; i++)`"
+        )
 
 
 class LoopRunner:
@@ -197,7 +219,7 @@ class LoopRunner:
         try:
             state = dr.while_loop(
                 (active, vals, counts, m.UInt32(0)),
-                lambda active, vals, counts, passes: active,
+                lambda active, vals, counts, passes: active & (passes < MAX_PASSES),
                 body,
                 labels=("active", "vars", "counts", "passes"),
                 label=f"spirv_loop_{hdr.label}",
@@ -206,7 +228,7 @@ class LoopRunner:
             self.detached = False
             self.base = outer
         self._set_state(vids, state[1], state[2])
-        return state[3]
+        return dr.select(state[0], MAX_PASSES + 1, state[3])  # stopped lanes: over the bound
 
     def trip_count(self, hdr, members, merge, counter) -> int:
         """The largest number of body passes of the loop over the frame's lanes (runs it
@@ -214,6 +236,7 @@ class LoopRunner:
         snapshot, counts = dict(self.vars), dict(self.counts)
         passes = self.symbolic_loop(hdr, members, merge, counter, detached=True)
         self.vars, self.counts = snapshot, counts
+        check_passes(self.M, {hdr.label: passes}, "the shader")
         return int(dr.max(passes)[0]) if dr.width(passes) else 0
 
     # ---- replay: a loop on detached values, derivatives of its affine state attached after --

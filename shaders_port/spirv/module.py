@@ -1,6 +1,7 @@
 """A SPIR-V module read with the machine-readable SPIR-V grammar, for the SPIR-V executor.
 
-:func:`compile_fragment` turns a core GLSL fragment shader into SPIR-V: ``glslangValidator -G
+:func:`compile_fragment` turns a GLSL fragment shader (any dialect of ``spirv.dialects``, translated
+to core GLSL there) into SPIR-V: ``glslangValidator -G
 --aml --amb -g`` (OpenGL semantics, locations and bindings mapped automatically, debug line
 information kept), then ``spirv-opt`` passes that make the module easier to execute without
 changing what it computes (:data:`OPT_PASSES`: every function call inlined into ``main``, a
@@ -19,11 +20,14 @@ from __future__ import annotations
 
 import functools
 import json
+import shutil
 import struct
 import subprocess
 import tempfile
 from dataclasses import dataclass, field
 from pathlib import Path
+
+from .dialects import ShaderError, front_end, glslang_errors
 
 GRAMMAR_DIR = Path("/usr/include/spirv/unified1")
 CORE_GRAMMAR = GRAMMAR_DIR / "spirv.core.grammar.json"
@@ -220,7 +224,7 @@ class Module:
         self.entry, self.interface = None, []
         fn = block = None
         for ins in decode(words[5:]):
-            if label is not None and ins.line is not None:
+            if label is not None and ins.line is not None and _is_main(ins.line[0], label):
                 ins.line = (label, ins.line[1])  # the compiled temporary file is the source
             op = ins.opname
             if op == "OpName":
@@ -286,19 +290,30 @@ class Module:
         )
 
 
-def compile_fragment(source: str, label: str, defines: tuple = ()) -> bytes:
-    """SPIR-V of a core GLSL fragment shader ``source`` compiled with the preprocessor names
-    ``defines``, with debug lines naming ``label`` (a file name), optimised by
-    :data:`OPT_PASSES` and validated. RuntimeError with the tool's log on failure."""
+def _is_main(file: str, label: str) -> bool:
+    """Whether an ``OpLine`` file name is the compiled file of ``label`` (not an include)."""
+    name = Path(label).name
+    return Path(file).name in (name, f"{name}.frag") or not file
+
+
+def compile_fragment(source: str, label: str, defines: tuple = (), include_paths=()) -> bytes:
+    """SPIR-V of a GLSL fragment shader ``source`` in any dialect of ``spirv.dialects``
+    (translated to core GLSL there, ``#include`` s searched in ``include_paths``) compiled
+    with the preprocessor names ``defines`` (``NAME`` or ``NAME=VALUE``), with debug lines
+    naming ``label`` (a file name), optimised by :data:`OPT_PASSES` and validated.
+    :class:`~shaders_port.spirv.dialects.ShaderError` with glslang's errors (file and line of
+    the user's file) if it does not compile; RuntimeError if a tool is missing."""
+    text = front_end(source, label, tuple(defines), tuple(include_paths))
     with tempfile.TemporaryDirectory(prefix="spirv-exec.") as d:
         src = Path(d) / Path(label).name
         src = src if src.suffix == ".frag" else src.with_suffix(".frag")
         raw, opt = Path(d) / "raw.spv", Path(d) / "opt.spv"
-        src.write_text(source, encoding="utf-8")
+        src.write_text(text, encoding="utf-8")
         steps = [
             ["glslangValidator", "-G", "--aml", "--amb", "-g", "-S", "frag"]
             + [f"-D{n}" for n in defines]
-            + ["-o", str(raw), str(src)],
+            + [f"-I{Path(p).resolve()}" for p in include_paths]
+            + ["-o", str(raw), src.name],
             ["spirv-opt", *OPT_PASSES, str(raw), "-o", str(opt)],
             ["spirv-val", str(opt)],
         ]
@@ -309,17 +324,20 @@ def compile_fragment(source: str, label: str, defines: tuple = ()) -> bytes:
                 text=True,
                 timeout=120,
                 check=False,
+                cwd=d,
             )
             if res.returncode != 0:
-                log = (res.stdout + res.stderr).replace(str(src), label).strip()
-                raise RuntimeError(f"{args[0]} failed on {label}:\n{log}")
+                log = (res.stdout + res.stderr).replace(str(src), label).replace(src.name, label)
+                if args[0] == "glslangValidator":
+                    raise ShaderError(
+                        f"{label} does not compile:\n{glslang_errors(log, label, include_paths)}"
+                    )
+                raise ShaderError(f"{args[0]} failed on {label}:\n{log.strip()}")
         return opt.read_bytes()
 
 
 def _exe(name: str) -> str:
     """The path of the program ``name``; RuntimeError naming the Debian package otherwise."""
-    import shutil
-
     package = {"glslangValidator": "glslang-tools"}.get(name, "spirv-tools")
     exe = shutil.which(name)
     if exe is None:

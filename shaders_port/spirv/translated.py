@@ -44,6 +44,7 @@ from ..pipeline.frame import (
 from ..pipeline.raster import prepare
 from ..pipeline.texture import CLAMP, LINEAR, NEAREST, Texture2D, backend_types
 from .execute import Executor
+from .loops import check_passes
 from .module import Module, compile_fragment
 from .ops import lift
 
@@ -86,10 +87,11 @@ _DECL_TAIL = r"(?P<value>[^;]*)(?P<tail>;.*)$"
 
 @dataclass(frozen=True)
 class ShaderSpec:
-    """A fragment shader to execute: its core GLSL ``source``, a ``label`` (file name for
-    messages and debug lines), the preprocessor names ``defines``, ``constants``: GLSL name ->
-    ``CONSTANT_SPECS`` key or the user's name (each a declaration with an initializer, made a
-    uniform), and ``bindings``: shader name -> :data:`STUDY_INPUTS` name."""
+    """A fragment shader to execute: its GLSL ``source`` (a dialect of ``spirv.dialects``), a
+    ``label`` (file name for messages and debug lines), the preprocessor names ``defines``,
+    ``constants``: GLSL name -> ``CONSTANT_SPECS`` key or the user's name (each a declaration
+    with an initializer, made a uniform, or a uniform without one), ``bindings``: shader name
+    -> :data:`STUDY_INPUTS` name, and ``include_paths``: folders of its ``#include`` files."""
 
     source: str
     label: str
@@ -97,6 +99,7 @@ class ShaderSpec:
     constants: tuple = ()  # ((glsl name, key), ...)
     bindings: tuple = ()  # ((shader name, study name), ...)
     ints: tuple = field(default=())  # GLSL names of the integer constants
+    include_paths: tuple = ()  # folders searched for its #include files
 
     def prepared_source(self) -> str:
         """The source with every declared constant a uniform without initializer (line for
@@ -111,6 +114,8 @@ def _prepared(source: str, label: str, constants: tuple) -> str:
     for glsl, _ in constants:
         pat = re.compile(_DECL.format(name=re.escape(glsl)) + _DECL_TAIL, re.M)
         found = pat.search(src)
+        if found is None and re.search(rf"^\s*uniform\s+\w+\s+{re.escape(glsl)}\s*;", src, re.M):
+            continue  # a uniform without initializer (the engine sets it): bound as it is
         if found is None:
             raise ValueError(
                 f"{label}: no declaration `const|uniform <float|int|vec3|vec4> {glsl} "
@@ -127,10 +132,11 @@ _MODULES: dict = {}
 
 def module_of(spec: ShaderSpec) -> Module:
     """The compiled, decoded module of ``spec`` (cached by source and defines)."""
-    key = (spec.prepared_source(), spec.defines, spec.label)
+    key = (spec.prepared_source(), spec.defines, spec.label, spec.include_paths)
     mod = _MODULES.get(key)
     if mod is None:
-        mod = Module(compile_fragment(key[0], spec.label, spec.defines), label=spec.label)
+        spv = compile_fragment(key[0], spec.label, spec.defines, spec.include_paths)
+        mod = Module(spv, label=spec.label)
         if len(_MODULES) > 64:
             _MODULES.clear()
         _MODULES[key] = mod
@@ -315,6 +321,7 @@ def trip_counts(m, P, inputs, spec: ShaderSpec, C) -> dict:
     b = frame_bindings(m, P, inputs, spec)
     with dr.suspend_grad():
         passes = _recorded(_key(spec, C, "passes"), fn, m, _lanes(P), C, b)
+    check_passes(module_of(spec), passes, spec.label)
     return {k: int(dr.max(v)[0]) if dr.width(v) else 0 for k, v in passes.items()}
 
 
@@ -337,9 +344,10 @@ def render(
     b = frame_bindings(m, P, inputs, spec)
 
     def fn(m, P, C, b):
-        return shade_lanes(m, P, b, spec, C)[:2]
+        return shade_lanes(m, P, b, spec, C)
 
-    color, diag = _recorded(_key(spec, C), fn, m, _lanes(P), C, b)
+    color, diag, passes = _recorded(_key(spec, C), fn, m, _lanes(P), C, b)
+    check_passes(module_of(spec), passes, spec.label)  # a loop stopped at its bound: an error
     return finish_output(m, P, color, diag, spec.label)
 
 

@@ -1,18 +1,28 @@
 """A user's own GLSL water shader: its declaration, its renders and derivatives through SPIR-V,
 and its constants written back into its file.
 
-The shader is a core GLSL fragment shader (``#version 330 core`` or later) that runs after the
-study's ``water.vert`` (so it reads the study's varyings, :data:`spirv.translated.STUDY_INPUTS`).
-Its *declaration* says which constants to fit and what its own names of inputs mean, either as
-pragmas in the file::
+The shader is a GLSL fragment shader in any dialect of ``spirv.dialects`` (GLSL 1.10-4.60,
+GLSL ES 1.00-3.20; ``#include`` files searched in ``include_paths``, preprocessor names
+``defines``) that runs after the study's ``water.vert`` (so it reads the study's varyings,
+:data:`spirv.translated.STUDY_INPUTS`). Its *declaration* says which constants to fit and what
+its own names of inputs mean, either as pragmas in the file::
 
     // @study constant FOG_DENSITY 0.01 4.0      (a constant to fit and its range)
+    // @study constant uWaterTint 0.0 1.0 0.3    (... and its start value: a bare uniform)
     // @study bind waterNormals normalMap        (the shader's sampler -> a study input)
 
 or as a table (an experiment's TOML), ``{"constants": {"FOG_DENSITY": [0.01, 4.0]},
 "bindings": {"waterNormals": "normalMap"}}``; the table adds to and overrides the pragmas.
-Every constant is a one-line declaration with an initializer, ``const float FOG_DENSITY =
-0.35;`` (or ``uniform``; ``float``, ``vec3`` or ``vec4``); its start value is the initializer.
+Every constant is a one-line declaration, ``float``, ``vec3`` or ``vec4``: with an
+initializer, ``const float FOG_DENSITY = 0.35;`` or ``uniform float FOG_DENSITY = 0.35;``
+(desktop GLSL 1.20 and later), whose value is the start value; or a uniform without one,
+``uniform float FOG_DENSITY;``, as an engine's material sets it (GLSL ES has no uniform
+initializers), whose start value the declaration gives (``LOW HIGH START``; a vector's START
+is one number or its components joined by commas, ``0.1,0.2,0.3``). Written back
+(:meth:`UserShader.written`), a bare uniform gets the fitted value as an initializer where its
+dialect allows one (desktop GLSL 1.20 and later) and is left as it is otherwise (GLSL 1.10,
+GLSL ES): the fitted value is then only in ``constants.json`` and the binding sheets, for the
+engine to set; the GL check sets it as a uniform.
 Every problem is refused by :meth:`UserShader.validate` with a message naming it: a constant
 without such a declaration, a range that is empty or excludes the start value, a binding to a
 name that is not a study input, a bound name the shader does not use, a sampler or uniform the
@@ -38,6 +48,7 @@ from ..gl.round_trip import TranslatedRenderer
 from ..pipeline.frame import finish_output, tangents
 from ..pipeline.raster import prepare
 from ..pipeline.texture import backend_types
+from . import dialects
 from . import translated as spirv_port
 
 __all__ = ["UserShader", "UserConstant"]
@@ -48,6 +59,11 @@ _DECL = re.compile(
     r"[ \t]*=[ \t]*)(?P<value>[^;\n]*)(?P<tail>;)",
     re.M,
 )
+_BARE = re.compile(
+    r"^[ \t]*uniform[ \t]+(?:(?:lowp|mediump|highp)[ \t]+)?(?P<type>float|vec3|vec4)[ \t]+"
+    r"(?P<name>\w+)[ \t]*(?P<tail>;)",
+    re.M,
+)
 _SIZES = {"float": 1, "vec3": 3, "vec4": 4}
 
 
@@ -55,7 +71,8 @@ _SIZES = {"float": 1, "vec3": 3, "vec4": 4}
 class UserConstant:
     """A constant to fit: GLSL ``name``, ``type`` ('float', 'vec3', 'vec4'), the start value
     ``default`` (a tuple of floats, one per component), the range ``lo`` <= value <= ``hi``
-    (every component), and ``span``: the (start, end) offsets of the initializer in the file."""
+    (every component), and ``span``: the (start, end) offsets of the initializer in the file
+    (a uniform without initializer, ``bare``: both the offset of its ``;``)."""
 
     name: str
     type: str
@@ -63,6 +80,7 @@ class UserConstant:
     lo: float
     hi: float
     span: tuple
+    bare: bool = False
 
     def scalar_names(self) -> list[str]:
         n = _SIZES[self.type]
@@ -88,6 +106,28 @@ def _parse_value(text: str, gtype: str, where: str) -> tuple:
     return vals
 
 
+def _start(args: list) -> tuple:
+    """The optional START of a pragma's arguments: () or (text,)."""
+    return tuple(args)
+
+
+def _start_value(text, gtype: str, where: str) -> tuple:
+    """A declared start value (a number, or a vector's components joined by commas) as the
+    tuple of its components."""
+    parts = [p for p in str(text).split(",") if p.strip()] if isinstance(text, str) else [text]
+    if isinstance(text, (list, tuple)):
+        parts = list(text)
+    try:
+        vals = tuple(float(p) for p in parts)
+    except (TypeError, ValueError):
+        raise ValueError(f"{where}: the start value {text!r} is not a number") from None
+    vals = vals * _SIZES[gtype] if len(vals) == 1 else vals
+    if len(vals) != _SIZES[gtype]:
+        n = _SIZES[gtype]
+        raise ValueError(f"{where}: {gtype} needs {n} start components, got {len(vals)}")
+    return vals
+
+
 def _literal(x: float) -> str:
     r = str(np.float32(x))  # the shortest text that reads back as the same float32
     return r if ("e" in r or "." in r or "n" in r) else r + ".0"
@@ -96,24 +136,29 @@ def _literal(x: float) -> str:
 class UserShader:
     """A user's fragment shader file with its declaration (see the module doc)."""
 
-    def __init__(self, source: str, label: str, declaration: dict | None = None, path=None):
+    def __init__(self, source: str, label: str, declaration: dict | None = None, path=None,
+                 defines=(), include_paths=()):  # fmt: skip
         self.source, self.label, self.path = source, label, path
+        self.defines, self.include_paths = tuple(defines), tuple(str(p) for p in include_paths)
+        self.dialect = dialects.detect(source, label)
         ranges, bindings = {}, {}
         for m in _PRAGMA.finditer(source):
             args = m["args"].split()
             line = source.count("\n", 0, m.start()) + 1
             where = f"{label}:{line}"
-            if m["verb"] == "constant" and len(args) == 3:
+            if m["verb"] == "constant" and len(args) in (3, 4):
                 try:
-                    ranges[args[0]] = (float(args[1]), float(args[2]))
+                    ranges[args[0]] = (float(args[1]), float(args[2]), *_start(args[3:]))
                 except ValueError:
-                    raise ValueError(f"{where}: `// @study constant NAME LOW HIGH`") from None
+                    msg = "`// @study constant NAME LOW HIGH [START]`"
+                    raise ValueError(f"{where}: {msg}") from None
             elif m["verb"] == "bind" and len(args) == 2:
                 bindings[args[0]] = args[1]
             else:
                 raise ValueError(
                     f"{where}: unknown pragma `// @study {m['verb']} {m['args']}`; write "
-                    "`// @study constant NAME LOW HIGH` or `// @study bind NAME STUDY_INPUT`"
+                    "`// @study constant NAME LOW HIGH [START]` or `// @study bind NAME "
+                    "STUDY_INPUT`"
                 )
         decl = dict(declaration or {})
         unknown = set(decl) - {"constants", "bindings"}
@@ -123,34 +168,59 @@ class UserShader:
                 "use 'constants' and 'bindings'"
             )
         for name, r in dict(decl.get("constants", {})).items():
-            if not (isinstance(r, (list, tuple)) and len(r) == 2):
-                raise ValueError(f"{label}: constants.{name} must be [low, high], got {r!r}")
-            ranges[name] = (float(r[0]), float(r[1]))
+            if not (isinstance(r, (list, tuple)) and len(r) in (2, 3)):
+                raise ValueError(
+                    f"{label}: constants.{name} must be [low, high] or [low, high, start], "
+                    f"got {r!r}"
+                )
+            ranges[name] = (float(r[0]), float(r[1]), *r[2:])
         bindings.update(dict(decl.get("bindings", {})))
         self.bindings = bindings
         self.constants = self._constants(ranges)
         self.validate()
 
     @classmethod
-    def from_file(cls, path, declaration: dict | None = None) -> "UserShader":
+    def from_file(cls, path, declaration: dict | None = None, defines=(), include_paths=()):
+        """The shader of the file ``path``; its ``#include`` s are searched in its folder, then
+        in ``include_paths``."""
         p = Path(path)
         if not p.is_file():
             raise ValueError(f"fit.shader: no file {str(p)!r}")
-        return cls(p.read_text(encoding="utf-8"), p.name, declaration, path=p)
+        incs = (str(p.resolve().parent), *include_paths)
+        return cls(p.read_text(encoding="utf-8"), p.name, declaration, p, defines, incs)
 
     def _constants(self, ranges: dict) -> dict:
         decls = {m["name"]: m for m in _DECL.finditer(self.source)}
+        bare = {m["name"]: m for m in _BARE.finditer(self.source)}
         out = {}
-        for name, (lo, hi) in ranges.items():
-            m = decls.get(name)
+        for name, (lo, hi, *start) in ranges.items():
+            m = decls.get(name) or bare.get(name)
             if m is None:
                 raise ValueError(
-                    f"{self.label}: the constant {name} to fit has no one-line declaration "
-                    f"`const float {name} = <value>;` (or uniform; float, vec3 or vec4)"
+                    f"{self.label}: the constant {name} to fit has no one-line declaration: "
+                    f"`const float {name} = <value>;`, `uniform float {name} = <value>;` "
+                    f"(desktop GLSL 1.20 and later) or `uniform float {name};` with its start "
+                    "value in the declaration (`constant NAME LOW HIGH START`); float, vec3 "
+                    "or vec4"
                 )
             line = self.source.count("\n", 0, m.start()) + 1
             where = f"{self.label}:{line}"
-            default = _parse_value(m["value"], m["type"], where)
+            if name in bare and name not in decls:
+                if not start:
+                    raise ValueError(
+                        f"{where}: the uniform {name} has no initializer (the engine sets it); "
+                        f"give its start value: `// @study constant {name} {lo:g} {hi:g} START`"
+                    )
+                default = _start_value(start[0], m["type"], where)
+                span, is_bare = (m.start("tail"), m.start("tail")), True
+            elif start:
+                raise ValueError(
+                    f"{where}: {name} has an initializer, its start value; give no START in "
+                    "its declaration (or remove the initializer)"
+                )
+            else:
+                default = _parse_value(m["value"], m["type"], where)
+                span, is_bare = (m.start("value"), m.end("value")), False
             if not (np.isfinite(lo) and np.isfinite(hi) and lo < hi):
                 raise ValueError(f"{where}: the range [{lo}, {hi}] of {name} is empty")
             if not all(lo <= v <= hi for v in default):
@@ -158,9 +228,7 @@ class UserShader:
                     f"{where}: {name} = {m['value'].strip()} lies outside its "
                     f"range [{lo}, {hi}]; widen the range or change the value"
                 )
-            out[name] = UserConstant(
-                name, m["type"], default, lo, hi, (m.start("value"), m.end("value"))
-            )
+            out[name] = UserConstant(name, m["type"], default, lo, hi, span, is_bare)
         if not out:
             raise ValueError(
                 f"{self.label}: the declaration names no constant to fit; add "
@@ -175,7 +243,8 @@ class UserShader:
                     f"{self.label}: the binding {name} -> {study!r} names no study input; the "
                     f"study's inputs: {', '.join(spirv_port.STUDY_INPUTS)}"
                 )
-            if not re.search(rf"\b{re.escape(name)}\b", re.sub(r"//.*", "", self.source)):
+            code = re.sub(r"//.*", "", self.source)
+            if "#include" not in code and not re.search(rf"\b{re.escape(name)}\b", code):
                 raise ValueError(f"{self.label}: the bound name {name} is not used by the shader")
         return self
 
@@ -195,6 +264,13 @@ class UserShader:
         """The scalar names to fit: each float, and the first three components of a vector
         (RGB; an alpha is never compared)."""
         return [s for c in self.constants.values() for s in c.scalar_names()]
+
+    def declared_range(self, name: str) -> list:
+        """``[low, high]`` of constant ``name``, with its start value (a float or a list) for a
+        uniform without initializer: the declaration table's entry."""
+        c = self.constants[name]
+        start = list(c.default) if len(c.default) > 1 else c.default[0]
+        return [c.lo, c.hi, start] if c.bare else [c.lo, c.hi]
 
     def bounds(self, scalar: str) -> tuple[float, float]:
         c = self.constants[scalar.split("[")[0]]
@@ -233,9 +309,28 @@ class UserShader:
         return spirv_port.ShaderSpec(
             self.source,
             self.label,
+            defines=self.defines,
             constants=tuple((n, n) for n in self.constants),
             bindings=tuple(self.bindings.items()),
+            include_paths=self.include_paths,
         )
+
+    def check(self) -> "UserShader":
+        """Compile the shader (``dialects.ShaderError`` with glslang's errors, file and line)
+        and check that every input, uniform and sampler it reads is a study input, bound or a
+        constant: before anything is rendered."""
+        mod = spirv_port.module_of(self.spec())
+        known = set(spirv_port.STUDY_INPUTS) | set(self.bindings) | set(self.constants)
+        for vid, ins in mod.defs.items():
+            name = mod.binding_name(vid)
+            if (ins.opname == "OpVariable" and ins.operands[0] in ("Input", "UniformConstant")
+                    and len(ins.operands) == 1 and name not in known):  # fmt: skip
+                raise dialects.ShaderError(
+                    f"{self.label}: the shader reads {name!r} but nothing binds it: bind it to "
+                    "one of the study's inputs (`// @study bind NAME INPUT` or fit.declare), or "
+                    "declare it a constant to fit"
+                )
+        return self
 
     def _resolved(self, m, values: dict):
         def conv(x):
@@ -289,15 +384,38 @@ class UserShader:
         other byte as in the file."""
         vals = self._checked(values)
         out, pos = [], 0
+        d = self.dialect
+        initializers = not d.es and d.version >= 120  # a bare uniform may get one
         for c in sorted(self.constants.values(), key=lambda c: c.span[0]):
+            if c.bare and not initializers:
+                continue
             v = vals[c.name]
             comps = v if isinstance(v, (tuple, list)) else (v,)
             text = _literal(comps[0]) if c.type == "float" else (
                 f"{c.type}({', '.join(_literal(x) for x in comps)})")  # fmt: skip
-            out += [self.source[pos : c.span[0]], text]
+            out += [self.source[pos : c.span[0]], f" = {text}" if c.bare else text]
             pos = c.span[1]
         out.append(self.source[pos:])
         return "".join(out)
+
+    def gl_source(self, values: dict | None = None) -> str:
+        """The GLSL OpenGL runs for :meth:`written` with ``values``: that text, or, for a
+        dialect that is translated or a file with ``#include`` s or ``defines``, its
+        translation to GLSL 330 core (``dialects.front_end``). ShaderError for GLSL ES 3.10
+        and later, which a desktop OpenGL does not run."""
+        d = self.dialect
+        if not d.runs_on_desktop_gl:
+            raise dialects.ShaderError(
+                f"{self.label} is {d.name}, which a desktop OpenGL context does not run "
+                "(moderngl's EGL backend binds desktop OpenGL only, so Mesa's llvmpipe gets no "
+                "OpenGL ES context here); glslang compiled it with its ES profile"
+            )
+        text = self.written(values or {})
+        if not (d.translated or self.defines or "#include" in text):
+            return text
+        return dialects.for_opengl(
+            dialects.front_end(text, self.label, self.defines, self.include_paths, True)
+        )
 
     def gl_renderer(self, inputs, values: dict | None = None, source=None, reflection=None):
         """A ``GLRenderer`` (OpenGL, llvmpipe) drawing the written-back shader with ``values`` (its
@@ -308,8 +426,17 @@ class UserShader:
 
         bindings = dict(self.bindings)
         base = GLRenderer if reflection is None else TranslatedRenderer
+        vals = self._checked(values)
+        bare = {c.name: np.asarray(vals[c.name], np.float32).tobytes()
+                for c in self.constants.values() if c.bare}  # fmt: skip
+
+        label = self.label
 
         class _Bound(base):
+            def __init__(self, *args, **kw):
+                super().__init__(*args, **kw)
+                self.name = label  # messages name the user's file
+
             def _sampler_uniform(self, prog, sname):
                 for name in [n for n, s in bindings.items() if s == sname] + [sname]:
                     found = super()._sampler_uniform(prog, name)
@@ -318,14 +445,14 @@ class UserShader:
                 return None
 
             def _write_uniforms(self, prog, vals):
-                renamed = dict(vals)
+                renamed = {**bare, **vals}
                 for n, s in bindings.items():
                     if s in vals:
                         renamed[n] = vals[s]
                 super()._write_uniforms(prog, renamed)
 
         if reflection is None:
-            return _Bound("water_refraction", inputs, source=self.written(values or {}))
+            return _Bound("water_refraction", inputs, source=self.gl_source(values))
         return _Bound("water_refraction", inputs, source, reflection)
 
     def gl_render(self, inputs, values: dict | None = None):

@@ -150,9 +150,11 @@ def export_calibration(exp, model, frames: list, cal, out: Path, timings: dict):
         "shader_file": str(exp.fit.shader),
         "shader_sha256": hashlib.sha256(text.encode("utf-8")).hexdigest(),
         "declaration": {
-            "constants": {n: [c.lo, c.hi] for n, c in user.constants.items()},
+            "constants": {n: user.declared_range(n) for n in user.constants},
             "bindings": dict(user.bindings),
         },
+        "defines": list(user.defines),
+        "include_paths": list(user.include_paths[1:]),  # after the file's own folder
     }
     return gl, engine_targets, extra
 

@@ -12,6 +12,7 @@ import copy
 import hashlib
 import json
 import math
+import re
 import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -118,8 +119,8 @@ def user_declaration(lines: list | None) -> dict:
     for line in lines or []:
         parts = str(line).split()
         try:
-            if parts[0] == "constant" and len(parts) == 4:
-                decl["constants"][parts[1]] = [float(parts[2]), float(parts[3])]
+            if parts[0] == "constant" and len(parts) in (4, 5):
+                decl["constants"][parts[1]] = [float(parts[2]), float(parts[3]), *parts[4:]]
                 continue
             if parts[0] == "bind" and len(parts) == 3:
                 decl["bindings"][parts[1]] = parts[2]
@@ -127,7 +128,8 @@ def user_declaration(lines: list | None) -> dict:
         except (IndexError, ValueError):
             pass
         raise ExperimentError(
-            f"fit.declare: {_clip(line)}: write `constant NAME LOW HIGH` or `bind NAME INPUT`"
+            f"fit.declare: {_clip(line)}: write `constant NAME LOW HIGH [START]` or "
+            "`bind NAME INPUT`"
         )
     return decl
 
@@ -136,15 +138,42 @@ def load_user_shader(values: dict):
     """The ``UserShader`` of ``fit.shader`` (a resolved path) and ``fit.declare``;
     ExperimentError naming the problem."""
     try:
-        return UserShader.from_file(values["fit.shader"], user_declaration(values["fit.declare"]))
+        return UserShader.from_file(
+            values["fit.shader"],
+            user_declaration(values["fit.declare"]),
+            values.get("fit.defines") or (),
+            values.get("fit.include_paths") or (),
+        )
     except ValueError as exc:
         raise ExperimentError(f"fit.shader: {exc}") from None
 
 
-def _check_user_shader(values: dict, base) -> None:
-    p = Path(values["fit.shader"]).expanduser()
-    values["fit.shader"] = str((p if p.is_absolute() else (base or Path.cwd()) / p).resolve())
+def _resolved(value: str, base) -> str:
+    p = Path(value).expanduser()
+    return str((p if p.is_absolute() else (base or Path.cwd()) / p).resolve())
+
+
+def _check_user_shader(values: dict, base: dict) -> None:
+    """``fit.shader`` and ``fit.include_paths`` made absolute (relative to the experiment
+    file), ``fit.defines`` checked; the shader read, compiled and its bindings checked
+    (before any reference is rendered)."""
+    values["fit.shader"] = _resolved(values["fit.shader"], base.get("fit.shader"))
+    incs = values["fit.include_paths"] or []
+    values["fit.include_paths"] = [_resolved(p, base.get("fit.include_paths")) for p in incs]
+    for p in values["fit.include_paths"]:
+        if not Path(p).is_dir():
+            raise ExperimentError(f"fit.include_paths: no folder {_clip(p)}")
+    for d in values["fit.defines"] or []:
+        if not re.fullmatch(r"[A-Za-z_]\w*(=[^\n]*)?", d) or d.startswith("GL_"):
+            raise ExperimentError(
+                f'fit.defines: {_clip(d)} is not "NAME" or "NAME=VALUE" (a preprocessor name: '
+                "letters, digits and _, not starting with GL_)"
+            )
     shader = load_user_shader(values)
+    try:
+        shader.check()
+    except ValueError as exc:
+        raise ExperimentError(f"fit.shader: {exc}") from None
     if values["fit.parameters"] is not None:  # e.g. a shipped experiment's list
         log(
             f"experiment: fit.parameters names the study's constants; {shader.label} fits the "
@@ -454,12 +483,14 @@ def validate(raw: dict, overrides: list[str] | None = None, path: Path | None = 
             'renders; use that method or fit.input_noise = "ignore"'
         )
     if is_user_shader(values["fit.shader"]):
-        _check_user_shader(values, base.get("fit.shader"))
-    elif values["fit.declare"] is not None:
-        raise ExperimentError(
-            "fit.declare declares your own fit.shader (a .frag file); "
-            "remove it, or set fit.shader to the file"
-        )
+        _check_user_shader(values, base)
+    else:
+        for key in ("fit.declare", "fit.defines", "fit.include_paths"):
+            if values[key] is not None:
+                raise ExperimentError(
+                    f"{key} is for your own fit.shader (a .frag file); "
+                    "remove it, or set fit.shader to the file"
+                )
     _check_shaders(values)
     if not is_user_shader(values["fit.shader"]):
         values["fit.parameters"] = fit_parameters(values["fit.shader"], values["fit.parameters"])

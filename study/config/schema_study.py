@@ -239,8 +239,21 @@ STUDY_KEYS: dict[str, Field] = {
         "list_str",
         None,
         "Declaration of your own `fit.shader` besides its `// @study` pragmas, one line each: "
-        "`constant NAME LOW HIGH` (a constant to fit and its range) or `bind NAME INPUT` (the "
+        "`constant NAME LOW HIGH` (a constant to fit and its range; `constant NAME LOW HIGH "
+        "START` for a uniform without initializer) or `bind NAME INPUT` (the "
         "shader's sampler or uniform NAME is the study's INPUT).",
+    ),
+    "fit.include_paths": Field(
+        "list_str",
+        None,
+        "Folders (relative to the experiment file) searched, after the including file's own "
+        'folder, for the `#include "x.glsl"` files of your own `fit.shader`.',
+    ),
+    "fit.defines": Field(
+        "list_str",
+        None,
+        "Preprocessor names your own `fit.shader` is compiled with, as an engine sets them: "
+        '`"NAME"` or `"NAME=VALUE"` each (e.g. `["WAVE_LAYERS=2", "USE_FOG"]`).',
     ),
     "fit.write_back": Field(
         "str",

@@ -121,12 +121,26 @@ def gl_check_user(shader, inputs, values: dict, ours: dict) -> dict:
     and run on OpenGL (llvmpipe) against the executor's render ``ours`` (``ShaderOutput.numpy()``):
     mean and 99.9th percentile of the per-pixel max-over-channel |difference| on the pixels both
     cover, passed within ``GL_MEAN`` / ``GL_P999``; ``ran`` False (with ``why``) without a headless
-    OpenGL."""
+    OpenGL; a shader OpenGL does not run (a GLSL ES 3.10 file, a compile error of the driver)
+    is a failed check, ``passed`` False with ``why`` naming the file, and a warning on stderr."""
     try:
         rgba, mask = shader.gl_render(inputs, values)
+    except ValueError as exc:  # dialects.ShaderError: a dialect no desktop OpenGL runs
+        return _user_failed(str(exc))
     except RuntimeError as exc:
-        return {"ran": False, "why": str(exc).splitlines()[0], "passed": None}
+        msg = str(exc)
+        if "rejected" in msg:  # the driver's compile or link log
+            log = [ln.strip() for ln in msg.splitlines()[1:] if "error" in ln.lower()]
+            return _user_failed(f"OpenGL (llvmpipe) rejected {shader.label}: {'; '.join(log[:3])}")
+        return {"ran": False, "why": msg.splitlines()[0], "passed": None}
     return _user_verdict(rgba, mask, ours)
+
+
+def _user_failed(why: str) -> dict:
+    """A GL check of a user's shader that could not run its shader: failed, with the reason
+    (also on stderr)."""
+    print(f"calibrate: WARNING: the GL check failed: {why}", file=sys.stderr)
+    return {"ran": False, "why": why, "passed": False}
 
 
 def hlsl_check_user(shader, inputs, values: dict, ours: dict, shaders_dir: Path) -> dict:

@@ -91,7 +91,9 @@ def user_shader_of(path):
             f"{path}: the calibrated shader {file} is gone; put it back at that path or edit "
             "shader_file"
         )
-    shader = UserShader.from_file(file, data.get("declaration"))
+    shader = UserShader.from_file(
+        file, data.get("declaration"), data.get("defines", ()), data.get("include_paths", ())
+    )
     sha = hashlib.sha256(shader.source.encode("utf-8")).hexdigest()
     if data.get("shader_sha256") not in (None, sha):
         print(f"export: {file} has changed since it was calibrated", file=sys.stderr)

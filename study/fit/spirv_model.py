@@ -13,6 +13,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from shaders_port.spirv.dialects import ShaderError
+
 from ..config.experiment import Experiment, load_user_shader
 from .model import ReferenceModel, at_resolution
 
@@ -47,7 +49,28 @@ class SpirvModel(ReferenceModel):
             exp, inputs_full, reference_full, resolution, stderr_full
         )
         shader = shader or load_user_shader(exp.values)
-        return cls(shader, inputs, ref, backend, reference_mask=water, reference_stderr=se)
+        model = cls(shader, inputs, ref, backend, reference_mask=water, reference_stderr=se)
+        model.check_finite()
+        return model
+
+    def check_finite(self, constants: dict | None = None) -> None:
+        """ShaderError if the shader's colour with ``constants`` (default: the start values) is
+        NaN or infinite on some water pixel: how many, the first few (x, y) pixel coordinates
+        (x from the left, y from the top, at the model's resolution) and their bounding box."""
+        out = self.user_shader.render(self.inputs, constants, backend=self.backend).numpy()
+        bad = (out["nonfinite"] > 0.5) & self.mask
+        if not bad.any():
+            return
+        ys, xs = np.nonzero(bad)
+        first = ", ".join(f"({x}, {y})" for x, y in list(zip(xs, ys))[:5])
+        h, w = bad.shape
+        raise ShaderError(
+            f"{self.label}: the shader's colour is not finite (NaN or inf) on {int(bad.sum())} of "
+            f"{int(self.mask.sum())} water pixels at the start values ({w}x{h}; pixel (x, y) "
+            f"from the top left: {first}; all within x {xs.min()}..{xs.max()}, y "
+            f"{ys.min()}..{ys.max()}); guard what can fail there (sqrt or log of a negative, "
+            "pow of a negative base, a division by zero, normalize of a zero vector)"
+        )
 
     # ---- the parameters (``study.fit.protocol.CalibrationModel``) ----------------------------
     @property

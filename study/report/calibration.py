@@ -406,7 +406,8 @@ def _export_lines(gl: dict | None, user_file: str | None = None) -> list[str]:
     the path of a user's shader (its copy with the fitted constants was exported)."""
     check = "."
     if gl and gl.get("ran", True) is False:
-        check = f"; not run on OpenGL ({gl['why']})."
+        failed = "**FAILED**: " if gl.get("passed") is False else ""
+        check = f"; {failed}not run on OpenGL ({gl['why']})."
     elif gl:
         check = (
             f"; the exported core shader on llvmpipe vs the Dr.Jit shader with the fitted "

@@ -1,0 +1,359 @@
+"""A user's fragment shader in the dialect it was written in, made the core GLSL glslang compiles.
+
+glslang makes SPIR-V for OpenGL only from desktop GLSL 330 and GLSL ES 310. A shader written
+for an older OpenGL, for WebGL 1 or WebGL 2 is translated first, as text, into ``#version 330
+core`` (:func:`front_end`); every message quotes the user's own file and line numbers.
+
+Dialects, from the ``#version`` directive (:func:`detect`):
+
+* none: GLSL ES 1.00 (WebGL 1) when the file has a ``precision`` statement or names
+  ``GL_ES`` (a WebGL 1 fragment shader must declare the precision of ``float``); otherwise
+  desktop GLSL 1.10, the version the GLSL specification gives a file without ``#version``;
+* ``#version 110`` ... ``150`` (any profile), ``#version 100`` (GLSL ES 1.00) and
+  ``#version 300 es`` (WebGL 2), and ``#version 330`` ... ``460 compatibility``: translated;
+* ``#version 330`` ... ``460`` (``core`` or no profile): compiled as written;
+* ``#version 310 es`` / ``320 es``: compiled as written (glslang makes their SPIR-V); OpenGL
+  on Mesa's llvmpipe (a desktop context) does not run them, so their GL check fails with
+  that reason.
+
+Anything else (``#version 200``, ``#version 130 es``, a ``#version`` after other code, ...)
+is refused with a :class:`ShaderError` naming the line.
+
+A translated file is first compiled by glslang in its own dialect (no SPIR-V: glslang checks
+every dialect), so a mistake is reported as the dialect's compiler reports it. The
+translation then:
+
+* replaces the ``#version`` line by ``#version 330 core`` and puts after it the declarations
+  the file needs (an ``out vec4`` for ``gl_FragColor``, the study's varyings and matrices the
+  compatibility built-ins become), then a ``#line`` directive, so that every following line
+  keeps its number;
+* runs glslang's preprocessor (``glslangValidator -E``: the experiment's ``#define`` s and
+  ``#include`` files expanded, comments removed) and on its tokens:
+  ``varying`` -> ``in``; ``gl_FragColor`` and ``gl_FragData[0]`` -> the ``out vec4``;
+  ``texture2D``, ``textureCube``, ``texture3D`` -> ``texture``; ``texture2DProj`` ->
+  ``textureProj``; ``texture2DLod``, ``textureCubeLod`` (and their ``EXT`` forms) ->
+  ``textureLod``; ``texture2DGradEXT`` -> ``textureGrad``; ``gl_FragDepthEXT`` ->
+  ``gl_FragDepth``; ``gl_TexCoord[i]`` (i = 0..3) -> the study's ``vTexCoord<i>`` (the
+  texture coordinates ``water.vert`` writes); ``gl_ModelViewProjectionMatrix`` (and its
+  ``Inverse``) -> ``uModelViewProjectionMatrix`` (the study's world -> clip matrix: the
+  water's model matrix is the identity); ``gl_NormalMatrix`` -> ``uNormalMatrix``;
+  in GLSL ES 1.00 and GLSL 1.10/1.20, user names that are keywords or built-in functions of
+  GLSL 330 (``texture``, ``layout``, ``flat``, ``smooth``, ``uint``, ...) get a ``_u_``
+  prefix; the WebGL extensions that
+  GLSL 330 has built in (``GL_OES_standard_derivatives``, ``GL_EXT_shader_texture_lod``,
+  ``GL_EXT_frag_depth``) lose their ``#extension`` line. ``precision`` statements and
+  qualifiers stay: GLSL 330 accepts and ignores them.
+
+Refused, with the reason: ``gl_FragData[i]`` for i > 0 (the study compares one colour),
+``ftransform()`` and ``attribute`` (vertex shader only), ``shadow2D`` and the other
+compatibility built-ins (``gl_ModelViewMatrix``, ``gl_LightSource``, ``gl_Color``, ...: the
+study's vertex shader gives no such value; declare a uniform and bind it to a study input).
+
+``__VERSION__`` reads 330 in a translated file; ``GL_ES`` is defined for the GLSL ES
+dialects, as their compilers define it.
+"""
+
+from __future__ import annotations
+
+import re
+import shutil
+import subprocess
+import tempfile
+from dataclasses import dataclass
+from pathlib import Path
+
+__all__ = ["Dialect", "ShaderError", "detect", "for_opengl", "front_end", "glslang_errors"]
+
+TARGET = "#version 330 core"
+DESKTOP = (110, 120, 130, 140, 150, 330, 400, 410, 420, 430, 440, 450, 460)
+INCLUDE_EXT = "#extension GL_GOOGLE_include_directive : require"
+MAX_ERRORS = 8  # glslang error lines kept in a message
+_VERSION = re.compile(r"^[ \t]*#[ \t]*version\b[ \t]*(?P<rest>[^\n]*)$", re.M)
+_COMMENTS = re.compile(r"//[^\n]*|/\*.*?\*/", re.S)
+_RENAMES = {
+    "texture2D": "texture",
+    "textureCube": "texture",
+    "texture3D": "texture",
+    "texture1D": "texture",
+    "texture2DProj": "textureProj",
+    "texture2DLod": "textureLod",
+    "textureCubeLod": "textureLod",
+    "texture2DLodEXT": "textureLod",
+    "textureCubeLodEXT": "textureLod",
+    "texture2DProjLodEXT": "textureProjLod",
+    "texture2DGradEXT": "textureGrad",
+    "textureCubeGradEXT": "textureGrad",
+    "gl_FragDepthEXT": "gl_FragDepth",
+    "varying": "in",
+}
+# names a legacy file may use that GLSL 330 takes as a keyword or built-in function
+_RESERVED = ("texture", "layout", "flat", "smooth", "noperspective", "centroid", "uint", "uvec2",
+             "uvec3", "uvec4", "textureProj", "textureLod", "textureGrad", "sample")  # fmt: skip
+# compatibility built-ins -> (study name, declaration)
+_BUILTINS = {
+    "gl_ModelViewProjectionMatrixInverse": ("uModelViewProjectionMatrixInverse", "uniform mat4"),
+    "gl_ModelViewProjectionMatrix": ("uModelViewProjectionMatrix", "uniform mat4"),
+    "gl_NormalMatrix": ("uNormalMatrix", "uniform mat3"),
+}
+_CORE_BUILTINS = {"gl_FragCoord", "gl_FrontFacing", "gl_PointCoord", "gl_FragDepth"}
+_CORE_EXTENSIONS = ("GL_OES_standard_derivatives", "GL_EXT_shader_texture_lod", "GL_EXT_frag_depth")
+OUT = "_study_FragColor"
+
+
+class ShaderError(ValueError):
+    """A user's shader that cannot be compiled or run as written; the message names its file
+    and line and what to change."""
+
+
+@dataclass(frozen=True)
+class Dialect:
+    """The language of a fragment shader: ``version`` (100, 110, ..., 460), ``es`` (GLSL ES),
+    ``profile`` ('core', 'compatibility', 'es'), ``line``: the line of its ``#version``
+    directive (0: none)."""
+
+    version: int
+    es: bool
+    profile: str
+    line: int
+
+    @property
+    def name(self) -> str:
+        if self.es:
+            return f"GLSL ES {self.version // 100}.{self.version % 100:02d}"
+        if self.version < 330:
+            return f"GLSL {self.version // 100}.{self.version % 100:02d}"
+        return f"GLSL {self.version} {self.profile}"
+
+    @property
+    def translated(self) -> bool:
+        """Whether the file is translated to GLSL 330 core (else compiled as written)."""
+        if self.es:
+            return self.version in (100, 300)
+        return self.version < 330 or self.profile == "compatibility"
+
+    @property
+    def runs_on_desktop_gl(self) -> bool:
+        """Whether the text compiled (as written or translated) runs on a desktop OpenGL."""
+        return not (self.es and self.version >= 310)
+
+
+def detect(source: str, label: str) -> Dialect:
+    """The dialect of ``source`` (module doc); ShaderError for a ``#version`` glslang's
+    compilers do not know or one that is not the file's first directive."""
+    m = _VERSION.search(source)
+    if m is None:
+        code = _COMMENTS.sub(" ", source)
+        es = bool(re.search(r"\bprecision\s+(lowp|mediump|highp)\b|\bGL_ES\b", code))
+        return Dialect(100, True, "es", 0) if es else Dialect(110, False, "compatibility", 0)
+    line = source.count("\n", 0, m.start()) + 1
+    before = _COMMENTS.sub(" ", source[: m.start()])
+    where = f"{label}:{line}"
+    if before.strip():
+        raise ShaderError(f"{where}: #version must come before anything else in the file")
+    parts = _COMMENTS.sub(" ", m["rest"]).split()
+    ok = parts and parts[0].isdigit() and len(parts) <= 2
+    version = int(parts[0]) if ok else -1
+    profile = parts[1] if ok and len(parts) == 2 else None
+    if version in (100, 300, 310, 320) and (profile == "es" or version == 100) and profile in (
+        None, "es"):  # fmt: skip
+        return Dialect(version, True, "es", line)
+    if version in DESKTOP and profile in (None, "core", "compatibility"):
+        default = "core" if version >= 150 else "compatibility"
+        return Dialect(version, False, profile or default, line)
+    raise ShaderError(
+        f"{where}: '#version {m['rest'].strip()}' is no version of GLSL this tool compiles; use "
+        "100 or 300 es (WebGL), 310 es or 320 es, 110-150, or 330-460 (core or compatibility)"
+    )
+
+
+def _tool() -> str:
+    exe = shutil.which("glslangValidator")
+    if exe is None:
+        raise RuntimeError(
+            "glslangValidator not found on PATH; install it with `apt-get install "
+            "glslang-tools` (scripts/setup.sh does)"
+        )
+    return exe
+
+
+def glslang_errors(log: str, label: str, include_paths=()) -> str:
+    """The error lines of a glslang log, at most :data:`MAX_ERRORS` (the file name line, the
+    summary and the linker's lines left out); an include that was not found gets the folders
+    searched."""
+    lines = [ln.strip() for ln in log.splitlines()]
+    errs = [ln for ln in lines if re.match(r"ERROR: [^:]+:\d+:", ln)]
+    other = [ln for ln in lines if ln.startswith("ERROR:") and "compilation errors" not in ln]
+    errs = errs or [ln for ln in other if "Linking" not in ln] or [ln for ln in lines if ln]
+    out = []
+    for e in errs[:MAX_ERRORS]:
+        e = e.removeprefix("ERROR: ")
+        if "Could not process include directive" in e:
+            searched = ", ".join(str(p) for p in include_paths) or "no folder"
+            e += f" (searched {searched}; add the folder that holds it to fit.include_paths)"
+        out.append(e)
+    more = len(errs) - MAX_ERRORS
+    return "\n".join(out) + (f"\n... and {more} more errors" if more > 0 else "")
+
+
+def _glslang(text: str, label: str, args: list[str], include_paths, what: str) -> str:
+    """Run glslangValidator on ``text`` saved as ``label``'s file name in a temporary folder
+    (the working directory): its stdout; ShaderError with the errors (:func:`glslang_errors`)."""
+    name = Path(label).name
+    name = name if name.endswith(".frag") else f"{name}.frag"
+    with tempfile.TemporaryDirectory(prefix="spirv-front.") as d:
+        (Path(d) / name).write_text(text, encoding="utf-8")
+        incs = [f"-I{Path(p).resolve()}" for p in include_paths]
+        res = subprocess.run([_tool(), *args, *incs, "-S", "frag", name], cwd=d,
+                             capture_output=True, text=True, timeout=120, check=False)  # fmt: skip
+        if res.returncode != 0:
+            log = (res.stdout + res.stderr).replace(name, Path(label).name)
+            raise ShaderError(
+                f"{label} does not compile ({what}):\n" + glslang_errors(log, label, include_paths)
+            )
+        return res.stdout.replace(f'"{name}"', f'"{Path(label).name}"')
+
+
+def _line_directive(next_line: int, version: int, es: bool) -> str:
+    """A ``#line`` after which the next line is ``next_line`` (glslang: desktop GLSL before
+    330 numbers the directive's own line)."""
+    sets_next = es or version >= 330
+    return f"#line {next_line if sets_next else next_line - 1}"
+
+
+def _with_head(source: str, d: Dialect, version_line: str, head: list[str]) -> str:
+    """``source`` with its ``#version`` line replaced by ``version_line`` (or that line put
+    first), ``head`` after it, then a ``#line`` so that the file's lines keep their numbers
+    (in the numbering of ``version_line``'s version)."""
+    v = int(version_line.split()[1])
+    es = version_line.endswith(" es") or v == 100
+    lines = source.split("\n")
+    if d.line:
+        pre, rest, nxt = lines[: d.line - 1], lines[d.line :], d.line + 1
+        pre = ["" for _ in pre]  # comments before #version: blank (their lines are kept)
+    else:
+        pre, rest, nxt = [], lines, 1
+    return "\n".join([version_line, *head, _line_directive(nxt, v, es), *pre, *rest])
+
+
+def _own_version_line(d: Dialect) -> str:
+    if d.es:
+        return "#version 100" if d.version == 100 else f"#version {d.version} es"
+    return f"#version {d.version}" + (f" {d.profile}" if d.version >= 150 else "")
+
+
+def front_end(source: str, label: str, defines=(), include_paths=(), preprocess=False) -> str:
+    """The GLSL glslang compiles to SPIR-V for ``source`` (a fragment shader of any dialect of
+    the module doc, file name ``label``), with the preprocessor names ``defines``
+    (``NAME`` or ``NAME=VALUE``) and ``#include`` files searched in ``include_paths`` (after
+    the including file's folder). A GLSL 330+ core or GLSL ES 310+ file without ``#include``
+    is returned as it is (its defines are given to glslang when it is compiled) unless
+    ``preprocess`` (for an OpenGL driver, which takes no defines); any other is
+    preprocessed by glslang (``#include`` s expanded, defines applied, comments removed) with
+    ``#line`` directives keeping the file's line numbers, and translated to GLSL 330 core if
+    its dialect needs it. ShaderError for a file that does not compile in its own dialect or
+    uses what the translation refuses, naming the file and line."""
+    d = detect(source, label)
+    includes = bool(re.search(r"^[ \t]*#[ \t]*include\b", source, re.M))
+    dargs = [f"-D{x}" for x in defines]
+    if not d.translated:
+        if not (includes or preprocess):
+            return source
+        head = [INCLUDE_EXT] if includes else []
+        text = _with_head(source, d, _own_version_line(d), head)
+        return _glslang(text, label, ["-E", *dargs], include_paths, "preprocessing")
+    own = _with_head(source, d, _own_version_line(d), [INCLUDE_EXT] if includes else [])
+    _glslang(own, label, ["-l", *dargs], include_paths, d.name)  # the dialect's own verdict
+    code = _COMMENTS.sub(lambda m: re.sub(r"[^\n]", " ", m[0]), source)
+    decls = [f"out vec4 {OUT};"] if re.search(r"\bgl_Frag(Color|Data)\b", code) else []
+    for i in range(4):
+        if re.search(rf"\bgl_TexCoord\s*\[\s*{i}\s*\]", code) and not re.search(
+            rf"\bvTexCoord{i}\b", code
+        ):
+            decls.append(f"in vec4 vTexCoord{i};")
+    for old, (new, decl) in _BUILTINS.items():
+        if re.search(rf"\b{old}\b", code) and not re.search(rf"\b{new}\b", code):
+            decls.append(f"{decl} {new};")
+    head = [INCLUDE_EXT] if includes else []
+    dargs += ["-DGL_ES=1"] if d.es else []
+    text = _with_head(source, d, TARGET, head + decls)
+    pre = _glslang(text, label, ["-E", *dargs], include_paths, "preprocessing")
+    legacy = d.version == 100 if d.es else d.version < 130  # before texture() and layout
+    return _translate_tokens(pre, label, len(head) + len(decls), legacy)
+
+
+def _translate_tokens(pre: str, label: str, n_head: int, legacy: bool) -> str:
+    """The preprocessed text ``pre`` (``#version 330 core``, the head of ``n_head`` lines, then
+    the file) with the legacy names of the module doc rewritten; ShaderError for a refused
+    one, at its file and line."""
+    lines = pre.split("\n")
+    where = _line_map(lines, label)
+    out = lines[: 1 + n_head]
+    for k in range(1 + n_head, len(lines)):
+        ln = lines[k]
+        if re.match(r"\s*#\s*extension\s+(" + "|".join(_CORE_EXTENSIONS) + r")\b", ln):
+            out.append("")
+            continue
+        if ln.lstrip().startswith("#"):
+            out.append(ln)
+            continue
+        out.append(_rewrite_line(ln, where[k], legacy))
+    return "\n".join(out)
+
+
+def _rewrite_line(ln: str, where: str, legacy: bool) -> str:
+    def refuse(msg):
+        raise ShaderError(f"{where}: {msg}")
+
+    m = re.search(r"\bgl_FragData\s*\[\s*([^\]]*)\]", ln)
+    while m is not None:
+        if m[1].strip() not in ("0", "0u"):
+            refuse(
+                f"gl_FragData[{m[1].strip()}]: the study compares one colour; write it to "
+                "gl_FragData[0] or gl_FragColor"
+            )
+        ln = ln[: m.start()] + OUT + ln[m.end() :]
+        m = re.search(r"\bgl_FragData\s*\[\s*([^\]]*)\]", ln)
+    ln = re.sub(r"\bgl_FragColor\b", OUT, ln)
+    ln = re.sub(r"\bgl_TexCoord\s*\[\s*([0-3])\s*\]", r"vTexCoord\1", ln)
+    if re.search(r"\bgl_TexCoord\b", ln):
+        refuse("gl_TexCoord: only gl_TexCoord[0] ... gl_TexCoord[3] with a constant index")
+    if re.search(r"\bftransform\b", ln):
+        refuse("ftransform() is a vertex shader function; a fragment shader cannot call it")
+    if re.search(r"\bshadow(1D|2D)\w*\b", ln):
+        refuse("shadow samplers: the study has no depth texture to compare against")
+    for old, (new, _) in _BUILTINS.items():
+        ln = re.sub(rf"\b{old}\b", new, ln)
+    for name in re.findall(r"\bgl_\w+", ln):
+        if name not in _CORE_BUILTINS and not name.startswith("gl_Max"):
+            refuse(
+                f"{name}: a compatibility built-in the study's vertex shader gives no value of; "
+                "declare a uniform or varying of your own and bind it to a study input "
+                "(`// @study bind NAME INPUT`)"
+            )
+    for name in _RESERVED if legacy else ():
+        ln = re.sub(rf"\b{name}\b", f"_u_{name}", ln)
+    for old, new in _RENAMES.items():
+        ln = re.sub(rf"\b{old}\b", new, ln)
+    return ln
+
+
+def _line_map(lines: list[str], label: str) -> list[str]:
+    """``file:line`` of each line of preprocessed GLSL 330 text (``#line N ["file"]``
+    directives: the next line is N)."""
+    out, file, cur = [], label, 1
+    for ln in lines:
+        m = re.match(r'\s*#\s*line\s+(\d+)(?:\s+"([^"]*)")?', ln)
+        out.append(f"{file}:{cur}")
+        if m:
+            cur, file = int(m[1]), (m[2] or file)
+            continue
+        cur += 1
+    return out
+
+
+def for_opengl(text: str) -> str:
+    """:func:`front_end` text as an OpenGL driver takes it: glslang's own extensions
+    (``GL_GOOGLE_include_directive`` and its file-named ``#line`` s) left out, line for
+    line."""
+    text = re.sub(r"^[ \t]*#[ \t]*extension[ \t]+GL_GOOGLE_\w+[^\n]*", "", text, flags=re.M)
+    return re.sub(r'^([ \t]*#[ \t]*line[ \t]+\d+)[ \t]+"[^"\n]*"', r"\1", text, flags=re.M)

@@ -1,0 +1,206 @@
+"""A user's shader as engines write it: GLSL 1.20, WebGL 1 (GLSL ES 1.00) and WebGL 2 (GLSL ES
+3.00) files translated to GLSL 330 core (``shaders_port.spirv.dialects``) render the image of
+their core equivalent through the executor and on llvmpipe; ``#include`` files and defines from
+the experiment; uniforms without initializers as constants; and hostile shaders (a loop that
+never ends, NaN pixels, an instruction the executor lacks, a dialect OpenGL cannot run, a
+compile error) stop with one error naming the user's file and line."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from helpers import REPO
+from helpers.experiments import TINY, sets
+from helpers.synthetic import synthetic_inputs
+from shaders_port.spirv.dialects import ShaderError, detect, front_end
+from shaders_port.spirv.loops import MAX_PASSES
+from shaders_port.spirv.user_shader import UserShader
+from study.cli import main
+from study.config.errors import ExperimentError
+from study.export.gl_check import GL_MEAN, GL_P999, gl_check_user
+from study.fit.spirv_model import SpirvModel
+
+SHADERS = Path(__file__).parent / "shaders"
+INCLUDE = SHADERS / "include"
+DIALECTS = {
+    "schlick_fog_webgl1": ("GLSL ES 1.00", {}),
+    "schlick_fog_es300": ("GLSL ES 3.00", {}),
+    "schlick_fog_120": ("GLSL 1.20", {"defines": ["WATER_FOG=1"], "include_paths": [INCLUDE]}),
+}
+
+
+@pytest.fixture(scope="module")
+def inputs():
+    return synthetic_inputs(width=48, height=36)
+
+
+@pytest.fixture(scope="module")
+def core_image(inputs):
+    return UserShader.from_file(SHADERS / "schlick_fog.frag").render(inputs).numpy()
+
+
+@pytest.mark.parametrize("name", sorted(DIALECTS))
+def test_each_dialect_renders_its_core_equivalent(name, inputs, core_image):
+    """The same water in three dialects: the executor's image equals the core file's exactly
+    (the translation changes names, not arithmetic); the written file on llvmpipe (Mesa's
+    core context: the GLSL 330 translation of the file) matches the executor within the GL
+    check's thresholds."""
+    dialect, kw = DIALECTS[name]
+    shader = UserShader.from_file(SHADERS / f"{name}.frag", **kw).check()
+    assert shader.dialect.name == dialect
+    ours = shader.render(inputs).numpy()
+    np.testing.assert_array_equal(ours["color"], core_image["color"])
+    check = gl_check_user(shader, inputs, shader.defaults(), ours)
+    assert check["ran"] and check["passed"], check
+    assert check["mean_abs"] <= GL_MEAN and check["p999"] <= GL_P999
+
+
+def test_dialects_are_detected_and_unknown_versions_refused():
+    cases = {
+        "precision mediump float;\nvoid main() {}\n": "GLSL ES 1.00",
+        "void main() { gl_FragColor = vec4(1.0); }\n": "GLSL 1.10",
+        "// head\n#version 100\nvoid main() {}\n": "GLSL ES 1.00",
+        "#version 150 compatibility\n": "GLSL 1.50",
+        "#version 300 es\n": "GLSL ES 3.00",
+        "#version 460 core\n": "GLSL 460 core",
+    }
+    for src, name in cases.items():
+        assert detect(src, "a.frag").name == name, src
+    with pytest.raises(ShaderError, match=r"a\.frag:2: '#version 200' is no version"):
+        detect("// x\n#version 200\n", "a.frag")
+    with pytest.raises(ShaderError, match=r"a\.frag:2: #version must come before"):
+        detect("float x;\n#version 330\n", "a.frag")
+
+
+def test_translation_keeps_the_users_line_numbers():
+    """An undeclared name on line 6 of a WebGL 1 file, behind comments, a precision block and
+    an #include: glslang's message quotes that line of the user's file, and no built-in."""
+    src = (
+        "// a WebGL 1 material\n#ifdef GL_ES\nprecision mediump float;\n#endif\n"
+        '#include "water_common.glsl"\nvoid main() { gl_FragColor = vec4(waterTint, 1.0); }\n'
+    )
+    with pytest.raises(ShaderError) as err:
+        front_end(src, "tint.frag", include_paths=[INCLUDE])
+    msg = str(err.value)
+    assert msg.startswith("tint.frag does not compile (GLSL ES 1.00):\ntint.frag:6: 'waterTint'")
+    assert len(msg.splitlines()) <= 3 and "gl_MaxDrawBuffers" not in msg
+
+
+def test_refused_legacy_forms_name_their_line():
+    base = "#version 120\nvarying vec3 varyingVecEye;\nvoid main() {\n%s\n}\n"
+    for body, why in (
+        ("gl_FragData[1] = vec4(1.0);", r"gl_FragData\[1\]: the study compares one colour"),
+        ("gl_FragColor = gl_Color;", r"gl_Color: a compatibility built-in"),
+        ("gl_FragColor = gl_TexCoord[5];", r"gl_TexCoord: only gl_TexCoord\[0\]"),
+    ):
+        with pytest.raises(ShaderError, match=rf"^legacy\.frag:4: {why}"):
+            front_end(base % body, "legacy.frag")
+
+
+def test_include_and_define_errors_name_the_file_and_the_search_path(tmp_path):
+    src = (SHADERS / "schlick_fog_120.frag").read_text()
+    with pytest.raises(ShaderError) as err:
+        UserShader(src, "schlick_fog_120.frag", include_paths=[tmp_path]).check()
+    assert "schlick_fog_120.frag:11: '#include' : Could not process include directive" in str(
+        err.value
+    )
+    assert f"water_common.glsl (searched {tmp_path}" in str(err.value)
+    with_fog = UserShader.from_file(SHADERS / "schlick_fog_120.frag", None, ["WATER_FOG=1"],
+                                    [INCLUDE])  # fmt: skip
+    without = UserShader.from_file(SHADERS / "schlick_fog_120.frag", None, (), [INCLUDE])
+    inputs = synthetic_inputs(width=16, height=12)
+    a, b = with_fog.render(inputs).numpy()["color"], without.render(inputs).numpy()["color"]
+    assert np.abs(a - b).max() > 0.01  # `#if WATER_FOG`: the define switches the fog on
+
+
+def test_bare_uniforms_take_declared_start_values_and_are_written_back_by_dialect():
+    """WebGL 1: no uniform initializers, so the written file is the user's byte for byte (the
+    fitted values go to constants.json and the GL check sets them); GLSL 1.20 takes an
+    initializer, which the written file gets."""
+    webgl = UserShader.from_file(SHADERS / "schlick_fog_webgl1.frag")
+    assert webgl.defaults()["FOG_COLOR"] == (0.05, 0.2, 0.25)
+    assert webgl.written({"FOG_DENSITY": 0.8}) == webgl.source
+    assert webgl.declared_range("FOG_DENSITY") == [0.01, 4.0, 0.35]
+    src = "#version 120\n// @study constant K 0.0 2.0 0.5\nuniform float K;\nvoid main() {\n"
+    src += "gl_FragColor = vec4(K);\n}\n"
+    assert "uniform float K = 0.8;\n" in UserShader(src, "k.frag").written({"K": 0.8})
+    with pytest.raises(ValueError, match=r"k\.frag:3: the uniform K has no initializer"):
+        UserShader(src.replace(" 0.5\n", "\n"), "k.frag")
+
+
+@pytest.mark.timeout(120)
+def test_a_loop_that_never_ends_is_stopped_with_its_line(inputs):
+    shader = UserShader.from_file(SHADERS / "hostile_loop.frag").check()
+    with pytest.raises(ShaderError, match=rf"^hostile_loop\.frag:12: a loop did not end within "
+                       rf"{MAX_PASSES} passes for \d+ pixel"):  # fmt: skip
+        shader.render(inputs)
+
+
+def test_non_finite_pixels_are_one_error_with_their_places(inputs):
+    shader = UserShader.from_file(SHADERS / "hostile_nan.frag")
+    with pytest.raises(ShaderError) as err:
+        SpirvModel(shader, inputs, np.zeros((36, 48, 3), np.float32)).check_finite()
+    msg = str(err.value)
+    assert msg.startswith("hostile_nan.frag: the shader's colour is not finite (NaN or inf) on ")
+    assert "pixel (x, y) from the top left: (" in msg and "all within x " in msg
+
+
+def test_an_unsupported_instruction_is_one_error_line(inputs):
+    shader = UserShader.from_file(SHADERS / "hostile_unsupported.frag").check()
+    with pytest.raises(ValueError, match=r"OpBitReverse, at hostile_unsupported\.frag:11$"):
+        shader.render(inputs)
+
+
+def test_gl_check_of_a_dialect_opengl_cannot_run_fails_with_its_reason(inputs, capsys):
+    shader = UserShader.from_file(SHADERS / "water_es310.frag").check()
+    check = gl_check_user(shader, inputs, {}, shader.render(inputs).numpy())
+    assert check["passed"] is False and check["ran"] is False
+    assert check["why"].startswith("water_es310.frag is GLSL ES 3.10, which a desktop OpenGL")
+    assert "the GL check failed: water_es310.frag" in capsys.readouterr().err
+
+
+def test_experiment_keys_and_a_broken_shader_refused_before_any_reference(tmp_path, capsys):
+    """fit.include_paths (relative to the experiment) and fit.defines reach the compiler; a
+    shader that does not compile stops `study calibrate` when the experiment loads, before a
+    reference is rendered (the cache stays empty), with glslang's line."""
+    from study import load_experiment
+
+    (tmp_path / "inc").mkdir()
+    (tmp_path / "inc" / "water_common.glsl").write_text((INCLUDE / "water_common.glsl").read_text())
+    shader = tmp_path / "w.frag"
+    shader.write_text((SHADERS / "schlick_fog_120.frag").read_text())
+    exp_file = tmp_path / "e.toml"
+    exp_file.write_text(
+        '[fit]\nshader = "w.frag"\ninclude_paths = ["inc"]\ndefines = ["WATER_FOG=1"]\n'
+    )
+    exp = load_experiment(exp_file)
+    assert exp.values["fit.include_paths"] == [str(tmp_path / "inc")]
+    with pytest.raises(ExperimentError, match=r"fit.defines: 'GL_X' is not"):
+        load_experiment(exp_file, ['fit.defines=["GL_X"]'])
+    shader.write_text(shader.read_text().replace("n.x * BUMP", "n.x * BUMPS"))
+    cache = tmp_path / "cache"
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setenv("STUDY_CACHE", str(cache))
+        rc = main(["calibrate", str(exp_file), "--out", str(tmp_path / "out"), *sets(TINY)])
+    err = capsys.readouterr().err
+    assert rc == 2
+    assert "study calibrate: error: fit.shader: w.frag does not compile (GLSL 1.20):\n" in err
+    assert "w.frag:26: 'BUMPS' : undeclared identifier" in err and "Traceback" not in err
+    assert not cache.exists() or not any(cache.rglob("*.exr"))
+
+
+def test_study_calibrate_reports_nan_pixels_not_a_json_error(tmp_path, capsys):
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setenv("STUDY_CACHE", str(tmp_path / "cache"))
+        shader = f'fit.shader="{SHADERS / "hostile_nan.frag"}"'
+        out = str(tmp_path / "out")
+        rc = main(["calibrate", str(REPO / "experiments" / "default.toml"), "--out", out,
+                   *sets([*TINY, shader])])  # fmt: skip
+    err = capsys.readouterr().err
+    assert rc == 2
+    assert "study calibrate: error: fit.shader" not in err  # the file compiles
+    assert "study calibrate: error: hostile_nan.frag: the shader's colour is not finite" in err
+    assert "JSON" not in err and "Traceback" not in err
