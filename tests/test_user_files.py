@@ -116,6 +116,24 @@ def test_every_bad_file_is_refused_naming_key_and_file(tmp_path):
         assert len(msg) < 600, (name, msg)
 
 
+def test_a_long_path_is_named_with_its_file(tmp_path):
+    """A missing file in a deep folder: the error keeps the file's name and the folder's tail
+    (a message cut at a fixed length from the start lost the name)."""
+    deep = tmp_path / ("d" * 60) / ("e" * 60)
+    missing = deep / "floor_height.exr"
+    with pytest.raises(ExperimentError) as err:
+        _exp(**{"floor.shape": '"heightmap"', "floor.heightmap": f'"{missing}"'})
+    msg = str(err.value)
+    assert str(missing) in msg and "no such file" in msg, msg
+    very = tmp_path / ("f" * 300) / "floor_height.exr"
+    with pytest.raises(ExperimentError) as err:
+        _exp(**{"floor.shape": '"heightmap"', "floor.heightmap": f'"{very}"'})
+    # a folder name longer than the file system allows: named, clipped, never a traceback
+    msg = str(err.value)
+    assert "...f" in msg and "/floor_height.exr" in msg and "File name too long" in msg, msg
+    assert len(msg) < 600
+
+
 def test_relative_paths_resolve_against_the_experiment_file():
     exp = load_experiment(USER)
     for key in uf.FILE_KEYS:

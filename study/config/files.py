@@ -59,6 +59,12 @@ def clip_text(text: str, limit: int = 80) -> str:
     )
 
 
+def clip_path(path, limit: int = 240) -> str:
+    """A path cut to its last ``limit`` characters (the file's name stays whole), marked."""
+    text = str(path)
+    return text if len(text) <= limit else f"...{text[-limit:]}"
+
+
 def resolve(key: str, value: str, base: Path | None) -> str:
     """Absolute path of a file key's value (relative to ``base``), or "" for none; checks it
     exists."""
@@ -67,12 +73,16 @@ def resolve(key: str, value: str, base: Path | None) -> str:
     p = Path(value).expanduser()
     if not p.is_absolute():
         p = (base or Path.cwd()) / p
-    p = p.resolve()
     ext = MESH_EXT if key == "mesh.file" else IMAGE_EXT
     if p.suffix.lower() not in ext:
-        raise _error(key, clip_text(p), f"expected a {', '.join(ext)} file")
-    if not p.is_file():
-        raise _error(key, clip_text(p), "no such file")
+        raise _error(key, clip_path(p), f"expected a {', '.join(ext)} file")
+    try:
+        p = p.resolve()
+        found = p.is_file()
+    except OSError as exc:  # e.g. a name longer than the file system allows
+        raise _error(key, clip_path(p), f"not a usable path ({exc.strerror})") from None
+    if not found:
+        raise _error(key, clip_path(p), "no such file")
     return str(p)
 
 
