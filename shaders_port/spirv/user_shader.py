@@ -96,8 +96,12 @@ def _literal(x: float) -> str:
 class UserShader:
     """A user's fragment shader file with its declaration (see the module doc)."""
 
-    def __init__(self, source: str, label: str, declaration: dict | None = None, path=None):
-        self.source, self.label, self.path = source, label, path
+    def __init__(
+        self, source: str, label: str, declaration: dict | None = None, path=None, vertex=None
+    ):
+        # vertex: the user's own vertex shader (``spirv.user_vertex.UserVertex``), or None for
+        # the study's water.vert
+        self.source, self.label, self.path, self.vertex = source, label, path, vertex
         ranges, bindings = {}, {}
         for m in _PRAGMA.finditer(source):
             args = m["args"].split()
@@ -132,11 +136,11 @@ class UserShader:
         self.validate()
 
     @classmethod
-    def from_file(cls, path, declaration: dict | None = None) -> "UserShader":
+    def from_file(cls, path, declaration: dict | None = None, vertex=None) -> "UserShader":
         p = Path(path)
         if not p.is_file():
             raise ValueError(f"fit.shader: no file {str(p)!r}")
-        return cls(p.read_text(encoding="utf-8"), p.name, declaration, path=p)
+        return cls(p.read_text(encoding="utf-8"), p.name, declaration, path=p, vertex=vertex)
 
     def _constants(self, ranges: dict) -> dict:
         decls = {m["name"]: m for m in _DECL.finditer(self.source)}
@@ -251,6 +255,8 @@ class UserShader:
         """A ``ShaderOutput`` (colour (H, W, 3) linear RGB, mask, ``fetches``/``iterations``)."""
         m = backend_types(backend)
         C = self._resolved(m, self._checked(values))
+        if self.vertex is not None:
+            return self.vertex.render(inputs, self.spec(), C, backend)
         return spirv_port.render(inputs, None, spec=self.spec(), backend=backend, resolved=C)
 
     def render_with_jacobian(self, inputs, values, names: list[str], backend: str = "llvm"):
@@ -268,9 +274,14 @@ class UserShader:
             vals = self.with_scalars(vals, {s: p})
         P = prepare(inputs, m)
         try:
-            color, diag = spirv_port.shade(
-                m, P, inputs, self.spec(), self._resolved(m, vals), differentiate=True
-            )
+            if self.vertex is not None:
+                P, color, diag = self.vertex.shade(
+                    m, inputs, self.spec(), self._resolved(m, vals), differentiate=True
+                )
+            else:
+                color, diag = spirv_port.shade(
+                    m, P, inputs, self.spec(), self._resolved(m, vals), differentiate=True
+                )
             color, diag, grads = tangents(m, color, diag, params)
             dr.eval(color, diag, grads)
         finally:
@@ -308,6 +319,12 @@ class UserShader:
 
         bindings = dict(self.bindings)
         base = GLRenderer if reflection is None else TranslatedRenderer
+        if self.vertex is not None:
+            if reflection is not None:
+                raise RuntimeError(
+                    "the HLSL round trip of a pair with your own vertex shader is not built"
+                )
+            base = self.vertex.gl_class(base, inputs)
 
         class _Bound(base):
             def _sampler_uniform(self, prog, sname):
