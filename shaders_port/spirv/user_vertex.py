@@ -30,7 +30,6 @@ from collections import OrderedDict
 import numpy as np
 
 from ..gl.grid import grid_renderer_class
-from ..pipeline import frame as _frame
 from ..pipeline.frame import finish_output
 from ..pipeline.interpolate import interpolate, rasterize_triangles, water_grid
 from ..pipeline.raster import Raster, prepare
@@ -199,26 +198,11 @@ class UserVertex:
         return P, color, diag
 
     def render(self, inputs, spec, C, backend: str = "llvm"):
-        """A ``ShaderOutput`` of ``spec`` after this vertex shader (replayed from a recording,
-        ``pipeline.frame.call_frozen``, as the study's quad is)."""
+        """A ``ShaderOutput`` of ``spec`` after this vertex shader. Traced on every call, not
+        replayed from a recording (``pipeline.frame.call_frozen``): the vertex stage's values
+        freed by the garbage collector while a recording runs abort Dr.Jit."""
         m = backend_types(backend)
-        P, b = self.frame(m, inputs, spec)
-
-        def fn(m, P_, C, b):
-            return spirv_port.shade_lanes(m, P_, b, spec, C)[:2]
-
-        key = ("spirv-vertex", self.shader.source, self.cells, spec.prepared_source(),
-               spec.label) + _frame.python_config(C)  # fmt: skip
-        lanes = dataclasses.replace(
-            P, **{f.name: None for f in dataclasses.fields(P)
-                  if f.name not in ("varyingVecWorldPosition", "upload")}
-        )  # fmt: skip
-        try:
-            color, diag = _frame.call_frozen(key, fn, m, lanes, C, b)
-        except RuntimeError as exc:
-            if "frozen function" not in str(exc):
-                raise
-            color, diag = fn(m, P, C, b)
+        P, color, diag = self.shade(m, inputs, spec, C)
         return finish_output(m, P, color, diag, spec.label)
 
     # ---- OpenGL ----------------------------------------------------------------------------
@@ -243,4 +227,3 @@ class UserVertex:
                 v = v.T if v.ndim == 2 else v[: t[1]]  # GL's column-major order
                 uniforms[name] = np.ascontiguousarray(v).tobytes()
         return grid_renderer_class(base, self.shader.source, attributes, grid.triangles, uniforms)
-

@@ -12,9 +12,10 @@ study's ``water.vert``), by a pragma of the file::
     // @study bind aPos position          (the shader's name -> a meaning or an engine name)
 
 or by the study's own uniform names, which bind only as themselves (``wave1`` ... ``wave4``,
-``viewpos``, ``lightpos``, the texture matrices, its samplers). Its outputs are ``gl_Position`` (the ``gl_PerVertex`` block's
-first member) and every ``Output`` variable, each with its ``flat`` / ``noperspective``
-decoration and its ``layout(location = N)`` when the source gives one.
+``viewpos``, ``lightpos``, the texture matrices, its samplers). Its outputs are
+``gl_Position`` (the ``gl_PerVertex`` block's first member) and every ``Output`` variable,
+each with its ``flat`` / ``noperspective`` decoration and its ``layout(location = N)`` when
+the source gives one.
 
 :meth:`VertexShader.run` returns them as NumPy arrays, one row per vertex.
 """

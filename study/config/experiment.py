@@ -20,6 +20,7 @@ import numpy as np
 
 from shaders_port.space import parse_fix
 from shaders_port.spirv.user_shader import UserShader
+from shaders_port.spirv.user_vertex import UserVertex
 from shaders_port.variants import get_variant
 
 from .._progress import log
@@ -133,17 +134,46 @@ def user_declaration(lines: list | None) -> dict:
 
 
 def load_user_shader(values: dict):
-    """The ``UserShader`` of ``fit.shader`` (a resolved path) and ``fit.declare``;
-    ExperimentError naming the problem."""
+    """The ``UserShader`` of ``fit.shader`` (a resolved path) and ``fit.declare``, after its
+    ``fit.vertex`` (a resolved path) when set; ExperimentError naming the problem."""
+    vertex = None
+    if values.get("fit.vertex"):
+        try:
+            vertex = UserVertex.from_file(values["fit.vertex"], values["fit.vertex_grid"])
+        except (ValueError, RuntimeError) as exc:
+            raise ExperimentError(f"fit.vertex: {exc}") from None
     try:
-        return UserShader.from_file(values["fit.shader"], user_declaration(values["fit.declare"]))
+        return UserShader.from_file(
+            values["fit.shader"], user_declaration(values["fit.declare"]), vertex=vertex
+        )
     except ValueError as exc:
         raise ExperimentError(f"fit.shader: {exc}") from None
 
 
-def _check_user_shader(values: dict, base) -> None:
+def _resolve_vertex(values: dict, base) -> None:
+    """``fit.vertex`` as an absolute path: ``"auto"`` the ``.vert`` beside ``fit.shader`` (a
+    resolved path), else relative to ``base``; ``fit.vertex_grid`` as two ints."""
+    v = values.get("fit.vertex")
+    values["fit.vertex_grid"] = [int(round(c)) for c in values["fit.vertex_grid"]]
+    if not v:
+        return
+    if v == "auto":
+        p = Path(values["fit.shader"]).with_suffix(".vert")
+        if not p.is_file():
+            raise ExperimentError(
+                f'fit.vertex = "auto": no vertex shader {p.name} beside the fragment shader; '
+                "name the file in fit.vertex or unset it (the study's water.vert)"
+            )
+    else:
+        p = Path(v).expanduser()
+        p = p if p.is_absolute() else (base or Path.cwd()) / p
+    values["fit.vertex"] = str(p.resolve())
+
+
+def _check_user_shader(values: dict, base, vertex_base=None) -> None:
     p = Path(values["fit.shader"]).expanduser()
     values["fit.shader"] = str((p if p.is_absolute() else (base or Path.cwd()) / p).resolve())
+    _resolve_vertex(values, vertex_base)
     shader = load_user_shader(values)
     if values["fit.parameters"] is not None:  # e.g. a shipped experiment's list
         log(
@@ -454,7 +484,12 @@ def validate(raw: dict, overrides: list[str] | None = None, path: Path | None = 
             'renders; use that method or fit.input_noise = "ignore"'
         )
     if is_user_shader(values["fit.shader"]):
-        _check_user_shader(values, base.get("fit.shader"))
+        _check_user_shader(values, base.get("fit.shader"), base.get("fit.vertex"))
+    elif values["fit.vertex"]:
+        raise ExperimentError(
+            "fit.vertex is the vertex shader of your own fit.shader (a .frag file); "
+            "remove it, or set fit.shader to your fragment shader"
+        )
     elif values["fit.declare"] is not None:
         raise ExperimentError(
             "fit.declare declares your own fit.shader (a .frag file); "
