@@ -210,10 +210,11 @@ class Function:
 class Module:
     """A decoded SPIR-V module: ``names`` (id -> OpName), ``decorations`` (id -> {name:
     parameters}), ``defs`` (id -> the instruction defining a type, constant or global
-    variable), ``functions`` (id -> :class:`Function`), ``entry`` (the fragment entry point's
-    function id) and ``interface`` (its interface variable ids)."""
+    variable), ``functions`` (id -> :class:`Function`), ``entry`` (the entry point's function
+    id, of execution model ``stage``: 'Fragment' or 'Vertex') and ``interface`` (its interface
+    variable ids)."""
 
-    def __init__(self, binary: bytes, label: str | None = None):
+    def __init__(self, binary: bytes, label: str | None = None, stage: str = "Fragment"):
         if len(binary) % 4 or len(binary) < 20:
             raise ValueError("SPIR-V: a module is a whole number of 32-bit words, at least 5")
         words = list(struct.unpack(f"<{len(binary) // 4}I", binary))
@@ -236,7 +237,7 @@ class Module:
             elif op == "OpExtInstImport":
                 self.ext_sets[ins.result] = ins.operands[0]
             elif op == "OpEntryPoint":
-                if ins.operands[0] == "Fragment":
+                if ins.operands[0] == stage:
                     self.entry, self.interface = ins.operands[1], list(ins.operands[3:])
             elif op == "OpFunction":
                 fn = Function(ins.result, {}, [])
@@ -267,7 +268,7 @@ class Module:
             elif ins.result is not None:
                 self.defs[ins.result] = ins
         if self.entry is None:
-            raise ValueError("SPIR-V: the module has no Fragment entry point")
+            raise ValueError(f"SPIR-V: the module has no {stage} entry point")
 
     def name(self, id_: int) -> str:
         return self.names.get(id_, f"%{id_}")

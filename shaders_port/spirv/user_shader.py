@@ -137,8 +137,10 @@ class UserShader:
     """A user's fragment shader file with its declaration (see the module doc)."""
 
     def __init__(self, source: str, label: str, declaration: dict | None = None, path=None,
-                 defines=(), include_paths=()):  # fmt: skip
-        self.source, self.label, self.path = source, label, path
+                 defines=(), include_paths=(), vertex=None):  # fmt: skip
+        # vertex: the user's own vertex shader (``spirv.user_vertex.UserVertex``), or None for
+        # the study's water.vert
+        self.source, self.label, self.path, self.vertex = source, label, path, vertex
         self.defines, self.include_paths = tuple(defines), tuple(str(p) for p in include_paths)
         self.dialect = dialects.detect(source, label)
         ranges, bindings = {}, {}
@@ -180,14 +182,15 @@ class UserShader:
         self.validate()
 
     @classmethod
-    def from_file(cls, path, declaration: dict | None = None, defines=(), include_paths=()):
+    def from_file(cls, path, declaration: dict | None = None, defines=(), include_paths=(),
+                  vertex=None):  # fmt: skip
         """The shader of the file ``path``; its ``#include`` s are searched in its folder, then
-        in ``include_paths``."""
+        in ``include_paths``; ``vertex``: the user's vertex shader (``UserVertex``) or None."""
         p = Path(path)
         if not p.is_file():
             raise ValueError(f"fit.shader: no file {str(p)!r}")
         incs = (str(p.resolve().parent), *include_paths)
-        return cls(p.read_text(encoding="utf-8"), p.name, declaration, p, defines, incs)
+        return cls(p.read_text(encoding="utf-8"), p.name, declaration, p, defines, incs, vertex)
 
     def _constants(self, ranges: dict) -> dict:
         decls = {m["name"]: m for m in _DECL.finditer(self.source)}
@@ -346,6 +349,8 @@ class UserShader:
         """A ``ShaderOutput`` (colour (H, W, 3) linear RGB, mask, ``fetches``/``iterations``)."""
         m = backend_types(backend)
         C = self._resolved(m, self._checked(values))
+        if self.vertex is not None:
+            return self.vertex.render(inputs, self.spec(), C, backend)
         return spirv_port.render(inputs, None, spec=self.spec(), backend=backend, resolved=C)
 
     def render_with_jacobian(self, inputs, values, names: list[str], backend: str = "llvm"):
@@ -363,9 +368,14 @@ class UserShader:
             vals = self.with_scalars(vals, {s: p})
         P = prepare(inputs, m)
         try:
-            color, diag = spirv_port.shade(
-                m, P, inputs, self.spec(), self._resolved(m, vals), differentiate=True
-            )
+            if self.vertex is not None:
+                P, color, diag = self.vertex.shade(
+                    m, inputs, self.spec(), self._resolved(m, vals), differentiate=True
+                )
+            else:
+                color, diag = spirv_port.shade(
+                    m, P, inputs, self.spec(), self._resolved(m, vals), differentiate=True
+                )
             color, diag, grads = tangents(m, color, diag, params)
             dr.eval(color, diag, grads)
         finally:
@@ -429,6 +439,12 @@ class UserShader:
         vals = self._checked(values)
         bare = {c.name: np.asarray(vals[c.name], np.float32).tobytes()
                 for c in self.constants.values() if c.bare}  # fmt: skip
+        if self.vertex is not None:
+            if reflection is not None:
+                raise RuntimeError(
+                    "the HLSL round trip of a pair with your own vertex shader is not built"
+                )
+            base = self.vertex.gl_class(base, inputs)
 
         label = self.label
 

@@ -21,6 +21,7 @@ import numpy as np
 
 from shaders_port.space import parse_fix
 from shaders_port.spirv.user_shader import UserShader
+from shaders_port.spirv.user_vertex import UserVertex
 from shaders_port.variants import get_variant
 
 from .._progress import log
@@ -135,14 +136,21 @@ def user_declaration(lines: list | None) -> dict:
 
 
 def load_user_shader(values: dict):
-    """The ``UserShader`` of ``fit.shader`` (a resolved path) and ``fit.declare``;
-    ExperimentError naming the problem."""
+    """The ``UserShader`` of ``fit.shader`` (a resolved path) and ``fit.declare``, after its
+    ``fit.vertex`` (a resolved path) when set; ExperimentError naming the problem."""
+    vertex = None
+    if values.get("fit.vertex"):
+        try:
+            vertex = UserVertex.from_file(values["fit.vertex"], values["fit.vertex_grid"])
+        except (ValueError, RuntimeError) as exc:
+            raise ExperimentError(f"fit.vertex: {exc}") from None
     try:
         return UserShader.from_file(
             values["fit.shader"],
             user_declaration(values["fit.declare"]),
             values.get("fit.defines") or (),
             values.get("fit.include_paths") or (),
+            vertex=vertex,
         )
     except ValueError as exc:
         raise ExperimentError(f"fit.shader: {exc}") from None
@@ -153,11 +161,31 @@ def _resolved(value: str, base) -> str:
     return str((p if p.is_absolute() else (base or Path.cwd()) / p).resolve())
 
 
+def _resolve_vertex(values: dict, base) -> None:
+    """``fit.vertex`` as an absolute path: ``"auto"`` the ``.vert`` beside ``fit.shader`` (a
+    resolved path), else relative to ``base``; ``fit.vertex_grid`` as two ints."""
+    v = values.get("fit.vertex")
+    values["fit.vertex_grid"] = [int(round(c)) for c in values["fit.vertex_grid"]]
+    if not v:
+        return
+    if v == "auto":
+        p = Path(values["fit.shader"]).with_suffix(".vert")
+        if not p.is_file():
+            raise ExperimentError(
+                f'fit.vertex = "auto": no vertex shader {p.name} beside the fragment shader; '
+                "name the file in fit.vertex or unset it (the study's water.vert)"
+            )
+        values["fit.vertex"] = str(p.resolve())
+    else:
+        values["fit.vertex"] = _resolved(v, base)
+
+
 def _check_user_shader(values: dict, base: dict) -> None:
-    """``fit.shader`` and ``fit.include_paths`` made absolute (relative to the experiment
-    file), ``fit.defines`` checked; the shader read, compiled and its bindings checked
-    (before any reference is rendered)."""
+    """``fit.shader``, ``fit.vertex`` and ``fit.include_paths`` made absolute (relative to the
+    experiment file), ``fit.defines`` checked; the shader read, compiled and its bindings
+    checked (before any reference is rendered)."""
     values["fit.shader"] = _resolved(values["fit.shader"], base.get("fit.shader"))
+    _resolve_vertex(values, base.get("fit.vertex"))
     incs = values["fit.include_paths"] or []
     values["fit.include_paths"] = [_resolved(p, base.get("fit.include_paths")) for p in incs]
     for p in values["fit.include_paths"]:
@@ -484,6 +512,11 @@ def validate(raw: dict, overrides: list[str] | None = None, path: Path | None = 
         )
     if is_user_shader(values["fit.shader"]):
         _check_user_shader(values, base)
+    elif values["fit.vertex"]:
+        raise ExperimentError(
+            "fit.vertex is the vertex shader of your own fit.shader (a .frag file); "
+            "remove it, or set fit.shader to your fragment shader"
+        )
     else:
         for key in ("fit.declare", "fit.defines", "fit.include_paths"):
             if values[key] is not None:

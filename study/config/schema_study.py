@@ -255,6 +255,23 @@ STUDY_KEYS: dict[str, Field] = {
         "Preprocessor names your own `fit.shader` is compiled with, as an engine sets them: "
         '`"NAME"` or `"NAME=VALUE"` each (e.g. `["WAVE_LAYERS=2", "USE_FOG"]`).',
     ),
+    "fit.vertex": Field(
+        "path",
+        "",
+        "Your own vertex shader for your `fit.shader` (`.vert`, relative to the experiment file), "
+        "in place of the study's `water.vert`: run on every vertex of a grid over the water "
+        'quad, its triangles rasterised and its outputs interpolated as OpenGL does; `"auto"`: '
+        "the file beside `fit.shader` with its name and `.vert` (`water.frag` -> `water.vert`). "
+        "Unset: the study's `water.vert` (`docs/user-shader.md`).",
+    ),
+    "fit.vertex_grid": Field(
+        "vec2",
+        [64, 64],
+        "Cells of the grid `fit.vertex` runs on, along x and z (two triangles each).",
+        "cells",
+        1,
+        1024,
+    ),
     "fit.write_back": Field(
         "str",
         "copy",

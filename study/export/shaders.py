@@ -156,13 +156,17 @@ def export_user_shader(
 ) -> list[Path]:
     """Write a user's shader (``shaders_port.spirv.user_shader.UserShader``) with ``values`` (GLSL
     name -> float | tuple) in place of its constants' initializers, ``out_dir/core/<file>``,
-    beside the study's vertex shader it runs after, ``out_dir/core/water.vert``; ``targets``
+    beside the vertex shader it runs after (``out_dir/core/water.vert``, the study's, or the
+    user's own, ``shader.vertex``, under its file name); ``targets``
     ``textures`` and ``status`` as :func:`export_shaders` (translated from those two files).
     Compile-checked and written all or not at all, as there; returns the written paths."""
     texts = {
         ("core", "water.vert"): read_source("water", "vert", "core"),
         ("core", shader.label): shader.written(values),
     }
+    if shader.vertex is not None:  # the user's own vertex shader in place of the study's
+        texts = {("core", shader.vertex.label): shader.vertex.shader.source,
+                 ("core", shader.label): texts[("core", shader.label)]}  # fmt: skip
     fit = {"status": status or {}, "reads": None}
     return _write_checked(texts, out_dir, targets, values, textures, fit)
 

@@ -1,0 +1,229 @@
+"""A user's fragment shader run after the user's own vertex shader, as OpenGL draws the pair.
+
+:class:`UserVertex` holds a :class:`~shaders_port.spirv.vertex.VertexShader` and the grid it
+runs on (``cells = (nx, nz)`` cells of two triangles over the water quad). For one frame
+(:meth:`UserVertex.frame`) it
+
+1. runs the vertex shader on every grid vertex (``spirv.vertex``);
+2. rasterises the triangles from its ``gl_Position`` (``pipeline.interpolate``: clipping, the
+   viewport, coverage, the depth test), so a displaced vertex moves the coverage and depth as
+   GL's would; the water pixels are the covered ones;
+3. interpolates each vertex output the fragment shader reads, perspective-correct, ``flat``
+   (provoking vertex: the triangle's last) or ``noperspective`` by the *fragment* shader's
+   qualifier, matched by name, else by an explicit ``layout(location = N)`` on both sides;
+4. binds ``gl_FragCoord`` (pixel centre, window depth, ``1 / w``) and ``gl_FrontFacing``, and
+   every uniform and sampler as for the fragment shader alone (``spirv.translated``).
+
+A fragment input no vertex output feeds is refused (GL would not link the pair). The result
+is a prepared frame (``pipeline.raster.Prepared``) whose raster is the grid's coverage (its
+``world`` the interpolated grid position, the plane point under the displaced one) and the
+fragment shader's bindings; :meth:`UserVertex.render` and :meth:`UserVertex.shade` run the
+fragment shader on it as ``spirv.translated`` does on the study's quad.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import itertools
+from collections import OrderedDict
+
+import numpy as np
+
+from ..gl.grid import grid_renderer_class
+from ..pipeline.frame import finish_output
+from ..pipeline.interpolate import interpolate, rasterize_triangles, water_grid
+from ..pipeline.raster import Raster, prepare
+from ..pipeline.texture import backend_types
+from . import engine_names as names_
+from . import translated as spirv_port
+from .vertex import ATTRIBUTES, VertexShader, explicit_locations, glsl_type, pointee_type
+
+__all__ = ["UserVertex", "DEFAULT_CELLS"]
+
+DEFAULT_CELLS = (64, 64)
+_PER_PIXEL = ("varyingVecWorldPosition", "varyingVecEye", "varyingVecLight", "vTexCoord0",
+              "vTexCoord1", "vTexCoord2", "vTexCoord3", "gl_FragCoord")  # fmt: skip
+_FRAMES: OrderedDict = OrderedDict()  # the last few frames (a joint fit alternates scenes)
+_UPLOADS = itertools.count(1)
+
+
+def _lanes_of(m, a: np.ndarray, kind: str):
+    """(N, ...) array -> the executor's nested lists of per-lane Dr.Jit values."""
+    if a.ndim > 1:
+        return [_lanes_of(m, a[:, i], kind) for i in range(a.shape[1])]
+    if kind == "float":
+        return m.Float(a.astype(np.float32))
+    return (m.Int32 if kind == "int" else m.UInt32)(np.rint(a).astype(np.int64))
+
+
+def _kind(t: tuple) -> str:
+    return t[2] if t[0] == "vec" else ("float" if t[0] == "mat" else t[0])
+
+
+class UserVertex:
+    """The user's vertex shader ``shader`` (a ``VertexShader``) on a grid of ``cells``."""
+
+    def __init__(self, shader: VertexShader, cells=DEFAULT_CELLS):
+        cells = tuple(int(c) for c in cells)
+        if len(cells) != 2 or min(cells) < 1 or max(cells) > 1024:
+            raise ValueError(f"fit.vertex_grid: {list(cells)} must be two cell counts in 1..1024")
+        self.shader, self.cells = shader, cells
+
+    @property
+    def label(self) -> str:
+        return self.shader.label
+
+    @classmethod
+    def from_file(cls, path, cells=DEFAULT_CELLS) -> "UserVertex":
+        return cls(VertexShader.from_file(path), cells)
+
+    def grid(self, inputs):
+        return water_grid(inputs.water_rect, inputs.normal_tile, self.cells)
+
+    # ---- one frame -------------------------------------------------------------------------
+    def frame(self, m, inputs, spec):
+        """``(P, bindings)``: the prepared frame of the grid's coverage and the fragment
+        shader's bindings (see the module doc); remembered for the last eight frames."""
+        P0 = prepare(inputs, m)
+        key = (P0.upload, m.__name__, self.shader.source, self.cells, spec.prepared_source(),
+               spec.bindings)  # fmt: skip
+        hit = _FRAMES.get(key)
+        if hit is not None:
+            _FRAMES.move_to_end(key)
+            return hit
+        study = spirv_port.study_bindings(m, P0, inputs)
+        for k in range(4):
+            study[f"wave{k + 1}"] = [float(v) for v in np.asarray(inputs.waves[k], np.float32)]
+        grid = self.grid(inputs)
+        clip, outs = self.shader.run(m, inputs, grid, study)
+        cov = rasterize_triangles(clip, grid.triangles, inputs.width, inputs.height)
+        if cov.index.size == 0:
+            raise ValueError(
+                f"{self.label}: the vertex shader's triangles cover no pixel (check its "
+                "gl_Position: clip space, projection * view * model * position)"
+            )
+        b = {k: v for k, v in study.items() if k not in _PER_PIXEL}
+        b.update(self._varyings(m, spec, cov, grid, outs))
+        b.update(self._builtins(m, cov, inputs))
+        for name, target in spec.bindings:
+            if target in b:
+                b[name] = b[target]
+        mod = spirv_port.module_of(spec)
+        b = {k: v for k, v in b.items() if k in mod.bound_names}
+        hit = (self._prepared(m, P0, cov, grid, inputs), b)
+        _FRAMES[key] = hit
+        while len(_FRAMES) > 8:
+            _FRAMES.popitem(last=False)
+        return hit
+
+    def _varyings(self, m, spec, cov, grid, outs: dict) -> dict:
+        mod = spirv_port.module_of(spec)
+        vouts, by_loc = self.shader.outputs, {}
+        for name, v in vouts.items():
+            if v.location is not None:
+                by_loc[v.location] = name
+        places = explicit_locations(spec.source, "in")
+        b = {}
+        for vid, ins in mod.defs.items():
+            if ins.opname != "OpVariable" or ins.operands[0] != "Input":
+                continue
+            name = mod.binding_name(vid)
+            if name.startswith("gl_"):
+                continue
+            src = name if name in vouts else by_loc.get(places.get(name, -1))
+            if src is None:
+                raise ValueError(
+                    f"{spec.label}: the fragment shader reads `in {name}`, which the vertex "
+                    f"shader {self.label} does not write (its outputs: "
+                    f"{', '.join(vouts) or 'none'}); write it there or name it alike"
+                )
+            if src not in outs:
+                raise ValueError(
+                    f"{self.label}: the output {src} that {spec.label} reads is never written"
+                )
+            deco = mod.decorations.get(vid, {})
+            mode = "flat" if "Flat" in deco else (
+                "noperspective" if "NoPerspective" in deco else "smooth")  # fmt: skip
+            t = pointee_type(mod, vid)
+            kind = _kind(t)
+            if kind != "float" and mode != "flat":
+                raise ValueError(f"{spec.label}: the integer input {name} must be `flat`")
+            b[name] = _lanes_of(m, interpolate(outs[src], cov, grid.triangles, mode), kind)
+        return b
+
+    def _builtins(self, m, cov, inputs) -> dict:
+        W, H = inputs.width, inputs.height
+        col = (cov.index % W).astype(np.float32)
+        row = (cov.index // W).astype(np.float32)
+        return {
+            "gl_FragCoord": [
+                m.Float(col + np.float32(0.5)),
+                m.Float(np.float32(H) - row - np.float32(0.5)),
+                m.Float(cov.depth.astype(np.float32)),
+                m.Float(cov.inv_w.astype(np.float32)),
+            ],
+            "gl_FrontFacing": m.Bool(cov.front),
+        }
+
+    def _prepared(self, m, P0, cov, grid, inputs):
+        world = interpolate(grid.position, cov, grid.triangles, "smooth")
+        base = world[:, [0, 2]] / inputs.normal_tile
+        tex = np.stack([base + np.asarray(inputs.waves[k], np.float64) for k in range(4)])
+        r = Raster(
+            mask=cov.mask,
+            index=cov.index,
+            world=world.astype(np.float32),
+            vec_eye=(np.asarray(inputs.viewpos, np.float64) - world).astype(np.float32),
+            vec_light=(np.asarray(inputs.lightpos, np.float64) - world).astype(np.float32),
+            texcoord=tex.astype(np.float32),
+            width=inputs.width,
+            height=inputs.height,
+        )
+        return dataclasses.replace(
+            P0,
+            raster=r,
+            varyingVecWorldPosition=m.Array3f(r.world.T),
+            varyingVecEye=m.Array3f(r.vec_eye.T),
+            varyingVecLight=m.Array3f(r.vec_light.T),
+            texcoord=[(m.Float(tex[k, :, 0]), m.Float(tex[k, :, 1])) for k in range(4)],
+            upload=-next(_UPLOADS),  # negative: never a number of pipeline.raster.prepare's
+        )
+
+    # ---- renders -----------------------------------------------------------------------------
+    def shade(self, m, inputs, spec, C, differentiate: bool = False):
+        """``(P, colour Array3f, diag)`` of the fragment shader ``spec`` (a
+        ``spirv.translated.ShaderSpec``) with resolved constants ``C`` on the grid's frame."""
+        P, b = self.frame(m, inputs, spec)
+        color, diag, _ = spirv_port.shade_lanes(m, P, b, spec, C, differentiate)
+        return P, color, diag
+
+    def render(self, inputs, spec, C, backend: str = "llvm"):
+        """A ``ShaderOutput`` of ``spec`` after this vertex shader. Traced on every call, not
+        replayed from a recording (``pipeline.frame.call_frozen``): the vertex stage's values
+        freed by the garbage collector while a recording runs abort Dr.Jit."""
+        m = backend_types(backend)
+        P, color, diag = self.shade(m, inputs, spec, C)
+        return finish_output(m, P, color, diag, spec.label)
+
+    # ---- OpenGL ----------------------------------------------------------------------------
+    def gl_class(self, base, inputs):
+        """``base`` (a ``GLRenderer`` class) drawing the grid with this vertex shader: its
+        attributes and recognised uniforms set as :meth:`frame` binds them."""
+        mod, grid = self.shader.module, self.grid(inputs)
+        data = {"position": grid.position, "uv": grid.uv,
+                "normal": np.tile(np.float32([0, 1, 0]), (len(grid.position), 1)),
+                "tangent": np.tile(np.float32([1, 0, 0, -1]), (len(grid.position), 1))}  # fmt: skip
+        attributes, uniforms = {}, {}
+        for vid, ins in mod.defs.items():
+            if ins.opname != "OpVariable" or ins.operands[0] not in ("Input", "UniformConstant"):
+                continue
+            name = mod.binding_name(vid)
+            meaning = names_.meaning_of(name, self.shader.bindings)
+            if meaning in ATTRIBUTES:
+                attributes[name] = data[meaning]
+            elif meaning is not None:
+                t = glsl_type(mod, mod.defs[ins.type_id].operands[1])
+                v = np.asarray(names_.meaning_values(inputs, meaning), np.float32)
+                v = v.T if v.ndim == 2 else v[: t[1]]  # GL's column-major order
+                uniforms[name] = np.ascontiguousarray(v).tobytes()
+        return grid_renderer_class(base, self.shader.source, attributes, grid.triangles, uniforms)

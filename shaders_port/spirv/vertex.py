@@ -1,0 +1,274 @@
+"""A user's own vertex shader, compiled to SPIR-V and executed per vertex of the water grid.
+
+The shader is core GLSL (``#version 330 core`` or later). It is compiled as the fragment
+shaders are (``spirv.module``: ``glslangValidator -G --aml --amb -g``, every call inlined by
+``spirv-opt``, ``spirv-val``) with ``-S vert``, and run by the same executor
+(``spirv.execute.Executor``), one lane per vertex of the tessellated water quad
+(``pipeline.interpolate.water_grid``). Its ``Input`` variables are the grid's attributes, its
+uniforms the frame's matrices and vectors, each bound by its declared name
+(``spirv.engine_names``: the names of three.js, Babylon.js, jMonkeyEngine, Urho3D, OGRE and the
+study's ``water.vert``), by a pragma of the file::
+
+    // @study bind aPos position          (the shader's name -> a meaning or an engine name)
+
+or by the study's own uniform names, which bind only as themselves (``wave1`` ... ``wave4``,
+``viewpos``, ``lightpos``, the texture matrices, its samplers). Its outputs are
+``gl_Position`` (the ``gl_PerVertex`` block's first member) and every ``Output`` variable,
+each with its ``flat`` / ``noperspective`` decoration and its ``layout(location = N)`` when
+the source gives one.
+
+:meth:`VertexShader.run` returns them as NumPy arrays, one row per vertex.
+"""
+
+from __future__ import annotations
+
+import re
+import shutil
+import subprocess
+import tempfile
+from dataclasses import dataclass
+from pathlib import Path
+
+import drjit as dr
+import numpy as np
+
+from . import engine_names as names_
+from .execute import Executor, UnboundVariable
+from .loops import UnsupportedInstruction
+from .module import OPT_PASSES, Module
+
+__all__ = ["VertexShader", "Varying", "compile_vertex", "ATTRIBUTES"]
+
+ATTRIBUTES = ("position", "uv", "normal", "tangent")
+_PRAGMA = re.compile(r"^\s*//\s*@study\s+(?P<verb>\S+)\s*(?P<args>.*?)\s*$", re.M)
+_LOCATION = re.compile(
+    r"layout\s*\(\s*location\s*=\s*(?P<loc>\d+)\s*\)\s*(?:(?:flat|noperspective|smooth|"
+    r"centroid|highp|mediump|lowp)\s+)*(?P<dir>in|out)\s+\w+\s+(?P<name>\w+)"
+)
+
+
+def explicit_locations(source: str, direction: str) -> dict:
+    """name -> ``layout(location = N)`` of the ``in`` or ``out`` variables ``source`` places
+    itself (not those glslang maps automatically)."""
+    code = re.sub(r"//.*|/\*.*?\*/", "", source, flags=re.S)
+    return {m["name"]: int(m["loc"]) for m in _LOCATION.finditer(code) if m["dir"] == direction}
+
+
+def compile_vertex(source: str, label: str) -> bytes:
+    """SPIR-V of a core GLSL vertex shader, optimised and validated as
+    ``spirv.module.compile_fragment`` does a fragment shader; ValueError with the tool's log."""
+    with tempfile.TemporaryDirectory(prefix="spirv-vert.") as d:
+        src = Path(d) / (Path(label).stem + ".vert")
+        raw, opt = Path(d) / "raw.spv", Path(d) / "opt.spv"
+        src.write_text(source, encoding="utf-8")
+        steps = [
+            ["glslangValidator", "-G", "--aml", "--amb", "-g", "-S", "vert", "-o", str(raw),
+             str(src)],
+            ["spirv-opt", *OPT_PASSES, str(raw), "-o", str(opt)],
+            ["spirv-val", str(opt)],
+        ]  # fmt: skip
+        for args in steps:
+            exe = shutil.which(args[0])
+            if exe is None:
+                pkg = "glslang-tools" if args[0] == "glslangValidator" else "spirv-tools"
+                raise RuntimeError(f"{args[0]} not found on PATH; `apt-get install {pkg}`")
+            res = subprocess.run([exe, *args[1:]], capture_output=True, text=True, timeout=120,
+                                 check=False)  # fmt: skip
+            if res.returncode != 0:
+                log = (res.stdout + res.stderr).replace(str(src), label).strip()
+                raise ValueError(f"{args[0]} failed on the vertex shader {label}:\n{log}")
+        return opt.read_bytes()
+
+
+@dataclass(frozen=True)
+class Varying:
+    """A vertex output: its variable id, ``mode`` ('smooth', 'flat', 'noperspective') and
+    ``location`` (the source's explicit one, else None)."""
+
+    vid: int
+    mode: str
+    location: int | None
+
+
+def _mode(decorations: dict) -> str:
+    if "Flat" in decorations:
+        return "flat"
+    return "noperspective" if "NoPerspective" in decorations else "smooth"
+
+
+def glsl_type(module: Module, tid: int) -> tuple:
+    """A type as ('float' | 'int' | 'uint' | 'bool',) ('vec', n, kind) ('mat', columns, rows)
+    or ('other', opname)."""
+    ins = module.defs[tid]
+    op, o = ins.opname, ins.operands
+    if op == "OpTypeFloat":
+        return ("float",)
+    if op == "OpTypeInt":
+        return ("int",) if o[1] else ("uint",)
+    if op == "OpTypeBool":
+        return ("bool",)
+    if op == "OpTypeVector":
+        return ("vec", o[1], glsl_type(module, o[0])[0])
+    if op == "OpTypeMatrix":
+        return ("mat", o[1], glsl_type(module, o[0])[1])
+    return ("other", op)
+
+
+def pointee_type(module: Module, vid: int) -> tuple:
+    """:func:`glsl_type` of what the global variable ``vid`` holds."""
+    ptr = module.defs[module.defs[vid].type_id]
+    return glsl_type(module, ptr.operands[1])
+
+
+def _describe(t: tuple) -> str:
+    if t[0] == "vec":
+        return f"vec{t[1]}"
+    if t[0] == "mat":
+        return f"mat{t[1]}" if t[1] == t[2] else f"mat{t[1]}x{t[2]}"
+    return t[-1] if t[0] == "other" else t[0]
+
+
+class VertexShader:
+    """A user's vertex shader file (see the module doc): ``source``, ``label`` (file name),
+    ``bindings`` (declared name -> meaning or engine name, from its pragmas)."""
+
+    def __init__(self, source: str, label: str, path=None):
+        self.source, self.label, self.path = source, label, path
+        self.bindings = {}
+        for m in _PRAGMA.finditer(source):
+            args, line = m["args"].split(), source.count("\n", 0, m.start()) + 1
+            if m["verb"] != "bind" or len(args) != 2:
+                raise ValueError(
+                    f"{label}:{line}: a vertex shader takes `// @study bind NAME MEANING` "
+                    "pragmas only (its constants are not fitted; declare them in the fragment "
+                    "shader)"
+                )
+            self.bindings[args[0]] = args[1]
+        self.module = Module(compile_vertex(source, label), label=label, stage="Vertex")
+        for name, target in self.bindings.items():
+            if names_.meaning_of(name, self.bindings) is None and target not in names_.MEANINGS:
+                raise ValueError(
+                    f"{label}: the binding {name} -> {target} names no meaning nor engine "
+                    f"name; the meanings: {', '.join(names_.MEANINGS)}"
+                )
+        self.outputs, self.position = self._outputs()
+
+    @classmethod
+    def from_file(cls, path) -> "VertexShader":
+        p = Path(path)
+        if not p.is_file():
+            raise ValueError(f"fit.vertex: no file {str(p)!r}")
+        return cls(p.read_text(encoding="utf-8"), p.name, path=p)
+
+    def _outputs(self) -> tuple[dict, int | None]:
+        mod, places = self.module, explicit_locations(self.source, "out")
+        outs, position = {}, None
+        for vid in mod.interface:
+            if mod.defs[vid].operands[0] != "Output":
+                continue
+            ptr = mod.defs[mod.defs[vid].type_id]
+            tname = mod.names.get(ptr.operands[1], "")
+            if tname == "gl_PerVertex" or mod.binding_name(vid) == "gl_Position":
+                position = vid
+                continue
+            name = mod.name(vid)
+            outs[name] = Varying(vid, _mode(mod.decorations.get(vid, {})), places.get(name))
+        return outs, position
+
+    # ---- the bindings of one frame -----------------------------------------------------------
+    def _attribute(self, m, meaning: str, t: tuple, grid, name: str) -> list:
+        n = len(grid.position)
+        base = {
+            "position": grid.position.astype(np.float64),
+            "uv": grid.uv.astype(np.float64),
+            "normal": np.tile([0.0, 1.0, 0.0], (n, 1)),
+            "tangent": np.tile([1.0, 0.0, 0.0, -1.0], (n, 1)),
+        }[meaning]
+        k = t[1] if t[0] == "vec" else 1
+        if t[0] not in ("vec", "float") or (t[0] == "vec" and t[2] != "float"):
+            raise ValueError(
+                f"{self.label}: the attribute {name} ({names_.MEANINGS[meaning][1]}) is "
+                f"declared {_describe(t)}; declare it a float vector"
+            )
+        fill = np.array([0.0, 0.0, 0.0, 1.0])
+        cols = [base[:, i] if i < base.shape[1] else np.full(n, fill[i]) for i in range(k)]
+        lanes = [m.Float(c.astype(np.float32)) for c in cols]
+        return lanes if t[0] == "vec" else lanes[0]
+
+    def _uniform(self, inputs, meaning: str, t: tuple, name: str):
+        want = names_.MEANINGS[meaning][0]
+        if _describe(t) not in want:
+            raise ValueError(
+                f"{self.label}: {name} is the {meaning} ({names_.MEANINGS[meaning][1]}), a "
+                f"{' or '.join(want)}; the shader declares it {_describe(t)}"
+            )
+        try:
+            v = np.asarray(names_.meaning_values(inputs, meaning), np.float32)
+        except ValueError as exc:
+            raise ValueError(f"{self.label}: {name}: {exc}") from None
+        if v.ndim == 2:
+            return [[float(v[i, j]) for i in range(v.shape[0])] for j in range(v.shape[1])]
+        return [float(x) for x in v[: t[1]]]
+
+    def bindings_for(self, m, inputs, grid, study: dict) -> dict:
+        """Binding name -> value of every input and uniform the module reads: the grid's
+        attributes (per-vertex Floats), the recognised matrices and vectors, ``study`` (the
+        study's uniform and sampler values by name, ``spirv.translated.study_bindings``)."""
+        out, mod = {}, self.module
+        for vid, ins in mod.defs.items():
+            if ins.opname != "OpVariable" or ins.operands[0] not in ("Input", "UniformConstant"):
+                continue
+            name = mod.binding_name(vid)
+            meaning = names_.meaning_of(name, self.bindings)
+            t = pointee_type(mod, vid)
+            if meaning in ATTRIBUTES:
+                out[name] = self._attribute(m, meaning, t, grid, name)
+            elif meaning is not None:
+                out[name] = self._uniform(inputs, meaning, t, name)
+            elif name in study:
+                out[name] = study[name]
+        return out
+
+    def run(self, m, inputs, grid, study: dict) -> tuple[np.ndarray, dict]:
+        """Run the shader on every vertex of ``grid`` (``pipeline.interpolate.Grid``):
+        ``(clip (V, 4) float64 gl_Position, {output name: (V, ...) float64})``; an output
+        never written is absent."""
+        if self.position is None:
+            raise ValueError(f"{self.label}: the vertex shader never writes gl_Position")
+        ex = Executor(self.module, m, self.bindings_for(m, inputs, grid, study))
+        try:
+            ex.run()
+            V = len(grid.position)
+            pv = ex.vars.get(self.position)
+            if pv is None:
+                raise ValueError(f"{self.label}: the vertex shader never writes gl_Position")
+            if self.module.binding_name(self.position) != "gl_Position":
+                pv = pv[0]
+            clip = to_numpy(pv, V)
+            outs = {n: to_numpy(ex.vars[v.vid], V) for n, v in self.outputs.items()
+                    if ex.vars.get(v.vid) is not None}  # fmt: skip
+        except UnboundVariable as exc:
+            raise ValueError(
+                f"{self.label}: {exc}. A vertex shader's attributes and matrices bind by the "
+                f"names engines give them ({', '.join(sorted(names_.ENGINE_NAMES))}) or by "
+                "`// @study bind NAME MEANING` in its file (docs/user-shader.md)"
+            ) from None
+        except UnsupportedInstruction as exc:
+            raise ValueError(f"{self.label}: {exc}") from None
+        finally:
+            ex.release()
+        return clip, outs
+
+
+def to_numpy(value, lanes: int) -> np.ndarray:
+    """A value of the executor (a Python number, a Dr.Jit array of 1 or ``lanes`` entries, or
+    nested lists of them: vector components, matrix columns) as a float64 array
+    ``(lanes, ...)``."""
+    if isinstance(value, (list, tuple)):
+        return np.stack([to_numpy(v, lanes) for v in value], 1)
+    if isinstance(value, dr.ArrayBase):
+        dr.eval(value)
+        a = np.asarray(value.numpy(), np.float64).ravel()
+    else:
+        a = np.asarray(float(value), np.float64).ravel()
+    return np.broadcast_to(a, (lanes,)).copy()

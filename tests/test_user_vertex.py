@@ -1,0 +1,226 @@
+"""A user's own vertex shader (``fit.vertex``): run per vertex of a tessellated water grid
+through SPIR-V, its triangles rasterised and its outputs interpolated as GL does, with
+vertex/fragment pairs written for these tests (``tests/shaders/``) in the names of three.js,
+Babylon.js, jMonkeyEngine and Urho3D; each pair compared with llvmpipe drawing the same grid,
+differentiated (central differences) and calibrated through ``study calibrate``."""
+
+from __future__ import annotations
+
+import json
+import shutil
+from pathlib import Path
+
+import drjit as dr
+import numpy as np
+import pytest
+
+from helpers import REPO
+from helpers.experiments import TINY, sets
+from helpers.port_checks import FD_NOISE, FD_RTOL
+from helpers.synthetic import synthetic_inputs
+from shaders_port.pipeline.interpolate import interpolate, rasterize_triangles, water_grid
+from shaders_port.pipeline.raster import rasterize_water
+from shaders_port.spirv.user_shader import UserShader
+from shaders_port.spirv.user_vertex import UserVertex
+from shaders_port.spirv.vertex import VertexShader
+from study.export.gl_check import GL_MEAN, GL_P999
+
+SHADERS = Path(__file__).parent / "shaders"
+MY_WATER = REPO / "experiments" / "my_water.toml"
+PAIRS = ("projective_water", "flat_noperspective", "displaced_water")
+
+
+@pytest.fixture(scope="module")
+def inputs():
+    return synthetic_inputs(width=64, height=48)
+
+
+def _pair(name: str, cells=(24, 24), frag: str | None = None) -> UserShader:
+    vertex = UserVertex.from_file(SHADERS / f"{name}.vert", cells)
+    return UserShader.from_file(SHADERS / (frag or f"{name}.frag"), vertex=vertex)
+
+
+def _gl_compare(shader: UserShader, inputs):
+    ours = shader.render(inputs).numpy()
+    try:
+        rgba, mask = shader.gl_render(inputs)
+    except RuntimeError as exc:  # no headless OpenGL here
+        pytest.skip(str(exc).splitlines()[0])
+    mine = ours["mask"] > 0.5
+    both = mask & mine
+    d = np.abs(rgba[..., :3] - ours["color"]).max(-1)[both]
+    return ours, mask, float(d.mean()), float(np.percentile(d, 99.9)), int((mask ^ mine).sum())
+
+
+@pytest.mark.parametrize("name", PAIRS)
+def test_pair_matches_llvmpipe(name, inputs):
+    shader = _pair(name)
+    ours, mask, mean, p999, differ = _gl_compare(shader, inputs)
+    assert mask.sum() > 800 and differ <= 0.001 * mask.sum(), (int(mask.sum()), differ)
+    assert mean <= GL_MEAN and p999 <= GL_P999, (mean, p999)
+    # measured on llvmpipe: means 1.5e-7 .. 7.5e-7; far below the GL check's thresholds
+    assert mean <= 1e-5, mean
+    plane = rasterize_water(inputs).mask
+    if name == "displaced_water":  # the coverage is the displaced surface's, not the plane's
+        assert (plane ^ mask).sum() > 10
+    else:
+        assert (plane ^ mask).sum() <= 0.002 * mask.sum()
+
+
+def test_interpolation_is_perspective_correct_flat_and_noperspective(inputs):
+    """On the plane, a perspective-correct world position is the ray-plane intersection the
+    study's raster computes; a noperspective window position is the pixel centre; a flat
+    value is the provoking (last) vertex's."""
+    grid = water_grid(inputs.water_rect, inputs.normal_tile, (16, 16))
+    vp = inputs.view_proj.astype(np.float64)
+    clip = np.c_[grid.position, np.ones(len(grid.position))] @ vp.T
+    W, H = inputs.width, inputs.height
+    cov = rasterize_triangles(clip, grid.triangles, W, H)
+    ref = rasterize_water(inputs)
+    assert np.array_equal(cov.mask, ref.mask)
+    world = interpolate(grid.position, cov, grid.triangles, "smooth")
+    assert np.abs(world - ref.world).max() < 1e-5
+    ndc = clip[:, :2] / clip[:, 3:]
+    win = (ndc + 1.0) * 0.5 * np.array([W, H])
+    got = interpolate(win, cov, grid.triangles, "noperspective")
+    col, row = cov.index % W + 0.5, H - cov.index // W - 0.5
+    assert np.abs(got - np.c_[col, row]).max() < 1e-6
+    ids = np.arange(len(grid.position), dtype=np.float64)
+    flat = interpolate(ids, cov, grid.triangles, "flat")
+    assert np.array_equal(flat, grid.triangles[cov.triangle, 2])
+
+
+def test_the_studys_water_vert_through_the_grid_gives_the_studys_image(inputs):
+    """The study's own water.vert as the user's vertex shader: the worked example's fragment
+    shader gives the image of the study's quad (its varyings computed per pixel)."""
+    frag = REPO / "experiments" / "shaders" / "my_water.frag"
+    decl = {"constants": {"F0": [0.0, 0.2]}}
+    alone = UserShader.from_file(frag, decl).render(inputs).numpy()
+    vert = VertexShader.from_file(REPO / "shaders_port" / "glsl" / "core" / "water.vert")
+    paired = UserShader.from_file(frag, decl, vertex=UserVertex(vert, (8, 8))).render(inputs)
+    paired = paired.numpy()
+    both = (alone["mask"] > 0) & (paired["mask"] > 0)
+    assert both.sum() >= 0.998 * (alone["mask"] > 0).sum()
+    d = np.abs(alone["color"] - paired["color"]).max(-1)[both]
+    assert d.mean() < 1e-5 and np.percentile(d, 99.9) < 1e-3, (d.mean(), d.max())
+
+
+@pytest.mark.parametrize("name", PAIRS)
+def test_jacobian_matches_central_differences(name, inputs):
+    shader = _pair(name, cells=(12, 12))
+    names = shader.scalar_names()
+    base = shader.render(inputs).numpy()
+    out, J = shader.render_with_jacobian(inputs, None, names)
+    assert np.array_equal(out.numpy()["mask"], base["mask"])
+    assert np.abs(out.numpy()["color"] - base["color"]).max() <= 1e-6
+    v = shader.defaults()
+    for j, s in enumerate(names):
+        b, _, idx = s.partition("[")
+        x = v[b][int(idx[:-1])] if idx else v[b]
+        h = 1e-3 * max(abs(x), 1.0)
+        p = shader.render(inputs, shader.with_scalars(v, {s: x + h})).numpy()
+        m = shader.render(inputs, shader.with_scalars(v, {s: x - h})).numpy()
+        fd = (p["color"] - m["color"]) / (2 * h)
+        fp, fm = (p["color"] - base["color"]) / h, (base["color"] - m["color"]) / h
+        noise = FD_NOISE / h
+        water = base["mask"] > 0
+        # pixels without a kink in the stencil (a texel edge of a bilinear fetch crossed)
+        smooth = water & (np.abs(fp - fm) <= 0.2 * np.abs(fd) + 2 * noise).all(-1)
+        assert smooth.sum() >= 0.95 * water.sum(), s
+        assert np.abs(fd[water]).max() > 10 * noise, s
+        bad = smooth & ~(np.abs(J[..., j] - fd) <= 2 * noise + FD_RTOL * np.abs(fd)).all(-1)
+        assert not bad.any(), (s, int(bad.sum()))
+
+
+def test_errors_name_the_problem(inputs, tmp_path):
+    frag = SHADERS / "projective_water.frag"
+    head = "#version 330 core\nin vec3 position;\n"
+
+    def vert(body: str, name="v.vert"):
+        (tmp_path / name).write_text(head + body)
+        return UserVertex.from_file(tmp_path / name, (4, 4))
+
+    # a fragment input the vertex shader does not write (GL would not link the pair)
+    v = vert(
+        "uniform mat4 viewProjection;\nout vec4 vProj;\n"
+        "void main() { vProj = vec4(position, 1.0); gl_Position = viewProjection * vProj; }"
+    )
+    with pytest.raises(
+        ValueError, match="reads `in vUv0`, which the vertex shader v.vert does not write"
+    ):
+        UserShader.from_file(frag, vertex=v).render(inputs)
+    # a uniform nothing binds: the engine names are listed
+    v = vert(
+        "uniform mat4 myCamera;\nvoid main() { gl_Position = myCamera * vec4(position, 1.0); }"
+    )
+    with pytest.raises(ValueError, match="myCamera.*g_WorldViewProjectionMatrix"):
+        v.shader.run(dr.llvm.ad, inputs, v.grid(inputs), {})
+    # a recognised name declared with the wrong type
+    v = vert(
+        "uniform vec2 cameraPosition;\nout vec2 c;\n"
+        "void main() { c = cameraPosition; gl_Position = vec4(position, 1.0); }"
+    )
+    with pytest.raises(ValueError, match="cameraPosition is the cameraPosition.*vec2"):
+        v.shader.run(dr.llvm.ad, inputs, v.grid(inputs), {})
+    # a pragma that is not a binding, a binding to nothing known, a shader that does not compile
+    with pytest.raises(ValueError, match="bind NAME MEANING"):
+        vert("// @study constant A 0 1\nvoid main() { gl_Position = vec4(position, 1.0); }")
+    with pytest.raises(ValueError, match="names no meaning"):
+        vert(
+            "// @study bind position somewhere\nvoid main() { gl_Position = vec4(position, 1.0); }"
+        )
+    with pytest.raises(ValueError, match="glslangValidator failed on the vertex shader"):
+        vert("void main() { gl_Position = undeclared; }")
+    with pytest.raises(ValueError, match="fit.vertex_grid"):
+        UserVertex(v.shader, (0, 4))
+    # a binding of the shader's own name makes it bind
+    v = vert(
+        "// @study bind camera viewProjection\nuniform mat4 camera;\n"
+        "void main() { gl_Position = camera * vec4(position, 1.0); }"
+    )
+    clip, _ = v.shader.run(dr.llvm.ad, inputs, v.grid(inputs), {})
+    want = np.c_[v.grid(inputs).position, np.ones(25)] @ inputs.view_proj.T.astype(np.float64)
+    assert np.abs(clip - want).max() < 1e-4
+
+
+def test_experiment_keys(tmp_path):
+    from study import load_experiment
+    from study.config.errors import ExperimentError
+
+    frag = tmp_path / "w.frag"
+    shutil.copy(REPO / "experiments" / "shaders" / "my_water.frag", frag)
+    with pytest.raises(ExperimentError, match='"auto": no vertex shader w.vert'):
+        load_experiment(MY_WATER, [f'fit.shader="{frag}"', 'fit.vertex="auto"'])
+    shutil.copy(SHADERS / "urho_water.vert", tmp_path / "w.vert")
+    exp = load_experiment(MY_WATER, [f'fit.shader="{frag}"', 'fit.vertex="auto"',
+                                     "fit.vertex_grid=[8, 6]"])  # fmt: skip
+    assert exp["fit.vertex"] == str(tmp_path / "w.vert") and exp["fit.vertex_grid"] == [8, 6]
+    with pytest.raises(ExperimentError, match="fit.vertex is the vertex shader of your own"):
+        load_experiment(MY_WATER, ['fit.shader="water_refraction"', 'fit.vertex="w.vert"'])
+    with pytest.raises(ExperimentError, match="fit.vertex: no file"):
+        load_experiment(MY_WATER, [f'fit.vertex="{tmp_path / "none.vert"}"'])
+
+
+@pytest.mark.slow
+def test_study_calibrate_with_the_users_vertex_shader(tmp_path, monkeypatch):
+    """``study calibrate`` of the worked example's fragment shader after a vertex shader in
+    Urho3D's names (``fit.vertex``) on the tiny pool: it fits, its statuses are the
+    calibration's, the written pair runs on llvmpipe like the executor, and the HLSL round trip
+    (not built for a user's vertex shader) is reported as not run."""
+    from study.cli import main
+
+    monkeypatch.setenv("STUDY_CACHE", str(tmp_path / "cache"))
+    out = tmp_path / "c"
+    args = sets(TINY) + sets([f'fit.vertex="{SHADERS / "urho_water.vert"}"',
+                             "fit.vertex_grid=[16, 16]"])  # fmt: skip
+    assert main(["calibrate", str(MY_WATER), "--out", str(out)] + args) == 0
+    res = json.loads((out / "constants.json").read_text())
+    assert res["error"]["rmse"]["fitted"] < res["error"]["rmse"]["default"], res["error"]
+    assert {p["status"] for p in res["parameters"].values()} <= {"fitted", "bound", "frozen"}
+    assert any(p["status"] == "fitted" for p in res["parameters"].values())
+    if res["gl_check"]["ran"]:
+        assert res["gl_check"]["passed"], res["gl_check"]
+    assert (out / "shaders" / "core" / "urho_water.vert").is_file()
+    hlsl = res["engine_targets"].get("hlsl", {}).get("llvmpipe")
+    if hlsl is not None:
+        assert hlsl["ran"] is False and "vertex shader" in hlsl["why"], hlsl
