@@ -265,13 +265,10 @@ def _pareto(path: Path, folder: Path) -> Path:
 
 
 def sha256(path: Path) -> str:
-    import hashlib
+    """SHA-256 of a file's contents (``study.config.files.digest``)."""
+    from study.config.files import digest
 
-    h = hashlib.sha256()
-    with open(path, "rb") as f:
-        for block in iter(lambda: f.read(1 << 20), b""):
-            h.update(block)
-    return h.hexdigest()
+    return digest(str(path))
 
 
 def _rel(path: Path) -> str:
