@@ -22,6 +22,7 @@ import html
 import json
 import re
 import string
+import tempfile
 from pathlib import Path
 
 import numpy as np
@@ -31,6 +32,7 @@ from shaders_port.inputs import GLSL_NAMES, normal_matrix, perspective_view_proj
 from shaders_port.variants import get_variant
 
 from ..._io import read_exr
+from ..shaders import export_user_shader, user_shader_of
 from ..targets import target_file
 from ..textures import with_exported_textures
 
@@ -96,6 +98,25 @@ def spec_defines(frag: str, start: dict) -> str:
     return "".join(lines)
 
 
+def with_spec_defines(frag: str, start: dict) -> str:
+    """``frag`` with the :func:`spec_defines` of ``start`` after its ``#version`` line."""
+    head, sep, rest = frag.partition("\n")
+    return head + sep + spec_defines(frag, start) + rest
+
+
+def _at_start(out: Path, frag: str, start: dict, stem: str) -> str:
+    """The GLSL ES fragment shader of a user's shader calibrated in ``out`` at its start values
+    ``start``: exported again (SPIRV-Cross writes a user's constants as literals, no
+    specialization constants), or ``frag`` when it has specialization constants."""
+    if _SPEC.search(frag):
+        return with_spec_defines(frag, start)
+    shader = user_shader_of(out / "constants.json")
+    values = {k: tuple(v) if isinstance(v, list) else v for k, v in start.items()}
+    with tempfile.TemporaryDirectory(prefix="viewer_start_") as tmp:
+        export_user_shader(shader, values, Path(tmp), targets=("gles300",))
+        return (Path(tmp) / target_file("gles300", stem, "frag")).read_text("utf-8")
+
+
 def tied_names(frag: str, bindings: dict | None = None) -> list[str]:
     """The screen-space inputs (``SCREEN_SPACE``) the fragment shader text ``frag`` reads, by
     their own names or through ``bindings`` (the shader's name -> the study's input)."""
@@ -103,10 +124,11 @@ def tied_names(frag: str, bindings: dict | None = None) -> list[str]:
     return [n for n in SCREEN_SPACE if re.search(rf"\b{n}\b", frag) or n in bound]
 
 
-def viewer_data(inputs: ShaderInputs, vert: str, frag: str, start: dict, images: dict,
+def viewer_data(inputs: ShaderInputs, vert: str, frag: str, frag_default: str, images: dict,
                 camera: dict, animation: dict, bindings: dict | None = None) -> dict:  # fmt: skip
     """The object ``data.js`` assigns. ``inputs``: as the exported shader runs them (float32);
-    ``vert`` / ``frag``: GLSL ES 3.00 text; ``start``: the start constants (GLSL names);
+    ``vert`` / ``frag`` / ``frag_default``: GLSL ES 3.00 text, the last with the start
+    constants;
     ``images``: name -> (H, W, 3) linear RGB in image order (row 0 at the top); ``camera``:
     position, target, fov_y (degrees), near, far, orbit (bool), pitch_deg; ``animation``:
     velocities (4, 2) texture units per second; ``bindings``: a user's shader's sampler and
@@ -127,7 +149,7 @@ def viewer_data(inputs: ShaderInputs, vert: str, frag: str, start: dict, images:
     return {
         "width": int(i.width),
         "height": int(i.height),
-        "shaders": {"vert": vert, "frag": frag, "default_defines": spec_defines(frag, start)},
+        "shaders": {"vert": vert, "frag": frag, "frag_default": frag_default},
         "inputs": {
             "quad": [float(v) for row in quad for v in row],
             "normal_tile": float(i.normal_tile),
@@ -160,7 +182,7 @@ def write_viewer(folder: Path, data: dict, page: dict) -> Path:
     text = json.dumps(data, separators=(",", ":"), allow_nan=False)
     (folder / "data.js").write_text(f"window.WATER_VIEWER_DATA = {text};\n", encoding="utf-8")
     (folder / "viewer.js").write_text((TEMPLATES / "viewer.js").read_text("utf-8"), "utf-8")
-    fields = {k: v if k == "options" else html.escape(str(v)) for k, v in page.items()}
+    fields = {k: v if k == "options" else html.escape(str(v), quote=False) for k, v in page.items()}
     page_text = string.Template((TEMPLATES / "page.html").read_text("utf-8")).substitute(fields)
     (folder / "index.html").write_text(page_text, encoding="utf-8")
     return folder / "index.html"
@@ -240,23 +262,25 @@ def calibration_viewer(out: Path, exp, inputs: ShaderInputs) -> Path:
     images = {k: read_exr(out / f"{k}.exr")[0] for k in ("reference", "default", "fitted")}
     start = read_exr(out / "default.exr")[1].get("constants", {})
     start = {GLSL_NAMES.get(k, k): v for k, v in start.items()}
+    frag_default = _at_start(out, frag, start, stem) if user else with_spec_defines(frag, start)
     bindings = summary.get("declaration", {}).get("bindings", {}) if user else {}
     tied = tied_names(frag, bindings)
     camera = _camera(exp, inputs, orbit=not user and not tied)
     vel = np.asarray(exp.animation.velocities, np.float64)
-    data = viewer_data(inputs, vert, frag, start, images, camera,
+    data = viewer_data(inputs, vert, frag, frag_default, images, camera,
                        {"velocities": vel.tolist()}, bindings)  # fmt: skip
     err = summary["error"]
-    options = [("live_fitted", "live: fitted shader (WebGL 2)"),
-               ("live_default", "live: original constants (WebGL 2)"),
-               ("reference", "reference (path traced)"),
-               ("default", f"port, original constants (FLIP {err['flip']['default']:.4f})"),
-               ("fitted", f"port, fitted constants (FLIP {err['flip']['fitted']:.4f})")]  # fmt: skip
+    flip = err["flip"]
+    options = [
+        ("live_fitted", "live: fitted shader (WebGL 2)"),
+        ("live_default", "live: original constants (WebGL 2)"),
+        ("reference", "reference (path traced)"),
+        ("default", f"port, original constants (FLIP {flip['default']:.4f})"),
+        ("fitted", f"port, fitted constants (FLIP {flip['fitted']:.4f})"),
+    ]
     page = {
         "title": f"{summary['experiment']}: {summary['shader']}, calibrated",
-        "options": "".join(
-            f'<option value="{v}">{html.escape(t)}</option>' for v, t in options
-        ),
+        "options": "".join(f'<option value="{v}">{html.escape(t)}</option>' for v, t in options),
         "flip_default": f"{err['flip']['default']:.4f}",
         "flip_fitted": f"{err['flip']['fitted']:.4f}",
         "rmse_default": f"{err['rmse']['default']:.4f}",

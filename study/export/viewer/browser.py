@@ -1,7 +1,9 @@
 """A headless Chromium driven through the DevTools protocol over a pipe
-(``--remote-debugging-pipe``: JSON messages, each ended by a NUL byte, on file descriptors 3 and
-4 of the browser), enough to load a page and evaluate JavaScript in it. No third-party package:
-the standard library's ``subprocess`` and ``json``.
+(``--remote-debugging-pipe``: JSON messages, each ended by a NUL byte, on file descriptors 3
+and 4 of the browser), enough to load a page and evaluate JavaScript in it (no third-party
+package: the standard library's ``subprocess`` and ``json``); and the viewer run in it: the
+page opened from ``file://`` as a user opens it, its errors, and the shader's float framebuffer
+read back.
 
 The browser is Debian's ``chromium-headless-shell`` (``scripts/setup.sh`` installs it). The flags
 ``--use-angle=swiftshader --enable-unsafe-swiftshader`` give WebGL 2 on the CPU (SwiftShader),
@@ -10,6 +12,7 @@ with float textures, float render targets and exact read-back, on a machine with
 
 from __future__ import annotations
 
+import base64
 import json
 import os
 import select
@@ -18,6 +21,8 @@ import subprocess
 import tempfile
 import time
 from pathlib import Path
+
+import numpy as np
 
 BROWSERS = ("chromium-headless-shell", "chromium", "google-chrome")
 # WebGL 2 on SwiftShader (software): no GPU needed, the same results on every machine
@@ -61,12 +66,16 @@ class Chromium:
         to_browser_r, self._w = os.pipe()
         self._r, from_browser_w = os.pipe()
 
-        def _fds():  # the browser reads commands on fd 3 and writes replies on fd 4
-            a, b = os.dup(to_browser_r), os.dup(from_browser_w)  # above 3 and 4 whatever they are
-            os.dup2(a, 3)
-            os.dup2(b, 4)
-
+        # the browser reads commands on fd 3 and writes replies on fd 4: a shell moves the pipes
+        # there (bash: dash takes no fd number over 9; no preexec_fn: no fork of this possibly
+        # multithreaded process)
+        r, w = to_browser_r, from_browser_w
+        move = f'exec 3<&{r} 4>&{w} {r}<&- {w}>&- "$@"'
         args = [
+            "/bin/bash",
+            "-c",
+            move,
+            "sh",
             exe,
             "--headless",
             "--remote-debugging-pipe",
@@ -86,8 +95,7 @@ class Chromium:
                 stdin=subprocess.DEVNULL,
                 stdout=subprocess.DEVNULL,
                 stderr=subprocess.PIPE,
-                preexec_fn=_fds,
-                pass_fds=(3, 4),
+                pass_fds=(r, w),
             )
         except OSError as exc:
             raise BrowserError(f"could not start {exe}: {exc}") from exc
@@ -127,7 +135,9 @@ class Chromium:
             ready, _, _ = select.select([self._r], [], [], min(left, 1.0))
             if not ready:
                 if self.proc.poll() is not None:
-                    raise BrowserError(f"the browser exited ({self.proc.returncode}){self._stderr()}")
+                    raise BrowserError(
+                        f"the browser exited ({self.proc.returncode}){self._stderr()}"
+                    )
                 continue
             chunk = os.read(self._r, 1 << 20)
             if not chunk:
@@ -146,11 +156,12 @@ class Chromium:
     def open(self, url: str, width: int = 800, height: int = 600) -> None:
         """Open ``url`` in a new tab of ``width`` x ``height`` CSS pixels and wait for its load
         event."""
-        target = self.send("Target.createTarget", {"url": "about:blank", "width": width,
-                                                    "height": height})["targetId"]
-        self.session = self.send(
-            "Target.attachToTarget", {"targetId": target, "flatten": True}
-        )["sessionId"]
+        target = self.send(
+            "Target.createTarget", {"url": "about:blank", "width": width, "height": height}
+        )["targetId"]
+        self.session = self.send("Target.attachToTarget", {"targetId": target, "flatten": True})[
+            "sessionId"
+        ]
         self.send("Page.enable", session=self.session)
         self.send("Page.navigate", {"url": url}, session=self.session)
         deadline = time.monotonic() + self.timeout
@@ -202,3 +213,42 @@ class Chromium:
 
     def __exit__(self, *exc) -> None:
         self.close()
+
+
+def open_viewer(browser: Chromium, index_html: Path, *, expect_errors: bool = False) -> list[str]:
+    """Open ``index_html`` from the file system (``file://``) and wait until the page has set
+    itself up. Returns the errors the page reports (``waterViewer.errors``, shown in its text);
+    BrowserError when it reports any and ``expect_errors`` is False."""
+    browser.open(Path(index_html).resolve().as_uri())
+    state = browser.evaluate(
+        "JSON.stringify(window.waterViewer ? {ready: waterViewer.ready, errors: "
+        "waterViewer.errors} : {ready: false, errors: ['viewer.js did not run']})"
+    )
+    state = json.loads(state)
+    if state["errors"] and not expect_errors:
+        raise BrowserError("the viewer reports: " + " | ".join(state["errors"]))
+    return state["errors"]
+
+
+def render_float(browser: Chromium, **opts) -> tuple[np.ndarray, np.ndarray]:
+    """One frame of the opened viewer's shader (``waterViewer.renderFloat(opts)``: ``time``
+    seconds, ``constants`` 'fitted' | 'default', ``yaw`` / ``pitch`` degrees, ``distance``
+    factor; none: the study's camera at time 0): (rgba (H, W, 4) float32 as the shader wrote it,
+    mask (H, W) bool, the water's coverage), row 0 at the top as the port's images."""
+    r = browser.evaluate(f"waterViewer.renderFloat({json.dumps(opts)})")
+    w, h = r["width"], r["height"]
+    rgba = np.frombuffer(base64.b64decode(r["rgba"]), "<f4").reshape(h, w, 4)[::-1].copy()
+    mask = np.frombuffer(base64.b64decode(r["mask"]), "<f4").reshape(h, w, 4)[::-1, :, 0] > 0.5
+    return rgba, mask
+
+
+class BrowserRenderer:
+    """The renderer ``shaders_port.gl.compare.compare_port_gl`` takes, drawing with the viewer
+    open in ``browser`` (its own constants: ``which`` 'fitted' or 'default'; the constants
+    passed to ``render`` are those the port renders with)."""
+
+    def __init__(self, browser: Chromium, which: str = "fitted", time: float = 0.0):
+        self.browser, self.which, self.time = browser, which, time
+
+    def render(self, constants=None):
+        return render_float(self.browser, constants=self.which, time=self.time)

@@ -398,11 +398,9 @@ void main() {
     for (const ext of ["EXT_color_buffer_float", "OES_texture_float_linear"]) {
       if (!gl.getExtension(ext)) throw new Error(`WebGL 2 here lacks ${ext}, which the float data needs`);
     }
-    const frag = D.shaders.frag;
-    const withDefaults = frag.replace(/^(#version[^\n]*\n)/, "$1" + D.shaders.default_defines);
     programs = {
-      fitted: link(D.shaders.vert, frag, "the fitted shader"),
-      default: link(D.shaders.vert, withDefaults, "the shader at its original constants"),
+      fitted: link(D.shaders.vert, D.shaders.frag, "the fitted shader"),
+      default: link(D.shaders.vert, D.shaders.frag_default, "the shader at its original constants"),
       mask: link(D.shaders.vert, MASK_FRAG, "the water's coverage"),
     };
     showProg = link(SHOW_VERT, SHOW_FRAG, "the display pass");
