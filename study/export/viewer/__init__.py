@@ -28,7 +28,7 @@ from pathlib import Path
 import numpy as np
 
 from shaders_port import ShaderInputs
-from shaders_port.inputs import GLSL_NAMES, normal_matrix, perspective_view_proj
+from shaders_port.inputs import normal_matrix, perspective_view_proj
 from shaders_port.variants import get_variant
 
 from ..._io import read_exr
@@ -237,6 +237,35 @@ def _camera_note(camera: dict, tied: list[str], user: bool) -> str:
     return "fixed at the study's camera: the experiment's camera is not a plain look-at."
 
 
+def start_constants(summary: dict) -> dict:
+    """The start constants of the calibration ``summary`` (``constants.json``): its fitted
+    ``constants`` (GLSL names) with each scalar of ``parameters`` (``'waterColor[1]'``, ...) at
+    its ``default``, the value the fit started from."""
+    start = {k: list(v) if isinstance(v, list) else v for k, v in summary["constants"].items()}
+    for name, p in summary.get("parameters", {}).items():
+        base, _, index = name.partition("[")
+        if "default" not in p or base not in start:
+            continue
+        if index:
+            start[base][int(index.rstrip("]"))] = p["default"]
+        else:
+            start[base] = p["default"]
+    return start
+
+
+def _images(out: Path, summary: dict) -> dict:
+    """The run's images in ``out``: ``reference``, ``default`` and ``fitted`` (an animated
+    calibration: ``fitted_frame0.exr`` and frame 0's reference where the cache still holds it),
+    (H, W, 3) float32; those missing left out."""
+    files = {k: out / f"{k}.exr" for k in ("reference", "default", "fitted")}
+    if not files["fitted"].is_file():
+        files["fitted"] = out / "fitted_frame0.exr"
+    refs = summary.get("animation", {}).get("references") or []
+    if not files["reference"].is_file() and refs:
+        files["reference"] = Path(refs[0]["path"])
+    return {k: read_exr(f)[0] for k, f in files.items() if f.is_file()}
+
+
 def calibration_viewer(out: Path, exp, inputs: ShaderInputs) -> Path:
     """``out/viewer/`` of the calibration in ``out`` (its ``constants.json``, ``shaders/``
     export and ``reference.exr`` / ``default.exr`` / ``fitted.exr``) of experiment ``exp``
@@ -259,9 +288,8 @@ def calibration_viewer(out: Path, exp, inputs: ShaderInputs) -> Path:
     inputs = with_exported_textures(inputs, shaders)
     if not user:
         inputs = get_variant(summary["shader"]).prepare_inputs(inputs)
-    images = {k: read_exr(out / f"{k}.exr")[0] for k in ("reference", "default", "fitted")}
-    start = read_exr(out / "default.exr")[1].get("constants", {})
-    start = {GLSL_NAMES.get(k, k): v for k, v in start.items()}
+    images = _images(out, summary)
+    start = start_constants(summary)
     frag_default = _at_start(out, frag, start, stem) if user else with_spec_defines(frag, start)
     bindings = summary.get("declaration", {}).get("bindings", {}) if user else {}
     tied = tied_names(frag, bindings)
@@ -278,6 +306,7 @@ def calibration_viewer(out: Path, exp, inputs: ShaderInputs) -> Path:
         ("default", f"port, original constants (FLIP {flip['default']:.4f})"),
         ("fitted", f"port, fitted constants (FLIP {flip['fitted']:.4f})"),
     ]
+    options = [(v, t) for v, t in options if v.startswith("live_") or v in images]
     page = {
         "title": f"{summary['experiment']}: {summary['shader']}, calibrated",
         "options": "".join(f'<option value="{v}">{html.escape(t)}</option>' for v, t in options),

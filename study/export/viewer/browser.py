@@ -13,6 +13,7 @@ with float textures, float render targets and exact read-back, on a machine with
 from __future__ import annotations
 
 import base64
+import fcntl
 import json
 import os
 import select
@@ -69,7 +70,10 @@ class Chromium:
         # the browser reads commands on fd 3 and writes replies on fd 4: a shell moves the pipes
         # there (bash: dash takes no fd number over 9; no preexec_fn: no fork of this possibly
         # multithreaded process)
-        r, w = to_browser_r, from_browser_w
+        # (both ends first moved to 10 and above, clear of 3 and 4)
+        r, w = (fcntl.fcntl(fd, fcntl.F_DUPFD, 10) for fd in (to_browser_r, from_browser_w))
+        for fd in (to_browser_r, from_browser_w):
+            os.close(fd)
         move = f'exec 3<&{r} 4>&{w} {r}<&- {w}>&- "$@"'
         args = [
             "/bin/bash",
@@ -100,8 +104,8 @@ class Chromium:
         except OSError as exc:
             raise BrowserError(f"could not start {exe}: {exc}") from exc
         finally:
-            os.close(to_browser_r)
-            os.close(from_browser_w)
+            os.close(r)
+            os.close(w)
         self._next_id, self._buf, self.session = 0, b"", None
         self.events: list[dict] = []
 

@@ -361,9 +361,9 @@ void main() {
   // what each view shows: a live render (its program) or one of the run's images
   function source(view, cam) {
     if (view === "live_fitted" || view === "live_default") {
-      return { tex: target.tex, masked: 1, back: cam.study ? images.reference : black, live: view.slice(5) };
+      return { tex: target.tex, masked: 1, back: cam.study && images.reference ? images.reference : black, live: view.slice(5) };
     }
-    return { tex: images[view], masked: 0, back: black };
+    return { tex: images[view] || black, masked: 0, back: black };
   }
 
   function frame() {
@@ -471,6 +471,7 @@ void main() {
   function controls() {
     const $ = (id) => document.getElementById(id);
     const redraw = () => { try { frame(); } catch (e) { fail(e.message); stop(); } };
+    if (!D.images.reference) state.right = "live_default";
     for (const side of ["left", "right"]) {
       $(side).value = state[side];
       $(side).addEventListener("change", () => { state[side] = $(side).value; redraw(); });
