@@ -35,6 +35,7 @@ from ..._io import read_exr
 from ..shaders import export_user_shader, user_shader_of
 from ..targets import target_file
 from ..textures import with_exported_textures
+from ...scene.reference import water_mask
 
 TEMPLATES = Path(__file__).parent
 # uniforms and samplers rendered for the study's camera: a shader that reads one is tied to it
@@ -129,7 +130,8 @@ def viewer_data(inputs: ShaderInputs, vert: str, frag: str, frag_default: str, i
     """The object ``data.js`` assigns. ``inputs``: as the exported shader runs them (float32);
     ``vert`` / ``frag`` / ``frag_default``: GLSL ES 3.00 text, the last with the start
     constants;
-    ``images``: name -> (H, W, 3) linear RGB in image order (row 0 at the top); ``camera``:
+    ``images``: name -> (H, W, 3) linear RGB in image order (row 0 at the top), ``scored``
+    (H, W) 1 where the reference sees the water at the study's camera; ``camera``:
     position, target, fov_y (degrees), near, far, orbit (bool), pitch_deg; ``animation``:
     velocities (4, 2) texture units per second; ``bindings``: a user's shader's sampler and
     uniform names -> the study's inputs."""
@@ -289,6 +291,8 @@ def calibration_viewer(out: Path, exp, inputs: ShaderInputs) -> Path:
     if not user:
         inputs = get_variant(summary["shader"]).prepare_inputs(inputs)
     images = _images(out, summary)
+    # where the reference sees the water (not a wall in front of it): the pixels the run scored
+    images["scored"] = water_mask(exp, inputs.width, inputs.height).astype(np.float32)
     start = start_constants(summary)
     frag_default = _at_start(out, frag, start, stem) if user else with_spec_defines(frag, start)
     bindings = summary.get("declaration", {}).get("bindings", {}) if user else {}
@@ -307,6 +311,7 @@ def calibration_viewer(out: Path, exp, inputs: ShaderInputs) -> Path:
         ("fitted", f"port, fitted constants (FLIP {flip['fitted']:.4f})"),
     ]
     options = [(v, t) for v, t in options if v.startswith("live_") or v in images]
+    images.pop("scored")
     page = {
         "title": f"{summary['experiment']}: {summary['shader']}, calibrated",
         "options": "".join(f'<option value="{v}">{html.escape(t)}</option>' for v, t in options),

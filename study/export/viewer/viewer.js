@@ -183,12 +183,12 @@
   const SHOW_VERT = "#version 300 es\nout vec2 uv;\nvoid main() {\n" +
     "  vec2 p = vec2(float((gl_VertexID << 1) & 2), float(gl_VertexID & 2));\n" +
     "  uv = p; gl_Position = vec4(2.0 * p - 1.0, 0.0, 1.0);\n}\n";
-  // two images side by side at a wipe position, each over a background where its mask is 0,
-  // shown sRGB-encoded (linear values clipped to [0, 1])
+  // two images side by side at a wipe position, each over a background where the product of
+  // its two masks is 0, shown sRGB-encoded (linear values clipped to [0, 1])
   const SHOW_FRAG = `#version 300 es
 precision highp float;
-uniform sampler2D left, right, leftBack, rightBack, mask;
-uniform float split, leftMasked, rightMasked;
+uniform sampler2D left, right, leftBack, rightBack, leftMaskA, leftMaskB, rightMaskA, rightMaskB;
+uniform float split;
 in vec2 uv;
 out vec4 color;
 vec3 srgb(vec3 x) {
@@ -199,7 +199,8 @@ void main() {
   bool isLeft = uv.x < split;
   vec3 c = isLeft ? texture(left, uv).rgb : texture(right, uv).rgb;
   vec3 b = isLeft ? texture(leftBack, uv).rgb : texture(rightBack, uv).rgb;
-  float m = (isLeft ? leftMasked : rightMasked) > 0.5 ? texture(mask, uv).r : 1.0;
+  float m = isLeft ? texture(leftMaskA, uv).r * texture(leftMaskB, uv).r
+                   : texture(rightMaskA, uv).r * texture(rightMaskB, uv).r;
   vec3 rgb = mix(b, c, m);
   if (abs(uv.x - split) < 0.004 && split > 0.0 && split < 1.0) rgb = vec3(1.0, 0.85, 0.2);
   color = vec4(srgb(rgb), 1.0);
@@ -209,7 +210,7 @@ void main() {
     time: 0, playing: false, speed: 1, yaw: 0, pitch: null, distance: 1,
     left: "live_fitted", right: "reference", split: 0.5, last: null,
   };
-  let programs, vao, quad, quadBuffer, textures, target, maskTarget, showProg, images, black;
+  let programs, vao, quad, quadBuffer, textures, target, maskTarget, showProg, images, black, white;
 
   function uniformValues(cam, time) {
     const I = D.inputs, waves = [];
@@ -358,12 +359,17 @@ void main() {
     return px;
   }
 
-  // what each view shows: a live render (its program) or one of the run's images
+  // what each view shows: a live render (its program) or one of the run's images; at the
+  // study's camera, water the reference sees (not behind a wall) over the reference
   function source(view, cam) {
+    const ref = images.reference || black;
     if (view === "live_fitted" || view === "live_default") {
-      return { tex: target.tex, masked: 1, back: cam.study && images.reference ? images.reference : black, live: view.slice(5) };
+      const study = cam.study;
+      return { tex: target.tex, maskA: maskTarget.tex, maskB: study ? images.scored : white,
+               back: study ? ref : black, live: view.slice(5) };
     }
-    return { tex: images[view] || black, masked: 0, back: black };
+    if (view === "reference") return { tex: ref, maskA: white, maskB: white, back: black };
+    return { tex: images[view] || black, maskA: images.scored, maskB: white, back: ref };
   }
 
   function frame() {
@@ -380,10 +386,10 @@ void main() {
       gl.uniform1i(gl.getUniformLocation(showProg, name), unit);
     };
     bind("left", 0, L.tex); bind("right", 1, R.tex);
-    bind("leftBack", 2, L.back); bind("rightBack", 3, R.back); bind("mask", 4, maskTarget.tex);
+    bind("leftBack", 2, L.back); bind("rightBack", 3, R.back);
+    bind("leftMaskA", 4, L.maskA); bind("leftMaskB", 5, L.maskB);
+    bind("rightMaskA", 6, R.maskA); bind("rightMaskB", 7, R.maskB);
     gl.uniform1f(gl.getUniformLocation(showProg, "split"), state.split);
-    gl.uniform1f(gl.getUniformLocation(showProg, "leftMasked"), L.masked);
-    gl.uniform1f(gl.getUniformLocation(showProg, "rightMasked"), R.masked);
     gl.bindVertexArray(null);
     gl.drawArrays(gl.TRIANGLES, 0, 3);
     checkError("showing the frame");
@@ -410,7 +416,9 @@ void main() {
     }
     images = {};
     for (const [name, t] of Object.entries(D.images)) images[name] = texture2d(t, "nearest", false);
-    black = texture2d({ width: 1, height: 1, channels: 3, data: floatsToB64(new Float32Array(3)) }, "nearest", false);
+    const one = (v) => texture2d({ width: 1, height: 1, channels: 3, data: floatsToB64(new Float32Array([v, v, v])) }, "nearest", false);
+    black = one(0);
+    white = one(1);
     vao = gl.createVertexArray();
     gl.bindVertexArray(vao);
     quad = new Float32Array(D.inputs.quad);
@@ -465,6 +473,8 @@ void main() {
     return out;
   };
   api.state = state;
+  api.width = W;
+  api.height = H;
   api.redraw = () => frame();
 
   // ---- the controls --------------------------------------------------------------------------
