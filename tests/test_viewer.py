@@ -25,8 +25,9 @@ from study._backend import drjit_backend
 from study.cli import main
 from study.commands.steps import prepare
 from study.export.gl_check import GL_MEAN, GL_P999
-from study.export.shaders import load_constants_json, user_shader_of
+from study.export.shaders import export_shaders, load_constants_json, user_shader_of
 from study.export.textures import with_exported_textures
+from study.export.viewer import spec_defines, tied_names, with_spec_defines
 from study.export.viewer.browser import BrowserRenderer, Chromium, open_viewer, render_float
 from study.scene.baseline_inputs import inputs_for_shader
 from study.scene.shader_inputs import load_or_build_shader_inputs
@@ -216,3 +217,39 @@ def test_study_viewer_writes_it_again_and_refuses_another_experiment(runs, capsy
         assert main(["viewer", str(out), str(DEFAULT)] + sets(other)) == 2
     err = capsys.readouterr().err
     assert "is not the experiment" in err and "same --set options" in err
+
+
+@pytest.mark.slow  # a calibration per shader (~15 s each)
+@pytest.mark.parametrize("shader", ["water_reflection", "water_baseline"])
+def test_the_reflection_and_baseline_shaders_in_chromium(shader, tmp_path, browser):
+    """The raycast reflection (top-down inputs from below: orbits) and the baseline (screen-space
+    buffers of the study's camera: stays there) against the port, as the refraction shader."""
+    ov = replaced(TINY, "fit.max_steps=2", f'fit.shader="{shader}"')
+    out, inputs = _calibrate(tmp_path, shader, ov)
+    assert open_viewer(browser, out / "viewer" / "index.html") == []
+    fitted = load_constants_json(out / "constants.json")
+    res = compare_port_gl(inputs, fitted, shader, renderer=BrowserRenderer(browser))
+    assert _passes(res), {k: res[k] for k in ("mean_abs", "p999", "max_abs", "unexplained")}
+    assert _data(out)["camera"]["orbit"] is (shader == "water_reflection")
+
+
+def test_what_ties_a_shader_to_the_camera_and_the_start_constants(tmp_path):
+    """From the exported GLSL ES text: the screen-space inputs a shader reads, and the
+    ``#define`` lines that set its specialization constants (GLSL ES takes no int for a float)."""
+    export_shaders(Constants(), tmp_path, ["water_refraction", "water_baseline"], ("gles300",))
+    refr = (tmp_path / "gles300" / "water_refraction.frag").read_text()
+    base = (tmp_path / "gles300" / "water_baseline.frag").read_text()
+    assert tied_names(refr) == []
+    assert {"sceneColor", "sceneDepth"} <= set(tied_names(base))
+    assert tied_names(
+        "uniform sampler2D buf; void main() { texture(buf, p); }", {"buf": "sceneColor"}
+    ) == ["sceneColor"]
+    start = {"ATTENUATION_DISTANCE": 7, "LOOP_CAP": 12, "waterColor": [0.1, 0.2, 0.3, 1.0]}
+    lines = spec_defines(refr, start).splitlines()
+    values = dict(line.split()[1:] for line in lines)
+    ids = dict(re.findall(r"#define (SPIRV_CROSS_CONSTANT_ID_\d+) [^\n]*\n#endif\n"
+                          r"const \w+ (\w+) =", refr))  # fmt: skip
+    by_name = {ids[k]: v for k, v in values.items()}
+    colour = {f"waterColor_{c}": v for c, v in zip("rgba", ("0.1", "0.2", "0.3", "1.0"))}
+    assert by_name == {"ATTENUATION_DISTANCE": "7.0", "LOOP_CAP": "12", **colour}
+    assert with_spec_defines(refr, start).startswith("#version 300 es\n" + lines[0])
