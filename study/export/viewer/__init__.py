@@ -268,6 +268,16 @@ def _images(out: Path, summary: dict) -> dict:
     return {k: read_exr(f)[0] for k, f in files.items() if f.is_file()}
 
 
+def _scene_error(summary: dict) -> tuple[str, dict]:
+    """(the scene the viewer shows, its ``{"rmse"|"flip": {"default", "fitted"}}``): a joint
+    calibration's first scene (its ``error`` is scene -> start / fitted -> metrics)."""
+    if "scenes" not in summary:
+        return summary["experiment"], summary["error"]
+    name = summary["scenes"][0]
+    e = summary["error"][name]
+    return name, {m: {k: e[k][m] for k in ("default", "fitted")} for m in ("rmse", "flip")}
+
+
 def calibration_viewer(out: Path, exp, inputs: ShaderInputs) -> Path:
     """``out/viewer/`` of the calibration in ``out`` (its ``constants.json``, ``shaders/``
     export and ``reference.exr`` / ``default.exr`` / ``fitted.exr``) of experiment ``exp``
@@ -301,7 +311,7 @@ def calibration_viewer(out: Path, exp, inputs: ShaderInputs) -> Path:
     vel = np.asarray(exp.animation.velocities, np.float64)
     data = viewer_data(inputs, vert, frag, frag_default, images, camera,
                        {"velocities": vel.tolist()}, bindings)  # fmt: skip
-    err = summary["error"]
+    name, err = _scene_error(summary)
     flip = err["flip"]
     options = [
         ("live_fitted", "live: fitted shader (WebGL 2)"),
@@ -313,7 +323,7 @@ def calibration_viewer(out: Path, exp, inputs: ShaderInputs) -> Path:
     options = [(v, t) for v, t in options if v.startswith("live_") or v in images]
     images.pop("scored")
     page = {
-        "title": f"{summary['experiment']}: {summary['shader']}, calibrated",
+        "title": f"{name}: {summary['shader']}, calibrated",
         "options": "".join(f'<option value="{v}">{html.escape(t)}</option>' for v, t in options),
         "flip_default": f"{err['flip']['default']:.4f}",
         "flip_fitted": f"{err['flip']['fitted']:.4f}",
@@ -325,7 +335,7 @@ def calibration_viewer(out: Path, exp, inputs: ShaderInputs) -> Path:
         "inputs": ", ".join(sorted(data["textures"])),
         "velocities": "; ".join(f"wave{k + 1} ({v[0]:g}, {v[1]:g})" for k, v in enumerate(vel)),
         "camera_note": _camera_note(camera, tied, user),
-        "provenance": f"Experiment {summary['experiment']}, {inputs.width}x{inputs.height} "
+        "provenance": f"Experiment {name}, {inputs.width}x{inputs.height} "
         f"pixels; written by study.export.viewer from {out.name}/.",
     }
     return write_viewer(out / "viewer", data, page)
