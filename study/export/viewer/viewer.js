@@ -210,7 +210,7 @@ void main() {
     time: 0, playing: false, speed: 1, yaw: 0, pitch: null, distance: 1,
     left: "live_fitted", right: "reference", split: 0.5, last: null,
   };
-  let programs, vao, quad, quadBuffer, textures, target, maskTarget, showProg, images, black, white;
+  let programs, vao, quad, quadBuffer, textures, targets, maskTarget, showProg, images, black, white;
 
   function uniformValues(cam, time) {
     const I = D.inputs, waves = [];
@@ -333,7 +333,7 @@ void main() {
     gl.bufferData(gl.ARRAY_BUFFER, quad, gl.DYNAMIC_DRAW);
     gl.drawArrays(gl.TRIANGLE_STRIP, 0, 4);
     // the shader where the stencil is set
-    gl.bindFramebuffer(gl.FRAMEBUFFER, target.fbo);
+    gl.bindFramebuffer(gl.FRAMEBUFFER, targets[which].fbo);
     gl.clear(gl.COLOR_BUFFER_BIT);
     gl.stencilFunc(gl.EQUAL, 1, 0xff);
     gl.stencilOp(gl.KEEP, gl.KEEP, gl.KEEP);
@@ -365,7 +365,7 @@ void main() {
     const ref = images.reference || black;
     if (view === "live_fitted" || view === "live_default") {
       const study = cam.study;
-      return { tex: target.tex, maskA: maskTarget.tex, maskB: study ? images.scored : white,
+      return { tex: targets[view.slice(5)].tex, maskA: maskTarget.tex, maskB: study ? images.scored : white,
                back: study ? ref : black, live: view.slice(5) };
     }
     if (view === "reference") return { tex: ref, maskA: white, maskB: white, back: black };
@@ -375,8 +375,9 @@ void main() {
   function frame() {
     const cam = camera();
     const L = source(state.left, cam), R = source(state.right, cam);
-    // one live render per frame: both sides live with different constants show the left's
-    if (L.live || R.live) drawWater(L.live || R.live, state.time, cam);
+    // each live side drawn once (the coverage is the same for both)
+    if (L.live) drawWater(L.live, state.time, cam);
+    if (R.live && R.live !== L.live) drawWater(R.live, state.time, cam);
     gl.bindFramebuffer(gl.FRAMEBUFFER, null);
     gl.viewport(0, 0, canvas.width, canvas.height);
     gl.useProgram(showProg);
@@ -434,7 +435,8 @@ void main() {
         }
       }
     }
-    target = floatTarget(W, H);
+    // one float target per live shader: both can be on screen at once
+    targets = { fitted: floatTarget(W, H), default: floatTarget(W, H) };
     maskTarget = floatTarget(W, H);
     checkError("setting up");
   }
@@ -449,8 +451,9 @@ void main() {
     state.pitch = opts.pitch === undefined ? null : opts.pitch;
     state.distance = opts.distance || 1;
     try {
-      drawWater(opts.constants || "fitted", opts.time || 0, camera());
-      return { width: W, height: H, rgba: floatsToB64(readFloats(target.fbo)), mask: floatsToB64(readFloats(maskTarget.fbo)) };
+      const which = opts.constants || "fitted";
+      drawWater(which, opts.time || 0, camera());
+      return { width: W, height: H, rgba: floatsToB64(readFloats(targets[which].fbo)), mask: floatsToB64(readFloats(maskTarget.fbo)) };
     } finally {
       [state.yaw, state.pitch, state.distance] = saved;
     }
@@ -461,7 +464,7 @@ void main() {
     const px = new Float32Array(4), out = [];
     const one = () => {
       drawWater("fitted", state.time, camera());
-      gl.bindFramebuffer(gl.FRAMEBUFFER, target.fbo);
+      gl.bindFramebuffer(gl.FRAMEBUFFER, targets.fitted.fbo);
       gl.readPixels(0, 0, 1, 1, gl.RGBA, gl.FLOAT, px);
     };
     one();
@@ -487,7 +490,11 @@ void main() {
       $(side).addEventListener("change", () => { state[side] = $(side).value; redraw(); });
     }
     $("split").addEventListener("input", () => { state.split = +$("split").value / 100; redraw(); });
-    $("time").addEventListener("input", () => { state.time = +$("time").value; redraw(); });
+    $("time").addEventListener("input", () => {
+      state.time = +$("time").value;
+      $("clock").textContent = state.time.toFixed(2) + " s";
+      redraw();
+    });
     $("speed").addEventListener("change", () => { state.speed = +$("speed").value; });
     $("play").addEventListener("click", () => { state.playing ? stop() : play(); });
     if (D.camera.orbit) {
