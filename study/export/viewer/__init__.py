@@ -321,7 +321,6 @@ def calibration_viewer(out: Path, exp, inputs: ShaderInputs) -> Path:
         ("fitted", f"port, fitted constants (FLIP {flip['fitted']:.4f})"),
     ]
     options = [(v, t) for v, t in options if v.startswith("live_") or v in images]
-    images.pop("scored")
     page = {
         "title": f"{name}: {summary['shader']}, calibrated",
         "options": "".join(f'<option value="{v}">{html.escape(t)}</option>' for v, t in options),
