@@ -1,11 +1,12 @@
 #!/usr/bin/env bash
 # Idempotent set-up: system packages (libLLVM for Dr.Jit, Mesa EGL/GL, glslang, SPIRV-Tools
-# and SPIRV-Cross for the engine targets)
+# and SPIRV-Cross for the engine targets, headless Chromium for the WebGL 2 viewer's tests)
 # and the virtual environment at .venv/ with the project installed.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
-SYSTEM_PACKAGES=(libllvm19 libegl1 libegl-mesa0 libgl1-mesa-dri glslang-tools spirv-tools spirv-cross spirv-headers)
+SYSTEM_PACKAGES=(libllvm19 libegl1 libegl-mesa0 libgl1-mesa-dri glslang-tools spirv-tools spirv-cross spirv-headers
+    chromium-headless-shell)
 missing=()
 for p in "${SYSTEM_PACKAGES[@]}"; do
     dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing+=("$p")

@@ -140,6 +140,7 @@ def build_parser() -> argparse.ArgumentParser:
     _add_stability(sub)
     _add_failures(sub)
     _add_export(sub)
+    _add_viewer(sub)
     return parser
 
 
@@ -240,6 +241,27 @@ def _add_export(sub) -> None:
     )
 
 
+def _add_viewer(sub) -> None:
+    p = sub.add_parser(
+        "viewer",
+        help="write OUT/viewer/, the calibrated shader live in WebGL 2 beside the reference "
+        "(calibrate writes it; this writes it again for an existing result)",
+    )
+    p.add_argument("out", help="output folder of a `study calibrate` run")
+    p.add_argument(
+        "experiment", help="the experiment TOML file the calibration ran (its shader inputs)"
+    )
+    p.add_argument(
+        "--set",
+        dest="overrides",
+        action="append",
+        default=[],
+        metavar="KEY=VALUE",
+        help="the calibration's --set options (repeatable)",
+    )
+    _backend_arg(p, None, "default: the calibration's")
+
+
 def _command_line(argv) -> str:
     """The command as a user would type it (``study ...``), for a report's "Reproduce" line."""
     import shlex
@@ -309,6 +331,8 @@ def main(argv=None) -> int:
             )
         elif args.command == "export":
             commands.run_export(args.constants, args.out, args.targets, args.shaders)
+        elif args.command == "viewer":
+            commands.run_viewer(args.out, args.experiment, args.overrides, args.variant)
     except (ExperimentError, BackendError, FileNotFoundError, ValueError) as exc:
         print(f"study {args.command}: error: {exc}", file=sys.stderr)
         return 2

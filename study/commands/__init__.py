@@ -10,6 +10,7 @@ from .export import run_export
 from .joint import run_generalise
 from .render import run_preview, run_render
 from .sweeps import run_failures, run_stability, run_tradeoff
+from .viewer import run_viewer
 
 __all__ = [
     "run_calibrate",
@@ -20,4 +21,5 @@ __all__ = [
     "run_render",
     "run_stability",
     "run_tradeoff",
+    "run_viewer",
 ]

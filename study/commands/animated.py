@@ -29,6 +29,7 @@ from ..fit.result import CalibrationResult
 from ..report.animation import animation_figures, write_animation_report
 from ..scene.frame_data import load_frames
 from .steps import export_calibration
+from .viewer import write_viewer
 
 
 def _score(frames, refs, inputs, backend, constants: dict) -> dict:
@@ -125,6 +126,7 @@ def run_calibrate_animated(exp, variant: str, out: Path, solver: str, cache=None
                       {"engine_targets": engine_targets, **extra}, more)  # fmt: skip
     write_json(out / "constants.json", summary)
     write_animation_report(out, summary)
+    write_viewer(out, exp, inputs[0])
     s = summary["animation"]["scores"]
     _log(
         f"calibrate: {len(frames)} frames, mean FLIP {s['start']['flip_mean']:.4f} -> "

@@ -25,6 +25,7 @@ from .steps import (
     prepare,
     write_result,
 )
+from .viewer import write_viewer
 
 
 def run_calibrate(experiment, out, overrides=None, variant=None, solver=None, cache=None) -> dict:
@@ -84,4 +85,6 @@ def run_calibrate(experiment, out, overrides=None, variant=None, solver=None, ca
     result.engine_targets = engine_targets
     result.textures = extra.pop("textures")
     result.extra.update(extra)
-    return write_result(out, result, figs, ev)
+    summary = write_result(out, result, figs, ev)
+    write_viewer(out, exp, inputs)
+    return summary

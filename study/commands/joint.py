@@ -20,6 +20,7 @@ from ..fit.result import CalibrationResult, glsl_renamed, jsonable
 from ..report.generalise import write_generalise_report, write_joint_report
 from ..scene.frames import refuse_animated
 from .steps import export_calibration, load_scene_data
+from .viewer import write_viewer
 
 
 def load_scenes(experiments, overrides, variant, cache):
@@ -135,6 +136,7 @@ def joint_fit(scenes, variant, out: Path, solver):
     summary = result.to_json()
     write_json(out / "constants.json", summary)
     write_joint_report(out, summary)
+    write_viewer(out, first, scenes[0]["inputs"])
     _log(f"calibrate (joint, {len(scenes)} scenes): wrote {out}")
     return summary, cal, evaluate
 

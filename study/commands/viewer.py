@@ -1,0 +1,55 @@
+"""``study viewer``: the WebGL 2 viewer (``study.export.viewer``) of a calibration's output
+folder, written again (or for the first time, for a result from before the viewer existed)."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+from .._progress import log as _log
+from ..config.experiment import ExperimentError
+from ..export.viewer import calibration_viewer
+from ..scene.baseline_inputs import inputs_for_shader
+from ..scene.frames import frame_experiment
+from ..scene.reference import reference_key
+from ..scene.shader_inputs import load_or_build_shader_inputs
+from .steps import prepare
+
+
+def write_viewer(out: Path, exp, inputs) -> Path | None:
+    """``out/viewer/`` of the calibration just written in ``out`` (see
+    ``study.export.viewer.calibration_viewer``); a calibration without a GLSL ES export (the
+    SPIRV-Cross tools missing) gets none, with a note. Returns ``index.html`` or None."""
+    try:
+        page = calibration_viewer(out, exp, inputs)
+    except FileNotFoundError as exc:
+        _log(f"calibrate: no viewer: {exc}")
+        return None
+    _log(f"calibrate: wrote the WebGL 2 viewer {page} (open it in a browser)")
+    return page
+
+
+def run_viewer(out, experiment, overrides=None, variant=None, cache=None) -> Path:
+    """``study viewer OUT EXPERIMENT``: ``OUT/viewer/`` of the calibration in ``OUT``, whose shader
+    inputs are built again (or read from the cache) from ``experiment`` with ``overrides`` (the
+    calibration's own ``--set`` options: the experiment must give the calibration's reference,
+    ExperimentError otherwise). Returns the path of ``index.html``."""
+    out = Path(out)
+    result = out / "constants.json"
+    if not result.is_file():
+        raise FileNotFoundError(f"no calibration in {out}: {result} is missing")
+    summary = json.loads(result.read_text("utf-8"))
+    exp, variant, _ = prepare(experiment, out, overrides, variant or summary.get("backend"))
+    exp = frame_experiment(exp, 0)
+    key = summary.get("reference", {}).get("key")
+    if key is not None and reference_key(exp, variant) != key:
+        raise ExperimentError(
+            f"{experiment} (with the --set options given) is not the experiment {out} was "
+            f"calibrated on (its reference key differs from {key}): pass the calibration's "
+            "experiment file and the same --set options"
+        )
+    inputs = load_or_build_shader_inputs(exp, variant, cache=cache, log=_log)
+    inputs = inputs_for_shader(exp, inputs, exp.fit.shader, variant, cache=cache, log=_log)
+    page = calibration_viewer(out, exp, inputs)
+    _log(f"viewer: wrote {page}")
+    return page
