@@ -82,8 +82,9 @@ class _OwnBlock:
 
 
 GLES_NOTE = (
-    "not run: moderngl's EGL backend (glcontext) binds the desktop OpenGL API only, so no "
-    "GLES 3 context is made here; compiled by glslang's ES profile"
+    "not run on llvmpipe: moderngl's EGL backend (glcontext) binds the desktop OpenGL API only, "
+    "so no GLES 3 context is made here; compiled by glslang's ES profile; the same files run in "
+    "WebGL 2 in viewer/ (matched against the port in headless Chromium by the test suite)"
 )
 
 
