@@ -10,6 +10,7 @@ import hashlib
 import importlib.util
 import json
 import os
+import re
 import shutil
 import subprocess
 
@@ -93,6 +94,23 @@ def test_a_changed_result_file_or_a_missing_figure_is_caught():
     edited = copy.deepcopy(committed)
     del edited["not_redrawn"]["docs/results/variants/pareto.png"]
     assert any("variants/pareto.png: not listed" in p for p in mod.ledger_problems(edited))
+
+
+def test_the_front_pages_viewer_is_make_runs_committed_result():
+    """The viewer the docs embed runs the constants of the make-run result committed beside it
+    (copy out/default/viewer there when re-running make run)."""
+    import numpy as np
+
+    folder = REPO / "docs" / "results" / "default"
+    c = json.loads((folder / "constants.json").read_text())
+    text = (folder / "viewer" / "data.js").read_text()
+    data = json.loads(text[text.index("{") : text.rindex("}") + 1])
+    frag = data["shaders"]["frag"]
+    for name in ("ATTENUATION_DISTANCE", "SPECULAR_STRENGTH", "SPECULAR_EXPONENT", "BumptexMult"):
+        value = float(np.float32(c["constants"][name]))
+        defined = re.findall(rf"#define (SPIRV_CROSS_CONSTANT_ID_\d+) (\S+)\n[^\n]*\n?"
+                             rf"const float {name} = \1;", frag)  # fmt: skip
+        assert defined and float(defined[0][1]) == value, (name, defined, value)
 
 
 def test_mkdocs_build_strict(tmp_path):
