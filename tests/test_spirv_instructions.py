@@ -11,6 +11,8 @@ with the study's vertex shader), and a full-screen frame whose only input is ``g
 
 from __future__ import annotations
 
+import gc
+
 import drjit as dr
 import drjit.llvm.ad as m
 import numpy as np
@@ -27,6 +29,15 @@ from shaders_port.spirv.user_shader import UserShader
 
 W, H = 16, 12  # the full-screen frame (even: every quad whole)
 _VERT = "#version 330 core\nin vec2 pos;\nvoid main() { gl_Position = vec4(pos, 0.0, 1.0); }\n"
+
+
+@pytest.fixture(autouse=True)
+def _collected():
+    """Collect each test's garbage at its end: an error raised while tracing leaves Dr.Jit
+    values in reference cycles (its traceback's frames), which the garbage collector must not
+    free during a later test's frozen-kernel recording (Dr.Jit aborts)."""
+    yield
+    gc.collect()
 
 
 @pytest.fixture(scope="module")
@@ -78,8 +89,8 @@ def _gl_full(frag: str, textures=(), blocks=(), uniforms=()) -> np.ndarray:
 
 
 def _executed(frag: str, bindings: dict | None = None, label="full.frag", grad=None):
-    """``frag`` executed over the W x H frame: (H, W, 4) (row 0 = window y 0) and the
-    executor; ``grad``: a constant's name whose forward derivative is returned too."""
+    """``frag`` executed over the W x H frame: (H, W, 4) (row 0 = window y 0) and None;
+    ``grad``: a constant's name whose forward derivative is returned too."""
     x, y = np.meshgrid(np.arange(W), np.arange(H))
     x, y = x.ravel(), y.ravel()
     b = {
@@ -91,13 +102,18 @@ def _executed(frag: str, bindings: dict | None = None, label="full.frag", grad=N
     if grad is not None:
         dr.enable_grad(b[grad])
     ex = Executor(mod, m, b, differentiate=grad is not None)
-    (out,) = [v for v in ex.run().values() if v is not None]
+    try:
+        (out,) = [v for v in ex.run().values() if v is not None]
+    finally:
+        ex.release()  # no Dr.Jit value left for the garbage collector to free in a recording
     out = [m.Float(c) if isinstance(c, dr.ArrayBase) else m.Float(np.full(W * H, c)) for c in out]
     img = np.stack([c.numpy() for c in out], -1).reshape(H, W, 4)
     if grad is None:
-        return img, ex
+        return img, None
     dr.forward(b[grad])
-    return img, np.stack([dr.grad(c).numpy() for c in out], -1).reshape(H, W, 4)
+    J = np.stack([dr.grad(c).numpy() for c in out], -1).reshape(H, W, 4)
+    dr.disable_grad(b[grad])
+    return img, J
 
 
 def _water_pair(inputs, src: str, values=None):
@@ -380,3 +396,16 @@ def test_unsupported_instruction_is_still_named(water):
     spec = spirv_port.ShaderSpec(src, "gather.frag", bindings=(("S", "normalMap"),))
     with pytest.raises(UnsupportedInstruction, match=r"OpImageGather.*gather\.frag:\d+"):
         spirv_port.render(water, None, spec=spec)
+
+
+def test_frames_with_and_without_quads_are_kept_apart(water):
+    """A shader without derivatives and one with them, reading the same inputs, on one
+    frame: each gets its own lanes (the bindings cache tells them apart)."""
+    plain = _DERIV.replace("dFdx(v)", "v").replace("dFdy(v)", "v").replace("fwidth(v)", "v")
+    for name in ("dFdxCoarse(e.x)", "dFdyFine(e.z)", "fwidthCoarse(e.y)", "dFdxFine(p.z)"):
+        plain = plain.replace(name, "0.0")
+    plain = plain.replace("dFdyCoarse(p.x)", "0.0")
+    a = spirv_port.render(water, None, spec=spirv_port.ShaderSpec(plain, "plain.frag"))
+    b = spirv_port.render(water, None, spec=spirv_port.ShaderSpec(_DERIV, "deriv.frag"))
+    mask = a.numpy()["mask"] > 0
+    assert not np.array_equal(a.numpy()["color"][mask], b.numpy()["color"][mask])

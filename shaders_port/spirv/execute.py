@@ -322,6 +322,7 @@ class Executor(LoopRunner, ImageOps):
         """Drop every Dr.Jit value the run holds (a recorded frozen kernel of a port must not
         see them freed later by the garbage collector)."""
         self.env, self.vars, self.bindings, self.base, self.passes = {}, {}, {}, TRUE, {}
+        self.quads = None
         self.counts = {k: 0.0 for k in self.counts}
 
     def region(self, start, members, mask, header, merge):

@@ -231,7 +231,7 @@ def frame_bindings(m, P, inputs, spec: ShaderSpec) -> dict:
     module does not read (each Python number of a recording's arguments is checked on every
     replay)."""
     mod = module_of(spec)
-    key = (P.upload, m.__name__, spec.bindings, mod.bound_names)
+    key = (P.upload, m.__name__, spec.bindings, mod.bound_names, _quads.uses_quads(mod, {}))
     hit = _BINDINGS.get(key)
     if hit is not None:
         return hit
