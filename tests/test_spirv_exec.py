@@ -177,9 +177,9 @@ def test_module_is_decoded_with_the_grammar():
 
 
 def test_unsupported_instruction_names_opcode_and_line(small):
-    src = _SHADER % "    fragColor.x += dFdx(e.x);"
+    src = _SHADER % "    fragColor.x += outerProduct(e, e)[0][0];"
     spec = spirv_port.ShaderSpec(src, "deriv.frag")
-    with pytest.raises(UnsupportedInstruction, match=r"OpDPdx.*deriv\.frag:9"):
+    with pytest.raises(UnsupportedInstruction, match=r"OpOuterProduct.*deriv\.frag:9"):
         spirv_port.render(small, None, spec=spec)
 
 

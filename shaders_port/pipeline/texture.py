@@ -1,4 +1,4 @@
-"""OpenGL-faithful texture sampling in Dr.Jit (no mipmaps), used by the shader ports.
+"""OpenGL-faithful texture sampling in Dr.Jit, used by the shader ports and the SPIR-V executor.
 
 Implements the OpenGL 4.5 core specification, section 8.14 (texture minification /
 magnification without mipmaps):
@@ -12,6 +12,16 @@ magnification without mipmaps):
   ``s = (sc / |ma| + 1) / 2``, ``t = (tc / |ma| + 1) / 2``; bilinear within that face
   with clamp to edge (seamless cube-map filtering off).
 
+Mipmaps (section 8.14.3), for a texture whose binding has them (:meth:`Texture2D.with_mipmaps`;
+the study's inputs have none, and :meth:`Texture2D.sample` is level 0): levels are box-filtered
+halvings (``max(1, n // 2)`` texels, each the mean of the 2x2 -- or 2x1 / 1x2 -- texels it
+covers); ``mipmap`` is the filter between levels ('nearest': level ``ceil(lod + 0.5) - 1``,
+'linear': ``floor(lod)`` and the next blended by ``frac(lod)``), ``filter`` the filter within
+a level and the magnification filter (``lod <= 0``: level 0). The level of detail of implicit
+and gradient lookups is Mesa llvmpipe's (:func:`lod_from_gradients`): ``0.5 * log2(max(|d/dx|^2,
+|d/dy|^2))`` of the texel-space gradients with llvmpipe's piecewise-linear log2 (the
+specification allows an approximation of rho and of the logarithm).
+
 Textures are stored as flat Dr.Jit ``Float`` arrays in OpenGL upload order: texel
 ``(row r, column c)`` of a ``(H, W, C)`` array sits at ``(r * W + c) * C + channel``; row
 ``r`` has ``t = (r + 0.5) / H``. Texture coordinates are Dr.Jit ``Float`` arrays (one per
@@ -22,6 +32,7 @@ bilinear weights (texel values carry no gradient; nearest lookups have zero deri
 from __future__ import annotations
 
 from dataclasses import dataclass
+from dataclasses import replace as dataclasses_replace
 
 import drjit as dr
 import numpy as np
@@ -51,6 +62,8 @@ class Texture2D:
     channels: int
     filter: str
     wrap: str
+    levels: tuple = ()  # mip levels 1..q: ((data, width, height), ...); () without mipmaps
+    mipmap: str | None = None  # the filter between levels, NEAREST | LINEAR; None: none
 
     @classmethod
     def from_numpy(cls, m, array: np.ndarray, filter: str, wrap: str) -> "Texture2D":
@@ -96,6 +109,123 @@ class Texture2D:
     def _fetch(self, m, i, j, active) -> list:
         base = m.UInt32((j * self.width + i) * self.channels)
         return [dr.gather(m.Float, self.data, base + c, active) for c in range(self.channels)]
+
+    # ---- mipmaps -------------------------------------------------------------------------------
+    def with_mipmaps(self, m, mipmap: str = LINEAR) -> "Texture2D":
+        """This texture with its box-filtered mip chain down to 1 x 1 (see the module doc) and
+        ``mipmap`` the filter between levels."""
+        if mipmap not in (NEAREST, LINEAR):
+            raise ValueError(f"unknown mipmap filter {mipmap!r}")
+        a = np.asarray(self.data.numpy(), np.float32).reshape(self.height, self.width, -1)
+        levels = []
+        for lv in box_mip_chain(a)[1:]:
+            levels.append((m.Float(np.ascontiguousarray(lv).ravel()), lv.shape[1], lv.shape[0]))
+        return dataclasses_replace(self, levels=tuple(levels), mipmap=mipmap)
+
+    def level(self, k: int) -> tuple:
+        """(data, width, height) of mip level ``k`` (0: the base level)."""
+        return (self.data, self.width, self.height) if k == 0 else self.levels[k - 1]
+
+    def filtered(self, m, k: int, s, t, active, offset=(0, 0), filt: str | None = None) -> list:
+        """Level ``k`` (a Python int) sampled at ``(s, t)`` with filter ``filt`` (default
+        ``filter``) and a texel ``offset`` (GLSL ``textureOffset``): ``channels`` Floats."""
+        data, w, h = self.level(k)
+        C, wrap = self.channels, self.wrap
+
+        def fetch(i, j):
+            base = m.UInt32((j * w + i) * C)
+            return [dr.gather(m.Float, data, base + c, active) for c in range(C)]
+
+        if (filt or self.filter) == NEAREST:
+            i = _wrap(m, m.Int32(dr.floor(s * w)) + offset[0], w, wrap)
+            j = _wrap(m, m.Int32(dr.floor(t * h)) + offset[1], h, wrap)
+            return fetch(i, j)
+        u, v = s * w - 0.5, t * h - 0.5
+        fu, fv = dr.floor(u), dr.floor(v)
+        a, b = u - fu, v - fv
+        i0, j0 = m.Int32(fu) + offset[0], m.Int32(fv) + offset[1]
+        i1, j1 = _wrap(m, i0 + 1, w, wrap), _wrap(m, j0 + 1, h, wrap)
+        i0, j0 = _wrap(m, i0, w, wrap), _wrap(m, j0, h, wrap)
+        t00, t10, t01, t11 = fetch(i0, j0), fetch(i1, j0), fetch(i0, j1), fetch(i1, j1)
+        w00, w10, w01, w11 = (1 - a) * (1 - b), a * (1 - b), (1 - a) * b, a * b
+        return [w00 * t00[c] + w10 * t10[c] + w01 * t01[c] + w11 * t11[c] for c in range(C)]
+
+    def sample_lod(self, m, s, t, lod, active=True, offset=(0, 0)) -> list:
+        """GL's lookup at level of detail ``lod`` (a Float per lane or a Python float, bias
+        already added): level selection and filtering of section 8.14 (module doc)."""
+        q = len(self.levels)
+        if self.mipmap is None or q == 0:
+            return self.filtered(m, 0, s, t, active, offset)
+        lod = m.Float(lod)
+        mag = lod <= 0.0
+        if self.mipmap == NEAREST:
+            d = dr.clip(dr.ceil(lod + 0.5) - 1.0, 0.0, float(q))
+            out = self.filtered(m, 0, s, t, active, offset)
+            for k in range(1, q + 1):
+                hit = (d == float(k)) & ~mag
+                tk = self.filtered(m, k, s, t, active & hit, offset)
+                out = [dr.select(hit, x, y) for x, y in zip(tk, out)]
+            return out
+        lam = dr.clip(lod, 0.0, float(q))
+        d1 = dr.floor(lam)
+        frac = lam - d1
+        out = [dr.zeros(m.Float, dr.width(lam)) for _ in range(self.channels)]
+        for k in range(0, q + 1):
+            w = dr.select(d1 == float(k), 1.0 - frac, 0.0) + dr.select(
+                d1 + 1.0 == float(k), frac, 0.0
+            )
+            w = dr.select(mag, 1.0 if k == 0 else 0.0, w)
+            used = active & (w > 0.0)
+            tk = self.filtered(m, k, s, t, used, offset)
+            out = [o + dr.select(used, w * x, 0.0) for o, x in zip(out, tk)]
+        return out
+
+    def texel(self, m, i, j, k, active=True) -> list:
+        """GLSL ``texelFetch``: texel ``(i, j)`` (Int32 per lane) of level ``k`` (a Python int);
+        0 outside the level (what llvmpipe returns; GL leaves it undefined)."""
+        data, w, h = self.level(k)
+        inside = (i >= 0) & (i < w) & (j >= 0) & (j < h)
+        base = m.UInt32((dr.clip(j, 0, h - 1) * w + dr.clip(i, 0, w - 1)) * self.channels)
+        return [
+            dr.select(inside, dr.gather(m.Float, data, base + c, active & inside), 0.0)
+            for c in range(self.channels)
+        ]
+
+
+def box_mip_chain(a: np.ndarray) -> list:
+    """The box-filtered mip chain of ``a`` ((H, W, C) float32): [a, level 1, ..., 1 x 1], each
+    level ``max(1, n // 2)`` texels a side, the mean of the texels each covers (an odd size's
+    last row or column is left out, as a 2x2 box of the even part)."""
+    out = [np.asarray(a, np.float32)]
+    while out[-1].shape[0] > 1 or out[-1].shape[1] > 1:
+        x = out[-1].astype(np.float64)
+        h, w = x.shape[:2]
+        if h > 1:
+            x = 0.5 * (x[0 : h // 2 * 2 : 2] + x[1 : h // 2 * 2 : 2])
+        if w > 1:
+            x = 0.5 * (x[:, 0 : w // 2 * 2 : 2] + x[:, 1 : w // 2 * 2 : 2])
+        out.append(x.astype(np.float32))
+    return out
+
+
+def fast_log2(m, x):
+    """llvmpipe's ``lp_build_fast_log2``: ``exponent + mantissa - 1`` (mantissa in [1, 2)),
+    piecewise linear between powers of two, exact at them; ``x`` > 0 Float (normal numbers;
+    derivatives flow through the mantissa)."""
+    x = m.Float(x)
+    bits = dr.reinterpret_array(m.Int32, dr.detach(x))
+    e = m.Float((bits >> 23) & 0xFF) - 127.0
+    return e + x * dr.exp2(-e) - 1.0  # x / 2^e is exact: the derivative is x's, scaled
+
+
+def lod_from_gradients(m, tex, dsdx, dtdx, dsdy, dtdy):
+    """llvmpipe's level of detail from texture-coordinate gradients (Floats): ``0.5 *
+    fast_log2(max(|dx|^2, |dy|^2))`` with the gradients in level-0 texels."""
+    w, h = float(tex.width), float(tex.height)
+    ax, ay = dsdx * w, dtdx * h
+    bx, by = dsdy * w, dtdy * h
+    rho2 = dr.maximum(ax * ax + ay * ay, bx * bx + by * by)
+    return 0.5 * fast_log2(m, dr.maximum(rho2, 1e-30))
 
 
 def _wrap(m, i, n: int, mode: str):

@@ -36,16 +36,29 @@ from collections import defaultdict
 import drjit as dr
 
 from . import ops
+from . import quads as _quads
+from .images import IMAGE_OPS, ImageOps
 from .loops import LoopRunner, UnsupportedInstruction
 from .module import grammar
 from .ops import TRUE, Mask, both, branch, is_py, join, lift
+
+
+def module_discards(module) -> bool:
+    """Whether the entry point can discard (``OpKill``, ``OpTerminateInvocation``,
+    ``OpDemoteToHelperInvocation``)."""
+    kills = ("OpKill", "OpTerminateInvocation", "OpDemoteToHelperInvocation")
+    return any(
+        i.opname in kills
+        for b in module.functions[module.entry].blocks.values()
+        for i in [*b.body, b.terminator]
+    )
 
 
 class UnboundVariable(ValueError):
     """The shader reads an input, uniform or sampler that nothing binds."""
 
 
-class Executor(LoopRunner):
+class Executor(LoopRunner, ImageOps):
     """One run of ``module``'s entry point over the lanes of one frame (see the module doc).
 
     ``m``: the Dr.Jit type module (``drjit.llvm.ad``); ``bindings``: GLSL name -> value;
@@ -64,8 +77,12 @@ class Executor(LoopRunner):
         self.vars: dict = {}  # variable id -> value (function variables and outputs)
         self.base = TRUE  # lanes the current straight-line code runs for
         self.counts = {"fetches": 0.0, "iterations": 0.0}
+        if module_discards(module):  # discards counted per lane (loop state like the costs)
+            self.counts["discarded"] = 0.0
         self.detached = False
         self.counter = None  # the edge that counts the iterations of the innermost loop
+        self.quads = bindings.get(_quads.QUADS_KEY)  # the lanes' pixel quads (spirv.quads)
+        self.lane_loops = 0  # symbolic loops (lane-dependent trip counts) being traced
         self.fn = module.functions[module.entry]
         self.blocks = self.fn.blocks
         self._types: dict = {}
@@ -158,13 +175,19 @@ class Executor(LoopRunner):
         return ops.detach(v) if self.detached and not isinstance(v, tuple) else v
 
     def global_value(self, vid: int):
-        """The bound value of an Input / UniformConstant variable."""
+        """The bound value of an Input / Uniform / UniformConstant variable: its binding, or
+        a struct's or block's members bound one by one (``name.member``; a block's member by
+        its own name too; ``name[i].member`` in an array of structs)."""
         ins = self.M.defs[vid]
         key = self.M.binding_name(vid)
         if key in self.bindings:
             return self.bindings[key]
         if len(ins.operands) > 1:  # a uniform's initializer: its value when nothing sets it
             return self.constant(ins.operands[1])
+        missing: list = []
+        value = self._members(key, self.pointee(vid), missing)
+        if not missing:
+            return value
         use = next(
             (
                 i
@@ -175,10 +198,29 @@ class Executor(LoopRunner):
             ins,
         )
         raise UnboundVariable(
-            f"the shader reads {ins.operands[0]} variable {key!r} (at {use.where()}) but "
+            f"the shader reads {ins.operands[0]} variable {missing[0]!r} (at {use.where()}) but "
             "nothing binds it: bind it to one of the study's inputs in the shader's "
             "declaration (docs/user-shader.md)"
         )
+
+    def _members(self, name: str, tid: int, missing: list):
+        """The value of a struct / array of structs bound member by member (see
+        :meth:`global_value`); the unbound names are appended to ``missing``."""
+        t = self.type(tid)
+        if t[0] == "struct":
+            names = self.M.member_names.get(tid, {})
+            block = "Block" in self.M.decorations.get(tid, {})
+            out = []
+            for i, sub in enumerate(t[1]):
+                member = names.get(i, str(i))
+                keys = ([f"{name}.{member}"] if name else []) + ([member] if block else [])
+                hit = next((k for k in keys if k in self.bindings), None)
+                out.append(self.bindings[hit] if hit else self._members(keys[0], sub, missing))
+            return out
+        if t[0] == "array" and self.type(t[1])[0] == "struct":
+            return [self._members(f"{name}[{i}]", t[1], missing) for i in range(t[2])]
+        missing.append(name)
+        return None
 
     def load(self, ptr):
         _, vid, path = ptr
@@ -190,8 +232,18 @@ class Executor(LoopRunner):
                 raise UnsupportedInstruction(f"loading from a {sc} variable")
             v = self.global_value(vid)
         for i in path:
-            v = v[i]
+            v = self._pick(v, i)
         return ops.detach(v) if self.detached else v
+
+    def _pick(self, v, i):
+        """``v[i]``; ``i`` a per-lane Dr.Jit index selects per lane (an index outside the array,
+        undefined in GL, gives element 0)."""
+        if isinstance(i, int):
+            return v[i]
+        out = v[0]
+        for k in range(1, len(v)):
+            out = ops.select_any(self.m, i == k, v[k], out)
+        return out
 
     def store(self, ptr, value, mask: Mask):
         _, vid, path = ptr
@@ -203,18 +255,22 @@ class Executor(LoopRunner):
         if old is None:
             old = self.zero(ptype)
 
-        def put(cur, tid, path):
+        def put(cur, tid, path, eff):
             if not path:
                 if eff.value is True:
                     return value
                 return ops.select(self.m, eff.value, value, cur, self.kind(tid))
-            t = self.type(tid)
-            sub = t[1][path[0]] if t[0] == "struct" else t[1]
+            t, i = self.type(tid), path[0]
+            sub = t[1][i] if t[0] == "struct" else t[1]
             out = list(cur)
-            out[path[0]] = put(cur[path[0]], sub, path[1:])
+            if isinstance(i, int):
+                out[i] = put(cur[i], sub, path[1:], eff)
+            else:  # an index that differs between pixels: each element where it points
+                for k in range(len(cur)):
+                    out[k] = put(cur[k], sub, path[1:], both(eff, Mask(i == k)))
             return out
 
-        self.vars[vid] = put(old, ptype, list(path))
+        self.vars[vid] = put(old, ptype, list(path), eff)
         self.store_hook(vid, value, eff)
 
     def count(self, key: str, mask: Mask):
@@ -233,13 +289,41 @@ class Executor(LoopRunner):
         for vid in self.M.interface:
             if self.M.defs[vid].operands[0] == "Output":
                 outs[self.M.name(vid)] = self.vars.get(vid)
+        if self.quads is not None:  # helper lanes leave no output and cost nothing
+            outs = {k: self.quads.shaded_part(self.m, v) for k, v in outs.items()}
+            self.counts = {k: self.quads.shaded_part(self.m, v) for k, v in self.counts.items()}
         return outs
+
+    @property
+    def discarded(self):
+        """Bool per lane: the lanes that ran ``discard`` (or ``demote``); None when the
+        shader cannot discard."""
+        if "discarded" not in self.counts:
+            return None
+        return lift(self.m, self.counts["discarded"], "float") > 0.0
+
+    def symbolic_loop(self, *args, **kw):
+        self.lane_loops += 1
+        try:
+            return super().symbolic_loop(*args, **kw)
+        except RuntimeError as exc:  # dr.while_loop wraps an error of the shader it traced
+            cause = exc.__cause__ or exc.__context__
+            if isinstance(cause, (UnsupportedInstruction, UnboundVariable)):
+                raise cause from None
+            raise
+        finally:
+            self.lane_loops -= 1
+
+    def discard(self, bm: Mask) -> None:
+        """Mark the lanes of ``bm`` (under the current base) discarded."""
+        self.count("discarded", bm)
 
     def release(self) -> None:
         """Drop every Dr.Jit value the run holds (a recorded frozen kernel of a port must not
         see them freed later by the garbage collector)."""
         self.env, self.vars, self.bindings, self.base, self.passes = {}, {}, {}, TRUE, {}
-        self.counts = {"fetches": 0.0, "iterations": 0.0}
+        self.quads = None
+        self.counts = {k: 0.0 for k in self.counts}
 
     def region(self, start, members, mask, header, merge):
         """Run the blocks of ``members`` reachable from ``start`` in topological order under
@@ -258,6 +342,8 @@ class Executor(LoopRunner):
                 self.count("iterations", bm)
             if block.merge is not None and block.merge.opname == "OpLoopMerge" and label != header:
                 self.loop(block, bm)
+                if self.discarded is not None:  # lanes that discarded in the loop stop there
+                    bm = both(bm, Mask(~self.discarded))
                 succ = [(block.merge.operands[0], bm)]
             else:
                 for ins in block.body:
@@ -313,15 +399,25 @@ class Executor(LoopRunner):
             ]
         if op == "OpSwitch":
             sel, default = self.get(term.operands[0]), term.operands[1]
+            signed = self.kind(self._value_type(term.operands[0])) == "int"
             out, rest = [], bm
             for lit, target in term.operands[2:]:
-                hit = (sel == lit) if not is_py(sel) else sel == lit
+                lit = lit[0] if isinstance(lit, list) else lit
+                lit = lit - (1 << 32) if signed and lit >= 1 << 31 else lit
+                hit = sel == lit
                 out.append((target, branch(rest, hit, True)))
                 rest = branch(rest, hit, False)
             return out + [(default, rest)]
-        if op == "OpReturn":
+        if op in ("OpReturn", "OpUnreachable"):
+            return []
+        if op in ("OpKill", "OpTerminateInvocation"):
+            self.discard(bm)
             return []
         raise self.unsupported(term)
+
+    def _value_type(self, vid: int) -> int:
+        ins = self.M.defs.get(vid) or self._defining(vid)
+        return ins.type_id
 
     def root(self, pid: int) -> int:
         ins = self._defining(pid)
@@ -354,8 +450,9 @@ class Executor(LoopRunner):
             return
         if op in ("OpLine", "OpNoLine", "OpNop", "OpSelectionMerge", "OpLoopMerge"):
             return
-        if op == "OpKill":
-            raise self.unsupported(ins, "discard")
+        if op == "OpDemoteToHelperInvocation":
+            self.discard(bm)
+            return
         value = self.value_of(ins, bm, edges)
         self.env[ins.result] = value
 
@@ -365,10 +462,12 @@ class Executor(LoopRunner):
             return self.load(self.get(o[0]))
         if op in ("OpAccessChain", "OpInBoundsAccessChain"):
             _, vid, path = self.get(o[0])
-            idx = [self.get(i) for i in o[1:]]
-            if not all(isinstance(i, int) for i in idx):
-                raise self.unsupported(ins, "an index that differs between pixels")
+            idx = [self.get(i) for i in o[1:]]  # an index that differs between pixels: a Dr.Jit int
             return ("ptr", vid, path + tuple(idx))
+        if op in _quads.DERIVATIVES:
+            return self.derivative(ins)
+        if op in IMAGE_OPS:
+            return self.image_op(ins, bm)
         if op in ops.BINARY:
             return ops.cw(ops.BINARY[op], self.get(o[0]), self.get(o[1]))
         if op in ops.UNARY:
@@ -455,11 +554,24 @@ class Executor(LoopRunner):
             return ops.cw(lambda x: py(x) if is_py(x) else lift(m, x, k), self.get(o[0]))
         if op == "OpPhi":
             return self.phi(ins, edges)
-        if op in ("OpImageSampleImplicitLod", "OpImageSampleExplicitLod"):
-            return self.sample(ins, bm)
         if op == "OpUndef":
             return self.zero(ins.type_id)
         raise self.unsupported(ins)
+
+    def derivative(self, ins):
+        """OpDPdx / OpDPdy / OpFwidth and their Fine and Coarse forms (``spirv.quads``)."""
+        if self.quads is None:
+            raise self.unsupported(ins, "a derivative without the frame's pixel quads")
+        if self.lane_loops:
+            raise self.unsupported(
+                ins,
+                "a derivative inside a loop whose trip count differs between pixels (undefined "
+                "in GL); take it before the loop",
+            )
+        axis = _quads.DERIVATIVES[ins.opname]
+        return ops.cw(
+            lambda v: _quads.derivative(self.m, self.quads, v, axis), self.get(ins.operands[0])
+        )
 
     def _mat_vec(self, cols, v):
         mul, add = ops.BINARY["OpFMul"], ops.BINARY["OpFAdd"]
@@ -478,26 +590,3 @@ class Executor(LoopRunner):
         for v, k in live[:-1][::-1]:
             out = ops.select(self.m, k.value, v, out, self.kind(ins.type_id))
         return out
-
-    def sample(self, ins, bm: Mask):
-        o = ins.operands
-        tex, coord = self.get(o[0]), self.get(o[1])
-        if len(o) > 2:
-            lod = [p for name, p in o[2] if name == "Lod"]
-            others = [name for name, _ in o[2] if name != "Lod"]
-            if others or (lod and self.get(lod[0][0]) != 0.0):
-                raise self.unsupported(ins, "image operands other than Lod 0 (no mipmaps)")
-        if not hasattr(tex, "sample"):
-            raise self.unsupported(ins, "a sampler that is not bound to a study texture")
-        eff = both(self.base, bm)
-        active = True if eff.value is True else eff.value
-        c = [lift(self.m, x, "float") for x in coord]
-        self.count("fetches", bm)
-        if len(c) == 3:
-            texel = tex.sample(self.m, c[0], c[1], c[2], active)
-        elif len(c) == 2:
-            texel = tex.sample(self.m, c[0], c[1], active)
-        else:
-            raise self.unsupported(ins, f"a {len(c)}-component coordinate")
-        texel = list(texel)
-        return texel + [0.0, 0.0, 1.0][len(texel) - 1 :] if len(texel) < 4 else texel[:4]

@@ -76,10 +76,10 @@ class LoopRunner:
         try:
             for _ in range(MAX_UNROLL):  # lane-independent exits: unroll
                 ex, back = self.iteration(hdr.label, members, merge, counter)
+                if back.value is False:  # every lane left in this pass (a do {} while (false))
+                    return
                 if not (ex.static and back.static):
                     break
-                if back.value is False:
-                    return
             else:
                 raise self.unsupported(hdr.merge, f"a loop of more than {MAX_UNROLL} iterations")
             self.vars, self.counts = snapshot, counts

@@ -39,6 +39,16 @@ OPT_PASSES = (
     "--inline-entry-points-exhaustive",
     "--eliminate-dead-functions",
 )
+_TERMINATORS = (
+    "OpBranch",
+    "OpBranchConditional",
+    "OpSwitch",
+    "OpReturn",
+    "OpReturnValue",
+    "OpKill",
+    "OpTerminateInvocation",
+    "OpUnreachable",
+)
 _ID_KINDS = ("IdResultType", "IdResult", "IdRef", "IdScope", "IdMemorySemantics")
 
 
@@ -175,7 +185,7 @@ def decode(words: list) -> list[Instruction]:
             line = None
             continue
         out.append(Instruction(name, type_id, result, ops, line))
-        if name in ("OpBranch", "OpBranchConditional", "OpReturn", "OpReturnValue", "OpKill"):
+        if name in _TERMINATORS:
             line = None  # an OpLine does not reach past the end of its block
     return out
 
@@ -220,7 +230,7 @@ class Module:
         words = list(struct.unpack(f"<{len(binary) // 4}I", binary))
         if words[0] != MAGIC:
             raise ValueError(f"SPIR-V: bad magic number {words[0]:#x} (expected {MAGIC:#x})")
-        self.names, self.decorations, self.defs = {}, {}, {}
+        self.names, self.decorations, self.defs, self.member_names = {}, {}, {}, {}
         self.functions, self.ext_sets = {}, {}
         self.entry, self.interface = None, []
         fn = block = None
@@ -230,6 +240,8 @@ class Module:
             op = ins.opname
             if op == "OpName":
                 self.names[ins.operands[0]] = ins.operands[1]
+            elif op == "OpMemberName":
+                self.member_names.setdefault(ins.operands[0], {})[ins.operands[1]] = ins.operands[2]
             elif op == "OpDecorate":
                 dec = ins.operands[1]
                 name, params = (dec[0], dec[1:]) if isinstance(dec, tuple) else (dec, ())
@@ -252,15 +264,7 @@ class Module:
             elif block is not None:
                 if op in ("OpSelectionMerge", "OpLoopMerge"):
                     block.merge = ins
-                elif op in (
-                    "OpBranch",
-                    "OpBranchConditional",
-                    "OpSwitch",
-                    "OpReturn",
-                    "OpReturnValue",
-                    "OpKill",
-                    "OpUnreachable",
-                ):
+                elif op in _TERMINATORS:
                     block.terminator = ins
                     block = None
                 else:
@@ -282,13 +286,20 @@ class Module:
     @functools.cached_property
     def bound_names(self) -> frozenset:
         """The binding names of the module's ``Input``, ``UniformConstant`` and ``Uniform``
-        variables: what a run may read from its bindings."""
-        return frozenset(
-            self.binding_name(vid)
-            for vid, ins in self.defs.items()
-            if ins.opname == "OpVariable"
-            and ins.operands[0] in ("Input", "UniformConstant", "Uniform")
-        )
+        variables, and of the members of a uniform block or struct (``member`` for a block's
+        member, ``name.member`` too): what a run may read from its bindings."""
+        out = set()
+        for vid, ins in self.defs.items():
+            if ins.opname == "OpVariable" and ins.operands[0] in ("Input", "UniformConstant",
+                                                                  "Uniform"):  # fmt: skip
+                out.add(self.binding_name(vid))
+                pointee = self.defs[ins.type_id].operands[1]
+                block = "Block" in self.decorations.get(pointee, {})
+                for name in self.member_names.get(pointee, {}).values():
+                    out.add(f"{self.name(vid)}.{name}")
+                    if block:
+                        out.add(name)
+        return frozenset(out)
 
 
 def _is_main(file: str, label: str) -> bool:

@@ -88,6 +88,12 @@ def _trunc_div(a, b):
     return int(a / b) if b else 0
 
 
+def _smod(a, b):
+    """GLSL ``%`` of signed integers as SPIR-V OpSMod: the sign of the divisor."""
+    r = a % b  # Dr.Jit: the sign of the dividend (C)
+    return dr.select((r != 0) & ((r < 0) != (b < 0)), r + b, r)
+
+
 BINARY = {
     "OpFAdd": _fold(lambda a, b: a + b, _f(np.add)),
     "OpFSub": _fold(lambda a, b: a - b, _f(np.subtract)),
@@ -99,6 +105,14 @@ BINARY = {
     "OpIMul": _fold(lambda a, b: a * b, lambda a, b: a * b),
     "OpSDiv": _fold(lambda a, b: a // b, _trunc_div),
     "OpUDiv": _fold(lambda a, b: a // b, _trunc_div),
+    "OpSRem": _fold(lambda a, b: a % b, lambda a, b: int(math.fmod(a, b)) if b else 0),
+    "OpSMod": _fold(_smod, lambda a, b: a % b if b else 0),
+    "OpUMod": _fold(lambda a, b: a % b, lambda a, b: a % b if b else 0),
+    "OpBitwiseAnd": _fold(lambda a, b: a & b, lambda a, b: a & b),
+    "OpBitwiseOr": _fold(lambda a, b: a | b, lambda a, b: a | b),
+    "OpBitwiseXor": _fold(lambda a, b: a ^ b, lambda a, b: a ^ b),
+    "OpShiftLeftLogical": _fold(lambda a, b: a << b, lambda a, b: a << b),
+    "OpShiftRightArithmetic": _fold(lambda a, b: a >> b, lambda a, b: a >> b),
     "OpFOrdEqual": _fold(lambda a, b: a == b, lambda a, b: a == b),
     "OpFOrdNotEqual": _fold(lambda a, b: a != b, lambda a, b: a != b and a == a and b == b),
     "OpFUnordNotEqual": _fold(lambda a, b: ~(a == b), lambda a, b: not a == b),
@@ -139,6 +153,29 @@ def select(m, c, a, b, kind: str):
     if is_py(a) and is_py(b) and a == b and type(a) is type(b):
         return a
     return dr.select(c, lift(m, a, kind), lift(m, b, kind))
+
+
+def kind_of(x) -> str:
+    """'float' | 'int' | 'uint' | 'bool' of a scalar value (the first leaf of a list)."""
+    while isinstance(x, list):
+        x = x[0]
+    if isinstance(x, bool):
+        return "bool"
+    if isinstance(x, (int, float)):
+        return "int" if isinstance(x, int) else "float"
+    name = type(x).__name__
+    return {"Bool": "bool", "Int": "int", "Int32": "int", "UInt": "uint", "UInt32": "uint"}.get(
+        name, "float"
+    )
+
+
+def select_any(m, c, a, b):
+    """``c ? a : b`` per lane for values of one shape whose leaves may differ in kind (a
+    struct's members); each leaf's kind from the Dr.Jit operand, else the Python one."""
+    if isinstance(a, list):
+        return [select_any(m, c, x, y) for x, y in zip(a, b)]
+    k = kind_of(b) if is_py(a) and not is_py(b) else kind_of(a)
+    return select(m, c, a, b, k)
 
 
 def dot(m, a, b):

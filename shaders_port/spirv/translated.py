@@ -18,7 +18,12 @@ names (:data:`STUDY_INPUTS`, those of the shipped core shaders) bind themselves;
 ``ShaderSpec.bindings`` entry binds another name of the shader to one of them.
 
 Diagnostics: ``fetches`` and ``iterations`` per pixel, counted by the executor from the
-translated code (texture samples executed; loop bodies entered), and ``nonfinite``.
+translated code (texture samples executed; loop bodies entered), ``nonfinite``, and
+``discarded`` (1 where the shader ran ``discard``; such a pixel's colour is 0, the cleared
+framebuffer's, and it leaves a model's scored mask) when the shader can discard.
+
+Derivatives (``dFdx`` ...): the frame's lanes are then its covered pixels followed by the
+helper pixels of their 2x2 quads (``spirv.quads``); only the covered pixels' results are kept.
 """
 
 from __future__ import annotations
@@ -43,6 +48,7 @@ from ..pipeline.frame import (
 )
 from ..pipeline.raster import prepare
 from ..pipeline.texture import CLAMP, LINEAR, NEAREST, Texture2D, backend_types
+from . import quads as _quads
 from .execute import Executor
 from .loops import check_passes
 from .module import Module, compile_fragment
@@ -231,7 +237,7 @@ def frame_bindings(m, P, inputs, spec: ShaderSpec) -> dict:
     module does not read (each Python number of a recording's arguments is checked on every
     replay)."""
     mod = module_of(spec)
-    key = (P.upload, m.__name__, spec.bindings, mod.bound_names)
+    key = (P.upload, m.__name__, spec.bindings, mod.bound_names, _quads.uses_quads(mod, {}))
     hit = _BINDINGS.get(key)
     if hit is not None:
         return hit
@@ -244,6 +250,8 @@ def frame_bindings(m, P, inputs, spec: ShaderSpec) -> dict:
             )
         b[name] = b[study]
     b = {k: v for k, v in b.items() if k in mod.bound_names}
+    if _quads.uses_quads(mod, b):  # derivatives: the helper lanes of the frame's quads too
+        b = _quads.study_quad_bindings(m, P, inputs, b)
     if len(_BINDINGS) >= 8:
         _BINDINGS.pop(next(iter(_BINDINGS)))
     _BINDINGS[key] = b
@@ -261,6 +269,8 @@ def shade_lanes(m, P, b: dict, spec: ShaderSpec, C, differentiate=False, trips=N
     ex = Executor(module_of(spec), m, b, differentiate=differentiate, trips=trips)
     try:
         outs, counts, passes = ex.run(), dict(ex.counts), dict(ex.passes)
+        discarded = ex.discarded
+        counts.pop("discarded", None)
         if info is not None:
             info["unrolled"] = ex.unrolled
     finally:
@@ -274,6 +284,9 @@ def shade_lanes(m, P, b: dict, spec: ShaderSpec, C, differentiate=False, trips=N
         "fetches": lift(m, counts["fetches"], "float"),
         "nonfinite": m.Float(0.0),
     }
+    if discarded is not None:  # a discarded pixel keeps the cleared framebuffer's 0, as on GL
+        color = dr.select(discarded, 0.0, color)
+        diag["discarded"] = dr.select(discarded, 1.0, 0.0)
     return color, diag, passes
 
 

@@ -145,6 +145,8 @@ class Diagnostics:
             out["not_crossed_fraction"] = float(1.0 - self.maps["crossed"][mask].mean())
         if "nonfinite" in self.maps:
             out["nonfinite_pixels"] = int(self.maps["nonfinite"][mask].sum())
+        if "discarded" in self.maps:  # a user's shader that ran `discard`
+            out["discarded_pixels"] = int(self.maps["discarded"][mask].sum())
         return out
 
 
@@ -202,6 +204,8 @@ class ReferenceModel:
         )
         out = self._shade(self.start_constants()).numpy()
         mask = out["mask"] > 0.5
+        if "discarded" in out:  # pixels the shader discards (at its start constants) are no water
+            mask &= out["discarded"] == 0
         if reference_mask is not None:
             mask &= reference_mask
         self.mask = erode(mask, 1)
