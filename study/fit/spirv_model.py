@@ -11,6 +11,8 @@ ranges are those its declaration names (``// @study constant NAME LOW HIGH`` or
 
 from __future__ import annotations
 
+import warnings
+
 import numpy as np
 
 from shaders_port.spirv.dialects import ShaderError
@@ -49,7 +51,9 @@ class SpirvModel(ReferenceModel):
             exp, inputs_full, reference_full, resolution, stderr_full
         )
         shader = shader or load_user_shader(exp.values)
-        model = cls(shader, inputs, ref, backend, reference_mask=water, reference_stderr=se)
+        with warnings.catch_warnings():  # check_finite says it, with the pixels
+            warnings.filterwarnings("ignore", r".*were non-finite", RuntimeWarning)
+            model = cls(shader, inputs, ref, backend, reference_mask=water, reference_stderr=se)
         model.check_finite()
         return model
 
@@ -57,7 +61,9 @@ class SpirvModel(ReferenceModel):
         """ShaderError if the shader's colour with ``constants`` (default: the start values) is
         NaN or infinite on some water pixel: how many, the first few (x, y) pixel coordinates
         (x from the left, y from the top, at the model's resolution) and their bounding box."""
-        out = self.user_shader.render(self.inputs, constants, backend=self.backend).numpy()
+        with warnings.catch_warnings():  # the error below says it, with the pixels
+            warnings.filterwarnings("ignore", r".*were non-finite", RuntimeWarning)
+            out = self.user_shader.render(self.inputs, constants, backend=self.backend).numpy()
         bad = (out["nonfinite"] > 0.5) & self.mask
         if not bad.any():
             return
