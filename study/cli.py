@@ -13,6 +13,14 @@ from .config.experiment import ExperimentError
 from .studies.stability import SOLVERS
 
 
+def _set_arg(p, help_text: str) -> None:
+    """The repeatable ``--set KEY=VALUE`` option of a command (into ``overrides``)."""
+    p.add_argument(
+        "--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE",
+        help=help_text,
+    )  # fmt: skip
+
+
 def _backend_arg(p: argparse.ArgumentParser, default: str | None, what: str) -> None:
     """``--backend`` (the Mitsuba / Dr.Jit variant; ``--variant`` is its old name)."""
     p.add_argument(
@@ -33,14 +41,7 @@ def _common(p: argparse.ArgumentParser, many: bool = False) -> None:
     else:
         p.add_argument("experiment", help="experiment TOML file (see experiments/README.md)")
     p.add_argument("--out", required=True, help="output folder (created if missing)")
-    p.add_argument(
-        "--set",
-        dest="overrides",
-        action="append",
-        default=[],
-        metavar="KEY=VALUE",
-        help="override an experiment key, e.g. --set water.ior=1.33 (repeatable)",
-    )
+    _set_arg(p, "override an experiment key, e.g. --set water.ior=1.33 (repeatable)")
     _backend_arg(p, None, "default: the experiment's, normally llvm_ad_rgb")
 
 
@@ -50,14 +51,7 @@ def _sweep_common(p: argparse.ArgumentParser, experiments_help: str) -> None:
     p.add_argument(
         "--out", required=True, help="output folder (created if missing; a re-run resumes)"
     )
-    p.add_argument(
-        "--set",
-        dest="overrides",
-        action="append",
-        default=[],
-        metavar="KEY=VALUE",
-        help="override a key of every experiment (repeatable)",
-    )
+    _set_arg(p, "override a key of every experiment (repeatable)")
     _backend_arg(p, "llvm_ad_rgb", "of the workers")
     _cluster_args(p)
 
@@ -198,14 +192,7 @@ def _add_failures(sub) -> None:
     )
     p.add_argument("experiments", nargs="+", metavar="EXPERIMENT", help="experiment TOML files")
     p.add_argument("--out", required=True, help="output folder (created if missing)")
-    p.add_argument(
-        "--set",
-        dest="overrides",
-        action="append",
-        default=[],
-        metavar="KEY=VALUE",
-        help="override an experiment key in every experiment (repeatable)",
-    )
+    _set_arg(p, "override an experiment key in every experiment (repeatable)")
     _backend_arg(p, None, "default: each experiment's")
     p.add_argument(
         "--shader", default=None, help="shader variant (default: each experiment's fit.shader)"
@@ -251,14 +238,7 @@ def _add_viewer(sub) -> None:
     p.add_argument(
         "experiment", help="the experiment TOML file the calibration ran (its shader inputs)"
     )
-    p.add_argument(
-        "--set",
-        dest="overrides",
-        action="append",
-        default=[],
-        metavar="KEY=VALUE",
-        help="the calibration's --set options (repeatable)",
-    )
+    _set_arg(p, "the calibration's --set options (repeatable)")
     _backend_arg(p, None, "default: the calibration's")
 
 

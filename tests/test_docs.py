@@ -105,6 +105,10 @@ def test_the_front_pages_viewer_is_make_runs_committed_result():
     c = json.loads((folder / "constants.json").read_text())
     text = (folder / "viewer" / "data.js").read_text()
     data = json.loads(text[text.index("{") : text.rindex("}") + 1])
+    # the page's code is the templates' as they are (a changed viewer.js: copy the viewer again)
+    assert (folder / "viewer" / "viewer.js").read_text() == (
+        REPO / "study" / "export" / "viewer" / "viewer.js"
+    ).read_text()
     frag = data["shaders"]["frag"]
     for name in ("ATTENUATION_DISTANCE", "SPECULAR_STRENGTH", "SPECULAR_EXPONENT", "BumptexMult"):
         value = float(np.float32(c["constants"][name]))
