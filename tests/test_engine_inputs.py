@@ -44,7 +44,7 @@ def test_every_engine_name_is_an_input_and_every_input_documented():
         assert inp in STUDY_INPUTS and engines, name
     for name in ei.ENGINE_INPUTS:
         assert name in STUDY_INPUTS and STUDY_INPUTS[name].split(":")[0] in (
-            "mat4", "float", "vec3", "sampler2D")  # fmt: skip
+            "mat4", "float", "vec3", "sampler2D", "samplerCube")  # fmt: skip
     assert set(ei.SAME_AS.values()) <= set(STUDY_INPUTS)
 
 
@@ -144,3 +144,42 @@ def test_up_z_matches_llvmpipe_and_is_z_up():
     # and the texture matrix takes Z-up points to the same ground as the Y-up frame's
     assert ground["color"][covered].max() > 0.05
     assert np.abs(rgb - ground["color"])[covered].max() < 1e-5
+
+
+def test_sky_cube_is_the_sky_unflipped_and_matches_llvmpipe():
+    """``sky_cube`` at ``d`` is ``reflectionTexture`` at ``d * (1, -1, 1)`` (the study's
+    shaders' lookup), texel for texel; executor = llvmpipe."""
+    shader = UserShader.from_file(SHADERS / "engine_sky.frag")
+    inputs = synthetic_inputs(48, 36)
+    inputs = dataclasses.replace(
+        inputs, cubemap=np.random.default_rng(5).random(inputs.cubemap.shape).astype(np.float32)
+    )
+    rgb = _gl_agrees(shader, inputs)
+    src = (SHADERS / "engine_sky.frag").read_text().replace("samplerCube sky_cube", "samplerCube "
+                                                             "reflectionTexture")  # fmt: skip
+    src = src.replace("texture(sky_cube, r)", "texture(reflectionTexture, r * vec3(1, -1, 1))")
+    study = UserShader(src, "flipped.frag").render(inputs).numpy()
+    covered = study["mask"] > 0
+    assert np.abs(rgb - study["color"])[covered].max() < 1e-6
+
+
+def test_docs_page_lists_every_input_with_its_bind_line():
+    import sys
+
+    sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "scripts"))
+    from docs_engine_inputs import engine_inputs_page
+
+    page = engine_inputs_page()
+    for name, desc in STUDY_INPUTS.items():
+        assert f"| `{name}` |" in page, name
+        if desc.split(":")[0] in ("sampler2D", "samplerCube", "mat4", "mat3", "vec2", "vec3",
+                                  "float"):  # fmt: skip
+            assert f"`// @study bind myName {name}`" in page, name
+    for alias in ei.ENGINE_ALIASES:
+        assert f"`{alias}`" in page, alias
+
+
+def test_a_frame_without_the_mirrored_camera_names_what_is_missing():
+    shader = UserShader.from_file(SHADERS / "engine_screen.frag")
+    with pytest.raises(ValueError, match="textureMatrix reads the study input reflection_texture"):
+        shader.render(synthetic_inputs(32, 24))

@@ -39,7 +39,7 @@ from pathlib import Path
 import numpy as np
 
 from ..inputs import ShaderInputs, normal_matrix
-from ..pipeline.texture import CLAMP, LINEAR, REPEAT, Texture2D
+from ..pipeline.texture import CLAMP, LINEAR, REPEAT, CubeMap, Texture2D
 
 __all__ = [
     "ENGINE_INPUTS",
@@ -53,6 +53,7 @@ __all__ = [
     "resolve_bindings",
     "gl_textures",
     "read_normal_map",
+    "sky_cube",
     "to_up",
     "uniform_values",
 ]
@@ -80,6 +81,9 @@ ENGINE_INPUTS = {
     "camera_position": ("vec3", "the same as viewpos: camera position, world units"),
     "inverse_view_projection": ("mat4", "the same as uModelViewProjectionMatrixInverse: "
                                 "clip -> world"),
+    "sky_cube": ("samplerCube", "the sky as engines hold a cube map: the texel of direction d "
+                 "holds the sky in direction d (reflectionTexture holds it in d * (1, -1, 1)); "
+                 "linear RGB, bilinear, clamp, no filtering across faces"),
     "user_normal_map": ("sampler2D", "the image `// @study normal_map FILE` names: RGB as "
                         "stored / 255, bilinear, repeat, mipmapped (trilinear)"),
 }  # fmt: skip
@@ -195,6 +199,16 @@ def dudv_map(normal_map: np.ndarray) -> np.ndarray:
     return np.concatenate([rg, np.zeros_like(rg[..., :1])], -1).astype(np.float32)
 
 
+def sky_cube(cubemap: np.ndarray) -> np.ndarray:
+    """(6, F, F, C) the study's sky cube map ``cubemap`` (GL face order +X, -X, +Y, -Y, +Z, -Z,
+    the texel of direction ``d`` holding the sky in direction ``d * (1, -1, 1)``) as engines
+    hold one (the texel of ``d`` holding the sky in ``d``): the texel of ``d * (1, -1, 1)`` is
+    on the same face for the x and z faces and on the opposite one for the y faces, at the same
+    s and the opposite t, so the faces +Y and -Y swap and every face's rows reverse (exact: the
+    texel centres are symmetric)."""
+    return np.ascontiguousarray(np.asarray(cubemap)[[0, 1, 3, 2, 4, 5], ::-1])
+
+
 def read_normal_map(path) -> np.ndarray:
     """(H, W, 3) float32 RGB in [0, 1] of an 8- or 16-bit image file, rows in GL upload order:
     the file's top row at ``t = 1`` (as three.js and Babylon.js upload an image, ``flipY`` /
@@ -243,6 +257,7 @@ def engine_values(m, inputs: ShaderInputs, options: dict) -> dict:
     for name, (a, filt, wrap, mips) in gl_textures(inputs, options.get("normal_map")).items():
         tex = Texture2D.from_numpy(m, a, filt, wrap if wrap in (REPEAT, CLAMP) else CLAMP)
         out[name] = tex.with_mipmaps(m, LINEAR) if mips else tex
+    out["sky_cube"] = CubeMap.from_numpy(m, sky_cube(inputs.cubemap))
     return out
 
 
@@ -324,6 +339,13 @@ def gl_class(base, options: dict):
                 rep = wrap == REPEAT
                 smp = self.ctx.sampler(repeat_x=rep, repeat_y=rep, filter=(fmin, f))
                 self._engine_textures[name] = (10 + k, tex, smp)
+            cube = sky_cube(self.inputs.cubemap).astype(np.float32)
+            tex = self.ctx.texture_cube(
+                (cube.shape[1], cube.shape[1]), cube.shape[3], cube.tobytes(), dtype="f4"
+            )
+            f = mgl.LINEAR
+            smp = self.ctx.sampler(repeat_x=False, repeat_y=False, repeat_z=False, filter=(f, f))
+            self._engine_textures["sky_cube"] = (10 + len(self._engine_textures), tex, smp)
 
         def _bind_textures(self) -> None:
             super()._bind_textures()

@@ -285,12 +285,20 @@ def frame_bindings(m, P, inputs, spec: ShaderSpec) -> dict:
         return hit
     b = study_bindings(m, P, inputs, spec.engine)
     for name, study in spec.bindings:
-        if study not in b:
+        if study in STUDY_INPUTS and study not in b and name in mod.bound_names:
+            raise ValueError(
+                f"{spec.label}: {name} reads the study input {study}, which this frame has not "
+                "built (a screen-space buffer or the mirrored camera: `study calibrate` renders "
+                "them for a shader that reads them; else build the inputs with "
+                "study.scene.baseline_inputs.with_baseline_inputs)"
+            )
+        if study not in b and study not in STUDY_INPUTS:
             raise ValueError(
                 f"{spec.label}: the binding {name} = {study!r} names no study input the frame "
                 f"has; the study's inputs: {', '.join(sorted(STUDY_INPUTS))}"
             )
-        b[name] = b[study]
+        if study in b:
+            b[name] = b[study]
     b = {k: v for k, v in b.items() if k in mod.bound_names}
     if _quads.uses_quads(mod, b):  # derivatives: the helper lanes of the frame's quads too
         b = _quads.study_quad_bindings(m, P, inputs, b)
