@@ -183,3 +183,20 @@ def test_a_frame_without_the_mirrored_camera_names_what_is_missing():
     shader = UserShader.from_file(SHADERS / "engine_screen.frag")
     with pytest.raises(ValueError, match="textureMatrix reads the study input reflection_texture"):
         shader.render(synthetic_inputs(32, 24))
+
+
+def test_animated_frames_carry_their_clock(monkeypatch):
+    """``load_frames`` gives frame ``k`` the ``time`` ``k * animation.time_step`` (the renders
+    and the inputs' builds stubbed: only the clock is under test)."""
+    from study.config.experiment import load_experiment
+    from study.scene import frame_data
+
+    exp = load_experiment(Path(__file__).parent.parent / "experiments" / "animated.toml")
+    still = synthetic_inputs(8, 6)
+    monkeypatch.setattr(frame_data, "load_or_render", lambda *a, **k: None)
+    monkeypatch.setattr(frame_data, "load_or_build_shader_inputs", lambda *a, **k: still)
+    monkeypatch.setattr(frame_data, "inputs_for_shader", lambda e, i, *a, **k: i)
+    got = frame_data.load_frames(exp, "llvm_ad_rgb")
+    dt = float(exp.animation.time_step)
+    assert [i.time for i in got["inputs"]] == [k * dt for k in range(int(exp.animation.frames))]
+    assert got["inputs"][3].time > 0 and still.time == 0.0

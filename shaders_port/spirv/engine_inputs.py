@@ -18,7 +18,8 @@ linear RGB.
   ``far = P[2,3] / (P[2,2] + 1)``), so ``sceneDepth`` (window depth ``d`` in [0, 1]) linearises
   to the eye distance ``2 n f / (f + n - (2 d - 1)(f - n))``;
 * ``dudv_map``: the waves' DuDv map, derived from the study's normal map (:func:`dudv_map`);
-* ``time``: ``ShaderInputs.time`` seconds (0 for a still frame);
+* ``time``: ``ShaderInputs.time`` seconds (``k * animation.time_step`` on frame ``k`` of an
+  animated experiment, ``study.scene.frame_data``; 0 for a still frame);
 * ``sun_direction``: unit vector from the centre of the water quad towards ``lightpos``;
   ``sun_color``: ``lightcolor`` (the highlight's linear RGB scale);
 * ``user_normal_map``: the image file the declaration names (``// @study normal_map FILE``):
@@ -75,7 +76,7 @@ ENGINE_INPUTS = {
     "camera_far": ("float", "far plane of the camera's projection, world units"),
     "dudv_map": ("sampler2D", "DuDv of the waves: RG = 0.5 + 0.5 (-dh/dx, -dh/dz) of the "
                  "study's normal map (0.5: no distortion), B = 0; bilinear, repeat"),
-    "time": ("float", "animation clock, seconds (0 for a still frame)"),
+    "time": ("float", "animation clock, seconds: k * animation.time_step on frame k, 0 still"),
     "sun_direction": ("vec3", "unit vector towards the light from the water quad's centre"),
     "sun_color": ("vec3", "linear RGB of the highlight (lightcolor)"),
     "camera_position": ("vec3", "the same as viewpos: camera position, world units"),
