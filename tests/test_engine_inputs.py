@@ -200,3 +200,10 @@ def test_animated_frames_carry_their_clock(monkeypatch):
     dt = float(exp.animation.time_step)
     assert [i.time for i in got["inputs"]] == [k * dt for k in range(int(exp.animation.frames))]
     assert got["inputs"][3].time > 0 and still.time == 0.0
+
+
+def test_binding_sheets_describe_engine_names():
+    from study.export.bindings import _meaning
+
+    assert _meaning("textureMatrix") == ei.ENGINE_INPUTS["reflection_texture_matrix"][1]
+    assert "DuDv" in _meaning("dudv_map") and _meaning("viewpos") == "camera position, world units"
