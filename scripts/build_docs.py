@@ -18,7 +18,9 @@ Every table of results in ``docs/`` is written by this script, never by hand:
   ``schedules.md``, the same calibration at three step schedules (``schedules.json``);
 * ``docs/experiment-keys.md``: the experiment file's key table, from the schema;
 * ``docs/file-formats.md``: the files a user gives and the files the tool writes, its tables
-  from the schema, the file readers and the committed result files (``docs_file_formats.py``).
+  from the schema, the file readers and the committed result files (``docs_file_formats.py``);
+* ``docs/engine-inputs.md``: every input a user's shader can read, from the code's tables
+  (``docs_engine_inputs.py``).
 
 and every figure it can draw from those files (:func:`figures`): the Pareto chart of a
 tradeoff-family study whose ``tradeoff.parquet`` is committed, a study's ``motion.png``, the
@@ -95,10 +97,12 @@ def generated() -> dict[Path, str]:
     from study.config.experiment import schema_markdown
 
     sys.path.insert(0, str(Path(__file__).resolve().parent))
+    from docs_engine_inputs import engine_inputs_page
     from docs_file_formats import file_formats_page
 
     pages = {DOCS / "experiment-keys.md": KEYS_HEADER + schema_markdown()}
     pages[DOCS / "file-formats.md"] = file_formats_page()
+    pages[DOCS / "engine-inputs.md"] = engine_inputs_page()
     for study in TRADEOFF_FAMILY:
         folder = RESULTS / study
         pages[folder / "report.md"] = tradeoff_report_text(_tradeoff_summary(folder))

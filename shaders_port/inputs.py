@@ -84,6 +84,9 @@ class ShaderInputs:
         reflection_view_proj: (4, 4) world -> clip space of the mirrored camera
             (``o2v_projection_reflection`` of seed 004; :func:`mirrored_view_proj`).
 
+    Optional, read by a user's shader only (``spirv.engine_inputs``):
+        time: the animation clock, seconds (0.0 for a still frame); GLSL ``time``.
+
     Optional, read by no shader (the fit's, ``None`` unless built):
         refraction_halves: (2, H0, W0, 3) linear RGB, two independent Monte Carlo estimates of
             ``refraction_texture`` (each from half of its samples, never denoised): the fit's
@@ -114,6 +117,7 @@ class ShaderInputs:
     reflection_color: np.ndarray | None = None
     reflection_view_proj: np.ndarray | None = None
     refraction_halves: np.ndarray | None = None
+    time: float = 0.0
 
     def __post_init__(self) -> None:
         shapes = {

@@ -81,9 +81,13 @@ class ImageOps:
             raise self.unsupported(ins, "a sampler that is not bound to a study texture")
         return tex
 
-    def _coords(self, ins, coord, proj: bool) -> list:
+    def _coords(self, ins, coord, proj: bool, cube: bool = True) -> list:
+        """The lookup's coordinates; ``textureProj``'s divided by their last component (of a
+        2D texture's ``vec4``, the third is ignored, as GLSL says)."""
         c = [lift(self.m, x, "float") for x in coord]
         if proj:
+            if not cube and len(c) == 4:
+                c = [c[0], c[1], c[3]]
             c = [x / c[-1] for x in c[:-1]]
         return c
 
@@ -106,7 +110,7 @@ class ImageOps:
         o = ins.operands
         tex = self._texture(ins)
         proj = "Proj" in ins.opname
-        c = self._coords(ins, self.get(o[1]), proj)
+        c = self._coords(ins, self.get(o[1]), proj, isinstance(tex, CubeMap))
         operands = dict(o[2]) if len(o) > 2 else {}
         unknown = set(operands) - {"Bias", "Lod", "Grad", "ConstOffset"}
         if unknown:

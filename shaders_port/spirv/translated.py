@@ -48,6 +48,7 @@ from ..pipeline.frame import (
 )
 from ..pipeline.raster import prepare
 from ..pipeline.texture import CLAMP, LINEAR, NEAREST, Texture2D, backend_types
+from . import engine_inputs as _engine
 from . import quads as _quads
 from .execute import Executor
 from .loops import check_passes
@@ -86,6 +87,22 @@ STUDY_INPUTS = {
     "viewpos": "vec3: camera position",
     "lightpos": "vec3: light position",
     "lightcolor": "vec3: linear RGB of the highlight",
+    # the inputs engines' water shaders read besides (``spirv.engine_inputs``)
+    **{k: f"{t}: {what}" for k, (t, what) in _engine.ENGINE_INPUTS.items()},
+}
+# the study's inputs given in world space: their kind for a Z-up world (``engine_inputs.to_up``)
+_WORLD = {
+    "varyingVecWorldPosition": "vector",
+    "varyingVecEye": "vector",
+    "varyingVecLight": "vector",
+    "viewpos": "vector",
+    "lightpos": "vector",
+    "uTextureMatrix0": "matrix",
+    "uTextureMatrix1": "matrix",
+    "uModelViewProjectionMatrix": "matrix",
+    "o2v_projection_reflection": "matrix",
+    "uModelViewProjectionMatrixInverse": "inverse",
+    "uNormalMatrix": "rotation",
 }
 _DECL = r"^(?P<head>\s*(?:const|uniform)\s+(?P<type>float|int|vec3|vec4)\s+{name}\s*=\s*)"
 _DECL_TAIL = r"(?P<value>[^;]*)(?P<tail>;.*)$"
@@ -97,7 +114,8 @@ class ShaderSpec:
     ``label`` (file name for messages and debug lines), the preprocessor names ``defines``,
     ``constants``: GLSL name -> ``CONSTANT_SPECS`` key or the user's name (each a declaration
     with an initializer, made a uniform, or a uniform without one), ``bindings``: shader name
-    -> :data:`STUDY_INPUTS` name, and ``include_paths``: folders of its ``#include`` files."""
+    -> :data:`STUDY_INPUTS` name, ``include_paths``: folders of its ``#include`` files, and
+    ``engine``: the options of ``spirv.engine_inputs`` (``up``, ``normal_map``) as pairs."""
 
     source: str
     label: str
@@ -106,6 +124,7 @@ class ShaderSpec:
     bindings: tuple = ()  # ((shader name, study name), ...)
     ints: tuple = field(default=())  # GLSL names of the integer constants
     include_paths: tuple = ()  # folders searched for its #include files
+    engine: tuple = ()  # options of spirv.engine_inputs: (("up", "z"), ("normal_map", path))
 
     def prepared_source(self) -> str:
         """The source with every declared constant a uniform without initializer (line for
@@ -163,8 +182,30 @@ def _columns(M) -> list:
     return [[float(a[i, j]) for i in range(a.shape[0])] for j in range(a.shape[1])]
 
 
-def study_bindings(m, P, inputs: ShaderInputs) -> dict:
-    """The values of :data:`STUDY_INPUTS` for one prepared frame."""
+def study_bindings(m, P, inputs: ShaderInputs, engine: tuple = ()) -> dict:
+    """The values of :data:`STUDY_INPUTS` for one prepared frame; ``engine``: the options of
+    ``spirv.engine_inputs`` (with ``up`` 'z' the world-space values in a Z-up frame)."""
+    b = _study_values(m, P, inputs)
+    options = dict(engine)
+    up = options.get("up", "y")
+    if up != "y":
+        for name, kind in _WORLD.items():
+            if name in b and name.startswith("varying"):
+                x, y, z = b[name]
+                b[name] = [x, -z, y] if up == "z" else b[name]
+            elif name in b:
+                a = np.asarray(b[name], np.float64).T if kind != "vector" else b[name]
+                v = _engine.to_up(up, a, kind)
+                b[name] = _columns(v) if kind != "vector" else [float(np.float32(c)) for c in v]
+    b.update(_engine.engine_values(m, inputs, options))
+    for name, study in _engine.SAME_AS.items():
+        if study in b:
+            b[name] = b[study]
+    return b
+
+
+def _study_values(m, P, inputs: ShaderInputs) -> dict:
+    """The values of the study's own inputs for one prepared frame, in its Y-up world."""
     r = P.raster
     b = {
         "varyingVecWorldPosition": [P.varyingVecWorldPosition[i] for i in range(3)],
@@ -237,18 +278,27 @@ def frame_bindings(m, P, inputs, spec: ShaderSpec) -> dict:
     module does not read (each Python number of a recording's arguments is checked on every
     replay)."""
     mod = module_of(spec)
-    key = (P.upload, m.__name__, spec.bindings, mod.bound_names, _quads.uses_quads(mod, {}))
+    key = (P.upload, m.__name__, spec.bindings, spec.engine, mod.bound_names,
+           _quads.uses_quads(mod, {}))  # fmt: skip
     hit = _BINDINGS.get(key)
     if hit is not None:
         return hit
-    b = study_bindings(m, P, inputs)
+    b = study_bindings(m, P, inputs, spec.engine)
     for name, study in spec.bindings:
-        if study not in b:
+        if study in STUDY_INPUTS and study not in b and name in mod.bound_names:
+            raise ValueError(
+                f"{spec.label}: {name} reads the study input {study}, which this frame has not "
+                "built (a screen-space buffer or the mirrored camera: `study calibrate` renders "
+                "them for a shader that reads them; else build the inputs with "
+                "study.scene.baseline_inputs.with_baseline_inputs)"
+            )
+        if study not in b and study not in STUDY_INPUTS:
             raise ValueError(
                 f"{spec.label}: the binding {name} = {study!r} names no study input the frame "
                 f"has; the study's inputs: {', '.join(sorted(STUDY_INPUTS))}"
             )
-        b[name] = b[study]
+        if study in b:
+            b[name] = b[study]
     b = {k: v for k, v in b.items() if k in mod.bound_names}
     if _quads.uses_quads(mod, b):  # derivatives: the helper lanes of the frame's quads too
         b = _quads.study_quad_bindings(m, P, inputs, b)

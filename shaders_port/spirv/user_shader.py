@@ -49,6 +49,7 @@ from ..pipeline.frame import finish_output, tangents
 from ..pipeline.raster import prepare
 from ..pipeline.texture import backend_types
 from . import dialects
+from . import engine_inputs as _engine
 from . import translated as spirv_port
 
 __all__ = ["UserShader", "UserConstant"]
@@ -143,7 +144,7 @@ class UserShader:
         self.source, self.label, self.path, self.vertex = source, label, path, vertex
         self.defines, self.include_paths = tuple(defines), tuple(str(p) for p in include_paths)
         self.dialect = dialects.detect(source, label)
-        ranges, bindings = {}, {}
+        ranges, bindings, self.engine = {}, {}, {"up": "y", "normal_map": None}
         for m in _PRAGMA.finditer(source):
             args = m["args"].split()
             line = source.count("\n", 0, m.start()) + 1
@@ -156,13 +157,16 @@ class UserShader:
                     raise ValueError(f"{where}: {msg}") from None
             elif m["verb"] == "bind" and len(args) == 2:
                 bindings[args[0]] = args[1]
+            elif m["verb"] in ("up", "normal_map") and len(args) == 1:
+                self.engine[m["verb"]] = args[0]
             else:
                 raise ValueError(
                     f"{where}: unknown pragma `// @study {m['verb']} {m['args']}`; write "
-                    "`// @study constant NAME LOW HIGH [START]` or `// @study bind NAME "
-                    "STUDY_INPUT`"
+                    "`// @study constant NAME LOW HIGH [START]`, `// @study bind NAME "
+                    "STUDY_INPUT`, `// @study up z` or `// @study normal_map FILE`"
                 )
         decl = dict(declaration or {})
+        self.engine.update({k: decl.pop(k) for k in ("up", "normal_map") if k in decl})
         unknown = set(decl) - {"constants", "bindings"}
         if unknown:
             raise ValueError(
@@ -179,6 +183,7 @@ class UserShader:
         bindings.update(dict(decl.get("bindings", {})))
         self.bindings = bindings
         self.constants = self._constants(ranges)
+        self._engine_options(path)
         self.validate()
 
     @classmethod
@@ -251,12 +256,30 @@ class UserShader:
                 raise ValueError(f"{self.label}: the bound name {name} is not used by the shader")
         return self
 
+    def _engine_options(self, path) -> None:
+        """``up`` checked and ``normal_map`` made a path (relative to the shader's file)."""
+        if self.engine["up"] not in ("y", "z"):
+            raise ValueError(f"{self.label}: `// @study up {self.engine['up']}`: write up y or z")
+        if self.engine["up"] == "z" and self.vertex is not None:
+            raise ValueError(f"{self.label}: `up z` with your own vertex shader is not built")
+        nm = self.engine["normal_map"]
+        if nm:
+            p = Path(nm) if path is None else Path(path).parent / nm
+            if not p.is_file():
+                raise ValueError(f"{self.label}: normal_map: no image file {str(p)!r}")
+            self.engine["normal_map"] = str(p.resolve())
+
+    def run_bindings(self) -> dict:
+        """The bindings the shader runs with: its own and the engine names it reads
+        (``spirv.engine_inputs.resolve_bindings``)."""
+        return _engine.resolve_bindings(self.source, self.bindings, self.constants)
+
     def study_inputs(self) -> set[str]:
         """The study's inputs (:data:`spirv.translated.STUDY_INPUTS`) the shader reads: by their own
         names in its code (comments left out), or through a binding."""
-        code = re.sub(r"//.*|/\*.*?\*/", "", self.source, flags=re.S)
+        code = re.sub(r"//[^\n]*|/\*.*?\*/", "", self.source, flags=re.S)
         named = {n for n in spirv_port.STUDY_INPUTS if re.search(rf"\b{re.escape(n)}\b", code)}
-        return named | set(self.bindings.values())
+        return named | set(self.bindings.values()) | set(self.run_bindings().values())
 
     # ---- values ----------------------------------------------------------------------------
     def defaults(self) -> dict:
@@ -314,8 +337,9 @@ class UserShader:
             self.label,
             defines=self.defines,
             constants=tuple((n, n) for n in self.constants),
-            bindings=tuple(self.bindings.items()),
+            bindings=tuple(self.run_bindings().items()),
             include_paths=self.include_paths,
+            engine=tuple(sorted(self.engine.items())),
         )
 
     def check(self) -> "UserShader":
@@ -323,7 +347,7 @@ class UserShader:
         and check that every input, uniform and sampler it reads is a study input, bound or a
         constant: before anything is rendered."""
         mod = spirv_port.module_of(self.spec())
-        known = set(spirv_port.STUDY_INPUTS) | set(self.bindings) | set(self.constants)
+        known = set(spirv_port.STUDY_INPUTS) | set(self.run_bindings()) | set(self.constants)
         for vid, ins in mod.defs.items():
             name = mod.binding_name(vid)
             if (ins.opname == "OpVariable" and ins.operands[0] in ("Input", "UniformConstant")
@@ -434,7 +458,7 @@ class UserShader:
         HLSL), that GLSL through a ``TranslatedRenderer``. Use it as a context manager,
         ``render(None)`` / ``time_frames(None, n, warmup)``."""
 
-        bindings = dict(self.bindings)
+        bindings = self.run_bindings()
         base = GLRenderer if reflection is None else TranslatedRenderer
         vals = self._checked(values)
         bare = {c.name: np.asarray(vals[c.name], np.float32).tobytes()
@@ -445,6 +469,7 @@ class UserShader:
                     "the HLSL round trip of a pair with your own vertex shader is not built"
                 )
             base = self.vertex.gl_class(base, inputs)
+        base = _engine.gl_class(base, self.engine)
 
         label = self.label
 

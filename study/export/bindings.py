@@ -2,7 +2,8 @@
 
 Built from ``spirv-cross --reflect`` of the shaders of the target (textures, samplers, uniforms,
 their blocks and offsets, stage inputs and outputs with their locations, specialization
-constants) and from :data:`MEANINGS`, the experiment's meaning and units of each name.
+constants) and from :data:`MEANINGS`, the experiment's meaning and units of each name (an
+engine input's, ``shaders_port.spirv.engine_inputs.ENGINE_INPUTS``, for the names it adds).
 """
 
 from __future__ import annotations
@@ -10,6 +11,8 @@ from __future__ import annotations
 import re
 
 import numpy as np
+
+from shaders_port.spirv.engine_inputs import ENGINE_ALIASES, ENGINE_INPUTS
 
 # name in the GLSL -> what the application binds there (units, conventions of the study)
 MEANINGS = {
@@ -96,6 +99,9 @@ def _meaning(name: str) -> str:
     base = name.rsplit(".", 1)[-1]
     base = re.sub(r"^_(\w+)_sampler$", r"\1", base)
     m = MEANINGS.get(base, "")
+    engine = ENGINE_ALIASES.get(base, (base,))[0]  # an engine input (docs/engine-inputs.md)
+    if not m and engine in ENGINE_INPUTS:
+        m = ENGINE_INPUTS[engine][1]
     return f"sampler of {base}" if not m and base != name else m
 
 

@@ -242,7 +242,15 @@ def with_baseline_inputs(
 
 # the study's inputs a shader reads (``shaders_port.spirv.translated.STUDY_INPUTS``) that only the
 # baseline's buffers hold
-SCREEN_INPUTS = ("sceneColor", "sceneDepth", "reflection_sampler", "o2v_projection_reflection")
+SCREEN_INPUTS = (
+    "sceneColor",
+    "sceneDepth",
+    "reflection_sampler",
+    "o2v_projection_reflection",
+    "reflection_texture_matrix",
+    "refraction_sampler",
+    "depth_sampler",
+)
 
 
 def inputs_for_shader(
