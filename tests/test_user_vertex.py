@@ -224,3 +224,14 @@ def test_study_calibrate_with_the_users_vertex_shader(tmp_path, monkeypatch):
     hlsl = res["engine_targets"].get("hlsl", {}).get("llvmpipe")
     if hlsl is not None:
         assert hlsl["ran"] is False and "vertex shader" in hlsl["why"], hlsl
+
+
+def test_explicit_locations_after_a_line_comment():
+    """A ``//`` comment ends at its line: the locations placed after it are read (a pattern
+    with ``.`` matching newlines dropped the rest of the file)."""
+    from shaders_port.spirv.vertex import explicit_locations
+
+    src = "// a comment\nlayout(location = 3) out vec4 vA;\n/* b\n c */\n"
+    src += "layout(location = 5) flat out vec2 vB;\nlayout(location = 1) in vec4 aPos;\n"
+    assert explicit_locations(src, "out") == {"vA": 3, "vB": 5}
+    assert explicit_locations(src, "in") == {"aPos": 1}

@@ -50,7 +50,7 @@ _LOCATION = re.compile(
 def explicit_locations(source: str, direction: str) -> dict:
     """name -> ``layout(location = N)`` of the ``in`` or ``out`` variables ``source`` places
     itself (not those glslang maps automatically)."""
-    code = re.sub(r"//.*|/\*.*?\*/", "", source, flags=re.S)
+    code = re.sub(r"//[^\n]*|/\*.*?\*/", "", source, flags=re.S)  # a line comment ends at \n
     return {m["name"]: int(m["loc"]) for m in _LOCATION.finditer(code) if m["dir"] == direction}
 
 
