@@ -468,11 +468,7 @@ class UserShader:
         vals = self._checked(values)
         bare = {c.name: np.asarray(vals[c.name], np.float32).tobytes()
                 for c in self.constants.values() if c.bare}  # fmt: skip
-        if self.vertex is not None:
-            if reflection is not None:
-                raise RuntimeError(
-                    "the HLSL round trip of a pair with your own vertex shader is not built"
-                )
+        if self.vertex is not None:  # the grid drawn with the user's GLSL vertex shader
             base = self.vertex.gl_class(base, inputs)
         base = _engine.gl_class(base, self.engine)
 
