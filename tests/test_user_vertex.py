@@ -168,6 +168,28 @@ def test_the_hlsl_round_trip_of_a_pair_runs_like_the_executor(name, inputs, tmp_
     assert check["mean_abs"] <= 1e-5, check
 
 
+def test_a_vertex_shader_with_glsl_compatibility_names(inputs, tmp_path):
+    # GLSL 1.20 with ftransform(), gl_Vertex, gl_MultiTexCoord0, gl_Normal, gl_ModelViewMatrix,
+    # gl_NormalMatrix and gl_TexCoord[0], after a GLSL 1.20 fragment shader reading them
+    shader = _pair("legacy_water")
+    assert "ftransform" in shader.vertex.shader.original
+    assert shader.vertex.shader.source.startswith("#version 330 core")
+    ours, mask, mean, p999, differ = _gl_compare(shader, inputs)
+    assert mask.sum() > 800 and differ <= 0.001 * mask.sum(), (int(mask.sum()), differ)
+    # measured on llvmpipe: mean 5.2e-8
+    assert mean <= 1e-5 and p999 <= GL_P999, (mean, p999)
+    # ftransform() is the study's world -> clip matrix on the grid's positions
+    assert (rasterize_water(inputs).mask ^ mask).sum() <= 0.002 * mask.sum()
+    assert np.std(ours["color"][mask], 0).min() > 0.01  # the varyings vary over the water
+    # a compatibility name the grid gives no value of: refused at its line
+    (tmp_path / "c.vert").write_text(
+        "#version 120\nvarying vec4 c;\nvoid main() {\n  gl_Position = ftransform();\n"
+        "  c = gl_Color;\n}\n"
+    )
+    with pytest.raises(ValueError, match=r"c.vert:5: gl_Color: a compatibility built-in"):
+        UserVertex.from_file(tmp_path / "c.vert")
+
+
 def test_errors_name_the_problem(inputs, tmp_path):
     frag = SHADERS / "projective_water.frag"
     head = "#version 330 core\nin vec3 position;\n"

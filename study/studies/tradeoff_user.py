@@ -62,7 +62,7 @@ def shader_sha256(shader) -> str:
     )
     vertex = ""
     if shader.vertex is not None:
-        vertex = json.dumps([shader.vertex.shader.source, list(shader.vertex.cells)])
+        vertex = json.dumps([shader.vertex.shader.original, list(shader.vertex.cells)])
     parts = [shader.source, expanded, json.dumps(list(shader.defines)), decl, vertex]
     return hashlib.sha256("\0".join(parts).encode()).hexdigest()
 
