@@ -19,6 +19,11 @@ positions the vertex shader wrote (``gl_Position``, one per vertex) and, in floa
 * keeps per pixel the nearest fragment (depth test ``GL_LESS``, depth cleared to 1; of equal
   depths the triangle drawn first).
 
+:func:`weights_at` evaluates a sub-triangle's plane equations at any pixel centre (inside it
+or not); :func:`quad_helpers` builds with it the helper pixels of each triangle's 2x2 quads,
+as GL runs a derivative's quads. :func:`plane_points` is the study's own quad's
+interpolation: the points of ``y = 0`` seen through pixel centres (``pipeline.raster``).
+
 Perspective-correct weights are ``(l_i / w_i) / sum_j (l_j / w_j)`` of the window-space
 (linear) weights ``l_i``; ``flat`` outputs take the provoking vertex, GL's default last vertex
 of the triangle (``triangles[t, 2]``). Pixels no triangle covers are not water pixels.
