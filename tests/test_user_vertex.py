@@ -130,8 +130,8 @@ def test_mip_lookups_and_derivatives_after_a_flat_grid_equal_the_study_quads(inp
     # levels of detail (the study quad's are compared with llvmpipe in test_spirv_instructions)
     study = spirv_port.study_bindings
 
-    def mipmapped(m, P, frame):
-        b = study(m, P, frame)
+    def mipmapped(m, P, frame, *engine):
+        b = study(m, P, frame, *engine)
         b["normalMap"] = b["normalMap"].with_mipmaps(m)
         return b
 

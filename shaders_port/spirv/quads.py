@@ -165,9 +165,10 @@ def uses_quads(module, bindings: dict) -> bool:
     return implicit and any(getattr(v, "levels", ()) for v in bindings.values())
 
 
-def study_quad_bindings(m, P, inputs, b: dict) -> dict:
+def study_quad_bindings(m, P, inputs, b: dict, up: str = "y") -> dict:
     """The study's bindings ``b`` (``spirv.translated.study_bindings`` of the prepared frame
-    ``P``) with the frame's helper lanes after its covered pixels, and the frame's
+    ``P``, in the world frame ``up``: 'z' gives the world-space varyings as ``(x, -z, y)``,
+    as there) with the frame's helper lanes after its covered pixels, and the frame's
     :class:`Quads` under :data:`QUADS_KEY`."""
     r = P.raster
     col, row = r.index % r.width, r.index // r.width
@@ -185,6 +186,10 @@ def study_quad_bindings(m, P, inputs, b: dict) -> dict:
             [hx + 0.5, hy + 0.5, 0.5 * clip[:, 2] / clip[:, 3] + 0.5, 1.0 / clip[:, 3]]
         ),
     }
+    if up == "z":  # the world-space varyings in the Z-up frame the shaded lanes have
+        for name in ("varyingVecWorldPosition", "varyingVecEye", "varyingVecLight"):
+            x_, y_, z_ = helper[name]
+            helper[name] = np.stack([x_, -z_, y_])
     for k in range(4):
         tc = base + inputs.waves[k].astype(np.float64)
         helper[f"vTexCoord{k}"] = np.stack(
