@@ -409,3 +409,24 @@ def test_frames_with_and_without_quads_are_kept_apart(water):
     b = spirv_port.render(water, None, spec=spirv_port.ShaderSpec(_DERIV, "deriv.frag"))
     mask = a.numpy()["mask"] > 0
     assert not np.array_equal(a.numpy()["color"][mask], b.numpy()["color"][mask])
+
+
+def test_helper_pixels_of_a_z_up_shader_are_in_its_frame(water, tmp_path):
+    # with `// @study up z` the world-space varyings are (x, -z, y) on the helper lanes too:
+    # fwidth of each component equals the Y-up shader's of the component it came from, on
+    # the water's edge pixels as inside (helpers left in the Y-up frame gave the
+    # edge pixels derivatives wrong by up to 4.5 here)
+    body = (
+        "// @study constant GAIN 0.0 2.0\nin vec3 varyingVecWorldPosition;\n"
+        "out vec4 fragColor;\nconst float GAIN = 1.0;\nvoid main() {\n"
+        "    vec3 p = varyingVecWorldPosition;\n"
+        "    fragColor = vec4(GAIN * vec3(fwidth(p.x), fwidth(p.%s), fwidth(p.%s)), 1.0);\n}\n"
+    )
+    (tmp_path / "y.frag").write_text("#version 330 core\n" + body % ("y", "z"))
+    (tmp_path / "z.frag").write_text("#version 330 core\n// @study up z\n" + body % ("z", "y"))
+    y_up = UserShader.from_file(tmp_path / "y.frag").render(water).numpy()
+    z_up = UserShader.from_file(tmp_path / "z.frag").render(water).numpy()
+    mask = y_up["mask"] > 0.5
+    assert np.array_equal(mask, z_up["mask"] > 0.5)
+    assert y_up["color"][mask][:, 2].min() > 0  # the derivatives are not all zero
+    assert np.abs(y_up["color"] - z_up["color"]).max(-1)[mask].max() <= 1e-6

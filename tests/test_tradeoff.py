@@ -286,3 +286,39 @@ def test_motion_findings_hand_checked():
     assert f["banding"][0]["rel"] == pytest.approx((1.5e-3 / 1.0e-3) ** 0.5 - 1)
     loose = motion_findings(pts, {"label": "cheap"}, tolerance=0.25, z=2.0)
     assert loose["bands"] == []
+
+
+def test_a_user_shaders_job_hash_covers_includes_defines_and_the_vertex_shader(tmp_path):
+    # what the tradeoff keys a user's point by: editing an include file, a define or the
+    # vertex shader measures it again; an unchanged experiment reads the same key
+    from study import load_experiment
+    from study.studies.tradeoff_user import user_jobs
+
+    shaders = REPO / "tests" / "shaders"
+    (tmp_path / "inc").mkdir()
+    common = tmp_path / "inc" / "water_common.glsl"
+    common.write_text((shaders / "include" / "water_common.glsl").read_text())
+    (tmp_path / "w.frag").write_text((shaders / "schlick_fog_120.frag").read_text())
+    vert = tmp_path / "w.vert"
+    vert.write_text((shaders / "urho_water.vert").read_text())
+    exp_file = tmp_path / "e.toml"
+    exp_file.write_text(
+        '[fit]\nshader = "w.frag"\ninclude_paths = ["inc"]\ndefines = ["WATER_FOG=1"]\n'
+    )
+
+    def key(*overrides):
+        (job,) = user_jobs([load_experiment(exp_file, list(overrides))], ["scene"])
+        return job["shader_sha256"]
+
+    base = key()
+    assert key() == base
+    assert key('fit.defines=["WATER_FOG=0"]') != base
+    assert key('fit.defines=["WATER_FOG=1", "UNUSED"]') != base
+    common.write_text(common.read_text().replace("F0 = 0.02", "F0 = 0.03"))
+    edited = key()
+    assert edited != base
+    with_vertex = key(f'fit.vertex="{vert}"')
+    assert with_vertex != edited
+    assert key(f'fit.vertex="{vert}"', "fit.vertex_grid=[8, 8]") != with_vertex
+    vert.write_text(vert.read_text() + "\n// an edit\n")
+    assert key(f'fit.vertex="{vert}"') != with_vertex

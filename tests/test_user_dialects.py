@@ -17,7 +17,11 @@ from helpers.experiments import TINY, sets
 from helpers.synthetic import synthetic_inputs
 from shaders_port.spirv.dialects import ShaderError, detect, front_end
 from shaders_port.spirv.loops import MAX_PASSES
+from shaders_port.spirv.support import check_supported, supported_opcodes, supported_std450
+from shaders_port.spirv.translated import builtin_spec, module_of
 from shaders_port.spirv.user_shader import UserShader
+from shaders_port.spirv.vertex import VertexShader
+from shaders_port.variants import VARIANTS
 from study.cli import main
 from study.config.errors import ExperimentError
 from study.export.gl_check import GL_MEAN, GL_P999, gl_check_user
@@ -151,9 +155,51 @@ def test_non_finite_pixels_are_one_error_with_their_places(inputs):
 
 
 def test_an_unsupported_instruction_is_one_error_line(inputs):
-    shader = UserShader.from_file(SHADERS / "hostile_unsupported.frag").check()
+    # found by the check when the shader loads (spirv.support), and by the executor itself
+    shader = UserShader.from_file(SHADERS / "hostile_unsupported.frag")
+    with pytest.raises(ValueError, match=r"OpBitReverse, at hostile_unsupported\.frag:11$"):
+        shader.check()
     with pytest.raises(ValueError, match=r"OpBitReverse, at hostile_unsupported\.frag:11$"):
         shader.render(inputs)
+
+
+def test_an_unsupported_instruction_is_refused_when_the_experiment_loads(tmp_path, capsys):
+    from study import load_experiment
+
+    exp_file = tmp_path / "e.toml"
+    exp_file.write_text(f'[fit]\nshader = "{SHADERS / "hostile_unsupported.frag"}"\n')
+    want = (
+        "fit.shader: the SPIR-V executor does not support OpBitReverse, at "
+        "hostile_unsupported.frag:11"
+    )
+    with pytest.raises(ExperimentError) as err:
+        load_experiment(exp_file)
+    assert str(err.value) == want
+    cache = tmp_path / "cache"
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setenv("STUDY_CACHE", str(cache))
+        rc = main(["calibrate", str(exp_file), "--out", str(tmp_path / "out"), *sets(TINY)])
+    err = capsys.readouterr().err
+    assert rc == 2 and f"study calibrate: error: {want}\n" in err and "Traceback" not in err
+    assert not cache.exists() or not any(cache.rglob("*.exr"))
+
+
+def test_the_load_check_passes_every_shader_the_executor_runs():
+    # the supported set is read from the executor's dispatch: no shader it runs is refused
+    for variant in VARIANTS.values():
+        check_supported(module_of(builtin_spec(variant.shader, variant.defines)))
+    for path in sorted(SHADERS.glob("*.frag")):
+        if path.stem == "hostile_unsupported":
+            continue
+        opts = DIALECTS.get(path.stem, ("", {}))[1]
+        shader = UserShader.from_file(path, None, opts.get("defines", ()),
+                                      opts.get("include_paths", ()))  # fmt: skip
+        check_supported(module_of(shader.spec()))
+    for path in sorted(SHADERS.glob("*.vert")):
+        check_supported(VertexShader.from_file(path).module)
+    assert {"OpPhi", "OpSwitch", "OpKill", "OpMatrixTimesVector"} <= supported_opcodes()
+    assert "OpBitReverse" not in supported_opcodes()
+    assert {"Cross", "Reflect", "Normalize", "FMix", "Pow"} <= supported_std450()
 
 
 def test_gl_check_of_a_dialect_opengl_cannot_run_fails_with_its_reason(inputs, capsys):

@@ -31,7 +31,7 @@ class TranslatedRenderer(GLRenderer):
     def __init__(self, name: str, inputs, source: str, reflection: dict):
         self._members = self._block_members(reflection)
         self._combined = self._combined_samplers(reflection)
-        self._ubo = None
+        self._ubo, self._data = None, None  # the uniform block's buffer and its bytes
         super().__init__(name, inputs, source=source)
 
     @staticmethod
@@ -89,7 +89,9 @@ class TranslatedRenderer(GLRenderer):
         if block is None:
             return
         size = max(self._members[""][0], block.size)  # GL pads the block to 16 bytes
-        data = bytearray(size)
+        if self._data is None or len(self._data) != size:
+            self._data = bytearray(size)
+        data = self._data  # kept: a later call (the vertex shader's uniforms) writes its own
         for uname, raw in vals.items():
             if uname not in self._members:
                 continue

@@ -19,6 +19,11 @@ positions the vertex shader wrote (``gl_Position``, one per vertex) and, in floa
 * keeps per pixel the nearest fragment (depth test ``GL_LESS``, depth cleared to 1; of equal
   depths the triangle drawn first).
 
+:func:`weights_at` evaluates a sub-triangle's plane equations at any pixel centre (inside it
+or not); :func:`quad_helpers` builds with it the helper pixels of each triangle's 2x2 quads,
+as GL runs a derivative's quads. :func:`plane_points` is the study's own quad's
+interpolation: the points of ``y = 0`` seen through pixel centres (``pipeline.raster``).
+
 Perspective-correct weights are ``(l_i / w_i) / sum_j (l_j / w_j)`` of the window-space
 (linear) weights ``l_i``; ``flat`` outputs take the provoking vertex, GL's default last vertex
 of the triangle (``triangles[t, 2]``). Pixels no triangle covers are not water pixels.
@@ -30,7 +35,17 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["Grid", "Coverage", "water_grid", "rasterize_triangles", "interpolate"]
+__all__ = [
+    "Grid",
+    "Coverage",
+    "Planes",
+    "water_grid",
+    "rasterize_triangles",
+    "weights_at",
+    "quad_helpers",
+    "interpolate",
+    "plane_points",
+]
 
 SUBPIXEL = 256.0  # window positions snapped to 1/SUBPIXEL pixel
 
@@ -84,6 +99,8 @@ class Coverage:
         depth: (N,) float64 window depth in [0, 1] (``gl_FragCoord.z``).
         inv_w: (N,) float64 ``1 / w_clip`` (``gl_FragCoord.w``).
         front: (N,) bool counter-clockwise in window coordinates (``gl_FrontFacing``).
+        sub: (N,) int64 the clipped sub-triangle of :attr:`planes` each pixel sees.
+        planes: the mesh's :class:`Planes` (for :func:`quad_helpers`).
     """
 
     mask: np.ndarray
@@ -94,6 +111,37 @@ class Coverage:
     depth: np.ndarray
     inv_w: np.ndarray
     front: np.ndarray
+    sub: np.ndarray | None = None
+    planes: "Planes | None" = None
+
+
+def plane_points(view_proj: np.ndarray, width: int, height: int, col, row):
+    """The points of the water plane ``y = 0`` seen through the centres of image pixels
+    ``(col, row)`` (float64 arrays of one shape, row 0 at the top; either may lie outside the
+    image), as the study's quad interpolates them: ``(points (..., 3) float64, t (...))``,
+    ``t`` the point's place on the segment from the near plane (0) to the far plane (1), NaN
+    or infinite for a ray parallel to the plane. ``view_proj`` (4, 4) must be invertible."""
+    vp = np.asarray(view_proj, np.float64)
+    try:
+        inv = np.linalg.inv(vp)
+    except np.linalg.LinAlgError as e:
+        raise ValueError(
+            "ShaderInputs.view_proj is singular; build it with perspective_view_proj"
+        ) from e
+    ndc_x = 2.0 * (np.asarray(col, np.float64) + 0.5) / width - 1.0
+    ndc_y = 2.0 * (height - np.asarray(row, np.float64) - 0.5) / height - 1.0
+
+    def unproject(z):
+        q = np.stack([ndc_x, ndc_y, np.full_like(ndc_x, z), np.ones_like(ndc_x)], -1) @ inv.T
+        return q[..., :3] / q[..., 3:4]
+
+    p_near, p_far = unproject(-1.0), unproject(1.0)
+    d = p_far - p_near
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t = -p_near[..., 1] / d[..., 1]
+    p = p_near + t[..., None] * d
+    p[..., 1] = 0.0
+    return p, t
 
 
 def _clip_polygon(verts, smooth, plane):
@@ -159,10 +207,49 @@ def _edge(ax, ay, bx, by, px, py):
     return (bx - ax) * (py - ay) - (by - ay) * (px - ax)
 
 
-def rasterize_triangles(clip: np.ndarray, triangles: np.ndarray, width: int, height: int):
-    """:class:`Coverage` of the triangles ``triangles`` (T, 3) over vertices at clip-space
-    positions ``clip`` (V, 4) on a ``width x height`` image (see the module doc)."""
-    clip = np.asarray(clip, np.float64)
+@dataclass
+class Planes:
+    """The window-space plane equations of the (clipped) sub-triangles of a mesh: ``fx``,
+    ``fy`` (S, 3) float64 unsnapped window positions, ``zw`` (S, 3) window depths, ``w`` (S, 3)
+    clip ``w``, ``smooth`` / ``linear`` (S, 3, 3) each vertex's weights over its original
+    triangle's vertices (clip-space and window-space), ``parent`` (S,) the original triangle,
+    ``area`` (S,) twice the signed window area of the snapped positions."""
+
+    fx: np.ndarray
+    fy: np.ndarray
+    zw: np.ndarray
+    w: np.ndarray
+    smooth: np.ndarray
+    linear: np.ndarray
+    parent: np.ndarray
+    area: np.ndarray
+
+
+def weights_at(planes: Planes, s: np.ndarray, px: np.ndarray, py: np.ndarray) -> dict:
+    """The interpolants of sub-triangles ``s`` (M,) at the centres of window pixels ``(px,
+    py)`` (M,) int, inside the triangle or not (a helper pixel's are extrapolated on the same
+    planes): ``smooth`` / ``linear`` (M, 3) float64 weights over the original triangle's
+    vertices, ``depth`` (M,) window depth, ``inv_w`` (M,) ``1 / w_clip``. The weights come
+    from the unsnapped positions, as llvmpipe's attribute setup takes them."""
+    FX, FY = planes.fx[s], planes.fy[s]
+    cx, cy = px + 0.5, py + 0.5
+    E = np.stack([_edge(FX[:, (i + 1) % 3], FY[:, (i + 1) % 3], FX[:, (i + 2) % 3],
+                        FY[:, (i + 2) % 3], cx, cy) for i in range(3)], 1)  # fmt: skip
+    lw = E / E.sum(1, keepdims=True)  # window-space weights of the sub-triangle
+    q = lw / planes.w[s]
+    inv_w = q.sum(1)
+    persp = q / inv_w[:, None]
+    return {
+        "smooth": np.einsum("ni,nij->nj", persp, planes.smooth[s]),
+        "linear": np.einsum("ni,nij->nj", lw, planes.linear[s]),
+        "depth": (lw * planes.zw[s]).sum(1),
+        "inv_w": inv_w,
+    }
+
+
+def _planes(clip: np.ndarray, triangles: np.ndarray, width: int, height: int):
+    """(:class:`Planes`, snapped window x (S, 3), snapped window y (S, 3), order within the
+    parent (S,)) of the mesh after near/far clipping."""
     verts, smooth, lin, parent, order = _clipped(clip, np.asarray(triangles, np.int64))
     w = verts[..., 3]
     with np.errstate(divide="ignore", invalid="ignore"):
@@ -171,6 +258,14 @@ def rasterize_triangles(clip: np.ndarray, triangles: np.ndarray, width: int, hei
         zw = (verts[..., 2] / w + 1.0) * 0.5
     xw, yw = np.round(fx * SUBPIXEL) / SUBPIXEL, np.round(fy * SUBPIXEL) / SUBPIXEL
     area = _edge(xw[:, 0], yw[:, 0], xw[:, 1], yw[:, 1], xw[:, 2], yw[:, 2])
+    return Planes(fx, fy, zw, w, smooth, lin, parent, area), xw, yw, order
+
+
+def rasterize_triangles(clip: np.ndarray, triangles: np.ndarray, width: int, height: int):
+    """:class:`Coverage` of the triangles ``triangles`` (T, 3) over vertices at clip-space
+    positions ``clip`` (V, 4) on a ``width x height`` image (see the module doc)."""
+    planes, xw, yw, order = _planes(np.asarray(clip, np.float64), triangles, width, height)
+    area, w, parent = planes.area, planes.w, planes.parent
     ok = np.isfinite(area) & (area != 0) & (w > 0).all(1)
     big = float(max(width, height) + 2)
     lo_x = np.ceil(np.clip(xw.min(1), -2, big) - 0.5).astype(np.int64).clip(0, width - 1)
@@ -190,16 +285,8 @@ def rasterize_triangles(clip: np.ndarray, triangles: np.ndarray, width: int, hei
         top_left = (dy < 0) | ((dy == 0) & (dx < 0))
         inside &= (e > 0) | ((e == 0) & top_left)
     s, px, py = s[inside], px[inside], py[inside]
-    # the weights from the unsnapped positions, as llvmpipe's attribute setup takes them
-    FX, FY = fx[s], fy[s]
-    cx, cy = px + 0.5, py + 0.5
-    E = np.stack([_edge(FX[:, (i + 1) % 3], FY[:, (i + 1) % 3], FX[:, (i + 2) % 3],
-                        FY[:, (i + 2) % 3], cx, cy) for i in range(3)], 1)  # fmt: skip
-    lw = E / E.sum(1, keepdims=True)  # window-space weights of the sub-triangle
-    depth = (lw * zw[s]).sum(1)
-    q = lw / w[s]
-    inv_w = q.sum(1)
-    persp = q / inv_w[:, None]
+    wts = weights_at(planes, s, px, py)
+    depth = wts["depth"]
     pixel = (height - 1 - py) * width + px
     # depth test GL_LESS: the nearest fragment, of equal depths the one drawn first
     pick = np.lexsort((order[s], parent[s], depth, pixel))
@@ -214,12 +301,52 @@ def rasterize_triangles(clip: np.ndarray, triangles: np.ndarray, width: int, hei
         mask=mask.reshape(height, width),
         index=pixel[keep],
         triangle=parent[ks],
-        smooth=np.einsum("ni,nij->nj", persp[keep], smooth[ks]),
-        linear=np.einsum("ni,nij->nj", lw[keep], lin[ks]),
+        smooth=wts["smooth"][keep],
+        linear=wts["linear"][keep],
         depth=depth[keep],
-        inv_w=inv_w[keep],
+        inv_w=wts["inv_w"][keep],
         front=area[ks] > 0,
+        sub=ks,
+        planes=planes,
     )
+
+
+def quad_helpers(cov: Coverage, width: int, height: int):
+    """The helper invocations of the covered pixels' 2x2 quads, as GL runs them: each
+    triangle's fragments of a quad run together, and the quad's other pixels (not covered, or
+    covered by another triangle) run with that triangle's interpolants extrapolated to their
+    centres (:func:`weights_at` on its plane equations). Returns ``(x, y, group, helpers)``:
+    window pixel x, y (int64, y up; helpers may lie outside the image) and the quad invocation
+    (int64) of every lane, the covered pixels first (in ``cov.index`` order), and a
+    :class:`Coverage` of the helper lanes (``mask`` None, ``index`` -1)."""
+    x = cov.index % width
+    y = height - 1 - cov.index // width
+    qx, qy = x >> 1, y >> 1
+    key = np.stack([qx, qy, cov.triangle], 1)
+    _, first, group = np.unique(key, axis=0, return_index=True, return_inverse=True)
+    group = group.ravel()
+    have = set(zip(group.tolist(), (x & 1).tolist(), (y & 1).tolist()))
+    hg, hx, hy = [], [], []
+    for g, f in enumerate(first.tolist()):
+        for dx, dy in ((0, 0), (1, 0), (0, 1), (1, 1)):
+            if (g, dx, dy) not in have:
+                hg.append(g)
+                hx.append(2 * qx[f] + dx)
+                hy.append(2 * qy[f] + dy)
+    hg, hx, hy = (np.asarray(a, np.int64) for a in (hg, hx, hy))
+    hs = cov.sub[first[hg]]  # the sub-triangle of a covered pixel of its invocation
+    wts = weights_at(cov.planes, hs, hx, hy)
+    helpers = Coverage(
+        mask=None,
+        index=np.full(len(hg), -1, np.int64),
+        triangle=cov.triangle[first[hg]],
+        smooth=wts["smooth"],
+        linear=wts["linear"],
+        depth=wts["depth"],
+        inv_w=wts["inv_w"],
+        front=cov.front[first[hg]],
+    )
+    return np.r_[x, hx], np.r_[y, hy], np.r_[group, hg], helpers
 
 
 def interpolate(values: np.ndarray, cov: Coverage, triangles: np.ndarray, mode: str):

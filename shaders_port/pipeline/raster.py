@@ -29,6 +29,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..inputs import ShaderInputs
+from .interpolate import plane_points
 from .texture import CLAMP, LINEAR, NEAREST, REPEAT, CubeMap, Texture2D
 
 
@@ -60,26 +61,8 @@ def rasterize_water(inputs: ShaderInputs) -> Raster:
     """Coverage and interpolated varyings of the water quad for ``inputs.width x inputs.height``."""
     W, H = inputs.width, inputs.height
     vp = inputs.view_proj.astype(np.float64)
-    try:
-        inv = np.linalg.inv(vp)
-    except np.linalg.LinAlgError as e:
-        raise ValueError(
-            "ShaderInputs.view_proj is singular; build it with perspective_view_proj"
-        ) from e
     c, r = np.meshgrid(np.arange(W, dtype=np.float64), np.arange(H, dtype=np.float64))
-    ndc_x = 2.0 * (c + 0.5) / W - 1.0
-    ndc_y = 2.0 * (H - r - 0.5) / H - 1.0
-
-    def unproject(z):
-        q = np.stack([ndc_x, ndc_y, np.full_like(ndc_x, z), np.ones_like(ndc_x)], -1) @ inv.T
-        return q[..., :3] / q[..., 3:4]
-
-    p_near, p_far = unproject(-1.0), unproject(1.0)
-    d = p_far - p_near
-    with np.errstate(divide="ignore", invalid="ignore"):
-        t = -p_near[..., 1] / d[..., 1]
-    p = p_near + t[..., None] * d
-    p[..., 1] = 0.0
+    p, t = plane_points(vp, W, H, c, r)
     x0, z0, x1, z1 = inputs.water_rect
     clip = np.concatenate([p, np.ones_like(p[..., :1])], -1) @ vp.T
     w = clip[..., 3]

@@ -1,4 +1,4 @@
-"""A user's fragment shader in the dialect it was written in, made the core GLSL glslang compiles.
+"""A user's shader in the dialect it was written in, made the core GLSL glslang compiles.
 
 glslang makes SPIR-V for OpenGL only from desktop GLSL 330 and GLSL ES 310. A shader written
 for an older OpenGL, for WebGL 1 or WebGL 2 is translated first, as text, into ``#version 330
@@ -49,6 +49,12 @@ Refused, with the reason: ``gl_FragData[i]`` for i > 0 (the study compares one c
 compatibility built-ins (``gl_ModelViewMatrix``, ``gl_LightSource``, ``gl_Color``, ...: the
 study's vertex shader gives no such value; declare a uniform and bind it to a study input).
 
+A vertex shader (``front_end(..., stage="vert")``) is translated alike, with ``attribute``
+-> ``in``, ``varying`` -> ``out``, ``gl_TexCoord[i]`` -> ``out vec4 vTexCoord<i>`` and its
+compatibility attributes and matrices -> names of ``spirv.engine_names`` that bind themselves
+(:data:`_VERTEX_BUILTINS`; ``ftransform()`` -> ``gl_ModelViewProjectionMatrix * gl_Vertex``
+in them); any other compatibility built-in is refused at its line.
+
 ``__VERSION__`` reads 330 in a translated file; ``GL_ES`` is defined for the GLSL ES
 dialects, as their compilers define it.
 """
@@ -96,6 +102,19 @@ _BUILTINS = {
     "gl_NormalMatrix": ("uNormalMatrix", "uniform mat3"),
 }
 _CORE_BUILTINS = {"gl_FragCoord", "gl_FrontFacing", "gl_PointCoord", "gl_FragDepth"}
+# a vertex shader's compatibility built-ins -> (a name that binds itself to the grid's value
+# or the frame's matrix, ``spirv.engine_names``; its declaration)
+_VERTEX_BUILTINS = {
+    "gl_Vertex": ("aVertex", "in vec4"),
+    "gl_MultiTexCoord0": ("aMultiTexCoord0", "in vec4"),
+    "gl_Normal": ("inNormal", "in vec3"),
+    "gl_ModelViewProjectionMatrix": ("uModelViewProjectionMatrix", "uniform mat4"),
+    "gl_ModelViewMatrix": ("g_WorldViewMatrix", "uniform mat4"),
+    "gl_ProjectionMatrix": ("g_ProjectionMatrix", "uniform mat4"),
+    "gl_NormalMatrix": ("g_NormalMatrix", "uniform mat3"),
+}
+_FTRANSFORM = re.compile(r"\bftransform\s*\(\s*\)")
+_VERTEX_CORE = {"gl_Position", "gl_PointSize", "gl_VertexID", "gl_InstanceID", "gl_ClipDistance"}
 _CORE_EXTENSIONS = ("GL_OES_standard_derivatives", "GL_EXT_shader_texture_lod", "GL_EXT_frag_depth")
 OUT = "_study_FragColor"
 
@@ -195,15 +214,18 @@ def glslang_errors(log: str, label: str, include_paths=()) -> str:
     return "\n".join(out) + (f"\n... and {more} more errors" if more > 0 else "")
 
 
-def _glslang(text: str, label: str, args: list[str], include_paths, what: str) -> str:
+def _glslang(
+    text: str, label: str, args: list[str], include_paths, what: str, stage: str = "frag"
+) -> str:
     """Run glslangValidator on ``text`` saved as ``label``'s file name in a temporary folder
-    (the working directory): its stdout; ShaderError with the errors (:func:`glslang_errors`)."""
+    (the working directory), as a shader of ``stage`` ('frag' or 'vert'): its stdout;
+    ShaderError with the errors (:func:`glslang_errors`)."""
     name = Path(label).name
-    name = name if name.endswith(".frag") else f"{name}.frag"
+    name = name if name.endswith(f".{stage}") else f"{name}.{stage}"
     with tempfile.TemporaryDirectory(prefix="spirv-front.") as d:
         (Path(d) / name).write_text(text, encoding="utf-8")
         incs = [f"-I{Path(p).resolve()}" for p in include_paths]
-        res = subprocess.run([_tool(), *args, *incs, "-S", "frag", name], cwd=d,
+        res = subprocess.run([_tool(), *args, *incs, "-S", stage, name], cwd=d,
                              capture_output=True, text=True, timeout=120, check=False)  # fmt: skip
         if res.returncode != 0:
             log = (res.stdout + res.stderr).replace(name, Path(label).name)
@@ -241,17 +263,19 @@ def _own_version_line(d: Dialect) -> str:
     return f"#version {d.version}" + (f" {d.profile}" if d.version >= 150 else "")
 
 
-def front_end(source: str, label: str, defines=(), include_paths=(), preprocess=False) -> str:
-    """The GLSL glslang compiles to SPIR-V for ``source`` (a fragment shader of any dialect of
-    the module doc, file name ``label``), with the preprocessor names ``defines``
-    (``NAME`` or ``NAME=VALUE``) and ``#include`` files searched in ``include_paths`` (after
-    the including file's folder). A GLSL 330+ core or GLSL ES 310+ file without ``#include``
-    is returned as it is (its defines are given to glslang when it is compiled) unless
-    ``preprocess`` (for an OpenGL driver, which takes no defines); any other is
-    preprocessed by glslang (``#include`` s expanded, defines applied, comments removed) with
-    ``#line`` directives keeping the file's line numbers, and translated to GLSL 330 core if
-    its dialect needs it. ShaderError for a file that does not compile in its own dialect or
-    uses what the translation refuses, naming the file and line."""
+def front_end(
+    source: str, label: str, defines=(), include_paths=(), preprocess=False, stage: str = "frag"
+) -> str:
+    """The GLSL glslang compiles to SPIR-V for ``source`` (a shader of ``stage`` 'frag' or
+    'vert' in any dialect of the module doc, file name ``label``), with the preprocessor names
+    ``defines`` (``NAME`` or ``NAME=VALUE``) and ``#include`` files searched in
+    ``include_paths`` (after the including file's folder). A GLSL 330+ core or GLSL ES 310+
+    file without ``#include`` is returned as it is (its defines are given to glslang when it
+    is compiled) unless ``preprocess`` (for an OpenGL driver, which takes no defines); any
+    other is preprocessed by glslang (``#include`` s expanded, defines applied, comments
+    removed) with ``#line`` directives keeping the file's line numbers, and translated to GLSL
+    330 core if its dialect needs it. ShaderError for a file that does not compile in its own
+    dialect or uses what the translation refuses, naming the file and line."""
     d = detect(source, label)
     includes = bool(re.search(r"^[ \t]*#[ \t]*include\b", source, re.M))
     dargs = [f"-D{x}" for x in defines]
@@ -260,28 +284,39 @@ def front_end(source: str, label: str, defines=(), include_paths=(), preprocess=
             return source
         head = [INCLUDE_EXT] if includes else []
         text = _with_head(source, d, _own_version_line(d), head)
-        return _glslang(text, label, ["-E", *dargs], include_paths, "preprocessing")
+        return _glslang(text, label, ["-E", *dargs], include_paths, "preprocessing", stage)
     own = _with_head(source, d, _own_version_line(d), [INCLUDE_EXT] if includes else [])
-    _glslang(own, label, ["-l", *dargs], include_paths, d.name)  # the dialect's own verdict
+    _glslang(own, label, ["-l", *dargs], include_paths, d.name, stage)  # the dialect's verdict
     code = _COMMENTS.sub(lambda m: re.sub(r"[^\n]", " ", m[0]), source)
-    decls = [f"out vec4 {OUT};"] if re.search(r"\bgl_Frag(Color|Data)\b", code) else []
+    decls = _declarations(code, stage)
+    head = [INCLUDE_EXT] if includes else []
+    dargs += ["-DGL_ES=1"] if d.es else []
+    text = _with_head(source, d, TARGET, head + decls)
+    pre = _glslang(text, label, ["-E", *dargs], include_paths, "preprocessing", stage)
+    legacy = d.version == 100 if d.es else d.version < 130  # before texture() and layout
+    return _translate_tokens(pre, label, len(head) + len(decls), legacy, stage)
+
+
+def _declarations(code: str, stage: str) -> list[str]:
+    """The declarations a translated file of ``stage`` needs for the compatibility names its
+    ``code`` (comments blanked) uses: the colour output, the texture coordinates, the
+    matrices and attributes they become (a name the file declares itself is left to it)."""
+    frag = stage == "frag"
+    decls = [f"out vec4 {OUT};"] if frag and re.search(r"\bgl_Frag(Color|Data)\b", code) else []
     for i in range(4):
         if re.search(rf"\bgl_TexCoord\s*\[\s*{i}\s*\]", code) and not re.search(
             rf"\bvTexCoord{i}\b", code
         ):
-            decls.append(f"in vec4 vTexCoord{i};")
-    for old, (new, decl) in _BUILTINS.items():
+            decls.append(f"{'in' if frag else 'out'} vec4 vTexCoord{i};")
+    if not frag and _FTRANSFORM.search(code):
+        code += " gl_Vertex gl_ModelViewProjectionMatrix"
+    for old, (new, decl) in (_BUILTINS if frag else _VERTEX_BUILTINS).items():
         if re.search(rf"\b{old}\b", code) and not re.search(rf"\b{new}\b", code):
             decls.append(f"{decl} {new};")
-    head = [INCLUDE_EXT] if includes else []
-    dargs += ["-DGL_ES=1"] if d.es else []
-    text = _with_head(source, d, TARGET, head + decls)
-    pre = _glslang(text, label, ["-E", *dargs], include_paths, "preprocessing")
-    legacy = d.version == 100 if d.es else d.version < 130  # before texture() and layout
-    return _translate_tokens(pre, label, len(head) + len(decls), legacy)
+    return decls
 
 
-def _translate_tokens(pre: str, label: str, n_head: int, legacy: bool) -> str:
+def _translate_tokens(pre: str, label: str, n_head: int, legacy: bool, stage: str) -> str:
     """The preprocessed text ``pre`` (``#version 330 core``, the head of ``n_head`` lines, then
     the file) with the legacy names of the module doc rewritten; ShaderError for a refused
     one, at its file and line."""
@@ -296,7 +331,8 @@ def _translate_tokens(pre: str, label: str, n_head: int, legacy: bool) -> str:
         if ln.lstrip().startswith("#"):
             out.append(ln)
             continue
-        out.append(_rewrite_line(ln, where[k], legacy))
+        rewrite = _rewrite_line if stage == "frag" else _rewrite_vertex_line
+        out.append(rewrite(ln, where[k], legacy))
     return "\n".join(out)
 
 
@@ -332,6 +368,32 @@ def _rewrite_line(ln: str, where: str, legacy: bool) -> str:
             )
     for name in _RESERVED if legacy else ():
         ln = re.sub(rf"\b{name}\b", f"_u_{name}", ln)
+    for old, new in _RENAMES.items():
+        ln = re.sub(rf"\b{old}\b", new, ln)
+    return ln
+
+
+def _rewrite_vertex_line(ln: str, where: str, legacy: bool) -> str:
+    """A line of a vertex shader: ``attribute`` -> ``in``, ``varying`` -> ``out``,
+    ``ftransform()`` -> ``(uModelViewProjectionMatrix * aVertex)``, ``gl_TexCoord[i]`` ->
+    ``vTexCoord<i>``, the compatibility attributes and matrices -> the names of
+    :data:`_VERTEX_BUILTINS` (which bind themselves); ShaderError for another one."""
+    ln = _FTRANSFORM.sub("(gl_ModelViewProjectionMatrix * gl_Vertex)", ln)
+    ln = re.sub(r"\bgl_TexCoord\s*\[\s*([0-3])\s*\]", r"vTexCoord\1", ln)
+    for old, (new, _) in _VERTEX_BUILTINS.items():
+        ln = re.sub(rf"\b{old}\b", new, ln)
+    for name in re.findall(r"\bgl_\w+", ln):
+        if name not in _VERTEX_CORE and not name.startswith("gl_Max"):
+            raise ShaderError(
+                f"{where}: {name}: a compatibility built-in the water grid gives no value of "
+                f"(it gives {', '.join(_VERTEX_BUILTINS)}, ftransform() and gl_TexCoord[0..3]); "
+                "declare an attribute or uniform of your own and bind it "
+                "(`// @study bind NAME MEANING`)"
+            )
+    for name in _RESERVED if legacy else ():
+        ln = re.sub(rf"\b{name}\b", f"_u_{name}", ln)
+    ln = re.sub(r"\battribute\b", "in", ln)
+    ln = re.sub(r"\bvarying\b", "out", ln)
     for old, new in _RENAMES.items():
         ln = re.sub(rf"\b{old}\b", new, ln)
     return ln

@@ -12,7 +12,9 @@ the quad's origin pixel ``(x0, y0)`` (:attr:`Quads.origin`, :attr:`Quads.right`,
 
 Helper invocations. A pixel of a quad that the primitive does not cover still runs the
 shader, as a helper: its inputs are the primitive's interpolants extrapolated to its centre
-(for the water quad, the plane point seen through that pixel, :func:`study_quad_bindings`).
+(for the water quad, the plane point seen through that pixel, :func:`study_quad_bindings`;
+for a user's vertex shader's triangles, the interpolants of the triangle whose fragments the
+quad runs, evaluated on its plane equations, ``pipeline.interpolate.quad_helpers``).
 The executor runs such lanes after the shaded ones (lanes ``shaded ..`` of a run) and keeps
 only the shaded lanes' outputs and costs (:meth:`Quads.shaded_part`).
 
@@ -30,6 +32,7 @@ from dataclasses import dataclass
 import drjit as dr
 import numpy as np
 
+from ..pipeline.interpolate import plane_points
 from .ops import is_py
 
 QUADS_KEY = "@quads"  # the bindings entry holding a frame's Quads (no GLSL name can be it)
@@ -92,34 +95,39 @@ def helper_pixels(x: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarray]
     return hx[:, 0], hx[:, 1]
 
 
-def quads_of_pixels(m, x: np.ndarray, y: np.ndarray, shaded: int) -> Quads:
+def quads_of_pixels(m, x: np.ndarray, y: np.ndarray, shaded: int, group=None) -> Quads:
     """:class:`Quads` of lanes at window pixels ``(x, y)`` (int, every quad complete: the
-    shaded pixels then their helpers)."""
+    shaded pixels then their helpers). ``group`` (int, one per lane) tells the quad
+    invocations apart where one quad runs more than once (one invocation per triangle that
+    covers pixels of it, ``pipeline.interpolate.quad_helpers``); by default one per quad."""
     x, y = np.asarray(x, np.int64), np.asarray(y, np.int64)
-    ox, oy = x.min() - 2, y.min() - 2
-    span = int(x.max() - ox + 4)
-    key = (y - oy) * span + (x - ox)
-    order = np.argsort(key)
+    if group is None:
+        _, group = np.unique(np.stack([x >> 1, y >> 1], 1), axis=0, return_inverse=True)
+    group = np.asarray(group, np.int64).ravel()
+    key = group * 4 + (x & 1) + 2 * (y & 1)
+    order = np.argsort(key, kind="stable")
     sorted_keys = key[order]
+    if np.any(sorted_keys[1:] == sorted_keys[:-1]):
+        raise ValueError("a pixel of a quad invocation is given twice")
 
-    def lane(px, py):
-        k = (py - oy) * span + (px - ox)
+    def lane(dx, dy):
+        k = group * 4 + dx + 2 * dy
         pos = np.clip(np.searchsorted(sorted_keys, k), 0, len(k) - 1)
         if not np.array_equal(sorted_keys[pos], k):
             raise ValueError("a quad of the frame's lanes is incomplete (a helper is missing)")
         return m.UInt32(order[pos].astype(np.uint32))
 
-    x0, y0 = x - (x & 1), y - (y & 1)
+    sx, sy = x & 1, y & 1
     return Quads(
         shaded=int(shaded),
         lanes=len(x),
-        x_lo=lane(x0, y),
-        x_hi=lane(x0 + 1, y),
-        y_lo=lane(x, y0),
-        y_hi=lane(x, y0 + 1),
-        origin=lane(x0, y0),
-        right=lane(x0 + 1, y0),
-        up=lane(x0, y0 + 1),
+        x_lo=lane(0, sy),
+        x_hi=lane(1, sy),
+        y_lo=lane(sx, 0),
+        y_hi=lane(sx, 1),
+        origin=lane(0, 0),
+        right=lane(1, 0),
+        up=lane(0, 1),
     )
 
 
@@ -157,38 +165,17 @@ def uses_quads(module, bindings: dict) -> bool:
     return implicit and any(getattr(v, "levels", ()) for v in bindings.values())
 
 
-def plane_points(inputs, col: np.ndarray, row: np.ndarray) -> np.ndarray:
-    """(N, 3) float64: the points of the water plane ``y = 0`` seen through the centres of
-    image pixels ``(col, row)`` (row 0 at the top; either may lie outside the image): what GL
-    interpolates at a helper invocation (``pipeline.raster``'s construction, extrapolated)."""
-    W, H = inputs.width, inputs.height
-    inv = np.linalg.inv(inputs.view_proj.astype(np.float64))
-    ndc_x = 2.0 * (col + 0.5) / W - 1.0
-    ndc_y = 2.0 * (H - row - 0.5) / H - 1.0
-
-    def unproject(z):
-        q = np.stack([ndc_x, ndc_y, np.full_like(ndc_x, z), np.ones_like(ndc_x)], -1) @ inv.T
-        return q[..., :3] / q[..., 3:4]
-
-    p_near, p_far = unproject(-1.0), unproject(1.0)
-    d = p_far - p_near
-    with np.errstate(divide="ignore", invalid="ignore"):
-        t = -p_near[..., 1] / d[..., 1]
-    p = p_near + t[..., None] * d
-    p[..., 1] = 0.0
-    return p
-
-
-def study_quad_bindings(m, P, inputs, b: dict) -> dict:
+def study_quad_bindings(m, P, inputs, b: dict, up: str = "y") -> dict:
     """The study's bindings ``b`` (``spirv.translated.study_bindings`` of the prepared frame
-    ``P``) with the frame's helper lanes after its covered pixels, and the frame's
+    ``P``, in the world frame ``up``: 'z' gives the world-space varyings as ``(x, -z, y)``,
+    as there) with the frame's helper lanes after its covered pixels, and the frame's
     :class:`Quads` under :data:`QUADS_KEY`."""
     r = P.raster
     col, row = r.index % r.width, r.index // r.width
     x, y = col, r.height - 1 - row
     hx, hy = helper_pixels(x, y)
     hcol, hrow = hx, r.height - 1 - hy
-    world = plane_points(inputs, hcol.astype(np.float64), hrow.astype(np.float64))
+    world, _ = plane_points(inputs.view_proj, r.width, r.height, hcol, hrow)
     clip = np.c_[world, np.ones(len(hx))] @ inputs.view_proj.astype(np.float64).T
     base = world[:, [0, 2]] / inputs.normal_tile
     helper = {
@@ -199,6 +186,10 @@ def study_quad_bindings(m, P, inputs, b: dict) -> dict:
             [hx + 0.5, hy + 0.5, 0.5 * clip[:, 2] / clip[:, 3] + 0.5, 1.0 / clip[:, 3]]
         ),
     }
+    if up == "z":  # the world-space varyings in the Z-up frame the shaded lanes have
+        for name in ("varyingVecWorldPosition", "varyingVecEye", "varyingVecLight"):
+            x_, y_, z_ = helper[name]
+            helper[name] = np.stack([x_, -z_, y_])
     for k in range(4):
         tc = base + inputs.waves[k].astype(np.float64)
         helper[f"vTexCoord{k}"] = np.stack(

@@ -127,27 +127,34 @@ def specialize_constants(source: str) -> str:
     return "\n".join(out)
 
 
-def _varying_locations() -> dict[str, int]:
-    """Name -> location of each output of the core vertex shader, in declaration order: the one
-    numbering both stages use, so that stages link by location (HLSL semantics ``TEXCOORD<n>``,
-    Metal ``[[user(locn<n>)]]``, Vulkan) as they link by name in GLSL."""
-    decl = re.compile(r"^out\s+\w+\s+([A-Za-z_]\w*)\s*;", re.M)
-    return {n: k for k, n in enumerate(decl.findall(read_source("water", "vert", "core")))}
+_QUALIFIERS = r"((?:(?:flat|noperspective|smooth|centroid)\s+)*)"
 
 
-def link_locations(source: str, stage: str) -> str:
+def _varying_locations(vertex_source: str | None = None) -> dict[str, int]:
+    """Name -> location of each output of the vertex shader (``vertex_source``, by default the
+    core ``water.vert``), in declaration order: the one numbering both stages use, so that
+    stages link by location (HLSL semantics ``TEXCOORD<n>``, Metal ``[[user(locn<n>)]]``,
+    Vulkan) as they link by name in GLSL."""
+    text = read_source("water", "vert", "core") if vertex_source is None else vertex_source
+    decl = re.compile(rf"^{_QUALIFIERS}out\s+\w+\s+([A-Za-z_]\w*)\s*;", re.M)
+    return {m[2]: k for k, m in enumerate(decl.finditer(text))}
+
+
+def link_locations(source: str, stage: str, vertex_source: str | None = None) -> str:
     """``source`` with ``layout(location = n)`` on each varying (the vertex shader's ``out``, the
-    fragment shader's ``in`` lines) by :func:`_varying_locations`; ValueError for a varying the
-    vertex shader does not write."""
+    fragment shader's ``in`` lines, interpolation qualifiers kept) by
+    :func:`_varying_locations` of ``vertex_source`` (None: the study's ``water.vert``);
+    ValueError for a varying the vertex shader does not write."""
     io = "out" if stage == "vert" else "in"
-    locs = _varying_locations()
+    locs = _varying_locations(vertex_source if stage == "frag" else source)
+    what = "water.vert" if vertex_source is None else "it runs after"
 
     def put(m: re.Match) -> str:
-        if m[1] not in locs:
-            raise ValueError(f"varying {m[1]!r} is not an output of the vertex shader water.vert")
-        return f"layout(location = {locs[m[1]]}) {m[0]}"
+        if m[2] not in locs:
+            raise ValueError(f"varying {m[2]!r} is not an output of the vertex shader {what}")
+        return f"layout(location = {locs[m[2]]}) {m[0]}"
 
-    out = re.sub(rf"^{io}\s+\w+\s+([A-Za-z_]\w*)\s*;", put, source, flags=re.M)
+    out = re.sub(rf"^{_QUALIFIERS}{io}\s+\w+\s+([A-Za-z_]\w*)\s*;", put, source, flags=re.M)
     first, _, rest = out.partition("\n")  # GLSL 330 takes varying locations with this extension
     return f"{first}\n#extension GL_ARB_separate_shader_objects : require\n{rest}"
 

@@ -301,7 +301,7 @@ def frame_bindings(m, P, inputs, spec: ShaderSpec) -> dict:
             b[name] = b[study]
     b = {k: v for k, v in b.items() if k in mod.bound_names}
     if _quads.uses_quads(mod, b):  # derivatives: the helper lanes of the frame's quads too
-        b = _quads.study_quad_bindings(m, P, inputs, b)
+        b = _quads.study_quad_bindings(m, P, inputs, b, dict(spec.engine).get("up", "y"))
     if len(_BINDINGS) >= 8:
         _BINDINGS.pop(next(iter(_BINDINGS)))
     _BINDINGS[key] = b

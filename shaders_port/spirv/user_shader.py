@@ -51,6 +51,7 @@ from ..pipeline.texture import backend_types
 from . import dialects
 from . import engine_inputs as _engine
 from . import translated as spirv_port
+from .support import check_supported
 
 __all__ = ["UserShader", "UserConstant"]
 
@@ -345,8 +346,12 @@ class UserShader:
     def check(self) -> "UserShader":
         """Compile the shader (``dialects.ShaderError`` with glslang's errors, file and line)
         and check that every input, uniform and sampler it reads is a study input, bound or a
-        constant: before anything is rendered."""
+        constant, and that the executor implements every instruction of it (and of its
+        vertex shader): before anything is rendered."""
         mod = spirv_port.module_of(self.spec())
+        check_supported(mod)
+        if self.vertex is not None:
+            check_supported(self.vertex.shader.module)
         known = set(spirv_port.STUDY_INPUTS) | set(self.run_bindings()) | set(self.constants)
         for vid, ins in mod.defs.items():
             name = mod.binding_name(vid)
@@ -463,11 +468,7 @@ class UserShader:
         vals = self._checked(values)
         bare = {c.name: np.asarray(vals[c.name], np.float32).tobytes()
                 for c in self.constants.values() if c.bare}  # fmt: skip
-        if self.vertex is not None:
-            if reflection is not None:
-                raise RuntimeError(
-                    "the HLSL round trip of a pair with your own vertex shader is not built"
-                )
+        if self.vertex is not None:  # the grid drawn with the user's GLSL vertex shader
             base = self.vertex.gl_class(base, inputs)
         base = _engine.gl_class(base, self.engine)
 

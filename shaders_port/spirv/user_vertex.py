@@ -12,7 +12,11 @@ runs on (``cells = (nx, nz)`` cells of two triangles over the water quad). For o
    (provoking vertex: the triangle's last) or ``noperspective`` by the *fragment* shader's
    qualifier, matched by name, else by an explicit ``layout(location = N)`` on both sides;
 4. binds ``gl_FragCoord`` (pixel centre, window depth, ``1 / w``) and ``gl_FrontFacing``, and
-   every uniform and sampler as for the fragment shader alone (``spirv.translated``).
+   every uniform and sampler as for the fragment shader alone (``spirv.translated``);
+5. where the fragment shader takes a derivative or an implicit-level mipmapped lookup, adds
+   the helper lanes of each triangle's 2x2 quads (``pipeline.interpolate.quad_helpers``: the
+   triangle's interpolants extrapolated to the helper's centre) and their
+   :class:`~shaders_port.spirv.quads.Quads`.
 
 A fragment input no vertex output feeds is refused (GL would not link the pair). The result
 is a prepared frame (``pipeline.raster.Prepared``) whose raster is the grid's coverage (its
@@ -31,10 +35,17 @@ import numpy as np
 
 from ..gl.grid import grid_renderer_class
 from ..pipeline.frame import finish_output
-from ..pipeline.interpolate import interpolate, rasterize_triangles, water_grid
+from ..pipeline.interpolate import (
+    Coverage,
+    interpolate,
+    quad_helpers,
+    rasterize_triangles,
+    water_grid,
+)
 from ..pipeline.raster import Raster, prepare
 from ..pipeline.texture import backend_types
 from . import engine_names as names_
+from . import quads as _quads
 from . import translated as spirv_port
 from .vertex import ATTRIBUTES, VertexShader, explicit_locations, glsl_type, pointee_type
 
@@ -54,6 +65,13 @@ def _lanes_of(m, a: np.ndarray, kind: str):
     if kind == "float":
         return m.Float(a.astype(np.float32))
     return (m.Int32 if kind == "int" else m.UInt32)(np.rint(a).astype(np.int64))
+
+
+def _joined(cov: Coverage, helpers: Coverage) -> Coverage:
+    """The covered pixels' lanes then the helper lanes (``mask`` None)."""
+    fields = ("index", "triangle", "smooth", "linear", "depth", "inv_w", "front")
+    cat = {f: np.concatenate([getattr(cov, f), getattr(helpers, f)]) for f in fields}
+    return Coverage(mask=None, **cat)
 
 
 def _kind(t: tuple) -> str:
@@ -102,14 +120,20 @@ class UserVertex:
                 f"{self.label}: the vertex shader's triangles cover no pixel (check its "
                 "gl_Position: clip space, projection * view * model * position)"
             )
+        mod = spirv_port.module_of(spec)
         b = {k: v for k, v in study.items() if k not in _PER_PIXEL}
-        b.update(self._varyings(m, spec, cov, grid, outs))
-        b.update(self._builtins(m, cov, inputs))
+        lanes, x, y, group = cov, None, None, None
+        if _quads.uses_quads(mod, {k: v for k, v in b.items() if k in mod.bound_names}):
+            x, y, group, helpers = quad_helpers(cov, inputs.width, inputs.height)
+            lanes = _joined(cov, helpers)
+        b.update(self._varyings(m, spec, lanes, grid, outs))
+        b.update(self._builtins(m, lanes, inputs, x, y))
         for name, target in spec.bindings:
             if target in b:
                 b[name] = b[target]
-        mod = spirv_port.module_of(spec)
         b = {k: v for k, v in b.items() if k in mod.bound_names}
+        if group is not None:
+            b[_quads.QUADS_KEY] = _quads.quads_of_pixels(m, x, y, cov.index.size, group)
         hit = (self._prepared(m, P0, cov, grid, inputs), b)
         _FRAMES[key] = hit
         while len(_FRAMES) > 8:
@@ -151,14 +175,16 @@ class UserVertex:
             b[name] = _lanes_of(m, interpolate(outs[src], cov, grid.triangles, mode), kind)
         return b
 
-    def _builtins(self, m, cov, inputs) -> dict:
-        W, H = inputs.width, inputs.height
-        col = (cov.index % W).astype(np.float32)
-        row = (cov.index // W).astype(np.float32)
+    def _builtins(self, m, cov, inputs, x=None, y=None) -> dict:
+        """``gl_FragCoord`` and ``gl_FrontFacing`` of the lanes ``cov``, at window pixels
+        ``(x, y)`` (int, y up; by default those of ``cov.index``)."""
+        if x is None:
+            x = cov.index % inputs.width
+            y = inputs.height - 1 - cov.index // inputs.width
         return {
             "gl_FragCoord": [
-                m.Float(col + np.float32(0.5)),
-                m.Float(np.float32(H) - row - np.float32(0.5)),
+                m.Float(x.astype(np.float32) + np.float32(0.5)),
+                m.Float(y.astype(np.float32) + np.float32(0.5)),
                 m.Float(cov.depth.astype(np.float32)),
                 m.Float(cov.inv_w.astype(np.float32)),
             ],

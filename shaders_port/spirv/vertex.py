@@ -1,6 +1,12 @@
 """A user's own vertex shader, compiled to SPIR-V and executed per vertex of the water grid.
 
-The shader is core GLSL (``#version 330 core`` or later). It is compiled as the fragment
+The shader is core GLSL (``#version 330 core`` or later), or an older dialect (GLSL 1.10-1.50,
+a compatibility profile, GLSL ES 1.00 / 3.00) translated to it first (``spirv.dialects``:
+``attribute`` / ``varying``, and the compatibility names ``gl_Vertex``, ``gl_MultiTexCoord0``,
+``gl_Normal``, ``gl_ModelViewProjectionMatrix``, ``gl_ModelViewMatrix``,
+``gl_ProjectionMatrix``, ``gl_NormalMatrix``, ``ftransform()`` and ``gl_TexCoord[i]`` become
+names that bind themselves); :attr:`VertexShader.source` is the text compiled and drawn,
+:attr:`VertexShader.original` the file's. It is compiled as the fragment
 shaders are (``spirv.module``: ``glslangValidator -G --aml --amb -g``, every call inlined by
 ``spirv-opt``, ``spirv-val``) with ``-S vert``, and run by the same executor
 (``spirv.execute.Executor``), one lane per vertex of the tessellated water quad
@@ -32,6 +38,7 @@ from pathlib import Path
 import drjit as dr
 import numpy as np
 
+from . import dialects
 from . import engine_names as names_
 from .execute import Executor, UnboundVariable
 from .loops import UnsupportedInstruction
@@ -133,7 +140,10 @@ class VertexShader:
     ``bindings`` (declared name -> meaning or engine name, from its pragmas)."""
 
     def __init__(self, source: str, label: str, path=None):
-        self.source, self.label, self.path = source, label, path
+        self.original, self.label, self.path = source, label, path
+        self.source = source
+        if dialects.detect(source, label).translated:
+            self.source = dialects.for_opengl(dialects.front_end(source, label, stage="vert"))
         self.bindings = {}
         for m in _PRAGMA.finditer(source):
             args, line = m["args"].split(), source.count("\n", 0, m.start()) + 1
@@ -144,7 +154,7 @@ class VertexShader:
                     "shader)"
                 )
             self.bindings[args[0]] = args[1]
-        self.module = Module(compile_vertex(source, label), label=label, stage="Vertex")
+        self.module = Module(compile_vertex(self.source, label), label=label, stage="Vertex")
         for name, target in self.bindings.items():
             if names_.meaning_of(name, self.bindings) is None and target not in names_.MEANINGS:
                 raise ValueError(

@@ -84,15 +84,18 @@ def _loose_uniforms(spv: bytes, stage: str, label: str) -> list[dict]:
     ]
 
 
-def _one_file(fname: str, text: str, targets) -> tuple[dict, dict, dict, dict]:
+def _one_file(fname: str, text: str, targets, vertex=None) -> tuple[dict, dict, dict, dict]:
     """Translate and check one core file: (relative path -> bytes, relative path of each
     reflection -> its JSON, target -> seconds, specialization constant id -> name). The
-    reflection of a target other than HLSL gets ``loose_uniforms`` (:func:`_loose_uniforms`)."""
+    reflection of a target other than HLSL gets ``loose_uniforms`` (:func:`_loose_uniforms`).
+    ``vertex``: the text of the vertex shader the varyings' locations follow (None: the
+    study's ``water.vert``)."""
     stem, stage = fname.rsplit(".", 1)
     files, reflections, seconds = {}, {}, {}
     t0 = time.perf_counter()
     label = f"core/{fname}"
-    spv = S.glsl_to_spirv(S.link_locations(S.specialize_constants(text), stage), stage, label)
+    linked = S.link_locations(S.specialize_constants(text), stage, vertex)
+    spv = S.glsl_to_spirv(linked, stage, label)
     base = S.reflect(spv, label)
     spec = {c["id"]: c["name"] for c in base.get("specialization_constants", [])}
     loose = _loose_uniforms(spv, stage, label) if set(targets) - {"hlsl"} else []
@@ -126,8 +129,9 @@ def translate_targets(
     with the tool's log when a translation or a check fails (nothing is written then)."""
     files, manifest = {}, {"targets": {}, "seconds": {}}
     reflections, spec = {}, {}
+    vertex = next((t for f, t in core_texts.items() if f.endswith(".vert")), None)
     for fname, text in core_texts.items():
-        f, r, s, c = _one_file(fname, text, targets)
+        f, r, s, c = _one_file(fname, text, targets, vertex)
         files.update(f)
         reflections.update(r)
         spec.update(c)

@@ -10,7 +10,9 @@ from the translated code, the GL frame times of the written-back file beside the
 shader, and the executor's own frame time at 512x512. Its variant name is ``user:<file name>``; it
 is one point (``kind`` ``fixed``: the loops it has are its own, their counts are measured, not
 swept), on the front and a candidate for the recommendation like any other. Its job carries the
-SHA-256 of the shader's text and declaration, so an edited shader is measured again, never read
+SHA-256 of what the shader's images depend on (:func:`shader_sha256`: its text, its text after
+``#include`` s and ``fit.defines``, the defines, its declaration, its vertex shader's text and
+grid), so an edited shader, include file, define or vertex shader is measured again, never read
 back from the table.
 
 :func:`~.tradeoff_analysis.placement` says where it stands among the points of its scene;
@@ -27,6 +29,8 @@ from pathlib import Path
 
 import numpy as np
 
+from shaders_port.spirv import dialects
+
 from .._io import write_text_atomic
 from .._metrics import erode, errors, information_criteria
 from ..config.experiment import is_user_shader, load_user_shader
@@ -39,11 +43,28 @@ from ..sweep import load_scene
 from .tradeoff_analysis import USER, constants_of, is_user
 from .tradeoff_jobs import timed_frames
 
-__all__ = ["user_jobs", "user_point_job", "user_image", "export_user", "is_user"]
+__all__ = ["shader_sha256", "user_jobs", "user_point_job", "user_image", "export_user", "is_user"]
 
 
 def _shader_of(exp):
     return load_user_shader(exp.values) if is_user_shader(exp.fit.shader) else None
+
+
+def shader_sha256(shader) -> str:
+    """Hex SHA-256 of what a ``UserShader``'s images depend on: its file's text, the text
+    after preprocessing (every ``#include`` d file's contents and the defines applied), its
+    defines, bindings and declared constants, and with ``fit.vertex`` the vertex shader's text
+    and grid."""
+    decl = json.dumps({"bindings": shader.bindings, "constants": {
+        n: [c.lo, c.hi] for n, c in shader.constants.items()}}, sort_keys=True)  # fmt: skip
+    expanded = dialects.front_end(
+        shader.source, shader.label, shader.defines, shader.include_paths, True
+    )
+    vertex = ""
+    if shader.vertex is not None:
+        vertex = json.dumps([shader.vertex.shader.original, list(shader.vertex.cells)])
+    parts = [shader.source, expanded, json.dumps(list(shader.defines)), decl, vertex]
+    return hashlib.sha256("\0".join(parts).encode()).hexdigest()
 
 
 def user_jobs(exps, specs) -> list[dict]:
@@ -53,9 +74,7 @@ def user_jobs(exps, specs) -> list[dict]:
         shader = _shader_of(exp)
         if shader is None:
             continue
-        decl = json.dumps({"bindings": shader.bindings, "constants": {
-            n: [c.lo, c.hi] for n, c in shader.constants.items()}}, sort_keys=True)  # fmt: skip
-        sha = hashlib.sha256((shader.source + "\0" + decl).encode()).hexdigest()
+        sha = shader_sha256(shader)
         jobs.append(
             {
                 "scene": spec,
