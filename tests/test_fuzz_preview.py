@@ -33,6 +33,12 @@ COST_KEYS = {
     "reference.max_spp",
     "fit.max_steps",
     "reference.max_depth",
+    # the top-down lighting's sample counts and sizes (its upper ends take minutes, by design)
+    "reference.lighting_size",
+    "reference.bounce_spp",
+    "reference.sun_photons",
+    "reference.sky_directions",
+    "reference.wall_spp",
 }
 SKIP = {"name", "description", "fit.parameters", "fit.solver", "fit.max_steps"}
 
