@@ -11,7 +11,6 @@ with the study's vertex shader), and a full-screen frame whose only input is ``g
 
 from __future__ import annotations
 
-import gc
 
 import drjit as dr
 import drjit.llvm.ad as m
@@ -29,15 +28,6 @@ from shaders_port.spirv.user_shader import UserShader
 
 W, H = 16, 12  # the full-screen frame (even: every quad whole)
 _VERT = "#version 330 core\nin vec2 pos;\nvoid main() { gl_Position = vec4(pos, 0.0, 1.0); }\n"
-
-
-@pytest.fixture(autouse=True)
-def _collected():
-    """Collect each test's garbage at its end: an error raised while tracing leaves Dr.Jit
-    values in reference cycles (its traceback's frames), which the garbage collector must not
-    free during a later test's frozen-kernel recording (Dr.Jit aborts)."""
-    yield
-    gc.collect()
 
 
 @pytest.fixture(scope="module")

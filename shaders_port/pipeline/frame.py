@@ -13,6 +13,7 @@ of derivatives and the forward-mode Jacobian passes. Shader files hold only shad
 from __future__ import annotations
 
 import dataclasses
+import gc
 import os
 import warnings
 from collections import OrderedDict
@@ -126,13 +127,23 @@ def call_frozen(key: tuple, fn, m, P, *args):
 
     A replay whose outputs have another width, or a function recorded more than
     :data:`MAX_RECORDINGS` times, is never passed on: the call is traced instead, and that
-    configuration is traced from then on, with one warning."""
+    configuration is traced from then on, with one warning.
+
+    Python's cyclic garbage collector is off during the frozen call: collecting Dr.Jit values
+    that an earlier call left in reference cycles (an exception's traceback frames) while a
+    recording runs aborts Dr.Jit; they are collected once the call is over."""
     args = (m, P) + args
     if not USE_FROZEN or key in _BROKEN:
         return fn(*args)
     lanes = lane_count(P)
     f = frozen(key + (P.upload,), fn)
-    out = _unpack(f(*args), lanes)
+    was_collecting = gc.isenabled()
+    gc.disable()  # the collector freeing other calls' Dr.Jit values mid-recording aborts Dr.Jit
+    try:
+        out = _unpack(f(*args), lanes)
+    finally:
+        if was_collecting:
+            gc.enable()
     bad = sorted({w for w in _widths(out, []) if w != lanes})
     why = None
     if bad:
