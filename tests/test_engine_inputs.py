@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 from PIL import Image
 
+from helpers.gl import user_gl_render_or_skip
 from helpers.synthetic import synthetic_baseline_inputs, synthetic_inputs
 from shaders_port.inputs import perspective_view_proj
 from shaders_port.spirv import engine_inputs as ei
@@ -24,13 +25,7 @@ def _gl_agrees(shader: UserShader, inputs) -> np.ndarray:
     """The executor's colour (H, W, 3) after checking it against llvmpipe on the covered pixels
     (mean and 99.9th percentile of the per-pixel largest difference)."""
     ours = shader.render(inputs).numpy()
-    pytest.importorskip("moderngl")
-    try:
-        rgba, mask = shader.gl_render(inputs)
-    except RuntimeError as exc:
-        if "EGL" in str(exc) or "context" in str(exc).lower():
-            pytest.skip(f"no headless OpenGL here: {exc}")
-        raise
+    rgba, mask = user_gl_render_or_skip(shader, inputs)
     both = mask & (ours["mask"] > 0)
     mine = ours["color"]
     d = np.abs(rgba[..., :3] - mine).max(-1)[both]

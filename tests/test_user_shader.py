@@ -12,6 +12,7 @@ import numpy as np
 import pytest
 
 from helpers.experiments import TINY as CLI_TINY
+from helpers.gl import user_gl_render_or_skip
 from helpers.images import save_comparison
 from helpers.port_checks import FD_NOISE, FD_RTOL
 from helpers.synthetic import synthetic_inputs
@@ -85,13 +86,7 @@ def test_calibrates_written_back_and_gl_checked(name, inputs, tmp_path):
         ln for ln in shader.source.split("\n") if not any(f" {n} =" in ln for n in shader.constants)
     ]
     assert strip == orig
-    pytest.importorskip("moderngl")
-    try:
-        rgba, mask = again.gl_render(inputs)
-    except RuntimeError as exc:
-        if "EGL" in str(exc) or "context" in str(exc).lower():
-            pytest.skip(f"no headless OpenGL here: {exc}")
-        raise
+    rgba, mask = user_gl_render_or_skip(again, inputs)
     ours = again.render(inputs).numpy()
     both = mask & (ours["mask"] > 0)
     d = np.abs(rgba[..., :3] - ours["color"]).max(-1)[both]

@@ -17,6 +17,7 @@ import pytest
 
 from helpers import REPO
 from helpers.experiments import TINY, sets
+from helpers.gl import user_gl_render_or_skip
 from helpers.port_checks import FD_NOISE, FD_RTOL
 from helpers.synthetic import synthetic_inputs
 from shaders_port.pipeline.interpolate import interpolate, rasterize_triangles, water_grid
@@ -47,10 +48,7 @@ def _pair(name: str, cells=(24, 24), frag: str | None = None) -> UserShader:
 
 def _gl_compare(shader: UserShader, inputs):
     ours = shader.render(inputs).numpy()
-    try:
-        rgba, mask = shader.gl_render(inputs)
-    except RuntimeError as exc:  # no headless OpenGL here
-        pytest.skip(str(exc).splitlines()[0])
+    rgba, mask = user_gl_render_or_skip(shader, inputs)
     mine = ours["mask"] > 0.5
     both = mask & mine
     d = np.abs(rgba[..., :3] - ours["color"]).max(-1)[both]

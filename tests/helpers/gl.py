@@ -25,6 +25,18 @@ def compare_or_skip(inputs, constants, shader, **kw) -> dict:
         raise
 
 
+def user_gl_render_or_skip(shader, inputs, values=None):
+    """``UserShader.gl_render`` (RGBA (H, W, 4) float32, covered mask (H, W) bool), skipping
+    the test where no headless OpenGL context can be made; any other failure raises."""
+    pytest.importorskip("moderngl")
+    try:
+        return shader.gl_render(inputs, values)
+    except RuntimeError as exc:
+        if "EGL" in str(exc) or "context" in str(exc).lower():
+            pytest.skip(f"no headless OpenGL here: {exc}")
+        raise
+
+
 def check_gl_match(res: dict, tag: str) -> None:
     """Assert the thresholds on a ``compare_port_gl`` result; images to tests/_failures/ first
     when one fails."""
