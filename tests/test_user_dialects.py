@@ -62,6 +62,27 @@ def test_each_dialect_renders_its_core_equivalent(name, inputs, core_image):
     assert check["mean_abs"] <= GL_MEAN and check["p999"] <= GL_P999
 
 
+# schlick_fog_120 keeps uniform initializers, which GLSL ES refuses and HLSL ignores: a
+# user's uniform initializers are not yet carried into the engine targets (an open gap)
+@pytest.mark.parametrize("name", ["schlick_fog_es300", "schlick_fog_webgl1"])
+def test_each_dialect_exports_to_the_engine_targets(name, tmp_path):
+    """The file is exported as it was written (fitted numbers in place); the engine targets are
+    translated from its GLSL 330 core translation (glslang makes no SPIR-V of the older
+    dialects: the export of a WebGL 1 file failed there after its fit)."""
+    from shaders_port.spirv.tools import missing_tools
+    from study.export.shaders import export_user_shader
+
+    if missing_tools():
+        pytest.skip(f"the engine targets need {', '.join(missing_tools())}")
+    _, kw = DIALECTS[name]
+    shader = UserShader.from_file(SHADERS / f"{name}.frag", **kw).check()
+    export_user_shader(shader, shader.defaults(), tmp_path / "shaders", ["hlsl", "gles300"])
+    written = (tmp_path / "shaders" / "core" / f"{name}.frag").read_text()
+    assert written == shader.written(shader.defaults())
+    for target in ("hlsl/{}.frag.hlsl", "gles300/{}.frag"):
+        assert (tmp_path / "shaders" / target.format(name)).is_file(), target
+
+
 def test_dialects_are_detected_and_unknown_versions_refused():
     cases = {
         "precision mediump float;\nvoid main() {}\n": "GLSL ES 1.00",

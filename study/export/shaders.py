@@ -168,20 +168,26 @@ def export_user_shader(
         texts = {("core", shader.vertex.label): shader.vertex.shader.source,
                  ("core", shader.label): texts[("core", shader.label)]}  # fmt: skip
     fit = {"status": status or {}, "reads": None}
-    return _write_checked(texts, out_dir, targets, values, textures, fit)
+    # the engine targets come from the core GLSL the study compiles (a file in an older dialect,
+    # or with includes and defines, translated), the file itself is written as the user wrote it
+    core = {shader.label: shader.gl_source(values)} if shader.dialect.runs_on_desktop_gl else {}
+    return _write_checked(texts, out_dir, targets, values, textures, fit, core)
 
 
-def _write_checked(texts: dict, out_dir, targets, constants, textures=None, fit=None) -> list[Path]:
+def _write_checked(
+    texts: dict, out_dir, targets, constants, textures=None, fit=None, core_sources=None
+) -> list[Path]:
     """Compile every text of ``texts`` ((dialect, file name) -> GLSL), translate the core ones
-    to ``targets``, write them and the ``textures`` into a temporary folder beside ``out_dir``
-    and swap it in."""
-    for (dialect, fname), text in texts.items():
-        compile_check(text, fname.rsplit(".", 1)[1])
+    (or, per file name, the text ``core_sources`` gives) to ``targets``, write them and the
+    ``textures`` into a temporary folder beside ``out_dir`` and swap it in."""
+    core_sources = core_sources or {}
+    for (dialect, fname), text in texts.items():  # what glslang compiles (includes resolved)
+        compile_check(core_sources.get(fname, text), fname.rsplit(".", 1)[1])
     extra = {}
     targets = resolve_targets(targets)
     expects = expects_lines(textures[0]) if textures else []
     if targets:
-        core = {f: t for (d, f), t in texts.items() if d == "core"}
+        core = {f: t for (d, f), t in texts.items() if d == "core"} | core_sources
         with disk_full(out_dir):  # the tools' scratch files (nothing reaches out_dir yet)
             extra, _ = translate_targets(core, targets, constants, expects, fit)
     out_dir = Path(out_dir)
