@@ -65,7 +65,7 @@ def test_each_dialect_renders_its_core_equivalent(name, inputs, core_image):
 # schlick_fog_120 keeps uniform initializers, which GLSL ES refuses and HLSL ignores: a
 # user's uniform initializers are not yet carried into the engine targets (an open gap)
 @pytest.mark.parametrize("name", ["schlick_fog_es300", "schlick_fog_webgl1"])
-def test_each_dialect_exports_to_the_engine_targets(name, tmp_path):
+def test_each_dialect_exports_to_the_engine_targets(name, tmp_path, inputs):
     """The file is exported as it was written (fitted numbers in place); the engine targets are
     translated from its GLSL 330 core translation (glslang makes no SPIR-V of the older
     dialects: the export of a WebGL 1 file failed there after its fit)."""
@@ -81,6 +81,13 @@ def test_each_dialect_exports_to_the_engine_targets(name, tmp_path):
     assert written == shader.written(shader.defaults())
     for target in ("hlsl/{}.frag.hlsl", "gles300/{}.frag"):
         assert (tmp_path / "shaders" / target.format(name)).is_file(), target
+    # the HLSL runs back on llvmpipe (its colour output is the translation's _study_FragColor)
+    from study.export.gl_check import hlsl_check_user
+
+    ours = shader.render(inputs).numpy()
+    check = hlsl_check_user(shader, inputs, shader.defaults(), ours, tmp_path / "shaders")
+    if check.get("ran"):
+        assert check["passed"], check
 
 
 def test_dialects_are_detected_and_unknown_versions_refused():

@@ -230,7 +230,9 @@ def hlsl_round_trip(hlsl: str, stage: str = "frag", label: str = "<hlsl>") -> tu
     for io, key in (("in", "inputs"), ("out", "outputs")):
         for var in refl.get(key, []):
             plain = var["name"].rsplit(".", 1)[-1]
-            if not re.fullmatch(r"[A-Za-z]\w*", plain):
+            # a GLSL identifier (a leading _ too: the dialect translation's colour output),
+            # not one GLSL reserves (gl_ prefix, a double underscore)
+            if not re.fullmatch(r"(?!gl_)[A-Za-z_]\w*", plain) or "__" in plain:
                 raise RuntimeError(f"{label}: cannot name the stage {io}put {var['name']!r}")
             args += ["--rename-interface-variable", io, str(var["location"]), plain]
     return cross(spv, args, f"{label} -> GLSL 330"), refl
