@@ -16,6 +16,9 @@ Every table of results in ``docs/`` is written by this script, never by hand:
 * ``docs/results/animation/report.md``: the animated calibration's report, from the
   ``constants.json`` that ``study calibrate experiments/animated.toml`` writes, and
   ``schedules.md``, the same calibration at three step schedules (``schedules.json``);
+* ``docs/results/engine-shaders/report.md``: the engine-style shader pairs of
+  ``experiments/`` calibrated, from each one's ``constants.json`` (``study calibrate
+  experiments/<name>.toml``);
 * ``docs/experiment-keys.md``: the experiment file's key table, from the schema;
 * ``docs/file-formats.md``: the files a user gives and the files the tool writes, its tables
   from the schema, the file readers and the committed result files (``docs_file_formats.py``);
@@ -58,6 +61,7 @@ TRADEOFF_FAMILY = (
     "user-shader/tradeoff",
 )
 STABILITY_PHASES = ("stability/multistart", "stability/noise")
+ENGINE_PAIRS = ("webgl_mirror_water", "dudv_depth_water", "fog_cube_water", "zup_water")
 DEFAULT_TOLERANCE = 0.02
 
 KEYS_HEADER = """# Experiment keys
@@ -121,7 +125,50 @@ def generated() -> dict[Path, str]:
         folder = RESULTS / phase
         pages[folder / "stability.md"] = stability_report_text(_json(folder / "summary.json"))
     pages.update(_default_run_pages(RESULTS / "default"))
+    pages[RESULTS / "engine-shaders" / "report.md"] = _engine_pairs_page(RESULTS / "engine-shaders")
     return pages
+
+
+def _engine_pairs_page(folder: Path) -> str:
+    """The engine-style pairs' calibrations: one section per ``folder/<name>/constants.json``
+    (errors, every constant's status and value, the GL check and the HLSL round trip)."""
+    from study.report.calibration import fmt
+
+    lines = [
+        "# Engine waters, calibrated",
+        "",
+        "*Written by `scripts/build_docs.py` from the `constants.json` that `study calibrate "
+        "experiments/<name>.toml --out docs/results/engine-shaders/<name>` wrote, committed "
+        "beside this page. The shaders: [Four engine waters](../../user-shader.md#four-engine-"
+        "waters-shipped).*",
+        "",
+        "| experiment | RMSE start -> fitted | FLIP start -> fitted | solver steps | GL check "
+        "(mean, 99.9th pct.) | HLSL round trip |",
+        "|---|---|---|---|---|---|",
+    ]
+    runs = {n: _json(folder / n / "constants.json") for n in ENGINE_PAIRS}
+    for name, d in runs.items():
+        e, gl = d["error"], d["gl_check"]
+        hlsl = (d.get("engine_targets") or {}).get("hlsl", {}).get("llvmpipe") or {}
+        hl = f"{fmt(hlsl['mean_abs'], 3)}, {fmt(hlsl['p999'], 3)}" if "mean_abs" in hlsl else "-"
+        lines.append(
+            f"| `{name}` | {e['rmse']['default']:.4f} -> {e['rmse']['fitted']:.4f} | "
+            f"{e['flip']['default']:.4f} -> {e['flip']['fitted']:.4f} | {d['iterations']} | "
+            f"{fmt(gl['mean_abs'], 3)}, {fmt(gl['p999'], 3)} "
+            f"({'passed' if gl['passed'] else 'FAILED'}) | {hl} |"
+        )
+    for name, d in runs.items():
+        lines += ["", f"## `{name}`", "", f"`{d['shader']}` after its own vertex shader "
+                  f"`{Path(d['vertex_file']).name}`.", "",
+                  "| constant | start | exported | status | relative standard error | why |",
+                  "|---|---|---|---|---|---|"]  # fmt: skip
+        for cname, p in d["parameters"].items():
+            se = p.get("rel_std_error")
+            lines.append(
+                f"| `{cname}` | {fmt(p['default'])} | {fmt(p['fitted'])} | {p['status']} | "
+                f"{'-' if se is None else f'{100 * se:.1f} %'} | {p['reason']} |"
+            )
+    return "\n".join(lines) + "\n"
 
 
 def _json(path: Path) -> dict:

@@ -172,8 +172,11 @@ directions (`varyingVecWorldPosition`, `varyingVecEye`, `varyingVecLight`, `view
 is multiplied by the inverse rotation on its right; `inverse_view_projection` by the rotation on
 its left. Textures stay as they are (the normal map keeps `g` = the study's up; the cube maps
 are indexed by Y-up directions: look them up with `vec3(d.x, d.z, -d.y)` of a Z-up `d`). The
-study's own frame stays Y-up; the GL check draws the quad in the Z-up frame. Not built with your
-own vertex shader (`fit.vertex`), which is refused with `up z`.
+study's own frame stays Y-up; the GL check draws the quad in the Z-up frame. With your own
+vertex shader (`fit.vertex`) the pragma in the fragment shader holds for the pair: the grid's
+positions lie on `z = 0`, its normal is `+z`, its tangent `(1, 0, 0, -1)` and texture
+coordinate as in Y-up, and every matrix and camera position it reads is in the Z-up frame
+(`experiments/zup_water.toml`: a Z-up GLSL 1.20 pair with `ftransform()` and `gl_TexCoord`).
 
 ## The sky cube maps
 

@@ -15,7 +15,13 @@ Files (all procedural, deterministic; world units, +y up, water plane y = 0):
 * ``rock.obj``: a closed rocky ridge (top surface, skirt, flat bottom) with texture
   coordinates, on the far (-z) side of the pool, its bottom at y = 0.36 (above the walls);
 * ``rock.ply``: the same mesh as an ASCII PLY (x y z u v);
-* ``rock_texture.png``: 8-bit sRGB stone texture for ``mesh.texture``.
+* ``rock_texture.png``: 8-bit sRGB stone texture for ``mesh.texture``;
+* ``water_normals.png``: 8-bit RGB tangent-space normal map, 256 x 256, of the default
+  experiment's wave height field (``waves.*`` of ``experiments/default.toml``, one repeat per
+  ``waves.normal_tile``) as engines author one: RGB = ``0.5 n + 0.5`` with ``n`` = (along u =
+  world x, along v = world z, up), slopes authored 8 times steeper than one layer of the
+  waves (a shader scales them down), the top row at v = 1; read by the engine-style shaders of
+  ``experiments/shaders/`` (``// @study normal_map``).
 """
 
 from __future__ import annotations
@@ -125,6 +131,24 @@ def rock_texture(n: int = 128) -> np.ndarray:
     return np.clip(base * (strata * speck)[..., None], 0, 1)
 
 
+def water_normals(n: int = 256, steeper: float = 8.0) -> np.ndarray:
+    """(n, n, 3) uint8 tangent-space normal map of the default waves (see the module doc), rows
+    top first (v = 1 at row 0)."""
+    from study import load_experiment  # noqa: PLC0415 - the study's waves, only for this file
+    from study.scene.geometry import Waves  # noqa: PLC0415
+
+    exp = load_experiment(REPO / "experiments" / "default.toml")
+    w = Waves(exp["waves.amplitude"], exp["waves.normal_tile"], exp["waves.components"],
+              exp["waves.seed"], exp["waves.offsets"])  # fmt: skip
+    c = (np.arange(n) + 0.5) / n
+    u, v = np.meshgrid(c, c[::-1])  # row 0 at the top: v = 1
+    _, hu, hv = w._h0(u, v)
+    s = steeper * w.amplitude / w.tile
+    t = np.stack([-s * hu, -s * hv, np.ones_like(hu)], -1)
+    t /= np.linalg.norm(t, axis=-1, keepdims=True)
+    return np.clip(np.rint((0.5 * t + 0.5) * 255.0), 0, 255).astype(np.uint8)
+
+
 def linear_to_srgb8(img: np.ndarray) -> np.ndarray:
     x = np.clip(img, 0, 1)
     s = np.where(x <= 0.0031308, 12.92 * x, 1.055 * x ** (1 / 2.4) - 0.055)
@@ -182,6 +206,7 @@ def main(argv=None) -> None:
     write_obj(out / "rock.obj", pos, uv, faces)
     write_ply(out / "rock.ply", pos, uv, faces)
     Image.fromarray(linear_to_srgb8(rock_texture())).save(out / "rock_texture.png")
+    Image.fromarray(water_normals()).save(out / "water_normals.png")
     for p in sorted(out.iterdir()):
         print(f"{p}  {p.stat().st_size} bytes")
 

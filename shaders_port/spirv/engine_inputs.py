@@ -317,8 +317,8 @@ def gl_class(base, options: dict):
     class _EngineInputs(base):
         def _setup_geometry(self) -> None:
             super()._setup_geometry()
-            if up == "y":
-                return
+            if up == "y" or not hasattr(self, "_vbo"):
+                return  # a user's vertex shader's grid (``gl.grid``) has its attributes in ``up``
             data = np.frombuffer(self._vbo.read(), np.float32).reshape(-1, 5).copy()
             data[:, :3] = to_up(up, data[:, :3], "vector")
             self._vbo.release()

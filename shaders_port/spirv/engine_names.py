@@ -14,6 +14,13 @@ vertex file. Conventions of every value (those of the study, ``shaders_port.inpu
 * the texture coordinate is the one the study's own quad carries, ``(x, z) / normal_tile``
   (``ShaderInputs.normal_tile``: world units per repeat of the normal map).
 
+With ``up`` 'z' (the pair declares ``// @study up z``: ``spirv.engine_inputs.to_up``) every
+world-space value is given in the Z-up frame ``(x, y, z) -> (x, -z, y)``: the grid's positions
+lie on ``z = 0``, the normal is ``(0, 0, 1)``, the tangent ``(1, 0, 0, -1)`` as before (a
+rotation keeps the cross product: ``cross(normal, tangent.xyz) * w`` is ``-y``, the study's
+``+z``), a matrix taking world points is multiplied by ``R^T`` on its right, its inverse by ``R``
+on its left, the camera position rotated; the texture coordinate and the projection stay.
+
 ``view`` and ``projection`` are recovered from the frame's ``view_proj`` and camera position
 (``viewpos``): ``view = [R | -R eye]`` with ``R`` the camera's rotation
 (``shaders_port.inputs.normal_matrix``), ``projection = view_proj * view^-1``; their product is
@@ -26,8 +33,16 @@ from __future__ import annotations
 import numpy as np
 
 from ..inputs import ShaderInputs, normal_matrix
+from .engine_inputs import to_up
 
-__all__ = ["MEANINGS", "ENGINE_NAMES", "STUDY_VERTEX_NAMES", "meaning_of", "meaning_values"]
+__all__ = [
+    "MEANINGS",
+    "ENGINE_NAMES",
+    "STUDY_VERTEX_NAMES",
+    "attribute_values",
+    "meaning_of",
+    "meaning_values",
+]
 
 # meaning -> (GLSL types it can be read as, what it is)
 MEANINGS = {
@@ -141,10 +156,40 @@ def _split_view(inputs: ShaderInputs) -> tuple[np.ndarray, np.ndarray]:
     return view, vp @ np.linalg.inv(view)
 
 
-def meaning_values(inputs: ShaderInputs, meaning: str) -> np.ndarray:
-    """The value of a uniform ``meaning`` on a frame, float64: a (4, 4) or (3, 3) matrix
-    (row-major, acting on column vectors) or a vector. ValueError naming the problem when the
-    frame cannot give it."""
+def attribute_values(grid, meaning: str, up: str = "y") -> np.ndarray:
+    """(V, k) float64 per-vertex values of the attribute ``meaning`` ('position', 'uv',
+    'normal', 'tangent') on ``grid`` (``pipeline.interpolate.Grid``), in the world frame
+    ``up``."""
+    n = len(grid.position)
+    if meaning == "uv":
+        return np.asarray(grid.uv, np.float64)
+    if meaning == "tangent":
+        return np.tile([1.0, 0.0, 0.0, -1.0], (n, 1))
+    base = {"position": np.asarray(grid.position, np.float64),
+            "normal": np.tile([0.0, 1.0, 0.0], (n, 1))}[meaning]  # fmt: skip
+    return to_up(up, base, "vector")
+
+
+_KIND = {
+    "view": "matrix", "modelView": "matrix", "viewProjection": "matrix",
+    "modelViewProjection": "matrix", "viewInverse": "inverse", "modelViewInverse": "inverse",
+    "viewProjectionInverse": "inverse", "modelViewProjectionInverse": "inverse",
+    "normalMatrix": "rotation", "cameraPosition": "vector",
+}  # fmt: skip
+
+
+def meaning_values(inputs: ShaderInputs, meaning: str, up: str = "y") -> np.ndarray:
+    """The value of a uniform ``meaning`` on a frame, float64, in the world frame ``up`` (see
+    the module doc): a (4, 4) or (3, 3) matrix (row-major, acting on column vectors) or a
+    vector. ValueError naming the problem when the frame cannot give it."""
+    v = _meaning_values(inputs, meaning)
+    if meaning == "cameraPosition":
+        return np.r_[to_up(up, v[:3], "vector"), 1.0]
+    return to_up(up, v, _KIND[meaning]) if meaning in _KIND else v
+
+
+def _meaning_values(inputs: ShaderInputs, meaning: str) -> np.ndarray:
+    """:func:`meaning_values` in the study's Y-up frame."""
     vp = np.asarray(inputs.view_proj, np.float64)
     if meaning == "cameraPosition":
         return np.r_[np.asarray(inputs.viewpos, np.float64), 1.0]

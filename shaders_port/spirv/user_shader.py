@@ -261,8 +261,6 @@ class UserShader:
         """``up`` checked and ``normal_map`` made a path (relative to the shader's file)."""
         if self.engine["up"] not in ("y", "z"):
             raise ValueError(f"{self.label}: `// @study up {self.engine['up']}`: write up y or z")
-        if self.engine["up"] == "z" and self.vertex is not None:
-            raise ValueError(f"{self.label}: `up z` with your own vertex shader is not built")
         nm = self.engine["normal_map"]
         if nm:
             p = Path(nm) if path is None else Path(path).parent / nm
@@ -353,6 +351,11 @@ class UserShader:
         if self.vertex is not None:
             check_supported(self.vertex.shader.module)
         known = set(spirv_port.STUDY_INPUTS) | set(self.run_bindings()) | set(self.constants)
+        if self.vertex is not None:  # its varyings come from the vertex shader
+            try:
+                known |= set(self.vertex.feeds(mod, self.spec().source, self.label))
+            except ValueError as exc:
+                raise dialects.ShaderError(str(exc)) from None
         for vid, ins in mod.defs.items():
             name = mod.binding_name(vid)
             if (ins.opname == "OpVariable" and ins.operands[0] in ("Input", "UniformConstant")
@@ -418,13 +421,14 @@ class UserShader:
         return out, J.reshape(r.height, r.width, 3, len(names))
 
     # ---- the file ----------------------------------------------------------------------------
-    def written(self, values: dict) -> str:
+    def written(self, values: dict, bare_initializers: bool = True) -> str:
         """The shader's text with ``values`` in place of its constants' initializers; every
-        other byte as in the file."""
+        other byte as in the file. A uniform declared without initializer gets one where its
+        dialect allows (desktop GLSL 1.20 and later) and ``bare_initializers`` asks."""
         vals = self._checked(values)
         out, pos = [], 0
         d = self.dialect
-        initializers = not d.es and d.version >= 120  # a bare uniform may get one
+        initializers = bare_initializers and not d.es and d.version >= 120
         for c in sorted(self.constants.values(), key=lambda c: c.span[0]):
             if c.bare and not initializers:
                 continue
@@ -437,11 +441,13 @@ class UserShader:
         out.append(self.source[pos:])
         return "".join(out)
 
-    def gl_source(self, values: dict | None = None) -> str:
+    def gl_source(self, values: dict | None = None, bare_initializers: bool = True) -> str:
         """The GLSL OpenGL runs for :meth:`written` with ``values``: that text, or, for a
         dialect that is translated or a file with ``#include`` s or ``defines``, its
-        translation to GLSL 330 core (``dialects.front_end``). ShaderError for GLSL ES 3.10
-        and later, which a desktop OpenGL does not run."""
+        translation to GLSL 330 core (``dialects.front_end``). ``bare_initializers`` False
+        leaves the uniforms declared without initializer so (the engine targets: GLSL ES and
+        HLSL have no uniform initializers; their binding sheets give the values). ShaderError
+        for GLSL ES 3.10 and later, which a desktop OpenGL does not run."""
         d = self.dialect
         if not d.runs_on_desktop_gl:
             raise dialects.ShaderError(
@@ -449,7 +455,7 @@ class UserShader:
                 "(moderngl's EGL backend binds desktop OpenGL only, so Mesa's llvmpipe gets no "
                 "OpenGL ES context here); glslang compiled it with its ES profile"
             )
-        text = self.written(values or {})
+        text = self.written(values or {}, bare_initializers)
         if not (d.translated or self.defines or "#include" in text):
             return text
         return dialects.for_opengl(
@@ -464,12 +470,14 @@ class UserShader:
         ``render(None)`` / ``time_frames(None, n, warmup)``."""
 
         bindings = self.run_bindings()
+        if self.vertex is not None:  # its uniforms that are study or engine inputs
+            bindings = {**self.vertex.shader.inputs, **bindings}
         base = GLRenderer if reflection is None else TranslatedRenderer
         vals = self._checked(values)
         bare = {c.name: np.asarray(vals[c.name], np.float32).tobytes()
                 for c in self.constants.values() if c.bare}  # fmt: skip
         if self.vertex is not None:  # the grid drawn with the user's GLSL vertex shader
-            base = self.vertex.gl_class(base, inputs)
+            base = self.vertex.gl_class(base, inputs, self.engine["up"])
         base = _engine.gl_class(base, self.engine)
 
         label = self.label

@@ -109,11 +109,11 @@ class UserVertex:
         if hit is not None:
             _FRAMES.move_to_end(key)
             return hit
-        study = spirv_port.study_bindings(m, P0, inputs)
+        study = spirv_port.study_bindings(m, P0, inputs, spec.engine)
         for k in range(4):
             study[f"wave{k + 1}"] = [float(v) for v in np.asarray(inputs.waves[k], np.float32)]
         grid = self.grid(inputs)
-        clip, outs = self.shader.run(m, inputs, grid, study)
+        clip, outs = self.shader.run(m, inputs, grid, study, dict(spec.engine).get("up", "y"))
         cov = rasterize_triangles(clip, grid.triangles, inputs.width, inputs.height)
         if cov.index.size == 0:
             raise ValueError(
@@ -122,6 +122,7 @@ class UserVertex:
             )
         mod = spirv_port.module_of(spec)
         b = {k: v for k, v in study.items() if k not in _PER_PIXEL}
+        b.update({n: b[t] for n, t in spec.bindings if t in b})  # a bound mipmapped sampler
         lanes, x, y, group = cov, None, None, None
         if _quads.uses_quads(mod, {k: v for k, v in b.items() if k in mod.bound_names}):
             x, y, group, helpers = quad_helpers(cov, inputs.width, inputs.height)
@@ -140,14 +141,14 @@ class UserVertex:
             _FRAMES.popitem(last=False)
         return hit
 
-    def _varyings(self, m, spec, cov, grid, outs: dict) -> dict:
-        mod = spirv_port.module_of(spec)
-        vouts, by_loc = self.shader.outputs, {}
-        for name, v in vouts.items():
-            if v.location is not None:
-                by_loc[v.location] = name
-        places = explicit_locations(spec.source, "in")
-        b = {}
+    def feeds(self, mod, source: str, label: str) -> dict:
+        """Fragment input name -> the vertex output that feeds it (by name, else by an explicit
+        ``layout(location = N)`` on both sides) for every ``in`` of the fragment module ``mod``
+        (its GLSL ``source``, file name ``label``); ValueError naming an input nothing feeds."""
+        vouts = self.shader.outputs
+        by_loc = {v.location: n for n, v in vouts.items() if v.location is not None}
+        places = explicit_locations(source, "in")
+        out = {}
         for vid, ins in mod.defs.items():
             if ins.opname != "OpVariable" or ins.operands[0] != "Input":
                 continue
@@ -157,10 +158,24 @@ class UserVertex:
             src = name if name in vouts else by_loc.get(places.get(name, -1))
             if src is None:
                 raise ValueError(
-                    f"{spec.label}: the fragment shader reads `in {name}`, which the vertex "
+                    f"{label}: the fragment shader reads `in {name}`, which the vertex "
                     f"shader {self.label} does not write (its outputs: "
                     f"{', '.join(vouts) or 'none'}); write it there or name it alike"
                 )
+            out[name] = src
+        return out
+
+    def _varyings(self, m, spec, cov, grid, outs: dict) -> dict:
+        mod = spirv_port.module_of(spec)
+        fed = self.feeds(mod, spec.source, spec.label)
+        b = {}
+        for vid, ins in mod.defs.items():
+            if ins.opname != "OpVariable" or ins.operands[0] != "Input":
+                continue
+            name = mod.binding_name(vid)
+            if name not in fed:
+                continue
+            src = fed[name]
             if src not in outs:
                 raise ValueError(
                     f"{self.label}: the output {src} that {spec.label} reads is never written"
@@ -232,13 +247,11 @@ class UserVertex:
         return finish_output(m, P, color, diag, spec.label)
 
     # ---- OpenGL ----------------------------------------------------------------------------
-    def gl_class(self, base, inputs):
+    def gl_class(self, base, inputs, up: str = "y"):
         """``base`` (a ``GLRenderer`` class) drawing the grid with this vertex shader: its
-        attributes and recognised uniforms set as :meth:`frame` binds them."""
+        attributes and recognised uniforms set as :meth:`frame` binds them, in the world frame
+        ``up``."""
         mod, grid = self.shader.module, self.grid(inputs)
-        data = {"position": grid.position, "uv": grid.uv,
-                "normal": np.tile(np.float32([0, 1, 0]), (len(grid.position), 1)),
-                "tangent": np.tile(np.float32([1, 0, 0, -1]), (len(grid.position), 1))}  # fmt: skip
         attributes, uniforms = {}, {}
         for vid, ins in mod.defs.items():
             if ins.opname != "OpVariable" or ins.operands[0] not in ("Input", "UniformConstant"):
@@ -246,10 +259,10 @@ class UserVertex:
             name = mod.binding_name(vid)
             meaning = names_.meaning_of(name, self.shader.bindings)
             if meaning in ATTRIBUTES:
-                attributes[name] = data[meaning]
+                attributes[name] = names_.attribute_values(grid, meaning, up).astype(np.float32)
             elif meaning is not None:
                 t = glsl_type(mod, mod.defs[ins.type_id].operands[1])
-                v = np.asarray(names_.meaning_values(inputs, meaning), np.float32)
+                v = np.asarray(names_.meaning_values(inputs, meaning, up), np.float32)
                 v = v.T if v.ndim == 2 else v[: t[1]]  # GL's column-major order
                 uniforms[name] = np.ascontiguousarray(v).tobytes()
         return grid_renderer_class(base, self.shader.source, attributes, grid.triangles, uniforms)

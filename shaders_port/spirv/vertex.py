@@ -39,7 +39,9 @@ import drjit as dr
 import numpy as np
 
 from . import dialects
+from . import engine_inputs as _engine
 from . import engine_names as names_
+from .translated import STUDY_INPUTS
 from .execute import Executor, UnboundVariable
 from .loops import UnsupportedInstruction
 from .module import OPT_PASSES, Module
@@ -47,6 +49,7 @@ from .module import OPT_PASSES, Module
 __all__ = ["VertexShader", "Varying", "compile_vertex", "ATTRIBUTES"]
 
 ATTRIBUTES = ("position", "uv", "normal", "tangent")
+_INPUTS = set(STUDY_INPUTS) | {"wave1", "wave2", "wave3", "wave4"}
 _PRAGMA = re.compile(r"^\s*//\s*@study\s+(?P<verb>\S+)\s*(?P<args>.*?)\s*$", re.M)
 _LOCATION = re.compile(
     r"layout\s*\(\s*location\s*=\s*(?P<loc>\d+)\s*\)\s*(?:(?:flat|noperspective|smooth|"
@@ -156,12 +159,20 @@ class VertexShader:
             self.bindings[args[0]] = args[1]
         self.module = Module(compile_vertex(self.source, label), label=label, stage="Vertex")
         for name, target in self.bindings.items():
-            if names_.meaning_of(name, self.bindings) is None and target not in names_.MEANINGS:
+            if names_.meaning_of(name, self.bindings) is None and target not in names_.MEANINGS \
+                    and _engine.canonical(target) not in _INPUTS:  # fmt: skip
                 raise ValueError(
-                    f"{label}: the binding {name} -> {target} names no meaning nor engine "
-                    f"name; the meanings: {', '.join(names_.MEANINGS)}"
+                    f"{label}: the binding {name} -> {target} names no meaning, engine name "
+                    f"or study input; the meanings: {', '.join(names_.MEANINGS)}; the inputs: "
+                    "docs/engine-inputs.md"
                 )
         self.outputs, self.position = self._outputs()
+        # uniforms that are study or engine inputs (``time``, ``textureMatrix``, ...): their
+        # engine names and the pragmas binding one of them, name -> the study input
+        plain = {n: t for n, t in self.bindings.items() if names_.meaning_of(n, self.bindings)
+                 is None}  # fmt: skip
+        found = _engine.resolve_bindings(self.source, plain, ())
+        self.inputs = {n: t for n, t in found.items() if t in _INPUTS}
 
     @classmethod
     def from_file(cls, path) -> "VertexShader":
@@ -186,14 +197,9 @@ class VertexShader:
         return outs, position
 
     # ---- the bindings of one frame -----------------------------------------------------------
-    def _attribute(self, m, meaning: str, t: tuple, grid, name: str) -> list:
+    def _attribute(self, m, meaning: str, t: tuple, grid, name: str, up: str) -> list:
         n = len(grid.position)
-        base = {
-            "position": grid.position.astype(np.float64),
-            "uv": grid.uv.astype(np.float64),
-            "normal": np.tile([0.0, 1.0, 0.0], (n, 1)),
-            "tangent": np.tile([1.0, 0.0, 0.0, -1.0], (n, 1)),
-        }[meaning]
+        base = names_.attribute_values(grid, meaning, up)
         k = t[1] if t[0] == "vec" else 1
         if t[0] not in ("vec", "float") or (t[0] == "vec" and t[2] != "float"):
             raise ValueError(
@@ -205,7 +211,7 @@ class VertexShader:
         lanes = [m.Float(c.astype(np.float32)) for c in cols]
         return lanes if t[0] == "vec" else lanes[0]
 
-    def _uniform(self, inputs, meaning: str, t: tuple, name: str):
+    def _uniform(self, inputs, meaning: str, t: tuple, name: str, up: str):
         want = names_.MEANINGS[meaning][0]
         if _describe(t) not in want:
             raise ValueError(
@@ -213,17 +219,18 @@ class VertexShader:
                 f"{' or '.join(want)}; the shader declares it {_describe(t)}"
             )
         try:
-            v = np.asarray(names_.meaning_values(inputs, meaning), np.float32)
+            v = np.asarray(names_.meaning_values(inputs, meaning, up), np.float32)
         except ValueError as exc:
             raise ValueError(f"{self.label}: {name}: {exc}") from None
         if v.ndim == 2:
             return [[float(v[i, j]) for i in range(v.shape[0])] for j in range(v.shape[1])]
         return [float(x) for x in v[: t[1]]]
 
-    def bindings_for(self, m, inputs, grid, study: dict) -> dict:
+    def bindings_for(self, m, inputs, grid, study: dict, up: str = "y") -> dict:
         """Binding name -> value of every input and uniform the module reads: the grid's
-        attributes (per-vertex Floats), the recognised matrices and vectors, ``study`` (the
-        study's uniform and sampler values by name, ``spirv.translated.study_bindings``)."""
+        attributes (per-vertex Floats), the recognised matrices and vectors, in the world frame
+        ``up`` (``spirv.engine_names``), ``study`` (the study's uniform and sampler values by
+        name, ``spirv.translated.study_bindings``, in the same frame)."""
         out, mod = {}, self.module
         for vid, ins in mod.defs.items():
             if ins.opname != "OpVariable" or ins.operands[0] not in ("Input", "UniformConstant"):
@@ -232,20 +239,23 @@ class VertexShader:
             meaning = names_.meaning_of(name, self.bindings)
             t = pointee_type(mod, vid)
             if meaning in ATTRIBUTES:
-                out[name] = self._attribute(m, meaning, t, grid, name)
+                out[name] = self._attribute(m, meaning, t, grid, name, up)
             elif meaning is not None:
-                out[name] = self._uniform(inputs, meaning, t, name)
+                out[name] = self._uniform(inputs, meaning, t, name, up)
             elif name in study:
                 out[name] = study[name]
+            elif self.inputs.get(name) in study:
+                out[name] = study[self.inputs[name]]
         return out
 
-    def run(self, m, inputs, grid, study: dict) -> tuple[np.ndarray, dict]:
-        """Run the shader on every vertex of ``grid`` (``pipeline.interpolate.Grid``):
+    def run(self, m, inputs, grid, study: dict, up: str = "y") -> tuple[np.ndarray, dict]:
+        """Run the shader on every vertex of ``grid`` (``pipeline.interpolate.Grid``, in the
+        study's Y-up world; given to the shader in the world frame ``up``):
         ``(clip (V, 4) float64 gl_Position, {output name: (V, ...) float64})``; an output
         never written is absent."""
         if self.position is None:
             raise ValueError(f"{self.label}: the vertex shader never writes gl_Position")
-        ex = Executor(self.module, m, self.bindings_for(m, inputs, grid, study))
+        ex = Executor(self.module, m, self.bindings_for(m, inputs, grid, study, up))
         try:
             ex.run()
             V = len(grid.position)

@@ -21,6 +21,7 @@ from .._progress import Stages
 from .._progress import log as _log
 from ..config.experiment import load_experiment
 from ..export.gl_check import (
+    GLES_NOT_RUN,
     gl_check,
     gl_check_user,
     hlsl_check_user,
@@ -28,6 +29,7 @@ from ..export.gl_check import (
     target_checks,
 )
 from ..export.shaders import export_shaders, export_user_shader
+from ..export.viewer import not_drawn
 from ..export.textures import lut_image, texture_record, with_exported_textures, write_textures
 from ..fit.build import build_model
 from ..fit.calibrate import timed
@@ -133,6 +135,8 @@ def export_calibration(exp, model, frames: list, cal, out: Path, timings: dict):
         ours = [user.render(i, fitted, backend=model.backend).numpy() for i in frames]
         gl = [gl_check_user(user, i, fitted, o) for i, o in zip(frames, ours)]
         engine_targets = manifest_checks(shaders)
+        if "gles300" in engine_targets and not_drawn(user):  # no viewer/ runs them
+            engine_targets["gles300"]["llvmpipe"] = GLES_NOT_RUN
         if "hlsl" in engine_targets:
             engine_targets["hlsl"]["llvmpipe"] = hlsl_check_user(
                 user, frames[0], fitted, ours[0], shaders
@@ -156,6 +160,9 @@ def export_calibration(exp, model, frames: list, cal, out: Path, timings: dict):
         "defines": list(user.defines),
         "include_paths": list(user.include_paths[1:]),  # after the file's own folder
     }
+    if user.vertex is not None:  # the pair: its vertex shader and the grid it ran on
+        extra["vertex_file"] = str(exp.fit.vertex)
+        extra["vertex_grid"] = list(user.vertex.cells)
     return gl, engine_targets, extra
 
 

@@ -8,7 +8,7 @@ from pathlib import Path
 
 from .._progress import log as _log
 from ..config.experiment import ExperimentError
-from ..export.viewer import calibration_viewer
+from ..export.viewer import ViewerUnsupported, calibration_viewer
 from ..scene.baseline_inputs import inputs_for_shader
 from ..scene.frames import frame_experiment
 from ..scene.reference import reference_key
@@ -22,7 +22,7 @@ def write_viewer(out: Path, exp, inputs) -> Path | None:
     SPIRV-Cross tools missing) gets none, with a note. Returns ``index.html`` or None."""
     try:
         page = calibration_viewer(out, exp, inputs)
-    except FileNotFoundError as exc:
+    except (FileNotFoundError, ViewerUnsupported) as exc:
         _log(f"calibrate: no viewer: {exc}")
         return None
     _log(f"calibrate: wrote the WebGL 2 viewer {page} (open it in a browser)")

@@ -81,10 +81,13 @@ class _OwnBlock:
         return self.r.render(None)
 
 
-GLES_NOTE = (
+GLES_NOT_RUN = (
     "not run on llvmpipe: moderngl's EGL backend (glcontext) binds the desktop OpenGL API only, "
-    "so no GLES 3 context is made here; compiled by glslang's ES profile; the same files run in "
-    "WebGL 2 in viewer/ (matched against the port in headless Chromium by the test suite)"
+    "so no GLES 3 context is made here; compiled by glslang's ES profile"
+)
+GLES_NOTE = (
+    f"{GLES_NOT_RUN}; the same files run in WebGL 2 in viewer/ (matched against the port in "
+    "headless Chromium by the test suite)"
 )
 
 

@@ -30,6 +30,7 @@ from pathlib import Path
 from shaders_port import CONSTANT_SPECS, GLSL_NAMES, Constants
 from shaders_port.glsl_text import compile_check, read_source, write_constants
 from shaders_port.spirv.user_shader import UserShader
+from shaders_port.spirv.user_vertex import DEFAULT_CELLS, UserVertex
 from shaders_port.variants import SHIPPED, VARIANTS, get_variant
 
 from .._io import disk_full
@@ -91,8 +92,21 @@ def user_shader_of(path):
             f"{path}: the calibrated shader {file} is gone; put it back at that path or edit "
             "shader_file"
         )
+    vertex = None
+    if data.get("vertex_file"):  # a pair: the user's own vertex shader
+        vfile = Path(data["vertex_file"])
+        if not vfile.is_file():
+            raise ValueError(
+                f"{path}: the calibrated vertex shader {vfile} is gone; put it back at that "
+                "path or edit vertex_file"
+            )
+        vertex = UserVertex.from_file(vfile, data.get("vertex_grid") or DEFAULT_CELLS)
     shader = UserShader.from_file(
-        file, data.get("declaration"), data.get("defines", ()), data.get("include_paths", ())
+        file,
+        data.get("declaration"),
+        data.get("defines", ()),
+        data.get("include_paths", ()),
+        vertex=vertex,
     )
     sha = hashlib.sha256(shader.source.encode("utf-8")).hexdigest()
     if data.get("shader_sha256") not in (None, sha):
@@ -164,13 +178,18 @@ def export_user_shader(
         ("core", "water.vert"): read_source("water", "vert", "core"),
         ("core", shader.label): shader.written(values),
     }
-    if shader.vertex is not None:  # the user's own vertex shader in place of the study's
-        texts = {("core", shader.vertex.label): shader.vertex.shader.source,
-                 ("core", shader.label): texts[("core", shader.label)]}  # fmt: skip
     fit = {"status": status or {}, "reads": None}
     # the engine targets come from the core GLSL the study compiles (a file in an older dialect,
-    # or with includes and defines, translated), the file itself is written as the user wrote it
-    core = {shader.label: shader.gl_source(values)} if shader.dialect.runs_on_desktop_gl else {}
+    # or with includes and defines, translated; a uniform of a constant without initializer,
+    # which GLSL ES and HLSL do not take), the file itself is written as the user wrote it
+    core = {}
+    if shader.dialect.runs_on_desktop_gl:
+        core[shader.label] = shader.gl_source(values, bare_initializers=False)
+    if shader.vertex is not None:  # the user's own vertex shader in place of the study's
+        v = shader.vertex.shader
+        texts = {("core", v.label): v.original,
+                 ("core", shader.label): texts[("core", shader.label)]}  # fmt: skip
+        core[v.label] = v.source
     return _write_checked(texts, out_dir, targets, values, textures, fit, core)
 
 

@@ -292,7 +292,9 @@ def report_text(summary: dict, figures: dict) -> str:
     t = summary["timings"]
     lines += ["## Timings (seconds)", "", "| stage | s |", "|---|---|"]
     lines += [f"| {k} | {fmt(v, 3)} |" for k, v in t.items()] + [""]
-    lines += _export_lines(summary.get("gl_check"), summary.get("shader_file"))
+    lines += _export_lines(
+        summary.get("gl_check"), summary.get("shader_file"), summary.get("vertex_file")
+    )
     lines += engine_targets_section(
         summary.get("engine_targets") or {}, user=bool(summary.get("shader_file"))
     )
@@ -401,7 +403,7 @@ def _diagnostics_lines(d: dict, figure: str) -> list[str]:
     ]
 
 
-def _export_lines(gl: dict | None, user_file: str | None = None) -> list[str]:
+def _export_lines(gl: dict | None, user_file: str | None = None, vertex_file=None) -> list[str]:
     """What was exported and how the GL check of the exported core shader went; ``user_file``:
     the path of a user's shader (its copy with the fitted constants was exported)."""
     check = "."
@@ -423,8 +425,13 @@ def _export_lines(gl: dict | None, user_file: str | None = None) -> list[str]:
         name = Path(user_file).name
         what = (
             f"`shaders/core/{name}` (your `{user_file}` with the fitted constants in place of "
-            "their initializers, every other byte as in your file) and `shaders/core/water.vert` "
-            "(the study's vertex shader it runs after); compiled with glslangValidator"
+            "their initializers, every other byte as in your file) and "
+            + (
+                f"`shaders/core/{Path(vertex_file).name}` (your vertex shader, as you wrote it)"
+                if vertex_file
+                else "`shaders/core/water.vert` (the study's vertex shader it runs after)"
+            )
+            + "; compiled with glslangValidator"
         )
     else:
         what = (

@@ -29,6 +29,7 @@ import numpy as np
 
 from shaders_port import ShaderInputs
 from shaders_port.inputs import normal_matrix, perspective_view_proj
+from shaders_port.spirv.engine_inputs import ENGINE_INPUTS, SAME_AS
 from shaders_port.variants import get_variant
 
 from ..._io import read_exr
@@ -38,6 +39,7 @@ from ..textures import with_exported_textures
 from ...scene.reference import water_mask
 
 TEMPLATES = Path(__file__).parent
+ENGINE_ONLY = set(ENGINE_INPUTS) - set(SAME_AS)  # the engine inputs that are no study input
 # uniforms and samplers rendered for the study's camera: a shader that reads one is tied to it
 SCREEN_SPACE = ("sceneColor", "sceneDepth", "reflection_sampler", "o2v_projection_reflection",
                 "screenSize", "gl_FragCoord")  # fmt: skip
@@ -278,6 +280,25 @@ def _scene_error(summary: dict) -> tuple[str, dict]:
     return name, {m: {k: e[k][m] for k in ("default", "fitted")} for m in ("rmse", "flip")}
 
 
+class ViewerUnsupported(ValueError):
+    """A calibration the viewer does not draw (its message says why and what to use)."""
+
+
+def not_drawn(shader) -> str | None:
+    """Why the viewer cannot draw a user's shader (``UserShader``; None when it can): it draws
+    the study's water quad with ``water.vert`` and binds the study's inputs of
+    :data:`_TEXTURES`."""
+    if shader.vertex is not None:
+        return (
+            f"{shader.label} runs after its own vertex shader {shader.vertex.label}, which the "
+            "viewer does not draw (it draws the study's water.vert)"
+        )
+    engine = sorted(set(shader.run_bindings().values()) & ENGINE_ONLY)
+    if engine:
+        return f"{shader.label} reads the engine inputs {', '.join(engine)}, which it does not bind"
+    return None
+
+
 def calibration_viewer(out: Path, exp, inputs: ShaderInputs) -> Path:
     """``out/viewer/`` of the calibration in ``out`` (its ``constants.json``, ``shaders/``
     export and ``reference.exr`` / ``default.exr`` / ``fitted.exr``) of experiment ``exp``
@@ -287,6 +308,11 @@ def calibration_viewer(out: Path, exp, inputs: ShaderInputs) -> Path:
     summary = json.loads((out / "constants.json").read_text("utf-8"))
     shaders = out / "shaders"
     user = "shader_file" in summary
+    why = not_drawn(user_shader_of(out / "constants.json")) if user else None
+    if why is not None:
+        raise ViewerUnsupported(
+            f"{why}; the GL check and the engine targets in {out / 'shaders'} are written"
+        )
     stem = summary["shader"].rsplit(".", 1)[0] if user else summary["shader"]
     frag_path = shaders / target_file("gles300", stem, "frag")
     if not frag_path.is_file():
