@@ -7,6 +7,7 @@ shader's uniforms that are study or engine inputs bound by name or by a pragma."
 
 from __future__ import annotations
 
+import json
 import re
 
 import drjit as dr
@@ -126,3 +127,23 @@ def test_a_vertex_binding_to_nothing_known_is_named(tmp_path):
     )
     with pytest.raises(ValueError, match=re.escape("clock -> nowhere names no meaning, engine")):
         VertexShader(src, "v.vert")
+
+
+def test_export_of_a_pair_reads_its_vertex_shader_back(tmp_path):
+    """A pair's ``constants.json`` names its vertex shader (``vertex_file``, ``vertex_grid``):
+    ``study export`` takes the pair back, and says so when the file is gone."""
+    from study.export.shaders import user_shader_of
+
+    shaders = EXPERIMENTS / "shaders"
+    data = {
+        "shader": "zup_water.frag", "shader_file": str(shaders / "zup_water.frag"),
+        "vertex_file": str(shaders / "zup_water.vert"), "vertex_grid": [8, 6],
+        "declaration": {"constants": {}, "bindings": {}}, "constants": {},
+    }  # fmt: skip
+    (tmp_path / "constants.json").write_text(json.dumps(data))
+    shader = user_shader_of(tmp_path / "constants.json")
+    assert shader.vertex.label == "zup_water.vert" and shader.vertex.cells == (8, 6)
+    data["vertex_file"] = str(tmp_path / "gone.vert")
+    (tmp_path / "constants.json").write_text(json.dumps(data))
+    with pytest.raises(ValueError, match="the calibrated vertex shader .*gone.vert is gone"):
+        user_shader_of(tmp_path / "constants.json")
