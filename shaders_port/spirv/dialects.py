@@ -333,6 +333,10 @@ def _translate_tokens(pre: str, label: str, n_head: int, legacy: bool, stage: st
             continue
         rewrite = _rewrite_line if stage == "frag" else _rewrite_vertex_line
         out.append(rewrite(ln, where[k], legacy))
+    if not re.search(rf"\b{OUT}\b", "\n".join(out[1 + n_head :])):
+        # gl_FragColor a macro of the file's own output (Urho3D's `fragData[0]`): the colour
+        # output declared for it is never written, and is left out (its line kept, blank)
+        out[: 1 + n_head] = ["" if h == f"out vec4 {OUT};" else h for h in out[: 1 + n_head]]
     return "\n".join(out)
 
 

@@ -135,6 +135,31 @@ def _literal(x: float) -> str:
     return r if ("e" in r or "." in r or "n" in r) else r + ".0"
 
 
+def _same(a, b) -> bool:
+    """Whether the paths ``a`` and ``b`` (or None) are the same file."""
+    return a is not None and b is not None and Path(a).resolve() == Path(b).resolve()
+
+
+def _referenced(mod) -> set:
+    """The ids the code of ``mod``'s functions names (every integer operand: an id, or a
+    literal that happens to equal one)."""
+    out: set = set()
+
+    def walk(x):
+        if isinstance(x, int):
+            out.add(x)
+        elif isinstance(x, (tuple, list)):
+            for y in x:
+                walk(y)
+
+    for fn in mod.functions.values():
+        for b in fn.blocks.values():
+            for ins in [*b.body, b.merge, b.terminator]:
+                if ins is not None:
+                    walk(ins.operands)
+    return out
+
+
 class UserShader:
     """A user's fragment shader file with its declaration (see the module doc)."""
 
@@ -160,6 +185,8 @@ class UserShader:
                 bindings[args[0]] = args[1]
             elif m["verb"] in ("up", "normal_map") and len(args) == 1:
                 self.engine[m["verb"]] = args[0]
+            elif m["verb"] == "value" and vertex is not None and _same(vertex.shader.path, path):
+                pass  # the vertex shader's (one file for both stages)
             else:
                 raise ValueError(
                     f"{where}: unknown pragma `// @study {m['verb']} {m['args']}`; write "
@@ -201,9 +228,13 @@ class UserShader:
     def _constants(self, ranges: dict) -> dict:
         decls = {m["name"]: m for m in _DECL.finditer(self.source)}
         bare = {m["name"]: m for m in _BARE.finditer(self.source)}
+        included = self._included_uniforms(set(ranges) - set(decls) - set(bare))
         out = {}
         for name, (lo, hi, *start) in ranges.items():
             m = decls.get(name) or bare.get(name)
+            if m is None and name in included:
+                out[name] = self._included_constant(name, included[name], lo, hi, start)
+                continue
             if m is None:
                 raise ValueError(
                     f"{self.label}: the constant {name} to fit has no one-line declaration: "
@@ -244,6 +275,33 @@ class UserShader:
                 "`// @study constant NAME LOW HIGH` lines or a constants table"
             )
         return out
+
+    def _included_uniforms(self, names: set) -> dict:
+        """name -> ``_BARE`` match in the preprocessed text, for the ``names`` declared as a
+        uniform without initializer in an ``#include`` d file only (an engine's common
+        uniforms, e.g. Urho3D's ``cFogColor`` in ``Uniforms.glsl``)."""
+        if not names or not re.search(r"^[ \t]*#[ \t]*include\b", self.source, re.M):
+            return {}
+        text = dialects.front_end(self.source, self.label, self.defines, self.include_paths, True)
+        return {m["name"]: m for m in _BARE.finditer(text) if m["name"] in names}
+
+    def _included_constant(self, name, m, lo, hi, start) -> UserConstant:
+        """The constant of a uniform an ``#include`` d file declares: never written back (the
+        file is the engine's), its start value from the declaration; span ``(-1, -1)``."""
+        where = f"{self.label} (an #include)"
+        if not start:
+            raise ValueError(
+                f"{where}: the uniform {name} has no initializer (the engine sets it); "
+                f"give its start value: `// @study constant {name} {lo:g} {hi:g} START`"
+            )
+        default = _start_value(start[0], m["type"], where)
+        if not (np.isfinite(lo) and np.isfinite(hi) and lo < hi):
+            raise ValueError(f"{where}: the range [{lo}, {hi}] of {name} is empty")
+        if not all(lo <= v <= hi for v in default):
+            raise ValueError(
+                f"{where}: the start value of {name} lies outside its range [{lo}, {hi}]"
+            )
+        return UserConstant(name, m["type"], default, lo, hi, (-1, -1), True)
 
     def validate(self) -> "UserShader":
         for name, study in self.bindings.items():
@@ -353,8 +411,15 @@ class UserShader:
         if self.vertex is not None:
             check_supported(self.vertex.shader.module)
         known = set(spirv_port.STUDY_INPUTS) | set(self.run_bindings()) | set(self.constants)
+        used = _referenced(mod)
         for vid, ins in mod.defs.items():
             name = mod.binding_name(vid)
+            if vid not in used:
+                continue  # declared, never read (an engine's common uniforms and samplers)
+            if self.vertex is not None and ins.opname == "OpVariable" and (
+                ins.operands[0] == "Input"
+            ):
+                continue  # fed by the vertex shader: linked by user_vertex (by name or location)
             if (ins.opname == "OpVariable" and ins.operands[0] in ("Input", "UniformConstant")
                     and len(ins.operands) == 1 and name not in known):  # fmt: skip
                 raise dialects.ShaderError(
@@ -426,7 +491,7 @@ class UserShader:
         d = self.dialect
         initializers = not d.es and d.version >= 120  # a bare uniform may get one
         for c in sorted(self.constants.values(), key=lambda c: c.span[0]):
-            if c.bare and not initializers:
+            if c.bare and (not initializers or c.span[0] < 0):  # < 0: an #include's
                 continue
             v = vals[c.name]
             comps = v if isinstance(v, (tuple, list)) else (v,)

@@ -92,8 +92,9 @@ class UserVertex:
         return self.shader.label
 
     @classmethod
-    def from_file(cls, path, cells=DEFAULT_CELLS) -> "UserVertex":
-        return cls(VertexShader.from_file(path), cells)
+    def from_file(cls, path, cells=DEFAULT_CELLS, defines=(), include_paths=(),
+                  shared=False) -> "UserVertex":  # fmt: skip
+        return cls(VertexShader.from_file(path, defines, include_paths, shared), cells)
 
     def grid(self, inputs):
         return water_grid(inputs.water_rect, inputs.normal_tile, self.cells)
@@ -104,12 +105,12 @@ class UserVertex:
         shader's bindings (see the module doc); remembered for the last eight frames."""
         P0 = prepare(inputs, m)
         key = (P0.upload, m.__name__, self.shader.source, self.cells, spec.prepared_source(),
-               spec.bindings)  # fmt: skip
+               spec.bindings, spec.engine)  # fmt: skip
         hit = _FRAMES.get(key)
         if hit is not None:
             _FRAMES.move_to_end(key)
             return hit
-        study = spirv_port.study_bindings(m, P0, inputs)
+        study = spirv_port.study_bindings(m, P0, inputs, spec.engine)
         for k in range(4):
             study[f"wave{k + 1}"] = [float(v) for v in np.asarray(inputs.waves[k], np.float32)]
         grid = self.grid(inputs)
@@ -123,7 +124,8 @@ class UserVertex:
         mod = spirv_port.module_of(spec)
         b = {k: v for k, v in study.items() if k not in _PER_PIXEL}
         lanes, x, y, group = cov, None, None, None
-        if _quads.uses_quads(mod, {k: v for k, v in b.items() if k in mod.bound_names}):
+        named = {**b, **{n: b[t] for n, t in spec.bindings if t in b}}  # and by the bindings
+        if _quads.uses_quads(mod, {k: v for k, v in named.items() if k in mod.bound_names}):
             x, y, group, helpers = quad_helpers(cov, inputs.width, inputs.height)
             lanes = _joined(cov, helpers)
         b.update(self._varyings(m, spec, lanes, grid, outs))
@@ -252,4 +254,6 @@ class UserVertex:
                 v = np.asarray(names_.meaning_values(inputs, meaning), np.float32)
                 v = v.T if v.ndim == 2 else v[: t[1]]  # GL's column-major order
                 uniforms[name] = np.ascontiguousarray(v).tobytes()
+            elif name in self.shader.values:  # a `// @study value` pragma's
+                uniforms[name] = np.float32(self.shader.values[name]).tobytes()
         return grid_renderer_class(base, self.shader.source, attributes, grid.triangles, uniforms)
