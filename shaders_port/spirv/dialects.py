@@ -276,6 +276,8 @@ def front_end(
     removed) with ``#line`` directives keeping the file's line numbers, and translated to GLSL
     330 core if its dialect needs it. ShaderError for a file that does not compile in its own
     dialect or uses what the translation refuses, naming the file and line."""
+    # jMonkeyEngine's `#import "Common/ShaderLib/X.glsllib"` is its loader's #include
+    source = re.sub(r'^([ \t]*#[ \t]*)import([ \t]+")', r"\1include\2", source, flags=re.M)
     d = detect(source, label)
     includes = bool(re.search(r"^[ \t]*#[ \t]*include\b", source, re.M))
     dargs = [f"-D{x}" for x in defines]

@@ -27,7 +27,14 @@ import numpy as np
 
 from ..inputs import ShaderInputs, normal_matrix
 
-__all__ = ["MEANINGS", "ENGINE_NAMES", "STUDY_VERTEX_NAMES", "meaning_of", "meaning_values"]
+__all__ = [
+    "MEANINGS",
+    "ENGINE_NAMES",
+    "STUDY_VERTEX_NAMES",
+    "TRANSPOSED",
+    "meaning_of",
+    "meaning_values",
+]
 
 # meaning -> (GLSL types it can be read as, what it is)
 MEANINGS = {
@@ -116,6 +123,10 @@ ENGINE_NAMES = {
     "cCameraPos": ("cameraPosition", "Urho3D"),
     "eyePosition": ("cameraPosition", "OGRE"),
 }
+
+# names of matrices their engine uploads row-major as GL's column-major (glUniformMatrix4fv
+# without transpose) and its shaders multiply `vec4(p, 1.0) * cViewProj`: given transposed
+TRANSPOSED = frozenset({"cModel", "cView", "cViewInv", "cViewProj"})  # Urho3D
 
 # the study's uniforms a vertex shader may read besides (values from ``translated``)
 STUDY_VERTEX_NAMES = ("wave1", "wave2", "wave3", "wave4")

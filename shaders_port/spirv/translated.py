@@ -141,7 +141,7 @@ def _prepared(source: str, label: str, constants: tuple) -> str:
         found = pat.search(src)
         if found is None and re.search(rf"^\s*uniform\s+\w+\s+{re.escape(glsl)}\s*;", src, re.M):
             continue  # a uniform without initializer (the engine sets it): bound as it is
-        if found is None and re.search(r"^[ \t]*#[ \t]*include\b", src, re.M):
+        if found is None and re.search(r"^[ \t]*#[ \t]*(?:include|import)\b", src, re.M):
             continue  # declared in an #include (a uniform without initializer, checked there)
         if found is None:
             raise ValueError(

@@ -135,9 +135,15 @@ def _literal(x: float) -> str:
     return r if ("e" in r or "." in r or "n" in r) else r + ".0"
 
 
-def _same(a, b) -> bool:
-    """Whether the paths ``a`` and ``b`` (or None) are the same file."""
-    return a is not None and b is not None and Path(a).resolve() == Path(b).resolve()
+def _fixed(text: str, where: str) -> tuple:
+    """The components of a ``// @study value NAME V[,V...]`` pragma's value."""
+    try:
+        return tuple(float(x) for x in text.split(","))
+    except ValueError:
+        raise ValueError(
+            f"{where}: write `// @study value NAME V` or `// @study value NAME V1,V2,...` (the "
+            "uniform's value as the engine sets it, one number per component)"
+        ) from None
 
 
 def _referenced(mod) -> set:
@@ -171,6 +177,7 @@ class UserShader:
         self.defines, self.include_paths = tuple(defines), tuple(str(p) for p in include_paths)
         self.dialect = dialects.detect(source, label)
         ranges, bindings, self.engine = {}, {}, {"up": "y", "normal_map": None}
+        self.values = values = {}  # `value` pragmas: uniforms the engine sets, not fitted
         for m in _PRAGMA.finditer(source):
             args = m["args"].split()
             line = source.count("\n", 0, m.start()) + 1
@@ -185,13 +192,14 @@ class UserShader:
                 bindings[args[0]] = args[1]
             elif m["verb"] in ("up", "normal_map") and len(args) == 1:
                 self.engine[m["verb"]] = args[0]
-            elif m["verb"] == "value" and vertex is not None and _same(vertex.shader.path, path):
-                pass  # the vertex shader's (one file for both stages)
+            elif m["verb"] == "value" and len(args) == 2:
+                values[args[0]] = _fixed(args[1], where)
             else:
                 raise ValueError(
                     f"{where}: unknown pragma `// @study {m['verb']} {m['args']}`; write "
                     "`// @study constant NAME LOW HIGH [START]`, `// @study bind NAME "
-                    "STUDY_INPUT`, `// @study up z` or `// @study normal_map FILE`"
+                    "STUDY_INPUT`, `// @study value NAME V[,V...]`, `// @study up z` or "
+                    "`// @study normal_map FILE`"
                 )
         decl = dict(declaration or {})
         self.engine.update({k: decl.pop(k) for k in ("up", "normal_map") if k in decl})
@@ -280,7 +288,7 @@ class UserShader:
         """name -> ``_BARE`` match in the preprocessed text, for the ``names`` declared as a
         uniform without initializer in an ``#include`` d file only (an engine's common
         uniforms, e.g. Urho3D's ``cFogColor`` in ``Uniforms.glsl``)."""
-        if not names or not re.search(r"^[ \t]*#[ \t]*include\b", self.source, re.M):
+        if not names or not re.search(r"^[ \t]*#[ \t]*(?:include|import)\b", self.source, re.M):
             return {}
         text = dialects.front_end(self.source, self.label, self.defines, self.include_paths, True)
         return {m["name"]: m for m in _BARE.finditer(text) if m["name"] in names}
@@ -395,7 +403,7 @@ class UserShader:
             self.source,
             self.label,
             defines=self.defines,
-            constants=tuple((n, n) for n in self.constants),
+            constants=tuple((n, n) for n in [*self.constants, *self.values]),
             bindings=tuple(self.run_bindings().items()),
             include_paths=self.include_paths,
             engine=tuple(sorted(self.engine.items())),
@@ -411,6 +419,7 @@ class UserShader:
         if self.vertex is not None:
             check_supported(self.vertex.shader.module)
         known = set(spirv_port.STUDY_INPUTS) | set(self.run_bindings()) | set(self.constants)
+        known |= set(self.values)
         used = _referenced(mod)
         for vid, ins in mod.defs.items():
             name = mod.binding_name(vid)
@@ -436,6 +445,8 @@ class UserShader:
         vals = {}
         for n, v in values.items():
             vals[n] = tuple(conv(x) for x in v) if isinstance(v, (tuple, list)) else conv(v)
+        for n, v in self.values.items():  # `value` pragmas' (one float, or a vector)
+            vals[n] = conv(v[0]) if len(v) == 1 else tuple(conv(x) for x in v)
         return types.SimpleNamespace(values=vals)
 
     # ---- renders ---------------------------------------------------------------------------
@@ -533,6 +544,7 @@ class UserShader:
         vals = self._checked(values)
         bare = {c.name: np.asarray(vals[c.name], np.float32).tobytes()
                 for c in self.constants.values() if c.bare}  # fmt: skip
+        bare.update({n: np.float32(v).tobytes() for n, v in self.values.items()})
         if self.vertex is not None:  # the grid drawn with the user's GLSL vertex shader
             base = self.vertex.gl_class(base, inputs)
         base = _engine.gl_class(base, self.engine)

@@ -252,6 +252,8 @@ class UserVertex:
             elif meaning is not None:
                 t = glsl_type(mod, mod.defs[ins.type_id].operands[1])
                 v = np.asarray(names_.meaning_values(inputs, meaning), np.float32)
+                if v.ndim == 2 and name in names_.TRANSPOSED and name not in self.shader.bindings:
+                    v = v.T  # the engine's row-major upload (Urho3D's `p * cViewProj`)
                 v = v.T if v.ndim == 2 else v[: t[1]]  # GL's column-major order
                 uniforms[name] = np.ascontiguousarray(v).tobytes()
             elif name in self.shader.values:  # a `// @study value` pragma's

@@ -161,7 +161,7 @@ class VertexShader:
         # a binding to a vertex meaning or engine name are the fragment shader's
         self.original, self.label, self.path = source, label, path
         self.source = source
-        pre = bool(defines) or bool(re.search(r"^[ \t]*#[ \t]*include\b", source, re.M))
+        pre = bool(defines) or bool(re.search(r"^[ \t]*#[ \t]*(?:include|import)\b", source, re.M))
         if pre or dialects.detect(source, label).translated:
             text = dialects.front_end(source, label, tuple(defines), tuple(include_paths),
                                       preprocess=True, stage="vert")  # fmt: skip
@@ -247,6 +247,8 @@ class VertexShader:
             v = np.asarray(names_.meaning_values(inputs, meaning), np.float32)
         except ValueError as exc:
             raise ValueError(f"{self.label}: {name}: {exc}") from None
+        if v.ndim == 2 and name in names_.TRANSPOSED and name not in self.bindings:
+            v = v.T  # the engine's row-major upload read as GL's columns
         if v.ndim == 2:
             return [[float(v[i, j]) for i in range(v.shape[0])] for j in range(v.shape[1])]
         return [float(x) for x in v[: t[1]]]
