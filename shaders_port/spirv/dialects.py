@@ -278,6 +278,8 @@ def front_end(
     dialect or uses what the translation refuses, naming the file and line."""
     # jMonkeyEngine's `#import "Common/ShaderLib/X.glsllib"` is its loader's #include
     source = re.sub(r'^([ \t]*#[ \t]*)import([ \t]+")', r"\1include\2", source, flags=re.M)
+    # `#include <name>` (three.js's chunks): glslang's includer searches only quoted names
+    source = re.sub(r"^([ \t]*#[ \t]*include[ \t]*)<([^>\n]+)>", r'\1"\2"', source, flags=re.M)
     d = detect(source, label)
     includes = bool(re.search(r"^[ \t]*#[ \t]*include\b", source, re.M))
     dargs = [f"-D{x}" for x in defines]

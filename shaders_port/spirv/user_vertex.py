@@ -44,6 +44,7 @@ from ..pipeline.interpolate import (
 )
 from ..pipeline.raster import Raster, prepare
 from ..pipeline.texture import backend_types
+from . import engine_inputs as _engine
 from . import engine_names as names_
 from . import quads as _quads
 from . import translated as spirv_port
@@ -242,6 +243,7 @@ class UserVertex:
                 "normal": np.tile(np.float32([0, 1, 0]), (len(grid.position), 1)),
                 "tangent": np.tile(np.float32([1, 0, 0, -1]), (len(grid.position), 1))}  # fmt: skip
         attributes, uniforms = {}, {}
+        engine = _engine.uniform_values(inputs)  # fragment inputs a vertex shader may read
         for vid, ins in mod.defs.items():
             if ins.opname != "OpVariable" or ins.operands[0] not in ("Input", "UniformConstant"):
                 continue
@@ -258,4 +260,7 @@ class UserVertex:
                 uniforms[name] = np.ascontiguousarray(v).tobytes()
             elif name in self.shader.values:  # a `// @study value` pragma's
                 uniforms[name] = np.float32(self.shader.values[name]).tobytes()
+            elif _engine.ENGINE_ALIASES.get(name, ("",))[0] in engine:  # three.js's textureMatrix
+                v = np.asarray(engine[_engine.ENGINE_ALIASES[name][0]], np.float32)
+                uniforms[name] = np.ascontiguousarray(v.T if v.ndim == 2 else v).tobytes()
         return grid_renderer_class(base, self.shader.source, attributes, grid.triangles, uniforms)

@@ -39,6 +39,7 @@ import drjit as dr
 import numpy as np
 
 from . import dialects
+from . import engine_inputs as _engine
 from . import engine_names as names_
 from .execute import Executor, UnboundVariable
 from .loops import UnsupportedInstruction
@@ -272,6 +273,9 @@ class VertexShader:
                 out[name] = self._value(name, t)
             elif name in study:
                 out[name] = study[name]
+            elif _engine.canonical(_engine.ENGINE_ALIASES.get(name, ("",))[0]) in study:
+                # a fragment input's engine name (three.js's textureMatrix in Water's vertex)
+                out[name] = study[_engine.canonical(_engine.ENGINE_ALIASES[name][0])]
         return out
 
     def _value(self, name: str, t: tuple):
