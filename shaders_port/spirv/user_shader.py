@@ -425,8 +425,10 @@ class UserShader:
             name = mod.binding_name(vid)
             if vid not in used:
                 continue  # declared, never read (an engine's common uniforms and samplers)
-            if self.vertex is not None and ins.opname == "OpVariable" and (
-                ins.operands[0] == "Input"
+            if (
+                self.vertex is not None
+                and ins.opname == "OpVariable"
+                and (ins.operands[0] == "Input")
             ):
                 continue  # fed by the vertex shader: linked by user_vertex (by name or location)
             if (ins.opname == "OpVariable" and ins.operands[0] in ("Input", "UniformConstant")
