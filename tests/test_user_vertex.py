@@ -19,7 +19,7 @@ from helpers import REPO
 from helpers.experiments import TINY, sets
 from helpers.gl import user_gl_render_or_skip
 from helpers.port_checks import FD_NOISE, FD_RTOL
-from helpers.synthetic import synthetic_inputs
+from helpers.synthetic import synthetic_baseline_inputs, synthetic_inputs
 from shaders_port.pipeline.interpolate import interpolate, rasterize_triangles, water_grid
 from shaders_port.pipeline.raster import rasterize_water
 from shaders_port.spirv import translated as spirv_port
@@ -332,3 +332,65 @@ def test_explicit_locations_after_a_line_comment():
     src += "layout(location = 5) flat out vec2 vB;\nlayout(location = 1) in vec4 aPos;\n"
     assert explicit_locations(src, "out") == {"vA": 3, "vB": 5}
     assert explicit_locations(src, "in") == {"aPos": 1}
+
+
+def _one_file(cells=(24, 24)) -> UserShader:
+    path = SHADERS / "one_file_water.glsl"
+    vertex = UserVertex.from_file(path, cells, ("COMPILEVS", "VS=main"), (), shared=True)
+    return UserShader.from_file(path, None, ("COMPILEPS", "PS=main"), (), vertex=vertex)
+
+
+def test_one_file_for_both_stages_as_urho3d_compiles_it(inputs, tmp_path):
+    # one file, a define per stage, uniforms (and two constants to fit) in an #include, the
+    # engine's row-major matrices (`p * cViewProj`), `value` pragmas, an output array
+    shader = _one_file()
+    assert set(shader.constants) == {"cTint", "cShine"}
+    assert shader.values == shader.vertex.shader.values == {"cTiling": (0.5,), "cBias": (0.25, 0.5)}
+    ours, mask, mean, p999, differ = _gl_compare(shader, inputs)
+    assert mask.sum() > 800 and differ <= 0.001 * mask.sum(), (int(mask.sum()), differ)
+    assert mean <= 1e-5 and p999 <= GL_P999, (mean, p999)
+    # the transposed matrices project the grid onto the study's water quad
+    assert (rasterize_water(inputs).mask ^ mask).sum() <= 0.002 * mask.sum()
+    # an included uniform is not written back (the engine's file); the export names the stages
+    values = shader.defaults()
+    assert shader.written(values) == shader.source
+    export_user_shader(shader, values, tmp_path / "shaders", targets=None)
+    assert (tmp_path / "shaders" / "core" / "one_file_water.frag").is_file()
+    assert (tmp_path / "shaders" / "core" / "one_file_water.vert").is_file()
+    check = hlsl_check_user(shader, inputs, values, ours, tmp_path / "shaders")
+    if not check["ran"]:
+        pytest.skip(check["why"])
+    assert check["passed"] and check["mean_abs"] <= 1e-5, check
+
+
+def test_chunks_imports_and_engine_inputs_in_a_vertex_shader():
+    # `#include <chunk>`, jMonkeyEngine's `#import "..."`, and three.js's textureMatrix read
+    # by the vertex shader, in the executor and on llvmpipe alike (a frame with the mirrored
+    # camera's image)
+    inputs = synthetic_baseline_inputs(64, 48)
+    vertex = UserVertex.from_file(SHADERS / "chunked_water.vert", (24, 24))
+    shader = UserShader.from_file(SHADERS / "chunked_water.frag", vertex=vertex)
+    ours, mask, mean, p999, differ = _gl_compare(shader, inputs)
+    assert mask.sum() > 800 and differ <= 0.001 * mask.sum(), (int(mask.sum()), differ)
+    assert mean <= 1e-5 and p999 <= GL_P999, (mean, p999)
+    assert np.std(ours["color"][mask], 0).max() > 0.01  # the mirrored image varies
+
+
+def test_one_file_experiment_keys(tmp_path):
+    from study import load_experiment
+    from study.config.errors import ExperimentError
+    from study.config.experiment import load_user_shader
+
+    path = SHADERS / "one_file_water.glsl"
+    keys = [f'fit.shader="{path}"', f'fit.vertex="{path}"', 'fit.defines=["COMPILEPS", "PS=main"]',
+            'fit.vertex_defines=["COMPILEVS", "VS=main"]', "fit.vertex_grid=[8, 6]",
+            "fit.declare=[]"]  # fmt: skip
+    exp = load_experiment(MY_WATER, keys)
+    shader = load_user_shader(exp.values)
+    assert shader.label == "one_file_water.glsl" and shader.vertex.shader.values["cTiling"] == (
+        0.5,
+    )
+    with pytest.raises(ExperimentError, match="fit.vertex_defines is for your own fit.vertex"):
+        load_experiment(MY_WATER, keys[:1] + keys[2:4] + keys[5:])
+    with pytest.raises(ExperimentError, match="fit.vertex_defines: '1X' is not \"NAME\""):
+        load_experiment(MY_WATER, keys[:3] + ['fit.vertex_defines=["1X"]'] + keys[5:])

@@ -1,7 +1,8 @@
 #version 300 es
 // A water vertex shader in the style of Urho3D's water (GLSL ES 3.00 for WebGL 2, Urho3D's
 // i/c names), written for the study: the clip position for screen-space lookups, two
-// scrolled noise coordinates, the vector to the eye.
+// scrolled noise coordinates, the vector to the eye. Urho3D uploads its matrices row-major and
+// multiplies a row vector on the left, as here.
 precision highp float;
 
 // @study bind cElapsedTime time
@@ -22,10 +23,10 @@ out vec3 vEyeVec;
 
 void main()
 {
-    vec4 worldPos = cModel * iPos;
+    vec4 worldPos = iPos * cModel;
     vec2 speed = vec2(0.05, 0.03) * cElapsedTime;
     vWaterUV = vec4(iTexCoord + cNoiseOffset0 + speed, iTexCoord + cNoiseOffset1 - speed.yx);
     vEyeVec = cCameraPos - worldPos.xyz;
-    gl_Position = cViewProj * worldPos;
+    gl_Position = worldPos * cViewProj;
     vScreenPos = gl_Position;
 }

@@ -276,6 +276,10 @@ def front_end(
     removed) with ``#line`` directives keeping the file's line numbers, and translated to GLSL
     330 core if its dialect needs it. ShaderError for a file that does not compile in its own
     dialect or uses what the translation refuses, naming the file and line."""
+    # jMonkeyEngine's `#import "Common/ShaderLib/X.glsllib"` is its loader's #include
+    source = re.sub(r'^([ \t]*#[ \t]*)import([ \t]+")', r"\1include\2", source, flags=re.M)
+    # `#include <name>` (three.js's chunks): glslang's includer searches only quoted names
+    source = re.sub(r"^([ \t]*#[ \t]*include[ \t]*)<([^>\n]+)>", r'\1"\2"', source, flags=re.M)
     d = detect(source, label)
     includes = bool(re.search(r"^[ \t]*#[ \t]*include\b", source, re.M))
     dargs = [f"-D{x}" for x in defines]
@@ -333,6 +337,10 @@ def _translate_tokens(pre: str, label: str, n_head: int, legacy: bool, stage: st
             continue
         rewrite = _rewrite_line if stage == "frag" else _rewrite_vertex_line
         out.append(rewrite(ln, where[k], legacy))
+    if not re.search(rf"\b{OUT}\b", "\n".join(out[1 + n_head :])):
+        # gl_FragColor a macro of the file's own output (Urho3D's `fragData[0]`): the colour
+        # output declared for it is never written, and is left out (its line kept, blank)
+        out[: 1 + n_head] = ["" if h == f"out vec4 {OUT};" else h for h in out[: 1 + n_head]]
     return "\n".join(out)
 
 

@@ -40,6 +40,7 @@ __all__ = [
     "ENGINE_NAMES",
     "STUDY_VERTEX_NAMES",
     "attribute_values",
+    "TRANSPOSED",
     "meaning_of",
     "meaning_values",
 ]
@@ -131,6 +132,10 @@ ENGINE_NAMES = {
     "cCameraPos": ("cameraPosition", "Urho3D"),
     "eyePosition": ("cameraPosition", "OGRE"),
 }
+
+# names of matrices their engine uploads row-major as GL's column-major (glUniformMatrix4fv
+# without transpose) and its shaders multiply `vec4(p, 1.0) * cViewProj`: given transposed
+TRANSPOSED = frozenset({"cModel", "cView", "cViewInv", "cViewProj"})  # Urho3D
 
 # the study's uniforms a vertex shader may read besides (values from ``translated``)
 STUDY_VERTEX_NAMES = ("wave1", "wave2", "wave3", "wave4")

@@ -230,6 +230,8 @@ def hlsl_round_trip(hlsl: str, stage: str = "frag", label: str = "<hlsl>") -> tu
     for io, key in (("in", "inputs"), ("out", "outputs")):
         for var in refl.get(key, []):
             plain = var["name"].rsplit(".", 1)[-1]
+            # an element of an output array (Urho3D's `out vec4 fragData[1]`): `fragData_0`
+            plain = re.sub(r"\[(\d+)\]$", r"_\1", plain) if io == "out" else plain
             # a GLSL identifier (a leading _ too: the dialect translation's colour output),
             # not one GLSL reserves (gl_ prefix, a double underscore)
             if not re.fullmatch(r"(?!gl_)[A-Za-z_]\w*", plain) or "__" in plain:

@@ -141,6 +141,8 @@ def _prepared(source: str, label: str, constants: tuple) -> str:
         found = pat.search(src)
         if found is None and re.search(rf"^\s*uniform\s+\w+\s+{re.escape(glsl)}\s*;", src, re.M):
             continue  # a uniform without initializer (the engine sets it): bound as it is
+        if found is None and re.search(r"^[ \t]*#[ \t]*(?:include|import)\b", src, re.M):
+            continue  # declared in an #include (a uniform without initializer, checked there)
         if found is None:
             raise ValueError(
                 f"{label}: no declaration `const|uniform <float|int|vec3|vec4> {glsl} "
@@ -328,7 +330,10 @@ def shade_lanes(m, P, b: dict, spec: ShaderSpec, C, differentiate=False, trips=N
     color = [v for v in outs.values() if v is not None]
     if len(color) != 1:
         raise ValueError(f"{spec.label}: the shader must write exactly one vec4 output")
-    color = m.Array3f(*(lift(m, c, "float") for c in color[0][:3]))
+    color = color[0]
+    if isinstance(color[0], (list, tuple)):  # an output array (`out vec4 fragData[1]`):
+        color = color[0]  # its element 0, at location 0 (the one colour the study compares)
+    color = m.Array3f(*(lift(m, c, "float") for c in color[:3]))
     diag = {
         "iterations": lift(m, counts["iterations"], "float"),
         "fetches": lift(m, counts["fetches"], "float"),

@@ -135,6 +135,37 @@ def _literal(x: float) -> str:
     return r if ("e" in r or "." in r or "n" in r) else r + ".0"
 
 
+def _fixed(text: str, where: str) -> tuple:
+    """The components of a ``// @study value NAME V[,V...]`` pragma's value."""
+    try:
+        return tuple(float(x) for x in text.split(","))
+    except ValueError:
+        raise ValueError(
+            f"{where}: write `// @study value NAME V` or `// @study value NAME V1,V2,...` (the "
+            "uniform's value as the engine sets it, one number per component)"
+        ) from None
+
+
+def _referenced(mod) -> set:
+    """The ids the code of ``mod``'s functions names (every integer operand: an id, or a
+    literal that happens to equal one)."""
+    out: set = set()
+
+    def walk(x):
+        if isinstance(x, int):
+            out.add(x)
+        elif isinstance(x, (tuple, list)):
+            for y in x:
+                walk(y)
+
+    for fn in mod.functions.values():
+        for b in fn.blocks.values():
+            for ins in [*b.body, b.merge, b.terminator]:
+                if ins is not None:
+                    walk(ins.operands)
+    return out
+
+
 class UserShader:
     """A user's fragment shader file with its declaration (see the module doc)."""
 
@@ -146,6 +177,7 @@ class UserShader:
         self.defines, self.include_paths = tuple(defines), tuple(str(p) for p in include_paths)
         self.dialect = dialects.detect(source, label)
         ranges, bindings, self.engine = {}, {}, {"up": "y", "normal_map": None}
+        self.values = values = {}  # `value` pragmas: uniforms the engine sets, not fitted
         for m in _PRAGMA.finditer(source):
             args = m["args"].split()
             line = source.count("\n", 0, m.start()) + 1
@@ -160,11 +192,14 @@ class UserShader:
                 bindings[args[0]] = args[1]
             elif m["verb"] in ("up", "normal_map") and len(args) == 1:
                 self.engine[m["verb"]] = args[0]
+            elif m["verb"] == "value" and len(args) == 2:
+                values[args[0]] = _fixed(args[1], where)
             else:
                 raise ValueError(
                     f"{where}: unknown pragma `// @study {m['verb']} {m['args']}`; write "
                     "`// @study constant NAME LOW HIGH [START]`, `// @study bind NAME "
-                    "STUDY_INPUT`, `// @study up z` or `// @study normal_map FILE`"
+                    "STUDY_INPUT`, `// @study value NAME V[,V...]`, `// @study up z` or "
+                    "`// @study normal_map FILE`"
                 )
         decl = dict(declaration or {})
         self.engine.update({k: decl.pop(k) for k in ("up", "normal_map") if k in decl})
@@ -201,9 +236,13 @@ class UserShader:
     def _constants(self, ranges: dict) -> dict:
         decls = {m["name"]: m for m in _DECL.finditer(self.source)}
         bare = {m["name"]: m for m in _BARE.finditer(self.source)}
+        included = self._included_uniforms(set(ranges) - set(decls) - set(bare))
         out = {}
         for name, (lo, hi, *start) in ranges.items():
             m = decls.get(name) or bare.get(name)
+            if m is None and name in included:
+                out[name] = self._included_constant(name, included[name], lo, hi, start)
+                continue
             if m is None:
                 raise ValueError(
                     f"{self.label}: the constant {name} to fit has no one-line declaration: "
@@ -244,6 +283,33 @@ class UserShader:
                 "`// @study constant NAME LOW HIGH` lines or a constants table"
             )
         return out
+
+    def _included_uniforms(self, names: set) -> dict:
+        """name -> ``_BARE`` match in the preprocessed text, for the ``names`` declared as a
+        uniform without initializer in an ``#include`` d file only (an engine's common
+        uniforms, e.g. Urho3D's ``cFogColor`` in ``Uniforms.glsl``)."""
+        if not names or not re.search(r"^[ \t]*#[ \t]*(?:include|import)\b", self.source, re.M):
+            return {}
+        text = dialects.front_end(self.source, self.label, self.defines, self.include_paths, True)
+        return {m["name"]: m for m in _BARE.finditer(text) if m["name"] in names}
+
+    def _included_constant(self, name, m, lo, hi, start) -> UserConstant:
+        """The constant of a uniform an ``#include`` d file declares: never written back (the
+        file is the engine's), its start value from the declaration; span ``(-1, -1)``."""
+        where = f"{self.label} (an #include)"
+        if not start:
+            raise ValueError(
+                f"{where}: the uniform {name} has no initializer (the engine sets it); "
+                f"give its start value: `// @study constant {name} {lo:g} {hi:g} START`"
+            )
+        default = _start_value(start[0], m["type"], where)
+        if not (np.isfinite(lo) and np.isfinite(hi) and lo < hi):
+            raise ValueError(f"{where}: the range [{lo}, {hi}] of {name} is empty")
+        if not all(lo <= v <= hi for v in default):
+            raise ValueError(
+                f"{where}: the start value of {name} lies outside its range [{lo}, {hi}]"
+            )
+        return UserConstant(name, m["type"], default, lo, hi, (-1, -1), True)
 
     def validate(self) -> "UserShader":
         for name, study in self.bindings.items():
@@ -335,7 +401,7 @@ class UserShader:
             self.source,
             self.label,
             defines=self.defines,
-            constants=tuple((n, n) for n in self.constants),
+            constants=tuple((n, n) for n in [*self.constants, *self.values]),
             bindings=tuple(self.run_bindings().items()),
             include_paths=self.include_paths,
             engine=tuple(sorted(self.engine.items())),
@@ -356,8 +422,18 @@ class UserShader:
                 known |= set(self.vertex.feeds(mod, self.spec().source, self.label))
             except ValueError as exc:
                 raise dialects.ShaderError(str(exc)) from None
+        known |= set(self.values)
+        used = _referenced(mod)
         for vid, ins in mod.defs.items():
             name = mod.binding_name(vid)
+            if vid not in used:
+                continue  # declared, never read (an engine's common uniforms and samplers)
+            if (
+                self.vertex is not None
+                and ins.opname == "OpVariable"
+                and (ins.operands[0] == "Input")
+            ):
+                continue  # fed by the vertex shader: linked by user_vertex (by name or location)
             if (ins.opname == "OpVariable" and ins.operands[0] in ("Input", "UniformConstant")
                     and len(ins.operands) == 1 and name not in known):  # fmt: skip
                 raise dialects.ShaderError(
@@ -374,6 +450,8 @@ class UserShader:
         vals = {}
         for n, v in values.items():
             vals[n] = tuple(conv(x) for x in v) if isinstance(v, (tuple, list)) else conv(v)
+        for n, v in self.values.items():  # `value` pragmas' (one float, or a vector)
+            vals[n] = conv(v[0]) if len(v) == 1 else tuple(conv(x) for x in v)
         return types.SimpleNamespace(values=vals)
 
     # ---- renders ---------------------------------------------------------------------------
@@ -430,7 +508,7 @@ class UserShader:
         d = self.dialect
         initializers = bare_initializers and not d.es and d.version >= 120
         for c in sorted(self.constants.values(), key=lambda c: c.span[0]):
-            if c.bare and not initializers:
+            if c.bare and (not initializers or c.span[0] < 0):  # < 0: an #include's
                 continue
             v = vals[c.name]
             comps = v if isinstance(v, (tuple, list)) else (v,)
@@ -476,6 +554,7 @@ class UserShader:
         vals = self._checked(values)
         bare = {c.name: np.asarray(vals[c.name], np.float32).tobytes()
                 for c in self.constants.values() if c.bare}  # fmt: skip
+        bare.update({n: np.float32(v).tobytes() for n, v in self.values.items()})
         if self.vertex is not None:  # the grid drawn with the user's GLSL vertex shader
             base = self.vertex.gl_class(base, inputs, self.engine["up"])
         base = _engine.gl_class(base, self.engine)

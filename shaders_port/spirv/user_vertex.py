@@ -44,6 +44,7 @@ from ..pipeline.interpolate import (
 )
 from ..pipeline.raster import Raster, prepare
 from ..pipeline.texture import backend_types
+from . import engine_inputs as _engine
 from . import engine_names as names_
 from . import quads as _quads
 from . import translated as spirv_port
@@ -92,8 +93,9 @@ class UserVertex:
         return self.shader.label
 
     @classmethod
-    def from_file(cls, path, cells=DEFAULT_CELLS) -> "UserVertex":
-        return cls(VertexShader.from_file(path), cells)
+    def from_file(cls, path, cells=DEFAULT_CELLS, defines=(), include_paths=(),
+                  shared=False) -> "UserVertex":  # fmt: skip
+        return cls(VertexShader.from_file(path, defines, include_paths, shared), cells)
 
     def grid(self, inputs):
         return water_grid(inputs.water_rect, inputs.normal_tile, self.cells)
@@ -104,7 +106,7 @@ class UserVertex:
         shader's bindings (see the module doc); remembered for the last eight frames."""
         P0 = prepare(inputs, m)
         key = (P0.upload, m.__name__, self.shader.source, self.cells, spec.prepared_source(),
-               spec.bindings)  # fmt: skip
+               spec.bindings, spec.engine)  # fmt: skip
         hit = _FRAMES.get(key)
         if hit is not None:
             _FRAMES.move_to_end(key)
@@ -253,6 +255,7 @@ class UserVertex:
         ``up``."""
         mod, grid = self.shader.module, self.grid(inputs)
         attributes, uniforms = {}, {}
+        engine = _engine.uniform_values(inputs)  # fragment inputs a vertex shader may read
         for vid, ins in mod.defs.items():
             if ins.opname != "OpVariable" or ins.operands[0] not in ("Input", "UniformConstant"):
                 continue
@@ -263,6 +266,13 @@ class UserVertex:
             elif meaning is not None:
                 t = glsl_type(mod, mod.defs[ins.type_id].operands[1])
                 v = np.asarray(names_.meaning_values(inputs, meaning, up), np.float32)
+                if v.ndim == 2 and name in names_.TRANSPOSED and name not in self.shader.bindings:
+                    v = v.T  # the engine's row-major upload (Urho3D's `p * cViewProj`)
                 v = v.T if v.ndim == 2 else v[: t[1]]  # GL's column-major order
                 uniforms[name] = np.ascontiguousarray(v).tobytes()
+            elif name in self.shader.values:  # a `// @study value` pragma's
+                uniforms[name] = np.float32(self.shader.values[name]).tobytes()
+            elif _engine.ENGINE_ALIASES.get(name, ("",))[0] in engine:  # three.js's textureMatrix
+                v = np.asarray(engine[_engine.ENGINE_ALIASES[name][0]], np.float32)
+                uniforms[name] = np.ascontiguousarray(v.T if v.ndim == 2 else v).tobytes()
         return grid_renderer_class(base, self.shader.source, attributes, grid.triangles, uniforms)

@@ -68,7 +68,7 @@ def compile_vertex(source: str, label: str) -> bytes:
     """SPIR-V of a core GLSL vertex shader, optimised and validated as
     ``spirv.module.compile_fragment`` does a fragment shader; ValueError with the tool's log."""
     with tempfile.TemporaryDirectory(prefix="spirv-vert.") as d:
-        src = Path(d) / (Path(label).stem + ".vert")
+        src = Path(d) / Path(label).name  # -S vert: the name is the label's (its OpLines)
         raw, opt = Path(d) / "raw.spv", Path(d) / "opt.spv"
         src.write_text(source, encoding="utf-8")
         steps = [
@@ -88,6 +88,20 @@ def compile_vertex(source: str, label: str) -> bytes:
                 log = (res.stdout + res.stderr).replace(str(src), label).strip()
                 raise ValueError(f"{args[0]} failed on the vertex shader {label}:\n{log}")
         return opt.read_bytes()
+
+
+def _value(args: list, where: str) -> tuple:
+    """``(name, components)`` of a ``// @study value NAME V[,V...]`` pragma: a uniform the
+    engine sets (a material's or frame's constant with no meaning of ``engine_names``)."""
+    try:
+        if len(args) != 2:
+            raise ValueError
+        return args[0], tuple(float(x) for x in args[1].split(","))
+    except ValueError:
+        raise ValueError(
+            f"{where}: write `// @study value NAME V` or `// @study value NAME V1,V2,...` "
+            "(the uniform's value as the engine sets it, one number per component)"
+        ) from None
 
 
 @dataclass(frozen=True)
@@ -142,19 +156,33 @@ class VertexShader:
     """A user's vertex shader file (see the module doc): ``source``, ``label`` (file name),
     ``bindings`` (declared name -> meaning or engine name, from its pragmas)."""
 
-    def __init__(self, source: str, label: str, path=None):
+    def __init__(self, source: str, label: str, path=None, defines=(), include_paths=(),
+                 shared=False):  # fmt: skip
+        # defines, include_paths: as a fragment shader's (``spirv.dialects.front_end``); a
+        # file that needs them is compiled and drawn preprocessed. shared: the file is the
+        # fragment shader's too (Urho3D's one file for both stages), whose pragmas other than
+        # a binding to a vertex meaning or engine name are the fragment shader's
         self.original, self.label, self.path = source, label, path
         self.source = source
-        if dialects.detect(source, label).translated:
-            self.source = dialects.for_opengl(dialects.front_end(source, label, stage="vert"))
-        self.bindings = {}
+        pre = bool(defines) or bool(re.search(r"^[ \t]*#[ \t]*(?:include|import)\b", source, re.M))
+        if pre or dialects.detect(source, label).translated:
+            text = dialects.front_end(source, label, tuple(defines), tuple(include_paths),
+                                      preprocess=True, stage="vert")  # fmt: skip
+            self.source = dialects.for_opengl(text)
+        self.bindings, self.values = {}, {}
         for m in _PRAGMA.finditer(source):
             args, line = m["args"].split(), source.count("\n", 0, m.start()) + 1
+            if m["verb"] == "value":
+                self.values.update([_value(args, f"{label}:{line}")])
+                continue
+            ours = len(args) == 2 and (args[1] in names_.MEANINGS or args[1] in names_.ENGINE_NAMES)
+            if shared and not (m["verb"] == "bind" and ours):
+                continue
             if m["verb"] != "bind" or len(args) != 2:
                 raise ValueError(
-                    f"{label}:{line}: a vertex shader takes `// @study bind NAME MEANING` "
-                    "pragmas only (its constants are not fitted; declare them in the fragment "
-                    "shader)"
+                    f"{label}:{line}: a vertex shader takes `// @study bind NAME MEANING` and "
+                    "`// @study value NAME V[,V...]` pragmas only (its constants are not "
+                    "fitted; declare them in the fragment shader)"
                 )
             self.bindings[args[0]] = args[1]
         self.module = Module(compile_vertex(self.source, label), label=label, stage="Vertex")
@@ -175,11 +203,14 @@ class VertexShader:
         self.inputs = {n: t for n, t in found.items() if t in _INPUTS}
 
     @classmethod
-    def from_file(cls, path) -> "VertexShader":
+    def from_file(cls, path, defines=(), include_paths=(), shared=False) -> "VertexShader":
+        """The shader of the file ``path``; its ``#include`` s are searched in its folder, then
+        in ``include_paths``; ``shared``: the file is the fragment shader's too."""
         p = Path(path)
         if not p.is_file():
             raise ValueError(f"fit.vertex: no file {str(p)!r}")
-        return cls(p.read_text(encoding="utf-8"), p.name, path=p)
+        incs = (str(p.resolve().parent), *(str(i) for i in include_paths))
+        return cls(p.read_text(encoding="utf-8"), p.name, p, defines, incs, shared)
 
     def _outputs(self) -> tuple[dict, int | None]:
         mod, places = self.module, explicit_locations(self.source, "out")
@@ -222,6 +253,8 @@ class VertexShader:
             v = np.asarray(names_.meaning_values(inputs, meaning, up), np.float32)
         except ValueError as exc:
             raise ValueError(f"{self.label}: {name}: {exc}") from None
+        if v.ndim == 2 and name in names_.TRANSPOSED and name not in self.bindings:
+            v = v.T  # the engine's row-major upload read as GL's columns
         if v.ndim == 2:
             return [[float(v[i, j]) for i in range(v.shape[0])] for j in range(v.shape[1])]
         return [float(x) for x in v[: t[1]]]
@@ -242,11 +275,25 @@ class VertexShader:
                 out[name] = self._attribute(m, meaning, t, grid, name, up)
             elif meaning is not None:
                 out[name] = self._uniform(inputs, meaning, t, name, up)
+            elif name in self.values:
+                out[name] = self._value(name, t)
             elif name in study:
                 out[name] = study[name]
             elif self.inputs.get(name) in study:
                 out[name] = study[self.inputs[name]]
         return out
+
+    def _value(self, name: str, t: tuple):
+        """The value a ``value`` pragma gives the uniform ``name`` of type ``t``."""
+        v = self.values[name]
+        n = t[1] if t[0] == "vec" and t[2] == "float" else (1 if t[0] == "float" else 0)
+        if n != len(v):
+            want = "a float" if n == 1 else (f"vec{n}" if n else f"{_describe(t)}: not built")
+            raise ValueError(
+                f"{self.label}: `// @study value {name}` gives {len(v)} component(s); the "
+                f"shader declares it {_describe(t)} ({want})"
+            )
+        return list(v) if t[0] == "vec" else v[0]
 
     def run(self, m, inputs, grid, study: dict, up: str = "y") -> tuple[np.ndarray, dict]:
         """Run the shader on every vertex of ``grid`` (``pipeline.interpolate.Grid``, in the

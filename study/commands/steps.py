@@ -29,6 +29,7 @@ from ..export.gl_check import (
     target_checks,
 )
 from ..export.shaders import export_shaders, export_user_shader
+from ..export.targets import resolve_targets
 from ..export.viewer import not_drawn
 from ..export.textures import lut_image, texture_record, with_exported_textures, write_textures
 from ..fit.build import build_model
@@ -123,7 +124,7 @@ def export_calibration(exp, model, frames: list, cal, out: Path, timings: dict):
         if user is None:
             export_shaders(fitted, shaders, [model.shader], None, textures, status)
         else:
-            export_user_shader(user, fitted, shaders, None, textures, status)
+            _export_user(user, fitted, shaders, textures, status)
     # the GL check runs the textures that ship: read back from the exported files
     frames = [with_exported_textures(i, shaders) for i in frames]
     with timed(timings, "gl_check_s"):
@@ -260,3 +261,23 @@ def write_result(out, result, figs, ev) -> dict:
         f"{e1['flip']:.4f}; wrote {out}"
     )
     return summary
+
+
+def _export_user(user, fitted: dict, shaders: Path, textures, status: dict) -> None:
+    """``export_user_shader`` into every engine target the user's files translate to: a target
+    whose translation or compile check fails (a vertex shader writing ``gl_ClipDistance`` is
+    no GLSL ES 3.00) is left out with a warning naming its error; ValueError when the core
+    files themselves fail or no target is left."""
+    targets = list(resolve_targets(None))
+    while True:
+        try:
+            export_user_shader(user, fitted, shaders, targets, textures, status)
+            return
+        except RuntimeError as exc:
+            head = str(exc).splitlines()[0] if str(exc) else repr(exc)
+            bad = [t for t in targets if f" on {t}/" in head]
+            if not bad:
+                raise ValueError(f"export of {user.label}: {exc}") from None
+            targets.remove(bad[0])
+            why = "; ".join(ln for ln in str(exc).splitlines()[1:] if "ERROR" in ln) or head
+            _log(f"calibrate: WARNING: engine target {bad[0]} left out: {why}")

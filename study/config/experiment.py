@@ -108,9 +108,15 @@ def _check_shaders(values: dict) -> None:
         raise ExperimentError(str(exc)) from None
 
 
+# the endings engines give a GLSL fragment shader's file (Urho3D's one-file `Water.glsl`,
+# Babylon.js's `water.fragment.fx`, `.fs` / `.fsh` of GLES code bases)
+USER_SHADER_SUFFIXES = (".frag", ".glsl", ".fs", ".fsh", ".fx")
+
+
 def is_user_shader(name: str) -> bool:
-    """Whether ``fit.shader`` names a GLSL file of the user's (not a shader of the space)."""
-    return str(name).endswith(".frag")
+    """Whether ``fit.shader`` names a GLSL file of the user's (one of
+    :data:`USER_SHADER_SUFFIXES`), not a shader of the space."""
+    return str(name).endswith(USER_SHADER_SUFFIXES)
 
 
 def user_declaration(lines: list | None) -> dict:
@@ -141,7 +147,14 @@ def load_user_shader(values: dict):
     vertex = None
     if values.get("fit.vertex"):
         try:
-            vertex = UserVertex.from_file(values["fit.vertex"], values["fit.vertex_grid"])
+            vdefs = values.get("fit.vertex_defines")
+            vertex = UserVertex.from_file(
+                values["fit.vertex"],
+                values["fit.vertex_grid"],
+                values.get("fit.defines") or () if vdefs is None else vdefs,
+                values.get("fit.include_paths") or (),
+                Path(values["fit.vertex"]).resolve() == Path(values["fit.shader"]).resolve(),
+            )
         except (ValueError, RuntimeError) as exc:
             raise ExperimentError(f"fit.vertex: {exc}") from None
     try:
@@ -191,12 +204,15 @@ def _check_user_shader(values: dict, base: dict) -> None:
     for p in values["fit.include_paths"]:
         if not Path(p).is_dir():
             raise ExperimentError(f"fit.include_paths: no folder {_clip(p)}")
-    for d in values["fit.defines"] or []:
-        if not re.fullmatch(r"[A-Za-z_]\w*(=[^\n]*)?", d) or d.startswith("GL_"):
-            raise ExperimentError(
-                f'fit.defines: {_clip(d)} is not "NAME" or "NAME=VALUE" (a preprocessor name: '
-                "letters, digits and _, not starting with GL_)"
-            )
+    for key in ("fit.defines", "fit.vertex_defines"):
+        for d in values[key] or []:
+            if not re.fullmatch(r"[A-Za-z_]\w*(=[^\n]*)?", d) or d.startswith("GL_"):
+                raise ExperimentError(
+                    f'{key}: {_clip(d)} is not "NAME" or "NAME=VALUE" (a preprocessor name: '
+                    "letters, digits and _, not starting with GL_)"
+                )
+    if values["fit.vertex_defines"] is not None and not values["fit.vertex"]:
+        raise ExperimentError("fit.vertex_defines is for your own fit.vertex; set it or remove it")
     shader = load_user_shader(values)
     try:
         shader.check()
@@ -514,11 +530,12 @@ def validate(raw: dict, overrides: list[str] | None = None, path: Path | None = 
         _check_user_shader(values, base)
     elif values["fit.vertex"]:
         raise ExperimentError(
-            "fit.vertex is the vertex shader of your own fit.shader (a .frag file); "
+            "fit.vertex is the vertex shader of your own fit.shader (a .frag, .glsl, .fs, .fsh "
+            "or .fx file); "
             "remove it, or set fit.shader to your fragment shader"
         )
     else:
-        for key in ("fit.declare", "fit.defines", "fit.include_paths"):
+        for key in ("fit.declare", "fit.defines", "fit.vertex_defines", "fit.include_paths"):
             if values[key] is not None:
                 raise ExperimentError(
                     f"{key} is for your own fit.shader (a .frag file); "

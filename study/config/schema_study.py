@@ -255,6 +255,14 @@ STUDY_KEYS: dict[str, Field] = {
         "Preprocessor names your own `fit.shader` is compiled with, as an engine sets them: "
         '`"NAME"` or `"NAME=VALUE"` each (e.g. `["WAVE_LAYERS=2", "USE_FOG"]`).',
     ),
+    "fit.vertex_defines": Field(
+        "list_str",
+        None,
+        "Preprocessor names your own `fit.vertex` is compiled with, where they differ from the "
+        "fragment shader's (an engine that compiles one file for both stages, e.g. Urho3D's "
+        '`["COMPILEVS", "GL3"]` against `fit.defines = ["COMPILEPS", "GL3"]`); unset: '
+        "`fit.defines`.",
+    ),
     "fit.vertex": Field(
         "path",
         "",

@@ -174,9 +174,10 @@ def export_user_shader(
     user's own, ``shader.vertex``, under its file name); ``targets``
     ``textures`` and ``status`` as :func:`export_shaders` (translated from those two files).
     Compile-checked and written all or not at all, as there; returns the written paths."""
+    frag = _staged_name(shader.label, "frag")
     texts = {
         ("core", "water.vert"): read_source("water", "vert", "core"),
-        ("core", shader.label): shader.written(values),
+        ("core", frag): shader.written(values),
     }
     fit = {"status": status or {}, "reads": None}
     # the engine targets come from the core GLSL the study compiles (a file in an older dialect,
@@ -184,13 +185,20 @@ def export_user_shader(
     # which GLSL ES and HLSL do not take), the file itself is written as the user wrote it
     core = {}
     if shader.dialect.runs_on_desktop_gl:
-        core[shader.label] = shader.gl_source(values, bare_initializers=False)
+        core[frag] = shader.gl_source(values, bare_initializers=False)
     if shader.vertex is not None:  # the user's own vertex shader in place of the study's
-        v = shader.vertex.shader
-        texts = {("core", v.label): v.original,
-                 ("core", shader.label): texts[("core", shader.label)]}  # fmt: skip
-        core[v.label] = v.source
+        vert = _staged_name(shader.vertex.label, "vert")
+        texts = {("core", vert): shader.vertex.shader.source,
+                 ("core", frag): texts[("core", frag)]}  # fmt: skip
     return _write_checked(texts, out_dir, targets, values, textures, fit, core)
+
+
+def _staged_name(label: str, stage: str) -> str:
+    """The exported name of a user's file of ``stage`` ('frag' or 'vert'): ``label`` itself
+    when it ends in ``.frag`` / ``.vert``, else its stem with that ending (Urho3D's one
+    ``Water.glsl`` for both stages is written as ``Water.frag`` and ``Water.vert``)."""
+    stem, dot, ext = label.rpartition(".")
+    return label if dot and ext == stage else f"{stem or ext}.{stage}"
 
 
 def _write_checked(
