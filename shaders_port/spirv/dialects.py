@@ -68,7 +68,15 @@ import tempfile
 from dataclasses import dataclass
 from pathlib import Path
 
-__all__ = ["Dialect", "ShaderError", "detect", "for_opengl", "front_end", "glslang_errors"]
+__all__ = [
+    "Dialect",
+    "ShaderError",
+    "detect",
+    "for_opengl",
+    "front_end",
+    "glslang_errors",
+    "has_includes",
+]
 
 TARGET = "#version 330 core"
 DESKTOP = (110, 120, 130, 140, 150, 330, 400, 410, 420, 430, 440, 450, 460)
@@ -76,6 +84,7 @@ INCLUDE_EXT = "#extension GL_GOOGLE_include_directive : require"
 MAX_ERRORS = 8  # glslang error lines kept in a message
 _VERSION = re.compile(r"^[ \t]*#[ \t]*version\b[ \t]*(?P<rest>[^\n]*)$", re.M)
 _COMMENTS = re.compile(r"//[^\n]*|/\*.*?\*/", re.S)
+_INCLUDE_LINE = re.compile(r"^[ \t]*#[ \t]*(?:include|import)\b", re.M)
 _RENAMES = {
     "texture2D": "texture",
     "textureCube": "texture",
@@ -154,6 +163,11 @@ class Dialect:
     def runs_on_desktop_gl(self) -> bool:
         """Whether the text compiled (as written or translated) runs on a desktop OpenGL."""
         return not (self.es and self.version >= 310)
+
+
+def has_includes(text: str) -> bool:
+    """Whether ``text`` has an ``#include`` (or jMonkeyEngine's ``#import``) line."""
+    return _INCLUDE_LINE.search(text) is not None
 
 
 def detect(source: str, label: str) -> Dialect:

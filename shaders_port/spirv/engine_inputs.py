@@ -55,6 +55,7 @@ __all__ = [
     "gl_textures",
     "read_normal_map",
     "sky_cube",
+    "split_view",
     "to_up",
     "uniform_values",
 ]
@@ -154,13 +155,21 @@ def to_up(up: str, value: np.ndarray, kind: str) -> np.ndarray:
     raise ValueError(f"unknown kind {kind!r}")
 
 
-def _near_far(inputs: ShaderInputs) -> tuple[float, float]:
+def split_view(inputs: ShaderInputs) -> tuple[np.ndarray, np.ndarray]:
+    """``(view, projection)`` float64 (4, 4) of a frame, acting on column vectors:
+    ``view = [R | -R eye]`` with ``R`` the camera's rotation (``shaders_port.inputs.
+    normal_matrix``) and ``eye`` = ``viewpos``, ``projection = view_proj @ view^-1``.
+    ValueError when ``view_proj`` is no perspective times a rigid view."""
     vp = np.asarray(inputs.view_proj, np.float64)
-    view = np.eye(4)
     R = normal_matrix(vp).astype(np.float64)
+    view = np.eye(4)
     view[:3, :3] = R
     view[:3, 3] = -R @ np.asarray(inputs.viewpos, np.float64)
-    P = vp @ np.linalg.inv(view)
+    return view, vp @ np.linalg.inv(view)
+
+
+def _near_far(inputs: ShaderInputs) -> tuple[float, float]:
+    P = split_view(inputs)[1]
     return float(P[2, 3] / (P[2, 2] - 1.0)), float(P[2, 3] / (P[2, 2] + 1.0))
 
 

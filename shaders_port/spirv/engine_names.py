@@ -32,8 +32,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..inputs import ShaderInputs, normal_matrix
-from .engine_inputs import to_up
+from ..inputs import ShaderInputs
+from .engine_inputs import split_view, to_up
 
 __all__ = [
     "MEANINGS",
@@ -151,16 +151,6 @@ def meaning_of(name: str, bindings: dict | None = None) -> str | None:
     return hit[0] if hit else (target if target in MEANINGS else None)
 
 
-def _split_view(inputs: ShaderInputs) -> tuple[np.ndarray, np.ndarray]:
-    """(view, projection) float64 (4, 4) of the frame (see the module doc)."""
-    vp = np.asarray(inputs.view_proj, np.float64)
-    R = normal_matrix(vp).astype(np.float64)
-    view = np.eye(4)
-    view[:3, :3] = R
-    view[:3, 3] = -R @ np.asarray(inputs.viewpos, np.float64)
-    return view, vp @ np.linalg.inv(view)
-
-
 def attribute_values(grid, meaning: str, up: str = "y") -> np.ndarray:
     """(V, k) float64 per-vertex values of the attribute ``meaning`` ('position', 'uv',
     'normal', 'tangent') on ``grid`` (``pipeline.interpolate.Grid``), in the world frame
@@ -207,7 +197,7 @@ def _meaning_values(inputs: ShaderInputs, meaning: str) -> np.ndarray:
     if meaning in ("viewProjectionInverse", "modelViewProjectionInverse"):
         return np.linalg.inv(vp)
     try:
-        view, proj = _split_view(inputs)
+        view, proj = split_view(inputs)
     except ValueError as exc:
         raise ValueError(
             f"the vertex shader reads the {meaning} matrix, which this frame has not: "

@@ -52,6 +52,7 @@ from . import engine_inputs as _engine
 from . import quads as _quads
 from .execute import Executor
 from .loops import check_passes
+from .dialects import has_includes
 from .module import Module, compile_fragment
 from .ops import lift
 
@@ -141,7 +142,7 @@ def _prepared(source: str, label: str, constants: tuple) -> str:
         found = pat.search(src)
         if found is None and re.search(rf"^\s*uniform\s+\w+\s+{re.escape(glsl)}\s*;", src, re.M):
             continue  # a uniform without initializer (the engine sets it): bound as it is
-        if found is None and re.search(r"^[ \t]*#[ \t]*(?:include|import)\b", src, re.M):
+        if found is None and has_includes(src):
             continue  # declared in an #include (a uniform without initializer, checked there)
         if found is None:
             raise ValueError(

@@ -52,6 +52,7 @@ from . import dialects
 from . import engine_inputs as _engine
 from . import translated as spirv_port
 from .support import check_supported
+from .vertex import value_pragma
 
 __all__ = ["UserShader", "UserConstant"]
 
@@ -135,17 +136,6 @@ def _literal(x: float) -> str:
     return r if ("e" in r or "." in r or "n" in r) else r + ".0"
 
 
-def _fixed(text: str, where: str) -> tuple:
-    """The components of a ``// @study value NAME V[,V...]`` pragma's value."""
-    try:
-        return tuple(float(x) for x in text.split(","))
-    except ValueError:
-        raise ValueError(
-            f"{where}: write `// @study value NAME V` or `// @study value NAME V1,V2,...` (the "
-            "uniform's value as the engine sets it, one number per component)"
-        ) from None
-
-
 def _referenced(mod) -> set:
     """The ids the code of ``mod``'s functions names (every integer operand: an id, or a
     literal that happens to equal one)."""
@@ -193,7 +183,7 @@ class UserShader:
             elif m["verb"] in ("up", "normal_map") and len(args) == 1:
                 self.engine[m["verb"]] = args[0]
             elif m["verb"] == "value" and len(args) == 2:
-                values[args[0]] = _fixed(args[1], where)
+                values.update([value_pragma(args, where)])
             else:
                 raise ValueError(
                     f"{where}: unknown pragma `// @study {m['verb']} {m['args']}`; write "
@@ -288,7 +278,7 @@ class UserShader:
         """name -> ``_BARE`` match in the preprocessed text, for the ``names`` declared as a
         uniform without initializer in an ``#include`` d file only (an engine's common
         uniforms, e.g. Urho3D's ``cFogColor`` in ``Uniforms.glsl``)."""
-        if not names or not re.search(r"^[ \t]*#[ \t]*(?:include|import)\b", self.source, re.M):
+        if not names or not dialects.has_includes(self.source):
             return {}
         text = dialects.front_end(self.source, self.label, self.defines, self.include_paths, True)
         return {m["name"]: m for m in _BARE.finditer(text) if m["name"] in names}
@@ -417,9 +407,9 @@ class UserShader:
         if self.vertex is not None:
             check_supported(self.vertex.shader.module)
         known = set(spirv_port.STUDY_INPUTS) | set(self.run_bindings()) | set(self.constants)
-        if self.vertex is not None:  # its varyings come from the vertex shader
+        if self.vertex is not None:  # every input of it is fed by the vertex shader
             try:
-                known |= set(self.vertex.feeds(mod, self.spec().source, self.label))
+                self.vertex.feeds(mod, self.spec().source, self.label)
             except ValueError as exc:
                 raise dialects.ShaderError(str(exc)) from None
         known |= set(self.values)

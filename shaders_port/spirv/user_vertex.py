@@ -44,7 +44,6 @@ from ..pipeline.interpolate import (
 )
 from ..pipeline.raster import Raster, prepare
 from ..pipeline.texture import backend_types
-from . import engine_inputs as _engine
 from . import engine_names as names_
 from . import quads as _quads
 from . import translated as spirv_port
@@ -255,7 +254,6 @@ class UserVertex:
         ``up``."""
         mod, grid = self.shader.module, self.grid(inputs)
         attributes, uniforms = {}, {}
-        engine = _engine.uniform_values(inputs)  # fragment inputs a vertex shader may read
         for vid, ins in mod.defs.items():
             if ins.opname != "OpVariable" or ins.operands[0] not in ("Input", "UniformConstant"):
                 continue
@@ -272,7 +270,4 @@ class UserVertex:
                 uniforms[name] = np.ascontiguousarray(v).tobytes()
             elif name in self.shader.values:  # a `// @study value` pragma's
                 uniforms[name] = np.float32(self.shader.values[name]).tobytes()
-            elif _engine.ENGINE_ALIASES.get(name, ("",))[0] in engine:  # three.js's textureMatrix
-                v = np.asarray(engine[_engine.ENGINE_ALIASES[name][0]], np.float32)
-                uniforms[name] = np.ascontiguousarray(v.T if v.ndim == 2 else v).tobytes()
         return grid_renderer_class(base, self.shader.source, attributes, grid.triangles, uniforms)

@@ -46,7 +46,7 @@ from .execute import Executor, UnboundVariable
 from .loops import UnsupportedInstruction
 from .module import OPT_PASSES, Module
 
-__all__ = ["VertexShader", "Varying", "compile_vertex", "ATTRIBUTES"]
+__all__ = ["VertexShader", "Varying", "compile_vertex", "value_pragma", "ATTRIBUTES"]
 
 ATTRIBUTES = ("position", "uv", "normal", "tangent")
 _INPUTS = set(STUDY_INPUTS) | {"wave1", "wave2", "wave3", "wave4"}
@@ -90,9 +90,10 @@ def compile_vertex(source: str, label: str) -> bytes:
         return opt.read_bytes()
 
 
-def _value(args: list, where: str) -> tuple:
-    """``(name, components)`` of a ``// @study value NAME V[,V...]`` pragma: a uniform the
-    engine sets (a material's or frame's constant with no meaning of ``engine_names``)."""
+def value_pragma(args: list, where: str) -> tuple:
+    """``(name, components)`` of a ``// @study value NAME V[,V...]`` pragma's arguments: a
+    uniform the engine sets (a material's or frame's constant with no meaning of
+    ``engine_names``, not fitted)."""
     try:
         if len(args) != 2:
             raise ValueError
@@ -164,7 +165,7 @@ class VertexShader:
         # a binding to a vertex meaning or engine name are the fragment shader's
         self.original, self.label, self.path = source, label, path
         self.source = source
-        pre = bool(defines) or bool(re.search(r"^[ \t]*#[ \t]*(?:include|import)\b", source, re.M))
+        pre = bool(defines) or dialects.has_includes(source)
         if pre or dialects.detect(source, label).translated:
             text = dialects.front_end(source, label, tuple(defines), tuple(include_paths),
                                       preprocess=True, stage="vert")  # fmt: skip
@@ -173,7 +174,7 @@ class VertexShader:
         for m in _PRAGMA.finditer(source):
             args, line = m["args"].split(), source.count("\n", 0, m.start()) + 1
             if m["verb"] == "value":
-                self.values.update([_value(args, f"{label}:{line}")])
+                self.values.update([value_pragma(args, f"{label}:{line}")])
                 continue
             ours = len(args) == 2 and (args[1] in names_.MEANINGS or args[1] in names_.ENGINE_NAMES)
             if shared and not (m["verb"] == "bind" and ours):
