@@ -206,6 +206,32 @@ def test_a_worker_slow_to_exit_at_close_keeps_the_sweeps_outcome(monkeypatch):
     assert any("took longer than the cluster's 5 s to exit" in m for m in said), said
 
 
+def test_a_heartbeat_in_flight_at_close_is_not_reported_as_an_error(capfd):
+    """A worker closing while its heartbeat waits for the scheduler's answer: distributed's
+    ``Worker.close`` shuts its connections under that heartbeat, which it then logs as an error
+    with a traceback (in a sweep's output after Ctrl-C). The scheduler here answers heartbeats
+    1.5 s late, and the cluster is closed while one waits; the worker's log stays clean."""
+    import asyncio
+    import threading
+
+    from study.sweep.cluster import open_client
+
+    waiting = threading.Event()
+    with open_client(workers=1) as c:
+        scheduler = c.cluster.scheduler
+        answer = scheduler.handlers["heartbeat_worker"]
+
+        async def late(*args, **kwargs):
+            waiting.set()
+            await asyncio.sleep(1.5)
+            return answer(*args, **kwargs)
+
+        scheduler.handlers["heartbeat_worker"] = late
+        assert waiting.wait(30), "no heartbeat reached the scheduler"
+    err = capfd.readouterr().err
+    assert "during heartbeat" not in err and "Traceback" not in err, err[-3000:]
+
+
 def test_progress_writes_to_the_stderr_of_its_sweep(monkeypatch):
     """The progress line goes to ``sys.stderr`` as it is when the sweep runs, not as it was when
     the engine was imported (a capture closed since: "I/O operation on closed file")."""

@@ -29,6 +29,7 @@ from distributed.diagnostics.plugin import WorkerPlugin
 from .._backend import init_backend
 
 SCHEDULER_ENV = "STUDY_SCHEDULER"
+HEARTBEAT_WAIT_S = 2.5  # longest wait, seconds, for a closing worker's heartbeat to be answered
 
 
 def cpu_count() -> int:
@@ -54,6 +55,28 @@ class BackendPlugin(WorkerPlugin):
         import drjit as dr
 
         dr.set_thread_count(self.threads or cpu_count())  # 0: every core of the worker's machine
+
+    async def teardown(self, worker=None):
+        """On a worker's close, stop its heartbeat and let one in flight get its answer before
+        the worker shuts its connections. ``Worker.close`` removes plugins first and stops the
+        heartbeat and closes its connection pool after; a heartbeat sent just before reads from a
+        connection closed under it, and distributed logs that as an error with a traceback (its
+        worker does not wait for the heartbeat on close, an open race upstream). The wait is
+        bounded by ``HEARTBEAT_WAIT_S``, within the 4 s a nanny gives its worker to exit."""
+        import asyncio
+        import time
+
+        from distributed.core import Status
+
+        if worker is None or worker.status != Status.closing:
+            return  # the plugin is replaced or removed from a running worker: leave it be
+        beat = worker.periodic_callbacks.get("heartbeat")
+        if beat is not None:
+            beat.stop()
+        address = worker.scheduler.address
+        deadline = time.monotonic() + HEARTBEAT_WAIT_S
+        while worker.rpc.occupied.get(address) and time.monotonic() < deadline:
+            await asyncio.sleep(0.01)
 
 
 def scheduler_address(scheduler: str | None = None) -> str | None:
