@@ -8,6 +8,7 @@ precision highp float;
 // @study normal_map ../files/water_normals.png
 // @study constant distortionScale 0.0 8.0
 // @study constant normalScale 0.01 2.0
+// @study normal n
 // @study constant waterColor 0.0 1.0
 // @study constant rf0 0.0 0.5
 // @study constant specularStrength 0.0 4.0

@@ -10,6 +10,7 @@ its own names of inputs mean, either as pragmas in the file::
     // @study constant FOG_DENSITY 0.01 4.0      (a constant to fit and its range)
     // @study constant uWaterTint 0.0 1.0 0.3    (... and its start value: a bare uniform)
     // @study bind waterNormals normalMap        (the shader's sampler -> a study input)
+    // @study normal n world                     (the variable holding the surface normal)
 
 or as a table (an experiment's TOML), ``{"constants": {"FOG_DENSITY": [0.01, 4.0]},
 "bindings": {"waterNormals": "normalMap"}}``; the table adds to and overrides the pragmas.
@@ -52,7 +53,7 @@ from . import dialects
 from . import engine_inputs as _engine
 from . import translated as spirv_port
 from .support import check_supported
-from .vertex import value_pragma
+from .vertex import normal_pragma, value_pragma
 
 __all__ = ["UserShader", "UserConstant"]
 
@@ -168,6 +169,7 @@ class UserShader:
         self.dialect = dialects.detect(source, label)
         ranges, bindings, self.engine = {}, {}, {"up": "y", "normal_map": None}
         self.values = values = {}  # `value` pragmas: uniforms the engine sets, not fitted
+        self.normal = None  # `normal` pragma: (variable holding the surface normal, its frame)
         for m in _PRAGMA.finditer(source):
             args = m["args"].split()
             line = source.count("\n", 0, m.start()) + 1
@@ -184,14 +186,18 @@ class UserShader:
                 self.engine[m["verb"]] = args[0]
             elif m["verb"] == "value" and len(args) == 2:
                 values.update([value_pragma(args, where)])
+            elif m["verb"] == "normal" and len(args) in (1, 2):
+                self.normal = normal_pragma(args, where)
             else:
                 raise ValueError(
                     f"{where}: unknown pragma `// @study {m['verb']} {m['args']}`; write "
                     "`// @study constant NAME LOW HIGH [START]`, `// @study bind NAME "
                     "STUDY_INPUT`, `// @study value NAME V[,V...]`, `// @study up z` or "
-                    "`// @study normal_map FILE`"
+                    "`// @study normal_map FILE` or `// @study normal NAME [world|tangent]`"
                 )
         decl = dict(declaration or {})
+        if "normal" in decl:
+            self.normal = normal_pragma(str(decl.pop("normal")).split(), f"{label}: normal")
         self.engine.update({k: decl.pop(k) for k in ("up", "normal_map") if k in decl})
         unknown = set(decl) - {"constants", "bindings"}
         if unknown:
@@ -432,6 +438,11 @@ class UserShader:
                     "declare it a constant to fit"
                 )
         return self
+
+    def resolved_values(self, m, values: dict | None = None):
+        """``values`` (default: the start values) checked and resolved for a run on the Dr.Jit
+        type module ``m``."""
+        return self._resolved(m, self._checked(values))
 
     def _resolved(self, m, values: dict):
         def conv(x):

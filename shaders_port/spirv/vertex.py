@@ -105,6 +105,22 @@ def value_pragma(args: list, where: str) -> tuple:
         ) from None
 
 
+NORMAL_FRAMES = ("world", "tangent")
+
+
+def normal_pragma(args: list, where: str) -> tuple:
+    """``(name, frame)`` of a ``// @study normal NAME [world|tangent]`` pragma's arguments: the
+    fragment shader's variable that holds the surface normal when ``main`` returns, in the
+    world frame (the shader's, ``up`` y or z) or the water's tangent frame (default world)."""
+    frame = args[1] if len(args) == 2 else "world"
+    if len(args) not in (1, 2) or frame not in NORMAL_FRAMES:
+        raise ValueError(
+            f"{where}: write `// @study normal NAME` or `// @study normal NAME tangent` (the "
+            "variable holding the surface normal; its frame world, the default, or tangent)"
+        )
+    return args[0], frame
+
+
 @dataclass(frozen=True)
 class Varying:
     """A vertex output: its variable id, ``mode`` ('smooth', 'flat', 'noperspective') and

@@ -20,6 +20,7 @@ from pathlib import Path
 import numpy as np
 
 from shaders_port.space import parse_fix
+from shaders_port.spirv.probe import waves_digest
 from shaders_port.spirv.user_shader import UserShader
 from shaders_port.spirv.user_vertex import UserVertex
 from shaders_port.variants import get_variant
@@ -86,6 +87,10 @@ _LATER_KEYS = (
     "mesh.rotation",
     "mesh.albedo",
     "mesh.texture",
+    "waves.source",
+    "waves.height_scale",
+    "waves.shader_grid",
+    "waves.time",
 )
 
 
@@ -165,6 +170,28 @@ def load_user_shader(values: dict):
             values.get("fit.include_paths") or (),
             vertex=vertex,
         )
+    except ValueError as exc:
+        raise ExperimentError(f"fit.shader: {exc}") from None
+
+
+def _shader_waves_digest(values: dict) -> str:
+    """The digest of what makes the waves of ``waves.source = "shader"``
+    (``shaders_port.spirv.probe.waves_digest``): the reference is cached under it."""
+    if not is_user_shader(values["fit.shader"]):
+        raise ExperimentError(
+            f"waves.source = 'shader' takes the waves of your own fit.shader (a .frag file); "
+            f"{values['fit.shader']!r} is a shader of the study's space, whose waves are the "
+            "study's: remove waves.source"
+        )
+    shader = load_user_shader(values)
+    if shader.normal is None:
+        raise ExperimentError(
+            f"waves.source = 'shader': {shader.label} does not name the variable that holds its "
+            "surface normal; add `// @study normal NAME` (world frame) or `// @study normal NAME "
+            "tangent` to it"
+        )
+    try:
+        return waves_digest(shader)
     except ValueError as exc:
         raise ExperimentError(f"fit.shader: {exc}") from None
 
@@ -552,6 +579,8 @@ def validate(raw: dict, overrides: list[str] | None = None, path: Path | None = 
     for key in user_files.FILE_KEYS:
         values[key] = user_files.resolve(key, values[key], base.get(key))
     digests = user_files.check_files(values)
+    if values["waves.source"] == "shader":
+        digests["waves.source"] = _shader_waves_digest(values)
     _check_ledge(values)
     n = values["reference.sky_directions"]
     if round(n**0.5) ** 2 != n:

@@ -181,6 +181,43 @@ SCENE_KEYS: dict[str, Field] = {
         100.0,
     ),
     "waves.normal_map_size": Field("int", 256, "Normal-map resolution.", "texels", 8, 4096),
+    "waves.source": Field(
+        "str",
+        "study",
+        "Where the reference's waves come from: `study`, the height field above (the study's "
+        "shaders sample its normal map); `shader`, the surface whose normals the calibrated "
+        "shader (fit.shader) computes at its start values, read from the variable its "
+        "declaration names (`// @study normal NAME [world|tangent]`) and integrated (least "
+        "squares) into a height field.",
+        choices=("study", "shader"),
+    ),
+    "waves.height_scale": Field(
+        "float",
+        1.0,
+        "With waves.source = shader: factor on the integrated surface's height (and so its "
+        "slopes), a known truth for the shader's normal-strength constant to recover.",
+        "",
+        0.05,
+        20.0,
+    ),
+    "waves.shader_grid": Field(
+        "int",
+        512,
+        "With waves.source = shader: samples along the longer side of the water at which the "
+        "shader's normals are read and integrated.",
+        "samples",
+        16,
+        4096,
+    ),
+    "waves.time": Field(
+        "float",
+        0.0,
+        "With waves.source = shader: the shader's `time` at which its waves are read (frame k "
+        "of an animated experiment sets k * animation.time_step).",
+        "seconds",
+        0.0,
+        1e6,
+    ),
     "animation.frames": Field(
         "int",
         1,

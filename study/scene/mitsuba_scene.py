@@ -35,6 +35,7 @@ from ..config.experiment import Experiment
 from ..config.files import albedo_over_pool, heightmap_floor
 from ..config.floor import floor_height
 from .geometry import Waves, sun_direction
+from .shader_waves import ShaderWaves, shader_waves
 from .user_scene import mesh_bounds, mesh_shape, reference_sky
 
 WATER_INSET = 1e-3  # the water volume stays this far inside the walls (no coincident faces)
@@ -42,11 +43,22 @@ LEDGE_GAP = 0.02  # the ends of an under-water ledge stay this far from the wall
 # water volume's sides), so no faces intersect
 
 
-def waves_of(exp: Experiment) -> Waves:
+def study_waves(exp: Experiment) -> Waves:
+    """The study's height field of ``exp`` (``geometry.Waves``): its normal map is the shader's
+    ``normalMap`` whatever makes the reference's surface."""
     w = exp.section("waves")
     return Waves(
         w["amplitude"], w["normal_tile"], w["components"], w["seed"], w["offsets"], w["slope_scale"]
     )
+
+
+def waves_of(exp: Experiment) -> Waves | ShaderWaves:
+    """The reference's water surface: the study's waves, or with ``waves.source = "shader"``
+    the surface of the shader's normals (``shader_waves``); both answer
+    ``height_and_gradient(x, z)``."""
+    if exp.waves.source == "shader":
+        return shader_waves(exp)
+    return study_waves(exp)
 
 
 def floor_of(exp: Experiment, x, z) -> np.ndarray:

@@ -42,7 +42,7 @@ from ..config.experiment import Experiment
 from .cache import SCENE_VERSION, cache_dir, versions
 from .frames import shared_part
 from .lighting import lighting_colour
-from .mitsuba_scene import camera_view_proj, waves_of
+from .mitsuba_scene import camera_view_proj, study_waves
 from .topdown import (
     MAX_OPTICAL_DEPTH,
     NO_GEOMETRY,
@@ -205,7 +205,7 @@ def build_shader_inputs(
     tm = ortho_tex_matrix(*extent)
     refl_y, refl_col, tm1 = _reflection_textures(exp, extent, size, world_y, colour, st, shared)
     hx, hz = exp.pool.half_extent
-    waves = waves_of(exp)
+    waves = study_waves(exp)
     lightpos, lightcolor = light_of(exp)
     c = exp.section("camera")
     with st.stage("inputs.maps_s", "shader inputs: normal map, sky cube map, Fresnel LUT"):
