@@ -122,6 +122,29 @@ def test_the_shaders_surface_is_the_one_its_normals_describe(tmp_path, frame, ex
     assert s.stats["normal"] == ["nrm", frame]
 
 
+def test_a_vertex_shader_that_displaces_the_surface_displaces_the_reference(tmp_path):
+    """A pair whose vertex shader lifts the grid by H = 0.35 sin(2.1 x + 0.4) cos(1.7 z) and
+    hands its normal on: the reference's surface is H, read where the displaced surface is
+    drawn."""
+    from study import load_experiment
+
+    shaders = REPO / "tests" / "shaders"
+    (tmp_path / "displaced_water.vert").write_text((shaders / "displaced_water.vert").read_text())
+    frag = (shaders / "displaced_water.frag").read_text()
+    frag = frag.replace("const float BUMP = 0.5;", "const float BUMP = 0.0;")
+    (tmp_path / "displaced_water.frag").write_text(frag + "// @study normal n\n")
+    exp = load_experiment(DEFAULT, SMALL_OVERRIDES + [
+        f"fit.shader={tmp_path / 'displaced_water.frag'}", "fit.vertex=auto",
+        "waves.source=shader", "waves.shader_grid=160"])  # fmt: skip
+    s = shader_waves(exp)
+    x, z = _grid(exp)
+    want = 0.35 * np.sin(2.1 * x + 0.4) * np.cos(1.7 * z)
+    want -= want.mean()
+    err = np.abs(s.h - want).max()
+    assert err < 0.02 * np.ptp(want), (err, np.ptp(want))
+    assert s.stats["curl_mean_deg"] < 0.5, s.stats  # the grid's interpolated normals: nearly none
+
+
 def test_the_height_scale_scales_heights_and_slopes(tmp_path):
     one = shader_waves(_experiment(tmp_path))
     more = shader_waves(_experiment(tmp_path, "world", "wn", "", "nrm", "waves.height_scale=1.3"))

@@ -14,6 +14,7 @@
 // @study constant m_waterColor 0.0 1.0 0.0078,0.3176,0.5
 // @study constant m_fresnelPower 1.0 10.0 2.0
 // @study constant m_shininess 10.0 2000.0 300.0
+// @study normal n
 uniform sampler2D m_water_reflection;
 uniform sampler2D m_water_refraction;
 uniform sampler2D m_water_dudvmap;

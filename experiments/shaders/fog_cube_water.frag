@@ -19,6 +19,7 @@ precision highp float;
 // @study constant cFogColor 0.0 1.0
 // @study constant cFresnelPower 0.5 10.0
 // @study constant cReflectionGain 0.0 2.0
+// @study normal normal
 uniform sampler2D sNormalMap;
 uniform sampler2D sRefractMap;
 uniform sampler2D sDepthBuffer;

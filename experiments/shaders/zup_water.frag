@@ -13,6 +13,7 @@
 // @study constant distortion 0.0 0.1
 // @study constant watercolor 0.0 1.5
 // @study constant fresnelfloor 0.0 1.0
+// @study normal n
 uniform sampler2D tex0;
 uniform sampler2D tex1;
 uniform sampler2D tex2;

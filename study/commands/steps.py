@@ -41,6 +41,7 @@ from ..scene.baseline_inputs import inputs_for_shader
 from ..scene.frames import is_animated, refuse_animated
 from ..scene.reference import load_or_render
 from ..scene.shader_inputs import load_or_build_shader_inputs
+from ..scene.shader_waves import shader_waves
 from ..scene.user_scene import check_scene, sun_summary
 from ..scene.view import check_water_in_view
 
@@ -164,6 +165,8 @@ def export_calibration(exp, model, frames: list, cal, out: Path, timings: dict):
     if user.vertex is not None:  # the pair: its vertex shader and the grid it ran on
         extra["vertex_file"] = str(exp.fit.vertex)
         extra["vertex_grid"] = list(user.vertex.cells)
+    if exp.waves.source == "shader":  # the reference's surface: how well it fits the normals
+        extra["waves"] = shader_waves(exp).stats
     return gl, engine_targets, extra
 
 

@@ -15,7 +15,14 @@ import numpy as np
 from .._io import to_srgb, write_text_atomic
 from .._metrics import flip_map
 from ..export.textures import expects_lines
-from .calibration import constants_table, fit_steps_line, fmt, identifiability_table, pyplot
+from .calibration import (
+    constants_table,
+    fit_steps_line,
+    fmt,
+    identifiability_table,
+    pyplot,
+    waves_lines,
+)
 
 PANELS = ("reference", "fitted (all frames)", "FLIP error")
 
@@ -188,9 +195,8 @@ def animation_report_text(summary: dict, gif: bool = True) -> str:
         + (f"; also as [GIF]({figs['animation_gif']})" if gif and "animation_gif" in figs else "")
         + ".",
         "",
-        "## FLIP per frame",
-        "",
     ]
+    lines += waves_lines(summary.get("waves")) + ["## FLIP per frame", ""]
     lines += per_frame_table(sc) + [""]
     lines += [
         "## Temporal error",

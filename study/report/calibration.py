@@ -261,7 +261,8 @@ def write_report(out: Path, summary: dict, figures: dict) -> Path:
 def report_text(summary: dict, figures: dict) -> str:
     """The Markdown of :func:`write_report` (``figures``: figure name -> file, those drawn)."""
     e = summary["error"]
-    lines = _header_lines(summary) + _decorrelated_lines(summary.get("fit", {}))
+    lines = _header_lines(summary) + waves_lines(summary.get("waves"))
+    lines += _decorrelated_lines(summary.get("fit", {}))
     lines += [
         "| metric (water pixels) | default constants | fitted constants |",
         "|---|---|---|",
@@ -299,6 +300,28 @@ def report_text(summary: dict, figures: dict) -> str:
         summary.get("engine_targets") or {}, user=bool(summary.get("shader_file"))
     )
     return "\n".join(lines)
+
+
+def waves_lines(waves: dict | None) -> list[str]:
+    """What the report says of a reference whose waves are the shader's (``waves.source =
+    "shader"``, the ``waves`` record of ``study.scene.shader_waves``); nothing otherwise."""
+    if not waves:
+        return []
+    name, frame = waves["normal"]
+    scale = waves["height_scale"]
+    scaled = "" if scale == 1.0 else f", its height scaled by {scale:g} (`waves.height_scale`)"
+    return [
+        "## The reference's waves: the shader's own",
+        "",
+        f"The reference's water is the surface whose normals `{waves['shader']}` computes in "
+        f"`{name}` ({frame} frame) at its start values, integrated in least squares over a "
+        f"{waves['grid'][0]}x{waves['grid'][1]} grid of the water{scaled}; its RMS slope is "
+        f"{waves['slope_rms']:.3g}. The shader's normals differ from that surface's by "
+        f"{waves['curl_mean_deg']:.2f} degrees on average ({waves['curl_p99_deg']:.2f} at the "
+        "99th percentile): the part of its normal field no surface has (its curl), which no "
+        "reference can match.",
+        "",
+    ]
 
 
 def _header_lines(summary: dict) -> list[str]:

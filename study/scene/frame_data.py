@@ -8,7 +8,7 @@ import dataclasses
 from .._progress import Stages
 from .._progress import log as _log
 from .baseline_inputs import inputs_for_shader
-from .frames import FrameShared, frames_of
+from .frames import FrameShared, frame_time, frames_of
 from .mitsuba_scene import build_scene, set_waves
 from .reference import load_or_render
 from .shader_inputs import load_or_build_shader_inputs
@@ -16,8 +16,8 @@ from .shader_inputs import load_or_build_shader_inputs
 
 def load_frames(exp, variant: str, cache=None) -> dict:
     """Every frame of ``exp``: ``frames`` (the frame experiments), ``refs`` (``Reference``),
-    ``inputs`` (``ShaderInputs`` with what ``fit.shader`` reads, ``time`` the frame's
-    ``k * animation.time_step`` seconds), ``base`` (the study's shader
+    ``inputs`` (``ShaderInputs`` with what ``fit.shader`` reads, ``time`` the frame's clock,
+    ``frames.frame_time``), ``base`` (the study's shader
     inputs without a shader's extra buffers: ``baseline_inputs.inputs_for_shader`` adds them
     for another shader), ``timings`` (per frame and summed: ``reference_s``,
     ``inputs_s``) and ``shared`` (the ``FrameShared`` record: what was built once, how often it
@@ -49,7 +49,7 @@ def load_frames(exp, variant: str, cache=None) -> dict:
                 e, variant, cache=cache, log=_log, progress=st, shared=shared
             )
             # the frame's clock, the `time` a user's shader reads (spirv.engine_inputs)
-            i = dataclasses.replace(i, time=k * float(exp.animation.time_step))
+            i = dataclasses.replace(i, time=frame_time(exp, k))
             base.append(i)
             i = inputs_for_shader(e, i, e.fit.shader, variant, cache=cache, log=_log)
             inputs.append(i)

@@ -65,11 +65,20 @@ def frame_offsets(exp: Experiment, k: int) -> np.ndarray:
     return base + (k * float(exp.animation.time_step)) * vel
 
 
+def frame_time(exp: Experiment, k: int) -> float:
+    """The clock of frame ``k``, seconds: ``waves.time + k * animation.time_step`` (the ``time``
+    a user's shader reads; ``waves.time`` is 0 unless set)."""
+    return float(exp.waves.time) + k * float(exp.animation.time_step)
+
+
 def frame_experiment(exp: Experiment, k: int) -> Experiment:
     """Frame ``k`` of ``exp`` as a still experiment: ``waves.offsets`` = :func:`frame_offsets`,
-    the ``animation.*`` keys at their defaults (frame 0 of any animation is ``exp`` as a still)."""
+    with ``waves.source = "shader"`` ``waves.time`` = :func:`frame_time`, the ``animation.*``
+    keys at their defaults (frame 0 of any animation is ``exp`` as a still)."""
     values = copy.deepcopy(exp.values)
     values["waves.offsets"] = frame_offsets(exp, k).tolist()
+    if exp.waves.source == "shader":  # the shader's waves at the frame's clock
+        values["waves.time"] = frame_time(exp, k)
     for key in ANIMATION_KEYS:
         values[key] = copy.deepcopy(SCHEMA[key].default)
     return Experiment(values, exp.path, dict(exp.digests))
@@ -85,6 +94,7 @@ def offsets_free_key(exp: Experiment) -> str:
     wave offsets: equal for all frames of one animation, different for any other scene."""
     still = copy.deepcopy(exp.values)
     still["waves.offsets"] = None
+    still["waves.time"] = SCHEMA["waves.time"].default  # the shader's waves move with it
     other = Experiment(still, exp.path, dict(exp.digests))
     data = [other.scene_hash(), other.inputs_hash()]
     return hashlib.sha256(json.dumps(data).encode()).hexdigest()[:32]
@@ -119,11 +129,13 @@ class FrameShared:
     def scene(self, exp: Experiment, name: str, build: Callable, move: Callable):
         """The Mitsuba scene ``name`` (``build()`` the first time) with its water surface at the
         waves of ``exp``: a scene built for another frame is moved by ``move(scene, exp)``
-        (:func:`~.mitsuba_scene.set_waves`) when its offsets differ from ``exp``'s."""
-        part = self.get(exp, name, lambda: [build(), exp.waves.offsets])
-        if part[1] != exp.waves.offsets:
+        (:func:`~.mitsuba_scene.set_waves`) when its offsets or ``waves.time`` differ from
+        ``exp``'s."""
+        state = [exp.waves.offsets, exp.waves.time]
+        part = self.get(exp, name, lambda: [build(), copy.deepcopy(state)])
+        if part[1] != state:
             move(part[0], exp)
-            part[1] = copy.deepcopy(exp.waves.offsets)
+            part[1] = copy.deepcopy(state)
         return part[0]
 
 

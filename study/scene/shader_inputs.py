@@ -292,6 +292,16 @@ def half_inputs(exp: Experiment, inputs: ShaderInputs) -> tuple[ShaderInputs, Sh
 def load_or_build_shader_inputs(
     exp: Experiment, variant: str, cache=None, log=print, progress=None, shared=None
 ) -> ShaderInputs:
+    """:func:`cached_shader_inputs` with ``time`` = ``waves.time`` (the clock of the waves the
+    reference has, 0 unless set)."""
+    inputs = cached_shader_inputs(exp, variant, cache, log, progress, shared)
+    t = float(exp.waves.time)
+    return inputs if t == inputs.time else dataclasses.replace(inputs, time=t)
+
+
+def cached_shader_inputs(
+    exp: Experiment, variant: str, cache=None, log=print, progress=None, shared=None
+) -> ShaderInputs:
     """The shader inputs of ``exp`` from ``<cache>/inputs/<key>.npz`` if present, else built
     and written there atomically. The key hashes every experiment value that affects them
     (``Experiment.inputs_hash``), the variant, ``SCENE_VERSION``, ``INPUTS_VERSION``, this

@@ -41,6 +41,10 @@ from ..config.experiment import Experiment, load_user_shader
 from .geometry import Waves
 
 _SURFACES: dict = {}  # scene hash -> ShaderWaves (the last few)
+# the probe camera's field of view, degrees: it stands d = 115 half-extents above the water, so
+# a point a vertex shader lifts by y is seen off its own (x, z) by y / d of its distance from
+# the centre
+PROBE_FOV_DEG = 1.0
 
 
 def integrate(gx: np.ndarray, gz: np.ndarray, dx: float, dz: float) -> np.ndarray:
@@ -119,7 +123,7 @@ def probe_grid(exp: Experiment) -> tuple[int, int]:
 
 def probe_inputs(exp: Experiment, normal_map: np.ndarray) -> ShaderInputs:
     """The shader's inputs for reading its normals: a camera straight above the pool's centre
-    (looking down ``-y``, image up ``-z``) whose ``Nx x Nz`` pixel centres are the points
+    (:data:`PROBE_FOV_DEG`, looking down ``-y``, image up ``-z``) whose ``Nx x Nz`` pixel centres are the points
     ``x = -hx + (j + 0.5) 2 hx / Nx``, ``z = -hz + (i + 0.5) 2 hz / Nz`` of the water plane
     (row ``i`` of the image from the top: a view straight down maps the plane affinely); the
     study's normal map ``normal_map`` ((S, S, 3) encoded, what ``normalMap`` and ``dudv_map``
@@ -127,7 +131,7 @@ def probe_inputs(exp: Experiment, normal_map: np.ndarray) -> ShaderInputs:
     every texture that is not the waves'."""
     hx, hz = exp.pool.half_extent
     nx, nz = probe_grid(exp)
-    fov = 30.0
+    fov = PROBE_FOV_DEG
     d = hz / math.tan(math.radians(fov) / 2)
     eye = (0.0, d, 0.0)
     vp = perspective_view_proj(eye, (0.0, 0.0, 0.0), (0.0, 0.0, -1.0), fov, hx / hz, d / 2, 2 * d)
@@ -202,3 +206,13 @@ def shader_waves(exp: Experiment) -> ShaderWaves:
         _SURFACES.pop(next(iter(_SURFACES)))
     _SURFACES[key] = surface
     return surface
+
+
+def wave_extremes(exp: Experiment) -> tuple[float, float]:
+    """``(trough, crest)``, world y: bounds of the reference's water surface, the study's
+    ``-+waves.amplitude`` or the lowest and highest point of the shader's surface."""
+    if exp.waves.source == "shader":
+        h = shader_waves(exp).h
+        return float(h.min()), float(h.max())
+    a = float(exp.waves.amplitude)
+    return -a, a

@@ -12,6 +12,7 @@ from .._backend import jit_input
 from .._progress import render_in_passes
 from ..config.experiment import Experiment
 from .mitsuba_scene import build_geometry, floor_of, has_medium, water_medium
+from .shader_waves import wave_extremes
 from .user_scene import reference_sky, reflection_extent
 
 NO_GEOMETRY = -1e3  # world y of a texel with nothing below it (the shaders' sentinel)
@@ -161,14 +162,14 @@ def render_top_down(
 def underwater_camera_height(exp: Experiment) -> float:
     """Height of the under-water orthographic camera: below the lowest wave trough, above the
     floor."""
-    y_cam = -exp.waves.amplitude - 0.02
+    y_cam = wave_extremes(exp)[0] - 0.02
     hx, hz = exp.pool.half_extent
     x, z = np.meshgrid(np.linspace(-hx, hx, 129), np.linspace(-hz, hz, 129))
     top = float(floor_of(exp, x, z).max())
     if top >= y_cam - 0.01:
         raise ValueError(
             f"the floor rises to y = {top:.3f}, above the wave troughs (y = {y_cam + 0.02:.3f}): "
-            "make floor.depth larger or floor.relief / waves.amplitude smaller, or set "
+            "make floor.depth larger or floor.relief / the waves smaller, or set "
             'reference.refraction_lighting = "dry"'
         )
     return y_cam

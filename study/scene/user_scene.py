@@ -27,6 +27,7 @@ from ..config import files as uf
 from ..config.errors import ExperimentError
 from ..config.experiment import Experiment
 from .geometry import cubemap_directions, envmap_image, sky_radiance, sun_direction
+from .shader_waves import wave_extremes
 
 SKY_HEIGHT = 512  # rows of the built-in gradient sky's lat-long map (0.35 degree texels)
 CUBE_SUPERSAMPLE = 4  # lookups per cube-map texel side when resampling a sky file
@@ -204,7 +205,7 @@ def mesh_bounds(mi, exp: Experiment) -> tuple[np.ndarray, np.ndarray]:
         tuple(exp.mesh.position),
         exp.mesh.scale,
         exp.mesh.rotation,
-        exp.waves.amplitude,
+        wave_extremes(exp),
     )
     if key in _BOUNDS:
         return _BOUNDS[key]
@@ -219,7 +220,7 @@ def mesh_bounds(mi, exp: Experiment) -> tuple[np.ndarray, np.ndarray]:
     hi = np.array([bb.max.x, bb.max.y, bb.max.z], np.float64).ravel()
     if not (np.all(np.isfinite(lo)) and np.all(np.isfinite(hi))) or shape.face_count() == 0:
         raise ExperimentError(f"mesh.file: no faces or non-finite vertices (file {exp.mesh.file})")
-    crest = exp.waves.amplitude + MESH_CLEARANCE
+    crest = wave_extremes(exp)[1] + MESH_CLEARANCE
     if lo[1] < crest:
         raise ExperimentError(
             f"mesh.file: the placed mesh reaches down to y = {lo[1]:.4g}, into the water "
