@@ -123,8 +123,9 @@ def probe_grid(exp: Experiment) -> tuple[int, int]:
 
 def probe_inputs(exp: Experiment, normal_map: np.ndarray) -> ShaderInputs:
     """The shader's inputs for reading its normals: a camera straight above the pool's centre
-    (:data:`PROBE_FOV_DEG`, looking down ``-y``, image up ``-z``) whose ``Nx x Nz`` pixel centres are the points
-    ``x = -hx + (j + 0.5) 2 hx / Nx``, ``z = -hz + (i + 0.5) 2 hz / Nz`` of the water plane
+    (:data:`PROBE_FOV_DEG`, looking down ``-y``, image up ``-z``) whose ``Nx x Nz`` pixel
+    centres are the points ``x = -hx + (j + 0.5) 2 hx / Nx``, ``z = -hz + (i + 0.5) 2 hz / Nz``
+    of the water plane
     (row ``i`` of the image from the top: a view straight down maps the plane affinely); the
     study's normal map ``normal_map`` ((S, S, 3) encoded, what ``normalMap`` and ``dudv_map``
     give), its wave offsets, ``time`` = ``waves.time``; 8x8 placeholders of no colour for
