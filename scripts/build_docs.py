@@ -103,6 +103,7 @@ def generated() -> dict[Path, str]:
     sys.path.insert(0, str(Path(__file__).resolve().parent))
     from docs_engine_inputs import engine_inputs_page
     from docs_file_formats import file_formats_page
+    from docs_own_waves import own_waves_page
 
     pages = {DOCS / "experiment-keys.md": KEYS_HEADER + schema_markdown()}
     pages[DOCS / "file-formats.md"] = file_formats_page()
@@ -126,6 +127,7 @@ def generated() -> dict[Path, str]:
         pages[folder / "stability.md"] = stability_report_text(_json(folder / "summary.json"))
     pages.update(_default_run_pages(RESULTS / "default"))
     pages[RESULTS / "engine-shaders" / "report.md"] = _engine_pairs_page(RESULTS / "engine-shaders")
+    pages[RESULTS / "own-waves" / "report.md"] = own_waves_page(RESULTS)
     return pages
 
 

@@ -137,11 +137,14 @@ def user_declaration(lines: list | None) -> dict:
             if parts[0] == "bind" and len(parts) == 3:
                 decl["bindings"][parts[1]] = parts[2]
                 continue
+            if parts[0] == "normal" and len(parts) in (2, 3):
+                decl["normal"] = " ".join(parts[1:])
+                continue
         except (IndexError, ValueError):
             pass
         raise ExperimentError(
-            f"fit.declare: {_clip(line)}: write `constant NAME LOW HIGH [START]` or "
-            "`bind NAME INPUT`"
+            f"fit.declare: {_clip(line)}: write `constant NAME LOW HIGH [START]`, "
+            "`bind NAME INPUT` or `normal NAME [world|tangent]`"
         )
     return decl
 

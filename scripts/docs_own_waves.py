@@ -1,0 +1,157 @@
+"""The docs' page of the engine waters calibrated against a reference with their own waves
+(``waves.source = "shader"``), beside the same shaders against the study's waves, and the figure
+of where their glints land.
+
+The page is generated from committed ``constants.json`` files:
+
+* ``docs/results/engine-shaders/<name>/``: ``study calibrate experiments/<name>.toml`` (the
+  study's waves);
+* ``docs/results/own-waves/<name>/``: the same with ``--set waves.source=shader``;
+* ``docs/results/own-waves/<name>-x1.3/``: the same with ``--set waves.height_scale=1.3`` (a
+  known factor on the reference's waves, for the shader's normal-strength constant to recover);
+* ``docs/results/own-waves/<name>-animated-<source>/``: an animated calibration, both sources.
+
+The figure (``glints.png``) is drawn from two run folders' ``reference.exr`` and ``fitted.exr``:
+``python scripts/docs_own_waves.py STUDY_RUN OWN_RUN docs/results/own-waves/glints.png``.
+"""
+
+from __future__ import annotations
+
+import json
+import sys
+from pathlib import Path
+
+REPO = Path(__file__).resolve().parents[1]
+OWN_WAVES = ("webgl_mirror_water", "dudv_depth_water", "fog_cube_water", "zup_water")
+# (experiment, its normal-strength constant) whose fit at waves.height_scale 1.3 is committed
+RECOVERY = (("my_water", "BUMP"), ("zup_water", "bumpscale"))
+ANIMATED = "zup_water"
+
+
+def _json(path: Path) -> dict:
+    if not path.is_file():
+        raise FileNotFoundError(f"{path} is missing: re-run the calibration into {path.parent}")
+    return json.loads(path.read_text())
+
+
+def own_waves_page(results: Path) -> str:
+    """The Markdown of ``results/own-waves/report.md`` (see the module doc)."""
+    own = results / "own-waves"
+    lines = [
+        "# Engine waters against their own waves",
+        "",
+        "*Written by `scripts/build_docs.py` (`scripts/docs_own_waves.py`) from the committed "
+        "`constants.json` of `study calibrate experiments/<name>.toml` with the study's waves "
+        "(`docs/results/engine-shaders/<name>`) and with `--set waves.source=shader` "
+        "(`docs/results/own-waves/<name>`). What the key does: [your shader's own "
+        "waves](../../user-shader.md#the-reference-with-your-shaders-own-waves).*",
+        "",
+        "The reference of each shader's own waves is the surface whose normals the shader "
+        "computes at its start values, integrated in least squares; the curl is the angle "
+        "between the shader's normals and that surface's (what no surface has).",
+        "",
+        "| experiment | FLIP fitted, study's waves | FLIP fitted, own waves | RMSE fitted, "
+        "study's -> own | curl, mean (99th pct.) | RMS slope of its surface |",
+        "|---|---|---|---|---|---|",
+    ]
+    for name in OWN_WAVES:
+        s, o = (
+            _json(results / "engine-shaders" / name / "constants.json"),
+            _json(own / name / "constants.json"),
+        )
+        w = o["waves"]
+        lines.append(
+            f"| `{name}` | {s['error']['flip']['fitted']:.4f} | {o['error']['flip']['fitted']:.4f}"
+            f" | {s['error']['rmse']['fitted']:.4f} -> {o['error']['rmse']['fitted']:.4f} | "
+            f"{w['curl_mean_deg']:.2f} ({w['curl_p99_deg']:.2f}) degrees | {w['slope_rms']:.3f} |"
+        )
+    lines += ["", "## A known truth: the reference's waves 1.3 times as steep", ""]
+    lines += [
+        "`--set waves.height_scale=1.3` scales the reference's surface (heights and slopes) by "
+        "1.3; a shader whose normal-strength constant scales its normals' slopes should fit it "
+        "1.3 times as large. Each constant below is fitted with the shader's other constants, "
+        "against path-traced references.",
+        "",
+        "| experiment | constant | fitted, own waves | fitted, own waves x 1.3 | ratio | "
+        "relative standard errors |",
+        "|---|---|---|---|---|---|",
+    ]
+    for name, const in RECOVERY:
+        a, b = _json(own / name / "constants.json"), _json(own / f"{name}-x1.3" / "constants.json")
+        pa, pb = a["parameters"][const], b["parameters"][const]
+        se = [p.get("rel_std_error") for p in (pa, pb)]
+        ses = ", ".join("-" if v is None else f"{100 * v:.1f} %" for v in se)
+        lines.append(
+            f"| `{name}` | `{const}` | {pa['fitted']:.4g} ({pa['status']}) | {pb['fitted']:.4g} "
+            f"({pb['status']}) | {pb['fitted'] / pa['fitted']:.4f} | {ses} |"
+        )
+    lines += _animated_lines(own)
+    if (own / "glints.png").is_file():
+        lines += [
+            "",
+            "## Where the glints land",
+            "",
+            "![reference, fitted shader and their difference, with the study's waves (top) and "
+            "the shader's own (bottom)](glints.png)",
+        ]
+    return "\n".join(lines) + "\n"
+
+
+def _animated_lines(own: Path) -> list[str]:
+    runs = {s: own / f"{ANIMATED}-animated-{s}" / "constants.json" for s in ("study", "shader")}
+    if not all(p.is_file() for p in runs.values()):
+        return []
+    lines = [
+        "",
+        "## In motion",
+        "",
+        f"`{ANIMATED}` animated (one constants block fitted on every frame): the shader's clock "
+        "and the reference's frames move together when the reference has the shader's waves.",
+        "",
+        "| reference's waves | frames | mean FLIP | temporal RMSE | above the reference's noise "
+        "| change ratio |",
+        "|---|---|---|---|---|---|",
+    ]
+    names = {"study": "the study's", "shader": "the shader's own"}
+    for source, path in runs.items():
+        d = _json(path)
+        a = d["animation"]
+        sc = a["scores"]["all_frames"]
+        t = sc["temporal"]
+        lines.append(
+            f"| {names[source]} | {a['frames']} | {sc['flip_mean']:.4f} | {t['trmse']:.5f} | "
+            f"{t['trmse_excess']:.5f} | {t['change_ratio']:.3f} |"
+        )
+    return lines
+
+
+def glints_figure(study_run: Path, own_run: Path, out: Path) -> None:
+    """``out`` (PNG): reference | fitted | absolute difference of the two runs (rows), sRGB."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    import numpy as np
+
+    from study._io import read_exr, to_srgb
+
+    fig, axes = plt.subplots(2, 3, figsize=(9, 6.2))
+    for row, (run, label) in enumerate(((study_run, "study's waves"), (own_run, "own waves"))):
+        ref, fit = (read_exr(run / f)[0][..., :3] for f in ("reference.exr", "fitted.exr"))
+        diff = np.abs(fit - ref).mean(-1)
+        for col, (img, title) in enumerate(
+            ((to_srgb(ref), "reference"), (to_srgb(fit), "fitted shader"), (diff, "|difference|"))
+        ):
+            ax = axes[row, col]
+            ax.imshow(img, cmap="magma" if img.ndim == 2 else None, vmin=0, vmax=0.5)
+            ax.set_title(f"{title}, {label}", fontsize=9)
+            ax.axis("off")
+    fig.tight_layout()
+    fig.savefig(out, dpi=90)
+    plt.close(fig)
+
+
+if __name__ == "__main__":
+    if len(sys.argv) != 4:
+        sys.exit("usage: python scripts/docs_own_waves.py STUDY_RUN OWN_RUN OUT.png")
+    glints_figure(Path(sys.argv[1]), Path(sys.argv[2]), Path(sys.argv[3]))
