@@ -293,8 +293,8 @@ def test_normal_strength_recovers_a_known_factor_on_the_waves(tmp_path):
     within 2 %."""
     import json
     import subprocess
+    import sys
 
-    from helpers import STUDY
     from helpers.experiments import sets
 
     fitted = []
@@ -302,10 +302,11 @@ def test_normal_strength_recovers_a_known_factor_on_the_waves(tmp_path):
         out = tmp_path / f"x{scale}"
         over = ["resolution=[128,128]", "fit.resolution=[64,64]", "reference.spp=96",
                 "waves.source=shader", f"waves.height_scale={scale}"]  # fmt: skip
+        exp = str(REPO / "experiments" / "zup_water.toml")
+        args = [sys.executable, "-m", "study.cli", "calibrate", exp, "--out", str(out)]
         run = subprocess.run(
-            STUDY + ["calibrate", str(REPO / "experiments" / "zup_water.toml"), "--out", str(out)]
-            + sets(over), capture_output=True, text=True, timeout=1800, cwd=tmp_path,
-        )  # fmt: skip
+            args + sets(over), capture_output=True, text=True, timeout=1800, cwd=tmp_path
+        )
         assert run.returncode == 0, run.stderr[-3000:]
         p = json.loads((out / "constants.json").read_text())["parameters"]["bumpscale"]
         assert p["status"] == "fitted", p
