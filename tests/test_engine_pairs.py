@@ -22,7 +22,7 @@ from shaders_port.spirv.user_shader import UserShader
 from shaders_port.spirv.user_vertex import UserVertex
 from shaders_port.spirv.vertex import VertexShader
 from study import load_experiment
-from study.config.experiment import load_user_shader
+from study.config.user_shader import load_user_shader
 
 EXPERIMENTS = REPO / "experiments"
 PAIRS = ("webgl_mirror_water", "dudv_depth_water", "fog_cube_water", "zup_water")

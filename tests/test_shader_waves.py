@@ -253,7 +253,7 @@ def test_constants_recovered_on_inputs_lit_through_the_shaders_surface(tmp_path,
     noise (sigma 0.01, seeded): every constant is recovered from the clean target, and lands
     within two standard errors of the truth from the noisy one."""
     from study import load_experiment
-    from study.config.experiment import load_user_shader
+    from study.config.user_shader import load_user_shader
     from study.fit.calibrate import calibrate_model
     from study.fit.model import get_value
     from study.fit.spirv_model import SpirvModel

@@ -379,7 +379,7 @@ def test_chunks_imports_and_engine_inputs_in_a_vertex_shader():
 def test_one_file_experiment_keys(tmp_path):
     from study import load_experiment
     from study.config.errors import ExperimentError
-    from study.config.experiment import load_user_shader
+    from study.config.user_shader import load_user_shader
 
     path = SHADERS / "one_file_water.glsl"
     keys = [f'fit.shader="{path}"', f'fit.vertex="{path}"', 'fit.defines=["COMPILEPS", "PS=main"]',

@@ -18,18 +18,22 @@ shader's branches taken as they are on each pixel.
 
 from __future__ import annotations
 
+import hashlib
+import json
+from pathlib import Path
+
 import drjit as dr
 import numpy as np
 
 from ..pipeline.raster import prepare
 from ..pipeline.texture import backend_types
 from . import translated as spirv_port
-from .dialects import ShaderError
+from .dialects import ShaderError, front_end
 from .engine_inputs import UP_Z
 from .execute import Executor
 from .ops import lift
 
-__all__ = ["capture", "surface_normals", "variable_id"]
+__all__ = ["capture", "surface_normals", "variable_id", "waves_digest"]
 
 
 def variable_id(mod, name: str, label: str) -> int:
@@ -145,12 +149,6 @@ def waves_digest(shader) -> str:
     expanded, its defines applied), its vertex shader's, the declaration (start values, engine
     values, bindings, options, the normal's name and frame) and the bytes of the normal-map
     image it names. A reference built from the shader's waves is cached under it."""
-    import hashlib
-    import json
-    from pathlib import Path
-
-    from .dialects import front_end
-
     text = front_end(shader.source, shader.label, shader.defines, shader.include_paths,
                      preprocess=True)  # fmt: skip
     engine = dict(shader.engine)

@@ -12,7 +12,6 @@ import copy
 import hashlib
 import json
 import math
-import re
 import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -20,9 +19,6 @@ from pathlib import Path
 import numpy as np
 
 from shaders_port.space import parse_fix
-from shaders_port.spirv.probe import waves_digest
-from shaders_port.spirv.user_shader import UserShader
-from shaders_port.spirv.user_vertex import UserVertex
 from shaders_port.variants import get_variant
 
 from .._progress import log
@@ -30,6 +26,7 @@ from . import files as user_files
 from .errors import ExperimentError
 from .files import clip_text, heightmap_floor
 from .floor import floor_height
+from .user_shader import check_user_shader, is_user_shader, shader_waves_digest
 from .schema import (
     FIT_PARAMETERS,
     FLOOR_SHAPES,
@@ -111,149 +108,6 @@ def _check_shaders(values: dict) -> None:
         parse_fix(values["tradeoff.fix"])
     except ValueError as exc:
         raise ExperimentError(str(exc)) from None
-
-
-# the endings engines give a GLSL fragment shader's file (Urho3D's one-file `Water.glsl`,
-# Babylon.js's `water.fragment.fx`, `.fs` / `.fsh` of GLES code bases)
-USER_SHADER_SUFFIXES = (".frag", ".glsl", ".fs", ".fsh", ".fx")
-
-
-def is_user_shader(name: str) -> bool:
-    """Whether ``fit.shader`` names a GLSL file of the user's (one of
-    :data:`USER_SHADER_SUFFIXES`), not a shader of the space."""
-    return str(name).endswith(USER_SHADER_SUFFIXES)
-
-
-def user_declaration(lines: list | None) -> dict:
-    """``fit.declare`` lines as a declaration table of
-    ``shaders_port.spirv.user_shader.UserShader``."""
-    decl: dict = {"constants": {}, "bindings": {}}
-    for line in lines or []:
-        parts = str(line).split()
-        try:
-            if parts[0] == "constant" and len(parts) in (4, 5):
-                decl["constants"][parts[1]] = [float(parts[2]), float(parts[3]), *parts[4:]]
-                continue
-            if parts[0] == "bind" and len(parts) == 3:
-                decl["bindings"][parts[1]] = parts[2]
-                continue
-            if parts[0] == "normal" and len(parts) in (2, 3):
-                decl["normal"] = " ".join(parts[1:])
-                continue
-        except (IndexError, ValueError):
-            pass
-        raise ExperimentError(
-            f"fit.declare: {_clip(line)}: write `constant NAME LOW HIGH [START]`, "
-            "`bind NAME INPUT` or `normal NAME [world|tangent]`"
-        )
-    return decl
-
-
-def load_user_shader(values: dict):
-    """The ``UserShader`` of ``fit.shader`` (a resolved path) and ``fit.declare``, after its
-    ``fit.vertex`` (a resolved path) when set; ExperimentError naming the problem."""
-    vertex = None
-    if values.get("fit.vertex"):
-        try:
-            vdefs = values.get("fit.vertex_defines")
-            vertex = UserVertex.from_file(
-                values["fit.vertex"],
-                values["fit.vertex_grid"],
-                values.get("fit.defines") or () if vdefs is None else vdefs,
-                values.get("fit.include_paths") or (),
-                Path(values["fit.vertex"]).resolve() == Path(values["fit.shader"]).resolve(),
-            )
-        except (ValueError, RuntimeError) as exc:
-            raise ExperimentError(f"fit.vertex: {exc}") from None
-    try:
-        return UserShader.from_file(
-            values["fit.shader"],
-            user_declaration(values["fit.declare"]),
-            values.get("fit.defines") or (),
-            values.get("fit.include_paths") or (),
-            vertex=vertex,
-        )
-    except ValueError as exc:
-        raise ExperimentError(f"fit.shader: {exc}") from None
-
-
-def _shader_waves_digest(values: dict) -> str:
-    """The digest of what makes the waves of ``waves.source = "shader"``
-    (``shaders_port.spirv.probe.waves_digest``): the reference is cached under it."""
-    if not is_user_shader(values["fit.shader"]):
-        raise ExperimentError(
-            f"waves.source = 'shader' takes the waves of your own fit.shader (a .frag file); "
-            f"{values['fit.shader']!r} is a shader of the study's space, whose waves are the "
-            "study's: remove waves.source"
-        )
-    shader = load_user_shader(values)
-    if shader.normal is None:
-        raise ExperimentError(
-            f"waves.source = 'shader': {shader.label} does not name the variable that holds its "
-            "surface normal; add `// @study normal NAME` (world frame) or `// @study normal NAME "
-            "tangent` to it"
-        )
-    try:
-        return waves_digest(shader)
-    except ValueError as exc:
-        raise ExperimentError(f"fit.shader: {exc}") from None
-
-
-def _resolved(value: str, base) -> str:
-    p = Path(value).expanduser()
-    return str((p if p.is_absolute() else (base or Path.cwd()) / p).resolve())
-
-
-def _resolve_vertex(values: dict, base) -> None:
-    """``fit.vertex`` as an absolute path: ``"auto"`` the ``.vert`` beside ``fit.shader`` (a
-    resolved path), else relative to ``base``; ``fit.vertex_grid`` as two ints."""
-    v = values.get("fit.vertex")
-    values["fit.vertex_grid"] = [int(round(c)) for c in values["fit.vertex_grid"]]
-    if not v:
-        return
-    if v == "auto":
-        p = Path(values["fit.shader"]).with_suffix(".vert")
-        if not p.is_file():
-            raise ExperimentError(
-                f'fit.vertex = "auto": no vertex shader {p.name} beside the fragment shader; '
-                "name the file in fit.vertex or unset it (the study's water.vert)"
-            )
-        values["fit.vertex"] = str(p.resolve())
-    else:
-        values["fit.vertex"] = _resolved(v, base)
-
-
-def _check_user_shader(values: dict, base: dict) -> None:
-    """``fit.shader``, ``fit.vertex`` and ``fit.include_paths`` made absolute (relative to the
-    experiment file), ``fit.defines`` checked; the shader read, compiled and its bindings
-    checked (before any reference is rendered)."""
-    values["fit.shader"] = _resolved(values["fit.shader"], base.get("fit.shader"))
-    _resolve_vertex(values, base.get("fit.vertex"))
-    incs = values["fit.include_paths"] or []
-    values["fit.include_paths"] = [_resolved(p, base.get("fit.include_paths")) for p in incs]
-    for p in values["fit.include_paths"]:
-        if not Path(p).is_dir():
-            raise ExperimentError(f"fit.include_paths: no folder {_clip(p)}")
-    for key in ("fit.defines", "fit.vertex_defines"):
-        for d in values[key] or []:
-            if not re.fullmatch(r"[A-Za-z_]\w*(=[^\n]*)?", d) or d.startswith("GL_"):
-                raise ExperimentError(
-                    f'{key}: {_clip(d)} is not "NAME" or "NAME=VALUE" (a preprocessor name: '
-                    "letters, digits and _, not starting with GL_)"
-                )
-    if values["fit.vertex_defines"] is not None and not values["fit.vertex"]:
-        raise ExperimentError("fit.vertex_defines is for your own fit.vertex; set it or remove it")
-    shader = load_user_shader(values)
-    try:
-        shader.check()
-    except ValueError as exc:
-        raise ExperimentError(f"fit.shader: {exc}") from None
-    if values["fit.parameters"] is not None:  # e.g. a shipped experiment's list
-        log(
-            f"experiment: fit.parameters names the study's constants; {shader.label} fits the "
-            f"constants its declaration names ({', '.join(shader.constants)})"
-        )
-        values["fit.parameters"] = None
 
 
 def fit_parameters(shader_name: str, listed: list | None) -> list[str]:
@@ -557,7 +411,7 @@ def validate(raw: dict, overrides: list[str] | None = None, path: Path | None = 
             'renders; use that method or fit.input_noise = "ignore"'
         )
     if is_user_shader(values["fit.shader"]):
-        _check_user_shader(values, base)
+        check_user_shader(values, base)
     elif values["fit.vertex"]:
         raise ExperimentError(
             "fit.vertex is the vertex shader of your own fit.shader (a .frag, .glsl, .fs, .fsh "
@@ -583,7 +437,7 @@ def validate(raw: dict, overrides: list[str] | None = None, path: Path | None = 
         values[key] = user_files.resolve(key, values[key], base.get(key))
     digests = user_files.check_files(values)
     if values["waves.source"] == "shader":
-        digests["waves.source"] = _shader_waves_digest(values)
+        digests["waves.source"] = shader_waves_digest(values)
     _check_ledge(values)
     n = values["reference.sky_directions"]
     if round(n**0.5) ** 2 != n:

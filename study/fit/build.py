@@ -9,7 +9,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..config.experiment import Experiment, is_user_shader, load_user_shader
+from ..config.experiment import Experiment
+from ..config.user_shader import is_user_shader, load_user_shader
 from .model import ShaderModel
 from .protocol import ImageModel
 from .spirv_model import SpirvModel

@@ -17,7 +17,8 @@ import numpy as np
 
 from shaders_port.spirv.dialects import ShaderError
 
-from ..config.experiment import Experiment, load_user_shader
+from ..config.experiment import Experiment
+from ..config.user_shader import load_user_shader
 from .model import ReferenceModel, at_resolution
 
 

@@ -36,7 +36,8 @@ from shaders_port.variants import get_variant
 
 from .._backend import jit_input
 from .._io import disk_full
-from ..config.experiment import Experiment, is_user_shader, load_user_shader
+from ..config.experiment import Experiment
+from ..config.user_shader import is_user_shader, load_user_shader
 from .cache import SCENE_VERSION, cache_dir, versions
 from .geometry import envmap_image, sky_radiance
 from .mitsuba_scene import build_geometry, sky_params

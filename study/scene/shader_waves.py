@@ -37,7 +37,8 @@ import numpy as np
 from shaders_port import ShaderInputs, perspective_view_proj
 from shaders_port.spirv.probe import surface_normals
 
-from ..config.experiment import Experiment, load_user_shader
+from ..config.experiment import Experiment
+from ..config.user_shader import load_user_shader
 from .geometry import Waves
 
 _SURFACES: dict = {}  # scene hash -> ShaderWaves (the last few)

@@ -68,7 +68,8 @@ from shaders_port.variants import get_variant
 from .._backend import drjit_backend
 from .._io import write_json
 from .._metrics import flip_map
-from ..config.experiment import is_user_shader, load_experiments, load_user_shader
+from ..config.experiment import load_experiments
+from ..config.user_shader import is_user_shader, load_user_shader
 from ..fit.build import build_model
 from ..fit.model import constants_from_experiment, constants_json
 from ..report.failures import failures_figure, scenes_of, write_failures_report

@@ -30,7 +30,7 @@ import numpy as np
 
 from .._backend import drjit_backend
 from .._metrics import errors
-from ..config.experiment import is_user_shader, load_user_shader
+from ..config.user_shader import is_user_shader, load_user_shader
 from ..fit.build import build_model
 from ..fit.calibrate import DISCRETE, calibrate_experiment, make_problem, scene_frozen
 from ..fit.losses import transformed

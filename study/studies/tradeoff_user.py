@@ -33,7 +33,7 @@ from shaders_port.spirv import dialects
 
 from .._io import write_text_atomic
 from .._metrics import erode, errors, information_criteria
-from ..config.experiment import is_user_shader, load_user_shader
+from ..config.user_shader import is_user_shader, load_user_shader
 from ..export.gl_check import gl_check_user
 from ..fit.build import build_model
 from ..fit.calibrate import calibrate_experiment
