@@ -11,7 +11,9 @@ The page is generated from committed ``constants.json`` files:
   known factor on the reference's waves, for the shader's normal-strength constant to recover);
 * ``docs/results/own-waves/<name>-animated-<source>/``: an animated calibration, both sources.
 
-The figure (``glints.png``) is drawn from two run folders' ``reference.exr`` and ``fitted.exr``:
+The figure (``glints.png``) and its scores (``glints.json``) come from two run folders'
+``reference.exr`` and ``fitted.exr`` (``study calibrate experiments/dudv_depth_water.toml``,
+without and with ``--set waves.source=shader``):
 ``python scripts/docs_own_waves.py STUDY_RUN OWN_RUN docs/results/own-waves/glints.png``.
 """
 
@@ -26,6 +28,7 @@ OWN_WAVES = ("webgl_mirror_water", "dudv_depth_water", "fog_cube_water", "zup_wa
 # (experiment, its normal-strength constant) whose fit at waves.height_scale 1.3 is committed
 RECOVERY = (("my_water", "BUMP"), ("zup_water", "bumpscale"))
 ANIMATED = "zup_water"
+GLINTS = "dudv_depth_water"  # the shader of the glints' figure
 
 
 def _json(path: Path) -> dict:
@@ -86,10 +89,25 @@ def own_waves_page(results: Path) -> str:
             f"({pb['status']}) | {pb['fitted'] / pa['fitted']:.4f} | {ses} |"
         )
     lines += _animated_lines(own)
-    if (own / "glints.png").is_file():
+    if (own / "glints.json").is_file():
+        g = _json(own / "glints.json")
         lines += [
             "",
             "## Where the glints land",
+            "",
+            f"`{GLINTS}` fitted against each reference (the middle rows of the image, where the "
+            "sun's glints are). A glint is a pixel brighter than the "
+            f"{g['percentile']:g}th percentile of its image's water; one is matched when the "
+            f"other image has one within {g['radius_px']} pixels.",
+            "",
+            "| reference's waves | shader's glints on one of the reference's | reference's "
+            "glints the shader has |",
+            "|---|---|---|",
+        ]
+        for label, sc in g["scores"].items():
+            p, r = 100 * sc["precision"], 100 * sc["recall"]
+            lines.append(f"| {label} | {p:.1f} % | {r:.1f} % |")
+        lines += [
             "",
             "![reference, fitted shader and their difference, with the study's waves (top) and "
             "the shader's own (bottom)](glints.png)",
@@ -125,8 +143,37 @@ def _animated_lines(own: Path) -> list[str]:
     return lines
 
 
-def glints_figure(study_run: Path, own_run: Path, out: Path) -> None:
-    """``out`` (PNG): reference | fitted | absolute difference of the two runs (rows), sRGB."""
+GLINT_PERCENTILE = 99.0  # a glint: a pixel brighter than this percentile of its image
+GLINT_RADIUS = 2  # pixels: a glint is matched when the other image has one this close
+
+
+def glint_match(ref, img, mask) -> dict:
+    """How well the glints of ``img`` land on those of ``ref`` ((H, W, 3) linear RGB) on the
+    pixels ``mask``: each image's glints are its pixels above :data:`GLINT_PERCENTILE` of its
+    luminance there; ``precision``: the fraction of ``img``'s glints with one of ``ref``'s
+    within :data:`GLINT_RADIUS` pixels; ``recall``: the fraction of ``ref``'s with one of
+    ``img``'s."""
+    import numpy as np
+    from scipy.ndimage import binary_dilation
+
+    def glints(x):
+        lum = x @ np.array([0.2126, 0.7152, 0.0722])
+        return mask & (lum > np.percentile(lum[mask], GLINT_PERCENTILE))
+
+    a, b = glints(ref), glints(img)
+    near = np.ones((2 * GLINT_RADIUS + 1,) * 2, bool)
+    return {
+        "precision": float((b & binary_dilation(a, near)).sum() / max(b.sum(), 1)),
+        "recall": float((a & binary_dilation(b, near)).sum() / max(a.sum(), 1)),
+        "glints": [int(a.sum()), int(b.sum())],
+    }
+
+
+def glints_figure(study_run: Path, own_run: Path, out: Path) -> dict:
+    """``out`` (PNG): reference | fitted | absolute difference of the two runs (rows), sRGB,
+    the middle of the image where the sun's glints are; and ``out`` with ``.json``: the
+    :func:`glint_match` of each run on its water pixels (its ``reference.exr``'s finite,
+    fitted non-zero pixels)."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -135,13 +182,19 @@ def glints_figure(study_run: Path, own_run: Path, out: Path) -> None:
 
     from study._io import read_exr, to_srgb
 
-    fig, axes = plt.subplots(2, 3, figsize=(9, 6.2))
+    fig, axes = plt.subplots(2, 3, figsize=(9, 4.4))
+    scores = {}
     for row, (run, label) in enumerate(((study_run, "study's waves"), (own_run, "own waves"))):
         ref, fit = (read_exr(run / f)[0][..., :3] for f in ("reference.exr", "fitted.exr"))
-        diff = np.abs(fit - ref).mean(-1)
+        mask = np.isfinite(ref).all(-1) & (fit.max(-1) > 0)
+        scores[label] = glint_match(ref, fit, mask)
+        h, w = ref.shape[:2]
+        crop = (slice(h // 4, 3 * h // 5), slice(w // 8, 7 * w // 8))
+        diff = np.abs(fit - ref).mean(-1)[crop]
         for col, (img, title) in enumerate(
-            ((to_srgb(ref), "reference"), (to_srgb(fit), "fitted shader"), (diff, "|difference|"))
-        ):
+            ((to_srgb(ref[crop]), "reference"), (to_srgb(fit[crop]), "fitted shader"),
+             (diff, "|difference|"))
+        ):  # fmt: skip
             ax = axes[row, col]
             ax.imshow(img, cmap="magma" if img.ndim == 2 else None, vmin=0, vmax=0.5)
             ax.set_title(f"{title}, {label}", fontsize=9)
@@ -149,6 +202,10 @@ def glints_figure(study_run: Path, own_run: Path, out: Path) -> None:
     fig.tight_layout()
     fig.savefig(out, dpi=90)
     plt.close(fig)
+    record = {"study_run": study_run.name, "own_run": own_run.name, "scores": scores,
+              "percentile": GLINT_PERCENTILE, "radius_px": GLINT_RADIUS}  # fmt: skip
+    out.with_suffix(".json").write_text(json.dumps(record, indent=2) + "\n")
+    return record
 
 
 if __name__ == "__main__":

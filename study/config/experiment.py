@@ -437,7 +437,7 @@ def validate(raw: dict, overrides: list[str] | None = None, path: Path | None = 
         values[key] = user_files.resolve(key, values[key], base.get(key))
     digests = user_files.check_files(values)
     if values["waves.source"] == "shader":
-        digests["waves.source"] = shader_waves_digest(values)
+        digests["waves.surface"] = shader_waves_digest(values)  # what draws the waves
     _check_ledge(values)
     n = values["reference.sky_directions"]
     if round(n**0.5) ** 2 != n:
