@@ -103,11 +103,11 @@ def own_waves_page(results: Path) -> str:
     lines += [
         "",
         "A ratio off by more than its standard errors says the fit does not find the constant "
-        "that makes the shader's normals the reference's: its loss along the constant has "
-        "plateaus (a refracted lookup of a nearest-sampled texture, as `my_water.frag`'s floor "
-        "height, jumps from texel to texel), and from a noise-free target of its own image the "
-        "solver can stop short of the truth (`tests/test_shader_waves.py` fits a shader whose "
-        "lookups are all bilinear).",
+        "that makes the shader's normals the reference's, and then the fit is the weak link, "
+        "not the reference: fitted to a noise-free image of its own, `my_water.frag` also stops "
+        "short of its true `BUMP` (its loss falls only slowly over a stretch below the truth, "
+        "where the solver's stopping rule ends the fit), where a shader whose lookups are all "
+        "bilinear is recovered exactly (`tests/test_shader_waves.py`).",
     ]
     lines += _animated_lines(own)
     if (own / "glints.json").is_file():
