@@ -290,7 +290,7 @@ def test_normal_strength_recovers_a_known_factor_on_the_waves(tmp_path):
     """Against path-traced references of the Z-up engine water's own waves, as they are and 1.3
     times as steep (``waves.height_scale``): its ``bumpscale`` (a factor on its normals'
     slopes) fitted against the steeper one, divided by the one fitted against its own, is 1.3
-    within 2 %."""
+    within 2 % (two calibrations of experiments/zup_water.toml, minutes)."""
     import json
     import subprocess
     import sys
@@ -300,8 +300,9 @@ def test_normal_strength_recovers_a_known_factor_on_the_waves(tmp_path):
     fitted = []
     for scale in (1.0, 1.3):
         out = tmp_path / f"x{scale}"
-        over = ["resolution=[128,128]", "fit.resolution=[64,64]", "reference.spp=96",
-                "waves.source=shader", f"waves.height_scale={scale}"]  # fmt: skip
+        # the experiment as it ships (256x256, fit at 128x128): at 128x128 (fit at 64x64) the
+        # ratio was measured at 1.10, the waves' glints too few pixels to pin bumpscale
+        over = ["waves.source=shader", f"waves.height_scale={scale}"]
         exp = str(REPO / "experiments" / "zup_water.toml")
         args = [sys.executable, "-m", "study.cli", "calibrate", exp, "--out", str(out)]
         run = subprocess.run(
