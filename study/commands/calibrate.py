@@ -14,6 +14,7 @@ from ..fit.calibrate import calibrate_model, scene_frozen, timed
 from ..fit.decorrelated import half_models, texture_half_models
 from ..fit.solvers import SOLVERS
 from ..scene.frames import is_animated
+from ..scene.views import has_views
 from .animated import run_calibrate_animated
 from .joint import run_calibrate_joint
 from .steps import (
@@ -47,6 +48,8 @@ def run_calibrate(experiment, out, overrides=None, variant=None, solver=None, ca
     setup_s = time.perf_counter() - t_start
     solver = solver or exp.fit.solver
 
+    if has_views(exp):  # one constants block over the views: the joint fit's path
+        return run_calibrate_joint([experiment], out, overrides, variant, solver, cache)
     if is_animated(exp):
         return run_calibrate_animated(exp, variant, out, solver, cache, setup_s)
     ref, inputs, timings = load_scene_data(exp, variant, cache)

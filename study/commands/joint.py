@@ -18,7 +18,11 @@ from ..fit.joint import JointModel, joint_calibrate, leave_one_out, universality
 from ..fit.model import constants_json
 from ..fit.result import CalibrationResult, glsl_renamed, jsonable
 from ..report.generalise import write_generalise_report, write_joint_report
+from ..scene.baseline_inputs import inputs_for_shader
 from ..scene.frames import refuse_animated
+from ..scene.reference import load_or_render
+from ..scene.shader_inputs import load_or_build_shader_inputs
+from ..scene.views import has_views, view_experiments, view_inputs
 from .steps import export_calibration, load_scene_data
 from .viewer import write_viewer
 
@@ -31,27 +35,39 @@ def load_scenes(experiments, overrides, variant, cache):
     exps = [load_experiment(e, overrides) for e in experiments]
 
     for exp in exps:
-        refuse_animated(exp, "a fit over several experiments")
+        if not has_views(exp):
+            refuse_animated(exp, "a fit over several experiments")
+    views = [view_experiments(exp) for exp in exps]  # refuses views of an animation
     variant = init_backend(variant or exps[0].variant)
     scenes, seen = [], {}
-    for path, exp in zip(experiments, exps):
+    for path, exp, its_views in zip(experiments, exps, views):
         name = exp.name
         seen[name] = seen.get(name, 0) + 1
         if seen[name] > 1:
             name = f"{name}#{seen[name]}"
-        ref, inputs, _ = load_scene_data(exp, variant, cache)
-        model = build_model(exp, inputs, ref.image, backend=drjit_backend(variant))
-        scenes.append(
-            {
-                "name": name,
-                "path": str(path),
-                "exp": exp,
-                "ref": ref,
-                "inputs": inputs,
-                "model": model,
-                "frozen": scene_frozen(exp),
-            }
-        )
+        base = None  # the first view's inputs: the scene's for every view
+        for k, view in enumerate(its_views):
+            if len(its_views) == 1:
+                ref, inputs, _ = load_scene_data(view, variant, cache)
+            else:
+                _log(f"{name}: view {k + 1}/{len(its_views)}, camera at {view.camera.position}")
+                ref = load_or_render(view, variant, cache=cache, log=_log)
+                if base is None:
+                    base = load_or_build_shader_inputs(view, variant, cache=cache, log=_log)
+                inputs = inputs_for_shader(view, view_inputs(view, base), view.fit.shader,
+                                           variant, cache=cache, log=_log)  # fmt: skip
+            model = build_model(view, inputs, ref.image, backend=drjit_backend(variant))
+            scenes.append(
+                {
+                    "name": f"{name}/view{k}" if len(its_views) > 1 else name,
+                    "path": str(path),
+                    "exp": view,
+                    "ref": ref,
+                    "inputs": inputs,
+                    "model": model,
+                    "frozen": scene_frozen(view),
+                }
+            )
     return variant, scenes
 
 
@@ -146,9 +162,12 @@ def run_generalise(experiments, out, overrides=None, variant=None, solver=None, 
     leave-one-scene-out validation (each scene scored under the seed's constants, the constants
     fitted on the other scenes and its own fit) and the universal/scene-specific verdict per
     constant; generalise.json and generalise.md."""
-    if len(experiments) < 2:
-        raise ValueError("study generalise needs at least two experiments (leave-one-scene-out)")
     variant, scenes = load_scenes(experiments, overrides, variant, cache)
+    if len(scenes) < 2:
+        raise ValueError(
+            "study generalise needs at least two experiments or views (camera.views) to leave "
+            "one out"
+        )
     out = Path(out)
     joint, cal, evaluate = joint_fit(scenes, variant, out, solver)
     first = scenes[0]["exp"]
@@ -164,12 +183,17 @@ def run_generalise(experiments, out, overrides=None, variant=None, solver=None, 
         log=_log,
     )
     uni = universality({r["scene"]: r["own_calibration"] for r in rows}, cal)
+    # the first scene's own constants on every scene: what a block fitted on one view (or
+    # scene) loses on the others
+    index = {s["name"]: i for i, s in enumerate(scenes)}
+    first = next(r for r in rows if r["scene"] == scenes[0]["name"])["own_calibration"].fitted
     table = [
         {
             "scene": r["scene"],
             "seed": r["seed"],
             "others": r["others"],
             "own": r["own"],
+            "first": evaluate(index[r["scene"]], first),
             "own_constants": {n: p["fitted"] for n, p in r["own_calibration"].parameters.items()},
             "own_status": {n: p["status"] for n, p in r["own_calibration"].parameters.items()},
         }

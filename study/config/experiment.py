@@ -88,6 +88,7 @@ _LATER_KEYS = (
     "waves.height_scale",
     "waves.shader_grid",
     "waves.time",
+    "camera.views",
 )
 
 
@@ -238,6 +239,14 @@ def _check(key: str, f: Field, v):
         ):
             bad(f"expected 4 pairs of numbers, got {_clip(v)}")
         return [[num(x) for x in r] for r in v]
+    if k == "views":
+        shape_ok = isinstance(v, list) and all(
+            isinstance(w, list) and len(w) == 2 and all(isinstance(p, list) and len(p) == 3
+                                                        for p in w) for w in v
+        )  # fmt: skip
+        if not shape_ok:
+            bad(f"expected a list of [[x, y, z], [x, y, z]] (position, target), got {_clip(v)}")
+        return [[[num(x) for x in p] for p in w] for w in v]
     if k == "list_str":
         if not isinstance(v, list) or not all(isinstance(x, str) for x in v):
             bad(f"expected a list of strings, got {_clip(v)}")
@@ -432,6 +441,12 @@ def validate(raw: dict, overrides: list[str] | None = None, path: Path | None = 
         raise ExperimentError("camera.position equals camera.target; move one of them")
     if values["camera.position"][1] <= 0.0:
         raise ExperimentError("camera.position: the camera must be above the water plane (y > 0)")
+    for i, (position, target) in enumerate(values["camera.views"]):
+        if position[1] <= 0.0 or position == target:
+            raise ExperimentError(
+                f"camera.views[{i}] = {[position, target]}: a view's position must be above the "
+                "water plane (y > 0) and differ from its target"
+            )
 
     for key in user_files.FILE_KEYS:
         values[key] = user_files.resolve(key, values[key], base.get(key))

@@ -13,7 +13,7 @@ class Field:
     """One experiment key: its kind, default, meaning, units and allowed range or choices."""
 
     kind: str  # float, int, str, bool, vec2, vec3, vec2x4, int_or_auto, list_str, list_float,
-    # path, extent
+    # path, extent, views
     default: object
     doc: str
     units: str = ""
@@ -37,6 +37,14 @@ SCENE_KEYS: dict[str, Field] = {
     "camera.position": Field("vec3", [0.0, 3.2, 6.5], "Camera position.", "world units"),
     "camera.target": Field("vec3", [0.0, -1.0, 0.0], "Point the camera looks at.", "world units"),
     "camera.fov_y": Field("float", 45.0, "Vertical field of view.", "degrees", 1.0, 170.0),
+    "camera.views": Field(
+        "views",
+        [],
+        "More views of the same scene, each [position, target] like camera.position and "
+        "camera.target (the first view): `study calibrate` fits one constants block over all "
+        "views, `study generalise` leaves each out in turn. [] = the one view.",
+        "world units",
+    ),
     "pool.half_extent": Field(
         "vec2", [4.0, 4.0], "Half size of the water surface in x and z.", "world units", 0.1, 1000.0
     ),
