@@ -96,6 +96,7 @@ def _tradeoff_summary(folder: Path) -> dict:
 def generated() -> dict[Path, str]:
     """Every generated page: path -> its Markdown."""
     from study.report.animation import animation_report_text
+    from study.report.generalise import generalise_report_text
     from study.report.stability import stability_report_text
     from study.report.tradeoff import tradeoff_report_text
     from study.config.experiment import schema_markdown
@@ -128,6 +129,9 @@ def generated() -> dict[Path, str]:
     pages.update(_default_run_pages(RESULTS / "default"))
     pages[RESULTS / "engine-shaders" / "report.md"] = _engine_pairs_page(RESULTS / "engine-shaders")
     pages[RESULTS / "own-waves" / "report.md"] = own_waves_page(RESULTS)
+    pages[RESULTS / "views" / "generalise.md"] = generalise_report_text(
+        _json(RESULTS / "views" / "generalise.json")
+    )
     return pages
 
 

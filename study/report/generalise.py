@@ -95,6 +95,15 @@ def universality_table(uni: dict, scenes: list[str]) -> list[str]:
 
 
 def write_generalise_report(out: Path, summary: dict) -> Path:
+    """``out/generalise.md`` (:func:`generalise_report_text`)."""
+    path = Path(out) / "generalise.md"
+    write_text_atomic(path, generalise_report_text(summary))
+    return path
+
+
+def generalise_report_text(summary: dict) -> str:
+    """The Markdown of ``generalise.md`` from ``generalise.json``'s content (also the docs'
+    generated page)."""
     lines = [
         "# Constants that generalise",
         "",
@@ -117,6 +126,4 @@ def write_generalise_report(out: Path, summary: dict) -> Path:
     ]
     lines += universality_table(summary["universality"], summary["scenes"]) + [""]
     lines += ["", "---", ""] + joint_lines(summary["joint"])
-    path = Path(out) / "generalise.md"
-    write_text_atomic(path, "\n".join(lines))
-    return path
+    return "\n".join(lines)
