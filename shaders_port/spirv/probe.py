@@ -31,6 +31,7 @@ from . import translated as spirv_port
 from .dialects import ShaderError, front_end
 from .engine_inputs import UP_Z
 from .execute import Executor
+from .loops import check_passes
 from .ops import lift
 
 __all__ = ["capture", "surface_normals", "variable_id", "waves_digest"]
@@ -69,6 +70,7 @@ def _captured(m, P, b: dict, spec, C, name: str) -> np.ndarray:
     ex = Executor(mod, m, b)
     try:
         ex.run()
+        check_passes(mod, dict(ex.passes), spec.label)  # a loop stopped at its bound: an error
         value = ex.vars.get(vid)
         if value is None:
             raise ShaderError(f"{spec.label}: the variable {name!r} is never written")
@@ -114,7 +116,7 @@ def surface_normals(shader, inputs, values: dict | None = None, backend: str = "
     normal is not finite, has no length or points down."""
     if shader.normal is None:
         raise ShaderError(
-            f"{shader.label}: waves.from = 'shader' needs the variable that holds the surface "
+            f"{shader.label}: waves.source = 'shader' needs the variable that holds the surface "
             "normal: declare it with `// @study normal NAME [world|tangent]`"
         )
     name, frame = shader.normal
