@@ -71,16 +71,36 @@ def test_calibrate_and_generalise_over_views(tmp_path):
     out = tmp_path / "gen"
     assert main(["generalise", exp, "--out", str(out), *sets(TINY + [TWO_VIEWS])]) == 0
     gen = json.loads((out / "generalise.json").read_text())
-    assert gen["scenes"] == ["default/view0", "default/view1"]
+    assert gen["scenes"] == ["default-view0", "default-view1"]
     for r in gen["leave_one_out"]:
         for k in ("seed", "others", "own", "first"):
             assert 0 <= r[k]["flip"] <= 1
     # the first view's own fit, scored on the first view, is its own fit
     row0 = gen["leave_one_out"][0]
     assert row0["first"] == row0["own"]
-    assert "default/view0's fit" in (out / "generalise.md").read_text()
+    assert "default-view0's fit" in (out / "generalise.md").read_text()
     one = tmp_path / "one"
     assert main(["calibrate", exp, "--out", str(one), *sets(TINY + [TWO_VIEWS])]) == 0
     joint = json.loads((one / "constants.json").read_text())
-    assert joint["scenes"] == ["default/view0", "default/view1"]
+    assert joint["scenes"] == ["default-view0", "default-view1"]
     assert joint["constants"] == gen["joint"]["constants"]  # the same joint fit
+
+
+@pytest.mark.slow
+def test_the_tradeoff_judges_its_shaders_on_every_view(tmp_path):
+    """``study tradeoff`` on an experiment with two views: one scene per view, the
+    recommendation judged over both (the study's joint points)."""
+    from study.cli import main
+
+    tiny = SMALL_OVERRIDES + [
+        'tradeoff.variants=["water_refraction"]', "tradeoff.steps_grazing=[5.0]",
+        "tradeoff.steps_steep=[3.0]", "tradeoff.loop_cap=[20]", "tradeoff.scales=[0.5,1.0]",
+        "tradeoff.converged_scale=2.0", "tradeoff.gl_repeats=1", "fit.max_steps=3", TWO_VIEWS,
+    ]  # fmt: skip
+    out = tmp_path / "t"
+    args = ["tradeoff", str(DEFAULT), "--out", str(out), "--workers", "1",
+            "--search", "exhaustive", *sets(tiny)]  # fmt: skip
+    assert main(args) == 0
+    summary = json.loads((out / "summary.json").read_text())
+    assert sorted(summary["scenes"]) == ["default-view0", "default-view1"]
+    assert all(summary["scenes"][n]["recommended"] for n in summary["scenes"])

@@ -59,7 +59,7 @@ def load_scenes(experiments, overrides, variant, cache):
             model = build_model(view, inputs, ref.image, backend=drjit_backend(variant))
             scenes.append(
                 {
-                    "name": f"{name}/view{k}" if len(its_views) > 1 else name,
+                    "name": view.name if len(its_views) > 1 else name,
                     "path": str(path),
                     "exp": view,
                     "ref": ref,

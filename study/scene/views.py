@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import copy
 import dataclasses
+import json
 
 import numpy as np
 
@@ -34,9 +35,21 @@ def has_views(exp: Experiment) -> bool:
     return bool(exp.camera.views)
 
 
+def view_overrides(exp: Experiment, k: int) -> list[str]:
+    """The ``--set`` overrides that make ``exp`` its view ``k`` (:func:`view_experiments`): its
+    camera, ``camera.views`` = [] and the name ``<name>-view<k>``."""
+    position, target = [[exp.camera.position, exp.camera.target], *exp.camera.views][k]
+    return [
+        f"camera.position={json.dumps(list(position))}",
+        f"camera.target={json.dumps(list(target))}",
+        "camera.views=[]",
+        f"name={json.dumps(f'{exp.name}-view{k}')}",
+    ]
+
+
 def view_experiments(exp: Experiment) -> list[Experiment]:
     """``[exp]`` for one view; else one still experiment per view, the first ``exp``'s own
-    camera, each with ``camera.views`` = []."""
+    camera, each with ``camera.views`` = [] and named ``<name>-view<k>``."""
     if not has_views(exp):
         return [exp]
     if is_animated(exp):
@@ -46,10 +59,12 @@ def view_experiments(exp: Experiment) -> list[Experiment]:
             "view (--set camera.views=[])"
         )
     out = []
-    for position, target in [[exp.camera.position, exp.camera.target], *exp.camera.views]:
+    views = [[exp.camera.position, exp.camera.target], *exp.camera.views]
+    for k, (position, target) in enumerate(views):
         values = copy.deepcopy(exp.values)
         values["camera.position"], values["camera.target"] = list(position), list(target)
         values["camera.views"] = []
+        values["name"] = f"{exp.name}-view{k}"
         out.append(Experiment(values, exp.path, dict(exp.digests)))
     return out
 

@@ -61,6 +61,7 @@ from ..report.tradeoff import pareto_figure, write_tradeoff_report
 from ..report.tradeoff_motion import motion_figure
 from ..scene.baseline_inputs import inputs_for_shader
 from ..scene.frames import is_animated
+from ..scene.views import has_views, view_experiments, view_overrides
 from ..sweep import load_scene, run_sweep, scene_spec
 from .search import Search
 from .tradeoff_analysis import COSTS, analyse, config_label, constants_of, is_user, point_record
@@ -127,7 +128,14 @@ def run_tradeoff(
     measure -> limit (``fetches_mean``, ``gl_norm_ms_1080p``): recommend the lowest FLIP
     within it."""
 
-    exps = load_experiments(experiments, overrides)
+    # an experiment with several views (camera.views) is one scene per view: the study judges
+    # its shaders on every view, as on several scenes
+    views = [
+        (p, v, view_overrides(e, k) if has_views(e) else [])
+        for p, e in zip(experiments, load_experiments(experiments, overrides))
+        for k, v in enumerate(view_experiments(e))
+    ]
+    experiments, exps = [p for p, _, _ in views], [v for _, v, _ in views]
     names = [e.name for e in exps]
     tol = exps[0].tradeoff.tolerance if tolerance is None else float(tolerance)
     if tol < 0:
@@ -142,8 +150,8 @@ def run_tradeoff(
     # (an animated experiment's frame 0 as a still: the search and the fits run there)
     plain = [o for o in overrides or [] if o.split("=", 1)[0].strip() not in PLAN_KEYS]
     specs = [
-        scene_spec(p, still_overrides(plain) if is_animated(e) else plain)
-        for p, e in zip(experiments, exps)
+        scene_spec(p, (still_overrides(plain) if is_animated(e) else plain) + extra)
+        for p, e, (_, _, extra) in zip(experiments, exps, views)
     ]
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
