@@ -95,7 +95,7 @@ def test_the_tradeoff_judges_its_shaders_on_every_view(tmp_path):
     tiny = SMALL_OVERRIDES + [
         'tradeoff.variants=["water_refraction"]', "tradeoff.steps_grazing=[5.0]",
         "tradeoff.steps_steep=[3.0]", "tradeoff.loop_cap=[20]", "tradeoff.scales=[0.5,1.0]",
-        "tradeoff.converged_scale=2.0", "tradeoff.gl_repeats=1", "fit.max_steps=3", TWO_VIEWS,
+        "tradeoff.converged_scale=2.0", "tradeoff.gl_repeats=3", "fit.max_steps=3", TWO_VIEWS,
     ]  # fmt: skip
     out = tmp_path / "t"
     args = ["tradeoff", str(DEFAULT), "--out", str(out), "--workers", "1",
