@@ -99,7 +99,7 @@ def shader_waves_digest(values: dict) -> str:
         raise ExperimentError(
             f"waves.source = 'shader': {shader.label} does not name the variable that holds its "
             "surface normal; add `// @study normal NAME` (world frame) or `// @study normal NAME "
-            "tangent` to it"
+            "tangent` to it, or `normal NAME` to fit.declare"
         )
     try:
         return waves_digest(shader)
