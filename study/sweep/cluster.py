@@ -55,10 +55,23 @@ class BackendPlugin(WorkerPlugin):
         import drjit as dr
 
         dr.set_thread_count(self.threads or cpu_count())  # 0: every core of the worker's machine
+        self._beating = False
+        beat = getattr(worker, "periodic_callbacks", {}).get("heartbeat")
+        if beat is not None:  # the heartbeat, marked while it runs (see teardown)
+            heartbeat = beat.callback
+
+            async def marked():
+                self._beating = True
+                try:
+                    await heartbeat()
+                finally:
+                    self._beating = False
+
+            beat.callback = marked
 
     async def teardown(self, worker=None):
-        """On a worker's close, stop its heartbeat and let one in flight get its answer before
-        the worker shuts its connections. ``Worker.close`` removes plugins first and stops the
+        """On a worker's close, stop its heartbeat and let one under way finish before the
+        worker shuts its connections. ``Worker.close`` removes plugins first and stops the
         heartbeat and closes its connection pool after; a heartbeat sent just before reads from a
         connection closed under it, and distributed logs that as an error with a traceback (its
         worker does not wait for the heartbeat on close, an open race upstream). The wait is
@@ -73,9 +86,8 @@ class BackendPlugin(WorkerPlugin):
         beat = worker.periodic_callbacks.get("heartbeat")
         if beat is not None:
             beat.stop()
-        address = worker.scheduler.address
         deadline = time.monotonic() + HEARTBEAT_WAIT_S
-        while worker.rpc.occupied.get(address) and time.monotonic() < deadline:
+        while getattr(self, "_beating", False) and time.monotonic() < deadline:
             await asyncio.sleep(0.01)
 
 
