@@ -42,7 +42,8 @@ SCENE_KEYS: dict[str, Field] = {
         [],
         "More views of the same scene, each [position, target] like camera.position and "
         "camera.target (the first view): `study calibrate` fits one constants block over all "
-        "views, `study generalise` leaves each out in turn. [] = the one view.",
+        "views, `study generalise` leaves each out in turn, `study tradeoff` judges its shaders "
+        "on every view; other commands use the first. [] = the one view.",
         "world units",
     ),
     "pool.half_extent": Field(
@@ -220,8 +221,9 @@ SCENE_KEYS: dict[str, Field] = {
     "waves.time": Field(
         "float",
         0.0,
-        "With waves.source = shader: the shader's `time` at which its waves are read (frame k "
-        "of an animated experiment sets k * animation.time_step).",
+        "The clock a user's shader reads as `time` on a still frame and frame 0 (frame k of an "
+        "animated experiment: waves.time + k * animation.time_step); with waves.source = "
+        "shader, the reference's waves are read at it too.",
         "seconds",
         0.0,
         1e6,
