@@ -53,10 +53,12 @@ def own_waves_page(results: Path) -> str:
         "",
         "The reference of each shader's own waves is the surface whose normals the shader "
         "computes at its start values, integrated in least squares; the curl is the angle "
-        "between the shader's normals and that surface's (what no surface has). A steep "
-        "surface (an RMS slope near 1 is a storm) refracts and reflects in ways a "
-        "screen-space shader cannot follow: its fit then flattens the normals (the "
-        "normal-strength constant fitted, last column) and gains error by blurring.",
+        "between the shader's normals and that surface's (what no surface has). Against its "
+        "own waves a shader's fit may still lower its normal strength (last column): what it "
+        "shades with its normals (a distorted mirror, a refraction buffer without the water's "
+        "caustics) does not make the reference's glitter and caustics, and flatter normals "
+        "lower the error by blurring, the more so the steeper the surface (an RMS slope near 1 "
+        "is a storm).",
         "",
         "| experiment | FLIP fitted, study's waves | FLIP fitted, own waves | RMSE fitted, "
         "study's -> own | curl, mean (99th pct.) | RMS slope of its surface | normal constant: "
