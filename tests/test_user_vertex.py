@@ -394,3 +394,22 @@ def test_one_file_experiment_keys(tmp_path):
         load_experiment(MY_WATER, keys[:1] + keys[2:4] + keys[5:])
     with pytest.raises(ExperimentError, match="fit.vertex_defines: '1X' is not \"NAME\""):
         load_experiment(MY_WATER, keys[:3] + ['fit.vertex_defines=["1X"]'] + keys[5:])
+
+
+def test_a_one_file_pairs_constants_json_keeps_its_stages_defines(tmp_path):
+    """``study export`` of a one-file pair reads its vertex stage with that stage's defines
+    (``vertex_defines``) and as the shared file it is, as the calibration compiled it."""
+    from study.export.shaders import user_shader_of
+
+    path = SHADERS / "one_file_water.glsl"
+    data = {"shader": path.name, "shader_file": str(path), "defines": ["COMPILEPS", "PS=main"],
+            "vertex_file": str(path), "vertex_grid": [8, 6],
+            "vertex_defines": list(_one_file().vertex.shader.defines)}  # fmt: skip
+    (tmp_path / "constants.json").write_text(json.dumps(data))
+    shader = user_shader_of(tmp_path / "constants.json")
+    assert shader.vertex.shader.defines == ("COMPILEVS", "VS=main")
+    assert shader.vertex.shader.values == {"cTiling": (0.5,), "cBias": (0.25, 0.5)}
+    del data["vertex_defines"]  # unset, as fit.vertex_defines: the fragment stage's
+    (tmp_path / "constants.json").write_text(json.dumps(data))
+    assert user_shader_of(tmp_path / "constants.json").vertex.shader.defines == (
+        "COMPILEPS", "PS=main")  # fmt: skip

@@ -171,7 +171,8 @@ def _describe(t: tuple) -> str:
 
 class VertexShader:
     """A user's vertex shader file (see the module doc): ``source``, ``label`` (file name),
-    ``bindings`` (declared name -> meaning or engine name, from its pragmas)."""
+    ``bindings`` (declared name -> meaning or engine name, from its pragmas), ``defines`` (the
+    preprocessor names it is compiled with)."""
 
     def __init__(self, source: str, label: str, path=None, defines=(), include_paths=(),
                  shared=False):  # fmt: skip
@@ -180,7 +181,7 @@ class VertexShader:
         # fragment shader's too (Urho3D's one file for both stages), whose pragmas other than
         # a binding to a vertex meaning or engine name are the fragment shader's
         self.original, self.label, self.path = source, label, path
-        self.source = source
+        self.source, self.defines = source, tuple(defines)
         pre = bool(defines) or dialects.has_includes(source)
         if pre or dialects.detect(source, label).translated:
             text = dialects.front_end(source, label, tuple(defines), tuple(include_paths),

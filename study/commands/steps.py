@@ -165,6 +165,7 @@ def export_calibration(exp, model, frames: list, cal, out: Path, timings: dict):
     if user.vertex is not None:  # the pair: its vertex shader and the grid it ran on
         extra["vertex_file"] = str(exp.fit.vertex)
         extra["vertex_grid"] = list(user.vertex.cells)
+        extra["vertex_defines"] = list(user.vertex.shader.defines)
     if exp.waves.source == "shader":  # the reference's surface: how well it fits the normals
         extra["waves"] = shader_waves(exp).stats
     return gl, engine_targets, extra

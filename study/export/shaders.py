@@ -100,7 +100,13 @@ def user_shader_of(path):
                 f"{path}: the calibrated vertex shader {vfile} is gone; put it back at that "
                 "path or edit vertex_file"
             )
-        vertex = UserVertex.from_file(vfile, data.get("vertex_grid") or DEFAULT_CELLS)
+        vertex = UserVertex.from_file(
+            vfile,
+            data.get("vertex_grid") or DEFAULT_CELLS,
+            data.get("vertex_defines", data.get("defines", ())),
+            data.get("include_paths", ()),
+            vfile.resolve() == file.resolve(),  # one file for both stages
+        )
     shader = UserShader.from_file(
         file,
         data.get("declaration"),
