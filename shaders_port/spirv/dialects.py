@@ -295,7 +295,7 @@ def front_end(
     # `#include <name>` (three.js's chunks): glslang's includer searches only quoted names
     source = re.sub(r"^([ \t]*#[ \t]*include[ \t]*)<([^>\n]+)>", r'\1"\2"', source, flags=re.M)
     d = detect(source, label)
-    includes = bool(re.search(r"^[ \t]*#[ \t]*include\b", source, re.M))
+    includes = has_includes(source)  # after #import is written #include
     dargs = [f"-D{x}" for x in defines]
     if not d.translated:
         if not (includes or preprocess):

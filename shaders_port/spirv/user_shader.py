@@ -459,7 +459,7 @@ class UserShader:
     def render(self, inputs, values: dict | None = None, backend: str = "llvm"):
         """A ``ShaderOutput`` (colour (H, W, 3) linear RGB, mask, ``fetches``/``iterations``)."""
         m = backend_types(backend)
-        C = self._resolved(m, self._checked(values))
+        C = self.resolved_values(m, values)
         if self.vertex is not None:
             return self.vertex.render(inputs, self.spec(), C, backend)
         return spirv_port.render(inputs, None, spec=self.spec(), backend=backend, resolved=C)
