@@ -419,8 +419,9 @@ def validate(raw: dict, overrides: list[str] | None = None, path: Path | None = 
             'independent halves, which only reference.texture_method = "lighting" '
             'renders; use that method or fit.input_noise = "ignore"'
         )
+    user = None  # the user's shader, loaded and checked
     if is_user_shader(values["fit.shader"]):
-        check_user_shader(values, base)
+        user = check_user_shader(values, base)
     elif values["fit.vertex"]:
         raise ExperimentError(
             "fit.vertex is the vertex shader of your own fit.shader (a .frag, .glsl, .fs, .fsh "
@@ -452,7 +453,7 @@ def validate(raw: dict, overrides: list[str] | None = None, path: Path | None = 
         values[key] = user_files.resolve(key, values[key], base.get(key))
     digests = user_files.check_files(values)
     if values["waves.source"] == "shader":
-        digests["waves.surface"] = shader_waves_digest(values)  # what draws the waves
+        digests["waves.surface"] = shader_waves_digest(values, user)  # what draws the waves
     _check_ledge(values)
     n = values["reference.sky_directions"]
     if round(n**0.5) ** 2 != n:

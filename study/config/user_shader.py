@@ -85,16 +85,17 @@ def load_user_shader(values: dict):
         raise ExperimentError(f"fit.shader: {exc}") from None
 
 
-def shader_waves_digest(values: dict) -> str:
+def shader_waves_digest(values: dict, shader=None) -> str:
     """The digest of what makes the waves of ``waves.source = "shader"``
-    (``shaders_port.spirv.probe.waves_digest``): the reference is cached under it."""
-    if not is_user_shader(values["fit.shader"]):
+    (``shaders_port.spirv.probe.waves_digest``): the reference is cached under it. ``shader``:
+    the ``UserShader`` of ``values`` when already loaded (:func:`check_user_shader`'s)."""
+    if shader is None and not is_user_shader(values["fit.shader"]):
         raise ExperimentError(
             f"waves.source = 'shader' takes the waves of your own fit.shader (a .frag file); "
             f"{values['fit.shader']!r} is a shader of the study's space, whose waves are the "
             "study's: remove waves.source"
         )
-    shader = load_user_shader(values)
+    shader = shader or load_user_shader(values)
     if shader.normal is None:
         raise ExperimentError(
             f"waves.source = 'shader': {shader.label} does not name the variable that holds its "
@@ -131,10 +132,10 @@ def _resolve_vertex(values: dict, base) -> None:
         values["fit.vertex"] = _resolved(v, base)
 
 
-def check_user_shader(values: dict, base: dict) -> None:
+def check_user_shader(values: dict, base: dict):
     """``fit.shader``, ``fit.vertex`` and ``fit.include_paths`` made absolute (relative to the
     experiment file), ``fit.defines`` checked; the shader read, compiled and its bindings
-    checked (before any reference is rendered)."""
+    checked (before any reference is rendered). Returns the ``UserShader``."""
     values["fit.shader"] = _resolved(values["fit.shader"], base.get("fit.shader"))
     _resolve_vertex(values, base.get("fit.vertex"))
     incs = values["fit.include_paths"] or []
@@ -162,3 +163,4 @@ def check_user_shader(values: dict, base: dict) -> None:
             f"constants its declaration names ({', '.join(shader.constants)})"
         )
         values["fit.parameters"] = None
+    return shader
