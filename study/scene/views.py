@@ -35,10 +35,15 @@ def has_views(exp: Experiment) -> bool:
     return bool(exp.camera.views)
 
 
+def _views(exp: Experiment) -> list:
+    """``[position, target]`` of every view of ``exp``, the camera's first."""
+    return [[exp.camera.position, exp.camera.target], *exp.camera.views]
+
+
 def view_overrides(exp: Experiment, k: int) -> list[str]:
     """The ``--set`` overrides that make ``exp`` its view ``k`` (:func:`view_experiments`): its
     camera, ``camera.views`` = [] and the name ``<name>-view<k>``."""
-    position, target = [[exp.camera.position, exp.camera.target], *exp.camera.views][k]
+    position, target = _views(exp)[k]
     return [
         f"camera.position={json.dumps(list(position))}",
         f"camera.target={json.dumps(list(target))}",
@@ -59,8 +64,7 @@ def view_experiments(exp: Experiment) -> list[Experiment]:
             "view (--set camera.views=[])"
         )
     out = []
-    views = [[exp.camera.position, exp.camera.target], *exp.camera.views]
-    for k, (position, target) in enumerate(views):
+    for k, (position, target) in enumerate(_views(exp)):
         values = copy.deepcopy(exp.values)
         values["camera.position"], values["camera.target"] = list(position), list(target)
         values["camera.views"] = []
