@@ -6,6 +6,7 @@ through SPIR-V, differentiated (checked by central differences), fitted to synth
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
 
 import numpy as np
@@ -327,3 +328,58 @@ def test_study_tradeoff_charts_the_users_shader(user_run):
         assert again[0]["fitted.FOG_DENSITY"] != user["fitted.FOG_DENSITY"]
         summary = json.loads((root / "t" / "summary.json").read_text())
         assert summary["scenes"]["my_water"]["user"][0]["flip"] == again[0]["flip"]
+
+
+def test_fit_declare_gives_every_pragma_without_editing_the_file(tmp_path):
+    """An engine's file calibrates untouched: the `// @study` lines of a shipped pair moved into
+    fit.declare (``up``, ``bind``, ``constant``, ``normal``, ``value`` for either stage,
+    ``normal_map`` relative to the experiment file) declare the same shader."""
+    from study import load_experiment
+    from study.config.errors import ExperimentError
+    from study.config.user_shader import load_user_shader
+    from study.studies.tradeoff_user import shader_sha256
+
+    shaders = Path(__file__).parent.parent / "experiments" / "shaders"
+    for stem in ("zup_water", "webgl_mirror_water"):
+        frag = (shaders / f"{stem}.frag").read_text()
+        lines = [ln for ln in frag.splitlines() if ln.startswith("// @study ")]
+        bare = "\n".join(ln for ln in frag.splitlines() if not ln.startswith("// @study "))
+        (tmp_path / f"{stem}.frag").write_text(bare + "\n")
+        (tmp_path / f"{stem}.vert").write_text((shaders / f"{stem}.vert").read_text())
+        # the normal map relative to the experiment file (tmp_path/exp/e.toml)
+        declare = [
+            "normal_map ../files/water_normals.png" if ln.startswith("// @study normal_map") else
+            ln[len("// @study ") :] for ln in lines
+        ]  # fmt: skip
+        (tmp_path / "files").mkdir(exist_ok=True)
+        (tmp_path / "files" / "water_normals.png").write_bytes(
+            (MY_WATER.parent / "files" / "water_normals.png").read_bytes()
+        )
+        (tmp_path / "exp").mkdir(exist_ok=True)
+        (tmp_path / "exp" / "e.toml").write_text(
+            (MY_WATER.parent / f"{stem}.toml")
+            .read_text()
+            .replace(f'"shaders/{stem}.frag"', f'"{tmp_path / f"{stem}.frag"}"')
+            .replace("[fit]", f"[fit]\ndeclare = {json.dumps(declare)}")
+        )
+        ours = load_user_shader(load_experiment(tmp_path / "exp" / "e.toml").values)
+        theirs = load_user_shader(load_experiment(MY_WATER.parent / f"{stem}.toml").values)
+        assert ours.engine["up"] == theirs.engine["up"]
+        assert ours.engine_record() == theirs.engine_record()
+        assert ours.bindings == theirs.bindings and ours.normal == theirs.normal
+        assert {n: c.default for n, c in ours.constants.items()} == {
+            n: c.default for n, c in theirs.constants.items()
+        }
+        assert ours.engine_values() == theirs.engine_values()
+        assert shader_sha256(ours) != shader_sha256(theirs)  # their texts differ
+    # a value reaches the stage that reads it; a value nobody reads is refused
+    one = SHADERS / "one_file_water.glsl"
+    keys = [f'fit.shader="{one}"', f'fit.vertex="{one}"', 'fit.defines=["COMPILEPS", "PS=main"]',
+            'fit.vertex_defines=["COMPILEVS", "VS=main"]', "fit.vertex_grid=[8, 6]"]  # fmt: skip
+    exp = load_experiment(MY_WATER, [*keys, 'fit.declare=["value cTiling 0.75"]'])
+    shader = load_user_shader(exp.values)
+    assert shader.vertex.shader.values["cTiling"] == (0.75,)
+    with pytest.raises(ExperimentError, match="value cNoSuch: neither this shader nor its vertex"):
+        load_experiment(MY_WATER, [*keys, 'fit.declare=["value cNoSuch 1"]'])
+    with pytest.raises(ExperimentError, match="fit.declare: 'up x'"):
+        load_experiment(MY_WATER, [*keys, 'fit.declare=["up x"]'])

@@ -20,7 +20,6 @@ from __future__ import annotations
 
 import hashlib
 import json
-from pathlib import Path
 
 import drjit as dr
 import numpy as np
@@ -153,9 +152,6 @@ def waves_digest(shader) -> str:
     image it names. A reference built from the shader's waves is cached under it."""
     text = front_end(shader.source, shader.label, shader.defines, shader.include_paths,
                      preprocess=True)  # fmt: skip
-    engine = dict(shader.engine)
-    if engine.get("normal_map"):
-        engine["normal_map"] = hashlib.sha256(Path(engine["normal_map"]).read_bytes()).hexdigest()
     data = {
         "fragment": text,
         "vertex": None if shader.vertex is None else shader.vertex.shader.source,
@@ -163,7 +159,7 @@ def waves_digest(shader) -> str:
         "start": {k: list(np.atleast_1d(v).astype(float)) for k, v in shader.defaults().items()},
         "values": {k: list(v) for k, v in shader.values.items()},
         "bindings": sorted(shader.run_bindings().items()),
-        "engine": sorted(engine.items()),
+        "engine": shader.engine_record(),
         "normal": list(shader.normal or ()),
     }
     return hashlib.sha256(json.dumps(data, sort_keys=True).encode()).hexdigest()

@@ -36,6 +36,7 @@ initializers, byte for byte the same elsewhere.
 
 from __future__ import annotations
 
+import hashlib
 import re
 import types
 from dataclasses import dataclass
@@ -199,11 +200,12 @@ class UserShader:
         if "normal" in decl:
             self.normal = normal_pragma(str(decl.pop("normal")).split(), f"{label}: normal")
         self.engine.update({k: decl.pop(k) for k in ("up", "normal_map") if k in decl})
+        self._declared_values(dict(decl.pop("values", {})), vertex)
         unknown = set(decl) - {"constants", "bindings"}
         if unknown:
             raise ValueError(
                 f"{label}: unknown declaration key(s) {sorted(unknown)}; "
-                "use 'constants' and 'bindings'"
+                "use 'constants', 'bindings', 'values', 'normal', 'up' and 'normal_map'"
             )
         for name, r in dict(decl.get("constants", {})).items():
             if not (isinstance(r, (list, tuple)) and len(r) in (2, 3)):
@@ -280,6 +282,31 @@ class UserShader:
             )
         return out
 
+    def _declared_values(self, values: dict, vertex) -> None:
+        """The declaration's ``values`` (name -> components: uniforms the engine sets, as
+        ``// @study value`` gives them) to the stage that declares each: this shader (its
+        file or an ``#include``), its vertex shader (``UserVertex``), or both."""
+        if not values:
+            return
+        text = self.source
+        if dialects.has_includes(self.source):
+            text = dialects.front_end(self.source, self.label, self.defines, self.include_paths,
+                                      True)  # fmt: skip
+        vtext = "" if vertex is None else vertex.shader.source
+        for name, comps in values.items():
+            comps = tuple(float(c) for c in comps)
+            pattern = rf"\b{re.escape(name)}\b"
+            found = [t for t in (text, vtext) if re.search(pattern, t)]
+            if not found:
+                raise ValueError(
+                    f"{self.label}: value {name}: neither this shader nor its vertex shader "
+                    f"reads a uniform {name}; remove the line or correct the name"
+                )
+            if re.search(pattern, text):
+                self.values[name] = comps
+            if vertex is not None and re.search(pattern, vtext):
+                vertex.shader.values[name] = comps
+
     def _included_uniforms(self, names: set) -> dict:
         """name -> ``_BARE`` match in the preprocessed text, for the ``names`` declared as a
         uniform without initializer in an ``#include`` d file only (an engine's common
@@ -329,6 +356,22 @@ class UserShader:
             if not p.is_file():
                 raise ValueError(f"{self.label}: normal_map: no image file {str(p)!r}")
             self.engine["normal_map"] = str(p.resolve())
+
+    def engine_values(self) -> dict:
+        """Name -> components of every uniform the engine sets (``value`` lines), of both
+        stages."""
+        vertex = {} if self.vertex is None else self.vertex.shader.values
+        return {**vertex, **self.values}
+
+    def engine_record(self) -> list:
+        """Sorted ``(option, value)`` pairs of the engine options (``up``, ``normal_map``), the
+        normal-map image given by the SHA-256 of its bytes: what a digest of the shader's images
+        takes (the image may change under the same name)."""
+        engine = dict(self.engine)
+        if engine.get("normal_map"):
+            image = Path(engine["normal_map"]).read_bytes()
+            engine["normal_map"] = hashlib.sha256(image).hexdigest()
+        return sorted(engine.items())
 
     def run_bindings(self) -> dict:
         """The bindings the shader runs with: its own and the engine names it reads

@@ -158,6 +158,8 @@ def export_calibration(exp, model, frames: list, cal, out: Path, timings: dict):
         "declaration": {
             "constants": {n: user.declared_range(n) for n in user.constants},
             "bindings": dict(user.bindings),
+            "values": {n: list(v) for n, v in user.engine_values().items()},
+            **{k: v for k, v in user.engine.items() if v is not None},
         },
         "defines": list(user.defines),
         "include_paths": list(user.include_paths[1:]),  # after the file's own folder

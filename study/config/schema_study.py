@@ -238,10 +238,13 @@ STUDY_KEYS: dict[str, Field] = {
     "fit.declare": Field(
         "list_str",
         None,
-        "Declaration of your own `fit.shader` besides its `// @study` pragmas, one line each: "
+        "Declaration of your own `fit.shader` besides its `// @study` pragmas (the same "
+        "lines without `// @study`, so an engine's file needs no edit), one line each: "
         "`constant NAME LOW HIGH` (a constant to fit and its range; `constant NAME LOW HIGH "
-        "START` for a uniform without initializer) or `bind NAME INPUT` (the "
-        "shader's sampler or uniform NAME is the study's INPUT).",
+        "START` for a uniform without initializer), `bind NAME INPUT` (the shader's sampler "
+        "or uniform NAME is the study's INPUT), `value NAME V[,V...]` (a uniform the engine "
+        "sets, in either stage), `normal NAME [world|tangent]`, `up y|z` or `normal_map FILE` "
+        "(relative to the experiment file).",
     ),
     "fit.include_paths": Field(
         "list_str",

@@ -32,28 +32,43 @@ def is_user_shader(name: str) -> bool:
     return str(name).endswith(USER_SHADER_SUFFIXES)
 
 
+_DECLARE_FORMS = (
+    "`constant NAME LOW HIGH [START]`, `bind NAME INPUT`, `value NAME V[,V...]`, "
+    "`normal NAME [world|tangent]`, `up y|z` or `normal_map FILE`"
+)
+
+
 def user_declaration(lines: list | None) -> dict:
     """``fit.declare`` lines as a declaration table of
-    ``shaders_port.spirv.user_shader.UserShader``."""
-    decl: dict = {"constants": {}, "bindings": {}}
+    ``shaders_port.spirv.user_shader.UserShader``: what the file's ``// @study`` pragmas say,
+    given without editing the file (a ``normal_map FILE`` as :func:`check_user_shader` made it:
+    absolute)."""
+    decl: dict = {"constants": {}, "bindings": {}, "values": {}}
     for line in lines or []:
         parts = str(line).split()
+        verb, args = (parts[0], parts[1:]) if parts else ("", [])
         try:
-            if parts[0] == "constant" and len(parts) in (4, 5):
-                decl["constants"][parts[1]] = [float(parts[2]), float(parts[3]), *parts[4:]]
+            if verb == "constant" and len(args) in (3, 4):
+                decl["constants"][args[0]] = [float(args[1]), float(args[2]), *args[3:]]
                 continue
-            if parts[0] == "bind" and len(parts) == 3:
-                decl["bindings"][parts[1]] = parts[2]
+            if verb == "bind" and len(args) == 2:
+                decl["bindings"][args[0]] = args[1]
                 continue
-            if parts[0] == "normal" and len(parts) in (2, 3):
-                decl["normal"] = " ".join(parts[1:])
+            if verb == "value" and len(args) == 2:
+                decl["values"][args[0]] = [float(x) for x in args[1].split(",")]
                 continue
-        except (IndexError, ValueError):
+            if verb == "normal" and len(args) in (1, 2):
+                decl["normal"] = " ".join(args)
+                continue
+            if verb == "up" and args in (["y"], ["z"]):
+                decl["up"] = args[0]
+                continue
+            if verb == "normal_map" and len(args) == 1:
+                decl["normal_map"] = args[0]
+                continue
+        except ValueError:
             pass
-        raise ExperimentError(
-            f"fit.declare: {_clip(line)}: write `constant NAME LOW HIGH [START]`, "
-            "`bind NAME INPUT` or `normal NAME [world|tangent]`"
-        )
+        raise ExperimentError(f"fit.declare: {_clip(line)}: write {_DECLARE_FORMS}")
     return decl
 
 
@@ -132,6 +147,15 @@ def _resolve_vertex(values: dict, base) -> None:
         values["fit.vertex"] = _resolved(v, base)
 
 
+def _declared_file(line, base) -> str:
+    """A ``fit.declare`` line with the FILE of ``normal_map FILE`` made absolute (relative to
+    ``base``, the experiment file's folder); any other line as it is."""
+    parts = str(line).split()
+    if len(parts) == 2 and parts[0] == "normal_map":
+        return f"normal_map {_resolved(parts[1], base)}"
+    return line
+
+
 def check_user_shader(values: dict, base: dict):
     """``fit.shader``, ``fit.vertex`` and ``fit.include_paths`` made absolute (relative to the
     experiment file), ``fit.defines`` checked; the shader read, compiled and its bindings
@@ -140,6 +164,8 @@ def check_user_shader(values: dict, base: dict):
     _resolve_vertex(values, base.get("fit.vertex"))
     incs = values["fit.include_paths"] or []
     values["fit.include_paths"] = [_resolved(p, base.get("fit.include_paths")) for p in incs]
+    values["fit.declare"] = [_declared_file(line, base.get("fit.declare")) for line in
+                             values["fit.declare"] or []] or values["fit.declare"]  # fmt: skip
     for p in values["fit.include_paths"]:
         if not Path(p).is_dir():
             raise ExperimentError(f"fit.include_paths: no folder {_clip(p)}")

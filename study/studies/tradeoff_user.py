@@ -53,16 +53,18 @@ def _shader_of(exp):
 def shader_sha256(shader) -> str:
     """Hex SHA-256 of what a ``UserShader``'s images depend on: its file's text, the text
     after preprocessing (every ``#include`` d file's contents and the defines applied), its
-    defines, bindings and declared constants, and with ``fit.vertex`` the vertex shader's text
-    and grid."""
+    defines, bindings, declared constants, engine values and options (the normal-map image's
+    bytes), and with ``fit.vertex`` the vertex shader's text, grid and engine values."""
     decl = json.dumps({"bindings": shader.bindings, "constants": {
-        n: [c.lo, c.hi] for n, c in shader.constants.items()}}, sort_keys=True)  # fmt: skip
+        n: [c.lo, c.hi] for n, c in shader.constants.items()}, "values": shader.values,
+        "engine": shader.engine_record()}, sort_keys=True)  # fmt: skip
     expanded = dialects.front_end(
         shader.source, shader.label, shader.defines, shader.include_paths, True
     )
     vertex = ""
     if shader.vertex is not None:
-        vertex = json.dumps([shader.vertex.shader.original, list(shader.vertex.cells)])
+        v = shader.vertex
+        vertex = json.dumps([v.shader.original, list(v.cells), v.shader.values], sort_keys=True)
     parts = [shader.source, expanded, json.dumps(list(shader.defines)), decl, vertex]
     return hashlib.sha256("\0".join(parts).encode()).hexdigest()
 
