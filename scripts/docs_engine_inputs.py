@@ -54,6 +54,7 @@ CONVENTIONS = {
                       "nearest, clamp"),
     "camera_near": ("world units (0.05 for the study's cameras)", "-", "-"),
     "camera_far": ("world units (100 for the study's cameras)", "-", "-"),
+    "camera_near_far": ("(camera_near, camera_far), world units", "-", "-"),
     "dudv_map": ("(s, t) = vTexCoord, as normalMap", "RG = 0.5 + 0.5 (-dh/dx, -dh/dz), B = 0",
                  "bilinear, repeat"),
     "time": ("seconds", "-", "-"),
@@ -66,6 +67,9 @@ CONVENTIONS = {
     "user_normal_map": ("the shader's own coordinates; the file's top row at t = 1",
                         "the file's RGB / 255, no sRGB decoding", "trilinear (mipmapped), "
                         "repeat"),
+    "waves_normal_map": ("the shader's own coordinates (the waves' are normalMap's); tangent "
+                         "space, x along u = world +x, y along v = world +z, z up",
+                         "RGB = 0.5 + 0.5 (n_x, n_z, n_y)", "trilinear (mipmapped), repeat"),
 }  # fmt: skip
 
 HEADER = """# Engine inputs: every input your shader can read
@@ -145,7 +149,18 @@ The image (PNG, JPEG, ...: anything Pillow reads; 8 or 16 bits) is read as store
 Babylon.js upload it), sampled bilinear with its box-filtered mip chain (trilinear), repeat.
 Its tiling and scrolling are your shader's (a constant such as Urho3D's `cNoiseTiling`, declared
 as a constant to fit if you like). Whether the reference's waves are those of your image is
-another matter: the reference renders the study's waves.
+another matter: the reference renders the study's waves, unless `waves.source = "shader"`
+takes them from your shader.
+
+With no image named, an engine's normal-map sampler (three.js's `normalSampler`, Babylon.js's
+`bumpSampler`, jMonkeyEngine's `m_water_normalmap`, three.js's `tNormalMap0`; or any sampler
+with `// @study bind NAME waves_normal_map`) reads `waves_normal_map`: the study's own waves,
+the reference's, stored as engines store a normal map. Each texel is the tangent-space normal
+`RGB = 0.5 + 0.5 (n_x, n_z, n_y)` of the world normal `n` (x along the texture's u = world +x,
+y along v = world +z, z up; a flat texel is (0.5, 0.5, 1.0)), the frame jMonkeyEngine's and
+three.js's water shaders build from `tangent = (1, 0, 0)`, `binormal = (0, 0, 1)`, `normal =
+(0, 1, 0)`; sampled trilinear with its mip chain, repeat, at the texture coordinates of the
+study's `normalMap` (`(x, z) / normal_tile` plus the waves' offsets).
 
 ## Time, sun, camera
 

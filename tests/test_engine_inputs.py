@@ -39,7 +39,7 @@ def test_every_engine_name_is_an_input_and_every_input_documented():
         assert inp in STUDY_INPUTS and engines, name
     for name in ei.ENGINE_INPUTS:
         assert name in STUDY_INPUTS and STUDY_INPUTS[name].split(":")[0] in (
-            "mat4", "float", "vec3", "sampler2D", "samplerCube")  # fmt: skip
+            "mat4", "float", "vec2", "vec3", "sampler2D", "samplerCube")  # fmt: skip
     assert set(ei.SAME_AS.values()) <= set(STUDY_INPUTS)
 
 
@@ -84,6 +84,7 @@ def test_screen_space_inputs_match_llvmpipe():
     shader = UserShader.from_file(SHADERS / "engine_screen.frag")
     assert shader.run_bindings()["mirrorSampler"] == "reflection_sampler"
     assert shader.run_bindings()["refractionSampler"] == "sceneColor"
+    assert shader.run_bindings()["m_FrustumNearFar"] == "camera_near_far"
     inputs = synthetic_baseline_inputs(48, 36)
     _gl_agrees(shader, inputs)
 
@@ -111,6 +112,23 @@ def test_uniform_inputs_and_user_normal_map_match_llvmpipe(tmp_path):
     a = _gl_agrees(shader, inputs)
     b = shader.render(dataclasses.replace(inputs, time=0.0)).numpy()["color"]
     assert np.abs(a - b).max() > 1e-3  # the clock moves the DuDv lookup
+
+
+def test_an_engine_normal_map_without_an_image_reads_the_waves_in_tangent_space():
+    """An engine's normal-map sampler (three.js's normalSampler) with no image declared reads
+    the study's waves as engines store a normal map: tangent space (x along u = world +x, y
+    along v = world +z, z up), mipmapped; executor = llvmpipe."""
+    shader = UserShader.from_file(SHADERS / "engine_uniforms.frag")
+    assert shader.run_bindings()["normalSampler"] == "waves_normal_map"
+    n = np.array([0.3, 0.9, -0.2])
+    n /= np.linalg.norm(n)
+    enc = ei.waves_normal_map((0.5 * n + 0.5).astype(np.float32)[None, None])[0, 0]
+    assert np.allclose(2 * enc - 1, [n[0], n[2], n[1]], atol=1e-6)
+    flat = ei.waves_normal_map(np.full((1, 1, 3), [0.5, 1.0, 0.5], np.float32))
+    assert np.allclose(flat, [0.5, 0.5, 1.0])
+    inputs = dataclasses.replace(synthetic_inputs(48, 36), time=0.5)
+    a = _gl_agrees(shader, inputs)
+    assert np.std(a[..., 2], axis=None) > 1e-3  # the waves vary over the water
 
 
 def test_missing_normal_map_image_is_named(tmp_path):

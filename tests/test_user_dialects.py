@@ -121,6 +121,25 @@ def test_translation_keeps_the_users_line_numbers():
     assert len(msg.splitlines()) <= 3 and "gl_MaxDrawBuffers" not in msg
 
 
+def test_a_legacy_file_is_preprocessed_in_its_own_version(tmp_path):
+    """An engine's compatibility include that switches on ``__VERSION__`` (as jMonkeyEngine's
+    GLSLCompat does) takes the GLSL 1.20 branch, where ``texture`` is a user's name; a refused
+    form after the include is named at its own line."""
+    (tmp_path / "compat.glsllib").write_text(
+        "#if __VERSION__ >= 130\n#define texture2D texture\nout vec4 outColor;\n"
+        "#define gl_FragColor outColor\n#else\n#define LEGACY_BRANCH 1\n#endif\n"
+    )
+    src = (
+        '#version 120\n#import "compat.glsllib"\n#ifndef LEGACY_BRANCH\n#error not 1.20\n'
+        "#endif\nuniform sampler2D tex;\nvarying vec2 uv;\nvoid main() {\n"
+        "  float texture = 0.5;\n  gl_FragColor = texture2D(tex, uv) * texture;\n%s}\n"
+    )
+    text = front_end(src % "", "legacy.frag", include_paths=[tmp_path])
+    assert "_u_texture" in text and "LEGACY_BRANCH" not in text
+    with pytest.raises(ShaderError, match=r"^legacy\.frag:11: gl_Color: a compatibility"):
+        front_end(src % "  gl_FragColor = gl_Color;\n", "legacy.frag", include_paths=[tmp_path])
+
+
 def test_refused_legacy_forms_name_their_line():
     base = "#version 120\nvarying vec3 varyingVecEye;\nvoid main() {\n%s\n}\n"
     for body, why in (

@@ -55,8 +55,9 @@ compatibility attributes and matrices -> names of ``spirv.engine_names`` that bi
 (:data:`_VERTEX_BUILTINS`; ``ftransform()`` -> ``gl_ModelViewProjectionMatrix * gl_Vertex``
 in them); any other compatibility built-in is refused at its line.
 
-``__VERSION__`` reads 330 in a translated file; ``GL_ES`` is defined for the GLSL ES
-dialects, as their compilers define it.
+The file is preprocessed in its own version: ``__VERSION__`` reads the version the file was
+written for (an engine's ``#if __VERSION__ >= 130`` takes the branch it takes in the engine)
+and ``GL_ES`` is defined for the GLSL ES dialects, as their compilers define it.
 """
 
 from __future__ import annotations
@@ -308,11 +309,26 @@ def front_end(
     code = _COMMENTS.sub(lambda m: re.sub(r"[^\n]", " ", m[0]), source)
     decls = _declarations(code, stage)
     head = [INCLUDE_EXT] if includes else []
-    dargs += ["-DGL_ES=1"] if d.es else []
-    text = _with_head(source, d, TARGET, head + decls)
+    text = _with_head(source, d, _own_version_line(d), head + decls)
     pre = _glslang(text, label, ["-E", *dargs], include_paths, "preprocessing", stage)
+    pre = _as_target(pre, d)
     legacy = d.version == 100 if d.es else d.version < 130  # before texture() and layout
     return _translate_tokens(pre, label, len(head) + len(decls), legacy, stage)
+
+
+def _as_target(pre: str, d: Dialect) -> str:
+    """glslang's preprocessed text ``pre`` of a file of dialect ``d`` (preprocessed in its own
+    version, so ``__VERSION__`` and ``GL_ES`` read what its compiler gives: an engine's
+    ``#if __VERSION__ >= 130`` takes the branch it takes in the engine) with its ``#version``
+    line made :data:`TARGET` and its ``#line`` directives in GLSL 330's numbering."""
+    lines = pre.split("\n")
+    lines[0] = TARGET
+    if not (d.es or d.version >= 330):  # `#line N` numbered the directive's own line
+        for k, ln in enumerate(lines):
+            m = re.match(r"(\s*#\s*line\s+)(\d+)(.*)", ln)
+            if m:
+                lines[k] = f"{m[1]}{int(m[2]) + 1}{m[3]}"
+    return "\n".join(lines)
 
 
 def _declarations(code: str, stage: str) -> list[str]:

@@ -24,7 +24,11 @@ linear RGB.
   ``sun_color``: ``lightcolor`` (the highlight's linear RGB scale);
 * ``user_normal_map``: the image file the declaration names (``// @study normal_map FILE``):
   8-bit RGB read as stored (no sRGB decoding: a normal map holds data), bilinear, repeat, with
-  its box-filtered mip chain (trilinear, as engines sample it).
+  its box-filtered mip chain (trilinear, as engines sample it);
+* ``waves_normal_map``: the study's waves as engines store a normal map (:func:`waves_normal_map`:
+  tangent space, x along the texture's u = world +x, y along v = world +z, z up), sampled as
+  ``user_normal_map`` is. An engine's normal-map sampler (:data:`NORMAL_MAP_ALIASES`) reads it
+  when the declaration names no image file: the shader's waves are then the reference's.
 
 The option ``up = "z"`` (``// @study up z``) gives every world-space input in a Z-up frame:
 a position or direction ``v`` as ``R v``, a matrix ``M`` taking world points as ``M R^T``
@@ -56,6 +60,7 @@ __all__ = [
     "read_normal_map",
     "sky_cube",
     "split_view",
+    "waves_normal_map",
     "to_up",
     "uniform_values",
 ]
@@ -75,6 +80,7 @@ ENGINE_INPUTS = {
                       "non-linear depth buffer), nearest, clamp"),
     "camera_near": ("float", "near plane of the camera's projection, world units"),
     "camera_far": ("float", "far plane of the camera's projection, world units"),
+    "camera_near_far": ("vec2", "(camera_near, camera_far), world units"),
     "dudv_map": ("sampler2D", "DuDv of the waves: RG = 0.5 + 0.5 (-dh/dx, -dh/dz) of the "
                  "study's normal map (0.5: no distortion), B = 0; bilinear, repeat"),
     "time": ("float", "animation clock, seconds: k * animation.time_step on frame k, 0 still"),
@@ -88,6 +94,9 @@ ENGINE_INPUTS = {
                  "linear RGB, bilinear, clamp, no filtering across faces"),
     "user_normal_map": ("sampler2D", "the image `// @study normal_map FILE` names: RGB as "
                         "stored / 255, bilinear, repeat, mipmapped (trilinear)"),
+    "waves_normal_map": ("sampler2D", "the study's waves as a tangent-space normal map: RGB = "
+                         "0.5 + 0.5 (n_x, n_z, n_y) of the world normal (x along u = world +x, "
+                         "y along v = world +z, z up); bilinear, repeat, mipmapped (trilinear)"),
 }  # fmt: skip
 
 # an input that is another name of a study input
@@ -111,6 +120,7 @@ ENGINE_ALIASES = {
     "m_water_depthmap": ("depth_sampler", "jMonkeyEngine (SimpleWater)"),
     "cameraNear": ("camera_near", "three.js"),
     "cameraFar": ("camera_far", "three.js"),
+    "m_FrustumNearFar": ("camera_near_far", "jMonkeyEngine (SimpleWater)"),
     "m_water_dudvmap": ("dudv_map", "jMonkeyEngine (SimpleWater)"),
     "m_time": ("time", "jMonkeyEngine"),
     "cElapsedTimePS": ("time", "Urho3D"),
@@ -126,6 +136,10 @@ ENGINE_ALIASES = {
     "m_water_normalmap": ("user_normal_map", "jMonkeyEngine (SimpleWater)"),
     "tNormalMap0": ("user_normal_map", "three.js (Water2)"),
 }
+
+
+# the engine names of a normal-map sampler: the image `normal_map FILE` names, else the waves
+NORMAL_MAP_ALIASES = tuple(k for k, (v, _) in ENGINE_ALIASES.items() if v == "user_normal_map")
 
 
 def canonical(name: str) -> str:
@@ -191,6 +205,7 @@ def uniform_values(inputs: ShaderInputs, up: str = "y") -> dict:
         out["reflection_texture_matrix"] = to_up(up, m, "matrix")
     try:
         out["camera_near"], out["camera_far"] = (np.float64(v) for v in _near_far(inputs))
+        out["camera_near_far"] = np.array([out["camera_near"], out["camera_far"]])
     except ValueError:
         pass  # no perspective * rigid split: a shader reading them fails naming the input
     return out
@@ -207,6 +222,14 @@ def dudv_map(normal_map: np.ndarray) -> np.ndarray:
     ny = np.maximum(n[..., 1], 1e-6)
     rg = np.clip(0.5 + 0.5 * n[..., [0, 2]] / ny[..., None], 0.0, 1.0)
     return np.concatenate([rg, np.zeros_like(rg[..., :1])], -1).astype(np.float32)
+
+
+def waves_normal_map(normal_map: np.ndarray) -> np.ndarray:
+    """(H, W, 3) float32 tangent-space normal map of the study's normal map ``normal_map``
+    ((H, W, 3), world normals encoded ``0.5 n + 0.5``, ``+y`` up): RGB = ``0.5 + 0.5 (n_x, n_z,
+    n_y)``, the frame of a normal-map texel on the water plane (x along the texture's u = world
+    +x, y along v = world +z, z up; a flat texel is (0.5, 0.5, 1))."""
+    return np.ascontiguousarray(np.asarray(normal_map, np.float32)[..., [0, 2, 1]])
 
 
 def sky_cube(cubemap: np.ndarray) -> np.ndarray:
@@ -241,7 +264,10 @@ def read_normal_map(path) -> np.ndarray:
 def gl_textures(inputs: ShaderInputs, normal_map: str | None) -> dict:
     """Input -> (array (H, W, C) float32 in GL upload order, filter, wrap, mipmapped) of the
     sampler inputs of :data:`ENGINE_INPUTS` that are not another study input's name."""
-    out = {"dudv_map": (dudv_map(inputs.normal_map), LINEAR, REPEAT, False)}
+    out = {
+        "dudv_map": (dudv_map(inputs.normal_map), LINEAR, REPEAT, False),
+        "waves_normal_map": (waves_normal_map(inputs.normal_map), LINEAR, REPEAT, True),
+    }
     if normal_map:
         out["user_normal_map"] = (read_normal_map(normal_map), LINEAR, REPEAT, True)
     return out
@@ -271,16 +297,18 @@ def engine_values(m, inputs: ShaderInputs, options: dict) -> dict:
     return out
 
 
-def resolve_bindings(source: str, bindings: dict, constants) -> dict:
+def resolve_bindings(source: str, bindings: dict, constants, image: bool = False) -> dict:
     """The bindings a user's shader runs with: its own (``bindings``, name -> input) and each
     engine name of :data:`ENGINE_ALIASES` and input of :data:`SAME_AS` its code (comments left
     out) uses that it neither binds nor declares a constant (in ``constants``); every target
-    given as the study input it stands for (:func:`canonical`)."""
+    given as the study input it stands for (:func:`canonical`). An engine's normal-map sampler
+    reads ``user_normal_map`` when the declaration names an image (``image``), else
+    ``waves_normal_map``."""
     code = re.sub(r"//[^\n]*|/\*.*?\*/", "", source, flags=re.S)
     out = {}
     for name, (inp, _) in ENGINE_ALIASES.items():
         if name not in constants and re.search(rf"\b{name}\b", code):
-            out[name] = inp
+            out[name] = "waves_normal_map" if inp == "user_normal_map" and not image else inp
     for name in SAME_AS:
         if name not in constants and re.search(rf"\b{name}\b", code):
             out[name] = name

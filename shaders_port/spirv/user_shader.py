@@ -376,7 +376,9 @@ class UserShader:
     def run_bindings(self) -> dict:
         """The bindings the shader runs with: its own and the engine names it reads
         (``spirv.engine_inputs.resolve_bindings``)."""
-        return _engine.resolve_bindings(self.source, self.bindings, self.constants)
+        return _engine.resolve_bindings(
+            self.source, self.bindings, self.constants, bool(self.engine["normal_map"])
+        )
 
     def study_inputs(self) -> set[str]:
         """The study's inputs (:data:`spirv.translated.STUDY_INPUTS`) the shader reads: by their own
