@@ -24,6 +24,7 @@ from shaders_port.pipeline.interpolate import interpolate, rasterize_triangles, 
 from shaders_port.pipeline.raster import rasterize_water
 from shaders_port.spirv import translated as spirv_port
 from shaders_port.spirv import user_vertex
+from shaders_port.spirv.dialects import ShaderError
 from shaders_port.spirv.user_shader import UserShader
 from shaders_port.spirv.user_vertex import UserVertex
 from shaders_port.spirv.vertex import VertexShader
@@ -413,3 +414,54 @@ def test_a_one_file_pairs_constants_json_keeps_its_stages_defines(tmp_path):
     (tmp_path / "constants.json").write_text(json.dumps(data))
     assert user_shader_of(tmp_path / "constants.json").vertex.shader.defines == (
         "COMPILEPS", "PS=main")  # fmt: skip
+
+
+def test_a_shared_file_without_stage_guards_leaves_the_other_entry_point_out(inputs, tmp_path):
+    """Urho3D's own Water.glsl defines VS() and PS() unguarded; its loader comments out the
+    other stage's function. `!NAME` among a stage's defines does the same, every line keeping
+    its number; the pair renders as the guarded file does."""
+    text = (SHADERS / "one_file_water.glsl").read_text()
+    bare = "\n".join(
+        "" if ln.strip() in ("#ifdef COMPILEVS", "#ifdef COMPILEPS", "#endif") else ln
+        for ln in text.split("\n")
+    )
+    path = tmp_path / "bare_water.glsl"
+    path.write_text(bare)
+    incs = [SHADERS]  # include/one_file_uniforms.glsl
+    with pytest.raises(ShaderError, match="sWaves"):
+        UserVertex.from_file(path, (24, 24), ("COMPILEVS", "VS=main"), incs, shared=True)
+    vertex = UserVertex.from_file(path, (24, 24), ("COMPILEVS", "VS=main", "!PS"), incs, True)
+    shader = UserShader.from_file(path, None, ("COMPILEPS", "PS=main", "!VS"), incs, vertex=vertex)
+    a = shader.render(inputs).numpy()
+    b = _one_file().render(inputs).numpy()
+    assert np.array_equal(a["mask"], b["mask"]) and np.abs(a["color"] - b["color"]).max() == 0.0
+    with pytest.raises(ShaderError, match="no function NOPE"):
+        UserShader.from_file(path, None, ("COMPILEPS", "PS=main", "!NOPE"), incs, vertex=vertex)
+
+
+def test_a_vertex_uniform_nothing_binds_is_refused_at_load_with_its_file_and_line(tmp_path):
+    """A vertex shader's uniform with no value, meaning or input stops the experiment when it
+    loads (before any reference), naming the included file and line that reads it."""
+    from study import load_experiment
+    from study.config.errors import ExperimentError
+
+    (tmp_path / "include").mkdir()
+    (tmp_path / "include" / "one_file_uniforms.glsl").write_text(
+        (SHADERS / "include" / "one_file_uniforms.glsl").read_text()
+    )
+    inc = tmp_path / "include" / "tiling.glsl"
+    inc.write_text("float tiling()\n{\n    return cTiling;\n}\n")
+    src = (SHADERS / "one_file_water.glsl").read_text()
+    src = src.replace("// @study value cTiling 0.5\n", "")
+    src = src.replace('#include "include/one_file_uniforms.glsl"\n',
+                      '#include "include/one_file_uniforms.glsl"\n'
+                      '#ifdef COMPILEVS\n#include "include/tiling.glsl"\n#endif\n')  # fmt: skip
+    src = src.replace("vUv = iTexCoord * cTiling;", "vUv = iTexCoord * tiling();")
+    path = tmp_path / "w.glsl"
+    path.write_text(src)
+    keys = [f'fit.shader="{path}"', f'fit.vertex="{path}"', 'fit.defines=["COMPILEPS", "PS=main"]',
+            'fit.vertex_defines=["COMPILEVS", "VS=main"]', "fit.vertex_grid=[8, 6]",
+            "fit.declare=[]"]  # fmt: skip
+    with pytest.raises(ExperimentError, match=r"reads 'cTiling' \(at .*tiling\.glsl:3\)"):
+        load_experiment(MY_WATER, keys)
+    load_experiment(MY_WATER, [*keys[:-1], 'fit.declare=["value cTiling 0.5"]'])

@@ -278,12 +278,39 @@ def _own_version_line(d: Dialect) -> str:
     return f"#version {d.version}" + (f" {d.profile}" if d.version >= 150 else "")
 
 
+def split_defines(defines) -> tuple[tuple, tuple]:
+    """``(preprocessor names, functions to leave out)`` of a stage's defines: an entry
+    ``"!NAME"`` leaves the function ``NAME`` out of the stage (as Urho3D's loader comments out
+    the other stage's entry point of a file compiled for both), any other is a ``#define``."""
+    names = tuple(str(d) for d in defines)
+    return (tuple(d for d in names if not d.startswith("!")),
+            tuple(d[1:] for d in names if d.startswith("!")))  # fmt: skip
+
+
+def omit_functions(source: str, names) -> str:
+    """``source`` with the definition of each function of ``names`` (``TYPE NAME(...) {...}``
+    at file scope) blanked out, its newlines kept (every other line keeps its number)."""
+    for name in names:
+        code = _COMMENTS.sub(lambda m: re.sub(r"[^\n]", " ", m[0]), source)
+        m = re.search(rf"^[ \t]*\w+[ \t]+{re.escape(name)}[ \t]*\([^)]*\)\s*\{{", code, re.M)
+        if m is None:
+            raise ShaderError(f"!{name}: the file defines no function {name}() to leave out")
+        depth, k = 1, m.end()
+        while depth and k < len(code):
+            depth += {"{": 1, "}": -1}.get(code[k], 0)
+            k += 1
+        body = re.sub(r"[^\n]", " ", source[m.start() : k])
+        source = source[: m.start()] + body + source[k:]
+    return source
+
+
 def front_end(
     source: str, label: str, defines=(), include_paths=(), preprocess=False, stage: str = "frag"
 ) -> str:
     """The GLSL glslang compiles to SPIR-V for ``source`` (a shader of ``stage`` 'frag' or
     'vert' in any dialect of the module doc, file name ``label``), with the preprocessor names
-    ``defines`` (``NAME`` or ``NAME=VALUE``) and ``#include`` files searched in
+    ``defines`` (``NAME`` or ``NAME=VALUE``; ``!NAME`` leaves function ``NAME`` out,
+    :func:`split_defines`) and ``#include`` files searched in
     ``include_paths`` (after the including file's folder). A GLSL 330+ core or GLSL ES 310+
     file without ``#include`` is returned as it is (its defines are given to glslang when it
     is compiled) unless ``preprocess`` (for an OpenGL driver, which takes no defines); any
@@ -291,6 +318,8 @@ def front_end(
     removed) with ``#line`` directives keeping the file's line numbers, and translated to GLSL
     330 core if its dialect needs it. ShaderError for a file that does not compile in its own
     dialect or uses what the translation refuses, naming the file and line."""
+    defines, omitted = split_defines(defines)
+    source = omit_functions(source, omitted)
     # jMonkeyEngine's `#import "Common/ShaderLib/X.glsllib"` is its loader's #include
     source = re.sub(r'^([ \t]*#[ \t]*)import([ \t]+")', r"\1include\2", source, flags=re.M)
     # `#include <name>` (three.js's chunks): glslang's includer searches only quoted names

@@ -124,6 +124,7 @@ ENGINE_ALIASES = {
     "m_water_dudvmap": ("dudv_map", "jMonkeyEngine (SimpleWater)"),
     "m_time": ("time", "jMonkeyEngine"),
     "cElapsedTimePS": ("time", "Urho3D"),
+    "cElapsedTime": ("time", "Urho3D"),
     "sunDirection": ("sun_direction", "three.js (Water)"),
     "sunColor": ("sun_color", "three.js (Water)"),
     "eye": ("camera_position", "three.js (Water)"),

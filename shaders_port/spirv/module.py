@@ -27,7 +27,7 @@ import tempfile
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from .dialects import ShaderError, front_end, glslang_errors
+from .dialects import split_defines, ShaderError, front_end, glslang_errors
 
 GRAMMAR_DIR = Path("/usr/include/spirv/unified1")
 CORE_GRAMMAR = GRAMMAR_DIR / "spirv.core.grammar.json"
@@ -323,7 +323,7 @@ def compile_fragment(source: str, label: str, defines: tuple = (), include_paths
         src.write_text(text, encoding="utf-8")
         steps = [
             ["glslangValidator", "-G", "--aml", "--amb", "-g", "-S", "frag"]
-            + [f"-D{n}" for n in defines]
+            + [f"-D{n}" for n in split_defines(defines)[0]]
             + [f"-I{Path(p).resolve()}" for p in include_paths]
             + ["-o", str(raw), src.name],
             ["spirv-opt", *OPT_PASSES, str(raw), "-o", str(opt)],
@@ -358,3 +358,23 @@ def _exe(name: str) -> str:
             "(scripts/setup.sh does)"
         )
     return exe
+
+
+def referenced(mod) -> set:
+    """The ids the code of ``mod``'s functions names (every integer operand: an id, or a
+    literal that happens to equal one)."""
+    out: set = set()
+
+    def walk(x):
+        if isinstance(x, int):
+            out.add(x)
+        elif isinstance(x, (tuple, list)):
+            for y in x:
+                walk(y)
+
+    for fn in mod.functions.values():
+        for b in fn.blocks.values():
+            for ins in [*b.body, b.merge, b.terminator]:
+                if ins is not None:
+                    walk(ins.operands)
+    return out

@@ -53,6 +53,7 @@ from ..pipeline.texture import backend_types
 from . import dialects
 from . import engine_inputs as _engine
 from . import translated as spirv_port
+from .module import referenced
 from .support import check_supported
 from .vertex import normal_pragma, value_pragma
 
@@ -136,26 +137,6 @@ def _start_value(text, gtype: str, where: str) -> tuple:
 def _literal(x: float) -> str:
     r = str(np.float32(x))  # the shortest text that reads back as the same float32
     return r if ("e" in r or "." in r or "n" in r) else r + ".0"
-
-
-def _referenced(mod) -> set:
-    """The ids the code of ``mod``'s functions names (every integer operand: an id, or a
-    literal that happens to equal one)."""
-    out: set = set()
-
-    def walk(x):
-        if isinstance(x, int):
-            out.add(x)
-        elif isinstance(x, (tuple, list)):
-            for y in x:
-                walk(y)
-
-    for fn in mod.functions.values():
-        for b in fn.blocks.values():
-            for ins in [*b.body, b.merge, b.terminator]:
-                if ins is not None:
-                    walk(ins.operands)
-    return out
 
 
 class UserShader:
@@ -461,10 +442,11 @@ class UserShader:
         if self.vertex is not None:  # every input of it is fed by the vertex shader
             try:
                 self.vertex.feeds(mod, self.spec().source, self.label)
+                self.vertex.shader.check_bound()
             except ValueError as exc:
                 raise dialects.ShaderError(str(exc)) from None
         known |= set(self.values)
-        used = _referenced(mod)
+        used = referenced(mod)
         for vid, ins in mod.defs.items():
             name = mod.binding_name(vid)
             if vid not in used:

@@ -44,7 +44,7 @@ from . import engine_names as names_
 from .translated import STUDY_INPUTS
 from .execute import Executor, UnboundVariable
 from .loops import UnsupportedInstruction
-from .module import OPT_PASSES, Module
+from .module import OPT_PASSES, Module, referenced
 
 __all__ = ["VertexShader", "Varying", "compile_vertex", "value_pragma", "ATTRIBUTES"]
 
@@ -183,10 +183,11 @@ class VertexShader:
         self.original, self.label, self.path = source, label, path
         self.source, self.defines = source, tuple(defines)
         pre = bool(defines) or dialects.has_includes(source)
+        compiled = source  # glslang's text: an #include's lines named by their file
         if pre or dialects.detect(source, label).translated:
-            text = dialects.front_end(source, label, tuple(defines), tuple(include_paths),
-                                      preprocess=True, stage="vert")  # fmt: skip
-            self.source = dialects.for_opengl(text)
+            compiled = dialects.front_end(source, label, tuple(defines), tuple(include_paths),
+                                          preprocess=True, stage="vert")  # fmt: skip
+            self.source = dialects.for_opengl(compiled)
         self.bindings, self.values = {}, {}
         for m in _PRAGMA.finditer(source):
             args, line = m["args"].split(), source.count("\n", 0, m.start()) + 1
@@ -203,7 +204,7 @@ class VertexShader:
                     "fitted; declare them in the fragment shader)"
                 )
             self.bindings[args[0]] = args[1]
-        self.module = Module(compile_vertex(self.source, label), label=label, stage="Vertex")
+        self.module = Module(compile_vertex(compiled, label), label=label, stage="Vertex")
         for name, target in self.bindings.items():
             if names_.meaning_of(name, self.bindings) is None and target not in names_.MEANINGS \
                     and _engine.canonical(target) not in _INPUTS:  # fmt: skip
@@ -300,6 +301,30 @@ class VertexShader:
             elif self.inputs.get(name) in study:
                 out[name] = study[self.inputs[name]]
         return out
+
+    def check_bound(self) -> None:
+        """ValueError naming the first attribute or uniform the shader reads that nothing binds
+        (no meaning of ``engine_names``, no ``value``, no study or engine input, no
+        initializer) and the line that reads it: before anything is rendered."""
+        mod, used = self.module, referenced(self.module)
+        for vid, ins in mod.defs.items():
+            if (vid not in used or ins.opname != "OpVariable" or len(ins.operands) > 1
+                    or ins.operands[0] not in ("Input", "UniformConstant")):  # fmt: skip
+                continue
+            name = mod.binding_name(vid)
+            if (name.startswith("gl_") or names_.meaning_of(name, self.bindings) is not None
+                    or name in self.values or name in _INPUTS or name in self.inputs
+                    or pointee_type(mod, vid)[0] in ("struct", "array")):  # fmt: skip
+                continue
+            loads = (i for fn in mod.functions.values() for b in fn.blocks.values()
+                     for i in b.body if i.opname == "OpLoad" and i.operands[0] == vid)  # fmt: skip
+            use = next(loads, ins)
+            raise ValueError(
+                f"{self.label}: the vertex shader reads {name!r} (at {use.where()}) but nothing "
+                f"binds it: give its value (`// @study value {name} V[,V...]`, or `value` in "
+                "fit.declare), bind it to a meaning or input (`// @study bind NAME MEANING`; "
+                "docs/user-shader.md), or declare it a constant to fit"
+            )
 
     def _value(self, name: str, t: tuple):
         """The value a ``value`` pragma gives the uniform ``name`` of type ``t``."""

@@ -256,14 +256,17 @@ STUDY_KEYS: dict[str, Field] = {
         "list_str",
         None,
         "Preprocessor names your own `fit.shader` is compiled with, as an engine sets them: "
-        '`"NAME"` or `"NAME=VALUE"` each (e.g. `["WAVE_LAYERS=2", "USE_FOG"]`).',
+        '`"NAME"` or `"NAME=VALUE"` each (e.g. `["WAVE_LAYERS=2", "USE_FOG"]`); `"!NAME"` '
+        "leaves the function NAME out of the stage (the other stage's entry point of a file "
+        "compiled for both, as Urho3D's loader does).",
     ),
     "fit.vertex_defines": Field(
         "list_str",
         None,
         "Preprocessor names your own `fit.vertex` is compiled with, where they differ from the "
         "fragment shader's (an engine that compiles one file for both stages, e.g. Urho3D's "
-        '`["COMPILEVS", "GL3"]` against `fit.defines = ["COMPILEPS", "GL3"]`); unset: '
+        '`["COMPILEVS", "VS=main", "!PS"]` against `fit.defines = ["COMPILEPS", "PS=main", '
+        '"!VS"]`); unset: '
         "`fit.defines`.",
     ),
     "fit.vertex": Field(
