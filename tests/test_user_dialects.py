@@ -140,6 +140,28 @@ def test_a_legacy_file_is_preprocessed_in_its_own_version(tmp_path):
         front_end(src % "  gl_FragColor = gl_Color;\n", "legacy.frag", include_paths=[tmp_path])
 
 
+def test_es_functions_glslang_holds_as_extension_built_ins_and_unread_bool_uniforms(inputs):
+    """A GLSL ES 3.00 file defining its own `average` (three.js's `common` chunk), which
+    glslang's ES tables hold as an extension built-in, compiles and runs; an unread `uniform
+    bool` (three.js's `isOrthographic`, which SPIR-V for OpenGL cannot hold) is left aside and a
+    read one is refused with the fix."""
+    src = (
+        "#version 300 es\nprecision highp float;\nuniform bool isOrthographic;\n%s"
+        "// @study constant GAIN 0.5 2.0\nconst float GAIN = 1.0;\n"
+        "in vec3 varyingVecWorldPosition;\nout vec4 color;\n"
+        "float average( const in vec3 v ) { return dot( v, vec3( 0.3333333 ) ); }\n"
+        "void main() { color = vec4(GAIN * vec3(average(fract(varyingVecWorldPosition))), 1.0); }\n"
+    )
+    out = UserShader(src % "", "avg.frag").render(inputs).numpy()
+    m = out["mask"] > 0
+    assert m.sum() > 100 and np.all(np.isfinite(out["color"][m]))
+    assert 0.05 < out["color"][m].mean() < 0.95 and out["color"][m].std() > 0.01
+    read = src % "float ortho() { return isOrthographic ? 1.0 : 0.0; }\n"
+    read = read.replace("1.0); }", "ortho()); }")
+    with pytest.raises(ShaderError, match="uniform bool isOrthographic: SPIR-V for OpenGL"):
+        UserShader(read, "avg.frag").render(inputs)
+
+
 def test_refused_legacy_forms_name_their_line():
     base = "#version 120\nvarying vec3 varyingVecEye;\nvoid main() {\n%s\n}\n"
     for body, why in (

@@ -327,22 +327,67 @@ def front_end(
     d = detect(source, label)
     includes = has_includes(source)  # after #import is written #include
     dargs = [f"-D{x}" for x in defines]
+    clean = _unshadowed if d.es else (lambda text: text)
     if not d.translated:
         if not (includes or preprocess):
-            return source
+            return clean(source)
         head = [INCLUDE_EXT] if includes else []
         text = _with_head(source, d, _own_version_line(d), head)
-        return _glslang(text, label, ["-E", *dargs], include_paths, "preprocessing", stage)
+        return clean(_glslang(text, label, ["-E", *dargs], include_paths, "preprocessing", stage))
     own = _with_head(source, d, _own_version_line(d), [INCLUDE_EXT] if includes else [])
-    _glslang(own, label, ["-l", *dargs], include_paths, d.name, stage)  # the dialect's verdict
+    if d.es:  # the dialect's verdict on the text with the user's functions kept apart
+        own = clean(_glslang(own, label, ["-E", *dargs], include_paths, "preprocessing", stage))
+        _glslang(own, label, ["-l"], (), d.name, stage)
+    else:
+        _glslang(own, label, ["-l", *dargs], include_paths, d.name, stage)
     code = _COMMENTS.sub(lambda m: re.sub(r"[^\n]", " ", m[0]), source)
     decls = _declarations(code, stage)
     head = [INCLUDE_EXT] if includes else []
     text = _with_head(source, d, _own_version_line(d), head + decls)
     pre = _glslang(text, label, ["-E", *dargs], include_paths, "preprocessing", stage)
-    pre = _as_target(pre, d)
+    pre = _as_target(clean(pre), d)
     legacy = d.version == 100 if d.es else d.version < 130  # before texture() and layout
     return _translate_tokens(pre, label, len(head) + len(decls), legacy, stage)
+
+
+# functions glslang declares in its GLSL ES 3.x tables without their extension
+# (GL_INTEL_shader_integer_functions2) being enabled: a user's function of one of these names
+# (three.js's `average` in its `common` chunk) is refused as a redeclaration there, though the
+# ES specification reserves none of them
+_GLSLANG_EXTENSION_FUNCTIONS = ("absoluteDifference", "addSaturate", "average", "averageRounded",
+                                "countLeadingZeros", "countTrailingZeros", "multiply32x16",
+                                "subtractSaturate")  # fmt: skip
+
+
+def _unshadowed(text: str) -> str:
+    """GLSL ES ``text`` with each function of :data:`_GLSLANG_EXTENSION_FUNCTIONS` it defines
+    itself named ``_u_NAME`` (every use too), so that glslang compiles it as the ES
+    specification and the drivers do."""
+    for name in _GLSLANG_EXTENSION_FUNCTIONS:
+        if re.search(rf"\b\w+\s+{name}\s*\([^;{{}}]*\)\s*\{{", text):
+            text = re.sub(rf"\b{name}\b", f"_u_{name}", text)
+    return text
+
+
+_BOOL_UNIFORM = re.compile(
+    r"^(?P<pre>[ \t]*uniform\s+(?:(?:lowp|mediump|highp)\s+)?)bool(?P<post>\s+(?P<name>\w+)\s*;)",
+    re.M,
+)
+
+
+def without_bool_uniforms(text: str, label: str) -> str:
+    """``text`` (GLSL on its way to SPIR-V for OpenGL, which holds no ``bool`` uniform) with
+    each ``uniform bool NAME;`` the code never reads declared ``int`` (an unread uniform changes
+    nothing; three.js's program prefix declares ``isOrthographic``); ShaderError naming one
+    that is read."""
+    code = _COMMENTS.sub(" ", text)
+    for m in _BOOL_UNIFORM.finditer(code):
+        if len(re.findall(rf"\b{m['name']}\b", code)) > 1:
+            raise ShaderError(
+                f"{label}: uniform bool {m['name']}: SPIR-V for OpenGL has no bool uniform; "
+                f"declare it `uniform int {m['name']};` (0 or 1) and read it as `{m['name']} != 0`"
+            )
+    return _BOOL_UNIFORM.sub(r"\g<pre>int\g<post>", text)
 
 
 def _as_target(pre: str, d: Dialect) -> str:

@@ -27,7 +27,13 @@ import tempfile
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from .dialects import split_defines, ShaderError, front_end, glslang_errors
+from .dialects import (
+    ShaderError,
+    front_end,
+    glslang_errors,
+    split_defines,
+    without_bool_uniforms,
+)
 
 GRAMMAR_DIR = Path("/usr/include/spirv/unified1")
 CORE_GRAMMAR = GRAMMAR_DIR / "spirv.core.grammar.json"
@@ -315,7 +321,9 @@ def compile_fragment(source: str, label: str, defines: tuple = (), include_paths
     naming ``label`` (a file name), optimised by :data:`OPT_PASSES` and validated.
     :class:`~shaders_port.spirv.dialects.ShaderError` with glslang's errors (file and line of
     the user's file) if it does not compile; RuntimeError if a tool is missing."""
-    text = front_end(source, label, tuple(defines), tuple(include_paths))
+    text = without_bool_uniforms(
+        front_end(source, label, tuple(defines), tuple(include_paths)), label
+    )
     with tempfile.TemporaryDirectory(prefix="spirv-exec.") as d:
         src = Path(d) / Path(label).name
         src = src if src.suffix == ".frag" else src.with_suffix(".frag")

@@ -34,6 +34,7 @@ from pathlib import Path
 
 from ..glsl_text import BEGIN_MARKER, END_MARKER, read_source
 from ..inputs import CONSTANT_SPECS
+from .dialects import without_bool_uniforms
 
 # program -> Debian package that ships it
 TOOLS = {
@@ -160,10 +161,12 @@ def link_locations(source: str, stage: str, vertex_source: str | None = None) ->
 
 
 def glsl_to_spirv(source: str, stage: str, label: str = "<source>") -> bytes:
-    """SPIR-V of a GLSL source (``glslangValidator -G --aml --amb``), validated by spirv-val."""
+    """SPIR-V of a GLSL source (``glslangValidator -G --aml --amb``; an unread ``uniform
+    bool`` declared ``int``, ``spirv.dialects.without_bool_uniforms``), validated by
+    spirv-val."""
     with tempfile.TemporaryDirectory(prefix="spirv.") as d:
         src, spv = Path(d) / f"shader.{stage}", Path(d) / "shader.spv"
-        src.write_text(source, encoding="utf-8")
+        src.write_text(without_bool_uniforms(source, label), encoding="utf-8")
         _run(["glslangValidator", "-G", "--aml", "--amb", "-o", str(spv), str(src)], label)
         _run(["spirv-val", str(spv)], f"the SPIR-V of {label}")
         return spv.read_bytes()

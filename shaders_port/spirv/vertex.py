@@ -70,7 +70,7 @@ def compile_vertex(source: str, label: str) -> bytes:
     with tempfile.TemporaryDirectory(prefix="spirv-vert.") as d:
         src = Path(d) / Path(label).name  # -S vert: the name is the label's (its OpLines)
         raw, opt = Path(d) / "raw.spv", Path(d) / "opt.spv"
-        src.write_text(source, encoding="utf-8")
+        src.write_text(dialects.without_bool_uniforms(source, label), encoding="utf-8")
         steps = [
             ["glslangValidator", "-G", "--aml", "--amb", "-g", "-S", "vert", "-o", str(raw),
              str(src)],
