@@ -162,6 +162,27 @@ def test_es_functions_glslang_holds_as_extension_built_ins_and_unread_bool_unifo
         UserShader(read, "avg.frag").render(inputs)
 
 
+def test_the_version_line_an_engine_puts_before_the_file_is_a_define(inputs):
+    """A file without #version that its engine compiles as GLSL 1.50 (Urho3D's GL3 path puts
+    `#version 150` before it) takes the define `#version 150`: read as GLSL 1.50, its line
+    numbers kept; a file with its own #version refuses the define."""
+    src = (
+        "// no version line: the engine gives it\nin vec3 varyingVecWorldPosition;\n"
+        "out vec4 color;\n// @study constant GAIN 0.5 2.0\nconst float GAIN = 1.0;\n"
+        "void main() { color = vec4(GAIN * fract(varyingVecWorldPosition), 1.0); }\n"
+    )
+    with pytest.raises(ShaderError):  # GLSL 1.10, as the file reads without the define
+        UserShader(src, "v.frag").check()
+    shader = UserShader(src, "v.frag", defines=["#version 150"])
+    assert shader.dialect.name == "GLSL 1.50" and shader.dialect.line == 0
+    m = shader.render(inputs).numpy()["mask"] > 0
+    assert m.sum() > 100
+    with pytest.raises(ShaderError, match=r"\(GLSL 1\.50\):\nv\.frag:6: 'nope'"):
+        front_end(src.replace("GAIN *", "nope *"), "v.frag", ["#version 150"])
+    with pytest.raises(ShaderError, match="has its own #version; remove the define"):
+        front_end("#version 330 core\n" + src, "v.frag", ["#version 150"])
+
+
 def test_refused_legacy_forms_name_their_line():
     base = "#version 120\nvarying vec3 varyingVecEye;\nvoid main() {\n%s\n}\n"
     for body, why in (

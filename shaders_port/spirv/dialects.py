@@ -55,6 +55,10 @@ compatibility attributes and matrices -> names of ``spirv.engine_names`` that bi
 (:data:`_VERTEX_BUILTINS`; ``ftransform()`` -> ``gl_ModelViewProjectionMatrix * gl_Vertex``
 in them); any other compatibility built-in is refused at its line.
 
+A file without ``#version`` takes the version line its engine puts before it from a define
+``"#version N"`` (:func:`version_define`); a define ``"!NAME"`` leaves the function ``NAME``
+out (:func:`omit_functions`: the other stage's entry point of a file compiled for both).
+
 The file is preprocessed in its own version: ``__VERSION__`` reads the version the file was
 written for (an engine's ``#if __VERSION__ >= 130`` takes the branch it takes in the engine)
 and ``GL_ES`` is defined for the GLSL ES dialects, as their compilers define it.
@@ -153,6 +157,9 @@ class Dialect:
             return f"GLSL {self.version // 100}.{self.version % 100:02d}"
         return f"GLSL {self.version} {self.profile}"
 
+    def _replace_line(self, line: int) -> "Dialect":
+        return Dialect(self.version, self.es, self.profile, line)
+
     @property
     def translated(self) -> bool:
         """Whether the file is translated to GLSL 330 core (else compiled as written)."""
@@ -171,10 +178,18 @@ def has_includes(text: str) -> bool:
     return _INCLUDE_LINE.search(text) is not None
 
 
-def detect(source: str, label: str) -> Dialect:
+def detect(source: str, label: str, version: str | None = None) -> Dialect:
     """The dialect of ``source`` (module doc); ShaderError for a ``#version`` glslang's
-    compilers do not know or one that is not the file's first directive."""
+    compilers do not know or one that is not the file's first directive. ``version``: the
+    ``#version`` line an engine puts before the file (:func:`version_define`; the file then has
+    none of its own)."""
     m = _VERSION.search(source)
+    if version is not None:
+        if m is not None:
+            raise ShaderError(
+                f"{label}: the file has its own #version; remove the define `{version}`"
+            )
+        return detect(version, label)._replace_line(0)
     if m is None:
         code = _COMMENTS.sub(" ", source)
         es = bool(re.search(r"\bprecision\s+(lowp|mediump|highp)\b|\bGL_ES\b", code))
@@ -281,10 +296,20 @@ def _own_version_line(d: Dialect) -> str:
 def split_defines(defines) -> tuple[tuple, tuple]:
     """``(preprocessor names, functions to leave out)`` of a stage's defines: an entry
     ``"!NAME"`` leaves the function ``NAME`` out of the stage (as Urho3D's loader comments out
-    the other stage's entry point of a file compiled for both), any other is a ``#define``."""
-    names = tuple(str(d) for d in defines)
+    the other stage's entry point of a file compiled for both), an entry ``"#version ..."`` is
+    the version line (:func:`detect`), any other is a ``#define``."""
+    names = tuple(str(d) for d in defines if not str(d).startswith("#"))
     return (tuple(d for d in names if not d.startswith("!")),
             tuple(d[1:] for d in names if d.startswith("!")))  # fmt: skip
+
+
+def version_define(defines) -> str | None:
+    """The ``"#version ..."`` entry of a stage's defines (the line an engine puts before a file
+    that has none: Urho3D's ``#version 150`` on its GL3 path), or None."""
+    lines = [str(d) for d in defines if str(d).startswith("#")]
+    if len(lines) > 1 or (lines and not re.fullmatch(r"#version[ \t]+\d+([ \t]+\w+)?", lines[0])):
+        raise ShaderError(f"{lines}: give one define `#version N` or `#version N es|core|...`")
+    return lines[0] if lines else None
 
 
 def omit_functions(source: str, names) -> str:
@@ -318,19 +343,21 @@ def front_end(
     removed) with ``#line`` directives keeping the file's line numbers, and translated to GLSL
     330 core if its dialect needs it. ShaderError for a file that does not compile in its own
     dialect or uses what the translation refuses, naming the file and line."""
+    version = version_define(defines)
     defines, omitted = split_defines(defines)
     source = omit_functions(source, omitted)
     # jMonkeyEngine's `#import "Common/ShaderLib/X.glsllib"` is its loader's #include
     source = re.sub(r'^([ \t]*#[ \t]*)import([ \t]+")', r"\1include\2", source, flags=re.M)
     # `#include <name>` (three.js's chunks): glslang's includer searches only quoted names
     source = re.sub(r"^([ \t]*#[ \t]*include[ \t]*)<([^>\n]+)>", r'\1"\2"', source, flags=re.M)
-    d = detect(source, label)
+    d = detect(source, label, version)
     includes = has_includes(source)  # after #import is written #include
     dargs = [f"-D{x}" for x in defines]
     clean = _unshadowed if d.es else (lambda text: text)
     if not d.translated:
         if not (includes or preprocess):
-            return clean(source)
+            own = source if version is None else _with_head(source, d, _own_version_line(d), [])
+            return clean(own)
         head = [INCLUDE_EXT] if includes else []
         text = _with_head(source, d, _own_version_line(d), head)
         return clean(_glslang(text, label, ["-E", *dargs], include_paths, "preprocessing", stage))

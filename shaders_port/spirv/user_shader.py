@@ -148,7 +148,7 @@ class UserShader:
         # the study's water.vert
         self.source, self.label, self.path, self.vertex = source, label, path, vertex
         self.defines, self.include_paths = tuple(defines), tuple(str(p) for p in include_paths)
-        self.dialect = dialects.detect(source, label)
+        self.dialect = dialects.detect(source, label, dialects.version_define(self.defines))
         ranges, bindings, self.engine = {}, {}, {"up": "y", "normal_map": None}
         self.values = values = {}  # `value` pragmas: uniforms the engine sets, not fitted
         self.normal = None  # `normal` pragma: (variable holding the surface normal, its frame)

@@ -184,7 +184,7 @@ class VertexShader:
         self.source, self.defines = source, tuple(defines)
         pre = bool(defines) or dialects.has_includes(source)
         compiled = source  # glslang's text: an #include's lines named by their file
-        if pre or dialects.detect(source, label).translated:
+        if pre or dialects.detect(source, label, dialects.version_define(defines)).translated:
             compiled = dialects.front_end(source, label, tuple(defines), tuple(include_paths),
                                           preprocess=True, stage="vert")  # fmt: skip
             self.source = dialects.for_opengl(compiled)

@@ -258,7 +258,8 @@ STUDY_KEYS: dict[str, Field] = {
         "Preprocessor names your own `fit.shader` is compiled with, as an engine sets them: "
         '`"NAME"` or `"NAME=VALUE"` each (e.g. `["WAVE_LAYERS=2", "USE_FOG"]`); `"!NAME"` '
         "leaves the function NAME out of the stage (the other stage's entry point of a file "
-        "compiled for both, as Urho3D's loader does).",
+        'compiled for both, as Urho3D\'s loader does); `"#version 150"` is the version line '
+        "your engine puts before a file that has none.",
     ),
     "fit.vertex_defines": Field(
         "list_str",

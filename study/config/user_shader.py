@@ -171,12 +171,13 @@ def check_user_shader(values: dict, base: dict):
             raise ExperimentError(f"fit.include_paths: no folder {_clip(p)}")
     for key in ("fit.defines", "fit.vertex_defines"):
         for d in values[key] or []:
-            ok = re.fullmatch(r"[A-Za-z_]\w*(=[^\n]*)?|![A-Za-z_]\w*", d)
+            ok = re.fullmatch(r"[A-Za-z_]\w*(=[^\n]*)?|![A-Za-z_]\w*|#version \d+( \w+)?", d)
             if not ok or d.startswith("GL_"):
                 raise ExperimentError(
                     f'{key}: {_clip(d)} is not "NAME" or "NAME=VALUE" (a preprocessor name: '
-                    'letters, digits and _, not starting with GL_) or "!NAME" (leave the '
-                    "function NAME out of this stage)"
+                    'letters, digits and _, not starting with GL_), "!NAME" (leave the '
+                    'function NAME out of this stage) or "#version N" (the version line your '
+                    "engine puts before a file without one)"
                 )
     if values["fit.vertex_defines"] is not None and not values["fit.vertex"]:
         raise ExperimentError("fit.vertex_defines is for your own fit.vertex; set it or remove it")
