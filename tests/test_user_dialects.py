@@ -244,6 +244,24 @@ def test_non_finite_pixels_are_one_error_with_their_places(inputs):
     assert "pixel (x, y) from the top left: (" in msg and "all within x " in msg
 
 
+def test_non_finite_pixels_at_a_trial_step_name_the_constants_and_the_fix(inputs):
+    """Finite at its start values, the shader goes NaN where a constant's declared range lets a
+    step reach (sqrt of K - 1.2 below 1.2): the model's error names the pixels, the constants'
+    values there and what to change; the fit never goes on with NaN."""
+    src = (
+        "#version 330 core\n// @study constant K 0.0 2.0\nconst float K = 1.5;\n"
+        "in vec3 varyingVecWorldPosition;\nout vec4 color;\n"
+        "void main() { color = vec4(fract(varyingVecWorldPosition) + sqrt(K - 1.2), 1.0); }\n"
+    )
+    model = SpirvModel(UserShader(src, "k.frag"), inputs, np.zeros((36, 48, 3), np.float32))
+    assert np.all(np.isfinite(model.residual({"K": 1.5})))
+    with pytest.raises(FloatingPointError) as err:
+        model.residual({"K": 1.0})
+    msg = str(err.value)
+    assert "non-finite water pixels (first at pixel (" in msg and "at K=1.0" in msg
+    assert "narrow the range of the constant" in msg
+
+
 def test_an_unsupported_instruction_is_one_error_line(inputs):
     # found by the check when the shader loads (spirv.support), and by the executor itself
     shader = UserShader.from_file(SHADERS / "hostile_unsupported.frag")

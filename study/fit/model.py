@@ -242,7 +242,7 @@ class ReferenceModel:
     def residual(self, constants) -> np.ndarray:
         """(M,) float64 shader - reference over water pixels and RGB channels."""
         img, diag = self.render(constants)
-        self._check(diag)
+        self._check(diag, constants)
         return (img[self.mask] - self.reference[self.mask]).astype(np.float64).ravel()
 
     @_thread_handoff
@@ -253,7 +253,8 @@ class ReferenceModel:
             out, jac = self._shade_with_jacobian(constants, names)
         o = out.numpy()
         self.n_jacobians += 1
-        self._check(Diagnostics({k: v for k, v in o.items() if k not in ("color", "mask")}))
+        self._check(Diagnostics({k: v for k, v in o.items() if k not in ("color", "mask")}),
+                    constants)  # fmt: skip
         r = (o["color"][self.mask] - self.reference[self.mask]).astype(np.float64).ravel()
         J = np.asarray(jac)[self.mask].reshape(-1, len(names)).astype(np.float64)
         if not np.all(np.isfinite(J)):
@@ -282,13 +283,21 @@ class ReferenceModel:
         d = (out.color - self._ref_t) * self._mask_t
         return (0.5 * dr.sum(d * d, axis=None)).array  # a size-1 Float
 
-    def _check(self, diag: Diagnostics) -> None:
+    def _check(self, diag: Diagnostics, constants=None) -> None:
+        """FloatingPointError naming how many water pixels are non-finite, the first of them
+        and the constants ``constants`` they came from (a dict or a dataclass of them)."""
         bad = diag.maps.get("nonfinite")
-        if bad is not None and bad[self.mask].any():
-            raise FloatingPointError(
-                f"{self.what} produced {int(bad[self.mask].sum())} non-finite water "
-                "pixels; see the 'nonfinite' diagnostic"
-            )
+        if bad is None or not bad[self.mask].any():
+            return
+        ys, xs = np.nonzero((np.asarray(bad) != 0) & self.mask)
+        vals = constants if isinstance(constants, dict) else getattr(constants, "__dict__", {})
+        at = ", ".join(f"{k}={np.round(np.asarray(v, float), 6).tolist()}" for k, v in vals.items())
+        raise FloatingPointError(
+            f"{self.what} produced {int(bad[self.mask].sum())} non-finite water pixels (first "
+            f"at pixel ({xs[0]}, {ys[0]}))" + (f" at {at}" if at else "") + "; the shader is "
+            "not finite over its constants' ranges: narrow the range of the constant that "
+            "reaches there (the fit's steps stay within the ranges)"
+        )
 
 
 class ShaderModel(ReferenceModel):
