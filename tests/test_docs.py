@@ -106,9 +106,10 @@ def test_the_front_pages_viewer_is_make_runs_committed_result():
     text = (folder / "viewer" / "data.js").read_text()
     data = json.loads(text[text.index("{") : text.rindex("}") + 1])
     # the page's code is the templates' as they are (a changed viewer.js: copy the viewer again)
-    assert (folder / "viewer" / "viewer.js").read_text() == (
-        REPO / "study" / "export" / "viewer" / "viewer.js"
-    ).read_text()
+    for script in ("viewer.js", "bound.js"):
+        assert (folder / "viewer" / script).read_text() == (
+            REPO / "study" / "export" / "viewer" / script
+        ).read_text(), script
     frag = data["shaders"]["frag"]
     for name in ("ATTENUATION_DISTANCE", "SPECULAR_STRENGTH", "SPECULAR_EXPONENT", "BumptexMult"):
         value = float(np.float32(c["constants"][name]))

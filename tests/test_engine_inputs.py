@@ -220,3 +220,50 @@ def test_binding_sheets_describe_engine_names():
 
     assert _meaning("textureMatrix") == ei.ENGINE_INPUTS["reflection_texture_matrix"][1]
     assert "DuDv" in _meaning("dudv_map") and _meaning("viewpos") == "camera position, world units"
+
+
+def test_export_ships_the_textures_the_executor_binds(tmp_path):
+    """A user's shader reading a DuDv map, its own normal-map image and the sky cube, and one
+    reading the engine's render targets: the export writes the first three under
+    ``shaders/textures/`` with exactly the texels the executor binds (a cube map as its six
+    faces), records their sampler state, and lists them in BINDINGS.md by the shader's names;
+    the render targets are named there as the engine's own, no file written."""
+    from helpers.experiments import small_experiment
+    from shaders_port.pipeline.texture import backend_types
+    from study import read_exr
+    from study.export.shaders import export_user_shader
+    from study.export.textures import expects_lines, texture_record, write_textures
+
+    exp, inputs = small_experiment(), synthetic_baseline_inputs(32, 24)
+    shader = UserShader.from_file(SHADERS / "engine_textures.frag")
+    record = texture_record(exp, inputs, shader)
+    out = tmp_path / "shaders"
+    export_user_shader(shader, shader.defaults(), out, ("gles300",),
+                       (record, lambda f: write_textures(record, inputs, f,
+                                                         shader.engine["normal_map"])))  # fmt: skip
+    bound = ei.engine_values(backend_types("llvm"), inputs, shader.engine)
+    ship = record["shipped"]
+    for inp in ("dudv_map", "user_normal_map"):
+        tex = bound[inp]
+        want = np.asarray(tex.data.numpy()).reshape(tex.height, tex.width, tex.channels)
+        got, meta, _ = read_exr(out / "textures" / ship[inp]["file"])
+        assert np.array_equal(got, want) and meta["texture"]["input"] == inp
+    cube = bound["sky_cube"]
+    faces = np.stack([read_exr(out / "textures" / f)[0] for f in ship["sky_cube"]["files"]])
+    assert [f[-6:-4] for f in ship["sky_cube"]["files"]] == ["px", "nx", "py", "ny", "pz", "nz"]
+    assert np.array_equal(faces.ravel(), np.asarray(cube.data.numpy()))
+    assert (ship["user_normal_map"]["mipmaps"], ship["dudv_map"]["mipmaps"]) == (True, False)
+    assert ship["sky_cube"]["wrap"] == "clamp" and ship["dudv_map"]["wrap"] == "repeat"
+    assert ship["dudv_map"]["bound_as"] == ["m_water_dudvmap"] and "rendered" in record
+    sheet = (out / "gles300" / "BINDINGS.md").read_text()
+    assert "`m_water_dudvmap` = `dudv_map.exr`" in sheet
+    assert "`normalSampler` = `user_normal_map.exr`" in sheet and "water_normals.png" in sheet
+    assert "`sky_cube` = `sky_cube_px.exr` ... `sky_cube_nz.exr`" in sheet
+    screen = UserShader.from_file(SHADERS / "engine_screen.frag")
+    rendered = texture_record(exp, inputs, screen)["rendered"]
+    assert {i: r["bound_as"] for i, r in rendered.items()} == {
+        "reflection_sampler": ["mirrorSampler"], "sceneColor": ["refractionSampler"],
+        "sceneDepth": ["m_water_depthmap"]}  # fmt: skip
+    lines = expects_lines(texture_record(exp, inputs, screen))
+    assert "* `mirrorSampler` (`reflection_sampler`)" in "\n".join(lines)
+    assert any("textures the engine renders itself" in line for line in lines)

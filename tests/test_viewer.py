@@ -8,6 +8,7 @@ One tiny calibration of the study's shader and one of a user's shader, shared by
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import re
 import shutil
@@ -18,12 +19,16 @@ import pytest
 
 from helpers import REPO
 from helpers.experiments import DEFAULT, TINY, replaced, sets
+from helpers.synthetic import synthetic_baseline_inputs
+from helpers.viewer import shader_viewer, smooth_sky, swiftshader_snapping
 from shaders_port import Constants
 from shaders_port.gl.compare import compare_port_gl
-from study import read_exr
+from shaders_port.spirv.user_shader import UserShader
+from study import load_experiment, read_exr
 from study._backend import drjit_backend
 from study.cli import main
 from study.commands.steps import prepare
+from study.config.user_shader import load_user_shader
 from study.export.gl_check import GL_MEAN, GL_P999
 from study.export.shaders import export_shaders, load_constants_json, user_shader_of
 from study.export.textures import with_exported_textures
@@ -36,13 +41,14 @@ OVERRIDES = replaced(TINY, "fit.max_steps=5")
 USER = [*OVERRIDES, f'fit.shader="{REPO / "experiments" / "shaders" / "my_water.frag"}"']
 
 
-def _calibrate(root: Path, name: str, overrides: list[str]) -> tuple[Path, object]:
-    """A tiny calibration into ``root/name`` and its shader inputs as the GL check runs them."""
+def _calibrate(root: Path, name: str, overrides: list[str], experiment=DEFAULT):
+    """A tiny calibration of ``experiment`` into ``root/name`` and its shader inputs as the GL
+    check runs them."""
     out = root / name
     with pytest.MonkeyPatch.context() as mp:
         mp.setenv("STUDY_CACHE", str(root / "cache"))
-        assert main(["calibrate", str(DEFAULT), "--out", str(out)] + sets(overrides)) == 0
-        exp, variant, _ = prepare(DEFAULT, out, overrides)
+        assert main(["calibrate", str(experiment), "--out", str(out)] + sets(overrides)) == 0
+        exp, variant, _ = prepare(experiment, out, overrides)
         i = load_or_build_shader_inputs(exp, variant, log=lambda *a: None)
         i = inputs_for_shader(exp, i, exp.fit.shader, variant, log=lambda *a: None)
     return out, with_exported_textures(i, out / "shaders")
@@ -89,14 +95,15 @@ def _self_contained(runs, name: str) -> None:
     """The viewer folder of calibration ``name``: three files, nothing fetched, the exported
     shader as it is, the FLIP of each image."""
     folder = runs["out"][name] / "viewer"
-    assert sorted(p.name for p in folder.iterdir()) == ["data.js", "index.html", "viewer.js"]
+    assert sorted(p.name for p in folder.iterdir()) == [
+        "bound.js", "data.js", "index.html", "viewer.js"]  # fmt: skip
     page = (folder / "index.html").read_text()
     summary = json.loads((runs["out"][name] / "constants.json").read_text())
     for k in ("default", "fitted"):  # the FLIP of each beside the images
         assert f"{summary['error']['flip'][k]:.4f}" in page
     # nothing fetched: two local scripts, no URL, no module, no framework
-    assert re.findall(r'<script src="([^"]+)"', page) == ["data.js", "viewer.js"]
-    for f in ("index.html", "viewer.js"):
+    assert re.findall(r'<script src="([^"]+)"', page) == ["data.js", "bound.js", "viewer.js"]
+    for f in ("index.html", "viewer.js", "bound.js"):
         assert not re.search(r"https?://|import\s|fetch\(", (folder / f).read_text()), f
     data = (folder / "data.js").read_text()
     assert data.startswith("window.WATER_VIEWER_DATA = {")
@@ -253,3 +260,98 @@ def test_what_ties_a_shader_to_the_camera_and_the_start_constants(tmp_path):
     colour = {f"waterColor_{c}": v for c, v in zip("rgba", ("0.1", "0.2", "0.3", "1.0"))}
     assert by_name == {"ATTENUATION_DISTANCE": "7.0", "LOOP_CAP": "12", **colour}
     assert with_spec_defines(refr, start).startswith("#version 300 es\n" + lines[0])
+
+
+# ---- a user's shader pair, and the engine inputs, drawn as the GL check binds them ----------
+ENGINE_EXPERIMENTS = REPO / "experiments"
+
+
+@pytest.fixture(scope="module")
+def engine_inputs():
+    """48x36 synthetic frame with the screen-space buffers, its sky continuous across the cube
+    map's faces (``helpers.viewer.smooth_sky``)."""
+    return dataclasses.replace(synthetic_baseline_inputs(48, 36), cubemap=smooth_sky())
+
+
+def _pair(name: str):
+    exp = load_experiment(ENGINE_EXPERIMENTS / f"{name}.toml", ["fit.vertex_grid=[16,16]"])
+    return load_user_shader(exp.values)
+
+
+def _against(rgba, mask, ours) -> dict:
+    """The browser's frame against an executor's ``ShaderOutput.numpy()``: pixels covered by
+    one only, and the per-pixel max-over-channel |difference| where both cover."""
+    mine = ours["mask"] > 0.5
+    d = np.abs(rgba[..., :3] - ours["color"]).max(-1)[mask & mine]
+    return {"xor": int((mask ^ mine).sum()), "n": int(d.size), "mean": float(d.mean()),
+            "p999": float(np.percentile(d, 99.9)), "max": float(d.max())}  # fmt: skip
+
+
+@pytest.mark.parametrize("name", ["fog_cube_water", "zup_water"])
+def test_a_pair_in_chromium_matches_the_executor(name, browser, engine_inputs, tmp_path,
+                                                 monkeypatch):  # fmt: skip
+    """A pair (the user's vertex shader on the water grid: Urho3D-style with a DuDv map, the
+    sky cube, the depth buffer, an #include and a #define; a Z-up one), its uniforms and
+    textures as the GL check binds them. SwiftShader snaps vertices to 1/16 pixel: against the
+    executor given the same snapped vertices the GL check's thresholds hold; against the exact
+    executor the varyings shift by up to 1/32 pixel, a difference the thresholds below bound
+    at about twice its measure (docs/engine.md gives the figures)."""
+    shader = _pair(name)
+    page, bound = shader_viewer(tmp_path, shader, engine_inputs)
+    g = bound["geometry"]
+    assert g["mode"] == "triangles" and g["depth_test"] and g["screen"] is None
+    assert open_viewer(browser, page) == []
+    rgba, mask = render_float(browser)
+    exact = _against(rgba, mask, shader.render(engine_inputs).numpy())
+    swiftshader_snapping(monkeypatch)
+    snapped = _against(rgba, mask, shader.render(engine_inputs).numpy())
+    assert snapped["n"] > 400 and snapped["xor"] <= 1
+    assert snapped["mean"] <= GL_MEAN and snapped["p999"] <= GL_P999, snapped
+    assert exact["xor"] <= 2 and exact["mean"] <= 5e-3 and exact["p999"] <= 3e-2, exact
+    later, _ = render_float(browser, time=2.0)
+    assert np.abs(later - rgba)[mask].mean() > 1e-3  # the clock moves the layers' offsets
+
+
+def test_engine_textures_in_chromium_match_the_executor(browser, engine_inputs, tmp_path):
+    """A fragment shader reading a DuDv map, the user's own normal-map image (trilinear) and the
+    sky cube on the study's quad (drawn as the screen's corners: no snapping): every texture as
+    the GL check uploads it; the mip level SwiftShader picks differs from llvmpipe's (which
+    the executor reproduces), a difference the thresholds bound at about twice its measure."""
+    shader = UserShader.from_file(REPO / "tests" / "shaders" / "engine_textures.frag")
+    page, bound = shader_viewer(tmp_path, shader, engine_inputs)
+    tex = {t["input"]: t for t in bound["textures"]}
+    assert sorted(tex) == ["dudv_map", "sky_cube", "user_normal_map"]
+    assert tex["user_normal_map"]["min_filter"] == "linear_mipmap_linear"
+    assert len(tex["user_normal_map"]["levels"]) == 9 and tex["sky_cube"]["target"] == "cube"
+    assert bound["geometry"]["screen"] is not None and bound["clock"]["time"] == "time"
+    assert open_viewer(browser, page) == []
+    rgba, mask = render_float(browser)
+    res = _against(rgba, mask, shader.render(engine_inputs).numpy())
+    assert res["n"] > 400 and res["xor"] <= 1
+    assert res["mean"] <= 3e-3 and res["p999"] <= 2e-2, res
+    later, _ = render_float(browser, time=2.0)
+    assert np.abs(later - rgba)[mask].mean() > 1e-3  # time scrolls the DuDv map
+
+
+@pytest.mark.slow  # a calibration of a pair (~40 s)
+def test_calibrate_writes_the_viewer_of_a_pair(tmp_path, browser, monkeypatch):
+    """``study calibrate`` of an engine-style pair (experiments/fog_cube_water.toml, shrunk)
+    writes its viewer and ships the textures it reads: the page draws the pair at the study's
+    camera, against the executor (SwiftShader's snapping given to it) within the GL check's
+    thresholds."""
+    ov = replaced(TINY, "fit.max_steps=2", "fit.vertex_grid=[16,16]")
+    out, inputs = _calibrate(tmp_path, "pair", ov, ENGINE_EXPERIMENTS / "fog_cube_water.toml")
+    _self_contained({"out": {"pair": out}}, "pair")
+    files = {p.name for p in (out / "shaders" / "textures").iterdir()}
+    assert {"dudv_map.exr", "sky_cube_px.exr", "sky_cube_nz.exr"} <= files
+    assert "`sEnvCubeMap` = `sky_cube_px.exr`" in (out / "shaders/gles300/BINDINGS.md").read_text()
+    page = (out / "viewer" / "index.html").read_text()
+    assert "its own vertex shader fog_cube_water.vert draws the water grid" in page
+    assert open_viewer(browser, out / "viewer" / "index.html") == []
+    user = user_shader_of(out / "constants.json")
+    values = load_constants_json(out / "constants.json")
+    rgba, mask = render_float(browser)
+    swiftshader_snapping(monkeypatch)
+    res = _against(rgba, mask, user.render(inputs, values).numpy())
+    assert res["n"] > 100 and res["xor"] <= 1
+    assert res["mean"] <= GL_MEAN and res["p999"] <= GL_P999, res

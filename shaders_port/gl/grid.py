@@ -56,6 +56,12 @@ def grid_renderer_class(base, vertex_source: str, attributes: dict, triangles, u
             super()._set_static_uniforms(prog)
             self._write_uniforms(prog, uniforms)
 
+        def geometry(self) -> dict:
+            """What ``draw`` draws: ``mode`` 'triangles', ``attributes`` as given, ``indices``
+            (T, 3) int32, ``depth_test`` True (``GL_LESS``, cleared to 1)."""
+            return {"mode": "triangles", "attributes": dict(attributes), "indices": tris,
+                    "depth_test": True}  # fmt: skip
+
         def _draw_grid(self, vao) -> None:
             self.fbo.use()
             self.ctx.enable_direct(_GL_DEPTH_TEST)

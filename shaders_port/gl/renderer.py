@@ -170,12 +170,30 @@ class GLRenderer:
                 repeat_x=repeat, repeat_y=repeat, repeat_z=repeat, filter=(f, f)
             )
 
+    def texture_units(self) -> dict:
+        """Input name -> (texture unit, moderngl texture, moderngl sampler) of every texture
+        this renderer binds (``_SAMPLERS``: those of its inputs that are not None)."""
+        return {s: (unit, self._textures[s], self._samplers[s])
+                for s, (unit, _, _) in _SAMPLERS.items() if s in self._textures}  # fmt: skip
+
+    def geometry(self) -> dict:
+        """What :meth:`draw` draws: ``mode`` ('triangle_strip'), ``attributes`` name ->
+        (V, k) float32 per-vertex values (``aVertex`` the quad's corners, world units;
+        ``aMultiTexCoord0`` (x, z) / normal_tile), ``indices`` None, ``depth_test`` False."""
+        data = np.frombuffer(self._vbo.read(), np.float32).reshape(-1, 5)
+        attributes = {"aVertex": data[:, :3].copy(), "aMultiTexCoord0": data[:, 3:].copy()}
+        return {"mode": "triangle_strip", "attributes": attributes, "indices": None,
+                "depth_test": False}  # fmt: skip
+
+    def program_of(self, constants: Constants | None = None):
+        """The linked moderngl program :meth:`draw` runs for ``constants``, its static
+        uniforms set."""
+        return self._program(self._frag_source(constants))[0]
+
     def _bind_textures(self) -> None:
-        for sname, (unit, _, _) in _SAMPLERS.items():
-            if sname not in self._textures:
-                continue
-            self._textures[sname].use(location=unit)
-            self._samplers[sname].use(location=unit)
+        for unit, tex, smp in self.texture_units().values():
+            tex.use(location=unit)
+            smp.use(location=unit)
 
     def _program(self, frag_source: str):
         prog = self._programs.get(frag_source)

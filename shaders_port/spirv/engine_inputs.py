@@ -386,11 +386,8 @@ def gl_class(base, options: dict):
             smp = self.ctx.sampler(repeat_x=False, repeat_y=False, repeat_z=False, filter=(f, f))
             self._engine_textures["sky_cube"] = (10 + len(self._engine_textures), tex, smp)
 
-        def _bind_textures(self) -> None:
-            super()._bind_textures()
-            for unit, tex, smp in self._engine_textures.values():
-                tex.use(location=unit)
-                smp.use(location=unit)
+        def texture_units(self) -> dict:
+            return {**super().texture_units(), **self._engine_textures}
 
         def _set_static_uniforms(self, prog) -> None:
             super()._set_static_uniforms(prog)

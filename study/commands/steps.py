@@ -109,7 +109,8 @@ def export_calibration(exp, model, frames: list, cal, out: Path, timings: dict):
     was fitted) exported into ``out/shaders``: a variant's core and compatibility GLSL,
     or a copy of a user's file with the fitted constants in place (``fit.write_back = "file"``:
     the file itself too, once the GL check passed); every engine target the installed tools
-    make; the Fresnel LUT and normal map the constants assume, in ``shaders/textures/``
+    make; the Fresnel LUT and normal map the constants assume, and every other texture a
+    user's shader reads that the engine uploads, in ``shaders/textures/``
     (``study.export.textures``). Then run on OpenGL (llvmpipe), with those textures read back
     from their files, against the Dr.Jit shader on each of ``frames`` (shader inputs at the
     experiment's resolution), and the engine targets' checks. Returns (a GL check per frame,
@@ -117,8 +118,9 @@ def export_calibration(exp, model, frames: list, cal, out: Path, timings: dict):
     file, its SHA-256 and declaration)."""
     shaders, fitted = out / "shaders", cal.fitted
     user = getattr(model, "user_shader", None)
-    record = texture_record(exp, frames[0])
-    textures = (record, lambda folder: write_textures(record, frames[0], folder))
+    record = texture_record(exp, frames[0], user)
+    normal_map = user.engine["normal_map"] if user is not None else None
+    textures = (record, lambda folder: write_textures(record, frames[0], folder, normal_map))
     status = {glsl_scalar(n): p["status"] for n, p in cal.parameters.items()}
     with timed(timings, "export_s"):
         _log(f"calibrate: exporting and compiling {model.label} (and its vertex shader)")

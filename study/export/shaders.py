@@ -180,7 +180,7 @@ def export_user_shader(
     user's own, ``shader.vertex``, under its file name); ``targets``
     ``textures`` and ``status`` as :func:`export_shaders` (translated from those two files).
     Compile-checked and written all or not at all, as there; returns the written paths."""
-    frag = _staged_name(shader.label, "frag")
+    frag = staged_name(shader.label, "frag")
     texts = {
         ("core", "water.vert"): read_source("water", "vert", "core"),
         ("core", frag): shader.written(values),
@@ -193,13 +193,13 @@ def export_user_shader(
     if shader.dialect.runs_on_desktop_gl:
         core[frag] = shader.gl_source(values, bare_initializers=False)
     if shader.vertex is not None:  # the user's own vertex shader in place of the study's
-        vert = _staged_name(shader.vertex.label, "vert")
+        vert = staged_name(shader.vertex.label, "vert")
         texts = {("core", vert): shader.vertex.shader.source,
                  ("core", frag): texts[("core", frag)]}  # fmt: skip
     return _write_checked(texts, out_dir, targets, values, textures, fit, core)
 
 
-def _staged_name(label: str, stage: str) -> str:
+def staged_name(label: str, stage: str) -> str:
     """The exported name of a user's file of ``stage`` ('frag' or 'vert'): ``label`` itself
     when it ends in ``.frag`` / ``.vert``, else its stem with that ending (Urho3D's one
     ``Water.glsl`` for both stages is written as ``Water.frag`` and ``Water.vert``)."""

@@ -14,16 +14,30 @@ these files (:func:`with_exported_textures`).
 ``shaders/textures/``: ``fresnel_lut.exr`` (1 x N: R transmission, G reflection, B 0),
 ``normal_map.exr`` (S x S: ``0.5 n + 0.5``, +y up in world space before the shader's own
 swizzle), ``textures.json`` (the record of :func:`texture_record`).
+
+A user's shader may read more textures the engine uploads (``shaders_port.spirv.
+engine_inputs``, :func:`shader_textures`): each is written beside them, exactly the texels the
+executor and the GL check bound, with its sampler state in the record and the shader's names
+of it: ``dudv_map.exr`` (the DuDv map of the study's normal map), ``user_normal_map.exr``
+(the declaration's ``normal_map`` image as the shader read it, RGB / 255 or / 65535),
+``sky_cube_{px,nx,py,ny,pz,nz}.exr`` (the sky as engines hold a cube map) and
+``reflection_cube_*.exr`` (the study's ``reflectionTexture``, the sky at ``d * (1, -1, 1)``),
+a cube map's faces in GL order with the face and axis table of ``docs/engine-inputs.md``. The
+screen-space and top-down renders a shader reads (:data:`RENDERED`) are the engine's own render
+targets: the record and the binding sheet name them, nothing is written.
 """
 
 from __future__ import annotations
 
 import dataclasses
 import json
+import re
 import shutil
 from pathlib import Path
 
 import numpy as np
+
+from shaders_port.spirv.engine_inputs import dudv_map, read_normal_map, sky_cube
 
 from .._io import read_exr, write_exr
 
@@ -33,6 +47,7 @@ __all__ = [
     "expects_lines",
     "lut_image",
     "read_texture_record",
+    "shader_textures",
     "texture_record",
     "with_exported_textures",
     "write_textures",
@@ -42,10 +57,103 @@ __all__ = [
 FOLDER = "textures"
 
 
-def texture_record(exp, inputs) -> dict:
-    """What the constants assume of the two textures (JSON-able): the LUT's law, index of
+# a cube map's faces in GL order, as file-name suffixes
+FACES = ("px", "nx", "py", "ny", "pz", "nz")
+# texture inputs a user's shader may read that ship as files: input -> (file stem, encoding,
+# filter, wrap, mipmaps)
+SHIPPED = {
+    "dudv_map": ("dudv_map", "RG = 0.5 + 0.5 (-dh/dx, -dh/dz) of the study's normal map "
+                 "(0.5: no distortion), B = 0; linear floats", "linear", "repeat", False),
+    "user_normal_map": ("user_normal_map", "the declaration's normal_map image as the shader "
+                        "read it: RGB as stored / 255 (16-bit: / 65535), no sRGB decoding",
+                        "linear", "repeat", True),
+    "sky_cube": ("sky_cube", "the sky as engines hold a cube map: the texel of direction d "
+                 "holds the sky in d; linear RGB", "linear", "clamp", False),
+    "reflectionTexture": ("reflection_cube", "the study's sky cube map: the texel of direction "
+                          "d holds the sky in d * (1, -1, 1); linear RGB", "linear", "clamp",
+                          False),
+}  # fmt: skip
+#: texture inputs the engine renders itself (never shipped): input -> what to render
+RENDERED = {
+    "sceneColor": "the scene without the water, this camera (screen space, a render target)",
+    "sceneDepth": "the depth buffer of that view, window depth in [0, 1] (a render target)",
+    "reflection_sampler": "the scene above the water seen by the camera mirrored in the water "
+    "plane (a render target)",
+    "refractionTexture": "the ground under the water seen from straight above (a top-down "
+    "render of the engine's scene)",
+    "worldYComponent": "the world height of that ground (a top-down render, R32F)",
+    "worldYComponentReflection": "the world height of the geometry above the water seen from "
+    "below (a top-down render, R32F)",
+    "reflectionBottom": "that geometry's colour seen from below (a top-down render)",
+}
+
+
+def shader_textures(shader) -> dict:
+    """Texture input -> the sampler names of the user's shader ``shader`` (``UserShader``)
+    reading it, of the inputs of :data:`SHIPPED` and :data:`RENDERED`: by its own name in the
+    code (comments left out), through the declaration or an engine's name
+    (``UserShader.run_bindings``)."""
+    code = re.sub(r"//[^\n]*|/\*.*?\*/", "", shader.source, flags=re.S)
+    out: dict[str, list] = {}
+    for name, inp in shader.run_bindings().items():
+        if inp in SHIPPED or inp in RENDERED:
+            out.setdefault(inp, []).append(name)
+    for inp in (*SHIPPED, *RENDERED):
+        if re.search(rf"\b{inp}\b", code) and inp not in out.get(inp, []):
+            out.setdefault(inp, []).append(inp)
+    return out
+
+
+def _shipped_record(inp: str, names: list, inputs, shader) -> dict:
+    """The record of the shipped texture ``inp`` the shader reads as ``names``."""
+    stem, encoding, filt, wrap, mips = SHIPPED[inp]
+    rec = {"bound_as": names, "encoding": encoding, "filter": filt, "wrap": wrap,
+           "mipmaps": mips}  # fmt: skip
+    if inp in ("sky_cube", "reflectionTexture"):
+        f = int(inputs.cubemap.shape[1])
+        layout = ("six faces in GL order +X, -X, +Y, -Y, +Z, -Z (world axes, +y up), each in "
+                  "GL upload order (face and axis table: docs/engine-inputs.md), filtered per "
+                  "face (GL_TEXTURE_CUBE_MAP_SEAMLESS off)")  # fmt: skip
+        rec.update(files=[f"{stem}_{k}.exr" for k in FACES], size=[f, f], layout=layout)
+        return rec
+    a = _shipped_texels(inp, inputs, shader.engine["normal_map"])
+    rec.update(file=f"{stem}.exr", size=[int(a.shape[1]), int(a.shape[0])])
+    if inp == "user_normal_map":
+        rec["source"] = Path(shader.engine["normal_map"]).name
+    return rec
+
+
+def _shipped_texels(inp: str, inputs, normal_map=None) -> np.ndarray:
+    """The texels of the shipped texture ``inp`` as the executor and the GL check bind them:
+    (H, W, 3) float32 in GL upload order, a cube map (6, F, F, 3)."""
+    if inp == "dudv_map":
+        return dudv_map(inputs.normal_map)
+    if inp == "user_normal_map":
+        return read_normal_map(normal_map)
+    if inp == "sky_cube":
+        return sky_cube(inputs.cubemap).astype(np.float32)
+    return np.asarray(inputs.cubemap, np.float32)  # reflectionTexture
+
+
+def texture_record(exp, inputs, shader=None) -> dict:
+    """What the constants assume of the textures (JSON-able): the LUT's law, index of
     refraction, size, layout and sampling; the normal map's encoding, size, tiling and
-    sampling."""
+    sampling; for a user's shader ``shader`` (``UserShader``), every other texture it reads
+    (:func:`shader_textures`): a shipped one's files, encoding, size, filter, wrap, mipmaps
+    and the shader's names of it (``bound_as``), under ``shipped``; the engine's render
+    targets it reads under ``rendered`` (input -> ``{"bound_as", "what"}``)."""
+    record = _study_record(exp, inputs)
+    if shader is not None:
+        reads = shader_textures(shader)
+        record["shipped"] = {i: _shipped_record(i, n, inputs, shader)
+                             for i, n in reads.items() if i in SHIPPED}  # fmt: skip
+        record["rendered"] = {i: {"bound_as": n, "what": RENDERED[i]}
+                              for i, n in reads.items() if i in RENDERED}  # fmt: skip
+    return record
+
+
+def _study_record(exp, inputs) -> dict:
+    """The Fresnel LUT's and the normal map's record (:func:`texture_record`)."""
     ior = float(exp.water.ior)
     radiance = exp.reference.fresnel_transmission == "radiance"
     return {
@@ -58,6 +166,9 @@ def texture_record(exp, inputs) -> dict:
             "layout": "N x 1 texels; R = transmission, G = reflection (B unused), linear floats",
             "index": "s = cos(theta) between the normal and the view ray; texel i at (i + 0.5) / N",
             "sampling": "nearest, clamp to edge",
+            "filter": "nearest",
+            "wrap": "clamp",
+            "mipmaps": False,
             "too_bright_with_usual_lut": ior**2 if radiance else 1.0,
         },
         "normal_map": {
@@ -66,6 +177,9 @@ def texture_record(exp, inputs) -> dict:
             "size": int(inputs.normal_map.shape[0]),
             "tile": float(exp.waves.normal_tile),
             "sampling": "bilinear, repeat; row 0 of the file is t = 0 (upload in file order)",
+            "filter": "linear",
+            "wrap": "repeat",
+            "mipmaps": False,
             "layers": "sampled four times at vTexCoord0..3 = (x, z) / tile + wave1..4",
         },
         "colour_space": "linear RGB",
@@ -80,8 +194,9 @@ def lut_image(fresnel_lut: np.ndarray) -> np.ndarray:
     return img
 
 
-def write_textures(record: dict, inputs, shaders_dir: Path) -> Path:
-    """``shaders_dir/textures/``: the LUT and the normal map of ``inputs`` as float32 EXR and
+def write_textures(record: dict, inputs, shaders_dir: Path, normal_map=None) -> Path:
+    """``shaders_dir/textures/``: the LUT and the normal map of ``inputs`` as float32 EXR, the
+    record's ``shipped`` textures (``normal_map``: the path of a user's normal-map image) and
     ``textures.json`` (``record``). Returns the folder."""
     folder = Path(shaders_dir) / FOLDER
     folder.mkdir(parents=True, exist_ok=True)
@@ -90,6 +205,11 @@ def write_textures(record: dict, inputs, shaders_dir: Path) -> Path:
     write_exr(
         folder / record["normal_map"]["file"], inputs.normal_map, {"texture": record["normal_map"]}
     )
+    for inp, rec in record.get("shipped", {}).items():
+        a = _shipped_texels(inp, inputs, normal_map)
+        files = rec["files"] if "files" in rec else [rec["file"]]
+        for f, texels in zip(files, a if "files" in rec else [a]):
+            write_exr(folder / f, texels, {"texture": {**rec, "input": inp}})
     (folder / "textures.json").write_text(json.dumps(record, indent=1) + "\n", encoding="utf-8")
     return folder
 
@@ -127,6 +247,7 @@ def expects_lines(record: dict | None) -> list[str]:
     if not record:
         return []
     lut, nm = record["fresnel_lut"], record["normal_map"]
+    which = "textures" if record.get("shipped") else "two textures"
     law = (
         f"transmission {lut['transmission']} with n = {lut['ior']:g} (the radiance law): an "
         "engine's usual LUT (T = 1 - R) makes the water "
@@ -137,14 +258,51 @@ def expects_lines(record: dict | None) -> list[str]:
     return [
         "## What this shader expects",
         "",
-        "The fitted constants hold only with the two textures they were fitted with, shipped in "
+        f"The fitted constants hold only with the {which} they were fitted with, shipped in "
         "`shaders/textures/` as float32 OpenEXR (upload them as float textures):",
         "",
         f"* `fresnelLookup` = `{lut['file']}`: {lut['layout']}; {law}; indexed by "
         f"{lut['index']}; {lut['sampling']}.",
         f"* `normalMap` = `{nm['file']}` ({nm['size']} x {nm['size']}): {nm['encoding']}; "
         f"{nm['sampling']}; {nm['layers']} (tile {nm['tile']:g}).",
+        *_shipped_lines(record.get("shipped", {})),
         f"* Every colour is {record['colour_space']}; world units, +y up, the water plane at "
         "y = 0.",
+        "",
+        *_rendered_lines(record.get("rendered", {})),
+    ]
+
+
+def _names(rec: dict) -> str:
+    return " / ".join(f"`{n}`" for n in rec["bound_as"])
+
+
+def _shipped_lines(shipped: dict) -> list[str]:
+    """A line per shipped texture of a user's shader: its names, files, encoding, sampling."""
+    lines = []
+    for inp, r in shipped.items():
+        files = f"`{r['files'][0]}` ... `{r['files'][-1]}`" if "files" in r else f"`{r['file']}`"
+        mips = ("mipmapped: build its mip chain (`glGenerateMipmap`), trilinear"
+                if r["mipmaps"] else "no mipmaps")  # fmt: skip
+        src = f", from `{r['source']}`" if "source" in r else ""
+        each = " each" if "files" in r else ""
+        lay = f"; {r['layout']}" if "layout" in r else ""
+        lines.append(
+            f"* {_names(r)} = {files} ({r['size'][0]} x {r['size'][1]}{each}, `{inp}`{src}): "
+            f"{r['encoding']}{lay}; {r['filter']}, {r['wrap']}, {mips}."
+        )
+    return lines
+
+
+def _rendered_lines(rendered: dict) -> list[str]:
+    """The engine's own render targets a user's shader reads: named, never shipped."""
+    if not rendered:
+        return []
+    return [
+        "The shader also reads textures the engine renders itself, every frame for its camera "
+        "(not shipped: the study rendered its own for the calibration, the viewer gets them as "
+        "data):",
+        "",
+        *[f"* {_names(r)} (`{inp}`): {r['what']}." for inp, r in rendered.items()],
         "",
     ]

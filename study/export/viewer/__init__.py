@@ -2,8 +2,9 @@
 that runs the exported GLSL ES 3.00 shaders (``shaders/gles300/``) in WebGL 2 on the
 calibration's own inputs, beside the run's reference and port images.
 
-The folder holds three files and needs nothing else: ``index.html`` (the page, from
-``page.html``), ``viewer.js`` (the WebGL 2 code, copied as it is) and ``data.js``, one
+The folder holds four files and needs nothing else: ``index.html`` (the page, from
+``page.html``), ``viewer.js`` (the WebGL 2 code) and ``bound.js`` (a user's shader bound as the
+GL check binds it), both copied as they are, and ``data.js``, one
 ``window.WATER_VIEWER_DATA = {...}`` assignment holding the shaders' text and every array as
 base64 little-endian float32. Script files because Chromium, opened on a ``file://`` page,
 neither fetches files nor uploads images to WebGL; a ``<script src>`` it loads.
@@ -12,7 +13,10 @@ neither fetches files nor uploads images to WebGL; a ``<script src>`` it loads.
 exported, and the ``#define SPIRV_CROSS_CONSTANT_ID_<id> <value>`` lines that give the start
 constants), the inputs the GL check runs (the variant's prepared inputs with the exported LUT
 and normal map), the matrices column-major, the water quad, the camera, the animation rule and
-the run's reference / default / fitted images in GL row order (row 0 at the bottom).
+the run's reference / default / fitted images in GL row order (row 0 at the bottom). For a
+user's shader, ``bound`` (``user.bound_data``) instead of the study's textures: every uniform,
+texture and vertex attribute the GL check binds for it on llvmpipe, with the geometry it draws
+(the water quad after ``water.vert``, or the grid after the user's own vertex shader).
 """
 
 from __future__ import annotations
@@ -22,24 +26,22 @@ import html
 import json
 import re
 import string
-import tempfile
 from pathlib import Path
 
 import numpy as np
 
 from shaders_port import ShaderInputs
 from shaders_port.inputs import normal_matrix, perspective_view_proj
-from shaders_port.spirv.engine_inputs import ENGINE_INPUTS, SAME_AS
 from shaders_port.variants import get_variant
 
 from ..._io import read_exr
-from ..shaders import export_user_shader, user_shader_of
+from ..shaders import load_constants_json, user_shader_of
 from ..targets import target_file
 from ..textures import with_exported_textures
 from ...scene.reference import water_mask
+from .user import user_parts
 
 TEMPLATES = Path(__file__).parent
-ENGINE_ONLY = set(ENGINE_INPUTS) - set(SAME_AS)  # the engine inputs that are no study input
 # uniforms and samplers rendered for the study's camera: a shader that reads one is tied to it
 SCREEN_SPACE = ("sceneColor", "sceneDepth", "reflection_sampler", "o2v_projection_reflection",
                 "screenSize", "gl_FragCoord")  # fmt: skip
@@ -107,19 +109,6 @@ def with_spec_defines(frag: str, start: dict) -> str:
     return head + sep + spec_defines(frag, start) + rest
 
 
-def _at_start(out: Path, frag: str, start: dict, stem: str) -> str:
-    """The GLSL ES fragment shader of a user's shader calibrated in ``out`` at its start values
-    ``start``: exported again (SPIRV-Cross writes a user's constants as literals, no
-    specialization constants), or ``frag`` when it has specialization constants."""
-    if _SPEC.search(frag):
-        return with_spec_defines(frag, start)
-    shader = user_shader_of(out / "constants.json")
-    values = {k: tuple(v) if isinstance(v, list) else v for k, v in start.items()}
-    with tempfile.TemporaryDirectory(prefix="viewer_start_") as tmp:
-        export_user_shader(shader, values, Path(tmp), targets=("gles300",))
-        return (Path(tmp) / target_file("gles300", stem, "frag")).read_text("utf-8")
-
-
 def tied_names(frag: str, bindings: dict | None = None) -> list[str]:
     """The screen-space inputs (``SCREEN_SPACE``) the fragment shader text ``frag`` reads, by
     their own names or through ``bindings`` (the shader's name -> the study's input)."""
@@ -178,14 +167,15 @@ def viewer_data(inputs: ShaderInputs, vert: str, frag: str, frag_default: str, i
 
 
 def write_viewer(folder: Path, data: dict, page: dict) -> Path:
-    """``index.html``, ``viewer.js`` and ``data.js`` in ``folder`` (created); ``page``: the
-    template's fields (``page.html``: title, errors, notes), HTML-escaped here except
-    ``options``. Returns the path of ``index.html``."""
+    """``index.html``, ``viewer.js``, ``bound.js`` and ``data.js`` in ``folder`` (created);
+    ``page``: the template's fields (``page.html``: title, errors, notes), HTML-escaped here
+    except ``options``. Returns the path of ``index.html``."""
     folder = Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
     text = json.dumps(data, separators=(",", ":"), allow_nan=False)
     (folder / "data.js").write_text(f"window.WATER_VIEWER_DATA = {text};\n", encoding="utf-8")
-    (folder / "viewer.js").write_text((TEMPLATES / "viewer.js").read_text("utf-8"), "utf-8")
+    for script in ("viewer.js", "bound.js"):
+        (folder / script).write_text((TEMPLATES / script).read_text("utf-8"), "utf-8")
     fields = {k: v if k == "options" else html.escape(str(v), quote=False) for k, v in page.items()}
     page_text = string.Template((TEMPLATES / "page.html").read_text("utf-8")).substitute(fields)
     (folder / "index.html").write_text(page_text, encoding="utf-8")
@@ -212,7 +202,8 @@ def _camera(exp, inputs: ShaderInputs, orbit: bool) -> dict:
     }
 
 
-def _camera_note(camera: dict, tied: list[str], user: bool) -> str:
+def _camera_note(camera: dict, tied: list[str], shader=None) -> str:
+    """The page's words on the camera; ``shader``: a user's shader (``UserShader``) or None."""
     views = (
         "The raycast refraction reads the ground seen from above (refractionTexture, "
         "worldYComponent) and the raycast reflection the geometry above the water seen from "
@@ -228,10 +219,17 @@ def _camera_note(camera: dict, tied: list[str], user: bool) -> str:
             "is independent of the view. " + views + " The run's images are at the study's "
             "camera only."
         )
-    if user:
+    if shader is not None:
+        pair = (
+            f"; its own vertex shader {shader.vertex.label} draws the water grid with the "
+            "study camera's matrices, baked into the data as the GL check binds them"
+            if shader.vertex is not None
+            else ""
+        )
         return (
-            "fixed at the study's camera: a user's shader, its inputs bound by name; the "
-            "viewer does not know which of them its technique ties to the view. " + views
+            "fixed at the study's camera: a user's shader, every uniform and texture bound as "
+            f"the GL check (llvmpipe) binds them for that camera{pair}; the viewer does not "
+            "know which of them its technique ties to the view. " + views
         )
     if tied:
         return (
@@ -285,18 +283,28 @@ class ViewerUnsupported(ValueError):
 
 
 def not_drawn(shader) -> str | None:
-    """Why the viewer cannot draw a user's shader (``UserShader``; None when it can): it draws
-    the study's water quad with ``water.vert`` and binds the study's inputs of
-    :data:`_TEXTURES`."""
-    if shader.vertex is not None:
+    """Why the viewer cannot draw a user's shader (``UserShader``; None when it can): it binds
+    what the GL check binds on llvmpipe (``user.bound_data``), so a dialect no desktop OpenGL
+    runs (GLSL ES 3.10 and later) has nothing to bind."""
+    d = shader.dialect
+    if not d.runs_on_desktop_gl:
         return (
-            f"{shader.label} runs after its own vertex shader {shader.vertex.label}, which the "
-            "viewer does not draw (it draws the study's water.vert)"
+            f"{shader.label} is {d.name}, which the GL check does not run on llvmpipe (the "
+            "viewer binds what the GL check binds)"
         )
-    engine = sorted(set(shader.run_bindings().values()) & ENGINE_ONLY)
-    if engine:
-        return f"{shader.label} reads the engine inputs {', '.join(engine)}, which it does not bind"
     return None
+
+
+def _user_parts(out: Path, shader, inputs: ShaderInputs, start: dict) -> dict:
+    """``user.user_parts`` of the user's shader ``shader`` calibrated in ``out`` at its fitted
+    and ``start`` values; ViewerUnsupported without a headless OpenGL."""
+    fitted = load_constants_json(out / "constants.json", shader)
+    start = {k: tuple(v) if isinstance(v, list) else v for k, v in start.items()}
+    try:
+        return user_parts(shader, out / "shaders", inputs, fitted, start)
+    except RuntimeError as exc:  # no headless OpenGL: nothing to read the bindings from
+        first = str(exc).splitlines()[0]
+        raise ViewerUnsupported(f"{first} (the viewer binds what the GL check binds)") from None
 
 
 def calibration_viewer(out: Path, exp, inputs: ShaderInputs) -> Path:
@@ -308,7 +316,8 @@ def calibration_viewer(out: Path, exp, inputs: ShaderInputs) -> Path:
     summary = json.loads((out / "constants.json").read_text("utf-8"))
     shaders = out / "shaders"
     user = "shader_file" in summary
-    why = not_drawn(user_shader_of(out / "constants.json")) if user else None
+    shader = user_shader_of(out / "constants.json") if user else None
+    why = not_drawn(shader) if user else None
     if why is not None:
         raise ViewerUnsupported(
             f"{why}; the GL check and the engine targets in {out / 'shaders'} are written"
@@ -321,22 +330,27 @@ def calibration_viewer(out: Path, exp, inputs: ShaderInputs) -> Path:
             "glslang-tools and spirv-cross (scripts/setup.sh installs them); export again with "
             f"`study export {out / 'constants.json'} --out {out}`"
         )
-    vert = (shaders / target_file("gles300", "water", "vert")).read_text("utf-8")
-    frag = frag_path.read_text("utf-8")
     inputs = with_exported_textures(inputs, shaders)
-    if not user:
+    start = start_constants(summary)
+    if user:
+        u = _user_parts(out, shader, inputs, start)
+        vert, frag, frag_default = u["vert"], u["frag"], u["frag_default"]
+    else:
+        vert = (shaders / target_file("gles300", "water", "vert")).read_text("utf-8")
+        frag = frag_path.read_text("utf-8")
+        frag_default = with_spec_defines(frag, start)
         inputs = get_variant(summary["shader"]).prepare_inputs(inputs)
     images = _images(out, summary)
     # where the reference sees the water (not a wall in front of it): the pixels the run scored
     images["scored"] = water_mask(exp, inputs.width, inputs.height).astype(np.float32)
-    start = start_constants(summary)
-    frag_default = _at_start(out, frag, start, stem) if user else with_spec_defines(frag, start)
     bindings = summary.get("declaration", {}).get("bindings", {}) if user else {}
     tied = tied_names(frag, bindings)
     camera = _camera(exp, inputs, orbit=not user and not tied)
     vel = np.asarray(exp.animation.velocities, np.float64)
     data = viewer_data(inputs, vert, frag, frag_default, images, camera,
                        {"velocities": vel.tolist()}, bindings)  # fmt: skip
+    if user:  # bound as the GL check binds it: the study's own textures are not needed
+        data["textures"], data["bound"] = {}, u["bound"]
     name, err = _scene_error(summary)
     flip = err["flip"]
     options = [
@@ -357,9 +371,9 @@ def calibration_viewer(out: Path, exp, inputs: ShaderInputs) -> Path:
         "time_max": "20",
         "pitch_deg": camera["pitch_deg"],
         "orbit_drag": "" if camera["orbit"] else " (off: see the camera below)",
-        "inputs": ", ".join(sorted(data["textures"])),
+        "inputs": u["names"] if user else ", ".join(sorted(data["textures"])),
         "velocities": "; ".join(f"wave{k + 1} ({v[0]:g}, {v[1]:g})" for k, v in enumerate(vel)),
-        "camera_note": _camera_note(camera, tied, user),
+        "camera_note": _camera_note(camera, tied, shader),
         "provenance": f"Experiment {name}, {inputs.width}x{inputs.height} "
         f"pixels; written by study.export.viewer from {out.name}/.",
     }

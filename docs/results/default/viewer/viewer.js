@@ -211,6 +211,7 @@ void main() {
     left: "live_fitted", right: "reference", split: 0.5, last: null,
   };
   let programs, vao, quad, quadBuffer, textures, targets, maskTarget, showProg, images, black, white;
+  let bound = null; // a user's shader: bound as the GL check bound it (bound.js)
 
   function uniformValues(cam, time) {
     const I = D.inputs, waves = [];
@@ -315,6 +316,7 @@ void main() {
   }
 
   function drawWater(which, time, cam) {
+    if (bound) return bound.draw(which, time, targets[which], maskTarget);
     const vals = uniformValues(cam, time);
     const plane = screenPlane(cam);
     // the water's coverage: into the mask target's colour and stencil
@@ -420,6 +422,10 @@ void main() {
     const one = (v) => texture2d({ width: 1, height: 1, channels: 3, data: floatsToB64(new Float32Array([v, v, v])) }, "nearest", false);
     black = one(0);
     white = one(1);
+    if (D.bound) {
+      if (!window.waterViewerBound) throw new Error("bound.js did not load: keep it beside index.html");
+      bound = window.waterViewerBound(gl, D, { floats, FORMATS, checkError, W, H }, programs);
+    }
     vao = gl.createVertexArray();
     gl.bindVertexArray(vao);
     quad = new Float32Array(D.inputs.quad);
