@@ -267,3 +267,12 @@ def test_export_ships_the_textures_the_executor_binds(tmp_path):
     lines = expects_lines(texture_record(exp, inputs, screen))
     assert "* `mirrorSampler` (`reflection_sampler`)" in "\n".join(lines)
     assert any("textures the engine renders itself" in line for line in lines)
+    # an engine's normal-map sampler with no image named ships the waves as it read them
+    waves = UserShader.from_file(SHADERS / "engine_uniforms.frag")
+    rec = texture_record(exp, inputs, waves)
+    write_textures(rec, inputs, out, None)
+    tex = bound["waves_normal_map"]
+    want = np.asarray(tex.data.numpy()).reshape(tex.height, tex.width, tex.channels)
+    got, _, _ = read_exr(out / "textures" / rec["shipped"]["waves_normal_map"]["file"])
+    assert rec["shipped"]["waves_normal_map"]["bound_as"] == ["normalSampler"]
+    assert np.array_equal(got, want) and rec["shipped"]["waves_normal_map"]["mipmaps"]

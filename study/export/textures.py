@@ -18,7 +18,8 @@ swizzle), ``textures.json`` (the record of :func:`texture_record`).
 A user's shader may read more textures the engine uploads (``shaders_port.spirv.
 engine_inputs``, :func:`shader_textures`): each is written beside them, exactly the texels the
 executor and the GL check bound, with its sampler state in the record and the shader's names
-of it: ``dudv_map.exr`` (the DuDv map of the study's normal map), ``user_normal_map.exr``
+of it: ``dudv_map.exr`` (the DuDv map of the study's normal map), ``waves_normal_map.exr``
+(the study's waves as a tangent-space normal map), ``user_normal_map.exr``
 (the declaration's ``normal_map`` image as the shader read it, RGB / 255 or / 65535),
 ``sky_cube_{px,nx,py,ny,pz,nz}.exr`` (the sky as engines hold a cube map) and
 ``reflection_cube_*.exr`` (the study's ``reflectionTexture``, the sky at ``d * (1, -1, 1)``),
@@ -37,7 +38,12 @@ from pathlib import Path
 
 import numpy as np
 
-from shaders_port.spirv.engine_inputs import dudv_map, read_normal_map, sky_cube
+from shaders_port.spirv.engine_inputs import (
+    dudv_map,
+    read_normal_map,
+    sky_cube,
+    waves_normal_map,
+)
 
 from .._io import read_exr, write_exr
 
@@ -67,6 +73,9 @@ SHIPPED = {
     "user_normal_map": ("user_normal_map", "the declaration's normal_map image as the shader "
                         "read it: RGB as stored / 255 (16-bit: / 65535), no sRGB decoding",
                         "linear", "repeat", True),
+    "waves_normal_map": ("waves_normal_map", "the study's waves as a tangent-space normal map: "
+                         "RGB = 0.5 + 0.5 (n_x, n_z, n_y) of the world normal (x along u, y "
+                         "along v, z up); linear floats", "linear", "repeat", True),
     "sky_cube": ("sky_cube", "the sky as engines hold a cube map: the texel of direction d "
                  "holds the sky in d; linear RGB", "linear", "clamp", False),
     "reflectionTexture": ("reflection_cube", "the study's sky cube map: the texel of direction "
@@ -128,6 +137,8 @@ def _shipped_texels(inp: str, inputs, normal_map=None) -> np.ndarray:
     (H, W, 3) float32 in GL upload order, a cube map (6, F, F, 3)."""
     if inp == "dudv_map":
         return dudv_map(inputs.normal_map)
+    if inp == "waves_normal_map":
+        return waves_normal_map(inputs.normal_map)
     if inp == "user_normal_map":
         return read_normal_map(normal_map)
     if inp == "sky_cube":
