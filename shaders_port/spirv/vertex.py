@@ -41,7 +41,7 @@ import numpy as np
 from . import dialects
 from . import engine_inputs as _engine
 from . import engine_names as names_
-from .translated import STUDY_INPUTS
+from .translated import STUDY_INPUTS, prepared_source
 from .execute import Executor, UnboundVariable
 from .loops import UnsupportedInstruction
 from .module import OPT_PASSES, Module
@@ -62,6 +62,14 @@ def explicit_locations(source: str, direction: str) -> dict:
     itself (not those glslang maps automatically)."""
     code = re.sub(r"//[^\n]*|/\*.*?\*/", "", source, flags=re.S)  # a line comment ends at \n
     return {m["name"]: int(m["loc"]) for m in _LOCATION.finditer(code) if m["dir"] == direction}
+
+
+def _range(args: list, where: str) -> tuple:
+    """``(low, high[, start])`` of a ``// @study constant NAME LOW HIGH [START]`` pragma."""
+    try:
+        return (float(args[1]), float(args[2]), *args[3:])
+    except ValueError:
+        raise ValueError(f"{where}: `// @study constant NAME LOW HIGH [START]`") from None
 
 
 def compile_vertex(source: str, label: str) -> bytes:
@@ -175,19 +183,18 @@ class VertexShader:
     preprocessor names it is compiled with)."""
 
     def __init__(self, source: str, label: str, path=None, defines=(), include_paths=(),
-                 shared=False):  # fmt: skip
+                 shared=False, constants=()):  # fmt: skip
         # defines, include_paths: as a fragment shader's (``spirv.dialects.front_end``); a
         # file that needs them is compiled and drawn preprocessed. shared: the file is the
         # fragment shader's too (Urho3D's one file for both stages), whose pragmas other than
-        # a binding to a vertex meaning or engine name are the fragment shader's
+        # a binding to a vertex meaning or engine name are the fragment shader's. constants:
+        # the names of the constants to fit it declares, compiled as uniforms that each run
+        # binds (``spirv.user_shader.UserShader`` finds them)
         self.original, self.label, self.path = source, label, path
-        self.source, self.defines = source, tuple(defines)
-        pre = bool(defines) or dialects.has_includes(source)
-        if pre or dialects.detect(source, label).translated:
-            text = dialects.front_end(source, label, tuple(defines), tuple(include_paths),
-                                      preprocess=True, stage="vert")  # fmt: skip
-            self.source = dialects.for_opengl(text)
-        self.bindings, self.values = {}, {}
+        self.defines, self.include_paths = tuple(defines), tuple(include_paths)
+        self.shared, self.constants = bool(shared), tuple(constants)
+        self.source = self.gl_text(source)
+        self.bindings, self.values, self.ranges = {}, {}, {}
         for m in _PRAGMA.finditer(source):
             args, line = m["args"].split(), source.count("\n", 0, m.start()) + 1
             if m["verb"] == "value":
@@ -196,14 +203,18 @@ class VertexShader:
             ours = len(args) == 2 and (args[1] in names_.MEANINGS or args[1] in names_.ENGINE_NAMES)
             if shared and not (m["verb"] == "bind" and ours):
                 continue
+            if m["verb"] == "constant" and len(args) in (3, 4):
+                self.ranges[args[0]] = (_range(args, f"{label}:{line}"), f"{label}:{line}")
+                continue
             if m["verb"] != "bind" or len(args) != 2:
                 raise ValueError(
-                    f"{label}:{line}: a vertex shader takes `// @study bind NAME MEANING` and "
-                    "`// @study value NAME V[,V...]` pragmas only (its constants are not "
-                    "fitted; declare them in the fragment shader)"
+                    f"{label}:{line}: a vertex shader takes `// @study bind NAME MEANING`, "
+                    "`// @study value NAME V[,V...]` and `// @study constant NAME LOW HIGH "
+                    "[START]` pragmas only"
                 )
             self.bindings[args[0]] = args[1]
-        self.module = Module(compile_vertex(self.source, label), label=label, stage="Vertex")
+        text = prepared_source(self.source, label, self.constants)
+        self.module = Module(compile_vertex(text, label), label=label, stage="Vertex")
         for name, target in self.bindings.items():
             if names_.meaning_of(name, self.bindings) is None and target not in names_.MEANINGS \
                     and _engine.canonical(target) not in _INPUTS:  # fmt: skip
@@ -219,6 +230,22 @@ class VertexShader:
                  is None}  # fmt: skip
         found = _engine.resolve_bindings(self.source, plain, ())
         self.inputs = {n: t for n, t in found.items() if t in _INPUTS}
+
+    def gl_text(self, text: str) -> str:
+        """``text`` (this file's, e.g. with fitted values written in) as it is compiled and
+        drawn: GLSL 330 core, translated from an older dialect and preprocessed where the file
+        needs it (defines, ``#include`` s)."""
+        pre = bool(self.defines) or dialects.has_includes(text)
+        if pre or dialects.detect(text, self.label).translated:
+            text = dialects.front_end(text, self.label, self.defines, self.include_paths,
+                                      preprocess=True, stage="vert")  # fmt: skip
+            return dialects.for_opengl(text)
+        return text
+
+    def with_constants(self, names) -> "VertexShader":
+        """This shader compiled again with the constants ``names`` made uniforms."""
+        return VertexShader(self.original, self.label, self.path, self.defines,
+                            self.include_paths, self.shared, tuple(names))  # fmt: skip
 
     @classmethod
     def from_file(cls, path, defines=(), include_paths=(), shared=False) -> "VertexShader":
@@ -313,14 +340,22 @@ class VertexShader:
             )
         return list(v) if t[0] == "vec" else v[0]
 
-    def run(self, m, inputs, grid, study: dict, up: str = "y") -> tuple[np.ndarray, dict]:
+    def run(self, m, inputs, grid, study: dict, up: str = "y", constants=None, params=()):
         """Run the shader on every vertex of ``grid`` (``pipeline.interpolate.Grid``, in the
         study's Y-up world; given to the shader in the world frame ``up``):
         ``(clip (V, 4) float64 gl_Position, {output name: (V, ...) float64})``; an output
-        never written is absent."""
+        never written is absent. ``constants``: name -> the executor's value (a size-1 Float
+        or a tuple of them) of each of :attr:`constants`. ``params``: gradient-enabled size-1
+        Floats among those values; given, a third item is returned, one ``(dclip, douts)`` per
+        param: the forward-mode derivatives of ``clip`` and of each output, shaped alike."""
         if self.position is None:
             raise ValueError(f"{self.label}: the vertex shader never writes gl_Position")
-        ex = Executor(self.module, m, self.bindings_for(m, inputs, grid, study, up))
+        b = self.bindings_for(m, inputs, grid, study, up)
+        for n in self.constants:
+            v = (constants or {}).get(n)
+            if v is not None:
+                b[n] = list(v) if isinstance(v, tuple) else v
+        ex = Executor(self.module, m, b, differentiate=bool(params))
         try:
             ex.run()
             V = len(grid.position)
@@ -329,9 +364,13 @@ class VertexShader:
                 raise ValueError(f"{self.label}: the vertex shader never writes gl_Position")
             if self.module.binding_name(self.position) != "gl_Position":
                 pv = pv[0]
+            written = {n: ex.vars[v.vid] for n, v in self.outputs.items()
+                       if ex.vars.get(v.vid) is not None}  # fmt: skip
             clip = to_numpy(pv, V)
-            outs = {n: to_numpy(ex.vars[v.vid], V) for n, v in self.outputs.items()
-                    if ex.vars.get(v.vid) is not None}  # fmt: skip
+            outs = {n: to_numpy(v, V) for n, v in written.items()}
+            if params:
+                per = _tangents([pv, *written.values()], params, V)
+                tangent = [(t[0], dict(zip(written, t[1:]))) for t in per]
         except UnboundVariable as exc:
             raise ValueError(
                 f"{self.label}: {exc}. A vertex shader's attributes and matrices bind by the "
@@ -342,7 +381,43 @@ class VertexShader:
             raise ValueError(f"{self.label}: {exc}") from None
         finally:
             ex.release()
-        return clip, outs
+        return (clip, outs, tangent) if params else (clip, outs)
+
+
+def _tangents(values: list, params, lanes: int) -> list:
+    """For each of ``params``: the forward-mode derivative of each of ``values`` (the
+    executor's values: Dr.Jit arrays, numbers, nested lists of them) in that param, as
+    :func:`to_numpy` gives the value."""
+    leaves: list = []
+
+    def leaf(x):
+        if isinstance(x, (list, tuple)):
+            return [leaf(y) for y in x]
+        if isinstance(x, dr.ArrayBase) and dr.grad_enabled(x):
+            # a node of its own: a target of the pass, never an interior node (whose gradient
+            # the pass clears)
+            leaves.append(x + dr.opaque(type(x), 0.0))
+            return len(leaves) - 1
+        return None
+
+    def fill(shape, grads):
+        if isinstance(shape, list):
+            return [fill(y, grads) for y in shape]
+        return 0.0 if shape is None else grads[shape]
+
+    shapes = [leaf(v) for v in values]
+    keep = dr.ADFlag.ClearInterior | dr.ADFlag.ClearInput
+    out = []
+    for p in params:
+        for q in params:
+            dr.clear_grad(q)
+        dr.clear_grad(leaves)
+        dr.set_grad(p, 1.0)
+        grads = list(dr.forward_to(leaves, flags=keep)) if leaves else []
+        out.append([to_numpy(fill(s, grads), lanes) for s in shapes])
+    for q in params:
+        dr.clear_grad(q)
+    return out
 
 
 def to_numpy(value, lanes: int) -> np.ndarray:

@@ -151,6 +151,10 @@ def export_calibration(exp, model, frames: list, cal, out: Path, timings: dict):
             text = (shaders / "core" / user.label).read_text(encoding="utf-8")
             Path(exp.fit.shader).write_text(text, "utf-8")
             _log(f"calibrate: wrote the fitted constants into {exp.fit.shader}")
+            vtext = user.vertex_written(fitted)
+            if vtext is not None and vtext != user.vertex.shader.original:  # its own constants
+                Path(exp.fit.vertex).write_text(vtext, "utf-8")
+                _log(f"calibrate: wrote the fitted constants into {exp.fit.vertex}")
     extra = {
         "textures": record,
         "shader_file": str(exp.fit.shader),
@@ -222,10 +226,11 @@ def calibration_figures(out, exp, model, ref, ev, cal, solver) -> dict:
 def calibration_result(exp, variant, model, ref, cal, ev, solver, timings, gl):
     """The ``CalibrationResult`` of one scene's calibration."""
     e0, e1 = ev["e0"], ev["e1"]
+    user = getattr(model, "user_shader", None)
     return CalibrationResult(
         shader=model.label,
         backend=variant,
-        parameters=cal.parameters,
+        parameters=with_stages(cal.parameters, user),
         constants=constants_json(cal.fitted),
         error={
             "rmse": {"default": e0["rmse"], "fitted": e1["rmse"]},
@@ -252,6 +257,15 @@ def calibration_result(exp, variant, model, ref, cal, ev, solver, timings, gl):
         sun=sun_summary(exp),
         parsimony=ev["parsimony"],
     )
+
+
+def with_stages(parameters: dict, user) -> dict:
+    """``parameters`` (scalar name -> the fit's record) with each one's ``stage`` ('fragment',
+    'vertex' or 'both': the stages that read it) for a user's shader run after its own vertex
+    shader (``user``, a ``UserShader``; else unchanged)."""
+    if user is None or user.vertex is None:
+        return parameters
+    return {n: {**p, "stage": user.stage_of(n.split("[")[0])} for n, p in parameters.items()}
 
 
 def write_result(out, result, figs, ev) -> dict:
