@@ -500,8 +500,10 @@ class UserShader:
             bindings = {**self.vertex.shader.inputs, **bindings}
         base = GLRenderer if reflection is None else TranslatedRenderer
         vals = self._checked(values)
+        # every constant that is a uniform of the program gets its value (one without
+        # initializer must; one with an initializer loses it in the HLSL round trip)
         bare = {c.name: np.asarray(vals[c.name], np.float32).tobytes()
-                for c in self.constants.values() if any(s.bare for s in c.sites)}  # fmt: skip
+                for c in self.constants.values()}  # fmt: skip
         bare.update({n: np.float32(v).tobytes() for n, v in self.values.items()})
         if self.vertex is not None:  # the grid drawn with the user's GLSL vertex shader
             base = self.vertex.gl_class(base, inputs, self.engine["up"],

@@ -148,11 +148,17 @@ def export_calibration(exp, model, frames: list, cal, out: Path, timings: dict):
         if not all(g["passed"] is not False for g in gl):
             _log(f"calibrate: {user.label} not written back: the GL check failed")
         else:
-            text = (shaders / "core" / user.label).read_text(encoding="utf-8")
+            # the initializers replaced; a uniform without one stays so (its START, in the
+            # declaration, stays the start value: the file must read back as it was declared)
+            text = user.written(fitted, bare_initializers=False)
             Path(exp.fit.shader).write_text(text, "utf-8")
             _log(f"calibrate: wrote the fitted constants into {exp.fit.shader}")
-            vtext = user.vertex_written(fitted)
-            if vtext is not None and vtext != user.vertex.shader.original:  # its own constants
+            vtext = user.vertex_written(fitted, bare_initializers=False)
+            if (
+                vtext is not None
+                and not user.vertex.shader.shared
+                and vtext != user.vertex.shader.original
+            ):
                 Path(exp.fit.vertex).write_text(vtext, "utf-8")
                 _log(f"calibrate: wrote the fitted constants into {exp.fit.vertex}")
     extra = {

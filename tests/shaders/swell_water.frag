@@ -2,7 +2,7 @@
 // Shades swell_water.vert's surface: its normal perturbed by the normal map, the sky reflected
 // with Schlick's Fresnel over a height-tinted body colour and the vertex shader's glint.
 // @study constant BUMP 0.0 2.0
-// @study constant SHINE 0.0 1.0
+// @study constant SHINE 0.0 1.0 0.6
 in vec3 worldPos;
 in vec3 waveNormal;
 in vec2 texCoord;
@@ -11,7 +11,7 @@ in float glint;
 out vec4 fragColor;
 uniform samplerCube reflectionTexture;
 uniform sampler2D normalMap;
-uniform float SHINE = 0.6;
+uniform float SHINE;
 const float BUMP = 0.5;
 const vec3 DEEP = vec3(0.05, 0.25, 0.3);
 

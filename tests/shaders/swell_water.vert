@@ -2,7 +2,7 @@
 // A vertex shader in jMonkeyEngine's names whose constants shape the image: the swell's height
 // (the vertices displaced), the normal map's tiling (a uniform without initializer, as an
 // engine's material sets it) and a glint strength shared with the fragment shader (a uniform
-// of both stages, which GL links into one).
+// of both stages, which GL links into one; declared in the fragment shader).
 // @study constant AMPLITUDE 0.0 1.0
 // @study constant uTiling 0.25 4.0 1.5
 in vec3 inPosition;
@@ -13,7 +13,7 @@ uniform mat4 g_WorldViewProjectionMatrix;
 uniform vec3 g_CameraPosition;
 uniform vec2 wave1;
 uniform float uTiling;
-uniform float SHINE = 0.6;
+uniform float SHINE;
 out vec3 worldPos;
 out vec3 waveNormal;
 out vec2 texCoord;
