@@ -4,7 +4,8 @@ and its constants written back into its file.
 The shader is a GLSL fragment shader in any dialect of ``spirv.dialects`` (GLSL 1.10-4.60,
 GLSL ES 1.00-3.20; ``#include`` files searched in ``include_paths``, preprocessor names
 ``defines``) that runs after the study's ``water.vert`` (so it reads the study's varyings,
-:data:`spirv.translated.STUDY_INPUTS`). Its *declaration* says which constants to fit and what
+:data:`spirv.translated.STUDY_INPUTS`) or after the user's own vertex shader
+(``spirv.user_vertex``). Its *declaration* says which constants to fit and what
 its own names of inputs mean, either as pragmas in the file::
 
     // @study constant FOG_DENSITY 0.01 4.0      (a constant to fit and its range)
@@ -14,7 +15,9 @@ its own names of inputs mean, either as pragmas in the file::
 
 or as a table (an experiment's TOML), ``{"constants": {"FOG_DENSITY": [0.01, 4.0]},
 "bindings": {"waterNormals": "normalMap"}}``; the table adds to and overrides the pragmas.
-Every constant is a one-line declaration, ``float``, ``vec3`` or ``vec4``: with an
+Every constant is a one-line declaration (``spirv.declaration``), ``float``, ``vec2``,
+``vec3`` or ``vec4``, in the fragment shader's file, in the vertex shader's (whose ``constant``
+pragmas count too) or in both (one constant, as GL links a uniform of one name): with an
 initializer, ``const float FOG_DENSITY = 0.35;`` or ``uniform float FOG_DENSITY = 0.35;``
 (desktop GLSL 1.20 and later), whose value is the start value; or a uniform without one,
 ``uniform float FOG_DENSITY;``, as an engine's material sets it (GLSL ES has no uniform
@@ -31,7 +34,9 @@ shader reads that is neither a study input nor bound (at the first render).
 
 Values are dicts ``{GLSL name: float | tuple}``; scalar names of vector components are
 ``NAME[i]``. :meth:`UserShader.written` is the file's text with the values in place of the
-initializers, byte for byte the same elsewhere.
+initializers, byte for byte the same elsewhere; :meth:`UserShader.vertex_written` the vertex
+shader file's. The derivatives in the vertex shader's constants go through its per-vertex run
+and the interpolation, the coverage held fixed (``spirv.user_vertex.UserVertex.frame``).
 """
 
 from __future__ import annotations

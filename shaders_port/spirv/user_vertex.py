@@ -18,6 +18,13 @@ runs on (``cells = (nx, nz)`` cells of two triangles over the water quad). For o
    triangle's interpolants extrapolated to the helper's centre) and their
    :class:`~shaders_port.spirv.quads.Quads`.
 
+The vertex shader's constants to fit are uniforms of its run, at the values of each render.
+Their forward-mode derivatives come from the vertex run (``VertexShader.run``), carried
+through the interpolation (``pipeline.interpolate.weight_tangents``: a moved vertex moves the
+plane a pixel interpolates on) onto the varyings and ``gl_FragCoord``, the coverage held fixed
+(each pixel keeps its triangle; which pixels a moved vertex covers changes in steps no
+derivative sees).
+
 A fragment input no vertex output feeds is refused (GL would not link the pair). The result
 is a prepared frame (``pipeline.raster.Prepared``) whose raster is the grid's coverage (its
 ``world`` the interpolated grid position, the plane point under the displaced one) and the

@@ -23,7 +23,11 @@ or by the study's own uniform names, which bind only as themselves (``wave1`` ..
 each with its ``flat`` / ``noperspective`` decoration and its ``layout(location = N)`` when
 the source gives one.
 
-:meth:`VertexShader.run` returns them as NumPy arrays, one row per vertex.
+Its constants to fit are declared as a fragment shader's (``// @study constant NAME LOW HIGH
+[START]``, collected in :attr:`VertexShader.ranges`; ``spirv.user_shader`` finds their
+declarations); the shader is compiled with them made uniforms (``constants``), which each run
+binds. :meth:`VertexShader.run` returns the outputs as NumPy arrays, one row per vertex, and,
+given gradient-enabled constants, their forward-mode derivatives alike.
 """
 
 from __future__ import annotations
