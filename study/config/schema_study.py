@@ -239,8 +239,9 @@ STUDY_KEYS: dict[str, Field] = {
         "list_str",
         None,
         "Declaration of your own `fit.shader` besides its `// @study` pragmas, one line each: "
-        "`constant NAME LOW HIGH` (a constant to fit and its range; `constant NAME LOW HIGH "
-        "START` for a uniform without initializer) or `bind NAME INPUT` (the "
+        "`constant NAME LOW HIGH` (a constant to fit and its range, declared in `fit.shader` "
+        "or `fit.vertex`; `constant NAME LOW HIGH START` for a uniform without initializer) or "
+        "`bind NAME INPUT` (the "
         "shader's sampler or uniform NAME is the study's INPUT).",
     ),
     "fit.include_paths": Field(
@@ -270,6 +271,7 @@ STUDY_KEYS: dict[str, Field] = {
         "in place of the study's `water.vert`: run on every vertex of a grid over the water "
         'quad, its triangles rasterised and its outputs interpolated as OpenGL does; `"auto"`: '
         "the file beside `fit.shader` with its name and `.vert` (`water.frag` -> `water.vert`). "
+        "Its `// @study constant` pragmas are fitted with the fragment shader's. "
         "Unset: the study's `water.vert` (`docs/user-shader.md`).",
     ),
     "fit.vertex_grid": Field(
