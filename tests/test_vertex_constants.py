@@ -8,6 +8,7 @@ on llvmpipe at the fitted values, written back into the vertex file and exported
 from __future__ import annotations
 
 import json
+import shutil
 import re
 from pathlib import Path
 
@@ -274,3 +275,36 @@ def test_study_calibrate_fits_the_vertex_shaders_constants(tmp_path, monkeypatch
     if res["parameters"]["AMPLITUDE"]["status"] in ("fitted", "bound"):
         assert written != VERT.read_text()
     assert "uniform float uTiling;" in written and "uniform float SHINE;" in written
+
+
+def test_a_constant_of_the_vertex_stage_of_one_file_for_both_stages(inputs, tmp_path):
+    """Urho3D's one file for both stages (``one_file_water.glsl``) with its grid tiling fitted:
+    a uniform without initializer that an ``#include`` declares for the vertex stage only. Its
+    derivative matches central differences; written back and on llvmpipe, the file stays as
+    it is (the engine's include holds the uniform) and the GL check sets the value."""
+    shutil.copytree(SHADERS / "include", tmp_path / "include")
+    text = (SHADERS / "one_file_water.glsl").read_text()
+    path = tmp_path / "one_file_water.glsl"
+    path.write_text(
+        text.replace("// @study value cTiling 0.5", "// @study constant cTiling 0.1 2.0 0.5")
+    )
+    vertex = UserVertex.from_file(path, (12, 12), ("COMPILEVS", "VS=main"), (), shared=True)
+    shader = UserShader.from_file(path, None, ("COMPILEPS", "PS=main"), (), vertex=vertex)
+    assert (shader.constants["cTiling"].stage, shader.stage_of("cTiling")) == ("vertex", "vertex")
+    assert shader.stage_of("cTint") == "fragment"
+    values = {**shader.defaults(), "cTiling": 0.7}
+    base = shader.render(inputs, values).numpy()
+    _, J = shader.render_with_jacobian(inputs, values, ["cTiling"])
+    h = 3e-4  # 1e-3 puts a texel edge of the normal map inside one pixel's stencil undetected
+    p = shader.render(inputs, {**values, "cTiling": 0.7 + h}).numpy()
+    m = shader.render(inputs, {**values, "cTiling": 0.7 - h}).numpy()
+    fd, water = (p["color"] - m["color"]) / (2 * h), base["mask"] > 0
+    fp, fm = (p["color"] - base["color"]) / h, (base["color"] - m["color"]) / h
+    smooth = water & (np.abs(fp - fm) <= 0.2 * np.abs(fd) + 2 * FD_NOISE / h).all(-1)
+    assert smooth.sum() >= 0.9 * water.sum() and np.abs(fd[water]).max() > 0.1
+    bad = smooth & ~(np.abs(J[..., 0] - fd) <= 2 * FD_NOISE / h + FD_RTOL * np.abs(fd)).all(-1)
+    assert not bad.any(), int(bad.sum())
+    assert shader.vertex_written(values) == shader.written(values) == path.read_text()
+    rgba, mask = user_gl_render_or_skip(shader, inputs, values)
+    d = np.abs(rgba[..., :3] - base["color"]).max(-1)[mask & water]
+    assert d.mean() <= 1e-5, d.mean()

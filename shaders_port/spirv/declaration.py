@@ -165,13 +165,14 @@ def find_constants(ranges: dict, texts: dict, included: dict | None = None) -> d
     ``(lo, hi, start)``), found in ``texts`` (stage -> ``(source, label)``, the fragment
     shader's first, the vertex shader's when it is a file of its own) or, for a uniform
     without initializer only an ``#include`` d file of the fragment shader declares, in
-    ``included`` (name -> its match in the preprocessed text). ValueError naming the problem."""
+    ``included`` (name -> (its match in a stage's preprocessed text, that stage)). ValueError
+    naming the problem."""
     found = {stage: declared(src) for stage, (src, _) in texts.items()}
     out = {}
     for name, (lo, hi, *start) in ranges.items():
         stages = [s for s in texts if name in found[s][0] or name in found[s][1]]
         if not stages and name in (included or {}):
-            out[name] = _included_constant(name, included[name], texts, lo, hi, start)
+            out[name] = _included_constant(name, *included[name], texts, lo, hi, start)
             continue
         if not stages:
             raise _no_declaration(name, [label for _, label in texts.values()])
@@ -226,10 +227,10 @@ def _start_of(name, values, wheres, gtype, lo, hi, start) -> tuple:
     return given[0][0] if given else start_value(start[0], gtype, wheres[0])
 
 
-def _included_constant(name, m, texts, lo, hi, start) -> UserConstant:
-    """The constant of a uniform an ``#include`` d file of the fragment shader declares: never
-    written back (the file is the engine's), its start value from the declaration."""
-    where = f"{texts['fragment'][1]} (an #include)"
+def _included_constant(name, m, stage, texts, lo, hi, start) -> UserConstant:
+    """The constant of a uniform an ``#include`` d file of ``stage`` declares: never written
+    back (the file is the engine's), its start value from the declaration."""
+    where = f"{texts.get(stage, texts['fragment'])[1]} (an #include)"
     if not start:
         raise ValueError(
             f"{where}: the uniform {name} has no initializer (the engine sets it); "
@@ -240,7 +241,7 @@ def _included_constant(name, m, texts, lo, hi, start) -> UserConstant:
         raise ValueError(f"{where}: the range [{lo}, {hi}] of {name} is empty")
     if not all(lo <= v <= hi for v in default):
         raise ValueError(f"{where}: the start value of {name} lies outside its range [{lo}, {hi}]")
-    return UserConstant(name, m["type"], default, lo, hi, (Site("fragment", (-1, -1), True),))
+    return UserConstant(name, m["type"], default, lo, hi, (Site(stage, (-1, -1), True),))
 
 
 def written_text(source: str, constants, values: dict, stage: str, initializers: bool) -> str:

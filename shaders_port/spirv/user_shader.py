@@ -207,6 +207,9 @@ class UserShader:
         if v is not None and not v.shared:  # a file of its own (else the fragment's file)
             texts["vertex"] = (v.original, v.label)
         decls, bare = declared(self.source)
+        if "vertex" in texts:
+            more = declared(texts["vertex"][0])
+            decls, bare = {**decls, **more[0]}, {**bare, **more[1]}
         included = self._included_uniforms(set(ranges) - set(decls) - set(bare))
         out = find_constants(ranges, texts, included)
         if not out:
@@ -217,13 +220,20 @@ class UserShader:
         return out
 
     def _included_uniforms(self, names: set) -> dict:
-        """name -> ``BARE`` match in the preprocessed text, for the ``names`` declared as a
-        uniform without initializer in an ``#include`` d file only (an engine's common
-        uniforms, e.g. Urho3D's ``cFogColor`` in ``Uniforms.glsl``)."""
-        if not names or not dialects.has_includes(self.source):
-            return {}
-        text = dialects.front_end(self.source, self.label, self.defines, self.include_paths, True)
-        return {m["name"]: m for m in BARE.finditer(text) if m["name"] in names}
+        """name -> ``(BARE match, stage)`` in a stage's preprocessed text, for the ``names``
+        declared as a uniform without initializer in an ``#include`` d file only (an engine's
+        common uniforms, e.g. Urho3D's ``cFogColor`` in ``Uniforms.glsl``): the fragment
+        shader's, else the vertex shader's."""
+        out = {}
+        v = self.vertex.shader if self.vertex is not None else None
+        if names and v is not None and v.source != v.original:  # preprocessed or translated
+            out = {m["name"]: (m, "vertex") for m in BARE.finditer(v.source) if m["name"] in names}
+        if names and dialects.has_includes(self.source):
+            text = dialects.front_end(self.source, self.label, self.defines, self.include_paths,
+                                      True)  # fmt: skip
+            out.update({m["name"]: (m, "fragment") for m in BARE.finditer(text)
+                        if m["name"] in names})  # fmt: skip
+        return out
 
     def validate(self) -> "UserShader":
         for name, study in self.bindings.items():
