@@ -307,7 +307,9 @@ CONSTANTS_ROWS = [
     (
         "`parameters`",
         "per fitted scalar (GLSL name): `default` (the start), `fitted`, `status` (`fitted`, "
-        "`bound`, `frozen`), `reason`, sensitivities, standard errors, `name` (the study's)",
+        "`bound`, `frozen`), `reason`, sensitivities, standard errors, `name` (the study's); "
+        "`stage` (`fragment`, `vertex`, `both`: the stages that read it) for your shader after "
+        "your own vertex shader",
     ),
     ("`error`", "RMSE and FLIP on the water pixels, `default` and `fitted` (joint: per scene)"),
     (
@@ -333,7 +335,11 @@ CONSTANTS_ROWS = [
     (
         "`shader_file`, `shader_sha256`, `declaration`",
         "your own shader's calibration only: its file, the SHA-256 of the text the calibration "
-        "leaves, its declaration",
+        "leaves, its declaration (the constants of both stages)",
+    ),
+    (
+        "`vertex_file`, `vertex_grid`, `vertex_defines`",
+        "your own vertex shader's calibration only: its file, the grid it ran on, its defines",
     ),
 ]
 CONSTANTS = (

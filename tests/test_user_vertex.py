@@ -260,9 +260,10 @@ def test_errors_name_the_problem(inputs, tmp_path):
     )
     with pytest.raises(ValueError, match="cameraPosition is the cameraPosition.*vec2"):
         v.shader.run(dr.llvm.ad, inputs, v.grid(inputs), {})
-    # a pragma that is not a binding, a binding to nothing known, a shader that does not compile
+    # a pragma a vertex shader does not take, a binding to nothing known, a shader that does not
+    # compile
     with pytest.raises(ValueError, match="bind NAME MEANING"):
-        vert("// @study constant A 0 1\nvoid main() { gl_Position = vec4(position, 1.0); }")
+        vert("// @study up z\nvoid main() { gl_Position = vec4(position, 1.0); }")
     with pytest.raises(ValueError, match="names no meaning"):
         vert(
             "// @study bind position somewhere\nvoid main() { gl_Position = vec4(position, 1.0); }"

@@ -336,7 +336,9 @@ def tangents(m, color, diag: dict, params: list):
     bad = ~(dr.isfinite(color.x) & dr.isfinite(color.y) & dr.isfinite(color.z))
     bad |= diag["nonfinite"] > 0
     lanes = m.Array3f(*(dr.select(bad, 0.0, color[c]) for c in range(3)))
-    keep = dr.ADFlag.ClearInterior | dr.ADFlag.ClearInput
+    # a param the colour does not depend on (a constant read by no code of the frame) has
+    # derivative 0
+    keep = dr.ADFlag.ClearInterior | dr.ADFlag.ClearInput | dr.ADFlag.AllowNoGrad
     grads = []
     for p in params:
         for q in params:

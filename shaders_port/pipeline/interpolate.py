@@ -45,6 +45,8 @@ __all__ = [
     "quad_helpers",
     "interpolate",
     "plane_points",
+    "weight_tangents",
+    "interpolate_tangent",
 ]
 
 SUBPIXEL = 256.0  # window positions snapped to 1/SUBPIXEL pixel
@@ -360,3 +362,66 @@ def interpolate(values: np.ndarray, cov: Coverage, triangles: np.ndarray, mode: 
     wts = cov.smooth if mode == "smooth" else cov.linear
     extra = (None,) * (vals.ndim - 1)
     return sum(wts[(slice(None), i, *extra)] * vals[tri[:, i]] for i in range(3))
+
+
+def weight_tangents(clip, dclip, triangles, tri, px, py, width: int, height: int) -> dict:
+    """Forward-mode derivatives of the interpolants of lanes at the fixed centres of window
+    pixels ``(px, py)`` (N,) int (y up), each on the original triangle ``tri`` (N,) of
+    ``triangles``, when the clip-space positions ``clip`` (V, 4) move by ``dclip`` (V, 4): the
+    coverage held fixed, each pixel keeps its triangle. Returns float64 ``smooth`` / ``linear``
+    (N, 3) weights and their derivatives ``dsmooth`` / ``dlinear``, ``ddepth`` and ``dinv_w``
+    (N,). The weights are those :func:`weights_at` gives, in closed form: the point of the
+    triangle's plane seen through the pixel is ``P = sum_i b_i C_i`` with ``(P.x, P.y) = (X, Y)
+    P.w`` (``X``, ``Y`` the centre's NDC), so ``b`` is ``M^-1 (X, Y, 1)`` normalised, ``M`` the
+    columns ``(x, y, w)`` of the vertices ``C_i`` (clipping keeps that plane); ``linear`` is
+    ``b_i w_i / P.w``, the depth ``(P.z / P.w + 1) / 2``, ``gl_FragCoord.w`` ``1 / P.w``."""
+    V = np.asarray(triangles, np.int64)[tri]
+    C, dC = np.asarray(clip, np.float64)[V], np.asarray(dclip, np.float64)[V]  # (N, 3, 4)
+    X = 2.0 * (np.asarray(px, np.float64) + 0.5) / width - 1.0
+    Y = 2.0 * (np.asarray(py, np.float64) + 0.5) / height - 1.0
+    M = np.stack([C[..., 0], C[..., 1], C[..., 3]], 1)  # rows x, y, w; a column per vertex
+    dM = np.stack([dC[..., 0], dC[..., 1], dC[..., 3]], 1)
+    rhs = np.stack([X, Y, np.ones_like(X)], 1)
+    n = len(X)
+    a, da = np.zeros((n, 3)), np.zeros((n, 3))
+    det = np.linalg.det(M) if n else np.zeros(0)
+    ok = np.isfinite(det) & (np.abs(det) > 1e-300)
+    if ok.any():
+        a[ok] = np.linalg.solve(M[ok], rhs[ok, :, None])[..., 0]
+        da[ok] = -np.linalg.solve(M[ok], np.einsum("nij,nj->ni", dM[ok], a[ok])[..., None])[..., 0]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        S, dS = a.sum(1, keepdims=True), da.sum(1, keepdims=True)
+        b = a / S
+        db = (da - b * dS) / S
+        P = np.einsum("ni,nik->nk", b, C)
+        dP = np.einsum("ni,nik->nk", db, C) + np.einsum("ni,nik->nk", b, dC)
+        w, dw = C[..., 3], dC[..., 3]
+        Pw, dPw = P[:, 3:], dP[:, 3:]
+        lin = b * w / Pw
+        dlin = (db * w + b * dw) / Pw - lin * dPw / Pw
+        ddepth = 0.5 * (dP[:, 2] * Pw[:, 0] - P[:, 2] * dPw[:, 0]) / Pw[:, 0] ** 2
+        dinv_w = -dPw[:, 0] / Pw[:, 0] ** 2
+    bad = ~ok
+    for arr in (db, dlin):
+        arr[bad] = 0.0
+    ddepth[bad], dinv_w[bad] = 0.0, 0.0
+    return {"smooth": b, "linear": lin, "dsmooth": db, "dlinear": dlin, "ddepth": ddepth,
+            "dinv_w": dinv_w}  # fmt: skip
+
+
+def interpolate_tangent(values, dvalues, weights, dweights, vertices, mode: str):
+    """The derivative of one vertex output interpolated (:func:`interpolate`) at lanes whose
+    triangle's vertices are ``vertices`` (N, 3): ``values`` and its derivative ``dvalues``
+    (V, ...), the lanes' weights of ``mode`` and their derivatives (N, 3) (``smooth`` or
+    ``linear`` of :func:`weight_tangents`; a ``flat`` output takes the provoking vertex's
+    derivative). Returns (N, ...) float64."""
+    vals, dvals = np.asarray(values, np.float64), np.asarray(dvalues, np.float64)
+    tri = np.asarray(vertices, np.int64)
+    if mode == "flat":
+        return dvals[tri[:, 2]]
+    extra = (None,) * (vals.ndim - 1)
+    out = 0.0
+    for i in range(3):
+        w = (slice(None), i, *extra)
+        out = out + dweights[w] * vals[tri[:, i]] + weights[w] * dvals[tri[:, i]]
+    return out

@@ -97,7 +97,7 @@ def capture(shader, inputs, name: str, values: dict | None = None, backend: str 
     spec = shader.spec()
     C = shader.resolved_values(m, values)
     if shader.vertex is not None:
-        P, b = shader.vertex.frame(m, inputs, spec)
+        P, b = shader.vertex.frame(m, inputs, spec, C)
     else:
         P = prepare(inputs, m)
         b = spirv_port.frame_bindings(m, P, inputs, spec)

@@ -105,7 +105,10 @@ _WORLD = {
     "uModelViewProjectionMatrixInverse": "inverse",
     "uNormalMatrix": "rotation",
 }
-_DECL = r"^(?P<head>\s*(?:const|uniform)\s+(?P<type>float|int|vec3|vec4)\s+{name}\s*=\s*)"
+_DECL = (
+    r"^(?P<head>\s*(?:const|uniform)\s+(?:(?:lowp|mediump|highp)\s+)?"
+    r"(?P<type>float|int|vec2|vec3|vec4)\s+{name}\s*=\s*)"
+)
 _DECL_TAIL = r"(?P<value>[^;]*)(?P<tail>;.*)$"
 
 
@@ -140,7 +143,8 @@ def _prepared(source: str, label: str, constants: tuple) -> str:
     for glsl, _ in constants:
         pat = re.compile(_DECL.format(name=re.escape(glsl)) + _DECL_TAIL, re.M)
         found = pat.search(src)
-        if found is None and re.search(rf"^\s*uniform\s+\w+\s+{re.escape(glsl)}\s*;", src, re.M):
+        bare = rf"^\s*uniform\s+(?:\w+\s+)?\w+\s+{re.escape(glsl)}\s*;"
+        if found is None and re.search(bare, src, re.M):
             continue  # a uniform without initializer (the engine sets it): bound as it is
         if found is None and has_includes(src):
             continue  # declared in an #include (a uniform without initializer, checked there)
@@ -153,6 +157,12 @@ def _prepared(source: str, label: str, constants: tuple) -> str:
         indent = found["head"][: len(found["head"]) - len(found["head"].lstrip())]
         src = src[: found.start()] + indent + decl + src[found.end() :]
     return src
+
+
+def prepared_source(source: str, label: str, names) -> str:
+    """``source`` with each constant of ``names`` (GLSL names declared on one line) a uniform
+    without initializer, as :meth:`ShaderSpec.prepared_source` makes a fragment shader's."""
+    return _prepared(source, label, tuple((n, n) for n in names))
 
 
 _MODULES: dict = {}

@@ -4,7 +4,8 @@ and its constants written back into its file.
 The shader is a GLSL fragment shader in any dialect of ``spirv.dialects`` (GLSL 1.10-4.60,
 GLSL ES 1.00-3.20; ``#include`` files searched in ``include_paths``, preprocessor names
 ``defines``) that runs after the study's ``water.vert`` (so it reads the study's varyings,
-:data:`spirv.translated.STUDY_INPUTS`). Its *declaration* says which constants to fit and what
+:data:`spirv.translated.STUDY_INPUTS`) or after the user's own vertex shader
+(``spirv.user_vertex``). Its *declaration* says which constants to fit and what
 its own names of inputs mean, either as pragmas in the file::
 
     // @study constant FOG_DENSITY 0.01 4.0      (a constant to fit and its range)
@@ -14,7 +15,9 @@ its own names of inputs mean, either as pragmas in the file::
 
 or as a table (an experiment's TOML), ``{"constants": {"FOG_DENSITY": [0.01, 4.0]},
 "bindings": {"waterNormals": "normalMap"}}``; the table adds to and overrides the pragmas.
-Every constant is a one-line declaration, ``float``, ``vec3`` or ``vec4``: with an
+Every constant is a one-line declaration (``spirv.declaration``), ``float``, ``vec2``,
+``vec3`` or ``vec4``, in the fragment shader's file, in the vertex shader's (whose ``constant``
+pragmas count too) or in both (one constant, as GL links a uniform of one name): with an
 initializer, ``const float FOG_DENSITY = 0.35;`` or ``uniform float FOG_DENSITY = 0.35;``
 (desktop GLSL 1.20 and later), whose value is the start value; or a uniform without one,
 ``uniform float FOG_DENSITY;``, as an engine's material sets it (GLSL ES has no uniform
@@ -31,7 +34,9 @@ shader reads that is neither a study input nor bound (at the first render).
 
 Values are dicts ``{GLSL name: float | tuple}``; scalar names of vector components are
 ``NAME[i]``. :meth:`UserShader.written` is the file's text with the values in place of the
-initializers, byte for byte the same elsewhere.
+initializers, byte for byte the same elsewhere; :meth:`UserShader.vertex_written` the vertex
+shader file's. The derivatives in the vertex shader's constants go through its per-vertex run
+and the interpolation, the coverage held fixed (``spirv.user_vertex.UserVertex.frame``).
 """
 
 from __future__ import annotations
@@ -39,7 +44,6 @@ from __future__ import annotations
 import hashlib
 import re
 import types
-from dataclasses import dataclass
 from pathlib import Path
 
 import drjit as dr
@@ -53,6 +57,7 @@ from ..pipeline.texture import backend_types
 from . import dialects
 from . import engine_inputs as _engine
 from . import translated as spirv_port
+from .declaration import BARE, UserConstant, declared, find_constants, written_text
 from .module import referenced
 from .support import check_supported
 from .vertex import normal_pragma, value_pragma
@@ -60,83 +65,6 @@ from .vertex import normal_pragma, value_pragma
 __all__ = ["UserShader", "UserConstant"]
 
 _PRAGMA = re.compile(r"^\s*//\s*@study\s+(?P<verb>\S+)\s*(?P<args>.*?)\s*$", re.M)
-_DECL = re.compile(
-    r"^(?P<head>[ \t]*(?:const|uniform)[ \t]+(?P<type>float|vec3|vec4)[ \t]+(?P<name>\w+)"
-    r"[ \t]*=[ \t]*)(?P<value>[^;\n]*)(?P<tail>;)",
-    re.M,
-)
-_BARE = re.compile(
-    r"^[ \t]*uniform[ \t]+(?:(?:lowp|mediump|highp)[ \t]+)?(?P<type>float|vec3|vec4)[ \t]+"
-    r"(?P<name>\w+)[ \t]*(?P<tail>;)",
-    re.M,
-)
-_SIZES = {"float": 1, "vec3": 3, "vec4": 4}
-
-
-@dataclass(frozen=True)
-class UserConstant:
-    """A constant to fit: GLSL ``name``, ``type`` ('float', 'vec3', 'vec4'), the start value
-    ``default`` (a tuple of floats, one per component), the range ``lo`` <= value <= ``hi``
-    (every component), and ``span``: the (start, end) offsets of the initializer in the file
-    (a uniform without initializer, ``bare``: both the offset of its ``;``)."""
-
-    name: str
-    type: str
-    default: tuple
-    lo: float
-    hi: float
-    span: tuple
-    bare: bool = False
-
-    def scalar_names(self) -> list[str]:
-        n = _SIZES[self.type]
-        return [self.name] if n == 1 else [f"{self.name}[{i}]" for i in range(min(n, 3))]
-
-
-def _parse_value(text: str, gtype: str, where: str) -> tuple:
-    t = text.strip()
-    if gtype == "float":
-        parts = [t]
-    else:
-        m = re.fullmatch(rf"{gtype}\s*\((.*)\)", t)
-        if m is None:
-            raise ValueError(f"{where}: the initializer {t!r} is not {gtype}(...) of numbers")
-        parts = [p.strip() for p in m[1].split(",")]
-        parts = parts * _SIZES[gtype] if len(parts) == 1 else parts
-    try:
-        vals = tuple(float(p.rstrip("fF")) for p in parts)
-    except ValueError:
-        raise ValueError(f"{where}: the initializer {t!r} is not made of number literals") from None
-    if len(vals) != _SIZES[gtype]:
-        raise ValueError(f"{where}: {gtype} needs {_SIZES[gtype]} components, got {len(vals)}")
-    return vals
-
-
-def _start(args: list) -> tuple:
-    """The optional START of a pragma's arguments: () or (text,)."""
-    return tuple(args)
-
-
-def _start_value(text, gtype: str, where: str) -> tuple:
-    """A declared start value (a number, or a vector's components joined by commas) as the
-    tuple of its components."""
-    parts = [p for p in str(text).split(",") if p.strip()] if isinstance(text, str) else [text]
-    if isinstance(text, (list, tuple)):
-        parts = list(text)
-    try:
-        vals = tuple(float(p) for p in parts)
-    except (TypeError, ValueError):
-        raise ValueError(f"{where}: the start value {text!r} is not a number") from None
-    vals = vals * _SIZES[gtype] if len(vals) == 1 else vals
-    if len(vals) != _SIZES[gtype]:
-        n = _SIZES[gtype]
-        raise ValueError(f"{where}: {gtype} needs {n} start components, got {len(vals)}")
-    return vals
-
-
-def _literal(x: float) -> str:
-    r = str(np.float32(x))  # the shortest text that reads back as the same float32
-    return r if ("e" in r or "." in r or "n" in r) else r + ".0"
 
 
 class UserShader:
@@ -158,7 +86,7 @@ class UserShader:
             where = f"{label}:{line}"
             if m["verb"] == "constant" and len(args) in (3, 4):
                 try:
-                    ranges[args[0]] = (float(args[1]), float(args[2]), *_start(args[3:]))
+                    ranges[args[0]] = (float(args[1]), float(args[2]), *args[3:])
                 except ValueError:
                     msg = "`// @study constant NAME LOW HIGH [START]`"
                     raise ValueError(f"{where}: {msg}") from None
@@ -197,7 +125,8 @@ class UserShader:
             ranges[name] = (float(r[0]), float(r[1]), *r[2:])
         bindings.update(dict(decl.get("bindings", {})))
         self.bindings = bindings
-        self.constants = self._constants(ranges)
+        self.constants = self._constants(self._with_vertex_pragmas(ranges, decl))
+        self._vertex_constants()
         self._engine_options(path)
         self.validate()
 
@@ -212,50 +141,60 @@ class UserShader:
         incs = (str(p.resolve().parent), *include_paths)
         return cls(p.read_text(encoding="utf-8"), p.name, declaration, p, defines, incs, vertex)
 
-    def _constants(self, ranges: dict) -> dict:
-        decls = {m["name"]: m for m in _DECL.finditer(self.source)}
-        bare = {m["name"]: m for m in _BARE.finditer(self.source)}
-        included = self._included_uniforms(set(ranges) - set(decls) - set(bare))
-        out = {}
-        for name, (lo, hi, *start) in ranges.items():
-            m = decls.get(name) or bare.get(name)
-            if m is None and name in included:
-                out[name] = self._included_constant(name, included[name], lo, hi, start)
+    def _with_vertex_pragmas(self, ranges: dict, decl: dict) -> dict:
+        """``ranges`` (the fragment file's pragmas and the table's) with the vertex file's
+        ``constant`` pragmas; the table overrides either file's, the two files must agree."""
+        v = self.vertex.shader if self.vertex is not None else None
+        if v is None or not v.ranges:
+            return ranges
+        table = set(dict(decl.get("constants", {})))
+        out = dict(ranges)
+        for name, (r, where) in v.ranges.items():
+            if name in table:
                 continue
-            if m is None:
+            if name in out and tuple(out[name]) != tuple(r):
                 raise ValueError(
-                    f"{self.label}: the constant {name} to fit has no one-line declaration: "
-                    f"`const float {name} = <value>;`, `uniform float {name} = <value>;` "
-                    f"(desktop GLSL 1.20 and later) or `uniform float {name};` with its start "
-                    "value in the declaration (`constant NAME LOW HIGH START`); float, vec3 "
-                    "or vec4"
+                    f"{where}: the constant {name} is declared with the range {list(r)} here and "
+                    f"{list(out[name])} in {self.label}; declare it once (one constant of both "
+                    "stages) or alike"
                 )
-            line = self.source.count("\n", 0, m.start()) + 1
-            where = f"{self.label}:{line}"
-            if name in bare and name not in decls:
-                if not start:
-                    raise ValueError(
-                        f"{where}: the uniform {name} has no initializer (the engine sets it); "
-                        f"give its start value: `// @study constant {name} {lo:g} {hi:g} START`"
-                    )
-                default = _start_value(start[0], m["type"], where)
-                span, is_bare = (m.start("tail"), m.start("tail")), True
-            elif start:
-                raise ValueError(
-                    f"{where}: {name} has an initializer, its start value; give no START in "
-                    "its declaration (or remove the initializer)"
-                )
-            else:
-                default = _parse_value(m["value"], m["type"], where)
-                span, is_bare = (m.start("value"), m.end("value")), False
-            if not (np.isfinite(lo) and np.isfinite(hi) and lo < hi):
-                raise ValueError(f"{where}: the range [{lo}, {hi}] of {name} is empty")
-            if not all(lo <= v <= hi for v in default):
-                raise ValueError(
-                    f"{where}: {name} = {m['value'].strip()} lies outside its "
-                    f"range [{lo}, {hi}]; widen the range or change the value"
-                )
-            out[name] = UserConstant(name, m["type"], default, lo, hi, span, is_bare)
+            out[name] = r
+        return out
+
+    def _vertex_constants(self) -> None:
+        """The user's vertex shader compiled again with the constants its text declares made
+        uniforms, which every run binds to the values of the run."""
+        if self.vertex is None:
+            return
+        decls, bare = declared(self.vertex.shader.source)
+        names = tuple(n for n in self.constants if n in decls or n in bare)
+        if names:
+            self.vertex = self.vertex.with_constants(names)
+
+    def stage_of(self, name: str) -> str:
+        """'fragment', 'vertex' or 'both': the stages whose compiled code reads the constant
+        ``name`` (those whose files declare it, if neither reads it)."""
+        c = self.constants[name]
+        if self.vertex is None:
+            return "fragment"
+        reads = [name in spirv_port.module_of(self.spec()).bound_names,
+                 name in self.vertex.shader.constants
+                 and name in self.vertex.shader.module.bound_names]  # fmt: skip
+        if not any(reads):
+            return c.stage
+        return "both" if all(reads) else ("fragment" if reads[0] else "vertex")
+
+    def _constants(self, ranges: dict) -> dict:
+        texts = {"fragment": (self.source, self.label)}
+        v = self.vertex.shader if self.vertex is not None else None
+        if v is not None and not v.shared:  # a file of its own (else the fragment's file)
+            texts["vertex"] = (v.original, v.label)
+        decls, bare = declared(self.source)
+        if "vertex" in texts:
+            more = declared(texts["vertex"][0])
+            decls, bare = {**decls, **more[0]}, {**bare, **more[1]}
+        included = self._included_uniforms(set(ranges) - set(decls) - set(bare))
+        out = find_constants(ranges, texts, included)
         if not out:
             raise ValueError(
                 f"{self.label}: the declaration names no constant to fit; add "
@@ -289,31 +228,20 @@ class UserShader:
                 vertex.shader.values[name] = comps
 
     def _included_uniforms(self, names: set) -> dict:
-        """name -> ``_BARE`` match in the preprocessed text, for the ``names`` declared as a
-        uniform without initializer in an ``#include`` d file only (an engine's common
-        uniforms, e.g. Urho3D's ``cFogColor`` in ``Uniforms.glsl``)."""
-        if not names or not dialects.has_includes(self.source):
-            return {}
-        text = dialects.front_end(self.source, self.label, self.defines, self.include_paths, True)
-        return {m["name"]: m for m in _BARE.finditer(text) if m["name"] in names}
-
-    def _included_constant(self, name, m, lo, hi, start) -> UserConstant:
-        """The constant of a uniform an ``#include`` d file declares: never written back (the
-        file is the engine's), its start value from the declaration; span ``(-1, -1)``."""
-        where = f"{self.label} (an #include)"
-        if not start:
-            raise ValueError(
-                f"{where}: the uniform {name} has no initializer (the engine sets it); "
-                f"give its start value: `// @study constant {name} {lo:g} {hi:g} START`"
-            )
-        default = _start_value(start[0], m["type"], where)
-        if not (np.isfinite(lo) and np.isfinite(hi) and lo < hi):
-            raise ValueError(f"{where}: the range [{lo}, {hi}] of {name} is empty")
-        if not all(lo <= v <= hi for v in default):
-            raise ValueError(
-                f"{where}: the start value of {name} lies outside its range [{lo}, {hi}]"
-            )
-        return UserConstant(name, m["type"], default, lo, hi, (-1, -1), True)
+        """name -> ``(BARE match, stage)`` in a stage's preprocessed text, for the ``names``
+        declared as a uniform without initializer in an ``#include`` d file only (an engine's
+        common uniforms, e.g. Urho3D's ``cFogColor`` in ``Uniforms.glsl``): the fragment
+        shader's, else the vertex shader's."""
+        out = {}
+        v = self.vertex.shader if self.vertex is not None else None
+        if names and v is not None and v.source != v.original:  # preprocessed or translated
+            out = {m["name"]: (m, "vertex") for m in BARE.finditer(v.source) if m["name"] in names}
+        if names and dialects.has_includes(self.source):
+            text = dialects.front_end(self.source, self.label, self.defines, self.include_paths,
+                                      True)  # fmt: skip
+            out.update({m["name"]: (m, "fragment") for m in BARE.finditer(text)
+                        if m["name"] in names})  # fmt: skip
+        return out
 
     def validate(self) -> "UserShader":
         for name, study in self.bindings.items():
@@ -423,11 +351,15 @@ class UserShader:
             self.source,
             self.label,
             defines=self.defines,
-            constants=tuple((n, n) for n in [*self.constants, *self.values]),
+            constants=tuple((n, n) for n in [*self.fragment_constants(), *self.values]),
             bindings=tuple(self.run_bindings().items()),
             include_paths=self.include_paths,
             engine=tuple(sorted(self.engine.items())),
         )
+
+    def fragment_constants(self) -> list[str]:
+        """The constants the fragment shader's file (or an ``#include`` of it) declares."""
+        return [n for n, c in self.constants.items() if c.site("fragment") is not None]
 
     def check(self) -> "UserShader":
         """Compile the shader (``dialects.ShaderError`` with glslang's errors, file and line)
@@ -491,10 +423,8 @@ class UserShader:
             return self.vertex.render(inputs, self.spec(), C, backend)
         return spirv_port.render(inputs, None, spec=self.spec(), backend=backend, resolved=C)
 
-    def render_with_jacobian(self, inputs, values, names: list[str], backend: str = "llvm"):
-        """``(ShaderOutput, J)``, ``J`` float32 (H, W, 3, len(names)): forward-mode derivatives
-        of the colour in the scalar names ``names`` (lane-dependent loops unrolled)."""
-        m = backend_types(backend)
+    def _params(self, m, values, names: list[str]) -> tuple[dict, list]:
+        """``(values with each scalar of names a gradient-enabled size-1 Float, those Floats)``."""
         vals, params = dict(self._checked(values)), []
         for s in names:
             base, _, idx = s.partition("[")
@@ -504,11 +434,33 @@ class UserShader:
             dr.enable_grad(p)
             params.append(p)
             vals = self.with_scalars(vals, {s: p})
+        return vals, params
+
+    def vertex_motion(self, inputs, values, names: list[str], backend: str = "llvm") -> list:
+        """For each scalar of ``names``: the largest |derivative| of a vertex's ``gl_Position``
+        in it (all 0 without a vertex shader of the user's)."""
+        if self.vertex is None:
+            return [0.0] * len(names)
+        m = backend_types(backend)
+        vals, params = self._params(m, values, names)
+        try:
+            return self.vertex.motion(m, inputs, self.spec(), self._resolved(m, vals), params)
+        finally:
+            for p in params:
+                dr.disable_grad(p)
+
+    def render_with_jacobian(self, inputs, values, names: list[str], backend: str = "llvm"):
+        """``(ShaderOutput, J)``, ``J`` float32 (H, W, 3, len(names)): forward-mode derivatives
+        of the colour in the scalar names ``names`` (lane-dependent loops unrolled); those in
+        the constants of the user's vertex shader through its outputs and the interpolation,
+        the coverage held fixed (``spirv.user_vertex.UserVertex.frame``)."""
+        m = backend_types(backend)
+        vals, params = self._params(m, values, names)
         P = prepare(inputs, m)
         try:
             if self.vertex is not None:
                 P, color, diag = self.vertex.shade(
-                    m, inputs, self.spec(), self._resolved(m, vals), differentiate=True
+                    m, inputs, self.spec(), self._resolved(m, vals), True, params
                 )
             else:
                 color, diag = spirv_port.shade(
@@ -531,21 +483,31 @@ class UserShader:
         """The shader's text with ``values`` in place of its constants' initializers; every
         other byte as in the file. A uniform declared without initializer gets one where its
         dialect allows (desktop GLSL 1.20 and later) and ``bare_initializers`` asks."""
-        vals = self._checked(values)
-        out, pos = [], 0
         d = self.dialect
         initializers = bare_initializers and not d.es and d.version >= 120
-        for c in sorted(self.constants.values(), key=lambda c: c.span[0]):
-            if c.bare and (not initializers or c.span[0] < 0):  # < 0: an #include's
-                continue
-            v = vals[c.name]
-            comps = v if isinstance(v, (tuple, list)) else (v,)
-            text = _literal(comps[0]) if c.type == "float" else (
-                f"{c.type}({', '.join(_literal(x) for x in comps)})")  # fmt: skip
-            out += [self.source[pos : c.span[0]], f" = {text}" if c.bare else text]
-            pos = c.span[1]
-        out.append(self.source[pos:])
-        return "".join(out)
+        vals = self._checked(values)
+        return written_text(self.source, self.constants.values(), vals, "fragment", initializers)
+
+    def vertex_written(self, values: dict, bare_initializers: bool = True) -> str | None:
+        """The user's vertex shader file's text with ``values`` in place of the initializers of
+        the constants it declares, as :meth:`written` (None without a vertex shader; the
+        fragment shader's :meth:`written` for one file of both stages)."""
+        if self.vertex is None:
+            return None
+        v = self.vertex.shader
+        if v.shared:
+            return self.written(values, bare_initializers)
+        d = dialects.detect(v.original, v.label)
+        initializers = bare_initializers and not d.es and d.version >= 120
+        vals = self._checked(values)
+        return written_text(v.original, self.constants.values(), vals, "vertex", initializers)
+
+    def vertex_gl_source(self, values: dict | None = None, bare_initializers: bool = True):
+        """The GLSL 330 core OpenGL runs for :meth:`vertex_written` (translated as the vertex
+        shader is compiled: ``spirv.vertex.VertexShader.gl_text``); None without one."""
+        if self.vertex is None:
+            return None
+        return self.vertex.shader.gl_text(self.vertex_written(values or {}, bare_initializers))
 
     def gl_source(self, values: dict | None = None, bare_initializers: bool = True) -> str:
         """The GLSL OpenGL runs for :meth:`written` with ``values``: that text, or, for a
@@ -580,11 +542,14 @@ class UserShader:
             bindings = {**self.vertex.shader.inputs, **bindings}
         base = GLRenderer if reflection is None else TranslatedRenderer
         vals = self._checked(values)
+        # every constant that is a uniform of the program gets its value (one without
+        # initializer must; one with an initializer loses it in the HLSL round trip)
         bare = {c.name: np.asarray(vals[c.name], np.float32).tobytes()
-                for c in self.constants.values() if c.bare}  # fmt: skip
+                for c in self.constants.values()}  # fmt: skip
         bare.update({n: np.float32(v).tobytes() for n, v in self.values.items()})
         if self.vertex is not None:  # the grid drawn with the user's GLSL vertex shader
-            base = self.vertex.gl_class(base, inputs, self.engine["up"])
+            base = self.vertex.gl_class(base, inputs, self.engine["up"],
+                                        self.vertex_gl_source(values))  # fmt: skip
         base = _engine.gl_class(base, self.engine)
 
         label = self.label

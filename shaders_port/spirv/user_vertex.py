@@ -18,6 +18,13 @@ runs on (``cells = (nx, nz)`` cells of two triangles over the water quad). For o
    triangle's interpolants extrapolated to the helper's centre) and their
    :class:`~shaders_port.spirv.quads.Quads`.
 
+The vertex shader's constants to fit are uniforms of its run, at the values of each render.
+Their forward-mode derivatives come from the vertex run (``VertexShader.run``), carried
+through the interpolation (``pipeline.interpolate.weight_tangents``: a moved vertex moves the
+plane a pixel interpolates on) onto the varyings and ``gl_FragCoord``, the coverage held fixed
+(each pixel keeps its triangle; which pixels a moved vertex covers changes in steps no
+derivative sees).
+
 A fragment input no vertex output feeds is refused (GL would not link the pair). The result
 is a prepared frame (``pipeline.raster.Prepared``) whose raster is the grid's coverage (its
 ``world`` the interpolated grid position, the plane point under the displaced one) and the
@@ -31,6 +38,7 @@ import dataclasses
 import itertools
 from collections import OrderedDict
 
+import drjit as dr
 import numpy as np
 
 from ..gl.grid import grid_renderer_class
@@ -38,9 +46,11 @@ from ..pipeline.frame import finish_output
 from ..pipeline.interpolate import (
     Coverage,
     interpolate,
+    interpolate_tangent,
     quad_helpers,
     rasterize_triangles,
     water_grid,
+    weight_tangents,
 )
 from ..pipeline.raster import Raster, prepare
 from ..pipeline.texture import backend_types
@@ -65,6 +75,58 @@ def _lanes_of(m, a: np.ndarray, kind: str):
     if kind == "float":
         return m.Float(a.astype(np.float32))
     return (m.Int32 if kind == "int" else m.UInt32)(np.rint(a).astype(np.int64))
+
+
+def _leaves(values: dict) -> list:
+    """The scalars of resolved values (name -> value or tuple of values)."""
+    return [x for v in values.values() for x in (v if isinstance(v, (tuple, list)) else (v,))]
+
+
+def _numbers(values: dict) -> tuple:
+    """Resolved values as Python floats (a cache key)."""
+    return tuple(float(x[0]) if isinstance(x, dr.ArrayBase) else float(x) for x in _leaves(values))
+
+
+class _Motion:
+    """What the vertex shader's constants ``params`` move, for one frame's ``lanes`` at window
+    pixels ``(x, y)``: ``douts[j]`` the outputs' per-vertex derivatives in ``params[j]``
+    (``tangents`` of ``VertexShader.run``), ``weights[j]`` the interpolation weights'
+    (``pipeline.interpolate.weight_tangents``, the coverage held fixed), ``deltas[j]`` the
+    zero Dr.Jit scalar ``p - detach(p)`` that carries a derivative into a lane."""
+
+    def __init__(self, clip, tangents, params, grid, lanes, x, y, inputs):
+        self.vertices = np.asarray(grid.triangles, np.int64)[lanes.triangle]
+        self.douts = [t[1] for t in tangents]
+        self.weights = [
+            weight_tangents(
+                clip, t[0], grid.triangles, lanes.triangle, x, y, inputs.width, inputs.height
+            )  # fmt: skip
+            for t in tangents
+        ]
+        self.deltas = [p - dr.detach(p) for p in params]
+
+    def varying(self, values, name: str, mode: str) -> list:
+        """The derivatives (N, ...) of the output ``name`` (``values`` (V, ...)) interpolated
+        by ``mode`` at the lanes, one per param."""
+        key = "linear" if mode == "noperspective" else "smooth"
+        return [
+            interpolate_tangent(values, d[name], w[key], w["d" + key], self.vertices, mode)
+            for d, w in zip(self.douts, self.weights)
+        ]
+
+    def lanes(self, m, value: np.ndarray, tangents: list, kind: str):
+        """``value`` (N, ...) as the executor's lanes (``_lanes_of``), each float lane plus
+        ``tangent * delta`` per param: the same numbers, with the derivatives attached."""
+        if value.ndim > 1:
+            return [self.lanes(m, value[:, i], [t[:, i] for t in tangents], kind)
+                    for i in range(value.shape[1])]  # fmt: skip
+        out = _lanes_of(m, value, kind)
+        if kind != "float":
+            return out
+        for t, d in zip(tangents, self.deltas):
+            if np.any(t):
+                out = out + m.Float(np.asarray(t, np.float32)) * d
+        return out
 
 
 def _joined(cov: Coverage, helpers: Coverage) -> Coverage:
@@ -99,22 +161,31 @@ class UserVertex:
     def grid(self, inputs):
         return water_grid(inputs.water_rect, inputs.normal_tile, self.cells)
 
+    def with_constants(self, names) -> "UserVertex":
+        """This vertex shader with the constants ``names`` (declared in its text) made uniforms
+        bound to each run's values (``spirv.user_shader.UserShader`` finds them)."""
+        return UserVertex(self.shader.with_constants(names), self.cells)
+
     # ---- one frame -------------------------------------------------------------------------
-    def frame(self, m, inputs, spec):
+    def frame(self, m, inputs, spec, C=None, params=()):
         """``(P, bindings)``: the prepared frame of the grid's coverage and the fragment
-        shader's bindings (see the module doc); remembered for the last eight frames."""
+        shader's bindings (see the module doc), the vertex shader's constants at their values
+        in ``C`` (resolved values, ``C.values``: name -> executor value). ``params``: gradient-
+        enabled size-1 Floats; those among the vertex shader's constants make every varying
+        and ``gl_FragCoord`` carry its forward-mode derivatives in them, through the vertex
+        shader and the interpolation, the coverage held fixed (a pixel keeps its triangle).
+        Frames without such derivatives are remembered, the last eight."""
+        values = {n: C.values[n] for n in self.shader.constants} if C is not None else {}
+        moving = [p for p in params if any(x is p for x in _leaves(values))]
         P0 = prepare(inputs, m)
-        key = (P0.upload, m.__name__, self.shader.source, self.cells, spec.prepared_source(),
-               spec.bindings, spec.engine)  # fmt: skip
-        hit = _FRAMES.get(key)
+        key = (P0.upload, m.__name__, self.shader.source, self.shader.constants, self.cells,
+               _numbers(values), spec.prepared_source(), spec.bindings, spec.engine)  # fmt: skip
+        hit = None if moving else _FRAMES.get(key)
         if hit is not None:
             _FRAMES.move_to_end(key)
             return hit
-        study = spirv_port.study_bindings(m, P0, inputs, spec.engine)
-        for k in range(4):
-            study[f"wave{k + 1}"] = [float(v) for v in np.asarray(inputs.waves[k], np.float32)]
-        grid = self.grid(inputs)
-        clip, outs = self.shader.run(m, inputs, grid, study, dict(spec.engine).get("up", "y"))
+        grid, study, run = self._run(m, P0, inputs, spec, values, moving)
+        clip, outs = run[0], run[1]
         cov = rasterize_triangles(clip, grid.triangles, inputs.width, inputs.height)
         if cov.index.size == 0:
             raise ValueError(
@@ -124,12 +195,16 @@ class UserVertex:
         mod = spirv_port.module_of(spec)
         b = {k: v for k, v in study.items() if k not in _PER_PIXEL}
         b.update({n: b[t] for n, t in spec.bindings if t in b})  # a bound mipmapped sampler
-        lanes, x, y, group = cov, None, None, None
+        lanes, group = cov, None
+        x, y = cov.index % inputs.width, inputs.height - 1 - cov.index // inputs.width
         if _quads.uses_quads(mod, {k: v for k, v in b.items() if k in mod.bound_names}):
             x, y, group, helpers = quad_helpers(cov, inputs.width, inputs.height)
             lanes = _joined(cov, helpers)
-        b.update(self._varyings(m, spec, lanes, grid, outs))
-        b.update(self._builtins(m, lanes, inputs, x, y))
+        motion = None
+        if moving:
+            motion = _Motion(clip, run[2], moving, grid, lanes, x, y, inputs)
+        b.update(self._varyings(m, spec, lanes, grid, outs, motion))
+        b.update(self._builtins(m, lanes, x, y, motion))
         for name, target in spec.bindings:
             if target in b:
                 b[name] = b[target]
@@ -137,10 +212,27 @@ class UserVertex:
         if group is not None:
             b[_quads.QUADS_KEY] = _quads.quads_of_pixels(m, x, y, cov.index.size, group)
         hit = (self._prepared(m, P0, cov, grid, inputs), b)
-        _FRAMES[key] = hit
-        while len(_FRAMES) > 8:
-            _FRAMES.popitem(last=False)
+        if not moving:
+            _FRAMES[key] = hit
+            while len(_FRAMES) > 8:
+                _FRAMES.popitem(last=False)
         return hit
+
+    def _run(self, m, P0, inputs, spec, values: dict, params=()):
+        """``(grid, study bindings, VertexShader.run's result)`` of one frame ``P0``."""
+        study = spirv_port.study_bindings(m, P0, inputs, spec.engine)
+        for k in range(4):
+            study[f"wave{k + 1}"] = [float(v) for v in np.asarray(inputs.waves[k], np.float32)]
+        grid = self.grid(inputs)
+        up = dict(spec.engine).get("up", "y")
+        return grid, study, self.shader.run(m, inputs, grid, study, up, values, params)
+
+    def motion(self, m, inputs, spec, C, params) -> list[float]:
+        """For each of ``params`` (gradient-enabled scalars of ``C``, see :meth:`frame`): the
+        largest |derivative| of a vertex's clip-space position (``gl_Position``) in it."""
+        values = {n: C.values[n] for n in self.shader.constants}
+        run = self._run(m, prepare(inputs, m), inputs, spec, values, params)[2]
+        return [float(np.abs(t[0]).max()) for t in run[2]]
 
     def feeds(self, mod, source: str, label: str) -> dict:
         """Fragment input name -> the vertex output that feeds it (by name, else by an explicit
@@ -166,7 +258,7 @@ class UserVertex:
             out[name] = src
         return out
 
-    def _varyings(self, m, spec, cov, grid, outs: dict) -> dict:
+    def _varyings(self, m, spec, cov, grid, outs: dict, motion=None) -> dict:
         mod = spirv_port.module_of(spec)
         fed = self.feeds(mod, spec.source, spec.label)
         b = {}
@@ -188,21 +280,29 @@ class UserVertex:
             kind = _kind(t)
             if kind != "float" and mode != "flat":
                 raise ValueError(f"{spec.label}: the integer input {name} must be `flat`")
-            b[name] = _lanes_of(m, interpolate(outs[src], cov, grid.triangles, mode), kind)
+            value = interpolate(outs[src], cov, grid.triangles, mode)
+            if motion is None:
+                b[name] = _lanes_of(m, value, kind)
+            else:
+                b[name] = motion.lanes(m, value, motion.varying(outs[src], src, mode), kind)
         return b
 
-    def _builtins(self, m, cov, inputs, x=None, y=None) -> dict:
-        """``gl_FragCoord`` and ``gl_FrontFacing`` of the lanes ``cov``, at window pixels
-        ``(x, y)`` (int, y up; by default those of ``cov.index``)."""
-        if x is None:
-            x = cov.index % inputs.width
-            y = inputs.height - 1 - cov.index // inputs.width
+    def _builtins(self, m, cov, x, y, motion=None) -> dict:
+        """``gl_FragCoord`` and ``gl_FrontFacing`` of the lanes ``cov`` at window pixels
+        ``(x, y)`` (int, y up); with ``motion`` (:class:`_Motion`) the depth and ``1 / w``
+        carry their derivatives."""
+        depth, inv_w = cov.depth, cov.inv_w
+        if motion is None:
+            z, w = m.Float(depth.astype(np.float32)), m.Float(inv_w.astype(np.float32))
+        else:
+            z = motion.lanes(m, depth, [t["ddepth"] for t in motion.weights], "float")
+            w = motion.lanes(m, inv_w, [t["dinv_w"] for t in motion.weights], "float")
         return {
             "gl_FragCoord": [
                 m.Float(x.astype(np.float32) + np.float32(0.5)),
                 m.Float(y.astype(np.float32) + np.float32(0.5)),
-                m.Float(cov.depth.astype(np.float32)),
-                m.Float(cov.inv_w.astype(np.float32)),
+                z,
+                w,
             ],
             "gl_FrontFacing": m.Bool(cov.front),
         }
@@ -232,10 +332,11 @@ class UserVertex:
         )
 
     # ---- renders -----------------------------------------------------------------------------
-    def shade(self, m, inputs, spec, C, differentiate: bool = False):
+    def shade(self, m, inputs, spec, C, differentiate: bool = False, params=()):
         """``(P, colour Array3f, diag)`` of the fragment shader ``spec`` (a
-        ``spirv.translated.ShaderSpec``) with resolved constants ``C`` on the grid's frame."""
-        P, b = self.frame(m, inputs, spec)
+        ``spirv.translated.ShaderSpec``) with resolved constants ``C`` on the grid's frame;
+        ``params``: the gradient-enabled scalars of ``C`` (see :meth:`frame`)."""
+        P, b = self.frame(m, inputs, spec, C, params)
         color, diag, _ = spirv_port.shade_lanes(m, P, b, spec, C, differentiate)
         return P, color, diag
 
@@ -248,10 +349,10 @@ class UserVertex:
         return finish_output(m, P, color, diag, spec.label)
 
     # ---- OpenGL ----------------------------------------------------------------------------
-    def gl_class(self, base, inputs, up: str = "y"):
-        """``base`` (a ``GLRenderer`` class) drawing the grid with this vertex shader: its
-        attributes and recognised uniforms set as :meth:`frame` binds them, in the world frame
-        ``up``."""
+    def gl_class(self, base, inputs, up: str = "y", source: str | None = None):
+        """``base`` (a ``GLRenderer`` class) drawing the grid with this vertex shader (its GLSL
+        330 ``source``, by default the file's as compiled): its attributes and recognised
+        uniforms set as :meth:`frame` binds them, in the world frame ``up``."""
         mod, grid = self.shader.module, self.grid(inputs)
         attributes, uniforms = {}, {}
         for vid, ins in mod.defs.items():
@@ -270,4 +371,5 @@ class UserVertex:
                 uniforms[name] = np.ascontiguousarray(v).tobytes()
             elif name in self.shader.values:  # a `// @study value` pragma's
                 uniforms[name] = np.float32(self.shader.values[name]).tobytes()
-        return grid_renderer_class(base, self.shader.source, attributes, grid.triangles, uniforms)
+        text = self.shader.source if source is None else source
+        return grid_renderer_class(base, text, attributes, grid.triangles, uniforms)

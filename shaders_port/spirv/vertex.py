@@ -23,7 +23,11 @@ or by the study's own uniform names, which bind only as themselves (``wave1`` ..
 each with its ``flat`` / ``noperspective`` decoration and its ``layout(location = N)`` when
 the source gives one.
 
-:meth:`VertexShader.run` returns them as NumPy arrays, one row per vertex.
+Its constants to fit are declared as a fragment shader's (``// @study constant NAME LOW HIGH
+[START]``, collected in :attr:`VertexShader.ranges`; ``spirv.user_shader`` finds their
+declarations); the shader is compiled with them made uniforms (``constants``), which each run
+binds. :meth:`VertexShader.run` returns the outputs as NumPy arrays, one row per vertex, and,
+given gradient-enabled constants, their forward-mode derivatives alike.
 """
 
 from __future__ import annotations
@@ -41,7 +45,7 @@ import numpy as np
 from . import dialects
 from . import engine_inputs as _engine
 from . import engine_names as names_
-from .translated import STUDY_INPUTS
+from .translated import STUDY_INPUTS, prepared_source
 from .execute import Executor, UnboundVariable
 from .loops import UnsupportedInstruction
 from .module import OPT_PASSES, Module, referenced
@@ -62,6 +66,14 @@ def explicit_locations(source: str, direction: str) -> dict:
     itself (not those glslang maps automatically)."""
     code = re.sub(r"//[^\n]*|/\*.*?\*/", "", source, flags=re.S)  # a line comment ends at \n
     return {m["name"]: int(m["loc"]) for m in _LOCATION.finditer(code) if m["dir"] == direction}
+
+
+def _range(args: list, where: str) -> tuple:
+    """``(low, high[, start])`` of a ``// @study constant NAME LOW HIGH [START]`` pragma."""
+    try:
+        return (float(args[1]), float(args[2]), *args[3:])
+    except ValueError:
+        raise ValueError(f"{where}: `// @study constant NAME LOW HIGH [START]`") from None
 
 
 def compile_vertex(source: str, label: str) -> bytes:
@@ -175,20 +187,19 @@ class VertexShader:
     preprocessor names it is compiled with)."""
 
     def __init__(self, source: str, label: str, path=None, defines=(), include_paths=(),
-                 shared=False):  # fmt: skip
+                 shared=False, constants=()):  # fmt: skip
         # defines, include_paths: as a fragment shader's (``spirv.dialects.front_end``); a
         # file that needs them is compiled and drawn preprocessed. shared: the file is the
         # fragment shader's too (Urho3D's one file for both stages), whose pragmas other than
-        # a binding to a vertex meaning or engine name are the fragment shader's
+        # a binding to a vertex meaning or engine name are the fragment shader's. constants:
+        # the names of the constants to fit it declares, compiled as uniforms that each run
+        # binds (``spirv.user_shader.UserShader`` finds them)
         self.original, self.label, self.path = source, label, path
-        self.source, self.defines = source, tuple(defines)
-        pre = bool(defines) or dialects.has_includes(source)
-        compiled = source  # glslang's text: an #include's lines named by their file
-        if pre or dialects.detect(source, label, dialects.version_define(defines)).translated:
-            compiled = dialects.front_end(source, label, tuple(defines), tuple(include_paths),
-                                          preprocess=True, stage="vert")  # fmt: skip
-            self.source = dialects.for_opengl(compiled)
-        self.bindings, self.values = {}, {}
+        self.defines, self.include_paths = tuple(defines), tuple(include_paths)
+        self.shared, self.constants = bool(shared), tuple(constants)
+        compiled = self.glslang_text(source)
+        self.source = source if compiled is source else dialects.for_opengl(compiled)
+        self.bindings, self.values, self.ranges = {}, {}, {}
         for m in _PRAGMA.finditer(source):
             args, line = m["args"].split(), source.count("\n", 0, m.start()) + 1
             if m["verb"] == "value":
@@ -197,14 +208,18 @@ class VertexShader:
             ours = len(args) == 2 and (args[1] in names_.MEANINGS or args[1] in names_.ENGINE_NAMES)
             if shared and not (m["verb"] == "bind" and ours):
                 continue
+            if m["verb"] == "constant" and len(args) in (3, 4):
+                self.ranges[args[0]] = (_range(args, f"{label}:{line}"), f"{label}:{line}")
+                continue
             if m["verb"] != "bind" or len(args) != 2:
                 raise ValueError(
-                    f"{label}:{line}: a vertex shader takes `// @study bind NAME MEANING` and "
-                    "`// @study value NAME V[,V...]` pragmas only (its constants are not "
-                    "fitted; declare them in the fragment shader)"
+                    f"{label}:{line}: a vertex shader takes `// @study bind NAME MEANING`, "
+                    "`// @study value NAME V[,V...]` and `// @study constant NAME LOW HIGH "
+                    "[START]` pragmas only"
                 )
             self.bindings[args[0]] = args[1]
-        self.module = Module(compile_vertex(compiled, label), label=label, stage="Vertex")
+        text = prepared_source(compiled, label, self.constants)
+        self.module = Module(compile_vertex(text, label), label=label, stage="Vertex")
         for name, target in self.bindings.items():
             if names_.meaning_of(name, self.bindings) is None and target not in names_.MEANINGS \
                     and _engine.canonical(target) not in _INPUTS:  # fmt: skip
@@ -220,6 +235,28 @@ class VertexShader:
                  is None}  # fmt: skip
         found = _engine.resolve_bindings(self.source, plain, ())
         self.inputs = {n: t for n, t in found.items() if t in _INPUTS}
+
+    def gl_text(self, text: str) -> str:
+        """``text`` (this file's, e.g. with fitted values written in) as it is drawn: GLSL 330
+        core, translated from an older dialect and preprocessed where the file needs it
+        (defines, ``#include`` s)."""
+        out = self.glslang_text(text)
+        return text if out is text else dialects.for_opengl(out)
+
+    def glslang_text(self, text: str) -> str:
+        """``text`` as glslang compiles it (:meth:`gl_text` with an ``#include`` d file's lines
+        still named by their file, so that errors name it)."""
+        version = dialects.version_define(self.defines)
+        pre = bool(self.defines) or dialects.has_includes(text)
+        if pre or dialects.detect(text, self.label, version).translated:
+            return dialects.front_end(text, self.label, self.defines, self.include_paths,
+                                      preprocess=True, stage="vert")  # fmt: skip
+        return text
+
+    def with_constants(self, names) -> "VertexShader":
+        """This shader compiled again with the constants ``names`` made uniforms."""
+        return VertexShader(self.original, self.label, self.path, self.defines,
+                            self.include_paths, self.shared, tuple(names))  # fmt: skip
 
     @classmethod
     def from_file(cls, path, defines=(), include_paths=(), shared=False) -> "VertexShader":
@@ -314,6 +351,7 @@ class VertexShader:
             name = mod.binding_name(vid)
             if (name.startswith("gl_") or names_.meaning_of(name, self.bindings) is not None
                     or name in self.values or name in _INPUTS or name in self.inputs
+                    or name in self.constants
                     or pointee_type(mod, vid)[0] in ("struct", "array")):  # fmt: skip
                 continue
             loads = (i for fn in mod.functions.values() for b in fn.blocks.values()
@@ -338,14 +376,22 @@ class VertexShader:
             )
         return list(v) if t[0] == "vec" else v[0]
 
-    def run(self, m, inputs, grid, study: dict, up: str = "y") -> tuple[np.ndarray, dict]:
+    def run(self, m, inputs, grid, study: dict, up: str = "y", constants=None, params=()):
         """Run the shader on every vertex of ``grid`` (``pipeline.interpolate.Grid``, in the
         study's Y-up world; given to the shader in the world frame ``up``):
         ``(clip (V, 4) float64 gl_Position, {output name: (V, ...) float64})``; an output
-        never written is absent."""
+        never written is absent. ``constants``: name -> the executor's value (a size-1 Float
+        or a tuple of them) of each of :attr:`constants`. ``params``: gradient-enabled size-1
+        Floats among those values; given, a third item is returned, one ``(dclip, douts)`` per
+        param: the forward-mode derivatives of ``clip`` and of each output, shaped alike."""
         if self.position is None:
             raise ValueError(f"{self.label}: the vertex shader never writes gl_Position")
-        ex = Executor(self.module, m, self.bindings_for(m, inputs, grid, study, up))
+        b = self.bindings_for(m, inputs, grid, study, up)
+        for n in self.constants:
+            v = (constants or {}).get(n)
+            if v is not None:
+                b[n] = list(v) if isinstance(v, tuple) else v
+        ex = Executor(self.module, m, b, differentiate=bool(params))
         try:
             ex.run()
             V = len(grid.position)
@@ -354,9 +400,13 @@ class VertexShader:
                 raise ValueError(f"{self.label}: the vertex shader never writes gl_Position")
             if self.module.binding_name(self.position) != "gl_Position":
                 pv = pv[0]
+            written = {n: ex.vars[v.vid] for n, v in self.outputs.items()
+                       if ex.vars.get(v.vid) is not None}  # fmt: skip
             clip = to_numpy(pv, V)
-            outs = {n: to_numpy(ex.vars[v.vid], V) for n, v in self.outputs.items()
-                    if ex.vars.get(v.vid) is not None}  # fmt: skip
+            outs = {n: to_numpy(v, V) for n, v in written.items()}
+            if params:
+                per = _tangents([pv, *written.values()], params, V)
+                tangent = [(t[0], dict(zip(written, t[1:]))) for t in per]
         except UnboundVariable as exc:
             raise ValueError(
                 f"{self.label}: {exc}. A vertex shader's attributes and matrices bind by the "
@@ -367,7 +417,43 @@ class VertexShader:
             raise ValueError(f"{self.label}: {exc}") from None
         finally:
             ex.release()
-        return clip, outs
+        return (clip, outs, tangent) if params else (clip, outs)
+
+
+def _tangents(values: list, params, lanes: int) -> list:
+    """For each of ``params``: the forward-mode derivative of each of ``values`` (the
+    executor's values: Dr.Jit arrays, numbers, nested lists of them) in that param, as
+    :func:`to_numpy` gives the value."""
+    leaves: list = []
+
+    def leaf(x):
+        if isinstance(x, (list, tuple)):
+            return [leaf(y) for y in x]
+        if isinstance(x, dr.ArrayBase) and dr.grad_enabled(x):
+            # a node of its own: a target of the pass, never an interior node (whose gradient
+            # the pass clears)
+            leaves.append(x + dr.opaque(type(x), 0.0))
+            return len(leaves) - 1
+        return None
+
+    def fill(shape, grads):
+        if isinstance(shape, list):
+            return [fill(y, grads) for y in shape]
+        return 0.0 if shape is None else grads[shape]
+
+    shapes = [leaf(v) for v in values]
+    keep = dr.ADFlag.ClearInterior | dr.ADFlag.ClearInput
+    out = []
+    for p in params:
+        for q in params:
+            dr.clear_grad(q)
+        dr.clear_grad(leaves)
+        dr.set_grad(p, 1.0)
+        grads = list(dr.forward_to(leaves, flags=keep)) if leaves else []
+        out.append([to_numpy(fill(s, grads), lanes) for s in shapes])
+    for q in params:
+        dr.clear_grad(q)
+    return out
 
 
 def to_numpy(value, lanes: int) -> np.ndarray:

@@ -28,7 +28,7 @@ from ..fit.model import constants_json
 from ..fit.result import CalibrationResult
 from ..report.animation import animation_figures, write_animation_report
 from ..scene.frame_data import load_frames
-from .steps import export_calibration
+from .steps import export_calibration, with_stages
 from .viewer import write_viewer
 
 
@@ -107,6 +107,7 @@ def run_calibrate_animated(exp, variant: str, out: Path, solver: str, cache=None
             {"start": start, "single_frame": single.fitted, "all_frames": joint.fitted},
         )
     shader = models[0].label
+    joint.parameters = with_stages(joint.parameters, getattr(models[0], "user_shader", None))
     gl_frames, engine_targets, extra = export_calibration(
         exp, models[0], inputs, joint, out, timings
     )

@@ -23,7 +23,7 @@ from ..scene.frames import refuse_animated
 from ..scene.reference import load_or_render
 from ..scene.shader_inputs import load_or_build_shader_inputs
 from ..scene.views import has_views, view_experiments, view_inputs
-from .steps import export_calibration, load_scene_data
+from .steps import export_calibration, load_scene_data, with_stages
 from .viewer import write_viewer
 
 
@@ -134,7 +134,7 @@ def joint_fit(scenes, variant, out: Path, solver):
     result = CalibrationResult(
         shader=model.label,
         backend=variant,
-        parameters=cal.parameters,
+        parameters=with_stages(cal.parameters, getattr(model, "user_shader", None)),
         constants=constants_json(cal.fitted),
         error=per_scene,
         solver=solver,

@@ -150,9 +150,19 @@ def export_calibration(exp, model, frames: list, cal, out: Path, timings: dict):
         if not all(g["passed"] is not False for g in gl):
             _log(f"calibrate: {user.label} not written back: the GL check failed")
         else:
-            text = (shaders / "core" / user.label).read_text(encoding="utf-8")
+            # the initializers replaced; a uniform without one stays so (its START, in the
+            # declaration, stays the start value: the file must read back as it was declared)
+            text = user.written(fitted, bare_initializers=False)
             Path(exp.fit.shader).write_text(text, "utf-8")
             _log(f"calibrate: wrote the fitted constants into {exp.fit.shader}")
+            vtext = user.vertex_written(fitted, bare_initializers=False)
+            if (
+                vtext is not None
+                and not user.vertex.shader.shared
+                and vtext != user.vertex.shader.original
+            ):
+                Path(exp.fit.vertex).write_text(vtext, "utf-8")
+                _log(f"calibrate: wrote the fitted constants into {exp.fit.vertex}")
     extra = {
         "textures": record,
         "shader_file": str(exp.fit.shader),
@@ -226,10 +236,11 @@ def calibration_figures(out, exp, model, ref, ev, cal, solver) -> dict:
 def calibration_result(exp, variant, model, ref, cal, ev, solver, timings, gl):
     """The ``CalibrationResult`` of one scene's calibration."""
     e0, e1 = ev["e0"], ev["e1"]
+    user = getattr(model, "user_shader", None)
     return CalibrationResult(
         shader=model.label,
         backend=variant,
-        parameters=cal.parameters,
+        parameters=with_stages(cal.parameters, user),
         constants=constants_json(cal.fitted),
         error={
             "rmse": {"default": e0["rmse"], "fitted": e1["rmse"]},
@@ -256,6 +267,15 @@ def calibration_result(exp, variant, model, ref, cal, ev, solver, timings, gl):
         sun=sun_summary(exp),
         parsimony=ev["parsimony"],
     )
+
+
+def with_stages(parameters: dict, user) -> dict:
+    """``parameters`` (scalar name -> the fit's record) with each one's ``stage`` ('fragment',
+    'vertex' or 'both': the stages that read it) for a user's shader run after its own vertex
+    shader (``user``, a ``UserShader``; else unchanged)."""
+    if user is None or user.vertex is None:
+        return parameters
+    return {n: {**p, "stage": user.stage_of(n.split("[")[0])} for n, p in parameters.items()}
 
 
 def write_result(out, result, figs, ev) -> dict:

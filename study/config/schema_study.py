@@ -240,11 +240,11 @@ STUDY_KEYS: dict[str, Field] = {
         None,
         "Declaration of your own `fit.shader` besides its `// @study` pragmas (the same "
         "lines without `// @study`, so an engine's file needs no edit), one line each: "
-        "`constant NAME LOW HIGH` (a constant to fit and its range; `constant NAME LOW HIGH "
-        "START` for a uniform without initializer), `bind NAME INPUT` (the shader's sampler "
-        "or uniform NAME is the study's INPUT), `value NAME V[,V...]` (a uniform the engine "
-        "sets, in either stage), `normal NAME [world|tangent]`, `up y|z` or `normal_map FILE` "
-        "(relative to the experiment file).",
+        "`constant NAME LOW HIGH` (a constant to fit and its range, declared in `fit.shader` "
+        "or `fit.vertex`; `constant NAME LOW HIGH START` for a uniform without initializer), "
+        "`bind NAME INPUT` (the shader's sampler or uniform NAME is the study's INPUT), "
+        "`value NAME V[,V...]` (a uniform the engine sets, in either stage), `normal NAME "
+        "[world|tangent]`, `up y|z` or `normal_map FILE` (relative to the experiment file).",
     ),
     "fit.include_paths": Field(
         "list_str",
@@ -277,6 +277,7 @@ STUDY_KEYS: dict[str, Field] = {
         "in place of the study's `water.vert`: run on every vertex of a grid over the water "
         'quad, its triangles rasterised and its outputs interpolated as OpenGL does; `"auto"`: '
         "the file beside `fit.shader` with its name and `.vert` (`water.frag` -> `water.vert`). "
+        "Its `// @study constant` pragmas are fitted with the fragment shader's. "
         "Unset: the study's `water.vert` (`docs/user-shader.md`).",
     ),
     "fit.vertex_grid": Field(

@@ -205,15 +205,21 @@ def constants_lines(spec: dict, constants, fit: dict | None) -> list[str]:
     return lines
 
 
-def _bind_rows(reflections: dict) -> list[str]:
+def _bind_rows(reflections: dict, values: dict | None = None) -> list[str]:
     """What the application binds, over every stage: textures, uniforms (a member of a stage's
-    constant buffer once per stage) and the vertex attributes."""
+    constant buffer once per stage) and the vertex attributes. ``values``: a user's shader's
+    constants (GLSL name -> value): a uniform among them is marked with the value to set."""
     rows, seen = [], set()
 
     def add(name, kind, gtype, where):
         if (name, where) not in seen:  # a block member once per stage, at its offset there
             seen.add((name, where))
-            rows.append(f"| `{name}` | {kind} | {gtype} | {where} | {_meaning(name)} |")
+            meaning = _meaning(name)
+            if values and name in values and kind == "uniform":
+                v = values[name]
+                shown = ", ".join(_fmt(x) for x in v) if isinstance(v, (list, tuple)) else _fmt(v)
+                meaning = f"fitted constant: set it to {shown}"
+            rows.append(f"| `{name}` | {kind} | {gtype} | {where} | {meaning} |")
 
     ordered = sorted(reflections.items(), key=lambda kv: ".vert." not in kv[0])
     for path, refl in ordered:
@@ -262,7 +268,7 @@ def binding_sheet(
         "",
         "| name | kind | type | where | meaning |",
         "|---|---|---|---|---|",
-        *_bind_rows(reflections),
+        *_bind_rows(reflections, constants if isinstance(constants, dict) else None),
         "",
     ]
     out += constants_lines(spec, constants, fit)

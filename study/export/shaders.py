@@ -177,7 +177,8 @@ def export_user_shader(
     """Write a user's shader (``shaders_port.spirv.user_shader.UserShader``) with ``values`` (GLSL
     name -> float | tuple) in place of its constants' initializers, ``out_dir/core/<file>``,
     beside the vertex shader it runs after (``out_dir/core/water.vert``, the study's, or the
-    user's own, ``shader.vertex``, under its file name); ``targets``
+    user's own, ``shader.vertex``, under its file name, with the values of the constants it
+    declares in place alike); ``targets``
     ``textures`` and ``status`` as :func:`export_shaders` (translated from those two files).
     Compile-checked and written all or not at all, as there; returns the written paths."""
     frag = staged_name(shader.label, "frag")
@@ -192,10 +193,13 @@ def export_user_shader(
     core = {}
     if shader.dialect.runs_on_desktop_gl:
         core[frag] = shader.gl_source(values, bare_initializers=False)
-    if shader.vertex is not None:  # the user's own vertex shader in place of the study's
+    if shader.vertex is not None:  # the user's own vertex shader in place of the study's:
+        # its file with the fitted values of the constants it declares, its engine targets
+        # from the GLSL 330 it is compiled as
         vert = staged_name(shader.vertex.label, "vert")
-        texts = {("core", vert): shader.vertex.shader.source,
+        texts = {("core", vert): shader.vertex_written(values),
                  ("core", frag): texts[("core", frag)]}  # fmt: skip
+        core[vert] = shader.vertex_gl_source(values, bare_initializers=False)
     return _write_checked(texts, out_dir, targets, values, textures, fit, core)
 
 

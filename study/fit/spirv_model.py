@@ -33,6 +33,7 @@ class SpirvModel(ReferenceModel):
                  reference_mask=None, reference_stderr=None):  # fmt: skip
         self.user_shader = shader
         super().__init__(inputs, reference, backend, reference_mask, reference_stderr)
+        self.check_vertex_constants()
 
     @classmethod
     def from_experiment(
@@ -78,6 +79,32 @@ class SpirvModel(ReferenceModel):
             f"{ys.min()}..{ys.max()}); guard what can fail there (sqrt or log of a negative, "
             "pow of a negative base, a division by zero, normalize of a zero vector)"
         )
+
+    def check_vertex_constants(self) -> None:
+        """ShaderError for a constant only the user's vertex shader reads that moves the
+        vertices (``gl_Position``) but changes the colour of no scored pixel at its start value:
+        it changes only which pixels the water covers, which the fit does not see (its
+        derivatives hold the coverage fixed)."""
+        shader = self.user_shader
+        if shader.vertex is None:
+            return
+        names = [s for n, c in shader.constants.items() if shader.stage_of(n) == "vertex"
+                 for s in c.scalar_names()]  # fmt: skip
+        if not names:
+            return
+        moves = shader.vertex_motion(self.inputs, None, names, self.backend)
+        if not any(moves):
+            return
+        _, J = self._shade_with_jacobian(shader.defaults(), names)
+        for j, s in enumerate(names):
+            if moves[j] > 0.0 and not np.any(J[..., j][self.mask]):
+                raise ShaderError(
+                    f"{shader.vertex.label}: the constant {s} moves the vertices (gl_Position) "
+                    f"but changes no interpolant {shader.label} reads: it changes only which "
+                    "pixels the water covers, which the fit does not see (its derivatives hold "
+                    f"the coverage fixed); remove {s.split('[')[0]} from the declaration, or "
+                    "pass on what it shapes as an output the fragment shader reads"
+                )
 
     # ---- the parameters (``study.fit.protocol.CalibrationModel``) ----------------------------
     @property

@@ -124,17 +124,21 @@ def fmt(x, digits: int = 4) -> str:
 
 def constants_table(parameters: dict) -> list[str]:
     """Each constant by its GLSL name (the study's descriptive name beside it, where the record
-    gives one that differs): its default (the fit's start), exported value, status and why."""
+    gives one that differs; the stage that reads it, for a user's shader after its own vertex
+    shader): its default (the fit's start), exported value, status and why."""
     named = any(p.get("name", n) != n for n, p in parameters.items())
+    staged = any("stage" in p for p in parameters.values())  # a pair with its vertex shader
     cols = ["constant (GLSL)", "study name"] if named else ["constant (GLSL)"]
+    cols += ["stage"] if staged else []
     cols += ["default", "exported", "status", "why"]
     lines = ["| " + " | ".join(cols) + " |", "|" + "---|" * len(cols)]
     for name, p in parameters.items():
         shown = p["fitted"] if p["fitted"] is not None else p["default"]
         study = [p.get("name", name)] if named else []
+        stage = [p.get("stage", "")] if staged else []
         lines.append(
             "| "
-            + " | ".join([f"`{name}`", *study, fmt(p["default"]), fmt(shown)])
+            + " | ".join([f"`{name}`", *study, *stage, fmt(p["default"]), fmt(shown)])
             + f" | {p.get('status', '')} | {p.get('reason', '')} |"
         )
     return lines
@@ -450,7 +454,8 @@ def _export_lines(gl: dict | None, user_file: str | None = None, vertex_file=Non
             f"`shaders/core/{name}` (your `{user_file}` with the fitted constants in place of "
             "their initializers, every other byte as in your file) and "
             + (
-                f"`shaders/core/{Path(vertex_file).name}` (your vertex shader, as you wrote it)"
+                f"`shaders/core/{Path(vertex_file).name}` (your vertex shader, the fitted values "
+                "of the constants it declares in place alike)"
                 if vertex_file
                 else "`shaders/core/water.vert` (the study's vertex shader it runs after)"
             )
