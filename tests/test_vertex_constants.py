@@ -308,3 +308,14 @@ def test_a_constant_of_the_vertex_stage_of_one_file_for_both_stages(inputs, tmp_
     rgba, mask = user_gl_render_or_skip(shader, inputs, values)
     d = np.abs(rgba[..., :3] - base["color"]).max(-1)[mask & water]
     assert d.mean() <= 1e-5, d.mean()
+
+
+def test_values_a_declaration_gives_the_vertex_stage_survive_its_constants():
+    """The vertex shader is compiled again once its constants are known; the uniforms a
+    declaration's `value` lines set on it (fit.declare, after it was read) stay set."""
+    from shaders_port.spirv.vertex import VertexShader
+
+    v = VertexShader.from_file(SHADERS / "swell_water.vert")
+    v.values["cEngineSet"] = (0.25, 0.5)
+    w = v.with_constants(("AMPLITUDE",))
+    assert w.constants == ("AMPLITUDE",) and w.values["cEngineSet"] == (0.25, 0.5)

@@ -254,9 +254,12 @@ class VertexShader:
         return text
 
     def with_constants(self, names) -> "VertexShader":
-        """This shader compiled again with the constants ``names`` made uniforms."""
-        return VertexShader(self.original, self.label, self.path, self.defines,
-                            self.include_paths, self.shared, tuple(names))  # fmt: skip
+        """This shader compiled again with the constants ``names`` made uniforms (the values
+        given it after it was read, ``value`` lines of a declaration, kept)."""
+        out = VertexShader(self.original, self.label, self.path, self.defines,
+                           self.include_paths, self.shared, tuple(names))  # fmt: skip
+        out.values.update(self.values)
+        return out
 
     @classmethod
     def from_file(cls, path, defines=(), include_paths=(), shared=False) -> "VertexShader":
