@@ -16,7 +16,6 @@ import numpy as np
 __all__ = ["grid_renderer_class"]
 
 _GL_DEPTH_TEST = 0x0B71
-MASK_FRAG = "#version 330 core\nout vec4 fragColor;\nvoid main(void) { fragColor = vec4(1.0); }\n"
 
 
 def grid_renderer_class(base, vertex_source: str, attributes: dict, triangles, uniforms: dict):
@@ -66,7 +65,7 @@ def grid_renderer_class(base, vertex_source: str, attributes: dict, triangles, u
         def _render_mask(self) -> np.ndarray:
             self.fbo = self.ctx.framebuffer(color_attachments=[self._color],
                                             depth_attachment=self._depth)  # fmt: skip
-            prog = self.ctx.program(vertex_shader=self._vert, fragment_shader=MASK_FRAG)
+            prog = self.ctx.program(vertex_shader=self._vert, fragment_shader=self.MASK_FRAG)
             self._set_static_uniforms(prog)
             vao = self._vao(prog)
             self._draw_grid(vao)

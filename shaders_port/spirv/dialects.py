@@ -278,7 +278,13 @@ def _own_version_line(d: Dialect) -> str:
 
 
 def front_end(
-    source: str, label: str, defines=(), include_paths=(), preprocess=False, stage: str = "frag"
+    source: str,
+    label: str,
+    defines=(),
+    include_paths=(),
+    preprocess=False,
+    stage: str = "frag",
+    translate: bool = True,
 ) -> str:
     """The GLSL glslang compiles to SPIR-V for ``source`` (a shader of ``stage`` 'frag' or
     'vert' in any dialect of the module doc, file name ``label``), with the preprocessor names
@@ -288,8 +294,10 @@ def front_end(
     is compiled) unless ``preprocess`` (for an OpenGL driver, which takes no defines); any
     other is preprocessed by glslang (``#include`` s expanded, defines applied, comments
     removed) with ``#line`` directives keeping the file's line numbers, and translated to GLSL
-    330 core if its dialect needs it. ShaderError for a file that does not compile in its own
-    dialect or uses what the translation refuses, naming the file and line."""
+    330 core if its dialect needs it and ``translate`` (False: the file in its own dialect, for
+    a context that runs that dialect: ``gl.contexts``). ShaderError for a file that does not
+    compile in its own dialect or uses what the translation refuses, naming the file and
+    line."""
     # jMonkeyEngine's `#import "Common/ShaderLib/X.glsllib"` is its loader's #include
     source = re.sub(r'^([ \t]*#[ \t]*)import([ \t]+")', r"\1include\2", source, flags=re.M)
     # `#include <name>` (three.js's chunks): glslang's includer searches only quoted names
@@ -297,7 +305,7 @@ def front_end(
     d = detect(source, label)
     includes = has_includes(source)  # after #import is written #include
     dargs = [f"-D{x}" for x in defines]
-    if not d.translated:
+    if not (d.translated and translate):
         if not (includes or preprocess):
             return source
         head = [INCLUDE_EXT] if includes else []

@@ -44,12 +44,10 @@ from pathlib import Path
 import drjit as dr
 import numpy as np
 
-from ..gl.renderer import GLRenderer
-from ..gl.round_trip import TranslatedRenderer
 from ..pipeline.frame import finish_output, tangents
 from ..pipeline.raster import prepare
 from ..pipeline.texture import backend_types
-from . import dialects
+from . import dialects, gl_run
 from . import engine_inputs as _engine
 from . import translated as spirv_port
 from .support import check_supported
@@ -76,7 +74,8 @@ class UserConstant:
     """A constant to fit: GLSL ``name``, ``type`` ('float', 'vec3', 'vec4'), the start value
     ``default`` (a tuple of floats, one per component), the range ``lo`` <= value <= ``hi``
     (every component), and ``span``: the (start, end) offsets of the initializer in the file
-    (a uniform without initializer, ``bare``: both the offset of its ``;``)."""
+    (a uniform without initializer, ``bare``: both the offset of its ``;``); ``assign``: of a
+    uniform with an initializer, the offsets of `` = <value>`` (else empty)."""
 
     name: str
     type: str
@@ -85,6 +84,12 @@ class UserConstant:
     hi: float
     span: tuple
     bare: bool = False
+    assign: tuple = ()
+
+    @property
+    def uniform(self) -> bool:
+        """Whether the constant is a uniform (the engine may set it), not a ``const``."""
+        return self.bare or bool(self.assign)
 
     def scalar_names(self) -> list[str]:
         n = _SIZES[self.type]
@@ -248,7 +253,7 @@ class UserShader:
                     "or vec4"
                 )
             line = self.source.count("\n", 0, m.start()) + 1
-            where = f"{self.label}:{line}"
+            where, assign = f"{self.label}:{line}", ()
             if name in bare and name not in decls:
                 if not start:
                     raise ValueError(
@@ -265,6 +270,8 @@ class UserShader:
             else:
                 default = _parse_value(m["value"], m["type"], where)
                 span, is_bare = (m.start("value"), m.end("value")), False
+                if m["head"].lstrip().startswith("uniform"):
+                    assign = (m.end("name"), m.end("value"))
             if not (np.isfinite(lo) and np.isfinite(hi) and lo < hi):
                 raise ValueError(f"{where}: the range [{lo}, {hi}] of {name} is empty")
             if not all(lo <= v <= hi for v in default):
@@ -272,7 +279,7 @@ class UserShader:
                     f"{where}: {name} = {m['value'].strip()} lies outside its "
                     f"range [{lo}, {hi}]; widen the range or change the value"
                 )
-            out[name] = UserConstant(name, m["type"], default, lo, hi, span, is_bare)
+            out[name] = UserConstant(name, m["type"], default, lo, hi, span, is_bare, assign)
         if not out:
             raise ValueError(
                 f"{self.label}: the declaration names no constant to fit; add "
@@ -500,16 +507,23 @@ class UserShader:
         return out, J.reshape(r.height, r.width, 3, len(names))
 
     # ---- the file ----------------------------------------------------------------------------
-    def written(self, values: dict, bare_initializers: bool = True) -> str:
+    def written(self, values: dict, uniform_initializers: bool = True) -> str:
         """The shader's text with ``values`` in place of its constants' initializers; every
         other byte as in the file. A uniform declared without initializer gets one where its
-        dialect allows (desktop GLSL 1.20 and later) and ``bare_initializers`` asks."""
+        dialect allows (desktop GLSL 1.20 and later). ``uniform_initializers`` False: no
+        uniform of a constant has an initializer (those the file gives one lose it), the text
+        the engine targets are made from (GLSL ES refuses uniform initializers, HLSL and Metal
+        ignore them: the material sets the values, ``study.export.bindings``)."""
         vals = self._checked(values)
         out, pos = [], 0
         d = self.dialect
-        initializers = bare_initializers and not d.es and d.version >= 120
+        initializers = uniform_initializers and not d.es and d.version >= 120
         for c in sorted(self.constants.values(), key=lambda c: c.span[0]):
             if c.bare and (not initializers or c.span[0] < 0):  # < 0: an #include's
+                continue
+            if c.assign and not uniform_initializers:
+                out += [self.source[pos : c.assign[0]]]
+                pos = c.assign[1]
                 continue
             v = vals[c.name]
             comps = v if isinstance(v, (tuple, list)) else (v,)
@@ -520,21 +534,18 @@ class UserShader:
         out.append(self.source[pos:])
         return "".join(out)
 
-    def gl_source(self, values: dict | None = None, bare_initializers: bool = True) -> str:
-        """The GLSL OpenGL runs for :meth:`written` with ``values``: that text, or, for a
-        dialect that is translated or a file with ``#include`` s or ``defines``, its
-        translation to GLSL 330 core (``dialects.front_end``). ``bare_initializers`` False
-        leaves the uniforms declared without initializer so (the engine targets: GLSL ES and
-        HLSL have no uniform initializers; their binding sheets give the values). ShaderError
-        for GLSL ES 3.10 and later, which a desktop OpenGL does not run."""
+    def gl_source(self, values: dict | None = None, uniform_initializers: bool = True) -> str:
+        """The core-profile GLSL of :meth:`written` with ``values`` (and
+        ``uniform_initializers``): that text for a GLSL 330+ core file, else its translation to
+        GLSL 330 core (``dialects.front_end``; a file with ``#include`` s or ``defines``
+        preprocessed). ShaderError for GLSL ES 3.10 and later, which has no translation."""
         d = self.dialect
         if not d.runs_on_desktop_gl:
             raise dialects.ShaderError(
-                f"{self.label} is {d.name}, which a desktop OpenGL context does not run "
-                "(moderngl's EGL backend binds desktop OpenGL only, so Mesa's llvmpipe gets no "
-                "OpenGL ES context here); glslang compiled it with its ES profile"
+                f"{self.label} is {d.name}, which has no core-profile translation (glslang "
+                "compiles it with its ES profile)"
             )
-        text = self.written(values or {}, bare_initializers)
+        text = self.written(values or {}, uniform_initializers)
         if not (d.translated or self.defines or "#include" in text):
             return text
         return dialects.for_opengl(
@@ -542,48 +553,14 @@ class UserShader:
         )
 
     def gl_renderer(self, inputs, values: dict | None = None, source=None, reflection=None):
-        """A ``GLRenderer`` (OpenGL, llvmpipe) drawing the written-back shader with ``values`` (its
-        samplers and uniforms bound to the study's inputs by the declaration); or, given
-        ``source`` and its ``reflection`` (``spirv.tools.hlsl_round_trip`` of the exported
-        HLSL), that GLSL through a ``TranslatedRenderer``. Use it as a context manager,
-        ``render(None)`` / ``time_frames(None, n, warmup)``."""
-
-        bindings = self.run_bindings()
-        if self.vertex is not None:  # its uniforms that are study or engine inputs
-            bindings = {**self.vertex.shader.inputs, **bindings}
-        base = GLRenderer if reflection is None else TranslatedRenderer
-        vals = self._checked(values)
-        bare = {c.name: np.asarray(vals[c.name], np.float32).tobytes()
-                for c in self.constants.values() if c.bare}  # fmt: skip
-        bare.update({n: np.float32(v).tobytes() for n, v in self.values.items()})
-        if self.vertex is not None:  # the grid drawn with the user's GLSL vertex shader
-            base = self.vertex.gl_class(base, inputs, self.engine["up"])
-        base = _engine.gl_class(base, self.engine)
-
-        label = self.label
-
-        class _Bound(base):
-            def __init__(self, *args, **kw):
-                super().__init__(*args, **kw)
-                self.name = label  # messages name the user's file
-
-            def _sampler_uniform(self, prog, sname):
-                for name in [n for n, s in bindings.items() if s == sname] + [sname]:
-                    found = super()._sampler_uniform(prog, name)
-                    if found is not None:
-                        return found
-                return None
-
-            def _write_uniforms(self, prog, vals):
-                renamed = {**bare, **vals}
-                for n, s in bindings.items():
-                    if s in vals:
-                        renamed[n] = vals[s]
-                super()._write_uniforms(prog, renamed)
-
-        if reflection is None:
-            return _Bound("water_refraction", inputs, source=self.gl_source(values))
-        return _Bound("water_refraction", inputs, source, reflection)
+        """A ``GLRenderer`` (OpenGL, llvmpipe) drawing the written-back shader with ``values``
+        as ``spirv.gl_run.plan`` chooses (the file as written on a context of its dialect, or
+        its core-profile translation; ``r.gl_run`` says which); or, given ``source`` and its
+        ``reflection`` (``spirv.tools.hlsl_round_trip`` of the exported HLSL), that GLSL
+        through a ``TranslatedRenderer``, every uniform constant set as the material sets it.
+        Its samplers and uniforms are bound to the study's inputs by the declaration. Use it as
+        a context manager, ``render(None)`` / ``time_frames(None, n, warmup)``."""
+        return gl_run.renderer(self, inputs, self._checked(values), source, reflection)
 
     def gl_render(self, inputs, values: dict | None = None):
         """The written-back shader on OpenGL (llvmpipe): ``(rgba (H, W, 4), mask (H, W))``."""

@@ -124,12 +124,19 @@ def gl_check_user(shader, inputs, values: dict, ours: dict) -> dict:
     """A user's shader (``shaders_port.spirv.user_shader.UserShader``) written back with ``values``
     and run on OpenGL (llvmpipe) against the executor's render ``ours`` (``ShaderOutput.numpy()``):
     mean and 99.9th percentile of the per-pixel max-over-channel |difference| on the pixels both
-    cover, passed within ``GL_MEAN`` / ``GL_P999``; ``ran`` False (with ``why``) without a headless
-    OpenGL; a shader OpenGL does not run (a GLSL ES 3.10 file, a compile error of the driver)
-    is a failed check, ``passed`` False with ``why`` naming the file, and a warning on stderr."""
+    cover, passed within ``GL_MEAN`` / ``GL_P999``; ``text``: which text ran (the file as
+    written, or its core-profile translation, ``shaders_port.spirv.gl_run``), ``context``: on
+    which context (e.g. "OpenGL 4.5 compatibility profile, llvmpipe ..."), ``why_translation``:
+    why the file did not run as written; ``ran`` False (with ``why``) without a headless
+    OpenGL; a shader OpenGL does not run (a GLSL ES 3.10 file where no ES context is made, a
+    compile error of the driver) is a failed check, ``passed`` False with ``why`` naming the
+    file, and a warning on stderr. A failed check on an OpenGL ES context adds ``note``
+    (:data:`ES_PRECISION`)."""
     try:
-        rgba, mask = shader.gl_render(inputs, values)
-    except ValueError as exc:  # dialects.ShaderError: a dialect no desktop OpenGL runs
+        with shader.gl_renderer(inputs, values) as r:
+            rgba, mask = r.render(None)
+            run, context = r.gl_run, r.context
+    except ValueError as exc:  # dialects.ShaderError: a dialect no context here runs
         return _user_failed(str(exc))
     except RuntimeError as exc:
         msg = str(exc)
@@ -137,7 +144,28 @@ def gl_check_user(shader, inputs, values: dict, ours: dict) -> dict:
             log = [ln.strip() for ln in msg.splitlines()[1:] if "error" in ln.lower()]
             return _user_failed(f"OpenGL (llvmpipe) rejected {shader.label}: {'; '.join(log[:3])}")
         return {"ran": False, "why": msg.splitlines()[0], "passed": None}
-    return _user_verdict(rgba, mask, ours)
+    out = _user_verdict(rgba, mask, ours)
+    out.update(text=run.what, context=context)
+    if run.why:
+        out["why_translation"] = run.why
+    if not out["passed"]:
+        if run.kind == "es":
+            out["note"] = ES_PRECISION
+        print(
+            f"calibrate: WARNING: {shader.label} ({run.what}) on {context} does not match the "
+            f"executor: mean |diff| {out['mean_abs']:.3g}, 99.9th percentile {out['p999']:.3g}",
+            file=sys.stderr,
+        )
+    return out
+
+
+ES_PRECISION = (
+    "an OpenGL ES driver may compute lowp and mediump values at 16-bit float, as llvmpipe does, "
+    "and GLSL ES samples with lowp precision unless told otherwise (`precision highp "
+    "sampler2D;`, `precision highp samplerCube;`); the executor computes every value at 32-bit. "
+    "OpenGL ES also filters cube maps across their faces (seamless), the executor each face on "
+    "its own"
+)
 
 
 def _user_failed(why: str) -> dict:

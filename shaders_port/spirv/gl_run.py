@@ -1,0 +1,182 @@
+"""Which text of a user's fragment shader OpenGL runs, and on which context (the GL check).
+
+:func:`plan` chooses, for a :class:`~shaders_port.spirv.user_shader.UserShader` written back
+with values (:meth:`UserShader.written`), a :class:`GLRun`:
+
+* desktop GLSL 330-460 core: the file as written, on an OpenGL core-profile context;
+* desktop GLSL 1.10-1.50 and the ``compatibility`` profiles: the file as written, on an
+  OpenGL compatibility-profile context (``gl.contexts``; the study's vertex shader in GLSL 1.20
+  or 1.50 compatibility, its built-ins fed by the fixed-function state, ``gl.dialect``) when
+  the driver makes one that runs the file's version (OpenGL 4.5 compatibility on llvmpipe:
+  GLSL 1.10-4.50);
+* GLSL ES 1.00-3.20: the file as written, on an OpenGL ES context (the study's vertex shader in
+  the file's GLSL ES version) when the driver makes one that runs it (ES 3.2 on llvmpipe);
+* otherwise the core-profile translation (``dialects.front_end``: GLSL 330 core) on a
+  core-profile context, with the reason (``why``); GLSL ES 3.10 and later, which has none, is
+  refused (``dialects.ShaderError``) with the reason.
+
+A file with ``#include`` s or the experiment's defines is run preprocessed by glslang in its own
+dialect (the includes and defines expanded). A shader run after the user's own vertex shader
+runs as the pair's core-profile translation. Which contexts this machine makes, and the newest
+GLSL version each runs, are found once per process (:func:`context_support`).
+"""
+
+from __future__ import annotations
+
+import functools
+from dataclasses import dataclass
+
+import numpy as np
+
+from . import dialects
+from .engine_inputs import split_view, to_up
+
+__all__ = ["GLRun", "context_support", "plan", "fixed_function_matrices"]
+
+AS_WRITTEN = "your file as written"
+PREPROCESSED = AS_WRITTEN + " (its #include files and defines expanded by glslang's preprocessor)"
+TRANSLATION = "its core-profile translation (GLSL 330 core)"
+
+
+@dataclass(frozen=True)
+class GLRun:
+    """A user's fragment shader as OpenGL runs it: ``text`` (the GLSL the driver compiles),
+    ``kind`` (the context, ``gl.contexts.KINDS``), ``what`` (which text, in words: "your file
+    as written" or "its core-profile translation (GLSL 330 core)"), ``why`` (why the
+    translation ran: '' when the file runs as written), ``dialect`` (the file's)."""
+
+    text: str
+    kind: str
+    what: str
+    why: str
+    dialect: dialects.Dialect
+
+    @property
+    def as_written(self) -> bool:
+        return self.what.startswith(AS_WRITTEN)
+
+
+@functools.lru_cache(maxsize=None)
+def context_support(kind: str) -> tuple[int, str]:
+    """(newest GLSL version the context runs (0: none made), the context in words or why
+    none was made) for a context of ``kind`` on this machine, found by making one."""
+    from ..gl import contexts
+
+    try:
+        ctx = contexts.create_context(kind)
+    except (RuntimeError, ImportError) as exc:
+        return 0, str(exc).splitlines()[0]
+    try:
+        return contexts.glsl_version(ctx), contexts.describe(ctx)
+    finally:
+        ctx.release()
+
+
+def _own_text(shader, text: str) -> str:
+    """``text`` (the file written back) as a driver of its own dialect takes it."""
+    if not (shader.defines or dialects.has_includes(text)):
+        return text
+    pre = dialects.front_end(
+        text, shader.label, shader.defines, shader.include_paths, True, translate=False
+    )
+    return dialects.for_opengl(pre)
+
+
+def plan(shader, values: dict | None = None) -> GLRun:
+    """The :class:`GLRun` of ``shader`` written back with ``values`` (module doc)."""
+    d = shader.dialect
+    written = shader.written(values or {})
+    what = PREPROCESSED if (shader.defines or dialects.has_includes(written)) else AS_WRITTEN
+    if not d.translated and d.runs_on_desktop_gl:
+        return GLRun(_own_text(shader, written), "core", what, "", d)
+    kind = "es" if d.es else "compatibility"
+    if shader.vertex is not None:
+        why = "a shader run after your own vertex shader runs as the pair's translation"
+    else:
+        version, about = context_support(kind)
+        if version >= d.version:
+            return GLRun(_own_text(shader, written), kind, what, "", d)
+        api = "OpenGL ES" if kind == "es" else "OpenGL compatibility-profile"
+        why = (
+            f"no {api} context here ({about})" if version == 0
+            else f"{d.name} is newer than {about} runs"
+        )  # fmt: skip
+    if not d.runs_on_desktop_gl:
+        raise dialects.ShaderError(
+            f"{shader.label} is {d.name}, which no context here runs ({why}) and which has no "
+            "core-profile translation; glslang compiled it with its ES profile"
+        )
+    return GLRun(shader.gl_source(values), "core", TRANSLATION, why, d)
+
+
+def fixed_function_matrices(inputs, up: str = "y") -> dict:
+    """{'modelview', 'projection'}: the frame's view and projection (``split_view``; model =
+    identity) in the world frame ``up``, float64 (4, 4) acting on column vectors, as a
+    compatibility context's fixed-function matrices; a ``view_proj`` that is no perspective
+    times a rigid view is loaded whole as the projection (the modelview the identity)."""
+    try:
+        view, proj = split_view(inputs)
+    except ValueError:
+        view, proj = np.eye(4), np.asarray(inputs.view_proj, np.float64)
+    return {"modelview": to_up(up, view, "matrix"), "projection": proj}
+
+
+def renderer(shader, inputs, values: dict, source=None, reflection=None):
+    """The GL renderer of :meth:`UserShader.gl_renderer` for ``values`` (checked): the
+    :func:`plan` 's text on its context (``r.gl_run`` the plan, ``r.context`` the context in
+    words), or ``source`` with its ``reflection`` (the HLSL round trip) on a core context,
+    every uniform constant set (``r.gl_run`` None)."""
+    from ..gl.contexts import describe
+    from ..gl.dialect import dialect_renderer_class
+    from ..gl.renderer import GLRenderer
+    from ..gl.round_trip import TranslatedRenderer
+    from . import engine_inputs
+
+    bindings = shader.run_bindings()
+    if shader.vertex is not None:  # its uniforms that are study or engine inputs
+        bindings = {**shader.vertex.shader.inputs, **bindings}
+    run = plan(shader, values) if reflection is None else None
+    base = GLRenderer if reflection is None else TranslatedRenderer
+    # the uniforms the text leaves without initializer, set as the engine's material sets them:
+    # a bare one where the dialect takes no initializer (or an #include declares it), and in
+    # the HLSL every one
+    d = shader.dialect
+    initializers = not d.es and d.version >= 120
+    unset = {
+        c.name: np.asarray(values[c.name], np.float32).tobytes()
+        for c in shader.constants.values()
+        if (c.bare and (not initializers or c.span[0] < 0)) or (run is None and c.uniform)
+    }
+    unset.update({n: np.float32(v).tobytes() for n, v in shader.values.items()})
+    up = shader.engine["up"]
+    if run is not None and run.kind != "core":
+        matrices = fixed_function_matrices(inputs, up)
+        base = dialect_renderer_class(base, run.kind, run.dialect.version, matrices)
+    if shader.vertex is not None:  # the grid drawn with the user's GLSL vertex shader
+        base = shader.vertex.gl_class(base, inputs, up)
+    base = engine_inputs.gl_class(base, shader.engine)
+    label = shader.label
+
+    class _Bound(base):
+        def __init__(self, *args, **kw):
+            super().__init__(*args, **kw)
+            self.name = label  # messages name the user's file
+            self.gl_run, self.context = run, describe(self.ctx)
+
+        def _sampler_uniform(self, prog, sname):
+            for name in [n for n, s in bindings.items() if s == sname] + [sname]:
+                found = super()._sampler_uniform(prog, name)
+                if found is not None:
+                    return found
+            return None
+
+        def _write_uniforms(self, prog, vals):
+            renamed = {**unset, **vals}
+            for n, s in bindings.items():
+                if s in vals:
+                    renamed[n] = vals[s]
+            super()._write_uniforms(prog, renamed)
+
+    if reflection is None:
+        return _Bound("water_refraction", inputs, source=run.text)
+    return _Bound("water_refraction", inputs, source, reflection)
