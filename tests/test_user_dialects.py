@@ -7,6 +7,7 @@ compile error) stop with one error naming the user's file and line."""
 
 from __future__ import annotations
 
+import re
 from pathlib import Path
 
 import numpy as np
@@ -46,12 +47,28 @@ def core_image(inputs):
     return UserShader.from_file(SHADERS / "schlick_fog.frag").render(inputs).numpy()
 
 
+def _ran_as_written(check: dict, kind: str) -> None:
+    """The GL check ran the file as written on a context of ``kind`` where this machine makes
+    one, else its core-profile translation saying why; the record names the context."""
+    from shaders_port.gl.contexts import KINDS
+    from shaders_port.spirv.gl_run import context_support
+
+    assert kind in KINDS
+    words = {"es": "OpenGL ES 3.", "compatibility": "compatibility profile", "core": "core profile"}
+    if context_support(kind)[0]:
+        assert check["text"].startswith("your file as written"), check
+        assert words[kind] in check["context"] and "why_translation" not in check, check
+    else:
+        assert check["text"] == "its core-profile translation (GLSL 330 core)", check
+        assert "core profile" in check["context"] and check["why_translation"], check
+
+
 @pytest.mark.parametrize("name", sorted(DIALECTS))
 def test_each_dialect_renders_its_core_equivalent(name, inputs, core_image):
     """The same water in three dialects: the executor's image equals the core file's exactly
-    (the translation changes names, not arithmetic); the written file on llvmpipe (Mesa's
-    core context: the GLSL 330 translation of the file) matches the executor within the GL
-    check's thresholds."""
+    (the translation changes names, not arithmetic); the written file on llvmpipe, as written
+    on a context of its dialect (OpenGL compatibility profile for GLSL 1.20, OpenGL ES for
+    GLSL ES), matches the executor within the GL check's thresholds."""
     dialect, kw = DIALECTS[name]
     shader = UserShader.from_file(SHADERS / f"{name}.frag", **kw).check()
     assert shader.dialect.name == dialect
@@ -60,32 +77,96 @@ def test_each_dialect_renders_its_core_equivalent(name, inputs, core_image):
     check = gl_check_user(shader, inputs, shader.defaults(), ours)
     assert check["ran"] and check["passed"], check
     assert check["mean_abs"] <= GL_MEAN and check["p999"] <= GL_P999
+    _ran_as_written(check, "es" if shader.dialect.es else "compatibility")
 
 
-# schlick_fog_120 keeps uniform initializers, which GLSL ES refuses and HLSL ignores: a
-# user's uniform initializers are not yet carried into the engine targets (an open gap)
-@pytest.mark.parametrize("name", ["schlick_fog_es300", "schlick_fog_webgl1"])
+def test_compatibility_built_ins_run_as_written_from_the_fixed_function_state(inputs, monkeypatch):
+    """A GLSL 1.10 file reading gl_TexCoord[0], gl_NormalMatrix and gl_ModelViewProjectionMatrix
+    runs as written on a compatibility-profile context (the matrices loaded as its
+    fixed-function modelview and projection) and matches the executor (which reads them as the
+    translation's study inputs); without such a context its core-profile translation runs,
+    and the record says why."""
+    from shaders_port.spirv import gl_run
+
+    shader = UserShader.from_file(SHADERS / "compat_builtins_110.frag").check()
+    assert shader.dialect.name == "GLSL 1.10"
+    ours = shader.render(inputs).numpy()
+    check = gl_check_user(shader, inputs, shader.defaults(), ours)
+    assert check["ran"] and check["passed"], check
+    _ran_as_written(check, "compatibility")
+    monkeypatch.setattr(gl_run, "context_support", lambda kind: (0, "EGL: none, for the test"))
+    check = gl_check_user(shader, inputs, shader.defaults(), ours)
+    assert check["ran"] and check["passed"], check
+    assert check["text"] == "its core-profile translation (GLSL 330 core)"
+    assert check["why_translation"] == (
+        "no OpenGL compatibility-profile context here (EGL: none, for the test)"
+    )
+
+
+def test_lowp_samplers_of_a_webgl1_file_are_named_when_the_es_check_fails(inputs):
+    """GLSL ES samples at lowp unless told: the WebGL 1 file without its `precision highp
+    sampler2D/samplerCube` lines, as written on OpenGL ES, matches the executor or, where the
+    driver computes lowp lookups at 16-bit float (llvmpipe on a CPU with F16C), fails with a
+    note naming the precision and the fix."""
+    from study.export.gl_check import ES_PRECISION
+
+    src = (SHADERS / "schlick_fog_webgl1.frag").read_text()
+    lowp = src.replace("precision highp sampler2D;\n", "").replace(
+        "precision highp samplerCube;\n", ""
+    )
+    assert lowp.count("precision highp") == 1
+    shader = UserShader(lowp, "lowp_webgl1.frag").check()
+    check = gl_check_user(shader, inputs, shader.defaults(), shader.render(inputs).numpy())
+    assert check["ran"], check
+    _ran_as_written(check, "es")
+    if not check["passed"]:
+        assert check["note"] == ES_PRECISION and "precision highp sampler2D" in check["note"]
+
+
+def _core_with_uniforms(tmp_path) -> Path:
+    """schlick_fog.frag (GLSL 330 core) with its fog constants as uniforms with initializers."""
+    src = (SHADERS / "schlick_fog.frag").read_text()
+    for name in ("FOG_DENSITY", "FOG_COLOR"):
+        kind = "float" if name == "FOG_DENSITY" else "vec3"
+        assert f"const {kind} {name} = " in src
+        src = src.replace(f"const {kind} {name} = ", f"uniform {kind} {name} = ")
+    path = tmp_path / "schlick_fog_uniforms.frag"
+    path.write_text(src)
+    return path
+
+
+@pytest.mark.parametrize("name", [*sorted(DIALECTS), "schlick_fog_uniforms"])
 def test_each_dialect_exports_to_the_engine_targets(name, tmp_path, inputs):
     """The file is exported as it was written (fitted numbers in place); the engine targets are
     translated from its GLSL 330 core translation (glslang makes no SPIR-V of the older
-    dialects: the export of a WebGL 1 file failed there after its fit)."""
+    dialects: the export of a WebGL 1 file failed there after its fit), every uniform of a
+    fitted constant declared without initializer there (GLSL ES refuses the initializers of
+    GLSL 1.20 and 330 files, HLSL ignores them) and its fitted value in the binding sheets, for
+    the material to set; the HLSL run back on llvmpipe with those values matches."""
     from shaders_port.spirv.tools import missing_tools
+    from study.export.gl_check import hlsl_check_user
     from study.export.shaders import export_user_shader
 
     if missing_tools():
         pytest.skip(f"the engine targets need {', '.join(missing_tools())}")
-    _, kw = DIALECTS[name]
-    shader = UserShader.from_file(SHADERS / f"{name}.frag", **kw).check()
-    export_user_shader(shader, shader.defaults(), tmp_path / "shaders", ["hlsl", "gles300"])
-    written = (tmp_path / "shaders" / "core" / f"{name}.frag").read_text()
-    assert written == shader.written(shader.defaults())
+    path = _core_with_uniforms(tmp_path) if name not in DIALECTS else SHADERS / f"{name}.frag"
+    kw = DIALECTS.get(name, ("", {}))[1]
+    shader = UserShader.from_file(path, **kw).check()
+    values = {"FOG_DENSITY": 0.8, "FOG_COLOR": (0.1, 0.25, 0.3)}  # fitted, not the start values
+    out = tmp_path / "shaders"
+    export_user_shader(shader, values, out, ["hlsl", "gles300"])
+    written = (out / "core" / f"{name}.frag").read_text()
+    assert written == shader.written(values)
     for target in ("hlsl/{}.frag.hlsl", "gles300/{}.frag"):
-        assert (tmp_path / "shaders" / target.format(name)).is_file(), target
+        text = (out / target.format(name)).read_text()
+        assert re.search(r"\bFOG_DENSITY\s*=", text) is None, target  # no initializer
+        sheet = (out / target.split("/")[0] / "BINDINGS.md").read_text()
+        assert "## Uniforms the material sets" in sheet
+        assert "| `FOG_DENSITY` | float | 0.8 |" in sheet, sheet
+        assert "| `FOG_COLOR` | vec3 | vec3(0.1, 0.25, 0.3) |" in sheet, sheet
     # the HLSL runs back on llvmpipe (its colour output is the translation's _study_FragColor)
-    from study.export.gl_check import hlsl_check_user
-
-    ours = shader.render(inputs).numpy()
-    check = hlsl_check_user(shader, inputs, shader.defaults(), ours, tmp_path / "shaders")
+    ours = shader.render(inputs, values).numpy()
+    check = hlsl_check_user(shader, inputs, values, ours, out)
     if check.get("ran"):
         assert check["passed"], check
 
@@ -230,11 +311,25 @@ def test_the_load_check_passes_every_shader_the_executor_runs():
     assert {"Cross", "Reflect", "Normalize", "FMix", "Pow"} <= supported_std450()
 
 
-def test_gl_check_of_a_dialect_opengl_cannot_run_fails_with_its_reason(inputs, capsys):
+def test_gl_check_of_a_dialect_no_context_runs_fails_with_its_reason(inputs, capsys, monkeypatch):
+    """GLSL ES 3.10 runs as written on an OpenGL ES context; where none is made it has no
+    translation to fall back to: a failed check naming the reason."""
+    from shaders_port.spirv import gl_run
+
     shader = UserShader.from_file(SHADERS / "water_es310.frag").check()
-    check = gl_check_user(shader, inputs, {}, shader.render(inputs).numpy())
+    ours = shader.render(inputs).numpy()
+    if gl_run.context_support("es")[0] >= 310:
+        check = gl_check_user(shader, inputs, {}, ours)
+        assert check["ran"] and check["passed"], check
+        _ran_as_written(check, "es")
+    monkeypatch.setattr(gl_run, "context_support", lambda kind: (0, "EGL: none, for the test"))
+    check = gl_check_user(shader, inputs, {}, ours)
     assert check["passed"] is False and check["ran"] is False
-    assert check["why"].startswith("water_es310.frag is GLSL ES 3.10, which a desktop OpenGL")
+    assert check["why"] == (
+        "water_es310.frag is GLSL ES 3.10, which no context here runs (no OpenGL ES context "
+        "here (EGL: none, for the test)) and which has no core-profile translation; glslang "
+        "compiled it with its ES profile"
+    )
     assert "the GL check failed: water_es310.frag" in capsys.readouterr().err
 
 

@@ -12,9 +12,8 @@ Dialects, from the ``#version`` directive (:func:`detect`):
 * ``#version 110`` ... ``150`` (any profile), ``#version 100`` (GLSL ES 1.00) and
   ``#version 300 es`` (WebGL 2), and ``#version 330`` ... ``460 compatibility``: translated;
 * ``#version 330`` ... ``460`` (``core`` or no profile): compiled as written;
-* ``#version 310 es`` / ``320 es``: compiled as written (glslang makes their SPIR-V); OpenGL
-  on Mesa's llvmpipe (a desktop context) does not run them, so their GL check fails with
-  that reason.
+* ``#version 310 es`` / ``320 es``: compiled as written (glslang makes their SPIR-V); they
+  have no translation (the GL check runs them on an OpenGL ES context, ``spirv.gl_run``).
 
 Anything else (``#version 200``, ``#version 130 es``, a ``#version`` after other code, ...)
 is refused with a :class:`ShaderError` naming the line.

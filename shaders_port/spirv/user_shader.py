@@ -23,7 +23,10 @@ is one number or its components joined by commas, ``0.1,0.2,0.3``). Written back
 (:meth:`UserShader.written`), a bare uniform gets the fitted value as an initializer where its
 dialect allows one (desktop GLSL 1.20 and later) and is left as it is otherwise (GLSL 1.10,
 GLSL ES): the fitted value is then only in ``constants.json`` and the binding sheets, for the
-engine to set; the GL check sets it as a uniform.
+engine to set; the GL check sets it as a uniform. The engine targets are made from the text
+with no uniform initializer (``written(values, uniform_initializers=False)``). The GL check
+runs the file as ``spirv.gl_run`` chooses (as written on a context of its dialect, or its
+core-profile translation).
 Every problem is refused by :meth:`UserShader.validate` with a message naming it: a constant
 without such a declaration, a range that is empty or excludes the start value, a binding to a
 name that is not a study input, a bound name the shader does not use, a sampler or uniform the

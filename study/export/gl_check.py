@@ -82,8 +82,8 @@ class _OwnBlock:
 
 
 GLES_NOT_RUN = (
-    "not run on llvmpipe: moderngl's EGL backend (glcontext) binds the desktop OpenGL API only, "
-    "so no GLES 3 context is made here; compiled by glslang's ES profile"
+    "not run on llvmpipe (the GL check runs the core file and the HLSL); compiled by glslang's "
+    "ES profile"
 )
 GLES_NOTE = (
     f"{GLES_NOT_RUN}; the same files run in WebGL 2 in viewer/ (matched against the port in "

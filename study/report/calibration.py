@@ -426,6 +426,16 @@ def _diagnostics_lines(d: dict, figure: str) -> list[str]:
     ]
 
 
+def gl_ran(gl: dict, default: str) -> str:
+    """Which text the GL check ran on which context, in words (a user's shader's record has
+    ``text`` and ``context``, ``why_translation`` when its translation ran); ``default`` for a
+    record without them."""
+    if not gl.get("text"):
+        return default
+    why = f" (not as written: {gl['why_translation']})" if gl.get("why_translation") else ""
+    return f"{gl['text']}, on {gl['context']}{why},"
+
+
 def _export_lines(gl: dict | None, user_file: str | None = None, vertex_file=None) -> list[str]:
     """What was exported and how the GL check of the exported core shader went; ``user_file``:
     the path of a user's shader (its copy with the fitted constants was exported)."""
@@ -435,14 +445,15 @@ def _export_lines(gl: dict | None, user_file: str | None = None, vertex_file=Non
         check = f"; {failed}not run on OpenGL ({gl['why']})."
     elif gl:
         check = (
-            f"; the exported core shader on llvmpipe vs the Dr.Jit shader with the fitted "
-            f"constants: mean |diff| {fmt(gl['mean_abs'], 3)}, 99.9th percentile "
+            f"; {gl_ran(gl, 'the exported core shader on llvmpipe')} vs the Dr.Jit shader with "
+            f"the fitted constants: mean |diff| {fmt(gl['mean_abs'], 3)}, 99.9th percentile "
             f"{fmt(gl['p999'], 3)}"
             + (
                 "."
                 if gl.get("passed")
                 else " -- **MISMATCH: do not ship these shaders; see constants.json gl_check**."
             )
+            + (f" ({gl['note']}.)" if gl.get("note") else "")
         )
     if user_file:
         name = Path(user_file).name
@@ -470,7 +481,8 @@ def engine_targets_section(targets: dict, user: bool = False) -> list[str]:
     if not targets:
         return []
     how = (
-        "the fitted constants as written in the file"
+        "the fitted constants as written in the file, those that are uniforms declared without "
+        'initializer (the sheet\'s "Uniforms the material sets" gives their values)'
         if user
         else "the fitted constants as named specialization constants"
     )
