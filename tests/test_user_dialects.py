@@ -15,6 +15,7 @@ import pytest
 
 from helpers import REPO
 from helpers.experiments import TINY, sets
+from helpers.gl import assert_ran_as_written
 from helpers.synthetic import synthetic_inputs
 from shaders_port.spirv.dialects import ShaderError, detect, front_end
 from shaders_port.spirv.loops import MAX_PASSES
@@ -47,22 +48,6 @@ def core_image(inputs):
     return UserShader.from_file(SHADERS / "schlick_fog.frag").render(inputs).numpy()
 
 
-def _ran_as_written(check: dict, kind: str) -> None:
-    """The GL check ran the file as written on a context of ``kind`` where this machine makes
-    one, else its core-profile translation saying why; the record names the context."""
-    from shaders_port.gl.contexts import KINDS
-    from shaders_port.spirv.gl_run import context_support
-
-    assert kind in KINDS
-    words = {"es": "OpenGL ES 3.", "compatibility": "compatibility profile", "core": "core profile"}
-    if context_support(kind)[0]:
-        assert check["text"].startswith("your file as written"), check
-        assert words[kind] in check["context"] and "why_translation" not in check, check
-    else:
-        assert check["text"] == "its core-profile translation (GLSL 330 core)", check
-        assert "core profile" in check["context"] and check["why_translation"], check
-
-
 @pytest.mark.parametrize("name", sorted(DIALECTS))
 def test_each_dialect_renders_its_core_equivalent(name, inputs, core_image):
     """The same water in three dialects: the executor's image equals the core file's exactly
@@ -77,7 +62,7 @@ def test_each_dialect_renders_its_core_equivalent(name, inputs, core_image):
     check = gl_check_user(shader, inputs, shader.defaults(), ours)
     assert check["ran"] and check["passed"], check
     assert check["mean_abs"] <= GL_MEAN and check["p999"] <= GL_P999
-    _ran_as_written(check, "es" if shader.dialect.es else "compatibility")
+    assert_ran_as_written(check, "es" if shader.dialect.es else "compatibility")
 
 
 def test_compatibility_built_ins_run_as_written_from_the_fixed_function_state(inputs, monkeypatch):
@@ -93,7 +78,7 @@ def test_compatibility_built_ins_run_as_written_from_the_fixed_function_state(in
     ours = shader.render(inputs).numpy()
     check = gl_check_user(shader, inputs, shader.defaults(), ours)
     assert check["ran"] and check["passed"], check
-    _ran_as_written(check, "compatibility")
+    assert_ran_as_written(check, "compatibility")
     monkeypatch.setattr(gl_run, "context_support", lambda kind: (0, "EGL: none, for the test"))
     check = gl_check_user(shader, inputs, shader.defaults(), ours)
     assert check["ran"] and check["passed"], check
@@ -103,24 +88,31 @@ def test_compatibility_built_ins_run_as_written_from_the_fixed_function_state(in
     )
 
 
-def test_lowp_samplers_of_a_webgl1_file_are_named_when_the_es_check_fails(inputs):
-    """GLSL ES samples at lowp unless told: the WebGL 1 file without its `precision highp
-    sampler2D/samplerCube` lines, as written on OpenGL ES, matches the executor or, where the
-    driver computes lowp lookups at 16-bit float (llvmpipe on a CPU with F16C), fails with a
-    note naming the precision and the fix."""
-    from study.export.gl_check import ES_PRECISION
+def test_an_es_file_runs_at_highp_and_its_own_precision_is_measured(inputs):
+    """The WebGL 1 file samples at lowp (GLSL ES's default for samplers): on OpenGL ES its check
+    runs it with every value at highp, which matches the executor (32-bit); the file at its own
+    precision is measured beside it, and where llvmpipe computes lowp at 16-bit float (on a
+    CPU with F16C) and the difference passes the thresholds the record says why."""
+    shader = UserShader.from_file(SHADERS / "schlick_fog_webgl1.frag").check()
+    assert "precision highp sampler2D" not in shader.source
+    ours = shader.render(inputs).numpy()
+    check = gl_check_user(shader, inputs, shader.defaults(), ours)
+    assert check["ran"] and check["passed"], check
+    assert_ran_as_written(check, "es")
+    from shaders_port.spirv.gl_run import context_support
 
-    src = (SHADERS / "schlick_fog_webgl1.frag").read_text()
-    lowp = src.replace("precision highp sampler2D;\n", "").replace(
-        "precision highp samplerCube;\n", ""
-    )
-    assert lowp.count("precision highp") == 1
-    shader = UserShader(lowp, "lowp_webgl1.frag").check()
-    check = gl_check_user(shader, inputs, shader.defaults(), shader.render(inputs).numpy())
-    assert check["ran"], check
-    _ran_as_written(check, "es")
-    if not check["passed"]:
-        assert check["note"] == ES_PRECISION and "precision highp sampler2D" in check["note"]
+    if not context_support("es")[0]:
+        return
+    assert check["text"].endswith(", every value at highp (lowp and mediump read as highp)")
+    own = check["own_precision"]
+    assert own["mean_abs"] >= check["mean_abs"] and own["within"] == ("note" not in own), own
+    if not own["within"]:
+        assert "16-bit float" in own["note"] and "precision highp sampler2D" in own["note"]
+    # the text at highp: lowp and mediump defined as highp after #version, the lines kept
+    with shader.gl_renderer(inputs, shader.defaults()) as r:
+        text = r.gl_run.text
+    assert text.startswith("#version 100\n#define lowp highp\n#define mediump highp\n")
+    assert text.split("#line 1\n", 1)[1] == shader.source
 
 
 def _core_with_uniforms(tmp_path) -> Path:
@@ -321,7 +313,7 @@ def test_gl_check_of_a_dialect_no_context_runs_fails_with_its_reason(inputs, cap
     if gl_run.context_support("es")[0] >= 310:
         check = gl_check_user(shader, inputs, {}, ours)
         assert check["ran"] and check["passed"], check
-        _ran_as_written(check, "es")
+        assert_ran_as_written(check, "es")
     monkeypatch.setattr(gl_run, "context_support", lambda kind: (0, "EGL: none, for the test"))
     check = gl_check_user(shader, inputs, {}, ours)
     assert check["passed"] is False and check["ran"] is False

@@ -46,7 +46,11 @@ _BODY = """void main(void)
 """
 # GL enums (Khronos gl.h)
 _GL_FLOAT, _GL_ARRAY_BUFFER, _GL_TEXTURE0 = 0x1406, 0x8892, 0x84C0
-_GL_VERTEX_ARRAY, _GL_TEXTURE_COORD_ARRAY = 0x8074, 0x8078
+_GL_VERTEX_ARRAY, _GL_NORMAL_ARRAY, _GL_TEXTURE_COORD_ARRAY = 0x8074, 0x8075, 0x8078
+_ARRAYS = {
+    "gl_Vertex": ("glVertexPointer", _GL_VERTEX_ARRAY),
+    "gl_MultiTexCoord0": ("glTexCoordPointer", _GL_TEXTURE_COORD_ARRAY),
+}
 _GL_MODELVIEW, _GL_PROJECTION = 0x1700, 0x1701
 _STRIDE, _UV_OFFSET = 20, 12  # the quad's buffer: x, y, z, s, t float32 per vertex
 
@@ -101,12 +105,48 @@ def _matrix(m) -> ctypes.Array:
     return (ctypes.c_float * 16)(*np.asarray(m, np.float32).T.ravel())
 
 
+def _load_matrices(matrices: dict) -> None:
+    """The fixed-function projection and modelview matrices of the current context."""
+    load = gl_function("glLoadMatrixf", None, ctypes.POINTER(ctypes.c_float))
+    mode = gl_function("glMatrixMode", None, ctypes.c_uint32)
+    mode(_GL_PROJECTION)
+    load(_matrix(matrices["projection"]))
+    mode(_GL_MODELVIEW)
+    load(_matrix(matrices["modelview"]))
+
+
+def _client_arrays(vao_glo: int, arrays: dict) -> None:
+    """Point the fixed-function arrays of the vertex array object ``vao_glo`` at ``arrays``
+    (built-in name -> (moderngl buffer, components, stride, offset), float32)."""
+    u32, i32, vp = ctypes.c_uint32, ctypes.c_int32, ctypes.c_void_p
+    bind_va = gl_function("glBindVertexArray", None, u32)
+    bind_buffer = gl_function("glBindBuffer", None, u32, u32)
+    enable = gl_function("glEnableClientState", None, u32)
+    bind_va(vao_glo)
+    for name, (buf, k, stride, offset) in arrays.items():
+        bind_buffer(_GL_ARRAY_BUFFER, buf.glo)
+        if name == "gl_Normal":
+            if k != 3:
+                raise ValueError(f"gl_Normal takes 3 components, got {k}")
+            gl_function("glNormalPointer", None, u32, i32, vp)(_GL_FLOAT, stride, offset)
+            enable(_GL_NORMAL_ARRAY)
+            continue
+        if name == "gl_MultiTexCoord0":
+            gl_function("glClientActiveTexture", None, u32)(_GL_TEXTURE0)
+        fn, kind = _ARRAYS[name]
+        gl_function(fn, None, i32, u32, i32, vp)(k, _GL_FLOAT, stride, offset)
+        enable(kind)
+    bind_va(0)
+
+
 def dialect_renderer_class(base, kind: str, version: int, matrices: dict | None = None):
     """A subclass of ``base`` (``GLRenderer`` or a subclass drawing the study's quad) on a
     context of ``kind`` ('compatibility' or 'es') for a fragment shader of GLSL ``version``
     (module doc); ``matrices``: {'modelview', 'projection'} (4, 4) float64 acting on column
     vectors, loaded as the fixed-function matrices of a compatibility context (their product is
-    the frame's world -> clip matrix: the water's model matrix is the identity)."""
+    the frame's world -> clip matrix: the water's model matrix is the identity). A subclass
+    drawing a grid (``gl.grid``) replaces the vertex shader; the matrices and the built-in
+    attributes it names are fed alike."""
     if kind not in ("compatibility", "es"):
         raise ValueError(f"a dialect renderer draws on a compatibility or ES context, not {kind!r}")
     es = kind == "es"
@@ -115,38 +155,34 @@ def dialect_renderer_class(base, kind: str, version: int, matrices: dict | None 
         CONTEXT = kind
         MASK_FRAG = mask_fragment(version, es)
 
+        def _setup_context(self) -> None:
+            super()._setup_context()
+            if not es:
+                _load_matrices(matrices)
+
         def _setup_geometry(self) -> None:
             super()._setup_geometry()
             self._vert = study_vertex(version, es)
-            if es:
-                return
-            load = gl_function("glLoadMatrixf", None, ctypes.POINTER(ctypes.c_float))
-            mode = gl_function("glMatrixMode", None, ctypes.c_uint32)
-            mode(_GL_PROJECTION)
-            load(_matrix(matrices["projection"]))
-            mode(_GL_MODELVIEW)
-            load(_matrix(matrices["modelview"]))
+
+        def _texture2d(self, arr):
+            a = np.asarray(arr, np.float32)
+            if es and a.ndim == 3 and a.shape[2] == 3:  # RGB32F: no mipmaps in OpenGL ES
+                a = np.concatenate([a, np.ones_like(a[..., :1])], axis=2)
+            return super()._texture2d(a)
+
+        def _fixed_function_arrays(self, vao, arrays: dict) -> None:
+            if arrays and not es:
+                _client_arrays(vao.glo, arrays)
 
         def _vertex_array(self, prog):
             if es:
                 return super()._vertex_array(prog)
             vao = self.ctx.vertex_array(prog, [])
             vao.vertices = 4
-            u32, i32 = ctypes.c_uint32, ctypes.c_int32
-            bind_va = gl_function("glBindVertexArray", None, u32)
-            bind_buffer = gl_function("glBindBuffer", None, u32, u32)
-            pointer = (i32, u32, i32, ctypes.c_void_p)
-            vertex_pointer = gl_function("glVertexPointer", None, *pointer)
-            texcoord_pointer = gl_function("glTexCoordPointer", None, *pointer)
-            enable = gl_function("glEnableClientState", None, u32)
-            bind_va(vao.glo)
-            bind_buffer(_GL_ARRAY_BUFFER, self._vbo.glo)
-            vertex_pointer(3, _GL_FLOAT, _STRIDE, None)
-            enable(_GL_VERTEX_ARRAY)
-            gl_function("glClientActiveTexture", None, u32)(_GL_TEXTURE0)
-            texcoord_pointer(2, _GL_FLOAT, _STRIDE, _UV_OFFSET)
-            enable(_GL_TEXTURE_COORD_ARRAY)
-            bind_va(0)
+            self._fixed_function_arrays(vao, {
+                "gl_Vertex": (self._vbo, 3, _STRIDE, 0),
+                "gl_MultiTexCoord0": (self._vbo, 2, _STRIDE, _UV_OFFSET),
+            })  # fmt: skip
             return vao
 
     return DialectRenderer

@@ -108,6 +108,7 @@ class GLRenderer:
         try:
             if self.CONTEXT != "es":  # OpenGL ES filters every cube map seamlessly
                 self.ctx.disable_direct(_GL_TEXTURE_CUBE_MAP_SEAMLESS)
+            self._setup_context()
             self._setup_geometry()
             self._setup_textures()
             w, h = inputs.width, inputs.height
@@ -119,6 +120,13 @@ class GLRenderer:
             raise
 
     # -- set-up -------------------------------------------------------------------------------
+    def _setup_context(self) -> None:
+        """State of the context the shaders read besides uniforms (none on a core context)."""
+
+    def _fixed_function_arrays(self, vao, arrays: dict) -> None:
+        """Feed ``vao`` 's compatibility built-in attributes from ``arrays`` (built-in name ->
+        (buffer, components, stride, offset)); none on a core context."""
+
     def _setup_geometry(self) -> None:
         x0, z0, x1, z1 = self.inputs.water_rect
         tile = self.inputs.normal_tile

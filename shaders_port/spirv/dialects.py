@@ -70,6 +70,7 @@ from pathlib import Path
 __all__ = [
     "Dialect",
     "ShaderError",
+    "at_highp",
     "detect",
     "for_opengl",
     "front_end",
@@ -121,6 +122,8 @@ _VERTEX_BUILTINS = {
     "gl_ProjectionMatrix": ("g_ProjectionMatrix", "uniform mat4"),
     "gl_NormalMatrix": ("g_NormalMatrix", "uniform mat3"),
 }
+# the translation's attribute name -> the compatibility built-in attribute it stands for
+BUILTIN_ATTRIBUTES = {new: old for old, (new, d) in _VERTEX_BUILTINS.items() if d.startswith("in ")}
 _FTRANSFORM = re.compile(r"\bftransform\s*\(\s*\)")
 _VERTEX_CORE = {"gl_Position", "gl_PointSize", "gl_VertexID", "gl_InstanceID", "gl_ClipDistance"}
 _CORE_EXTENSIONS = ("GL_OES_standard_derivatives", "GL_EXT_shader_texture_lod", "GL_EXT_frag_depth")
@@ -440,6 +443,24 @@ def _line_map(lines: list[str], label: str) -> list[str]:
             continue
         cur += 1
     return out
+
+
+# read every precision qualifier of a GLSL ES text as highp, and make highp the default of
+# every type that has one (GLSL ES samplers default to lowp)
+_HIGHP = [
+    "#define lowp highp",
+    "#define mediump highp",
+    *(f"precision highp {t};" for t in ("float", "int", "sampler2D", "samplerCube")),
+]
+
+
+def at_highp(text: str, label: str) -> str:
+    """A GLSL ES ``text`` (of the file ``label``) with every value at ``highp``: ``lowp`` and
+    ``mediump`` defined as ``highp`` and highp the default precision of floats, ints and the
+    samplers, in lines after ``#version`` followed by a ``#line`` (every line of the file keeps
+    its number); a desktop GLSL text as it is (desktop GLSL ignores precision)."""
+    d = detect(text, label)
+    return _with_head(text, d, _own_version_line(d), _HIGHP) if d.es else text
 
 
 def for_opengl(text: str) -> str:

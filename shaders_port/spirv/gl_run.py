@@ -10,14 +10,20 @@ with values (:meth:`UserShader.written`), a :class:`GLRun`:
   the driver makes one that runs the file's version (OpenGL 4.5 compatibility on llvmpipe:
   GLSL 1.10-4.50);
 * GLSL ES 1.00-3.20: the file as written, on an OpenGL ES context (the study's vertex shader in
-  the file's GLSL ES version) when the driver makes one that runs it (ES 3.2 on llvmpipe);
+  the file's GLSL ES version) when the driver makes one that runs it (ES 3.2 on llvmpipe),
+  with every value at ``highp`` (``dialects.at_highp``: ``lowp`` and ``mediump`` read as
+  ``highp``, highp the default of floats, ints and samplers) unless ``highp`` is False: the
+  executor computes at 32-bit and llvmpipe computes ``lowp`` and ``mediump`` at 16-bit float;
 * otherwise the core-profile translation (``dialects.front_end``: GLSL 330 core) on a
   core-profile context, with the reason (``why``); GLSL ES 3.10 and later, which has none, is
-  refused (``dialects.ShaderError``) with the reason.
+  refused (``dialects.ShaderError``) with the reason. ``as_written`` False asks for it.
 
 A file with ``#include`` s or the experiment's defines is run preprocessed by glslang in its own
 dialect (the includes and defines expanded). A shader run after the user's own vertex shader
-runs as the pair's core-profile translation. Which contexts this machine makes, and the newest
+runs with that file as written alike where the two link as written (GLSL ES: one version;
+desktop GLSL: both before 1.40 or both from 1.40 on; the grid's attributes fed to its
+compatibility built-in attributes, ``gl.grid``), else as the pair's translation.
+Which contexts this machine makes, and the newest
 GLSL version each runs, are found once per process (:func:`context_support`).
 """
 
@@ -34,7 +40,8 @@ from .engine_inputs import split_view, to_up
 __all__ = ["GLRun", "context_support", "plan", "fixed_function_matrices"]
 
 AS_WRITTEN = "your file as written"
-PREPROCESSED = AS_WRITTEN + " (its #include files and defines expanded by glslang's preprocessor)"
+PREPROCESSED = " (its #include files and defines expanded by glslang's preprocessor)"
+HIGHP = ", every value at highp (lowp and mediump read as highp)"
 TRANSLATION = "its core-profile translation (GLSL 330 core)"
 
 
@@ -50,6 +57,7 @@ class GLRun:
     what: str
     why: str
     dialect: dialects.Dialect
+    vertex: str | None = None  # the user's vertex shader as run (None: the study's or its GLSL 330)
 
     @property
     def as_written(self) -> bool:
@@ -72,30 +80,48 @@ def context_support(kind: str) -> tuple[int, str]:
         ctx.release()
 
 
-def _own_text(shader, text: str) -> str:
-    """``text`` (the file written back) as a driver of its own dialect takes it."""
-    if not (shader.defines or dialects.has_includes(text)):
+def _own_text(text: str, label: str, defines, include_paths, stage: str = "frag") -> str:
+    """``text`` (a file written back) as a driver of its own dialect takes it."""
+    if not (defines or dialects.has_includes(text)):
         return text
-    pre = dialects.front_end(
-        text, shader.label, shader.defines, shader.include_paths, True, translate=False
-    )
+    pre = dialects.front_end(text, label, defines, include_paths, True, stage, translate=False)
     return dialects.for_opengl(pre)
 
 
-def plan(shader, values: dict | None = None) -> GLRun:
+def _vertex_as_written(shader, kind: str):
+    """(the user's vertex shader as written for a context of ``kind``, '') when it links
+    there with the fragment shader as written, else (None, why)."""
+    vs, d = shader.vertex.shader, shader.dialect
+    v = dialects.detect(vs.original, vs.label)
+    # GLSL ES links shaders of one version; desktop GLSL does not link 1.30 and earlier with
+    # 1.40 and later
+    ok = v.es == d.es and (
+        v.version == d.version if d.es else (v.version < 140) == (d.version < 140)
+    )
+    if not ok:
+        return None, f"your vertex shader ({v.name}) does not link with {d.name} as written"
+    return _own_text(vs.original, vs.label, vs.defines, vs.include_paths, "vert"), ""
+
+
+def plan(shader, values: dict | None = None, as_written: bool = True, highp: bool = True):
     """The :class:`GLRun` of ``shader`` written back with ``values`` (module doc)."""
     d = shader.dialect
     written = shader.written(values or {})
-    what = PREPROCESSED if (shader.defines or dialects.has_includes(written)) else AS_WRITTEN
+    what = AS_WRITTEN + (PREPROCESSED if shader.defines or dialects.has_includes(written) else "")
+    own = _own_text(written, shader.label, shader.defines, shader.include_paths)
     if not d.translated and d.runs_on_desktop_gl:
-        return GLRun(_own_text(shader, written), "core", what, "", d)
+        return GLRun(own, "core", what, "", d)
     kind = "es" if d.es else "compatibility"
-    if shader.vertex is not None:
-        why = "a shader run after your own vertex shader runs as the pair's translation"
-    else:
-        version, about = context_support(kind)
-        if version >= d.version:
-            return GLRun(_own_text(shader, written), kind, what, "", d)
+    version, about = context_support(kind)
+    vertex, why = _vertex_as_written(shader, kind) if shader.vertex else (None, "")
+    if not as_written:
+        why = "the translation asked for"
+    elif version >= d.version and not why:
+        if kind == "es" and highp:
+            own, what = dialects.at_highp(own, shader.label), what + HIGHP
+            vertex = vertex and dialects.at_highp(vertex, shader.vertex.label)
+        return GLRun(own, kind, what, "", d, vertex)
+    if not why:
         api = "OpenGL ES" if kind == "es" else "OpenGL compatibility-profile"
         why = (
             f"no {api} context here ({about})" if version == 0
@@ -121,11 +147,12 @@ def fixed_function_matrices(inputs, up: str = "y") -> dict:
     return {"modelview": to_up(up, view, "matrix"), "projection": proj}
 
 
-def renderer(shader, inputs, values: dict, source=None, reflection=None):
+def renderer(shader, inputs, values: dict, source=None, reflection=None, **how):
     """The GL renderer of :meth:`UserShader.gl_renderer` for ``values`` (checked): the
-    :func:`plan` 's text on its context (``r.gl_run`` the plan, ``r.context`` the context in
-    words), or ``source`` with its ``reflection`` (the HLSL round trip) on a core context,
-    every uniform constant set (``r.gl_run`` None)."""
+    :func:`plan` 's text (``how``: its ``as_written`` and ``highp``) on its context
+    (``r.gl_run`` the plan, ``r.context`` the context in words), or ``source`` with its
+    ``reflection`` (the HLSL round trip) on a core context, every uniform constant set
+    (``r.gl_run`` None)."""
     from ..gl.contexts import describe
     from ..gl.dialect import dialect_renderer_class
     from ..gl.renderer import GLRenderer
@@ -135,7 +162,7 @@ def renderer(shader, inputs, values: dict, source=None, reflection=None):
     bindings = shader.run_bindings()
     if shader.vertex is not None:  # its uniforms that are study or engine inputs
         bindings = {**shader.vertex.shader.inputs, **bindings}
-    run = plan(shader, values) if reflection is None else None
+    run = plan(shader, values, **how) if reflection is None else None
     base = GLRenderer if reflection is None else TranslatedRenderer
     # the uniforms the text leaves without initializer, set as the engine's material sets them:
     # a bare one where the dialect takes no initializer (or an #include declares it), and in
@@ -153,7 +180,9 @@ def renderer(shader, inputs, values: dict, source=None, reflection=None):
         matrices = fixed_function_matrices(inputs, up)
         base = dialect_renderer_class(base, run.kind, run.dialect.version, matrices)
     if shader.vertex is not None:  # the grid drawn with the user's GLSL vertex shader
-        base = shader.vertex.gl_class(base, inputs, up)
+        vertex = None if run is None else run.vertex
+        builtins = dialects.BUILTIN_ATTRIBUTES if vertex is not None else None
+        base = shader.vertex.gl_class(base, inputs, up, vertex, builtins)
     base = engine_inputs.gl_class(base, shader.engine)
     label = shader.label
 

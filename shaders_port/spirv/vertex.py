@@ -182,6 +182,7 @@ class VertexShader:
         # a binding to a vertex meaning or engine name are the fragment shader's
         self.original, self.label, self.path = source, label, path
         self.source, self.defines = source, tuple(defines)
+        self.include_paths = tuple(str(p) for p in include_paths)
         pre = bool(defines) or dialects.has_includes(source)
         if pre or dialects.detect(source, label).translated:
             text = dialects.front_end(source, label, tuple(defines), tuple(include_paths),

@@ -127,11 +127,12 @@ def gl_check_user(shader, inputs, values: dict, ours: dict) -> dict:
     cover, passed within ``GL_MEAN`` / ``GL_P999``; ``text``: which text ran (the file as
     written, or its core-profile translation, ``shaders_port.spirv.gl_run``), ``context``: on
     which context (e.g. "OpenGL 4.5 compatibility profile, llvmpipe ..."), ``why_translation``:
-    why the file did not run as written; ``ran`` False (with ``why``) without a headless
+    why the file did not run as written; on an OpenGL ES context (the file at highp),
+    ``own_precision``: the file at its own precision qualifiers (:func:`_own_precision`) and a
+    failed check's ``note`` (:data:`ES_CUBE`). ``ran`` False (with ``why``) without a headless
     OpenGL; a shader OpenGL does not run (a GLSL ES 3.10 file where no ES context is made, a
     compile error of the driver) is a failed check, ``passed`` False with ``why`` naming the
-    file, and a warning on stderr. A failed check on an OpenGL ES context adds ``note``
-    (:data:`ES_PRECISION`)."""
+    file, and a warning on stderr."""
     try:
         with shader.gl_renderer(inputs, values) as r:
             rgba, mask = r.render(None)
@@ -148,9 +149,11 @@ def gl_check_user(shader, inputs, values: dict, ours: dict) -> dict:
     out.update(text=run.what, context=context)
     if run.why:
         out["why_translation"] = run.why
+    if run.kind == "es":
+        out["own_precision"] = _own_precision(shader, inputs, values, ours)
     if not out["passed"]:
         if run.kind == "es":
-            out["note"] = ES_PRECISION
+            out["note"] = ES_CUBE
         print(
             f"calibrate: WARNING: {shader.label} ({run.what}) on {context} does not match the "
             f"executor: mean |diff| {out['mean_abs']:.3g}, 99.9th percentile {out['p999']:.3g}",
@@ -159,13 +162,30 @@ def gl_check_user(shader, inputs, values: dict, ours: dict) -> dict:
     return out
 
 
-ES_PRECISION = (
-    "an OpenGL ES driver may compute lowp and mediump values at 16-bit float, as llvmpipe does, "
-    "and GLSL ES samples with lowp precision unless told otherwise (`precision highp "
-    "sampler2D;`, `precision highp samplerCube;`); the executor computes every value at 32-bit. "
-    "OpenGL ES also filters cube maps across their faces (seamless), the executor each face on "
-    "its own"
+ES_CUBE = (
+    "OpenGL ES filters cube maps across their faces (seamless); the executor, as desktop "
+    "OpenGL with GL_TEXTURE_CUBE_MAP_SEAMLESS off, each face on its own"
 )
+
+
+def _own_precision(shader, inputs, values: dict, ours: dict) -> dict:
+    """The GLSL ES file at its own precision qualifiers (``lowp``, ``mediump``, and the samplers'
+    default ``lowp``; ``gl_run.plan(..., highp=False)``) on the ES context against ``ours``:
+    ``mean_abs``, ``p999``, ``within`` the GL check's thresholds, and ``note`` when not (llvmpipe
+    computes reduced precision at 16-bit float, the executor at 32-bit)."""
+    with shader.gl_renderer(inputs, values, highp=False) as r:
+        rgba, mask = r.render(None)
+    res = _user_verdict(rgba, mask, ours)
+    out = {"mean_abs": res["mean_abs"], "p999": res["p999"], "within": res["passed"]}
+    if not res["passed"]:
+        out["note"] = (
+            f"at its own precision qualifiers llvmpipe differs from the executor by "
+            f"{res['mean_abs']:.3g} on average, {res['p999']:.3g} at the 99.9th percentile: it "
+            "computes lowp and mediump values at 16-bit float (GLSL ES samples at lowp unless "
+            "told: `precision highp sampler2D;`, `precision highp samplerCube;`), the executor "
+            "every value at 32-bit; a GPU that honours them differs alike"
+        )
+    return out
 
 
 def _user_failed(why: str) -> dict:

@@ -1,15 +1,12 @@
 // Schlick-Fresnel water in the style of a WebGL 1 material (GLSL ES 1.00: no #version,
 // precision statements, varyings, texture2D/textureCube, gl_FragColor). The fitted constants
-// are uniforms the material sets: their start values are declared here. Its samplers are highp:
-// GLSL ES samples at lowp unless told, which a driver may compute at 16-bit float.
+// are uniforms the material sets: their start values are declared here.
 // @study constant FOG_DENSITY 0.01 4.0 0.35
 // @study constant FOG_COLOR 0.0 1.0 0.05,0.2,0.25
 // @study constant BUMP 0.05 4.0 1.0
 // @study bind waveNormals normalMap
 #ifdef GL_ES
 precision highp float;
-precision highp sampler2D;
-precision highp samplerCube;
 #endif
 uniform mat4 uTextureMatrix0;
 varying vec4 vTexCoord0;
