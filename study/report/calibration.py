@@ -433,7 +433,7 @@ def gl_ran(gl: dict, default: str) -> str:
     if not gl.get("text"):
         return default
     why = f" (not as written: {gl['why_translation']})" if gl.get("why_translation") else ""
-    return f"{gl['text']}, on {gl['context']}{why},"
+    return f"the GL check ran {gl['text']} on {gl['context']}{why},"
 
 
 def _export_lines(gl: dict | None, user_file: str | None = None, vertex_file=None) -> list[str]:
@@ -454,6 +454,11 @@ def _export_lines(gl: dict | None, user_file: str | None = None, vertex_file=Non
                 else " -- **MISMATCH: do not ship these shaders; see constants.json gl_check**."
             )
             + (f" ({gl['note']}.)" if gl.get("note") else "")
+            + (
+                f" Your file {own['note']}."
+                if (own := gl.get("own_precision") or {}).get("note")
+                else ""
+            )  # fmt: skip
         )
     if user_file:
         name = Path(user_file).name
