@@ -94,6 +94,26 @@ def test_compatibility_built_ins_run_as_written_from_the_fixed_function_state(in
     assert "(not as written: no OpenGL compatibility-profile context here" in report
 
 
+@pytest.mark.parametrize(
+    "version", ["130", "140", "150 compatibility", "330 compatibility", "460 compatibility"]
+)
+def test_each_desktop_version_runs_as_written_where_the_context_runs_it(version, inputs):
+    """The GLSL 1.10 file under each later desktop #version: as written on the compatibility
+    profile (after the study's vertex shader in GLSL 1.20 or 1.50 compatibility, which link
+    with it), except a version newer than the context, whose translation runs, saying why."""
+    from shaders_port.spirv.gl_run import context_support
+
+    src = f"#version {version}\n" + (SHADERS / "compat_builtins_110.frag").read_text()
+    shader = UserShader(src, "v.frag").check()
+    check = gl_check_user(shader, inputs, shader.defaults(), shader.render(inputs).numpy())
+    assert check["ran"] and check["passed"], check
+    newest, about = context_support("compatibility")
+    if newest and shader.dialect.version > newest:
+        assert check["why_translation"] == f"{shader.dialect.name} is newer than {about} runs"
+    else:
+        assert_ran_as_written(check, "compatibility")
+
+
 def test_an_es_file_runs_at_highp_and_its_own_precision_is_measured(inputs):
     """The WebGL 1 file samples at lowp (GLSL ES's default for samplers): on OpenGL ES its check
     runs it with every value at highp, which matches the executor (32-bit); the file at its own
