@@ -162,7 +162,7 @@ def test_each_dialect_exports_to_the_engine_targets(name, tmp_path, inputs):
     GLSL 1.20 and 330 files, HLSL ignores them) and its fitted value in the binding sheets, for
     the material to set; the HLSL run back on llvmpipe with those values matches."""
     from shaders_port.spirv.tools import missing_tools
-    from study.export.gl_check import hlsl_check_user
+    from study.export.gl_check import gles_check_user, hlsl_check_user
     from study.export.shaders import export_user_shader
 
     if missing_tools():
@@ -182,11 +182,19 @@ def test_each_dialect_exports_to_the_engine_targets(name, tmp_path, inputs):
         assert "## Uniforms the material sets" in sheet
         assert "| `FOG_DENSITY` | float | 0.8 |" in sheet, sheet
         assert "| `FOG_COLOR` | vec3 | vec3(0.1, 0.25, 0.3) |" in sheet, sheet
-    # the HLSL runs back on llvmpipe (its colour output is the translation's _study_FragColor)
+    # the HLSL runs back on llvmpipe (its colour output is the translation's _study_FragColor),
+    # the GLSL ES on an OpenGL ES context, each with the sheet's values set as uniforms
     ours = shader.render(inputs, values).numpy()
     check = hlsl_check_user(shader, inputs, values, ours, out)
     if check.get("ran"):
         assert check["passed"], check
+    check = gles_check_user(shader, inputs, values, ours, out)
+    if check.get("ran"):
+        assert check["passed"] and check["context"].startswith("OpenGL ES 3."), check
+    # the fitted values are what the GLSL ES needs: the start values give another image
+    other = gles_check_user(shader, inputs, shader.defaults(), ours, out)
+    if other.get("ran"):
+        assert not other["passed"], other
 
 
 def test_dialects_are_detected_and_unknown_versions_refused():

@@ -139,14 +139,17 @@ def _client_arrays(vao_glo: int, arrays: dict) -> None:
     bind_va(0)
 
 
-def dialect_renderer_class(base, kind: str, version: int, matrices: dict | None = None):
+def dialect_renderer_class(
+    base, kind: str, version: int, matrices: dict | None = None, vertex: str | None = None
+):
     """A subclass of ``base`` (``GLRenderer`` or a subclass drawing the study's quad) on a
     context of ``kind`` ('compatibility' or 'es') for a fragment shader of GLSL ``version``
     (module doc); ``matrices``: {'modelview', 'projection'} (4, 4) float64 acting on column
     vectors, loaded as the fixed-function matrices of a compatibility context (their product is
-    the frame's world -> clip matrix: the water's model matrix is the identity). A subclass
-    drawing a grid (``gl.grid``) replaces the vertex shader; the matrices and the built-in
-    attributes it names are fed alike."""
+    the frame's world -> clip matrix: the water's model matrix is the identity); ``vertex``: a
+    vertex shader of the quad with the core shader's names in place of the study's (an export's
+    ``gles300/water.vert``). A subclass drawing a grid (``gl.grid``) replaces the vertex shader;
+    the matrices and the built-in attributes it names are fed alike."""
     if kind not in ("compatibility", "es"):
         raise ValueError(f"a dialect renderer draws on a compatibility or ES context, not {kind!r}")
     es = kind == "es"
@@ -162,7 +165,7 @@ def dialect_renderer_class(base, kind: str, version: int, matrices: dict | None 
 
         def _setup_geometry(self) -> None:
             super()._setup_geometry()
-            self._vert = study_vertex(version, es)
+            self._vert = vertex or study_vertex(version, es)
 
         def _texture2d(self, arr):
             a = np.asarray(arr, np.float32)

@@ -147,12 +147,13 @@ def fixed_function_matrices(inputs, up: str = "y") -> dict:
     return {"modelview": to_up(up, view, "matrix"), "projection": proj}
 
 
-def renderer(shader, inputs, values: dict, source=None, reflection=None, **how):
+def renderer(shader, inputs, values: dict, source=None, reflection=None, es=None, **how):
     """The GL renderer of :meth:`UserShader.gl_renderer` for ``values`` (checked): the
     :func:`plan` 's text (``how``: its ``as_written`` and ``highp``) on its context
-    (``r.gl_run`` the plan, ``r.context`` the context in words), or ``source`` with its
-    ``reflection`` (the HLSL round trip) on a core context, every uniform constant set
-    (``r.gl_run`` None)."""
+    (``r.gl_run`` the plan, ``r.context`` the context in words); or, with every uniform
+    constant set as the material sets it (``r.gl_run`` None), ``source`` with its
+    ``reflection`` (the HLSL round trip) on a core context, or ``source`` after the vertex
+    shader ``es`` (the export's GLSL ES 3.00 files) on an OpenGL ES context."""
     from ..gl.contexts import describe
     from ..gl.dialect import dialect_renderer_class
     from ..gl.renderer import GLRenderer
@@ -162,7 +163,7 @@ def renderer(shader, inputs, values: dict, source=None, reflection=None, **how):
     bindings = shader.run_bindings()
     if shader.vertex is not None:  # its uniforms that are study or engine inputs
         bindings = {**shader.vertex.shader.inputs, **bindings}
-    run = plan(shader, values, **how) if reflection is None else None
+    run = plan(shader, values, **how) if source is None else None
     base = GLRenderer if reflection is None else TranslatedRenderer
     # the uniforms the text leaves without initializer, set as the engine's material sets them:
     # a bare one where the dialect takes no initializer (or an #include declares it), and in
@@ -179,8 +180,10 @@ def renderer(shader, inputs, values: dict, source=None, reflection=None, **how):
     if run is not None and run.kind != "core":
         matrices = fixed_function_matrices(inputs, up)
         base = dialect_renderer_class(base, run.kind, run.dialect.version, matrices)
+    elif es is not None:
+        base = dialect_renderer_class(base, "es", 300, vertex=es)
     if shader.vertex is not None:  # the grid drawn with the user's GLSL vertex shader
-        vertex = None if run is None else run.vertex
+        vertex = es if run is None else run.vertex
         builtins = dialects.BUILTIN_ATTRIBUTES if vertex is not None else None
         base = shader.vertex.gl_class(base, inputs, up, vertex, builtins)
     base = engine_inputs.gl_class(base, shader.engine)
@@ -207,5 +210,5 @@ def renderer(shader, inputs, values: dict, source=None, reflection=None, **how):
             super()._write_uniforms(prog, renamed)
 
     if reflection is None:
-        return _Bound("water_refraction", inputs, source=run.text)
+        return _Bound("water_refraction", inputs, source=run.text if run else source)
     return _Bound("water_refraction", inputs, source, reflection)

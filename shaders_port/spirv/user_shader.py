@@ -556,16 +556,18 @@ class UserShader:
         )
 
     def gl_renderer(self, inputs, values: dict | None = None, source=None, reflection=None,
-                    **how):  # fmt: skip
+                    es=None, **how):  # fmt: skip
         """A ``GLRenderer`` (OpenGL, llvmpipe) drawing the written-back shader with ``values``
         as ``spirv.gl_run.plan`` chooses (the file as written on a context of its dialect, or
         its core-profile translation; ``r.gl_run`` says which; ``how``: ``as_written`` and
         ``highp`` of ``spirv.gl_run.plan``); or, given ``source`` and its
         ``reflection`` (``spirv.tools.hlsl_round_trip`` of the exported HLSL), that GLSL
-        through a ``TranslatedRenderer``, every uniform constant set as the material sets it.
-        Its samplers and uniforms are bound to the study's inputs by the declaration. Use it as
-        a context manager, ``render(None)`` / ``time_frames(None, n, warmup)``."""
-        return gl_run.renderer(self, inputs, self._checked(values), source, reflection, **how)
+        through a ``TranslatedRenderer``, or, given ``source`` and ``es`` (the export's GLSL ES
+        3.00 fragment and vertex shaders), those on an OpenGL ES context: every uniform
+        constant set as the material sets it. Its samplers and uniforms are bound to the
+        study's inputs by the declaration. Use it as a context manager, ``render(None)`` /
+        ``time_frames(None, n, warmup)``."""
+        return gl_run.renderer(self, inputs, self._checked(values), source, reflection, es, **how)
 
     def gl_render(self, inputs, values: dict | None = None, **how):
         """The written-back shader on OpenGL (llvmpipe): ``(rgba (H, W, 4), mask (H, W))``."""

@@ -212,6 +212,29 @@ def hlsl_check_user(shader, inputs, values: dict, ours: dict, shaders_dir: Path)
     return _user_verdict(rgba, mask, ours)
 
 
+def gles_check_user(shader, inputs, values: dict, ours: dict, shaders_dir: Path) -> dict:
+    """A user's shader's exported GLSL ES 3.00 (``gles300/<stem>.frag`` of ``shaders_dir``,
+    after the export's ``gles300`` vertex shader) on an OpenGL ES context of llvmpipe against
+    the executor's render ``ours``, each uniform constant set to its value in ``values`` as the
+    material sets it (the binding sheet's "Uniforms the material sets"): the figures and
+    verdict of :func:`gl_check_user`, ``context``, and a failed check's ``note``; ``ran``
+    False (with ``why``) where no ES context is made."""
+    folder = Path(shaders_dir) / "gles300"
+    stem = shader.label.rsplit(".", 1)[0]
+    vstem = "water" if shader.vertex is None else shader.vertex.label.rsplit(".", 1)[0]
+    frag, vert = (folder / f"{stem}.frag").read_text(), (folder / f"{vstem}.vert").read_text()
+    try:
+        with shader.gl_renderer(inputs, values, source=frag, es=vert) as r:
+            rgba, mask = r.render(None)
+            context = r.context
+    except RuntimeError as exc:
+        return {"ran": False, "why": str(exc).splitlines()[0], "passed": None}
+    out = {**_user_verdict(rgba, mask, ours), "context": context}
+    if not out["passed"]:
+        out["note"] = ES_CUBE
+    return out
+
+
 def _user_verdict(rgba: np.ndarray, mask: np.ndarray, ours: dict) -> dict:
     both = mask & (ours["mask"] > 0.5)
     d = np.abs(rgba[..., :3] - ours["color"]).max(-1)[both]

@@ -507,9 +507,9 @@ def engine_targets_section(targets: dict, user: bool = False) -> list[str]:
         if isinstance(run, dict) and run.get("ran", True) is False:
             check += f"; not run on llvmpipe ({run['why']})"
         elif isinstance(run, dict):
+            how = run.get("context") or "llvmpipe through SPIR-V and GLSL 330"
             check += (
-                "; run on llvmpipe through SPIR-V and GLSL 330 vs the Dr.Jit shader: mean abs. "
-                "difference "
+                f"; run on {how} vs the Dr.Jit shader: mean abs. difference "
                 f"{fmt(run['mean_abs'], 3)}, 99.9th percentile {fmt(run['p999'], 3)} "
                 + ("(passed)" if run["passed"] else "(**MISMATCH**)")
             )
