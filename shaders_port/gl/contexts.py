@@ -40,7 +40,7 @@ _EGL_NONE, _EGL_RENDERABLE_TYPE, _EGL_SURFACE_TYPE, _EGL_PBUFFER_BIT = 0x3038, 0
 _EGL_OPENGL_BIT, _EGL_OPENGL_ES3_BIT = 0x0008, 0x0040
 _EGL_OPENGL_API, _EGL_OPENGL_ES_API = 0x30A2, 0x30A0
 _EGL_MAJOR, _EGL_MINOR, _EGL_PROFILE_MASK, _EGL_COMPAT_BIT = 0x3098, 0x30FB, 0x30FD, 0x2
-_EGL_PLATFORM_DEVICE = 0x313F
+_EGL_PLATFORM_DEVICE, _EGL_DRAW, _EGL_READ = 0x313F, 0x3059, 0x305A
 # kind -> (renderable bit, API, context attributes, the libGL moderngl's names resolve in)
 _KIND_ATTRS = {
     "compatibility": (_EGL_OPENGL_BIT, _EGL_OPENGL_API,
@@ -76,6 +76,9 @@ class _EGL:
             lib.eglMakeCurrent.argtypes = [_VP] * 4
             lib.eglDestroyContext.argtypes = [_VP] * 2
             lib.eglGetError.restype = ctypes.c_int32
+            for name in ("eglGetCurrentDisplay", "eglGetCurrentSurface", "eglGetCurrentContext"):
+                getattr(lib, name).restype = _VP
+            lib.eglGetCurrentSurface.argtypes = [ctypes.c_int32]
             cls._lib = lib
         return cls._lib
 
@@ -117,10 +120,15 @@ def _display():
 
 class _EGLContext:
     """A current EGL context of ``kind`` ('compatibility' or 'es') with glcontext's backend
-    protocol, surfaceless (the study draws into framebuffer objects)."""
+    protocol, surfaceless (the study draws into framebuffer objects). Released, it makes the
+    context that was current before it current again (moderngl's calls go to the current
+    context: a renderer made before it keeps drawing)."""
 
     def __init__(self, kind: str):
         egl = _EGL.lib()
+        self._previous = [egl.eglGetCurrentDisplay()]
+        self._previous += [egl.eglGetCurrentSurface(w) for w in (_EGL_DRAW, _EGL_READ)]
+        self._previous.append(egl.eglGetCurrentContext())
         bit, api, attrs = _KIND_ATTRS[kind]
         self.dpy = _display()
         want = (ctypes.c_int32 * 5)(_EGL_RENDERABLE_TYPE, bit, _EGL_SURFACE_TYPE,
@@ -154,8 +162,14 @@ class _EGLContext:
 
     def release(self):
         if self.ctx:
-            self.__exit__()
-            _EGL.lib().eglDestroyContext(self.dpy, self.ctx)
+            egl = _EGL.lib()
+            if egl.eglGetCurrentContext() == self.ctx:
+                dpy, draw, read, ctx = self._previous
+                if ctx:
+                    egl.eglMakeCurrent(dpy, draw, read, ctx)
+                else:
+                    self.__exit__()
+            egl.eglDestroyContext(self.dpy, self.ctx)
             self.ctx = None
 
 
