@@ -114,6 +114,28 @@ def test_each_desktop_version_runs_as_written_where_the_context_runs_it(version,
         assert_ran_as_written(check, "compatibility")
 
 
+def test_a_file_the_driver_rejects_as_written_runs_as_its_translation(inputs, capsys):
+    """A WebGL 1 file with GL_EXT_shader_texture_lod (GLSL 330 has textureLod built in): where
+    the ES driver lacks the extension (Mesa's ES 3 context offers it no GLSL ES 1.00 shader),
+    the check runs the translation and quotes the driver; the #extension line comes before the
+    precision lines the highp text adds (GLSL ES takes no #extension after a statement)."""
+    src = (
+        "#extension GL_EXT_shader_texture_lod : enable\nprecision highp float;\n"
+        "// @study constant K 0.1 2.0 1.0\nuniform float K;\nuniform sampler2D normalMap;\n"
+        "varying vec4 vTexCoord0;\n"
+        "void main() { gl_FragColor = K * texture2DLodEXT(normalMap, vTexCoord0.xy, 0.0); }\n"
+    )
+    shader = UserShader(src, "lod.frag").check()
+    check = gl_check_user(shader, inputs, shader.defaults(), shader.render(inputs).numpy())
+    assert check["ran"] and check["passed"], check
+    if check["text"].startswith("its core-profile translation"):
+        why = check["why_translation"]
+        assert why.startswith("OpenGL ES 3.") and "rejected your file as written: " in why
+        assert "texture2DLodEXT" in why and "its translation runs" in capsys.readouterr().err
+    else:
+        assert_ran_as_written(check, "es")
+
+
 def test_an_es_file_runs_at_highp_and_its_own_precision_is_measured(inputs):
     """The WebGL 1 file samples at lowp (GLSL ES's default for samplers): on OpenGL ES its check
     runs it with every value at highp, which matches the executor (32-bit); the file at its own

@@ -456,11 +456,21 @@ _HIGHP = [
 
 def at_highp(text: str, label: str) -> str:
     """A GLSL ES ``text`` (of the file ``label``) with every value at ``highp``: ``lowp`` and
-    ``mediump`` defined as ``highp`` and highp the default precision of floats, ints and the
-    samplers, in lines after ``#version`` followed by a ``#line`` (every line of the file keeps
-    its number); a desktop GLSL text as it is (desktop GLSL ignores precision)."""
+    ``mediump`` defined as ``highp`` after ``#version``, and highp the default precision of
+    floats, ints and the samplers after the file's last ``#extension`` line (GLSL ES takes no
+    ``#extension`` after a statement), each insertion followed by a ``#line`` (every line of the
+    file keeps its number); a desktop GLSL text as it is (desktop GLSL ignores precision)."""
     d = detect(text, label)
-    return _with_head(text, d, _own_version_line(d), _HIGHP) if d.es else text
+    if not d.es:
+        return text
+    lines = text.split("\n")
+    ext = [i for i, ln in enumerate(lines) if re.match(r"\s*#\s*extension\b", ln)]
+    if not ext:
+        return _with_head(text, d, _own_version_line(d), _HIGHP)
+    k = ext[-1] + 1  # the file's lines 1..k end with its last #extension
+    precision = [*_HIGHP[2:], _line_directive(k + 1, d.version, True)]
+    text = "\n".join([*lines[:k], *precision, *lines[k:]])
+    return _with_head(text, d, _own_version_line(d), _HIGHP[:2])
 
 
 def for_opengl(text: str) -> str:

@@ -11,6 +11,7 @@ import numpy as np
 from shaders_port.gl.compare import compare_port_gl
 from shaders_port.gl.renderer import GLRenderer
 from shaders_port.gl.round_trip import TranslatedRenderer
+from shaders_port.spirv.gl_run import context_support
 from shaders_port.spirv.tools import hlsl_round_trip
 from shaders_port.variants import get_variant
 
@@ -129,26 +130,37 @@ def gl_check_user(shader, inputs, values: dict, ours: dict) -> dict:
     which context (e.g. "OpenGL 4.5 compatibility profile, llvmpipe ..."), ``why_translation``:
     why the file did not run as written; on an OpenGL ES context (the file at highp),
     ``own_precision``: the file at its own precision qualifiers (:func:`_own_precision`) and a
-    failed check's ``note`` (:data:`ES_CUBE`). ``ran`` False (with ``why``) without a headless
+    failed check's ``note`` (:data:`ES_CUBE`). A file the driver rejects as written (what its
+    dialect has that this driver lacks: an extension, ...) runs as its translation,
+    ``why_translation`` quoting the driver. ``ran`` False (with ``why``) without a headless
     OpenGL; a shader OpenGL does not run (a GLSL ES 3.10 file where no ES context is made, a
-    compile error of the driver) is a failed check, ``passed`` False with ``why`` naming the
-    file, and a warning on stderr."""
+    compile error of the driver in a text with no translation, or in both) is a failed check,
+    ``passed`` False with ``why`` naming the file, and a warning on stderr."""
+    rejected = ""
     try:
-        with shader.gl_renderer(inputs, values) as r:
-            rgba, mask = r.render(None)
-            run, context = r.gl_run, r.context
+        rgba, mask, run, context = _render(shader, inputs, values)
     except ValueError as exc:  # dialects.ShaderError: a dialect no context here runs
         return _user_failed(str(exc))
     except RuntimeError as exc:
         msg = str(exc)
-        if "rejected" in msg:  # the driver's compile or link log
-            log = [ln.strip() for ln in msg.splitlines()[1:] if "error" in ln.lower()]
-            return _user_failed(f"OpenGL (llvmpipe) rejected {shader.label}: {'; '.join(log[:3])}")
-        return {"ran": False, "why": msg.splitlines()[0], "passed": None}
+        if "rejected" not in msg:  # no headless OpenGL
+            return {"ran": False, "why": msg.splitlines()[0], "passed": None}
+        log = "; ".join([ln.strip() for ln in msg.splitlines()[1:] if "error" in ln.lower()][:3])
+        if not shader.dialect.translated:  # nothing else to run
+            return _user_failed(f"OpenGL (llvmpipe) rejected {shader.label}: {log}")
+        # what this driver lacks of the file's dialect (an extension, ...): its translation runs
+        about = context_support("es" if shader.dialect.es else "compatibility")[1]
+        rejected = f"{about} rejected your file as written: {log}"
+        print(f"calibrate: {shader.label}: {rejected}; its translation runs", file=sys.stderr)
+        try:
+            rgba, mask, run, context = _render(shader, inputs, values, as_written=False)
+        except RuntimeError as exc2:
+            log2 = [ln.strip() for ln in str(exc2).splitlines()[1:] if "error" in ln.lower()]
+            return _user_failed(f"{rejected}; and its translation: {'; '.join(log2[:3])}")
     out = _user_verdict(rgba, mask, ours)
     out.update(text=run.what, context=context)
     if run.why:
-        out["why_translation"] = run.why
+        out["why_translation"] = rejected or run.why
     if run.kind == "es":
         out["own_precision"] = _own_precision(shader, inputs, values, ours)
     if not out["passed"]:
@@ -160,6 +172,13 @@ def gl_check_user(shader, inputs, values: dict, ours: dict) -> dict:
             file=sys.stderr,
         )
     return out
+
+
+def _render(shader, inputs, values: dict, **how):
+    """(rgba, mask, the ``GLRun``, the context in words) of ``shader.gl_renderer``."""
+    with shader.gl_renderer(inputs, values, **how) as r:
+        rgba, mask = r.render(None)
+        return rgba, mask, r.gl_run, r.context
 
 
 ES_CUBE = (
