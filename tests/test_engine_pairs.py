@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 
 from helpers import REPO
-from helpers.gl import user_gl_render_or_skip
+from helpers.gl import assert_ran_as_written, user_gl_render_or_skip
 from helpers.synthetic import synthetic_baseline_inputs
 from shaders_port.spirv.engine_inputs import UP_Z
 from shaders_port.spirv.user_shader import UserShader
@@ -40,16 +40,23 @@ def _shader(name: str, cells=(24, 24)) -> UserShader:
 
 @pytest.mark.parametrize("name", PAIRS)
 def test_engine_pair_matches_llvmpipe(name, inputs):
+    """The pair's GLSL 330 translation on the core context, and the GL check of the pair as
+    written (the GLSL 1.20 pairs on the compatibility profile, the GLSL ES ones on OpenGL ES)."""
+    from study.export.gl_check import gl_check_user
+
     shader = _shader(name)
     assert shader.vertex is not None
     ours = shader.render(inputs).numpy()
-    rgba, mask = user_gl_render_or_skip(shader, inputs)
+    rgba, mask = user_gl_render_or_skip(shader, inputs, as_written=False)
     mine = ours["mask"] > 0.5
     assert mask.sum() > 800 and (mask ^ mine).sum() <= 0.001 * mask.sum()
     d = np.abs(rgba[..., :3] - ours["color"]).max(-1)[mask & mine]
     # measured on llvmpipe: means 1e-7 .. 2.4e-6, 99.9th percentiles up to 5e-5
     assert d.mean() <= 1e-5 and np.percentile(d, 99.9) <= 2e-4, (d.mean(), d.max())
     assert np.isfinite(ours["color"][mine]).all() and ours["color"][mine].std() > 0.01
+    check = gl_check_user(shader, inputs, shader.defaults(), ours)
+    assert check["ran"] and check["passed"], check
+    assert_ran_as_written(check, "es" if shader.dialect.es else "compatibility")
 
 
 def test_experiments_declare_what_the_pairs_need():

@@ -236,3 +236,23 @@ def test_renderer_keeps_a_bounded_number_of_programs():
         assert len(r._programs) == r.MAX_PROGRAMS
         again, _ = r.render(Constants(attenuation_distance=2.0))
     assert np.array_equal(first, again)
+
+
+@pytest.mark.parametrize("kind", ["compatibility", "es"])
+def test_a_renderer_keeps_drawing_after_another_kind_of_context_is_released(kind, inputs):
+    """moderngl draws on the current context: a compatibility or ES context made and released
+    while a core renderer is open hands the current context back to it."""
+    from shaders_port import Constants
+    from shaders_port.gl.contexts import create_context, describe
+
+    with GLRenderer("water_refraction", inputs) as r:
+        before = r.render(Constants())[0]
+        try:
+            other = create_context(kind)
+        except RuntimeError as exc:
+            pytest.skip(f"no {kind} context here: {exc}")
+        assert ("OpenGL ES" in describe(other)) == (kind == "es")
+        other.release()
+        after = r.render(Constants())[0]
+    assert np.abs(before).max() > 0.1
+    np.testing.assert_array_equal(after, before)

@@ -7,6 +7,7 @@ compile error) stop with one error naming the user's file and line."""
 
 from __future__ import annotations
 
+import re
 from pathlib import Path
 
 import numpy as np
@@ -14,6 +15,7 @@ import pytest
 
 from helpers import REPO
 from helpers.experiments import TINY, sets
+from helpers.gl import assert_ran_as_written
 from helpers.synthetic import synthetic_inputs
 from shaders_port.spirv.dialects import ShaderError, detect, front_end
 from shaders_port.spirv.loops import MAX_PASSES
@@ -49,9 +51,9 @@ def core_image(inputs):
 @pytest.mark.parametrize("name", sorted(DIALECTS))
 def test_each_dialect_renders_its_core_equivalent(name, inputs, core_image):
     """The same water in three dialects: the executor's image equals the core file's exactly
-    (the translation changes names, not arithmetic); the written file on llvmpipe (Mesa's
-    core context: the GLSL 330 translation of the file) matches the executor within the GL
-    check's thresholds."""
+    (the translation changes names, not arithmetic); the written file on llvmpipe, as written
+    on a context of its dialect (OpenGL compatibility profile for GLSL 1.20, OpenGL ES for
+    GLSL ES), matches the executor within the GL check's thresholds."""
     dialect, kw = DIALECTS[name]
     shader = UserShader.from_file(SHADERS / f"{name}.frag", **kw).check()
     assert shader.dialect.name == dialect
@@ -60,34 +62,161 @@ def test_each_dialect_renders_its_core_equivalent(name, inputs, core_image):
     check = gl_check_user(shader, inputs, shader.defaults(), ours)
     assert check["ran"] and check["passed"], check
     assert check["mean_abs"] <= GL_MEAN and check["p999"] <= GL_P999
+    assert_ran_as_written(check, "es" if shader.dialect.es else "compatibility")
 
 
-# schlick_fog_120 keeps uniform initializers, which GLSL ES refuses and HLSL ignores: a
-# user's uniform initializers are not yet carried into the engine targets (an open gap)
-@pytest.mark.parametrize("name", ["schlick_fog_es300", "schlick_fog_webgl1"])
+def test_compatibility_built_ins_run_as_written_from_the_fixed_function_state(inputs, monkeypatch):
+    """A GLSL 1.10 file reading gl_TexCoord[0], gl_NormalMatrix and gl_ModelViewProjectionMatrix
+    runs as written on a compatibility-profile context (the matrices loaded as its
+    fixed-function modelview and projection) and matches the executor (which reads them as the
+    translation's study inputs); without such a context its core-profile translation runs,
+    and the record says why."""
+    from shaders_port.spirv import gl_run
+    from study.report.calibration import _export_lines
+
+    shader = UserShader.from_file(SHADERS / "compat_builtins_110.frag").check()
+    assert shader.dialect.name == "GLSL 1.10"
+    ours = shader.render(inputs).numpy()
+    check = gl_check_user(shader, inputs, shader.defaults(), ours)
+    assert check["ran"] and check["passed"], check
+    assert_ran_as_written(check, "compatibility")
+    report = "\n".join(_export_lines(check, "compat_builtins_110.frag"))
+    assert f"the GL check ran {check['text']} on {check['context']}, vs the Dr.Jit" in report
+    monkeypatch.setattr(gl_run, "context_support", lambda kind: (0, "EGL: none, for the test"))
+    check = gl_check_user(shader, inputs, shader.defaults(), ours)
+    assert check["ran"] and check["passed"], check
+    assert check["text"] == "its core-profile translation (GLSL 330 core)"
+    assert check["why_translation"] == (
+        "no OpenGL compatibility-profile context here (EGL: none, for the test)"
+    )
+    report = "\n".join(_export_lines(check, "compat_builtins_110.frag"))
+    assert f"core-profile translation (GLSL 330 core) on {check['context']} (not" in report
+    assert "(not as written: no OpenGL compatibility-profile context here" in report
+
+
+@pytest.mark.parametrize(
+    "version", ["130", "140", "150 compatibility", "330 compatibility", "460 compatibility"]
+)
+def test_each_desktop_version_runs_as_written_where_the_context_runs_it(version, inputs):
+    """The GLSL 1.10 file under each later desktop #version: as written on the compatibility
+    profile (after the study's vertex shader in GLSL 1.20 or 1.50 compatibility, which link
+    with it), except a version newer than the context, whose translation runs, saying why."""
+    from shaders_port.spirv.gl_run import context_support
+
+    src = f"#version {version}\n" + (SHADERS / "compat_builtins_110.frag").read_text()
+    shader = UserShader(src, "v.frag").check()
+    check = gl_check_user(shader, inputs, shader.defaults(), shader.render(inputs).numpy())
+    assert check["ran"] and check["passed"], check
+    newest, about = context_support("compatibility")
+    if newest and shader.dialect.version > newest:
+        assert check["why_translation"] == f"{shader.dialect.name} is newer than {about} runs"
+    else:
+        assert_ran_as_written(check, "compatibility")
+
+
+def test_a_file_the_driver_rejects_as_written_runs_as_its_translation(inputs, capsys):
+    """A WebGL 1 file with GL_EXT_shader_texture_lod (GLSL 330 has textureLod built in): where
+    the ES driver lacks the extension (Mesa's ES 3 context offers it no GLSL ES 1.00 shader),
+    the check runs the translation and quotes the driver; the #extension line comes before the
+    precision lines the highp text adds (GLSL ES takes no #extension after a statement)."""
+    src = (
+        "#extension GL_EXT_shader_texture_lod : enable\nprecision highp float;\n"
+        "// @study constant K 0.1 2.0 1.0\nuniform float K;\nuniform sampler2D normalMap;\n"
+        "varying vec4 vTexCoord0;\n"
+        "void main() { gl_FragColor = K * texture2DLodEXT(normalMap, vTexCoord0.xy, 0.0); }\n"
+    )
+    shader = UserShader(src, "lod.frag").check()
+    check = gl_check_user(shader, inputs, shader.defaults(), shader.render(inputs).numpy())
+    assert check["ran"] and check["passed"], check
+    if check["text"].startswith("its core-profile translation"):
+        why = check["why_translation"]
+        assert why.startswith("OpenGL ES 3.") and "rejected your file as written: " in why
+        assert "texture2DLodEXT" in why and "its translation runs" in capsys.readouterr().err
+    else:
+        assert_ran_as_written(check, "es")
+
+
+def test_an_es_file_runs_at_highp_and_its_own_precision_is_measured(inputs):
+    """The WebGL 1 file samples at lowp (GLSL ES's default for samplers): on OpenGL ES its check
+    runs it with every value at highp, which matches the executor (32-bit); the file at its own
+    precision is measured beside it, and where llvmpipe computes lowp at 16-bit float (on a
+    CPU with F16C) and the difference passes the thresholds the record says why."""
+    shader = UserShader.from_file(SHADERS / "schlick_fog_webgl1.frag").check()
+    assert "precision highp sampler2D" not in shader.source
+    ours = shader.render(inputs).numpy()
+    check = gl_check_user(shader, inputs, shader.defaults(), ours)
+    assert check["ran"] and check["passed"], check
+    assert_ran_as_written(check, "es")
+    from shaders_port.spirv.gl_run import context_support
+
+    if not context_support("es")[0]:
+        return
+    assert check["text"].endswith(", every value at highp (lowp and mediump read as highp)")
+    own = check["own_precision"]
+    assert own["mean_abs"] >= check["mean_abs"] and own["within"] == ("note" not in own), own
+    if not own["within"]:
+        assert "16-bit float" in own["note"] and "precision highp sampler2D" in own["note"]
+    # the text at highp: lowp and mediump defined as highp after #version, the lines kept
+    with shader.gl_renderer(inputs, shader.defaults()) as r:
+        text = r.gl_run.text
+    assert text.startswith("#version 100\n#define lowp highp\n#define mediump highp\n")
+    assert text.split("#line 1\n", 1)[1] == shader.source
+
+
+def _core_with_uniforms(tmp_path) -> Path:
+    """schlick_fog.frag (GLSL 330 core) with its fog constants as uniforms with initializers."""
+    src = (SHADERS / "schlick_fog.frag").read_text()
+    for name in ("FOG_DENSITY", "FOG_COLOR"):
+        kind = "float" if name == "FOG_DENSITY" else "vec3"
+        assert f"const {kind} {name} = " in src
+        src = src.replace(f"const {kind} {name} = ", f"uniform {kind} {name} = ")
+    path = tmp_path / "schlick_fog_uniforms.frag"
+    path.write_text(src)
+    return path
+
+
+@pytest.mark.parametrize("name", [*sorted(DIALECTS), "schlick_fog_uniforms"])
 def test_each_dialect_exports_to_the_engine_targets(name, tmp_path, inputs):
     """The file is exported as it was written (fitted numbers in place); the engine targets are
     translated from its GLSL 330 core translation (glslang makes no SPIR-V of the older
-    dialects: the export of a WebGL 1 file failed there after its fit)."""
+    dialects: the export of a WebGL 1 file failed there after its fit), every uniform of a
+    fitted constant declared without initializer there (GLSL ES refuses the initializers of
+    GLSL 1.20 and 330 files, HLSL ignores them) and its fitted value in the binding sheets, for
+    the material to set; the HLSL run back on llvmpipe with those values matches."""
     from shaders_port.spirv.tools import missing_tools
+    from study.export.gl_check import gles_check_user, hlsl_check_user
     from study.export.shaders import export_user_shader
 
     if missing_tools():
         pytest.skip(f"the engine targets need {', '.join(missing_tools())}")
-    _, kw = DIALECTS[name]
-    shader = UserShader.from_file(SHADERS / f"{name}.frag", **kw).check()
-    export_user_shader(shader, shader.defaults(), tmp_path / "shaders", ["hlsl", "gles300"])
-    written = (tmp_path / "shaders" / "core" / f"{name}.frag").read_text()
-    assert written == shader.written(shader.defaults())
+    path = _core_with_uniforms(tmp_path) if name not in DIALECTS else SHADERS / f"{name}.frag"
+    kw = DIALECTS.get(name, ("", {}))[1]
+    shader = UserShader.from_file(path, **kw).check()
+    values = {"FOG_DENSITY": 0.8, "FOG_COLOR": (0.1, 0.25, 0.3)}  # fitted, not the start values
+    out = tmp_path / "shaders"
+    export_user_shader(shader, values, out, ["hlsl", "gles300"])
+    written = (out / "core" / f"{name}.frag").read_text()
+    assert written == shader.written(values)
     for target in ("hlsl/{}.frag.hlsl", "gles300/{}.frag"):
-        assert (tmp_path / "shaders" / target.format(name)).is_file(), target
-    # the HLSL runs back on llvmpipe (its colour output is the translation's _study_FragColor)
-    from study.export.gl_check import hlsl_check_user
-
-    ours = shader.render(inputs).numpy()
-    check = hlsl_check_user(shader, inputs, shader.defaults(), ours, tmp_path / "shaders")
+        text = (out / target.format(name)).read_text()
+        assert re.search(r"\bFOG_DENSITY\s*=", text) is None, target  # no initializer
+        sheet = (out / target.split("/")[0] / "BINDINGS.md").read_text()
+        assert "## Uniforms the material sets" in sheet
+        assert "| `FOG_DENSITY` | float | 0.8 |" in sheet, sheet
+        assert "| `FOG_COLOR` | vec3 | vec3(0.1, 0.25, 0.3) |" in sheet, sheet
+    # the HLSL runs back on llvmpipe (its colour output is the translation's _study_FragColor),
+    # the GLSL ES on an OpenGL ES context, each with the sheet's values set as uniforms
+    ours = shader.render(inputs, values).numpy()
+    check = hlsl_check_user(shader, inputs, values, ours, out)
     if check.get("ran"):
         assert check["passed"], check
+    check = gles_check_user(shader, inputs, values, ours, out)
+    if check.get("ran"):
+        assert check["passed"] and check["context"].startswith("OpenGL ES 3."), check
+    # the fitted values are what the GLSL ES needs: the start values give another image
+    other = gles_check_user(shader, inputs, shader.defaults(), ours, out)
+    if other.get("ran"):
+        assert not other["passed"], other
 
 
 def test_dialects_are_detected_and_unknown_versions_refused():
@@ -310,11 +439,25 @@ def test_the_load_check_passes_every_shader_the_executor_runs():
     assert {"Cross", "Reflect", "Normalize", "FMix", "Pow"} <= supported_std450()
 
 
-def test_gl_check_of_a_dialect_opengl_cannot_run_fails_with_its_reason(inputs, capsys):
+def test_gl_check_of_a_dialect_no_context_runs_fails_with_its_reason(inputs, capsys, monkeypatch):
+    """GLSL ES 3.10 runs as written on an OpenGL ES context; where none is made it has no
+    translation to fall back to: a failed check naming the reason."""
+    from shaders_port.spirv import gl_run
+
     shader = UserShader.from_file(SHADERS / "water_es310.frag").check()
-    check = gl_check_user(shader, inputs, {}, shader.render(inputs).numpy())
+    ours = shader.render(inputs).numpy()
+    if gl_run.context_support("es")[0] >= 310:
+        check = gl_check_user(shader, inputs, {}, ours)
+        assert check["ran"] and check["passed"], check
+        assert_ran_as_written(check, "es")
+    monkeypatch.setattr(gl_run, "context_support", lambda kind: (0, "EGL: none, for the test"))
+    check = gl_check_user(shader, inputs, {}, ours)
     assert check["passed"] is False and check["ran"] is False
-    assert check["why"].startswith("water_es310.frag is GLSL ES 3.10, which a desktop OpenGL")
+    assert check["why"] == (
+        "water_es310.frag is GLSL ES 3.10, which no context here runs (no OpenGL ES context "
+        "here (EGL: none, for the test)) and which has no core-profile translation; glslang "
+        "compiled it with its ES profile"
+    )
     assert "the GL check failed: water_es310.frag" in capsys.readouterr().err
 
 

@@ -16,13 +16,17 @@ import numpy as np
 __all__ = ["grid_renderer_class"]
 
 _GL_DEPTH_TEST = 0x0B71
-MASK_FRAG = "#version 330 core\nout vec4 fragColor;\nvoid main(void) { fragColor = vec4(1.0); }\n"
 
 
-def grid_renderer_class(base, vertex_source: str, attributes: dict, triangles, uniforms: dict):
+def grid_renderer_class(
+    base, vertex_source: str, attributes: dict, triangles, uniforms: dict, builtins=None
+):
     """A subclass of ``base`` (``GLRenderer`` or a subclass) drawing the grid: ``attributes``
     name -> (V, k) float32 per-vertex values, ``triangles`` (T, 3) vertex indices, ``uniforms``
-    name -> GL bytes (matrices column-major). Constructed as ``base`` is; ``render(None)``."""
+    name -> GL bytes (matrices column-major); ``builtins``: attribute name -> the compatibility
+    built-in it is when ``vertex_source`` reads that instead (``gl_Vertex``, ... on a
+    compatibility context, ``gl.dialect``). Constructed as ``base`` is; ``render(None)``."""
+    builtins = dict(builtins or {})
     tris = np.ascontiguousarray(triangles, np.int32)
 
     class GridRenderer(base):
@@ -38,8 +42,13 @@ def grid_renderer_class(base, vertex_source: str, attributes: dict, triangles, u
 
         def _vao(self, prog):
             content = [(buf, f"{k}f", n) for n, (buf, k) in self._buffers.items() if n in prog]
-            return self.ctx.vertex_array(prog, content, index_buffer=self._ibo,
-                                         index_element_size=4)  # fmt: skip
+            vao = self.ctx.vertex_array(prog, content, index_buffer=self._ibo,
+                                        index_element_size=4)  # fmt: skip
+            # the attributes the program reads as compatibility built-ins (gl_Vertex, ...)
+            named = {builtins[n]: (b, k, 0, 0) for n, (b, k) in self._buffers.items()
+                     if n not in prog and n in builtins}  # fmt: skip
+            self._fixed_function_arrays(vao, named)
+            return vao
 
         def _program(self, frag_source: str):
             hit = self._programs.get(frag_source)
@@ -72,7 +81,7 @@ def grid_renderer_class(base, vertex_source: str, attributes: dict, triangles, u
         def _render_mask(self) -> np.ndarray:
             self.fbo = self.ctx.framebuffer(color_attachments=[self._color],
                                             depth_attachment=self._depth)  # fmt: skip
-            prog = self.ctx.program(vertex_shader=self._vert, fragment_shader=MASK_FRAG)
+            prog = self.ctx.program(vertex_shader=self._vert, fragment_shader=self.MASK_FRAG)
             self._set_static_uniforms(prog)
             vao = self._vao(prog)
             self._draw_grid(vao)

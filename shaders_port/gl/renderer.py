@@ -20,6 +20,7 @@ import numpy as np
 
 from ..glsl_text import compat_to_core, read_source, with_define, write_constants
 from ..inputs import CONSTANT_SPECS, Constants, ShaderInputs, normal_matrix
+from .contexts import create_context
 
 _GL_TEXTURE_CUBE_MAP_SEAMLESS = 0x884F
 _FRAG_NAMES = ("water_refraction", "water_reflection", "water_baseline")
@@ -52,19 +53,7 @@ _OPTIONAL_SAMPLERS = {
 def create_egl_context():
     """A standalone moderngl context (OpenGL >= 3.3 core) through EGL; clear error if
     unavailable."""
-    try:
-        import moderngl
-    except ImportError as exc:  # pragma: no cover - moderngl is a pinned dependency
-        raise RuntimeError("moderngl is not installed; `pip install moderngl==5.13.0`") from exc
-    try:
-        ctx = moderngl.create_context(standalone=True, backend="egl", require=330)
-    except Exception as exc:
-        raise RuntimeError(
-            "could not create a headless OpenGL 3.3 context through EGL "
-            f"({type(exc).__name__}: {exc}). Install Mesa's EGL and drivers, e.g. on Debian/Ubuntu "
-            "`apt-get install libegl1 libegl-mesa0 libgl1-mesa-dri` (llvmpipe needs no GPU)"
-        ) from exc
-    return ctx
+    return create_context("core")
 
 
 def _mat_bytes(m: np.ndarray) -> bytes:
@@ -87,6 +76,8 @@ class GLRenderer:
     """
 
     MAX_PROGRAMS = 8  # compiled programs kept (one per distinct constants text), oldest dropped
+    CONTEXT = "core"  # the kind of context (``gl.contexts.KINDS``)
+    MASK_FRAG = _MASK_FRAG  # the fragment shader of the coverage mask (links with ``_vert``)
 
     def __init__(
         self,
@@ -113,9 +104,11 @@ class GLRenderer:
         self._source = source if source is not None else read_source(name, "frag", dialect)
         self._vert = read_source("water", "vert", "core")
         self._programs: dict[str, object] = {}
-        self.ctx = create_egl_context()
+        self.ctx = create_context(self.CONTEXT)
         try:
-            self.ctx.disable_direct(_GL_TEXTURE_CUBE_MAP_SEAMLESS)
+            if self.CONTEXT != "es":  # OpenGL ES filters every cube map seamlessly
+                self.ctx.disable_direct(_GL_TEXTURE_CUBE_MAP_SEAMLESS)
+            self._setup_context()
             self._setup_geometry()
             self._setup_textures()
             w, h = inputs.width, inputs.height
@@ -127,6 +120,13 @@ class GLRenderer:
             raise
 
     # -- set-up -------------------------------------------------------------------------------
+    def _setup_context(self) -> None:
+        """State of the context the shaders read besides uniforms (none on a core context)."""
+
+    def _fixed_function_arrays(self, vao, arrays: dict) -> None:
+        """Feed ``vao`` 's compatibility built-in attributes from ``arrays`` (built-in name ->
+        (buffer, components, stride, offset)); none on a core context."""
+
     def _setup_geometry(self) -> None:
         x0, z0, x1, z1 = self.inputs.water_rect
         tile = self.inputs.normal_tile
@@ -202,12 +202,7 @@ class GLRenderer:
                 prog = self.ctx.program(vertex_shader=self._vert, fragment_shader=frag_source)
             except self._mgl.Error as exc:
                 raise RuntimeError(f"OpenGL rejected the {self.name} shader:\n{exc}") from exc
-            if "aMultiTexCoord0" in prog:
-                vao = self.ctx.vertex_array(
-                    prog, [(self._vbo, "3f 2f", "aVertex", "aMultiTexCoord0")]
-                )
-            else:  # a variant that reads no normal map (the linker dropped the texcoords)
-                vao = self.ctx.vertex_array(prog, [(self._vbo, "3f 8x", "aVertex")])
+            vao = self._vertex_array(prog)
             self._set_static_uniforms(prog)
             prog = (prog, vao)
             self._programs[frag_source] = prog
@@ -216,6 +211,13 @@ class GLRenderer:
                 old_vao.release()
                 old_prog.release()
         return prog
+
+    def _vertex_array(self, prog):
+        """The vertex array drawing the water quad (``_vbo``) with ``prog``."""
+        if "aMultiTexCoord0" in prog:
+            return self.ctx.vertex_array(prog, [(self._vbo, "3f 2f", "aVertex", "aMultiTexCoord0")])
+        # a variant that reads no normal map (the linker dropped the texcoords)
+        return self.ctx.vertex_array(prog, [(self._vbo, "3f 8x", "aVertex")])
 
     def _set_static_uniforms(self, prog) -> None:
         i = self.inputs
@@ -281,9 +283,9 @@ class GLRenderer:
         return compat_to_core(src, "frag") if self.dialect == "compat" else src
 
     def _render_mask(self) -> np.ndarray:
-        prog = self.ctx.program(vertex_shader=self._vert, fragment_shader=_MASK_FRAG)
+        prog = self.ctx.program(vertex_shader=self._vert, fragment_shader=self.MASK_FRAG)
         self._set_static_uniforms(prog)
-        vao = self.ctx.vertex_array(prog, [(self._vbo, "3f 8x", "aVertex")])
+        vao = self._vertex_array(prog)
         self.fbo.use()
         self.fbo.clear(0.0, 0.0, 0.0, 0.0)
         vao.render(self._mgl.TRIANGLE_STRIP)

@@ -40,11 +40,13 @@ class Site:
     """One declaration of a constant: ``stage`` ('fragment' or 'vertex'), ``span`` the (start,
     end) character offsets of its initializer in that stage's file (a uniform without
     initializer, ``bare``: both the offset of its ``;``; one an ``#include`` d file declares:
-    ``(-1, -1)``, never written back)."""
+    ``(-1, -1)``, never written back); ``assign``: of a uniform with an initializer, the
+    offsets of `` = <value>`` (empty otherwise)."""
 
     stage: str
     span: tuple
     bare: bool
+    assign: tuple = ()  # a uniform with an initializer: the offsets of `` = <value>``
 
 
 @dataclass(frozen=True)
@@ -71,6 +73,11 @@ class UserConstant:
         """Every declaration a uniform without initializer (its start value is the
         declaration's START)."""
         return all(s.bare for s in self.sites)
+
+    @property
+    def uniform(self) -> bool:
+        """Whether the constant is a uniform (the engine may set it), not a ``const``."""
+        return any(s.bare or s.assign for s in self.sites)
 
     @property
     def span(self) -> tuple:
@@ -147,7 +154,9 @@ def _one_site(stage: str, name: str, source: str, label: str, found: tuple):
     if name in bare:
         return Site(stage, (m.start("tail"), m.start("tail")), True), None, m["type"], where
     value = parse_value(m["value"], m["type"], where)
-    return Site(stage, (m.start("value"), m.end("value")), False), value, m["type"], where
+    assign = (m.end("name"), m.end("value")) if m["head"].lstrip().startswith("uniform") else ()
+    site = Site(stage, (m.start("value"), m.end("value")), False, assign)
+    return site, value, m["type"], where
 
 
 def _no_declaration(name: str, labels: list[str]) -> ValueError:
@@ -244,16 +253,22 @@ def _included_constant(name, m, stage, texts, lo, hi, start) -> UserConstant:
     return UserConstant(name, m["type"], default, lo, hi, (Site(stage, (-1, -1), True),))
 
 
-def written_text(source: str, constants, values: dict, stage: str, initializers: bool) -> str:
+def written_text(source: str, constants, values: dict, stage: str, initializers: bool,
+                 uniform_initializers: bool = True) -> str:  # fmt: skip
     """``source`` (the file of ``stage``) with ``values`` (name -> float | tuple) in place of
     the initializers of ``constants`` declared there; every other byte kept. A uniform without
     initializer gets one where ``initializers`` (its dialect allows one), else is left as it
-    is; one an ``#include`` declares is never written."""
+    is; one an ``#include`` declares is never written. ``uniform_initializers`` False: a
+    uniform's initializer is removed (the material sets the value)."""
     sites = [(c, c.site(stage)) for c in constants]
     sites = sorted(((c, s) for c, s in sites if s is not None), key=lambda cs: cs[1].span[0])
     out, pos = [], 0
     for c, s in sites:
         if s.bare and (not initializers or s.span[0] < 0):
+            continue
+        if s.assign and not uniform_initializers:
+            out += [source[pos : s.assign[0]]]
+            pos = s.assign[1]
             continue
         v = values[c.name]
         comps = v if isinstance(v, (tuple, list)) else (v,)

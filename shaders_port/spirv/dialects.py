@@ -12,9 +12,8 @@ Dialects, from the ``#version`` directive (:func:`detect`):
 * ``#version 110`` ... ``150`` (any profile), ``#version 100`` (GLSL ES 1.00) and
   ``#version 300 es`` (WebGL 2), and ``#version 330`` ... ``460 compatibility``: translated;
 * ``#version 330`` ... ``460`` (``core`` or no profile): compiled as written;
-* ``#version 310 es`` / ``320 es``: compiled as written (glslang makes their SPIR-V); OpenGL
-  on Mesa's llvmpipe (a desktop context) does not run them, so their GL check fails with
-  that reason.
+* ``#version 310 es`` / ``320 es``: compiled as written (glslang makes their SPIR-V); they
+  have no translation (the GL check runs them on an OpenGL ES context, ``spirv.gl_run``).
 
 Anything else (``#version 200``, ``#version 130 es``, a ``#version`` after other code, ...)
 is refused with a :class:`ShaderError` naming the line.
@@ -76,6 +75,7 @@ from pathlib import Path
 __all__ = [
     "Dialect",
     "ShaderError",
+    "at_highp",
     "detect",
     "for_opengl",
     "front_end",
@@ -127,6 +127,8 @@ _VERTEX_BUILTINS = {
     "gl_ProjectionMatrix": ("g_ProjectionMatrix", "uniform mat4"),
     "gl_NormalMatrix": ("g_NormalMatrix", "uniform mat3"),
 }
+# the translation's attribute name -> the compatibility built-in attribute it stands for
+BUILTIN_ATTRIBUTES = {new: old for old, (new, d) in _VERTEX_BUILTINS.items() if d.startswith("in ")}
 _FTRANSFORM = re.compile(r"\bftransform\s*\(\s*\)")
 _VERTEX_CORE = {"gl_Position", "gl_PointSize", "gl_VertexID", "gl_InstanceID", "gl_ClipDistance"}
 _CORE_EXTENSIONS = ("GL_OES_standard_derivatives", "GL_EXT_shader_texture_lod", "GL_EXT_frag_depth")
@@ -330,7 +332,13 @@ def omit_functions(source: str, names) -> str:
 
 
 def front_end(
-    source: str, label: str, defines=(), include_paths=(), preprocess=False, stage: str = "frag"
+    source: str,
+    label: str,
+    defines=(),
+    include_paths=(),
+    preprocess=False,
+    stage: str = "frag",
+    translate: bool = True,
 ) -> str:
     """The GLSL glslang compiles to SPIR-V for ``source`` (a shader of ``stage`` 'frag' or
     'vert' in any dialect of the module doc, file name ``label``), with the preprocessor names
@@ -341,8 +349,10 @@ def front_end(
     is compiled) unless ``preprocess`` (for an OpenGL driver, which takes no defines); any
     other is preprocessed by glslang (``#include`` s expanded, defines applied, comments
     removed) with ``#line`` directives keeping the file's line numbers, and translated to GLSL
-    330 core if its dialect needs it. ShaderError for a file that does not compile in its own
-    dialect or uses what the translation refuses, naming the file and line."""
+    330 core if its dialect needs it and ``translate`` (False: the file in its own dialect, for
+    a context that runs that dialect: ``gl.contexts``). ShaderError for a file that does not
+    compile in its own dialect or uses what the translation refuses, naming the file and
+    line."""
     version = version_define(defines)
     defines, omitted = split_defines(defines)
     source = omit_functions(source, omitted)
@@ -354,7 +364,7 @@ def front_end(
     includes = has_includes(source)  # after #import is written #include
     dargs = [f"-D{x}" for x in defines]
     clean = _unshadowed if d.es else (lambda text: text)
-    if not d.translated:
+    if not (d.translated and translate):
         if not (includes or preprocess):
             own = source if version is None else _with_head(source, d, _own_version_line(d), [])
             return clean(own)
@@ -550,6 +560,34 @@ def _line_map(lines: list[str], label: str) -> list[str]:
             continue
         cur += 1
     return out
+
+
+# read every precision qualifier of a GLSL ES text as highp, and make highp the default of
+# every type that has one (GLSL ES samplers default to lowp)
+_HIGHP = [
+    "#define lowp highp",
+    "#define mediump highp",
+    *(f"precision highp {t};" for t in ("float", "int", "sampler2D", "samplerCube")),
+]
+
+
+def at_highp(text: str, label: str) -> str:
+    """A GLSL ES ``text`` (of the file ``label``) with every value at ``highp``: ``lowp`` and
+    ``mediump`` defined as ``highp`` after ``#version``, and highp the default precision of
+    floats, ints and the samplers after the file's last ``#extension`` line (GLSL ES takes no
+    ``#extension`` after a statement), each insertion followed by a ``#line`` (every line of the
+    file keeps its number); a desktop GLSL text as it is (desktop GLSL ignores precision)."""
+    d = detect(text, label)
+    if not d.es:
+        return text
+    lines = text.split("\n")
+    ext = [i for i, ln in enumerate(lines) if re.match(r"\s*#\s*extension\b", ln)]
+    if not ext:
+        return _with_head(text, d, _own_version_line(d), _HIGHP)
+    k = ext[-1] + 1  # the file's lines 1..k end with its last #extension
+    precision = [*_HIGHP[2:], _line_directive(k + 1, d.version, True)]
+    text = "\n".join([*lines[:k], *precision, *lines[k:]])
+    return _with_head(text, d, _own_version_line(d), _HIGHP[:2])
 
 
 def for_opengl(text: str) -> str:

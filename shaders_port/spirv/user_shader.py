@@ -26,7 +26,10 @@ is one number or its components joined by commas, ``0.1,0.2,0.3``). Written back
 (:meth:`UserShader.written`), a bare uniform gets the fitted value as an initializer where its
 dialect allows one (desktop GLSL 1.20 and later) and is left as it is otherwise (GLSL 1.10,
 GLSL ES): the fitted value is then only in ``constants.json`` and the binding sheets, for the
-engine to set; the GL check sets it as a uniform.
+engine to set; the GL check sets it as a uniform. The engine targets are made from the text
+with no uniform initializer (``written(values, uniform_initializers=False)``). The GL check
+runs the file as ``spirv.gl_run`` chooses (as written on a context of its dialect, or its
+core-profile translation).
 Every problem is refused by :meth:`UserShader.validate` with a message naming it: a constant
 without such a declaration, a range that is empty or excludes the start value, a binding to a
 name that is not a study input, a bound name the shader does not use, a sampler or uniform the
@@ -49,12 +52,10 @@ from pathlib import Path
 import drjit as dr
 import numpy as np
 
-from ..gl.renderer import GLRenderer
-from ..gl.round_trip import TranslatedRenderer
 from ..pipeline.frame import finish_output, tangents
 from ..pipeline.raster import prepare
 from ..pipeline.texture import backend_types
-from . import dialects
+from . import dialects, gl_run
 from . import engine_inputs as _engine
 from . import translated as spirv_port
 from .declaration import BARE, UserConstant, declared, find_constants, written_text
@@ -479,16 +480,23 @@ class UserShader:
         return out, J.reshape(r.height, r.width, 3, len(names))
 
     # ---- the file ----------------------------------------------------------------------------
-    def written(self, values: dict, bare_initializers: bool = True) -> str:
+    def written(self, values: dict, bare_initializers: bool = True,
+                uniform_initializers: bool = True) -> str:  # fmt: skip
         """The shader's text with ``values`` in place of its constants' initializers; every
         other byte as in the file. A uniform declared without initializer gets one where its
-        dialect allows (desktop GLSL 1.20 and later) and ``bare_initializers`` asks."""
+        dialect allows (desktop GLSL 1.20 and later) and ``bare_initializers`` asks.
+        ``uniform_initializers`` False: no uniform of a constant has an initializer (those the
+        file gives one lose it), the text the engine targets are made from (GLSL ES refuses
+        uniform initializers, HLSL and Metal ignore them: the material sets the values,
+        ``study.export.bindings``)."""
         d = self.dialect
-        initializers = bare_initializers and not d.es and d.version >= 120
+        initializers = bare_initializers and uniform_initializers and not d.es and d.version >= 120
         vals = self._checked(values)
-        return written_text(self.source, self.constants.values(), vals, "fragment", initializers)
+        return written_text(self.source, self.constants.values(), vals, "fragment", initializers,
+                            uniform_initializers)  # fmt: skip
 
-    def vertex_written(self, values: dict, bare_initializers: bool = True) -> str | None:
+    def vertex_written(self, values: dict, bare_initializers: bool = True,
+                       uniform_initializers: bool = True) -> str | None:  # fmt: skip
         """The user's vertex shader file's text with ``values`` in place of the initializers of
         the constants it declares, as :meth:`written` (None without a vertex shader; the
         fragment shader's :meth:`written` for one file of both stages)."""
@@ -496,88 +504,55 @@ class UserShader:
             return None
         v = self.vertex.shader
         if v.shared:
-            return self.written(values, bare_initializers)
-        d = dialects.detect(v.original, v.label)
-        initializers = bare_initializers and not d.es and d.version >= 120
+            return self.written(values, bare_initializers, uniform_initializers)
+        d = dialects.detect(v.original, v.label, dialects.version_define(v.defines))
+        initializers = bare_initializers and uniform_initializers and not d.es and d.version >= 120
         vals = self._checked(values)
-        return written_text(v.original, self.constants.values(), vals, "vertex", initializers)
+        return written_text(v.original, self.constants.values(), vals, "vertex", initializers,
+                            uniform_initializers)  # fmt: skip
 
-    def vertex_gl_source(self, values: dict | None = None, bare_initializers: bool = True):
+    def vertex_gl_source(self, values: dict | None = None, bare_initializers: bool = True,
+                         uniform_initializers: bool = True):  # fmt: skip
         """The GLSL 330 core OpenGL runs for :meth:`vertex_written` (translated as the vertex
         shader is compiled: ``spirv.vertex.VertexShader.gl_text``); None without one."""
         if self.vertex is None:
             return None
-        return self.vertex.shader.gl_text(self.vertex_written(values or {}, bare_initializers))
+        text = self.vertex_written(values or {}, bare_initializers, uniform_initializers)
+        return self.vertex.shader.gl_text(text)
 
-    def gl_source(self, values: dict | None = None, bare_initializers: bool = True) -> str:
-        """The GLSL OpenGL runs for :meth:`written` with ``values``: that text, or, for a
-        dialect that is translated or a file with ``#include`` s or ``defines``, its
-        translation to GLSL 330 core (``dialects.front_end``). ``bare_initializers`` False
-        leaves the uniforms declared without initializer so (the engine targets: GLSL ES and
-        HLSL have no uniform initializers; their binding sheets give the values). ShaderError
-        for GLSL ES 3.10 and later, which a desktop OpenGL does not run."""
+    def gl_source(self, values: dict | None = None, uniform_initializers: bool = True) -> str:
+        """The core-profile GLSL of :meth:`written` with ``values`` (and
+        ``uniform_initializers``): that text for a GLSL 330+ core file, else its translation to
+        GLSL 330 core (``dialects.front_end``; a file with ``#include`` s or ``defines``
+        preprocessed). ShaderError for GLSL ES 3.10 and later, which has no translation."""
         d = self.dialect
         if not d.runs_on_desktop_gl:
             raise dialects.ShaderError(
-                f"{self.label} is {d.name}, which a desktop OpenGL context does not run "
-                "(moderngl's EGL backend binds desktop OpenGL only, so Mesa's llvmpipe gets no "
-                "OpenGL ES context here); glslang compiled it with its ES profile"
+                f"{self.label} is {d.name}, which has no core-profile translation (glslang "
+                "compiles it with its ES profile)"
             )
-        text = self.written(values or {}, bare_initializers)
+        text = self.written(values or {}, uniform_initializers=uniform_initializers)
         if not (d.translated or self.defines or "#include" in text):
             return text
         return dialects.for_opengl(
             dialects.front_end(text, self.label, self.defines, self.include_paths, True)
         )
 
-    def gl_renderer(self, inputs, values: dict | None = None, source=None, reflection=None):
-        """A ``GLRenderer`` (OpenGL, llvmpipe) drawing the written-back shader with ``values`` (its
-        samplers and uniforms bound to the study's inputs by the declaration); or, given
-        ``source`` and its ``reflection`` (``spirv.tools.hlsl_round_trip`` of the exported
-        HLSL), that GLSL through a ``TranslatedRenderer``. Use it as a context manager,
-        ``render(None)`` / ``time_frames(None, n, warmup)``."""
+    def gl_renderer(self, inputs, values: dict | None = None, source=None, reflection=None,
+                    es=None, **how):  # fmt: skip
+        """A ``GLRenderer`` (OpenGL, llvmpipe) drawing the written-back shader with ``values``
+        as ``spirv.gl_run.plan`` chooses (the file as written on a context of its dialect, or
+        its core-profile translation; ``r.gl_run`` says which; ``how``: ``as_written`` and
+        ``highp`` of ``spirv.gl_run.plan``); or, given ``source`` and its
+        ``reflection`` (``spirv.tools.hlsl_round_trip`` of the exported HLSL), that GLSL
+        through a ``TranslatedRenderer``, or, given ``source`` and ``es`` (the export's GLSL ES
+        3.00 fragment and vertex shaders), those on an OpenGL ES context: every uniform
+        constant set as the material sets it. Its samplers and uniforms are bound to the
+        study's inputs by the declaration. Use it as a context manager, ``render(None)`` /
+        ``time_frames(None, n, warmup)``."""
+        return gl_run.renderer(self, inputs, self._checked(values), source, reflection, es, **how)
 
-        bindings = self.run_bindings()
-        if self.vertex is not None:  # its uniforms that are study or engine inputs
-            bindings = {**self.vertex.shader.inputs, **bindings}
-        base = GLRenderer if reflection is None else TranslatedRenderer
-        vals = self._checked(values)
-        # every constant that is a uniform of the program gets its value (one without
-        # initializer must; one with an initializer loses it in the HLSL round trip)
-        bare = {c.name: np.asarray(vals[c.name], np.float32).tobytes()
-                for c in self.constants.values()}  # fmt: skip
-        bare.update({n: np.float32(v).tobytes() for n, v in self.values.items()})
-        if self.vertex is not None:  # the grid drawn with the user's GLSL vertex shader
-            base = self.vertex.gl_class(base, inputs, self.engine["up"],
-                                        self.vertex_gl_source(values))  # fmt: skip
-        base = _engine.gl_class(base, self.engine)
-
-        label = self.label
-
-        class _Bound(base):
-            def __init__(self, *args, **kw):
-                super().__init__(*args, **kw)
-                self.name = label  # messages name the user's file
-
-            def _sampler_uniform(self, prog, sname):
-                for name in [n for n, s in bindings.items() if s == sname] + [sname]:
-                    found = super()._sampler_uniform(prog, name)
-                    if found is not None:
-                        return found
-                return None
-
-            def _write_uniforms(self, prog, vals):
-                renamed = {**bare, **vals}
-                for n, s in bindings.items():
-                    if s in vals:
-                        renamed[n] = vals[s]
-                super()._write_uniforms(prog, renamed)
-
-        if reflection is None:
-            return _Bound("water_refraction", inputs, source=self.gl_source(values))
-        return _Bound("water_refraction", inputs, source, reflection)
-
-    def gl_render(self, inputs, values: dict | None = None):
+    def gl_render(self, inputs, values: dict | None = None, **how):
         """The written-back shader on OpenGL (llvmpipe): ``(rgba (H, W, 4), mask (H, W))``."""
-        with self.gl_renderer(inputs, values) as r:
+        with self.gl_renderer(inputs, values, **how) as r:
             return r.render(None)

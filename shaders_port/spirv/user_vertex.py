@@ -349,10 +349,11 @@ class UserVertex:
         return finish_output(m, P, color, diag, spec.label)
 
     # ---- OpenGL ----------------------------------------------------------------------------
-    def gl_class(self, base, inputs, up: str = "y", source: str | None = None):
+    def gl_class(self, base, inputs, up: str = "y", source: str | None = None, builtins=None):
         """``base`` (a ``GLRenderer`` class) drawing the grid with this vertex shader (its GLSL
-        330 ``source``, by default the file's as compiled): its attributes and recognised
-        uniforms set as :meth:`frame` binds them, in the world frame ``up``."""
+        330 text, or ``source``: the file as written, whose compatibility built-in attributes
+        ``builtins`` names, ``gl.grid``): its attributes and recognised uniforms set as
+        :meth:`frame` binds them, in the world frame ``up``."""
         mod, grid = self.shader.module, self.grid(inputs)
         attributes, uniforms = {}, {}
         for vid, ins in mod.defs.items():
@@ -372,4 +373,4 @@ class UserVertex:
             elif name in self.shader.values:  # a `// @study value` pragma's
                 uniforms[name] = np.float32(self.shader.values[name]).tobytes()
         text = self.shader.source if source is None else source
-        return grid_renderer_class(base, text, attributes, grid.triangles, uniforms)
+        return grid_renderer_class(base, text, attributes, grid.triangles, uniforms, builtins)

@@ -195,7 +195,8 @@ class VertexShader:
         # the names of the constants to fit it declares, compiled as uniforms that each run
         # binds (``spirv.user_shader.UserShader`` finds them)
         self.original, self.label, self.path = source, label, path
-        self.defines, self.include_paths = tuple(defines), tuple(include_paths)
+        self.defines = tuple(defines)
+        self.include_paths = tuple(str(p) for p in include_paths)
         self.shared, self.constants = bool(shared), tuple(constants)
         compiled = self.glslang_text(source)
         self.source = source if compiled is source else dialects.for_opengl(compiled)

@@ -21,16 +21,15 @@ from .._progress import Stages
 from .._progress import log as _log
 from ..config.experiment import load_experiment
 from ..export.gl_check import (
-    GLES_NOT_RUN,
     gl_check,
     gl_check_user,
+    gles_check_user,
     hlsl_check_user,
     manifest_checks,
     target_checks,
 )
 from ..export.shaders import export_shaders, export_user_shader
 from ..export.targets import resolve_targets
-from ..export.viewer import not_drawn
 from ..export.textures import lut_image, texture_record, with_exported_textures, write_textures
 from ..fit.build import build_model
 from ..fit.calibrate import timed
@@ -139,8 +138,10 @@ def export_calibration(exp, model, frames: list, cal, out: Path, timings: dict):
         ours = [user.render(i, fitted, backend=model.backend).numpy() for i in frames]
         gl = [gl_check_user(user, i, fitted, o) for i, o in zip(frames, ours)]
         engine_targets = manifest_checks(shaders)
-        if "gles300" in engine_targets and not_drawn(user):  # no viewer/ runs them
-            engine_targets["gles300"]["llvmpipe"] = GLES_NOT_RUN
+        if "gles300" in engine_targets:
+            engine_targets["gles300"]["llvmpipe"] = gles_check_user(
+                user, frames[0], fitted, ours[0], shaders
+            )
         if "hlsl" in engine_targets:
             engine_targets["hlsl"]["llvmpipe"] = hlsl_check_user(
                 user, frames[0], fitted, ours[0], shaders

@@ -205,6 +205,59 @@ def constants_lines(spec: dict, constants, fit: dict | None) -> list[str]:
     return lines
 
 
+# what a target does with a uniform's initializer (so each fitted uniform is declared without one)
+_INITIALIZERS = {
+    "gles300": "GLSL ES refuses a uniform initializer",
+    "hlsl": "HLSL ignores the initializer of a constant-buffer member (the application fills "
+    "the buffer)",
+    "msl": "Metal takes the uniforms from a buffer the application fills",
+    "spirv": "the uniforms are set by the application (`glUniform*`)",
+}
+
+
+def _uniform_types(reflections: dict) -> dict:
+    """Name -> GLSL type of every plain uniform of the reflections (block members and loose)."""
+    out = {}
+    for refl in reflections.values():
+        for ubo in refl.get("ubos", []):
+            out.update({m["name"]: m["type"] for m in refl["types"][ubo["type"]]["members"]})
+        out.update({u["name"]: u["type"] for u in refl.get("loose_uniforms", [])})
+    return out
+
+
+def material_lines(target: str, reflections: dict, constants, fit: dict | None) -> list[str]:
+    """The section of the fitted constants that are uniforms of the target's shaders (a user's
+    shader's uniforms, ``uniform float FOG_DENSITY = 0.35;`` or without initializer): each
+    with its value, which the material must set (``constants``, ``fit`` as
+    :func:`constants_lines`)."""
+    values = constants if isinstance(constants, dict) else constants.to_glsl_dict()
+    types = _uniform_types(reflections)
+    names = [n for n in values if n in types]
+    if not names:
+        return []
+    status = (fit or {}).get("status") or {}
+    rows = []
+    for n in names:
+        v = values[n]
+        text = ", ".join(_fmt(x) for x in v) if isinstance(v, (tuple, list)) else _fmt(v)
+        text = f"{types[n]}({text})" if isinstance(v, (tuple, list)) else text
+        st = status.get(n, status.get(f"{n}[0]"))
+        mark = "**" if st in ("fitted", "bound") else ""
+        rows.append(f"| `{n}` | {types[n]} | {mark}{text}{mark} | {STATUS_WORDS.get(st, st)} |")
+    return [
+        "## Uniforms the material sets",
+        "",
+        f"Constants of the shader that are uniforms: {_INITIALIZERS[target]}, so each is "
+        "declared here without one. Set each to its value below, as the material sets its "
+        "other uniforms (by name).",
+        "",
+        "| name | type | value | |",
+        "|---|---|---|---|",
+        *rows,
+        "",
+    ]
+
+
 def _bind_rows(reflections: dict, values: dict | None = None) -> list[str]:
     """What the application binds, over every stage: textures, uniforms (a member of a stage's
     constant buffer once per stage) and the vertex attributes. ``values``: a user's shader's
@@ -272,6 +325,7 @@ def binding_sheet(
         "",
     ]
     out += constants_lines(spec, constants, fit)
+    out += material_lines(target, reflections, constants, fit)
     out += [f"## Conventions of {target}", "", *[f"* {n}" for n in _NOTES[target]], ""]
     full = [f"# Binding sheet, in full: {target}", "", "The short sheet is `BINDINGS.md`.", ""]
     for path, refl in sorted(reflections.items()):

@@ -11,6 +11,7 @@ import numpy as np
 from shaders_port.gl.compare import compare_port_gl
 from shaders_port.gl.renderer import GLRenderer
 from shaders_port.gl.round_trip import TranslatedRenderer
+from shaders_port.spirv.gl_run import context_support
 from shaders_port.spirv.tools import hlsl_round_trip
 from shaders_port.variants import get_variant
 
@@ -82,8 +83,8 @@ class _OwnBlock:
 
 
 GLES_NOT_RUN = (
-    "not run on llvmpipe: moderngl's EGL backend (glcontext) binds the desktop OpenGL API only, "
-    "so no GLES 3 context is made here; compiled by glslang's ES profile"
+    "not run on llvmpipe (the GL check runs the core file and the HLSL); compiled by glslang's "
+    "ES profile"
 )
 GLES_NOTE = (
     f"{GLES_NOT_RUN}; the same files run in WebGL 2 in viewer/ (matched against the port in "
@@ -124,20 +125,86 @@ def gl_check_user(shader, inputs, values: dict, ours: dict) -> dict:
     """A user's shader (``shaders_port.spirv.user_shader.UserShader``) written back with ``values``
     and run on OpenGL (llvmpipe) against the executor's render ``ours`` (``ShaderOutput.numpy()``):
     mean and 99.9th percentile of the per-pixel max-over-channel |difference| on the pixels both
-    cover, passed within ``GL_MEAN`` / ``GL_P999``; ``ran`` False (with ``why``) without a headless
-    OpenGL; a shader OpenGL does not run (a GLSL ES 3.10 file, a compile error of the driver)
-    is a failed check, ``passed`` False with ``why`` naming the file, and a warning on stderr."""
+    cover, passed within ``GL_MEAN`` / ``GL_P999``; ``text``: which text ran (the file as
+    written, or its core-profile translation, ``shaders_port.spirv.gl_run``), ``context``: on
+    which context (e.g. "OpenGL 4.5 compatibility profile, llvmpipe ..."), ``why_translation``:
+    why the file did not run as written; on an OpenGL ES context (the file at highp),
+    ``own_precision``: the file at its own precision qualifiers (:func:`_own_precision`) and a
+    failed check's ``note`` (:data:`ES_CUBE`). A file the driver rejects as written (what its
+    dialect has that this driver lacks: an extension, ...) runs as its translation,
+    ``why_translation`` quoting the driver. ``ran`` False (with ``why``) without a headless
+    OpenGL; a shader OpenGL does not run (a GLSL ES 3.10 file where no ES context is made, a
+    compile error of the driver in a text with no translation, or in both) is a failed check,
+    ``passed`` False with ``why`` naming the file, and a warning on stderr."""
+    rejected = ""
     try:
-        rgba, mask = shader.gl_render(inputs, values)
-    except ValueError as exc:  # dialects.ShaderError: a dialect no desktop OpenGL runs
+        rgba, mask, run, context = _render(shader, inputs, values)
+    except ValueError as exc:  # dialects.ShaderError: a dialect no context here runs
         return _user_failed(str(exc))
     except RuntimeError as exc:
         msg = str(exc)
-        if "rejected" in msg:  # the driver's compile or link log
-            log = [ln.strip() for ln in msg.splitlines()[1:] if "error" in ln.lower()]
-            return _user_failed(f"OpenGL (llvmpipe) rejected {shader.label}: {'; '.join(log[:3])}")
-        return {"ran": False, "why": msg.splitlines()[0], "passed": None}
-    return _user_verdict(rgba, mask, ours)
+        if "rejected" not in msg:  # no headless OpenGL
+            return {"ran": False, "why": msg.splitlines()[0], "passed": None}
+        log = "; ".join([ln.strip() for ln in msg.splitlines()[1:] if "error" in ln.lower()][:3])
+        if not shader.dialect.translated:  # nothing else to run
+            return _user_failed(f"OpenGL (llvmpipe) rejected {shader.label}: {log}")
+        # what this driver lacks of the file's dialect (an extension, ...): its translation runs
+        about = context_support("es" if shader.dialect.es else "compatibility")[1]
+        rejected = f"{about} rejected your file as written: {log}"
+        print(f"calibrate: {shader.label}: {rejected}; its translation runs", file=sys.stderr)
+        try:
+            rgba, mask, run, context = _render(shader, inputs, values, as_written=False)
+        except RuntimeError as exc2:
+            log2 = [ln.strip() for ln in str(exc2).splitlines()[1:] if "error" in ln.lower()]
+            return _user_failed(f"{rejected}; and its translation: {'; '.join(log2[:3])}")
+    out = _user_verdict(rgba, mask, ours)
+    out.update(text=run.what, context=context)
+    if run.why:
+        out["why_translation"] = rejected or run.why
+    if run.kind == "es":
+        out["own_precision"] = _own_precision(shader, inputs, values, ours)
+    if not out["passed"]:
+        if run.kind == "es":
+            out["note"] = ES_CUBE
+        print(
+            f"calibrate: WARNING: {shader.label} ({run.what}) on {context} does not match the "
+            f"executor: mean |diff| {out['mean_abs']:.3g}, 99.9th percentile {out['p999']:.3g}",
+            file=sys.stderr,
+        )
+    return out
+
+
+def _render(shader, inputs, values: dict, **how):
+    """(rgba, mask, the ``GLRun``, the context in words) of ``shader.gl_renderer``."""
+    with shader.gl_renderer(inputs, values, **how) as r:
+        rgba, mask = r.render(None)
+        return rgba, mask, r.gl_run, r.context
+
+
+ES_CUBE = (
+    "OpenGL ES filters cube maps across their faces (seamless); the executor, as desktop "
+    "OpenGL with GL_TEXTURE_CUBE_MAP_SEAMLESS off, each face on its own"
+)
+
+
+def _own_precision(shader, inputs, values: dict, ours: dict) -> dict:
+    """The GLSL ES file at its own precision qualifiers (``lowp``, ``mediump``, and the samplers'
+    default ``lowp``; ``gl_run.plan(..., highp=False)``) on the ES context against ``ours``:
+    ``mean_abs``, ``p999``, ``within`` the GL check's thresholds, and ``note`` when not (llvmpipe
+    computes reduced precision at 16-bit float, the executor at 32-bit)."""
+    with shader.gl_renderer(inputs, values, highp=False) as r:
+        rgba, mask = r.render(None)
+    res = _user_verdict(rgba, mask, ours)
+    out = {"mean_abs": res["mean_abs"], "p999": res["p999"], "within": res["passed"]}
+    if not res["passed"]:
+        out["note"] = (
+            f"at its own precision qualifiers llvmpipe differs from the executor by "
+            f"{res['mean_abs']:.3g} on average, {res['p999']:.3g} at the 99.9th percentile: it "
+            "computes lowp and mediump values at 16-bit float (GLSL ES samples at lowp unless "
+            "told: `precision highp sampler2D;`, `precision highp samplerCube;`), the executor "
+            "every value at 32-bit; a GPU that honours them differs alike"
+        )
+    return out
 
 
 def _user_failed(why: str) -> dict:
@@ -162,6 +229,29 @@ def hlsl_check_user(shader, inputs, values: dict, ours: dict, shaders_dir: Path)
     except RuntimeError as exc:
         return {"ran": False, "why": str(exc).splitlines()[0], "passed": None}
     return _user_verdict(rgba, mask, ours)
+
+
+def gles_check_user(shader, inputs, values: dict, ours: dict, shaders_dir: Path) -> dict:
+    """A user's shader's exported GLSL ES 3.00 (``gles300/<stem>.frag`` of ``shaders_dir``,
+    after the export's ``gles300`` vertex shader) on an OpenGL ES context of llvmpipe against
+    the executor's render ``ours``, each uniform constant set to its value in ``values`` as the
+    material sets it (the binding sheet's "Uniforms the material sets"): the figures and
+    verdict of :func:`gl_check_user`, ``context``, and a failed check's ``note``; ``ran``
+    False (with ``why``) where no ES context is made."""
+    folder = Path(shaders_dir) / "gles300"
+    stem = shader.label.rsplit(".", 1)[0]
+    vstem = "water" if shader.vertex is None else shader.vertex.label.rsplit(".", 1)[0]
+    frag, vert = (folder / f"{stem}.frag").read_text(), (folder / f"{vstem}.vert").read_text()
+    try:
+        with shader.gl_renderer(inputs, values, source=frag, es=vert) as r:
+            rgba, mask = r.render(None)
+            context = r.context
+    except RuntimeError as exc:
+        return {"ran": False, "why": str(exc).splitlines()[0], "passed": None}
+    out = {**_user_verdict(rgba, mask, ours), "context": context}
+    if not out["passed"]:
+        out["note"] = ES_CUBE
+    return out
 
 
 def _user_verdict(rgba: np.ndarray, mask: np.ndarray, ours: dict) -> dict:

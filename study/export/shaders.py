@@ -179,7 +179,8 @@ def export_user_shader(
     beside the vertex shader it runs after (``out_dir/core/water.vert``, the study's, or the
     user's own, ``shader.vertex``, under its file name, with the values of the constants it
     declares in place alike); ``targets``
-    ``textures`` and ``status`` as :func:`export_shaders` (translated from those two files).
+    ``textures`` and ``status`` as :func:`export_shaders` (translated from those two files,
+    each uniform constant without initializer: its binding sheet gives the value to set).
     Compile-checked and written all or not at all, as there; returns the written paths."""
     frag = staged_name(shader.label, "frag")
     texts = {
@@ -188,18 +189,19 @@ def export_user_shader(
     }
     fit = {"status": status or {}, "reads": None}
     # the engine targets come from the core GLSL the study compiles (a file in an older dialect,
-    # or with includes and defines, translated; a uniform of a constant without initializer,
-    # which GLSL ES and HLSL do not take), the file itself is written as the user wrote it
+    # or with includes and defines, translated) with every uniform of a constant declared
+    # without initializer (GLSL ES refuses one, HLSL and Metal ignore it: the material sets
+    # the value its binding sheet gives); the file itself is written as the user wrote it
     core = {}
     if shader.dialect.runs_on_desktop_gl:
-        core[frag] = shader.gl_source(values, bare_initializers=False)
+        core[frag] = shader.gl_source(values, uniform_initializers=False)
     if shader.vertex is not None:  # the user's own vertex shader in place of the study's:
         # its file with the fitted values of the constants it declares, its engine targets
         # from the GLSL 330 it is compiled as
         vert = staged_name(shader.vertex.label, "vert")
         texts = {("core", vert): shader.vertex_written(values),
                  ("core", frag): texts[("core", frag)]}  # fmt: skip
-        core[vert] = shader.vertex_gl_source(values, bare_initializers=False)
+        core[vert] = shader.vertex_gl_source(values, uniform_initializers=False)
     return _write_checked(texts, out_dir, targets, values, textures, fit, core)
 
 

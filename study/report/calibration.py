@@ -430,6 +430,16 @@ def _diagnostics_lines(d: dict, figure: str) -> list[str]:
     ]
 
 
+def gl_ran(gl: dict, default: str) -> str:
+    """Which text the GL check ran on which context, in words (a user's shader's record has
+    ``text`` and ``context``, ``why_translation`` when its translation ran); ``default`` for a
+    record without them."""
+    if not gl.get("text"):
+        return default
+    why = f" (not as written: {gl['why_translation']})" if gl.get("why_translation") else ""
+    return f"the GL check ran {gl['text']} on {gl['context']}{why},"
+
+
 def _export_lines(gl: dict | None, user_file: str | None = None, vertex_file=None) -> list[str]:
     """What was exported and how the GL check of the exported core shader went; ``user_file``:
     the path of a user's shader (its copy with the fitted constants was exported)."""
@@ -439,14 +449,20 @@ def _export_lines(gl: dict | None, user_file: str | None = None, vertex_file=Non
         check = f"; {failed}not run on OpenGL ({gl['why']})."
     elif gl:
         check = (
-            f"; the exported core shader on llvmpipe vs the Dr.Jit shader with the fitted "
-            f"constants: mean |diff| {fmt(gl['mean_abs'], 3)}, 99.9th percentile "
+            f"; {gl_ran(gl, 'the exported core shader on llvmpipe')} vs the Dr.Jit shader with "
+            f"the fitted constants: mean |diff| {fmt(gl['mean_abs'], 3)}, 99.9th percentile "
             f"{fmt(gl['p999'], 3)}"
             + (
                 "."
                 if gl.get("passed")
                 else " -- **MISMATCH: do not ship these shaders; see constants.json gl_check**."
             )
+            + (f" ({gl['note']}.)" if gl.get("note") else "")
+            + (
+                f" Your file {own['note']}."
+                if (own := gl.get("own_precision") or {}).get("note")
+                else ""
+            )  # fmt: skip
         )
     if user_file:
         name = Path(user_file).name
@@ -475,7 +491,8 @@ def engine_targets_section(targets: dict, user: bool = False) -> list[str]:
     if not targets:
         return []
     how = (
-        "the fitted constants as written in the file"
+        "the fitted constants as written in the file, those that are uniforms declared without "
+        'initializer (the sheet\'s "Uniforms the material sets" gives their values)'
         if user
         else "the fitted constants as named specialization constants"
     )
@@ -495,9 +512,9 @@ def engine_targets_section(targets: dict, user: bool = False) -> list[str]:
         if isinstance(run, dict) and run.get("ran", True) is False:
             check += f"; not run on llvmpipe ({run['why']})"
         elif isinstance(run, dict):
+            how = run.get("context") or "llvmpipe through SPIR-V and GLSL 330"
             check += (
-                "; run on llvmpipe through SPIR-V and GLSL 330 vs the Dr.Jit shader: mean abs. "
-                "difference "
+                f"; run on {how} vs the Dr.Jit shader: mean abs. difference "
                 f"{fmt(run['mean_abs'], 3)}, 99.9th percentile {fmt(run['p999'], 3)} "
                 + ("(passed)" if run["passed"] else "(**MISMATCH**)")
             )

@@ -12,7 +12,7 @@ import numpy as np
 from shaders_port import space as _space
 
 from .._io import write_text_atomic
-from .calibration import fmt, pyplot
+from .calibration import fmt, gl_ran, pyplot
 from .tradeoff_motion import motion_lines
 
 COSTS = {
@@ -316,7 +316,8 @@ def _user_lines(places: list, export: dict | None, tolerance: float) -> list[str
                 if gl.get("ran")
                 else f"not run ({gl.get('why')})"
             )
-            lines.append(f"Its file with the fitted constants: `{export['file']}` (llvmpipe "
+            ran = gl_ran(gl, "llvmpipe")
+            lines.append(f"Its file with the fitted constants: `{export['file']}` ({ran} "
                          f"against the executor: {check}).")  # fmt: skip
     return lines
 

@@ -114,9 +114,11 @@ def bound_data(shader, inputs, fitted: dict, start: dict) -> dict:
     (``UserShader``) on ``inputs`` (``ShaderInputs`` as the GL check runs them) with the
     values ``fitted`` and ``start`` ({GLSL name: float | tuple}). RuntimeError without a
     headless OpenGL (llvmpipe), whose bindings it reads."""
-    with shader.gl_renderer(inputs, fitted) as r:
+    # the core-profile translation the GLSL ES export is made from (not the file as written
+    # on a compatibility or ES context, whose built-ins WebGL 2 has not)
+    with shader.gl_renderer(inputs, fitted, as_written=False) as r:
         rec = recorded_bindings(r)
-    with shader.gl_renderer(inputs, start) as r:
+    with shader.gl_renderer(inputs, start, as_written=False) as r:
         rec0 = recorded_bindings(r)
     up = shader.engine["up"]
     return {
