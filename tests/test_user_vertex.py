@@ -466,3 +466,33 @@ def test_a_vertex_uniform_nothing_binds_is_refused_at_load_with_its_file_and_lin
     with pytest.raises(ExperimentError, match=r"reads 'cTiling' \(at .*tiling\.glsl:3\)"):
         load_experiment(MY_WATER, keys)
     load_experiment(MY_WATER, [*keys[:-1], 'fit.declare=["value cTiling 0.5"]'])
+
+
+def test_a_target_the_pair_cannot_be_written_in_is_left_out_and_said(tmp_path):
+    """A vertex shader writing gl_ClipDistance has no GLSL ES 3.00: the export leaves that
+    target out with glslang's reason, the others are written, constants.json records why, the
+    report says it and the viewer (which runs the GLSL ES export) names that reason."""
+    from study.commands.steps import _export_user
+    from study.export.viewer import ViewerUnsupported, calibration_viewer
+    from study.report.calibration import engine_targets_section
+
+    vert = (SHADERS / "projective_water.vert").read_text()
+    vert = vert.replace("    vScreen = gl_Position;", "    vScreen = gl_Position;\n"
+                        "    gl_ClipDistance[0] = world.y + 10.0;")  # fmt: skip
+    (tmp_path / "clipped.vert").write_text(vert)
+    vertex = UserVertex.from_file(tmp_path / "clipped.vert", (8, 8))
+    shader = UserShader.from_file(SHADERS / "projective_water.frag", vertex=vertex)
+    left = _export_user(shader, shader.defaults(), tmp_path / "shaders", None, {})
+    assert set(left) == {"gles300"} and "gl_ClipDistance" in left["gles300"]
+    assert (tmp_path / "shaders" / "hlsl").is_dir() and not (
+        tmp_path / "shaders" / "gles300"
+    ).exists()
+    lines = engine_targets_section({"gles300": {"left_out": left["gles300"]}}, user=True)
+    assert any(ln.startswith("| gles300 | - | left out: ") for ln in lines)
+    summary = {"shader": "projective_water.frag",
+               "shader_file": str(SHADERS / "projective_water.frag"),
+               "vertex_file": str(tmp_path / "clipped.vert"), "vertex_grid": [8, 8],
+               "engine_targets": {"gles300": {"left_out": left["gles300"]}}}  # fmt: skip
+    (tmp_path / "constants.json").write_text(json.dumps(summary))
+    with pytest.raises(ViewerUnsupported, match="which projective_water.frag has none of"):
+        calibration_viewer(tmp_path, None, None)

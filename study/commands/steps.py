@@ -123,10 +123,11 @@ def export_calibration(exp, model, frames: list, cal, out: Path, timings: dict):
     status = {glsl_scalar(n): p["status"] for n, p in cal.parameters.items()}
     with timed(timings, "export_s"):
         _log(f"calibrate: exporting and compiling {model.label} (and its vertex shader)")
+        left_out = {}
         if user is None:
             export_shaders(fitted, shaders, [model.shader], None, textures, status)
         else:
-            _export_user(user, fitted, shaders, textures, status)
+            left_out = _export_user(user, fitted, shaders, textures, status)
     # the GL check runs the textures that ship: read back from the exported files
     frames = [with_exported_textures(i, shaders) for i in frames]
     with timed(timings, "gl_check_s"):
@@ -138,11 +139,12 @@ def export_calibration(exp, model, frames: list, cal, out: Path, timings: dict):
         ours = [user.render(i, fitted, backend=model.backend).numpy() for i in frames]
         gl = [gl_check_user(user, i, fitted, o) for i, o in zip(frames, ours)]
         engine_targets = manifest_checks(shaders)
-        if "gles300" in engine_targets:
+        engine_targets.update({t: {"left_out": why} for t, why in left_out.items()})
+        if "gles300" in engine_targets and "left_out" not in engine_targets["gles300"]:
             engine_targets["gles300"]["llvmpipe"] = gles_check_user(
                 user, frames[0], fitted, ours[0], shaders
             )
-        if "hlsl" in engine_targets:
+        if "hlsl" in engine_targets and "left_out" not in engine_targets["hlsl"]:
             engine_targets["hlsl"]["llvmpipe"] = hlsl_check_user(
                 user, frames[0], fitted, ours[0], shaders
             )
@@ -292,16 +294,16 @@ def write_result(out, result, figs, ev) -> dict:
     return summary
 
 
-def _export_user(user, fitted: dict, shaders: Path, textures, status: dict) -> None:
+def _export_user(user, fitted: dict, shaders: Path, textures, status: dict) -> dict:
     """``export_user_shader`` into every engine target the user's files translate to: a target
     whose translation or compile check fails (a vertex shader writing ``gl_ClipDistance`` is
     no GLSL ES 3.00) is left out with a warning naming its error; ValueError when the core
-    files themselves fail or no target is left."""
-    targets = list(resolve_targets(None))
+    files themselves fail or no target is left. Returns {target left out: why}."""
+    targets, left_out = list(resolve_targets(None)), {}
     while True:
         try:
             export_user_shader(user, fitted, shaders, targets, textures, status)
-            return
+            return left_out
         except RuntimeError as exc:
             head = str(exc).splitlines()[0] if str(exc) else repr(exc)
             bad = [t for t in targets if f" on {t}/" in head]
@@ -310,3 +312,4 @@ def _export_user(user, fitted: dict, shaders: Path, textures, status: dict) -> N
             targets.remove(bad[0])
             why = "; ".join(ln for ln in str(exc).splitlines()[1:] if "ERROR" in ln) or head
             _log(f"calibrate: WARNING: engine target {bad[0]} left out: {why}")
+            left_out[bad[0]] = why

@@ -506,6 +506,9 @@ def engine_targets_section(targets: dict, user: bool = False) -> list[str]:
         "|---|---|---|",
     ]
     for target, t in targets.items():
+        if "left_out" in t:  # the pair has no translation to it
+            lines.append(f"| {target} | - | left out: {t['left_out']} |")
+            continue
         shaders = [f for f in t["files"] if not f.endswith((".json", ".md"))]
         check = t["check"]
         run = t.get("llvmpipe")

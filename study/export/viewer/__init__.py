@@ -324,6 +324,12 @@ def calibration_viewer(out: Path, exp, inputs: ShaderInputs) -> Path:
         )
     stem = summary["shader"].rsplit(".", 1)[0] if user else summary["shader"]
     frag_path = shaders / target_file("gles300", stem, "frag")
+    left_out = summary.get("engine_targets", {}).get("gles300", {}).get("left_out")
+    if left_out:
+        raise ViewerUnsupported(
+            f"the viewer runs the GLSL ES 3.00 export, which {summary['shader']} has none of "
+            f"(left out: {left_out}); the other engine targets in {shaders} are written"
+        )
     if not frag_path.is_file():
         raise FileNotFoundError(
             f"{frag_path} is missing: the viewer runs the GLSL ES 3.00 export, which needs "
