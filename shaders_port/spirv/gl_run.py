@@ -34,7 +34,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from . import dialects
+from ..gl import contexts
+from ..gl.dialect import dialect_renderer_class
+from ..gl.renderer import GLRenderer
+from ..gl.round_trip import TranslatedRenderer
+from . import dialects, engine_inputs
 from .engine_inputs import split_view, to_up
 
 __all__ = ["GLRun", "context_support", "plan", "fixed_function_matrices"]
@@ -68,8 +72,6 @@ class GLRun:
 def context_support(kind: str) -> tuple[int, str]:
     """(newest GLSL version the context runs (0: none made), the context in words or why
     none was made) for a context of ``kind`` on this machine, found by making one."""
-    from ..gl import contexts
-
     try:
         ctx = contexts.create_context(kind)
     except (RuntimeError, ImportError) as exc:
@@ -156,12 +158,6 @@ def renderer(shader, inputs, values: dict, source=None, reflection=None, es=None
     constant set as the material sets it (``r.gl_run`` None), ``source`` with its
     ``reflection`` (the HLSL round trip) on a core context, or ``source`` after the vertex
     shader ``es`` (the export's GLSL ES 3.00 files) on an OpenGL ES context."""
-    from ..gl.contexts import describe
-    from ..gl.dialect import dialect_renderer_class
-    from ..gl.renderer import GLRenderer
-    from ..gl.round_trip import TranslatedRenderer
-    from . import engine_inputs
-
     bindings = shader.run_bindings()
     if shader.vertex is not None:  # its uniforms that are study or engine inputs
         bindings = {**shader.vertex.shader.inputs, **bindings}
@@ -193,7 +189,7 @@ def renderer(shader, inputs, values: dict, source=None, reflection=None, es=None
         def __init__(self, *args, **kw):
             super().__init__(*args, **kw)
             self.name = label  # messages name the user's file
-            self.gl_run, self.context = run, describe(self.ctx)
+            self.gl_run, self.context = run, contexts.describe(self.ctx)
 
         def _sampler_uniform(self, prog, sname):
             for name in [n for n, s in bindings.items() if s == sname] + [sname]:
