@@ -183,6 +183,8 @@ _BEER = {"attenuation_distance": ("absorption_r", "absorption_g", "absorption_b"
 _GGX = {"specular_exponent": ("specular_roughness",)}
 _NOSPEC = {"specular_strength": (), "specular_exponent": ()}
 _BASELINE_INPUTS = ("scene_color", "scene_depth", "reflection_color", "reflection_view_proj")
+# the local cube map and its box (reflection = box)
+BOX_INPUTS = ("box_cubemap", "box_min", "box_max", "box_capture")
 _BASELINE_FIT = (
     "refraction_index",
     "refraction_strength",
@@ -194,7 +196,8 @@ _BASELINE_FIT = (
 def from_space(choices: dict, description: str | None = None) -> Variant:
     """The :class:`Variant` of a configuration of the shader space (``space.AXES`` choices):
     its file and defines (``space.realise``), its step schedule, the constants its choices
-    fit in place of the original's, and the screen-space inputs of the baseline shader."""
+    fit in place of the original's, and the inputs beyond the study's it reads (the screen-space
+    buffers of the baseline shader and the mirror, the local cube map of ``reflection = box``)."""
     c = _space.checked(choices)
     shader, defines, textures = _space.realise(c)
     name = _space.name_of(c)
@@ -218,6 +221,7 @@ def from_space(choices: dict, description: str | None = None) -> Variant:
     elif c["specular"] == "none" and c["reflection"] != "none":
         replaces.update(_NOSPEC)
     mirror = c["reflection"] == "planar_distorted"  # 004's mirrored camera, 002's offset
+    extra = _BASELINE_INPUTS if mirror else BOX_INPUTS if c["reflection"] == "box" else ()
     return Variant(
         name,
         shader,
@@ -226,7 +230,7 @@ def from_space(choices: dict, description: str | None = None) -> Variant:
         description=description or _space.describe(c),
         replaces=replaces,
         textures=textures,
-        inputs=_BASELINE_INPUTS if mirror else (),
+        inputs=extra,
         fit_parameters=("reflect_distortion",) if mirror else (),
     )
 
