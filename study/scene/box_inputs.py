@@ -19,16 +19,19 @@
   (``user_scene.shader_cubemap``: no sun disc, the sun is the shader's highlight).
 
 Noise: a texel's standard error is estimated from its samples. The shader reads only the
-walls between the water and their top (:func:`wall_band`, about 5 % of the texels at the
-default pool); these are traced at ``BOX_BAND_SPP``, the rest of the dry scene at ``BOX_SPP``,
-and the RMS standard error of the band over its mean radiance is logged. The walls in shade
-are lit by the sky alone, which the sun-dominated sampling of the environment finds slowly
-(about 10 % at 32 samples), hence the many samples on so few texels; the cube is used as
-traced, not denoised (the band is a few texels high: a denoiser would blur its edges).
+walls between the water and their top (:func:`wall_band`, a few percent of the texels); these
+are traced at ``BOX_BAND_SPP``, the rest of the dry scene at ``BOX_SPP``, and the RMS standard
+error of the band over its mean radiance is logged. Walls in shade are lit by the sky alone,
+which the sun-dominated sampling of the environment finds slowly, hence the many samples on so
+few texels; the cube is used as traced, not denoised (the band is a few texels high: a
+denoiser would blur its edges). The walls are lit as in the scene without the water; the
+reference lights them with the water in the pool (its floor's bounce reaches them through
+the water), a little darker (docs/variants.md).
 
-Cost: ``6 F^2`` rays, those that hit geometry (the lower half of the cube) path traced; cached under ``<cache>/inputs/box_<key>.npz``, the key hashing the scene without
-the water (``Experiment.dry_scene_hash``: not the camera, so every view shares it), the
-Mitsuba variant, the size, the samples and ``BOX_INPUTS_VERSION``.
+Cost: ``6 F^2`` rays, those that hit geometry (the lower half of the cube) path traced;
+cached under ``<cache>/inputs/box_<key>.npz``, the key hashing the scene without the water
+(``Experiment.dry_scene_hash``: not the camera, so every view shares it), the Mitsuba variant,
+the size, the samples and ``BOX_INPUTS_VERSION``.
 """
 
 from __future__ import annotations
