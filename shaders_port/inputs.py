@@ -22,15 +22,14 @@ import numpy as np
 
 IOR_WATER = 1.333
 # ShaderInputs fields that only some shaders read (None when not built)
+# the local cube map of reflection = box and its box (optional fields of ShaderInputs)
+BOX_INPUTS = ("box_cubemap", "box_min", "box_max", "box_capture")
 OPTIONAL_INPUTS = (
     "scene_color",
     "scene_depth",
     "reflection_color",
     "reflection_view_proj",
-    "box_cubemap",
-    "box_min",
-    "box_max",
-    "box_capture",
+    *BOX_INPUTS,
     "refraction_halves",
 )
 

@@ -25,7 +25,7 @@ from dataclasses import dataclass, field
 from . import space as _space
 from .gl.renderer import GLRenderer
 from .glsl_text import constants_read, read_source, switches_of, with_define
-from .inputs import game_precision
+from .inputs import BOX_INPUTS, game_precision
 
 
 @dataclass(frozen=True)
@@ -183,8 +183,6 @@ _BEER = {"attenuation_distance": ("absorption_r", "absorption_g", "absorption_b"
 _GGX = {"specular_exponent": ("specular_roughness",)}
 _NOSPEC = {"specular_strength": (), "specular_exponent": ()}
 _BASELINE_INPUTS = ("scene_color", "scene_depth", "reflection_color", "reflection_view_proj")
-# the local cube map and its box (reflection = box)
-BOX_INPUTS = ("box_cubemap", "box_min", "box_max", "box_capture")
 _BASELINE_FIT = (
     "refraction_index",
     "refraction_strength",

@@ -21,10 +21,9 @@ from dataclasses import dataclass
 import drjit as dr
 import numpy as np
 
-from ..inputs import ShaderInputs
+from ..inputs import BOX_INPUTS, ShaderInputs
 from ..pipeline.texture import CubeMap
 
-BOX_FIELDS = ("box_cubemap", "box_min", "box_max", "box_capture")
 # the floor of |R| per axis in the box's slab distances (no division by zero)
 MIN_COMPONENT = 1e-6
 
@@ -45,7 +44,7 @@ def _vec3(v) -> tuple:
 
 def box_state(m, inputs: ShaderInputs, shader: str) -> BoxProbe:
     """Upload the local cube map and its box; a ValueError names what ``inputs`` lacks."""
-    missing = [f for f in BOX_FIELDS if getattr(inputs, f) is None]
+    missing = [f for f in BOX_INPUTS if getattr(inputs, f) is None]
     if missing:
         raise ValueError(
             f"{shader} needs ShaderInputs.{', '.join(missing)}; build the inputs "

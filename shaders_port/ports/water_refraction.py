@@ -490,7 +490,7 @@ def _frozen_shade(m, P, C, diagnose, opts, Mi):
     )
 
 
-def _mirror(m, inputs, opts: Options):
+def _reflection_state(m, inputs, opts: Options):
     """The state of the reflection ``opts`` reads beyond the study's inputs: the mirrored
     camera's (``ports.planar.Mirror``), the local cube map's (``ports.box.BoxProbe``) or None."""
     if opts.reflection and opts.reflection_map == "mirror":
@@ -526,7 +526,7 @@ def render(
     opts = options_of(defines)
     m = backend_types(backend)
     P = prepare(inputs, m)
-    Mi = _mirror(m, inputs, opts)
+    Mi = _reflection_state(m, inputs, opts)
     C = resolve_constants(m, constants if constants is not None else Constants(), loop_ad)
     with evaluated_loops_if(C.differentiable and loop_ad == "evaluated"):
         if _frame.USE_FROZEN and not C.differentiable:
@@ -568,7 +568,7 @@ def render_with_jacobian(
     opts = options_of(defines)
 
     def shade_tangents(m, P, C, params, frozen):
-        Mi = _mirror(m, inputs, opts)
+        Mi = _reflection_state(m, inputs, opts)
         if frozen:
             return _frozen_tangents(m, P, C, params, opts, Mi)
         return tangents(m, *_shade(m, P, C, False, opts, Mi), params)

@@ -43,6 +43,7 @@ import json
 import numpy as np
 
 from shaders_port import ShaderInputs
+from shaders_port.inputs import BOX_INPUTS
 
 from .._backend import jit_input
 from ..config.experiment import Experiment
@@ -55,7 +56,6 @@ BOX_INPUTS_VERSION = 1  # bump whenever the construction below changes
 BOX_CUBE_SIZE = 128  # texels per face edge
 BOX_SPP = 16  # path-traced samples per texel that sees geometry
 BOX_BAND_SPP = 1024  # per texel of the walls above the water (the texels the shader reads)
-BOX_FIELDS = ("box_cubemap", "box_min", "box_max", "box_capture")
 
 
 def box_probe(exp: Experiment) -> dict:
@@ -178,6 +178,6 @@ def with_box_inputs(
     ).hexdigest()[:32]
     path = (cache or cache_dir()) / "inputs" / f"box_{key}.npz"
     fields = cached_fields(
-        path, BOX_FIELDS, lambda: build_box_inputs(exp, log), "local cube map", log
+        path, BOX_INPUTS, lambda: build_box_inputs(exp, log), "local cube map", log
     )
     return dataclasses.replace(inputs, **fields)
