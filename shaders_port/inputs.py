@@ -22,11 +22,14 @@ import numpy as np
 
 IOR_WATER = 1.333
 # ShaderInputs fields that only some shaders read (None when not built)
+# the local cube map of reflection = box and its box (optional fields of ShaderInputs)
+BOX_INPUTS = ("box_cubemap", "box_min", "box_max", "box_capture")
 OPTIONAL_INPUTS = (
     "scene_color",
     "scene_depth",
     "reflection_color",
     "reflection_view_proj",
+    *BOX_INPUTS,
     "refraction_halves",
 )
 
@@ -84,6 +87,17 @@ class ShaderInputs:
         reflection_view_proj: (4, 4) world -> clip space of the mirrored camera
             (``o2v_projection_reflection`` of seed 004; :func:`mirrored_view_proj`).
 
+    Optional (``None`` unless built; read by ``water_refraction`` with ``BOX_REFLECTION``, the
+    box-projected local cube map of Lagarde and Zanuttini):
+        box_cubemap: (6, F, F, 3) linear RGB of the scene without the water (walls, their
+            surroundings, the sky without the sun) seen from ``box_capture``, faces and
+            ``y`` flip as ``cubemap`` (the texel of direction ``d`` holds the scene in direction
+            ``d * (1, -1, 1)``); GLSL ``boxReflectionTexture``; bilinear, clamp to edge.
+        box_min, box_max: (3,) corners of the axis-aligned box of the pool's walls, world
+            units; ``box_max[1]`` is the walls' top (``boxMin``, ``boxMax``).
+        box_capture: (3,) where ``box_cubemap`` was captured, world units
+            (``boxCapturePosition``).
+
     Optional, read by a user's shader only (``spirv.engine_inputs``):
         time: the animation clock, seconds (0.0 for a still frame); GLSL ``time``.
 
@@ -116,6 +130,10 @@ class ShaderInputs:
     scene_depth: np.ndarray | None = None
     reflection_color: np.ndarray | None = None
     reflection_view_proj: np.ndarray | None = None
+    box_cubemap: np.ndarray | None = None
+    box_min: np.ndarray | None = None
+    box_max: np.ndarray | None = None
+    box_capture: np.ndarray | None = None
     refraction_halves: np.ndarray | None = None
     time: float = 0.0
 
@@ -139,6 +157,10 @@ class ShaderInputs:
             "scene_depth": (2, None),
             "reflection_color": (3, 3),
             "reflection_view_proj": (2, None),
+            "box_cubemap": (4, 3),
+            "box_min": (1, 3),
+            "box_max": (1, 3),
+            "box_capture": (1, 3),
             "refraction_halves": (4, 3),
         }
         for name, (ndim, last) in shapes.items():
@@ -160,10 +182,10 @@ class ShaderInputs:
         for name in ("tex_matrix0", "tex_matrix1", "view_proj", "reflection_view_proj"):
             if getattr(self, name) is not None and getattr(self, name).shape != (4, 4):
                 raise ValueError(f"ShaderInputs.{name}: expected (4, 4)")
-        if self.cubemap.shape[0] != 6 or self.cubemap.shape[1] != self.cubemap.shape[2]:
-            raise ValueError(
-                f"ShaderInputs.cubemap: expected (6, F, F, 3), got {self.cubemap.shape}"
-            )
+        for name in ("cubemap", "box_cubemap"):
+            cube = getattr(self, name)
+            if cube is not None and (cube.shape[0] != 6 or cube.shape[1] != cube.shape[2]):
+                raise ValueError(f"ShaderInputs.{name}: expected (6, F, F, 3), got {cube.shape}")
         if self.refraction_halves is not None and (
             self.refraction_halves.shape != (2,) + self.refraction_texture.shape
         ):
@@ -499,8 +521,8 @@ def game_precision(inputs: ShaderInputs) -> ShaderInputs:
       clipped to [0, 1];
     * ``normal_map``: 8-bit UNORM (``GL_RGB8``, the usual ``0.5 n + 0.5`` encoding);
     * ``fresnel_lut``: 8-bit UNORM;
-    * depths (``world_y``, ``refl_world_y``) and the HDR sky ``cubemap``: half float (``GL_R16F``,
-      ``GL_RGB16F``).
+    * depths (``world_y``, ``refl_world_y``) and the HDR cube maps (``cubemap``, ``box_cubemap``):
+      half float (``GL_R16F``, ``GL_RGB16F``).
 
     Filtering still runs in float on the dequantised texels on both sides (GL hardware
     filters 8-bit texels at 8-bit sub-texel precision; this is not modelled). One result is
@@ -519,6 +541,7 @@ def game_precision(inputs: ShaderInputs) -> ShaderInputs:
         world_y=_half(inputs.world_y),
         refl_world_y=_half(inputs.refl_world_y),
         cubemap=_half(inputs.cubemap),
+        box_cubemap=None if inputs.box_cubemap is None else _half(inputs.box_cubemap),
     )
     _GAME_CACHE.clear()
     _GAME_CACHE[key] = (arrays, inputs, out)

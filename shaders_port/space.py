@@ -15,7 +15,8 @@ The axes and where each choice comes from (``SOURCE``):
   refracted light: the water's own colour, as 002 and 004 alone);
 * ``reflection``: ``cube`` (000's sky cube map), ``raycast`` (000 section 3, cube map where
   nothing is hit), ``planar_distorted`` (004's mirrored camera distorted by the normal, 002),
-  ``planar`` (004 alone), ``none``;
+  ``planar`` (004 alone), ``none``, ``box`` (Lagarde and Zanuttini's local cube map: a cube
+  map of the dry pool looked up where the reflected ray leaves the box of its walls);
 * ``attenuation``: ``linear`` (000's clamped mix) or ``beer`` (Beer-Lambert per channel);
 * ``specular``: ``phong`` (000), ``ggx``, ``none``;
 * ``refine``: the crossing after the linear search, ``linear`` (000), ``binary``, ``secant``;
@@ -23,8 +24,8 @@ The axes and where each choice comes from (``SOURCE``):
 * ``layers``: normal-map layers averaged, 4 (000), 2 or 1;
 * ``textures``: ``float`` or ``game`` (8-bit colour, half-float depth).
 
-What the files realise: the raycast refraction with the cube-map, raycast or no reflection
-and every other axis free (``water_refraction.frag``, ``water_reflection.frag``); the
+What the files realise: the raycast refraction with the cube-map, local cube-map, raycast or
+no reflection and every other axis free (``water_refraction.frag``, ``water_reflection.frag``); the
 screen-space refractions and no refraction with the planar or cube-map reflection, the other
 axes at the original's choices (``water_baseline.frag``: nine pairs, :data:`_BASELINE`), so
 each source's technique alone is one shader (001: ``water_baseline_flat_cube``; 003:
@@ -40,7 +41,7 @@ import itertools
 
 AXES: dict[str, tuple] = {
     "refraction": ("raycast", "planar_distorted", "distorted", "planar", "none"),
-    "reflection": ("cube", "raycast", "planar_distorted", "planar", "none"),
+    "reflection": ("cube", "raycast", "planar_distorted", "planar", "none", "box"),
     "attenuation": ("linear", "beer"),
     "specular": ("phong", "ggx", "none"),
     "refine": ("linear", "binary", "secant"),
@@ -62,6 +63,7 @@ SOURCE = {
     ("reflection", "planar_distorted"): "004 + 002",
     ("reflection", "planar"): "004",
     ("reflection", "none"): "000 (NOREFLECTION)",
+    ("reflection", "box"): "Lagarde and Zanuttini (local cube map)",
 }
 
 # each source's technique alone (the original's choices elsewhere, the cube map where a source
@@ -73,6 +75,7 @@ ALONE = {
     "002 on 004 (distorted mirror)": {"refraction": "none", "reflection": "planar_distorted"},
     "003 (distorted refraction)": {"refraction": "distorted", "reflection": "cube"},
     "004 (mirror, flat)": {"refraction": "none", "reflection": "planar"},
+    "Lagarde and Zanuttini (local cube map)": {"reflection": "box"},
     "001-004 (the games' composition)": {
         "refraction": "planar_distorted",
         "reflection": "planar_distorted",
@@ -90,11 +93,13 @@ _RAYCAST_DEFINES = {
     ("layers", 2): "TWO_NORMAL_LAYERS",
     ("layers", 1): "ONE_NORMAL_LAYER",
     ("reflection", "planar_distorted"): "PLANAR_REFLECTION",
+    ("reflection", "box"): "BOX_REFLECTION",
 }
 # name tokens, in name order (a name is the shader file then the tokens of its choices)
 _TOKENS = (
     (("reflection", "none"), "noreflection"),
     (("reflection", "planar_distorted"), "mirror"),
+    (("reflection", "box"), "box"),
     (("attenuation", "beer"), "beer"),
     (("specular", "ggx"), "ggx"),
     (("specular", "none"), "nospecular"),
@@ -184,7 +189,7 @@ def _realise_screen_space(c: dict) -> tuple[str, tuple[str, ...], str]:
             f"refraction = {c['refraction']} with reflection = {c['reflection']}: the "
             "screen-space shader's planar refraction is flat water (undistorted reflections "
             "only), its normal-mapped refractions go with the normal-mapped reflections, and "
-            f"it has no raycast reflection; it realises {allowed}"
+            f"it has neither the raycast reflection nor the local cube map; it realises {allowed}"
         )
     return "water_baseline", _BASELINE[key][1], "float"
 

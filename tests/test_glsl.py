@@ -94,6 +94,13 @@ def test_noreflection_variant_compiles(dialect):
     compile_check(src, "frag")
 
 
+@needs_glslang
+@pytest.mark.parametrize("dialect", ["compat", "core"])
+def test_box_reflection_variant_compiles(dialect):
+    src = with_define(read_source("water_refraction", "frag", dialect), "BOX_REFLECTION")
+    compile_check(src, "frag")
+
+
 @pytest.mark.parametrize("name,stage", SHADERS)
 def test_core_is_compat_through_substitution_table(name, stage):
     compat = read_source(name, stage, "compat")

@@ -14,7 +14,7 @@ from shaders_port.ports.switches import decode
 from shaders_port.variants import VARIANTS, get_variant
 from helpers.gl import check_gl_match, compare_or_skip
 from helpers.port_checks import VARIANT_CUSTOM as CUSTOM
-from helpers.synthetic import synthetic_baseline_inputs, synthetic_inputs
+from helpers.synthetic import synthetic_baseline_inputs, synthetic_inputs_for
 
 
 def _ports():
@@ -51,7 +51,8 @@ def test_each_source_technique_alone_is_a_shader_of_the_space():
 
 def test_pinned_axes_restrict_the_space():
     pinned = _space.configurations({"textures": "float", "layers": 4, "refine": "linear"})
-    assert len(pinned) == 3 * 12 + 4 + 9  # cube, mirror, raycast, none (no specular), screen
+    # cube, mirror, raycast, box; none (no specular); screen space
+    assert len(pinned) == 4 * 12 + 4 + 9
     assert all(c["layers"] == 4 and c["textures"] == "float" for c in pinned)
     with pytest.raises(ValueError, match="unknown axis"):
         _space.configurations({"fog": "on"})
@@ -59,7 +60,8 @@ def test_pinned_axes_restrict_the_space():
 
 def test_every_configuration_compiles_to_names_its_file_and_port_know():
     configs = _space.configurations()
-    assert len(configs) == 729  # 216 cube, mirror, raycast each + 72 refraction-only + 9 screen
+    # 216 cube, box, mirror, raycast each + 72 refraction-only + 9 screen
+    assert len(configs) == 945
     ports = _ports()
     names = set()
     for c in configs:
@@ -80,7 +82,8 @@ def test_every_configuration_compiles_to_names_its_file_and_port_know():
         ({"refraction": "planar_distorted", "attenuation": "beer"}, "not attenuation = beer"),
         ({"refraction": "planar", "reflection": "planar_distorted"}, "is flat water"),
         ({"refraction": "distorted", "reflection": "planar"}, "normal-mapped reflections"),
-        ({"refraction": "none", "reflection": "raycast"}, "no raycast reflection"),
+        ({"refraction": "none", "reflection": "raycast"}, "neither the raycast reflection"),
+        ({"refraction": "planar", "reflection": "box"}, "nor the local cube map"),
         ({"refraction": "raycast", "reflection": "planar"}, "reflect_distortion = 0 is the flat"),
     ],
 )
@@ -155,10 +158,10 @@ def test_configurations_nobody_registered_match_opengl(seed):
     the GL check's thresholds, and the configuration renders differently from the original."""
 
     raycast = _space.configurations({"refraction": "raycast"})
-    assert len(raycast) == 720
+    assert len(raycast) == 936
     c = random.Random(100 + seed).choice(raycast)
     name = _space.name_of(c)
-    inputs = (synthetic_baseline_inputs if get_variant(name).inputs else synthetic_inputs)(96, 72)
+    inputs = synthetic_inputs_for(name, 96, 72)
     res = compare_or_skip(inputs, CUSTOM, name)
     check_gl_match(res, f"gl_space_{name}")
 

@@ -226,18 +226,19 @@ def test_study_viewer_writes_it_again_and_refuses_another_experiment(runs, capsy
     assert "is not the experiment" in err and "same --set options" in err
 
 
-@pytest.mark.slow  # a calibration per shader (~15 s each)
-@pytest.mark.parametrize("shader", ["water_reflection", "water_baseline"])
+@pytest.mark.slow  # a calibration per shader (~15 s each; the local cube map's capture more)
+@pytest.mark.parametrize("shader", ["water_reflection", "water_baseline", "water_refraction_box"])
 def test_the_reflection_and_baseline_shaders_in_chromium(shader, tmp_path, browser):
-    """The raycast reflection (top-down inputs from below: orbits) and the baseline (screen-space
-    buffers of the study's camera: stays there) against the port, as the refraction shader."""
+    """The raycast reflection (top-down inputs from below: orbits), the local cube map (world
+    space: orbits) and the baseline (screen-space buffers of the study's camera: stays there)
+    against the port, as the refraction shader."""
     ov = replaced(TINY, "fit.max_steps=2", f'fit.shader="{shader}"')
     out, inputs = _calibrate(tmp_path, shader, ov)
     assert open_viewer(browser, out / "viewer" / "index.html") == []
     fitted = load_constants_json(out / "constants.json")
     res = compare_port_gl(inputs, fitted, shader, renderer=BrowserRenderer(browser))
     assert _passes(res), {k: res[k] for k in ("mean_abs", "p999", "max_abs", "unexplained")}
-    assert _data(out)["camera"]["orbit"] is (shader == "water_reflection")
+    assert _data(out)["camera"]["orbit"] is (shader != "water_baseline")
 
 
 def test_what_ties_a_shader_to_the_camera_and_the_start_constants(tmp_path):

@@ -9,7 +9,8 @@ Texture set-up (one texture unit each, no mipmaps, float32 storage):
 refractionTexture RGB32F linear clamp; worldYComponent R32F nearest clamp; normalMap RGB32F
 linear repeat; reflectionTexture cube RGB32F linear clamp, seamless cube filtering off;
 fresnelLookup (N x 1) RG32F nearest clamp; worldYComponentReflection R32F nearest clamp;
-reflectionBottom RGB32F linear clamp.
+reflectionBottom RGB32F linear clamp; the optional inputs: the baseline's screen-space buffers
+and the local cube map boxReflectionTexture (cube RGB32F linear clamp, as reflectionTexture).
 """
 
 from __future__ import annotations
@@ -41,13 +42,19 @@ _SAMPLERS = {
     "sceneColor": (7, "linear", False),
     "sceneDepth": (8, "nearest", False),
     "reflection_sampler": (9, "linear", False),
+    # the local cube map of BOX_REFLECTION (optional)
+    "boxReflectionTexture": (10, "linear", False),
 }
 # sampler -> the optional ShaderInputs field it is made from
 _OPTIONAL_SAMPLERS = {
     "sceneColor": "scene_color",
     "sceneDepth": "scene_depth",
     "reflection_sampler": "reflection_color",
+    "boxReflectionTexture": "box_cubemap",
 }
+_CUBE_SAMPLERS = ("reflectionTexture", "boxReflectionTexture")
+# vec3 uniform -> the optional ShaderInputs field it is set from
+_OPTIONAL_VEC3 = {"boxMin": "box_min", "boxMax": "box_max", "boxCapturePosition": "box_capture"}
 
 
 def create_egl_context():
@@ -141,17 +148,20 @@ class GLRenderer:
         h, w = arr.shape[:2]
         return self.ctx.texture((w, h), comps, arr.tobytes(), dtype="f4", alignment=4)
 
+    def _texture_cube(self, arr: np.ndarray):
+        """(6, F, F, 3) float32 faces in GL order -> an RGB32F cube-map texture."""
+        cube = np.ascontiguousarray(arr, dtype=np.float32)
+        size = (cube.shape[1], cube.shape[1])
+        return self.ctx.texture_cube(size, 3, cube.tobytes(), dtype="f4", alignment=4)
+
     def _setup_textures(self) -> None:
         i = self.inputs
         lut = i.fresnel_lut[None, :, :]  # (1, N, 2): N x 1 texture, s = cos(theta)
-        cube = np.ascontiguousarray(i.cubemap, dtype=np.float32)
         self._textures = {
             "refractionTexture": self._texture2d(i.refraction_texture),
             "worldYComponent": self._texture2d(i.world_y),
             "normalMap": self._texture2d(i.normal_map),
-            "reflectionTexture": self.ctx.texture_cube(
-                (cube.shape[1], cube.shape[1]), 3, cube.tobytes(), dtype="f4", alignment=4
-            ),
+            "reflectionTexture": self._texture_cube(i.cubemap),
             "fresnelLookup": self._texture2d(lut),
             "worldYComponentReflection": self._texture2d(i.refl_world_y),
             "reflectionBottom": self._texture2d(i.refl_texture),
@@ -159,7 +169,8 @@ class GLRenderer:
         for sname, field in _OPTIONAL_SAMPLERS.items():
             arr = getattr(i, field)
             if arr is not None:
-                self._textures[sname] = self._texture2d(arr)
+                cube = sname in _CUBE_SAMPLERS
+                self._textures[sname] = (self._texture_cube if cube else self._texture2d)(arr)
         mgl = self._mgl
         self._samplers = {}
         for sname, (unit, filt, repeat) in _SAMPLERS.items():
@@ -246,6 +257,14 @@ class GLRenderer:
                     "study.scene.baseline_inputs.with_baseline_inputs"
                 )
             vals["o2v_projection_reflection"] = _mat_bytes(i.reflection_view_proj)
+        for uname, field in _OPTIONAL_VEC3.items():
+            if self._reads(prog, uname):
+                if getattr(i, field) is None:
+                    raise ValueError(
+                        f"{self.name} reads {uname} but ShaderInputs.{field} is None; build "
+                        "the inputs with study.scene.box_inputs.with_box_inputs"
+                    )
+                vals[uname] = np.asarray(getattr(i, field), np.float32).tobytes()
         for k in range(4):
             vals[f"wave{k + 1}"] = i.waves[k].astype(np.float32).tobytes()
         self._write_uniforms(prog, vals)
@@ -253,10 +272,15 @@ class GLRenderer:
             uname = self._sampler_uniform(prog, sname)
             if uname is not None:
                 if sname not in self._textures:
+                    builder = (
+                        "box_inputs.with_box_inputs"
+                        if sname in _CUBE_SAMPLERS
+                        else "baseline_inputs.with_baseline_inputs"
+                    )
                     raise ValueError(
                         f"{self.name} reads the sampler {sname} but ShaderInputs."
                         f"{_OPTIONAL_SAMPLERS[sname]} is None; build the inputs with "
-                        "study.scene.baseline_inputs.with_baseline_inputs"
+                        f"study.scene.{builder}"
                     )
                 prog[uname].value = unit
 

@@ -2,7 +2,8 @@
 // Refraction pixel shader of Lipp, "Physically correct perturbed planar
 // refractions & reflections in real time" (seed 000, section 2).
 // Compile with NOREFLECTION defined for the refraction-only variant, with PLANAR_REFLECTION
-// for the reflection of seed 004's mirrored camera offset by the wave normal (seed 002).
+// for the reflection of seed 004's mirrored camera offset by the wave normal (seed 002), with
+// BOX_REFLECTION for a box-projected (local) cube map of the pool (Lagarde and Zanuttini).
 // Fixes against the documented text are listed in shaders_port/README.md.
 
 // ---- BEGIN TUNABLE CONSTANTS (written by `study export`) ----
@@ -49,6 +50,16 @@ uniform sampler2D fresnelLookup;
 
 //color of specular highlight
 uniform vec3 lightcolor;
+#ifdef BOX_REFLECTION
+//the dry scene (walls, sky) captured as a cube map at boxCapturePosition, stored like
+//reflectionTexture (texel of direction d holds the scene in direction d*vec3(1,-1,1))
+uniform samplerCube boxReflectionTexture;
+//the pool's walls as an axis-aligned box, world units; boxMax.y is the walls' top
+uniform vec3 boxMin;
+uniform vec3 boxMax;
+//where boxReflectionTexture was captured, world units
+uniform vec3 boxCapturePosition;
+#endif
 #ifdef PLANAR_REFLECTION
 //the scene above the water seen by the mirrored camera (seed 004)
 uniform sampler2D reflection_sampler;
@@ -220,10 +231,21 @@ void main (void)
     R = normalize(reflect(-vEye, vBumpTexMore));
     //clamp y to 0.0001, else reflection vector would go into water
     R.y = max(R.y,0.001);
+#ifdef BOX_REFLECTION
+    //variant: local cube map (Lagarde and Zanuttini). The reflected ray leaves the box of the
+    //pool's walls: through a wall below the walls' top it sees that wall, looked up from the
+    //capture point; through the top it sees the distant sky, looked up along R itself
+    vec3 boxPlane = mix(boxMin, boxMax, step(0.0, R));
+    vec3 boxT = abs(boxPlane - varyingVecWorldPosition) / max(abs(R), vec3(1e-6));
+    vec3 boxHit = varyingVecWorldPosition + min(boxT.x, boxT.z)*R;
+    vec3 boxLookup = boxHit.y < boxMax.y ? boxHit - boxCapturePosition : R;
+    vec4 vReflection = textureCube(boxReflectionTexture, normalize(boxLookup)*vec3(1,-1,1) )*reflectColor;
+#else
     //Fetch from cubemap, modulate with reflectColor
     //Somehow y-component is inverted, so it is rescaled with -1.
     //probably a bug in my code.
     vec4 vReflection = textureCube(reflectionTexture, normalize(R)*vec3(1,-1,1) )*reflectColor;
+#endif
 #endif
 
     // ---- [8] Specular highlight ----

@@ -66,6 +66,7 @@ from ..pipeline.frame import (
 )
 from ..pipeline.raster import prepare
 from ..pipeline.texture import backend_types, clamp, gl_pow, mix, texmat_xy
+from .box import box_reflection, box_state
 from .planar import MIRROR_NORMAL, mirror_state, planar_reflection
 from .switches import decode
 
@@ -87,10 +88,12 @@ class Options(NamedTuple):
     wall_faces: False (original) or True (``WALL_FACES``: a crossing into geometry that rises
         above the water plane, e.g. a pool wall, hit that geometry's vertical face under the
         water, which the top-down textures do not hold; it is shaded as ``waterColor``).
-    planar_reflection: False (original: the sky cube map) or True (``PLANAR_REFLECTION``:
-        block [7] reads seed 004's mirrored camera at the surface point, offset by the
+    reflection_map: what block [7] reads: 'cube' (original: the sky cube map), 'mirror'
+        (``PLANAR_REFLECTION``: seed 004's mirrored camera at the surface point, offset by the
         projected flattened wave normal times ``REFLECT_DISTORTION`` (seed 002); needs
-        ``ShaderInputs.reflection_color`` and ``reflection_view_proj``).
+        ``ShaderInputs.reflection_color`` and ``reflection_view_proj``) or 'box'
+        (``BOX_REFLECTION``: the local cube map of the pool, box-projected (``ports.box``);
+        needs ``ShaderInputs.box_cubemap``, ``box_min``, ``box_max`` and ``box_capture``).
     """
 
     reflection: bool = True
@@ -99,7 +102,7 @@ class Options(NamedTuple):
     attenuation: str = "linear"
     specular: str = "phong"
     wall_faces: bool = False
-    planar_reflection: bool = False
+    reflection_map: str = "cube"
 
 
 # the one table from the GLSL file's #define names to the port's options (see ports.switches)
@@ -113,7 +116,8 @@ DEFINES = {
     "GGX_SPECULAR": {"specular": "ggx"},
     "NO_SPECULAR": {"specular": "none"},
     "WALL_FACES": {"wall_faces": True},
-    "PLANAR_REFLECTION": {"planar_reflection": True},
+    "PLANAR_REFLECTION": {"reflection_map": "mirror"},
+    "BOX_REFLECTION": {"reflection_map": "box"},
 }
 # texture reads per pixel attributed to PLANAR_REFLECTION for the mirrored camera's pass (as
 # water_baseline.PASS_FETCHES)
@@ -427,35 +431,42 @@ def refraction_blocks(m, P, C, opts: Options = Options()) -> Refracted:
     )
 
 
-def _shade(m, P, C, diagnose: bool = False, opts: Options = Options(), Mi=None):
-    f = refraction_blocks(m, P, C, opts)
-    vEye, vLight, vBumpTex, vBumpTexMore = f.vEye, f.vLight, f.vBumpTex, f.vBumpTexMore
-    R, current_position, vRefraction = f.R, f.current_position, f.vRefraction
-    iterations, crossed, denominator = f.iterations, f.crossed, f.denominator
-    fetches = opts.normal_layers + 1 + iterations + 1  # iterations include the refinement steps
-    bad = nonfinite_any(vEye, vBumpTex, vBumpTexMore, R, current_position)
-    if opts.reflection and opts.planar_reflection:
+def reflection_block(m, P, C, opts: Options, Mi, f: Refracted):
+    """Blocks [7]-[9] with the reflection ``opts.reflection_map`` reads (``Mi``: its state,
+    ``ports.planar.Mirror`` or ``ports.box.BoxProbe``, None for the sky cube map). Returns
+    ``(gl_FragColor`` Array4f, texture fetches it adds, Bool of non-finite intermediates)."""
+    vEye, vLight, vBumpTex = f.vEye, f.vLight, f.vBumpTex
+    if opts.reflection_map == "mirror":
         # ---- [7] Reflection (PLANAR_REFLECTION: sources 004 and 002) ----
         vReflection, uv = planar_reflection(m, P, Mi, C, vBumpTex, m.Array3f(*MIRROR_NORMAL), False)
-        vReflection = specular_highlight(
-            m, P, vReflection, vBumpTex, vEye, vLight, C, opts.specular
-        )
-        gl_FragColor = fresnel_combine(m, P, vReflection, vRefraction, vEye, vBumpTex)
-        fetches = fetches + 2 + PASS_FETCHES
-        bad |= nonfinite_any(vLight) | ~(dr.isfinite(uv[0]) & dr.isfinite(uv[1]))
-    elif opts.reflection:
-        # ---- [7] Reflection ----
-        R = dr.normalize(reflect(m, -vEye, vBumpTexMore))
-        R.y = dr.maximum(R.y, 0.001)
-        vReflection = cubemap_reflection(m, P, R) * C.reflectColor
-        vReflection = specular_highlight(
-            m, P, vReflection, vBumpTex, vEye, vLight, C, opts.specular
-        )
-        gl_FragColor = fresnel_combine(m, P, vReflection, vRefraction, vEye, vBumpTex)
-        fetches = fetches + 2
-        bad |= nonfinite_any(R, vLight)
+        fetches = 2 + PASS_FETCHES
+        bad = nonfinite_any(vLight) | ~(dr.isfinite(uv[0]) & dr.isfinite(uv[1]))
     else:
-        gl_FragColor = vRefraction
+        # ---- [7] Reflection ----
+        R = dr.normalize(reflect(m, -vEye, f.vBumpTexMore))
+        R.y = dr.maximum(R.y, 0.001)
+        if opts.reflection_map == "box":  # BOX_REFLECTION
+            vReflection = box_reflection(m, P, Mi, C, R)
+        else:
+            vReflection = cubemap_reflection(m, P, R) * C.reflectColor
+        fetches = 2
+        bad = nonfinite_any(R, vLight)
+    vReflection = specular_highlight(m, P, vReflection, vBumpTex, vEye, vLight, C, opts.specular)
+    gl_FragColor = fresnel_combine(m, P, vReflection, f.vRefraction, vEye, vBumpTex)
+    return gl_FragColor, fetches, bad
+
+
+def _shade(m, P, C, diagnose: bool = False, opts: Options = Options(), Mi=None):
+    f = refraction_blocks(m, P, C, opts)
+    iterations, crossed, denominator = f.iterations, f.crossed, f.denominator
+    fetches = opts.normal_layers + 1 + iterations + 1  # iterations include the refinement steps
+    bad = nonfinite_any(f.vEye, f.vBumpTex, f.vBumpTexMore, f.R, f.current_position)
+    if opts.reflection:
+        gl_FragColor, more, worse = reflection_block(m, P, C, opts, Mi, f)
+        fetches = fetches + more
+        bad |= worse
+    else:
+        gl_FragColor = f.vRefraction
     diagnostics = {
         "iterations": m.Float(iterations),
         "fetches": m.Float(fetches),
@@ -479,10 +490,13 @@ def _frozen_shade(m, P, C, diagnose, opts, Mi):
     )
 
 
-def _mirror(m, inputs, opts: Options):
-    """The mirrored camera's state (``ports.planar.Mirror``) if ``opts`` reads it, else None."""
-    if opts.reflection and opts.planar_reflection:
+def _reflection_state(m, inputs, opts: Options):
+    """The state of the reflection ``opts`` reads beyond the study's inputs: the mirrored
+    camera's (``ports.planar.Mirror``), the local cube map's (``ports.box.BoxProbe``) or None."""
+    if opts.reflection and opts.reflection_map == "mirror":
         return mirror_state(m, inputs, "water_refraction with PLANAR_REFLECTION")
+    if opts.reflection and opts.reflection_map == "box":
+        return box_state(m, inputs, "water_refraction with BOX_REFLECTION")
     return None
 
 
@@ -512,7 +526,7 @@ def render(
     opts = options_of(defines)
     m = backend_types(backend)
     P = prepare(inputs, m)
-    Mi = _mirror(m, inputs, opts)
+    Mi = _reflection_state(m, inputs, opts)
     C = resolve_constants(m, constants if constants is not None else Constants(), loop_ad)
     with evaluated_loops_if(C.differentiable and loop_ad == "evaluated"):
         if _frame.USE_FROZEN and not C.differentiable:
@@ -554,7 +568,7 @@ def render_with_jacobian(
     opts = options_of(defines)
 
     def shade_tangents(m, P, C, params, frozen):
-        Mi = _mirror(m, inputs, opts)
+        Mi = _reflection_state(m, inputs, opts)
         if frozen:
             return _frozen_tangents(m, P, C, params, opts, Mi)
         return tangents(m, *_shade(m, P, C, False, opts, Mi), params)

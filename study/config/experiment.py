@@ -360,6 +360,20 @@ class Experiment:
         data.update(self._file_contents())
         return hashlib.sha256(json.dumps(data, sort_keys=True).encode()).hexdigest()
 
+    def dry_scene_hash(self) -> str:
+        """SHA-256 over every value that affects the scene without the water seen from a fixed
+        point (the pool, floor, sky, sun and mesh, their files' contents, the path length and
+        the seed of ``reference``): not the camera, the resolution, the water nor its waves."""
+        prefixes = ("pool.", "floor.", "sky.", "sun.", "mesh.")
+        keys = ("reference.max_depth", "reference.seed", "variant")
+        data = {
+            k: v
+            for k, v in sorted(self.values.items())
+            if (k.startswith(prefixes) or k in keys) and not _unset_later_key(k, v)
+        }
+        data.update({k: v for k, v in self._file_contents().items() if k.startswith(prefixes)})
+        return hashlib.sha256(json.dumps(data, sort_keys=True).encode()).hexdigest()
+
     def _file_contents(self) -> dict:
         """The file keys' paths replaced by their contents' digests (a moved file is the same
         scene; a changed file is a new one)."""

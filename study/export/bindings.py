@@ -31,6 +31,12 @@ MEANINGS = {
     "sceneColor": "linear RGB of the scene without the water, this camera (screen space)",
     "sceneDepth": "window-space depth in [0, 1] of that view (the GL depth buffer)",
     "reflection_sampler": "linear RGB of the scene above the water seen by the mirrored camera",
+    "boxReflectionTexture": "local cube map: the scene without the water (walls, sky without the "
+    "sun) seen from boxCapturePosition, linear RGB, GL face order, the texel of d holding the "
+    "scene in d * (1, -1, 1); bilinear, clamp",
+    "boxMin": "lower corner of the box of the pool's walls, world units",
+    "boxMax": "upper corner of that box, world units; its y is the walls' top (above it: sky)",
+    "boxCapturePosition": "where boxReflectionTexture was captured, world units",
     "uTextureMatrix0": "world (x, y, z, 1) -> (s, t) of refractionTexture and worldYComponent "
     "(the top-down camera's texture matrix)",
     "uTextureMatrix1": "world -> (s, t) of worldYComponentReflection and reflectionBottom",

@@ -27,6 +27,8 @@ cached under ``<cache>/inputs/baseline_<key>.npz`` keyed like the shader inputs.
 from __future__ import annotations
 
 import dataclasses
+import hashlib
+import json
 
 import numpy as np
 
@@ -35,10 +37,10 @@ from shaders_port.inputs import mirrored_view_proj
 from shaders_port.variants import get_variant
 
 from .._backend import jit_input
-from .._io import disk_full
 from ..config.experiment import Experiment
 from ..config.user_shader import is_user_shader, load_user_shader
-from .cache import SCENE_VERSION, cache_dir, versions
+from .box_inputs import with_box_inputs
+from .cache import SCENE_VERSION, cache_dir, cached_fields, versions
 from .geometry import envmap_image, sky_radiance
 from .mitsuba_scene import build_geometry, sky_params
 from .shader_inputs import INPUTS_VERSION
@@ -47,6 +49,7 @@ BASELINE_INPUTS_VERSION = 1  # bump whenever the construction below changes
 # path-traced samples per pixel of the two views (only the dry walls and their shading are
 # path traced: the floor under the water comes from the top-down texture); measured: see README
 BASELINE_SPP = 32
+BASELINE_FIELDS = ("scene_color", "scene_depth", "reflection_color", "reflection_view_proj")
 
 
 def pixel_rays(view_proj: np.ndarray, width: int, height: int):
@@ -187,11 +190,6 @@ def with_baseline_inputs(
     shader-input values (``Experiment.inputs_hash``), the Mitsuba variant, the resolution,
     ``BASELINE_SPP``, ``BASELINE_INPUTS_VERSION`` and the package
     versions; the top-down texture they reuse is keyed by the same values."""
-    import hashlib
-    import json
-    import os
-    import tempfile
-
     key = hashlib.sha256(
         json.dumps(
             {
@@ -208,36 +206,9 @@ def with_baseline_inputs(
         ).encode()
     ).hexdigest()[:32]
     path = (cache or cache_dir()) / "inputs" / f"baseline_{key}.npz"
-    fields = None
-    if path.exists():
-        try:
-            with np.load(path) as z:
-                fields = {
-                    k: z[k]
-                    for k in (
-                        "scene_color",
-                        "scene_depth",
-                        "reflection_color",
-                        "reflection_view_proj",
-                    )
-                }
-            log(f"baseline inputs: cached {path}")
-        except (OSError, ValueError, KeyError) as exc:
-            log(f"baseline inputs: unreadable cache file {path} ({exc}); rebuilding")
-            fields = None
-    if fields is None:
-        fields = build_baseline_inputs(exp, inputs)
-        path.parent.mkdir(parents=True, exist_ok=True)
-        fd, tmp = tempfile.mkstemp(dir=path.parent, suffix=".npz.tmp")
-        os.close(fd)
-        try:
-            with disk_full(path.parent), open(tmp, "wb") as f:
-                np.savez_compressed(f, **fields)
-            os.replace(tmp, path)
-        finally:
-            if os.path.exists(tmp):
-                os.unlink(tmp)
-        log(f"baseline inputs: built and cached at {path}")
+    fields = cached_fields(
+        path, BASELINE_FIELDS, lambda: build_baseline_inputs(exp, inputs), "baseline inputs", log
+    )
     return dataclasses.replace(inputs, **fields)
 
 
@@ -258,15 +229,18 @@ def inputs_for_shader(
     exp: Experiment, inputs: ShaderInputs, shader: str, variant: str, cache=None, log=print
 ) -> ShaderInputs:
     """``inputs`` with whatever optional fields the shader ``shader`` reads: a variant's
-    ``Variant.inputs``, or, for a user's file (``*.frag``, with ``fit.declare``), the screen
-    buffers when it reads one of :data:`SCREEN_INPUTS` (by name or through a binding); else
-    ``inputs`` unchanged."""
+    ``Variant.inputs`` (the screen-space buffers; the local cube map, ``box_inputs``), or, for
+    a user's file (``*.frag``, with ``fit.declare``), the screen buffers when it reads one of
+    :data:`SCREEN_INPUTS` (by name or through a binding); else ``inputs`` unchanged."""
 
     if is_user_shader(shader):
         reads = load_user_shader({**exp.values, "fit.shader": shader}).study_inputs()
         needs = any(n in reads for n in SCREEN_INPUTS)
     else:
-        needs = bool(get_variant(shader).inputs)
+        extra = get_variant(shader).inputs
+        needs = any(f in BASELINE_FIELDS for f in extra)
+        if "box_cubemap" in extra:
+            inputs = with_box_inputs(exp, inputs, variant, cache=cache, log=log)
     if needs:
         return with_baseline_inputs(exp, inputs, variant, cache=cache, log=log)
     return inputs

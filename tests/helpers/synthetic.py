@@ -139,3 +139,47 @@ def synthetic_baseline_inputs(width: int = 64, height: int = 48, seed: int = 0) 
         reflection_color=refl.astype(np.float32),
         reflection_view_proj=rvp,
     )
+
+
+def synthetic_box_inputs(
+    width: int = 64, height: int = 48, seed: int = 0, size: int = 32
+) -> "ShaderInputs":
+    """``synthetic_inputs`` plus the local cube map of ``reflection = box``: the water's box
+    (x, z in [-2, 2], walls 0.6 high) captured at (0, 0.6, 0), the walls striped in their own
+    coordinates (so a wrong parallax shows), the sky a gradient above; the study's ``y`` flip
+    (texel of direction d holds the scene in d * (1, -1, 1))."""
+    import dataclasses
+
+    base = synthetic_inputs(width, height, seed=seed)
+    lo, hi, capture = np.array([-2.0, -1.6, -2.0]), np.array([2.0, 0.6, 2.0]), np.array([0, 0.6, 0])
+    d = _cube_directions(size) * np.array([1.0, -1.0, 1.0])
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t = np.where(d > 0, (hi - capture) / d, (lo - capture) / d)
+    t = np.where(np.isfinite(t) & (t > 0), t, np.inf)[..., [0, 2]].min(-1)
+    p = capture + t[..., None] * d
+    along = np.where(np.abs(np.abs(p[..., 0]) - 2.0) < 1e-6, p[..., 2], p[..., 0])
+    wall = (0.5 + 0.4 * np.sin(3.0 * along))[..., None] * np.array([0.9, 0.5, 0.3])
+    wall = wall * (0.6 + 0.4 * np.clip(p[..., 1:2] / 0.6, 0.0, 1.0))
+    sky = np.array([0.5, 0.7, 1.0]) * (0.4 + 0.5 * np.clip(d[..., 1:2], 0, 1))
+    cube = np.where(d[..., 1:2] < 0.0, wall, sky).astype(np.float32)
+    return dataclasses.replace(base, box_cubemap=cube, box_min=lo, box_max=hi, box_capture=capture)
+
+
+def synthetic_inputs_for(name: str, width: int = 64, height: int = 48) -> "ShaderInputs":
+    """The synthetic inputs with whatever extra inputs the shader ``name`` reads."""
+    from shaders_port.variants import get_variant
+
+    extra = get_variant(name).inputs
+    if "box_cubemap" in extra:
+        return synthetic_box_inputs(width, height)
+    return (synthetic_baseline_inputs if extra else synthetic_inputs)(width, height)
+
+
+def _cube_directions(size: int) -> np.ndarray:
+    """(6, size, size, 3) unit directions of a GL cube map's texel centres (GL table 8.19)."""
+    c = 2 * (np.arange(size) + 0.5) / size - 1
+    s, t = np.meshgrid(c, c)
+    one = np.ones_like(s)
+    faces = [(one, -t, -s), (-one, -t, s), (s, one, t), (s, -one, -t), (s, -t, one), (-s, -t, -one)]
+    out = np.stack([np.stack(f, -1) for f in faces])
+    return out / np.linalg.norm(out, axis=-1, keepdims=True)

@@ -139,6 +139,13 @@ def viewer_data(inputs: ShaderInputs, vert: str, frag: str, frag_default: str, i
             a = a[None, :, :]  # N x 1
         textures[sampler] = _texture(a, filt, repeat)
     textures["reflectionTexture"] = {"size": int(i.cubemap.shape[1]), "data": _b64(i.cubemap)}
+    if i.box_cubemap is not None:  # the local cube map of reflection = box
+        textures["boxReflectionTexture"] = {
+            "size": int(i.box_cubemap.shape[1]),
+            "data": _b64(i.box_cubemap),
+        }
+    box = {k: None if getattr(i, k) is None else [float(v) for v in getattr(i, k)]
+           for k in ("box_min", "box_max", "box_capture")}  # fmt: skip
     return {
         "width": int(i.width),
         "height": int(i.height),
@@ -157,6 +164,7 @@ def viewer_data(inputs: ShaderInputs, vert: str, frag: str, frag_default: str, i
             "lightpos": [float(v) for v in i.lightpos],
             "lightcolor": [float(v) for v in i.lightcolor],
             "waves": np.asarray(i.waves, np.float32).tolist(),
+            **box,
         },
         "textures": textures,
         "images": {k: _texture(np.asarray(v, np.float32)[::-1]) for k, v in images.items()},
@@ -208,10 +216,12 @@ def _camera_note(camera: dict, tied: list[str], shader=None) -> str:
         "The raycast refraction reads the ground seen from above (refractionTexture, "
         "worldYComponent) and the raycast reflection the geometry above the water seen from "
         "below (worldYComponentReflection, reflectionBottom): top-down textures in world "
-        "coordinates; the sky cube map (reflectionTexture), the normal map and the light are "
-        "in world space too. Tied to the study's camera are screen-space buffers (sceneColor, "
-        "sceneDepth, the mirrored camera's reflection_sampler and o2v_projection_reflection, "
-        "read by the baseline shaders) and anything read through gl_FragCoord or screenSize."
+        "coordinates; the sky cube map (reflectionTexture), the local cube map and its box "
+        "(boxReflectionTexture, boxMin, boxMax, boxCapturePosition), the normal map and the "
+        "light are in world space too. Tied to the study's camera are screen-space buffers "
+        "(sceneColor, sceneDepth, the mirrored camera's reflection_sampler and "
+        "o2v_projection_reflection, read by the baseline shaders) and anything read through "
+        "gl_FragCoord or screenSize."
     )
     if camera["orbit"]:
         return (

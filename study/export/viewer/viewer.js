@@ -178,7 +178,10 @@
   const SAMPLERS = {
     refractionTexture: 0, worldYComponent: 1, normalMap: 2, reflectionTexture: 3, fresnelLookup: 4,
     worldYComponentReflection: 5, reflectionBottom: 6, sceneColor: 7, sceneDepth: 8, reflection_sampler: 9,
+    boxReflectionTexture: 10,
   };
+  // the samplers that read a cube map
+  const CUBES = new Set(["reflectionTexture", "boxReflectionTexture"]);
   const MASK_FRAG = "#version 300 es\nprecision highp float;\nout vec4 c;\nvoid main() { c = vec4(1.0); }\n";
   const SHOW_VERT = "#version 300 es\nout vec2 uv;\nvoid main() {\n" +
     "  vec2 p = vec2(float((gl_VertexID << 1) & 2), float(gl_VertexID & 2));\n" +
@@ -234,6 +237,11 @@ void main() {
       screenSize: ["v2", new Float32Array([W, H])],
     };
     if (I.reflection_view_proj) v.o2v_projection_reflection = ["m4", new Float32Array(I.reflection_view_proj)];
+    if (I.box_min) {
+      v.boxMin = ["v3", new Float32Array(I.box_min)];
+      v.boxMax = ["v3", new Float32Array(I.box_max)];
+      v.boxCapturePosition = ["v3", new Float32Array(I.box_capture)];
+    }
     for (let i = 0; i < 4; i++) v["wave" + (i + 1)] = ["v2", new Float32Array(waves[i])];
     return v;
   }
@@ -268,7 +276,7 @@ void main() {
       }
       const unit = SAMPLERS[study];
       gl.activeTexture(gl.TEXTURE0 + unit);
-      gl.bindTexture(study === "reflectionTexture" ? gl.TEXTURE_CUBE_MAP : gl.TEXTURE_2D, tex);
+      gl.bindTexture(CUBES.has(study) ? gl.TEXTURE_CUBE_MAP : gl.TEXTURE_2D, tex);
       gl.uniform1i(gl.getUniformLocation(prog, name), unit);
     }
   }
@@ -415,7 +423,7 @@ void main() {
     showProg = link(SHOW_VERT, SHOW_FRAG, "the display pass");
     textures = {};
     for (const [name, t] of Object.entries(D.textures)) {
-      textures[name] = name === "reflectionTexture" ? textureCube(t) : texture2d(t, t.filter, t.repeat);
+      textures[name] = CUBES.has(name) ? textureCube(t) : texture2d(t, t.filter, t.repeat);
     }
     images = {};
     for (const [name, t] of Object.entries(D.images)) images[name] = texture2d(t, "nearest", false);
