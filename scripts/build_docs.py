@@ -135,6 +135,13 @@ def generated() -> dict[Path, str]:
     return pages
 
 
+def _figures(run: dict) -> str:
+    """A target check's "mean, 99.9th percentile" (or "-" where it did not run)."""
+    from study.report.calibration import fmt
+
+    return f"{fmt(run['mean_abs'], 3)}, {fmt(run['p999'], 3)}" if "mean_abs" in run else "-"
+
+
 def _engine_pairs_page(folder: Path) -> str:
     """The engine-style pairs' calibrations: one section per ``folder/<name>/constants.json``
     (errors, every constant's status and value, the GL check and the HLSL round trip)."""
@@ -149,19 +156,22 @@ def _engine_pairs_page(folder: Path) -> str:
         "waters-shipped).*",
         "",
         "| experiment | RMSE start -> fitted | FLIP start -> fitted | solver steps | GL check "
-        "(mean, 99.9th pct.) | HLSL round trip |",
-        "|---|---|---|---|---|---|",
+        "(mean, 99.9th pct.) | the GL check ran | GLSL ES 3.00 export on OpenGL ES | HLSL round "
+        "trip |",
+        "|---|---|---|---|---|---|---|---|",
     ]
     runs = {n: _json(folder / n / "constants.json") for n in ENGINE_PAIRS}
     for name, d in runs.items():
         e, gl = d["error"], d["gl_check"]
-        hlsl = (d.get("engine_targets") or {}).get("hlsl", {}).get("llvmpipe") or {}
-        hl = f"{fmt(hlsl['mean_abs'], 3)}, {fmt(hlsl['p999'], 3)}" if "mean_abs" in hlsl else "-"
+        targets = d.get("engine_targets") or {}
+        hl, es = (_figures((targets.get(t) or {}).get("llvmpipe") or {})
+                  for t in ("hlsl", "gles300"))  # fmt: skip
+        ran = f"{gl.get('text', 'the core-profile translation')}, {gl.get('context', 'core')}"
         lines.append(
             f"| `{name}` | {e['rmse']['default']:.4f} -> {e['rmse']['fitted']:.4f} | "
             f"{e['flip']['default']:.4f} -> {e['flip']['fitted']:.4f} | {d['iterations']} | "
             f"{fmt(gl['mean_abs'], 3)}, {fmt(gl['p999'], 3)} "
-            f"({'passed' if gl['passed'] else 'FAILED'}) | {hl} |"
+            f"({'passed' if gl['passed'] else 'FAILED'}) | {ran} | {es} | {hl} |"
         )
     for name, d in runs.items():
         lines += ["", f"## `{name}`", "", f"`{d['shader']}` after its own vertex shader "
