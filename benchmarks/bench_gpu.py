@@ -40,6 +40,7 @@ import json
 import os
 import platform
 import resource
+import shlex
 import shutil
 import subprocess
 import sys
@@ -343,7 +344,7 @@ def main(argv=None) -> int:
     m["load_after"] = list(os.getloadavg())
     m["note"] = a.note
     inv = {"title": a.title or f"{', '.join(a.sizes)} on {', '.join(backends)}",
-           "command": " ".join(["benchmarks/bench_gpu.py", *(argv or sys.argv[1:])]),
+           "command": shlex.join(["benchmarks/bench_gpu.py", *(argv or sys.argv[1:])]),
            "machine": m, "overrides": a.overrides, "stages": [*ALWAYS, *a.stages],
            "results": results, "parity": parity(other + results) if a.parity else None,
            "parity_with": a.parity_with}  # fmt: skip
