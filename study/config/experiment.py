@@ -231,7 +231,7 @@ def _check(key: str, f: Field, v):
         return v if v == "auto" else num(v, integer=True)
     if k in _VEC_LEN and isinstance(v, str) and f.choices:  # a resolution's preset, or auto
         if v not in f.choices:
-            bad(f"unknown preset {_clip(v)}; give [width, height] or a preset")
+            bad(f"expected a list of {_VEC_LEN[k]} numbers or a preset, got {_clip(v)}")
         return v if v == AUTO else list(PRESETS[v])
     if k in _VEC_LEN:
         if not isinstance(v, list) or len(v) != _VEC_LEN[k]:
