@@ -392,6 +392,17 @@ class Experiment:
         return copy.deepcopy(self.values)
 
 
+def _choose_auto(values: dict) -> dict:
+    """Replace ``fit.resolution = "auto"`` in ``values`` by the tool's choice for the device of
+    the run (``study._backend.init_backend``'s variant when it ran, else the experiment's
+    ``variant``); return the keys so chosen (key -> "auto")."""
+    if values["fit.resolution"] != AUTO:
+        return {}
+    device = drjit_backend(active_variant() or values["variant"])
+    values["fit.resolution"] = auto_fit_resolution(values["resolution"], device)
+    return {"fit.resolution": AUTO}
+
+
 def validate(raw: dict, overrides: list[str] | None = None, path: Path | None = None) -> Experiment:
     """Validate a parsed TOML dictionary (plus ``key=value`` overrides) against SCHEMA."""
     if not isinstance(raw, dict):
@@ -422,12 +433,7 @@ def validate(raw: dict, overrides: list[str] | None = None, path: Path | None = 
     values = {}
     for key, f in SCHEMA.items():
         values[key] = _check(key, f, flat[key]) if key in flat else copy.deepcopy(f.default)
-    auto = {}
-    if values["fit.resolution"] == AUTO:  # the run's device when it is chosen, else `variant`
-        auto["fit.resolution"] = AUTO
-        values["fit.resolution"] = auto_fit_resolution(
-            values["resolution"], drjit_backend(active_variant() or values["variant"])
-        )
+    auto = _choose_auto(values)
     fmt = values["fit.resolution"]
     res = values["resolution"]
     if fmt[0] > res[0] or fmt[1] > res[1] or res[0] % fmt[0] or res[1] % fmt[1]:
