@@ -13,6 +13,8 @@ Every table of results in ``docs/`` is written by this script, never by hand:
 * ``docs/results/stability/<phase>/stability.md``: from the phase's ``summary.json``;
 * ``docs/results/search/report.md``: adaptive against exhaustive search, from the
   ``bench.json`` that ``benchmarks/bench_search.py --json`` writes;
+* ``docs/results/gpu/report.md``: the calibration's stages on the CPU and on a GPU, from the
+  ``bench.json`` that ``benchmarks/bench_gpu.py --json`` writes (tables: ``docs_gpu.py``);
 * ``docs/results/animation/report.md``: the animated calibration's report, from the
   ``constants.json`` that ``study calibrate experiments/animated.toml`` writes, and
   ``schedules.md``, the same calibration at three step schedules (``schedules.json``);
@@ -104,6 +106,7 @@ def generated() -> dict[Path, str]:
     sys.path.insert(0, str(Path(__file__).resolve().parent))
     from docs_engine_inputs import engine_inputs_page
     from docs_file_formats import file_formats_page
+    from docs_gpu import gpu_bench_page
     from docs_own_waves import own_waves_page
 
     pages = {DOCS / "experiment-keys.md": KEYS_HEADER + schema_markdown()}
@@ -117,6 +120,7 @@ def generated() -> dict[Path, str]:
     pages[RESULTS / "search" / "scenes.md"] = _search_page(
         _json(RESULTS / "search" / "bench_scenes.json"), "four scenes in one study"
     )
+    pages[RESULTS / "gpu" / "report.md"] = gpu_bench_page(_json(RESULTS / "gpu" / "bench.json"))
     pages[RESULTS / "animation" / "report.md"] = animation_report_text(
         _json(RESULTS / "animation" / "constants.json"), gif=False
     )

@@ -91,26 +91,57 @@ def ensure_llvm() -> tuple[int, int, int]:
     return version
 
 
+CUDA_FIX = (
+    f"run on the CPU with --backend {DEFAULT_VARIANT} (the default; or variant = "
+    f'"{DEFAULT_VARIANT}" in the experiment), or on a machine with an NVIDIA GPU and its driver'
+)
+
+_active: list[str] = []  # the variant init_backend set in this process
+
+
 def init_backend(variant: str | None = None) -> str:
-    """Check the backend and set the Mitsuba variant; return the variant in use.
+    """Check the backend, set the Mitsuba variant and make its Dr.Jit backend the default of
+    every port, the SPIR-V executor and the fit's models (``backend=None`` there); return the
+    variant in use. The one switch of a run: every stage takes its backend from here.
 
     Args:
         variant: ``"llvm_ad_rgb"`` (default, CPU) or ``"cuda_ad_rgb"`` (NVIDIA GPU).
+
+    Raises:
+        BackendError: an unknown variant, an unusable libLLVM, or a CUDA variant on a machine
+            where Dr.Jit finds no CUDA device; the message names the fix.
     """
     variant = variant or DEFAULT_VARIANT
     if variant not in VARIANTS:
         raise BackendError(f"unknown variant {variant!r}; choose one of {', '.join(VARIANTS)}")
     if variant.startswith("llvm"):
         ensure_llvm()
+    else:
+        import drjit as dr
+
+        if not dr.has_backend(dr.JitBackend.CUDA):
+            raise BackendError(
+                f"{variant} needs an NVIDIA GPU, and Dr.Jit found no CUDA device on this "
+                f"machine (no GPU, or no driver / libcuda.so); {CUDA_FIX}."
+            )
     import mitsuba as mi
 
     try:
         mi.set_variant(variant)
-    except Exception as exc:  # e.g. no CUDA driver
+    except Exception as exc:  # e.g. a driver Dr.Jit found but Mitsuba cannot use
         raise BackendError(
             f"cannot use Mitsuba variant {variant!r}: {exc}. Use {DEFAULT_VARIANT} (CPU) instead."
         ) from exc
+    from shaders_port.pipeline.texture import set_default_backend
+
+    set_default_backend(drjit_backend(variant))
+    _active[:] = [variant]
     return variant
+
+
+def active_variant() -> str | None:
+    """The variant :func:`init_backend` set in this process, or None before it ran."""
+    return _active[0] if _active else None
 
 
 def drjit_backend(variant: str) -> str:

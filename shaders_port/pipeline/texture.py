@@ -41,14 +41,42 @@ NEAREST, LINEAR = "nearest", "linear"
 CLAMP, REPEAT = "clamp", "repeat"
 
 
-def backend_types(backend: str):
-    """The Dr.Jit AD module for ``backend`` ("llvm" -> drjit.llvm.ad, "cuda" -> drjit.cuda.ad)."""
+BACKENDS = ("llvm", "cuda")
+_DEFAULT_BACKEND = ["llvm"]  # set once per process by study._backend.init_backend
+
+
+def set_default_backend(backend: str) -> None:
+    """Make ``backend`` ("llvm" or "cuda") what every port, the SPIR-V executor and the fit's
+    models use when they are given no backend (``backend=None``). ``study._backend.init_backend``
+    calls it with the backend of the Mitsuba variant it sets: the one switch of a run."""
+    if backend not in BACKENDS:
+        raise ValueError(f"backend must be 'llvm' or 'cuda', got {backend!r}")
+    _DEFAULT_BACKEND[0] = backend
+
+
+def resolve_backend(backend: str | None) -> str:
+    """``backend``, or the process's default (:func:`set_default_backend`; "llvm" until set)."""
+    backend = _DEFAULT_BACKEND[0] if backend is None else backend
+    if backend not in BACKENDS:
+        raise ValueError(f"backend must be 'llvm' or 'cuda', got {backend!r}")
+    return backend
+
+
+def backend_types(backend: str | None = None):
+    """The Dr.Jit AD module for ``backend`` ("llvm" -> drjit.llvm.ad, "cuda" -> drjit.cuda.ad;
+    None: :func:`resolve_backend`'s default). A CUDA backend on a machine where Dr.Jit found no
+    CUDA device is refused here, with the fix, before an array is made."""
+    backend = resolve_backend(backend)
     if backend == "llvm":
         import drjit.llvm.ad as m
-    elif backend == "cuda":
-        import drjit.cuda.ad as m
     else:
-        raise ValueError(f"backend must be 'llvm' or 'cuda', got {backend!r}")
+        if not dr.has_backend(dr.JitBackend.CUDA):
+            raise RuntimeError(
+                "the CUDA backend was asked for, but Dr.Jit found no CUDA device on this "
+                "machine (no NVIDIA GPU or driver): run on the CPU with --backend llvm_ad_rgb "
+                '(or variant = "llvm_ad_rgb"), or on a machine with an NVIDIA GPU and driver'
+            )
+        import drjit.cuda.ad as m
     return m
 
 
@@ -111,12 +139,15 @@ class Texture2D:
         return [dr.gather(m.Float, self.data, base + c, active) for c in range(self.channels)]
 
     # ---- mipmaps -------------------------------------------------------------------------------
-    def with_mipmaps(self, m, mipmap: str = LINEAR) -> "Texture2D":
+    def with_mipmaps(self, m, mipmap: str = LINEAR, array=None) -> "Texture2D":
         """This texture with its box-filtered mip chain down to 1 x 1 (see the module doc) and
-        ``mipmap`` the filter between levels."""
+        ``mipmap`` the filter between levels. ``array``: the level-0 texels ((H, W) or (H, W, C)
+        float32, those :meth:`from_numpy` uploaded) when the caller has them; else they are
+        read back from the device."""
         if mipmap not in (NEAREST, LINEAR):
             raise ValueError(f"unknown mipmap filter {mipmap!r}")
-        a = np.asarray(self.data.numpy(), np.float32).reshape(self.height, self.width, -1)
+        src = self.data.numpy() if array is None else array
+        a = np.asarray(src, np.float32).reshape(self.height, self.width, -1)
         levels = []
         for lv in box_mip_chain(a)[1:]:
             levels.append((m.Float(np.ascontiguousarray(lv).ravel()), lv.shape[1], lv.shape[0]))

@@ -360,7 +360,7 @@ def render(
     constants: Constants | None = None,
     *,
     defines: tuple = (),
-    backend: str = "llvm",
+    backend: str | None = None,
     loop_ad: str = "replay",
     diagnose: bool = False,
 ) -> ShaderOutput:
@@ -406,7 +406,7 @@ def render_with_jacobian(
     names: list[str],
     *,
     defines: tuple = (),
-    backend: str = "llvm",
+    backend: str | None = None,
     loop_ad: str = "replay",
 ):
     """Render and return ``(ShaderOutput, J)``, ``J`` float32 (H, W, 3, len(names)): the

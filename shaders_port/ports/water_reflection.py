@@ -211,7 +211,7 @@ def render(
     inputs: ShaderInputs,
     constants: Constants | None = None,
     *,
-    backend: str = "llvm",
+    backend: str | None = None,
     loop_ad: str = "replay",
     diagnose: bool = False,
     defines: tuple = (),
@@ -257,7 +257,7 @@ def render_with_jacobian(
     constants: Constants | None,
     names: list[str],
     *,
-    backend: str = "llvm",
+    backend: str | None = None,
     loop_ad: str = "replay",
     defines: tuple = (),
 ):

@@ -293,7 +293,7 @@ def engine_values(m, inputs: ShaderInputs, options: dict) -> dict:
             out[name] = float(np.float32(v))
     for name, (a, filt, wrap, mips) in gl_textures(inputs, options.get("normal_map")).items():
         tex = Texture2D.from_numpy(m, a, filt, wrap if wrap in (REPEAT, CLAMP) else CLAMP)
-        out[name] = tex.with_mipmaps(m, LINEAR) if mips else tex
+        out[name] = tex.with_mipmaps(m, LINEAR, a) if mips else tex
     out["sky_cube"] = CubeMap.from_numpy(m, sky_cube(inputs.cubemap))
     return out
 

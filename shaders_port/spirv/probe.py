@@ -88,7 +88,7 @@ def _captured(m, P, b: dict, spec, C, name: str) -> np.ndarray:
         ex.release()
 
 
-def capture(shader, inputs, name: str, values: dict | None = None, backend: str = "llvm"):
+def capture(shader, inputs, name: str, values: dict | None = None, backend: str | None = None):
     """``(value (H, W, k) float32, mask (H, W) bool)``: the value the variable ``name`` of the
     ``UserShader`` ``shader`` holds when ``main`` returns, on each pixel of ``inputs`` its water
     covers (through its vertex shader where it has one), with the constants ``values`` (default
@@ -108,7 +108,7 @@ def capture(shader, inputs, name: str, values: dict | None = None, backend: str 
     return out.reshape(r.height, r.width, -1), r.mask.copy()
 
 
-def surface_normals(shader, inputs, values: dict | None = None, backend: str = "llvm"):
+def surface_normals(shader, inputs, values: dict | None = None, backend: str | None = None):
     """``(normals (H, W, 3) float64, mask (H, W) bool)``: the unit surface normal the declaration
     names (``shader.normal``), in the study's world frame (see the module doc), on each covered
     pixel of ``inputs``. ShaderError when the shader declares none, or when a covered pixel's

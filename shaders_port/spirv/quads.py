@@ -209,7 +209,7 @@ def study_quad_bindings(m, P, inputs, b: dict, up: str = "y") -> dict:
                     else m.Float(np.r_[np.full(len(r.index), v, np.float32), h])
                 )
             else:
-                comps.append(m.Float(np.r_[np.asarray(v.numpy(), np.float32), h]))
+                comps.append(dr.concat([m.Float(v), m.Float(h)]))  # on the device
         out[name] = comps
     out[QUADS_KEY] = quads_of_pixels(m, np.r_[x, hx], np.r_[y, hy], len(x))
     return out

@@ -409,7 +409,7 @@ def render(
     constants: Constants | None = None,
     *,
     spec: ShaderSpec,
-    backend: str = "llvm",
+    backend: str | None = None,
     resolved=None,
 ) -> ShaderOutput:
     """Render ``spec`` on ``inputs`` with ``constants`` (the study's ``Constants``; or
@@ -442,7 +442,7 @@ def render_with_jacobian(
     names: list[str],
     *,
     spec: ShaderSpec,
-    backend: str = "llvm",
+    backend: str | None = None,
 ):
     """``(ShaderOutput, J)`` with ``J`` float32 (H, W, 3, len(names)): the forward-mode
     derivatives of the colour in the ``CONSTANT_SPECS`` scalar names ``names`` (as the ports'
@@ -488,12 +488,12 @@ class Translated:
     def __getattr__(self, name):
         return getattr(self._variant, name)
 
-    def render(self, inputs, constants=None, backend: str = "llvm", **kw):
+    def render(self, inputs, constants=None, backend: str | None = None, **kw):
         _no_port_options(kw)
         inputs = self._variant.prepare_inputs(inputs)
         return render(inputs, constants, spec=self._spec, backend=backend)
 
-    def render_with_jacobian(self, inputs, constants, names, backend: str = "llvm", **kw):
+    def render_with_jacobian(self, inputs, constants, names, backend: str | None = None, **kw):
         _no_port_options(kw)
         inputs = self._variant.prepare_inputs(inputs)
         return render_with_jacobian(inputs, constants, names, spec=self._spec, backend=backend)

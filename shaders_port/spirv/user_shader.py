@@ -416,7 +416,7 @@ class UserShader:
         return types.SimpleNamespace(values=vals)
 
     # ---- renders ---------------------------------------------------------------------------
-    def render(self, inputs, values: dict | None = None, backend: str = "llvm"):
+    def render(self, inputs, values: dict | None = None, backend: str | None = None):
         """A ``ShaderOutput`` (colour (H, W, 3) linear RGB, mask, ``fetches``/``iterations``)."""
         m = backend_types(backend)
         C = self.resolved_values(m, values)
@@ -437,7 +437,7 @@ class UserShader:
             vals = self.with_scalars(vals, {s: p})
         return vals, params
 
-    def vertex_motion(self, inputs, values, names: list[str], backend: str = "llvm") -> list:
+    def vertex_motion(self, inputs, values, names: list[str], backend: str | None = None) -> list:
         """For each scalar of ``names``: the largest |derivative| of a vertex's ``gl_Position``
         in it (all 0 without a vertex shader of the user's)."""
         if self.vertex is None:
@@ -450,7 +450,7 @@ class UserShader:
             for p in params:
                 dr.disable_grad(p)
 
-    def render_with_jacobian(self, inputs, values, names: list[str], backend: str = "llvm"):
+    def render_with_jacobian(self, inputs, values, names: list[str], backend: str | None = None):
         """``(ShaderOutput, J)``, ``J`` float32 (H, W, 3, len(names)): forward-mode derivatives
         of the colour in the scalar names ``names`` (lane-dependent loops unrolled); those in
         the constants of the user's vertex shader through its outputs and the interpolation,

@@ -340,7 +340,7 @@ class UserVertex:
         color, diag, _ = spirv_port.shade_lanes(m, P, b, spec, C, differentiate)
         return P, color, diag
 
-    def render(self, inputs, spec, C, backend: str = "llvm"):
+    def render(self, inputs, spec, C, backend: str | None = None):
         """A ``ShaderOutput`` of ``spec`` after this vertex shader. Traced on every call, not
         replayed from a recording (``pipeline.frame.call_frozen``): the vertex stage's values
         freed by the garbage collector while a recording runs abort Dr.Jit."""

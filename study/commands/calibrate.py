@@ -54,6 +54,29 @@ def run_calibrate(experiment, out, overrides=None, variant=None, solver=None, ca
         return run_calibrate_animated(exp, variant, out, solver, cache, setup_s)
     ref, inputs, timings = load_scene_data(exp, variant, cache)
     timings = {"setup_s": setup_s, **timings}
+    model, cal = fit_still(exp, variant, ref, inputs, solver, timings)
+    backend = model.backend
+    with timed(timings, "evaluate_s"):
+        ev = evaluate_calibration(exp, inputs, ref, model, cal, backend)
+    (gl,), engine_targets, extra = export_calibration(exp, model, [inputs], cal, out, timings)
+    with timed(timings, "figures_s"):
+        figs = calibration_figures(out, exp, model, ref, ev, cal, solver)
+    timings["total_s"] = time.perf_counter() - t_start  # up to the report (written last)
+    result = calibration_result(exp, variant, model, ref, cal, ev, solver, timings, gl)
+    result.engine_targets = engine_targets
+    result.textures = extra.pop("textures")
+    result.extra.update(extra)
+    summary = write_result(out, result, figs, ev)
+    write_viewer(out, exp, inputs)
+    return summary
+
+
+def fit_still(exp, variant: str, ref, inputs, solver: str, timings: dict):
+    """The fit of a still scene, as ``study calibrate`` runs it: the model of ``fit.shader`` at
+    ``fit.resolution`` on the backend of ``variant`` (timed as ``model_s``), its decorrelated
+    halves or basin check, then :func:`calibrate_model` (``fit_s``). ``ref``: the scene's
+    ``Reference``; ``inputs``: its ``ShaderInputs`` at ``resolution``. Returns (model, the
+    ``Calibration``)."""
     backend = drjit_backend(variant)
     with timed(timings, "model_s"):
         model = build_model(exp, inputs, ref.image, backend=backend, stderr_full=ref.stderr)
@@ -78,16 +101,4 @@ def run_calibrate(experiment, out, overrides=None, variant=None, solver=None, ca
             scan_basins=True,
             basin_check=check,
         )
-    with timed(timings, "evaluate_s"):
-        ev = evaluate_calibration(exp, inputs, ref, model, cal, backend)
-    (gl,), engine_targets, extra = export_calibration(exp, model, [inputs], cal, out, timings)
-    with timed(timings, "figures_s"):
-        figs = calibration_figures(out, exp, model, ref, ev, cal, solver)
-    timings["total_s"] = time.perf_counter() - t_start  # up to the report (written last)
-    result = calibration_result(exp, variant, model, ref, cal, ev, solver, timings, gl)
-    result.engine_targets = engine_targets
-    result.textures = extra.pop("textures")
-    result.extra.update(extra)
-    summary = write_result(out, result, figs, ev)
-    write_viewer(out, exp, inputs)
-    return summary
+    return model, cal

@@ -33,12 +33,12 @@ def load_scenes(experiments, overrides, variant, cache):
     if not experiments:
         raise ValueError("no experiment given")
     exps = [load_experiment(e, overrides) for e in experiments]
-
+    variant = init_backend(variant or exps[0].variant)
+    exps = [exp.on_backend(variant) for exp in exps]  # a fit.resolution "auto" for the device
     for exp in exps:
         if not has_views(exp):
             refuse_animated(exp, "a fit over several experiments")
     views = [view_experiments(exp) for exp in exps]  # refuses views of an animation
-    variant = init_backend(variant or exps[0].variant)
     scenes, seen = [], {}
     for path, exp, its_views in zip(experiments, exps, views):
         name = exp.name

@@ -50,13 +50,17 @@ def prepare(experiment, out, overrides=None, variant=None, frames: bool = False)
     (the mesh), create the output folder. ``frames``: the command handles every frame of an
     animated experiment (else it says that it uses frame 0)."""
     exp = load_experiment(experiment, overrides)
+    variant = init_backend(variant or exp.variant)
+    exp = exp.on_backend(variant)  # a fit.resolution "auto" for the device the run uses
+    if "fit.resolution" in exp.auto:
+        (w, h), (fw, fh) = exp.resolution, exp.fit.resolution
+        _log(f'experiment: fit.resolution = "auto": {fw}x{fh} ({w}x{h} on {variant})')
     check_water_in_view(exp)
     if is_animated(exp) and not frames:
         _log(
             f"experiment: {exp.name} has {exp.animation.frames} frames; this command uses "
             "frame 0 (study calibrate fits every frame)"
         )
-    variant = init_backend(variant or exp.variant)
     check_scene(exp)
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)

@@ -21,11 +21,13 @@ import numpy as np
 from shaders_port.space import parse_fix
 from shaders_port.variants import get_variant
 
+from .._backend import active_variant, drjit_backend
 from .._progress import log
 from . import files as user_files
 from .errors import ExperimentError
 from .files import clip_text, heightmap_floor
 from .floor import floor_height
+from .resolution import AUTO, PRESETS, auto_fit_resolution
 from .user_shader import check_user_shader, is_user_shader, shader_waves_digest
 from .schema import (
     FIT_PARAMETERS,
@@ -227,6 +229,10 @@ def _check(key: str, f: Field, v):
         return [num(x) for x in v]
     if k == "int_or_auto":
         return v if v == "auto" else num(v, integer=True)
+    if k in _VEC_LEN and isinstance(v, str) and f.choices:  # a resolution's preset, or auto
+        if v not in f.choices:
+            bad(f"expected a list of {_VEC_LEN[k]} numbers or a preset, got {_clip(v)}")
+        return v if v == AUTO else list(PRESETS[v])
     if k in _VEC_LEN:
         if not isinstance(v, list) or len(v) != _VEC_LEN[k]:
             bad(f"expected a list of {_VEC_LEN[k]} numbers, got {_clip(v)}")
@@ -293,6 +299,19 @@ class Experiment:
     values: dict
     path: Path | None = None
     digests: dict = field(default_factory=dict)  # file key -> SHA-256 of the file's contents
+    auto: dict = field(default_factory=dict)  # key -> "auto": values the tool chose
+
+    def on_backend(self, variant: str) -> "Experiment":
+        """This experiment for a run on the Mitsuba ``variant`` (``study._backend.init_backend``'s
+        choice): a ``fit.resolution = "auto"`` chosen for that device
+        (``study.config.resolution.auto_fit_resolution``); itself when nothing changes."""
+        if "fit.resolution" not in self.auto:
+            return self
+        fit = auto_fit_resolution(self.values["resolution"], drjit_backend(variant))
+        if fit == self.values["fit.resolution"]:
+            return self
+        values = {**self.values, "fit.resolution": fit}
+        return Experiment(values, self.path, dict(self.digests), dict(self.auto))
 
     def __getattr__(self, name: str):
         values = self.__dict__.get("values")
@@ -387,6 +406,17 @@ class Experiment:
         return copy.deepcopy(self.values)
 
 
+def _choose_auto(values: dict) -> dict:
+    """Replace ``fit.resolution = "auto"`` in ``values`` by the tool's choice for the device of
+    the run (``study._backend.init_backend``'s variant when it ran, else the experiment's
+    ``variant``); return the keys so chosen (key -> "auto")."""
+    if values["fit.resolution"] != AUTO:
+        return {}
+    device = drjit_backend(active_variant() or values["variant"])
+    values["fit.resolution"] = auto_fit_resolution(values["resolution"], device)
+    return {"fit.resolution": AUTO}
+
+
 def validate(raw: dict, overrides: list[str] | None = None, path: Path | None = None) -> Experiment:
     """Validate a parsed TOML dictionary (plus ``key=value`` overrides) against SCHEMA."""
     if not isinstance(raw, dict):
@@ -417,6 +447,7 @@ def validate(raw: dict, overrides: list[str] | None = None, path: Path | None = 
     values = {}
     for key, f in SCHEMA.items():
         values[key] = _check(key, f, flat[key]) if key in flat else copy.deepcopy(f.default)
+    auto = _choose_auto(values)
     fmt = values["fit.resolution"]
     res = values["resolution"]
     if fmt[0] > res[0] or fmt[1] > res[1] or res[0] % fmt[0] or res[1] % fmt[1]:
@@ -475,7 +506,7 @@ def validate(raw: dict, overrides: list[str] | None = None, path: Path | None = 
             f"reference.sky_directions = {n}: the directions are stratified on a square grid; "
             "use a square number (16, 25, 36, 49, ...)"
         )
-    return Experiment(values, path, digests)
+    return Experiment(values, path, digests, auto)
 
 
 def load_experiment(path, overrides: list[str] | None = None) -> Experiment:

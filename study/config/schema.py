@@ -57,11 +57,9 @@ def schema_markdown() -> str:
     """The key table of experiments/README.md, generated from SCHEMA."""
     lines = ["| key | type | default | units | allowed | meaning |", "|---|---|---|---|---|---|"]
     for key, f in SCHEMA.items():
-        allowed = (
-            ", ".join(f"`{c}`" for c in f.choices)
-            if f.choices
-            else (f"[{f.lo:g}, {f.hi:g}]" if f.lo is not None else "")
-        )
+        rng = f"[{f.lo:g}, {f.hi:g}]" if f.lo is not None else ""
+        names = ", ".join(f"`{c}`" for c in f.choices or ())
+        allowed = "; ".join(a for a in (rng, names) if a) if f.kind == "vec2" else names or rng
         default = json.dumps(f.default)
         lines.append(f"| `{key}` | {f.kind} | `{default}` | {f.units} | {allowed} | {f.doc} |")
     return "\n".join(lines) + "\n"

@@ -7,6 +7,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+from .resolution import PRESETS
+
 
 @dataclass(frozen=True)
 class Field:
@@ -27,7 +29,16 @@ FLOOR_SHAPES = ("flat", "slope", "steps", "terrain", "heightmap")
 SCENE_KEYS: dict[str, Field] = {
     "name": Field("str", "unnamed", "Name of the experiment (used in reports)."),
     "description": Field("str", "", "Free text."),
-    "resolution": Field("vec2", [256, 256], "Image width and height.", "pixels", 8, 4096),
+    "resolution": Field(
+        "vec2",
+        [256, 256],
+        "Image width and height, or a preset: `720p` (1280 x 720), `1080p` (1920 x 1080), "
+        "`1440p` (2560 x 1440).",
+        "pixels",
+        8,
+        4096,
+        choices=tuple(PRESETS),
+    ),
     "variant": Field(
         "str",
         "llvm_ad_rgb",

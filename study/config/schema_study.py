@@ -7,6 +7,7 @@ from __future__ import annotations
 from shaders_port import CONSTANT_SPECS
 from shaders_port.variants import SHIPPED
 
+from .resolution import AUTO, PRESETS
 from .schema_scene import Field
 
 SHADERS = tuple(SHIPPED)
@@ -310,10 +311,15 @@ STUDY_KEYS: dict[str, Field] = {
         "vec2",
         [128, 128],
         "Image size the fit runs at (the reference is "
-        "rendered at `resolution`, then box-downsampled when smaller).",
+        "rendered at `resolution`, then box-downsampled when smaller), a preset (as "
+        "`resolution`), or `auto`: chosen from the device and the scene, `resolution` divided "
+        "by the smallest factor common to both sides that leaves at most 128 x 128 pixels on the "
+        "CPU (`llvm_ad_rgb`) or 1920 x 1080 on a GPU (`cuda_ad_rgb`: full resolution up to "
+        "1080p); the device is the run's (`--backend`, else `variant`). docs/where-it-runs.md.",
         "pixels",
         8,
         4096,
+        choices=(AUTO, *PRESETS),
     ),
     "fit.input_noise": Field(
         "str",

@@ -34,10 +34,10 @@ def adam(
 
     ps = [problem.params[n] for n in names]
     Float = problem.drjit_float
-    if Float is None:
-        import drjit.llvm.ad as m
+    if Float is None:  # the run's backend (``study._backend.init_backend``)
+        from shaders_port.pipeline.texture import backend_types
 
-        Float = m.Float
+        Float = backend_types().Float
     opt = dr.opt.Adam(lr=lr)
     for p, ui in zip(ps, u0):
         opt[p.name] = Float(float(ui))

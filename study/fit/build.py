@@ -21,7 +21,7 @@ def build_model(
     inputs_full,
     reference_full: np.ndarray,
     shader: str | None = None,
-    backend: str = "llvm",
+    backend: str | None = None,
     resolution: tuple[int, int] | None = None,
     stderr_full: np.ndarray | None = None,
     translated: bool = False,

@@ -50,6 +50,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from shaders_port import Constants
+from shaders_port.pipeline.texture import backend_types
 
 from .._progress import log as _log
 from ..scene.mitsuba_scene import has_medium
@@ -118,9 +119,11 @@ def make_problem(
     def loss_drjit(values: dict):
         return model.loss_ad(with_values(start, values))
 
+    backend = getattr(model, "backend", None)  # Adam's variables on the model's backend
     return FitProblem(
-        params, residual, residual_and_jacobian, loss_drjit=loss_drjit, name="calibration"
-    )
+        params, residual, residual_and_jacobian, loss_drjit=loss_drjit, name="calibration",
+        drjit_float=backend_types(backend).Float,
+    )  # fmt: skip
 
 
 def _ident_dict(rep, names, J=None, r=None, values=None) -> dict:

@@ -19,7 +19,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from shaders_port import CONSTANT_SPECS, Constants, ShaderInputs
-from shaders_port.pipeline.texture import backend_types
+from shaders_port.pipeline.texture import backend_types, resolve_backend
 from shaders_port.spirv.translated import Translated
 from shaders_port.variants import get_variant
 
@@ -182,14 +182,15 @@ class ReferenceModel:
     :meth:`_shade_with_jacobian` (with the image Jacobian (H, W, 3, k)). ``reference_mask``:
     (H, W) bool, the reference scene's water (the scored mask is the shader's coverage and it,
     eroded by one pixel); ``reference_stderr``: (H, W, 3) float32, the reference's Monte Carlo
-    standard error per pixel, or None."""
+    standard error per pixel, or None; ``backend``: "llvm" or "cuda", None for the run's
+    (``shaders_port.pipeline.texture.resolve_backend``, set by ``study._backend.init_backend``)."""
 
     #: what non-finite water pixels are called in errors
     what = "the port"
 
-    def __init__(self, inputs, reference, backend="llvm", reference_mask=None,
+    def __init__(self, inputs, reference, backend=None, reference_mask=None,
                  reference_stderr=None):  # fmt: skip
-        self.inputs, self.backend = inputs, backend
+        self.inputs, self.backend = inputs, resolve_backend(backend)
         if reference.shape != (inputs.height, inputs.width, 3):
             raise ValueError(
                 f"reference is {reference.shape}, inputs are {inputs.height}x{inputs.width}"
@@ -312,7 +313,7 @@ class ShaderModel(ReferenceModel):
         shader: str,
         inputs: ShaderInputs,
         reference: np.ndarray,
-        backend: str = "llvm",
+        backend: str | None = None,
         reference_mask: np.ndarray | None = None,
         reference_stderr: np.ndarray | None = None,
         translated: bool = False,
@@ -330,7 +331,7 @@ class ShaderModel(ReferenceModel):
         inputs_full: ShaderInputs,
         reference_full: np.ndarray,
         shader: str | None = None,
-        backend: str = "llvm",
+        backend: str | None = None,
         resolution: tuple[int, int] | None = None,
         stderr_full: np.ndarray | None = None,
         translated: bool = False,

@@ -29,7 +29,8 @@ class FitProblem:
     """Residual over named parameters (see the module docstring for the callables' contract).
 
     ``params``: list of :class:`Param` (unique names). ``drjit_float``: the Dr.Jit float type
-    of the Adam variables handed to ``loss_drjit`` (default ``drjit.llvm.ad.Float``).
+    of the Adam variables handed to ``loss_drjit`` (default: the ``Float`` of the run's backend,
+    ``shaders_port.pipeline.texture.backend_types()``).
     """
 
     def __init__(

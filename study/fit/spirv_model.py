@@ -29,7 +29,7 @@ class SpirvModel(ReferenceModel):
 
     what = "the shader"
 
-    def __init__(self, shader, inputs, reference: np.ndarray, backend: str = "llvm",
+    def __init__(self, shader, inputs, reference: np.ndarray, backend: str | None = None,
                  reference_mask=None, reference_stderr=None):  # fmt: skip
         self.user_shader = shader
         super().__init__(inputs, reference, backend, reference_mask, reference_stderr)
@@ -41,7 +41,7 @@ class SpirvModel(ReferenceModel):
         exp: Experiment,
         inputs_full,
         reference_full: np.ndarray,
-        backend: str = "llvm",
+        backend: str | None = None,
         resolution: tuple[int, int] | None = None,
         stderr_full: np.ndarray | None = None,
         shader=None,

@@ -18,7 +18,7 @@ from .tradeoff_motion import motion_lines
 COSTS = {
     "fetches_mean": "texture fetches / water pixel (mean)",
     "gl_norm_ms_1080p": "llvmpipe ms / frame, 1920x1080 (normalised)",
-    "port_ms_512": "Dr.Jit LLVM port ms / frame, 512x512",
+    "port_ms_512": "Dr.Jit port ms / frame, 512x512 (the run's backend)",
 }
 MARKERS = {"grid": "o", "scale": "s", "converged": "*", "fixed": "D"}
 

@@ -81,7 +81,7 @@ def frame_experiment(exp: Experiment, k: int) -> Experiment:
         values["waves.time"] = frame_time(exp, k)
     for key in ANIMATION_KEYS:
         values[key] = copy.deepcopy(SCHEMA[key].default)
-    return Experiment(values, exp.path, dict(exp.digests))
+    return Experiment(values, exp.path, dict(exp.digests), dict(exp.auto))
 
 
 def frames_of(exp: Experiment) -> list[Experiment]:
@@ -95,7 +95,7 @@ def offsets_free_key(exp: Experiment) -> str:
     still = copy.deepcopy(exp.values)
     still["waves.offsets"] = None
     still["waves.time"] = SCHEMA["waves.time"].default  # the shader's waves move with it
-    other = Experiment(still, exp.path, dict(exp.digests))
+    other = Experiment(still, exp.path, dict(exp.digests), dict(exp.auto))
     data = [other.scene_hash(), other.inputs_hash()]
     return hashlib.sha256(json.dumps(data).encode()).hexdigest()[:32]
 

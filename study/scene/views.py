@@ -69,7 +69,7 @@ def view_experiments(exp: Experiment) -> list[Experiment]:
         values["camera.position"], values["camera.target"] = list(position), list(target)
         values["camera.views"] = []
         values["name"] = f"{exp.name}-view{k}"
-        out.append(Experiment(values, exp.path, dict(exp.digests)))
+        out.append(Experiment(values, exp.path, dict(exp.digests), dict(exp.auto)))
     return out
 
 

@@ -334,7 +334,7 @@ def catalogue_scene(
     constants,
     *,
     shader: str | None = None,
-    backend: str = "llvm",
+    backend: str | None = None,
     depth_complexity: bool = True,
 ) -> SceneCatalogue:
     """Render the port of ``shader`` (default ``fit.shader``) with its failure diagnostics at the

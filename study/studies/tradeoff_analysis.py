@@ -15,7 +15,7 @@ COST = "fetches_mean"
 COSTS = {
     "fetches_mean": "texture fetches / water pixel (mean)",
     "gl_norm_ms_1080p": "llvmpipe ms / frame at 1920x1080 (normalised)",
-    "port_ms_512": "Dr.Jit LLVM port ms / frame at 512x512",
+    "port_ms_512": "Dr.Jit port ms / frame at 512x512 (the run's backend)",
 }
 ERROR = "flip"
 USER = "user:"  # the variant name of a user's own shader: USER + its file name

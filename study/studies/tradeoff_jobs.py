@@ -17,11 +17,11 @@ experiment's full resolution; texture fetches and loop iterations per water pixe
 from the port's diagnostics; frame time of the fitted shader on llvmpipe at 512x512 and
 1920x1080 (draw + glFinish, median of ``gl_repeats`` frames after one warm-up) measured between two
 runs of a fixed reference shader (the seed's ``water_refraction`` with its own constants) in the
-same job, so the ratio to it compares fairly on a loaded machine; and the port's frame time (Dr.Jit
-LLVM, 512x512, median of 5). The converged raymarch gets no frame times (it is the error floor, not
-a candidate). For parsimony each point also carries its count of fitted constants (``n_fitted``:
-fitted or at a bound) and the AIC / BIC of its fit residual at the fit resolution
-(``study._metrics``).
+same job, so the ratio to it compares fairly on a loaded machine; and the port's frame time
+(Dr.Jit on the run's backend, 512x512, median of 5). The converged raymarch gets no frame times
+(it is the error floor, not a candidate). For parsimony each point also carries its count of
+fitted constants (``n_fitted``: fitted or at a bound) and the AIC / BIC of its fit residual at
+the fit resolution (``study._metrics``).
 """
 
 from __future__ import annotations
