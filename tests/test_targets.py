@@ -19,7 +19,7 @@ from shaders_port.spirv.tools import missing_tools
 from shaders_port.variants import SHIPPED, VARIANTS
 from study.export.shaders import export_shaders
 from study.export.targets import TARGETS, resolve_targets, target_file
-from helpers.synthetic import synthetic_baseline_inputs, synthetic_inputs
+from helpers.synthetic import synthetic_baseline_inputs, synthetic_inputs, synthetic_inputs_for
 
 MISSING = missing_tools()
 pytestmark = pytest.mark.skipif(
@@ -235,7 +235,7 @@ def test_uniform_initializers_become_specialization_constants():
 
 
 @pytest.mark.parametrize("seed", range(3))
-def test_hlsl_round_trip_of_configurations_nobody_registered(tmp_path, inputs, seed):
+def test_hlsl_round_trip_of_configurations_nobody_registered(tmp_path, seed):
     """Shaders of the space drawn at random (fixed seeds): exported to every target, and the
     HLSL round trip matches the port on llvmpipe as the registered variants' does."""
     import random
@@ -246,5 +246,5 @@ def test_hlsl_round_trip_of_configurations_nobody_registered(tmp_path, inputs, s
     name = _space.name_of(c)
     out = tmp_path / "shaders"
     export_shaders(FITTED, out, [name], targets=None)
-    res = _hlsl_check(out, name, inputs)
+    res = _hlsl_check(out, name, synthetic_inputs_for(name, 96, 72))
     assert res["n_water"] > 500 and res["passed"], (name, res)

@@ -6,6 +6,8 @@ import math
 
 import numpy as np
 
+from shaders_port.pipeline.texture import backend_types
+
 from .bridge import DrJitResidual
 from .problem import FTOL_WINDOW, FitProblem
 from .steps import Trace
@@ -35,8 +37,6 @@ def adam(
     ps = [problem.params[n] for n in names]
     Float = problem.drjit_float
     if Float is None:  # the run's backend (``study._backend.init_backend``)
-        from shaders_port.pipeline.texture import backend_types
-
         Float = backend_types().Float
     opt = dr.opt.Adam(lr=lr)
     for p, ui in zip(ps, u0):
