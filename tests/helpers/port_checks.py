@@ -148,3 +148,29 @@ def degenerate_light_inputs():
     inputs = flat_pool(0.9, lightpos=r.world[k].astype(np.float64))
     assert np.array_equal(rasterize_water(inputs).world[k], r.world[k])
     return inputs, divmod(int(r.index[k]), inputs.width)
+
+
+def assert_variant_jacobian_columns(v, inputs, constants, names, h: float = 1e-3):
+    """The registered variant ``v``'s forward-mode Jacobian columns for the scalar constants
+    ``names`` (``name`` or ``name[i]``) against central differences of step ``h`` on ``inputs``:
+    each column carries signal (|fd| > 1e-2 somewhere) and 90 % of the water pixels agree
+    within 1 % of the difference plus 2e-3 (bilinear texel edges and other kinks put a few
+    stencils across a corner). Returns (the render's ``numpy()`` dict, the water mask)."""
+    out, J = v.render_with_jacobian(inputs, constants, names)
+    water = out.numpy()["mask"] > 0
+    for j, name in enumerate(names):
+        key, _, idx = name.partition("[")
+        base = getattr(constants, key)
+        if idx:
+            i = int(idx[0])
+            plus = constants.replace(**{key: tuple(b + h * (k == i) for k, b in enumerate(base))})
+            minus = constants.replace(**{key: tuple(b - h * (k == i) for k, b in enumerate(base))})
+        else:
+            plus, minus = constants.replace(**{key: base + h}), constants.replace(**{key: base - h})
+        fd = v.render(inputs, plus).numpy()["color"] - v.render(inputs, minus).numpy()["color"]
+        fd = fd / (2 * h)
+        err = np.abs(J[..., j] - fd).max(-1)[water]
+        scale = np.abs(fd).max(-1)[water]
+        assert scale.max() > 1e-2, name
+        assert np.mean(err <= 1e-2 * scale + 2e-3) >= 0.9, (name, np.median(err))
+    return out.numpy(), water
