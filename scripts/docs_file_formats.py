@@ -277,7 +277,8 @@ the exported shaders as float32 EXR (upload them as float textures, not 8-bit):
 * `normal_map.exr`: S x S texels, `0.5 n + 0.5` per channel (+y up in world space), bilinear,
   repeat; row 0 of the file is t = 0 (upload in file order).
 * for a user's shader, every other texture it reads that the engine uploads: `dudv_map.exr`,
-  `user_normal_map.exr`, `sky_cube_{px,nx,py,ny,pz,nz}.exr` (`reflection_cube_*.exr`), each
+  `waves_normal_map.exr`, `user_normal_map.exr`, `sky_cube_{px,nx,py,ny,pz,nz}.exr`
+  (`reflection_cube_*.exr`), each
   under `shipped` in `textures.json` (files, size, encoding, filter, wrap, mipmaps, `bound_as`:
   the shader's sampler names); the engine's own render targets it reads under `rendered`
   (`bound_as`, `what`), no file.

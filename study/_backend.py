@@ -132,7 +132,8 @@ def init_backend(variant: str | None = None) -> str:
         raise BackendError(
             f"cannot use Mitsuba variant {variant!r}: {exc}. Use {DEFAULT_VARIANT} (CPU) instead."
         ) from exc
-    # local: importing it imports Dr.Jit, which must wait for the libLLVM check above
+    # keeps `import study._backend` free of Dr.Jit (its libLLVM check may run before Dr.Jit)
+    # local: the ports' default backend, set once the variant is chosen
     from shaders_port.pipeline.texture import set_default_backend
 
     set_default_backend(drjit_backend(variant))

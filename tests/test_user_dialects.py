@@ -150,7 +150,7 @@ def test_an_es_file_runs_at_highp_and_its_own_precision_is_measured(inputs):
     from shaders_port.spirv.gl_run import context_support
 
     if not context_support("es")[0]:
-        return
+        pytest.skip("no OpenGL ES context here: the file ran as its translation")
     assert check["text"].endswith(", every value at highp (lowp and mediump read as highp)")
     own = check["own_precision"]
     assert own["mean_abs"] >= check["mean_abs"] and own["within"] == ("note" not in own), own
@@ -208,15 +208,16 @@ def test_each_dialect_exports_to_the_engine_targets(name, tmp_path, inputs):
     # the GLSL ES on an OpenGL ES context, each with the sheet's values set as uniforms
     ours = shader.render(inputs, values).numpy()
     check = hlsl_check_user(shader, inputs, values, ours, out)
-    if check.get("ran"):
-        assert check["passed"], check
+    if not check.get("ran"):
+        pytest.skip(f"the HLSL round trip did not run here: {check.get('why')}")
+    assert check["passed"], check
     check = gles_check_user(shader, inputs, values, ours, out)
-    if check.get("ran"):
-        assert check["passed"] and check["context"].startswith("OpenGL ES 3."), check
+    if not check.get("ran"):
+        pytest.skip(f"no OpenGL ES context here: {check.get('why')}")
+    assert check["passed"] and check["context"].startswith("OpenGL ES 3."), check
     # the fitted values are what the GLSL ES needs: the start values give another image
     other = gles_check_user(shader, inputs, shader.defaults(), ours, out)
-    if other.get("ran"):
-        assert not other["passed"], other
+    assert other["ran"] and not other["passed"], other
 
 
 def test_dialects_are_detected_and_unknown_versions_refused():

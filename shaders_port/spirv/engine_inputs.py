@@ -65,6 +65,10 @@ __all__ = [
     "uniform_values",
 ]
 
+# the first texture unit of the engine inputs' textures on OpenGL: after the study's samplers
+# (``gl.renderer``'s units 0-10, the local cube map of the box reflection last)
+ENGINE_UNIT = 11
+
 # the right-handed rotation from the study's Y-up world to a Z-up one: (x, y, z) -> (x, -z, y)
 UP_Z = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, -1.0], [0.0, 1.0, 0.0]])
 # window-space bias: clip (x, y, z) in [-1, 1] -> [0, 1]
@@ -346,9 +350,9 @@ def _gl_bytes(v: np.ndarray) -> bytes:
 def gl_class(base, options: dict):
     """A subclass of the GL renderer class ``base`` (``gl.renderer.GLRenderer`` or a subclass)
     that also gives the shader the inputs of :data:`ENGINE_INPUTS` (uniforms, and the textures
-    of :func:`gl_textures` on texture units 10 and up) and, with ``options['up']`` 'z', draws
-    the water quad and gives every world-space uniform in the Z-up frame (``water.vert`` then
-    passes Z-up varyings)."""
+    of :func:`gl_textures` on texture units :data:`ENGINE_UNIT` and up, after the study's
+    samplers) and, with ``options['up']`` 'z', draws the water quad and gives every world-space
+    uniform in the Z-up frame (``water.vert`` then passes Z-up varyings)."""
     up = options.get("up", "y")
     normal_map = options.get("normal_map")
 
@@ -377,14 +381,14 @@ def gl_class(base, options: dict):
                     fmin = mgl.LINEAR_MIPMAP_LINEAR
                 rep = wrap == REPEAT
                 smp = self.ctx.sampler(repeat_x=rep, repeat_y=rep, filter=(fmin, f))
-                self._engine_textures[name] = (10 + k, tex, smp)
+                self._engine_textures[name] = (ENGINE_UNIT + k, tex, smp)
             cube = sky_cube(self.inputs.cubemap).astype(np.float32)
             tex = self.ctx.texture_cube(
                 (cube.shape[1], cube.shape[1]), cube.shape[3], cube.tobytes(), dtype="f4"
             )
             f = mgl.LINEAR
             smp = self.ctx.sampler(repeat_x=False, repeat_y=False, repeat_z=False, filter=(f, f))
-            self._engine_textures["sky_cube"] = (10 + len(self._engine_textures), tex, smp)
+            self._engine_textures["sky_cube"] = (ENGINE_UNIT + len(self._engine_textures), tex, smp)
 
         def texture_units(self) -> dict:
             return {**super().texture_units(), **self._engine_textures}

@@ -157,7 +157,7 @@ def waves_digest(shader) -> str:
         "vertex": None if shader.vertex is None else shader.vertex.shader.source,
         "vertex_cells": None if shader.vertex is None else list(shader.vertex.cells),
         "start": {k: list(np.atleast_1d(v).astype(float)) for k, v in shader.defaults().items()},
-        "values": {k: list(v) for k, v in shader.values.items()},
+        "values": {k: list(v) for k, v in shader.engine_values().items()},
         "bindings": sorted(shader.run_bindings().items()),
         "engine": shader.engine_record(),
         "normal": list(shader.normal or ()),

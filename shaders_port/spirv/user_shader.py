@@ -44,6 +44,7 @@ and the interpolation, the coverage held fixed (``spirv.user_vertex.UserVertex.f
 
 from __future__ import annotations
 
+import copy
 import hashlib
 import re
 import types
@@ -206,9 +207,15 @@ class UserShader:
     def _declared_values(self, values: dict, vertex) -> None:
         """The declaration's ``values`` (name -> components: uniforms the engine sets, as
         ``// @study value`` gives them) to the stage that declares each: this shader (its
-        file or an ``#include``), its vertex shader (``UserVertex``), or both."""
+        file or an ``#include``), its vertex shader (``UserVertex``; a copy of it becomes
+        ``self.vertex``, the caller's is left as it was), or both."""
         if not values:
             return
+        if vertex is not None:
+            shader = copy.copy(vertex.shader)
+            shader.values = dict(vertex.shader.values)
+            vertex = self.vertex = copy.copy(vertex)
+            vertex.shader = shader
         text = self.source
         if dialects.has_includes(self.source):
             text = dialects.front_end(self.source, self.label, self.defines, self.include_paths,
@@ -532,7 +539,7 @@ class UserShader:
                 "compiles it with its ES profile)"
             )
         text = self.written(values or {}, uniform_initializers=uniform_initializers)
-        if not (d.translated or self.defines or "#include" in text):
+        if not (d.translated or self.defines or dialects.has_includes(text)):
             return text
         return dialects.for_opengl(
             dialects.front_end(text, self.label, self.defines, self.include_paths, True)

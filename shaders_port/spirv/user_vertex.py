@@ -179,7 +179,8 @@ class UserVertex:
         moving = [p for p in params if any(x is p for x in _leaves(values))]
         P0 = prepare(inputs, m)
         key = (P0.upload, m.__name__, self.shader.source, self.shader.constants, self.cells,
-               _numbers(values), spec.prepared_source(), spec.bindings, spec.engine)  # fmt: skip
+               _numbers(values), tuple(sorted(self.shader.values.items())), spec.prepared_source(),
+               spec.bindings, spec.engine)  # fmt: skip
         hit = None if moving else _FRAMES.get(key)
         if hit is not None:
             _FRAMES.move_to_end(key)

@@ -15,7 +15,7 @@ import numpy as np
 from shaders_port import glsl_scalar
 
 from .._backend import init_backend
-from .._io import write_exr, write_json
+from .._io import write_exr, write_json, write_text_atomic
 from .._metrics import errors, information_criteria
 from .._progress import Stages
 from .._progress import log as _log
@@ -160,7 +160,7 @@ def export_calibration(exp, model, frames: list, cal, out: Path, timings: dict):
             # the initializers replaced; a uniform without one stays so (its START, in the
             # declaration, stays the start value: the file must read back as it was declared)
             text = user.written(fitted, bare_initializers=False)
-            Path(exp.fit.shader).write_text(text, "utf-8")
+            write_text_atomic(Path(exp.fit.shader), text)
             _log(f"calibrate: wrote the fitted constants into {exp.fit.shader}")
             vtext = user.vertex_written(fitted, bare_initializers=False)
             if (
@@ -168,7 +168,7 @@ def export_calibration(exp, model, frames: list, cal, out: Path, timings: dict):
                 and not user.vertex.shader.shared
                 and vtext != user.vertex.shader.original
             ):
-                Path(exp.fit.vertex).write_text(vtext, "utf-8")
+                write_text_atomic(Path(exp.fit.vertex), vtext)
                 _log(f"calibrate: wrote the fitted constants into {exp.fit.vertex}")
     extra = {
         "textures": record,

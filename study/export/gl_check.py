@@ -241,7 +241,8 @@ def gles_check_user(shader, inputs, values: dict, ours: dict, shaders_dir: Path)
     folder = Path(shaders_dir) / "gles300"
     stem = shader.label.rsplit(".", 1)[0]
     vstem = "water" if shader.vertex is None else shader.vertex.label.rsplit(".", 1)[0]
-    frag, vert = (folder / f"{stem}.frag").read_text(), (folder / f"{vstem}.vert").read_text()
+    frag = (folder / f"{stem}.frag").read_text(encoding="utf-8")
+    vert = (folder / f"{vstem}.vert").read_text(encoding="utf-8")
     try:
         with shader.gl_renderer(inputs, values, source=frag, es=vert) as r:
             rgba, mask = r.render(None)
