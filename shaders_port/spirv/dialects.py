@@ -78,6 +78,7 @@ __all__ = [
     "at_highp",
     "detect",
     "for_opengl",
+    "without_file_lines",
     "front_end",
     "glslang_errors",
     "has_includes",
@@ -88,7 +89,7 @@ DESKTOP = (110, 120, 130, 140, 150, 330, 400, 410, 420, 430, 440, 450, 460)
 INCLUDE_EXT = "#extension GL_GOOGLE_include_directive : require"
 MAX_ERRORS = 8  # glslang error lines kept in a message
 _VERSION = re.compile(r"^[ \t]*#[ \t]*version\b[ \t]*(?P<rest>[^\n]*)$", re.M)
-_COMMENTS = re.compile(r"//[^\n]*|/\*.*?\*/", re.S)
+COMMENTS = re.compile(r"//[^\n]*|/\*.*?\*/", re.S)
 _INCLUDE_LINE = re.compile(r"^[ \t]*#[ \t]*(?:include|import)\b", re.M)
 _RENAMES = {
     "texture2D": "texture",
@@ -193,15 +194,15 @@ def detect(source: str, label: str, version: str | None = None) -> Dialect:
             )
         return detect(version, label)._replace_line(0)
     if m is None:
-        code = _COMMENTS.sub(" ", source)
+        code = COMMENTS.sub(" ", source)
         es = bool(re.search(r"\bprecision\s+(lowp|mediump|highp)\b|\bGL_ES\b", code))
         return Dialect(100, True, "es", 0) if es else Dialect(110, False, "compatibility", 0)
     line = source.count("\n", 0, m.start()) + 1
-    before = _COMMENTS.sub(" ", source[: m.start()])
+    before = COMMENTS.sub(" ", source[: m.start()])
     where = f"{label}:{line}"
     if before.strip():
         raise ShaderError(f"{where}: #version must come before anything else in the file")
-    parts = _COMMENTS.sub(" ", m["rest"]).split()
+    parts = COMMENTS.sub(" ", m["rest"]).split()
     ok = parts and parts[0].isdigit() and len(parts) <= 2
     version = int(parts[0]) if ok else -1
     profile = parts[1] if ok and len(parts) == 2 else None
@@ -318,7 +319,7 @@ def omit_functions(source: str, names) -> str:
     """``source`` with the definition of each function of ``names`` (``TYPE NAME(...) {...}``
     at file scope) blanked out, its newlines kept (every other line keeps its number)."""
     for name in names:
-        code = _COMMENTS.sub(lambda m: re.sub(r"[^\n]", " ", m[0]), source)
+        code = COMMENTS.sub(lambda m: re.sub(r"[^\n]", " ", m[0]), source)
         m = re.search(rf"^[ \t]*\w+[ \t]+{re.escape(name)}[ \t]*\([^)]*\)\s*\{{", code, re.M)
         if m is None:
             raise ShaderError(f"!{name}: the file defines no function {name}() to leave out")
@@ -377,7 +378,7 @@ def front_end(
         _glslang(own, label, ["-l"], (), d.name, stage)
     else:
         _glslang(own, label, ["-l", *dargs], include_paths, d.name, stage)
-    code = _COMMENTS.sub(lambda m: re.sub(r"[^\n]", " ", m[0]), source)
+    code = COMMENTS.sub(lambda m: re.sub(r"[^\n]", " ", m[0]), source)
     decls = _declarations(code, stage)
     head = [INCLUDE_EXT] if includes else []
     text = _with_head(source, d, _own_version_line(d), head + decls)
@@ -404,27 +405,6 @@ def _unshadowed(text: str) -> str:
         if re.search(rf"\b\w+\s+{name}\s*\([^;{{}}]*\)\s*\{{", text):
             text = re.sub(rf"\b{name}\b", f"_u_{name}", text)
     return text
-
-
-_BOOL_UNIFORM = re.compile(
-    r"^(?P<pre>[ \t]*uniform\s+(?:(?:lowp|mediump|highp)\s+)?)bool(?P<post>\s+(?P<name>\w+)\s*;)",
-    re.M,
-)
-
-
-def without_bool_uniforms(text: str, label: str) -> str:
-    """``text`` (GLSL on its way to SPIR-V for OpenGL, which holds no ``bool`` uniform) with
-    each ``uniform bool NAME;`` the code never reads declared ``int`` (an unread uniform changes
-    nothing; three.js's program prefix declares ``isOrthographic``); ShaderError naming one
-    that is read."""
-    code = _COMMENTS.sub(" ", text)
-    for m in _BOOL_UNIFORM.finditer(code):
-        if len(re.findall(rf"\b{m['name']}\b", code)) > 1:
-            raise ShaderError(
-                f"{label}: uniform bool {m['name']}: SPIR-V for OpenGL has no bool uniform; "
-                f"declare it `uniform int {m['name']};` (0 or 1) and read it as `{m['name']} != 0`"
-            )
-    return _BOOL_UNIFORM.sub(r"\g<pre>int\g<post>", text)
 
 
 def _as_target(pre: str, d: Dialect) -> str:
@@ -590,9 +570,28 @@ def at_highp(text: str, label: str) -> str:
     return _with_head(text, d, _own_version_line(d), _HIGHP[:2])
 
 
-def for_opengl(text: str) -> str:
-    """:func:`front_end` text as an OpenGL driver takes it: glslang's own extensions
-    (``GL_GOOGLE_include_directive`` and its file-named ``#line`` s) left out, line for
-    line."""
+def for_opengl(
+    text: str,
+    label: str,
+    defines=(),
+    include_paths=(),
+    stage: str = "frag",
+    translate: bool = True,
+    file_lines: bool = False,
+) -> str:
+    """The file ``text`` (``label``) as an OpenGL driver takes it: as it is where it needs no
+    preprocessing (no defines, no ``#include``, a dialect run as written or ``translate``
+    False), else :func:`front_end`'s preprocessed (and with ``translate``, translated) text
+    with glslang's own extensions and file-named ``#line`` s left out, line for line
+    (``file_lines``: kept, for glslang, whose errors then name an included file)."""
+    d = detect(text, label, version_define(defines))
+    if not ((d.translated and translate) or defines or has_includes(text)):
+        return text
+    text = front_end(text, label, defines, include_paths, True, stage, translate)
+    return text if file_lines else without_file_lines(text)
+
+
+def without_file_lines(text: str) -> str:
+    """Preprocessed ``text`` without glslang's own extensions and file-named ``#line`` s."""
     text = re.sub(r"^[ \t]*#[ \t]*extension[ \t]+GL_GOOGLE_\w+[^\n]*", "", text, flags=re.M)
     return re.sub(r'^([ \t]*#[ \t]*line[ \t]+\d+)[ \t]+"[^"\n]*"', r"\1", text, flags=re.M)

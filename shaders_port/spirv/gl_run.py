@@ -82,14 +82,6 @@ def context_support(kind: str) -> tuple[int, str]:
         ctx.release()
 
 
-def _own_text(text: str, label: str, defines, include_paths, stage: str = "frag") -> str:
-    """``text`` (a file written back) as a driver of its own dialect takes it."""
-    if not (defines or dialects.has_includes(text)):
-        return text
-    pre = dialects.front_end(text, label, defines, include_paths, True, stage, translate=False)
-    return dialects.for_opengl(pre)
-
-
 def _vertex_as_written(shader, kind: str, values: dict):
     """(the user's vertex shader as written, with ``values`` in place of its constants'
     initializers, for a context of ``kind``, '') when it links there with the fragment shader
@@ -104,7 +96,8 @@ def _vertex_as_written(shader, kind: str, values: dict):
     if not ok:
         return None, f"your vertex shader ({v.name}) does not link with {d.name} as written"
     text = shader.vertex_written(values)
-    return _own_text(text, vs.label, vs.defines, vs.include_paths, "vert"), ""
+    own = dialects.for_opengl(text, vs.label, vs.defines, vs.include_paths, "vert", False)
+    return own, ""
 
 
 def plan(shader, values: dict | None = None, as_written: bool = True, highp: bool = True):
@@ -112,7 +105,8 @@ def plan(shader, values: dict | None = None, as_written: bool = True, highp: boo
     d = shader.dialect
     written = shader.written(values or {})
     what = AS_WRITTEN + (PREPROCESSED if shader.defines or dialects.has_includes(written) else "")
-    own = _own_text(written, shader.label, shader.defines, shader.include_paths)
+    own = dialects.for_opengl(written, shader.label, shader.defines, shader.include_paths,
+                              translate=False)  # fmt: skip
     if not d.translated and d.runs_on_desktop_gl:
         return GLRun(own, "core", what, "", d)
     kind = "es" if d.es else "compatibility"

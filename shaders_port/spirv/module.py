@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import functools
 import json
+import re
 import shutil
 import struct
 import subprocess
@@ -27,13 +28,7 @@ import tempfile
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from .dialects import (
-    ShaderError,
-    front_end,
-    glslang_errors,
-    split_defines,
-    without_bool_uniforms,
-)
+from .dialects import COMMENTS, ShaderError, front_end, glslang_errors, split_defines
 
 GRAMMAR_DIR = Path("/usr/include/spirv/unified1")
 CORE_GRAMMAR = GRAMMAR_DIR / "spirv.core.grammar.json"
@@ -386,3 +381,24 @@ def referenced(mod) -> set:
                 if ins is not None:
                     walk(ins.operands)
     return out
+
+
+_BOOL_UNIFORM = re.compile(
+    r"^(?P<pre>[ \t]*uniform\s+(?:(?:lowp|mediump|highp)\s+)?)bool(?P<post>\s+(?P<name>\w+)\s*;)",
+    re.M,
+)
+
+
+def without_bool_uniforms(text: str, label: str) -> str:
+    """``text`` (GLSL on its way to SPIR-V for OpenGL, which holds no ``bool`` uniform) with
+    each ``uniform bool NAME;`` the code never reads declared ``int`` (an unread uniform changes
+    nothing; three.js's program prefix declares ``isOrthographic``); ShaderError naming one
+    that is read."""
+    code = COMMENTS.sub(" ", text)
+    for m in _BOOL_UNIFORM.finditer(code):
+        if len(re.findall(rf"\b{m['name']}\b", code)) > 1:
+            raise ShaderError(
+                f"{label}: uniform bool {m['name']}: SPIR-V for OpenGL has no bool uniform; "
+                f"declare it `uniform int {m['name']};` (0 or 1) and read it as `{m['name']} != 0`"
+            )
+    return _BOOL_UNIFORM.sub(r"\g<pre>int\g<post>", text)

@@ -34,7 +34,7 @@ from pathlib import Path
 
 from ..glsl_text import BEGIN_MARKER, END_MARKER, read_source
 from ..inputs import CONSTANT_SPECS
-from .dialects import without_bool_uniforms
+from .module import without_bool_uniforms
 
 # program -> Debian package that ships it
 TOOLS = {

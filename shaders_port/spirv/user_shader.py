@@ -539,11 +539,7 @@ class UserShader:
                 "compiles it with its ES profile)"
             )
         text = self.written(values or {}, uniform_initializers=uniform_initializers)
-        if not (d.translated or self.defines or dialects.has_includes(text)):
-            return text
-        return dialects.for_opengl(
-            dialects.front_end(text, self.label, self.defines, self.include_paths, True)
-        )
+        return dialects.for_opengl(text, self.label, self.defines, self.include_paths)
 
     def gl_renderer(self, inputs, values: dict | None = None, source=None, reflection=None,
                     es=None, **how):  # fmt: skip

@@ -48,7 +48,7 @@ from . import engine_names as names_
 from .translated import STUDY_INPUTS, prepared_source
 from .execute import Executor, UnboundVariable
 from .loops import UnsupportedInstruction
-from .module import OPT_PASSES, Module, referenced
+from .module import OPT_PASSES, Module, referenced, without_bool_uniforms
 
 __all__ = ["VertexShader", "Varying", "compile_vertex", "value_pragma", "ATTRIBUTES"]
 
@@ -82,7 +82,7 @@ def compile_vertex(source: str, label: str) -> bytes:
     with tempfile.TemporaryDirectory(prefix="spirv-vert.") as d:
         src = Path(d) / Path(label).name  # -S vert: the name is the label's (its OpLines)
         raw, opt = Path(d) / "raw.spv", Path(d) / "opt.spv"
-        src.write_text(dialects.without_bool_uniforms(source, label), encoding="utf-8")
+        src.write_text(without_bool_uniforms(source, label), encoding="utf-8")
         steps = [
             ["glslangValidator", "-G", "--aml", "--amb", "-g", "-S", "vert", "-o", str(raw),
              str(src)],
@@ -198,8 +198,8 @@ class VertexShader:
         self.defines = tuple(defines)
         self.include_paths = tuple(str(p) for p in include_paths)
         self.shared, self.constants = bool(shared), tuple(constants)
-        compiled = self.glslang_text(source)
-        self.source = source if compiled is source else dialects.for_opengl(compiled)
+        compiled = self.gl_text(source, file_lines=True)
+        self.source = source if compiled is source else dialects.without_file_lines(compiled)
         self.bindings, self.values, self.ranges = {}, {}, {}
         for m in _PRAGMA.finditer(source):
             args, line = m["args"].split(), source.count("\n", 0, m.start()) + 1
@@ -237,22 +237,13 @@ class VertexShader:
         found = _engine.resolve_bindings(self.source, plain, ())
         self.inputs = {n: t for n, t in found.items() if t in _INPUTS}
 
-    def gl_text(self, text: str) -> str:
+    def gl_text(self, text: str, file_lines: bool = False) -> str:
         """``text`` (this file's, e.g. with fitted values written in) as it is drawn: GLSL 330
         core, translated from an older dialect and preprocessed where the file needs it
-        (defines, ``#include`` s)."""
-        out = self.glslang_text(text)
-        return text if out is text else dialects.for_opengl(out)
-
-    def glslang_text(self, text: str) -> str:
-        """``text`` as glslang compiles it (:meth:`gl_text` with an ``#include`` d file's lines
-        still named by their file, so that errors name it)."""
-        version = dialects.version_define(self.defines)
-        pre = bool(self.defines) or dialects.has_includes(text)
-        if pre or dialects.detect(text, self.label, version).translated:
-            return dialects.front_end(text, self.label, self.defines, self.include_paths,
-                                      preprocess=True, stage="vert")  # fmt: skip
-        return text
+        (defines, ``#include`` s); ``file_lines``: as glslang compiles it, an ``#include`` d
+        file's lines still named by their file, so that errors name it."""
+        return dialects.for_opengl(text, self.label, self.defines, self.include_paths, "vert",
+                                   file_lines=file_lines)  # fmt: skip
 
     def with_constants(self, names) -> "VertexShader":
         """This shader compiled again with the constants ``names`` made uniforms (the values
