@@ -18,7 +18,7 @@ import pytest
 from helpers import REPO
 from helpers.experiments import TINY, sets
 from helpers.gl import user_gl_render_or_skip
-from helpers.port_checks import FD_NOISE, FD_RTOL
+from helpers.port_checks import assert_user_jacobian
 from helpers.synthetic import synthetic_baseline_inputs, synthetic_inputs
 from shaders_port.pipeline.interpolate import interpolate, rasterize_triangles, water_grid
 from shaders_port.pipeline.raster import rasterize_water
@@ -155,29 +155,7 @@ def test_mip_lookups_and_derivatives_after_a_flat_grid_equal_the_study_quads(inp
 @pytest.mark.parametrize("name", PAIRS + ("displaced_water:faceted_water.frag",))
 def test_jacobian_matches_central_differences(name, inputs):
     name, _, frag = name.partition(":")
-    shader = _pair(name, cells=(12, 12), frag=frag or None)
-    names = shader.scalar_names()
-    base = shader.render(inputs).numpy()
-    out, J = shader.render_with_jacobian(inputs, None, names)
-    assert np.array_equal(out.numpy()["mask"], base["mask"])
-    assert np.abs(out.numpy()["color"] - base["color"]).max() <= 1e-6
-    v = shader.defaults()
-    for j, s in enumerate(names):
-        b, _, idx = s.partition("[")
-        x = v[b][int(idx[:-1])] if idx else v[b]
-        h = 1e-3 * max(abs(x), 1.0)
-        p = shader.render(inputs, shader.with_scalars(v, {s: x + h})).numpy()
-        m = shader.render(inputs, shader.with_scalars(v, {s: x - h})).numpy()
-        fd = (p["color"] - m["color"]) / (2 * h)
-        fp, fm = (p["color"] - base["color"]) / h, (base["color"] - m["color"]) / h
-        noise = FD_NOISE / h
-        water = base["mask"] > 0
-        # pixels without a kink in the stencil (a texel edge of a bilinear fetch crossed)
-        smooth = water & (np.abs(fp - fm) <= 0.2 * np.abs(fd) + 2 * noise).all(-1)
-        assert smooth.sum() >= 0.95 * water.sum(), s
-        assert np.abs(fd[water]).max() > 10 * noise, s
-        bad = smooth & ~(np.abs(J[..., j] - fd) <= 2 * noise + FD_RTOL * np.abs(fd)).all(-1)
-        assert not bad.any(), (s, int(bad.sum()))
+    assert_user_jacobian(_pair(name, cells=(12, 12), frag=frag or None), inputs, 0.95)
 
 
 MY_FRAG = "../../experiments/shaders/my_water.frag"

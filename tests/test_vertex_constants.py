@@ -17,7 +17,7 @@ import pytest
 
 from helpers.experiments import TINY, sets
 from helpers.gl import user_gl_render_or_skip
-from helpers.port_checks import FD_NOISE, FD_RTOL
+from helpers.port_checks import FD_NOISE, FD_RTOL, assert_user_jacobian
 from helpers.synthetic import synthetic_inputs
 from shaders_port.spirv.dialects import ShaderError
 from shaders_port.spirv.user_shader import UserShader
@@ -121,30 +121,7 @@ def test_jacobian_matches_central_differences(inputs):
     """Every constant of the pair, the vertex shader's included: through the per-vertex outputs
     and the interpolation weights (a displaced vertex moves the plane a pixel interpolates on),
     ``gl_FragCoord`` and the fragment shader; the coverage held fixed."""
-    shader = _pair(cells=(12, 12))
-    names = shader.scalar_names()
-    base = shader.render(inputs).numpy()
-    out, J = shader.render_with_jacobian(inputs, None, names)
-    assert np.array_equal(out.numpy()["mask"], base["mask"])
-    assert np.abs(out.numpy()["color"] - base["color"]).max() <= 1e-6
-    v = shader.defaults()
-    for j, s in enumerate(names):
-        x = get_value(v, s)
-        h = 1e-3 * max(abs(x), 1.0)
-        p = shader.render(inputs, shader.with_scalars(v, {s: x + h})).numpy()
-        m = shader.render(inputs, shader.with_scalars(v, {s: x - h})).numpy()
-        fd = (p["color"] - m["color"]) / (2 * h)
-        fp, fm = (p["color"] - base["color"]) / h, (base["color"] - m["color"]) / h
-        noise = FD_NOISE / h
-        water = (base["mask"] > 0) & (p["mask"] > 0) & (m["mask"] > 0)
-        assert water.sum() >= 0.99 * (base["mask"] > 0).sum(), s  # h moves few pixels' coverage
-        # pixels without a kink in the stencil (a texel edge of a bilinear fetch crossed, an
-        # edge between two triangles moved over the pixel)
-        smooth = water & (np.abs(fp - fm) <= 0.2 * np.abs(fd) + 2 * noise).all(-1)
-        assert smooth.sum() >= 0.9 * water.sum(), (s, int(smooth.sum()), int(water.sum()))
-        assert np.abs(fd[water]).max() > 10 * noise, s
-        bad = smooth & ~(np.abs(J[..., j] - fd) <= 2 * noise + FD_RTOL * np.abs(fd)).all(-1)
-        assert not bad.any(), (s, int(bad.sum()))
+    assert_user_jacobian(_pair(cells=(12, 12)), inputs, 0.9, moves_coverage=True)
 
 
 def test_constants_of_both_stages_recovered_from_a_synthetic_target(inputs):

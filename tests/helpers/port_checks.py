@@ -174,3 +174,38 @@ def assert_variant_jacobian_columns(v, inputs, constants, names, h: float = 1e-3
         assert scale.max() > 1e-2, name
         assert np.mean(err <= 1e-2 * scale + 2e-3) >= 0.9, (name, np.median(err))
     return out.numpy(), water
+
+
+def assert_user_jacobian(shader, inputs, smooth_share: float, moves_coverage: bool = False):
+    """A user's shader's (``UserShader``, with or without its own vertex shader) forward-mode
+    Jacobian in every declared scalar against central differences of step 1e-3 (relative):
+    the render with it equals the plain one; each column carries signal; on every water pixel
+    without a kink in its stencil (a bilinear texel edge crossed, an edge between two triangles
+    moved over the pixel), at least ``smooth_share`` of them, it agrees within the float32
+    noise and :data:`FD_RTOL`. ``moves_coverage``: the scalars may move the water's coverage
+    (a vertex shader's constants): pixels covered by all three renders only, 99 % of them."""
+    from study.fit.model import get_value
+
+    names = shader.scalar_names()
+    base = shader.render(inputs).numpy()
+    out, J = shader.render_with_jacobian(inputs, None, names)
+    assert np.array_equal(out.numpy()["mask"], base["mask"])
+    assert np.abs(out.numpy()["color"] - base["color"]).max() <= 1e-6
+    v = shader.defaults()
+    for j, s in enumerate(names):
+        x = get_value(v, s)
+        h = 1e-3 * max(abs(x), 1.0)
+        p = shader.render(inputs, shader.with_scalars(v, {s: x + h})).numpy()
+        m = shader.render(inputs, shader.with_scalars(v, {s: x - h})).numpy()
+        fd = (p["color"] - m["color"]) / (2 * h)
+        fp, fm = (p["color"] - base["color"]) / h, (base["color"] - m["color"]) / h
+        noise = FD_NOISE / h
+        water = base["mask"] > 0
+        if moves_coverage:
+            water &= (p["mask"] > 0) & (m["mask"] > 0)
+            assert water.sum() >= 0.99 * (base["mask"] > 0).sum(), s
+        smooth = water & (np.abs(fp - fm) <= 0.2 * np.abs(fd) + 2 * noise).all(-1)
+        assert smooth.sum() >= smooth_share * water.sum(), (s, int(smooth.sum()), int(water.sum()))
+        assert np.abs(fd[water]).max() > 10 * noise, s
+        bad = smooth & ~(np.abs(J[..., j] - fd) <= 2 * noise + FD_RTOL * np.abs(fd)).all(-1)
+        assert not bad.any(), (s, int(bad.sum()))
