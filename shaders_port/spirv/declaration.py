@@ -199,12 +199,6 @@ def find_constants(ranges: dict, texts: dict, included: dict | None = None) -> d
             )
         gtype = types.pop()
         default = _start_of(name, values, wheres, gtype, lo, hi, start)
-        if not all(lo <= v <= hi for v in default):
-            shown = f"{default[0]:g}" if len(set(default)) == 1 else str(default)
-            raise ValueError(
-                f"{wheres[0]}: {name} = {shown} lies outside its range [{lo}, {hi}]; widen the "
-                "range or change the value"
-            )
         out[name] = UserConstant(name, gtype, default, lo, hi, tuple(sites))
     return out
 
@@ -213,7 +207,7 @@ def _start_of(name, values, wheres, gtype, lo, hi, start) -> tuple:
     """The start value of a constant from its declarations' initializers ``values`` (None for
     a uniform without one) or the declaration's ``start``; ValueError for a range that is
     empty, a START beside an initializer, none for uniforms without one, or initializers of
-    the two stages that differ."""
+    the two stages that differ, or a start value outside the range."""
     if not (np.isfinite(lo) and np.isfinite(hi) and lo < hi):
         raise ValueError(f"{wheres[0]}: the range [{lo}, {hi}] of {name} is empty")
     given = [(v, w) for v, w in zip(values, wheres) if v is not None]
@@ -233,23 +227,21 @@ def _start_of(name, values, wheres, gtype, lo, hi, start) -> tuple:
             f"{given[1][0]} in the other; one constant of both stages (GL links the uniforms of "
             "one name) has one start value: make the initializers equal or rename one"
         )
-    return given[0][0] if given else start_value(start[0], gtype, wheres[0])
+    default = given[0][0] if given else start_value(start[0], gtype, wheres[0])
+    if not all(lo <= v <= hi for v in default):
+        shown = f"{default[0]:g}" if len(set(default)) == 1 else str(default)
+        raise ValueError(
+            f"{wheres[0]}: {name} = {shown} lies outside its range [{lo}, {hi}]; widen the "
+            "range or change the value"
+        )
+    return default
 
 
 def _included_constant(name, m, stage, texts, lo, hi, start) -> UserConstant:
     """The constant of a uniform an ``#include`` d file of ``stage`` declares: never written
     back (the file is the engine's), its start value from the declaration."""
     where = f"{texts.get(stage, texts['fragment'])[1]} (an #include)"
-    if not start:
-        raise ValueError(
-            f"{where}: the uniform {name} has no initializer (the engine sets it); "
-            f"give its start value: `// @study constant {name} {lo:g} {hi:g} START`"
-        )
-    default = start_value(start[0], m["type"], where)
-    if not (np.isfinite(lo) and np.isfinite(hi) and lo < hi):
-        raise ValueError(f"{where}: the range [{lo}, {hi}] of {name} is empty")
-    if not all(lo <= v <= hi for v in default):
-        raise ValueError(f"{where}: the start value of {name} lies outside its range [{lo}, {hi}]")
+    default = _start_of(name, [None], [where], m["type"], lo, hi, start)
     return UserConstant(name, m["type"], default, lo, hi, (Site(stage, (-1, -1), True),))
 
 
