@@ -262,6 +262,12 @@ CONSTANT_SPECS: dict[str, tuple[str, str, object, tuple[float, float]]] = {
     "absorption_g": ("ABSORPTION_G", "const float", 1.0 / 7.5, (1e-4, 100.0)),
     "absorption_b": ("ABSORPTION_B", "const float", 1.0 / 7.5, (1e-4, 100.0)),
     "specular_roughness": ("SPECULAR_ROUGHNESS", "const float", 0.2, (1e-3, 1.0)),
+    # the mirrored sun's disc (SUN_DISC_SPECULAR): angular radius at half brightness (degrees;
+    # the sun's: 0.27), the softness of its edge (0 hard, 1 a cone from the centre to twice the
+    # radius) and its radiance (times lightcolor)
+    "sun_disc_radius": ("SUN_DISC_RADIUS", "const float", 0.27, (0.05, 45.0)),
+    "sun_disc_softness": ("SUN_DISC_SOFTNESS", "const float", 0.05, (0.01, 1.0)),
+    "sun_disc_radiance": ("SUN_DISC_RADIANCE", "const float", 1.0, (0.0, 1e6)),
     "refine_steps": ("REFINE_STEPS", "const int", 3, (0, 64)),
     # the baseline shader (water_baseline: seeds 001-004); defaults are the seeds' where given
     "reflect_distortion": ("REFLECT_DISTORTION", "const float", 0.1, (0.0, 10.0)),  # 002: 0.1
@@ -334,6 +340,9 @@ class Constants:
     absorption_g: float = _default("absorption_g")
     absorption_b: float = _default("absorption_b")
     specular_roughness: float = _default("specular_roughness")
+    sun_disc_radius: float = _default("sun_disc_radius")
+    sun_disc_softness: float = _default("sun_disc_softness")
+    sun_disc_radiance: float = _default("sun_disc_radiance")
     refine_steps: int = _default("refine_steps")
     reflect_distortion: float = _default("reflect_distortion")
     refraction_index: float = _default("refraction_index")

@@ -18,7 +18,8 @@ The axes and where each choice comes from (``SOURCE``):
   ``planar`` (004 alone), ``none``, ``box`` (Lagarde and Zanuttini's local cube map: a cube
   map of the dry pool looked up where the reflected ray leaves the box of its walls);
 * ``attenuation``: ``linear`` (000's clamped mix) or ``beer`` (Beer-Lambert per channel);
-* ``specular``: ``phong`` (000), ``ggx``, ``none``;
+* ``specular``: ``phong`` (000), ``ggx``, ``none``, ``disc`` (the sun's disc mirrored by the
+  normal, soft-edged: the sun's glitter as a mirror shows it);
 * ``refine``: the crossing after the linear search, ``linear`` (000), ``binary``, ``secant``;
 * ``walls``: ``off`` (000) or ``on`` (a crossing into a wall shaded as its submerged face);
 * ``layers``: normal-map layers averaged, 4 (000), 2 or 1;
@@ -43,7 +44,7 @@ AXES: dict[str, tuple] = {
     "refraction": ("raycast", "planar_distorted", "distorted", "planar", "none"),
     "reflection": ("cube", "raycast", "planar_distorted", "planar", "none", "box"),
     "attenuation": ("linear", "beer"),
-    "specular": ("phong", "ggx", "none"),
+    "specular": ("phong", "ggx", "none", "disc"),
     "refine": ("linear", "binary", "secant"),
     "walls": ("off", "on"),
     "layers": (4, 2, 1),
@@ -64,6 +65,7 @@ SOURCE = {
     ("reflection", "planar"): "004",
     ("reflection", "none"): "000 (NOREFLECTION)",
     ("reflection", "box"): "Lagarde and Zanuttini (local cube map)",
+    ("specular", "disc"): "the sun's disc in the mirror (ocean shaders' sun glint)",
 }
 
 # each source's technique alone (the original's choices elsewhere, the cube map where a source
@@ -76,6 +78,7 @@ ALONE = {
     "003 (distorted refraction)": {"refraction": "distorted", "reflection": "cube"},
     "004 (mirror, flat)": {"refraction": "none", "reflection": "planar"},
     "Lagarde and Zanuttini (local cube map)": {"reflection": "box"},
+    "the sun's disc in the mirror (ocean shaders' sun glint)": {"specular": "disc"},
     "001-004 (the games' composition)": {
         "refraction": "planar_distorted",
         "reflection": "planar_distorted",
@@ -86,6 +89,7 @@ ALONE = {
 _RAYCAST_DEFINES = {
     ("attenuation", "beer"): "BEER_ATTENUATION",
     ("specular", "ggx"): "GGX_SPECULAR",
+    ("specular", "disc"): "SUN_DISC_SPECULAR",
     ("specular", "none"): "NO_SPECULAR",
     ("walls", "on"): "WALL_FACES",
     ("refine", "binary"): "BINARY_REFINE",
@@ -102,6 +106,7 @@ _TOKENS = (
     (("reflection", "box"), "box"),
     (("attenuation", "beer"), "beer"),
     (("specular", "ggx"), "ggx"),
+    (("specular", "disc"), "disc"),
     (("specular", "none"), "nospecular"),
     (("walls", "on"), "walls"),
     (("refine", "binary"), "binary"),

@@ -181,6 +181,8 @@ _REFLECTION_SCHEDULE = ("refl_steps_steep", "refl_steps_grazing", "refl_loop_cap
 # constants a choice fits in place of the original's (Variant.replaces)
 _BEER = {"attenuation_distance": ("absorption_r", "absorption_g", "absorption_b")}
 _GGX = {"specular_exponent": ("specular_roughness",)}
+# the sun's disc is the scene's sun (its start constants: study.fit.model.constants_from_experiment)
+_DISC = {"specular_strength": (), "specular_exponent": ()}
 _NOSPEC = {"specular_strength": (), "specular_exponent": ()}
 _BASELINE_INPUTS = ("scene_color", "scene_depth", "reflection_color", "reflection_view_proj")
 _BASELINE_FIT = (
@@ -216,6 +218,8 @@ def from_space(choices: dict, description: str | None = None) -> Variant:
         replaces.update(_BEER)
     if c["specular"] == "ggx":
         replaces.update(_GGX)
+    elif c["specular"] == "disc":
+        replaces.update(_DISC)
     elif c["specular"] == "none" and c["reflection"] != "none":
         replaces.update(_NOSPEC)
     mirror = c["reflection"] == "planar_distorted"  # 004's mirrored camera, 002's offset
@@ -268,6 +272,11 @@ _shipped(
     "water_refraction_beer_walls",
     "original + Beer-Lambert attenuation + a crossing into a wall above the water shaded as "
     "its submerged face (waterColor), not the wall's top",
+)
+_shipped(
+    "water_refraction_beer_disc_walls",
+    "beer_walls with the sun's disc seen in the mirror of the normal in place of Phong (its "
+    "angular radius and radiance the scene's sun's)",
 )
 _shipped(
     "water_refraction_binary",

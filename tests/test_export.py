@@ -39,6 +39,9 @@ EXPORTED = Constants(
     absorption_g=0.07,
     absorption_b=0.05,
     specular_roughness=0.15,
+    sun_disc_radius=4.5,
+    sun_disc_softness=0.2,
+    sun_disc_radiance=6.0,
     refine_steps=2,
     reflect_distortion=0.07,
 )

@@ -23,6 +23,11 @@ const float ABSORPTION_G = 0.13333334;
 const float ABSORPTION_B = 0.13333334;
 //variant GGX_SPECULAR: GGX roughness (alpha) of the specular lobe
 const float SPECULAR_ROUGHNESS = 0.2;
+//variant SUN_DISC_SPECULAR: the sun's disc, its angular radius at half brightness (degrees), the
+//softness of its edge (0 hard, 1 a cone from its centre to twice the radius) and its radiance
+const float SUN_DISC_RADIUS = 0.27;
+const float SUN_DISC_SOFTNESS = 0.05;
+const float SUN_DISC_RADIANCE = 1.0;
 //variants BINARY_REFINE / SECANT_REFINE: refinement steps after the linear search
 const int REFINE_STEPS = 3;
 //variant PLANAR_REFLECTION: scale of the reflection distortion (seed 002's "0.1 factor")
@@ -264,6 +269,13 @@ void main (void)
                           * (NdotE+sqrt(alpha2+(1.0-alpha2)*NdotE*NdotE)));
     vec4 specular = vec4(ggxD*smithVis*NdotL*lightcolor,1);
     vReflection+=specular*SPECULAR_STRENGTH;
+#elif defined(SUN_DISC_SPECULAR)
+    //variant: the sun's disc seen in the mirror of the normal, soft-edged (no lobe)
+    vec3 rLight = dot(2*vBumpTex,vLight)*vBumpTex-vLight;
+    float outerCos = cos(radians(SUN_DISC_RADIUS*(1.0+SUN_DISC_SOFTNESS)));
+    float innerCos = cos(radians(SUN_DISC_RADIUS*(1.0-SUN_DISC_SOFTNESS)));
+    vec4 specular = vec4(smoothstep(outerCos, innerCos, dot(rLight, vEye))*lightcolor,1);
+    vReflection+=specular*SUN_DISC_RADIANCE;
 #elif !defined(NO_SPECULAR)
     //Calculate specular Reflection vector
     vec3 rLight = dot(2*vBumpTex,vLight)*vBumpTex-vLight;

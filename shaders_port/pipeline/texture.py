@@ -347,6 +347,17 @@ def clamp(x, lo, hi):
     return dr.minimum(dr.maximum(x, lo), hi)
 
 
+def smoothstep(e0, e1, x):
+    """GLSL ``smoothstep``: ``t * t * (3 - 2 t)``, ``t = clamp((x - e0) / (e1 - e0), 0, 1)``."""
+    t = clamp((x - e0) / (e1 - e0), 0.0, 1.0)
+    return t * t * (3.0 - 2.0 * t)
+
+
+def radians(deg):
+    """GLSL ``radians``: degrees to radians."""
+    return deg * (3.14159265358979 / 180.0)
+
+
 def gl_pow(x, y):
     """GLSL ``pow`` for ``x >= 0``: ``exp2(y * log2(x))``, 0 at ``x = 0`` (and a 0 derivative
     there instead of the NaN of ``log2(0) * 0``)."""

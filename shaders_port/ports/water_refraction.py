@@ -65,7 +65,7 @@ from ..pipeline.frame import (
     tangents,
 )
 from ..pipeline.raster import prepare
-from ..pipeline.texture import backend_types, clamp, gl_pow, mix, texmat_xy
+from ..pipeline.texture import backend_types, clamp, gl_pow, mix, radians, smoothstep, texmat_xy
 from .box import box_reflection, box_state
 from .planar import MIRROR_NORMAL, mirror_state, planar_reflection
 from .switches import decode
@@ -84,7 +84,10 @@ class Options(NamedTuple):
         many (``REFINE_STEPS``) bracket refinements after the linear search.
     attenuation: 'linear' (original: clamped mix over ``ATTENUATION_DISTANCE``) or 'beer'
         (``BEER_ATTENUATION``: ``exp(-ABSORPTION_RGB * travelLength)`` towards ``waterColor``).
-    specular: 'phong' (original), 'ggx' (``GGX_SPECULAR``) or 'none' (``NO_SPECULAR``).
+    specular: 'phong' (original), 'ggx' (``GGX_SPECULAR``), 'disc' (``SUN_DISC_SPECULAR``: the
+        sun's disc mirrored by the normal: a smoothstep from ``SUN_DISC_RADIUS`` times
+        ``1 +- SUN_DISC_SOFTNESS`` degrees, times ``SUN_DISC_RADIANCE``) or 'none'
+        (``NO_SPECULAR``).
     wall_faces: False (original) or True (``WALL_FACES``: a crossing into geometry that rises
         above the water plane, e.g. a pool wall, hit that geometry's vertical face under the
         water, which the top-down textures do not hold; it is shaded as ``waterColor``).
@@ -115,6 +118,7 @@ DEFINES = {
     "BEER_ATTENUATION": {"attenuation": "beer"},
     "GGX_SPECULAR": {"specular": "ggx"},
     "NO_SPECULAR": {"specular": "none"},
+    "SUN_DISC_SPECULAR": {"specular": "disc"},
     "WALL_FACES": {"wall_faces": True},
     "PLANAR_REFLECTION": {"reflection_map": "mirror"},
     "BOX_REFLECTION": {"reflection_map": "box"},
@@ -304,11 +308,18 @@ def specular_highlight(m, P, vReflection, vBumpTex, vEye, vLight, C, lobe: str =
         vReflection += specular * C.specular_strength
         return vReflection
     rLight = dr.dot(2.0 * vBumpTex, vLight) * vBumpTex - vLight
-    spec = gl_pow(clamp(dr.dot(rLight, vEye), 0.0, 1.0), C.specular_exponent)
+    if lobe == "disc":  # SUN_DISC_SPECULAR
+        outerCos = dr.cos(radians(C.sun_disc_radius * (1.0 + C.sun_disc_softness)))
+        innerCos = dr.cos(radians(C.sun_disc_radius * (1.0 - C.sun_disc_softness)))
+        spec = smoothstep(outerCos, innerCos, dr.dot(rLight, vEye))
+        strength = C.sun_disc_radiance
+    else:
+        spec = gl_pow(clamp(dr.dot(rLight, vEye), 0.0, 1.0), C.specular_exponent)
+        strength = C.specular_strength
     specular = m.Array4f(
         spec * P.lightcolor[0], spec * P.lightcolor[1], spec * P.lightcolor[2], 1.0
     )
-    vReflection += specular * C.specular_strength
+    vReflection += specular * strength
     return vReflection
 
 

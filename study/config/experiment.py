@@ -299,7 +299,8 @@ class Experiment:
     values: dict
     path: Path | None = None
     digests: dict = field(default_factory=dict)  # file key -> SHA-256 of the file's contents
-    auto: dict = field(default_factory=dict)  # key -> "auto": values the tool chose
+    # key -> "auto" (fit.resolution) or "sun" (SUN_DISC_STARTS): values the tool chose
+    auto: dict = field(default_factory=dict)
 
     def on_backend(self, variant: str) -> "Experiment":
         """This experiment for a run on the Mitsuba ``variant`` (``study._backend.init_backend``'s
@@ -406,6 +407,11 @@ class Experiment:
         return copy.deepcopy(self.values)
 
 
+# start constants of the sun's disc (specular = disc) that default to the scene's sun
+# (study.fit.model.constants_from_experiment reads them off the sun)
+SUN_DISC_STARTS = ("constants.sun_disc_radius", "constants.sun_disc_radiance")
+
+
 def _choose_auto(values: dict) -> dict:
     """Replace ``fit.resolution = "auto"`` in ``values`` by the tool's choice for the device of
     the run (``study._backend.init_backend``'s variant when it ran, else the experiment's
@@ -448,6 +454,9 @@ def validate(raw: dict, overrides: list[str] | None = None, path: Path | None = 
     for key, f in SCHEMA.items():
         values[key] = _check(key, f, flat[key]) if key in flat else copy.deepcopy(f.default)
     auto = _choose_auto(values)
+    for key in SUN_DISC_STARTS:  # the sun's disc starts at the scene's sun unless given
+        if key not in flat:
+            auto[key] = "sun"
     fmt = values["fit.resolution"]
     res = values["resolution"]
     if fmt[0] > res[0] or fmt[1] > res[1] or res[0] % fmt[0] or res[1] % fmt[1]:

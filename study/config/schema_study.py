@@ -27,6 +27,9 @@ FIT_PARAMETERS = (
     "absorption_g",
     "absorption_b",
     "specular_roughness",
+    "sun_disc_radius",
+    "sun_disc_softness",
+    "sun_disc_radiance",
     # the baseline shader's (seeds 001-004)
     "refraction_index",
     "refraction_strength",
@@ -442,6 +445,13 @@ STUDY_KEYS: dict[str, Field] = {
         "int", 5, "Frames timed per GL measurement (median reported).", "", 3, 1000
     ),
 }
+# start values the scene's sun gives unless the experiment sets them (study.config.experiment,
+# SUN_DISC_STARTS)
+_FROM_THE_SUN = {
+    "sun_disc_radius": " Unset: the sun's angular radius (`sun.radius`, or the sky map's sun).",
+    "sun_disc_radiance": " Unset: the largest channel of the sun's radiance (`lightcolor` is "
+    "the radiance divided by it).",
+}
 for _name, (_glsl, _kind, _default, (_lo, _hi)) in CONSTANT_SPECS.items():
     if _kind.endswith("vec4"):
         STUDY_KEYS[f"constants.{_name}"] = Field(
@@ -451,8 +461,8 @@ for _name, (_glsl, _kind, _default, (_lo, _hi)) in CONSTANT_SPECS.items():
         STUDY_KEYS[f"constants.{_name}"] = Field(
             "int" if _kind.endswith("int") else "float",
             _default,
-            f"Start value of `{_glsl}`.",
-            "",
+            f"Start value of `{_glsl}`." + _FROM_THE_SUN.get(_name, ""),
+            "degrees" if _name == "sun_disc_radius" else "",
             _lo,
             _hi,
         )

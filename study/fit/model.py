@@ -26,6 +26,7 @@ from shaders_port.variants import get_variant
 from .._metrics import downsample, downsample_stderr, erode
 from ..config.experiment import Experiment
 from ..scene.reference import water_mask
+from ..scene.user_scene import sun_summary
 
 # ---- scalar names of constants: 'bumptex_mult', 'water_color[2]' (colours expand to RGB;
 # alpha is not fitted since the shader's output alpha is not compared) ----
@@ -99,10 +100,28 @@ def bounds(name: str) -> tuple[float, float]:
 
 def constants_from_experiment(exp: Experiment) -> Constants:
     """The shader's start constants: the ``[constants]`` table of the experiment (defaults:
-    the seed's numbers)."""
+    the seed's numbers; the sun's disc's: the scene's sun, :func:`sun_disc_starts`)."""
     c = exp.section("constants")
     kw = {k: tuple(v) if isinstance(v, list) else v for k, v in c.items() if k in CONSTANT_SPECS}
+    kw.update(sun_disc_starts(exp))
     return Constants(**kw).validate()
+
+
+def sun_disc_starts(exp: Experiment) -> dict:
+    """Start values of the sun's disc constants (``specular = disc``) the experiment leaves to
+    the scene (``SUN_DISC_STARTS``): ``sun_disc_radius``, the sun's angular radius in degrees,
+    and ``sun_disc_radiance``, the largest channel of its linear RGB radiance (``lightcolor`` is
+    the radiance divided by it)."""
+    keys = [k for k in ("sun_disc_radius", "sun_disc_radiance") if f"constants.{k}" in exp.auto]
+    if not keys:
+        return {}
+    sun = sun_summary(exp)
+    lo, hi = CONSTANT_SPECS["sun_disc_radius"][3]
+    found = {
+        "sun_disc_radius": min(max(sun.get("radius_deg", exp.sun.radius), lo), hi),
+        "sun_disc_radiance": max(sun["radiance"]),
+    }
+    return {k: found[k] for k in keys}
 
 
 def at_resolution(
