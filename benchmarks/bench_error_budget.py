@@ -17,14 +17,15 @@ reference (what ``study calibrate`` and ``study tradeoff`` score):
    the sun's term brighter than ``--glint`` in luminance; ``far wall``: the walls' share of the
    reflection, the reflected-without-sun term darker than the sky's cube map lookup by more
    than half; the rest), each class's share of the pixels and of the mean FLIP.
-3. **Highlights**: the shader's own sky and refraction with (a) its Phong highlight at its fitted
-   constants, (b) the same highlight averaged over ``--ss`` x ``--ss`` sub-pixel samples (what
-   a filtered normal map's variance can at best stand for: Toksvig, LEAN, mip-mapped normals),
-   (c) the exact reflection of the sun's disc (``sun.radius``, ``sun.radiance``) off the
-   shader's own (scaled) normal at every sub-pixel sample, Fresnel weighted (a glint model that
-   follows the surface the shader's normal map describes; no technique a shader can afford does
-   better with the same normals). (a) and (b) are refitted in strength (least squares against
-   the reference's sun term, the exponent from a grid), so neither keeps the fit's compromise.
+3. **Highlights**: the shader's own sky and refraction with its own highlight, (a) a Phong
+   highlight (the Phong sibling of the shader's configuration), (b) that highlight averaged
+   over ``--ss`` x ``--ss`` sub-pixel samples (what a filtered normal map's variance can at best
+   stand for: Toksvig, LEAN, mip-mapped normals), (c) the exact reflection of the sun's disc
+   (``sun.radius``, ``sun.radiance``) off the shader's own (scaled) normal, Fresnel weighted, at
+   the pixel centre and averaged over the sub-pixel samples (a glint that follows the surface
+   the shader's normal map describes, up to the sampling). (a) and (b) are refitted in strength
+   (least squares against the reference's sun term, the exponent from a grid), so neither
+   keeps the fit's compromise.
 
     STUDY_CACHE=... .venv/bin/python benchmarks/bench_error_budget.py FIT_DIR
         [--experiment experiments/default.toml] [--spp 256] [--ss 4] [--json out.json]
@@ -111,20 +112,26 @@ def best_strength(spec: np.ndarray, target: np.ndarray, mask: np.ndarray) -> flo
 
 
 def highlight_rows(variant, inputs, constants, terms, ref_sun, mask, score, k) -> list:
-    """Rows of table 3 (see the module doc): ``(label, FLIP, RMSE, note)``."""
+    """Rows (a), (b) of table 3 (see the module doc) on the Phong sibling of ``variant`` (its
+    configuration with ``specular = phong``), after the fit's own highlight: ``(label, FLIP,
+    RMSE, note)``."""
     from bench_grazing import shader_terms
 
+    from shaders_port import space
+    from shaders_port.variants import get_variant
+
     base = terms["F*sky"] + terms["T*refr"]
-    rows = [("(a') Phong at the fitted constants", *score(base + terms["F*spec"]), "")]
+    rows = [("the fit's own highlight", *score(base + terms["F*spec"]), variant.name)]
+    phong = get_variant(space.name_of({**space.choices_of(variant.name), "specular": "phong"}))
     s0 = float(constants.specular_strength)
     for label, kk in (("(a) Phong, refitted", 1), (f"(b) Phong over {k}x{k} samples", k)):
         best = None
         for e in EXPONENTS:
             c = constants.replace(specular_exponent=float(e))
             if kk == 1:
-                spec = shader_terms(variant, inputs, c)["F*spec"]
+                spec = shader_terms(phong, inputs, c)["F*spec"]
             else:
-                spec = supersampled(lambda i: shader_terms(variant, i, c), inputs, kk)["F*spec"]
+                spec = supersampled(lambda i: shader_terms(phong, i, c), inputs, kk)["F*spec"]
             s = best_strength(spec, ref_sun, mask)
             fl, rm = score(base + s * spec)
             if best is None or fl < best[1]:
@@ -174,7 +181,7 @@ def main(argv=None) -> None:
     t0 = time.perf_counter()
     rt = reference_split(reference_terms(a.experiment, a.set, (0, h), a.spp))
     render_s = time.perf_counter() - t0
-    out = {"experiment": exp["name"], "shader": v.name, "fit": str(a.fit), "spp": a.spp}
+    out = {"experiment": exp["name"], "shader": v.name, "fit": Path(a.fit).name, "spp": a.spp}
     out["reference_spp"] = ref.spp
     out["terms_render_s"] = round(render_s, 1)
 

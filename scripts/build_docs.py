@@ -18,6 +18,8 @@ Every table of results in ``docs/`` is written by this script, never by hand:
 * ``docs/results/animation/report.md``: the animated calibration's report, from the
   ``constants.json`` that ``study calibrate experiments/animated.toml`` writes, and
   ``schedules.md``, the same calibration at three step schedules (``schedules.json``);
+* ``docs/results/error-budget/report.md``: what the best shaders' remaining error is made of,
+  from ``benchmarks/bench_error_budget.py``'s results (``docs_error_budget.py``);
 * ``docs/results/engine-shaders/report.md``: the engine-style shader pairs of
   ``experiments/`` calibrated, from each one's ``constants.json`` (``study calibrate
   experiments/<name>.toml``);
@@ -107,6 +109,7 @@ def generated() -> dict[Path, str]:
     from docs_engine_inputs import engine_inputs_page
     from docs_file_formats import file_formats_page
     from docs_gpu import gpu_bench_page
+    from docs_error_budget import error_budget_page
     from docs_own_waves import own_waves_page
 
     pages = {DOCS / "experiment-keys.md": KEYS_HEADER + schema_markdown()}
@@ -133,6 +136,7 @@ def generated() -> dict[Path, str]:
     pages.update(_default_run_pages(RESULTS / "default"))
     pages[RESULTS / "engine-shaders" / "report.md"] = _engine_pairs_page(RESULTS / "engine-shaders")
     pages[RESULTS / "own-waves" / "report.md"] = own_waves_page(RESULTS)
+    pages[RESULTS / "error-budget" / "report.md"] = error_budget_page(RESULTS / "error-budget")
     pages[RESULTS / "views" / "generalise.md"] = generalise_report_text(
         _json(RESULTS / "views" / "generalise.json")
     )
@@ -311,6 +315,8 @@ def figures() -> dict[Path, tuple[list[Path], object]]:
         for data in sorted(folder.glob("images_*.exr")):
             png = data.with_suffix(".png")
             out[png] = ([data, data.with_suffix(".json")], panels_figure)
+    for data in sorted((RESULTS / "error-budget").glob("images_*.exr")):
+        out[data.with_suffix(".png")] = ([data, data.with_suffix(".json")], panels_figure)
     ms = RESULTS / "stability" / "multistart" / "summary.json"
     out[ms.parent / "solvers.png"] = ([ms], lambda p: solver_figure(p, _json(ms)["multistart"]))
     out[ms.parent / "spread.png"] = ([ms], lambda p: spread_figure(p, _json(ms)["multistart"]))
