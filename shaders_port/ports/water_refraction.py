@@ -68,6 +68,7 @@ from ..pipeline.raster import prepare
 from ..pipeline.texture import backend_types, clamp, gl_pow, mix, texmat_xy
 from .box import box_reflection, box_state
 from .planar import MIRROR_NORMAL, mirror_state, planar_reflection
+from .ssr import ssr_reflection, ssr_state
 from .switches import decode
 
 __all__ = ["render", "render_with_jacobian", "ShaderOutput", "Options", "DEFINES"]
@@ -91,9 +92,12 @@ class Options(NamedTuple):
     reflection_map: what block [7] reads: 'cube' (original: the sky cube map), 'mirror'
         (``PLANAR_REFLECTION``: seed 004's mirrored camera at the surface point, offset by the
         projected flattened wave normal times ``REFLECT_DISTORTION`` (seed 002); needs
-        ``ShaderInputs.reflection_color`` and ``reflection_view_proj``) or 'box'
+        ``ShaderInputs.reflection_color`` and ``reflection_view_proj``), 'box'
         (``BOX_REFLECTION``: the local cube map of the pool, box-projected (``ports.box``);
-        needs ``ShaderInputs.box_cubemap``, ``box_min``, ``box_max`` and ``box_capture``).
+        needs ``ShaderInputs.box_cubemap``, ``box_min``, ``box_max`` and ``box_capture``) or
+        'ssr' (``SSR_REFLECTION``: the screen-space reflection over the camera's buffers of the
+        dry scene, the sky cube map where it finds nothing (``ports.ssr``); needs
+        ``ShaderInputs.scene_color`` and ``scene_depth``).
     """
 
     reflection: bool = True
@@ -118,6 +122,7 @@ DEFINES = {
     "WALL_FACES": {"wall_faces": True},
     "PLANAR_REFLECTION": {"reflection_map": "mirror"},
     "BOX_REFLECTION": {"reflection_map": "box"},
+    "SSR_REFLECTION": {"reflection_map": "ssr"},
 }
 # texture reads per pixel attributed to PLANAR_REFLECTION for the mirrored camera's pass (as
 # water_baseline.PASS_FETCHES)
@@ -433,7 +438,8 @@ def refraction_blocks(m, P, C, opts: Options = Options()) -> Refracted:
 
 def reflection_block(m, P, C, opts: Options, Mi, f: Refracted):
     """Blocks [7]-[9] with the reflection ``opts.reflection_map`` reads (``Mi``: its state,
-    ``ports.planar.Mirror`` or ``ports.box.BoxProbe``, None for the sky cube map). Returns
+    ``ports.planar.Mirror``, ``ports.box.BoxProbe`` or ``ports.ssr.ScreenProbe``, None for the
+    sky cube map). Returns
     ``(gl_FragColor`` Array4f, texture fetches it adds, Bool of non-finite intermediates)."""
     vEye, vLight, vBumpTex = f.vEye, f.vLight, f.vBumpTex
     if opts.reflection_map == "mirror":
@@ -445,11 +451,14 @@ def reflection_block(m, P, C, opts: Options, Mi, f: Refracted):
         # ---- [7] Reflection ----
         R = dr.normalize(reflect(m, -vEye, f.vBumpTexMore))
         R.y = dr.maximum(R.y, 0.001)
+        fetches = 2
         if opts.reflection_map == "box":  # BOX_REFLECTION
             vReflection = box_reflection(m, P, Mi, C, R)
+        elif opts.reflection_map == "ssr":  # SSR_REFLECTION: its depth samples besides
+            vReflection, taken, _ = ssr_reflection(m, P, Mi, C, R, cubemap_reflection(m, P, R))
+            fetches = fetches + taken
         else:
             vReflection = cubemap_reflection(m, P, R) * C.reflectColor
-        fetches = 2
         bad = nonfinite_any(R, vLight)
     vReflection = specular_highlight(m, P, vReflection, vBumpTex, vEye, vLight, C, opts.specular)
     gl_FragColor = fresnel_combine(m, P, vReflection, f.vRefraction, vEye, vBumpTex)
@@ -492,11 +501,14 @@ def _frozen_shade(m, P, C, diagnose, opts, Mi):
 
 def _reflection_state(m, inputs, opts: Options):
     """The state of the reflection ``opts`` reads beyond the study's inputs: the mirrored
-    camera's (``ports.planar.Mirror``), the local cube map's (``ports.box.BoxProbe``) or None."""
+    camera's (``ports.planar.Mirror``), the local cube map's (``ports.box.BoxProbe``), the
+    camera's buffers (``ports.ssr.ScreenProbe``) or None."""
     if opts.reflection and opts.reflection_map == "mirror":
         return mirror_state(m, inputs, "water_refraction with PLANAR_REFLECTION")
     if opts.reflection and opts.reflection_map == "box":
         return box_state(m, inputs, "water_refraction with BOX_REFLECTION")
+    if opts.reflection and opts.reflection_map == "ssr":
+        return ssr_state(m, inputs, "water_refraction with SSR_REFLECTION")
     return None
 
 
