@@ -24,6 +24,8 @@ IOR_WATER = 1.333
 # ShaderInputs fields that only some shaders read (None when not built)
 # the local cube map of reflection = box and its box (optional fields of ShaderInputs)
 BOX_INPUTS = ("box_cubemap", "box_min", "box_max", "box_capture")
+# the camera's buffers of the dry scene that reflection = ssr reads (the baseline's first two)
+SSR_INPUTS = ("scene_color", "scene_depth")
 OPTIONAL_INPUTS = (
     "scene_color",
     "scene_depth",
@@ -75,7 +77,8 @@ class ShaderInputs:
         lightcolor: (3,) linear RGB of the specular highlight.
         width, height: output resolution in pixels (int).
 
-    Optional (``None`` unless built; read by the baseline shader ``water_baseline`` only):
+    Optional (``None`` unless built; read by the baseline shader ``water_baseline``, the first
+    two also by ``water_refraction`` with ``SSR_REFLECTION``, the screen-space reflection):
         scene_color: (Hs, Ws, 3) linear RGB of the scene *without the water* seen by this
             camera (a screen-space buffer, row 0 = bottom of the screen, GL order);
             GLSL ``sceneColor``; bilinear, clamp to edge.
@@ -531,7 +534,9 @@ def game_precision(inputs: ShaderInputs) -> ShaderInputs:
     * ``normal_map``: 8-bit UNORM (``GL_RGB8``, the usual ``0.5 n + 0.5`` encoding);
     * ``fresnel_lut``: 8-bit UNORM;
     * depths (``world_y``, ``refl_world_y``) and the HDR cube maps (``cubemap``, ``box_cubemap``):
-      half float (``GL_R16F``, ``GL_RGB16F``).
+      half float (``GL_R16F``, ``GL_RGB16F``); the camera's HDR colour buffer ``scene_color``
+      (read by ``reflection = ssr``): half float; its depth buffer ``scene_depth`` stays float
+      (a 32-bit depth buffer: half float cannot hold window depths apart).
 
     Filtering still runs in float on the dequantised texels on both sides (GL hardware
     filters 8-bit texels at 8-bit sub-texel precision; this is not modelled). One result is
@@ -551,6 +556,7 @@ def game_precision(inputs: ShaderInputs) -> ShaderInputs:
         refl_world_y=_half(inputs.refl_world_y),
         cubemap=_half(inputs.cubemap),
         box_cubemap=None if inputs.box_cubemap is None else _half(inputs.box_cubemap),
+        scene_color=None if inputs.scene_color is None else _half(inputs.scene_color),
     )
     _GAME_CACHE.clear()
     _GAME_CACHE[key] = (arrays, inputs, out)

@@ -16,7 +16,9 @@ The axes and where each choice comes from (``SOURCE``):
 * ``reflection``: ``cube`` (000's sky cube map), ``raycast`` (000 section 3, cube map where
   nothing is hit), ``planar_distorted`` (004's mirrored camera distorted by the normal, 002),
   ``planar`` (004 alone), ``none``, ``box`` (Lagarde and Zanuttini's local cube map: a cube
-  map of the dry pool looked up where the reflected ray leaves the box of its walls);
+  map of the dry pool looked up where the reflected ray leaves the box of its walls), ``ssr``
+  (engines' screen-space reflection: the reflected ray marched over the camera's depth buffer
+  of the dry scene, the sky cube map where it finds nothing);
 * ``attenuation``: ``linear`` (000's clamped mix) or ``beer`` (Beer-Lambert per channel);
 * ``specular``: ``phong`` (000), ``ggx``, ``none``, ``disc`` (the sun's disc mirrored by the
   normal, soft-edged: the sun's glitter as a mirror shows it);
@@ -25,15 +27,16 @@ The axes and where each choice comes from (``SOURCE``):
 * ``layers``: normal-map layers averaged, 4 (000), 2 or 1;
 * ``textures``: ``float`` or ``game`` (8-bit colour, half-float depth).
 
-What the files realise: the raycast refraction with the cube-map, local cube-map, raycast or
-no reflection and every other axis free (``water_refraction.frag``, ``water_reflection.frag``); the
-screen-space refractions and no refraction with the planar or cube-map reflection, the other
-axes at the original's choices (``water_baseline.frag``: nine pairs, :data:`_BASELINE`), so
-each source's technique alone is one shader (001: ``water_baseline_flat_cube``; 003:
-``water_baseline_noplanar_cube``; 004: ``water_baseline_flat_norefraction``; 002 on 004:
-``water_baseline_norefraction``). The raycast refraction takes 004's mirror distorted by
-002 too (``water_refraction_mirror``, ``PLANAR_REFLECTION``); 004's undistorted mirror is that
-shader at ``reflect_distortion = 0``, so ``planar`` with the raycast is refused with that.
+What the files realise: the raycast refraction with the cube-map, local cube-map, screen-space,
+raycast or no reflection and every other axis free (``water_refraction.frag``,
+``water_reflection.frag``); the screen-space refractions and no refraction with the planar or
+cube-map reflection, the other axes at the original's choices (``water_baseline.frag``: nine
+pairs, :data:`_BASELINE`), so each source's technique alone is one shader (001:
+``water_baseline_flat_cube``; 003: ``water_baseline_noplanar_cube``; 004:
+``water_baseline_flat_norefraction``; 002 on 004: ``water_baseline_norefraction``). The raycast
+refraction takes 004's mirror distorted by 002 too (``water_refraction_mirror``,
+``PLANAR_REFLECTION``); 004's undistorted mirror is that shader at ``reflect_distortion = 0``,
+so ``planar`` with the raycast is refused with that.
 """
 
 from __future__ import annotations
@@ -42,7 +45,7 @@ import itertools
 
 AXES: dict[str, tuple] = {
     "refraction": ("raycast", "planar_distorted", "distorted", "planar", "none"),
-    "reflection": ("cube", "raycast", "planar_distorted", "planar", "none", "box"),
+    "reflection": ("cube", "raycast", "planar_distorted", "planar", "none", "box", "ssr"),
     "attenuation": ("linear", "beer"),
     "specular": ("phong", "ggx", "none", "disc"),
     "refine": ("linear", "binary", "secant"),
@@ -66,6 +69,7 @@ SOURCE = {
     ("reflection", "none"): "000 (NOREFLECTION)",
     ("reflection", "box"): "Lagarde and Zanuttini (local cube map)",
     ("specular", "disc"): "the sun's disc in the mirror (ocean shaders' sun glint)",
+    ("reflection", "ssr"): "screen-space reflection (engines' SSR)",
 }
 
 # each source's technique alone (the original's choices elsewhere, the cube map where a source
@@ -79,6 +83,7 @@ ALONE = {
     "004 (mirror, flat)": {"refraction": "none", "reflection": "planar"},
     "Lagarde and Zanuttini (local cube map)": {"reflection": "box"},
     "the sun's disc in the mirror (ocean shaders' sun glint)": {"specular": "disc"},
+    "screen-space reflection (engines' SSR)": {"reflection": "ssr"},
     "001-004 (the games' composition)": {
         "refraction": "planar_distorted",
         "reflection": "planar_distorted",
@@ -98,12 +103,14 @@ _RAYCAST_DEFINES = {
     ("layers", 1): "ONE_NORMAL_LAYER",
     ("reflection", "planar_distorted"): "PLANAR_REFLECTION",
     ("reflection", "box"): "BOX_REFLECTION",
+    ("reflection", "ssr"): "SSR_REFLECTION",
 }
 # name tokens, in name order (a name is the shader file then the tokens of its choices)
 _TOKENS = (
     (("reflection", "none"), "noreflection"),
     (("reflection", "planar_distorted"), "mirror"),
     (("reflection", "box"), "box"),
+    (("reflection", "ssr"), "ssr"),
     (("attenuation", "beer"), "beer"),
     (("specular", "ggx"), "ggx"),
     (("specular", "disc"), "disc"),
@@ -194,7 +201,8 @@ def _realise_screen_space(c: dict) -> tuple[str, tuple[str, ...], str]:
             f"refraction = {c['refraction']} with reflection = {c['reflection']}: the "
             "screen-space shader's planar refraction is flat water (undistorted reflections "
             "only), its normal-mapped refractions go with the normal-mapped reflections, and "
-            f"it has neither the raycast reflection nor the local cube map; it realises {allowed}"
+            "it has neither the raycast reflection, the screen-space reflection of the raycast "
+            f"file nor the local cube map; it realises {allowed}"
         )
     return "water_baseline", _BASELINE[key][1], "float"
 

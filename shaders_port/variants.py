@@ -25,7 +25,7 @@ from dataclasses import dataclass, field
 from . import space as _space
 from .gl.renderer import GLRenderer
 from .glsl_text import constants_read, read_source, switches_of, with_define
-from .inputs import BOX_INPUTS, game_precision
+from .inputs import BOX_INPUTS, SSR_INPUTS, game_precision
 
 
 @dataclass(frozen=True)
@@ -197,7 +197,8 @@ def from_space(choices: dict, description: str | None = None) -> Variant:
     """The :class:`Variant` of a configuration of the shader space (``space.AXES`` choices):
     its file and defines (``space.realise``), its step schedule, the constants its choices
     fit in place of the original's, and the inputs beyond the study's it reads (the screen-space
-    buffers of the baseline shader and the mirror, the local cube map of ``reflection = box``)."""
+    buffers of the baseline shader and the mirror, the local cube map of ``reflection = box``,
+    the camera's buffers of ``reflection = ssr``)."""
     c = _space.checked(choices)
     shader, defines, textures = _space.realise(c)
     name = _space.name_of(c)
@@ -223,7 +224,7 @@ def from_space(choices: dict, description: str | None = None) -> Variant:
     elif c["specular"] == "none" and c["reflection"] != "none":
         replaces.update(_NOSPEC)
     mirror = c["reflection"] == "planar_distorted"  # 004's mirrored camera, 002's offset
-    extra = _BASELINE_INPUTS if mirror else BOX_INPUTS if c["reflection"] == "box" else ()
+    extra = {"planar_distorted": _BASELINE_INPUTS, "box": BOX_INPUTS, "ssr": SSR_INPUTS}
     return Variant(
         name,
         shader,
@@ -232,7 +233,7 @@ def from_space(choices: dict, description: str | None = None) -> Variant:
         description=description or _space.describe(c),
         replaces=replaces,
         textures=textures,
-        inputs=extra,
+        inputs=extra.get(c["reflection"], ()),
         fit_parameters=("reflect_distortion",) if mirror else (),
     )
 

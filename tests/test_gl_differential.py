@@ -32,3 +32,16 @@ def test_port_matches_gl(inputs, shader, which):
     constants = Constants() if which == "default" else CUSTOM
     res = compare_or_skip(inputs, constants, shader)
     check_gl_match(res, f"gl_{shader}_{which}")
+
+
+def test_a_refinement_lookup_on_a_texel_edge_is_explained():
+    """The binary refinement's fourth depth lookup of one pixel lands 1.5e-5 texels from a texel
+    edge (nearest-filtered): llvmpipe reads the neighbouring texel there and the colour jumps by
+    0.016; the port's ``refine_texel_edge`` diagnostic names the pixel."""
+    from helpers.port_checks import VARIANT_CUSTOM
+    from helpers.synthetic import synthetic_inputs_for
+
+    name = "water_refraction_beer_nospecular_walls_binary_1layer"
+    res = compare_or_skip(synthetic_inputs_for(name, 96, 72), VARIANT_CUSTOM, name)
+    assert res["n_outliers"] >= 1 and res["explained"]["nearest_texel_edge"] >= 1
+    assert res["unexplained"] == 0

@@ -52,8 +52,8 @@ def test_each_source_technique_alone_is_a_shader_of_the_space():
 
 def test_pinned_axes_restrict_the_space():
     pinned = _space.configurations({"textures": "float", "layers": 4, "refine": "linear"})
-    # cube, mirror, raycast, box; none (no specular); screen space
-    assert len(pinned) == 4 * 16 + 4 + 9
+    # cube, mirror, raycast, box, ssr; none (no specular); screen space
+    assert len(pinned) == 5 * 16 + 4 + 9
     assert all(c["layers"] == 4 and c["textures"] == "float" for c in pinned)
     with pytest.raises(ValueError, match="unknown axis"):
         _space.configurations({"fog": "on"})
@@ -61,8 +61,8 @@ def test_pinned_axes_restrict_the_space():
 
 def test_every_configuration_compiles_to_names_its_file_and_port_know():
     configs = _space.configurations()
-    # 288 cube, box, mirror, raycast each + 72 refraction-only + 9 screen
-    assert len(configs) == 1233
+    # 288 cube, box, ssr, mirror, raycast each + 72 refraction-only + 9 screen
+    assert len(configs) == 1521
     ports = _ports()
     names = set()
     for c in configs:
@@ -85,6 +85,7 @@ def test_every_configuration_compiles_to_names_its_file_and_port_know():
         ({"refraction": "distorted", "reflection": "planar"}, "normal-mapped reflections"),
         ({"refraction": "none", "reflection": "raycast"}, "neither the raycast reflection"),
         ({"refraction": "planar", "reflection": "box"}, "nor the local cube map"),
+        ({"refraction": "distorted", "reflection": "ssr"}, "the screen-space reflection of the"),
         ({"refraction": "raycast", "reflection": "planar"}, "reflect_distortion = 0 is the flat"),
     ],
 )
@@ -159,7 +160,7 @@ def test_configurations_nobody_registered_match_opengl(seed):
     the GL check's thresholds, and the configuration renders differently from the original."""
 
     raycast = _space.configurations({"refraction": "raycast"})
-    assert len(raycast) == 1224
+    assert len(raycast) == 1512
     c = random.Random(100 + seed).choice(raycast)
     name = _space.name_of(c)
     inputs = synthetic_inputs_for(name, 96, 72)

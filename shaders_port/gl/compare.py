@@ -8,10 +8,15 @@ flip:
 
 * ``tiny_denominator``: ``diagnostics['denominator'] < 1e-3`` (the crossing interpolation
   divides by a near-zero number, so rounding of the inputs is amplified);
-* ``reflection_decision``: (water_reflection) the reflection ray's hit / no-hit or its hit
-  step differs between neighbouring pixels (an edge of the geometry above the water);
-* ``crossing_step_edge``: the refraction crossing step differs from a 4-neighbour's (a
-  step-schedule discontinuity passes through the pixel).
+* ``reflection_decision``: (water_reflection and the screen-space reflection) the reflection
+  ray's hit / no-hit or its hit step differs between neighbouring pixels (an edge of the
+  geometry above the water);
+* ``crossing_step_edge``: the refraction crossing step, or the path of a refinement's
+  decisions, differs from a 4-neighbour's (a step-schedule discontinuity passes through the
+  pixel);
+* ``nearest_texel_edge``: a refinement's depth lookup (nearest-filtered) lies within
+  ``TEXEL_EDGE`` texels of a texel edge, where the GPU's texel addressing may read the
+  neighbouring texel.
 
 Anything else over the threshold is ``unexplained``.
 
@@ -29,6 +34,9 @@ from ..inputs import Constants, ShaderInputs
 from ..variants import get_variant
 
 OUTLIER = 1e-2
+# how near (texels) a nearest-filtered lookup may come to a texel edge before the two sides may
+# read different texels (float32 texel coordinates of a few hundred texels round at ~1e-5)
+TEXEL_EDGE = 1e-3
 
 
 def _neighbour_differs(a: np.ndarray, valid: np.ndarray) -> np.ndarray:
@@ -89,6 +97,9 @@ def compare_port_gl(
         raise ValueError("the port and GL share no water pixel; check the camera and water_rect")
     outlier = both & ~(diff <= OUTLIER)  # NaN on either side counts as an outlier
     reasons = {"crossing_step_edge": _neighbour_differs(out["iterations"], port_mask)}
+    if "refine_path" in out:  # the refinement's decisions, as the linear search's steps
+        reasons["crossing_step_edge"] |= _neighbour_differs(out["refine_path"], port_mask)
+        reasons["nearest_texel_edge"] = out["refine_texel_edge"] < TEXEL_EDGE
     if "denominator" in out:  # the raycast shaders' crossing interpolation
         reasons["tiny_denominator"] = out["denominator"] < 1e-3
     if "refl_hit" in out:

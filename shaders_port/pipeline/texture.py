@@ -134,6 +134,14 @@ class Texture2D:
             w00 * t00[c] + w10 * t10[c] + w01 * t01[c] + w11 * t11[c] for c in range(self.channels)
         ]
 
+    def texel_edge(self, m, s, t):
+        """Distance (Float, in texels) from ``(s, t)`` to the nearest texel edge of this texture:
+        where it is within float rounding of 0, a ``NEAREST`` lookup on another implementation
+        (a GPU's texel addressing) can read the neighbouring texel."""
+        u, v = s * self.width, t * self.height
+        du, dv = u - dr.floor(u), v - dr.floor(v)
+        return dr.minimum(dr.minimum(du, 1.0 - du), dr.minimum(dv, 1.0 - dv))
+
     def _fetch(self, m, i, j, active) -> list:
         base = m.UInt32((j * self.width + i) * self.channels)
         return [dr.gather(m.Float, self.data, base + c, active) for c in range(self.channels)]

@@ -52,11 +52,11 @@ from .water_refraction import (
 # the one table from the GLSL file's #define names to the port's options (see ports.switches): those
 # of water_refraction's blocks [2]-[6] and [8]; NOREFLECTION (block [7] skipped) is the
 # water_refraction_noreflection variant of the other shader, not a switch of this port, and the
-# mirror and the local cube map replace block [7] there
+# mirror, the local cube map and the screen-space reflection replace block [7] there
 DEFINES = {
     k: v
     for k, v in _REFRACTION_DEFINES.items()
-    if k not in ("NOREFLECTION", "PLANAR_REFLECTION", "BOX_REFLECTION")
+    if k not in ("NOREFLECTION", "PLANAR_REFLECTION", "BOX_REFLECTION", "SSR_REFLECTION")
 }
 
 __all__ = ["render", "render_with_jacobian", "ShaderOutput"]
@@ -187,6 +187,8 @@ def _shade(m, P, C, diagnose: bool = False, opts: Options = Options()):
         "refl_hit": dr.select(noHit, 0.0, 1.0),
         "nonfinite": dr.select(bad, 1.0, 0.0),
     }
+    if f.refine_path is not None:
+        diagnostics["refine_path"], diagnostics["refine_texel_edge"] = f.refine_path
     if diagnose:
         diagnostics.update(refraction_failure_diagnostics(m, P, C, f))
         diagnostics["refl_exit"] = reflection_exit(m, P, C, refl_loop_position, noHit)

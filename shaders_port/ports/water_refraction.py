@@ -65,9 +65,11 @@ from ..pipeline.frame import (
     tangents,
 )
 from ..pipeline.raster import prepare
-from ..pipeline.texture import backend_types, clamp, gl_pow, mix, radians, smoothstep, texmat_xy
+from ..pipeline.texture import backend_types, clamp, mix, texmat_xy
 from .box import box_reflection, box_state
+from .highlight import fresnel_combine, specular_highlight
 from .planar import MIRROR_NORMAL, mirror_state, planar_reflection
+from .ssr import ssr_reflection, ssr_state
 from .switches import decode
 
 __all__ = ["render", "render_with_jacobian", "ShaderOutput", "Options", "DEFINES"]
@@ -94,9 +96,12 @@ class Options(NamedTuple):
     reflection_map: what block [7] reads: 'cube' (original: the sky cube map), 'mirror'
         (``PLANAR_REFLECTION``: seed 004's mirrored camera at the surface point, offset by the
         projected flattened wave normal times ``REFLECT_DISTORTION`` (seed 002); needs
-        ``ShaderInputs.reflection_color`` and ``reflection_view_proj``) or 'box'
+        ``ShaderInputs.reflection_color`` and ``reflection_view_proj``), 'box'
         (``BOX_REFLECTION``: the local cube map of the pool, box-projected (``ports.box``);
-        needs ``ShaderInputs.box_cubemap``, ``box_min``, ``box_max`` and ``box_capture``).
+        needs ``ShaderInputs.box_cubemap``, ``box_min``, ``box_max`` and ``box_capture``) or
+        'ssr' (``SSR_REFLECTION``: the screen-space reflection over the camera's buffers of the
+        dry scene, the sky cube map where it finds nothing (``ports.ssr``); needs
+        ``ShaderInputs.scene_color`` and ``scene_depth``).
     """
 
     reflection: bool = True
@@ -122,6 +127,7 @@ DEFINES = {
     "WALL_FACES": {"wall_faces": True},
     "PLANAR_REFLECTION": {"reflection_map": "mirror"},
     "BOX_REFLECTION": {"reflection_map": "box"},
+    "SSR_REFLECTION": {"reflection_map": "ssr"},
 }
 # texture reads per pixel attributed to PLANAR_REFLECTION for the mirrored camera's pass (as
 # water_baseline.PASS_FETCHES)
@@ -229,7 +235,13 @@ def refine_crossing(m, P, current_position, current_position_old, depth, olddept
     """Variants ``BINARY_REFINE`` (``refine='binary'``, relief mapping) and ``SECANT_REFINE``
     (``'secant'``, parallax occlusion mapping): shrink the bracket ``REFINE_STEPS`` times at its
     middle or at its secant crossing (one depth fetch each). Unrolled (``REFINE_STEPS`` is a
-    compile-time integer), so derivatives flow through the secant fractions directly."""
+    compile-time integer), so derivatives flow through the secant fractions directly. Returns
+    the bracket and depths, the path of the decisions (Float, bit ``j`` set where step ``j``
+    found the middle below the ground) and the least distance, in texels, of a step's depth
+    lookup (nearest-filtered) to a texel edge: where float rounding flips a decision or a
+    lookup's texel, the crossing jumps."""
+    path = m.Float(0.0)
+    edge = m.Float(1.0)
     for j in range(C.refine_steps):
         if refine == "binary":
             middle_position = 0.5 * (current_position_old + current_position)
@@ -242,12 +254,14 @@ def refine_crossing(m, P, current_position, current_position_old, depth, olddept
             )
         s, t = texmat_xy(P.tex_matrix0, middle_position)
         middle_depth = m.Float(P.worldYComponent.sample(m, s, t)[0])
+        edge = dr.minimum(edge, dr.detach(P.worldYComponent.texel_edge(m, s, t)))
         below = middle_depth > middle_position.y
+        path = path + dr.select(below, float(2**j), 0.0)
         current_position = dr.select(below, middle_position, current_position)
         depth = dr.select(below, middle_depth, depth)
         current_position_old = dr.select(below, current_position_old, middle_position)
         olddepth = dr.select(below, olddepth, middle_depth)
-    return current_position, current_position_old, depth, olddepth
+    return current_position, current_position_old, depth, olddepth, (path, edge)
 
 
 def interpolate_crossing(m, P, current_position, current_position_old, depth, olddepth):
@@ -283,51 +297,6 @@ def cubemap_reflection(m, P, R):
     """``textureCube(reflectionTexture, normalize(R) * vec3(1, -1, 1))`` as a vec4."""
     d = dr.normalize(R) * m.Array3f(1.0, -1.0, 1.0)
     return m.Array4f(*P.reflectionTexture.sample(m, d.x, d.y, d.z), 1.0)
-
-
-def specular_highlight(m, P, vReflection, vBumpTex, vEye, vLight, C, lobe: str = "phong"):
-    # ---- [8] Specular highlight ----
-    if lobe == "none":  # NO_SPECULAR
-        return vReflection
-    if lobe == "ggx":  # GGX_SPECULAR
-        vHalf = dr.normalize(vLight + vEye)
-        NdotH = clamp(dr.dot(vBumpTex, vHalf), 0.0, 1.0)
-        NdotL = clamp(dr.dot(vBumpTex, vLight), 0.0, 1.0)
-        NdotE = clamp(dr.dot(vBumpTex, vEye), 0.0, 1.0)
-        alpha2 = C.specular_roughness * C.specular_roughness
-        ggxDenominator = NdotH * NdotH * (alpha2 - 1.0) + 1.0
-        ggxD = alpha2 / (3.14159265 * ggxDenominator * ggxDenominator)
-        smithVis = 1.0 / (
-            (NdotL + dr.sqrt(alpha2 + (1.0 - alpha2) * NdotL * NdotL))
-            * (NdotE + dr.sqrt(alpha2 + (1.0 - alpha2) * NdotE * NdotE))
-        )
-        spec = ggxD * smithVis * NdotL
-        specular = m.Array4f(
-            spec * P.lightcolor[0], spec * P.lightcolor[1], spec * P.lightcolor[2], 1.0
-        )
-        vReflection += specular * C.specular_strength
-        return vReflection
-    rLight = dr.dot(2.0 * vBumpTex, vLight) * vBumpTex - vLight
-    if lobe == "disc":  # SUN_DISC_SPECULAR
-        outerCos = dr.cos(radians(C.sun_disc_radius * (1.0 + C.sun_disc_softness)))
-        innerCos = dr.cos(radians(C.sun_disc_radius * (1.0 - C.sun_disc_softness)))
-        spec = smoothstep(outerCos, innerCos, dr.dot(rLight, vEye))
-        strength = C.sun_disc_radiance
-    else:
-        spec = gl_pow(clamp(dr.dot(rLight, vEye), 0.0, 1.0), C.specular_exponent)
-        strength = C.specular_strength
-    specular = m.Array4f(
-        spec * P.lightcolor[0], spec * P.lightcolor[1], spec * P.lightcolor[2], 1.0
-    )
-    vReflection += specular * strength
-    return vReflection
-
-
-def fresnel_combine(m, P, vReflection, vRefraction, vEye, vBumpTex):
-    # ---- [9] Fresnel combine ----
-    NdotV = clamp(dr.dot(vEye, vBumpTex), 0.0, 1.0)
-    FresnelCoeffs = P.fresnelLookup.sample(m, NdotV, m.Float(0.5))
-    return vReflection * FresnelCoeffs[1] + vRefraction * FresnelCoeffs[0]
 
 
 # ---- failure diagnostics (not in the GLSL: extra outputs, the colour is unchanged) --------
@@ -398,6 +367,8 @@ class Refracted:
     loop_position: object = None  # current_position after the last step
     loop_position_old: object = None  # current_position_old
     olddepth: object = None
+    # the refinement's decisions and least texel-edge distance (refine_crossing), or None
+    refine_path: object = None
 
 
 def refraction_blocks(m, P, C, opts: Options = Options()) -> Refracted:
@@ -412,8 +383,9 @@ def refraction_blocks(m, P, C, opts: Options = Options()) -> Refracted:
     current_position, current_position_old = loop_positions(
         m, C, R, current_position, current_position_old, iterations
     )
+    path = None
     if opts.refine is not None:
-        current_position, current_position_old, depth, olddepth = refine_crossing(
+        current_position, current_position_old, depth, olddepth, path = refine_crossing(
             m, P, current_position, current_position_old, depth, olddepth, C, opts.refine
         )
         iterations = iterations + C.refine_steps
@@ -439,14 +411,19 @@ def refraction_blocks(m, P, C, opts: Options = Options()) -> Refracted:
         loop_position,
         loop_position_old,
         olddepth,
+        path,
     )
 
 
 def reflection_block(m, P, C, opts: Options, Mi, f: Refracted):
     """Blocks [7]-[9] with the reflection ``opts.reflection_map`` reads (``Mi``: its state,
-    ``ports.planar.Mirror`` or ``ports.box.BoxProbe``, None for the sky cube map). Returns
-    ``(gl_FragColor`` Array4f, texture fetches it adds, Bool of non-finite intermediates)."""
+    ``ports.planar.Mirror``, ``ports.box.BoxProbe`` or ``ports.ssr.ScreenProbe``, None for the
+    sky cube map). Returns ``(gl_FragColor`` Array4f, texture fetches it adds, Bool of
+    non-finite intermediates, diagnostics of the reflection's decisions: with ``ssr``,
+    ``refl_hit`` (1 where the march found the scene) and ``refl_iterations`` (its depth
+    samples), as ``water_reflection`` reports its raycast's)."""
     vEye, vLight, vBumpTex = f.vEye, f.vLight, f.vBumpTex
+    decisions = {}
     if opts.reflection_map == "mirror":
         # ---- [7] Reflection (PLANAR_REFLECTION: sources 004 and 002) ----
         vReflection, uv = planar_reflection(m, P, Mi, C, vBumpTex, m.Array3f(*MIRROR_NORMAL), False)
@@ -456,15 +433,19 @@ def reflection_block(m, P, C, opts: Options, Mi, f: Refracted):
         # ---- [7] Reflection ----
         R = dr.normalize(reflect(m, -vEye, f.vBumpTexMore))
         R.y = dr.maximum(R.y, 0.001)
+        fetches = 2
         if opts.reflection_map == "box":  # BOX_REFLECTION
             vReflection = box_reflection(m, P, Mi, C, R)
+        elif opts.reflection_map == "ssr":  # SSR_REFLECTION: its depth samples besides
+            vReflection, taken, found = ssr_reflection(m, P, Mi, C, R, cubemap_reflection(m, P, R))
+            fetches = fetches + taken
+            decisions = {"refl_hit": dr.select(found, 1.0, 0.0), "refl_iterations": m.Float(taken)}
         else:
             vReflection = cubemap_reflection(m, P, R) * C.reflectColor
-        fetches = 2
         bad = nonfinite_any(R, vLight)
     vReflection = specular_highlight(m, P, vReflection, vBumpTex, vEye, vLight, C, opts.specular)
     gl_FragColor = fresnel_combine(m, P, vReflection, f.vRefraction, vEye, vBumpTex)
-    return gl_FragColor, fetches, bad
+    return gl_FragColor, fetches, bad, decisions
 
 
 def _shade(m, P, C, diagnose: bool = False, opts: Options = Options(), Mi=None):
@@ -472,8 +453,9 @@ def _shade(m, P, C, diagnose: bool = False, opts: Options = Options(), Mi=None):
     iterations, crossed, denominator = f.iterations, f.crossed, f.denominator
     fetches = opts.normal_layers + 1 + iterations + 1  # iterations include the refinement steps
     bad = nonfinite_any(f.vEye, f.vBumpTex, f.vBumpTexMore, f.R, f.current_position)
+    decisions = {}
     if opts.reflection:
-        gl_FragColor, more, worse = reflection_block(m, P, C, opts, Mi, f)
+        gl_FragColor, more, worse, decisions = reflection_block(m, P, C, opts, Mi, f)
         fetches = fetches + more
         bad |= worse
     else:
@@ -484,7 +466,10 @@ def _shade(m, P, C, diagnose: bool = False, opts: Options = Options(), Mi=None):
         "crossed": dr.select(crossed, 1.0, 0.0),
         "denominator": dr.abs(denominator),
         "nonfinite": dr.select(bad, 1.0, 0.0),
+        **decisions,
     }
+    if f.refine_path is not None:
+        diagnostics["refine_path"], diagnostics["refine_texel_edge"] = f.refine_path
     if diagnose:
         diagnostics.update(refraction_failure_diagnostics(m, P, C, f))
     return gl_FragColor, diagnostics
@@ -503,11 +488,14 @@ def _frozen_shade(m, P, C, diagnose, opts, Mi):
 
 def _reflection_state(m, inputs, opts: Options):
     """The state of the reflection ``opts`` reads beyond the study's inputs: the mirrored
-    camera's (``ports.planar.Mirror``), the local cube map's (``ports.box.BoxProbe``) or None."""
+    camera's (``ports.planar.Mirror``), the local cube map's (``ports.box.BoxProbe``), the
+    camera's buffers (``ports.ssr.ScreenProbe``) or None."""
     if opts.reflection and opts.reflection_map == "mirror":
         return mirror_state(m, inputs, "water_refraction with PLANAR_REFLECTION")
     if opts.reflection and opts.reflection_map == "box":
         return box_state(m, inputs, "water_refraction with BOX_REFLECTION")
+    if opts.reflection and opts.reflection_map == "ssr":
+        return ssr_state(m, inputs, "water_refraction with SSR_REFLECTION")
     return None
 
 
@@ -530,9 +518,12 @@ def render(
     (``|cpoy - cpy + depth - olddepth|``), ``nonfinite`` (1 where the colour or an intermediate
     vector -- vEye, vBumpTex, vBumpTexMore, R, the interpolated position, and with reflection
     vLight -- was non-finite: GLSL's clamp and texture lookups can turn a NaN into a finite
-    colour). ``loop_ad`` matters only for gradient-enabled constants (see the module doc).
-    ``diagnose=True`` adds the failure diagnostics of :func:`refraction_failure_diagnostics`
-    (extra outputs only: the colour is bit-identical).
+    colour); with ``SSR_REFLECTION`` also ``refl_hit`` and ``refl_iterations`` (the march's
+    decisions, :func:`reflection_block`), with a refinement ``refine_path`` and
+    ``refine_texel_edge`` (its decisions, its lookups' distance to a texel edge:
+    :func:`refine_crossing`). ``loop_ad`` matters only for gradient-enabled constants (see the
+    module doc). ``diagnose=True`` adds the failure diagnostics of
+    :func:`refraction_failure_diagnostics` (extra outputs only: the colour is bit-identical).
     """
     opts = options_of(defines)
     m = backend_types(backend)

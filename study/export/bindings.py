@@ -29,7 +29,8 @@ MEANINGS = {
     "(top-down, R32F; below the water plane where empty); nearest, clamp",
     "reflectionBottom": "linear RGB of that geometry seen from below; bilinear, clamp",
     "sceneColor": "linear RGB of the scene without the water, this camera (screen space)",
-    "sceneDepth": "window-space depth in [0, 1] of that view (the GL depth buffer)",
+    "sceneDepth": "window-space depth in [0, 1] of that view (the GL depth buffer, 1 where "
+    "nothing was drawn)",
     "reflection_sampler": "linear RGB of the scene above the water seen by the mirrored camera",
     "boxReflectionTexture": "local cube map: the scene without the water (walls, sky without the "
     "sun) seen from boxCapturePosition, linear RGB, GL face order, the texel of d holding the "

@@ -229,7 +229,8 @@ def inputs_for_shader(
     exp: Experiment, inputs: ShaderInputs, shader: str, variant: str, cache=None, log=print
 ) -> ShaderInputs:
     """``inputs`` with whatever optional fields the shader ``shader`` reads: a variant's
-    ``Variant.inputs`` (the screen-space buffers; the local cube map, ``box_inputs``), or, for
+    ``Variant.inputs`` (the screen-space buffers, of the baseline, the mirror and the
+    screen-space reflection; the local cube map, ``box_inputs``), or, for
     a user's file (``*.frag``, with ``fit.declare``), the screen buffers when it reads one of
     :data:`SCREEN_INPUTS` (by name or through a binding); else ``inputs`` unchanged."""
 

@@ -172,6 +172,8 @@ def synthetic_inputs_for(name: str, width: int = 64, height: int = 48) -> "Shade
     extra = get_variant(name).inputs
     if "box_cubemap" in extra:
         return synthetic_box_inputs(width, height)
+    if "scene_depth" in extra and "reflection_color" not in extra:  # reflection = ssr
+        return synthetic_ssr_inputs(width, height)
     return (synthetic_baseline_inputs if extra else synthetic_inputs)(width, height)
 
 
@@ -183,3 +185,62 @@ def _cube_directions(size: int) -> np.ndarray:
     faces = [(one, -t, -s), (-one, -t, s), (s, one, t), (s, -one, -t), (s, -t, one), (-s, -t, -one)]
     out = np.stack([np.stack(f, -1) for f in faces])
     return out / np.linalg.norm(out, axis=-1, keepdims=True)
+
+
+def _synthetic_pool_solid(p: np.ndarray) -> np.ndarray:
+    """Inside the dry scene of :func:`synthetic_ssr_inputs`: below the floor, or the deck around
+    the pool (outside x, z in [-2, 2]) up to the walls' top y = 0.6, at the water's level on the
+    camera's side (z > 2: no near wall hides the water)."""
+    outside = (np.abs(p[..., 0]) > 2.0) | (np.abs(p[..., 2]) > 2.0)
+    top = np.where(p[..., 2] > 2.0, 0.0, 0.6)
+    return (p[..., 1] < _synthetic_floor(p[..., 0], p[..., 2])) | (outside & (p[..., 1] < top))
+
+
+def _synthetic_pool_colour(q: np.ndarray) -> np.ndarray:
+    """The dry scene's colour at its surface points ``q``: the floor's checker in the pool, the
+    walls' inner faces striped along the wall and shaded with height, the deck grey-green."""
+    x, y, z = q[..., 0], q[..., 1], q[..., 2]
+    floor = _synthetic_floor_colour(x, z)
+    along = np.where(np.abs(np.abs(x) - 2.0) < np.abs(np.abs(z) - 2.0), z, x)
+    wall = (0.5 + 0.4 * np.sin(3.0 * along))[..., None] * np.array([0.9, 0.5, 0.3])
+    wall = wall * (0.6 + 0.4 * np.clip(y / 0.6, 0.0, 1.0))[..., None]
+    deck = np.broadcast_to(np.array([0.45, 0.5, 0.4]), q.shape)
+    ground = (np.abs(y) < 1e-4) & (z > 2.0)
+    inside = (np.abs(x) <= 2.0 + 1e-6) & (np.abs(z) <= 2.0 + 1e-6)
+    on_floor = y < _synthetic_floor(x, z) + 1e-3
+    return np.where(
+        (inside & on_floor)[..., None],
+        floor,
+        np.where(((y > 0.6 - 1e-4) | ground)[..., None], deck, wall),
+    )
+
+
+def synthetic_ssr_inputs(width: int = 64, height: int = 48, seed: int = 0) -> ShaderInputs:
+    """``synthetic_inputs`` plus the camera's buffers of ``reflection = ssr``: the pool (x, z in
+    [-2, 2]) sunk in a deck 0.6 above the water, its walls' inner faces striped (so a reflected
+    wall shows where SSR finds it), seen without the water by the camera (ray-marched at the
+    pixel centres, bisected to the surface; window depth, 1 where the sky is seen)."""
+    import dataclasses
+
+    base = synthetic_inputs(width, height, seed=seed)
+    vp = base.view_proj.astype(np.float64)
+    o, d = _pixel_rays(vp, width, height)  # o on the near plane, o + d on the far plane
+    lo, hi = np.zeros(o.shape[:2]), np.ones(o.shape[:2])
+    found = np.zeros(o.shape[:2], bool)
+    ts = np.linspace(0.0, 1.0, 4001)
+    for t0, t1 in zip(ts[:-1], ts[1:]):  # the first sample inside, per pixel
+        new = ~found & _synthetic_pool_solid(o + t1 * d)
+        lo, hi, found = np.where(new, t0, lo), np.where(new, t1, hi), found | new
+    for _ in range(40):  # bisection to the surface
+        mid = 0.5 * (lo + hi)
+        inside = _synthetic_pool_solid(o + mid[..., None] * d)
+        lo, hi = np.where(inside, lo, mid), np.where(inside, mid, hi)
+    q = o + hi[..., None] * d
+    clip = np.concatenate([q, np.ones_like(q[..., :1])], -1) @ vp.T
+    depth = np.where(found, 0.5 * clip[..., 2] / clip[..., 3] + 0.5, 1.0)
+    dn = d / np.linalg.norm(d, axis=-1, keepdims=True)
+    sky = np.array([0.5, 0.7, 1.0]) * (0.4 + 0.5 * np.clip(dn[..., 1], 0, 1))[..., None]
+    colour = np.where(found[..., None], _synthetic_pool_colour(q), sky)
+    return dataclasses.replace(
+        base, scene_color=colour.astype(np.float32), scene_depth=depth.astype(np.float32)
+    )

@@ -1,5 +1,7 @@
 #version 330 core
 // core-profile names replacing GLSL 1.20 built-ins (see shaders_port/README.md)
+uniform mat4 uModelViewProjectionMatrix;
+uniform mat4 uModelViewProjectionMatrixInverse;
 uniform mat3 uNormalMatrix;
 uniform mat4 uTextureMatrix0;
 in vec4 vTexCoord0;
@@ -11,7 +13,8 @@ out vec4 fragColor;
 // refractions & reflections in real time" (seed 000, section 2).
 // Compile with NOREFLECTION defined for the refraction-only variant, with PLANAR_REFLECTION
 // for the reflection of seed 004's mirrored camera offset by the wave normal (seed 002), with
-// BOX_REFLECTION for a box-projected (local) cube map of the pool (Lagarde and Zanuttini).
+// BOX_REFLECTION for a box-projected (local) cube map of the pool (Lagarde and Zanuttini), with
+// SSR_REFLECTION for a screen-space reflection over the camera's depth buffer (engines' SSR).
 // Fixes against the documented text are listed in shaders_port/README.md.
 
 // ---- BEGIN TUNABLE CONSTANTS (written by `study export`) ----
@@ -72,6 +75,15 @@ uniform vec3 boxMin;
 uniform vec3 boxMax;
 //where boxReflectionTexture was captured, world units
 uniform vec3 boxCapturePosition;
+#endif
+#ifdef SSR_REFLECTION
+//the scene without the water seen by this camera: colour and window-space depth (1: nothing)
+uniform sampler2D sceneColor;
+uniform sampler2D sceneDepth;
+//depth samples of the screen-space march
+#define SSR_STEPS 4
+//a surface up to this fraction of the view depth in front of the ray's previous sample is hit
+#define SSR_THICKNESS 0.02
 #endif
 #ifdef PLANAR_REFLECTION
 //the scene above the water seen by the mirrored camera (seed 004)
@@ -253,6 +265,48 @@ void main (void)
     vec3 boxHit = varyingVecWorldPosition + min(boxT.x, boxT.z)*R;
     vec3 boxLookup = boxHit.y < boxMax.y ? boxHit - boxCapturePosition : R;
     vec4 vReflection = texture(boxReflectionTexture, normalize(boxLookup)*vec3(1,-1,1) )*reflectColor;
+#elif defined(SSR_REFLECTION)
+    //variant: screen-space reflection (engines' SSR). The ray's homogeneous points are
+    //mix(ssrStart, ssrRay, u), u in [0,1] (1: its point at infinity); it leaves the plane
+    //f = w+x, w-x, w+y, w-y, w+z, w-z >= 0 of the view frustum at u = f0/(f0-min(fR,0))
+    vec4 ssrStart = uModelViewProjectionMatrix * vec4(varyingVecWorldPosition, 1.0);
+    vec4 ssrRay = uModelViewProjectionMatrix * vec4(R, 0.0);
+    vec3 ssrPlus = ssrStart.www + ssrStart.xyz;
+    vec3 ssrMinus = ssrStart.www - ssrStart.xyz;
+    vec3 ssrExit = min(ssrPlus / (ssrPlus - min(ssrRay.www + ssrRay.xyz, 0.0)),
+        ssrMinus / (ssrMinus - min(ssrRay.www - ssrRay.xyz, 0.0)));
+    vec4 ssrEnd = mix(ssrStart, ssrRay, min(min(ssrExit.x, ssrExit.y), ssrExit.z));
+    //window coordinates (s, t, depth) of its start and exit: linear on the screen between them
+    vec3 ssrFrom = 0.5 * ssrStart.xyz / ssrStart.w + 0.5;
+    vec3 ssrTo = 0.5 * ssrEnd.xyz / ssrEnd.w + 0.5;
+    vec3 ssrPrevious = ssrFrom;
+    //view depths (clip w) from window coordinates: 1/(MVP^-1 (2p-1, 1)).w
+    float ssrPreviousW = 1.0 / (uModelViewProjectionMatrixInverse * vec4(2.0*ssrFrom - 1.0, 1.0)).w;
+    vec3 ssrHit = ssrFrom;
+    bool ssrFound = false;
+    //SSR_STEPS equal steps on the screen; a hit: the depth buffer holds a surface (not 1), the
+    //sample is behind it, and it is at most SSR_THICKNESS of the view depth in front of the
+    //previous sample (the ray passed behind it during this step)
+    for (int k=1; k<=SSR_STEPS; k++)
+    {
+        vec3 ssrSample = mix(ssrFrom, ssrTo, float(k) / float(SSR_STEPS));
+        float sceneZ = texture(sceneDepth, ssrSample.xy).r;
+        float sceneW = 1.0 / (uModelViewProjectionMatrixInverse * vec4(2.0*vec3(ssrSample.xy, sceneZ) - 1.0, 1.0)).w;
+        if (sceneZ < 1.0 && sceneZ <= ssrSample.z && sceneW >= ssrPreviousW * (1.0 - SSR_THICKNESS))
+        {
+            //refined without a fetch: where the step's depth reaches the depth found (the
+            //step's start where that depth is nearer than the step)
+            ssrHit = mix(ssrPrevious, ssrSample, clamp(
+                (sceneZ - ssrPrevious.z) / max(ssrSample.z - ssrPrevious.z, 1e-30), 0.0, 1.0));
+            ssrFound = true;
+            break;
+        }
+        ssrPrevious = ssrSample;
+        ssrPreviousW = 1.0 / (uModelViewProjectionMatrixInverse * vec4(2.0*ssrSample - 1.0, 1.0)).w;
+    }
+    //the scene's colour at the hit, else the sky cube map as the original reads it
+    vec4 vReflection = (ssrFound ? vec4(texture(sceneColor, ssrHit.xy).rgb, 1.0)
+        : texture(reflectionTexture, normalize(R)*vec3(1,-1,1) ))*reflectColor;
 #else
     //Fetch from cubemap, modulate with reflectColor
     //Somehow y-component is inverted, so it is rescaled with -1.

@@ -220,7 +220,8 @@ def _camera_note(camera: dict, tied: list[str], shader=None) -> str:
         "(boxReflectionTexture, boxMin, boxMax, boxCapturePosition), the normal map and the "
         "light are in world space too. Tied to the study's camera are screen-space buffers "
         "(sceneColor, sceneDepth, the mirrored camera's reflection_sampler and "
-        "o2v_projection_reflection, read by the baseline shaders) and anything read through "
+        "o2v_projection_reflection, read by the baseline shaders; sceneColor and sceneDepth by "
+        "the screen-space reflection too) and anything read through "
         "gl_FragCoord or screenSize."
     )
     if camera["orbit"]:

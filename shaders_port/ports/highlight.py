@@ -1,0 +1,60 @@
+"""Blocks [8] and [9] of the raycast shaders (``water_refraction``, ``water_reflection``): the
+specular highlight added to the reflection, one of the ``specular`` choices of the shader space
+(Phong on the averaged normal, GGX with Smith masking, the sun's disc seen in the mirror of the
+normal), and the Fresnel combine of reflection and refraction through the LUT.
+
+``vBumpTex``, ``vEye``, ``vLight``: unit Array3f (world space); colours Array4f linear RGBA;
+``C``: the resolved constants (``pipeline.frame.resolve_constants``); ``P``: the prepared
+inputs (``lightcolor``, ``fresnelLookup``).
+"""
+
+from __future__ import annotations
+
+import drjit as dr
+
+from ..pipeline.texture import clamp, gl_pow, radians, smoothstep
+
+
+def specular_highlight(m, P, vReflection, vBumpTex, vEye, vLight, C, lobe: str = "phong"):
+    # ---- [8] Specular highlight ----
+    if lobe == "none":  # NO_SPECULAR
+        return vReflection
+    if lobe == "ggx":  # GGX_SPECULAR
+        vHalf = dr.normalize(vLight + vEye)
+        NdotH = clamp(dr.dot(vBumpTex, vHalf), 0.0, 1.0)
+        NdotL = clamp(dr.dot(vBumpTex, vLight), 0.0, 1.0)
+        NdotE = clamp(dr.dot(vBumpTex, vEye), 0.0, 1.0)
+        alpha2 = C.specular_roughness * C.specular_roughness
+        ggxDenominator = NdotH * NdotH * (alpha2 - 1.0) + 1.0
+        ggxD = alpha2 / (3.14159265 * ggxDenominator * ggxDenominator)
+        smithVis = 1.0 / (
+            (NdotL + dr.sqrt(alpha2 + (1.0 - alpha2) * NdotL * NdotL))
+            * (NdotE + dr.sqrt(alpha2 + (1.0 - alpha2) * NdotE * NdotE))
+        )
+        spec = ggxD * smithVis * NdotL
+        specular = m.Array4f(
+            spec * P.lightcolor[0], spec * P.lightcolor[1], spec * P.lightcolor[2], 1.0
+        )
+        vReflection += specular * C.specular_strength
+        return vReflection
+    rLight = dr.dot(2.0 * vBumpTex, vLight) * vBumpTex - vLight
+    if lobe == "disc":  # SUN_DISC_SPECULAR
+        outerCos = dr.cos(radians(C.sun_disc_radius * (1.0 + C.sun_disc_softness)))
+        innerCos = dr.cos(radians(C.sun_disc_radius * (1.0 - C.sun_disc_softness)))
+        spec = smoothstep(outerCos, innerCos, dr.dot(rLight, vEye))
+        strength = C.sun_disc_radiance
+    else:
+        spec = gl_pow(clamp(dr.dot(rLight, vEye), 0.0, 1.0), C.specular_exponent)
+        strength = C.specular_strength
+    specular = m.Array4f(
+        spec * P.lightcolor[0], spec * P.lightcolor[1], spec * P.lightcolor[2], 1.0
+    )
+    vReflection += specular * strength
+    return vReflection
+
+
+def fresnel_combine(m, P, vReflection, vRefraction, vEye, vBumpTex):
+    # ---- [9] Fresnel combine ----
+    NdotV = clamp(dr.dot(vEye, vBumpTex), 0.0, 1.0)
+    FresnelCoeffs = P.fresnelLookup.sample(m, NdotV, m.Float(0.5))
+    return vReflection * FresnelCoeffs[1] + vRefraction * FresnelCoeffs[0]
