@@ -68,8 +68,9 @@ def error_budget_page(folder: Path = FOLDER) -> str:
         "cached reference.*",
         "",
     ]
-    for p in fits:
-        lines += _fit_section(json.loads(p.read_text()))
+    results = [json.loads(p.read_text()) for p in fits]
+    for d in sorted(results, key=lambda d: -d["oracles"][0]["flip"]):  # the worst fit first
+        lines += _fit_section(d)
     if (folder / "images_default.exr").is_file():
         lines += [
             "![the reference beside the fitted shaders and their FLIP maps](images_default.png)",
@@ -81,7 +82,8 @@ def error_budget_page(folder: Path = FOLDER) -> str:
 def write_panels_from_runs(runs: list[Path], folder: Path = FOLDER) -> Path:
     """``images_default.exr`` / ``.json``: the first run's reference, then each run's fitted
     image titled by its shader, scored on the calibration's water pixels (the mask of
-    ``ShaderModel.from_experiment`` on the default experiment, as the bench scores)."""
+    ``ShaderModel.from_experiment`` on the default experiment for the first run's shader, as
+    the bench scores; the raycast shaders share it)."""
     sys.path.insert(0, str(REPO))
     from study import init_backend, load_experiment
     from study._io import read_exr
@@ -99,10 +101,10 @@ def write_panels_from_runs(runs: list[Path], folder: Path = FOLDER) -> Path:
         d = json.loads((run / "constants.json").read_text())
         if d.get("experiment") != exp["name"] or tuple(d.get("resolution", (w, h))) != (w, h):
             raise SystemExit(f"{run}: not a calibration of {exp['name']} at {w}x{h}")
-        m = ShaderModel.from_experiment(
-            exp, inputs, ref.image, shader=d["shader"], resolution=(w, h)
-        )
-        mask = m.mask if mask is None else mask & m.mask
+        if mask is None:  # the water quad's pixels: the same for every shader drawn on it
+            mask = ShaderModel.from_experiment(
+                exp, inputs, ref.image, shader=d["shader"], resolution=(w, h)
+            ).mask
         images[d["shader"]] = read_exr(run / "fitted.exr")[0]
     for title, img in list(images.items())[1:]:
         errs[title] = errors(ref.image, img, mask)
