@@ -117,7 +117,8 @@ def test_adaptive_tradeoff_tiny(tmp_path):
     assert main(args + [a for s in small for a in ("--set", s)]) == 0
     screen = read_table(tmp_path / "screen.parquet")
     assert {r["job.variant"] for r in screen} >= {"water_refraction", "water_baseline_flat"}
-    assert all(r["status"] == "ok" and len(r["flip_blocks"]) == 16 for r in screen)
+    # screened at fit.resolution (32x32) / tradeoff.screen_factor (1): 8 x 8 blocks of 4 x 4
+    assert all(r["status"] == "ok" and len(r["flip_blocks"]) == 64 for r in screen)
     summary = json.loads((tmp_path / "summary.json").read_text())
     assert summary["search"]["mode"] == "adaptive" and summary["budget"] == {"fetches_mean": 12.0}
     rec = summary["scenes"]["default"]["recommended"]
@@ -141,3 +142,21 @@ def test_the_cut_keeps_the_points_closest_to_the_front():
     kept = search.closest_to_front([a, b, c, d], 2)
     assert [p["variant"] for p in kept] == ["a", "b"]  # in their order, the front's two
     assert search.closest_to_front([a, b], 5) == [a, b]
+
+
+def test_the_schedule_cut_leaves_no_place_to_a_shader_without_a_raymarch():
+    flat = [0.0] * 64
+
+    def pt(name, fetches, flip, kind):
+        return {**_pt(name, fetches, flip, [flip + v for v in flat]), "kind": kind}
+
+    # the cheap screen-space shaders are on the front with nothing cheaper (infinite margin),
+    # the raymarch shaders are what rung 2 has schedules for
+    cheap = [pt(f"baseline{k}", 3 + k, 0.30 - 0.01 * k, "fixed") for k in range(3)]
+    box = pt("box", 17.128, 0.1022, "scale")
+    disc = pt("disc", 17.131, 0.0948, "scale")  # a hair dearer, much better
+    worse = pt("worse", 22.0, 0.2, "scale")  # dominated
+    points = cheap + [box, disc, worse]
+    # over every point the cheapest screen-space shader (nothing cheaper) takes one of the two
+    assert "baseline0" in [p["variant"] for p in search.closest_to_front(points, 2)]
+    assert [p["variant"] for p in search.to_schedule(points, 2.0, 2)] == ["box", "disc"]

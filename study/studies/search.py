@@ -11,7 +11,7 @@ screen resolution (``fit.resolution`` divided by ``tradeoff.screen_factor``) exc
    survivors' first (:func:`best_first`); stop when a round adds none or
    ``tradeoff.max_shaders`` have been screened (the cut drops the worst survivors'
    neighbours). A shader-LOD system's greedy walk along the front, with a noise margin; the
-   ``tradeoff.max_scheduled`` survivors closest to the front go on.
+   ``tradeoff.max_scheduled`` survivors with a raymarch closest to the front go on.
 2. **Schedules**: every step schedule of ``tradeoff_jobs.schedules`` for each surviving
    configuration with a raymarch, warm-started from its screen fit; the dominated
    (configuration, schedule) points are dropped the same way, and of the rest the
@@ -100,6 +100,14 @@ def closest_to_front(points: list, k: int, cost: str = "fetches_mean") -> list:
         return list(points)
     ranked = sorted(points, key=lambda x: -margin(x, points, cost))[:k]
     return [p for p in points if any(p is r for r in ranked)]
+
+
+def to_schedule(points: list, z: float, k: int, cost: str = "fetches_mean") -> list:
+    """The surviving points with a raymarch (kind not ``fixed``) closest to the front, at most
+    ``k``: the shaders rung 2 screens the schedules of. A screen-space shader has no schedule,
+    so it takes no place (rung 2 keeps it among its survivors all the same)."""
+    marching = [r for r in survivors(points, z, cost) if r["kind"] != "fixed"]
+    return closest_to_front(marching, k, cost)
 
 
 def first_round(fix: dict | None) -> list[dict]:
@@ -264,7 +272,7 @@ class Search:
             if self.variants:
                 break
             todo = next_round([r["choices"] for r in front], seen, self.fix)
-        return closest_to_front(survivors(self.ok(i), z), exp.tradeoff.max_scheduled)
+        return to_schedule(self.ok(i), z, exp.tradeoff.max_scheduled)
 
     def alone(self, i: int) -> list[dict]:
         """The screen points of each source's technique alone (``space.ALONE``) at its
