@@ -84,7 +84,7 @@ def test_auto_follows_the_device_of_the_run(monkeypatch):
     (``Experiment.on_backend``, and the variant ``init_backend`` set when it already ran)."""
     monkeypatch.setattr(experiment_module, "active_variant", lambda: None)
     exp = _load('resolution="1080p"', 'fit.resolution="auto"')
-    assert exp.fit.resolution == [160, 90] and exp.auto == {"fit.resolution": "auto"}
+    assert exp.fit.resolution == [160, 90] and exp.auto["fit.resolution"] == "auto"
     gpu = exp.on_backend("cuda_ad_rgb")
     assert gpu.fit.resolution == [1920, 1080] and gpu.resolution == [1920, 1080]
     assert gpu.on_backend("llvm_ad_rgb").fit.resolution == [160, 90]
