@@ -149,3 +149,14 @@ def test_saturated_log_logit_stays_inside_its_range():
     for u in (40.0, 400.0, 4000.0):
         assert float(p.from_u(u)) <= 1e5
     assert float(p.from_u(-4000.0)) >= 1.0
+
+
+@pytest.mark.parametrize("kind", ["log_logit", "clip"])
+def test_a_float32_step_maps_onto_the_bound_not_below_it(kind):
+    """JAX hands the solver's ``u`` back in float32: clipped in float32, the lower bound 1e-4
+    came back as 9.9999997e-05, which the next fit refused as a start outside its range
+    (measured: absorption_r in a tradeoff study's warm start)."""
+    p = Param("absorption_r", 0.13, 1e-4, 100.0, transform=kind)
+    for u in (np.float32(-4000.0), np.float32(-1e9)):
+        x = p.from_u(u)
+        assert float(x) == 1e-4 and np.asarray(x).dtype == np.float64, (x, np.asarray(x).dtype)

@@ -141,6 +141,8 @@ class Param:
     def from_u(self, u, xp=np):
         """Unconstrained ``u`` -> physical value; ``xp`` = ``numpy`` or ``drjit``
         (differentiable)."""
+        if xp is np:  # a float32 u (JAX's default) would clip to the bounds rounded to float32
+            u = np.asarray(u, np.float64)
         return self._ginv(float(self._g(np.float64(self.default))) + self._s * u, xp)
 
     def at_bound(self, u) -> str | None:
