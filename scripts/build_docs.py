@@ -2,7 +2,8 @@
 
 Every table of results in ``docs/`` is written by this script, never by hand:
 
-* ``docs/results/<study>/report.md`` of the tradeoff-family studies (``tradeoff``, ``variants``,
+* ``docs/results/<study>/report.md`` of the tradeoff-family studies (``tradeoff``, ``scenes``:
+  the tradeoff on deep_steps, grazing and calm, ``variants``,
   ``variants/shipped``, ``baselines``, ``animation/tradeoff``: the tradeoff in motion,
   ``user-shader/tradeoff``: a user's own shader charted): from the study's ``summary.json``
   where it is committed, else from its ``tradeoff.parquet`` (fronts, recommendations and
@@ -58,6 +59,7 @@ DOCS = REPO / "docs"
 RESULTS = DOCS / "results"
 TRADEOFF_FAMILY = (
     "tradeoff",
+    "scenes",
     "variants",
     "variants/shipped",
     "baselines",
