@@ -79,18 +79,12 @@ def glint_images(variant, inputs, constants, sun_dir, radius_deg, radiance) -> d
     the sun's disc reflected off the shader's scaled normal (``vBumpTexMore``) at each pixel
     centre (0 or the disc's radiance), and ``F``, the Fresnel reflectance there."""
     import drjit as dr
+    from bench_grazing import port_blocks
 
-    from shaders_port.pipeline.frame import resolve_constants
-    from shaders_port.pipeline.raster import prepare
-    from shaders_port.pipeline.texture import backend_types, clamp
+    from shaders_port.pipeline.texture import clamp
     from shaders_port.ports import water_refraction as wr
 
-    opts = wr.options_of(variant.defines)
-    inputs = variant.prepare_inputs(inputs)
-    m = backend_types("llvm")
-    P = prepare(inputs, m)
-    C = resolve_constants(m, constants, "replay")
-    f = wr.refraction_blocks(m, P, C, opts)
+    m, P, C, f = port_blocks(variant, inputs, constants)
     R = dr.normalize(wr.reflect(m, -f.vEye, f.vBumpTexMore))
     cos_to_sun = R.x * sun_dir[0] + R.y * sun_dir[1] + R.z * sun_dir[2]
     inside = dr.select(cos_to_sun >= np.cos(np.radians(radius_deg)), 1.0, 0.0)

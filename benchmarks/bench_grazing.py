@@ -47,27 +47,37 @@ sys.path.insert(0, str(REPO))
 BANDS_FAR = 10  # rows per band in the first table inside --rows
 
 
-def shader_terms(variant, inputs, constants) -> dict:
-    """(H, W, 3) float32 images of the Fresnel-combine terms of a ``water_refraction`` variant
-    (see the module doc) and the port's colour; 0 off the water."""
-    import drjit as dr
-
-    from shaders_port.ports import water_refraction as wr
+def port_blocks(variant, inputs, constants):
+    """``(m, P, C, f)``: the Dr.Jit types, prepared inputs, resolved constants and blocks
+    [1]-[6] (``water_refraction.refraction_blocks``) of a ``water_refraction`` variant with
+    reflection, for splitting its colour into terms."""
     from shaders_port.pipeline.frame import resolve_constants
     from shaders_port.pipeline.raster import prepare
-    from shaders_port.pipeline.texture import backend_types, clamp
+    from shaders_port.pipeline.texture import backend_types
+    from shaders_port.ports import water_refraction as wr
 
     opts = wr.options_of(variant.defines) if variant.shader == "water_refraction" else None
     if opts is None or not opts.reflection:
         raise ValueError(
             f"{variant.name}: the term split covers the water_refraction shader with reflection"
         )
-    inputs = variant.prepare_inputs(inputs)
     m = backend_types("llvm")
-    P = prepare(inputs, m)
+    P = prepare(variant.prepare_inputs(inputs), m)
     C = resolve_constants(m, constants, "replay")
+    return m, P, C, wr.refraction_blocks(m, P, C, opts)
+
+
+def shader_terms(variant, inputs, constants) -> dict:
+    """(H, W, 3) float32 images of the Fresnel-combine terms of a ``water_refraction`` variant
+    (see the module doc) and the port's colour; 0 off the water."""
+    import drjit as dr
+
+    from shaders_port.ports import water_refraction as wr
+    from shaders_port.pipeline.texture import clamp
+
     # the blocks of water_refraction._shade, the combine's two products kept apart
-    f = wr.refraction_blocks(m, P, C, opts)
+    m, P, C, f = port_blocks(variant, inputs, constants)
+    opts = wr.options_of(variant.defines)
     R = dr.normalize(wr.reflect(m, -f.vEye, f.vBumpTexMore))
     R.y = dr.maximum(R.y, 0.001)
     sky = wr.cubemap_reflection(m, P, R) * C.reflectColor

@@ -204,6 +204,16 @@ class ShaderInputs:
         if self.width < 1 or self.height < 1:
             raise ValueError("ShaderInputs: width and height must be positive")
 
+    def require(self, fields, shader: str, builder: str) -> None:
+        """Raise ValueError naming the optional ``fields`` this frame lacks (None), the
+        ``shader`` that reads them and the ``builder`` function that makes them."""
+        missing = [f for f in fields if getattr(self, f) is None]
+        if missing:
+            raise ValueError(
+                f"{shader} needs ShaderInputs.{', '.join(missing)}; build the inputs "
+                f"with {builder} (or set them)"
+            )
+
     def with_resolution(self, width: int, height: int) -> "ShaderInputs":
         """Same scene at another output resolution (the projection is unchanged)."""
         return dataclasses.replace(self, width=width, height=height)

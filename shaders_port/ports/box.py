@@ -44,12 +44,7 @@ def _vec3(v) -> tuple:
 
 def box_state(m, inputs: ShaderInputs, shader: str) -> BoxProbe:
     """Upload the local cube map and its box; a ValueError names what ``inputs`` lacks."""
-    missing = [f for f in BOX_INPUTS if getattr(inputs, f) is None]
-    if missing:
-        raise ValueError(
-            f"{shader} needs ShaderInputs.{', '.join(missing)}; build the inputs "
-            "with study.scene.box_inputs.with_box_inputs (or set them)"
-        )
+    inputs.require(BOX_INPUTS, shader, "study.scene.box_inputs.with_box_inputs")
     return BoxProbe(
         boxReflectionTexture=CubeMap.from_numpy(m, inputs.box_cubemap),
         boxMin=_vec3(inputs.box_min),

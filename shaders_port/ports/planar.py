@@ -38,14 +38,11 @@ def mat_tuple(M) -> tuple:
 
 def mirror_state(m, inputs: ShaderInputs, shader: str) -> Mirror:
     """Upload the mirrored camera's buffer; a ValueError names what ``inputs`` lacks."""
-    missing = [
-        f for f in ("reflection_color", "reflection_view_proj") if getattr(inputs, f) is None
-    ]
-    if missing:
-        raise ValueError(
-            f"{shader} needs ShaderInputs.{', '.join(missing)}; build the inputs "
-            "with study.scene.baseline_inputs.with_baseline_inputs (or set them)"
-        )
+    inputs.require(
+        ("reflection_color", "reflection_view_proj"),
+        shader,
+        "study.scene.baseline_inputs.with_baseline_inputs",
+    )
     return Mirror(
         reflection_sampler=Texture2D.from_numpy(m, inputs.reflection_color, LINEAR, CLAMP),
         o2v_projection_reflection=mat_tuple(inputs.reflection_view_proj),

@@ -66,12 +66,7 @@ class ScreenProbe:
 
 def ssr_state(m, inputs: ShaderInputs, shader: str) -> ScreenProbe:
     """Upload the camera's buffers; a ValueError names what ``inputs`` lacks."""
-    missing = [f for f in SSR_INPUTS if getattr(inputs, f) is None]
-    if missing:
-        raise ValueError(
-            f"{shader} needs ShaderInputs.{', '.join(missing)}; build the inputs "
-            "with study.scene.baseline_inputs.with_baseline_inputs (or set them)"
-        )
+    inputs.require(SSR_INPUTS, shader, "study.scene.baseline_inputs.with_baseline_inputs")
     return ScreenProbe(
         sceneColor=Texture2D.from_numpy(m, inputs.scene_color, LINEAR, CLAMP),
         sceneDepth=Texture2D.from_numpy(m, inputs.scene_depth, NEAREST, CLAMP),

@@ -120,12 +120,7 @@ def screen_state(m, P, inputs: ShaderInputs, o: Options = Options()) -> Screen:
     window coordinate."""
     need = ("scene_color", "scene_depth") if o.refraction else ()
     need += () if o.cube else ("reflection_color", "reflection_view_proj")
-    missing = [f for f in need if getattr(inputs, f) is None]
-    if missing:
-        raise ValueError(
-            f"water_baseline needs ShaderInputs.{', '.join(missing)}; build the inputs "
-            "with study.scene.baseline_inputs.with_baseline_inputs (or set them)"
-        )
+    inputs.require(need, "water_baseline", "study.scene.baseline_inputs.with_baseline_inputs")
     r = P.raster
     col = (r.index % r.width).astype(np.float32)
     row = (r.index // r.width).astype(np.float32)
