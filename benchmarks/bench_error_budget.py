@@ -145,29 +145,18 @@ def main(argv=None) -> None:
     ap.add_argument("--set", action="append", default=[], metavar="KEY=VALUE")
     a = ap.parse_args(argv)
 
-    from bench_grazing import reference_terms, shader_terms
+    from bench_grazing import load_fit, reference_terms
 
-    from shaders_port.inputs import Constants
-    from shaders_port.variants import get_variant
     from study._backend import init_backend
     from study._metrics import flip_map, rmse
     from study.commands.steps import load_scene_data
     from study.config.experiment import load_experiment
-    from study.fit.model import ShaderModel
     from study.scene.geometry import sun_direction
 
     exp = load_experiment(a.experiment, a.set)
     ref, inputs, _ = load_scene_data(exp, init_backend(exp["variant"]))
     w, h = exp["resolution"]
-    d = json.loads((Path(a.fit) / "constants.json").read_text())
-    if d.get("experiment") != exp["name"]:
-        raise SystemExit(f"{a.fit} is a fit of {d.get('experiment')!r}, not of {exp['name']!r}")
-    v = get_variant(d["shader"])
-    c = Constants.from_dict(d["constants"])
-    mask = ShaderModel.from_experiment(
-        exp, inputs, ref.image, shader=v.name, resolution=(w, h)
-    ).mask
-    terms = shader_terms(v, inputs, c)
+    v, c, mask, terms = load_fit(a.fit, exp, inputs, ref.image)
 
     def score(img):
         return float(flip_map(ref.image, img)[mask].mean()), rmse(ref.image, img, mask)

@@ -105,6 +105,23 @@ def shader_terms(variant, inputs, constants) -> dict:
     return out
 
 
+def load_fit(folder, exp, inputs, reference):
+    """A ``study calibrate`` output folder of ``exp``: ``(variant, constants, the scored water
+    mask (H, W) bool, shader_terms)``; exits naming the folder when it fits another experiment."""
+    from shaders_port.inputs import Constants
+    from shaders_port.variants import get_variant
+    from study.fit.model import ShaderModel
+
+    d = json.loads((Path(folder) / "constants.json").read_text())
+    if d.get("experiment") != exp["name"]:
+        raise SystemExit(f"{folder} is a fit of {d.get('experiment')!r}, not of {exp['name']!r}")
+    v = get_variant(d["shader"])
+    c = Constants.from_dict(d["constants"])
+    w, h = exp["resolution"]
+    mask = ShaderModel.from_experiment(exp, inputs, reference, shader=v.name, resolution=(w, h))
+    return v, c, mask.mask, shader_terms(v, inputs, c)
+
+
 def reference_terms(exp_path, overrides, rows, spp: int) -> dict:
     """(r1 - r0, W, 3) float32 renders of the reference's rows ``[r0, r1)`` at ``spp``: 'full',
     'reflected', 'reflected, no sun', 'transmitted', 'both' (see the module doc)."""
@@ -151,12 +168,9 @@ def main(argv=None) -> None:
     ap.add_argument("--set", action="append", default=[], metavar="KEY=VALUE")
     a = ap.parse_args(argv)
 
-    from shaders_port.inputs import Constants
-    from shaders_port.variants import get_variant
     from study._backend import init_backend
     from study.commands.steps import load_scene_data
     from study._metrics import flip_map
-    from study.fit.model import ShaderModel
     from study.config.experiment import load_experiment
 
     exp = load_experiment(a.experiment, a.set)
@@ -168,17 +182,7 @@ def main(argv=None) -> None:
         raise SystemExit(f"--rows {r0} {r1}: need 0 <= first < end <= {h} (the image's rows)")
     fits = {}
     for folder in a.fits:
-        d = json.loads((Path(folder) / "constants.json").read_text())
-        if d.get("experiment") != exp["name"]:
-            raise SystemExit(
-                f"{folder} is a fit of {d.get('experiment')!r}, not of {exp['name']!r}"
-            )
-        v = get_variant(d["shader"])
-        c = Constants.from_dict(d["constants"])
-        mask = ShaderModel.from_experiment(
-            exp, inputs, ref.image, shader=v.name, resolution=(w, h)
-        ).mask
-        terms = shader_terms(v, inputs, c)
+        v, c, mask, terms = load_fit(folder, exp, inputs, ref.image)
         fits[f"{v.name} ({Path(folder).name})"] = (terms, flip_map(ref.image, terms["port"]), mask)
     mask = np.logical_and.reduce([f[2] for f in fits.values()])  # pixels scored for every fit
 
