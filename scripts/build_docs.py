@@ -3,7 +3,8 @@
 Every table of results in ``docs/`` is written by this script, never by hand:
 
 * ``docs/results/<study>/report.md`` of the tradeoff-family studies (``tradeoff``, ``scenes``:
-  the tradeoff on deep_steps, grazing and calm, ``variants``,
+  the tradeoff on deep_steps, grazing and calm, ``views/tradeoff``: over four views of the
+  default pool, ``variants``,
   ``variants/shipped``, ``baselines``, ``animation/tradeoff``: the tradeoff in motion,
   ``user-shader/tradeoff``: a user's own shader charted): from the study's ``summary.json``
   where it is committed, else from its ``tradeoff.parquet`` (fronts, recommendations and
@@ -60,6 +61,7 @@ RESULTS = DOCS / "results"
 TRADEOFF_FAMILY = (
     "tradeoff",
     "scenes",
+    "views/tradeoff",
     "variants",
     "variants/shipped",
     "baselines",
