@@ -73,7 +73,8 @@ def error_budget_page(folder: Path = FOLDER) -> str:
         lines += _fit_section(d)
     if (folder / "images_default.exr").is_file():
         lines += [
-            "![the reference beside the fitted shaders and their absolute errors](images_default.png)",
+            "![the reference beside the fitted shaders and their absolute errors]"
+            "(images_default.png)",
             "",
         ]
     return "\n".join(lines)
