@@ -160,3 +160,27 @@ def test_a_float32_step_maps_onto_the_bound_not_below_it(kind):
     for u in (np.float32(-4000.0), np.float32(-1e9)):
         x = p.from_u(u)
         assert float(x) == 1e-4 and np.asarray(x).dtype == np.float64, (x, np.asarray(x).dtype)
+
+
+def test_a_jacobian_pass_on_a_float32_bound_renders():
+    """A fitted constant on its lower bound reaches the Jacobian pass as a size-1 Dr.Jit Float,
+    1e-4 rounded to float32 (9.9999997e-05): it is in range, and it was refused (measured:
+    ``study calibrate experiments/deep_steps.toml`` of ``water_refraction_beer_1layer``)."""
+    import drjit as dr
+
+    from shaders_port.pipeline.texture import backend_types
+    from shaders_port.variants import get_variant
+
+    m = backend_types("llvm")
+    on_bound = m.Float(np.float32(1e-4))
+    assert float(on_bound[0]) < 1e-4
+    inputs = synthetic_inputs(width=24, height=18)
+    v = get_variant("water_refraction_beer")
+    c = Constants().replace(absorption_r=on_bound)
+    out = v.render(inputs, c).numpy()
+    ref = v.render(inputs, Constants().replace(absorption_r=1e-4)).numpy()
+    assert np.array_equal(out["color"], ref["color"])
+    outside = Constants().replace(absorption_r=m.Float(np.float32(0.9e-4)))
+    with pytest.raises(ValueError, match="absorption_r"):
+        v.render(inputs, outside)
+    assert dr.width(on_bound) == 1

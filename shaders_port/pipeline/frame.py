@@ -237,6 +237,8 @@ def resolve_constants(m, constants: Constants, loop_ad: str = "replay") -> _Reso
                 )
             v = float(np.asarray(dr.detach(x).numpy()).ravel()[0])
             lo, hi = CONSTANT_SPECS[name][3]
+            # a float32 value on its bound is the bound rounded to float32 (1e-4 -> 9.9999997e-05)
+            lo, hi = float(np.float32(lo)), float(np.float32(hi))
             if not (np.isfinite(v) and lo <= v <= hi):
                 raise ValueError(f"constant {name} = {v!r} is not finite or outside [{lo}, {hi}]")
             diff = diff or dr.grad_enabled(x)
