@@ -1,104 +1,152 @@
-"""``study calibrate``: one command for every calibration. One experiment is a still scene or,
-with ``animation.frames`` > 1, every frame of moving water (``study.commands.animated``);
-several experiments are fitted jointly (``study.commands.joint``); ``fit.shader`` names a
-shader of the study's space or a user's GLSL file, fitted alike (``study.fit.build``)."""
+"""``study calibrate``: one command for every calibration, through the one pipeline of
+``study.calibration``: the frames (a still experiment, its views, an animation's frames, or
+several experiments), the fit over them, the start and fitted constants scored at full
+resolution, the export with its GL check, the figures, ``constants.json`` (a
+``CalibrationResult``), ``report.md`` and the viewer."""
 
 from __future__ import annotations
 
 import time
 
-from .._backend import drjit_backend
+from .._io import write_exr, write_json
 from .._progress import log as _log
-from ..fit.build import build_model
-from ..fit.calibrate import calibrate_model, scene_frozen, timed
-from ..fit.decorrelated import half_models, texture_half_models
-from ..fit.solvers import SOLVERS
-from ..scene.frames import is_animated
-from ..scene.views import has_views
-from .animated import run_calibrate_animated
-from .joint import run_calibrate_joint
-from .steps import (
-    calibration_figures,
-    calibration_result,
-    evaluate_calibration,
-    export_calibration,
-    load_scene_data,
-    prepare,
-    write_result,
-)
+from ..calibration.animation import animation_record, animation_step, write_offsets
+from ..calibration.export import fit_status, write_export
+from ..calibration.fitting import FitOptions, fit_frames, frame_models
+from ..calibration.frames import load_frames, output_folder
+from ..calibration.result import build_result
+from ..calibration.scoring import Scorer
+from ..calibration.shader import Shader
+from ..config.errors import ExperimentError
+from ..fit.calibrate import timed
+from ..fit.model import constants_json
+from ..report.animation import animation_figures, write_animation_report
+from ..report.calibration import comparison_figure, diagnostics_figure, loss_figure, write_report
+from ..report.generalise import write_joint_report
 from .viewer import write_viewer
 
 
 def run_calibrate(experiment, out, overrides=None, variant=None, solver=None, cache=None) -> dict:
     """``study calibrate``: reference (cached), fit, export, GL check, figures, report.md and
-    constants.json (a ``CalibrationResult``) in ``out``, for a shader of the study's space or a
-    user's GLSL file alike (``study.fit.build.build_model``). ``experiment``: one experiment file,
-    or a list of them: several are fitted jointly (``study.commands.joint``); an animated one
-    (``animation.frames`` > 1) on all its frames (``study.commands.animated``). Returns the JSON
-    object written."""
-    if isinstance(experiment, (list, tuple)):
-        if len(experiment) > 1:
-            return run_calibrate_joint(experiment, out, overrides, variant, solver, cache)
-        (experiment,) = experiment
-
-    if solver is not None and solver not in SOLVERS:
-        raise ValueError(f"unknown solver {solver!r}; choose one of {', '.join(SOLVERS)}")
+    constants.json in ``out``, for a shader of the study's space or a user's GLSL file alike.
+    ``experiment``: one experiment file, or a list (fitted jointly: one constants block for all
+    of them); an experiment with views is fitted on all its views, an animated one on all its
+    frames. Returns the JSON object written."""
     t_start = time.perf_counter()
-    exp, variant, out = prepare(experiment, out, overrides, variant, frames=True)
-    setup_s = time.perf_counter() - t_start
-    solver = solver or exp.fit.solver
-
-    if has_views(exp):  # one constants block over the views: the joint fit's path
-        return run_calibrate_joint([experiment], out, overrides, variant, solver, cache)
-    if is_animated(exp):
-        return run_calibrate_animated(exp, variant, out, solver, cache, setup_s)
-    ref, inputs, timings = load_scene_data(exp, variant, cache)
-    timings = {"setup_s": setup_s, **timings}
-    model, cal = fit_still(exp, variant, ref, inputs, solver, timings)
-    backend = model.backend
-    with timed(timings, "evaluate_s"):
-        ev = evaluate_calibration(exp, inputs, ref, model, cal, backend)
-    (gl,), engine_targets, extra = export_calibration(exp, model, [inputs], cal, out, timings)
-    with timed(timings, "figures_s"):
-        figs = calibration_figures(out, exp, model, ref, ev, cal, solver)
-    timings["total_s"] = time.perf_counter() - t_start  # up to the report (written last)
-    result = calibration_result(exp, variant, model, ref, cal, ev, solver, timings, gl)
-    result.engine_targets = engine_targets
-    result.textures = extra.pop("textures")
-    result.extra.update(extra)
-    summary = write_result(out, result, figs, ev)
-    write_viewer(out, exp, inputs)
-    return summary
+    frames = load_frames(experiment, overrides, variant, cache)
+    return calibrate_frames(frames, out, solver, t_start)[0]
 
 
-def fit_still(exp, variant: str, ref, inputs, solver: str, timings: dict):
-    """The fit of a still scene, as ``study calibrate`` runs it: the model of ``fit.shader`` at
-    ``fit.resolution`` on the backend of ``variant`` (timed as ``model_s``), its decorrelated
-    halves or basin check, then :func:`calibrate_model` (``fit_s``). ``ref``: the scene's
-    ``Reference``; ``inputs``: its ``ShaderInputs`` at ``resolution``. Returns (model, the
-    ``Calibration``)."""
-    backend = drjit_backend(variant)
-    with timed(timings, "model_s"):
-        model = build_model(exp, inputs, ref.image, backend=backend, stderr_full=ref.stderr)
-        start = model.start_constants(exp)
-        halves = half_models(exp, inputs, ref.image, backend=backend)
-        check = halves or texture_half_models(exp, inputs, ref.image, backend=backend)
-    names = model.parameter_names(exp.fit.parameters)
-    _log(
-        f"calibrate: fitting {', '.join(names)} of {model.label} with {solver} on "
-        f"{int(model.mask.sum())} water pixels at "
-        f"{exp.fit.resolution[0]}x{exp.fit.resolution[1]}"
-    )
-    with timed(timings, "fit_s"):
-        cal = calibrate_model(
-            model,
-            start,
-            exp.fit.parameters,
-            solver,
-            exp.fit.max_steps,
-            frozen_by_scene=scene_frozen(exp),
-            halves=halves,
-            scan_basins=True,
-            basin_check=check,
+def calibrate_frames(frames, out, solver=None, t_start=None) -> tuple:
+    """The calibration of loaded ``frames`` (``study.calibration.frames.Frames``) into ``out``
+    (see :func:`run_calibrate`). Returns (the JSON object written, the ``Fit``)."""
+    t_start = time.perf_counter() if t_start is None else t_start
+    exp = frames.first.exp
+    options = FitOptions.of(exp, solver)
+    if frames.kind == "animated" and exp.fit.input_noise != "ignore":
+        raise ExperimentError(
+            f'fit.input_noise = "{exp.fit.input_noise}" is not built for an animated '
+            "experiment (its frames are fitted jointly by least squares); use fit.input_noise = "
+            '"ignore", or --set animation.frames=1 to fit its frame 0 that way'
         )
-    return model, cal
+    out = output_folder(out)
+    shader = Shader.of(exp)
+    timings = dict(frames.timings)
+    with timed(timings, "model_s"):
+        models = frame_models(frames, shader, frames.variant, options.resolution)
+        start = models[0].start_constants(exp)
+    with timed(timings, "fit_s"):
+        fit = fit_frames(frames, shader, frames.variant, options, start, models)
+    cal = fit.calibration
+    scorer = Scorer(shader, frames, frames.variant)
+    step = None
+    with timed(timings, "evaluate_s"):
+        if frames.kind == "animated":
+            step = animation_step(frames, shader, fit, options, scorer, start)
+            scores = {"default": step["scores"]["start"], "fitted": step["scores"]["all_frames"]}
+        else:
+            scores = {"default": scorer.all(start), "fitted": scorer.all(cal.fitted)}
+    checked = [f.inputs for f in frames] if frames.kind == "animated" else [frames[0].inputs]
+    export = write_export(shader, exp, checked, cal.fitted, fit_status(cal.parameters), out,
+                          frames.variant, timings)  # fmt: skip
+    with timed(timings, "figures_s"):
+        figs = _figures(out, frames, shader, scores, cal, options.solver, step)
+    timings["total_s"] = time.perf_counter() - t_start  # up to the report (written last)
+    result = build_result(frames, shader, fit, scores, timings, export, options.solver)
+    if step is not None:
+        offsets = write_offsets(out / "shaders" / "animation.json", exp, frames)
+        result.extra["animation"] = animation_record(exp, frames, step, offsets, figs)
+    summary = result.to_json()
+    write_json(out / "constants.json", summary)
+    _report(out, frames.kind, summary, figs)
+    write_viewer(out, exp, frames[0].inputs)
+    _log_done(frames, summary, step, timings, out)
+    return summary, fit
+
+
+def _figures(out, frames, shader, scores: dict, cal, solver: str, step) -> dict:
+    """The figures of each form: one frame's comparison, diagnostics and loss plots and its
+    EXRs; an animation's clip and temporal error; none for several frames (their report is a
+    table). Returns figure name -> file name."""
+    if frames.kind == "animated":
+        record = step["record"]
+        ev = {
+            "images": {"all_frames": [s.image for s in step["scores"]["all_frames"]]},
+            "mask": step["mask"],
+            "scores": record,
+        }
+        figs = animation_figures(
+            out, [f.ref for f in frames], ev, frames.experiment.animation.time_step
+        )
+        write_exr(out / "fitted_frame0.exr", ev["images"]["all_frames"][0])
+        return figs
+    if frames.kind != "still":
+        return {}
+    ref, s0, s1 = frames[0].ref, scores["default"][0], scores["fitted"][0]
+    figs = {"comparison": "comparison.png", "diagnostics": "diagnostics.png", "loss": "loss.png"}
+    comparison_figure(
+        out / figs["comparison"],
+        {"reference": ref.image, "default": s0.image, "fitted": s1.image},
+        {"default": s0.errors, "fitted": s1.errors},
+        s1.mask,
+        title=f"{frames.experiment.name}: {shader.label}",
+    )
+    diagnostics_figure(
+        out / figs["diagnostics"],
+        s1.diagnostics.maps,
+        s1.mask,
+        title="diagnostics, fitted constants",
+    )
+    loss_figure(out / figs["loss"], {solver: cal.losses}, title="loss at each evaluation")
+    write_exr(out / "fitted.exr", s1.image, {"constants": constants_json(cal.fitted)})
+    write_exr(out / "default.exr", s0.image, {"constants": constants_json(cal.start)})
+    write_exr(out / "reference.exr", ref.image, ref.provenance)
+    return figs
+
+
+def _report(out, kind: str, summary: dict, figs: dict) -> None:
+    if kind == "still":
+        write_report(out, summary, figs)
+    elif kind == "animated":
+        write_animation_report(out, summary)
+    else:
+        write_joint_report(out, summary)
+
+
+def _log_done(frames, summary: dict, step, timings: dict, out) -> None:
+    if step is not None:
+        s = summary["animation"]["scores"]
+        _log(
+            f"calibrate: {len(frames)} frames, mean FLIP {s['start']['flip_mean']:.4f} -> "
+            f"{s['all_frames']['flip_mean']:.4f} (frame 0's fit: "
+            f"{s['single_frame']['flip_mean']:.4f}), temporal RMSE "
+            f"{s['all_frames']['temporal']['trmse']:.4f}; {timings['total_s']:.0f} s; wrote {out}"
+        )
+    elif frames.kind == "still":
+        e = summary["error"]
+        _log(
+            f"calibrate: RMSE {e['rmse']['default']:.4f} -> {e['rmse']['fitted']:.4f}, FLIP "
+            f"{e['flip']['default']:.4f} -> {e['flip']['fitted']:.4f}; wrote {out}"
+        )
+    else:
+        _log(f"calibrate (joint, {len(frames)} scenes): wrote {out}")

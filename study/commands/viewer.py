@@ -13,7 +13,7 @@ from ..scene.baseline_inputs import inputs_for_shader
 from ..scene.frames import frame_experiment
 from ..scene.reference import reference_key
 from ..scene.shader_inputs import load_or_build_shader_inputs
-from .steps import prepare
+from ..calibration.frames import prepare
 
 
 def write_viewer(out: Path, exp, inputs) -> Path | None:
