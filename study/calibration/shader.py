@@ -49,6 +49,12 @@ class Shader:
             return cls(name, load_user_shader({**exp.values, "fit.shader": name}))
         return cls(name)
 
+    @classmethod
+    def of_table(cls, exp, name: str) -> "Shader":
+        """The shader a sweep's table names ``name`` (:attr:`table_name`) in experiment ``exp``:
+        ``user:<file>`` is the experiment's own ``fit.shader``."""
+        return cls.of(exp) if str(name).startswith(USER) else cls.of(exp, name)
+
     @property
     def is_user(self) -> bool:
         return self.user is not None
@@ -81,6 +87,35 @@ class Shader:
         experiment's resolution, box-downsampled); ``stderr``: its per-pixel standard error."""
         return build_model(exp, inputs, reference, shader=self.name, backend=backend,
                            resolution=resolution, stderr_full=stderr)  # fmt: skip
+
+    def point_parameters(self, exp) -> tuple | None:
+        """The constants a sweep point refits: a user's file, ``fit.parameters`` (None: every
+        declared one); a shader of the space, those of ``fit.parameters`` it reads (unset: all
+        it reads) without its schedule constants (the sweep sets those), plus the variant's own
+        ``fit_parameters`` (e.g. the baseline's distortions)."""
+        if self.is_user:
+            p = exp.fit.parameters
+            return None if p is None else tuple(p)
+        from shaders_port.variants import get_variant
+
+        from ..config.experiment import fit_parameters
+
+        v = get_variant(self.name)
+        listed = exp.fit.parameters
+        if listed is None:  # an experiment of a user's own shader: the space's fit their own
+            listed = fit_parameters(self.name, None)
+        names = [n for n in v.fit_names(listed) if n not in v.schedule]
+        reads = set(v.reads())
+        return tuple(names + [n for n in v.fit_parameters if n in reads and n not in names])
+
+    def constants(self, values: dict, schedule: dict | None = None):
+        """The constants block of ``values`` (a table's ``fitted.*`` or ``start.*``: a
+        ``Constants.to_dict()``, or a user's scalar name -> value) with ``schedule`` set."""
+        if self.is_user:
+            return self.user.with_scalars(self.user.defaults(), values)
+        from shaders_port import Constants
+
+        return Constants.from_dict(values).replace(**(schedule or {}))
 
     def with_stages(self, parameters: dict) -> dict:
         """``parameters`` (scalar name -> the fit's record) with each one's ``stage``

@@ -15,7 +15,7 @@ from ..calibration.shader import Shader
 from ..fit.joint import leave_one_out, universality
 from ..fit.result import jsonable
 from ..report.generalise import write_generalise_report
-from .calibrate import calibrate_frames
+from ..calibration.run import calibrate
 
 
 def run_generalise(experiments, out, overrides=None, variant=None, solver=None, cache=None) -> dict:
@@ -30,9 +30,9 @@ def run_generalise(experiments, out, overrides=None, variant=None, solver=None, 
             "one out"
         )
     out = Path(out)
-    joint, fit = calibrate_frames(frames, out, solver)
     first = frames.first.exp
     shader, options = Shader.of(first), FitOptions.of(first, solver)
+    joint, fit = calibrate(frames, out, options, shader)
     models, cal = fit.models, fit.calibration
     start = cal.start
     scorer = Scorer(shader, frames, frames.variant)
