@@ -76,7 +76,9 @@ def main() -> None:
         exp = load_experiment(args.experiment, sets + [f"reference.seed={seed}"])
         inputs = load_or_build_shader_inputs(exp, variant, log=quiet)
         model = ShaderModel.from_experiment(exp, inputs, ref.image, backend=backend)
-        halves = half_models(exp, inputs, ref.image, backend=backend)
+        halves = half_models(
+            exp, inputs, lambda h: ShaderModel.from_experiment(exp, h, ref.image, backend=backend)
+        )
         for key, h in (("least squares", None), ("decorrelated", halves)):
             t0 = time.perf_counter()
             with contextlib.redirect_stderr(io.StringIO()):

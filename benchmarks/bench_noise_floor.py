@@ -38,7 +38,7 @@ def main() -> None:
     from study._io import read_exr
     from study._metrics import errors
     from study.calibration.frames import load_scene_data
-    from study.fit.build import build_model
+    from study.calibration.shader import Shader
     from study.scene.reference import load_or_render
 
     variant = init_backend("llvm_ad_rgb")
@@ -47,7 +47,7 @@ def main() -> None:
     titles = json.loads((folder / "images_default.json").read_text())["panels"]
     exp = load_experiment(REPO / "experiments" / "default.toml")
     ref, inputs, _ = load_scene_data(exp, variant)
-    model = build_model(exp, inputs, ref.image, resolution=tuple(exp.resolution))
+    model = Shader.of(exp).model(exp, inputs, ref.image, resolution=tuple(exp.resolution))
     mask = model.mask
     over = [
         f"reference.spp={args.spp}",

@@ -11,7 +11,8 @@ A *site* is a line of ``study/`` holding one of these tests, however written:
 * a comparison with the string ``"user"`` (a kind field), or a result's user-only key read as
   a question: ``"shader_file" in d``, ``d.get("shader_file")``;
 * a test (``if``, a conditional expression, ``while``, a comprehension's ``if``) that reads a
-  name assigned from one of the above in the same function (a flag that carries the answer).
+  name assigned from one of the above in the same function (a flag that carries the answer),
+  or a name or attribute whose name holds ``user`` (``if user:``, ``x if user_file else y``).
 
 Lines of the shader handle (``study/calibration/shader.py``, the one place meant to ask) and the
 predicates' own definitions are reported apart. Usage::
@@ -85,7 +86,7 @@ def _flag_tests(tree) -> set[int]:
                 flags |= {t.id for t in node.targets if isinstance(t, ast.Name)}
         if not flags:
             continue
-        tests = []
+        tests: list = []
         for node in ast.walk(fn):
             if isinstance(node, (ast.If, ast.IfExp, ast.While)):
                 tests.append(node.test)
@@ -95,6 +96,24 @@ def _flag_tests(tree) -> set[int]:
             if any(isinstance(n, ast.Name) and n.id in flags for n in ast.walk(t)):
                 out.add(t.lineno)
     return out
+
+
+def _user_tests(tree) -> set[int]:
+    """Lines of tests that read a name or attribute whose name holds ``user``."""
+    tests = []
+    for node in ast.walk(tree):
+        if isinstance(node, (ast.If, ast.IfExp, ast.While)):
+            tests.append(node.test)
+        elif isinstance(node, ast.comprehension):
+            tests += node.ifs
+    return {
+        t.lineno
+        for t in tests
+        if any(
+            isinstance(n, (ast.Name, ast.Attribute)) and "user" in _name(n).lower()
+            for n in ast.walk(t)
+        )
+    }
 
 
 def sites(files: dict[str, str]) -> dict[str, list[int]]:
@@ -108,7 +127,8 @@ def sites(files: dict[str, str]) -> dict[str, list[int]]:
             for n in ast.walk(tree)
             if isinstance(n, ast.FunctionDef) and n.name in PREDICATES
         }
-        lines = {n.lineno for n in ast.walk(tree) if _is_site(n)} | _flag_tests(tree)
+        lines = {n.lineno for n in ast.walk(tree) if _is_site(n)}
+        lines |= _flag_tests(tree) | _user_tests(tree)
         lines -= defs
         if lines:
             out[path] = sorted(lines)

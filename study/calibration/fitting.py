@@ -127,11 +127,13 @@ def fit_frames(frames, shader, variant: str, options: FitOptions, start=None, mo
 
 def _halves(frame, shader, variant: str, options: FitOptions) -> tuple:
     """(the refinement's models on the texture's halves or None, the basin check's or None)."""
-    kw = {"backend": drjit_backend(variant), "shader": shader.name}
-    if options.resolution is not None:
-        kw["resolution"] = options.resolution
     exp, inputs, ref = frame.exp, frame.inputs, frame.ref.image
-    halves = half_models(exp, inputs, ref, **kw) if options.refine else None
+    backend = drjit_backend(variant)
+
+    def model_of(half):
+        return shader.model(exp, half, ref, backend, options.resolution)
+
+    halves = half_models(exp, inputs, model_of) if options.refine else None
     if not options.basin_scan:
         return halves, None
-    return halves, halves or texture_half_models(exp, inputs, ref, **kw)
+    return halves, halves or texture_half_models(exp, inputs, model_of)

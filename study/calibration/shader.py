@@ -27,7 +27,8 @@ from ..export.gl_check import (
 from ..export.shaders import export_shaders, export_user_shader
 from ..export.targets import resolve_targets
 from ..export.textures import texture_record
-from ..fit.build import build_model
+from ..fit.model import ShaderModel
+from ..fit.spirv_model import SpirvModel
 from ..fit.result import glsl_renamed
 from ..scene.baseline_inputs import inputs_for_shader
 
@@ -94,8 +95,13 @@ class Shader:
         """The fit's model (``study.fit.protocol.ImageModel``) at ``resolution`` (default
         ``fit.resolution``) against ``reference`` ((H, W, 3) float32 linear RGB at the
         experiment's resolution, box-downsampled); ``stderr``: its per-pixel standard error."""
-        return build_model(exp, inputs, reference, shader=self.name, backend=backend,
-                           resolution=resolution, stderr_full=stderr)  # fmt: skip
+        if self.is_user:
+            return SpirvModel.from_experiment(
+                exp, inputs, reference, backend, resolution, stderr, shader=self.user
+            )
+        return ShaderModel.from_experiment(
+            exp, inputs, reference, self.name, backend, resolution, stderr
+        )
 
     def point_parameters(self, exp) -> tuple | None:
         """The constants a sweep point refits: a user's file, ``fit.parameters`` (None: every

@@ -40,7 +40,6 @@ import numpy as np
 from shaders_port import Constants
 
 from ..scene.shader_inputs import half_inputs
-from .build import build_model
 from .model import get_value, with_values
 from .solvers import FTOL_SE
 
@@ -182,24 +181,20 @@ def refine(
     return Refined(fitted, ok, l0, loss, steps, passes["n"], why or "converged", shift, at_bound)
 
 
-def half_models(exp, inputs, reference: np.ndarray, **kwargs) -> tuple | None:
-    """The two ``ShaderModel`` of ``exp`` on the refraction texture's halves
+def half_models(exp, inputs, model_of) -> tuple | None:
+    """The two models of ``exp`` on the refraction texture's halves
     (``study.scene.shader_inputs.half_inputs``, which raises ExperimentError without them) when
-    ``fit.input_noise = "decorrelate"``, else None. ``kwargs`` go to
-    ``ShaderModel.from_experiment`` (``backend``, ``shader``...)."""
+    ``fit.input_noise = "decorrelate"``, else None. ``model_of(inputs)``: the model of the
+    shader fitted on those inputs (``study.calibration.shader.Shader.model``)."""
     if exp.fit.input_noise != "decorrelate":
         return None
-    return _models_on_halves(exp, inputs, reference, **kwargs)
+    return tuple(model_of(h) for h in half_inputs(exp, inputs))
 
 
-def texture_half_models(exp, inputs, reference: np.ndarray, **kwargs) -> tuple | None:
+def texture_half_models(exp, inputs, model_of) -> tuple | None:
     """The same two models whenever the inputs carry halves (``reference.texture_method =
     "lighting"``), whatever ``fit.input_noise`` says, else None: the basin scan's check of a
     lower basin (``study.fit.basins.texture_delta``)."""
     if inputs.refraction_halves is None:
         return None
-    return _models_on_halves(exp, inputs, reference, **kwargs)
-
-
-def _models_on_halves(exp, inputs, reference: np.ndarray, **kwargs) -> tuple:
-    return tuple(build_model(exp, h, reference, **kwargs) for h in half_inputs(exp, inputs))
+    return tuple(model_of(h) for h in half_inputs(exp, inputs))
