@@ -459,7 +459,7 @@ def _default_run_pages(folder: Path) -> dict:
         "*Written by `scripts/build_docs.py` from the files `make run` wrote "
         "(`out/default/`), committed in `docs/results/default/`.*\n\n"
     )
-    pages = {folder / "report.md": head + report_text(calibration, {})}
+    pages = {folder / "report.md": head + report_text(calibration, {}, out=Path("out/default"))}
     for target in ("hlsl", "gles300"):
         pages[folder / f"BINDINGS-{target}.md"] = head + sheets[f"{target}/BINDINGS.md"]
     return pages
