@@ -29,7 +29,10 @@ Every table of results in ``docs/`` is written by this script, never by hand:
 * ``docs/file-formats.md``: the files a user gives and the files the tool writes, its tables
   from the schema, the file readers and the committed result files (``docs_file_formats.py``);
 * ``docs/engine-inputs.md``: every input a user's shader can read, from the code's tables
-  (``docs_engine_inputs.py``).
+  (``docs_engine_inputs.py``);
+* the quoted passages of the hand-written pages (``<!-- quote:NAME -->``: the front figure's
+  caption, make run's figures, the recommendation), from the result files
+  (``docs_figures.py``, which also marks a tradeoff-family report whose run is stale).
 
 and every figure it can draw from those files (:func:`figures`): the Pareto chart of a
 tradeoff-family study whose ``tradeoff.parquet`` is committed, a study's ``motion.png``, the
@@ -115,13 +118,24 @@ def generated() -> dict[Path, str]:
     from docs_gpu import gpu_bench_page
     from docs_error_budget import error_budget_page
     from docs_own_waves import own_waves_page
+    from docs_figures import quoted_pages, stale_results
 
+    stale_folders = stale_results()
     pages = {DOCS / "experiment-keys.md": KEYS_HEADER + schema_markdown()}
     pages[DOCS / "file-formats.md"] = file_formats_page()
     pages[DOCS / "engine-inputs.md"] = engine_inputs_page()
     for study in TRADEOFF_FAMILY:
         folder = RESULTS / study
-        pages[folder / "report.md"] = tradeoff_report_text(_tradeoff_summary(folder))
+        text = tradeoff_report_text(_tradeoff_summary(folder))
+        if study in stale_folders:  # its reference is not the current one: say so on top
+            title, rest = text.split("\n", 1)
+            text = (
+                f'{title}\n\n!!! warning "Not the current reference"\n    '
+                f"{stale_folders[study]}. Its figures compare its shaders with each other only; "
+                f"re-run the study (its command is in the page that links here) to compare them "
+                f"with the other pages.\n{rest}"
+            )
+        pages[folder / "report.md"] = text
     pages[RESULTS / "failures" / "report.md"] = _failures_page(RESULTS / "failures")
     pages[RESULTS / "search" / "report.md"] = _search_page(_json(RESULTS / "search" / "bench.json"))
     pages[RESULTS / "search" / "scenes.md"] = _search_page(
@@ -144,6 +158,7 @@ def generated() -> dict[Path, str]:
     pages[RESULTS / "views" / "generalise.md"] = generalise_report_text(
         _json(RESULTS / "views" / "generalise.json")
     )
+    pages.update(quoted_pages())  # the hand-written pages' quoted passages
     return pages
 
 
@@ -444,7 +459,7 @@ def _default_run_pages(folder: Path) -> dict:
         "*Written by `scripts/build_docs.py` from the files `make run` wrote "
         "(`out/default/`), committed in `docs/results/default/`.*\n\n"
     )
-    pages = {folder / "report.md": head + report_text(calibration, {})}
+    pages = {folder / "report.md": head + report_text(calibration, {}, out=Path("out/default"))}
     for target in ("hlsl", "gles300"):
         pages[folder / f"BINDINGS-{target}.md"] = head + sheets[f"{target}/BINDINGS.md"]
     return pages

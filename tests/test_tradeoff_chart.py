@@ -150,3 +150,37 @@ def test_report_labels_the_schedule_and_prints_no_dashes():
     floored = tradeoff_report_text(_summary(_points(True, True)))
     line = next(ln for ln in floored.splitlines() if "error floor" in ln)
     assert "water_refraction 0.14" in line and "-" not in line.split(":", 1)[1]
+
+
+def test_the_recommended_point_lies_on_the_front_drawn_and_frame_times_draw_none():
+    """The committed default tradeoff's chart: the front is drawn against the fetches only (frame
+    times on llvmpipe move from run to run), and the recommendation is one of its vertices."""
+    import json
+
+    from helpers import REPO
+
+    from study.studies.tradeoff_analysis import analyse
+    from study.sweep import read_table
+
+    folder = REPO / "docs" / "results" / "tradeoff"
+    summary = json.loads((folder / "summary.json").read_text())
+    _, recs = analyse(read_table(folder / "tradeoff.parquet"), list(summary["scenes"]),
+                      summary["tolerance"])  # fmt: skip
+    fig = pareto_chart(recs, summary)
+    rec = summary["scenes"]["default"]["recommended"]
+    fronts = {}
+    for ax, cost in zip(fig.axes, COSTS):
+        lines = [ln for ln in ax.lines if ln.get_gid() == "Pareto front"]
+        fronts[cost] = lines
+        marks = [c for c in ax.collections if c.get_gid() == "recommended"]
+        assert len(marks) == 1, cost
+        x, y = marks[0].get_offsets()[0]
+        assert (x, y) == pytest.approx((rec[cost], rec["flip"])), cost
+        for ln in lines:  # the mark is a vertex of the front drawn on its panel
+            assert any((px, py) == pytest.approx((x, y)) for px, py in zip(*ln.get_data())), cost
+    assert len(fronts[summary["cost"]]) == 1
+    assert all(not fronts[c] for c in COSTS if c != summary["cost"])
+    pyplot().close(fig)
+    text = tradeoff_report_text(summary)
+    assert "Frame times are shown, never ranked" in text and "ranked by BIC" in text
+    assert f"A quick screen fitted {summary['search']['screened']} points" in text

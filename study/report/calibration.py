@@ -201,7 +201,8 @@ def basin_lines(parameters: dict) -> list[str]:
             what = f"{minima} (no noise estimate of the reference to compare them with)."
         else:
             what = (
-                f"{minima}, each higher than the fit's by more than the reference's noise explains."
+                f"{minima}, each higher than the fit's by more than the reference's noise "
+                "explains: the fit is in the lowest basin found, nothing to try there."
             )
         if rest or not b["basins"]:
             lines.append(f"`{name}`: {what} (The other constants held at the solution.)")
@@ -258,14 +259,97 @@ def identifiability_table(ident: dict, parameters: dict | None = None) -> list[s
 def write_report(out: Path, summary: dict, figures: dict) -> Path:
     """``out/report.md`` from the calibration summary (the content of constants.json)."""
     path = out / "report.md"
-    write_text_atomic(path, report_text(summary, figures))
+    write_text_atomic(path, report_text(summary, figures, out=out))
     return path
 
 
-def report_text(summary: dict, figures: dict) -> str:
-    """The Markdown of :func:`write_report` (``figures``: figure name -> file, those drawn)."""
+# the tradeoff-family results committed with the project (absent from an installed package)
+COMMITTED_RESULTS = Path(__file__).resolve().parents[2] / "docs" / "results"
+TRADEOFF_RESULTS = ("tradeoff", "scenes", "views/tradeoff")
+
+
+def best_known(experiment: str, results: Path = COMMITTED_RESULTS) -> dict | None:
+    """The best shader a committed tradeoff knows for the scene ``experiment``: its best point
+    within the original's fetches (``best_within_seed_budget``, else the recommendation), with
+    the folder it comes from; None where no committed tradeoff holds the scene."""
+    import json
+
+    for folder in TRADEOFF_RESULTS:
+        summary = results / folder / "summary.json"
+        if not summary.is_file():
+            continue
+        scene = (json.loads(summary.read_text()).get("scenes") or {}).get(experiment)
+        best = scene and (scene.get("best_within_seed_budget") or scene.get("recommended"))
+        if best and best.get("flip") is not None:
+            return {**best, "folder": f"docs/results/{folder}"}
+    return None
+
+
+def verdict_lines(summary: dict, out: Path | None = None) -> list[str]:
+    """The report's opening: where the fit stands (against the reference's noise, the shader at
+    its start constants and the best shader a committed tradeoff knows for the scene) and the
+    commands to run next."""
+    e, noise = summary["error"], summary["reference"].get("noise")
+    rmse, flip = e["rmse"], e["flip"]
+    gain = 1 - flip["fitted"] / flip["default"] if flip["default"] else 0.0
+    lines = [
+        f"**Verdict.** FLIP {flip['default']:.4f} at the start constants -> "
+        f"{flip['fitted']:.4f} fitted ({100 * gain:.0f} % less error; RMSE "
+        f"{rmse['default']:.4f} -> {rmse['fitted']:.4f})."
+    ]
+    if noise:
+        ratio = rmse["fitted"] / noise
+        lines[0] += (
+            f" The fitted RMSE is {ratio:.1f}x the reference's measured noise ({noise:.4f}): "
+            + (
+                "the error left is the shader's, not the reference's noise."
+                if ratio >= 1.5
+                else "close to what this reference can tell; render it with more samples "
+                "(`reference.spp`) to judge the fit further."
+            )
+        )
+    best = best_known(summary["experiment"])
+    if best is None:
+        lines[0] += (
+            f" No committed tradeoff covers the scene `{summary['experiment']}`: "
+            "`study tradeoff` finds the best shader for it."
+        )
+    else:
+        ahead = best["flip"] < flip["fitted"]
+        lines[0] += (
+            f" The best shader the committed tradeoff knows for `{summary['experiment']}` "
+            f"within the original's fetches is `{best['label']}`, FLIP {best['flip']:.4f} "
+            f"({best['folder']}): "
+            + (
+                f"{100 * (1 - best['flip'] / flip['fitted']):.0f} % less error than this fit."
+                if ahead
+                else "this fit is as good or better."
+            )
+        )
+    where = str(out) if out is not None else "OUT"
+    experiment = f"experiments/{summary['experiment']}.toml"
+    lines += [
+        "",
+        "**Next.**",
+        "",
+        f"* Chart this scene's shaders, cost against error, and export the recommended one: "
+        f"`study tradeoff {experiment} --out {where}-tradeoff` (the experiment file you "
+        "calibrated).",
+        f"* Export these constants to GLSL ES 3.00, HLSL, Metal and SPIR-V: "
+        f"`study export {where}/constants.json --out {where}-export`.",
+        f"* See the fitted water live beside the reference: open `{where}/viewer/index.html` "
+        f"in a browser (`study viewer {where} {experiment}` writes it again).",
+        "",
+    ]
+    return lines
+
+
+def report_text(summary: dict, figures: dict, out: Path | None = None) -> str:
+    """The Markdown of :func:`write_report` (``figures``: figure name -> file, those drawn;
+    ``out``: the run's folder, for the commands it suggests)."""
     e = summary["error"]
-    lines = _header_lines(summary) + waves_lines(summary.get("waves"))
+    head = _header_lines(summary)
+    lines = head[:2] + verdict_lines(summary, out) + head[2:] + waves_lines(summary.get("waves"))
     lines += _decorrelated_lines(summary.get("fit", {}))
     lines += [
         "| metric (water pixels) | default constants | fitted constants |",

@@ -101,7 +101,8 @@ def _draw_panel(ax, pts: list, summary: dict, scene: str, cost: str, colours, le
                 color="gray" if conv else colours[r["variant"]],
             ),
         )
-    on = summary["scenes"][scene]["fronts_by_cost"][cost]
+    ranked = summary.get("cost", "fetches_mean")  # frame times are noisy: no front on them
+    on = summary["scenes"][scene]["fronts_by_cost"][cost] if cost == ranked else []
     front = sorted(
         (r for r in cands if r["label"] in on and r.get(cost) is not None), key=lambda r: r[cost]
     )
@@ -189,6 +190,12 @@ def tradeoff_report_text(summary: dict) -> str:
         "port's frame time. Recommendation: the cheapest point within "
         f"{100 * tol:g} % of the best FLIP.",
         "",
+        "Frame times are shown, never ranked: each is one timing on llvmpipe, a CPU rasteriser "
+        "shared with whatever else the machine runs, and it moves from run to run by more than "
+        "neighbouring points differ (a shader with fewer fetches can time slower). The "
+        "recommendation and the chart's front use the fetches, which do not move; the "
+        "frame-time panels show the points without a front.",
+        "",
         *_schedule_note(summary),
     ]
     lines += _search_lines(summary)
@@ -235,10 +242,11 @@ def _search_lines(summary: dict) -> list[str]:
     if s["mode"] == "adaptive":
         rounds = ", ".join(f"{k} {v}" for k, v in s.get("rounds", {}).items())
         lines += [
-            f"Search: adaptive, {s['screened']} screen points of {s['shaders_screened']} shader "
-            f"configurations (walk rounds per scene: {rounds}), {s['points_in_full']} points "
-            f"measured in full, {fmt(s['seconds'], 3)} s; axes held: {fixed} "
-            "(`study.studies.search`).",
+            f"Search: adaptive. A quick screen fitted {s['screened']} points ("
+            f"{s['shaders_screened']} shaders, some at several schedules; walk rounds per "
+            f"scene: {rounds}); the {s['points_in_full']} points nearest the screen's front were "
+            f"then measured in full, every constant refitted at full resolution "
+            f"({fmt(s['seconds'], 3)} s in all). Axes held: {fixed}.",
             "",
         ]
     else:
@@ -352,9 +360,12 @@ def _parsimony_lines(parsimony: dict) -> list[str]:
         b0 = min(d["bic"] for d in pars.values())
         lines += [
             "",
-            "Each variant at the original's schedule (constants fitted or at a "
-            "bound; BIC of the fit "
-            "residual, lower is better, relative to the lowest):",
+            "Each variant at the original's schedule (constants fitted or at a bound), ranked "
+            "by BIC: how well the fit's squared residual is explained for the constants the "
+            "variant spends (lower is better, relative to the lowest). BIC judges the "
+            "residual the fit minimises, FLIP what a viewer sees, so the two orders can "
+            "differ: a variant with more constants can lower the residual and still raise "
+            "FLIP.",
             "",
             "| variant | constants | FLIP | BIC - min |",
             "|---|---|---|---|",
