@@ -349,7 +349,7 @@ CONSTANTS = (
 
 What `study calibrate` writes (one scene, several scenes jointly, or the frames of an animated
 experiment) and what `study export` takes back; a tradeoff writes one for its recommendation,
-`shaders/constants.json`. One JSON object; every constant named as the shader's GLSL names it
+`recommended/constants.json`. One JSON object; every constant named as the shader's GLSL names it
 (`ATTENUATION_DISTANCE`, `BumptexMult`, a component of a vector `waterColor[1]`):
 
 | key | what |

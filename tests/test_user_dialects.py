@@ -80,7 +80,7 @@ def test_compatibility_built_ins_run_as_written_from_the_fixed_function_state(in
     check = gl_check_user(shader, inputs, shader.defaults(), ours)
     assert check["ran"] and check["passed"], check
     assert_ran_as_written(check, "compatibility")
-    report = "\n".join(_export_lines(check, "compat_builtins_110.frag"))
+    report = "\n".join(_export_lines(check, "`shaders/core/compat_builtins_110.frag`"))
     assert f"the GL check ran {check['text']} on {check['context']}, vs the Dr.Jit" in report
     monkeypatch.setattr(gl_run, "context_support", lambda kind: (0, "EGL: none, for the test"))
     check = gl_check_user(shader, inputs, shader.defaults(), ours)
@@ -89,7 +89,7 @@ def test_compatibility_built_ins_run_as_written_from_the_fixed_function_state(in
     assert check["why_translation"] == (
         "no OpenGL compatibility-profile context here (EGL: none, for the test)"
     )
-    report = "\n".join(_export_lines(check, "compat_builtins_110.frag"))
+    report = "\n".join(_export_lines(check, "`shaders/core/compat_builtins_110.frag`"))
     assert f"core-profile translation (GLSL 330 core) on {check['context']} (not" in report
     assert "(not as written: no OpenGL compatibility-profile context here" in report
 

@@ -465,7 +465,7 @@ def test_a_target_the_pair_cannot_be_written_in_is_left_out_and_said(tmp_path):
     assert (tmp_path / "shaders" / "hlsl").is_dir() and not (
         tmp_path / "shaders" / "gles300"
     ).exists()
-    lines = engine_targets_section({"gles300": {"left_out": left["gles300"]}}, user=True)
+    lines = engine_targets_section({"gles300": {"left_out": left["gles300"]}}, "as written")
     assert any(ln.startswith("| gles300 | - | left out: ") for ln in lines)
     summary = {"shader": "projective_water.frag",
                "shader_file": str(SHADERS / "projective_water.frag"),

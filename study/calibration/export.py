@@ -81,7 +81,8 @@ def write_export(
         gl = [shader.gl_check(i, constants, folder, backend) for i in checked]
         targets = shader.target_checks(checked[0], constants, folder, left_out, backend)
     text = shader.write_back(exp, constants, all(g.get("passed") is not False for g in gl))
-    extra = shader.file_record(exp, text) if text is not None else {}
+    extra = shader.file_record(exp, text)  # {} for a shader of the space
+    extra["export"] = shader.export_words(exp)
     if exp.waves.source == "shader":  # the reference's surface: how well it fits the normals
         extra["waves"] = shader_waves(exp).stats
     return Export(gl, targets, record, extra)

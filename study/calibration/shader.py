@@ -245,7 +245,31 @@ class Shader:
             _log(f"calibrate: wrote the fitted constants into {exp.fit.vertex}")
         return text
 
-    def file_record(self, exp, text: str) -> dict:
+    def export_words(self, exp) -> dict:
+        """What the export wrote, in the report's words: ``files`` (the shader files) and
+        ``constants`` (how the engine targets carry the fitted constants)."""
+        if not self.is_user:
+            return {
+                "files": "`shaders/compat/` (GLSL 1.20, drop-in) and `shaders/core/` (GLSL 330 "
+                "core); every file compiled with glslangValidator",
+                "constants": "the fitted constants as named specialization constants",
+            }
+        vertex = (
+            f"`shaders/core/{Path(exp.fit.vertex).name}` (your vertex shader, the fitted values "
+            "of the constants it declares in place alike)"
+            if self.user.vertex is not None
+            else "`shaders/core/water.vert` (the study's vertex shader it runs after)"
+        )
+        return {
+            "files": f"`shaders/core/{Path(exp.fit.shader).name}` (your `{exp.fit.shader}` with "
+            "the fitted constants in place of their initializers, every other byte as in your "
+            f"file) and {vertex}; compiled with glslangValidator",
+            "constants": "the fitted constants as written in the file, those that are uniforms "
+            'declared without initializer (the sheet\'s "Uniforms the material sets" gives '
+            "their values)",
+        }
+
+    def file_record(self, exp, text: str | None) -> dict:
         """What a result records of a user's file (its path, SHA-256 of ``text``, declaration,
         defines, include paths, vertex file and grid); {} for a shader of the space."""
         if not self.is_user:

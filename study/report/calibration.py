@@ -381,12 +381,9 @@ def report_text(summary: dict, figures: dict, out: Path | None = None) -> str:
     t = summary["timings"]
     lines += ["## Timings (seconds)", "", "| stage | s |", "|---|---|"]
     lines += [f"| {k} | {fmt(v, 3)} |" for k, v in t.items()] + [""]
-    lines += _export_lines(
-        summary.get("gl_check"), summary.get("shader_file"), summary.get("vertex_file")
-    )
-    lines += engine_targets_section(
-        summary.get("engine_targets") or {}, user=bool(summary.get("shader_file"))
-    )
+    words = summary["export"]
+    lines += _export_lines(summary.get("gl_check"), words["files"])
+    lines += engine_targets_section(summary.get("engine_targets") or {}, words["constants"])
     return "\n".join(lines)
 
 
@@ -524,9 +521,9 @@ def gl_ran(gl: dict, default: str) -> str:
     return f"the GL check ran {gl['text']} on {gl['context']}{why},"
 
 
-def _export_lines(gl: dict | None, user_file: str | None = None, vertex_file=None) -> list[str]:
-    """What was exported and how the GL check of the exported core shader went; ``user_file``:
-    the path of a user's shader (its copy with the fitted constants was exported)."""
+def _export_lines(gl: dict | None, what: str) -> list[str]:
+    """What was exported (``what``: the export's ``files`` in words, ``Shader.export_words``)
+    and how the GL check of the exported core shader went."""
     check = "."
     if gl and gl.get("ran", True) is False:
         failed = "**FAILED**: " if gl.get("passed") is False else ""
@@ -548,38 +545,14 @@ def _export_lines(gl: dict | None, user_file: str | None = None, vertex_file=Non
                 else ""
             )  # fmt: skip
         )
-    if user_file:
-        name = Path(user_file).name
-        what = (
-            f"`shaders/core/{name}` (your `{user_file}` with the fitted constants in place of "
-            "their initializers, every other byte as in your file) and "
-            + (
-                f"`shaders/core/{Path(vertex_file).name}` (your vertex shader, the fitted values "
-                "of the constants it declares in place alike)"
-                if vertex_file
-                else "`shaders/core/water.vert` (the study's vertex shader it runs after)"
-            )
-            + "; compiled with glslangValidator"
-        )
-    else:
-        what = (
-            "`shaders/compat/` (GLSL 1.20, drop-in) and `shaders/core/` "
-            "(GLSL 330 core); every file compiled with glslangValidator"
-        )
     return ["## Exported shaders", "", what + check, ""]
 
 
-def engine_targets_section(targets: dict, user: bool = False) -> list[str]:
-    """The report's "Engine targets" lines: each target written and what checked it; ``user``:
-    the export of a user's file (its constants stay as written, not specialization constants)."""
+def engine_targets_section(targets: dict, how: str) -> list[str]:
+    """The report's "Engine targets" lines: each target written and what checked it; ``how``:
+    how the targets carry the fitted constants, in words (``Shader.export_words``)."""
     if not targets:
         return []
-    how = (
-        "the fitted constants as written in the file, those that are uniforms declared without "
-        'initializer (the sheet\'s "Uniforms the material sets" gives their values)'
-        if user
-        else "the fitted constants as named specialization constants"
-    )
     lines = [
         "## Engine targets",
         "",

@@ -122,8 +122,9 @@ def _draw_panel(ax, pts: list, summary: dict, scene: str, cost: str, colours, le
             ax.scatter(r[cost], r["flip"], marker="x", s=120, color="red", gid="recommended")
             legend.setdefault("recommended", plt.Line2D([], [], ls="", marker="x", ms=10,
                                                         color="red", mew=1.5))  # fmt: skip
+    yours = {p["label"] for p in summary["scenes"][scene].get("user") or []}  # the analysis's
     for r in cands:
-        if is_user_variant(r["variant"]) and r.get(cost) is not None:
+        if r["label"] in yours and r.get(cost) is not None:
             name = r["variant"].split(":", 1)[1]
             entry = f"your shader ({name})"
             ax.scatter(r[cost], r["flip"], marker="D", s=90, facecolors="none", edgecolors="k",

@@ -34,8 +34,10 @@ Outputs in ``out``: ``tradeoff.parquet`` (a row per point measured in full), ``s
 ``pareto.png``, ``images_<scene>.png`` (the reference beside the original shader at its own
 constants, fitted, the best configuration within its fetch budget, the recommendation and the
 user's shader; its panels kept as data in ``images_<scene>.exr`` and ``.json``,
-``study.report.panels``), ``report.md``, ``summary.json``, ``shaders/`` (one experiment) or
-``shaders/<name>/`` (several), with the user's file fitted.
+``study.report.panels``), ``report.md``, ``summary.json``, and the recommendation calibrated as
+``study calibrate`` writes a calibration (``study.studies.tradeoff_export``): ``recommended/``
+(one experiment) or ``recommended/<name>/`` (several); a user's own shader that is not the
+recommendation in ``yours/`` alike.
 """
 
 from __future__ import annotations
