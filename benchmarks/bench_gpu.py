@@ -124,7 +124,7 @@ def _one_pass(spec: dict, root: Path) -> dict:
     from study.calibration.fitting import FitOptions, fit_frames
     from study.calibration.frames import Frame, load_scene_data, prepare
     from study.calibration.shader import Shader
-    from study.fit.result import jsonable
+    from study.export.result import jsonable
 
     last = max(STAGES.index(s) for s in spec["stages"])
     seconds: dict = {}

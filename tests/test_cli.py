@@ -158,7 +158,7 @@ def test_calibrate_writes_constants_json(runs):
     root, rc = runs
     assert rc["calibrate"] == 0
     c = json.loads((root / "calibrate" / "constants.json").read_text())
-    from study.fit.result import CalibrationResult
+    from study.export.result import CalibrationResult
 
     result = CalibrationResult.from_json(c)  # the typed record reads back what it wrote
     assert result.to_json() == c and not result.joint and result.extra == {}
@@ -317,7 +317,7 @@ def test_the_binding_sheets_are_written_again_from_the_export_alone(runs):
 
 
 def test_calibration_result_refuses_what_is_not_one():
-    from study.fit.result import CalibrationResult
+    from study.export.result import CalibrationResult
 
     with pytest.raises(ValueError, match="not a calibration result: missing.*'shader'"):
         CalibrationResult.from_json({"constants": {}})

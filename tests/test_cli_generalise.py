@@ -49,7 +49,7 @@ def test_joint_calibrate_through_cli(tmp_path):
     assert main(["calibrate", *EXPS, "--out", str(out), *sets(TINY)]) == 0
     joint = json.loads((out / "constants.json").read_text())
     assert joint["joint"] and len(joint["weights"]) == 2
-    from study.fit.result import CalibrationResult
+    from study.export.result import CalibrationResult
 
     result = CalibrationResult.from_json(joint)
     assert result.joint and result.to_json() == joint and result.experiment is None

@@ -227,7 +227,7 @@ def test_load_calibrate_style_file(tmp_path):
 def test_load_reads_the_glsl_named_file_and_the_older_layout(tmp_path):
     """constants.json names constants as the GLSL does, what the shader reads apart from the rest
     of the block; files older versions wrote (the study's names, all in one table) still load."""
-    from study.fit.result import glsl_named
+    from study.export.result import glsl_named
 
     new = glsl_named({"shader": "water_refraction", "constants": EXPORTED.to_dict()})
     assert "ATTENUATION_DISTANCE" in new["constants"] and "ABSORPTION_R" not in new["constants"]

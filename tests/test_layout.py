@@ -28,8 +28,10 @@ LAYERS = (
     ("study.report", "study.report.*", "study.export", "study.export.*"),
     ("study.fit", "study.fit.*"),
     ("study.sweep", "study.sweep.*"),
+    # the calibration pipeline: frames, shader handle, fit, score, export, result
+    ("study.calibration", "study.calibration.*"),
     ("study.studies", "study.studies.*"),
-    # the commands the command line runs, and the steps they share
+    # the commands the command line runs
     ("study.commands", "study.commands.*"),
     # the command line and the package's face (study/__init__.py)
     ("study.cli", "study"),

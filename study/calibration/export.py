@@ -15,6 +15,7 @@ from pathlib import Path
 
 from shaders_port import glsl_scalar
 
+from .._backend import drjit_backend
 from .._progress import log as _log
 from ..export.textures import with_exported_textures, write_textures
 from ..fit.calibrate import timed
@@ -59,8 +60,6 @@ def write_export(
     ``out/shaders`` and checked (module docstring). ``frames_inputs``: the shader inputs of each
     frame (at the experiment's resolution); the first gives the textures. ``status``: as
     :func:`fit_status`. ``timings`` gets ``export_s`` and ``gl_check_s``."""
-    from .._backend import drjit_backend
-
     timings = {} if timings is None else timings
     backend = drjit_backend(variant)
     folder = Path(out) / "shaders"

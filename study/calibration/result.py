@@ -8,7 +8,8 @@ import numpy as np
 
 from .._metrics import information_criteria
 from ..fit.model import constants_json
-from ..fit.result import CalibrationResult
+from ..export.result import CalibrationResult
+from ..fit.joint import JointModel
 from ..scene.user_scene import sun_summary
 
 
@@ -84,8 +85,6 @@ def build_result(frames, shader, fit, scores: dict, timings: dict, export, solve
             "defines": list(fit.models[0].defines),
         }
     if kind in ("views", "joint"):
-        from ..fit.joint import JointModel
-
         weights = JointModel(fit.models).weights
         result.experiments = [f.path for f in frames]
         result.scenes = [f.name for f in frames]

@@ -10,11 +10,15 @@ records of it. This module is the one place that asks which kind a shader is.
 
 from __future__ import annotations
 
+import hashlib
 from pathlib import Path
 
+from shaders_port import Constants
 from shaders_port.variants import get_variant
 
+from .._io import write_text_atomic
 from .._progress import log as _log
+from ..config.experiment import fit_parameters
 from ..config.user_shader import is_user_shader, load_user_shader
 from ..export.gl_check import (
     gl_check,
@@ -27,9 +31,9 @@ from ..export.gl_check import (
 from ..export.shaders import export_shaders, export_user_shader
 from ..export.targets import resolve_targets
 from ..export.textures import texture_record
-from ..fit.model import ShaderModel
+from ..fit.model import ShaderModel, constants_from_experiment
 from ..fit.spirv_model import SpirvModel
-from ..fit.result import glsl_renamed
+from ..export.result import glsl_renamed
 from ..scene.baseline_inputs import inputs_for_shader
 
 USER = "user:"  # the prefix of a user's shader's name in a sweep's table (``user:<file>``)
@@ -81,7 +85,7 @@ class Shader:
 
     def named(self, summary: dict) -> dict:
         """A JSON object of results with every constant as this shader's source names it: the
-        study's GLSL names for a shader of the space (``study.fit.result.glsl_renamed``); a
+        study's GLSL names for a shader of the space (``study.export.result.glsl_renamed``); a
         user's file names its own already."""
         return summary if self.is_user else glsl_renamed(summary)
 
@@ -111,8 +115,6 @@ class Shader:
         if self.is_user:
             p = exp.fit.parameters
             return None if p is None else tuple(p)
-        from ..config.experiment import fit_parameters
-
         v = get_variant(self.name)
         listed = exp.fit.parameters
         if listed is None:  # an experiment of a user's own shader: the space's fit their own
@@ -140,10 +142,6 @@ class Shader:
         constants for a shader of the space."""
         if self.is_user:
             return {**self.user.defaults(), **(values or {})}
-        from shaders_port import Constants
-
-        from ..fit.model import constants_from_experiment
-
         return Constants.from_dict(values) if values else constants_from_experiment(exp)
 
     def constants(self, values: dict, schedule: dict | None = None):
@@ -151,8 +149,6 @@ class Shader:
         ``Constants.to_dict()``, or a user's scalar name -> value) with ``schedule`` set."""
         if self.is_user:
             return self.user.with_scalars(self.user.defaults(), values)
-        from shaders_port import Constants
-
         return Constants.from_dict(values).replace(**(schedule or {}))
 
     def with_stages(self, parameters: dict) -> dict:
@@ -228,8 +224,6 @@ class Shader:
         if not passed:
             _log(f"calibrate: {user.label} not written back: the GL check failed")
             return user.source
-        from .._io import write_text_atomic
-
         # the initializers replaced; a uniform without one stays so (its start, in the
         # declaration, stays the start value: the file must read back as it was declared)
         text = user.written(constants, bare_initializers=False)
@@ -274,8 +268,6 @@ class Shader:
         defines, include paths, vertex file and grid); {} for a shader of the space."""
         if not self.is_user:
             return {}
-        import hashlib
-
         user = self.user
         extra = {
             "shader_file": str(exp.fit.shader),

@@ -13,7 +13,7 @@ from ..calibration.frames import load_frames
 from ..calibration.scoring import Scorer
 from ..calibration.shader import Shader
 from ..fit.joint import leave_one_out, universality
-from ..fit.result import jsonable
+from ..export.result import jsonable
 from ..report.generalise import write_generalise_report
 from ..calibration.run import calibrate
 

@@ -35,7 +35,7 @@ from shaders_port.spirv.user_vertex import DEFAULT_CELLS, UserVertex
 from shaders_port.variants import SHIPPED, VARIANTS, get_variant
 
 from .._io import disk_full
-from ..fit.result import CalibrationResult
+from .result import CalibrationResult
 from .targets import resolve_targets, translate_targets
 from .textures import expects_lines
 
