@@ -2,7 +2,7 @@
 fitted on all frames, reported per frame and over time, exported with the wave offsets as the
 vertex shader's uniforms.
 
-Per frame ``k`` (``study.scene.frames.frame_experiment``): the reference and the shader inputs,
+Per frame ``k`` (``study.scene.animation.frame_experiment``): the reference and the shader inputs,
 each cached under the frame's own key; the parts that do not depend on the wave offsets are
 built once (``FrameShared``). The fit is the joint fit of ``study.fit.joint`` with one scene per
 frame (each frame weighted equally); beside it frame 0 is fitted alone the same way, and both
@@ -27,7 +27,7 @@ from ..fit.joint import JointModel, joint_calibrate
 from ..fit.model import constants_json
 from ..fit.result import CalibrationResult
 from ..report.animation import animation_figures, write_animation_report
-from ..scene.frame_data import load_frames
+from ..scene.animation_data import load_frames
 from .steps import export_calibration, with_stages
 from .viewer import write_viewer
 

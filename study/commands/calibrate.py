@@ -13,7 +13,7 @@ from ..fit.build import build_model
 from ..fit.calibrate import calibrate_model, scene_frozen, timed
 from ..fit.decorrelated import half_models, texture_half_models
 from ..fit.solvers import SOLVERS
-from ..scene.frames import is_animated
+from ..scene.animation import is_animated
 from ..scene.views import has_views
 from .animated import run_calibrate_animated
 from .joint import run_calibrate_joint

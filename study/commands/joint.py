@@ -19,7 +19,7 @@ from ..fit.model import constants_json
 from ..fit.result import CalibrationResult, glsl_renamed, jsonable
 from ..report.generalise import write_generalise_report, write_joint_report
 from ..scene.baseline_inputs import inputs_for_shader
-from ..scene.frames import refuse_animated
+from ..scene.animation import refuse_animated
 from ..scene.reference import load_or_render
 from ..scene.shader_inputs import load_or_build_shader_inputs
 from ..scene.views import has_views, view_experiments, view_inputs

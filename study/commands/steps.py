@@ -37,12 +37,12 @@ from ..fit.model import constants_json
 from ..fit.result import CalibrationResult
 from ..report.calibration import comparison_figure, diagnostics_figure, loss_figure, write_report
 from ..scene.baseline_inputs import inputs_for_shader
-from ..scene.frames import is_animated, refuse_animated
+from ..scene.animation import is_animated, refuse_animated
 from ..scene.reference import load_or_render
 from ..scene.shader_inputs import load_or_build_shader_inputs
 from ..scene.shader_waves import shader_waves
 from ..scene.user_scene import check_scene, sun_summary
-from ..scene.view import check_water_in_view
+from ..scene.water_in_view import check_water_in_view
 
 
 def prepare(experiment, out, overrides=None, variant=None, frames: bool = False):

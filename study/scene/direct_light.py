@@ -45,7 +45,7 @@ import numpy as np
 from .._backend import jit_input
 from ..config.experiment import Experiment
 from .denoise import denoise_gain, denoise_radiance
-from .frames import shared_part
+from .animation import shared_part
 from .sun_photons import N_BATCHES, shape_named, sun_direct, sun_walk
 from .user_scene import reference_sky_parts
 
@@ -154,7 +154,7 @@ def traced_direct(
     ``reference.sun_photons`` photons per texel in ``N_BATCHES`` batches, raw (halves: batches 0-1
     and 2-3). ``scene``: a Mitsuba scene of the experiment's geometry with the water (the
     lighting render's, :func:`.lighting.lighting_scene`); ``shared``: a
-    :class:`~.frames.FrameShared` of an animation's frames, which then share the skylight's
+    :class:`~.animation.FrameShared` of an animation's frames, which then share the skylight's
     sample patterns (:func:`sky_samples`)."""
     import mitsuba as mi
 

@@ -71,7 +71,7 @@ from ..config.errors import ExperimentError
 from ..config.experiment import Experiment
 from .denoise import denoise_gain, denoise_radiance
 from .direct_light import traced_direct
-from .frames import shared_part
+from .animation import shared_part
 from .mitsuba_scene import build_geometry, has_medium, sampler_spp, set_waves, water_medium
 from .topdown import (
     MAX_OPTICAL_DEPTH,
@@ -340,7 +340,7 @@ def lighting_colour(
     measured noise (``noise``: RMS standard error of the colour over the pool texels) and the
     settings used; and the colour's two independent halves (2, size, size, 3) float32, each from
     half of the lighting passes (the dry render outside the pool is shared by both).
-    ``shared``: a :class:`~.frames.FrameShared` of an animation's frames, which then share the
+    ``shared``: a :class:`~.animation.FrameShared` of an animation's frames, which then share the
     lighting scene (its water moved to each frame's waves), the dry render with its albedo and
     the lighting grid's world y."""
     wet = exp.reference.refraction_lighting == "underwater"

@@ -267,7 +267,7 @@ def load_or_render(
     Safe with concurrent callers (a sweep's workers): a miss takes the entry's lock, looks again
     (another process may have rendered it meanwhile) and only then renders, so one key is
     rendered once. ``scene``: a callable returning the loaded scene of ``exp``, called on a miss
-    only (an animation's frames share one scene, :class:`~.frames.FrameShared`); ``keep_passes``:
+    only (an animation's frames share one scene, :class:`~.animation.FrameShared`); ``keep_passes``:
     a fresh render keeps its passes (``Reference.passes``, stored in the EXR as layers
     ``pass0..``; a cached file has them when it was rendered so)."""
     cache = (cache or cache_dir()) / "references"
