@@ -27,9 +27,9 @@ back down off the water's underside, off the walls, between floor and walls) is 
   under-water camera and cosine-weighted directions at each (strata permuted per texel), up
   through one refraction to the sky without the sun, with the water's transmittance evaluated,
   not sampled; the radiance gains ``ior^2`` entering the water (Mitsuba's ``dielectric`` in
-  radiance mode). Per texel its noise is 6-9 % before denoising against the path tracer's 27-34 %
-  at 32 spp (30-40 times less variance for the time, ``benchmarks/bench_direct_light.py``), so the
-  denoiser that follows has little to take for noise.
+  radiance mode). Its noise per texel is far below the path tracer's for the time
+  (``benchmarks/bench_direct_light.py``), so the denoiser that follows has little to take for
+  noise.
 
 ``tests/test_direct_light.py`` checks each against Mitsuba's own estimate of the same term, texel
 block by texel block.

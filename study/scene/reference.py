@@ -6,14 +6,12 @@ from their spread (unbiased sample variance / K). The scalar noise figure is the
 standard error over the water pixels, in linear RGB.
 
 Each pass samples with ``reference.sampler`` (``multijitter`` by default: Kensler's correlated
-multi-jittered strata, about a third of the independent sampler's variance at equal samples on
-the default scene and a fifth on the sun's glitter); the passes' seeds are independent, so their
-spread estimates the standard error of the mean for any sampler. Mitsuba's ``stratified``
-sampler reduces the variance as much but draws consecutive dimensions from permutations with
-consecutive seeds, which correlates them (measured: -0.01 at 36 spp, -0.004 at 144; multijitter
-and independent: none), and that biases volumetric path tracing: deep, chromatic water came out
-about 1 % too bright in green and blue, which moved the fitted water colour on the murky scene
-by 2.5 standard errors (docs/fast-references.md).
+multi-jittered strata, less variance than the independent sampler's at equal samples); the
+passes' seeds are independent, so their spread estimates the standard error of the mean for
+any sampler. Mitsuba's ``stratified`` sampler reduces the variance as much but draws
+consecutive dimensions from permutations with consecutive seeds, which correlates them, and
+that biases volumetric path tracing: deep, chromatic water comes out too bright
+(docs/fast-references.md, "Multi-jittered sampling").
 
 Automatic spp renders a pilot (``K`` x ``PILOT_SPP``), estimates the per-sample variance on
 the water pixels and picks the smallest power of two whose predicted noise is below
