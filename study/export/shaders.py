@@ -33,7 +33,7 @@ from shaders_port.spirv.user_shader import UserShader
 from shaders_port.spirv.user_vertex import DEFAULT_CELLS, UserVertex
 from shaders_port.variants import SHIPPED, VARIANTS, get_variant
 
-from .._io import disk_full
+from .._io import disk_full, repo_path
 from .targets import resolve_targets, translate_targets
 from .textures import expects_lines
 
@@ -80,13 +80,14 @@ def load_constants_json(path, shader=None) -> Constants | dict:
 
 def user_shader_of(path):
     """The ``UserShader`` a user shader's ``constants.json`` was fitted on (its ``shader_file``
-    and ``declaration``), or None for a calibration of the study's shaders. A file changed since
+    and ``declaration``; a relative path is the repository's, ``study._io.repo_path``), or None
+    for a calibration of the study's shaders. A file changed since
     the calibration (its SHA-256 differs from ``shader_sha256``) is read as it is now, with a
     note on stderr: the fitted values replace its constants' initializers."""
     data = _read_json(path)
     if "shader_file" not in data:
         return None
-    file = Path(data["shader_file"])
+    file = repo_path(data["shader_file"])
     if not file.is_file():
         raise ValueError(
             f"{path}: the calibrated shader {file} is gone; put it back at that path or edit "
@@ -94,7 +95,7 @@ def user_shader_of(path):
         )
     vertex = None
     if data.get("vertex_file"):  # a pair: the user's own vertex shader
-        vfile = Path(data["vertex_file"])
+        vfile = repo_path(data["vertex_file"])
         if not vfile.is_file():
             raise ValueError(
                 f"{path}: the calibrated vertex shader {vfile} is gone; put it back at that "
@@ -104,14 +105,14 @@ def user_shader_of(path):
             vfile,
             data.get("vertex_grid") or DEFAULT_CELLS,
             data.get("vertex_defines", data.get("defines", ())),
-            data.get("include_paths", ()),
+            tuple(str(repo_path(p)) for p in data.get("include_paths", ())),
             vfile.resolve() == file.resolve(),  # one file for both stages
         )
     shader = UserShader.from_file(
         file,
         data.get("declaration"),
         data.get("defines", ()),
-        data.get("include_paths", ()),
+        tuple(str(repo_path(p)) for p in data.get("include_paths", ())),
         vertex=vertex,
     )
     sha = hashlib.sha256(shader.source.encode("utf-8")).hexdigest()
