@@ -166,7 +166,7 @@ study's `normalMap` (`(x, z) / normal_tile` plus the waves' offsets).
 
 `time` is the animation clock in seconds: on frame `k` of an animated experiment
 (`experiments/animated.toml`) `k * animation.time_step`, the time at which the waves'
-offsets are `waves.offsets + time * animation.velocities` (`study.scene.frames`); 0 for a
+offsets are `waves.offsets + time * animation.velocities` (`study.scene.animation`); 0 for a
 still frame. `sun_direction`
 is the unit vector from the centre of the water quad towards `lightpos`. The study's light sits
 1000 world units from the origin in the sun's direction, so on the study's pools (centred on

@@ -1,9 +1,10 @@
 """``docs/file-formats.md``, written by ``scripts/build_docs.py``: the files a user gives and the
 result files the tool writes. Its tables come from the code and the committed results: the
 file keys and the keys that go with them from the experiment schema, the limits from
-``study.config.files``, the columns of each table from its committed Parquet file under
-``docs/results``, the top-level entries of a tradeoff's ``summary.json`` from the committed one,
-and ``textures.json`` from ``study.export.textures.texture_record`` on the default experiment.
+``study.config.files`` and ``study.config.image_maths``, the columns of each table from its
+committed Parquet file under ``docs/results``, the top-level entries of a tradeoff's
+``summary.json`` from the committed one, and ``textures.json`` from
+``study.export.textures.texture_record`` on the default experiment.
 A column or entry without a description here fails the build (describe it below)."""
 
 from __future__ import annotations
@@ -440,7 +441,7 @@ def _textures_json() -> list[str]:
 
 def file_formats_page() -> str:
     """The Markdown of ``docs/file-formats.md``."""
-    from study.config import files
+    from study.config import files, image_maths
 
     lines = [HEADER]
     lines.append(
@@ -448,8 +449,8 @@ def file_formats_page() -> str:
             image_ext=", ".join(e.lstrip(".").upper() for e in files.IMAGE_EXT),
             mesh_ext=", ".join(e.lstrip(".").upper() for e in files.MESH_EXT),
             max_texels=files.MAX_TEXELS,
-            sun_threshold=files.SUN_THRESHOLD,
-            sun_contrast=files.SUN_CONTRAST,
+            sun_threshold=image_maths.SUN_THRESHOLD,
+            sun_contrast=image_maths.SUN_CONTRAST,
             input_table="\n".join(
                 [
                     "| file | key | accepted | channels and values | orientation |",

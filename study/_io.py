@@ -6,6 +6,10 @@ Images are float32 ``(height, width, 3)`` linear RGB, row 0 at the top. Extra la
 Provenance is a JSON dictionary stored as the string attribute ``study_provenance``. Writes are
 atomic: the file is written under a temporary name in the same folder and renamed, so a killed
 process never leaves a truncated file under the final name.
+
+Paths a result file records are relative to the repository where they lie inside it
+(:func:`repo_relative`), so that a committed result names no folder of the machine that made
+it; :func:`repo_path` reads such a path back.
 """
 
 from __future__ import annotations
@@ -24,6 +28,24 @@ import numpy as np
 import OpenEXR
 
 PROVENANCE_KEY = "study_provenance"
+# the repository: the folder that holds the ``study`` package
+REPO_ROOT = Path(__file__).resolve().parents[1]
+
+
+def repo_relative(path) -> str:
+    """``path`` as a result file records it: relative to the repository (``experiments/a.toml``,
+    ``/`` separated) when it lies inside it, else as given. A relative ``path`` is read against
+    the working directory."""
+    try:
+        return Path(os.path.realpath(path)).relative_to(REPO_ROOT).as_posix()
+    except ValueError:
+        return str(path)
+
+
+def repo_path(path) -> Path:
+    """A path :func:`repo_relative` recorded, to open: a relative one is the repository's."""
+    p = Path(path)
+    return p if p.is_absolute() else REPO_ROOT / p
 
 
 class DiskFullError(OSError):

@@ -1,4 +1,4 @@
-"""Animated experiments (``study.scene.frames``): the two sides' waves move together, the frames
+"""Animated experiments (``study.scene.animation``): the two sides' waves move together, the frames
 share what does not move and are cached apart, and the temporal error measures what it says."""
 
 from __future__ import annotations
@@ -19,7 +19,7 @@ ANIMATED = {"animation.frames": 3, "animation.time_step": 0.2}
 def animated(mi):
     """A small animated experiment, its frames and their shader inputs built through one
     ``FrameShared`` (as ``study calibrate`` builds them), plus what it built once."""
-    from study.scene.frames import FrameShared, frames_of
+    from study.scene.animation import FrameShared, frames_of
     from study.scene.shader_inputs import build_shader_inputs
 
     exp = small_experiment(**ANIMATED)
@@ -86,7 +86,7 @@ def test_port_normal_map_at_frame_k_matches_the_reference_surface_at_frame_k(mi,
 
 def test_moved_scene_renders_as_one_built_for_the_frame(mi):
     """``set_waves`` on frame 0's scene renders frame 2 bit for bit as a scene built for it."""
-    from study.scene.frames import frame_experiment
+    from study.scene.animation import frame_experiment
     from study.scene.mitsuba_scene import build_scene, set_waves
 
     exp = small_experiment(**ANIMATED)
@@ -127,7 +127,7 @@ def test_frames_are_still_experiments_with_their_own_keys():
     """Frame k's offsets follow wave_i(k) = offsets_i + k dt v_i; frame 0 is the experiment as a
     still (same reference and inputs keys); each frame has its own keys; the offsets-free key is
     shared by the frames only."""
-    from study.scene.frames import frame_experiment, frame_offsets, offsets_free_key
+    from study.scene.animation import frame_experiment, frame_offsets, offsets_free_key
 
     exp = small_experiment(**ANIMATED)
     still = small_experiment()
@@ -234,7 +234,7 @@ def test_calibrate_on_an_animated_experiment_end_to_end(tmp_path, capsys):
 
     from helpers import REPO
     from study.cli import main
-    from study.scene.frames import frame_offsets
+    from study.scene.animation import frame_offsets
 
     exp = str(REPO / "experiments" / "default.toml")
     sets = [a for kv in TINY_ANIMATED for a in ("--set", kv)]

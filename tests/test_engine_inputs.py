@@ -202,14 +202,14 @@ def test_animated_frames_carry_their_clock(monkeypatch):
     """``load_frames`` gives frame ``k`` the ``time`` ``k * animation.time_step`` (the renders
     and the inputs' builds stubbed: only the clock is under test)."""
     from study.config.experiment import load_experiment
-    from study.scene import frame_data
+    from study.scene import animation_data
 
     exp = load_experiment(Path(__file__).parent.parent / "experiments" / "animated.toml")
     still = synthetic_inputs(8, 6)
-    monkeypatch.setattr(frame_data, "load_or_render", lambda *a, **k: None)
-    monkeypatch.setattr(frame_data, "load_or_build_shader_inputs", lambda *a, **k: still)
-    monkeypatch.setattr(frame_data, "inputs_for_shader", lambda e, i, *a, **k: i)
-    got = frame_data.load_frames(exp, "llvm_ad_rgb")
+    monkeypatch.setattr(animation_data, "load_or_render", lambda *a, **k: None)
+    monkeypatch.setattr(animation_data, "load_or_build_shader_inputs", lambda *a, **k: still)
+    monkeypatch.setattr(animation_data, "inputs_for_shader", lambda e, i, *a, **k: i)
+    got = animation_data.load_frames(exp, "llvm_ad_rgb")
     dt = float(exp.animation.time_step)
     assert [i.time for i in got["inputs"]] == [k * dt for k in range(int(exp.animation.frames))]
     assert got["inputs"][3].time > 0 and still.time == 0.0

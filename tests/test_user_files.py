@@ -17,6 +17,8 @@ from helpers import REPO, experiments
 from helpers.experiments import replaced
 from study.config.experiment import ExperimentError, load_experiment, validate
 from study.config import files as uf
+from study.config.floor import albedo_over_pool
+from study.config.image_maths import latlong_lookup
 
 FILES = REPO / "experiments" / "files"
 USER = REPO / "experiments" / "user_files.toml"
@@ -175,7 +177,7 @@ def test_albedo_png_is_decoded_from_srgb(tmp_path):
     img[...] = (128, 0, 255)
     Image.fromarray(img).save(tmp_path / "a.png")
     exp = _exp(**{"floor.albedo_image": f'"{tmp_path / "a.png"}"'})
-    a = uf.albedo_over_pool(exp.values)
+    a = albedo_over_pool(exp.values)
     np.testing.assert_allclose(a[0, 0], [0.2158605, 0.0, 1.0], atol=1e-5)
 
 
@@ -222,7 +224,7 @@ def test_shader_cube_map_is_the_map_without_its_sun(tmp_path):
     assert ref.max() > 8.0 and cube.max() < 2.0  # the sun stays in the reference only
     d = cubemap_directions(16) * np.array([1.0, -1.0, 1.0])  # stored y-flipped
     no_sun = _sky_with_sun(128, 40.0, 250.0, 4.0, (0.0, 0.0, 0.0))
-    want = uf.latlong_lookup(no_sun.astype(np.float64), d)
+    want = latlong_lookup(no_sun.astype(np.float64), d)
     sun = np.array(
         [
             math.cos(math.radians(40)) * math.cos(math.radians(250)),

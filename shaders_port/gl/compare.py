@@ -20,10 +20,9 @@ flip:
 
 Anything else over the threshold is ``unexplained``.
 
-Measured on tests/synthetic.py inputs (llvmpipe, Mesa, float32 textures): llvmpipe filters
-float textures with float weights (no 8-bit sub-texel quantisation); the port and GL differ
-by at most ~3e-5, from float32 rounding of the rasteriser's interpolation and of the
-texture-coordinate arithmetic.
+On llvmpipe (Mesa, float32 textures) float textures are filtered with float weights (no 8-bit
+sub-texel quantisation), so what remains between the port and GL is float32 rounding of the
+rasteriser's interpolation and of the texture-coordinate arithmetic.
 """
 
 from __future__ import annotations

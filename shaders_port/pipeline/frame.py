@@ -27,9 +27,8 @@ from .raster import prepare
 from .texture import backend_types
 
 # Plain renders and 'replay' Jacobians replay recorded kernels instead of re-tracing the shader
-# (``dr.freeze``): on the default experiment a fit is 1.25x faster, renders 3.1x, Jacobians of
-# two frames taken in turn (a joint fit's pattern) 2.6x (benchmarks/bench_freeze.py), the
-# default tradeoff 1.23x. ``STUDY_FREEZE=0`` (or this flag) traces every call.
+# (``dr.freeze``; benchmarks/bench_freeze.py measures the gain). ``STUDY_FREEZE=0`` (or this
+# flag) traces every call.
 USE_FROZEN = os.environ.get("STUDY_FREEZE", "1") != "0"
 
 # One frozen function per configuration and uploaded frame (a fit's scene), at most

@@ -19,7 +19,7 @@ linear RGB.
   to the eye distance ``2 n f / (f + n - (2 d - 1)(f - n))``;
 * ``dudv_map``: the waves' DuDv map, derived from the study's normal map (:func:`dudv_map`);
 * ``time``: ``ShaderInputs.time`` seconds (``k * animation.time_step`` on frame ``k`` of an
-  animated experiment, ``study.scene.frame_data``; 0 for a still frame);
+  animated experiment, ``study.scene.animation_data``; 0 for a still frame);
 * ``sun_direction``: unit vector from the centre of the water quad towards ``lightpos``;
   ``sun_color``: ``lightcolor`` (the highlight's linear RGB scale);
 * ``user_normal_map``: the image file the declaration names (``// @study normal_map FILE``):

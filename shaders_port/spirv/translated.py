@@ -1,21 +1,36 @@
-"""Any GLSL water fragment shader rendered and differentiated through SPIR-V, without a port.
+"""A GLSL water fragment shader executed through SPIR-V on Dr.Jit types: rendered, and
+differentiated in its constants, without a hand port.
 
-The shader's core GLSL (``#version 330`` or later, linked with the study's ``water.vert``) is
-compiled by glslang to SPIR-V and executed on Dr.Jit types by ``spirv.execute`` on the same
-per-pixel inputs the hand ports get (``pipeline.raster.prepare``): the result is a
-:class:`~shaders_port.pipeline.frame.ShaderOutput` like a port's, and :func:`render_with_jacobian`
-runs the ports' forward-mode passes (``pipeline.frame.jacobian_passes``).
+A :class:`ShaderSpec` names the shader: its source in any dialect of ``spirv.dialects``
+(compiled to SPIR-V by glslang there, ``#include`` files searched in its ``include_paths``),
+its preprocessor names, the constants to set or differentiate and the bindings of its own
+names. :func:`render` and :func:`render_with_jacobian` execute it (``spirv.execute``) on the
+per-pixel inputs the hand ports get (``pipeline.raster.prepare``, the varyings the study's
+``water.vert`` writes): the result is a :class:`~shaders_port.pipeline.frame.ShaderOutput`
+like a port's, the Jacobian comes from the ports' forward-mode passes
+(``pipeline.frame.jacobian_passes``), and both are replayed from a recording
+(``pipeline.frame.call_frozen``). Its users: :class:`Translated`, a shipped variant whose
+core GLSL file (:func:`builtin_spec`) runs in place of its hand port; a user's shader
+(``spirv.user_shader``); a user's vertex shader's frame (``spirv.user_vertex``, which shades
+its lanes with :func:`shade_lanes`).
 
-Tunable constants. Each constant to set or differentiate is a declaration of the shader,
-``const float NAME = 7.5;`` or ``uniform float NAME = 7.5;`` (``float``, ``int``, ``vec3``,
-``vec4``), named in :class:`ShaderSpec` ``constants``; before compiling, each becomes a plain
-``uniform`` (its value no longer folded into the code), and the executor binds it to the
-value of the run. The study's own shaders declare the constants of ``CONSTANT_SPECS`` (their
-GLSL names); a user's shader declares its own (``study.fit.user_shader``).
+Constants. Each is a one-line declaration ``const|uniform [precision] TYPE NAME = VALUE;``
+(``float``, ``int``, ``vec2``, ``vec3``, ``vec4``) made a plain ``uniform`` before compiling,
+line for line (:meth:`ShaderSpec.prepared_source`), so that the executor binds it to the
+run's value; a uniform without initializer (one an engine sets), or one an ``#include``
+declares, is bound as it is. The shipped shaders declare the constants of ``CONSTANT_SPECS``
+(their GLSL names); a user's shader declares its own (``spirv.user_shader``).
 
 Bindings. The shader's inputs, uniforms and samplers are bound by name: the study's GLSL
-names (:data:`STUDY_INPUTS`, those of the shipped core shaders) bind themselves; a
-``ShaderSpec.bindings`` entry binds another name of the shader to one of them.
+names (:data:`STUDY_INPUTS`: those of the shipped core shaders and the engines' names of
+``spirv.engine_inputs``, in a Z-up world with the spec's ``engine`` option ``up = "z"``) bind
+themselves; a ``ShaderSpec.bindings`` entry binds another name of the shader to one of them.
+The colour is the shader's one ``vec4`` output (element 0 of an output array).
+
+Loops. A loop whose trip count differs between lanes runs as ``spirv.loops`` says (its
+passes checked against their bound); for the Jacobian it is replayed on detached values with
+the derivatives attached after it when its differentiable state is affine, and otherwise
+unrolled its largest trip count over the frame, found by a plain run first.
 
 Diagnostics: ``fetches`` and ``iterations`` per pixel, counted by the executor from the
 translated code (texture samples executed; loop bodies entered), ``nonfinite``, and

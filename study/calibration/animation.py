@@ -10,7 +10,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .._io import write_json
+from .._io import repo_relative, write_json
 from .._metrics import temporal_errors
 from .._progress import log as _log
 from ..fit.joint import JointModel
@@ -112,7 +112,7 @@ def animation_record(exp, frames, step: dict, offsets: dict, figures: dict) -> d
                 "spp": f.ref.spp,
                 "noise": f.ref.noise,
                 "key": f.ref.provenance["key"],
-                "path": str(f.ref.path),
+                "path": repo_relative(f.ref.path),
             }
             for f in frames
         ],  # fmt: skip

@@ -7,7 +7,7 @@ of frames:
 * a still experiment is a list of one;
 * an experiment with ``camera.views`` is one frame per view (``study.scene.views``);
 * an animated experiment (``animation.frames`` > 1) is one frame per time step, each with its
-  own reference and wave offsets (``study.scene.frame_data``);
+  own reference and wave offsets (``study.scene.animation_data``);
 * several experiments are one frame (or one per view) each.
 
 :func:`load_frames` loads any of these; :class:`Frames` says which it is (``kind``).
@@ -25,12 +25,12 @@ from .._progress import log as _log
 from ..config.experiment import Experiment, load_experiment
 from ..fit.calibrate import scene_frozen
 from ..scene.baseline_inputs import inputs_for_shader
-from ..scene.frame_data import load_frames as load_animation
-from ..scene.frames import is_animated, refuse_animated
+from ..scene.animation_data import load_frames as load_animation
+from ..scene.animation import is_animated, refuse_animated
 from ..scene.reference import Reference, load_or_render
 from ..scene.shader_inputs import load_or_build_shader_inputs
 from ..scene.user_scene import check_scene
-from ..scene.view import check_water_in_view
+from ..scene.water_in_view import check_water_in_view
 from ..scene.views import has_views, view_experiments, view_inputs
 
 
@@ -64,7 +64,7 @@ class Frames:
     views), 'animated' (one experiment's time steps) or 'joint' (several experiments);
     ``variant`` (the Mitsuba variant, backend initialised), ``frames``, ``timings`` (stage ->
     seconds) and, for an animation, ``animation`` (what its frames share:
-    ``study.scene.frame_data.load_frames``'s ``shared`` and ``base``)."""
+    ``study.scene.animation_data.load_frames``'s ``shared`` and ``base``)."""
 
     kind: str
     variant: str

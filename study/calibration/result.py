@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from .._io import repo_relative
 from .._metrics import information_criteria
 from ..fit.model import constants_json
 from ..export.result import CalibrationResult
@@ -41,7 +42,7 @@ def reference_record(ref) -> dict:
         **{k: p.get(k) for k in ("spp_asked", "spp_per_pass", "n_seeds")},
         "sampler": p.get("sampler"),
         "noise": ref.noise,
-        "path": str(ref.path),
+        "path": repo_relative(ref.path),
         "key": p["key"],
     }
 
@@ -86,7 +87,7 @@ def build_result(frames, shader, fit, scores: dict, timings: dict, export, solve
         }
     if kind in ("views", "joint"):
         weights = JointModel(fit.models).weights
-        result.experiments = [f.path for f in frames]
+        result.experiments = [repo_relative(f.path) for f in frames]
         result.scenes = [f.name for f in frames]
         result.weights = {f.name: float(w) for f, w in zip(frames, weights)}
     return result

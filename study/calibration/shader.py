@@ -16,7 +16,7 @@ from pathlib import Path
 from shaders_port import Constants
 from shaders_port.variants import get_variant
 
-from .._io import write_text_atomic
+from .._io import repo_relative, write_text_atomic
 from .._progress import log as _log
 from ..config.experiment import fit_parameters
 from ..config.user_shader import is_user_shader, load_user_shader
@@ -270,7 +270,7 @@ class Shader:
             return {}
         user = self.user
         extra = {
-            "shader_file": str(exp.fit.shader),
+            "shader_file": repo_relative(exp.fit.shader),
             "shader_sha256": hashlib.sha256(text.encode("utf-8")).hexdigest(),
             "declaration": {
                 "constants": {n: user.declared_range(n) for n in user.constants},
@@ -279,10 +279,11 @@ class Shader:
                 **{k: v for k, v in user.engine.items() if v is not None},
             },
             "defines": list(user.defines),
-            "include_paths": list(user.include_paths[1:]),  # after the file's own folder
+            # after the file's own folder
+            "include_paths": [repo_relative(p) for p in user.include_paths[1:]],
         }
         if user.vertex is not None:  # the pair: its vertex shader and the grid it ran on
-            extra["vertex_file"] = str(exp.fit.vertex)
+            extra["vertex_file"] = repo_relative(exp.fit.vertex)
             extra["vertex_grid"] = list(user.vertex.cells)
             extra["vertex_defines"] = list(user.vertex.shader.defines)
         return extra

@@ -9,7 +9,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .._io import write_exr, write_json, write_png
+from .._io import repo_relative, write_exr, write_json, write_png
 from .._progress import log as _log
 from ..calibration.frames import Frame, load_scene_data, prepare
 from ..calibration.scoring import Scorer
@@ -83,7 +83,7 @@ def run_preview(experiment, out, overrides=None, variant=None, cache=None) -> di
         "constants": constants_json(constants),
         "error": err,
         "water_pixels": int(model.mask.sum()),
-        "reference": {"spp": ref.spp, "noise": ref.noise, "path": str(ref.path)},
+        "reference": {"spp": ref.spp, "noise": ref.noise, "path": repo_relative(ref.path)},
         "diagnostics": diag.summary(model.mask),
         "timings": timings,
         "sun": sun_summary(exp),

@@ -7,7 +7,7 @@ from .._progress import log as _log
 from ..export.shaders import load_constants_json
 from ..studies import failures, stability, tradeoff
 from ..config.experiment import load_experiment
-from ..scene.frames import refuse_animated
+from ..scene.animation import refuse_animated
 
 
 def run_tradeoff(

@@ -10,7 +10,7 @@ from .._progress import log as _log
 from ..config.experiment import ExperimentError
 from ..export.viewer import calibration_viewer
 from ..scene.baseline_inputs import inputs_for_shader
-from ..scene.frames import frame_experiment
+from ..scene.animation import frame_experiment
 from ..scene.reference import reference_key
 from ..scene.shader_inputs import load_or_build_shader_inputs
 from ..calibration.frames import prepare

@@ -24,9 +24,8 @@ from shaders_port.variants import get_variant
 from .._backend import active_variant, drjit_backend
 from .._progress import log
 from . import files as user_files
-from .errors import ExperimentError
-from .files import clip_text, heightmap_floor
-from .floor import floor_height
+from .errors import ExperimentError, clip_text
+from .floor import floor_height, heightmap_floor
 from .resolution import AUTO, PRESETS, auto_fit_resolution
 from .user_shader import check_user_shader, is_user_shader, shader_waves_digest
 from .schema import (

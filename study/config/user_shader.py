@@ -12,8 +12,7 @@ from shaders_port.spirv.user_shader import UserShader
 from shaders_port.spirv.user_vertex import UserVertex
 
 from .._progress import log
-from .errors import ExperimentError
-from .files import clip_text
+from .errors import ExperimentError, clip_text
 
 
 def _clip(v, limit: int = 80) -> str:

@@ -34,7 +34,7 @@ from shaders_port.spirv.user_shader import UserShader
 from shaders_port.spirv.user_vertex import DEFAULT_CELLS, UserVertex
 from shaders_port.variants import SHIPPED, VARIANTS, get_variant
 
-from .._io import disk_full
+from .._io import disk_full, repo_path
 from .result import CalibrationResult
 from .targets import resolve_targets, translate_targets
 from .textures import expects_lines
@@ -131,10 +131,10 @@ def _study_constants(path, table: dict) -> Constants:
 
 def _user_shader(path, data: dict):
     """The ``UserShader`` of a user shader's calibration ``data`` (its ``shader_file`` and
-    ``declaration``). A file changed since the calibration (its SHA-256 differs from
-    ``shader_sha256``) is read as it is now, with a note on stderr: the fitted values replace
-    its constants' initializers."""
-    file = Path(data["shader_file"])
+    ``declaration``; a relative path is the repository's, ``study._io.repo_path``). A file
+    changed since the calibration (its SHA-256 differs from ``shader_sha256``) is read as it is
+    now, with a note on stderr: the fitted values replace its constants' initializers."""
+    file = repo_path(data["shader_file"])
     if not file.is_file():
         raise ValueError(
             f"{path}: the calibrated shader {file} is gone; put it back at that path or edit "
@@ -142,7 +142,7 @@ def _user_shader(path, data: dict):
         )
     vertex = None
     if data.get("vertex_file"):  # a pair: the user's own vertex shader
-        vfile = Path(data["vertex_file"])
+        vfile = repo_path(data["vertex_file"])
         if not vfile.is_file():
             raise ValueError(
                 f"{path}: the calibrated vertex shader {vfile} is gone; put it back at that "
@@ -152,14 +152,14 @@ def _user_shader(path, data: dict):
             vfile,
             data.get("vertex_grid") or DEFAULT_CELLS,
             data.get("vertex_defines", data.get("defines", ())),
-            data.get("include_paths", ()),
+            tuple(str(repo_path(p)) for p in data.get("include_paths", ())),
             vfile.resolve() == file.resolve(),  # one file for both stages
         )
     shader = UserShader.from_file(
         file,
         data.get("declaration"),
         data.get("defines", ()),
-        data.get("include_paths", ()),
+        tuple(str(repo_path(p)) for p in data.get("include_paths", ())),
         vertex=vertex,
     )
     sha = hashlib.sha256(shader.source.encode("utf-8")).hexdigest()

@@ -2,9 +2,9 @@
 
 The bump scale (``BumptexMult``) tilts the normals that the raymarch follows, and the step at
 which each ray crosses the floor jumps as it changes: the loss along it is piecewise, with
-jumps, and can have several basins of nearly equal depth (on the default scene at 0.959 and
-0.98, on grazing at 0.85 and 0.93). A local solver stops in one of them, and the Gauss-Newton
-standard error, which reads the local curvature, says nothing of the others.
+jumps, and can have several basins of nearly equal depth. A local solver stops in one of them,
+and the Gauss-Newton standard error, which reads the local curvature, says nothing of the
+others.
 
 :func:`scan` evaluates the least-squares loss ``0.5 ||r||^2`` on a grid of ``POINTS`` values
 within ``+- SPAN`` (relative) of the fitted value, the other constants held at the solution,
@@ -24,11 +24,8 @@ standard error). Where the texture has two independent halves (``reference.textu
 "lighting"``), a lower basin must also be lower in their *decorrelated* loss
 (:func:`texture_delta`; ``study.fit.decorrelated``), whose expectation is the noise-free
 texture's loss: the texture's noise, or the bias of its denoiser, can make a basin lower in
-the texture's own loss (on afternoon_steps the denoised lighting put a basin at 0.76 below the
-fit's 0.82 by 4-5 noise SD on two seeds of five, where the halves' decorrelated loss put it
-higher by 0.05-0.08 and the clean texture's fits all land at 0.825). Such a basin is reported,
-not refitted. One scan costs ``POINTS`` renders at the fit resolution (0.4-0.9 s at
-128 x 128 on 2 cores).
+the texture's own loss and not in theirs. Such a basin is reported, not refitted. One scan
+costs ``POINTS`` renders at the fit resolution.
 """
 
 from __future__ import annotations

@@ -27,9 +27,9 @@ back down off the water's underside, off the walls, between floor and walls) is 
   under-water camera and cosine-weighted directions at each (strata permuted per texel), up
   through one refraction to the sky without the sun, with the water's transmittance evaluated,
   not sampled; the radiance gains ``ior^2`` entering the water (Mitsuba's ``dielectric`` in
-  radiance mode). Per texel its noise is 6-9 % before denoising against the path tracer's 27-34 %
-  at 32 spp (30-40 times less variance for the time, ``benchmarks/bench_direct_light.py``), so the
-  denoiser that follows has little to take for noise.
+  radiance mode). Its noise per texel is far below the path tracer's for the time
+  (``benchmarks/bench_direct_light.py``), so the denoiser that follows has little to take for
+  noise.
 
 ``tests/test_direct_light.py`` checks each against Mitsuba's own estimate of the same term, texel
 block by texel block.
@@ -45,7 +45,7 @@ import numpy as np
 from .._backend import jit_input
 from ..config.experiment import Experiment
 from .denoise import denoise_gain, denoise_radiance
-from .frames import shared_part
+from .animation import shared_part
 from .sun_photons import N_BATCHES, shape_named, sun_direct, sun_walk
 from .user_scene import reference_sky_parts
 
@@ -154,7 +154,7 @@ def traced_direct(
     ``reference.sun_photons`` photons per texel in ``N_BATCHES`` batches, raw (halves: batches 0-1
     and 2-3). ``scene``: a Mitsuba scene of the experiment's geometry with the water (the
     lighting render's, :func:`.lighting.lighting_scene`); ``shared``: a
-    :class:`~.frames.FrameShared` of an animation's frames, which then share the skylight's
+    :class:`~.animation.FrameShared` of an animation's frames, which then share the skylight's
     sample patterns (:func:`sky_samples`)."""
     import mitsuba as mi
 

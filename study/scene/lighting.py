@@ -21,12 +21,11 @@ constants (``benchmarks/bench_new_scene.py``).
 Outside the pool (the walls' tops, used where the shader's rays leave the pool) the dry scene
 is rendered in colour at ``reference.wall_spp`` (at least ``ALBEDO_SPP``, multi-jittered; the
 same render gives the albedo): the walls are lit directly by the sky and the sun, with light
-sampling, and jittered strata average the albedo over each texel. 16 jittered samples instead of
-64 independent ones halve the render's time and move no fitted constant by more than 0.3
-standard errors on the default and grazing scenes. At 16 spp the texels still carry 5-8 % noise,
-which the shader sees where its rays leave the pool, and noise in its inputs biases the fit; so
-with ``reference.wall_denoise = "oidn"`` (the default) the dry colour is denoised (guided by its
-albedo, :func:`denoise_dry`) and its mean outside the pool matched to the raw mean there.
+sampling, and jittered strata average the albedo over each texel. At the default 16 spp the
+texels still carry noise, which the shader sees where its rays leave the pool, and noise in its
+inputs biases the fit; so with ``reference.wall_denoise = "oidn"`` (the default) the dry colour
+is denoised (guided by its albedo, :func:`denoise_dry`) and its mean outside the pool matched to
+the raw mean there.
 
 Noise is measured, not assumed: the lighting is the mean of ``N_SEEDS`` renders with
 independent seeds, and the RMS standard error of the resulting colour over the pool texels
@@ -40,8 +39,7 @@ A denoiser trades variance for a bias of its own (it blurs what it takes for noi
 first); ``benchmarks/bench_denoise.py`` measures what it does to the fitted constants. The
 standard error returned is then that of the *input* to the denoiser. Its bias in brightness is
 measured on every build (:func:`denoise_gain`: the composed texture's mean over the pool against
-the raw mean of the same samples, which is unbiased; Open Image Denoise brightens the default
-scene's texture by 1.2-1.8 % in red and 0.3-0.9 % in green and blue) and, with ``"oidn"``,
+the raw mean of the same samples, which is unbiased) and, with ``"oidn"``,
 divided out per colour channel over the pool: the path tracer's brightness, the denoiser's
 detail (``"oidn_unmatched"`` keeps the denoiser's brightness).
 
@@ -71,7 +69,7 @@ from ..config.errors import ExperimentError
 from ..config.experiment import Experiment
 from .denoise import denoise_gain, denoise_radiance
 from .direct_light import traced_direct
-from .frames import shared_part
+from .animation import shared_part
 from .mitsuba_scene import build_geometry, has_medium, sampler_spp, set_waves, water_medium
 from .topdown import (
     MAX_OPTICAL_DEPTH,
@@ -340,7 +338,7 @@ def lighting_colour(
     measured noise (``noise``: RMS standard error of the colour over the pool texels) and the
     settings used; and the colour's two independent halves (2, size, size, 3) float32, each from
     half of the lighting passes (the dry render outside the pool is shared by both).
-    ``shared``: a :class:`~.frames.FrameShared` of an animation's frames, which then share the
+    ``shared``: a :class:`~.animation.FrameShared` of an animation's frames, which then share the
     lighting scene (its water moved to each frame's waves), the dry render with its albedo and
     the lighting grid's world y."""
     wet = exp.reference.refraction_lighting == "underwater"

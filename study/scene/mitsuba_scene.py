@@ -32,8 +32,7 @@ import numpy as np
 from shaders_port import perspective_view_proj
 
 from ..config.experiment import Experiment
-from ..config.files import albedo_over_pool, heightmap_floor
-from ..config.floor import floor_height
+from ..config.floor import albedo_over_pool, floor_height, heightmap_floor
 from .geometry import Waves, sun_direction
 from .shader_waves import ShaderWaves, shader_waves
 from .user_scene import mesh_bounds, mesh_shape, reference_sky

@@ -6,14 +6,12 @@ from their spread (unbiased sample variance / K). The scalar noise figure is the
 standard error over the water pixels, in linear RGB.
 
 Each pass samples with ``reference.sampler`` (``multijitter`` by default: Kensler's correlated
-multi-jittered strata, about a third of the independent sampler's variance at equal samples on
-the default scene and a fifth on the sun's glitter); the passes' seeds are independent, so their
-spread estimates the standard error of the mean for any sampler. Mitsuba's ``stratified``
-sampler reduces the variance as much but draws consecutive dimensions from permutations with
-consecutive seeds, which correlates them (measured: -0.01 at 36 spp, -0.004 at 144; multijitter
-and independent: none), and that biases volumetric path tracing: deep, chromatic water came out
-about 1 % too bright in green and blue, which moved the fitted water colour on the murky scene
-by 2.5 standard errors (docs/fast-references.md).
+multi-jittered strata, less variance than the independent sampler's at equal samples); the
+passes' seeds are independent, so their spread estimates the standard error of the mean for
+any sampler. Mitsuba's ``stratified`` sampler reduces the variance as much but draws
+consecutive dimensions from permutations with consecutive seeds, which correlates them, and
+that biases volumetric path tracing: deep, chromatic water comes out too bright
+(docs/fast-references.md, "Multi-jittered sampling").
 
 Automatic spp renders a pilot (``K`` x ``PILOT_SPP``), estimates the per-sample variance on
 the water pixels and picks the smallest power of two whose predicted noise is below
@@ -267,7 +265,7 @@ def load_or_render(
     Safe with concurrent callers (a sweep's workers): a miss takes the entry's lock, looks again
     (another process may have rendered it meanwhile) and only then renders, so one key is
     rendered once. ``scene``: a callable returning the loaded scene of ``exp``, called on a miss
-    only (an animation's frames share one scene, :class:`~.frames.FrameShared`); ``keep_passes``:
+    only (an animation's frames share one scene, :class:`~.animation.FrameShared`); ``keep_passes``:
     a fresh render keeps its passes (``Reference.passes``, stored in the EXR as layers
     ``pass0..``; a cached file has them when it was rendered so)."""
     cache = (cache or cache_dir()) / "references"

@@ -40,7 +40,7 @@ from .._progress import Stages
 from ..config.errors import ExperimentError
 from ..config.experiment import Experiment
 from .cache import SCENE_VERSION, cache_dir, versions
-from .frames import shared_part
+from .animation import shared_part
 from .lighting import lighting_colour
 from .mitsuba_scene import camera_view_proj, study_waves
 from .topdown import (
@@ -164,7 +164,7 @@ def build_shader_inputs(
     experiment's). ``progress``: a ``study._progress.Stages`` that times and reports each stage
     (default: quiet). ``info``, if given, receives how the refraction texture was made (``texture``:
     method, settings and, for ``lighting``, its measured noise). ``shared``: a
-    :class:`~.frames.FrameShared` of an animation's frames: what does not depend on the wave
+    :class:`~.animation.FrameShared` of an animation's frames: what does not depend on the wave
     offsets (world y, the dry render and albedo, the lighting scene, the lighting grid's world y,
     the skylight's sample patterns, the reflection textures of a mesh, the normal map, the cube
     map, the LUT) is then built once for all frames."""

@@ -9,10 +9,9 @@ sampling): the sun's caustics arrive as fireflies. The same holds for the sun's 
 water's underside (total internal reflection holds 44 % of the floor's cosine-weighted light
 under water): at the texture's 16 spp a few texels catch a firefly, the denoiser takes them for
 noise, and the pool-wide brightness match spreads what it removed over the whole pool, so the
-light at the feet of the sunlit walls comes out 2-4 % too dark in red and the rest of the floor
-slightly too bright. Photons from the sun land where the light goes, every one: those bands come
-within about 1 % of a 4096-spp texture. The fitted constants hardly notice (README, Fast
-references), so the default stays ``"path"``.
+light at the feet of the sunlit walls comes out too dark in red and the rest of the floor
+slightly too bright. Photons from the sun land where the light goes, every one. The fitted
+constants hardly notice (docs/fast-references.md), so the default stays ``"path"``.
 
 **The photons.** Uniform in solid angle in the cone of the sun's disc (:func:`sun_cone`; their
 radiance from the very envmap the path tracer sees, Mitsuba's ``envmap.eval``), from points

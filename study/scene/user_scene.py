@@ -1,7 +1,8 @@
 """Scene content from the user's files for the reference and the shader inputs.
 
-The file formats and their validation are in :mod:`study.config.files`; this module
-turns them into what the Mitsuba scene and the shader inputs use:
+The file formats and their validation are in :mod:`study.config.files`, the maths on lat-long
+maps in :mod:`study.config.image_maths`; this module turns them into what the Mitsuba scene
+and the shader inputs use:
 
 * the sky: :func:`reference_sky` (the lat-long map the reference's ``envmap`` emits: the
   file's map, or the built-in gradient, with the explicit sun disc when there is one),
@@ -23,8 +24,9 @@ import math
 
 import numpy as np
 
-from ..config import files as uf
-from ..config.errors import ExperimentError
+from ..config.errors import ExperimentError, clip_text
+from ..config.files import albedo_image, envmap_file
+from ..config.image_maths import fill_region, find_sun, latlong_directions, latlong_lookup
 from ..config.experiment import Experiment
 from .geometry import cubemap_directions, envmap_image, sky_radiance, sun_direction
 from .shader_waves import wave_extremes
@@ -52,9 +54,9 @@ def _explicit_sun(exp: Experiment) -> dict:
 @functools.lru_cache(maxsize=4)
 def _file_sky(path: str, sha: str, rotation: float, scale: float) -> tuple[np.ndarray, dict | None]:
     """(map, sun found in it or None) of a sky file (cached on its contents and placement)."""
-    sky = uf.envmap_file({"sky.envmap": path, "sky.rotation": rotation, "sky.scale": scale})
+    sky = envmap_file({"sky.envmap": path, "sky.rotation": rotation, "sky.scale": scale})
     try:
-        sun = uf.find_sun(sky)
+        sun = find_sun(sky)
     except ValueError:
         sun = None
     return sky, sun
@@ -74,7 +76,7 @@ def reference_sky(exp: Experiment) -> np.ndarray:
     sky, _ = file_sky(exp)
     if exp.sun.source == "explicit" and max(exp.sun.radiance) > 0:
         s = _explicit_sun(exp)
-        d, _ = uf.latlong_directions(sky.shape[0])
+        d, _ = latlong_directions(sky.shape[0])
         inside = (d @ s["sun_dir"]) >= math.cos(math.radians(s["sun_radius_deg"]))
         sky = sky + inside[..., None] * np.asarray(s["sun_radiance"], np.float32)
     return np.asarray(sky, np.float32)
@@ -92,7 +94,7 @@ def reference_sky_parts(exp: Experiment) -> tuple[np.ndarray, np.ndarray]:
     else:
         sky, sun = file_sky(exp)
         if exp.sun.source == "envmap" and sun is not None:
-            sky = uf.fill_region(sky, sun["mask"])
+            sky = fill_region(sky, sun["mask"])
     sun = np.maximum(ref - np.asarray(sky, np.float32), 0.0).astype(np.float32)
     return (ref - sun).astype(np.float32), sun
 
@@ -106,8 +108,8 @@ def shader_sky(exp: Experiment, d: np.ndarray) -> np.ndarray:
         )
     sky, sun = file_sky(exp)
     if exp.sun.source == "envmap":
-        sky = uf.fill_region(sky, sun["mask"])
-    return uf.latlong_lookup(sky, d)
+        sky = fill_region(sky, sun["mask"])
+    return latlong_lookup(sky, d)
 
 
 def shader_cubemap(exp: Experiment, size: int) -> np.ndarray:
@@ -167,7 +169,7 @@ def mesh_shape(mi, exp: Experiment) -> dict:
     if has_file(exp, "mesh.texture"):
         tex = {
             "type": "bitmap",
-            "bitmap": mi.Bitmap(uf.albedo_image(exp.values, "mesh.texture")),
+            "bitmap": mi.Bitmap(albedo_image(exp.values, "mesh.texture")),
             "raw": True,
             "filter_type": "bilinear",
         }
@@ -191,7 +193,7 @@ def _load_mesh(mi, exp: Experiment):
         return mi.load_dict(d)
     except Exception as exc:  # Mitsuba raises RuntimeError with its own message
         raise ExperimentError(
-            f"mesh.file: Mitsuba cannot load it ({uf.clip_text(exc, 300)}) (file {exp.mesh.file})"
+            f"mesh.file: Mitsuba cannot load it ({clip_text(exc, 300)}) (file {exp.mesh.file})"
         ) from exc
 
 

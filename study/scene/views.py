@@ -22,7 +22,7 @@ from shaders_port import ShaderInputs
 
 from ..config.errors import ExperimentError
 from ..config.experiment import Experiment
-from .frames import is_animated
+from .animation import is_animated
 from .mitsuba_scene import camera_view_proj
 
 # the ShaderInputs fields a camera sets; every other field is the scene's

@@ -59,7 +59,7 @@ from ..fit.model import constants_from_experiment
 from ..report.panels import panels_figure, write_panels
 from ..report.tradeoff import pareto_figure, write_tradeoff_report
 from ..report.tradeoff_motion import motion_figure
-from ..scene.frames import is_animated
+from ..scene.animation import is_animated
 from ..scene.views import has_views, view_experiments, view_overrides
 from ..sweep import load_scene, run_sweep, scene_spec
 from .search import Search

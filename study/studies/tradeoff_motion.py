@@ -5,7 +5,7 @@ changes the recommendation.
 The search and the full points run on frame 0 (the still experiment: the constants are fitted
 there, as on any still scene). Then, for each point measured in full (the converged raymarch
 included), :func:`motion_job` renders its constants on every frame at ``resolution`` against
-that frame's reference (``study.scene.frame_data``: references and inputs cached per frame,
+that frame's reference (``study.scene.animation_data``: references and inputs cached per frame,
 built once by :func:`prepare_frames_job` before the points run) and measures:
 
 * FLIP per frame, their mean (``flip_frames_mean``) and spread (``flip_frames_spread``, the
@@ -39,8 +39,8 @@ from ..calibration.frames import Frame
 from ..calibration.scoring import Scorer
 from ..calibration.shader import Shader
 from ..config.experiment import load_experiment
-from ..scene.frame_data import load_frames
-from ..scene.frames import is_animated
+from ..scene.animation import is_animated
+from ..scene.animation_data import load_frames
 from ..sweep import run_sweep, scene_spec
 from .tradeoff_analysis import COST, config_label, constants_of, point_record
 from .tradeoff_jobs import scaled_schedule

@@ -32,7 +32,7 @@ from pathlib import Path
 
 from .._backend import collect_here
 from .scenes import prepare_scene, spec_text
-from .table import clip_error, flatten, job_key, read_table, write_table
+from .table import clip_error, flatten, job_columns, job_key, read_table, write_table
 
 
 def _qualname(fn) -> str:
@@ -203,7 +203,7 @@ def _submit_all(client, job_fn, todo, rows, old, table, variant, label) -> None:
                     row = f.result()
                 except Exception as exc:  # the worker died (e.g. a crash in native code)
                     row = {"key": key, "status": "error", "error": clip_error(exc), "seconds": None}
-                rows[key] = {**flatten({"job": job}), **row}
+                rows[key] = {**job_columns(job), **row}
                 progress.update(row["status"] == "ok")
                 if time.perf_counter() - last_write > 2.0:  # keep finished rows on disk
                     save()

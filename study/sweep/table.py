@@ -6,7 +6,10 @@ Rows are flat dicts. Nested job inputs and results are flattened with dotted nam
 (non-finite entries as nulls) or of strings stay lists (Parquet list columns); anything else
 that is not a scalar is stored as its JSON text. Every row carries ``key`` (the job's
 identity, :func:`job_key`), ``status`` (``ok`` or ``error``), ``error`` (the exception's type
-and message, clipped), ``seconds`` (wall time of the job in its worker) and ``worker``.
+and message, clipped), ``seconds`` (wall time of the job in its worker) and ``worker``. The
+experiment file of a job's scene (``job.scene.experiment``) is recorded relative to the
+repository where it lies inside it, so that a committed table names no folder of the machine
+that ran it.
 """
 
 from __future__ import annotations
@@ -18,7 +21,7 @@ import os
 import tempfile
 from pathlib import Path
 
-from .._io import disk_full
+from .._io import disk_full, repo_relative
 
 SCHEMA_VERSION = 1
 ERROR_CHARS = 2000
@@ -47,6 +50,15 @@ def flatten(d: dict, prefix: str = "") -> dict:
         else:
             out[name] = _cell(v)
     return out
+
+
+def job_columns(job: dict) -> dict:
+    """The ``job.*`` columns of a job's row: its inputs flattened, the experiment file of its
+    scene relative to the repository where it lies inside it (``study._io.repo_relative``)."""
+    cols = flatten({"job": job})
+    if isinstance(cols.get("job.scene.experiment"), str):
+        cols["job.scene.experiment"] = repo_relative(cols["job.scene.experiment"])
+    return cols
 
 
 def _cell(v):

@@ -34,7 +34,7 @@ from shaders_port import ShaderInputs
 from shaders_port.inputs import normal_matrix, perspective_view_proj
 from shaders_port.variants import get_variant
 
-from ..._io import read_exr
+from ..._io import read_exr, repo_path
 from ..shaders import read_calibration
 from ..targets import target_file
 from ..textures import with_exported_textures
@@ -284,7 +284,7 @@ def _images(out: Path, summary: dict) -> dict:
         files["fitted"] = out / "fitted_frame0.exr"
     refs = summary.get("animation", {}).get("references") or []
     if not files["reference"].is_file() and refs:
-        files["reference"] = Path(refs[0]["path"])
+        files["reference"] = repo_path(refs[0]["path"])
     return {k: read_exr(f)[0] for k, f in files.items() if f.is_file()}
 
 

@@ -1,4 +1,4 @@
-"""The data of every frame of an animated experiment (``study.scene.frames``): references and
+"""The data of every frame of an animated experiment (``study.scene.animation``): references and
 shader inputs per frame, cached per frame, what the frames share built once."""
 
 from __future__ import annotations
@@ -8,7 +8,7 @@ import dataclasses
 from .._progress import Stages
 from .._progress import log as _log
 from .baseline_inputs import inputs_for_shader
-from .frames import FrameShared, frame_time, frames_of
+from .animation import FrameShared, frame_time, frames_of
 from .mitsuba_scene import build_scene, set_waves
 from .reference import load_or_render
 from .shader_inputs import load_or_build_shader_inputs
@@ -17,7 +17,7 @@ from .shader_inputs import load_or_build_shader_inputs
 def load_frames(exp, variant: str, cache=None) -> dict:
     """Every frame of ``exp``: ``frames`` (the frame experiments), ``refs`` (``Reference``),
     ``inputs`` (``ShaderInputs`` with what ``fit.shader`` reads, ``time`` the frame's clock,
-    ``frames.frame_time``), ``base`` (the study's shader
+    ``animation.frame_time``), ``base`` (the study's shader
     inputs without a shader's extra buffers: ``baseline_inputs.inputs_for_shader`` adds them
     for another shader), ``timings`` (per frame and summed: ``reference_s``,
     ``inputs_s``) and ``shared`` (the ``FrameShared`` record: what was built once, how often it
