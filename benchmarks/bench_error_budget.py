@@ -149,7 +149,7 @@ def main(argv=None) -> None:
 
     from study._backend import init_backend
     from study._metrics import flip_map, rmse
-    from study.commands.steps import load_scene_data
+    from study.calibration.frames import load_scene_data
     from study.config.experiment import load_experiment
     from study.scene.geometry import sun_direction
 

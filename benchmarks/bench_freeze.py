@@ -33,7 +33,7 @@ def main() -> None:
 
     init_backend("llvm_ad_rgb")
     from shaders_port.pipeline import frame as _frame
-    from study.commands.steps import load_scene_data
+    from study.calibration.frames import load_scene_data
     from study.fit.calibrate import calibrate_experiment
     from study.fit.model import ShaderModel, constants_from_experiment
 

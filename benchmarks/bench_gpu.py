@@ -11,7 +11,7 @@ experiment (default ``experiments/default.toml``) with ``resolution`` the size a
 * ``inputs``: the shader inputs (top-down textures and lighting, ``load_or_build_shader_inputs``);
 * ``fit``: the model at ``fit.resolution`` and the solver (``study.commands.calibrate.fit_still``);
 * ``export``: the fitted shader, its engine targets and textures written
-  (``study.commands.steps.export_calibration``);
+  (``study.calibration.export.write_export``);
 * ``gl``: the exported shader run on OpenGL (llvmpipe, on the CPU) against the port on the
   backend, at the size (the same call).
 
@@ -120,8 +120,11 @@ def _one_pass(spec: dict, root: Path) -> dict:
     stage, peak memory, and what the fit found."""
     import drjit as dr
 
-    from study.commands.calibrate import fit_still
-    from study.commands.steps import export_calibration, load_scene_data, prepare
+    from study.calibration.export import fit_status, write_export
+    from study.calibration.fitting import FitOptions, fit_frames
+    from study.calibration.frames import Frame, load_scene_data, prepare
+    from study.calibration.shader import Shader
+    from study.fit.result import jsonable
 
     last = max(STAGES.index(s) for s in spec["stages"])
     seconds: dict = {}
@@ -138,8 +141,10 @@ def _one_pass(spec: dict, root: Path) -> dict:
         res = {"fit_resolution": exp.fit.resolution, "spp": ref.spp, "noise": ref.noise}
         if last >= STAGES.index("fit"):
             timings: dict = {}
-            model, cal = fit_still(exp, variant, ref, inputs, exp.fit.solver, timings)
-            seconds["fit"] = timings["model_s"] + timings["fit_s"]
+            shader, t1 = Shader.of(exp), time.perf_counter()
+            fit = fit_frames([Frame.of(exp, ref, inputs)], shader, variant, FitOptions.of(exp))
+            seconds["fit"] = time.perf_counter() - t1
+            model, cal = fit.models[0], fit.calibration
             res["water_pixels"] = int(model.mask.sum())
             res["params"] = {
                 n: {"fitted": p["fitted"], "rel_se": p.get("rel_std_error"), "status": p["status"]}
@@ -147,8 +152,11 @@ def _one_pass(spec: dict, root: Path) -> dict:
             }
             if last >= STAGES.index("export"):
                 try:
-                    (gl,), _, _ = export_calibration(exp, model, [inputs], cal, out, timings)
-                    res["gl_passed"] = gl.get("passed")
+                    status = fit_status(cal.parameters)
+                    export = write_export(shader, exp, [inputs], cal.fitted, status, out,
+                                          variant, timings)  # fmt: skip
+                    res["gl_passed"] = export.gl[0].get("passed")
+                    res["gl_check"] = jsonable(export.gl[0])  # its figures: why it failed
                 except RuntimeError as exc:  # no OpenGL / glslang here: the other stages stand
                     res["export_error"] = f"{type(exc).__name__}: {exc}"[:300]
                 seconds["export"] = timings.get("export_s")

@@ -169,7 +169,7 @@ def main(argv=None) -> None:
     a = ap.parse_args(argv)
 
     from study._backend import init_backend
-    from study.commands.steps import load_scene_data
+    from study.calibration.frames import load_scene_data
     from study._metrics import flip_map
     from study.config.experiment import load_experiment
 

@@ -37,7 +37,7 @@ def main() -> None:
     from study import init_backend, load_experiment
     from study._io import read_exr
     from study._metrics import errors
-    from study.commands.steps import load_scene_data
+    from study.calibration.frames import load_scene_data
     from study.fit.build import build_model
     from study.scene.reference import load_or_render
 

@@ -52,7 +52,7 @@ SHIPPED = ["default", "calm", "clear", "grazing", "murky", "seed_lut"]
 
 def run_one(path: Path, overrides: list[str]) -> dict:
     from study import init_backend, load_experiment
-    from study.commands.steps import load_scene_data
+    from study.calibration.frames import load_scene_data
     from study.fit.calibrate import calibrate_experiment
     from study.fit.model import ShaderModel
 

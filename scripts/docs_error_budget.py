@@ -89,7 +89,7 @@ def write_panels_from_runs(runs: list[Path], folder: Path = FOLDER) -> Path:
     from study import init_backend, load_experiment
     from study._io import read_exr
     from study._metrics import errors
-    from study.commands.steps import load_scene_data
+    from study.calibration.frames import load_scene_data
     from study.fit.model import ShaderModel
     from study.report.panels import write_panels
 

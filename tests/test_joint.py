@@ -104,16 +104,11 @@ def test_leave_one_out_and_universality():
         r = models[i].residual(c)
         return {"rmse": float(np.sqrt(np.mean(r**2)))}
 
-    rows = leave_one_out(
-        models,
-        Constants(),
-        REQUESTED,
-        "levenberg_marquardt",
-        100,
-        evaluate,
-        names=["a", "b"],
-        log=lambda m: None,
-    )
+    def fit_on(idx):
+        return joint_calibrate([models[j] for j in idx], Constants(), REQUESTED,
+                               "levenberg_marquardt", 100)  # fmt: skip
+
+    rows = leave_one_out(["a", "b"], fit_on, evaluate, Constants(), log=lambda m: None)
     assert [r["scene"] for r in rows] == ["a", "b"]
     for row, t in zip(rows, truths):
         assert row["own"]["rmse"] < row["others"]["rmse"] < row["seed"]["rmse"], row

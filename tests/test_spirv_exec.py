@@ -207,7 +207,7 @@ def test_default_experiment_fits_the_same_constants(tmp_path, monkeypatch):
     1e-3 relative."""
     from helpers import REPO
     from study._backend import init_backend
-    from study.commands.steps import load_scene_data
+    from study.calibration.frames import load_scene_data
     from study.fit.calibrate import calibrate_experiment
     from study.fit.model import ShaderModel, expand_parameters, get_value
     from study.config.experiment import load_experiment

@@ -6,6 +6,8 @@ import json
 import numpy as np
 import pytest
 
+from study.studies.tradeoff_export import point_row
+
 from helpers import REPO
 from study.studies.pareto import pareto_front, recommend
 
@@ -213,14 +215,34 @@ def test_tradeoff_cli_tiny(tmp_path):
     rec = summary["scenes"]["default"]["recommended"]
     assert rec["label"] in {r["label"] for r in summary["scenes"]["default"]["front"]}
     assert summary["exports"]["default"]["gl_check"]["passed"]
-    assert (tmp_path / "shaders" / "core" / "water_refraction.frag").is_file()
-    # the recommendation exported again from its constants.json: the same shader and textures
-    saved = json.loads((tmp_path / "shaders" / "constants.json").read_text())
+    recommended = tmp_path / summary["exports"]["default"]["folder"]
+    assert recommended == tmp_path / "recommended"
+    assert (recommended / "shaders" / "core" / "water_refraction.frag").is_file()
+    # the recommendation calibrated as study calibrate calibrates: every constant's status (the
+    # refitted ones marked so in constants.json and the binding sheets), a report and a viewer
+    saved = json.loads((recommended / "constants.json").read_text())
     assert saved["shader"] == rec["variant"] and saved["textures"]["fresnel_lut"]["law"]
+    statuses = {n: p["status"] for n, p in saved["parameters"].items()}
+    assert "fitted" in statuses.values() and statuses == summary["exports"]["default"]["parameters"]
+    sheet = (recommended / "shaders" / "hlsl" / "BINDINGS.md").read_text()
+    fitted = [n for n, st in statuses.items() if st == "fitted"]
+    assert all(n.split("[")[0] in sheet for n in fitted), (fitted, sheet[:400])
+    marked = [ln for ln in sheet.splitlines() if ln.startswith("|") and f"`{fitted[0][:5]}" in ln]
+    assert marked and all("not fitted" not in ln for ln in marked), marked
+    assert (recommended / "viewer" / "index.html").is_file() and (
+        recommended / "report.md"
+    ).is_file()
+    row = point_row(rows, "default", rec["label"])
+    for n, p in saved["parameters"].items():  # the same constants as the point's row
+        if p["fitted"] is not None and not isinstance(row.get(f"fitted.{p['name']}"), list):
+            assert p["fitted"] == pytest.approx(row[f"fitted.{p['name']}"], rel=1e-6), n
+    # the recommendation exported again from its constants.json: the same shader and textures
     again = tmp_path / "again"
-    assert main(["export", str(tmp_path / "shaders" / "constants.json"), "--out", str(again)]) == 0
+    assert main(["export", str(recommended / "constants.json"), "--out", str(again)]) == 0
     for rel in (f"core/{rec['variant']}.frag", "textures/fresnel_lut.exr"):
-        assert (again / "shaders" / rel).read_bytes() == (tmp_path / "shaders" / rel).read_bytes()
+        assert (again / "shaders" / rel).read_bytes() == (
+            recommended / "shaders" / rel
+        ).read_bytes()
     assert (tmp_path / "pareto.png").stat().st_size > 10_000
     assert "Recommended" in (tmp_path / "report.md").read_text()
     # the reference beside the seed shader (seed constants, fitted) and the recommendation

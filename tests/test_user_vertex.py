@@ -450,7 +450,7 @@ def test_a_target_the_pair_cannot_be_written_in_is_left_out_and_said(tmp_path):
     """A vertex shader writing gl_ClipDistance has no GLSL ES 3.00: the export leaves that
     target out with glslang's reason, the others are written, constants.json records why, the
     report says it and the viewer (which runs the GLSL ES export) names that reason."""
-    from study.commands.steps import _export_user
+    from study.calibration.shader import _export_user
     from study.export.viewer import ViewerUnsupported, calibration_viewer
     from study.report.calibration import engine_targets_section
 

@@ -27,7 +27,7 @@ from shaders_port.spirv.user_shader import UserShader
 from study import load_experiment, read_exr
 from study._backend import drjit_backend
 from study.cli import main
-from study.commands.steps import prepare
+from study.calibration.frames import prepare
 from study.config.user_shader import load_user_shader
 from study.export.gl_check import GL_MEAN, GL_P999
 from study.export.shaders import export_shaders, load_constants_json, user_shader_of

@@ -1,13 +1,11 @@
 """The study's commands, one function per ``study`` subcommand; each writes its artifacts into
-one folder. The steps they share are written once: ``setup`` (the experiment, backend, output
-folder, reference and shader inputs), ``outputs`` (export and GL check, scoring at full
-resolution, figures, ``constants.json`` and the report). ``calibrate`` is one command for a still
-scene, several scenes (``joint``) or moving water (``animated``), of the study's shaders or a
-user's own alike."""
+one folder. The work they share is the calibration pipeline of ``study.calibration`` (frames,
+shader handle, fit, score, export, result); ``calibrate`` is one command for a still scene, its
+views, several scenes or moving water, of the study's shaders or a user's own alike."""
 
 from .calibrate import run_calibrate
 from .export import run_export
-from .joint import run_generalise
+from .generalise import run_generalise
 from .render import run_preview, run_render
 from .sweeps import run_failures, run_stability, run_tradeoff
 from .viewer import run_viewer

@@ -5,15 +5,19 @@ from __future__ import annotations
 
 import time
 
-from .._backend import drjit_backend
+from pathlib import Path
+
+import numpy as np
+
 from .._io import write_exr, write_json, write_png
-from .._metrics import errors
 from .._progress import log as _log
-from ..fit.build import build_model
+from ..calibration.frames import Frame, load_scene_data, prepare
+from ..calibration.scoring import Scorer
+from ..calibration.shader import Shader
+from ..export.textures import lut_image
 from ..fit.model import constants_json
 from ..report.calibration import comparison_figure, diagnostics_figure
 from ..scene.user_scene import sun_summary
-from .steps import load_scene_data, prepare, save_shader_inputs
 
 
 def run_render(experiment, out, overrides=None, variant=None, cache=None) -> dict:
@@ -46,15 +50,15 @@ def run_preview(experiment, out, overrides=None, variant=None, cache=None) -> di
     setup_s = time.perf_counter() - t_start
     ref, inputs, timings = load_scene_data(exp, variant, cache)
     timings = {"setup_s": setup_s, **timings}
-    w, h = exp.resolution
     t0 = time.perf_counter()
-    model = build_model(exp, inputs, ref.image, backend=drjit_backend(variant), resolution=(w, h))
+    scorer = Scorer(Shader.of(exp), [Frame.of(exp, ref, inputs)], variant)
+    model = scorer.model(0)
     constants = model.start_constants(exp)
     timings["model_s"] = time.perf_counter() - t0
     t0 = time.perf_counter()
-    img, diag = model.render(constants)
+    score = scorer(0, constants)
+    img, diag, err = score.image, score.diagnostics, score.errors
     timings["port_s"] = time.perf_counter() - t0
-    err = errors(ref.image, img, model.mask)
     t0 = time.perf_counter()
     write_exr(out / "reference.exr", ref.image, ref.provenance)
     write_exr(
@@ -91,3 +95,19 @@ def run_preview(experiment, out, overrides=None, variant=None, cache=None) -> di
         f"pixels; wrote {out}"
     )
     return summary
+
+
+def save_shader_inputs(inputs, folder: Path) -> None:
+    """All shader inputs as one .npz plus EXRs of the image-like ones (GL row order)."""
+    folder.mkdir(parents=True, exist_ok=True)
+    inputs.save(folder / "shader_inputs.npz")
+    write_exr(folder / "refraction_texture.exr", inputs.refraction_texture)
+    write_exr(folder / "world_y.exr", np.repeat(inputs.world_y[..., None], 3, -1))
+    write_exr(folder / "normal_map.exr", inputs.normal_map)
+    write_exr(folder / "refl_world_y.exr", np.repeat(inputs.refl_world_y[..., None], 3, -1))
+    write_exr(folder / "refl_texture.exr", inputs.refl_texture)
+    f = inputs.cubemap.shape[1]
+    write_exr(
+        folder / "cubemap_cross.exr", inputs.cubemap.transpose(1, 0, 2, 3).reshape(f, 6 * f, 3)
+    )
+    write_exr(folder / "fresnel_lut.exr", lut_image(inputs.fresnel_lut))

@@ -6,7 +6,8 @@ from __future__ import annotations
 from .._progress import log as _log
 from ..export.shaders import load_constants_json
 from ..studies import failures, stability, tradeoff
-from .steps import refuse_animated_all
+from ..config.experiment import load_experiment
+from ..scene.frames import refuse_animated
 
 
 def run_tradeoff(
@@ -81,3 +82,9 @@ def run_failures(
         workers=workers,
         log=_log,
     )
+
+
+def refuse_animated_all(experiments, overrides, command: str) -> None:
+    """ExperimentError if any of ``experiments`` is animated (``command`` takes still frames)."""
+    for path in experiments:
+        refuse_animated(load_experiment(path, overrides), command)

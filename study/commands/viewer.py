@@ -8,25 +8,12 @@ from pathlib import Path
 
 from .._progress import log as _log
 from ..config.experiment import ExperimentError
-from ..export.viewer import ViewerUnsupported, calibration_viewer
+from ..export.viewer import calibration_viewer
 from ..scene.baseline_inputs import inputs_for_shader
 from ..scene.frames import frame_experiment
 from ..scene.reference import reference_key
 from ..scene.shader_inputs import load_or_build_shader_inputs
-from .steps import prepare
-
-
-def write_viewer(out: Path, exp, inputs) -> Path | None:
-    """``out/viewer/`` of the calibration just written in ``out`` (see
-    ``study.export.viewer.calibration_viewer``); a calibration without a GLSL ES export (the
-    SPIRV-Cross tools missing) gets none, with a note. Returns ``index.html`` or None."""
-    try:
-        page = calibration_viewer(out, exp, inputs)
-    except (FileNotFoundError, ViewerUnsupported) as exc:
-        _log(f"calibrate: no viewer: {exc}")
-        return None
-    _log(f"calibrate: wrote the WebGL 2 viewer {page} (open it in a browser)")
-    return page
+from ..calibration.frames import prepare
 
 
 def run_viewer(out, experiment, overrides=None, variant=None, cache=None) -> Path:

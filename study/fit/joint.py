@@ -129,43 +129,27 @@ def joint_calibrate(
 
 
 def leave_one_out(
-    models: list,
-    start: Constants,
-    requested: list[str],
-    solver: str,
-    max_steps: int,
+    names: list[str],
+    fit_on: Callable[[list[int]], Calibration],
     evaluate: Callable[[int, Constants], dict],
-    frozen_per_scene: list[dict] | None = None,
-    names: list[str] | None = None,
+    start: Constants,
     log: Callable = print,
 ) -> list[dict]:
-    """For each scene ``i``: fit on the others (joint) and on ``i`` alone, and score ``i`` with
-    ``evaluate(i, constants) -> {"rmse": .., "flip": ..}`` under the seed's (``start``), the
-    others' and its own constants. Returns one dict per scene with the three scores and both
-    calibrations (``own``: :class:`Calibration`, ``others``: :class:`Calibration` or None for
-    a single scene)."""
-    n = len(models)
-    names = list(names) if names else [f"scene{i}" for i in range(n)]
-    frozen = frozen_per_scene or [{} for _ in models]
+    """For each scene ``i`` of ``names``: fit on the others and on ``i`` alone
+    (``fit_on(indices) -> Calibration``: the same fit for both, one scene or several) and score
+    ``i`` with ``evaluate(i, constants) -> {"rmse": .., "flip": ..}`` under the seed's
+    (``start``), the others' and its own constants. Returns one dict per scene with the three
+    scores and both calibrations (``own``: :class:`Calibration`, ``others``:
+    :class:`Calibration` or None for a single scene)."""
+    n = len(names)
     rows = []
     for i in range(n):
         log(f"generalise: scene {names[i]} ({i + 1}/{n}): own fit")
-        own = calibrate_model(
-            models[i], start, requested, solver, max_steps, frozen_by_scene=frozen[i]
-        )
+        own = fit_on([i])
         others = None
         if n > 1:
-            idx = [j for j in range(n) if j != i]
             log(f"generalise: scene {names[i]}: fit on the other {n - 1} scenes")
-            others = joint_calibrate(
-                [models[j] for j in idx],
-                start,
-                requested,
-                solver,
-                max_steps,
-                [frozen[j] for j in idx],
-                [names[j] for j in idx],
-            )
+            others = fit_on([j for j in range(n) if j != i])
         rows.append(
             {
                 "scene": names[i],

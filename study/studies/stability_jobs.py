@@ -28,15 +28,15 @@ import time
 
 import numpy as np
 
-from .._backend import drjit_backend
-from .._metrics import errors
+from ..calibration.fitting import FitOptions, fit_frames, frame_models
+from ..calibration.frames import Frame
+from ..calibration.scoring import Scorer
+from ..calibration.shader import Shader
 from ..config.user_shader import is_user_shader, load_user_shader
-from ..fit.build import build_model
-from ..fit.calibrate import DISCRETE, calibrate_experiment, make_problem, scene_frozen
+from ..fit.calibrate import DISCRETE, make_problem, scene_frozen
 from ..fit.losses import transformed
 from ..fit.model import expand_parameters, get_value
 from ..fit.solvers import FTOL, FTOL_SE, FTOL_WINDOW, fit
-from ..scene.baseline_inputs import inputs_for_shader
 from ..sweep import load_scene
 
 # Start box per constant (physical units) and whether to sample it log-uniformly. Wide enough
@@ -113,21 +113,32 @@ def failure_class(converged: bool, message: str, iterations: int, max_steps: int
     return "error"
 
 
-def _model(job, resolution=None, loss: str = "linear"):
-    """(experiment, reference, the inputs with what ``fit.shader`` reads, its model seen
-    through the residual ``loss``) of the job's scene."""
+def _model(job, loss: str = "linear"):
+    """(the job's scene as a ``Frame`` with the inputs ``fit.shader`` reads, its ``Shader``,
+    its model at ``fit.resolution`` seen through the residual ``loss``)."""
     mv = job.get("mitsuba_variant", "llvm_ad_rgb")
     exp, ref, inputs = load_scene(job["scene"], mv)
-    inputs = inputs_for_shader(exp, inputs, exp.fit.shader, mv, log=lambda m: None)
-    model = build_model(exp, inputs, ref.image, backend=drjit_backend(mv), resolution=resolution)
-    return exp, ref, inputs, transformed(model, loss)
+    shader = Shader.of(exp)
+    frame = Frame.of(exp, ref, shader.with_inputs(exp, inputs, mv))
+    (model,) = frame_models([frame], shader, mv)
+    return frame, shader, transformed(model, loss)
+
+
+def _fit(job: dict, loss: str = "linear"):
+    """(frame, shader, model, ``Calibration``, seconds) of the job's scene fitted as ``study
+    calibrate`` fits it (``study.calibration.fitting``), through the residual ``loss``."""
+    frame, shader, model = _model(job, loss)
+    mv = job.get("mitsuba_variant", "llvm_ad_rgb")
+    t0 = time.perf_counter()
+    fit = fit_frames([frame], shader, mv, FitOptions.of(frame.exp), models=[model])
+    return frame, shader, model, fit.calibration, time.perf_counter() - t0
 
 
 def multistart_job(job: dict) -> dict:
     """One fit: ``job = {"scene", "solver", "start": {name: value}, "names", "max_steps",
     "lr" (Adam), "start_index"}``."""
-    exp, _, _, model = _model(job)
-    start = model.start_constants(exp)
+    frame, _, model = _model(job)
+    start = model.start_constants(frame.exp)
     problem = make_problem(model, start, job["names"], progress=False)
     kw = {"lr": job["lr"]} if job["solver"] == "adam" else {}
     t0 = time.perf_counter()
@@ -163,13 +174,11 @@ def multistart_job(job: dict) -> dict:
 def noise_job(job: dict) -> dict:
     """The calibration against the job's scene (its spp, texture spp and seed are in the scene's
     overrides): constants, statuses and relative standard errors."""
-    exp, ref, _, model = _model(job)
-    t0 = time.perf_counter()
-    cal = calibrate_experiment(model, exp)
-    names = model.parameter_names(exp.fit.parameters)
+    frame, _, model, cal, fit_s = _fit(job)
+    names = model.parameter_names(frame.exp.fit.parameters)
     return {
-        "fit_seconds": time.perf_counter() - t0,
-        "reference_noise": float(ref.noise or float("nan")),
+        "fit_seconds": fit_s,
+        "reference_noise": float(frame.ref.noise or float("nan")),
         "value": {n: get_value(cal.fitted, n) for n in names},
         "status": {n: cal.parameters[n]["status"] for n in names},
         "rel_se": {n: cal.parameters[n].get("rel_std_error") for n in names},
@@ -178,17 +187,12 @@ def noise_job(job: dict) -> dict:
 
 def loss_job(job: dict) -> dict:
     """The calibration with residual ``job["loss"]``, scored at full resolution."""
-    exp, ref, inputs, model = _model(job, loss=job["loss"])
-    t0 = time.perf_counter()
-    cal = calibrate_experiment(model, exp)
-    fit_s = time.perf_counter() - t0
-    _, _, _, full = _model(job, resolution=tuple(exp.resolution))
-    img, _ = full.render(cal.fitted)
-    err = errors(ref.image, img, full.base.mask)
-    names = model.parameter_names(exp.fit.parameters)
+    frame, shader, model, cal, fit_s = _fit(job, job["loss"])
+    score = Scorer(shader, [frame], job.get("mitsuba_variant", "llvm_ad_rgb"))(0, cal.fitted)
+    names = model.parameter_names(frame.exp.fit.parameters)
     return {
-        "flip": float(err["flip"]),
-        "rmse": float(err["rmse"]),
+        "flip": score.flip,
+        "rmse": score.rmse,
         "fit_seconds": fit_s,
         "iterations": cal.fit_summary.get("iterations", 0),
         "value": {n: get_value(cal.fitted, n) for n in names},

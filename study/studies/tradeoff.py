@@ -48,26 +48,24 @@ from shaders_port.space import configurations, name_of, parse_fix
 
 from .._backend import init_backend
 from .._io import write_json
-from .._metrics import errors
 from .._progress import log as _log
 from ..config.experiment import load_experiments
-from ..export.gl_check import gl_check, target_checks
-from ..export.shaders import export_shaders
-from ..export.textures import texture_record, with_exported_textures, write_textures
+from ..calibration.frames import Frame
+from ..calibration.scoring import Scorer
+from ..calibration.shader import Shader
 from ..fit.model import constants_from_experiment
-from ..fit.result import glsl_named
 from ..report.panels import panels_figure, write_panels
 from ..report.tradeoff import pareto_figure, write_tradeoff_report
 from ..report.tradeoff_motion import motion_figure
-from ..scene.baseline_inputs import inputs_for_shader
 from ..scene.frames import is_animated
 from ..scene.views import has_views, view_experiments, view_overrides
 from ..sweep import load_scene, run_sweep, scene_spec
 from .search import Search
-from .tradeoff_analysis import COSTS, analyse, config_label, constants_of, is_user, point_record
-from .tradeoff_jobs import SEED_SCHEDULE, anchor_job, job_model, point_job, schedules
+from .tradeoff_analysis import COSTS, analyse, constants_of, is_user
+from .tradeoff_export import export_points, point_row
+from .tradeoff_jobs import SEED_SCHEDULE, anchor_job, point_job, schedules
 from .tradeoff_motion import run_motion, still_overrides
-from .tradeoff_user import export_user, user_image, user_jobs, user_point_job
+from .tradeoff_user import user_jobs, user_point_job
 
 # [tradeoff] keys that choose the jobs, never what one job computes
 PLAN_KEYS = frozenset(
@@ -176,13 +174,10 @@ def run_tradeoff(
                 ours = rec and not is_user(rec["variant"])
                 summary["scenes"][name]["marginals"] = searcher.marginals_of(i, rec) if ours else []
     summary["experiments"] = [str(p) for p in experiments]
-    summary["exports"] = export_recommended(exps, specs, summary, rows, out, variant, log)
-    # after the study's exports, which rewrite ``shaders/``
-    summary["user_exports"] = export_user(exps, specs, rows, out, variant, log)
-    for name, mine in summary["user_exports"].items():
-        rec = summary["scenes"][name]["recommended"]
-        if rec and is_user(rec["variant"]):  # the recommendation is the user's file
-            summary["exports"][name] = {**mine, "folder": str(Path(mine["file"]).parent)}
+    init_backend(variant)
+    summary["exports"], summary["user_exports"] = export_points(
+        exps, specs, summary, rows, out, variant, log
+    )
     summary["images"], summary["panels"] = side_by_side(exps, specs, summary, rows, out, variant)
 
     pareto_figure(out / "pareto.png", recs, summary)
@@ -300,72 +295,6 @@ def _search_summary(mode: str, searcher, rows: list, fix: dict, seconds: float) 
     return out
 
 
-def export_recommended(
-    exps, specs, summary: dict, rows: list, out: Path, variant: str, log
-) -> dict:
-    """Export each scene's recommended constants (``shaders/`` or ``shaders/<name>/``) and check
-    the export on llvmpipe against the port."""
-
-    init_backend(variant)
-    result = {}
-    for exp, spec in zip(exps, specs):
-        rec = summary["scenes"][exp.name]["recommended"]
-        if rec is None:
-            log(f"tradeoff: no successful point on {exp.name}; nothing exported")
-            continue
-        if is_user(rec["variant"]):  # its file is written by ``tradeoff_user.export_user``
-            log(f"tradeoff: {exp.name}: the recommendation is your shader")
-            continue
-        row = next(
-            r
-            for r in rows
-            if r.get("job.experiment") == exp.name
-            and r["status"] == "ok"
-            and config_label(point_record(r)) == rec["label"]
-            and r.get("job.kind") != "converged"
-        )
-        constants = Constants.from_dict(constants_of(row))
-        folder = out / "shaders" if len(exps) == 1 else out / "shaders" / exp.name
-        exp_s, _, inputs = load_scene(spec, variant)
-        inputs = inputs_for_shader(exp_s, inputs, rec["variant"], variant, log=log)
-        record = texture_record(exp_s, inputs)
-        textures = (record, lambda d: write_textures(record, inputs, d))
-        export_shaders(constants, folder, [rec["variant"]], targets=None, textures=textures)
-        inputs = with_exported_textures(inputs, folder)  # the GL check runs what ships
-        gl = gl_check(rec["variant"], inputs, constants, folder)
-        # what `study export` takes back: the recommendation's shader and constants
-        write_json(
-            folder / "constants.json",
-            glsl_named({"shader": rec["variant"], "label": rec["label"], "experiment": exp.name,
-                        "source": "study tradeoff (the recommended point)",
-                        "constants": constants.to_dict(), "textures": record}),
-        )  # fmt: skip
-        result[exp.name] = {
-            "folder": str(folder.relative_to(out)),  # the report lives in ``out``
-            "variant": rec["variant"],
-            "label": rec["label"],
-            "constants": constants.to_dict(),
-            "gl_check": gl,
-            "engine_targets": target_checks(rec["variant"], inputs, constants, folder),
-        }
-        log(
-            f"tradeoff: {exp.name}: exported {rec['label']} to {folder} (GL check "
-            f"{'passed' if gl['passed'] else 'FAILED'})"
-        )
-    return result
-
-
-def _point_row(rows: list, scene: str, label: str) -> dict:
-    return next(
-        r
-        for r in rows
-        if r.get("job.experiment") == scene
-        and r["status"] == "ok"
-        and config_label(point_record(r)) == label
-        and r.get("job.kind") != "converged"
-    )
-
-
 def side_by_side(exps, specs, summary: dict, rows: list, out: Path, variant: str) -> tuple:
     """Per scene, ``images_<scene>.png``: the reference | the seed shader with the experiment's
     constants at the seed's schedule | the seed's configuration refitted | the best configuration
@@ -392,29 +321,23 @@ def side_by_side(exps, specs, summary: dict, rows: list, out: Path, variant: str
         ):
             r = f.get(key)
             if r and r["label"] not in [p[0].split(": ", 1)[-1] for p in panels]:
-                row = _point_row(rows, exp.name, r["label"])
+                row = point_row(rows, exp.name, r["label"])
                 panels.append((f"{title}: {r['label']}", r["variant"], row))
         for p in f.get("user") or []:
             if p["label"] not in [q[0].split(": ", 1)[-1] for q in panels]:
-                panels.append((f"your shader: {p['label']}", p["label"], _point_row(
+                panels.append((f"your shader: {p['label']}", p["label"], point_row(
                     rows, exp.name, p["label"])))  # fmt: skip
         images, errs, mask = {}, {}, None
-        for title, shader, what in panels:
-            if is_user(shader):
-                exp_s, ref, inputs = load_scene(spec, variant)
-                img, m = user_image(exp_s, inputs, constants_of(what))
-            else:
-                _, ref, _, model = job_model(
-                    {"scene": spec, "variant": shader, "mitsuba_variant": variant},
-                    resolution=tuple(exp.resolution),
-                )
-                c = what if isinstance(what, Constants) else Constants.from_dict(constants_of(what))
-                img, _ = model.render(c)
-                m = model.mask
+        exp_s, ref, inputs = load_scene(spec, variant)
+        for title, name, what in panels:
+            shader = Shader.of_table(exp_s, name)
+            frame = Frame.of(exp_s, ref, shader.with_inputs(exp_s, inputs, variant))
+            c = what if isinstance(what, Constants) else shader.constants(constants_of(what))
+            score = Scorer(shader, [frame], variant)(0, c)
             images.setdefault("reference", ref.image)
-            images[title] = img
-            errs[title] = errors(ref.image, img, m)
-            mask = m
+            images[title] = score.image
+            errs[title] = score.errors
+            mask = score.mask
         name = f"images_{exp.name}.png"
         # the panels kept as data (``images_<scene>.exr``/``.json``), the figure drawn from them
         write_panels(out / name, images, errs, mask, title=exp.name)

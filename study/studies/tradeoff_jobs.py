@@ -35,12 +35,11 @@ import numpy as np
 from shaders_port import Constants
 from shaders_port.variants import get_variant
 
-from .._backend import drjit_backend
-from .._metrics import errors, flip_map, information_criteria, rmse
-from ..config.experiment import fit_parameters
-from ..fit.calibrate import calibrate_experiment
-from ..fit.model import ShaderModel
-from ..scene.baseline_inputs import inputs_for_shader
+from .._metrics import flip_map, information_criteria, rmse
+from ..calibration.fitting import FitOptions, fit_frames
+from ..calibration.frames import Frame
+from ..calibration.scoring import Scorer
+from ..calibration.shader import Shader
 from ..sweep import load_scene
 
 SEED_SCHEDULE = {"steps_grazing": 10.0, "steps_steep": 3.0, "loop_cap": 40}
@@ -115,45 +114,46 @@ def schedules(exp, variant_name: str) -> list[dict]:
 # ---- worker side ------------------------------------------------------------------------------
 
 
-def _fit_names(exp, variant_name: str) -> list[str]:
-    """``fit.parameters`` the variant reads (unset, as beside a user's own shader: all it
-    reads), without its schedule constants (the sweep sets those), plus the variant's own
-    ``fit_parameters`` (e.g. the baseline's distortions)."""
-
-    v = get_variant(variant_name)
-    listed = exp.fit.parameters
-    if listed is None:  # an experiment of a user's own shader: the study's shaders fit their own
-        listed = fit_parameters(variant_name, None)
-    names = [n for n in v.fit_names(listed) if n not in v.schedule]
-    reads = set(v.reads())
-    return names + [n for n in v.fit_parameters if n in reads and n not in names]
-
-
-def job_model(job, resolution=None):
+def job_frame(job: dict):
+    """The shader of ``job["variant"]`` (``Shader``) and the job's scene as a ``Frame`` with
+    the inputs that shader reads (from the sweep's render cache)."""
     mv = job.get("mitsuba_variant", "llvm_ad_rgb")
     exp, ref, inputs = load_scene(job["scene"], mv)
-    inputs = inputs_for_shader(exp, inputs, job["variant"], mv, log=lambda m: None)
-    model = ShaderModel.from_experiment(
-        exp,
-        inputs,
-        ref.image,
-        shader=job["variant"],
-        backend=drjit_backend(job.get("mitsuba_variant", "llvm_ad_rgb")),
-        resolution=resolution,
-    )
-    return exp, ref, inputs, model
+    shader = Shader.of_table(exp, job["variant"])
+    return shader, Frame.of(exp, ref, shader.with_inputs(exp, inputs, mv))
+
+
+def job_options(exp, shader, resolution=None) -> FitOptions:
+    """The fit options of a point of ``shader``: the experiment's, over the constants a point
+    refits (``Shader.point_parameters``), at ``resolution`` (default ``fit.resolution``)."""
+    return FitOptions.of(exp, parameters=shader.point_parameters(exp), resolution=resolution)
+
+
+def job_start(shader, job: dict):
+    """The start constants of ``job``: its ``start`` with its ``schedule``; None (the shader's
+    own start constants) for a job without one (a user's shader)."""
+    start = job.get("start")
+    return None if start is None else shader.constants(start, job.get("schedule"))
+
+
+def job_fit(job: dict, resolution=None):
+    """(shader, frame, ``Fit``, fit seconds) of ``job`` fitted from ``job["start"]`` with its
+    schedule, through the calibration's one fit (``study.calibration.fitting``)."""
+    mv = job.get("mitsuba_variant", "llvm_ad_rgb")
+    shader, frame = job_frame(job)
+    options = job_options(frame.exp, shader, resolution)
+    t0 = time.perf_counter()
+    fit = fit_frames([frame], shader, mv, options, job_start(shader, job))
+    return shader, frame, fit, time.perf_counter() - t0
 
 
 def anchor_job(job: dict) -> dict:
     """Phase 1: fit the continuous constants at the seed's schedule; returns them and the fit."""
-
-    exp, _, _, model = job_model(job)
-    start = Constants.from_dict(job["start"])
-    t0 = time.perf_counter()
-    cal = calibrate_experiment(model, exp, start, _fit_names(exp, job["variant"]))
+    _, _, fit, fit_s = job_fit({**job, "schedule": {}})
+    cal = fit.calibration
     return {
         "fitted": cal.fitted.to_dict(),
-        "fit_seconds": time.perf_counter() - t0,
+        "fit_seconds": fit_s,
         "iterations": cal.fit_summary.get("iterations", 0),
         "status_of": {n: p["status"] for n, p in cal.parameters.items()},
     }
@@ -161,42 +161,27 @@ def anchor_job(job: dict) -> dict:
 
 def point_job(job: dict) -> dict:
     """Phase 2: one (scene, variant, schedule) point, refitted warm from the anchor and measured
-    (see the module doc). Returns flat figures plus the fitted constants."""
-
-    exp, ref, inputs, model = job_model(job)
-    start = Constants.from_dict(job["start"]).replace(**job["schedule"])
-    t0 = time.perf_counter()
-    cal = calibrate_experiment(model, exp, start, _fit_names(exp, job["variant"]))
-    fit_s = time.perf_counter() - t0
-
+    (see the module doc). Returns flat figures plus the fitted constants and their statuses."""
+    shader, frame, fit, fit_s = job_fit(job)
+    cal, exp = fit.calibration, frame.exp
     fitted_names = [n for n, p in cal.parameters.items() if p["status"] in ("fitted", "bound")]
-    ic = information_criteria(model.residual(cal.fitted), len(fitted_names))
-    _, _, _, full = job_model(job, resolution=tuple(exp.resolution))
-    img, diag = full.render(cal.fitted)
-    err = errors(ref.image, img, full.mask)
-    m = full.mask
+    ic = information_criteria(fit.models[0].residual(cal.fitted), len(fitted_names))
+    score = Scorer(shader, [frame], job.get("mitsuba_variant", "llvm_ad_rgb"))(0, cal.fitted)
     out = {
-        "flip": err["flip"],
-        "rmse": err["rmse"],
+        "flip": score.flip,
+        "rmse": score.rmse,
         "fit_seconds": fit_s,
         "fit_iterations": cal.fit_summary.get("iterations", 0),
-        "water_pixels": int(m.sum()),
+        "water_pixels": int(score.mask.sum()),
         "n_fitted": len(fitted_names),
         "aic": ic["aic"],
         "bic": ic["bic"],
+        **score.per_pixel(),
     }
-    for k in ("fetches", "iterations", "refl_iterations"):
-        if k in diag.maps:
-            v = diag.maps[k][m]
-            out[f"{k}_mean"], out[f"{k}_p99"] = float(v.mean()), float(np.percentile(v, 99))
-    if "crossed" in diag.maps:
-        out["not_crossed"] = float(1.0 - diag.maps["crossed"][m].mean())
-    out["nonfinite_pixels"] = (
-        int(diag.maps["nonfinite"][m].sum()) if "nonfinite" in diag.maps else 0
-    )
     if job["kind"] != "converged":  # the error floor is not a candidate: its frame time is moot
-        out.update(frame_times(job["variant"], inputs, cal.fitted, exp.tradeoff.gl_repeats))
+        out.update(frame_times(job["variant"], frame.inputs, cal.fitted, exp.tradeoff.gl_repeats))
     out["fitted"] = cal.fitted.to_dict()
+    out["status_of"] = {n: p["status"] for n, p in cal.parameters.items()}
     return out
 
 
@@ -217,11 +202,8 @@ def screen_job(job: dict) -> dict:
     f = int(job["factor"])
     if w % f or h % f:
         raise ValueError(f"fit.resolution {w}x{h} is not divisible by the screen factor {f}")
-    exp, ref, _, model = job_model(job, resolution=(w // f, h // f))
-    start = Constants.from_dict(job["start"]).replace(**job["schedule"])
-    t0 = time.perf_counter()
-    cal = calibrate_experiment(model, exp, start, _fit_names(exp, job["variant"]))
-    fit_s = time.perf_counter() - t0
+    _, _, fit, fit_s = job_fit(job, resolution=(w // f, h // f))
+    model, cal = fit.models[0], fit.calibration
     img, diag = model.render(cal.fitted)
     m = model.mask
     fmap = np.where(m, flip_map(model.reference, img), np.nan)

@@ -32,20 +32,18 @@ import math
 
 import numpy as np
 
-from shaders_port import Constants
 from shaders_port.variants import get_variant
 
-from .._backend import drjit_backend
-from .._metrics import errors, temporal_errors
+from .._metrics import temporal_errors
+from ..calibration.frames import Frame
+from ..calibration.scoring import Scorer
+from ..calibration.shader import Shader
 from ..config.experiment import load_experiment
-from ..fit.model import ShaderModel
-from ..scene.baseline_inputs import inputs_for_shader
 from ..scene.frame_data import load_frames
 from ..scene.frames import is_animated
 from ..sweep import run_sweep, scene_spec
 from .tradeoff_analysis import COST, config_label, constants_of, is_user, point_record
 from .tradeoff_jobs import original_schedule, scaled_schedule
-from .tradeoff_user import user_image
 
 MOTION = "animation.frames"
 
@@ -62,9 +60,8 @@ def prepare_frames_job(job: dict) -> dict:
     mv = job.get("mitsuba_variant", "llvm_ad_rgb")
     _, data = _frames(json.dumps(job["scene"], sort_keys=True), mv)
     for v in job["variants"]:
-        if not is_user(v):
-            for e, base in zip(data["frames"], data["base"]):
-                inputs_for_shader(e, base, v, mv, log=lambda m: None)
+        for e, base in zip(data["frames"], data["base"]):
+            Shader.of_table(e, v).with_inputs(e, base, mv)
     return {"frames": len(data["frames"]), **data["timings"]}
 
 
@@ -75,29 +72,17 @@ def _frames(text: str, mv: str):
     return exp, load_frames(exp, mv)
 
 
-def _render_frames(job: dict, data: dict, mv: str, schedules: tuple = (None,)) -> tuple:
-    """The point's constants on every frame at ``resolution``, once per entry of ``schedules``
-    (None: its own schedule; else a schedule in place of it), each frame's model built once:
-    ([images per frame] per schedule, [scored mask per frame])."""
-
-    images, masks = [[] for _ in schedules], []
+def _scored_frames(job: dict, data: dict, mv: str, schedules: tuple = (None,)) -> list:
+    """The point's constants scored on every frame at the experiment's resolution, once per
+    entry of ``schedules`` (None: its own schedule; else a schedule in place of it; a user's
+    shader has none of the study's and keeps its own): [[``Score`` per frame] per schedule]."""
+    out = [[] for _ in schedules]
     for e, base, ref in zip(data["frames"], data["base"], data["refs"]):
-        if is_user(job["variant"]):  # a user's shader has no schedule of the study's
-            img, m = user_image(e, base, job["constants"])
-            for out in images:
-                out.append(img)
-        else:
-            inputs = inputs_for_shader(e, base, job["variant"], mv, log=lambda m: None)
-            model = ShaderModel.from_experiment(
-                e, inputs, ref.image, shader=job["variant"], backend=drjit_backend(mv),
-                resolution=tuple(e.resolution),
-            )  # fmt: skip
-            c = Constants.from_dict(job["constants"])
-            for out, sched in zip(images, schedules):
-                out.append(model.render(c.replace(**(sched or {})))[0])
-            m = model.mask
-        masks.append(m)
-    return images, masks
+        shader = Shader.of_table(e, job["variant"])
+        score = Scorer(shader, [Frame.of(e, ref, shader.with_inputs(e, base, mv))], mv)
+        for per, sched in zip(out, schedules):
+            per.append(score(0, shader.constants(job["constants"], sched)))
+    return out
 
 
 def motion_job(job: dict) -> dict:
@@ -108,10 +93,10 @@ def motion_job(job: dict) -> dict:
     refs = data["refs"]
     conv_schedule = job.get("converged_schedule")  # the same constants, the raymarch converged
     schedules = (None, conv_schedule) if conv_schedule else (None,)
-    renders, masks = _render_frames(job, data, mv, schedules)
-    images = renders[0]
-    flips = np.array([errors(r.image, i, m)["flip"] for r, i, m in zip(refs, images, masks)])
-    mask = np.logical_and.reduce(masks)
+    scores = _scored_frames(job, data, mv, schedules)
+    images = [s.image for s in scores[0]]
+    flips = np.array([s.flip for s in scores[0]])
+    mask = np.logical_and.reduce([s.mask for s in scores[0]])
     t = temporal_errors(
         [r.image for r in refs], images, mask, [r.stderr for r in refs], [r.passes for r in refs]
     )
@@ -130,7 +115,7 @@ def motion_job(job: dict) -> dict:
         "mask_pixels": int(mask.sum()),
     }
     if conv_schedule:
-        c = temporal_errors([r.image for r in refs], renders[1], mask)
+        c = temporal_errors([r.image for r in refs], [s.image for s in scores[1]], mask)
         out["converged_trmse"] = c["trmse"]
         out["converged_pair_ms"] = [p * p for p in c["per_pair"]]  # on the same pixels
     return out

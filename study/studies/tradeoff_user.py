@@ -4,7 +4,7 @@ and recommended like the study's shaders.
 Beside the points the search measures, each experiment whose ``fit.shader`` is a GLSL file gets one
 more point measured in full, as :func:`~.tradeoff_jobs.point_job` measures the study's shaders: the
 declared constants fitted at ``fit.resolution`` by the experiment's solver (the study's one
-calibration, ``study.fit.calibrate.calibrate_experiment``, of a ``SpirvModel``), FLIP and RMSE on
+calibration, ``study.calibration.fitting.fit_frames``, of a ``SpirvModel``), FLIP and RMSE on
 the water pixels at ``resolution``, texture fetches and loop iterations per water pixel counted
 from the translated code, the GL frame times of the written-back file beside the fixed reference
 shader, and the executor's own frame time at 512x512. Its variant name is ``user:<file name>``; it
@@ -16,38 +16,23 @@ grid), so an edited shader, include file, define or vertex shader is measured ag
 back from the table.
 
 :func:`~.tradeoff_analysis.placement` says where it stands among the points of its scene;
-:func:`export_user` writes its file with the fitted constants into the study's ``shaders/`` folder
-and checks it on OpenGL.
+``study.studies.tradeoff_export`` calibrates and exports it as ``study calibrate`` does.
 """
 
 from __future__ import annotations
 
 import hashlib
 import json
-import time
-from pathlib import Path
-
-import numpy as np
 
 from shaders_port.spirv import dialects
 
-from .._io import write_text_atomic
-from .._metrics import erode, errors, information_criteria
-from ..config.user_shader import is_user_shader, load_user_shader
-from ..export.gl_check import gl_check_user
-from ..fit.build import build_model
-from ..fit.calibrate import calibrate_experiment
+from .._metrics import information_criteria
+from ..calibration.scoring import Scorer
+from ..calibration.shader import Shader
 from ..fit.model import get_value
-from ..scene.reference import water_mask
-from ..sweep import load_scene
-from .tradeoff_analysis import USER, constants_of, is_user
-from .tradeoff_jobs import timed_frames
+from .tradeoff_jobs import job_fit, timed_frames
 
-__all__ = ["shader_sha256", "user_jobs", "user_point_job", "user_image", "export_user", "is_user"]
-
-
-def _shader_of(exp):
-    return load_user_shader(exp.values) if is_user_shader(exp.fit.shader) else None
+__all__ = ["shader_sha256", "user_jobs", "user_point_job"]
 
 
 def shader_sha256(shader) -> str:
@@ -73,15 +58,15 @@ def user_jobs(exps, specs) -> list[dict]:
     """One job per experiment whose ``fit.shader`` is a GLSL file (see the module doc)."""
     jobs = []
     for exp, spec in zip(exps, specs):
-        shader = _shader_of(exp)
-        if shader is None:
+        shader = Shader.of(exp)
+        if not shader.is_user:
             continue
-        sha = shader_sha256(shader)
+        sha = shader_sha256(shader.user)
         jobs.append(
             {
                 "scene": spec,
                 "experiment": exp.name,
-                "variant": USER + shader.label,
+                "variant": shader.table_name,
                 "kind": "fixed",
                 "scale": None,
                 "schedule": {},
@@ -91,97 +76,38 @@ def user_jobs(exps, specs) -> list[dict]:
     return jobs
 
 
-def _scored_mask(exp, out: dict) -> np.ndarray:
-    """(H, W) bool at the size of the render ``out`` (``ShaderOutput.numpy()``): the shader's
-    coverage and the reference's water, eroded by one pixel (the mask
-    ``study.fit.model.ShaderModel`` scores the study's shaders on)."""
-    cover = out["mask"] > 0.5
-    return erode(cover & water_mask(exp, cover.shape[1], cover.shape[0]), 1)
-
-
 def user_point_job(job: dict) -> dict:
-    """The user's shader fitted and measured (module doc); flat figures, ``fitted`` (scalar name
-    -> value) and ``status_of`` (scalar name -> fitted | bound | frozen)."""
-    exp, ref, inputs = load_scene(job["scene"], job.get("mitsuba_variant", "llvm_ad_rgb"))
-    model = build_model(exp, inputs, ref.image)
-    t0 = time.perf_counter()
-    cal = calibrate_experiment(model, exp)
-    fit_s = time.perf_counter() - t0
+    """The user's shader fitted and measured (module doc) as ``point_job`` measures the study's
+    shaders; flat figures, ``fitted`` (scalar name -> value) and ``status_of`` (scalar name ->
+    fitted | bound | frozen)."""
+    mv = job.get("mitsuba_variant", "llvm_ad_rgb")
+    shader, frame, fit, fit_s = job_fit(job)
+    cal = fit.calibration
     fitted = [n for n, p in cal.parameters.items() if p["status"] in ("fitted", "bound")]
-    ic = information_criteria(model.residual(cal.fitted), len(fitted))
-    full = build_model(exp, inputs, ref.image, resolution=tuple(exp.resolution))
-    img, diag = full.render(cal.fitted)
-    mask = full.mask
-    err = errors(ref.image, img, mask)
+    ic = information_criteria(fit.models[0].residual(cal.fitted), len(fitted))
+    score = Scorer(shader, [frame], mv)(0, cal.fitted)
     out = {
-        "flip": err["flip"],
-        "rmse": err["rmse"],
+        "flip": score.flip,
+        "rmse": score.rmse,
         "fit_seconds": fit_s,
         "fit_iterations": int(cal.fit_summary["iterations"]),
-        "water_pixels": int(mask.sum()),
+        "water_pixels": int(score.mask.sum()),
         "n_fitted": len(fitted),
         "aic": ic["aic"],
         "bic": ic["bic"],
-        "nonfinite_pixels": int(diag.maps["nonfinite"][mask].sum()),
+        **score.per_pixel(("fetches", "iterations")),
     }
-    for k in ("fetches", "iterations"):
-        v = diag.maps[k][mask]
-        out[f"{k}_mean"], out[f"{k}_p99"] = float(v.mean()), float(np.percentile(v, 99))
-    shader = model.user_shader
+    out.pop("not_crossed", None)
+    user = shader.user
     out.update(
         timed_frames(
-            lambda frame: shader.gl_renderer(frame, cal.fitted),
+            lambda f: user.gl_renderer(f, cal.fitted),
             None,
-            lambda frame: shader.render(frame, cal.fitted),
-            inputs,
-            exp.tradeoff.gl_repeats,
+            lambda f: user.render(f, cal.fitted),
+            frame.inputs,
+            frame.exp.tradeoff.gl_repeats,
         )
     )
     out["fitted"] = {n: get_value(cal.fitted, n) for n in cal.parameters}
     out["status_of"] = {n: p["status"] for n, p in cal.parameters.items()}
     return out
-
-
-def _values(shader, row: dict) -> dict:
-    return shader.with_scalars(shader.defaults(), constants_of(row))
-
-
-def user_image(exp, inputs, constants: dict) -> tuple[np.ndarray, np.ndarray]:
-    """The user's shader with fitted ``constants`` (scalar name -> value, a row's ``fitted``) at
-    the inputs' size: (image (H, W, 3) float32 linear RGB, the scored mask (H, W) bool)."""
-    shader = _shader_of(exp)
-    values = shader.with_scalars(shader.defaults(), constants)
-    out = shader.render(inputs, values).numpy()
-    return out["color"], _scored_mask(exp, out)
-
-
-def export_user(exps, specs, rows: list, out: Path, variant: str, log) -> dict:
-    """Per experiment with a user's shader: its file with the fitted constants in ``shaders/``
-    (one experiment) or ``shaders/<name>/``, every other byte as the user wrote it, and that
-    file on OpenGL against the executor at ``resolution`` (``gl_check_user``). Returns
-    {experiment: {"file", "variant", "label", "constants", "gl_check"}}."""
-    result = {}
-    for exp, spec in zip(exps, specs):
-        shader = _shader_of(exp)
-        row = next(
-            (r for r in rows if r.get("job.experiment") == exp.name
-             and is_user(r.get("job.variant")) and r["status"] == "ok"), None)  # fmt: skip
-        if shader is None or row is None:
-            continue
-        values = _values(shader, row)
-        folder = out / "shaders" if len(exps) == 1 else out / "shaders" / exp.name
-        folder.mkdir(parents=True, exist_ok=True)
-        path = folder / shader.label
-        write_text_atomic(path, shader.written(values))
-        _, _, inputs = load_scene(spec, variant)
-        gl = gl_check_user(shader, inputs, values, shader.render(inputs, values).numpy())
-        result[exp.name] = {
-            "file": str(path.relative_to(out)),
-            "variant": USER + shader.label,
-            "label": USER + shader.label,
-            "constants": constants_of(row),
-            "gl_check": gl,
-        }
-        verdict = "not run" if not gl["ran"] else ("passed" if gl["passed"] else "FAILED")
-        log(f"tradeoff: {exp.name}: wrote your shader, fitted, to {path} (GL check {verdict})")
-    return result

@@ -1,0 +1,137 @@
+"""The fit of a shader's constants over a list of frames, with explicit options.
+
+Every calibration fits here: ``study calibrate`` (one frame, views, an animation's frames,
+several experiments), ``study generalise`` and every point of the sweeps. One frame is fitted
+by ``study.fit.calibrate.calibrate_model`` on its model; several by the same function on their
+stacked, equally weighted residuals (``study.fit.joint.JointModel``). :class:`FitOptions` holds
+everything that decides the fit besides the start constants, so a sweep point and ``study
+calibrate`` given the same options and start fit the same constants.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass
+
+from .._backend import drjit_backend
+from .._progress import log as _log
+from ..fit.calibrate import Calibration, calibrate_model
+from ..fit.decorrelated import half_models, texture_half_models
+from ..fit.joint import JointModel, joint_frozen
+from ..fit.solvers import SOLVERS
+
+
+@dataclass(frozen=True)
+class FitOptions:
+    """What decides a fit besides its start.
+
+    parameters: the constants to fit (``fit.parameters``; None: every one the shader reads
+        that the experiment does not hold, ``model.parameter_names``).
+    solver: a name of ``study.fit.solvers.SOLVERS``; max_steps: its iteration cap.
+    basin_scan: scan the bump scale's loss for lower basins and refit from one
+        (``study.fit.basins``; a single frame with the reference's standard error only).
+    refine: refine on the decorrelated loss of the texture's independent halves
+        (``fit.input_noise = "decorrelate"``: ``study.fit.decorrelated``).
+    resolution: (width, height) pixels of the fit (None: ``fit.resolution``).
+    """
+
+    parameters: tuple | None
+    solver: str
+    max_steps: int
+    basin_scan: bool = True
+    refine: bool = False
+    resolution: tuple | None = None
+
+    @classmethod
+    def of(cls, exp, solver: str | None = None, **changes) -> "FitOptions":
+        """The options ``exp`` sets (``fit.parameters``, ``fit.solver``, ``fit.max_steps``,
+        ``fit.input_noise``), ``solver`` and ``changes`` over them."""
+        solver = solver or exp.fit.solver
+        if solver not in SOLVERS:
+            raise ValueError(f"unknown solver {solver!r}; choose one of {', '.join(SOLVERS)}")
+        params = exp.fit.parameters
+        opts = cls(
+            parameters=None if params is None else tuple(params),
+            solver=solver,
+            max_steps=int(exp.fit.max_steps),
+            refine=exp.fit.input_noise == "decorrelate",
+        )
+        return dataclasses.replace(opts, **changes)
+
+    @property
+    def requested(self) -> list | None:
+        return None if self.parameters is None else list(self.parameters)
+
+
+@dataclass
+class Fit:
+    """A fit's outcome: the ``models`` it ran on (one per frame, at the fit's resolution) and
+    the ``calibration`` (``study.fit.calibrate.Calibration``)."""
+
+    models: list
+    calibration: Calibration
+
+
+def frame_models(frames, shader, variant: str, resolution=None) -> list:
+    """One model per frame (``Shader.model``) at ``resolution`` (default ``fit.resolution``),
+    each carrying its reference's per-pixel standard error."""
+    backend = drjit_backend(variant)
+    return [
+        shader.model(f.exp, f.inputs, f.ref.image, backend, resolution, stderr=f.ref.stderr)
+        for f in frames
+    ]
+
+
+def fit_frames(frames, shader, variant: str, options: FitOptions, start=None, models=None) -> Fit:
+    """The constants of ``shader`` fitted over ``frames`` (a list of ``Frame``) with
+    ``options``, from ``start`` (default: the start constants of the first frame's experiment).
+    ``models``: the frames' models when built already (:func:`frame_models`)."""
+    frames = list(frames)
+    if models is None:
+        models = frame_models(frames, shader, variant, options.resolution)
+    first = frames[0]
+    start = models[0].start_constants(first.exp) if start is None else start
+    names = models[0].parameter_names(options.requested)
+    w, h = options.resolution or first.exp.fit.resolution
+    _log(
+        f"calibrate: fitting {', '.join(names)} of {models[0].label} with {options.solver} on "
+        f"{sum(int(m.mask.sum()) for m in models)} water pixels at {w}x{h}"
+        + (f" ({len(frames)} frames)" if len(frames) > 1 else "")
+    )
+    if len(frames) == 1:
+        halves, check = _halves(first, shader, variant, options)
+        cal = calibrate_model(
+            models[0],
+            start,
+            options.requested,
+            options.solver,
+            options.max_steps,
+            frozen_by_scene=first.frozen,
+            halves=halves,
+            scan_basins=options.basin_scan,
+            basin_check=check,
+        )
+    else:
+        cal = calibrate_model(
+            JointModel(models, [f.name for f in frames]),
+            start,
+            options.requested,
+            options.solver,
+            options.max_steps,
+            frozen_by_scene=joint_frozen([f.frozen for f in frames]),
+            scan_basins=options.basin_scan,
+        )
+    cal.parameters = shader.with_stages(cal.parameters)
+    return Fit(models, cal)
+
+
+def _halves(frame, shader, variant: str, options: FitOptions) -> tuple:
+    """(the refinement's models on the texture's halves or None, the basin check's or None)."""
+    kw = {"backend": drjit_backend(variant), "shader": shader.name}
+    if options.resolution is not None:
+        kw["resolution"] = options.resolution
+    exp, inputs, ref = frame.exp, frame.inputs, frame.ref.image
+    halves = half_models(exp, inputs, ref, **kw) if options.refine else None
+    if not options.basin_scan:
+        return halves, None
+    return halves, halves or texture_half_models(exp, inputs, ref, **kw)

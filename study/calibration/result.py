@@ -1,0 +1,93 @@
+"""The one builder of a calibration's ``CalibrationResult`` (what ``constants.json`` holds), for
+every form: one frame, several (views or experiments: the error per frame), an animation (the
+error averaged over its frames), and the tradeoff's recommended point."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .._metrics import information_criteria
+from ..fit.model import constants_json
+from ..fit.result import CalibrationResult
+from ..scene.user_scene import sun_summary
+
+
+def _mean(scores: list, key: str) -> float:
+    return float(np.mean([getattr(s, key) for s in scores]))
+
+
+def result_error(kind: str, frames, scores: dict) -> dict:
+    """The result's ``error``: ``scores`` is {"default": [Score per frame], "fitted": [...]}.
+    One frame or an animation: {"rmse": {"default", "fitted"}, "flip": {...}} (an animation's
+    averaged over its frames); views or experiments: frame name -> {"default": {"rmse",
+    "flip"}, "fitted": {...}}."""
+    if kind in ("still", "animated"):
+        return {
+            k: {which: _mean(scores[which], k) for which in ("default", "fitted")}
+            for k in ("rmse", "flip")
+        }
+    return {
+        f.name: {which: scores[which][i].errors for which in ("default", "fitted")}
+        for i, f in enumerate(frames)
+    }
+
+
+def reference_record(ref) -> dict:
+    """What a result records of a frame's reference (``Reference``)."""
+    p = ref.provenance
+    return {
+        "spp": ref.spp,
+        **{k: p.get(k) for k in ("spp_asked", "spp_per_pass", "n_seeds")},
+        "sampler": p.get("sampler"),
+        "noise": ref.noise,
+        "path": str(ref.path),
+        "key": p["key"],
+    }
+
+
+def build_result(frames, shader, fit, scores: dict, timings: dict, export, solver: str):
+    """The ``CalibrationResult`` of a calibration of ``shader`` over ``frames`` (``Frames``):
+    ``fit`` (``study.calibration.fitting.Fit``), ``scores`` ({"default", "fitted"}: a
+    ``Score`` per frame, ``study.calibration.scoring``), ``export``
+    (``study.calibration.export.Export``), ``timings`` (stage -> seconds)."""
+    cal, first = fit.calibration, frames[0]
+    kind = frames.kind
+    result = CalibrationResult(
+        shader=shader.label,
+        backend=frames.variant,
+        parameters=cal.parameters,
+        constants=constants_json(cal.fitted),
+        error=result_error(kind, frames, scores),
+        solver=solver,
+        fit=cal.fit_summary,
+        identifiability=cal.identifiability,
+        timings=timings,
+        gl_check=export.gl_check,
+        engine_targets=export.engine_targets,
+        textures=export.textures,
+        extra=dict(export.extra),
+    )
+    if kind in ("still", "animated"):
+        result.experiment = frames.experiment.name
+        result.fit_resolution = list(first.exp.fit.resolution)
+        result.resolution = list(first.exp.resolution)
+    if kind == "still":
+        fitted = scores["fitted"][0]
+        k = [n for n, p in cal.parameters.items() if p["status"] in ("fitted", "bound")]
+        result.step_sweep = cal.sweep
+        result.reference = reference_record(first.ref)
+        result.diagnostics = fitted.diagnostics.summary(fitted.mask)
+        result.sun = sun_summary(first.exp)
+        result.parsimony = {
+            **information_criteria(fit.models[0].residual(cal.fitted), len(k)),
+            "fitted": k,
+            "defines": list(fit.models[0].defines),
+        }
+    if kind in ("views", "joint"):
+        from ..fit.joint import JointModel
+
+        weights = JointModel(fit.models).weights
+        result.experiments = [f.path for f in frames]
+        result.scenes = [f.name for f in frames]
+        result.weights = {f.name: float(w) for f, w in zip(frames, weights)}
+    return result

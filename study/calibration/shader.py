@@ -1,0 +1,251 @@
+"""One handle for the shader a calibration fits, whichever kind it is.
+
+``fit.shader`` names a shader of the study's space (a hand port of ``shaders_port.variants``,
+exported as the study's GLSL) or a user's GLSL file (a ``UserShader``: executed through SPIR-V,
+exported as a copy of the file with the fitted constants in place). :class:`Shader` answers
+everything a calibration asks of either: its model at a resolution, the inputs it reads, its
+textures, its export into every engine target, the GL check of that export and what the result
+records of it. This module is the one place that asks which kind a shader is.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from .._progress import log as _log
+from ..config.user_shader import is_user_shader, load_user_shader
+from ..export.gl_check import (
+    gl_check,
+    gl_check_user,
+    gles_check_user,
+    hlsl_check_user,
+    manifest_checks,
+    target_checks,
+)
+from ..export.shaders import export_shaders, export_user_shader
+from ..export.targets import resolve_targets
+from ..export.textures import texture_record, write_textures
+from ..fit.build import build_model
+from ..fit.result import glsl_renamed
+from ..scene.baseline_inputs import inputs_for_shader
+
+USER = "user:"  # the prefix of a user's shader's name in a sweep's table (``user:<file>``)
+
+
+class Shader:
+    """The shader of ``fit.shader`` (``name``: a shader of the space, or a GLSL file's path),
+    ``user`` its ``UserShader`` when it is a file (read with the experiment's ``fit.declare``),
+    else None."""
+
+    def __init__(self, name: str, user=None):
+        self.name = name
+        self.user = user
+
+    @classmethod
+    def of(cls, exp, name: str | None = None) -> "Shader":
+        """The shader ``name`` (default: ``exp.fit.shader``) as ``exp`` declares it."""
+        name = name or exp.fit.shader
+        if is_user_shader(name):
+            return cls(name, load_user_shader({**exp.values, "fit.shader": name}))
+        return cls(name)
+
+    @classmethod
+    def of_table(cls, exp, name: str) -> "Shader":
+        """The shader a sweep's table names ``name`` (:attr:`table_name`) in experiment ``exp``:
+        ``user:<file>`` is the experiment's own ``fit.shader``."""
+        return cls.of(exp) if str(name).startswith(USER) else cls.of(exp, name)
+
+    @property
+    def is_user(self) -> bool:
+        return self.user is not None
+
+    @property
+    def label(self) -> str:
+        """How reports call it: the variant's name, or the file's name."""
+        return self.user.label if self.is_user else self.name
+
+    @property
+    def table_name(self) -> str:
+        """Its name in a sweep's table: the variant, or ``user:<file name>``."""
+        return USER + self.user.label if self.is_user else self.name
+
+    def named(self, summary: dict) -> dict:
+        """A JSON object of results with every constant as this shader's source names it: the
+        study's GLSL names for a shader of the space (``study.fit.result.glsl_renamed``); a
+        user's file names its own already."""
+        return summary if self.is_user else glsl_renamed(summary)
+
+    # ---- the fit --------------------------------------------------------------------------
+    def with_inputs(self, exp, inputs, variant: str, cache=None):
+        """``inputs`` with the optional fields this shader reads (screen buffers, a local cube
+        map: ``study.scene.baseline_inputs.inputs_for_shader``)."""
+        return inputs_for_shader(exp, inputs, self.name, variant, cache=cache, log=_log)
+
+    def model(self, exp, inputs, reference, backend=None, resolution=None, stderr=None):
+        """The fit's model (``study.fit.protocol.ImageModel``) at ``resolution`` (default
+        ``fit.resolution``) against ``reference`` ((H, W, 3) float32 linear RGB at the
+        experiment's resolution, box-downsampled); ``stderr``: its per-pixel standard error."""
+        return build_model(exp, inputs, reference, shader=self.name, backend=backend,
+                           resolution=resolution, stderr_full=stderr)  # fmt: skip
+
+    def point_parameters(self, exp) -> tuple | None:
+        """The constants a sweep point refits: a user's file, ``fit.parameters`` (None: every
+        declared one); a shader of the space, those of ``fit.parameters`` it reads (unset: all
+        it reads) without its schedule constants (the sweep sets those), plus the variant's own
+        ``fit_parameters`` (e.g. the baseline's distortions)."""
+        if self.is_user:
+            p = exp.fit.parameters
+            return None if p is None else tuple(p)
+        from shaders_port.variants import get_variant
+
+        from ..config.experiment import fit_parameters
+
+        v = get_variant(self.name)
+        listed = exp.fit.parameters
+        if listed is None:  # an experiment of a user's own shader: the space's fit their own
+            listed = fit_parameters(self.name, None)
+        names = [n for n in v.fit_names(listed) if n not in v.schedule]
+        reads = set(v.reads())
+        return tuple(names + [n for n in v.fit_parameters if n in reads and n not in names])
+
+    def constants(self, values: dict, schedule: dict | None = None):
+        """The constants block of ``values`` (a table's ``fitted.*`` or ``start.*``: a
+        ``Constants.to_dict()``, or a user's scalar name -> value) with ``schedule`` set."""
+        if self.is_user:
+            return self.user.with_scalars(self.user.defaults(), values)
+        from shaders_port import Constants
+
+        return Constants.from_dict(values).replace(**(schedule or {}))
+
+    def with_stages(self, parameters: dict) -> dict:
+        """``parameters`` (scalar name -> the fit's record) with each one's ``stage``
+        ('fragment', 'vertex' or 'both') for a user's shader run after its own vertex shader;
+        else unchanged."""
+        if not self.is_user or self.user.vertex is None:
+            return parameters
+        return {
+            n: {**p, "stage": self.user.stage_of(n.split("[")[0])} for n, p in parameters.items()
+        }
+
+    def render(self, inputs, constants, backend=None) -> dict:
+        """The shader on ``inputs`` with ``constants`` (``ShaderOutput.numpy()``: ``color``
+        (H, W, 3) float32 linear RGB, ``mask``, the diagnostics maps)."""
+        if self.is_user:
+            return self.user.render(inputs, constants, backend=backend).numpy()
+        from shaders_port.variants import get_variant
+
+        return get_variant(self.name).render(inputs, constants, backend=backend).numpy()
+
+    # ---- the export -----------------------------------------------------------------------
+    def texture_record(self, exp, inputs) -> dict:
+        """What the constants assume of the textures (``study.export.textures``)."""
+        return texture_record(exp, inputs, self.user)
+
+    def export(self, constants, folder: Path, record: dict, inputs, status: dict, targets=None):
+        """The shader with ``constants`` written into ``folder`` with every engine target the
+        installed tools make (``targets``: those named) and the textures of ``record`` (written
+        from ``inputs``); ``status``: GLSL scalar name -> the fit's status, which the binding
+        sheets mark. Returns {target left out: why} (a user's file whose translation to a
+        target fails leaves that target out)."""
+        normal_map = self.user.engine["normal_map"] if self.is_user else None
+        textures = (record, lambda d: write_textures(record, inputs, d, normal_map))
+        if not self.is_user:
+            export_shaders(constants, folder, [self.name], targets, textures, status)
+            return {}
+        return _export_user(self.user, constants, folder, textures, status, targets)
+
+    def gl_check(self, inputs, constants, folder: Path, backend=None) -> dict:
+        """The export in ``folder`` run on OpenGL (llvmpipe) against this shader on
+        ``inputs`` (``study.export.gl_check``)."""
+        if not self.is_user:
+            return gl_check(self.name, inputs, constants, folder)
+        return gl_check_user(self.user, inputs, constants, self.render(inputs, constants, backend))
+
+    def target_checks(self, inputs, constants, folder: Path, left_out: dict, backend=None):
+        """What checked each engine target of the export in ``folder`` (``targets.json``), with
+        the HLSL (and a user's GLSL ES) round trip run on llvmpipe against this shader."""
+        if not self.is_user:
+            return target_checks(self.name, inputs, constants, folder)
+        ours = self.render(inputs, constants, backend)
+        out = manifest_checks(folder)
+        out.update({t: {"left_out": why} for t, why in left_out.items()})
+        for target, check in (("gles300", gles_check_user), ("hlsl", hlsl_check_user)):
+            if target in out and "left_out" not in out[target]:
+                out[target]["llvmpipe"] = check(self.user, inputs, constants, ours, folder)
+        return out
+
+    def write_back(self, exp, constants, passed: bool) -> str | None:
+        """A user's file (and its own vertex file) with ``constants`` written over its own when
+        ``fit.write_back = "file"`` and the GL check ``passed``. Returns the fragment file's
+        text as the calibration leaves it; None for a shader of the space."""
+        if not self.is_user:
+            return None
+        user = self.user
+        if exp.fit.write_back != "file":
+            return user.source
+        if not passed:
+            _log(f"calibrate: {user.label} not written back: the GL check failed")
+            return user.source
+        from .._io import write_text_atomic
+
+        # the initializers replaced; a uniform without one stays so (its start, in the
+        # declaration, stays the start value: the file must read back as it was declared)
+        text = user.written(constants, bare_initializers=False)
+        write_text_atomic(Path(exp.fit.shader), text)
+        _log(f"calibrate: wrote the fitted constants into {exp.fit.shader}")
+        vtext = user.vertex_written(constants, bare_initializers=False)
+        if (
+            vtext is not None
+            and not user.vertex.shader.shared
+            and vtext != user.vertex.shader.original
+        ):
+            write_text_atomic(Path(exp.fit.vertex), vtext)
+            _log(f"calibrate: wrote the fitted constants into {exp.fit.vertex}")
+        return text
+
+    def file_record(self, exp, text: str) -> dict:
+        """What a result records of a user's file (its path, SHA-256 of ``text``, declaration,
+        defines, include paths, vertex file and grid); {} for a shader of the space."""
+        if not self.is_user:
+            return {}
+        import hashlib
+
+        user = self.user
+        extra = {
+            "shader_file": str(exp.fit.shader),
+            "shader_sha256": hashlib.sha256(text.encode("utf-8")).hexdigest(),
+            "declaration": {
+                "constants": {n: user.declared_range(n) for n in user.constants},
+                "bindings": dict(user.bindings),
+                "values": {n: list(v) for n, v in user.engine_values().items()},
+                **{k: v for k, v in user.engine.items() if v is not None},
+            },
+            "defines": list(user.defines),
+            "include_paths": list(user.include_paths[1:]),  # after the file's own folder
+        }
+        if user.vertex is not None:  # the pair: its vertex shader and the grid it ran on
+            extra["vertex_file"] = str(exp.fit.vertex)
+            extra["vertex_grid"] = list(user.vertex.cells)
+            extra["vertex_defines"] = list(user.vertex.shader.defines)
+        return extra
+
+
+def _export_user(user, values: dict, folder: Path, textures, status: dict, targets=None) -> dict:
+    """``export_user_shader`` into every engine target the user's files translate to: a target
+    whose translation or compile check fails (a vertex shader writing ``gl_ClipDistance`` is
+    no GLSL ES 3.00) is left out with a warning naming its error; ValueError when the core
+    files themselves fail or no target is left. Returns {target left out: why}."""
+    targets, left_out = list(resolve_targets(targets)), {}
+    while True:
+        try:
+            export_user_shader(user, values, folder, targets, textures, status)
+            return left_out
+        except RuntimeError as exc:
+            head = str(exc).splitlines()[0] if str(exc) else repr(exc)
+            bad = [t for t in targets if f" on {t}/" in head]
+            if not bad:
+                raise ValueError(f"export of {user.label}: {exc}") from None
+            targets.remove(bad[0])
+            why = "; ".join(ln for ln in str(exc).splitlines()[1:] if "ERROR" in ln) or head
+            _log(f"calibrate: WARNING: engine target {bad[0]} left out: {why}")
+            left_out[bad[0]] = why
