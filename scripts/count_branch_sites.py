@@ -4,11 +4,14 @@ A *site* is a line of ``study/`` holding one of these tests, however written:
 
 * a call of a predicate: ``is_user_shader(...)``, ``is_user(...)``;
 * an attribute read ``.is_user`` or ``.user_shader`` (not on ``self``), or
-  ``getattr(x, "user_shader", ...)``;
+  ``getattr(x, "user_shader", ...)``, ``hasattr(x, "user_shader")``;
 * ``x is None`` / ``x is not None`` on a name or attribute whose name holds ``user``;
 * ``isinstance(x, C)`` with ``C`` one of the user-or-port classes (``SpirvModel``,
   ``UserShader``, ``ShaderModel``, ``UserFile``, ``PortShader``);
-* a comparison with the string ``"user"`` (a kind field).
+* a comparison with the string ``"user"`` (a kind field), or a result's user-only key read as
+  a question: ``"shader_file" in d``, ``d.get("shader_file")``;
+* a test (``if``, a conditional expression, ``while``, a comprehension's ``if``) that reads a
+  name assigned from one of the above in the same function (a flag that carries the answer).
 
 Lines of the shader handle (``study/calibration/shader.py``, the one place meant to ask) and the
 predicates' own definitions are reported apart. Usage::
@@ -30,6 +33,7 @@ ROOT = Path(__file__).resolve().parents[1]
 PREDICATES = {"is_user_shader", "is_user"}
 CLASSES = {"SpirvModel", "UserShader", "ShaderModel", "UserFile", "PortShader"}
 ATTRIBUTES = {"is_user", "user_shader"}
+KEYS = {"shader_file"}  # a result's key only a user's shader has
 HANDLE = "study/calibration/shader.py"
 
 
@@ -46,7 +50,9 @@ def _is_site(node) -> bool:
         fn = _name(node.func)
         if fn in PREDICATES:
             return True
-        if fn == "getattr" and len(node.args) >= 2:
+        if fn == "get" and node.args and isinstance(node.args[0], ast.Constant):
+            return node.args[0].value in KEYS
+        if fn in ("getattr", "hasattr") and len(node.args) >= 2:
             a = node.args[1]
             return isinstance(a, ast.Constant) and a.value in ATTRIBUTES
         if fn == "isinstance" and len(node.args) == 2:
@@ -60,8 +66,35 @@ def _is_site(node) -> bool:
         if any(isinstance(op, (ast.Is, ast.IsNot)) for op in node.ops):
             if any(isinstance(p, ast.Constant) and p.value is None for p in parts):
                 return any("user" in _name(p).lower() for p in parts)
+        if any(isinstance(op, (ast.In, ast.NotIn)) for op in node.ops):
+            if isinstance(node.left, ast.Constant) and node.left.value in KEYS:
+                return True
         return any(isinstance(p, ast.Constant) and p.value == "user" for p in parts)
     return False
+
+
+def _flag_tests(tree) -> set[int]:
+    """Lines of tests that read a name assigned from a site, per function."""
+    out = set()
+    for fn in ast.walk(tree):
+        if not isinstance(fn, (ast.FunctionDef, ast.AsyncFunctionDef)):
+            continue
+        flags = set()
+        for node in ast.walk(fn):
+            if isinstance(node, ast.Assign) and any(_is_site(n) for n in ast.walk(node.value)):
+                flags |= {t.id for t in node.targets if isinstance(t, ast.Name)}
+        if not flags:
+            continue
+        tests = []
+        for node in ast.walk(fn):
+            if isinstance(node, (ast.If, ast.IfExp, ast.While)):
+                tests.append(node.test)
+            elif isinstance(node, ast.comprehension):
+                tests += node.ifs
+        for t in tests:
+            if any(isinstance(n, ast.Name) and n.id in flags for n in ast.walk(t)):
+                out.add(t.lineno)
+    return out
 
 
 def sites(files: dict[str, str]) -> dict[str, list[int]]:
@@ -75,7 +108,8 @@ def sites(files: dict[str, str]) -> dict[str, list[int]]:
             for n in ast.walk(tree)
             if isinstance(n, ast.FunctionDef) and n.name in PREDICATES
         }
-        lines = {n.lineno for n in ast.walk(tree) if _is_site(n)} - defs
+        lines = {n.lineno for n in ast.walk(tree) if _is_site(n)} | _flag_tests(tree)
+        lines -= defs
         if lines:
             out[path] = sorted(lines)
     return out

@@ -16,7 +16,7 @@ from pathlib import Path
 from shaders_port import glsl_scalar
 
 from .._progress import log as _log
-from ..export.textures import with_exported_textures
+from ..export.textures import with_exported_textures, write_textures
 from ..fit.calibrate import timed
 from ..scene.shader_waves import shader_waves
 
@@ -67,7 +67,9 @@ def write_export(
     record = shader.texture_record(exp, frames_inputs[0])
     with timed(timings, "export_s"):
         _log(f"calibrate: exporting and compiling {shader.label} (and its vertex shader)")
-        left_out = shader.export(constants, folder, record, frames_inputs[0], status)
+        first, normal_map = frames_inputs[0], shader.normal_map
+        textures = (record, lambda d: write_textures(record, first, d, normal_map))
+        left_out = shader.export(constants, folder, textures, status)
     # the GL check runs the textures that ship: read back from the exported files
     checked = [with_exported_textures(i, folder) for i in frames_inputs]
     if not check_frames:

@@ -12,6 +12,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from shaders_port.variants import get_variant
+
 from .._progress import log as _log
 from ..config.user_shader import is_user_shader, load_user_shader
 from ..export.gl_check import (
@@ -24,7 +26,7 @@ from ..export.gl_check import (
 )
 from ..export.shaders import export_shaders, export_user_shader
 from ..export.targets import resolve_targets
-from ..export.textures import texture_record, write_textures
+from ..export.textures import texture_record
 from ..fit.build import build_model
 from ..fit.result import glsl_renamed
 from ..scene.baseline_inputs import inputs_for_shader
@@ -47,7 +49,14 @@ class Shader:
         name = name or exp.fit.shader
         if is_user_shader(name):
             return cls(name, load_user_shader({**exp.values, "fit.shader": name}))
+        get_variant(name)  # ValueError naming the space's shaders for an unknown one
         return cls(name)
+
+    @classmethod
+    def of_saved(cls, saved) -> "Shader":
+        """The shader a saved calibration (``study.export.shaders.SavedCalibration``) was
+        fitted for: its ``shader``, and its user's file when it has one."""
+        return cls(saved.data.get("shader"), saved.user)
 
     @classmethod
     def of_table(cls, exp, name: str) -> "Shader":
@@ -96,8 +105,6 @@ class Shader:
         if self.is_user:
             p = exp.fit.parameters
             return None if p is None else tuple(p)
-        from shaders_port.variants import get_variant
-
         from ..config.experiment import fit_parameters
 
         v = get_variant(self.name)
@@ -107,6 +114,31 @@ class Shader:
         names = [n for n in v.fit_names(listed) if n not in v.schedule]
         reads = set(v.reads())
         return tuple(names + [n for n in v.fit_parameters if n in reads and n not in names])
+
+    def start_boxes(self, exp, study_boxes) -> dict:
+        """A multistart's boxes, scalar name -> (lo, hi, log-uniform): a user's file, each
+        declared constant's range, sampled log-uniformly when it starts above 0 and spans two
+        decades or more; a shader of the space, ``study_boxes(exp)``."""
+        if not self.is_user:
+            return study_boxes(exp)
+        u = self.user
+        return {
+            n: (lo, hi, bool(lo > 0 and hi / lo >= 100))
+            for n in u.scalar_names()
+            for lo, hi in [u.bounds(n)]
+        }
+
+    def start(self, exp, values: dict | None = None):
+        """Constants to render with: ``values`` (a ``Constants.to_dict()``, or a user's GLSL
+        name -> value) over the shader's own defaults; without them, the experiment's start
+        constants for a shader of the space."""
+        if self.is_user:
+            return {**self.user.defaults(), **(values or {})}
+        from shaders_port import Constants
+
+        from ..fit.model import constants_from_experiment
+
+        return Constants.from_dict(values) if values else constants_from_experiment(exp)
 
     def constants(self, values: dict, schedule: dict | None = None):
         """The constants block of ``values`` (a table's ``fitted.*`` or ``start.*``: a
@@ -132,8 +164,6 @@ class Shader:
         (H, W, 3) float32 linear RGB, ``mask``, the diagnostics maps)."""
         if self.is_user:
             return self.user.render(inputs, constants, backend=backend).numpy()
-        from shaders_port.variants import get_variant
-
         return get_variant(self.name).render(inputs, constants, backend=backend).numpy()
 
     # ---- the export -----------------------------------------------------------------------
@@ -141,16 +171,22 @@ class Shader:
         """What the constants assume of the textures (``study.export.textures``)."""
         return texture_record(exp, inputs, self.user)
 
-    def export(self, constants, folder: Path, record: dict, inputs, status: dict, targets=None):
+    @property
+    def normal_map(self):
+        """The normal-map image a user's declaration names (None: the study's)."""
+        return self.user.engine["normal_map"] if self.is_user else None
+
+    def export(self, constants, folder: Path, textures, status: dict, targets=None, names=None):
         """The shader with ``constants`` written into ``folder`` with every engine target the
-        installed tools make (``targets``: those named) and the textures of ``record`` (written
-        from ``inputs``); ``status``: GLSL scalar name -> the fit's status, which the binding
-        sheets mark. Returns {target left out: why} (a user's file whose translation to a
+        installed tools make (``targets``: those named); ``textures``: (record, writer) of what
+        the constants assume (``study.export.textures``), or None; ``status``: GLSL scalar name
+        -> the fit's status, which the binding sheets mark; ``names``: for a shader of the
+        space, the shaders to write with the constants (default: itself; with no name, every
+        shipped one). Returns {target left out: why} (a user's file whose translation to a
         target fails leaves that target out)."""
-        normal_map = self.user.engine["normal_map"] if self.is_user else None
-        textures = (record, lambda d: write_textures(record, inputs, d, normal_map))
         if not self.is_user:
-            export_shaders(constants, folder, [self.name], targets, textures, status)
+            names = names or ([self.name] if self.name else None)
+            export_shaders(constants, folder, names, targets, textures, status)
             return {}
         return _export_user(self.user, constants, folder, textures, status, targets)
 

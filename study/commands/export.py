@@ -3,13 +3,11 @@ with the textures they assume."""
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 
-from shaders_port import glsl_scalar
-
 from .._progress import log as _log
-from ..export.shaders import export_shaders, export_user_shader, load_constants_json, user_shader_of
+from ..calibration.shader import Shader
+from ..export.shaders import read_calibration
 from ..export.textures import copy_textures, read_texture_record
 
 
@@ -23,32 +21,28 @@ def run_export(constants_json, out, targets=None, shaders=None) -> list:
     'none', or None (every one the installed tools can make)."""
     if isinstance(targets, str):
         targets = [] if targets == "none" else [t for t in targets.split(",") if t]
-    user = user_shader_of(constants_json)
-    constants = load_constants_json(constants_json, user)
-    data = json.loads(Path(constants_json).read_text())  # read and checked by the loader above
+    saved = read_calibration(constants_json)
     out = Path(out)
     src = Path(constants_json).parent / "shaders"  # a calibration's own export
     if read_texture_record(src) is None:
-        src = Path(constants_json).parent  # a tradeoff's: the JSON inside its export
+        src = Path(constants_json).parent  # an export folder with the JSON inside
     record = read_texture_record(src)
     textures = None
-    if record is None and "parameters" in data:  # a calibration's, written before the textures
+    if record is None and "parameters" in saved.data:  # a calibration's, written before them
         _log(
             f"export: no textures beside {constants_json} (shaders/textures/): the Fresnel LUT "
             "and normal map the constants assume are not exported; calibrate again to get them"
         )
     elif record is not None:
         textures = (record, lambda folder: copy_textures(src, folder))
-    params = data.get("parameters") if isinstance(data.get("parameters"), dict) else {}
-    status = {glsl_scalar(n): p.get("status") for n, p in params.items() if isinstance(p, dict)}
-    if user is None:
-        names = _shaders(data, shaders)
-        paths = export_shaders(constants, out / "shaders", names, targets, textures, status)
-    else:
-        paths = export_user_shader(user, constants, out / "shaders", targets, textures, status)
-    made = sorted(p.name for p in (out / "shaders").iterdir() if p.is_dir())
+    shader = Shader.of_saved(saved)
+    folder = out / "shaders"
+    names = _shaders(saved.data, shaders)
+    shader.export(saved.constants, folder, textures, saved.status, targets, names)
+    paths = sorted(p for p in folder.rglob("*") if p.is_file())
+    made = sorted(p.name for p in folder.iterdir() if p.is_dir())
     _log(
-        f"export: wrote {len(paths)} files to {out / 'shaders'} ({', '.join(made)}; GLSL compiled "
+        f"export: wrote {len(paths)} files to {folder} ({', '.join(made)}; GLSL compiled "
         "with glslangValidator, targets checked as listed in targets.json)"
     )
     return paths

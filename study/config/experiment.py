@@ -97,11 +97,42 @@ _LATER_KEYS = (
 _NOTED: set = set()
 
 
-def _check_shaders(values: dict) -> None:
-    """``fit.shader`` and ``tradeoff.variants`` name shaders of the space, ``tradeoff.fix``
-    pins its axes (``shaders_port.space``)."""
-    names = [] if is_user_shader(values["fit.shader"]) else [("fit.shader", values["fit.shader"])]
-    names += [("tradeoff.variants", v) for v in values["tradeoff.variants"] or []]
+def _check_fit_shader(values: dict, base: dict):
+    """``fit.shader``: a user's file, loaded and checked with its declaration (returned, a
+    ``UserShader``); or a shader of the space (None returned), which takes none of the keys of
+    a user's file, and whose ``fit.parameters`` become those it fits (:func:`fit_parameters`).
+    Then ``tradeoff.variants`` and ``tradeoff.fix`` (:func:`_check_shaders`)."""
+    if is_user_shader(values["fit.shader"]):
+        user = check_user_shader(values, base)
+        _check_shaders(values, [])
+        return user
+    if values["fit.vertex"]:
+        raise ExperimentError(
+            "fit.vertex is the vertex shader of your own fit.shader (a .frag, .glsl, .fs, .fsh "
+            "or .fx file); "
+            "remove it, or set fit.shader to your fragment shader"
+        )
+    for key in ("fit.declare", "fit.defines", "fit.vertex_defines", "fit.include_paths"):
+        if values[key] is not None:
+            raise ExperimentError(
+                f"{key} is for your own fit.shader (a .frag file); "
+                "remove it, or set fit.shader to the file"
+            )
+    if values["waves.source"] == "shader":
+        raise ExperimentError(
+            f"waves.source = 'shader' takes the waves of your own fit.shader (a .frag file); "
+            f"{values['fit.shader']!r} is a shader of the study's space, whose waves are the "
+            "study's: remove waves.source"
+        )
+    _check_shaders(values, [("fit.shader", values["fit.shader"])])
+    values["fit.parameters"] = fit_parameters(values["fit.shader"], values["fit.parameters"])
+    return None
+
+
+def _check_shaders(values: dict, names: list) -> None:
+    """``names`` ((key, shader name) pairs) and ``tradeoff.variants`` name shaders of the
+    space, ``tradeoff.fix`` pins its axes (``shaders_port.space``)."""
+    names = names + [("tradeoff.variants", v) for v in values["tradeoff.variants"] or []]
     for key, name in names:
         try:
             get_variant(name)
@@ -473,25 +504,7 @@ def validate(raw: dict, overrides: list[str] | None = None, path: Path | None = 
             'independent halves, which only reference.texture_method = "lighting" '
             'renders; use that method or fit.input_noise = "ignore"'
         )
-    user = None  # the user's shader, loaded and checked
-    if is_user_shader(values["fit.shader"]):
-        user = check_user_shader(values, base)
-    elif values["fit.vertex"]:
-        raise ExperimentError(
-            "fit.vertex is the vertex shader of your own fit.shader (a .frag, .glsl, .fs, .fsh "
-            "or .fx file); "
-            "remove it, or set fit.shader to your fragment shader"
-        )
-    else:
-        for key in ("fit.declare", "fit.defines", "fit.vertex_defines", "fit.include_paths"):
-            if values[key] is not None:
-                raise ExperimentError(
-                    f"{key} is for your own fit.shader (a .frag file); "
-                    "remove it, or set fit.shader to the file"
-                )
-    _check_shaders(values)
-    if not is_user_shader(values["fit.shader"]):
-        values["fit.parameters"] = fit_parameters(values["fit.shader"], values["fit.parameters"])
+    user = _check_fit_shader(values, base)  # the user's shader, loaded and checked, or None
     if values["camera.position"] == values["camera.target"]:
         raise ExperimentError("camera.position equals camera.target; move one of them")
     if values["camera.position"][1] <= 0.0:
@@ -507,7 +520,7 @@ def validate(raw: dict, overrides: list[str] | None = None, path: Path | None = 
         values[key] = user_files.resolve(key, values[key], base.get(key))
     digests = user_files.check_files(values)
     if values["waves.source"] == "shader":
-        digests["waves.surface"] = shader_waves_digest(values, user)  # what draws the waves
+        digests["waves.surface"] = shader_waves_digest(user)  # what draws the waves
     _check_ledge(values)
     n = values["reference.sky_directions"]
     if round(n**0.5) ** 2 != n:

@@ -106,17 +106,10 @@ def load_user_shader(values: dict):
         raise ExperimentError(_keyed("fit.shader", exc)) from None
 
 
-def shader_waves_digest(values: dict, shader=None) -> str:
-    """The digest of what makes the waves of ``waves.source = "shader"``
-    (``shaders_port.spirv.probe.waves_digest``): the reference is cached under it. ``shader``:
-    the ``UserShader`` of ``values`` when already loaded (:func:`check_user_shader`'s)."""
-    if shader is None and not is_user_shader(values["fit.shader"]):
-        raise ExperimentError(
-            f"waves.source = 'shader' takes the waves of your own fit.shader (a .frag file); "
-            f"{values['fit.shader']!r} is a shader of the study's space, whose waves are the "
-            "study's: remove waves.source"
-        )
-    shader = shader or load_user_shader(values)
+def shader_waves_digest(shader) -> str:
+    """The digest of what makes the waves of ``waves.source = "shader"`` of the user's shader
+    ``shader`` (``UserShader``, :func:`check_user_shader`'s;
+    ``shaders_port.spirv.probe.waves_digest``): the reference is cached under it."""
     if shader.normal is None:
         raise ExperimentError(
             f"waves.source = 'shader': {shader.label} does not name the variable that holds its "

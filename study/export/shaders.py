@@ -21,19 +21,21 @@ from __future__ import annotations
 
 import hashlib
 import json
+from dataclasses import dataclass
 import os
 import shutil
 import sys
 import tempfile
 from pathlib import Path
 
-from shaders_port import CONSTANT_SPECS, GLSL_NAMES, Constants
+from shaders_port import CONSTANT_SPECS, GLSL_NAMES, Constants, glsl_scalar
 from shaders_port.glsl_text import compile_check, read_source, write_constants
 from shaders_port.spirv.user_shader import UserShader
 from shaders_port.spirv.user_vertex import DEFAULT_CELLS, UserVertex
 from shaders_port.variants import SHIPPED, VARIANTS, get_variant
 
 from .._io import disk_full
+from ..fit.result import CalibrationResult
 from .targets import resolve_targets, translate_targets
 from .textures import expects_lines
 
@@ -41,11 +43,35 @@ from .textures import expects_lines
 FRAGMENT_SHADERS = tuple(dict.fromkeys(VARIANTS[n].shader for n in SHIPPED))
 
 
-def load_constants_json(path, shader=None) -> Constants | dict:
-    """Constants from ``constants.json`` of ``study calibrate`` (its ``constants`` table) or from a
-    flat JSON object ``{name: value}`` with names of ``CONSTANT_SPECS``; for the calibration of a
-    user's shader (its ``shader_file``), the dict ``{GLSL name: float | tuple}`` of its declared
-    constants, checked against ``shader`` (default: :func:`user_shader_of` reads it)."""
+@dataclass
+class SavedCalibration:
+    """A ``constants.json`` read back, in every layout the tool has written: ``data`` (the JSON
+    object), ``user`` (the ``UserShader`` a user's shader was fitted on, its ``shader_file``;
+    None for the study's shaders), ``constants`` (``Constants``, or a user's ``{GLSL name: float
+    | tuple}``) and ``result`` (its ``CalibrationResult``; None for a file of constants alone,
+    such as a flat ``{name: value}`` object)."""
+
+    data: dict
+    user: object
+    constants: object
+    result: object
+
+    @property
+    def status(self) -> dict:
+        """GLSL scalar name -> the fit's status (fitted, bound, frozen, swept); {} without a
+        fit."""
+        params = self.data.get("parameters")
+        if not isinstance(params, dict):
+            return {}
+        return {glsl_scalar(n): p.get("status") for n, p in params.items() if isinstance(p, dict)}
+
+
+def read_calibration(path, user=None) -> SavedCalibration:
+    """``constants.json`` of ``study calibrate`` (every form), of the tradeoff's recommendation,
+    or a flat JSON object ``{name: value}`` with names of ``CONSTANT_SPECS``, read back
+    (:class:`SavedCalibration`). For a user's shader (its ``shader_file``) the constants are
+    its declared ones, checked against ``user`` (default: the file and declaration the JSON
+    names, :func:`_user_shader`). ValueError names what is wrong with the file."""
     data = _read_json(path)
     table = data.get("constants", data)
     if not isinstance(table, dict):
@@ -53,15 +79,40 @@ def load_constants_json(path, shader=None) -> Constants | dict:
     rest = (data.get("constants_not_read") or {}).get("values", {}) if "constants" in data else {}
     table = {**rest, **table}
     if "shader_file" in data:
-        shader = shader or user_shader_of(path)
-        values = {k: tuple(v) if isinstance(v, list) else v for k, v in table.items()}
-        unknown = sorted(set(values) - set(shader.constants))
-        if unknown:
-            raise ValueError(
-                f"{path}: {', '.join(unknown)} is no constant that {shader.label} declares "
-                f"({', '.join(shader.constants)})"
-            )
-        return values
+        user = user or _user_shader(path, data)
+        constants = _user_constants(path, table, user)
+    else:
+        constants = _study_constants(path, table)
+    try:
+        result = CalibrationResult.from_json(data)
+    except (TypeError, ValueError):  # constants alone: no fit recorded
+        result = None
+    return SavedCalibration(data, user, constants, result)
+
+
+def load_constants_json(path, shader=None) -> Constants | dict:
+    """The constants of :func:`read_calibration` (``shader``: a user's shader already read)."""
+    return read_calibration(path, shader).constants
+
+
+def user_shader_of(path):
+    """The ``UserShader`` a user shader's ``constants.json`` was fitted on, or None for a
+    calibration of the study's shaders (:func:`read_calibration`)."""
+    return read_calibration(path).user
+
+
+def _user_constants(path, table: dict, shader) -> dict:
+    values = {k: tuple(v) if isinstance(v, list) else v for k, v in table.items()}
+    unknown = sorted(set(values) - set(shader.constants))
+    if unknown:
+        raise ValueError(
+            f"{path}: {', '.join(unknown)} is no constant that {shader.label} declares "
+            f"({', '.join(shader.constants)})"
+        )
+    return values
+
+
+def _study_constants(path, table: dict) -> Constants:
     unknown = sorted(set(table) - set(CONSTANT_SPECS) - set(GLSL_NAMES.values()))
     if unknown:
         names = ", ".join(repr(u) if len(u) <= 80 else repr(u[:80]) + "..." for u in unknown[:5])
@@ -78,14 +129,11 @@ def load_constants_json(path, shader=None) -> Constants | dict:
         raise ValueError(f"{path}: {exc}") from exc
 
 
-def user_shader_of(path):
-    """The ``UserShader`` a user shader's ``constants.json`` was fitted on (its ``shader_file``
-    and ``declaration``), or None for a calibration of the study's shaders. A file changed since
-    the calibration (its SHA-256 differs from ``shader_sha256``) is read as it is now, with a
-    note on stderr: the fitted values replace its constants' initializers."""
-    data = _read_json(path)
-    if "shader_file" not in data:
-        return None
+def _user_shader(path, data: dict):
+    """The ``UserShader`` of a user shader's calibration ``data`` (its ``shader_file`` and
+    ``declaration``). A file changed since the calibration (its SHA-256 differs from
+    ``shader_sha256``) is read as it is now, with a note on stderr: the fitted values replace
+    its constants' initializers."""
     file = Path(data["shader_file"])
     if not file.is_file():
         raise ValueError(

@@ -174,7 +174,9 @@ def sheets_of_export(folder, calibration: dict) -> dict:
     values.update(calibration["constants"])
     fit = {
         "status": {n: p.get("status") for n, p in calibration.get("parameters", {}).items()},
-        "reads": None if "shader_file" in calibration else set(calibration["constants"]),
+        # what the shaders read: a calibration's ``constants`` hold those alone (a user's file
+        # declares its own, none a specialization constant)
+        "reads": set(calibration["constants"]),
     }
     record = read_texture_record(folder)
     expects = expects_lines(record) if record else []

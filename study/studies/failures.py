@@ -61,19 +61,16 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from shaders_port import Constants
 from shaders_port.pipeline.raster import rasterize_water
 from shaders_port.variants import get_variant
 
 from .._backend import drjit_backend
+from ..calibration.shader import Shader
 from .._io import write_json
 from .._metrics import flip_map
 from ..config.experiment import load_experiments
-from ..config.user_shader import is_user_shader, load_user_shader
-from ..fit.build import build_model
 from ..fit.model import constants_from_experiment, constants_json
 from ..report.failures import failures_figure, scenes_of, write_failures_report
-from ..scene.baseline_inputs import inputs_for_shader
 from ..scene.mitsuba_scene import build_geometry
 from ..sweep import load_scene, run_sweep, scene_spec, write_table
 
@@ -343,15 +340,13 @@ def catalogue_scene(
     import warnings
 
     w, h = exp.resolution
-    model = build_model(exp, inputs, reference, shader=shader, backend=backend, resolution=(w, h))
+    handle = Shader.of(exp, shader)
+    model = handle.model(exp, inputs, reference, backend, (w, h))
+    # a user's shader: what the study's refracted ray and the scene can tell (USER_CLASSES)
+    diagnosed, kept = (_user_maps, USER_CLASSES) if handle.is_user else (_study_maps, CLASS_KEYS)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", RuntimeWarning)  # non-finite pixels are a class here
-        if hasattr(model, "user_shader"):
-            out = _user_maps(exp, model, constants, backend)
-        else:
-            out = model.variant.render(
-                model.inputs, constants, backend=backend, diagnose=True
-            ).numpy()
+        out = diagnosed(exp, handle, model, constants, backend)
     water = out["mask"] > 0.5
     hidden = None
     if depth_complexity:
@@ -369,8 +364,7 @@ def catalogue_scene(
         refl_missed[r.index] = reflection_would_hit(model.inputs, r.world, dirs)
         refl_missed = refl_missed.reshape(h, w)
     classes = classify(out, water, hidden=hidden, refl_missed=refl_missed)
-    if hasattr(model, "user_shader"):  # what the study's refracted ray and the scene can tell
-        classes = {k: v for k, v in classes.items() if k in USER_CLASSES}
+    classes = {k: v for k, v in classes.items() if k in kept}
     fmap = flip_map(model.reference, out["color"])
     rows = failure_table(classes, fmap, model.mask)
     return SceneCatalogue(
@@ -392,13 +386,19 @@ def catalogue_scene(
 USER_CLASSES = ("invalid_refraction", "depth_complexity", "grazing")
 
 
-def _user_maps(exp, model, constants: dict, backend: str) -> dict:
-    """The maps :func:`classify` reads, for a user's shader (a ``SpirvModel``): its render's
+def _study_maps(exp, shader, model, constants, backend: str) -> dict:
+    """The maps :func:`classify` reads, for a shader of the study's space: its port's render
+    with every diagnostic."""
+    return model.variant.render(model.inputs, constants, backend=backend, diagnose=True).numpy()
+
+
+def _user_maps(exp, shader, model, constants: dict, backend: str) -> dict:
+    """The maps :func:`classify` reads, for a user's shader (``Shader``): its render's
     colour, coverage and non-finite pixels with ``constants``, and the refracted ray of the
     study's ``water_refraction`` port at the experiment's start constants (the scene's waves
     and refraction index): ``refract_k``, ``cos_eye_normal``, ``refr_dir_*``."""
 
-    mine = model.user_shader.render(model.inputs, constants, backend=backend).numpy()
+    mine = shader.render(model.inputs, constants, backend)
     study = (
         get_variant("water_refraction")
         .render(model.inputs, constants_from_experiment(exp), backend=backend, diagnose=True)
@@ -420,15 +420,9 @@ def failures_job(job: dict) -> dict:
     from pathlib import Path
 
     exp, ref, inputs = load_scene(job["scene"], job["variant"])
-    name = job.get("shader") or exp.fit.shader
-    inputs = inputs_for_shader(exp, inputs, name, job["variant"], log=lambda m: None)
-    if is_user_shader(name):
-        shader = load_user_shader({**exp.values, "fit.shader": name})
-        constants = {**shader.defaults(), **(job.get("constants") or {})}
-    elif job.get("constants"):
-        constants = Constants.from_dict(job["constants"])
-    else:
-        constants = constants_from_experiment(exp)
+    shader = Shader.of(exp, job.get("shader"))
+    inputs = shader.with_inputs(exp, inputs, job["variant"])
+    constants = shader.start(exp, job.get("constants"))
     cat = catalogue_scene(
         exp,
         ref.image,
@@ -519,8 +513,7 @@ def run_failures(
     log = log or (lambda m: print(m, file=sys.stderr, flush=True))
     exps = load_experiments(experiments, overrides)
     names = [e.name for e in exps]
-    if shader is not None and not is_user_shader(shader):
-        get_variant(shader)
+    Shader.of(exps[0], shader)  # a shader of the space by name, or a file: checked here
     out_arg, out = str(out), Path(out).resolve()
     out.mkdir(parents=True, exist_ok=True)
     jobs = [

@@ -32,7 +32,6 @@ from ..calibration.fitting import FitOptions, fit_frames, frame_models
 from ..calibration.frames import Frame
 from ..calibration.scoring import Scorer
 from ..calibration.shader import Shader
-from ..config.user_shader import is_user_shader, load_user_shader
 from ..fit.calibrate import DISCRETE, make_problem, scene_frozen
 from ..fit.losses import transformed
 from ..fit.model import expand_parameters, get_value
@@ -59,14 +58,12 @@ def start_boxes(exp) -> dict:
     """The multistart's boxes of ``exp``'s fit, scalar name -> (lo, hi, log-uniform): the study's
     :data:`BOX` for its own constants (``fit.parameters``, without the step counts and what the
     scene freezes); for a user's shader, each declared constant's range, sampled log-uniformly
-    when it starts above 0 and spans two decades or more."""
-    if is_user_shader(exp.fit.shader):
-        shader = load_user_shader(exp.values)
-        return {
-            n: (lo, hi, bool(lo > 0 and hi / lo >= 100))
-            for n in shader.scalar_names()
-            for lo, hi in [shader.bounds(n)]
-        }
+    when it starts above 0 and spans two decades or more (``Shader.start_boxes``)."""
+    return Shader.of(exp).start_boxes(exp, _study_boxes)
+
+
+def _study_boxes(exp) -> dict:
+    """:data:`BOX` for the constants ``exp`` fits of a shader of the study's space."""
     frozen = scene_frozen(exp)
     names = [
         n for n in expand_parameters(exp.fit.parameters) if n not in DISCRETE and n not in frozen

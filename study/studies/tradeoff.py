@@ -61,7 +61,7 @@ from ..scene.frames import is_animated
 from ..scene.views import has_views, view_experiments, view_overrides
 from ..sweep import load_scene, run_sweep, scene_spec
 from .search import Search
-from .tradeoff_analysis import COSTS, analyse, constants_of, is_user
+from .tradeoff_analysis import COSTS, analyse, constants_of
 from .tradeoff_export import export_points, point_row
 from .tradeoff_jobs import SEED_SCHEDULE, anchor_job, point_job, schedules
 from .tradeoff_motion import run_motion, still_overrides
@@ -170,9 +170,9 @@ def run_tradeoff(
         summary["search"] = _search_summary(mode, searcher, rows, fix, time.perf_counter() - t0)
         if searcher is not None:
             for i, name in enumerate(names):
+                # a point the search did not screen (a user's shader) has no marginals
                 rec = summary["scenes"][name]["recommended"]
-                ours = rec and not is_user(rec["variant"])
-                summary["scenes"][name]["marginals"] = searcher.marginals_of(i, rec) if ours else []
+                summary["scenes"][name]["marginals"] = searcher.marginals_of(i, rec) if rec else []
     summary["experiments"] = [str(p) for p in experiments]
     init_backend(variant)
     summary["exports"], summary["user_exports"] = export_points(

@@ -220,11 +220,9 @@ def scene_findings(pts: list, all_pts: list, tolerance: float, budget=None) -> d
     }
     crossing = {}
     for v in variants:
-        if is_user(v):
-            crossing[v] = "its own loops (not swept)"
-            continue
         if not any(r["schedule"] for r in all_pts if r["variant"] == v):
-            crossing[v] = "no raymarch"  # a loopless shader (the baselines)
+            # a loopless shader (the baselines), or a user's with loops of its own
+            crossing[v] = "no schedule swept"
             continue
         caps = sorted(
             {

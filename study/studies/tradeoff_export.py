@@ -18,6 +18,7 @@ from ..fit.model import get_value
 from ..sweep import load_scene
 from .tradeoff_analysis import config_label, point_record
 from .tradeoff_jobs import job_options, job_start
+from .tradeoff_user import own_shaders
 
 RELATIVE_MATCH = 1e-6  # the export's constants against the row's: the same fit, run again
 
@@ -109,24 +110,28 @@ def export_points(exps, specs, summary: dict, rows: list, out: Path, variant: st
             e = calibrate_point(spec, point_row(rows, exp.name, rec["label"]), folder, variant, log)
             exports[exp.name] = {**e, "folder": str(folder.relative_to(out))}
             _say(log, exp.name, "the recommendation", exports[exp.name])
-        mine = Shader.of(exp)
-        if not mine.is_user:
-            continue
-        if rec is not None and rec["variant"] == mine.table_name:
-            e = exports[exp.name]
-        else:
-            row = next((r for r in rows if r.get("job.experiment") == exp.name and r["status"]
-                        == "ok" and r.get("job.variant") == mine.table_name), None)  # fmt: skip
-            if row is None:
-                continue
-            folder = out.joinpath("yours", *sub)
-            e = {
-                **calibrate_point(spec, row, folder, variant, log),
-                "folder": str(folder.relative_to(out)),
-            }
-            _say(log, exp.name, "your shader", e)
-        yours[exp.name] = {**e, "file": str(Path(e["folder"]) / "shaders" / "core" / mine.label)}
+        for mine in own_shaders(exp):
+            e = _export_yours(spec, exp.name, mine, rec, rows, exports, out, sub, variant, log)
+            if e is not None:
+                core = Path(e["folder"]) / "shaders" / "core" / mine.label
+                yours[exp.name] = {**e, "file": str(core)}
     return exports, yours
+
+
+def _export_yours(spec, scene, mine, rec, rows, exports, out, sub, variant, log) -> dict | None:
+    """The user's shader ``mine`` on ``scene``: the recommendation's export when it is the
+    recommended point, else its own point calibrated into ``yours[/<scene>]``; None when its
+    point failed."""
+    if rec is not None and rec["variant"] == mine.table_name:
+        return exports[scene]
+    row = next((r for r in rows if r.get("job.experiment") == scene and r["status"] == "ok"
+                and r.get("job.variant") == mine.table_name), None)  # fmt: skip
+    if row is None:
+        return None
+    folder = out.joinpath("yours", *sub)
+    e = {**calibrate_point(spec, row, folder, variant, log), "folder": str(folder.relative_to(out))}
+    _say(log, scene, "your shader", e)
+    return e
 
 
 def _say(log, scene: str, what: str, e: dict) -> None:

@@ -42,8 +42,8 @@ from ..config.experiment import load_experiment
 from ..scene.frame_data import load_frames
 from ..scene.frames import is_animated
 from ..sweep import run_sweep, scene_spec
-from .tradeoff_analysis import COST, config_label, constants_of, is_user, point_record
-from .tradeoff_jobs import original_schedule, scaled_schedule
+from .tradeoff_analysis import COST, config_label, constants_of, point_record
+from .tradeoff_jobs import scaled_schedule
 
 MOTION = "animation.frames"
 
@@ -211,11 +211,11 @@ def motion_findings(pts: list, still_rec: dict | None, tolerance: float, z: floa
 
 def _converged(exp, row: dict) -> dict | None:
     """The converged raymarch's schedule (``tradeoff.converged_scale`` times the original's) for
-    a full point of a shader with a raymarch; None for a loopless shader, a user's shader and
-    the converged point itself."""
+    a full point of a shader with a raymarch; None for a point without a schedule of the study's
+    (``kind`` fixed: a loopless shader, a user's shader) and the converged point itself."""
 
     v = row["job.variant"]
-    if is_user(v) or row["job.kind"] == "converged" or original_schedule(v)["kind"] == "fixed":
+    if row["job.kind"] in ("converged", "fixed"):  # no schedule: a loopless or user's shader
         return None
     return scaled_schedule(get_variant(v), exp.tradeoff.converged_scale)
 

@@ -32,7 +32,7 @@ from ..calibration.shader import Shader
 from ..fit.model import get_value
 from .tradeoff_jobs import job_fit, timed_frames
 
-__all__ = ["shader_sha256", "user_jobs", "user_point_job"]
+__all__ = ["own_shaders", "shader_sha256", "user_jobs", "user_point_job"]
 
 
 def shader_sha256(shader) -> str:
@@ -54,26 +54,33 @@ def shader_sha256(shader) -> str:
     return hashlib.sha256("\0".join(parts).encode()).hexdigest()
 
 
+def own_shaders(exp) -> list:
+    """[the user's own shader (``Shader``)] of an experiment whose ``fit.shader`` is a GLSL
+    file; [] for a shader of the space (the search charts those)."""
+    shader = Shader.of(exp)
+    return [shader] if shader.is_user else []
+
+
 def user_jobs(exps, specs) -> list[dict]:
     """One job per experiment whose ``fit.shader`` is a GLSL file (see the module doc)."""
     jobs = []
     for exp, spec in zip(exps, specs):
-        shader = Shader.of(exp)
-        if not shader.is_user:
-            continue
-        sha = shader_sha256(shader.user)
-        jobs.append(
-            {
-                "scene": spec,
-                "experiment": exp.name,
-                "variant": shader.table_name,
-                "kind": "fixed",
-                "scale": None,
-                "schedule": {},
-                "shader_sha256": sha,
-            }
-        )
+        for shader in own_shaders(exp):
+            jobs.append(_user_job(exp, spec, shader))
     return jobs
+
+
+def _user_job(exp, spec: dict, shader) -> dict:
+    sha = shader_sha256(shader.user)
+    return {
+        "scene": spec,
+        "experiment": exp.name,
+        "variant": shader.table_name,
+        "kind": "fixed",
+        "scale": None,
+        "schedule": {},
+        "shader_sha256": sha,
+    }
 
 
 def user_point_job(job: dict) -> dict:

@@ -35,7 +35,7 @@ from shaders_port.inputs import normal_matrix, perspective_view_proj
 from shaders_port.variants import get_variant
 
 from ..._io import read_exr
-from ..shaders import load_constants_json, user_shader_of
+from ..shaders import read_calibration
 from ..targets import target_file
 from ..textures import with_exported_textures
 from ...scene.reference import water_mask
@@ -210,44 +210,53 @@ def _camera(exp, inputs: ShaderInputs, orbit: bool) -> dict:
     }
 
 
-def _camera_note(camera: dict, tied: list[str], shader=None) -> str:
-    """The page's words on the camera; ``shader``: a user's shader (``UserShader``) or None."""
-    views = (
-        "The raycast refraction reads the ground seen from above (refractionTexture, "
-        "worldYComponent) and the raycast reflection the geometry above the water seen from "
-        "below (worldYComponentReflection, reflectionBottom): top-down textures in world "
-        "coordinates; the sky cube map (reflectionTexture), the local cube map and its box "
-        "(boxReflectionTexture, boxMin, boxMax, boxCapturePosition), the normal map and the "
-        "light are in world space too. Tied to the study's camera are screen-space buffers "
-        "(sceneColor, sceneDepth, the mirrored camera's reflection_sampler and "
-        "o2v_projection_reflection, read by the baseline shaders; sceneColor and sceneDepth by "
-        "the screen-space reflection too) and anything read through "
-        "gl_FragCoord or screenSize."
-    )
+VIEWS_NOTE = (
+    "The raycast refraction reads the ground seen from above (refractionTexture, "
+    "worldYComponent) and the raycast reflection the geometry above the water seen from "
+    "below (worldYComponentReflection, reflectionBottom): top-down textures in world "
+    "coordinates; the sky cube map (reflectionTexture), the local cube map and its box "
+    "(boxReflectionTexture, boxMin, boxMax, boxCapturePosition), the normal map and the "
+    "light are in world space too. Tied to the study's camera are screen-space buffers "
+    "(sceneColor, sceneDepth, the mirrored camera's reflection_sampler and "
+    "o2v_projection_reflection, read by the baseline shaders; sceneColor and sceneDepth by "
+    "the screen-space reflection too) and anything read through "
+    "gl_FragCoord or screenSize."
+)
+
+
+def _camera_note(camera: dict, tied: list[str], fixed_note) -> str:
+    """The page's words on the camera; ``fixed_note(tied)``: why a fixed camera is fixed (the
+    parts' ``fixed_note``)."""
     if camera["orbit"]:
         return (
             "orbits the pool (drag on the image, or the sliders): everything this shader reads "
-            "is independent of the view. " + views + " The run's images are at the study's "
+            "is independent of the view. " + VIEWS_NOTE + " The run's images are at the study's "
             "camera only."
         )
-    if shader is not None:
-        pair = (
-            f"; its own vertex shader {shader.vertex.label} draws the water grid with the "
-            "study camera's matrices, baked into the data as the GL check binds them"
-            if shader.vertex is not None
-            else ""
-        )
-        return (
-            "fixed at the study's camera: a user's shader, every uniform and texture bound as "
-            f"the GL check (llvmpipe) binds them for that camera{pair}; the viewer does not "
-            "know which of them its technique ties to the view. " + views
-        )
+    return fixed_note(tied)
+
+
+def _study_fixed_note(tied: list[str]) -> str:
     if tied:
         return (
             f"fixed at the study's camera: this shader reads {', '.join(tied)}, rendered for "
-            "that camera. " + views
+            "that camera. " + VIEWS_NOTE
         )
     return "fixed at the study's camera: the experiment's camera is not a plain look-at."
+
+
+def _user_fixed_note(shader):
+    pair = (
+        f"; its own vertex shader {shader.vertex.label} draws the water grid with the "
+        "study camera's matrices, baked into the data as the GL check binds them"
+        if shader.vertex is not None
+        else ""
+    )
+    return lambda tied: (
+        "fixed at the study's camera: a user's shader, every uniform and texture bound as "
+        f"the GL check (llvmpipe) binds them for that camera{pair}; the viewer does not "
+        "know which of them its technique ties to the view. " + VIEWS_NOTE
+    )
 
 
 def start_constants(summary: dict) -> dict:
@@ -306,34 +315,11 @@ def not_drawn(shader) -> str | None:
     return None
 
 
-def _user_parts(out: Path, shader, inputs: ShaderInputs, start: dict) -> dict:
-    """``user.user_parts`` of the user's shader ``shader`` calibrated in ``out`` at its fitted
-    and ``start`` values; ViewerUnsupported without a headless OpenGL."""
-    fitted = load_constants_json(out / "constants.json", shader)
-    start = {k: tuple(v) if isinstance(v, list) else v for k, v in start.items()}
-    try:
-        return user_parts(shader, out / "shaders", inputs, fitted, start)
-    except RuntimeError as exc:  # no headless OpenGL: nothing to read the bindings from
-        first = str(exc).splitlines()[0]
-        raise ViewerUnsupported(f"{first} (the viewer binds what the GL check binds)") from None
-
-
-def calibration_viewer(out: Path, exp, inputs: ShaderInputs) -> Path:
-    """``out/viewer/`` of the calibration in ``out`` (its ``constants.json``, ``shaders/``
-    export and ``reference.exr`` / ``default.exr`` / ``fitted.exr``) of experiment ``exp``
-    (frame 0 of an animated one) with its shader inputs ``inputs`` (at the experiment's
-    resolution, before the variant's preparation). Returns the path of ``index.html``."""
-    out = Path(out)
-    summary = json.loads((out / "constants.json").read_text("utf-8"))
+def _check_export(out: Path, summary: dict, stem: str) -> Path:
+    """The GLSL ES 3.00 fragment file the viewer runs, ``shaders/gles300/<stem>.frag``;
+    ViewerUnsupported when the export left that target out, FileNotFoundError when it is
+    missing."""
     shaders = out / "shaders"
-    user = "shader_file" in summary
-    shader = user_shader_of(out / "constants.json") if user else None
-    why = not_drawn(shader) if user else None
-    if why is not None:
-        raise ViewerUnsupported(
-            f"{why}; the GL check and the engine targets in {out / 'shaders'} are written"
-        )
-    stem = summary["shader"].rsplit(".", 1)[0] if user else summary["shader"]
     frag_path = shaders / target_file("gles300", stem, "frag")
     left_out = summary.get("engine_targets", {}).get("gles300", {}).get("left_out")
     if left_out:
@@ -347,27 +333,82 @@ def calibration_viewer(out: Path, exp, inputs: ShaderInputs) -> Path:
             "glslang-tools and spirv-cross (scripts/setup.sh installs them); export again with "
             f"`study export {out / 'constants.json'} --out {out}`"
         )
-    inputs = with_exported_textures(inputs, shaders)
+    return frag_path
+
+
+def _study_parts(out: Path, saved, inputs: ShaderInputs, start: dict) -> dict:
+    """What the viewer runs of a shader of the study's space calibrated in ``out``: the
+    exported GLSL ES files (the fitted ``frag``, ``frag_default`` at ``start``), the inputs as
+    the variant prepares them, the study's textures bound by name."""
+    summary = saved.data
+    frag_path = _check_export(out, summary, summary["shader"])
+    frag = frag_path.read_text("utf-8")
+    return {
+        "vert": (out / "shaders" / target_file("gles300", "water", "vert")).read_text("utf-8"),
+        "frag": frag,
+        "frag_default": with_spec_defines(frag, start),
+        "inputs": get_variant(summary["shader"]).prepare_inputs(inputs),
+        "bindings": {},
+        "orbit": True,
+        "data": {},
+        "names": lambda data: ", ".join(sorted(data["textures"])),
+        "fixed_note": _study_fixed_note,
+    }
+
+
+def _user_parts(out: Path, saved, inputs: ShaderInputs, start: dict) -> dict:
+    """What the viewer runs of the user's shader calibrated in ``out`` (``user.user_parts``)
+    at its fitted and ``start`` values, bound as the GL check binds it (the study's own textures
+    are not needed); ViewerUnsupported for a dialect the GL check does not run, or without a
+    headless OpenGL."""
+    shader, summary = saved.user, saved.data
+    why = not_drawn(shader)
+    if why is not None:
+        raise ViewerUnsupported(
+            f"{why}; the GL check and the engine targets in {out / 'shaders'} are written"
+        )
+    _check_export(out, summary, summary["shader"].rsplit(".", 1)[0])
+    start = {k: tuple(v) if isinstance(v, list) else v for k, v in start.items()}
+    try:
+        u = user_parts(shader, out / "shaders", inputs, saved.constants, start)
+    except RuntimeError as exc:  # no headless OpenGL: nothing to read the bindings from
+        first = str(exc).splitlines()[0]
+        raise ViewerUnsupported(f"{first} (the viewer binds what the GL check binds)") from None
+    return {
+        "vert": u["vert"],
+        "frag": u["frag"],
+        "frag_default": u["frag_default"],
+        "inputs": inputs,
+        "bindings": summary.get("declaration", {}).get("bindings", {}),
+        "orbit": False,
+        "data": {"textures": {}, "bound": u["bound"]},
+        "names": lambda data: u["names"],
+        "fixed_note": _user_fixed_note(shader),
+    }
+
+
+def calibration_viewer(out: Path, exp, inputs: ShaderInputs) -> Path:
+    """``out/viewer/`` of the calibration in ``out`` (its ``constants.json``, ``shaders/``
+    export and ``reference.exr`` / ``default.exr`` / ``fitted.exr``) of experiment ``exp``
+    (frame 0 of an animated one) with its shader inputs ``inputs`` (at the experiment's
+    resolution, before the variant's preparation). Returns the path of ``index.html``."""
+    out = Path(out)
+    saved = read_calibration(out / "constants.json")
+    summary = saved.data
     start = start_constants(summary)
-    if user:
-        u = _user_parts(out, shader, inputs, start)
-        vert, frag, frag_default = u["vert"], u["frag"], u["frag_default"]
-    else:
-        vert = (shaders / target_file("gles300", "water", "vert")).read_text("utf-8")
-        frag = frag_path.read_text("utf-8")
-        frag_default = with_spec_defines(frag, start)
-        inputs = get_variant(summary["shader"]).prepare_inputs(inputs)
+    inputs = with_exported_textures(inputs, out / "shaders")
+    kind = _user_parts if saved.user is not None else _study_parts
+    parts = kind(out, saved, inputs, start)
+    inputs, vert, frag = parts["inputs"], parts["vert"], parts["frag"]
     images = _images(out, summary)
     # where the reference sees the water (not a wall in front of it): the pixels the run scored
     images["scored"] = water_mask(exp, inputs.width, inputs.height).astype(np.float32)
-    bindings = summary.get("declaration", {}).get("bindings", {}) if user else {}
-    tied = tied_names(frag, bindings)
-    camera = _camera(exp, inputs, orbit=not user and not tied)
+    tied = tied_names(frag, parts["bindings"])
+    camera = _camera(exp, inputs, orbit=parts["orbit"] and not tied)
     vel = np.asarray(exp.animation.velocities, np.float64)
-    data = viewer_data(inputs, vert, frag, frag_default, images, camera,
-                       {"velocities": vel.tolist()}, bindings)  # fmt: skip
-    if user:  # bound as the GL check binds it: the study's own textures are not needed
-        data["textures"], data["bound"] = {}, u["bound"]
+    data = viewer_data(inputs, vert, frag, parts["frag_default"], images, camera,
+                       {"velocities": vel.tolist()}, parts["bindings"])  # fmt: skip
+    data.update(parts["data"])
     name, err = _scene_error(summary)
     flip = err["flip"]
     options = [
@@ -388,9 +429,9 @@ def calibration_viewer(out: Path, exp, inputs: ShaderInputs) -> Path:
         "time_max": "20",
         "pitch_deg": camera["pitch_deg"],
         "orbit_drag": "" if camera["orbit"] else " (off: see the camera below)",
-        "inputs": u["names"] if user else ", ".join(sorted(data["textures"])),
+        "inputs": parts["names"](data),
         "velocities": "; ".join(f"wave{k + 1} ({v[0]:g}, {v[1]:g})" for k, v in enumerate(vel)),
-        "camera_note": _camera_note(camera, tied, shader),
+        "camera_note": _camera_note(camera, tied, parts["fixed_note"]),
         "provenance": f"Experiment {name}, {inputs.width}x{inputs.height} "
         f"pixels; written by study.export.viewer from {out.name}/.",
     }
