@@ -13,8 +13,35 @@ import sys
 import time
 
 
+# the stream that holds a progress line not yet ended, and that line's length
+_open_line: list = [None, 0]
+
+
+def progress_line(text: str, final: bool = False, stream=None) -> None:
+    """Redraw the one progress line on ``stream`` (stderr) as ``text``, over what it held
+    (padded where shorter); ``final`` ends the line. A line left open is ended by the next
+    :func:`log` or :func:`end_line`, so the next message starts on a line of its own."""
+    stream = sys.stderr if stream is None else stream
+    held = _open_line[1] if _open_line[0] is stream else 0
+    if _open_line[0] is not None and _open_line[0] is not stream:
+        end_line(_open_line[0])
+    pad = " " * max(0, held - len(text))
+    print("\r" + text + pad, end="\n" if final else "", file=stream, flush=True)
+    _open_line[:] = [None, 0] if final else [stream, len(text)]
+
+
+def end_line(stream=None) -> None:
+    """End the progress line left open on ``stream`` (stderr), if any."""
+    stream = sys.stderr if stream is None else stream
+    if _open_line[0] is stream:
+        _open_line[:] = [None, 0]
+        print(file=stream, flush=True)
+
+
 def log(msg: str) -> None:
-    """One progress line on stderr, flushed (the study's log: stdout stays free for results)."""
+    """One progress line on stderr, flushed (the study's log: stdout stays free for results),
+    on a line of its own (after a progress line left open)."""
+    end_line(sys.stderr)
     print(msg, file=sys.stderr, flush=True)
 
 
@@ -54,12 +81,8 @@ class Stages:
         def report(done: int, total: int) -> None:
             if self.quiet:
                 return
-            end = "\n" if done >= total else ""
-            print(
-                f"\r{label}: {done}/{total} ({time.perf_counter() - t0:.1f} s)",
-                end=end,
-                file=sys.stderr,
-                flush=True,
+            progress_line(
+                f"{label}: {done}/{total} ({time.perf_counter() - t0:.1f} s)", done >= total
             )
 
         return report

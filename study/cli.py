@@ -36,10 +36,10 @@ def _backend_arg(p: argparse.ArgumentParser, default: str | None, what: str) -> 
 def _common(p: argparse.ArgumentParser, many: bool = False) -> None:
     if many:
         p.add_argument(
-            "experiment", nargs="+", help="experiment TOML file(s) (see experiments/README.md)"
+            "experiment", nargs="+", help="experiment TOML file(s) (keys: docs/experiment-keys.md)"
         )
     else:
-        p.add_argument("experiment", help="experiment TOML file (see experiments/README.md)")
+        p.add_argument("experiment", help="experiment TOML file (keys: docs/experiment-keys.md)")
     p.add_argument("--out", required=True, help="output folder (created if missing)")
     _set_arg(p, "override an experiment key, e.g. --set water.ior=1.33 (repeatable)")
     _backend_arg(p, None, "default: the experiment's, normally llvm_ad_rgb")

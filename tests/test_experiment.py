@@ -137,6 +137,16 @@ def test_the_key_page_documents_every_key():
     assert "docs/experiment-keys.md" in (REPO / "experiments" / "README.md").read_text()
 
 
+def test_an_unknown_key_sends_the_user_to_the_key_page():
+    """The message names the page that lists the keys, and that page lists the suggestion."""
+    with pytest.raises(ExperimentError) as err:
+        validate({"camera": {"fovy": 40.0}})
+    message = str(err.value)
+    assert "(did you mean 'camera.fov_y'?)" in message
+    assert message.endswith("Every key is listed in docs/experiment-keys.md")
+    assert "`camera.fov_y`" in (REPO / "docs" / "experiment-keys.md").read_text()
+
+
 def test_fit_parameters_default_to_what_the_shader_reads(capfd):
     """Unset, ``fit.parameters`` is every continuous constant the chosen shader reads (not its
     step schedule); so ``--set fit.shader=...`` works with any shader of the registry."""

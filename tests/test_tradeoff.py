@@ -245,7 +245,7 @@ def test_tradeoff_cli_tiny(tmp_path):
         ).read_bytes()
     assert (tmp_path / "pareto.png").stat().st_size > 10_000
     assert "Recommended" in (tmp_path / "report.md").read_text()
-    # the reference beside the seed shader (seed constants, fitted) and the recommendation
+    # the reference beside the original shader (its own constants, fitted) and the recommendation
     assert summary["images"]["default"] == "images_default.png"
     assert (tmp_path / "images_default.png").stat().st_size > 10_000
     assert "images_default.png" in (tmp_path / "report.md").read_text()

@@ -32,7 +32,13 @@ from study.config.user_shader import load_user_shader
 from study.export.gl_check import GL_MEAN, GL_P999
 from study.export.shaders import export_shaders, load_constants_json, user_shader_of
 from study.export.textures import with_exported_textures
-from study.export.viewer import spec_defines, tied_names, with_spec_defines
+from study.export.viewer import (
+    read_names,
+    spec_defines,
+    tied_names,
+    views_note,
+    with_spec_defines,
+)
 from study.export.viewer.browser import BrowserRenderer, Chromium, open_viewer, render_float
 from study.scene.baseline_inputs import inputs_for_shader
 from study.scene.shader_inputs import load_or_build_shader_inputs
@@ -261,6 +267,26 @@ def test_what_ties_a_shader_to_the_camera_and_the_start_constants(tmp_path):
     colour = {f"waterColor_{c}": v for c, v in zip("rgba", ("0.1", "0.2", "0.3", "1.0"))}
     assert by_name == {"ATTENUATION_DISTANCE": "7.0", "LOOP_CAP": "12", **colour}
     assert with_spec_defines(refr, start).startswith("#version 300 es\n" + lines[0])
+
+
+def test_the_page_names_only_the_inputs_its_shader_reads(tmp_path):
+    """The page's list of textures and its words on the camera name what the exported shader
+    reads and nothing it does not (the refraction reads no reflection texture)."""
+    names = ["refraction", "reflection", "baseline"]
+    export_shaders(Constants(), tmp_path, [f"water_{n}" for n in names], ("gles300",))
+    frag = {n: (tmp_path / "gles300" / f"water_{n}.frag").read_text() for n in names}
+    textures = sorted(["refractionTexture", "worldYComponent", "worldYComponentReflection",
+                       "reflectionBottom", "reflectionTexture", "normalMap"])  # fmt: skip
+    refr = read_names(frag["refraction"], textures)
+    assert "refractionTexture" in refr and "worldYComponentReflection" not in refr
+    assert "reflectionBottom" in read_names(frag["reflection"], textures)
+    note = views_note(frag["refraction"])
+    assert note.startswith("It reads the ground seen from above (refractionTexture")
+    assert "reflectionBottom" not in note and "sceneColor" not in note
+    assert "reflectionBottom" in views_note(frag["reflection"])
+    assert views_note("void main() {}") == ""
+    page = (REPO / "study" / "export" / "viewer" / "page.html").read_text()
+    assert "the left view" not in page and "the image chosen under <i>left</i>" in page
 
 
 # ---- a user's shader pair, and the engine inputs, drawn as the GL check binds them ----------

@@ -110,7 +110,12 @@ def _figures(out, frames, shader, scores: dict, cal, solver: str, step) -> dict:
         s1.mask,
         title="diagnostics, fitted constants",
     )
-    loss_figure(out / figs["loss"], {solver: cal.losses}, title="loss at each evaluation")
+    loss_figure(
+        out / figs["loss"],
+        {solver: cal.losses},
+        title=f"loss at each of the solver's {len(cal.losses)} calls, in order\n"
+        "(x: the call; value and Jacobian calls, rejected trial points included)",
+    )
     write_exr(out / "fitted.exr", s1.image, {"constants": constants_json(cal.fitted)})
     write_exr(out / "default.exr", s0.image, {"constants": constants_json(cal.start)})
     write_exr(out / "reference.exr", ref.image, ref.provenance)

@@ -3,7 +3,7 @@
 An experiment describes one scene (pool floor, water, waves, sky and sun, camera,
 resolution), how its reference is rendered, and what is fitted. Its keys are those of
 ``schema.SCHEMA``, the single source of truth: validation, defaults and the key table of
-``experiments/README.md`` (``schema.schema_markdown``) all come from it.
+``docs/experiment-keys.md`` (``schema.schema_markdown``) all come from it.
 """
 
 from __future__ import annotations
@@ -478,7 +478,7 @@ def validate(raw: dict, overrides: list[str] | None = None, path: Path | None = 
         more = f" and {len(unknown) - 5} more" if len(unknown) > 5 else ""
         raise ExperimentError(
             f"unknown key(s): {', '.join(hints)}{more}. Every key is listed in "
-            "experiments/README.md"
+            "docs/experiment-keys.md"
         )
     values = {}
     for key, f in SCHEMA.items():

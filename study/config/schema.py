@@ -54,7 +54,7 @@ REFERENCE_ONLY_KEYS = frozenset(
 
 
 def schema_markdown() -> str:
-    """The key table of experiments/README.md, generated from SCHEMA."""
+    """The key table of docs/experiment-keys.md, generated from SCHEMA."""
     lines = ["| key | type | default | units | allowed | meaning |", "|---|---|---|---|---|---|"]
     for key, f in SCHEMA.items():
         rng = f"[{f.lo:g}, {f.hi:g}]" if f.lo is not None else ""

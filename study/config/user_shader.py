@@ -71,6 +71,12 @@ def user_declaration(lines: list | None) -> dict:
     return decl
 
 
+def _keyed(key: str, exc: Exception) -> str:
+    """``exc``'s message led by the key it is about, once (the shader's loader may name it)."""
+    text = str(exc)
+    return text if text.startswith(f"{key}:") else f"{key}: {text}"
+
+
 def load_user_shader(values: dict):
     """The ``UserShader`` of ``fit.shader`` (a resolved path) and ``fit.declare``, after its
     ``fit.vertex`` (a resolved path) when set; ExperimentError naming the problem."""
@@ -86,7 +92,7 @@ def load_user_shader(values: dict):
                 Path(values["fit.vertex"]).resolve() == Path(values["fit.shader"]).resolve(),
             )
         except (ValueError, RuntimeError) as exc:
-            raise ExperimentError(f"fit.vertex: {exc}") from None
+            raise ExperimentError(_keyed("fit.vertex", exc)) from None
     try:
         return UserShader.from_file(
             values["fit.shader"],
@@ -96,7 +102,7 @@ def load_user_shader(values: dict):
             vertex=vertex,
         )
     except ValueError as exc:
-        raise ExperimentError(f"fit.shader: {exc}") from None
+        raise ExperimentError(_keyed("fit.shader", exc)) from None
 
 
 def shader_waves_digest(shader) -> str:
@@ -112,7 +118,7 @@ def shader_waves_digest(shader) -> str:
     try:
         return waves_digest(shader)
     except ValueError as exc:
-        raise ExperimentError(f"fit.shader: {exc}") from None
+        raise ExperimentError(_keyed("fit.shader", exc)) from None
 
 
 def _resolved(value: str, base) -> str:
@@ -177,7 +183,7 @@ def check_user_shader(values: dict, base: dict):
     try:
         shader.check()
     except ValueError as exc:
-        raise ExperimentError(f"fit.shader: {exc}") from None
+        raise ExperimentError(_keyed("fit.shader", exc)) from None
     if values["fit.parameters"] is not None:  # e.g. a shipped experiment's list
         log(
             f"experiment: fit.parameters names the study's constants; {shader.label} fits the "

@@ -43,7 +43,6 @@
 
 from __future__ import annotations
 
-import sys
 import time
 from dataclasses import dataclass
 
@@ -53,6 +52,7 @@ from shaders_port import Constants
 from shaders_port.pipeline.texture import backend_types
 
 from .._progress import log as _log
+from .._progress import progress_line
 from ..scene.mitsuba_scene import has_medium
 from .identify import identify, sweep_1d, sweep_2d
 from .model import get_value, with_values
@@ -101,12 +101,7 @@ def make_problem(
     def note(r):
         count["n"] += 1
         if progress:
-            print(
-                f"\rfit: evaluation {count['n']}, loss {0.5 * float(r @ r):.6g}   ",
-                end="",
-                file=sys.stderr,
-                flush=True,
-            )
+            progress_line(f"fit: evaluation {count['n']}, loss {0.5 * float(r @ r):.6g}")
         return r
 
     def residual(values: dict):

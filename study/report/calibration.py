@@ -30,7 +30,7 @@ def comparison_figure(
     path: Path, images: dict, errors: dict, mask: np.ndarray, title: str = ""
 ) -> Path:
     """Row 1: the images (e.g. reference | default | fitted); row 2: |image - reference| averaged
-    over RGB on the water pixels, one shared colour scale."""
+    over RGB on the water pixels, one shared colour scale, each map under its image."""
     plt = pyplot()
     names = list(images)
     ref = images[names[0]]
@@ -57,7 +57,8 @@ def comparison_figure(
         else:
             err = np.where(mask, np.abs(images[k] - ref).mean(-1), np.nan)
             im = axes[1, j].imshow(err, cmap="magma", vmin=0, vmax=vmax)
-            axes[1, j].set_title(textwrap.fill(f"|{k} - {names[0]}|", 34), fontsize=9)
+            # the panel above names the image: a short title that fits the narrower map
+            axes[1, j].set_title(f"|above - {names[0]}|", fontsize=9)
     for ax in axes.ravel():
         ax.set_xticks([])
         ax.set_yticks([])

@@ -21,6 +21,9 @@ COSTS = {
     "port_ms_512": "Dr.Jit port ms / frame, 512x512 (the run's backend)",
 }
 MARKERS = {"grid": "o", "scale": "s", "converged": "*", "fixed": "D"}
+# the side-by-side's panel of the original shader at its own constants: the baseline of every
+# "x times the original's error" the report gives
+ORIGINAL_PANEL = "original shader, its own constants"
 
 
 def pareto_figure(path: Path, recs: list, summary: dict) -> Path:
@@ -416,7 +419,7 @@ def _scene_lines(scene: str, f: dict, summary: dict) -> list[str]:
             f"(the fitted original: {fmt(seed['flip'])}, "
             f"{100 * (bw['flip'] / seed['flip'] - 1):+.1f} %)."
         )
-    own = summary.get("panels", {}).get(scene, {}).get("seed shader, seed constants")
+    own = summary.get("panels", {}).get(scene, {}).get(ORIGINAL_PANEL)
     if own and bw:
         lines.append(
             f"Against the original shader at its own constants (FLIP {fmt(own['flip'])}): "

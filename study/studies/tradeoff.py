@@ -57,7 +57,7 @@ from ..calibration.scoring import Scorer
 from ..calibration.shader import Shader
 from ..fit.model import constants_from_experiment
 from ..report.panels import panels_figure, write_panels
-from ..report.tradeoff import pareto_figure, write_tradeoff_report
+from ..report.tradeoff import ORIGINAL_PANEL, pareto_figure, write_tradeoff_report
 from ..report.tradeoff_motion import motion_figure
 from ..scene.animation import is_animated
 from ..scene.views import has_views, view_experiments, view_overrides
@@ -298,10 +298,11 @@ def _search_summary(mode: str, searcher, rows: list, fix: dict, seconds: float) 
 
 
 def side_by_side(exps, specs, summary: dict, rows: list, out: Path, variant: str) -> tuple:
-    """Per scene, ``images_<scene>.png``: the reference | the seed shader with the experiment's
-    constants at the seed's schedule | the seed's configuration refitted | the best configuration
-    within the seed's fetch budget | the recommendation | the user's shader (duplicates left
-    out), each at the experiment's resolution with its FLIP and RMSE on the water pixels.
+    """Per scene, ``images_<scene>.png``: the reference | the original shader with the
+    experiment's constants at its schedule (``ORIGINAL_PANEL``) | the original's configuration
+    refitted | the best configuration within the original's fetch budget | the recommendation |
+    the user's shader (duplicates left out), each at the experiment's resolution with its FLIP
+    and RMSE on the water pixels.
     Returns ({scene: file name}, {scene: {panel title: {"flip", "rmse"}}}); the first panel's
     FLIP is the original shader at its own constants, the baseline of every "halves the
     original's error" claim."""
@@ -311,14 +312,14 @@ def side_by_side(exps, specs, summary: dict, rows: list, out: Path, variant: str
         f = summary["scenes"][exp.name]
         panels = [
             (
-                "seed shader, seed constants",
+                ORIGINAL_PANEL,
                 "water_refraction",
                 constants_from_experiment(exp).replace(**SEED_SCHEDULE),
             )
         ]
         for title, key in (
-            ("seed shader, fitted", "seed"),
-            ("best within the seed's fetches", "best_within_seed_budget"),
+            ("original shader, fitted", "seed"),
+            ("best within the original's fetches", "best_within_seed_budget"),
             ("recommended", "recommended"),
         ):
             r = f.get(key)

@@ -2,7 +2,7 @@
 score and time one (scene, variant, schedule) point, as jobs of the sweep engine
 (``study.studies.tradeoff`` plans and runs them).
 
-Per experiment and variant (``[tradeoff]`` table of the experiment, ``experiments/README.md``):
+Per experiment and variant (``[tradeoff]`` table of the experiment, ``docs/experiment-keys.md``):
 
 * the *anchor*: the continuous constants fitted at the seed's schedule (10, 3, 40) from the
   experiment's start constants (phase 1, one job per scene and variant);

@@ -31,6 +31,8 @@ import time
 from pathlib import Path
 
 from .._backend import collect_here
+from .._progress import log as _log
+from .._progress import progress_line
 from .scenes import prepare_scene, spec_text
 from .table import clip_error, flatten, job_columns, job_key, read_table, write_table
 
@@ -95,13 +97,11 @@ class Progress:
         frac = self.done / self.total if self.total else 1.0
         bar = "#" * round(frac * self.width) + "." * (self.width - round(frac * self.width))
         fail = f", {self.failed} failed" if self.failed else ""
-        end = "\n" if self.done >= self.total else ""
-        print(
-            f"\r{self.label} [{bar}] {self.done}/{self.total}{fail} "
+        progress_line(
+            f"{self.label} [{bar}] {self.done}/{self.total}{fail} "
             f"{time.perf_counter() - self.t0:.0f} s",
-            end=end,
-            file=self.stream,
-            flush=True,
+            self.done >= self.total,
+            self.stream,
         )
 
 
@@ -128,7 +128,7 @@ def run_sweep(
         workers: LocalCluster worker processes (default one per core).
         client: an open ``distributed.Client`` to use instead of opening one.
     """
-    log = log or (lambda m: print(m, file=sys.stderr, flush=True))
+    log = log or _log
     table = Path(table)
     name = _qualname(job_fn)
     keys = [job_key(name, j) for j in jobs]

@@ -210,37 +210,57 @@ def _camera(exp, inputs: ShaderInputs, orbit: bool) -> dict:
     }
 
 
-VIEWS_NOTE = (
-    "The raycast refraction reads the ground seen from above (refractionTexture, "
-    "worldYComponent) and the raycast reflection the geometry above the water seen from "
-    "below (worldYComponentReflection, reflectionBottom): top-down textures in world "
-    "coordinates; the sky cube map (reflectionTexture), the local cube map and its box "
-    "(boxReflectionTexture, boxMin, boxMax, boxCapturePosition), the normal map and the "
-    "light are in world space too. Tied to the study's camera are screen-space buffers "
-    "(sceneColor, sceneDepth, the mirrored camera's reflection_sampler and "
-    "o2v_projection_reflection, read by the baseline shaders; sceneColor and sceneDepth by "
-    "the screen-space reflection too) and anything read through "
-    "gl_FragCoord or screenSize."
-)
+def read_names(frag: str, names) -> list[str]:
+    """Those of ``names`` the shader text ``frag`` reads (each as a whole word), in order."""
+    return [n for n in names if re.search(rf"\b{re.escape(n)}\b", frag)]
 
 
-def _camera_note(camera: dict, tied: list[str], fixed_note) -> str:
+# the study's inputs that do not move with the view: (names, what they are, in the page's words)
+_WORLD_INPUTS = (
+    (("refractionTexture", "worldYComponent"),
+     "the ground seen from above, a top-down texture in world coordinates"),
+    (("worldYComponentReflection", "reflectionBottom"),
+     "the geometry above the water seen from below, a top-down texture in world coordinates"),
+    (("reflectionTexture",), "the sky cube map, in world space"),
+    (("boxReflectionTexture", "boxMin", "boxMax", "boxCapturePosition"),
+     "the local cube map and its box, in world space"),
+    (("normalMap",), "the normal map, laid on the water in world units"),
+    (("fresnelLookup",), "the Fresnel table, a function of the angle alone"),
+    (("lightpos", "lightcolor"), "the light, in world space"),
+)  # fmt: skip
+
+
+def views_note(frag: str) -> str:
+    """The inputs of the study's shader text ``frag`` that do not move with the view, in words:
+    only those it reads ("" for none)."""
+    parts = []
+    for names, what in _WORLD_INPUTS:
+        read = read_names(frag, names)
+        if read:
+            head, _, tail = what.partition(", ")
+            parts.append(f"{head} ({', '.join(read)}), {tail}")
+    return f"It reads {'; '.join(parts)}." if parts else ""
+
+
+def _camera_note(camera: dict, tied: list[str], fixed_note, frag: str = "") -> str:
     """The page's words on the camera; ``fixed_note(tied)``: why a fixed camera is fixed (the
-    parts' ``fixed_note``)."""
+    parts' ``fixed_note``); ``frag``: the shader text, whose view-independent inputs are named."""
     if camera["orbit"]:
+        views = views_note(frag)
         return (
             "orbits the pool (drag on the image, or the sliders): everything this shader reads "
-            "is independent of the view. " + VIEWS_NOTE + " The run's images are at the study's "
-            "camera only."
+            "is independent of the view. " + (views + " " if views else "") + "The run's "
+            "images are at the study's camera only."
         )
     return fixed_note(tied)
 
 
-def _study_fixed_note(tied: list[str]) -> str:
+def _study_fixed_note(tied: list[str], frag: str = "") -> str:
     if tied:
+        views = views_note(frag)
         return (
             f"fixed at the study's camera: this shader reads {', '.join(tied)}, rendered for "
-            "that camera. " + VIEWS_NOTE
+            "that camera." + (" " + views if views else "")
         )
     return "fixed at the study's camera: the experiment's camera is not a plain look-at."
 
@@ -255,7 +275,7 @@ def _user_fixed_note(shader):
     return lambda tied: (
         "fixed at the study's camera: a user's shader, every uniform and texture bound as "
         f"the GL check (llvmpipe) binds them for that camera{pair}; the viewer does not "
-        "know which of them its technique ties to the view. " + VIEWS_NOTE
+        "know which of them its technique ties to the view."
     )
 
 
@@ -351,8 +371,8 @@ def _study_parts(out: Path, saved, inputs: ShaderInputs, start: dict) -> dict:
         "bindings": {},
         "orbit": True,
         "data": {},
-        "names": lambda data: ", ".join(sorted(data["textures"])),
-        "fixed_note": _study_fixed_note,
+        "names": lambda data: ", ".join(read_names(frag, sorted(data["textures"]))),
+        "fixed_note": lambda tied: _study_fixed_note(tied, frag),
     }
 
 
@@ -431,7 +451,7 @@ def calibration_viewer(out: Path, exp, inputs: ShaderInputs) -> Path:
         "orbit_drag": "" if camera["orbit"] else " (off: see the camera below)",
         "inputs": parts["names"](data),
         "velocities": "; ".join(f"wave{k + 1} ({v[0]:g}, {v[1]:g})" for k, v in enumerate(vel)),
-        "camera_note": _camera_note(camera, tied, parts["fixed_note"]),
+        "camera_note": _camera_note(camera, tied, parts["fixed_note"], frag),
         "provenance": f"Experiment {name}, {inputs.width}x{inputs.height} "
         f"pixels; written by study.export.viewer from {out.name}/.",
     }
