@@ -338,10 +338,12 @@ def calibrate_experiment(
     requested: list[str] | None = None,
     halves: tuple | None = None,
 ) -> Calibration:
-    """:func:`calibrate_model` with the experiment's fit settings (``fit.parameters``,
-    ``fit.solver``, ``fit.max_steps``, the scene's own frozen constants), from ``start`` (default:
-    the model's start constants for the experiment) over ``requested`` (default:
-    ``fit.parameters``); ``halves`` as there (``fit.input_noise``:
+    """:func:`calibrate_model` of a model already built, with the experiment's fit settings
+    (``fit.parameters``, ``fit.solver``, ``fit.max_steps``, the scene's own frozen constants)
+    and no basin scan: the benchmarks' and tests' shortcut (every command and sweep fits
+    through ``study.calibration.fitting.fit_frames``, whose options add the basin scan). From
+    ``start`` (default: the model's start constants for the experiment) over ``requested``
+    (default: ``fit.parameters``); ``halves`` as there (``fit.input_noise``:
     ``study.fit.decorrelated.half_models``)."""
     return calibrate_model(
         model,
