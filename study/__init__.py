@@ -18,7 +18,7 @@ from ._metrics import flip, rmse
 from .commands import run_calibrate, run_export, run_preview, run_render, run_tradeoff
 from .config.experiment import Experiment, ExperimentError, load_experiment, validate
 from .export.shaders import export_shaders, load_constants_json
-from .fit.bridge import DrJitResidual, NonFiniteResidualError, make_jax_residual
+from .fit.jax_residual import DrJitResidual, NonFiniteResidualError, make_jax_residual
 from .fit.identify import IdentifyReport, identify, probe_gradient_solver, sweep_1d, sweep_2d
 from .fit.model import ShaderModel, constants_from_experiment
 from .fit.solvers import SOLVERS, FitProblem, FitResult, Param, fit

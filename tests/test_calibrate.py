@@ -101,7 +101,7 @@ BASE = Constants(bumptex_mult=0.9)
 
 
 def _jax_residual(model, names):
-    from study.fit.bridge import make_jax_residual
+    from study.fit.jax_residual import make_jax_residual
 
     def vals(x):
         return with_values(BASE, dict(zip(names, map(float, x))))

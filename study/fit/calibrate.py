@@ -229,10 +229,8 @@ def _fit_summary(sol, fits, refined, solver) -> dict:
             "iterations": int(sum(steps)),
             "rounds": len(fits),
             "iterations_per_round": steps,
-            "step_losses": [v for f in fits for v in f.extra.get("step_losses", [])],
-            "steps_to_0.1pct_per_round": [
-                steps_to_within(f.extra.get("step_losses", [])) for f in fits
-            ],
+            "step_losses": [v for f in fits for v in f.step_losses],
+            "steps_to_0.1pct_per_round": [steps_to_within(f.step_losses) for f in fits],
             "ftol": FTOL,
             "ftol_se": FTOL_SE,
             "ftol_window": FTOL_WINDOW,

@@ -1,61 +1,80 @@
-"""Nelder-Mead (SciPy), the derivative-free solver."""
+"""Nelder-Mead, the derivative-free solver: NumPy, values of ``0.5*||r(u)||^2`` only, with the
+coefficients of Lagarias et al. (1998) (reflection 1, expansion 2, contraction 1/2, shrink 1/2).
+
+The start simplex is ``u0`` and ``u0 + nm_step * e_i`` (``SolverSettings.nm_step``, in ``u``
+units). It stops (converged) when every vertex is within ``atol + rtol*|u_best|`` of the best
+(max norm) and every value within ``atol + rtol*|f_best|`` of the best one (optimistix's
+criterion). The loss-stall rule does not apply: the best vertex of a shrinking simplex may not
+improve for many steps.
+
+Written here rather than taken from optimistix: optimistix 0.1.0's ``NelderMead`` builds a
+degenerate start simplex for more than one parameter (vertex ``i`` is not ``y0 + delta*e_i``) and
+its ``y0_simplex`` option rejects valid simplices.
+"""
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 
-from .bridge import DrJitResidual
-from .steps import Trace
+from .solver_loop import Objective, Solution, Solver, Stop
+
+REFLECT, EXPAND, CONTRACT, SHRINK = 1.0, 2.0, 0.5, 0.5
 
 
-def nelder_mead(res: DrJitResidual, u0, max_steps, rtol, atol, nm_step, trace: Trace | None = None):
-    """Nelder-Mead on ``0.5*||r(u)||^2`` (NumPy; values only). Converged when every vertex is
-    within ``atol + rtol*|u_best|`` of the best (max norm) and every value within
-    ``atol + rtol*|f_best|`` of the best one (optimistix's criterion). Returns (u, steps, ok,
-    msg)."""
-    k = len(u0)
-    a_r, a_e, a_c, a_s = 1.0, 2.0, 0.5, 0.5
+@dataclass(frozen=True)
+class Simplex:
+    """The ``k + 1`` vertices ``X`` (k+1, k) and their losses ``F`` (k+1,), best first."""
 
-    def f(u):
-        r = res.value(u)
-        return 0.5 * float(r @ r)
+    X: np.ndarray
+    F: np.ndarray
 
-    try:
-        X = np.vstack([u0, u0[None, :] + nm_step * np.eye(k)])
-        F = np.array([f(x) for x in X])
-        for step in range(1, max_steps + 1):
-            order = np.argsort(F)
-            X, F = X[order], F[order]
-            if trace is not None and step > 1:
-                trace.note(float(F[0]))
-            if np.max(np.abs(X - X[0])) <= atol + rtol * np.max(np.abs(X[0])) and np.max(
-                np.abs(F - F[0])
-            ) <= atol + rtol * abs(F[0]):
-                return X[0], step - 1, True, f"converged after {step - 1} steps"
-            c = X[:-1].mean(axis=0)
-            xr = c + a_r * (c - X[-1])
-            fr = f(xr)
-            if fr < F[0]:
-                xe = c + a_e * (xr - c)
-                fe = f(xe)
-                X[-1], F[-1] = (xe, fe) if fe < fr else (xr, fr)
-            elif fr < F[-2]:
-                X[-1], F[-1] = xr, fr
+    @staticmethod
+    def sorted(X: np.ndarray, F: np.ndarray) -> Simplex:
+        order = np.argsort(F)
+        return Simplex(X[order], F[order])
+
+
+class NelderMead(Solver[Simplex]):
+    name = "nelder_mead"
+    derivative_free = True
+    stall_window_scale = None
+
+    def init(self, objective: Objective, u0) -> Simplex:
+        u0 = np.asarray(u0, np.float64)
+        X = np.vstack([u0, u0[None, :] + self.settings.nm_step * np.eye(len(u0))])
+        return Simplex.sorted(X, np.array([objective.loss(x) for x in X]))
+
+    def step(self, objective: Objective, state: Simplex) -> Simplex:
+        f = objective.loss
+        X, F = state.X.copy(), state.F.copy()
+        c = X[:-1].mean(axis=0)
+        xr = c + REFLECT * (c - X[-1])
+        fr = f(xr)
+        if fr < F[0]:
+            xe = c + EXPAND * (xr - c)
+            fe = f(xe)
+            X[-1], F[-1] = (xe, fe) if fe < fr else (xr, fr)
+        elif fr < F[-2]:
+            X[-1], F[-1] = xr, fr
+        else:
+            xc = c + CONTRACT * (xr - c) if fr < F[-1] else c - CONTRACT * (c - X[-1])
+            fc = f(xc)
+            if fc < min(fr, F[-1]):
+                X[-1], F[-1] = xc, fc
             else:
-                xc = c + a_c * (xr - c) if fr < F[-1] else c - a_c * (c - X[-1])
-                fc = f(xc)
-                if fc < min(fr, F[-1]):
-                    X[-1], F[-1] = xc, fc
-                else:
-                    X[1:] = X[0] + a_s * (X[1:] - X[0])
-                    F[1:] = [f(x) for x in X[1:]]
-        i = int(np.argmin(F))
-        return X[i], max_steps, False, f"stopped at max_steps={max_steps} before converging"
-    except FloatingPointError as e:
-        best = res.stats.best_x if res.stats.best_x is not None else np.asarray(u0)
-        return (
-            np.asarray(best),
-            0,
-            False,
-            f"solver aborted ({type(e).__name__}): {e}; returning the best point evaluated",
-        )
+                X[1:] = X[0] + SHRINK * (X[1:] - X[0])
+                F[1:] = [f(x) for x in X[1:]]
+        return Simplex.sorted(X, F)
+
+    def terminate(self, objective: Objective, state: Simplex) -> Stop | None:
+        s = self.settings
+        X, F = state.X, state.F
+        close = np.max(np.abs(X - X[0])) <= s.atol + s.rtol * np.max(np.abs(X[0]))
+        if close and np.max(np.abs(F - F[0])) <= s.atol + s.rtol * abs(F[0]):
+            return Stop(True, "converged")
+        return None
+
+    def postprocess(self, objective: Objective, state: Simplex) -> Solution:
+        return Solution(state.X[int(np.argmin(state.F))])

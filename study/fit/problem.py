@@ -1,5 +1,5 @@
-"""The fit problem (a residual and its parameters), the typed result, the solver names and the
-default stopping rule."""
+"""The fit problem (a residual over named parameters), the settings of a fit, its typed result
+and the default stopping rule."""
 
 from __future__ import annotations
 
@@ -9,13 +9,8 @@ from typing import Callable
 
 import numpy as np
 
-from .bridge import DrJitResidual, make_jax_residual
+from .jax_residual import DrJitResidual, make_jax_residual
 from .params import Param
-
-LEAST_SQUARES = ("levenberg_marquardt", "gauss_newton", "dogleg")
-MINIMISERS = ("bfgs", "nelder_mead", "nelder_mead_optimistix")
-SOLVERS = LEAST_SQUARES + MINIMISERS + ("adam",)
-DERIVATIVE_FREE = ("nelder_mead", "nelder_mead_optimistix")
 
 # default stopping rule of the gradient solvers (see ``solvers.fit``): the fit has stopped
 # improving when the lowest loss seen fell by less than max(FTOL, FTOL_SE / (m - k)) (relative) over
@@ -25,8 +20,59 @@ DERIVATIVE_FREE = ("nelder_mead", "nelder_mead_optimistix")
 FTOL, FTOL_SE, FTOL_WINDOW = 1e-6, 1.0, 3
 
 
+@dataclass(frozen=True)
+class SolverSettings:
+    """How a fit runs (see :func:`study.fit.solvers.fit`).
+
+    ``max_steps``: step cap (Adam: iterations; with restarts, over all of them). ``rtol`` /
+    ``atol``: the solvers' own tolerances (optimistix's Cauchy test: the step in ``u`` *and* the
+    change of the loss both below ``atol + rtol*|.|``; Nelder-Mead's simplex and values; Adam's
+    ``patience`` rule). ``ftol`` (None: off): the loss-stall rule - stop (converged) when the
+    lowest loss seen fell by less than ``ftol * loss`` over the last ``ftol_window`` steps;
+    ``ftol_se`` (None: off) raises that tolerance to ``ftol_se / (m - k)`` when larger.
+    ``lr``: Adam's learning rate in ``u`` units; ``patience`` (None: off): Adam also stops when
+    its best loss improved by less than ``rtol*loss + atol`` over that many iterations.
+    ``nm_step``: edge of Nelder-Mead's start simplex in ``u`` units. ``kkt_restarts``: how many
+    times a ``clip`` parameter left on a bound may be moved back inside when the loss gradient
+    there points inwards.
+    """
+
+    max_steps: int = 200
+    rtol: float = 1e-8
+    atol: float = 1e-12
+    ftol: float | None = None
+    ftol_window: int = FTOL_WINDOW
+    ftol_se: float | None = None
+    lr: float = 0.05
+    patience: int | None = None
+    nm_step: float = 0.5
+    kkt_restarts: int = 3
+
+    def __post_init__(self):
+        if self.max_steps < 1:
+            raise ValueError(f"max_steps must be >= 1, got {self.max_steps}")
+        if self.ftol is not None and not (self.ftol >= 0 and self.ftol_window >= 1):
+            raise ValueError(
+                f"need ftol >= 0 and ftol_window >= 1, got {self.ftol}, {self.ftol_window}"
+            )
+
+    def stall_tolerance(self, m: int, k: int) -> float | None:
+        """The relative tolerance of the loss-stall rule for ``m`` residuals and ``k`` fitted
+        parameters: ``ftol``, raised to ``ftol_se / (m - k)`` when that is larger."""
+        if self.ftol is None or not self.ftol_se:
+            return self.ftol
+        return max(self.ftol, self.ftol_se / max(m - k, 1))
+
+
+# the settings of a calibration's fits: tolerances on u (one unit is about a 50 % change) and on
+# the loss far below the parameters' standard errors, and the loss-stall rule
+CALIBRATION_SETTINGS = SolverSettings(
+    rtol=1e-6, atol=1e-9, ftol=FTOL, ftol_window=FTOL_WINDOW, ftol_se=FTOL_SE
+)
+
+
 class FitProblem:
-    """Residual over named parameters (see the module docstring for the callables' contract).
+    """Residual over named parameters (the callables' contract: ``study.fit.solvers``).
 
     ``params``: list of :class:`Param` (unique names). ``drjit_float``: the Dr.Jit float type
     of the Adam variables handed to ``loss_drjit`` (default: the ``Float`` of the run's backend,
@@ -70,7 +116,7 @@ class FitProblem:
                 )
         return vals
 
-    def bridge(self, base: dict, free: list[str]) -> DrJitResidual:
+    def jax_residual(self, base: dict, free: list[str]) -> DrJitResidual:
         """JAX residual of ``u`` (len(free),) with the other parameters held at ``base``."""
         ps = [self.params[n] for n in free]
 
@@ -98,12 +144,15 @@ class FitProblem:
 
 @dataclass
 class FitResult:
-    """Outcome of :func:`fit`.
+    """Outcome of :func:`study.fit.solvers.fit`.
 
     ``names``: fitted parameters; ``x`` (k,) their physical values; ``u`` (k,) unconstrained;
     ``constants``: every parameter's value (fitted and held); ``losses``: ``0.5*||r||^2`` at each
-    evaluation in call order (optimistix: every evaluated point, trial points included; Adam:
-    one per iteration); ``iterations``: solver steps.
+    evaluation in call order (every evaluated point, trial points included; Adam: one per
+    iteration); ``iterations``: solver steps (over every restart). ``step_losses`` /
+    ``step_seconds``: lowest loss seen and seconds since the start, after each step;
+    ``at_bound``: name -> ``'lower'``/``'upper'`` for the ``clip`` parameters on a bound at the
+    end; ``restarts``: how many times the fit restarted from inside a bound.
     """
 
     solver: str
@@ -121,7 +170,10 @@ class FitResult:
     seconds: float
     converged: bool
     message: str
-    extra: dict = field(default_factory=dict)
+    step_losses: list = field(default_factory=list)
+    step_seconds: list = field(default_factory=list)
+    at_bound: dict = field(default_factory=dict)
+    restarts: int = 0
 
     def summary(self) -> dict:
         """JSON-serialisable summary (no history)."""

@@ -17,11 +17,8 @@ from .basins import BASIN_PARAMETERS, scan, texture_delta
 from .decorrelated import refine
 from .identify import identify
 from .model import get_value, with_values
-from .solvers import FTOL, FTOL_SE, FTOL_WINDOW, fit
+from .solvers import CALIBRATION_SETTINGS, fit
 
-# solver stopping tolerances (on u = transformed parameters, where one unit is about a 50 %
-# change, and on the loss): 1e-6 is far below the parameters' standard errors
-FIT_RTOL, FIT_ATOL = 1e-6, 1e-9
 # a constant whose standard error at the solution exceeds this fraction of its value is not
 # identified (frozen at its start value, the rest refitted); at most SE_ROUNDS such rounds
 REL_SE_MAX, SE_ROUNDS = 0.5, 4
@@ -87,16 +84,7 @@ def solve_round(model, problem, start, x0, free, solver, max_steps) -> Solution:
     """One fit of the ``free`` constants from ``x0``, then its bounds, identifiability and
     standard errors (a constant the image stops depending on at the solution is one-sided)."""
     result = fit(
-        problem,
-        x0,
-        solver=solver,
-        free=free,
-        max_steps=max_steps,
-        rtol=FIT_RTOL,
-        atol=FIT_ATOL,
-        ftol=FTOL,
-        ftol_window=FTOL_WINDOW,
-        ftol_se=FTOL_SE,
+        problem, x0, solver=solver, free=free, settings=CALIBRATION_SETTINGS, max_steps=max_steps
     )
     print(file=sys.stderr)
     fitted = with_values(start, {n: result.constants[n] for n in free})
@@ -109,7 +97,7 @@ def solve_round(model, problem, start, x0, free, solver, max_steps) -> Solution:
             f"on its {side} bound {get_value(fitted, n):.4g}: the loss still falls beyond "
             "it, so the data want a value outside the constant's range; exported at the bound"
         )
-        for n, side in result.extra.get("at_bound", {}).items()
+        for n, side in result.at_bound.items()
     }
     inner = [n for n in free if n not in bound]
     sol = Solution(result, fitted, bound, inner)

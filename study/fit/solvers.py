@@ -1,4 +1,4 @@
-"""The fitting engine: parameters and their transforms, optimistix solvers, the Adam baseline.
+"""The fitting engine: parameters and their transforms, the solvers, and :func:`fit`.
 
 Parameters. Each fitted scalar is a :class:`Param` with a default, bounds ``(lo, hi)`` and a
 ``scale`` (a typical change, in the parameter's own units). Solvers never see the physical
@@ -30,72 +30,170 @@ parameters being fitted, since each Jacobian column costs a forward-mode pass), 
 optionally ``loss_drjit(values: dict name -> Dr.Jit scalar) -> Dr.Jit scalar 0.5*||r||^2``
 for reverse-mode Adam.
 
-Solvers (:data:`SOLVERS`): ``levenberg_marquardt``, ``gauss_newton``, ``dogleg`` through
-``optimistix.least_squares``; ``bfgs`` and ``nelder_mead`` through ``optimistix.minimise`` on
-``0.5*||r||^2``; ``nelder_mead`` is a plain NumPy Nelder-Mead (Lagarias et al. 1998
-coefficients) on the same loss, because optimistix 0.1.0's ``NelderMead`` builds a degenerate
-start simplex for a parameter vector of length > 1 (vertex ``i`` is not ``y0 + delta*e_i``;
-on ``sum((y - c)^2)`` in 3-D it stops at a wrong point) and its ``y0_simplex`` option rejects
-valid simplices; ``nelder_mead_optimistix`` keeps the optimistix solver for comparison;
-``adam``: the plain loop of Mitsuba's inverse-rendering tutorials with
-``drjit.opt.Adam`` (the optimiser Mitsuba 3 exposes as ``mi.ad.Adam``), over the Dr.Jit
-gradient of the loss (reverse mode through ``loss_drjit`` when given, else ``J^T r`` from the
-forward-mode Jacobian); no JAX. Parameters marked ``derivative_free`` (step counts, loop caps)
-are held at their start by the gradient solvers and fitted only by Nelder-Mead.
+Solvers (:data:`SOLVER_CLASSES`, keyed by the names in :data:`SOLVERS`), each a
+:class:`~study.fit.solver_loop.Solver` run by the one loop of ``study.fit.solver_loop``:
+``levenberg_marquardt``, ``gauss_newton``, ``dogleg`` (least squares on ``r``) and ``bfgs``
+(on ``0.5*||r||^2``) from optimistix (``study.fit.optimistix_solvers``); ``nelder_mead``, a NumPy
+Nelder-Mead on the same loss (``study.fit.nelder_mead``); ``adam``, Mitsuba's tutorial loop with
+``drjit.opt.Adam`` (``study.fit.adam``). Parameters marked ``derivative_free`` (step counts,
+loop caps) are held at their start by the gradient solvers and fitted only by Nelder-Mead.
 
 Failures (step cap, non-finite residual, solver error) never propagate: :func:`fit` returns
 a :class:`FitResult` with ``converged=False``, the reason in ``message`` and, for a crash,
 the best point evaluated. A start on a bound is moved inside by 1e-3 of the scale. Bad arguments
-(unknown solver or parameter, start outside the bounds) raise ValueError.
+(unknown solver, setting or parameter, start outside the bounds) raise ValueError or TypeError.
 """
 
 from __future__ import annotations
 
 import math
 import time
+from dataclasses import replace
 
 import numpy as np
 
-from .adam import adam
-from .bridge import DrJitResidual
-from .nelder_mead import nelder_mead
-from .optx import optimistix_fit, optimistix_stepped
+from .adam import Adam
+from .nelder_mead import NelderMead
+from .optimistix_solvers import BFGS, Dogleg, GaussNewton, LevenbergMarquardt
 from .params import TRANSFORMS, Param
 from .problem import (
-    DERIVATIVE_FREE,
+    CALIBRATION_SETTINGS,
     FTOL,
     FTOL_SE,
     FTOL_WINDOW,
-    LEAST_SQUARES,
-    MINIMISERS,
-    SOLVERS,
     FitProblem,
     FitResult,
+    SolverSettings,
 )
-from .steps import Trace
+from .solver_loop import Objective, Solver, SolverRun, Trace, run_solver
+
+SOLVER_CLASSES: dict[str, type[Solver]] = {
+    cls.name: cls for cls in (LevenbergMarquardt, GaussNewton, Dogleg, BFGS, NelderMead, Adam)
+}
+SOLVERS = tuple(SOLVER_CLASSES)
+DERIVATIVE_FREE = tuple(n for n, cls in SOLVER_CLASSES.items() if cls.derivative_free)
 
 __all__ = [
+    "CALIBRATION_SETTINGS",
     "DERIVATIVE_FREE",
     "FTOL",
     "FTOL_SE",
     "FTOL_WINDOW",
-    "LEAST_SQUARES",
-    "MINIMISERS",
     "SOLVERS",
+    "SOLVER_CLASSES",
     "TRANSFORMS",
     "FitProblem",
     "FitResult",
     "Param",
+    "SolverSettings",
     "fit",
+    "kkt_violations",
 ]
 
 
-def _free_names(problem: FitProblem, solver: str, free, treat_as_continuous) -> list[str]:
+def solver_class(name: str) -> type[Solver]:
+    """The solver registered as ``name``."""
+    cls = SOLVER_CLASSES.get(name)
+    if cls is None:
+        raise ValueError(f"unknown solver {name!r}; valid solvers: {', '.join(SOLVERS)}")
+    return cls
+
+
+def fit(
+    problem: FitProblem,
+    x0: dict | None = None,
+    *,
+    solver: str,
+    free: list[str] | None = None,
+    treat_as_continuous: list[str] = (),
+    settings: SolverSettings | None = None,
+    **overrides,
+) -> FitResult:
+    """Fit ``problem`` from ``x0`` (dict name -> physical value; missing: defaults).
+
+    ``solver``: one of :data:`SOLVERS`. ``free``: names to fit (default: every parameter the
+    solver can fit; the rest stay at ``x0``). ``treat_as_continuous``: ``derivative_free``
+    parameters a gradient solver may fit anyway (to measure what it does). ``settings``: a
+    :class:`SolverSettings` (default: its defaults; the calibration uses
+    :data:`CALIBRATION_SETTINGS`); keyword ``overrides`` replace single fields of it
+    (``max_steps=50``, ``lr=0.1``...).
+
+    The solver runs from ``x0``; when it converged with a ``clip`` parameter on a bound where the
+    loss gradient points inwards (:func:`kkt_violations`), it runs again from just inside, at most
+    ``kkt_restarts`` times and ``max_steps`` steps over all runs. The result is the solver's
+    point or, when lower, the lowest-loss point the residual evaluated (except Adam, which
+    returns its lowest-loss iterate).
+    """
+    settings = replace(settings or SolverSettings(), **overrides)
+    cls = solver_class(solver)
+    base = problem.start_values(x0)
+    names = _free_names(problem, cls, free, treat_as_continuous)
+    ps = [problem.params[n] for n in names]
+    u0 = np.array([float(p.to_u(_inside(p, base[p.name]))) for p in ps])
+    t0 = time.perf_counter()
+    objective = Objective(problem.jax_residual(base, names), problem, base, names)
+    try:
+        loss0 = 0.5 * float(np.sum(objective.residual.value(u0) ** 2))
+    except FloatingPointError as e:
+        run = SolverRun(u0, 0, False, f"start point rejected: {e}")
+        return _result(solver, objective, t0, run, math.nan, math.nan)
+    trace = Trace(t0, loss0)
+    ftol = settings.stall_tolerance(objective.residual.m, len(names))
+    run, restarts = _run_with_restarts(cls(settings), objective, u0, trace, ftol)
+    u, converged, message = run.u, run.converged, run.message
+    try:
+        loss = 0.5 * float(np.sum(objective.residual.value(u) ** 2))
+    except FloatingPointError as e:
+        loss, converged, message = math.nan, False, f"{message}; final point non-finite: {e}"
+    stats = objective.residual.stats
+    if cls.keeps_best_evaluated and stats.best_x is not None and stats.best_loss < loss:
+        u, loss = np.asarray(stats.best_x, np.float64), float(stats.best_loss)
+    run = replace(run, u=u, converged=converged, message=message)
+    return _result(solver, objective, t0, run, loss0, loss, trace, restarts)
+
+
+def _run_with_restarts(
+    solver: Solver, objective: Objective, u0, trace: Trace, ftol: float | None
+) -> tuple[SolverRun, int]:
+    """The solver from ``u0``, then again from inside a bound while :func:`kkt_violations`
+    finds a ``clip`` parameter the loss would move inwards. Returns the last run, with the steps,
+    gradient calls and iterate losses of all of them, and the number of restarts."""
+    s = solver.settings
+    runs, u, restarts = [], u0, 0
+    while True:
+        runs.append(run_solver(solver, objective, u, s.max_steps - _steps(runs), trace, ftol))
+        u = runs[-1].u
+        if not runs[-1].converged or restarts >= s.kkt_restarts or _steps(runs) >= s.max_steps:
+            break
+        inward = kkt_violations(objective, u, ftol)
+        if not inward:
+            break
+        restarts += 1
+        u = _moved_inside(objective.params, u, inward)
+    last = runs[-1]
+    message = last.message + (f" ({_steps(runs)} steps in all)" if restarts else "")
+    iterate_losses = (
+        None if last.iterate_losses is None else [v for r in runs for v in (r.iterate_losses or [])]
+    )
+    return replace(
+        last,
+        steps=_steps(runs),
+        message=message,
+        grad_calls=sum(r.grad_calls for r in runs),
+        iterate_losses=iterate_losses,
+    ), restarts
+
+
+def _steps(runs: list[SolverRun]) -> int:
+    return sum(r.steps for r in runs)
+
+
+def _free_names(problem: FitProblem, cls: type[Solver], free, treat_as_continuous) -> list[str]:
     cont = set(treat_as_continuous or ())
     unknown = (set(free or ()) | cont) - set(problem.names)
     if unknown:
         raise ValueError(f"unknown parameter(s) {sorted(unknown)}; known: {problem.names}")
-    gradient = solver not in DERIVATIVE_FREE
+    gradient = not cls.derivative_free
     if free is None:
         free = [
             n
@@ -125,145 +223,7 @@ def _inside(p: Param, v: float) -> float:
     return min(max(v, p.lo + eps), p.hi - eps)
 
 
-def fit(
-    problem: FitProblem,
-    x0: dict | None = None,
-    *,
-    solver: str,
-    max_steps: int = 200,
-    rtol: float = 1e-8,
-    atol: float = 1e-12,
-    free: list[str] | None = None,
-    treat_as_continuous: list[str] = (),
-    lr: float = 0.05,
-    patience: int | None = None,
-    nm_step: float = 0.5,
-    ftol: float | None = None,
-    ftol_window: int = FTOL_WINDOW,
-    ftol_se: float | None = None,
-    kkt_restarts: int = 3,
-) -> FitResult:
-    """Fit ``problem`` from ``x0`` (dict name -> physical value; missing: defaults).
-
-    ``solver``: one of :data:`SOLVERS`. ``free``: names to fit (default: every parameter the
-    solver can fit; the rest stay at ``x0``). ``rtol``/``atol``: optimistix's tolerances (its
-    Cauchy test: the step in ``u`` *and* the change of the loss both below ``atol + rtol*|.|``).
-    ``ftol`` (None: off): the loss-stall rule, checked after every step of the optimistix
-    solvers and Adam: stop (converged) when the lowest loss seen fell by less than
-    ``ftol * loss`` over the last ``ftol_window`` steps - the fit has stopped improving, whatever
-    the parameters still do (a parameter crawling towards an unreachable bound would otherwise
-    run the solver to its cap). ``ftol_se`` (None: off) raises the tolerance to
-    ``ftol_se / (m - k)`` when that is larger (an improvement worth less than
-    ``sqrt(ftol_se)`` standard errors of one parameter, see :data:`FTOL_SE`). The calibration
-    uses ``ftol = FTOL = 1e-6``, ``ftol_se = FTOL_SE = 1`` over ``FTOL_WINDOW = 3`` steps. For Adam
-    (the tutorial loop runs to the cap), with ``patience`` set, the run also stops (converged) when
-    the best loss improved by less than ``rtol*loss + atol`` over the last ``patience`` iterations;
-    Adam returns the lowest-loss iterate. ``lr``: Adam's learning rate in ``u`` units (one unit is
-    about one ``scale``). ``max_steps``: step cap (Adam: iterations; with restarts, over all of
-    them). ``nm_step``: edge of Nelder-Mead's start simplex in ``u`` units (vertices ``u0`` and
-    ``u0 + nm_step*e_i``; optimistix's own default is 2.5e-4 at ``u = 0``, which stalled far
-    from the minimum). ``kkt_restarts``: how many times a ``clip`` parameter the solver left on
-    a bound may be moved back inside when the loss gradient there points inwards.
-
-    ``FitResult.extra``: ``step_losses`` / ``step_seconds`` (lowest loss seen and seconds since
-    the start, after each step), ``at_bound`` (name -> ``'lower'``/``'upper'`` for ``clip``
-    parameters on a bound at the end), ``restarts`` (how many KKT restarts ran).
-    """
-    _check_settings(solver, max_steps, ftol, ftol_window)
-    base = problem.start_values(x0)
-    names = _free_names(problem, solver, free, treat_as_continuous)
-    ps = [problem.params[n] for n in names]
-    u0 = np.array([float(p.to_u(_inside(p, base[p.name]))) for p in ps])
-    t0 = time.perf_counter()
-    res = problem.bridge(base, names)
-    n_grad = 0
-    try:
-        loss0 = 0.5 * float(np.sum(res.value(u0) ** 2))
-    except FloatingPointError as e:
-        msg = f"start point rejected: {e}"
-        return _result(problem, solver, names, base, u0, math.nan, [], 0, res, 0, t0, False, msg)
-    trace = Trace(t0, loss0)
-    if ftol is not None and ftol_se:
-        ftol = max(ftol, ftol_se / max(res.m - len(names), 1))
-    u, iters, restarts, adam_losses = u0, 0, 0, []
-    settings = dict(rtol=rtol, atol=atol, lr=lr, patience=patience, nm_step=nm_step)
-    settings.update(ftol=ftol, ftol_window=ftol_window)
-    while True:
-        u, it, ok, msg, ng, ls = _run_solver(
-            solver, problem, res, base, names, u, max_steps - iters, trace, settings
-        )
-        n_grad, adam_losses, iters = n_grad + ng, adam_losses + ls, iters + it
-        if not ok or restarts >= kkt_restarts or iters >= max_steps:
-            break
-        inward = _kkt_violations(problem, base, ps, u, res, ftol)
-        if not inward:
-            break
-        restarts += 1
-        u = _moved_inside(ps, u, inward)
-        msg += f"; restarted from inside the bound for {[ps[j].name for j in inward]}"
-    if restarts:
-        msg += f" ({iters} steps in all)"
-    try:
-        loss = 0.5 * float(np.sum(res.value(u) ** 2))
-    except FloatingPointError as e:
-        loss, ok, msg = math.nan, False, f"{msg}; final point non-finite: {e}"
-    if res.stats.best_x is not None and res.stats.best_loss < loss and solver != "adam":
-        u, loss = np.asarray(res.stats.best_x, np.float64), float(res.stats.best_loss)
-    losses = adam_losses if solver == "adam" else list(res.stats.losses)
-    out = _result(problem, solver, names, base, u, loss0, losses, iters, res, n_grad, t0, ok, msg)
-    out.loss = loss
-    out.extra.update(
-        {
-            "step_losses": trace.losses,
-            "step_seconds": trace.seconds,
-            "at_bound": {p.name: p.at_bound(ui) for p, ui in zip(ps, out.u) if p.at_bound(ui)},
-            "restarts": restarts,
-        }
-    )
-    return out
-
-
-def _check_settings(solver: str, max_steps: int, ftol, ftol_window: int) -> None:
-    if solver not in SOLVERS:
-        raise ValueError(f"unknown solver {solver!r}; valid solvers: {', '.join(SOLVERS)}")
-    if max_steps < 1:
-        raise ValueError(f"max_steps must be >= 1, got {max_steps}")
-    if ftol is not None and not (ftol >= 0 and ftol_window >= 1):
-        raise ValueError(f"need ftol >= 0 and ftol_window >= 1, got {ftol}, {ftol_window}")
-
-
-def _run_solver(solver, problem, res, base, names, u, left, trace, o: dict):
-    """One run of ``solver`` from ``u`` for at most ``left`` steps; ``o``: the settings of
-    :func:`fit`. Returns ``(u, steps, ok, message, gradient calls, Adam's losses)``."""
-    if solver == "nelder_mead":
-        return (*nelder_mead(res, u, left, o["rtol"], o["atol"], o["nm_step"], trace), 0, [])
-    if solver == "adam":
-        return adam(
-            problem,
-            res,
-            base,
-            names,
-            u,
-            left,
-            o["lr"],
-            o["rtol"],
-            o["atol"],
-            o["patience"],
-            trace,
-            o["ftol"],
-            o["ftol_window"],
-        )
-    if solver == "nelder_mead_optimistix":
-        out = optimistix_fit(res, solver, u, left, o["rtol"], o["atol"], o["nm_step"])
-        trace.note(res.stats.best_loss)
-        return (*out, 0, [])
-    out = optimistix_stepped(
-        res, solver, u, left, o["rtol"], o["atol"], o["ftol"], o["ftol_window"], trace
-    )
-    return (*out, 0, [])
-
-
-def _moved_inside(ps: list, u, inward: dict) -> np.ndarray:
+def _moved_inside(ps: list[Param], u, inward: dict) -> np.ndarray:
     """``u`` with each parameter ``inward`` names (index -> 'lower'/'upper') moved from its
     bound to 5 % of its scale inside (where the loss falls inwards)."""
     u = np.array(u, np.float64)
@@ -279,22 +239,21 @@ def _moved_inside(ps: list, u, inward: dict) -> np.ndarray:
     return u
 
 
-def _kkt_violations(
-    problem: FitProblem, base: dict, ps: list, u, res: DrJitResidual, ftol: float | None = None
-) -> dict:
+def kkt_violations(objective: Objective, u, ftol: float | None = None) -> dict:
     """Index -> side for the ``clip`` parameters on a bound where the loss decreases inwards
     (``dL/dp < 0`` at a lower bound, ``> 0`` at an upper one) by a worthwhile amount: the
     Gauss-Newton gain of moving that parameter alone inwards, ``g^2 / (2 ||J_j||^2)``, exceeds
     ``ftol * loss`` (the stopping tolerance; 1e-9 without one). The solver left them there by
     overshooting, not because the data want it."""
+    ps = objective.params
     at = {j: p.at_bound(ui) for j, (p, ui) in enumerate(zip(ps, u)) if p.at_bound(ui)}
     if not at:
         return {}
-    vals = dict(base)
+    vals = dict(objective.base)
     vals.update({p.name: float(p.from_u(ui)) for p, ui in zip(ps, u)})
     names = [ps[j].name for j in at]
     try:
-        r, J = problem.residual_and_jacobian(vals, names)
+        r, J = objective.problem.residual_and_jacobian(vals, names)
     except FloatingPointError:
         return {}
     r, J = np.asarray(r, np.float64), np.asarray(J, np.float64)
@@ -311,26 +270,39 @@ def _kkt_violations(
 
 
 def _result(
-    problem, solver, names, base, u, loss0, losses, iters, res, n_grad, t0, ok, msg, loss=math.nan
+    solver: str,
+    objective: Objective,
+    t0: float,
+    run: SolverRun,
+    loss_start: float,
+    loss: float,
+    trace: Trace | None = None,
+    restarts: int = 0,
 ) -> FitResult:
-    ps = [problem.params[n] for n in names]
-    x = np.array([float(p.from_u(ui)) for p, ui in zip(ps, u)])
-    consts = dict(base)
-    consts.update(dict(zip(names, x.tolist())))
+    """The :class:`FitResult` of ``run`` (its point, steps, counts and message)."""
+    ps, stats = objective.params, objective.residual.stats
+    x = np.array([float(p.from_u(ui)) for p, ui in zip(ps, run.u)])
+    constants = dict(objective.base)
+    constants.update(dict(zip(objective.names, x.tolist())))
+    u = np.asarray(run.u, np.float64)
     return FitResult(
-        solver,
-        names,
-        x,
-        np.asarray(u, np.float64),
-        consts,
-        loss0,
-        loss,
-        losses,
-        iters,
-        res.stats.n_value_calls,
-        res.stats.n_jac_calls,
-        n_grad,
-        time.perf_counter() - t0,
-        bool(ok),
-        msg,
+        solver=solver,
+        names=objective.names,
+        x=x,
+        u=u,
+        constants=constants,
+        loss_start=loss_start,
+        loss=loss,
+        losses=list(stats.losses) if run.iterate_losses is None else list(run.iterate_losses),
+        iterations=run.steps,
+        n_value_calls=stats.n_value_calls,
+        n_jac_calls=stats.n_jac_calls,
+        n_grad_calls=run.grad_calls,
+        seconds=time.perf_counter() - t0,
+        converged=bool(run.converged),
+        message=run.message,
+        step_losses=trace.losses if trace is not None else [],
+        step_seconds=trace.seconds if trace is not None else [],
+        at_bound={p.name: p.at_bound(ui) for p, ui in zip(ps, u) if p.at_bound(ui)},
+        restarts=restarts,
     )

@@ -163,8 +163,8 @@ def multistart_job(job: dict) -> dict:
         "message": res.message[:300],
         "failure": failure_class(res.converged, res.message, res.iterations, job["max_steps"]),
         "fitted": {n: float(res.constants[n]) for n in job["names"]},
-        "trace_loss": [float(v) for v in res.extra.get("step_losses", [])],
-        "trace_seconds": [float(v) for v in res.extra.get("step_seconds", [])],
+        "trace_loss": [float(v) for v in res.step_losses],
+        "trace_seconds": [float(v) for v in res.step_seconds],
     }
 
 

@@ -8,7 +8,11 @@ jax = pytest.importorskip("jax")
 import jax.numpy as jnp  # noqa: E402
 
 from helpers.drjit_toy import TRUTH, ToyModel  # noqa: E402
-from study.fit.bridge import NonFiniteParameterError, NonFiniteResidualError, make_jax_residual  # noqa: E402
+from study.fit.jax_residual import (  # noqa: E402
+    NonFiniteParameterError,
+    NonFiniteResidualError,
+    make_jax_residual,
+)
 
 NAMES = ["amp", "rate", "shift"]
 X = np.array([0.9, 1.1, 0.12])

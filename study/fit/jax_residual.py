@@ -12,6 +12,9 @@ solvers and minimisers. It is a ``jax.custom_jvp`` function: the primal calls ``
 through one ``jax.pure_callback``; the JVP rule calls ``fn_value_and_jac`` through *one*
 ``jax.pure_callback`` and returns ``J @ t`` computed in JAX. ``J @ t`` is linear in the tangent
 ``t`` and transposable, so reverse mode (``J.T @ ct``) works too, with no further Dr.Jit call.
+The NumPy solvers call the same computation directly (:meth:`DrJitResidual.value`,
+:meth:`DrJitResidual.value_and_jac`); every call, from either side, is counted in
+:class:`CallStats`, which also keeps the lowest-loss point evaluated.
 
 Precision: building a residual switches JAX to 64-bit floats for the whole process
 (``jax.config.update("jax_enable_x64", True)``), because the solvers' convergence tests need
@@ -19,11 +22,13 @@ more than float32 once the residual is small. Code that imports this module is n
 until it builds a residual; after that, JAX arrays created from Python floats default to
 float64 in that process. Dr.Jit itself may compute in float32; values are cast to float64.
 
-Non-finite values: if ``fn_value`` or ``fn_value_and_jac`` returns a NaN or an infinity, the
-callback raises :class:`NonFiniteResidualError` (naming the parameter vector and how many
-entries were bad); JAX re-raises it from the jitted computation (wrapped in its runtime error).
-The residual object also keeps it in ``last_error`` so that a caller that catches JAX's error
-(as :func:`study._fit.fit` does) can report the original cause. Nothing continues with NaN.
+Non-finite values: a parameter vector holding NaN or infinity is refused before the model runs
+(:class:`NonFiniteParameterError`); a NaN or an infinity in what ``fn_value`` or
+``fn_value_and_jac`` returns raises :class:`NonFiniteResidualError` (naming the parameter vector
+and how many entries were bad). Both are ``FloatingPointError``s. JAX re-raises them from a
+jitted computation wrapped in its runtime error, so the residual also keeps the original in
+``last_error``, where the solver loop (``study.fit.solver_loop``) reads the cause of an aborted
+solve. Nothing continues with NaN.
 """
 
 from __future__ import annotations
