@@ -159,25 +159,7 @@ def test_history_words_are_found():
     ]
 
 
-# pages whose references into the source are still to move into a contributors section: each
-# fails the check, and passing it fails this list (strict), so the list only shrinks
-OVER_THE_LIMIT = {
-    "README.md",
-    "docs/engine.md",
-    "docs/fast-references.md",
-    "docs/process-state.md",
-    "docs/user-shader.md",
-    "docs/where-it-runs.md",
-}
-
-
-def _with_limit(page):
-    name = page.relative_to(REPO).as_posix()
-    over = pytest.mark.xfail(strict=True, reason="references to move to contributors")
-    return pytest.param(page, id=name, marks=[over] if name in OVER_THE_LIMIT else [])
-
-
-@pytest.mark.parametrize("page", [_with_limit(p) for p in _manual_pages()])
+@pytest.mark.parametrize("page", _manual_pages(), ids=lambda p: p.relative_to(REPO).as_posix())
 def test_pages_keep_source_references_for_contributors(page):
     """A rule a user needs is on the page; references into the source sit in a "For
     contributors" section or note, at most a few elsewhere."""
