@@ -187,7 +187,7 @@ def worker(spec: dict) -> dict:
     """Every pass of ``spec`` (size, variant, stages, passes, overrides) in this process."""
     t0 = time.perf_counter()
     from study._backend import init_backend
-    from study.commands import calibrate, steps  # noqa: F401  (imported before the clock stops)
+    from study.calibration import export, fitting, frames  # noqa: F401  (before the clock stops)
 
     init_backend(spec["variant"])  # a refusal (no CUDA) is the result's error
     startup = time.perf_counter() - t0
