@@ -20,23 +20,24 @@ flip:
 
 On a GPU's own OpenGL (NVIDIA's driver; docs/where-it-runs.md, "The GL check on a GPU") the
 texture units address and filter at a fixed sub-texel precision (8 fractional bits) where
-llvmpipe computes in float32. Three more reasons, from the port's diagnostics of a render with
-``diagnose=True`` (the raycast ports), explain what is left after the four above:
+llvmpipe computes in float32. On such an OpenGL (``gpu_addressing``: its ``GL_RENDERER`` is no
+software rasteriser, :func:`is_gpu`) two more reasons, from the port's diagnostics of a render
+with ``diagnose=True`` (the raycast ports), explain what is left after the four above:
 
 * ``raymarch_texel_edge``: one of the raymarch's nearest-filtered depth lookups (the start and
   every step) lies within ``GPU_TEXEL_EDGE`` (1/512 texel: half a step of 8 sub-texel bits) of a
   texel edge, where the GPU may read the neighbouring depth texel;
-* ``fresnel_texel_edge``: the Fresnel LUT's nearest lookup likewise;
-* ``highlight_slope``: the gap is no more than what a change of ``HIGHLIGHT_COS`` (1e-4) in the
-  Phong cosine ``dot(rLight, vEye)`` makes there (``ports.highlight.highlight_slope``: the
-  colour's slope in that cosine; with the exponent ~300 and strength ~10 of a fit, 1e-4 of the
-  cosine moves the colour by up to ~3e-2).
+* ``fresnel_texel_edge``: the Fresnel LUT's nearest lookup likewise.
 
-Together these three may explain at most ``GPU_SHARE`` (0.1 %) of the water pixels; beyond that
+Together these two may explain at most ``GPU_SHARE`` (0.1 %) of the water pixels; beyond that
 none of their pixels counts as explained (``gpu_over_cap``).
 
 Anything else over the threshold is ``unexplained``. ``outlier_pixels`` names each outlier
-(up to ``MAX_NAMED``) with every reason that applies to it.
+(up to ``MAX_NAMED``) with every reason that applies to it and, where the port gives it, the
+highlight's slope there (``highlight_slope``: the colour's change per unit of the Phong cosine
+``dot(rLight, vEye)``, ``ports.highlight.highlight_slope``; the gap over it is the cosine change
+that would make the gap, which a GPU filtering the normal map at its own precision can cause: it
+is recorded, never accepted as a reason).
 
 On llvmpipe (Mesa, float32 textures) float textures are filtered with float weights (no 8-bit
 sub-texel quantisation), so what remains between the port and GL is float32 rounding of the
@@ -59,10 +60,6 @@ TEXEL_EDGE = 1e-3
 # (on an H200 a lookup 3e-4 texels below an edge read the texel above; rounding the port's
 # coordinates to 1/256 texel reproduces those pixels' colours to 3e-4)
 GPU_TEXEL_EDGE = 2.0**-9
-# how far (in dot(rLight, vEye)) a GPU's Phong cosine may lie from the port's: its normal map,
-# filtered at its own sub-texel precision, moves the cosine by ~2e-6 typically and up to ~7e-5
-# on an H200 where the normal map is steep (the outliers of a fit with exponent 311, strength 9.7)
-HIGHLIGHT_COS = 1e-4
 GPU_SHARE = 1e-3  # the GPU reasons explain at most this share of the water pixels
 MAX_NAMED = 50  # outliers listed in ``outlier_pixels``
 
@@ -90,6 +87,7 @@ def compare_port_gl(
     *,
     renderer=None,
     output: dict | None = None,
+    gpu_addressing: bool = False,
 ) -> dict:
     """Render ``shader`` with the port (LLVM) and with the core GLSL on OpenGL and compare.
 
@@ -138,7 +136,8 @@ def compare_port_gl(
         reasons["reflection_decision"] = _neighbour_differs(
             out["refl_hit"], port_mask
         ) | _neighbour_differs(out["refl_iterations"], port_mask)
-    explained, left = explain_outliers(outlier, reasons, gpu_reasons(out, diff), int(both.sum()))
+    gpu = gpu_reasons(out) if gpu_addressing else {}
+    explained, left = explain_outliers(outlier, reasons, gpu, int(both.sum()))
     return {
         "mean_abs": float(d.mean()),
         "p999": float(np.percentile(d, 99.9)),
@@ -149,14 +148,14 @@ def compare_port_gl(
         "n_nonfinite": int((both & ~np.isfinite(diff)).sum()),
         "explained": explained,
         "unexplained": int(left.sum()),
-        "outlier_pixels": name_outliers(outlier, diff, {**reasons, **gpu_reasons(out, diff)}),
+        "outlier_pixels": name_outliers(outlier, diff, {**reasons, **gpu}, out),
         "diff": diff,
         "port": out["color"],
         "gl": rgba[..., :3],
     }
 
 
-def gpu_reasons(out: dict, diff: np.ndarray) -> dict:
+def gpu_reasons(out: dict) -> dict:
     """The GPU explanations (module doc) that the port's diagnostics in ``out`` allow: name ->
     (H, W) bool. Empty for a render without them (``diagnose`` off, the SPIR-V executor)."""
     why = {}
@@ -164,9 +163,16 @@ def gpu_reasons(out: dict, diff: np.ndarray) -> dict:
         why["raymarch_texel_edge"] = out["raymarch_texel_edge"] < GPU_TEXEL_EDGE
     if "fresnel_texel_edge" in out:
         why["fresnel_texel_edge"] = out["fresnel_texel_edge"] < GPU_TEXEL_EDGE
-    if "highlight_slope" in out:
-        why["highlight_slope"] = diff <= out["highlight_slope"] * HIGHLIGHT_COS
     return why
+
+
+def is_gpu(gl_renderer: str | None) -> bool:
+    """True for a ``GL_RENDERER`` that is no software rasteriser (Mesa's llvmpipe, softpipe,
+    lavapipe or SwiftShader): a GPU's texture unit, with its fixed sub-texel precision."""
+    if not gl_renderer:
+        return False
+    soft = ("llvmpipe", "softpipe", "lavapipe", "swiftshader")
+    return not any(s in gl_renderer.lower() for s in soft)
 
 
 def explain_outliers(outlier: np.ndarray, reasons: dict, gpu: dict, n_water: int):
@@ -194,17 +200,19 @@ def explain_outliers(outlier: np.ndarray, reasons: dict, gpu: dict, n_water: int
     return explained, left & ~taken
 
 
-def name_outliers(outlier: np.ndarray, diff: np.ndarray, reasons: dict) -> list[dict]:
-    """The outliers, largest first (at most ``MAX_NAMED``): ``y``, ``x``, ``diff`` and ``why``,
-    every reason of ``reasons`` that applies to the pixel (empty: none)."""
+def name_outliers(outlier: np.ndarray, diff: np.ndarray, reasons: dict, out: dict) -> list:
+    """The outliers, largest first (at most ``MAX_NAMED``): ``y``, ``x``, ``diff``, ``why``
+    (every reason of ``reasons`` that applies to the pixel; empty: none) and, where ``out``
+    has it, ``highlight_slope`` there."""
     ys, xs = np.nonzero(outlier)
     order = np.argsort(-np.nan_to_num(diff[ys, xs], nan=np.inf), kind="stable")[:MAX_NAMED]
-    return [
-        {
-            "y": int(ys[i]),
-            "x": int(xs[i]),
-            "diff": float(diff[ys[i], xs[i]]),
-            "why": [name for name, w in reasons.items() if w[ys[i], xs[i]]],
-        }
-        for i in order
-    ]
+    slope = out.get("highlight_slope")
+    named = []
+    for i in order:
+        y, x = int(ys[i]), int(xs[i])
+        p = {"y": y, "x": x, "diff": float(diff[y, x]),
+             "why": [name for name, w in reasons.items() if w[y, x]]}  # fmt: skip
+        if slope is not None:
+            p["highlight_slope"] = float(slope[y, x])
+        named.append(p)
+    return named

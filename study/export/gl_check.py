@@ -9,7 +9,7 @@ from pathlib import Path
 
 import numpy as np
 
-from shaders_port.gl.compare import compare_port_gl
+from shaders_port.gl.compare import compare_port_gl, is_gpu
 from shaders_port.gl.renderer import GLRenderer
 from shaders_port.gl.round_trip import TranslatedRenderer
 from shaders_port.spirv.gl_run import context_support
@@ -25,8 +25,10 @@ def gl_check(shader: str, inputs, constants, shaders_dir: Path) -> dict:
     variant = get_variant(shader)
     source = (shaders_dir / "core" / f"{variant.name}.frag").read_text()
     with GLRenderer(variant.shader, variant.prepare_inputs(inputs), source=source) as r:
-        res = compare_port_gl(inputs, constants, shader, renderer=_OwnBlock(r))
-        res["gl_renderer"] = gl_renderer_of(r)
+        gl = gl_renderer_of(r)
+        res = compare_port_gl(inputs, constants, shader, renderer=_OwnBlock(r),
+                              gpu_addressing=is_gpu(gl))  # fmt: skip
+        res["gl_renderer"] = gl
     return _verdict(res, "the exported shader")
 
 
@@ -107,8 +109,10 @@ def hlsl_check(shader: str, inputs, constants, shaders_dir: Path) -> dict:
     glsl, refl = hlsl_round_trip(hlsl, "frag", f"hlsl/{variant.name}.frag.hlsl")
     prepared = variant.prepare_inputs(inputs)
     with TranslatedRenderer(variant.shader, prepared, glsl, refl) as r:
-        res = compare_port_gl(inputs, constants, shader, renderer=_OwnBlock(r))
-        res["gl_renderer"] = gl_renderer_of(r)
+        gl = gl_renderer_of(r)
+        res = compare_port_gl(inputs, constants, shader, renderer=_OwnBlock(r),
+                              gpu_addressing=is_gpu(gl))  # fmt: skip
+        res["gl_renderer"] = gl
     return _verdict(res, "the exported HLSL (through glslang -D and SPIRV-Cross)")
 
 
