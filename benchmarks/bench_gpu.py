@@ -12,8 +12,10 @@ experiment (default ``experiments/default.toml``) with ``resolution`` the size a
 * ``fit``: the model at ``fit.resolution`` and the solver (``study.commands.calibrate.fit_still``);
 * ``export``: the fitted shader, its engine targets and textures written
   (``study.calibration.export.write_export``);
-* ``gl``: the exported shader run on OpenGL (llvmpipe, on the CPU) against the port on the
-  backend, at the size (the same call).
+* ``gl``: the exported shader run on the OpenGL that headless EGL gives (Mesa llvmpipe on the
+  CPU; on a GPU machine its driver, e.g. NVIDIA's) against the port on the backend, at the size
+  (the same call). Each pass records the check's figures, its reason when it fails, the pixels it
+  explains with their reasons and ``GL_RENDERER`` (``gl_check``; the result's ``gl_renderer``).
 
 ``--stages`` picks the stages printed; the stages before the last one picked run too (a fit
 needs its reference; export and GL check are one call). Passes (``--passes``): ``cold`` starts
@@ -157,6 +159,7 @@ def _one_pass(spec: dict, root: Path) -> dict:
                                           variant, timings)  # fmt: skip
                     res["gl_passed"] = export.gl[0].get("passed")
                     res["gl_check"] = jsonable(export.gl[0])  # its figures: why it failed
+                    res["gl_renderer"] = res["gl_check"].get("gl_renderer")
                 except RuntimeError as exc:  # no OpenGL / glslang here: the other stages stand
                     res["export_error"] = f"{type(exc).__name__}: {exc}"[:300]
                 seconds["export"] = timings.get("export_s")
@@ -184,7 +187,7 @@ def worker(spec: dict) -> dict:
     """Every pass of ``spec`` (size, variant, stages, passes, overrides) in this process."""
     t0 = time.perf_counter()
     from study._backend import init_backend
-    from study.commands import calibrate, steps  # noqa: F401  (imported before the clock stops)
+    from study.calibration import export, fitting, frames  # noqa: F401  (before the clock stops)
 
     init_backend(spec["variant"])  # a refusal (no CUDA) is the result's error
     startup = time.perf_counter() - t0
@@ -196,7 +199,10 @@ def worker(spec: dict) -> dict:
             last["seconds"] = {"startup": startup, **last["seconds"]}
             last["total"] += startup
         passes[name] = {k: last[k] for k in ("seconds", "total", "memory")}
-    keep = ("fit_resolution", "spp", "noise", "water_pixels", "params", "gl_passed", "export_error")
+        if "gl_check" in last:  # the check of this pass: figures, reason, explained pixels, GL
+            passes[name]["gl_check"] = last["gl_check"]
+    keep = ("fit_resolution", "spp", "noise", "water_pixels", "params", "gl_passed", "gl_check",
+            "gl_renderer", "export_error")  # fmt: skip
     return {"size": spec["size"], "variant": spec["variant"], "passes": passes,
             **{k: last.get(k) for k in keep}}  # fmt: skip
 

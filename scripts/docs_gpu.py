@@ -50,15 +50,35 @@ def _group(results: list) -> dict:
     return out
 
 
-def _stage_rows(cols: list, by: dict, stages: list) -> list[str]:
+def _gl_check(r: dict, p: dict) -> dict:
+    """The GL check's figures of a result's pass (``bench.json``), or of the result."""
+    return p.get("gl_check") or r.get("gl_check") or {}
+
+
+def gl_label(cols: list, by: dict, machine_gpu) -> str:
+    """The GL check's row label, naming the OpenGL that ran it (``GL_RENDERER``, per backend
+    where they differ); where none was recorded: llvmpipe on a machine without a GPU, "OpenGL not
+    recorded" on one with a GPU (EGL may have picked the GPU's driver)."""
+    known = [(c, _gl_check(*by[c]).get("gl_renderer") or by[c][0].get("gl_renderer"))
+             for c in cols if c in by]  # fmt: skip
+    known = [(c, g) for c, g in known if g]
+    if not known:
+        return "GL check (llvmpipe)" if not machine_gpu else "GL check (OpenGL not recorded)"
+    if len({g for _, g in known}) == 1:
+        return f"GL check ({known[0][1]})"
+    return "GL check (" + "; ".join(f"{c}: {g}" for c, g in known) + ")"
+
+
+def _stage_rows(cols: list, by: dict, stages: list, machine_gpu=None) -> list[str]:
     rows = []
+    names = {**STAGE_NAMES, "gl": gl_label(cols, by, machine_gpu)}
     for st in [*stages, "total"]:
         vals = [by[c][1]["seconds"].get(st) if c in by else None for c in cols]
         if st == "total":
             vals = [by[c][1].get("total") if c in by else None for c in cols]
         cells = " | ".join(_s(v) for v in vals)
         ratio = f" | {_ratio(vals[0], vals[1])}" if len(cols) == 2 else ""
-        rows.append(f"| {STAGE_NAMES.get(st, st)} | {cells}{ratio} |")
+        rows.append(f"| {names.get(st, st)} | {cells}{ratio} |")
     return rows
 
 
@@ -86,6 +106,7 @@ def _setting_line(cols: list, by: dict) -> str:
             f"{c}: fit at {_size_text(r['fit_resolution'])}, reference {r['spp']} spp "
             f"(noise {r['noise']:.2e}), {r['water_pixels']} water pixels in the fit"
             + ("" if r.get("gl_passed") in (None, True) else ", GL check **failed**")
+            + (f" ({why})" if (why := _gl_check(r, {}).get("reason")) else "")
             + (
                 f", export and GL check not run ({r['export_error']})"
                 if r.get("export_error")
@@ -117,7 +138,7 @@ def invocation_lines(inv: dict) -> list[str]:
         head = " | ".join(f"{c} s" for c in cols) + (" | CPU / GPU" if len(cols) == 2 else "")
         lines += [f"**{size}, {name}.** " + _setting_line(cols, by), ""]
         lines += [f"| stage | {head} |", "|---|" + "---|" * (len(cols) + (len(cols) == 2))]
-        lines += _stage_rows(cols, by, stages) + _memory_rows(cols, by) + [""]
+        lines += _stage_rows(cols, by, stages, m.get("gpu")) + _memory_rows(cols, by) + [""]
     for r in inv["results"]:
         if r.get("error"):
             lines += [

@@ -18,7 +18,26 @@ flip:
   ``TEXEL_EDGE`` texels of a texel edge, where the GPU's texel addressing may read the
   neighbouring texel.
 
-Anything else over the threshold is ``unexplained``.
+On a GPU's own OpenGL (NVIDIA's driver; docs/where-it-runs.md, "The GL check on a GPU") the
+texture units address and filter at a fixed sub-texel precision (8 fractional bits) where
+llvmpipe computes in float32. On such an OpenGL (``gpu_addressing``: its ``GL_RENDERER`` is no
+software rasteriser, :func:`is_gpu`) two more reasons, from the port's diagnostics of a render
+with ``diagnose=True`` (the raycast ports), explain what is left after the four above:
+
+* ``raymarch_texel_edge``: one of the raymarch's nearest-filtered depth lookups (the start and
+  every step) lies within ``GPU_TEXEL_EDGE`` (1/512 texel: half a step of 8 sub-texel bits) of a
+  texel edge, where the GPU may read the neighbouring depth texel;
+* ``fresnel_texel_edge``: the Fresnel LUT's nearest lookup likewise.
+
+Together these two may explain at most ``GPU_SHARE`` (0.1 %) of the water pixels; beyond that
+none of their pixels counts as explained (``gpu_over_cap``).
+
+Anything else over the threshold is ``unexplained``. ``outlier_pixels`` names each outlier
+(up to ``MAX_NAMED``) with every reason that applies to it and, where the port gives it, the
+highlight's slope there (``highlight_slope``: the colour's change per unit of the Phong cosine
+``dot(rLight, vEye)``, ``ports.highlight.highlight_slope``; the gap over it is the cosine change
+that would make the gap, which a GPU filtering the normal map at its own precision can cause: it
+is recorded, never accepted as a reason).
 
 On llvmpipe (Mesa, float32 textures) float textures are filtered with float weights (no 8-bit
 sub-texel quantisation), so what remains between the port and GL is float32 rounding of the
@@ -36,6 +55,13 @@ OUTLIER = 1e-2
 # how near (texels) a nearest-filtered lookup may come to a texel edge before the two sides may
 # read different texels (float32 texel coordinates of a few hundred texels round at ~1e-5)
 TEXEL_EDGE = 1e-3
+# a GPU's texture unit converts a nearest lookup's texel coordinate to fixed point with 8 sub-texel
+# bits: a coordinate within half a step (1/512 texel) of an edge may land in the neighbouring texel
+# (on an H200 a lookup 3e-4 texels below an edge read the texel above; rounding the port's
+# coordinates to 1/256 texel reproduces those pixels' colours to 3e-4)
+GPU_TEXEL_EDGE = 2.0**-9
+GPU_SHARE = 1e-3  # the GPU reasons explain at most this share of the water pixels
+MAX_NAMED = 50  # outliers listed in ``outlier_pixels``
 
 
 def _neighbour_differs(a: np.ndarray, valid: np.ndarray) -> np.ndarray:
@@ -61,6 +87,7 @@ def compare_port_gl(
     *,
     renderer=None,
     output: dict | None = None,
+    gpu_addressing: bool = False,
 ) -> dict:
     """Render ``shader`` with the port (LLVM) and with the core GLSL on OpenGL and compare.
 
@@ -79,7 +106,11 @@ def compare_port_gl(
     """
     variant = get_variant(shader)
     constants = constants if constants is not None else Constants()
-    out = variant.render(inputs, constants).numpy() if output is None else output
+    if output is None:  # the raycast ports' diagnostics for the reasons (colour bit-identical)
+        kw = {"diagnose": True} if getattr(variant.port(), "GL_CHECK_DIAGNOSE", False) else {}
+        out = variant.render(inputs, constants, **kw).numpy()
+    else:
+        out = output
     own = renderer is None
     if own:
         renderer = variant.gl_renderer(inputs)
@@ -105,10 +136,8 @@ def compare_port_gl(
         reasons["reflection_decision"] = _neighbour_differs(
             out["refl_hit"], port_mask
         ) | _neighbour_differs(out["refl_iterations"], port_mask)
-    explained, left = {}, outlier.copy()
-    for name, why in reasons.items():
-        explained[name] = int((left & why).sum())
-        left &= ~why
+    gpu = gpu_reasons(out) if gpu_addressing else {}
+    explained, left = explain_outliers(outlier, reasons, gpu, int(both.sum()))
     return {
         "mean_abs": float(d.mean()),
         "p999": float(np.percentile(d, 99.9)),
@@ -119,7 +148,71 @@ def compare_port_gl(
         "n_nonfinite": int((both & ~np.isfinite(diff)).sum()),
         "explained": explained,
         "unexplained": int(left.sum()),
+        "outlier_pixels": name_outliers(outlier, diff, {**reasons, **gpu}, out),
         "diff": diff,
         "port": out["color"],
         "gl": rgba[..., :3],
     }
+
+
+def gpu_reasons(out: dict) -> dict:
+    """The GPU explanations (module doc) that the port's diagnostics in ``out`` allow: name ->
+    (H, W) bool. Empty for a render without them (``diagnose`` off, the SPIR-V executor)."""
+    why = {}
+    if "raymarch_texel_edge" in out:
+        why["raymarch_texel_edge"] = out["raymarch_texel_edge"] < GPU_TEXEL_EDGE
+    if "fresnel_texel_edge" in out:
+        why["fresnel_texel_edge"] = out["fresnel_texel_edge"] < GPU_TEXEL_EDGE
+    return why
+
+
+def is_gpu(gl_renderer: str | None) -> bool:
+    """True for a ``GL_RENDERER`` that is no software rasteriser (Mesa's llvmpipe, softpipe,
+    lavapipe or SwiftShader): a GPU's texture unit, with its fixed sub-texel precision."""
+    if not gl_renderer:
+        return False
+    soft = ("llvmpipe", "softpipe", "lavapipe", "swiftshader")
+    return not any(s in gl_renderer.lower() for s in soft)
+
+
+def explain_outliers(outlier: np.ndarray, reasons: dict, gpu: dict, n_water: int):
+    """``(explained, left)``: each reason of ``reasons`` in turn takes the outliers it covers
+    (count in ``explained``); then the ``gpu`` reasons take what is left, as long as together
+    they take no more than ``GPU_SHARE`` of the ``n_water`` pixels (else none of theirs counts
+    and ``explained['gpu_over_cap']`` says how many they would have taken). ``left``: the
+    unexplained outliers."""
+    explained, left = {}, outlier.copy()
+    for name, why in reasons.items():
+        explained[name] = int((left & why).sum())
+        left &= ~why
+    if not gpu:
+        return explained, left
+    taken = np.zeros_like(left)
+    counts = {}
+    for name, why in gpu.items():
+        counts[name] = int((left & ~taken & why).sum())
+        taken |= left & why
+    if int(taken.sum()) > GPU_SHARE * n_water:
+        explained.update({name: 0 for name in gpu})
+        explained["gpu_over_cap"] = int(taken.sum())
+        return explained, left
+    explained.update(counts)
+    return explained, left & ~taken
+
+
+def name_outliers(outlier: np.ndarray, diff: np.ndarray, reasons: dict, out: dict) -> list:
+    """The outliers, largest first (at most ``MAX_NAMED``): ``y``, ``x``, ``diff``, ``why``
+    (every reason of ``reasons`` that applies to the pixel; empty: none) and, where ``out``
+    has it, ``highlight_slope`` there."""
+    ys, xs = np.nonzero(outlier)
+    order = np.argsort(-np.nan_to_num(diff[ys, xs], nan=np.inf), kind="stable")[:MAX_NAMED]
+    slope = out.get("highlight_slope")
+    named = []
+    for i in order:
+        y, x = int(ys[i]), int(xs[i])
+        p = {"y": y, "x": x, "diff": float(diff[y, x]),
+             "why": [name for name, w in reasons.items() if w[y, x]]}  # fmt: skip
+        if slope is not None:
+            p["highlight_slope"] = float(slope[y, x])
+        named.append(p)
+    return named

@@ -58,3 +58,35 @@ def fresnel_combine(m, P, vReflection, vRefraction, vEye, vBumpTex):
     NdotV = clamp(dr.dot(vEye, vBumpTex), 0.0, 1.0)
     FresnelCoeffs = P.fresnelLookup.sample(m, NdotV, m.Float(0.5))
     return vReflection * FresnelCoeffs[1] + vRefraction * FresnelCoeffs[0]
+
+
+# ---- diagnostics for the GL check (not in the GLSL: extra outputs, the colour is unchanged) ----
+
+
+def fresnel_texel_edge(m, P, vEye, vBumpTex):
+    """Distance, in texels, of block [9]'s nearest-filtered Fresnel LUT lookup to a texel edge
+    (detached Float): where it is under a GPU's sub-texel addressing precision, the GPU may
+    read the neighbouring LUT entry (``shaders_port.gl.compare``)."""
+    NdotV = clamp(dr.dot(dr.detach(vEye), dr.detach(vBumpTex)), 0.0, 1.0)
+    return m.Float(P.fresnelLookup.texel_edge(m, NdotV, m.Float(0.5)))
+
+
+def highlight_slope(m, P, vBumpTex, vEye, vLight, C, lobe: str = "phong"):
+    """|d colour / d cos| of block [8]'s Phong highlight as block [9] weighs it (detached Float):
+    ``R * SPECULAR_STRENGTH * SPECULAR_EXPONENT * cos^(SPECULAR_EXPONENT - 1) * max(lightcolor)``,
+    ``cos = clamp(dot(rLight, vEye), 0, 1)`` and ``R`` the Fresnel LUT's reflection weight.
+    How far the colour moves when the cosine moves by a little (a GPU's normal map filtered at
+    its own sub-texel precision moves it by ~1e-5 to 1e-4 where the normal map is steep): with a
+    large exponent and strength this reaches 1e-2 per 1e-4. 0 for the other lobes (None, GGX,
+    the sun's disc), which the GL check does not explain this way."""
+    if lobe != "phong":
+        return m.Float(dr.zeros(m.Float, dr.width(vEye)))
+    N, E, L = dr.detach(vBumpTex), dr.detach(vEye), dr.detach(vLight)
+    rLight = dr.dot(2.0 * N, L) * N - L
+    c = clamp(dr.dot(rLight, E), 0.0, 1.0)
+    e = dr.detach(C.specular_exponent)
+    slope = dr.detach(C.specular_strength) * e * gl_pow(c, dr.maximum(e - 1.0, 0.0))
+    NdotV = clamp(dr.dot(E, N), 0.0, 1.0)
+    reflectance = P.fresnelLookup.sample(m, NdotV, m.Float(0.5))[1]
+    lc = dr.maximum(dr.maximum(P.lightcolor[0], P.lightcolor[1]), P.lightcolor[2])
+    return m.Float(dr.abs(slope * reflectance * lc))

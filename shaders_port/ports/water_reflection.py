@@ -39,6 +39,7 @@ from .water_refraction import (
     Options,
     cubemap_reflection,
     fresnel_combine,
+    gl_check_diagnostics,
     loop_positions,
     loop_R,
     options_of,
@@ -48,6 +49,10 @@ from .water_refraction import (
     refraction_failure_diagnostics,
     specular_highlight,
 )
+
+# the GL check (shaders_port.gl.compare) renders with diagnose=True: its GPU explanations
+# (raymarch_texel_edge, fresnel_texel_edge, highlight_slope) come with the failure diagnostics
+GL_CHECK_DIAGNOSE = True
 
 # the one table from the GLSL file's #define names to the port's options (see ports.switches): those
 # of water_refraction's blocks [2]-[6] and [8]; NOREFLECTION (block [7] skipped) is the
@@ -191,6 +196,7 @@ def _shade(m, P, C, diagnose: bool = False, opts: Options = Options()):
         diagnostics["refine_path"], diagnostics["refine_texel_edge"] = f.refine_path
     if diagnose:
         diagnostics.update(refraction_failure_diagnostics(m, P, C, f))
+        diagnostics.update(gl_check_diagnostics(m, P, C, f, True, opts.specular))
         diagnostics["refl_exit"] = reflection_exit(m, P, C, refl_loop_position, noHit)
         d = dr.detach(refl_dir)
         diagnostics.update(

@@ -67,7 +67,7 @@ from ..pipeline.frame import (
 from ..pipeline.raster import prepare
 from ..pipeline.texture import backend_types, clamp, mix, texmat_xy
 from .box import box_reflection, box_state
-from .highlight import fresnel_combine, specular_highlight
+from .highlight import fresnel_combine, fresnel_texel_edge, highlight_slope, specular_highlight
 from .planar import MIRROR_NORMAL, mirror_state, planar_reflection
 from .ssr import ssr_reflection, ssr_state
 from .switches import decode
@@ -112,6 +112,10 @@ class Options(NamedTuple):
     wall_faces: bool = False
     reflection_map: str = "cube"
 
+
+# the GL check (shaders_port.gl.compare) renders with diagnose=True: its GPU explanations
+# (raymarch_texel_edge, fresnel_texel_edge, highlight_slope) come with the failure diagnostics
+GL_CHECK_DIAGNOSE = True
 
 # the one table from the GLSL file's #define names to the port's options (see ports.switches)
 DEFINES = {
@@ -229,6 +233,40 @@ def loop_positions(m, C, R, current_position, current_position_old, i):
 def loop_R(C, R):
     """The step vector handed to a raycast loop: detached in ``loop_ad='replay'`` mode."""
     return dr.detach(R) if C.loop_ad == "replay" else R
+
+
+@dr.syntax
+def raymarch_texel_edge(m, P, R, iterations):
+    """Least distance, in texels, of block [4]'s nearest-filtered depth lookups (the start and
+    each of the ``iterations`` steps, positions accumulated as :func:`raycast_ground` does) to a
+    texel edge of ``worldYComponent`` (detached Float). Where it is under a GPU's sub-texel
+    addressing precision (``shaders_port.gl.compare.GPU_TEXEL_EDGE``) the GPU may read the
+    neighbouring depth texel: the ray then crosses at another step, or the crossing
+    interpolates another depth, and the colour jumps (a diagnostic of the GL check: not in
+    the GLSL)."""
+    R = dr.detach(R)
+    p = m.Array3f(dr.detach(P.varyingVecWorldPosition))
+    s, t = texmat_xy(P.tex_matrix0, p)
+    edge = m.Float(P.worldYComponent.texel_edge(m, s, t))
+    k = m.UInt32(0)
+    n = m.UInt32(iterations)
+    while k < n:
+        p += R
+        s, t = texmat_xy(P.tex_matrix0, p)
+        edge = dr.minimum(edge, P.worldYComponent.texel_edge(m, s, t))
+        k += 1
+    return edge
+
+
+def gl_check_diagnostics(m, P, C, f: "Refracted", reflection: bool, lobe: str) -> dict:
+    """The port's side of the GL check's explanations for a GPU (``shaders_port.gl.compare``):
+    ``raymarch_texel_edge`` (:func:`raymarch_texel_edge`), and with the reflection block
+    ``fresnel_texel_edge`` and ``highlight_slope`` (``ports.highlight``). Extra outputs only."""
+    out = {"raymarch_texel_edge": raymarch_texel_edge(m, P, f.R, f.loop_iterations)}
+    if reflection:
+        out["fresnel_texel_edge"] = fresnel_texel_edge(m, P, f.vEye, f.vBumpTex)
+        out["highlight_slope"] = highlight_slope(m, P, f.vBumpTex, f.vEye, f.vLight, C, lobe)
+    return out
 
 
 def refine_crossing(m, P, current_position, current_position_old, depth, olddepth, C, refine):
@@ -369,6 +407,7 @@ class Refracted:
     olddepth: object = None
     # the refinement's decisions and least texel-edge distance (refine_crossing), or None
     refine_path: object = None
+    loop_iterations: object = None  # the linear search's steps (before any refinement)
 
 
 def refraction_blocks(m, P, C, opts: Options = Options()) -> Refracted:
@@ -384,6 +423,7 @@ def refraction_blocks(m, P, C, opts: Options = Options()) -> Refracted:
         m, C, R, current_position, current_position_old, iterations
     )
     path = None
+    loop_iterations = iterations
     if opts.refine is not None:
         current_position, current_position_old, depth, olddepth, path = refine_crossing(
             m, P, current_position, current_position_old, depth, olddepth, C, opts.refine
@@ -412,6 +452,7 @@ def refraction_blocks(m, P, C, opts: Options = Options()) -> Refracted:
         loop_position_old,
         olddepth,
         path,
+        loop_iterations,
     )
 
 
@@ -472,6 +513,7 @@ def _shade(m, P, C, diagnose: bool = False, opts: Options = Options(), Mi=None):
         diagnostics["refine_path"], diagnostics["refine_texel_edge"] = f.refine_path
     if diagnose:
         diagnostics.update(refraction_failure_diagnostics(m, P, C, f))
+        diagnostics.update(gl_check_diagnostics(m, P, C, f, opts.reflection, opts.specular))
     return gl_FragColor, diagnostics
 
 
