@@ -67,7 +67,8 @@ from ..pipeline.frame import (
 from ..pipeline.raster import prepare
 from ..pipeline.texture import backend_types, clamp, mix, texmat_xy
 from .box import box_reflection, box_state
-from .highlight import fresnel_combine, fresnel_texel_edge, highlight_slope, specular_highlight
+from .gl_diagnostics import gl_check_diagnostics
+from .highlight import fresnel_combine, specular_highlight
 from .planar import MIRROR_NORMAL, mirror_state, planar_reflection
 from .ssr import ssr_reflection, ssr_state
 from .switches import decode
@@ -233,40 +234,6 @@ def loop_positions(m, C, R, current_position, current_position_old, i):
 def loop_R(C, R):
     """The step vector handed to a raycast loop: detached in ``loop_ad='replay'`` mode."""
     return dr.detach(R) if C.loop_ad == "replay" else R
-
-
-@dr.syntax
-def raymarch_texel_edge(m, P, R, iterations):
-    """Least distance, in texels, of block [4]'s nearest-filtered depth lookups (the start and
-    each of the ``iterations`` steps, positions accumulated as :func:`raycast_ground` does) to a
-    texel edge of ``worldYComponent`` (detached Float). Where it is under a GPU's sub-texel
-    addressing precision (``shaders_port.gl.compare.GPU_TEXEL_EDGE``) the GPU may read the
-    neighbouring depth texel: the ray then crosses at another step, or the crossing
-    interpolates another depth, and the colour jumps (a diagnostic of the GL check: not in
-    the GLSL)."""
-    R = dr.detach(R)
-    p = m.Array3f(dr.detach(P.varyingVecWorldPosition))
-    s, t = texmat_xy(P.tex_matrix0, p)
-    edge = m.Float(P.worldYComponent.texel_edge(m, s, t))
-    k = m.UInt32(0)
-    n = m.UInt32(iterations)
-    while k < n:
-        p += R
-        s, t = texmat_xy(P.tex_matrix0, p)
-        edge = dr.minimum(edge, P.worldYComponent.texel_edge(m, s, t))
-        k += 1
-    return edge
-
-
-def gl_check_diagnostics(m, P, C, f: "Refracted", reflection: bool, lobe: str) -> dict:
-    """The port's side of the GL check's explanations for a GPU (``shaders_port.gl.compare``):
-    ``raymarch_texel_edge`` (:func:`raymarch_texel_edge`), and with the reflection block
-    ``fresnel_texel_edge`` and ``highlight_slope`` (``ports.highlight``). Extra outputs only."""
-    out = {"raymarch_texel_edge": raymarch_texel_edge(m, P, f.R, f.loop_iterations)}
-    if reflection:
-        out["fresnel_texel_edge"] = fresnel_texel_edge(m, P, f.vEye, f.vBumpTex)
-        out["highlight_slope"] = highlight_slope(m, P, f.vBumpTex, f.vEye, f.vLight, C, lobe)
-    return out
 
 
 def refine_crossing(m, P, current_position, current_position_old, depth, olddepth, C, refine):
