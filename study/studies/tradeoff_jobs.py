@@ -123,10 +123,13 @@ def job_frame(job: dict):
     return shader, Frame.of(exp, ref, shader.with_inputs(exp, inputs, mv))
 
 
-def job_options(exp, shader, resolution=None) -> FitOptions:
+def job_options(exp, shader, resolution=None, basin_scan: bool = True) -> FitOptions:
     """The fit options of a point of ``shader``: the experiment's, over the constants a point
-    refits (``Shader.point_parameters``), at ``resolution`` (default ``fit.resolution``)."""
-    return FitOptions.of(exp, parameters=shader.point_parameters(exp), resolution=resolution)
+    refits (``Shader.point_parameters``), at ``resolution`` (default ``fit.resolution``);
+    ``basin_scan`` False for the adaptive search's screen (:func:`screen_job`)."""
+    return FitOptions.of(
+        exp, parameters=shader.point_parameters(exp), resolution=resolution, basin_scan=basin_scan
+    )
 
 
 def job_start(shader, job: dict):
@@ -136,12 +139,13 @@ def job_start(shader, job: dict):
     return None if start is None else shader.constants(start, job.get("schedule"))
 
 
-def job_fit(job: dict, resolution=None):
+def job_fit(job: dict, resolution=None, basin_scan: bool = True):
     """(shader, frame, ``Fit``, fit seconds) of ``job`` fitted from ``job["start"]`` with its
-    schedule, through the calibration's one fit (``study.calibration.fitting``)."""
+    schedule, through the calibration's one fit (``study.calibration.fitting``) with the options
+    of :func:`job_options`."""
     mv = job.get("mitsuba_variant", "llvm_ad_rgb")
     shader, frame = job_frame(job)
-    options = job_options(frame.exp, shader, resolution)
+    options = job_options(frame.exp, shader, resolution, basin_scan)
     t0 = time.perf_counter()
     fit = fit_frames([frame], shader, mv, options, job_start(shader, job))
     return shader, frame, fit, time.perf_counter() - t0
@@ -191,7 +195,8 @@ SCREEN_BLOCK = 4  # pixels per side of the blocks the screen's FLIP map is avera
 def screen_job(job: dict) -> dict:
     """One cheap point of the adaptive search: the continuous constants fitted from
     ``job["start"]`` at ``job["schedule"]`` at the screen resolution (``fit.resolution`` /
-    ``job["factor"]``), scored there against the box-downsampled reference. Returns FLIP and
+    ``job["factor"]``) without the basin scan, scored there against the box-downsampled
+    reference. Returns FLIP and
     RMSE on the water pixels, texture fetches and loop iterations per water pixel, the share
     of rays not crossing the floor, ``flip_blocks`` (the FLIP map averaged over
     ``SCREEN_BLOCK`` x ``SCREEN_BLOCK`` pixel blocks, row-major, NaN where a block has no
@@ -202,7 +207,9 @@ def screen_job(job: dict) -> dict:
     f = int(job["factor"])
     if w % f or h % f:
         raise ValueError(f"fit.resolution {w}x{h} is not divisible by the screen factor {f}")
-    _, _, fit, fit_s = job_fit(job, resolution=(w // f, h // f))
+    # the screen ranks candidates: its fits skip the basin scan (which doubles a point's cost
+    # and serves the exported constants); the points it sends on are fitted with it
+    _, _, fit, fit_s = job_fit(job, resolution=(w // f, h // f), basin_scan=False)
     model, cal = fit.models[0], fit.calibration
     img, diag = model.render(cal.fitted)
     m = model.mask
