@@ -26,12 +26,14 @@ from ..scene.shader_waves import shader_waves
 class Export:
     """What an export wrote and how its check went: ``gl`` (one GL check per frame: the
     figures of ``study.export.gl_check`` and ``passed``), ``engine_targets`` (target -> its
-    files and checks), ``textures`` (the record of what the constants assume) and ``extra``
+    files and checks), ``textures`` (the record of what the constants assume), ``words`` (what
+    it wrote, in the report's words: ``Shader.export_words``) and ``extra``
     (what a result records of a user's file, and of waves taken from the shader)."""
 
     gl: list
     engine_targets: dict
     textures: dict
+    words: dict
     extra: dict = field(default_factory=dict)
 
     @property
@@ -81,7 +83,6 @@ def write_export(
         targets = shader.target_checks(checked[0], constants, folder, left_out, backend)
     text = shader.write_back(exp, constants, all(g.get("passed") is not False for g in gl))
     extra = shader.file_record(exp, text)  # {} for a shader of the space
-    extra["export"] = shader.export_words(exp)
     if exp.waves.source == "shader":  # the reference's surface: how well it fits the normals
         extra["waves"] = shader_waves(exp).stats
-    return Export(gl, targets, record, extra)
+    return Export(gl, targets, record, shader.export_words(exp), extra)

@@ -46,9 +46,7 @@ class FitOptions:
     def of(cls, exp, solver: str | None = None, **changes) -> "FitOptions":
         """The options ``exp`` sets (``fit.parameters``, ``fit.solver``, ``fit.max_steps``,
         ``fit.input_noise``), ``solver`` and ``changes`` over them."""
-        solver = solver or exp.fit.solver
-        if solver not in SOLVERS:
-            raise ValueError(f"unknown solver {solver!r}; choose one of {', '.join(SOLVERS)}")
+        solver = check_solver(solver or exp.fit.solver)
         params = exp.fit.parameters
         opts = cls(
             parameters=None if params is None else tuple(params),
@@ -61,6 +59,14 @@ class FitOptions:
     @property
     def requested(self) -> list | None:
         return None if self.parameters is None else list(self.parameters)
+
+
+def check_solver(solver: str | None) -> str | None:
+    """``solver`` when it names one of ``study.fit.solvers.SOLVERS`` (or is None); else
+    ValueError naming the choices."""
+    if solver is not None and solver not in SOLVERS:
+        raise ValueError(f"unknown solver {solver!r}; choose one of {', '.join(SOLVERS)}")
+    return solver
 
 
 @dataclass

@@ -67,6 +67,7 @@ def build_result(frames, shader, fit, scores: dict, timings: dict, export, solve
         gl_check=export.gl_check,
         engine_targets=export.engine_targets,
         textures=export.textures,
+        export=export.words,
         extra=dict(export.extra),
     )
     if kind in ("still", "animated"):

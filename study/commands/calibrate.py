@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import time
 
-from ..calibration.fitting import FitOptions
+from ..calibration.fitting import FitOptions, check_solver
 from ..calibration.frames import load_frames
 from ..calibration.run import calibrate
 
@@ -18,6 +18,7 @@ def run_calibrate(experiment, out, overrides=None, variant=None, solver=None, ca
     of them); an experiment with views is fitted on all its views, an animated one on all its
     frames. Returns the JSON object written."""
     t_start = time.perf_counter()
+    check_solver(solver)  # before any rendering
     frames = load_frames(experiment, overrides, variant, cache)
     options = FitOptions.of(frames.first.exp, solver)
     return calibrate(frames, out, options, t_start=t_start)[0]

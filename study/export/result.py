@@ -60,7 +60,8 @@ class CalibrationResult:
         experiments (paths), scenes (names), weights (scene -> weight of its residuals).
     Both, when written: engine_targets (the HLSL, Metal, GLSL ES and SPIR-V exports and what
     checked each, ``study.export.gl_check.target_checks``); textures (the Fresnel LUT and the
-    normal map the constants assume, exported beside them: ``study.export.textures``).
+    normal map the constants assume, exported beside them: ``study.export.textures``); export
+    (what the export wrote, in the report's words: ``files`` and ``constants``).
     """
 
     shader: str
@@ -86,6 +87,7 @@ class CalibrationResult:
     weights: dict | None = None
     engine_targets: dict | None = None
     textures: dict | None = None
+    export: dict | None = None
     extra: dict = field(default_factory=dict)
 
     @property

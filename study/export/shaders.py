@@ -78,9 +78,9 @@ def read_calibration(path, user=None) -> SavedCalibration:
         raise ValueError(f"{path}: 'constants' must be an object of name -> value")
     rest = (data.get("constants_not_read") or {}).get("values", {}) if "constants" in data else {}
     table = {**rest, **table}
-    if "shader_file" in data:
+    if "shader_file" in data:  # a user's result names its constants under "constants" alone
         user = user or _user_shader(path, data)
-        constants = _user_constants(path, table, user)
+        constants = _user_constants(path, {**rest, **data.get("constants", {})}, user)
     else:
         constants = _study_constants(path, table)
     try:

@@ -356,13 +356,15 @@ def _check_export(out: Path, summary: dict, stem: str) -> Path:
     return frag_path
 
 
-def _study_parts(out: Path, saved, inputs: ShaderInputs, start: dict) -> dict:
+def _study_parts(out: Path, saved, inputs: ShaderInputs) -> dict:
     """What the viewer runs of a shader of the study's space calibrated in ``out``: the
     exported GLSL ES files (the fitted ``frag``, ``frag_default`` at ``start``), the inputs as
     the variant prepares them, the study's textures bound by name."""
     summary = saved.data
     frag_path = _check_export(out, summary, summary["shader"])
     frag = frag_path.read_text("utf-8")
+    start = start_constants(summary)
+    inputs = with_exported_textures(inputs, out / "shaders")
     return {
         "vert": (out / "shaders" / target_file("gles300", "water", "vert")).read_text("utf-8"),
         "frag": frag,
@@ -376,7 +378,7 @@ def _study_parts(out: Path, saved, inputs: ShaderInputs, start: dict) -> dict:
     }
 
 
-def _user_parts(out: Path, saved, inputs: ShaderInputs, start: dict) -> dict:
+def _user_parts(out: Path, saved, inputs: ShaderInputs) -> dict:
     """What the viewer runs of the user's shader calibrated in ``out`` (``user.user_parts``)
     at its fitted and ``start`` values, bound as the GL check binds it (the study's own textures
     are not needed); ViewerUnsupported for a dialect the GL check does not run, or without a
@@ -388,7 +390,8 @@ def _user_parts(out: Path, saved, inputs: ShaderInputs, start: dict) -> dict:
             f"{why}; the GL check and the engine targets in {out / 'shaders'} are written"
         )
     _check_export(out, summary, summary["shader"].rsplit(".", 1)[0])
-    start = {k: tuple(v) if isinstance(v, list) else v for k, v in start.items()}
+    start = {k: tuple(v) if isinstance(v, list) else v for k, v in start_constants(summary).items()}
+    inputs = with_exported_textures(inputs, out / "shaders")
     try:
         u = user_parts(shader, out / "shaders", inputs, saved.constants, start)
     except RuntimeError as exc:  # no headless OpenGL: nothing to read the bindings from
@@ -415,10 +418,8 @@ def calibration_viewer(out: Path, exp, inputs: ShaderInputs) -> Path:
     out = Path(out)
     saved = read_calibration(out / "constants.json")
     summary = saved.data
-    start = start_constants(summary)
-    inputs = with_exported_textures(inputs, out / "shaders")
     kind = _user_parts if saved.user is not None else _study_parts
-    parts = kind(out, saved, inputs, start)
+    parts = kind(out, saved, inputs)
     inputs, vert, frag = parts["inputs"], parts["vert"], parts["frag"]
     images = _images(out, summary)
     # where the reference sees the water (not a wall in front of it): the pixels the run scored
