@@ -268,7 +268,8 @@ def test_write_back_into_the_users_own_file(user_run):
 
 def test_study_tradeoff_charts_the_users_shader(user_run):
     """``study tradeoff`` on a user's shader: it is measured in full beside the study's points,
-    placed on the front by the same rule, drawn, exported with its fitted constants; an edited
+    placed on the front by the same rule, drawn, calibrated and exported with its fitted
+    constants as study calibrate does; an edited
     shader is measured again, not read back from the table."""
     import json
 
@@ -316,7 +317,10 @@ def test_study_tradeoff_charts_the_users_shader(user_run):
         report = (root / "t" / "report.md").read_text()
         assert "**Your shader**, `my_water.frag`" in report
         assert "your shader: user:my_water.frag" in summary["panels"]["my_water"]
-        written = UserShader.from_file(root / "t" / "shaders" / "my_water.frag").defaults()
+        # calibrated as study calibrate calibrates it: recommended/ or yours/, its file inside
+        mine_out = root / "t" / summary["user_exports"]["my_water"]["file"]
+        assert mine_out.parent.parent.parent.name in ("recommended", "yours"), mine_out
+        written = UserShader.from_file(mine_out).defaults()
         for s in ("FOG_DENSITY", "BUMP"):
             assert np.float32(written[s]) == np.float32(user[f"fitted.{s}"]), s
         if summary["user_exports"]["my_water"]["gl_check"]["ran"]:

@@ -148,7 +148,9 @@ def test_the_water_moves_with_the_clock_and_the_camera_orbits(runs):
     o, mask_o = render_float(b, yaw=60.0, pitch=40.0)
     assert mask_o.sum() > 100 and np.all(np.isfinite(o[mask_o])) and (mask_o != mask).any()
     page = (out / "viewer" / "index.html").read_text()
-    assert "orbits the pool" in page and "screen-space buffers" in page
+    # the page names what this shader reads, not the screen-space buffers it does not read
+    assert "orbits the pool" in page and "screen-space buffers" not in page
+    assert "refractionTexture" in page
 
 
 @pytest.mark.slow  # a second calibration (~15 s)
