@@ -11,6 +11,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from study._io import repo_path
+
 from helpers import REPO
 from helpers.experiments import TINY, replaced, sets
 from study.cli import main
@@ -81,7 +83,9 @@ def test_joint_calibration_and_generalise(cache, tmp_path):
     _run(["generalise", *scenes, "--out", str(out)], cache, MY_WATER)
     summary = json.loads((out / "generalise.json").read_text())
     joint = summary["joint"]
-    assert joint["shader"] == "my_water.frag" and joint["shader_file"] == str(MY_WATER)
+    # recorded relative to the repository (study._io.repo_relative), read back as the file
+    assert joint["shader"] == "my_water.frag" and repo_path(joint["shader_file"]) == MY_WATER
+    assert not Path(joint["shader_file"]).is_absolute()
     for scene in joint["scenes"]:
         e = joint["error"][scene]
         assert e["fitted"]["rmse"] < e["default"]["rmse"], (scene, e)
