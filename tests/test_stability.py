@@ -163,8 +163,8 @@ def test_log_residual_jacobian_matches_central_differences():
         assert np.linalg.norm(J[:, j] - fd) < 2e-2 * np.linalg.norm(fd), n
     with pytest.raises(NotImplementedError, match="Adam"):
         model.loss_ad(c)
-    with pytest.raises(ValueError, match="unknown loss"):
-        transformed(model.base, "flip")
+    with pytest.raises(ValueError, match="unknown fit.loss 'l1'"):
+        transformed(model.base, "l1")
 
 
 def test_log_loss_calibration_recovers_a_synthetic_target():

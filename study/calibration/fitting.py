@@ -17,7 +17,9 @@ from .._backend import drjit_backend
 from .._progress import log as _log
 from ..fit.calibrate import Calibration, calibrate_model
 from ..fit.decorrelated import half_models, texture_half_models
+from ..config.errors import ExperimentError
 from ..fit.joint import JointModel, joint_frozen
+from ..fit.losses import LOSSES, transformed
 from ..fit.solvers import SOLVERS
 
 
@@ -33,6 +35,7 @@ class FitOptions:
     refine: refine on the decorrelated loss of the texture's independent halves
         (``fit.input_noise = "decorrelate"``: ``study.fit.decorrelated``).
     resolution: (width, height) pixels of the fit (None: ``fit.resolution``).
+    loss: the error minimised, a key of ``study.fit.losses.LOSSES`` (``fit.loss``).
     """
 
     parameters: tuple | None
@@ -41,6 +44,10 @@ class FitOptions:
     basin_scan: bool = True
     refine: bool = False
     resolution: tuple | None = None
+    loss: str = "linear"
+
+    def __post_init__(self):
+        check_loss(self.loss, self.solver, self.refine)
 
     @classmethod
     def of(cls, exp, solver: str | None = None, **changes) -> "FitOptions":
@@ -53,6 +60,7 @@ class FitOptions:
             solver=solver,
             max_steps=int(exp.fit.max_steps),
             refine=exp.fit.input_noise == "decorrelate",
+            loss=str(exp.fit.loss),
         )
         return dataclasses.replace(opts, **changes)
 
@@ -69,6 +77,25 @@ def check_solver(solver: str | None) -> str | None:
     return solver
 
 
+def check_loss(loss: str, solver: str | None, refine: bool) -> None:
+    """ExperimentError, in one line naming the fix, when ``loss`` is unknown or cannot be used
+    with ``solver`` or the texture-noise refinement (no fit falls back to another loss)."""
+    if loss not in LOSSES:
+        raise ExperimentError(f"unknown fit.loss {loss!r}; choose one of {', '.join(LOSSES)}")
+    if loss == "linear":
+        return
+    if solver == "adam":
+        raise ExperimentError(
+            f'fit.loss = "{loss}" needs a least-squares solver, and adam fits the squared error '
+            'only: set fit.solver = "levenberg_marquardt" (or fit.loss = "linear")'
+        )
+    if refine:
+        raise ExperimentError(
+            f'fit.input_noise = "decorrelate" refines the squared error only, not fit.loss = '
+            f'"{loss}": set fit.input_noise = "ignore" (or fit.loss = "linear")'
+        )
+
+
 @dataclass
 class Fit:
     """A fit's outcome: the ``models`` it ran on (one per frame, at the fit's resolution) and
@@ -78,12 +105,16 @@ class Fit:
     calibration: Calibration
 
 
-def frame_models(frames, shader, variant: str, resolution=None) -> list:
+def frame_models(frames, shader, variant: str, resolution=None, loss: str = "linear") -> list:
     """One model per frame (``Shader.model``) at ``resolution`` (default ``fit.resolution``),
-    each carrying its reference's per-pixel standard error."""
+    each carrying its reference's per-pixel standard error, its residual that of ``loss``
+    (``study.fit.losses``)."""
     backend = drjit_backend(variant)
     return [
-        shader.model(f.exp, f.inputs, f.ref.image, backend, resolution, stderr=f.ref.stderr)
+        transformed(
+            shader.model(f.exp, f.inputs, f.ref.image, backend, resolution, stderr=f.ref.stderr),
+            loss,
+        )
         for f in frames
     ]
 
@@ -94,13 +125,16 @@ def fit_frames(frames, shader, variant: str, options: FitOptions, start=None, mo
     ``models``: the frames' models when built already (:func:`frame_models`)."""
     frames = list(frames)
     if models is None:
-        models = frame_models(frames, shader, variant, options.resolution)
+        models = frame_models(frames, shader, variant, options.resolution, options.loss)
+    elif any(getattr(m, "loss_name", "linear") != options.loss for m in models):
+        raise ValueError(f"fit_frames: the models given are not those of fit.loss {options.loss!r}")
     first = frames[0]
     start = models[0].start_constants(first.exp) if start is None else start
     names = models[0].parameter_names(options.requested)
     w, h = options.resolution or first.exp.fit.resolution
     _log(
-        f"calibrate: fitting {', '.join(names)} of {models[0].label} with {options.solver} on "
+        f"calibrate: fitting {', '.join(names)} of {models[0].label} with {options.solver} "
+        f"(loss {options.loss}) on "
         f"{sum(int(m.mask.sum()) for m in models)} water pixels at {w}x{h}"
         + (f" ({len(frames)} frames)" if len(frames) > 1 else "")
     )
@@ -140,6 +174,6 @@ def _halves(frame, shader, variant: str, options: FitOptions) -> tuple:
         return shader.model(exp, half, ref, backend, options.resolution)
 
     halves = half_models(exp, inputs, model_of) if options.refine else None
-    if not options.basin_scan:
+    if not options.basin_scan or options.loss != "linear":
         return halves, None
     return halves, halves or texture_half_models(exp, inputs, model_of)

@@ -22,6 +22,7 @@ from pathlib import Path
 from .._backend import init_backend
 from .._progress import Stages
 from .._progress import log as _log
+from ..config.errors import ExperimentError
 from ..config.experiment import Experiment, load_experiment
 from ..fit.calibrate import scene_frozen
 from ..scene.baseline_inputs import inputs_for_shader
@@ -114,6 +115,7 @@ def load_frames(experiments, overrides=None, variant=None, cache=None) -> Frames
     exps, variant = load_experiments(paths, overrides, variant)
     setup_s = time.perf_counter() - t0
     if len(exps) == 1 and is_animated(exps[0]) and not has_views(exps[0]):
+        _refuse_decorrelated_frames(exps[0])  # before any frame is rendered
         frames = _animation(paths[0], exps[0], variant, cache)
         frames.timings = {"setup_s": setup_s, **frames.timings}
         return frames
@@ -128,6 +130,17 @@ def load_frames(experiments, overrides=None, variant=None, cache=None) -> Frames
         out += _still_frames(path, exp, name, variant, cache, timings)
     kind = "joint" if len(exps) > 1 else ("views" if len(out) > 1 else "still")
     return Frames(kind, variant, out, timings, exps[0])
+
+
+def _refuse_decorrelated_frames(exp) -> None:
+    """ExperimentError when an animated ``exp`` asks for the texture-noise decorrelation, which
+    the fit over frames does not do."""
+    if exp.fit.input_noise != "ignore":
+        raise ExperimentError(
+            f'fit.input_noise = "{exp.fit.input_noise}" is not built for an animated '
+            "experiment (its frames are fitted jointly by least squares); use fit.input_noise = "
+            '"ignore", or --set animation.frames=1 to fit its frame 0 that way'
+        )
 
 
 def _still_frames(path, exp, name: str, variant: str, cache, timings: dict) -> list[Frame]:

@@ -11,7 +11,6 @@ from pathlib import Path
 
 from .._io import write_exr, write_json
 from .._progress import log as _log
-from ..config.errors import ExperimentError
 from ..export.viewer import ViewerUnsupported, calibration_viewer
 from ..fit.calibrate import timed
 from ..fit.model import constants_json
@@ -36,17 +35,11 @@ def calibrate(frames, out, options=None, shader=None, start=None, t_start=None) 
     t_start = time.perf_counter() if t_start is None else t_start
     exp = frames.first.exp
     options = options or FitOptions.of(exp)
-    if frames.kind == "animated" and exp.fit.input_noise != "ignore":
-        raise ExperimentError(
-            f'fit.input_noise = "{exp.fit.input_noise}" is not built for an animated '
-            "experiment (its frames are fitted jointly by least squares); use fit.input_noise = "
-            '"ignore", or --set animation.frames=1 to fit its frame 0 that way'
-        )
     out = output_folder(out)
     shader = shader or Shader.of(exp)
     timings = dict(frames.timings)
     with timed(timings, "model_s"):
-        models = frame_models(frames, shader, frames.variant, options.resolution)
+        models = frame_models(frames, shader, frames.variant, options.resolution, options.loss)
         start = models[0].start_constants(exp) if start is None else start
     with timed(timings, "fit_s"):
         fit = fit_frames(frames, shader, frames.variant, options, start, models)

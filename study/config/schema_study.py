@@ -310,6 +310,15 @@ STUDY_KEYS: dict[str, Field] = {
     ),
     "fit.solver": Field("str", "levenberg_marquardt", "Solver.", choices=SOLVERS),
     "fit.max_steps": Field("int", 100, "Solver iteration cap.", "", 1, 100000),
+    "fit.loss": Field(
+        "str",
+        "linear",
+        "The error the fit minimises: `linear` (squared error in linear RGB), `log` (squared "
+        "error of log(RGB + 0.02)) or `flip` (the mean LDR-FLIP map the report gives, through a "
+        "differentiable FLIP). `flip` needs a least-squares solver and "
+        '`fit.input_noise = "ignore"`. docs/fitting.md.',
+        choices=("linear", "log", "flip"),
+    ),
     "fit.resolution": Field(
         "vec2",
         [128, 128],

@@ -33,7 +33,6 @@ from ..calibration.frames import Frame
 from ..calibration.scoring import Scorer
 from ..calibration.shader import Shader
 from ..fit.calibrate import DISCRETE, make_problem, scene_frozen
-from ..fit.losses import transformed
 from ..fit.model import expand_parameters, get_value
 from ..fit.solvers import FTOL, FTOL_SE, FTOL_WINDOW, fit
 from ..sweep import load_scene
@@ -117,8 +116,8 @@ def _model(job, loss: str = "linear"):
     exp, ref, inputs = load_scene(job["scene"], mv)
     shader = Shader.of(exp)
     frame = Frame.of(exp, ref, shader.with_inputs(exp, inputs, mv))
-    (model,) = frame_models([frame], shader, mv)
-    return frame, shader, transformed(model, loss)
+    (model,) = frame_models([frame], shader, mv, loss=loss)
+    return frame, shader, model
 
 
 def _fit(job: dict, loss: str = "linear"):
@@ -127,7 +126,7 @@ def _fit(job: dict, loss: str = "linear"):
     frame, shader, model = _model(job, loss)
     mv = job.get("mitsuba_variant", "llvm_ad_rgb")
     t0 = time.perf_counter()
-    fit = fit_frames([frame], shader, mv, FitOptions.of(frame.exp), models=[model])
+    fit = fit_frames([frame], shader, mv, FitOptions.of(frame.exp, loss=loss), models=[model])
     return frame, shader, model, fit.calibration, time.perf_counter() - t0
 
 
