@@ -19,7 +19,7 @@ from ..fit.calibrate import Calibration, calibrate_model
 from ..fit.decorrelated import half_models, texture_half_models
 from ..config.errors import ExperimentError
 from ..fit.joint import JointModel, joint_frozen
-from ..fit.losses import LOSSES, transformed
+from ..fit.losses import LOSSES, fit_ppd, transformed
 from ..fit.solvers import SOLVERS
 
 
@@ -110,13 +110,12 @@ def frame_models(frames, shader, variant: str, resolution=None, loss: str = "lin
     each carrying its reference's per-pixel standard error, its residual that of ``loss``
     (``study.fit.losses``)."""
     backend = drjit_backend(variant)
-    return [
-        transformed(
-            shader.model(f.exp, f.inputs, f.ref.image, backend, resolution, stderr=f.ref.stderr),
-            loss,
-        )
-        for f in frames
-    ]
+    models = []
+    for f in frames:
+        model = shader.model(f.exp, f.inputs, f.ref.image, backend, resolution, stderr=f.ref.stderr)
+        ppd = fit_ppd(model.reference.shape[1], f.ref.image.shape[1])
+        models.append(transformed(model, loss, ppd))
+    return models
 
 
 def fit_frames(frames, shader, variant: str, options: FitOptions, start=None, models=None) -> Fit:

@@ -40,6 +40,8 @@ PPD = 0.7 * 3840 / 0.7 * np.pi / 180
 QC, QF, PC, PT, FEATURE_W = 0.7, 0.5, 0.4, 0.95, 0.082
 #: where |x|, sqrt and the powers are smoothed for the derivatives (see the module docstring)
 SMOOTH = 1e-9
+#: keeps the square roots of :func:`flip_residual` differentiable at zero
+TINY = 1e-24
 
 _RGB2XYZ = np.array(
     [
@@ -200,20 +202,42 @@ def _features(gray, f):
     return edge, point
 
 
-def flip_map(reference, test, ppd: float = PPD):
+def flip_map(reference, test, ppd: float = PPD, knee: float = 0.0):
     """(H, W) LDR-FLIP map of ``test`` against ``reference`` ((H, W, 3) linear RGB, clipped to
-    [0, 1] here), a JAX array; differentiable in both images (compiled once per shape)."""
-    return _jitted()(reference, test, float(ppd))
+    [0, 1] here), a JAX array; differentiable in both images (compiled once per shape).
+    ``knee`` > 0 (HyAB units, where one unit is about a just noticeable difference) replaces
+    ``HyAB ** qc`` by ``(HyAB^2 + knee^2) ** (qc / 2) - knee ** qc``: quadratic below the knee,
+    FLIP's above it, so that a fit's loss has no cusp where an error crosses zero (the map is
+    then not FLIP's: the fit's loss, not the metric)."""
+    return _jitted("map")(reference, test, float(ppd), float(knee))
 
 
-@lru_cache(maxsize=1)
-def _jitted():
+def flip_residual(reference, test, ppd: float = PPD, knee: float = 0.0):
+    """(H, W, 3) residual whose squared norm per pixel is :func:`flip_map`'s value:
+    ``sqrt(FLIP) * d / |d|`` with ``d`` the pixel's difference in the Hunt-adjusted CIELab of
+    the colour pipeline. With ``knee`` > 0 it is linear in ``d`` near zero, so Gauss-Newton
+    sees a smooth least-squares problem whose loss is half the sum of the (kneed) map."""
+    return _jitted("residual")(reference, test, float(ppd), float(knee))
+
+
+@lru_cache(maxsize=2)
+def _jitted(what: str):
     import jax
+    import jax.numpy as jnp
 
-    return jax.jit(_flip_map, static_argnums=2)
+    def residual(reference, test, ppd, knee):
+        value, d = _flip_parts(reference, test, ppd, knee)
+        norm = jnp.sqrt(jnp.sum(d * d, axis=-1, keepdims=True) + TINY)
+        return jnp.sqrt(value + TINY)[..., None] * d / norm
+
+    def value(reference, test, ppd, knee):
+        return _flip_parts(reference, test, ppd, knee)[0]
+
+    return jax.jit(residual if what == "residual" else value, static_argnums=(2, 3))
 
 
-def _flip_map(reference, test, ppd: float):
+def _flip_parts(reference, test, ppd: float, knee: float):
+    """(the FLIP map (H, W), the Hunt-adjusted CIELab difference (H, W, 3))."""
     import jax.numpy as jnp
 
     f = _filters(ppd)
@@ -222,15 +246,18 @@ def _flip_map(reference, test, ppd: float):
 
     d = _lab_hunt(_filtered(ref, f)) - _lab_hunt(_filtered(tst, f))
     hyab = _smooth_abs(d[..., 0]) + _norm2(d[..., 1], d[..., 2])
-    power = jnp.power(jnp.maximum(hyab, SMOOTH), QC)
+    if knee > 0:
+        power = jnp.power(hyab * hyab + knee * knee, QC / 2) - knee**QC
+    else:
+        power = jnp.power(jnp.maximum(hyab, SMOOTH), QC)
     cmax = _cmax()
-    knee = PC * cmax
+    bend = PC * cmax
     colour = jnp.where(
-        power < knee, power * (PT / knee), PT + (power - knee) / (cmax - knee) * (1 - PT)
+        power < bend, power * (PT / bend), PT + (power - bend) / (cmax - bend) * (1 - PT)
     )
 
     er, pr = _features((ref[..., 0] + 16) / 116, f)
     et, pt = _features((tst[..., 0] + 16) / 116, f)
     diff = jnp.maximum(_smooth_abs(er - et), _smooth_abs(pr - pt))
     feature = jnp.power(jnp.maximum(diff / np.sqrt(2), SMOOTH), QF)
-    return jnp.power(jnp.maximum(colour, SMOOTH), 1 - feature)
+    return jnp.power(jnp.maximum(colour, SMOOTH), 1 - feature), d

@@ -8,14 +8,18 @@ The fit minimises ``0.5*||r||^2`` over a residual ``r``; each loss wraps a
   removed, so it prefers a blur to sharp glints slightly misplaced.
 * ``log``: ``f(port) - f(reference)``, ``f(x) = log(max(x, 0) + LOG_EPS)`` (``LOG_EPS = 0.02``,
   linear RGB): a relative error above ~0.02; ``J_f = f'(port) J``.
-* ``flip``: ``sqrt(FLIP_p + FLIP_DELTA)`` per water pixel ``p``, with ``FLIP_p`` the LDR-FLIP
-  map (``study.fit.flip_jax``, the algorithm of ``flip-evaluator`` that the study reports) of
-  the port's image, the reference's outside the water, against the reference; so ``0.5*||r||^2``
-  is half the sum of the map over the water pixels plus a constant, and the minimum is the
-  minimum of the mean FLIP the report gives at the fit's resolution. The Jacobian is
-  ``dFLIP/d image`` (JAX forward mode, one pass per column) applied to the model's ``J``,
-  divided by ``2 r``. FLIP compares tone-free, perceptually encoded, CSF-filtered colour and
-  edge/point features, so a sharp glint near its place beats a blur.
+* ``flip``: per water pixel ``p``, ``sqrt(FLIP_p) d_p / |d_p|`` (``flip_jax.flip_residual``),
+  ``FLIP_p`` the LDR-FLIP map (``study.fit.flip_jax``: the algorithm of ``flip-evaluator`` that
+  the report gives) of the port's image (the reference's outside the water) against the
+  reference, ``d_p`` the pixel's difference in FLIP's Hunt-adjusted CIELab. So ``0.5*||r||^2``
+  is half the sum of the map over the water pixels: the fit minimises the mean FLIP. Two
+  choices make it a fit's loss rather than the metric: the map is seen at :func:`fit_ppd`
+  (a fit pixel covers the visual angle of the scored pixels it stands for), and below a HyAB
+  distance of ``FLIP_KNEE`` (about a just noticeable difference) the colour term is quadratic
+  (``flip_map(knee=...)``), so the loss has no cusp where an error crosses zero and
+  Levenberg-Marquardt converges. The Jacobian is JAX's forward mode of the residual in the
+  image (one pass per column) applied to the model's ``J``. FLIP compares CSF-filtered colour
+  and edge and point features, so a sharp glint near its place costs less than a blur.
 
 Every wrapper is a :class:`~study.fit.protocol.CalibrationModel` (the model's parameters,
 ranges, start constants and renders). ``reference_stderr`` is carried through ``log`` to first
@@ -29,9 +33,8 @@ from __future__ import annotations
 import numpy as np
 
 LOG_EPS = 0.02
-#: added to the FLIP map before its square root, so that a pixel with no error has a finite
-#: derivative (the minimiser is unchanged: a constant per pixel)
-FLIP_DELTA = 1e-4
+#: HyAB distance below which the fit's FLIP is quadratic (``study.fit.flip_jax.flip_map``)
+FLIP_KNEE = 1.0
 
 _PASSED = ("label", "defines", "parameter_names", "bounds", "start_constants", "render",
            "reference", "inputs", "variant", "user_shader", "n_renders", "n_jacobians",
@@ -103,16 +106,18 @@ class LogResidual(_Wrapped):
 
 
 class FlipResidual(_Wrapped):
-    """``sqrt(FLIP map + FLIP_DELTA)`` over the water pixels (see the module docstring)."""
+    """The FLIP residual over the water pixels (see the module docstring)."""
 
     loss_name = "flip"
     reference_stderr = None
 
-    def __init__(self, model):
+    def __init__(self, model, ppd: float | None = None):
+        from .flip_jax import PPD
         from .jax_residual import enable_x64
 
         super().__init__(model)
         enable_x64()
+        self.ppd = PPD if ppd is None else float(ppd)
         self._image = np.asarray(model.reference, np.float64)
         self._ref = self._image[model.mask].ravel()
 
@@ -122,36 +127,44 @@ class FlipResidual(_Wrapped):
         img[self.base.mask] = port.reshape(-1, 3)
         return img
 
-    def residual(self, constants) -> np.ndarray:
-        from .flip_jax import flip_map
+    def _of(self, img):
+        from .flip_jax import flip_residual
 
+        return flip_residual(self._image, img, self.ppd, FLIP_KNEE)
+
+    def residual(self, constants) -> np.ndarray:
         port = self.base.residual(constants) + self._ref
-        fmap = np.asarray(flip_map(self._image, self._composite(port)))
-        return np.sqrt(fmap[self.base.mask] + FLIP_DELTA)
+        return np.asarray(self._of(self._composite(port)))[self.base.mask].ravel()
 
     def residual_and_jacobian(self, constants, names):
         import jax
 
-        from .flip_jax import flip_map
-
         r_lin, J = self.base.residual_and_jacobian(constants, names)
-        mask = self.base.mask
-        fmap, lin = jax.linearize(
-            lambda img: flip_map(self._image, img), self._composite(r_lin + self._ref)
-        )
-        tangents = np.zeros((J.shape[1], *self._image.shape))
-        tangents[:, mask] = J.T.reshape(J.shape[1], -1, 3)
-        dmap = np.asarray(jax.vmap(lin)(tangents))[:, mask].T  # (n, k)
-        r = np.sqrt(np.asarray(fmap)[mask] + FLIP_DELTA)
-        return r, dmap / (2.0 * r[:, None])
+        mask, k = self.base.mask, J.shape[1]
+        r, lin = jax.linearize(self._of, self._composite(r_lin + self._ref))
+        tangents = np.zeros((k, *self._image.shape))
+        tangents[:, mask] = J.T.reshape(k, -1, 3)
+        dr = np.asarray(jax.vmap(lin)(tangents))[:, mask].reshape(k, -1).T  # (3n, k)
+        return np.asarray(r)[mask].ravel(), dr
 
 
 LOSSES = {cls.loss_name: cls for cls in (Linear, LogResidual, FlipResidual)}
 
 
-def transformed(model, loss: str = "linear"):
+def transformed(model, loss: str = "linear", ppd: float | None = None):
     """``model`` with the residual of ``loss`` (a key of :data:`LOSSES`); ValueError naming
-    the choices for any other."""
+    the choices for any other. ``ppd``: the pixels per degree at which ``flip`` sees the
+    model's image (None: ``flip-evaluator``'s default; see :func:`fit_ppd`)."""
     if loss not in LOSSES:
         raise ValueError(f"unknown fit.loss {loss!r}; choose one of {', '.join(LOSSES)}")
-    return LOSSES[loss](model)
+    return FlipResidual(model, ppd) if loss == "flip" else LOSSES[loss](model)
+
+
+def fit_ppd(fit_width: int, scored_width: int) -> float:
+    """The pixels per degree at which a fit image ``fit_width`` pixels wide shows the scene as
+    the scored image, ``scored_width`` wide, is seen at ``flip-evaluator``'s default: each fit
+    pixel covers ``scored_width / fit_width`` scored pixels, so the FLIP the fit minimises
+    filters the same visual angle as the FLIP the report gives."""
+    from .flip_jax import PPD
+
+    return PPD * fit_width / scored_width

@@ -8,8 +8,8 @@ A solver keeps nothing of a run outside its state; it reads its settings
 (:class:`~study.fit.problem.SolverSettings`) and the :class:`Objective` it minimises.
 
 :func:`run_solver` owns what every solver shares: the step cap, the :class:`Trace` of the lowest
-loss after each step, the loss-stall rule (:meth:`Trace.stalled`, over
-``ftol_window * stall_window_scale`` steps of the solver), the guard against non-finite
+loss after each step, the loss-stall rule (:meth:`Trace.stalled`, over the last
+``ftol_window * stall_window_scale`` steps that moved the point), the guard against non-finite
 parameters and the residual that aborts a solve. A non-finite model value (a
 ``FloatingPointError``, raised directly or wrapped by JAX from inside a jitted step) ends the run
 not converged with the best point evaluated; any other error is a bug and propagates.
@@ -127,23 +127,29 @@ class Solver(ABC, Generic[State]):
 
 
 class Trace:
-    """Lowest loss seen and seconds since the start, after each solver step."""
+    """Lowest loss seen and seconds since the start, after each solver step, and the lowest
+    loss after each step that moved the solver's point (``moved_losses``)."""
 
     def __init__(self, t0: float, loss0: float):
         self.t0, self.best = t0, loss0
-        self.losses, self.seconds = [], []
+        self.losses, self.seconds, self.moved_losses = [], [], [loss0]
 
-    def note(self, loss: float) -> None:
+    def note(self, loss: float, moved: bool = True) -> None:
         if math.isfinite(loss):
             self.best = min(self.best, float(loss))
         self.losses.append(self.best)
         self.seconds.append(time.perf_counter() - self.t0)
+        if moved:
+            self.moved_losses.append(self.best)
 
     def stalled(self, ftol: float | None, window: int) -> bool:
-        """The lowest loss fell by less than ``ftol * loss`` over the last ``window`` steps."""
-        if ftol is None or len(self.losses) <= window:
+        """The lowest loss fell by less than ``ftol * loss`` over the last ``window`` steps
+        that moved the point. A step that did not (a trust-region solver rejecting its trial
+        and shrinking its radius) is a search, not a stall, and is not counted."""
+        v = self.moved_losses
+        if ftol is None or len(v) <= window:
             return False
-        return self.losses[-window - 1] - self.losses[-1] <= ftol * self.losses[-1]
+        return v[-window - 1] - v[-1] <= ftol * v[-1]
 
 
 @dataclass
@@ -187,9 +193,11 @@ def run_solver(
                     u0,
                     Stop(False, f"maximum number of steps reached (max_steps={max_steps})"),
                 )
+            before = solver.postprocess(objective, run.state).u
             run.state = solver.step(objective, run.state)
             run.steps += 1
-            trace.note(solver.trace_loss(objective, run.state))
+            moved = not np.array_equal(before, solver.postprocess(objective, run.state).u)
+            trace.note(solver.trace_loss(objective, run.state), moved)
     except Exception as exc:  # a non-finite model value aborts the run; anything else propagates
         return _aborted(solver, objective, run, u0, _floating_point_cause(exc, objective.residual))
     return _finished(
