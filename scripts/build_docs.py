@@ -152,6 +152,11 @@ def generated() -> dict[Path, str]:
         folder = RESULTS / phase
         pages[folder / "stability.md"] = stability_report_text(_json(folder / "summary.json"))
     pages.update(_default_run_pages(RESULTS / "default"))
+    pages[RESULTS / "loss-flip" / "report.md"] = _calibration_page(
+        RESULTS / "loss-flip",
+        "`study calibrate experiments/default.toml --set 'fit.loss=\"flip\"' --out out/loss-flip`",
+        Path("out/loss-flip"),
+    )
     pages[RESULTS / "engine-shaders" / "report.md"] = _engine_pairs_page(RESULTS / "engine-shaders")
     pages[RESULTS / "own-waves" / "report.md"] = own_waves_page(RESULTS)
     pages[RESULTS / "error-budget" / "report.md"] = error_budget_page(RESULTS / "error-budget")
@@ -463,6 +468,18 @@ def _default_run_pages(folder: Path) -> dict:
     for target in ("hlsl", "gles300"):
         pages[folder / f"BINDINGS-{target}.md"] = head + sheets[f"{target}/BINDINGS.md"]
     return pages
+
+
+def _calibration_page(folder: Path, command: str, out: Path) -> str:
+    """The report of a calibration committed as its ``constants.json`` in ``folder``, written
+    again from it (without the run's figures); ``command`` made it into ``out``."""
+    from study.report.calibration import report_text
+
+    head = (
+        f"*Written by `scripts/build_docs.py` from the `constants.json` that {command} wrote, "
+        f"committed in `docs/results/{folder.name}/`.*\n\n"
+    )
+    return head + report_text(_json(folder / "constants.json"), {}, out=out)
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -47,11 +47,12 @@ def reference_record(ref) -> dict:
     }
 
 
-def build_result(frames, shader, fit, scores: dict, timings: dict, export, solver: str):
+def build_result(frames, shader, fit, scores: dict, timings: dict, export, options):
     """The ``CalibrationResult`` of a calibration of ``shader`` over ``frames`` (``Frames``):
     ``fit`` (``study.calibration.fitting.Fit``), ``scores`` ({"default", "fitted"}: a
     ``Score`` per frame, ``study.calibration.scoring``), ``export``
-    (``study.calibration.export.Export``), ``timings`` (stage -> seconds)."""
+    (``study.calibration.export.Export``), ``timings`` (stage -> seconds), ``options`` the
+    fit's ``FitOptions`` (its solver and loss are recorded)."""
     cal, first = fit.calibration, frames[0]
     kind = frames.kind
     result = CalibrationResult(
@@ -60,7 +61,8 @@ def build_result(frames, shader, fit, scores: dict, timings: dict, export, solve
         parameters=cal.parameters,
         constants=constants_json(cal.fitted),
         error=result_error(kind, frames, scores),
-        solver=solver,
+        solver=options.solver,
+        loss=options.loss,
         fit=cal.fit_summary,
         identifiability=cal.identifiability,
         timings=timings,

@@ -58,7 +58,7 @@ def calibrate(frames, out, options=None, shader=None, start=None, t_start=None) 
     with timed(timings, "figures_s"):
         figs = _figures(out, frames, shader, scores, cal, options.solver, step)
     timings["total_s"] = time.perf_counter() - t_start  # up to the report (written last)
-    result = build_result(frames, shader, fit, scores, timings, export, options.solver)
+    result = build_result(frames, shader, fit, scores, timings, export, options)
     if step is not None:
         offsets = write_offsets(out / "shaders" / "animation.json", exp, frames)
         result.extra["animation"] = animation_record(exp, frames, step, offsets, figs)

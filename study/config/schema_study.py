@@ -316,7 +316,7 @@ STUDY_KEYS: dict[str, Field] = {
         "The error the fit minimises: `linear` (squared error in linear RGB), `log` (squared "
         "error of log(RGB + 0.02)) or `flip` (the mean LDR-FLIP map the report gives, through a "
         "differentiable FLIP). `flip` needs a least-squares solver and "
-        '`fit.input_noise = "ignore"`. docs/fitting.md.',
+        '`fit.input_noise = "ignore"`. docs/user-shader.md "What the fit minimises".',
         choices=("linear", "log", "flip"),
     ),
     "fit.resolution": Field(

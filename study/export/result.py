@@ -48,7 +48,9 @@ class CalibrationResult:
         constants: the fitted constants, ``Constants.to_dict()`` (what ``study export`` reads).
         error: one scene: {"rmse": {"default", "fitted"}, "flip": {...}} on the water pixels at
             the experiment's resolution; joint: scene -> {"default": {...}, "fitted": {...}}.
-        solver: the solver's name; fit: its summary (iterations, converged, message, steps).
+        solver: the solver's name; loss: the error it minimised (``fit.loss``, a key of
+        ``study.fit.losses.LOSSES``; "linear" in files written before it was recorded); fit: its
+        summary (iterations, converged, message, steps).
         identifiability: the identifiability analysis at the fitted constants.
         timings: stage -> seconds.
         gl_check: the exported shader on OpenGL against the port (``study.export.gl_check``).
@@ -74,6 +76,7 @@ class CalibrationResult:
     identifiability: dict
     timings: dict
     gl_check: dict
+    loss: str = "linear"
     experiment: str | None = None
     fit_resolution: list | None = None
     resolution: list | None = None

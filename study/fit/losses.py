@@ -23,9 +23,9 @@ The fit minimises ``0.5*||r||^2`` over a residual ``r``; each loss wraps a
 
 Every wrapper is a :class:`~study.fit.protocol.CalibrationModel` (the model's parameters,
 ranges, start constants and renders). ``reference_stderr`` is carried through ``log`` to first
-order; ``flip`` has none (its residual mixes a neighbourhood of pixels), so the basin scan's
-noise test, which needs it, does not run under ``flip``. Only ``linear`` has ``loss_ad``
-(Adam's reverse mode); the others are refused by Adam with one line.
+order; ``flip`` has none (its residual mixes a neighbourhood of pixels), so under ``flip`` the
+basin scan reports other minima without a noise test and never restarts from one. Only
+``linear`` has ``loss_ad`` (Adam's reverse mode); the others are refused by Adam in one line.
 """
 
 from __future__ import annotations

@@ -410,6 +410,18 @@ def waves_lines(waves: dict | None) -> list[str]:
     ]
 
 
+LOSS_WORDS = {
+    "linear": 'the squared error in linear RGB (`fit.loss = "linear"`)',
+    "log": 'the squared error of log(RGB + 0.02) (`fit.loss = "log"`)',
+    "flip": 'the mean FLIP at the fit\'s resolution (`fit.loss = "flip"`)',
+}
+
+
+def loss_words(loss: str) -> str:
+    """What the loss ``loss`` (``fit.loss``) is, in the report's words."""
+    return LOSS_WORDS.get(loss, f"`fit.loss = {loss!r}`")
+
+
 def _header_lines(summary: dict) -> list[str]:
     ref, res = summary["reference"], summary["fit_resolution"]
     return [
@@ -418,7 +430,8 @@ def _header_lines(summary: dict) -> list[str]:
         f"Reference: {spp_text(ref)}, measured noise {fmt(ref['noise'], 3)} "
         "(RMS standard error on "
         f"water pixels, linear RGB). Fit at {res[0]}x{res[1]} "
-        f"with `{summary['solver']}`: {fit_steps_line(summary)}",
+        f"with `{summary['solver']}`, minimising {loss_words(summary.get('loss', 'linear'))}: "
+        f"{fit_steps_line(summary)}",
         "",
     ]
 
