@@ -255,7 +255,8 @@ class Shader:
             else "`shaders/core/water.vert` (the study's vertex shader it runs after)"
         )
         return {
-            "files": f"`shaders/core/{Path(exp.fit.shader).name}` (your `{exp.fit.shader}` with "
+            "files": f"`shaders/core/{Path(exp.fit.shader).name}` (your "
+            f"`{repo_relative(exp.fit.shader)}` with "
             "the fitted constants in place of their initializers, every other byte as in your "
             f"file) and {vertex}; compiled with glslangValidator",
             "constants": "the fitted constants as written in the file, those that are uniforms "
