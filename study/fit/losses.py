@@ -32,6 +32,9 @@ from __future__ import annotations
 
 import numpy as np
 
+from .flip_jax import PPD, flip_residual
+from .jax_residual import enable_x64
+
 LOG_EPS = 0.02
 #: HyAB distance below which the fit's FLIP is quadratic (``study.fit.flip_jax.flip_map``)
 FLIP_KNEE = 1.0
@@ -112,9 +115,6 @@ class FlipResidual(_Wrapped):
     reference_stderr = None
 
     def __init__(self, model, ppd: float | None = None):
-        from .flip_jax import PPD
-        from .jax_residual import enable_x64
-
         super().__init__(model)
         enable_x64()
         self.ppd = PPD if ppd is None else float(ppd)
@@ -128,8 +128,6 @@ class FlipResidual(_Wrapped):
         return img
 
     def _of(self, img):
-        from .flip_jax import flip_residual
-
         return flip_residual(self._image, img, self.ppd, FLIP_KNEE)
 
     def residual(self, constants) -> np.ndarray:
@@ -165,6 +163,4 @@ def fit_ppd(fit_width: int, scored_width: int) -> float:
     the scored image, ``scored_width`` wide, is seen at ``flip-evaluator``'s default: each fit
     pixel covers ``scored_width / fit_width`` scored pixels, so the FLIP the fit minimises
     filters the same visual angle as the FLIP the report gives."""
-    from .flip_jax import PPD
-
     return PPD * fit_width / scored_width

@@ -8,11 +8,12 @@ A solver keeps nothing of a run outside its state; it reads its settings
 (:class:`~study.fit.problem.SolverSettings`) and the :class:`Objective` it minimises.
 
 :func:`run_solver` owns what every solver shares: the step cap, the :class:`Trace` of the lowest
-loss after each step, the loss-stall rule (:meth:`Trace.stalled`, over the last
-``ftol_window * stall_window_scale`` steps that moved the point), the guard against non-finite
-parameters and the residual that aborts a solve. A non-finite model value (a
-``FloatingPointError``, raised directly or wrapped by JAX from inside a jitted step) ends the run
-not converged with the best point evaluated; any other error is a bug and propagates.
+loss after each step, the loss-stall rule (:meth:`Trace.stalled`: over the last
+``ftol_window * stall_window_scale`` steps that moved the point, or twice as many of any kind),
+the guard against non-finite parameters and the residual that aborts a solve. A non-finite
+model value (a ``FloatingPointError``, raised directly or wrapped by JAX from inside a jitted
+step) ends the run not converged with the best point evaluated; any other error is a bug and
+propagates.
 """
 
 from __future__ import annotations
@@ -30,6 +31,9 @@ from .params import Param
 from .problem import FitProblem, SolverSettings
 
 State = TypeVar("State")
+
+#: how many loss-stall windows of steps, rejected trials included, end a run (Trace.stalled)
+SEARCH_WINDOWS = 2
 
 
 @dataclass(frozen=True)
@@ -143,13 +147,19 @@ class Trace:
             self.moved_losses.append(self.best)
 
     def stalled(self, ftol: float | None, window: int) -> bool:
-        """The lowest loss fell by less than ``ftol * loss`` over the last ``window`` steps
-        that moved the point. A step that did not (a trust-region solver rejecting its trial
-        and shrinking its radius) is a search, not a stall, and is not counted."""
-        v = self.moved_losses
-        if ftol is None or len(v) <= window:
+        """The lowest loss fell by less than ``ftol * loss`` over the last ``window`` steps that
+        moved the point, or over the last ``SEARCH_WINDOWS * window`` steps of any kind. A step
+        that did not move (a trust-region solver rejecting its trial and shrinking its radius)
+        is a search, given that longer window before it counts as a stall."""
+        if ftol is None:
             return False
-        return v[-window - 1] - v[-1] <= ftol * v[-1]
+
+        def fell_less(v, n):
+            return len(v) > n and v[-n - 1] - v[-1] <= ftol * v[-1]
+
+        return fell_less(self.moved_losses, window) or fell_less(
+            self.losses, SEARCH_WINDOWS * window
+        )
 
 
 @dataclass
