@@ -15,9 +15,9 @@ from dataclasses import dataclass
 
 from .._backend import drjit_backend
 from .._progress import log as _log
+from ..config.errors import ExperimentError
 from ..fit.calibrate import Calibration, calibrate_model
 from ..fit.decorrelated import half_models, texture_half_models
-from ..config.errors import ExperimentError
 from ..fit.joint import JointModel, joint_frozen
 from ..fit.losses import LOSSES, fit_ppd, transformed
 from ..fit.solvers import SOLVERS
@@ -173,6 +173,7 @@ def _halves(frame, shader, variant: str, options: FitOptions) -> tuple:
         return shader.model(exp, half, ref, backend, options.resolution)
 
     halves = half_models(exp, inputs, model_of) if options.refine else None
+    # the basin check compares the halves' decorrelated squared error: for that loss only
     if not options.basin_scan or options.loss != "linear":
         return halves, None
     return halves, halves or texture_half_models(exp, inputs, model_of)

@@ -7,7 +7,7 @@
 * :class:`study.fit.spirv_model.SpirvModel`: a user's GLSL file executed through SPIR-V,
   constants a dict ``{GLSL name: float | tuple}``;
 * :class:`study.fit.joint.JointModel`: several scenes or frames of one shader, stacked;
-* :class:`study.fit.losses.LogResidualModel`: a model seen through a log residual.
+* the losses of :mod:`study.fit.losses` (``fit.loss``): a model seen through another residual.
 
 Constants are addressed by *scalar names*: ``NAME`` for a float, ``NAME[i]`` for a vector's
 component (``study.fit.model.get_value`` / ``with_values`` read and set them in either kind of
