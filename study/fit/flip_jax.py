@@ -8,7 +8,7 @@ Images") step by step:
 2. colour pipeline: each YCxCz channel filtered by its contrast sensitivity function (sums of
    Gaussians, separable, edge-replicated borders), back to linear RGB and clamped to [0, 1],
    CIELab, Hunt-adjusted (a, b scaled by 0.01 L), HyAB distance ``|dL| + ||d(a, b)||``, raised
-   to ``qc = 0.7`` and remapped to [0, 1] (knee ``pc = 0.4`` of the green-blue distance ``cmax``
+   to ``qc = 0.7`` and remapped to [0, 1] (``pc = 0.4`` of the green-blue distance ``cmax``
    mapped to ``pt = 0.95``);
 3. feature pipeline: the achromatic channel ``(Y + 16) / 116`` filtered by the first and second
    derivatives of a Gaussian (``sigma = 0.5 * 0.082 * ppd`` pixels; positive and negative
@@ -17,7 +17,7 @@ Images") step by step:
 4. ``FLIP = colour ** (1 - feature)`` per pixel.
 
 It is computed in float64 (``flip-evaluator`` uses float32) and agrees with it to the
-tolerance ``tests/test_flip_jax.py`` states. :func:`flip_map` is the value; derivatives
+tolerance ``tests/test_flip_loss.py`` states. :func:`flip_map` is the value; derivatives
 (``jax.jvp``, ``jax.linearize``) are those of the same function with its kinks smoothed where
 the exact derivative is infinite or undefined: ``|dL|``, the (a, b) and feature magnitudes and
 the powers at zero use ``sqrt(x^2 + SMOOTH^2)`` and a floor of ``SMOOTH`` (``SMOOTH`` is far
