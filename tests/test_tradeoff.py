@@ -1,7 +1,13 @@
 """The speed-versus-accuracy study: Pareto fronts and the recommendation, the schedule plan, the
-analysis of a table, and a tiny `study tradeoff` end to end through the CLI."""
+analysis of a table, and a tiny `study tradeoff` end to end through the CLI (interrupted by
+Ctrl-C and resumed on the way)."""
 
 import json
+import re
+import signal
+import subprocess
+import sys
+import time
 
 import numpy as np
 import pytest
@@ -12,6 +18,7 @@ from study.studies.tradeoff_analysis import constants_of
 from study.studies.tradeoff_export import point_row
 
 from helpers import REPO
+from helpers.experiments import SMALL_OVERRIDES, sets
 from study.studies.pareto import pareto_front, recommend
 
 
@@ -175,19 +182,15 @@ def test_analysis_of_a_table():
     assert all("label" in r for r in recs)
 
 
-def test_tradeoff_cli_tiny(tmp_path):
-    """A few points at 32x32 through the CLI: table, chart, report, recommended shaders, resume."""
+def test_tradeoff_cli_tiny_interrupted_resumed_and_exported(tmp_path, capsys):
+    """A few points at 32x32 through the CLI, stopped by Ctrl-C once its first row is in: the
+    table at the interrupt is valid and the re-run computes only the missing points. Then the
+    finished sweep's table, chart, report and recommended shaders; a wider plan runs only its
+    new point."""
     from study.cli import main
     from study.sweep import read_table
 
-    small = [
-        "resolution=[32,32]",
-        "fit.resolution=[32,32]",
-        "reference.spp=16",
-        "reference.water_mesh=96",
-        "reference.texture_size=64",
-        "reference.texture_spp=8",
-        "waves.normal_map_size=64",
+    small = SMALL_OVERRIDES + [
         'tradeoff.variants=["water_refraction"]',
         "tradeoff.steps_grazing=[5.0]",
         "tradeoff.steps_steep=[3.0]",
@@ -206,9 +209,19 @@ def test_tradeoff_cli_tiny(tmp_path):
         "1",
         "--search",
         "exhaustive",
-    ] + [a for s in small for a in ("--set", s)]
-    assert main(args) == 0
-    rows = read_table(tmp_path / "tradeoff.parquet")
+    ] + sets(small)
+    table = tmp_path / "tradeoff.parquet"
+    done = _interrupt_after_the_first_row(args, table)
+    assert not list(tmp_path.glob(".*.tmp"))
+    capsys.readouterr()
+    assert main(args) == 0  # the re-run: only the points the interrupted one did not finish
+    m = re.search(
+        rf"points: {len(done)} of (\d+) jobs already in \S+tradeoff.parquet; running (\d+)",
+        capsys.readouterr().err,
+    )
+    assert m and int(m.group(2)) == int(m.group(1)) - len(done) > 0, m
+    rows = read_table(table)
+    assert all(r["seconds"] == done[r["key"]]["seconds"] for r in rows if r["key"] in done)
     assert len(rows) == 4 and all(r["status"] == "ok" for r in rows), [r.get("error") for r in rows]
     assert all(r["fetches_mean"] > 0 and 0 < r["flip"] < 1 for r in rows)
     assert all(
@@ -260,8 +273,6 @@ def test_tradeoff_cli_tiny(tmp_path):
     assert list(images)[0] == "reference" and mask.any() and title == "default"
     assert errs == summary["panels"]["default"]
     before = {r["key"]: r["seconds"] for r in rows}
-    assert main(args) == 0  # resumes: nothing re-run
-    assert {r["key"]: r["seconds"] for r in read_table(tmp_path / "tradeoff.parquet")} == before
     # a wider plan (one more scale) resumes too: only the new point runs
     wider = [a.replace("tradeoff.scales=[0.5,1.0]", "tradeoff.scales=[0.5,1.0,2.0]") for a in args]
     assert main(wider) == 0
@@ -348,3 +359,35 @@ def test_a_user_shaders_job_hash_covers_includes_defines_and_the_vertex_shader(t
     assert key(f'fit.vertex="{vert}"', "fit.vertex_grid=[8, 8]") != with_vertex
     vert.write_text(vert.read_text() + "\n// an edit\n")
     assert key(f'fit.vertex="{vert}"') != with_vertex
+
+
+def _interrupt_after_the_first_row(args: list, table) -> dict:
+    """Run ``study`` with ``args`` in a process of its own and send it SIGINT once ``table`` holds
+    a row: it exits 130 saying it was interrupted, and the table it leaves holds only finished
+    points. Returns those rows by key. The sweep installs its own SIGINT handler, so this holds
+    where a background shell (nohup, make under CI) starts the process with SIGINT ignored, as
+    well as for a terminal's Ctrl-C."""
+    from study.sweep import read_table
+
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "study.cli", *args],
+        cwd=table.parent,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.STDOUT,
+        text=True,
+    )
+    deadline = time.monotonic() + 600
+    while time.monotonic() < deadline and proc.poll() is None:
+        if table.exists() and len(read_table(table)) >= 1:
+            break
+        time.sleep(0.2)
+    assert proc.poll() is None, (
+        "the sweep ended before it could be interrupted: " + proc.stdout.read()[-2000:]
+    )
+    proc.send_signal(signal.SIGINT)
+    log = proc.communicate(timeout=300)[0]
+    assert proc.returncode == 130, log[-3000:]
+    assert "interrupted" in log and "Traceback" not in log, log[-3000:]
+    done = {r["key"]: r for r in read_table(table)}
+    assert len(done) >= 1 and all(r["status"] == "ok" for r in done.values())
+    return done

@@ -266,22 +266,16 @@ def test_write_back_into_the_users_own_file(user_run):
     assert changed and all(any(f" {n} = " in ln for n in res["constants"]) for ln in changed)
 
 
-def test_study_tradeoff_charts_the_users_shader(user_run):
-    """``study tradeoff`` on a user's shader: it is measured in full beside the study's points,
-    placed on the front by the same rule, drawn, calibrated and exported with its fitted
-    constants as study calibrate does; an edited
-    shader is measured again, not read back from the table."""
-    import json
-
-    from study.cli import main
-    from study.sweep import read_table
-
+def _user_tradeoff(user_run):
+    """(``study tradeoff`` arguments on a copy of the fitted user's shader, that copy, the
+    sweep's folder, its cache): one study shader at one schedule beside the user's."""
     import shutil
 
     out, fitted, _ = user_run
     root = out.parent
-    (root / "edit").mkdir()
-    mine = root / "edit" / "my_water.frag"  # a copy of its own: the file is edited below
+    edit = root / "edit"
+    edit.mkdir(exist_ok=True)
+    mine = edit / "my_water.frag"  # a copy of its own: a test may edit it
     shutil.copy(fitted, mine)
     plan = [
         'tradeoff.variants=["water_refraction"]',
@@ -293,46 +287,70 @@ def test_study_tradeoff_charts_the_users_shader(user_run):
     ]
     sets = [a for kv in TINY + plan + [f'fit.shader="{mine}"'] for a in ("--set", kv)]
     args = ["tradeoff", str(MY_WATER), "--out", str(root / "t"), "--workers", "1"]
-    args += ["--search", "exhaustive"] + sets
+    return args + ["--search", "exhaustive"] + sets, mine, root / "t", root / "cache"
+
+
+def test_study_tradeoff_charts_the_users_shader(user_run):
+    """``study tradeoff`` on a user's shader: it is measured in full beside the study's points,
+    placed on the front by the same rule, drawn, calibrated and exported with its fitted
+    constants as study calibrate does."""
+    import json
+
+    from study.cli import main
+    from study.sweep import read_table
+
+    args, _, t, cache = _user_tradeoff(user_run)
     with pytest.MonkeyPatch.context() as mp:
-        mp.setenv("STUDY_CACHE", str(root / "cache"))
+        mp.setenv("STUDY_CACHE", str(cache))
         assert main(args) == 0
-        (user,) = read_table(root / "t" / "user.parquet")
-        assert user["status"] == "ok", user.get("error")
-        assert user["fetches_mean"] == 5.0 and 0 < user["flip"] < 1 and user["gl_ms_512"] > 0
-        summary = json.loads((root / "t" / "summary.json").read_text())
-        scene = summary["scenes"]["my_water"]
-        (place,) = scene["user"]
-        assert place["label"] == "user:my_water.frag" and place["flip"] == user["flip"]
-        ours = [
-            r for r in read_table(root / "t" / "tradeoff.parquet") if r["job.kind"] != "converged"
-        ]
-        beaten = [
-            r
-            for r in ours
-            if r["fetches_mean"] <= user["fetches_mean"] and r["flip"] < user["flip"]
-        ]
-        assert place["on_front"] == (not beaten)
-        assert place["on_front"] == (place["label"] in {r["label"] for r in scene["front"]})
-        report = (root / "t" / "report.md").read_text()
-        assert "**Your shader**, `my_water.frag`" in report
-        assert "your shader: user:my_water.frag" in summary["panels"]["my_water"]
-        # calibrated as study calibrate calibrates it: recommended/ or yours/, its file inside
-        mine_out = root / "t" / summary["user_exports"]["my_water"]["file"]
-        assert mine_out.parent.parent.parent.name in ("recommended", "yours"), mine_out
-        written = UserShader.from_file(mine_out).defaults()
-        for s in ("FOG_DENSITY", "BUMP"):
-            assert np.float32(written[s]) == np.float32(user[f"fitted.{s}"]), s
-        if summary["user_exports"]["my_water"]["gl_check"]["ran"]:
-            assert summary["user_exports"]["my_water"]["gl_check"]["passed"]
-        # an edited shader (its fog twice as dense at the start) is fitted and measured again
+    (user,) = read_table(t / "user.parquet")
+    assert user["status"] == "ok", user.get("error")
+    assert user["fetches_mean"] == 5.0 and 0 < user["flip"] < 1 and user["gl_ms_512"] > 0
+    summary = json.loads((t / "summary.json").read_text())
+    scene = summary["scenes"]["my_water"]
+    (place,) = scene["user"]
+    assert place["label"] == "user:my_water.frag" and place["flip"] == user["flip"]
+    ours = [r for r in read_table(t / "tradeoff.parquet") if r["job.kind"] != "converged"]
+    beaten = [
+        r for r in ours if r["fetches_mean"] <= user["fetches_mean"] and r["flip"] < user["flip"]
+    ]
+    assert place["on_front"] == (not beaten)
+    assert place["on_front"] == (place["label"] in {r["label"] for r in scene["front"]})
+    report = (t / "report.md").read_text()
+    assert "**Your shader**, `my_water.frag`" in report
+    assert "your shader: user:my_water.frag" in summary["panels"]["my_water"]
+    # calibrated as study calibrate calibrates it: recommended/ or yours/, its file inside
+    mine_out = t / summary["user_exports"]["my_water"]["file"]
+    assert mine_out.parent.parent.parent.name in ("recommended", "yours"), mine_out
+    written = UserShader.from_file(mine_out).defaults()
+    for s in ("FOG_DENSITY", "BUMP"):
+        assert np.float32(written[s]) == np.float32(user[f"fitted.{s}"]), s
+    if summary["user_exports"]["my_water"]["gl_check"]["ran"]:
+        assert summary["user_exports"]["my_water"]["gl_check"]["passed"]
+
+
+@pytest.mark.slow
+def test_an_edited_users_shader_is_measured_again(user_run):
+    """An edited shader (its fog twice as dense at the start) is fitted and measured again, not
+    read back from the table (by default: its job key covers the text,
+    ``test_tradeoff.py::test_a_user_shaders_job_hash_covers_includes_defines_and_the_vertex_shader``)."""
+    import json
+
+    from study.cli import main
+    from study.sweep import read_table
+
+    args, mine, t, cache = _user_tradeoff(user_run)
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setenv("STUDY_CACHE", str(cache))
+        assert main(args) == 0
+        (user,) = read_table(t / "user.parquet")
         mine.write_text(mine.read_text().replace("exp(-FOG_DENSITY", "exp(-2.0 * FOG_DENSITY"))
         assert main(args) == 0
-        again = [r for r in read_table(root / "t" / "user.parquet") if r["key"] != user["key"]]
-        assert len(again) == 1 and again[0]["status"] == "ok", again
-        assert again[0]["fitted.FOG_DENSITY"] != user["fitted.FOG_DENSITY"]
-        summary = json.loads((root / "t" / "summary.json").read_text())
-        assert summary["scenes"]["my_water"]["user"][0]["flip"] == again[0]["flip"]
+    again = [r for r in read_table(t / "user.parquet") if r["key"] != user["key"]]
+    assert len(again) == 1 and again[0]["status"] == "ok", again
+    assert again[0]["fitted.FOG_DENSITY"] != user["fitted.FOG_DENSITY"]
+    summary = json.loads((t / "summary.json").read_text())
+    assert summary["scenes"]["my_water"]["user"][0]["flip"] == again[0]["flip"]
 
 
 def test_fit_declare_gives_every_pragma_without_editing_the_file(tmp_path):
