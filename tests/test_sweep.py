@@ -66,6 +66,25 @@ def test_sweep_records_failures_and_resumes(client, tmp_path):
     assert {r["job.x"]: r["status"] for r in rows}[5] == "ok"
 
 
+def test_rows_of_an_earlier_fit_are_set_aside_and_measured_again(client, tmp_path, capsys):
+    """A table written before the current ``SCHEMA_VERSION`` (its rows without ``schema``): its
+    rows go to a file beside it, never into the results, and their jobs run again."""
+    from study.sweep import read_table, run_sweep
+    from study.sweep.table import SCHEMA_VERSION, write_table
+
+    table = tmp_path / "t.parquet"
+    jobs = [{"x": i, "log": str(tmp_path / "runs.txt")} for i in (1, 2)]
+    first = run_sweep(sweep_jobs.square, jobs, table, client=client)
+    earlier = [{k: v for k, v in r.items() if k != "schema"} for r in first]  # as version 1 wrote
+    write_table(table, earlier)
+    rows = run_sweep(sweep_jobs.square, jobs, table, client=client, log=print)
+    assert "moved to" in capsys.readouterr().out
+    assert len(rows) == 2 and all(r["schema"] == SCHEMA_VERSION for r in rows)
+    assert read_table(table) == rows
+    assert read_table(tmp_path / "t.schema1.parquet") == earlier
+    assert sorted((tmp_path / "runs.txt").read_text().split()) == ["1", "1", "2", "2"]
+
+
 def test_duplicate_jobs_are_refused(tmp_path):
     from study.sweep import run_sweep
 

@@ -34,7 +34,16 @@ from .._backend import collect_here
 from .._progress import log as _log
 from .._progress import progress_line
 from .scenes import prepare_scene, spec_text
-from .table import clip_error, flatten, job_columns, job_key, read_table, write_table
+from .table import (
+    SCHEMA_VERSION,
+    clip_error,
+    flatten,
+    job_columns,
+    job_key,
+    read_table,
+    set_aside,
+    write_table,
+)
 
 
 def _qualname(fn) -> str:
@@ -45,7 +54,7 @@ def _run_job(fn, job: dict, key: str, scene_ready=None) -> dict:
     """Worker side: run one job; never raises (the error is the row). What the job prints is
     captured; the last lines are kept in the row (``log_tail``) when it fails."""
     t0 = time.perf_counter()
-    row = {"key": key, "status": "ok", "error": None}
+    row = {"key": key, "schema": SCHEMA_VERSION, "status": "ok", "error": None}
     captured = io.StringIO()
     try:
         with (
@@ -134,7 +143,13 @@ def run_sweep(
     keys = [job_key(name, j) for j in jobs]
     if len(set(keys)) != len(keys):
         raise ValueError("the sweep holds the same job twice; make every job dict distinct")
-    old = {r["key"]: r for r in read_table(table)}
+    current, aside = set_aside(table, read_table(table))
+    if aside is not None:
+        log(
+            f"{label}: the rows of an earlier version of the study's fit in {table} moved to "
+            f"{aside}; their jobs are measured again"
+        )
+    old = {r["key"]: r for r in current}
     rows = {k: old[k] for k in keys if k in old and old[k].get("status") == "ok"}
     todo = [(k, j) for k, j in zip(keys, jobs) if k not in rows]
     if rows:
@@ -202,7 +217,8 @@ def _submit_all(client, job_fn, todo, rows, old, table, variant, label) -> None:
                 try:
                     row = f.result()
                 except Exception as exc:  # the worker died (e.g. a crash in native code)
-                    row = {"key": key, "status": "error", "error": clip_error(exc), "seconds": None}
+                    row = {"key": key, "schema": SCHEMA_VERSION, "status": "error",
+                           "error": clip_error(exc), "seconds": None}  # fmt: skip
                 rows[key] = {**job_columns(job), **row}
                 progress.update(row["status"] == "ok")
                 if time.perf_counter() - last_write > 2.0:  # keep finished rows on disk

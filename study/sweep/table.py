@@ -23,7 +23,10 @@ from pathlib import Path
 
 from .._io import disk_full, repo_relative
 
-SCHEMA_VERSION = 1
+# what a row's results mean; every row records it (``schema``, 1 where absent). A sweep sets
+# aside the rows of another version (``set_aside``) and measures their jobs again. 2: every fit
+# pixel shaded at the footprint of ``fit.target_resolution``
+SCHEMA_VERSION = 2
 ERROR_CHARS = 2000
 
 
@@ -110,6 +113,22 @@ def write_table(path: Path, rows: list[dict]) -> Path:
         if os.path.exists(tmp):
             os.unlink(tmp)
     return path
+
+
+def set_aside(path: Path, rows: list[dict]) -> tuple[list[dict], Path | None]:
+    """(the rows of ``rows`` of this :data:`SCHEMA_VERSION`, the file the others went to or
+    None): rows of another version are appended to ``<name>.schema<v>.parquet`` beside the
+    table (nothing is lost), so that no result of an earlier fit is read as a current one."""
+    current = [r for r in rows if r.get("schema", 1) == SCHEMA_VERSION]
+    others = [r for r in rows if r.get("schema", 1) != SCHEMA_VERSION]
+    if not others:
+        return rows, None
+    path = Path(path)
+    versions = sorted({str(r.get("schema", 1)) for r in others})
+    aside = path.with_name(f"{path.stem}.schema{'-'.join(versions)}{path.suffix}")
+    write_table(aside, read_table(aside) + others)
+    write_table(path, current)
+    return current, aside
 
 
 def read_table(path: Path) -> list[dict]:
