@@ -118,6 +118,7 @@ def generated() -> dict[Path, str]:
     from docs_gpu import gpu_bench_page
     from docs_error_budget import error_budget_page
     from docs_own_waves import own_waves_page
+    from docs_resolution_transfer import resolution_transfer_page
     from docs_figures import quoted_pages, stale_results
 
     stale_folders = stale_results()
@@ -156,6 +157,9 @@ def generated() -> dict[Path, str]:
         RESULTS / "loss-flip",
         "`study calibrate experiments/default.toml --set 'fit.loss=\"flip\"' --out out/loss-flip`",
         Path("out/loss-flip"),
+    )
+    pages[RESULTS / "resolution-transfer" / "report.md"] = resolution_transfer_page(
+        RESULTS / "resolution-transfer"
     )
     pages[RESULTS / "engine-shaders" / "report.md"] = _engine_pairs_page(RESULTS / "engine-shaders")
     pages[RESULTS / "own-waves" / "report.md"] = own_waves_page(RESULTS)

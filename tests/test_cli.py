@@ -369,7 +369,8 @@ def test_the_report_counts_steps_over_rounds_and_gives_each_final_status():
     """The header's step count is the total over the fit's rounds and says so (the last round's
     reason counts its own steps); the identifiability table's decision is the start's, and the
     status beside it the one the Constants table gives."""
-    from study.report.calibration import fit_steps_line, identifiability_table
+    from study.report.calibration import fit_steps_line
+    from study.report.identifiability import identifiability_table
 
     summary = {"iterations": 46, "converged": True, "message": "converged after 6 steps",
                "fit": {"iterations_per_round": [40, 6]}}  # fmt: skip

@@ -16,6 +16,7 @@ from dataclasses import dataclass
 from .._backend import drjit_backend
 from .._progress import log as _log
 from ..config.errors import ExperimentError
+from ..config.resolution import supersample_factor
 from ..fit.calibrate import Calibration, calibrate_model
 from ..fit.decorrelated import half_models, texture_half_models
 from ..fit.joint import JointModel, joint_frozen
@@ -36,6 +37,9 @@ class FitOptions:
         (``fit.input_noise = "decorrelate"``: ``study.fit.decorrelated``).
     resolution: (width, height) pixels of the fit (None: ``fit.resolution``).
     loss: the error minimised, a key of ``study.fit.losses.LOSSES`` (``fit.loss``).
+    target_resolution: (width, height) pixels the shader runs at in the game
+        (``fit.target_resolution``, unset: ``resolution``); None: each fit pixel shaded once,
+        at its centre. A fit pixel takes :meth:`supersample` samples per side.
     """
 
     parameters: tuple | None
@@ -45,6 +49,7 @@ class FitOptions:
     refine: bool = False
     resolution: tuple | None = None
     loss: str = "linear"
+    target_resolution: tuple | None = None
 
     def __post_init__(self):
         check_loss(self.loss, self.solver, self.refine)
@@ -61,12 +66,18 @@ class FitOptions:
             max_steps=int(exp.fit.max_steps),
             refine=exp.fit.input_noise == "decorrelate",
             loss=str(exp.fit.loss),
+            target_resolution=tuple(exp.fit.target_resolution or exp.resolution),
         )
         return dataclasses.replace(opts, **changes)
 
     @property
     def requested(self) -> list | None:
         return None if self.parameters is None else list(self.parameters)
+
+    def supersample(self, exp) -> int:
+        """Samples per side of a fit pixel of ``exp`` under these options
+        (``study.config.resolution.supersample_factor``)."""
+        return supersample_factor(self.resolution or exp.fit.resolution, self.target_resolution)
 
 
 def check_solver(solver: str | None) -> str | None:
@@ -105,16 +116,21 @@ class Fit:
     calibration: Calibration
 
 
-def frame_models(frames, shader, variant: str, resolution=None, loss: str = "linear") -> list:
-    """One model per frame (``Shader.model``) at ``resolution`` (default ``fit.resolution``),
-    each carrying its reference's per-pixel standard error, its residual that of ``loss``
+def frame_models(frames, shader, variant: str, options: FitOptions | None = None) -> list:
+    """One model per frame (``Shader.model``) as ``options`` (default: those of the first
+    frame's experiment, :meth:`FitOptions.of`) set it up: at their resolution, each fit pixel
+    shaded :meth:`FitOptions.supersample` times per side, each model carrying its reference's
+    per-pixel standard error and its residual that of the options' loss
     (``study.fit.losses``)."""
+    frames = list(frames)
+    options = options or FitOptions.of(frames[0].exp)
     backend = drjit_backend(variant)
     models = []
     for f in frames:
-        model = shader.model(f.exp, f.inputs, f.ref.image, backend, resolution, stderr=f.ref.stderr)
+        model = shader.model(f.exp, f.inputs, f.ref.image, backend, options.resolution,
+                             f.ref.stderr, options.supersample(f.exp))  # fmt: skip
         ppd = fit_ppd(model.reference.shape[1], f.ref.image.shape[1])
-        models.append(transformed(model, loss, ppd))
+        models.append(transformed(model, options.loss, ppd))
     return models
 
 
@@ -124,17 +140,19 @@ def fit_frames(frames, shader, variant: str, options: FitOptions, start=None, mo
     ``models``: the frames' models when built already (:func:`frame_models`)."""
     frames = list(frames)
     if models is None:
-        models = frame_models(frames, shader, variant, options.resolution, options.loss)
+        models = frame_models(frames, shader, variant, options)
     elif any(getattr(m, "loss_name", "linear") != options.loss for m in models):
         raise ValueError(f"fit_frames: the models given are not those of fit.loss {options.loss!r}")
     first = frames[0]
     start = models[0].start_constants(first.exp) if start is None else start
     names = models[0].parameter_names(options.requested)
     w, h = options.resolution or first.exp.fit.resolution
+    s = options.supersample(first.exp)
     _log(
         f"calibrate: fitting {', '.join(names)} of {models[0].label} with {options.solver} "
         f"(loss {options.loss}) on "
         f"{sum(int(m.mask.sum()) for m in models)} water pixels at {w}x{h}"
+        + (f", {s}x{s} samples each (fit.target_resolution)" if s > 1 else "")
         + (f" ({len(frames)} frames)" if len(frames) > 1 else "")
     )
     if len(frames) == 1:
@@ -170,7 +188,8 @@ def _halves(frame, shader, variant: str, options: FitOptions) -> tuple:
     backend = drjit_backend(variant)
 
     def model_of(half):
-        return shader.model(exp, half, ref, backend, options.resolution)
+        return shader.model(exp, half, ref, backend, options.resolution,
+                            supersample=options.supersample(exp))  # fmt: skip
 
     halves = half_models(exp, inputs, model_of) if options.refine else None
     # the basin check compares the halves' decorrelated squared error: for that loss only

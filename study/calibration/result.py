@@ -76,6 +76,9 @@ def build_result(frames, shader, fit, scores: dict, timings: dict, export, optio
         result.experiment = frames.experiment.name
         result.fit_resolution = list(first.exp.fit.resolution)
         result.resolution = list(first.exp.resolution)
+        result.supersample = options.supersample(first.exp)
+        if options.target_resolution is not None:
+            result.target_resolution = list(options.target_resolution)
     if kind == "still":
         fitted = scores["fitted"][0]
         k = [n for n, p in cal.parameters.items() if p["status"] in ("fitted", "bound")]

@@ -39,7 +39,7 @@ def calibrate(frames, out, options=None, shader=None, start=None, t_start=None) 
     shader = shader or Shader.of(exp)
     timings = dict(frames.timings)
     with timed(timings, "model_s"):
-        models = frame_models(frames, shader, frames.variant, options.resolution, options.loss)
+        models = frame_models(frames, shader, frames.variant, options)
         start = models[0].start_constants(exp) if start is None else start
     with timed(timings, "fit_s"):
         fit = fit_frames(frames, shader, frames.variant, options, start, models)

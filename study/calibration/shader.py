@@ -95,17 +95,20 @@ class Shader:
         map: ``study.scene.baseline_inputs.inputs_for_shader``)."""
         return inputs_for_shader(exp, inputs, self.name, variant, cache=cache, log=_log)
 
-    def model(self, exp, inputs, reference, backend=None, resolution=None, stderr=None):
+    def model(self, exp, inputs, reference, backend=None, resolution=None, stderr=None,
+              supersample: int = 1):  # fmt: skip
         """The fit's model (``study.fit.protocol.ImageModel``) at ``resolution`` (default
         ``fit.resolution``) against ``reference`` ((H, W, 3) float32 linear RGB at the
-        experiment's resolution, box-downsampled); ``stderr``: its per-pixel standard error."""
+        experiment's resolution, box-downsampled); ``stderr``: its per-pixel standard error;
+        ``supersample``: samples per side of a pixel (``study.fit.model.ReferenceModel``)."""
         if self.is_user:
             return SpirvModel.from_experiment(
-                exp, inputs, reference, backend, resolution, stderr, shader=self.user
+                exp, inputs, reference, backend, resolution, stderr, self.user, supersample
             )
         return ShaderModel.from_experiment(
-            exp, inputs, reference, self.name, backend, resolution, stderr
-        )
+            exp, inputs, reference, self.name, backend, resolution, stderr,
+            supersample=supersample,
+        )  # fmt: skip
 
     def point_parameters(self, exp) -> tuple | None:
         """The constants a sweep point refits: a user's file, ``fit.parameters`` (None: every

@@ -333,6 +333,18 @@ STUDY_KEYS: dict[str, Field] = {
         4096,
         choices=(AUTO, *PRESETS),
     ),
+    "fit.target_resolution": Field(
+        "vec2",
+        None,
+        "The resolution the shader runs at in the game, or a preset (as `resolution`). Each fit "
+        "pixel is shaded at that resolution's pixel footprint: its target rows over "
+        "`fit.resolution`'s rows, rounded, samples per side (at most 4), averaged. Unset: "
+        '`resolution`, the reference\'s. docs/user-shader.md "What the fit minimises".',
+        "pixels",
+        8,
+        8192,
+        choices=tuple(PRESETS),
+    ),
     "fit.input_noise": Field(
         "str",
         "ignore",

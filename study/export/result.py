@@ -55,7 +55,9 @@ class CalibrationResult:
         timings: stage -> seconds.
         gl_check: the exported shader on OpenGL against the port (``study.export.gl_check``).
     One scene:
-        experiment, fit_resolution / resolution ([width, height] pixels), step_sweep (the
+        experiment, fit_resolution / resolution ([width, height] pixels), supersample (samples
+        per side of a fit pixel; 1 in files written before it was recorded) and
+        target_resolution (the game's [width, height] it stands for), step_sweep (the
         integer step schedule's sweep), reference (spp, noise, path, key), diagnostics (the
         port's diagnostics over the water), sun, parsimony (information criteria).
     Joint:
@@ -80,6 +82,8 @@ class CalibrationResult:
     experiment: str | None = None
     fit_resolution: list | None = None
     resolution: list | None = None
+    supersample: int = 1
+    target_resolution: list | None = None
     step_sweep: dict | None = None
     reference: dict | None = None
     diagnostics: dict | None = None

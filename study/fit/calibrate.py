@@ -315,6 +315,8 @@ def calibrate_model(
         inner = list(sol.id1.names)
         ident["solution"] = _ident_dict(sol.id1, inner)
         ident["solution"]["rel_std_error"] = [sol.se.get(n) for n in inner]
+        if sol.se_tiles:
+            ident["solution"]["rel_tile_error"] = [sol.se_tiles.get(n) for n in inner]
         if noise_se:
             ident["solution"]["rel_noise_error"] = [noise_se.get(n) for n in inner]
     sweep = None

@@ -81,6 +81,15 @@ class JointModel:
             [w * m.residual(constants) for w, m in zip(self.weights, self.models)]
         )
 
+    def residual_tiles(self) -> np.ndarray:
+        """(sum m_i,) int: each scene's image tiles (``residual_tiles``), numbered apart."""
+        out, offset = [], 0
+        for m in self.models:
+            t = np.asarray(m.residual_tiles())
+            out.append(t + offset)
+            offset += int(t.max()) + 1 if len(t) else 0
+        return np.concatenate(out)
+
     def residual_and_jacobian(self, constants: Constants, names: list[str]):
         rs, Js = [], []
         for w, m in zip(self.weights, self.models):

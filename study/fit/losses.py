@@ -41,7 +41,7 @@ FLIP_KNEE = 1.0
 
 _PASSED = ("label", "defines", "parameter_names", "bounds", "start_constants", "render",
            "reference", "inputs", "variant", "user_shader", "n_renders", "n_jacobians",
-           "resolution", "texture_size", "shader", "mask")  # fmt: skip
+           "resolution", "texture_size", "shader", "mask", "residual_tiles")  # fmt: skip
 
 
 class _Wrapped:

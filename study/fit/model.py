@@ -130,19 +130,22 @@ def at_resolution(
     reference_full: np.ndarray,
     resolution: tuple[int, int] | None = None,
     stderr_full: np.ndarray | None = None,
+    supersample: int = 1,
 ):
     """What a model of ``exp`` is built from at ``resolution`` (width, height; default
-    ``fit.resolution``): (the inputs at that size, ``reference_full`` (H, W, 3) linear RGB
-    box-downsampled to it, ``stderr_full`` (the reference's per-pixel Monte Carlo standard
-    error) carried through the box filter (``study._metrics.downsample_stderr``) or None, the
-    reference scene's water mask (H, W) bool)."""
+    ``fit.resolution``): (the inputs at ``supersample`` times that size, the shading grid,
+    ``reference_full`` (H, W, 3) linear RGB box-downsampled to ``resolution``, ``stderr_full``
+    (the reference's per-pixel Monte Carlo standard error) carried through the box filter
+    (``study._metrics.downsample_stderr``) or None, the reference scene's water mask (H, W)
+    bool at ``resolution``)."""
     w, h = resolution or exp.fit.resolution
     fy, fx = reference_full.shape[0] // h, reference_full.shape[1] // w
     ref = downsample(reference_full, fy, fx) if (fy, fx) != (1, 1) else reference_full
     se = None
     if stderr_full is not None:
         se = downsample_stderr(stderr_full, fy, fx) if (fy, fx) != (1, 1) else stderr_full
-    return inputs_full.with_resolution(w, h), ref, se, water_mask(exp, w, h)
+    shading = inputs_full.with_resolution(w * supersample, h * supersample)
+    return shading, ref, se, water_mask(exp, w, h)
 
 
 @dataclass
@@ -169,7 +172,13 @@ class Diagnostics:
         return out
 
 
+# the side in fit pixels of the image tiles whose residuals may share a model error
+# (``study.fit.rounds.tile_errors``)
+TILE = 8
+
 _DRJIT_LOCK = threading.RLock()
+# diagnostics that flag a sample (1 where it is so): a folded pixel is flagged when any is
+_FLAGS = frozenset({"nonfinite", "discarded"})
 
 
 def _thread_handoff(fn):
@@ -202,17 +211,30 @@ class ReferenceModel:
     (H, W) bool, the reference scene's water (the scored mask is the shader's coverage and it,
     eroded by one pixel); ``reference_stderr``: (H, W, 3) float32, the reference's Monte Carlo
     standard error per pixel, or None; ``backend``: "llvm" or "cuda", None for the run's
-    (``shaders_port.pipeline.texture.resolve_backend``, set by ``study._backend.init_backend``)."""
+    (``shaders_port.pipeline.texture.resolve_backend``, set by ``study._backend.init_backend``).
+
+    ``supersample`` (an int s >= 1): the shader runs on ``inputs`` of s times the reference's
+    width and height, s x s samples at the sub-pixel centres of each fit pixel, and every image
+    it gives (colour, Jacobian, diagnostics) is the box mean of its s x s samples
+    (:meth:`fold`): a fit pixel sees the shading of the finer pixels of the resolution the
+    shader runs at in the game (``fit.target_resolution``), not one sample at its centre. A
+    pixel is in the scored mask only when the water covers all its samples."""
 
     #: what non-finite water pixels are called in errors
     what = "the port"
 
     def __init__(self, inputs, reference, backend=None, reference_mask=None,
-                 reference_stderr=None):  # fmt: skip
+                 reference_stderr=None, supersample: int = 1):  # fmt: skip
         self.inputs, self.backend = inputs, resolve_backend(backend)
-        if reference.shape != (inputs.height, inputs.width, 3):
+        self.supersample = s = int(supersample)
+        if (
+            s < 1
+            or reference.shape != (inputs.height // s, inputs.width // s, 3)
+            or (inputs.height % s or inputs.width % s)
+        ):
             raise ValueError(
-                f"reference is {reference.shape}, inputs are {inputs.height}x{inputs.width}"
+                f"reference is {reference.shape}, inputs are {inputs.height}x{inputs.width}, "
+                f"supersample {supersample}: the inputs must be supersample times the reference"
             )
         if reference_stderr is not None and reference_stderr.shape != reference.shape:
             raise ValueError(
@@ -222,8 +244,8 @@ class ReferenceModel:
         self.reference_stderr = (
             None if reference_stderr is None else np.asarray(reference_stderr, np.float32)
         )
-        out = self._shade(self.start_constants()).numpy()
-        mask = out["mask"] > 0.5
+        out = self.fold(self._shade(self.start_constants()).numpy())
+        mask = out["mask"] > 1.0 - 1e-6  # every sample of the pixel on the water
         if "discarded" in out:  # pixels the shader discards (at its start constants) are no water
             mask &= out["discarded"] == 0
         if reference_mask is not None:
@@ -235,6 +257,31 @@ class ReferenceModel:
             raise ValueError("the reference has non-finite water pixels; render it again")
         self.n_renders = 0
         self.n_jacobians = 0
+
+    def fold(self, images):
+        """``images`` (an (sH, sW, ...) array, or a dict of them) at the shading grid ->
+        the box mean of each pixel's s x s samples, (H, W, ...) (identity when s = 1)."""
+        s = self.supersample
+        if s == 1:
+            return images
+        if isinstance(images, Mapping):  # a flag (non-finite, discarded): any of the samples
+            return {k: self._fold_any(v) if k in _FLAGS else self.fold(v)
+                    for k, v in images.items()}  # fmt: skip
+        a = np.asarray(images)
+        return downsample(a, s, s).astype(a.dtype, copy=False)
+
+    def _fold_any(self, flag):
+        s = self.supersample
+        a = np.asarray(flag)
+        h, w = a.shape[0] // s, a.shape[1] // s
+        return a.reshape(h, s, w, s, *a.shape[2:]).max(axis=(1, 3))
+
+    def residual_tiles(self, size: int = TILE) -> np.ndarray:
+        """(M,) int: the image tile (``size`` x ``size`` fit pixels, numbered row-major) of each
+        entry of :meth:`residual` (water pixels in row-major order, three channels each)."""
+        ys, xs = np.nonzero(self.mask)
+        cols = -(-self.mask.shape[1] // size)
+        return np.repeat((ys // size) * cols + xs // size, 3)
 
     def _shade(self, constants):
         raise NotImplementedError
@@ -252,7 +299,7 @@ class ReferenceModel:
             warnings.simplefilter(
                 "ignore", RuntimeWarning
             )  # non-finite pixels are in the diagnostics
-            out = self._shade(constants).numpy()
+            out = self.fold(self._shade(constants).numpy())
         self.n_renders += 1
         return out["color"], Diagnostics(
             {k: v for k, v in out.items() if k not in ("color", "mask")}
@@ -271,7 +318,8 @@ class ReferenceModel:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", RuntimeWarning)
             out, jac = self._shade_with_jacobian(constants, names)
-        o = out.numpy()
+        o = self.fold(out.numpy())
+        jac = self.fold(np.asarray(jac))
         self.n_jacobians += 1
         self._check(Diagnostics({k: v for k, v in o.items() if k not in ("color", "mask")}),
                     constants)  # fmt: skip
@@ -296,12 +344,25 @@ class ReferenceModel:
             out = self._shade(constants)
         self.n_renders += 1
         bad = out.diagnostics.get("nonfinite")
+        if bad is not None and self.supersample > 1:  # a mean of flags is > 0 where any is
+            bad = self._fold_ad(bad)
         if bad is not None and float(dr.sum(bad * self._mask_t[..., 0], axis=None).array[0]) > 0:
             raise FloatingPointError(
                 f"{self.what} produced non-finite water pixels; see the 'nonfinite' diagnostic"
             )
-        d = (out.color - self._ref_t) * self._mask_t
+        d = (self._fold_ad(out.color) - self._ref_t) * self._mask_t
         return (0.5 * dr.sum(d * d, axis=None)).array  # a size-1 Float
+
+    def _fold_ad(self, image):
+        """:meth:`fold` of a Dr.Jit (sH, sW, ...) tensor, kept in the AD graph."""
+        import drjit as dr
+
+        s = self.supersample
+        if s == 1:
+            return image
+        h, w = self.reference.shape[:2]
+        blocks = dr.reshape(type(image), image, (h, s, w, s, *image.shape[2:]))
+        return dr.sum(dr.sum(blocks, axis=3), axis=1) * (1.0 / (s * s))
 
     def _check(self, diag: Diagnostics, constants=None) -> None:
         """FloatingPointError naming how many water pixels are non-finite, the first of them
@@ -336,12 +397,13 @@ class ShaderModel(ReferenceModel):
         reference_mask: np.ndarray | None = None,
         reference_stderr: np.ndarray | None = None,
         translated: bool = False,
+        supersample: int = 1,
     ):
         self.shader = shader
         self.variant = get_variant(shader)
         if translated:  # its GLSL file executed through SPIR-V in place of the hand port
             self.variant = Translated(self.variant)
-        super().__init__(inputs, reference, backend, reference_mask, reference_stderr)
+        super().__init__(inputs, reference, backend, reference_mask, reference_stderr, supersample)
 
     @classmethod
     def from_experiment(
@@ -354,11 +416,13 @@ class ShaderModel(ReferenceModel):
         resolution: tuple[int, int] | None = None,
         stderr_full: np.ndarray | None = None,
         translated: bool = False,
+        supersample: int = 1,
     ) -> "ShaderModel":
         """The model at ``resolution`` (default ``fit.resolution``) against the box-downsampled
-        ``reference_full`` (:func:`at_resolution`)."""
+        ``reference_full``, shaded ``supersample`` x ``supersample`` per pixel
+        (:func:`at_resolution`)."""
         inputs, ref, se, water = at_resolution(
-            exp, inputs_full, reference_full, resolution, stderr_full
+            exp, inputs_full, reference_full, resolution, stderr_full, supersample
         )
         return cls(
             shader or exp.fit.shader,
@@ -368,6 +432,7 @@ class ShaderModel(ReferenceModel):
             reference_mask=water,
             reference_stderr=se,
             translated=translated,
+            supersample=supersample,
         )
 
     # ---- the parameters (``study.fit.protocol.CalibrationModel``) ----------------------------

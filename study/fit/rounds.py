@@ -56,13 +56,37 @@ def noise_errors(J: np.ndarray, sigma: np.ndarray, values: np.ndarray) -> list[f
     return [float(x / abs(v)) if v else None for x, v in zip(d, values)]
 
 
+def tile_errors(J: np.ndarray, r: np.ndarray, tiles: np.ndarray, values: np.ndarray):
+    """Relative standard errors that hold when the model is wrong in ways correlated over the
+    image: the cluster sandwich ``(J^T J)^-1 (sum_t J_t^T r_t r_t^T J_t) (J^T J)^-1 G / (G - 1)``
+    with the residuals (M,) grouped by image tile, ``tiles`` (M,) int (a tile's residuals may
+    share an error: a glint the shader puts elsewhere, a wave it does not have), its diagonal's
+    square root over |value|. Unlike :func:`std_errors` it does not assume independent residuals
+    of one variance; None for every constant where there are not more tiles than constants."""
+    m, k = J.shape
+    ids, inverse = np.unique(np.asarray(tiles), return_inverse=True)
+    g = len(ids)
+    if g <= k or len(tiles) != m:
+        return [None] * k
+    try:
+        bread = np.linalg.inv(J.T @ J)
+    except np.linalg.LinAlgError:
+        return [None] * k
+    scores = np.zeros((g, k))
+    np.add.at(scores, inverse, J * r[:, None])
+    cov = bread @ (scores.T @ scores) @ bread * (g / (g - 1))
+    d = np.sqrt(np.maximum(np.diag(cov), 0.0))
+    return [float(x / abs(v)) if v else None for x, v in zip(d, values)]
+
+
 @dataclass
 class Solution:
     """One round's solution and what was measured at it: the solver's ``result``, the fitted
     constants, the constants that ended on a bound (name -> reason), the ``inner`` ones (fitted,
     not on a bound) with the residual ``r1`` (m,) and Jacobian ``J1`` (m, len(inner)) there,
-    their identifiability ``id1``, the ``live`` columns (a free direction) with their values and
-    relative standard errors ``se``. ``id1`` is None when nothing was left inside the bounds."""
+    their identifiability ``id1``, the ``live`` columns (a free direction) with their values,
+    relative standard errors ``se`` and those robust to model error over image tiles
+    ``se_tiles`` (:func:`tile_errors`). ``id1`` is None when nothing was left inside the bounds."""
 
     result: object
     fitted: Constants
@@ -74,6 +98,7 @@ class Solution:
     live: list = field(default_factory=list)
     vals: np.ndarray | None = None
     se: dict = field(default_factory=dict)
+    se_tiles: dict = field(default_factory=dict)
 
     @property
     def live_names(self) -> list[str]:
@@ -115,6 +140,10 @@ def solve_round(model, problem, start, x0, free, solver, max_steps) -> Solution:
             _log(f"calibrate: {n} is only bounded by the data: {bound[n]}")
     sol.live = [i for i, n in enumerate(inner) if n not in bound]  # columns with a free direction
     _standard_errors(sol)
+    tiles = getattr(model, "residual_tiles", None)
+    if sol.live and tiles is not None:
+        errs = tile_errors(sol.J1[:, sol.live], sol.r1, tiles(), sol.vals)
+        sol.se_tiles = dict(zip(sol.live_names, errs))
     return sol
 
 

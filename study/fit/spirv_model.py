@@ -30,9 +30,9 @@ class SpirvModel(ReferenceModel):
     what = "the shader"
 
     def __init__(self, shader, inputs, reference: np.ndarray, backend: str | None = None,
-                 reference_mask=None, reference_stderr=None):  # fmt: skip
+                 reference_mask=None, reference_stderr=None, supersample: int = 1):  # fmt: skip
         self.user_shader = shader
-        super().__init__(inputs, reference, backend, reference_mask, reference_stderr)
+        super().__init__(inputs, reference, backend, reference_mask, reference_stderr, supersample)
         self.check_vertex_constants()
 
     @classmethod
@@ -45,17 +45,18 @@ class SpirvModel(ReferenceModel):
         resolution: tuple[int, int] | None = None,
         stderr_full: np.ndarray | None = None,
         shader=None,
+        supersample: int = 1,
     ) -> "SpirvModel":
         """The model of ``shader`` (default: ``fit.shader`` with ``fit.declare``) at
         ``resolution`` (default ``fit.resolution``) against the box-downsampled
         ``reference_full`` (``study.fit.model.at_resolution``)."""
         inputs, ref, se, water = at_resolution(
-            exp, inputs_full, reference_full, resolution, stderr_full
+            exp, inputs_full, reference_full, resolution, stderr_full, supersample
         )
         shader = shader or load_user_shader(exp.values)
         with warnings.catch_warnings():  # check_finite says it, with the pixels
             warnings.filterwarnings("ignore", r".*were non-finite", RuntimeWarning)
-            model = cls(shader, inputs, ref, backend, reference_mask=water, reference_stderr=se)
+            model = cls(shader, inputs, ref, backend, water, se, supersample)
         model.check_finite()
         return model
 
@@ -66,7 +67,7 @@ class SpirvModel(ReferenceModel):
         with warnings.catch_warnings():  # the error below says it, with the pixels
             warnings.filterwarnings("ignore", r".*were non-finite", RuntimeWarning)
             out = self.user_shader.render(self.inputs, constants, backend=self.backend).numpy()
-        bad = (out["nonfinite"] > 0.5) & self.mask
+        bad = (self.fold(out)["nonfinite"] > 0.5) & self.mask
         if not bad.any():
             return
         ys, xs = np.nonzero(bad)
@@ -96,6 +97,7 @@ class SpirvModel(ReferenceModel):
         if not any(moves):
             return
         _, J = self._shade_with_jacobian(shader.defaults(), names)
+        J = self.fold(np.asarray(J))
         for j, s in enumerate(names):
             if moves[j] > 0.0 and not np.any(J[..., j][self.mask]):
                 raise ShaderError(

@@ -15,14 +15,8 @@ import numpy as np
 from .._io import to_srgb, write_text_atomic
 from .._metrics import flip_map
 from ..export.textures import expects_lines
-from .calibration import (
-    constants_table,
-    fit_steps_line,
-    fmt,
-    identifiability_table,
-    pyplot,
-    waves_lines,
-)
+from .calibration import constants_table, fit_steps_line, fmt, pyplot, waves_lines
+from .identifiability import identifiability_table
 
 PANELS = ("reference", "fitted (all frames)", "FLIP error")
 

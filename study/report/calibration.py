@@ -15,6 +15,8 @@ from shaders_port import CONSTANT_SPECS, study_scalar
 from .._io import to_srgb, write_text_atomic
 from ..export.textures import expects_lines
 from ..scene.reference import spp_text
+from .identifiability import identifiability_section
+from .numbers import fmt
 
 
 def pyplot():
@@ -109,18 +111,6 @@ def loss_figure(path: Path, curves: dict, title: str = "") -> Path:
     fig.savefig(path, dpi=110, bbox_inches="tight")
     plt.close(fig)
     return path
-
-
-def fmt(x, digits: int = 4) -> str:
-    if x is None:
-        return "-"
-    if isinstance(x, (list, tuple)):
-        return "(" + ", ".join(fmt(v, digits) for v in x) + ")"
-    if isinstance(x, bool):
-        return "yes" if x else "no"
-    if isinstance(x, int):
-        return str(x)
-    return f"{x:.{digits}g}"
 
 
 def constants_table(parameters: dict) -> list[str]:
@@ -222,39 +212,6 @@ def _start_there(name: str, p: dict, value: float) -> str:
         f"To fit from there, set the initializer of `{name}` in your shader to {value:.4g} and "
         "run the same command (the fit starts from the shader's own values)."
     )
-
-
-def identifiability_table(ident: dict, parameters: dict | None = None) -> list[str]:
-    """The identifiability table: per constant its sensitivities, standard errors, the decision
-    at the start and, given the ``parameters`` table, its status at the end (the one the
-    Constants table gives)."""
-    lines = [
-        "| parameter | rel. sensitivity at start | at solution | rel. std. error at solution | "
-        "rel. error from reference noise | decision at the start | status |",
-        "|---|---|---|---|---|---|---|",
-    ]
-    parameters = parameters or {}
-    start, sol = ident.get("start", {}), ident.get("solution", {})
-    for name in start.get("names", []):
-        i = start["names"].index(name)
-        j = sol["names"].index(name) if name in sol.get("names", []) else None
-        s1 = fmt(sol["sensitivity"][j]) if j is not None else "-"
-        se = fmt(sol["rel_std_error"][j]) if j is not None and sol.get("rel_std_error") else "-"
-        ne = fmt(sol["rel_noise_error"][j]) if j is not None and sol.get("rel_noise_error") else "-"
-        status = parameters.get(name, {}).get("status", "-")
-        lines.append(
-            f"| `{name}` | {fmt(start['sensitivity'][i])} | {s1} | {se} | {ne} | "
-            f"{start['decision'][i]} | {status} |"
-        )
-    lines.append("")
-    for label, d in (("start", start), ("solution", sol)):
-        if d.get("singular_values"):
-            sv = ", ".join(fmt(v, 3) for v in d["singular_values"])
-            lines.append(
-                f"Singular values of the scaled Jacobian at the {label}: {sv} "
-                f"(condition number {fmt(d.get('condition'), 3)})."
-            )
-    return lines
 
 
 def write_report(out: Path, summary: dict, figures: dict) -> Path:
@@ -364,16 +321,7 @@ def report_text(summary: dict, figures: dict, out: Path | None = None) -> str:
     lines += ["## Constants", ""] + constants_table(summary["parameters"]) + [""]
     lines += basin_lines(summary["parameters"])
     lines += expects_lines(summary.get("textures"))
-    lines += [
-        "## Identifiability",
-        "",
-        "Sensitivity: norm of the Jacobian column with respect to log(value) (a relative change), "
-        "divided by the largest column norm. Standard error from the Gauss-Newton covariance "
-        "s^2 (J^T J)^-1 at the solution, s^2 = ||r||^2 / (m - k), as a "
-        "relative error of the value.",
-        "",
-    ]
-    lines += identifiability_table(summary["identifiability"], summary["parameters"]) + [""]
+    lines += identifiability_section(summary)
     lines += _sweep_lines(summary.get("step_sweep"))
     if "loss" in figures:
         lines += ["## Convergence", "", f"![loss per iteration]({figures['loss']})", ""]
@@ -429,11 +377,21 @@ def _header_lines(summary: dict) -> list[str]:
         "",
         f"Reference: {spp_text(ref)}, measured noise {fmt(ref['noise'], 3)} "
         "(RMS standard error on "
-        f"water pixels, linear RGB). Fit at {res[0]}x{res[1]} "
+        f"water pixels, linear RGB). Fit at {res[0]}x{res[1]}{footprint_words(summary)} "
         f"with `{summary['solver']}`, minimising {loss_words(summary.get('loss', 'linear'))}: "
         f"{fit_steps_line(summary)}",
         "",
     ]
+
+
+def footprint_words(summary: dict) -> str:
+    """How a fit pixel was shaded, in the report's words: empty for one sample at its centre;
+    else its samples and the game's resolution whose pixels they stand for."""
+    s, target = summary.get("supersample", 1), summary.get("target_resolution")
+    if s <= 1:
+        return ""
+    at = f" of {target[0]}x{target[1]}" if target else ""
+    return f" ({s}x{s} samples a pixel, the pixel footprint{at}: `fit.target_resolution`)"
 
 
 def fit_steps_line(summary: dict) -> str:

@@ -10,7 +10,8 @@ from __future__ import annotations
 from pathlib import Path
 
 from .._io import write_text_atomic
-from .calibration import constants_table, fit_steps_line, fmt, identifiability_table
+from .calibration import constants_table, fit_steps_line, fmt
+from .identifiability import identifiability_table
 
 
 def joint_lines(summary: dict) -> list[str]:

@@ -116,7 +116,7 @@ def _model(job, loss: str = "linear"):
     exp, ref, inputs = load_scene(job["scene"], mv)
     shader = Shader.of(exp)
     frame = Frame.of(exp, ref, shader.with_inputs(exp, inputs, mv))
-    (model,) = frame_models([frame], shader, mv, loss=loss)
+    (model,) = frame_models([frame], shader, mv, FitOptions.of(exp, loss=loss))
     return frame, shader, model
 
 
