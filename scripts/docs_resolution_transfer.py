@@ -23,8 +23,8 @@ def resolution_transfer_page(folder: Path) -> str:
         "each fit resolution from the same start, with one sample at each fit pixel's centre, or "
         'with `fit.target_resolution = "1080p"`: each fit pixel shaded at the samples of the '
         "1080p pixels it covers (at most 4 x 4) and averaged. Every fit is scored at 1080p on the "
-        "water pixels. The last column is FLIP against the 960 x 540 fit's, the stand-in for a "
-        "1080p fit on 2 cores.",
+        "water pixels. The column 'against 960x540' is FLIP relative to the 960 x 540 fit's, the "
+        "stand-in for a 1080p fit on 2 cores.",
         "",
     ]
     for path in sorted(folder.glob("*.json")):
@@ -34,7 +34,10 @@ def resolution_transfer_page(folder: Path) -> str:
 
 def _table(res: dict) -> list[str]:
     rows = res["rows"]
-    shown = [n for n in SHOWN if any(n in r["constants"] for r in rows)]
+    # the study's shaders: the highlight and the water; a user's shader: every fitted constant
+    shown = [n for n in SHOWN if any(n in r["constants"] for r in rows)] or [
+        n for n in rows[0]["constants"] if rows[0]["status"].get(n) in ("fitted", "bound")
+    ]
     ref = next((r for r in rows if r["fit_resolution"] == STAND_IN), None)
     ref_flip = ref["flip_1080p"] if ref else None
     head = "| fit | samples a pixel | fit seconds | FLIP at 1080p | against 960x540 | "
