@@ -154,3 +154,27 @@ def test_export_of_a_pair_reads_its_vertex_shader_back(tmp_path):
     (tmp_path / "constants.json").write_text(json.dumps(data))
     with pytest.raises(ValueError, match="the calibrated vertex shader .*gone.vert is gone"):
         user_shader_of(tmp_path / "constants.json")
+
+
+def test_a_results_normal_map_is_relative_to_its_shader_and_reads_back(tmp_path):
+    """The declared normal map a result records is relative to the shader's file, as the
+    declaration writes it (no path of the machine that made the result), and ``study export``'s
+    reading of the declaration finds the same file, from a copy of the pair elsewhere too."""
+    import shutil
+
+    from shaders_port.spirv.user_shader import UserShader
+    from study.calibration.shader import _engine_record
+
+    frag = REPO / "experiments" / "shaders" / "webgl_mirror_water.frag"
+    shader = UserShader.from_file(frag)
+    record = _engine_record(shader.engine, frag)
+    assert record["normal_map"] == "../files/water_normals.png"
+    declaration = {"constants": {}, "bindings": {}, **record}
+    again = UserShader.from_file(frag, declaration)
+    assert again.engine["normal_map"] == shader.engine["normal_map"]
+    (tmp_path / "shaders").mkdir()
+    (tmp_path / "files").mkdir()
+    shutil.copy(frag, tmp_path / "shaders" / frag.name)
+    shutil.copy(shader.engine["normal_map"], tmp_path / "files" / "water_normals.png")
+    moved = UserShader.from_file(tmp_path / "shaders" / frag.name, declaration)
+    assert moved.engine["normal_map"] == str((tmp_path / "files" / "water_normals.png").resolve())

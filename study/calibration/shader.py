@@ -11,6 +11,7 @@ records of it. This module is the one place that asks which kind a shader is.
 from __future__ import annotations
 
 import hashlib
+import os
 from pathlib import Path
 
 from shaders_port import Constants
@@ -280,7 +281,7 @@ class Shader:
                 "constants": {n: user.declared_range(n) for n in user.constants},
                 "bindings": dict(user.bindings),
                 "values": {n: list(v) for n, v in user.engine_values().items()},
-                **{k: v for k, v in user.engine.items() if v is not None},
+                **_engine_record(user.engine, exp.fit.shader),
             },
             "defines": list(user.defines),
             # after the file's own folder
@@ -291,6 +292,18 @@ class Shader:
             extra["vertex_grid"] = list(user.vertex.cells)
             extra["vertex_defines"] = list(user.vertex.shader.defines)
         return extra
+
+
+def _engine_record(engine: dict, shader_file) -> dict:
+    """A user's engine options as a result records them: a declared normal map's path relative
+    to the shader's file, as the declaration writes it and ``UserShader`` reads it back (no path
+    of the machine that made the result)."""
+    out = {k: v for k, v in engine.items() if v is not None}
+    if out.get("normal_map"):
+        out["normal_map"] = Path(
+            os.path.relpath(out["normal_map"], Path(shader_file).resolve().parent)
+        ).as_posix()
+    return out
 
 
 def _export_user(user, values: dict, folder: Path, textures, status: dict, targets=None) -> dict:
