@@ -339,7 +339,7 @@ STUDY_KEYS: dict[str, Field] = {
         "The resolution the shader runs at in the game, or a preset (as `resolution`). Each fit "
         "pixel is shaded at that resolution's pixel footprint: its target rows over "
         "`fit.resolution`'s rows, rounded, samples per side (at most 4), averaged. Unset: "
-        '`resolution`, the reference\'s. docs/user-shader.md "What the fit minimises".',
+        '`resolution`, the reference\'s. docs/user-shader.md "The pixels it sees".',
         "pixels",
         8,
         8192,
