@@ -46,7 +46,6 @@ def transfer(path: str, spp: int, overrides: list[str]) -> dict:
     from study.calibration.frames import load_frames
     from study.calibration.scoring import Scorer
     from study.calibration.shader import Shader
-    from study.config.resolution import supersample_factor
     from study.fit.model import get_value
 
     init_backend("llvm_ad_rgb")
@@ -70,7 +69,7 @@ def transfer(path: str, spp: int, overrides: list[str]) -> dict:
             {
                 "fit_resolution": list(res),
                 "target_resolution": None if target is None else list(target),
-                "supersample": supersample_factor(res, target),
+                "supersample": options.supersample(exp),
                 "fit_seconds": round(seconds, 2),
                 "iterations": cal.fit_summary.get("iterations"),
                 "flip_1080p": score.flip,

@@ -127,15 +127,9 @@ def _fit(target, inputs, loss: str):
 
 def _errors(fitted) -> dict:
     """Relative error of each fitted scalar against TRUTH."""
-    out = {}
-    for name in FITTED:
-        want, got = TRUTH[name], getattr(fitted, name)
-        if isinstance(want, tuple):
-            for i in range(3):
-                out[f"{name}[{i}]"] = abs(got[i] / want[i] - 1)
-        else:
-            out[name] = abs(got / want - 1)
-    return out
+    from helpers.synthetic import relative_errors
+
+    return relative_errors(fitted, TRUTH, FITTED)
 
 
 def test_flip_loss_recovers_the_constants_of_a_synthetic_target():

@@ -113,15 +113,9 @@ def _fit(model):
 
 
 def _errors(fitted) -> dict:
-    out = {}
-    for name in FITTED:
-        want, got = TRUTH[name], getattr(fitted, name)
-        if isinstance(want, tuple):
-            for i in range(3):
-                out[f"{name}[{i}]"] = abs(got[i] / want[i] - 1)
-        else:
-            out[name] = abs(got / want - 1)
-    return out
+    from helpers.synthetic import relative_errors
+
+    return relative_errors(fitted, TRUTH, FITTED)
 
 
 def test_supersampled_fit_recovers_what_one_sample_per_pixel_misses():

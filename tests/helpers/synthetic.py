@@ -244,3 +244,17 @@ def synthetic_ssr_inputs(width: int = 64, height: int = 48, seed: int = 0) -> Sh
     return dataclasses.replace(
         base, scene_color=colour.astype(np.float32), scene_depth=depth.astype(np.float32)
     )
+
+
+def relative_errors(fitted, truth: dict, names: list[str]) -> dict:
+    """Relative error of each fitted scalar of ``names`` against ``truth`` (constant -> value, a
+    colour as an RGB(A) tuple whose first three components count): {'water_color[1]': ...}."""
+    out = {}
+    for name in names:
+        want, got = truth[name], getattr(fitted, name)
+        if isinstance(want, tuple):
+            for i in range(3):
+                out[f"{name}[{i}]"] = abs(got[i] / want[i] - 1)
+        else:
+            out[name] = abs(got / want - 1)
+    return out
