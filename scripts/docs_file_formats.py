@@ -54,6 +54,8 @@ COLUMNS = {
     "job.spp": "its samples per pixel",
     "job.seed": "its seed",
     "key": "the job's key (a hash of the job): a re-run skips the jobs whose key has an `ok` row",
+    "schema": "the table's row layout version (`study.sweep.table.SCHEMA_VERSION`): a re-run "
+    "sets rows of another version aside in `<table>.schema<N>.parquet`",
     "status": "`ok` or `error`",
     "error": "the error message of a failed job (null when `ok`)",
     "seconds": "wall time of the job, s",
@@ -85,6 +87,8 @@ COLUMNS = {
     "it by the median reference time)",
     "port_ms_512": "the Dr.Jit port's frame time at 512x512, ms",
     "fitted.": "the fitted constants (as `job.start.`)",
+    "status_of.": "each fitted constant's status (as `status.`; a colour's channels as "
+    "`[0]` .. `[2]`)",
     "loss": "the final loss",
     "loss_start": "the loss at the start",
     "iterations": "the solver's steps",
