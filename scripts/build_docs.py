@@ -158,6 +158,12 @@ def generated() -> dict[Path, str]:
         "`study calibrate experiments/default.toml --set 'fit.loss=\"flip\"' --out out/loss-flip`",
         Path("out/loss-flip"),
     )
+    pages[RESULTS / "loss-transport" / "report.md"] = _calibration_page(
+        RESULTS / "loss-transport",
+        "`study calibrate experiments/default.toml --set 'fit.loss=\"transport\"' --out "
+        "out/loss-transport`",
+        Path("out/loss-transport"),
+    )
     pages[RESULTS / "resolution-transfer" / "report.md"] = resolution_transfer_page(
         RESULTS / "resolution-transfer"
     )

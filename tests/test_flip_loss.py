@@ -161,7 +161,7 @@ def test_a_loss_that_cannot_be_used_is_refused_in_one_line():
     from study.calibration.fitting import FitOptions
     from study.config.errors import ExperimentError
 
-    choices = "unknown fit.loss 'l1'; choose one of linear, log, flip"
+    choices = "unknown fit.loss 'l1'; choose one of linear, log, flip, transport"
     with pytest.raises(ExperimentError, match=choices):
         FitOptions(None, "levenberg_marquardt", 10, loss="l1")
     with pytest.raises(ExperimentError, match='set fit.solver = "levenberg_marquardt"'):

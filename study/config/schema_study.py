@@ -314,10 +314,12 @@ STUDY_KEYS: dict[str, Field] = {
         "str",
         "linear",
         "The error the fit minimises: `linear` (squared error in linear RGB), `log` (squared "
-        "error of log(RGB + 0.02)) or `flip` (the mean LDR-FLIP map the report gives, through a "
-        "differentiable FLIP). `flip` needs a least-squares solver and "
+        "error of log(RGB + 0.02)), `flip` (the mean LDR-FLIP map the report gives, through a "
+        "differentiable FLIP) or `transport` (in each 8 x 8 tile of the fit image, the sorted "
+        "values against the reference's sorted values: a glint moved within its tile costs "
+        "nothing). All but `linear` need a least-squares solver and "
         '`fit.input_noise = "ignore"`. docs/user-shader.md "What the fit minimises".',
-        choices=("linear", "log", "flip"),
+        choices=("linear", "log", "flip", "transport"),
     ),
     "fit.resolution": Field(
         "vec2",

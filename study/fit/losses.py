@@ -20,11 +20,22 @@ The fit minimises ``0.5*||r||^2`` over a residual ``r``; each loss wraps a
   Levenberg-Marquardt converges. The Jacobian is JAX's forward mode of the residual in the
   image (one pass per column) applied to the model's ``J``. FLIP compares CSF-filtered colour
   and edge and point features, so a sharp glint near its place costs less than a blur.
+* ``transport``: ``linear``'s residual times ``sqrt(TRANSPORT_LINEAR_SHARE)`` (1/4) stacked on
+  the matched values times ``sqrt(1 - TRANSPORT_LINEAR_SHARE)``: in each ``TILE`` x ``TILE``
+  tile of the fit image (8 x 8, ``residual_tiles``) and each channel, the port's water values
+  in increasing order minus the reference's in increasing order, the one-dimensional optimal
+  transport between the tile's two histograms (the assignment of the port's values to the
+  reference's that minimises the squared error). So ``0.5*||r||^2`` is never above
+  ``linear``'s; a glint moved within its tile costs a quarter of ``linear``'s charge (half a
+  glint removed), a glint removed, dimmed or widened costs its values, and the tiles and the
+  linear share keep where on the image each value is. The matched part's Jacobian is the
+  model's ``J`` with its rows in the same order (the order is constant between ties).
 
 Every wrapper is a :class:`~study.fit.protocol.CalibrationModel` (the model's parameters,
 ranges, start constants and renders). ``reference_stderr`` is carried through ``log`` to first
-order; ``flip`` has none (its residual mixes a neighbourhood of pixels), so under ``flip`` the
-basin scan reports other minima without a noise test and never restarts from one. Only
+order; ``flip`` and ``transport`` have none (a residual mixes a neighbourhood of pixels), so
+under them the basin scan reports other minima without a noise test and never restarts from
+one. Only
 ``linear`` has ``loss_ad`` (Adam's reverse mode); the others are refused by Adam in one line.
 """
 
@@ -34,10 +45,14 @@ import numpy as np
 
 from .flip_jax import PPD, flip_residual
 from .jax_residual import enable_x64
+from .model import TILE
 
 LOG_EPS = 0.02
 #: HyAB distance below which the fit's FLIP is quadratic (``study.fit.flip_jax.flip_map``)
 FLIP_KNEE = 1.0
+#: the squared error's share of the transport loss: a glint moved within its tile costs this
+#: share of what the squared error charges, a glint removed the whole of it
+TRANSPORT_LINEAR_SHARE = 0.25
 
 _PASSED = ("label", "defines", "parameter_names", "bounds", "start_constants", "render",
            "reference", "inputs", "variant", "user_shader", "n_renders", "n_jacobians",
@@ -146,7 +161,46 @@ class FlipResidual(_Wrapped):
         return np.asarray(r)[mask].ravel(), dr
 
 
-LOSSES = {cls.loss_name: cls for cls in (Linear, LogResidual, FlipResidual)}
+class TransportResidual(_Wrapped):
+    """The squared error's residual weighted by ``sqrt(share)`` above the port's water values
+    matched to the reference's within tiles, weighted by ``sqrt(1 - share)`` (see the module
+    docstring); ``size``: the tile's side in fit pixels."""
+
+    loss_name = "transport"
+    reference_stderr = None
+
+    def __init__(self, model, size: int = TILE, share: float = TRANSPORT_LINEAR_SHARE):
+        super().__init__(model)
+        self.size = int(size)
+        self._w = np.sqrt([share, 1.0 - share])
+        self._tiles = np.asarray(model.residual_tiles(self.size))
+        self._group = self._tiles * 3 + np.tile(np.arange(3), len(self._tiles) // 3)
+        self._ref = model.reference[model.mask].astype(np.float64).ravel()
+        self._ref_sorted = self._ref[np.lexsort((self._ref, self._group))]
+
+    def _matched(self, r: np.ndarray):
+        """(the stacked residual, the order of the matched part's rows) of the model's ``r``."""
+        port = r + self._ref
+        order = np.lexsort((port, self._group))  # by (tile, channel), then by value
+        return np.concatenate(
+            [self._w[0] * r, self._w[1] * (port[order] - self._ref_sorted)]
+        ), order
+
+    def residual(self, constants) -> np.ndarray:
+        return self._matched(self.base.residual(constants))[0]
+
+    def residual_and_jacobian(self, constants, names):
+        r, J = self.base.residual_and_jacobian(constants, names)
+        stacked, order = self._matched(r)
+        return stacked, np.concatenate([self._w[0] * J, self._w[1] * J[order]])
+
+    def residual_tiles(self, size: int = TILE) -> np.ndarray:
+        """(6n,) int: each entry's tile of ``self.size`` fit pixels (a matched value's is the
+        tile it is matched in, whatever ``size``)."""
+        return np.concatenate([self._tiles, np.sort(self._group) // 3])
+
+
+LOSSES = {cls.loss_name: cls for cls in (Linear, LogResidual, FlipResidual, TransportResidual)}
 
 
 def transformed(model, loss: str = "linear", ppd: float | None = None):

@@ -362,6 +362,8 @@ LOSS_WORDS = {
     "linear": 'the squared error in linear RGB (`fit.loss = "linear"`)',
     "log": 'the squared error of log(RGB + 0.02) (`fit.loss = "log"`)',
     "flip": 'the mean FLIP at the fit\'s resolution (`fit.loss = "flip"`)',
+    "transport": "a quarter the squared error, three quarters the values matched within 8 x 8 "
+    'tiles (`fit.loss = "transport"`)',
 }
 
 
