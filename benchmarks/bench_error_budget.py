@@ -23,7 +23,12 @@ reference (what ``study calibrate`` and ``study tradeoff`` score):
    stand for: Toksvig, LEAN, mip-mapped normals), (c) the exact reflection of the sun's disc
    (``sun.radius``, ``sun.radiance``) off the shader's own (scaled) normal, Fresnel weighted, at
    the pixel centre and averaged over the sub-pixel samples (a glint that follows the surface
-   the shader's normal map describes, up to the sampling). (a) and (b) are refitted in strength
+   the shader's normal map describes, up to the sampling), (d) the same off the slope-blended
+   normal of the shader's ``normals = "slopes"`` sibling (the normal of the layers' mean
+   height), (e) the same off the reference surface's exact normal under the pixel's point on
+   the water plane (what any normal map can at best give), (f) that normal where the pixel's
+   eye ray meets the surface (the heights' parallax, which a normal map read on the plane
+   does not have). (a) and (b) are refitted in strength
    (least squares against the reference's sun term, the exponent from a grid), so neither
    keeps the fit's compromise.
 
@@ -74,10 +79,28 @@ def supersampled(render, inputs, k: int) -> dict:
     return {n: downsample(v, k, k) for n, v in render(big).items()}
 
 
-def glint_images(variant, inputs, constants, sun_dir, radius_deg, radiance) -> dict:
+def surface_hits(eye: np.ndarray, plane: np.ndarray, waves, steps: int = 8) -> np.ndarray:
+    """(N, 3) float64: where the eye rays through the water-plane points ``plane`` (N, 3, y = 0)
+    meet the surface ``y = H(x, z)`` of ``waves`` (fixed-point iteration on the ray's length;
+    the slopes are small)."""
+    d = plane - eye
+    d /= np.linalg.norm(d, axis=-1, keepdims=True)
+    p = plane.copy()
+    for _ in range(steps):
+        h, _, _ = waves.height_and_gradient(p[:, 0], p[:, 2])
+        p = eye + ((h - eye[1]) / d[:, 1])[:, None] * d
+    return p
+
+
+def glint_images(
+    variant, inputs, constants, sun_dir, radius_deg, radiance, waves=None, displaced=False
+) -> dict:
     """(H, W, 3) float32 at ``inputs``' resolution: ``disc``, the Fresnel-weighted radiance of
     the sun's disc reflected off the shader's scaled normal (``vBumpTexMore``) at each pixel
-    centre (0 or the disc's radiance), and ``F``, the Fresnel reflectance there."""
+    centre (0 or the disc's radiance), and ``F``, the Fresnel reflectance there. ``waves``
+    (``height_and_gradient(x, z)``): the normal is instead that of this surface under the pixel
+    centre's point on the water plane, exact (no normal map, no bump scale); ``displaced``: at
+    the point where the pixel's eye ray meets that surface, seen from the eye there."""
     import drjit as dr
     from bench_grazing import port_blocks
 
@@ -85,10 +108,21 @@ def glint_images(variant, inputs, constants, sun_dir, radius_deg, radiance) -> d
     from shaders_port.ports import water_refraction as wr
 
     m, P, C, f = port_blocks(variant, inputs, constants)
-    R = dr.normalize(wr.reflect(m, -f.vEye, f.vBumpTexMore))
+    N, N_fresnel, vEye = f.vBumpTexMore, f.vBumpTex, f.vEye
+    if waves is not None:
+        p = np.asarray(P.raster.world, np.float64)
+        if displaced:
+            eye = np.asarray(inputs.viewpos, np.float64)
+            p = surface_hits(eye, p, waves)
+            e = (eye - p) / np.linalg.norm(eye - p, axis=-1, keepdims=True)
+            vEye = m.Array3f(*e.T.astype(np.float32))
+        _, gx, gz = waves.height_and_gradient(p[:, 0], p[:, 2])
+        n = np.stack([-gx, np.ones_like(gx), -gz]) / np.sqrt(1.0 + gx * gx + gz * gz)
+        N = N_fresnel = m.Array3f(*n.astype(np.float32))
+    R = dr.normalize(wr.reflect(m, -vEye, N))
     cos_to_sun = R.x * sun_dir[0] + R.y * sun_dir[1] + R.z * sun_dir[2]
     inside = dr.select(cos_to_sun >= np.cos(np.radians(radius_deg)), 1.0, 0.0)
-    NdotV = clamp(dr.dot(f.vEye, f.vBumpTex), 0.0, 1.0)
+    NdotV = clamp(dr.dot(vEye, N_fresnel), 0.0, 1.0)
     F = P.fresnelLookup.sample(m, NdotV, m.Float(0.5))[1]
     r = P.raster
     out = {}
@@ -151,7 +185,10 @@ def main(argv=None) -> None:
     from study._metrics import flip_map, rmse
     from study.calibration.frames import load_scene_data
     from study.config.experiment import load_experiment
+    from shaders_port import space
+    from shaders_port.variants import get_variant
     from study.scene.geometry import sun_direction
+    from study.scene.mitsuba_scene import waves_of
 
     exp = load_experiment(a.experiment, a.set)
     ref, inputs, _ = load_scene_data(exp, init_backend(exp["variant"]))
@@ -208,12 +245,24 @@ def main(argv=None) -> None:
     sun_dir = sun_direction(exp.sun.elevation, exp.sun.azimuth)
     radiance = np.asarray(exp.sun.radiance, np.float32)
     base = terms["F*sky"] + terms["T*refr"]
-    for kk in (1, a.ss):
-        g = supersampled(
-            lambda i: glint_images(v, i, c, sun_dir, exp.sun.radius, radiance), inputs, kk
-        )
-        label = f"(c) the sun's disc off the shader's normal, {kk}x{kk} samples"
-        rows.append((label, *score(base + g["disc"]), f"radius {exp.sun.radius} degrees"))
+    slopes = get_variant(space.name_of({**space.choices_of(v.name), "normals": "slopes"}))
+    normals = (
+        ("(c) the sun's disc off the shader's normal", v, None, False),
+        ("(d) the sun's disc off the slope-blended normal", slopes, None, False),
+        ("(e) the sun's disc off the surface's exact normal", v, waves_of(exp), False),
+        ("(f) the same where the eye ray meets the surface", v, waves_of(exp), True),
+    )
+    for what, shader, waves, displaced in normals:
+        for kk in (1, a.ss):
+            g = supersampled(
+                lambda i: glint_images(
+                    shader, i, c, sun_dir, exp.sun.radius, radiance, waves, displaced
+                ),
+                inputs,
+                kk,
+            )
+            label = f"{what}, {kk}x{kk} samples"
+            rows.append((label, *score(base + g["disc"]), f"radius {exp.sun.radius} degrees"))
     rows.append(("the reference's sun term (oracle)", *score(base + rt["F*spec"]), ""))
     print("\n| highlight (the shader's sky and refraction) | FLIP | RMSE | |\n|---|---|---|---|")
     for label, fl, rm, note in rows:

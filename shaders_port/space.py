@@ -25,6 +25,9 @@ The axes and where each choice comes from (``SOURCE``):
 * ``refine``: the crossing after the linear search, ``linear`` (000), ``binary``, ``secant``;
 * ``walls``: ``off`` (000) or ``on`` (a crossing into a wall shaded as its submerged face);
 * ``layers``: normal-map layers averaged, 4 (000), 2 or 1;
+* ``normals``: how the layers make one normal: ``average`` (000: their normals averaged) or
+  ``slopes`` (their slopes averaged, the normal of their mean height: partial-derivative
+  blending, Barre-Brisebois and Hill 2012; with two or four layers);
 * ``textures``: ``float`` or ``game`` (8-bit colour, half-float depth).
 
 What the files realise: the raycast refraction with the cube-map, local cube-map, screen-space,
@@ -51,6 +54,7 @@ AXES: dict[str, tuple] = {
     "refine": ("linear", "binary", "secant"),
     "walls": ("off", "on"),
     "layers": (4, 2, 1),
+    "normals": ("average", "slopes"),
     "textures": ("float", "game"),
 }
 ORIGINAL = {axis: choices[0] for axis, choices in AXES.items()}
@@ -70,6 +74,7 @@ SOURCE = {
     ("reflection", "box"): "Lagarde and Zanuttini (local cube map)",
     ("specular", "disc"): "the sun's disc in the mirror (ocean shaders' sun glint)",
     ("reflection", "ssr"): "screen-space reflection (engines' SSR)",
+    ("normals", "slopes"): "Barre-Brisebois and Hill (partial-derivative blending)",
 }
 
 # each source's technique alone (the original's choices elsewhere, the cube map where a source
@@ -84,6 +89,7 @@ ALONE = {
     "Lagarde and Zanuttini (local cube map)": {"reflection": "box"},
     "the sun's disc in the mirror (ocean shaders' sun glint)": {"specular": "disc"},
     "screen-space reflection (engines' SSR)": {"reflection": "ssr"},
+    "Barre-Brisebois and Hill (slope-blended normals)": {"normals": "slopes"},
     "001-004 (the games' composition)": {
         "refraction": "planar_distorted",
         "reflection": "planar_distorted",
@@ -101,6 +107,7 @@ _RAYCAST_DEFINES = {
     ("refine", "secant"): "SECANT_REFINE",
     ("layers", 2): "TWO_NORMAL_LAYERS",
     ("layers", 1): "ONE_NORMAL_LAYER",
+    ("normals", "slopes"): "SLOPE_NORMALS",
     ("reflection", "planar_distorted"): "PLANAR_REFLECTION",
     ("reflection", "box"): "BOX_REFLECTION",
     ("reflection", "ssr"): "SSR_REFLECTION",
@@ -120,6 +127,7 @@ _TOKENS = (
     (("refine", "secant"), "secant"),
     (("layers", 2), "2layers"),
     (("layers", 1), "1layer"),
+    (("normals", "slopes"), "slopes"),
     (("textures", "game"), "game_textures"),
 )
 # the screen-space file's (refraction, reflection) pairs: name and #defines. Planar refraction
@@ -170,6 +178,11 @@ def realise(choices: dict) -> tuple[str, tuple[str, ...], str]:
             "shader only: with refraction = raycast choose reflection = planar_distorted "
             "(its reflect_distortion = 0 is the flat mirror)"
         )
+    if c["normals"] == "slopes" and c["layers"] == 1:
+        raise Unrealisable(
+            "normals = slopes blends the layers, and one layer has nothing to blend: choose "
+            "layers = 4 or 2 with it (one layer's normal is the same either way)"
+        )
     if c["reflection"] == "none" and c["specular"] != "none":
         raise Unrealisable(
             "reflection = none skips block [7], and the highlight is added to the reflection: "
@@ -186,13 +199,14 @@ def realise(choices: dict) -> tuple[str, tuple[str, ...], str]:
 
 
 def _realise_screen_space(c: dict) -> tuple[str, tuple[str, ...], str]:
-    fixed = ("attenuation", "specular", "refine", "walls", "layers", "textures")
+    fixed = ("attenuation", "specular", "refine", "walls", "layers", "normals", "textures")
     off = [f"{a} = {c[a]}" for a in fixed if c[a] != ORIGINAL[a]]
     if off:
         raise Unrealisable(
             f"the screen-space shader (water_baseline, refraction = {c['refraction']}) has the "
             "original's choices on the other axes only (depth tint, Phong highlight, no "
-            f"refinement, no wall faces, four layers, float textures), not {', '.join(off)}"
+            "refinement, no wall faces, four layers averaged, float textures), not "
+            f"{', '.join(off)}"
         )
     key = (c["refraction"], c["reflection"])
     if key not in _BASELINE:

@@ -48,7 +48,7 @@ def _port_normals(inputs) -> tuple[np.ndarray, np.ndarray]:
     ``wave1..wave4``, ``BumptexMult = 1``) on its water pixels: ((N, 2) world x, z, (N, 3))."""
     from shaders_port.pipeline.raster import prepare
     from shaders_port.pipeline.texture import backend_types
-    from shaders_port.ports.water_refraction import normal_map_block
+    from shaders_port.ports.normals import normal_map_block
 
     m = backend_types("llvm")
     P = prepare(inputs, m)

@@ -174,6 +174,7 @@ FD_CASES = [
     ("water_refraction_secant", "steps_steep", 3e-4),
     ("water_refraction_binary", "steps_steep", 3e-4),
     ("water_refraction_secant", "bumptex_mult", 3e-4),
+    ("water_refraction_slopes", "bumptex_mult", 3e-4),  # through the slope-blended normal
 ]
 FD_AT = FD_CONSTANTS.replace(
     absorption_r=0.6,

@@ -71,6 +71,17 @@ varying vec3 varyingVecEye;
 //vector from varyingVecWorldPosition to worldspace Light Position
 varying vec3 varyingVecLight;
 
+#ifdef SLOPE_NORMALS
+//variant: the layers blended as slopes (partial-derivative blending, Barre-Brisebois and Hill
+//2012): the normal of the layers' mean height, not the mean of their normals.
+//A layer's slope (dh/dx, dh/dz) from its texel; texels tipped past 87 degrees are held there
+vec2 layerSlope(vec3 texel)
+{
+    vec3 n = 2.0 * texel - 1.0;
+    return -n.xz / max(n.y, 0.05);
+}
+#endif
+
 void main (void)
 {
     // ---- [1] Eye and light vectors ----
@@ -88,7 +99,12 @@ void main (void)
     //variant: average the first two layers, transform from [0,1] to [-1,1]
     vec3 vBumpTexA = vec3(texture2D(normalMap, gl_TexCoord[0].xy));
     vec3 vBumpTexB = vec3(texture2D(normalMap, gl_TexCoord[1].xy));
+#ifdef SLOPE_NORMALS
+    vec2 meanSlope = 0.5 * (layerSlope(vBumpTexA) + layerSlope(vBumpTexB));
+    vec3 vBumpTex = normalize(vec3(-meanSlope.x, 1.0, -meanSlope.y));
+#else
     vec3 vBumpTex = normalize( 2.0 * (vBumpTexA+vBumpTexB) - 2.0);
+#endif
 #else
     //Sample normalmap at different locations
     vec3 vBumpTexA = vec3(texture2D(normalMap, gl_TexCoord[0].xy));
@@ -96,9 +112,16 @@ void main (void)
     vec3 vBumpTexC = vec3(texture2D(normalMap, gl_TexCoord[2].xy));
     vec3 vBumpTexD = vec3(texture2D(normalMap, gl_TexCoord[3].xy));
 
+#ifdef SLOPE_NORMALS
+    //variant: the mean of the layers' slopes, the normal of their mean height
+    vec2 meanSlope = 0.25 * (layerSlope(vBumpTexA) + layerSlope(vBumpTexB)
+        + layerSlope(vBumpTexC) + layerSlope(vBumpTexD));
+    vec3 vBumpTex = normalize(vec3(-meanSlope.x, 1.0, -meanSlope.y));
+#else
     //Average Bump Layers, transform from [0,1] to [-1,1]
     vec3 vBumpTex = normalize( 2.0 *
         (vBumpTexA+vBumpTexB+vBumpTexC+vBumpTexD) - 4.0);
+#endif
 #endif
 
     //Increase bumps: decrease y-component, then renormalize

@@ -69,6 +69,7 @@ from ..pipeline.texture import backend_types, clamp, mix, texmat_xy
 from .box import box_reflection, box_state
 from .gl_diagnostics import gl_check_diagnostics
 from .highlight import fresnel_combine, specular_highlight
+from .normals import normal_map_block
 from .planar import MIRROR_NORMAL, mirror_state, planar_reflection
 from .ssr import ssr_reflection, ssr_state
 from .switches import decode
@@ -83,6 +84,9 @@ class Options(NamedTuple):
     reflection: True (original) or False (``NOREFLECTION``: block [7] skipped, the refraction
         colour alone -- no sky reflection and so no highlight).
     normal_layers: 4 (original), 2 (``TWO_NORMAL_LAYERS``) or 1 (``ONE_NORMAL_LAYER``).
+    slope_normals: False (original: the layers' normals averaged) or True (``SLOPE_NORMALS``:
+        the layers' slopes averaged, the normal of their mean height; one layer is the same
+        either way).
     refine: None (original), 'binary' (``BINARY_REFINE``) or 'secant' (``SECANT_REFINE``): that
         many (``REFINE_STEPS``) bracket refinements after the linear search.
     attenuation: 'linear' (original: clamped mix over ``ATTENUATION_DISTANCE``) or 'beer'
@@ -107,6 +111,7 @@ class Options(NamedTuple):
 
     reflection: bool = True
     normal_layers: int = 4
+    slope_normals: bool = False
     refine: str | None = None
     attenuation: str = "linear"
     specular: str = "phong"
@@ -123,6 +128,7 @@ DEFINES = {
     "NOREFLECTION": {"reflection": False},
     "TWO_NORMAL_LAYERS": {"normal_layers": 2},
     "ONE_NORMAL_LAYER": {"normal_layers": 1},
+    "SLOPE_NORMALS": {"slope_normals": True},
     "BINARY_REFINE": {"refine": "binary"},
     "SECANT_REFINE": {"refine": "secant"},
     "BEER_ATTENUATION": {"attenuation": "beer"},
@@ -152,25 +158,6 @@ def eye_and_light(m, P):
     vEye = dr.normalize(P.varyingVecEye)
     vLight = dr.normalize(P.varyingVecLight)
     return vEye, vLight
-
-
-def normal_map_block(m, P, BumptexMult, layers: int = 4):
-    # ---- [2] Normal map: average four layers, bump scaling ----
-    if layers == 1:  # ONE_NORMAL_LAYER
-        vBumpTexA = m.Array3f(P.normalMap.sample(m, P.texcoord[0][0], P.texcoord[0][1]))
-        vBumpTex = dr.normalize(2.0 * vBumpTexA - 1.0)
-    elif layers == 2:  # TWO_NORMAL_LAYERS
-        vBumpTexA = m.Array3f(P.normalMap.sample(m, P.texcoord[0][0], P.texcoord[0][1]))
-        vBumpTexB = m.Array3f(P.normalMap.sample(m, P.texcoord[1][0], P.texcoord[1][1]))
-        vBumpTex = dr.normalize(2.0 * (vBumpTexA + vBumpTexB) - 2.0)
-    else:
-        vBumpTexA = m.Array3f(P.normalMap.sample(m, P.texcoord[0][0], P.texcoord[0][1]))
-        vBumpTexB = m.Array3f(P.normalMap.sample(m, P.texcoord[1][0], P.texcoord[1][1]))
-        vBumpTexC = m.Array3f(P.normalMap.sample(m, P.texcoord[2][0], P.texcoord[2][1]))
-        vBumpTexD = m.Array3f(P.normalMap.sample(m, P.texcoord[3][0], P.texcoord[3][1]))
-        vBumpTex = dr.normalize(2.0 * (vBumpTexA + vBumpTexB + vBumpTexC + vBumpTexD) - 4.0)
-    vBumpTexMore = dr.normalize(vBumpTex * m.Array3f(1.0, BumptexMult, 1.0))
-    return vBumpTex, vBumpTexMore
 
 
 def refract(m, I, N, eta):
@@ -381,7 +368,9 @@ def refraction_blocks(m, P, C, opts: Options = Options()) -> Refracted:
     """Blocks [1]-[6], shared by ``water_refraction`` and ``water_reflection`` (the seed's
     section 3: "very similar to the previous one")."""
     vEye, vLight = eye_and_light(m, P)
-    vBumpTex, vBumpTexMore = normal_map_block(m, P, C.bumptex_mult, opts.normal_layers)
+    vBumpTex, vBumpTexMore = normal_map_block(
+        m, P, C.bumptex_mult, opts.normal_layers, opts.slope_normals
+    )
     R = refraction_vector(m, vEye, vBumpTexMore, C)
     current_position, current_position_old, depth, olddepth, iterations, crossed = raycast_ground(
         m, P, loop_R(C, R), C.loop_cap
