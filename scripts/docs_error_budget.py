@@ -50,7 +50,36 @@ def _fit_section(d: dict) -> list[str]:
         [h["label"], f"{h['flip']:.4f}", f"{h['rmse']:.4f}", h["note"]] for h in d["highlights"]
     ]
     out += _table(["highlight", "FLIP", "RMSE", ""], rows)
-    return out + [""]
+    return out + [""] + glint_split(d["highlights"])
+
+
+def glint_split(highlights: list[dict]) -> list[str]:
+    """A paragraph: the FLIP between the sun's disc off the shader's normal at one sample a
+    pixel and the reference's glitter, term by term, from rows (c), (e), (f) and the oracle
+    (none where the result has no rows (e) and (f))."""
+    flip = {}
+    for h in highlights:
+        if h["label"][:3] in ("(c)", "(e)", "(f)"):
+            flip[h["label"][:3], h["label"].rsplit(", ", 1)[1].split()[0]] = h["flip"]
+        elif "(oracle)" in h["label"]:
+            flip["oracle"] = h["flip"]
+    fine = {n[1] for n in flip if n != "oracle" and n[1] != "1x1"}
+    need = [("(c)", "1x1"), "oracle"] + [(t, k) for t in ("(c)", "(e)", "(f)") for k in fine]
+    if len(fine) != 1 or any(n not in flip for n in need):
+        return []
+    (k,) = fine
+    c1, ck, ek, fk, o = (
+        flip[n] for n in (("(c)", "1x1"), ("(c)", k), ("(e)", k), ("(f)", k), "oracle")
+    )
+    return [
+        f"From the sun's disc off the shader's normal at one sample a pixel (FLIP {c1:.4f}) to "
+        f"the reference's glitter ({o:.4f}): {c1 - o:.4f} in all, of which the pixel's footprint "
+        f"({k} samples) {c1 - ck:.4f}, the normal (the surface's exact normal in place of the "
+        f"shader's) {ck - ek:.4f}, the heights' parallax (that normal where the eye ray meets "
+        f"the surface, not under the pixel's point on the water plane) {ek - fk:.4f}, and the "
+        f"rest {fk - o:.4f}.",
+        "",
+    ]
 
 
 def error_budget_page(folder: Path = FOLDER) -> str:

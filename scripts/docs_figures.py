@@ -262,7 +262,15 @@ def _times(scale: float) -> str:
     return {0.5: "half", 1.0: "the same as", 2.0: "twice"}.get(scale, f"{scale:g} times")
 
 
+def _glint_split() -> str:
+    """What separates the sun's disc from the reference's glitter, term by term."""
+    from docs_error_budget import glint_split
+
+    return glint_split(_json("error-budget/water_refraction_beer_disc_walls.json")["highlights"])[0]
+
+
 QUOTES = {
+    "glint-split": _glint_split,
     "front-caption-readme": lambda: _front_caption("docs/"),
     "front-caption-docs": lambda: _front_caption(""),
     "make-run": _make_run,
