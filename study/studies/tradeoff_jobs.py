@@ -26,6 +26,7 @@ the fit resolution (``study._metrics``).
 
 from __future__ import annotations
 
+import dataclasses
 import itertools
 import statistics
 import time
@@ -123,13 +124,16 @@ def job_frame(job: dict):
     return shader, Frame.of(exp, ref, shader.with_inputs(exp, inputs, mv))
 
 
-def job_options(exp, shader, resolution=None, basin_scan: bool = True) -> FitOptions:
+def job_options(exp, shader, resolution=None, screen: bool = False) -> FitOptions:
     """The fit options of a point of ``shader``: the experiment's, over the constants a point
-    refits (``Shader.point_parameters``), at ``resolution`` (default ``fit.resolution``);
-    ``basin_scan`` False for the adaptive search's screen (:func:`screen_job`)."""
-    return FitOptions.of(
-        exp, parameters=shader.point_parameters(exp), resolution=resolution, basin_scan=basin_scan
+    refits (``Shader.point_parameters``), at ``resolution`` (default ``fit.resolution``).
+    ``screen``: the adaptive search's screen (:func:`screen_job`), without the basin scan and
+    with one sample at each fit pixel's centre in place of ``fit.target_resolution``'s
+    footprint (the points it sends on are fitted with both)."""
+    options = FitOptions.of(
+        exp, parameters=shader.point_parameters(exp), resolution=resolution, basin_scan=not screen
     )
+    return dataclasses.replace(options, target_resolution=None) if screen else options
 
 
 def job_start(shader, job: dict):
@@ -139,13 +143,13 @@ def job_start(shader, job: dict):
     return None if start is None else shader.constants(start, job.get("schedule"))
 
 
-def job_fit(job: dict, resolution=None, basin_scan: bool = True):
+def job_fit(job: dict, resolution=None, screen: bool = False):
     """(shader, frame, ``Fit``, fit seconds) of ``job`` fitted from ``job["start"]`` with its
     schedule, through the calibration's one fit (``study.calibration.fitting``) with the options
     of :func:`job_options`."""
     mv = job.get("mitsuba_variant", "llvm_ad_rgb")
     shader, frame = job_frame(job)
-    options = job_options(frame.exp, shader, resolution, basin_scan)
+    options = job_options(frame.exp, shader, resolution, screen)
     t0 = time.perf_counter()
     fit = fit_frames([frame], shader, mv, options, job_start(shader, job))
     return shader, frame, fit, time.perf_counter() - t0
@@ -208,8 +212,9 @@ def screen_job(job: dict) -> dict:
     if w % f or h % f:
         raise ValueError(f"fit.resolution {w}x{h} is not divisible by the screen factor {f}")
     # the screen ranks candidates: its fits skip the basin scan (which doubles a point's cost
-    # and serves the exported constants); the points it sends on are fitted with it
-    _, _, fit, fit_s = job_fit(job, resolution=(w // f, h // f), basin_scan=False)
+    # and serves the exported constants) and shade one sample a pixel (the footprint's samples
+    # multiply a fit's cost); the points it sends on are fitted with both
+    _, _, fit, fit_s = job_fit(job, resolution=(w // f, h // f), screen=True)
     model, cal = fit.models[0], fit.calibration
     img, diag = model.render(cal.fitted)
     m = model.mask

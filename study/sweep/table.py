@@ -25,8 +25,9 @@ from .._io import disk_full, repo_relative
 
 # what a row's results mean; every row records it (``schema``, 1 where absent). A sweep sets
 # aside the rows of another version (``set_aside``) and measures their jobs again. 2: every fit
-# pixel shaded at the footprint of ``fit.target_resolution``
-SCHEMA_VERSION = 2
+# pixel shaded at the footprint of ``fit.target_resolution``; 3: the adaptive search's screen
+# shades one sample a pixel
+SCHEMA_VERSION = 3
 ERROR_CHARS = 2000
 
 
