@@ -140,6 +140,7 @@ def test_flip_loss_recovers_the_constants_of_a_synthetic_target():
     assert max(err.values()) < 0.01, err
 
 
+@pytest.mark.slow  # the misregistration the fit is held to: tests/test_transport_loss.py
 def test_misregistered_waves_cost_the_squared_error_its_colours():
     """Known truth, misregistered: the target's waves moved by 0.01 texture units (about a
     tenth of a pixel at 48 x 32). Measured: the squared error misses water_color[0] by 54 %,

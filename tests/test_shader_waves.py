@@ -204,6 +204,7 @@ def _broken(tmp_path, pragma):
                                                        "waves.shader_grid=64"])  # fmt: skip
 
 
+@pytest.mark.slow  # about 50 s on 2 cores, nearly all the executor's compile of the shader
 def test_an_engine_shader_names_its_normal():
     """The shipped three.js-style water declares its normal; its field's curl is measured."""
     from study import load_experiment
