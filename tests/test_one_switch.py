@@ -112,4 +112,5 @@ def test_calibrate_end_to_end_through_the_one_dispatch(tmp_path, monkeypatch, mi
     assert seen and set(seen) == {"llvm"}, set(seen)
     result = json.loads((out / "constants.json").read_text())
     assert result["backend"] == "llvm_ad_rgb"
+    assert 0.0 < result["fit_error"]["flip"] < 1.0  # the fitted constants at the fit's pixels
     assert (out / "shaders").is_dir()

@@ -133,3 +133,35 @@ def test_supersampled_fit_recovers_what_one_sample_per_pixel_misses():
     err = _errors(fitted_folded)
     assert max(err.values()) < 0.01, err
     assert fitted_point.specular_strength < 0.5 * TRUTH["specular_strength"], _errors(fitted_point)
+
+
+def test_the_report_says_where_it_scored_and_what_the_fit_saw():
+    """The report's line under its table: the scored resolution, the fitted constants' FLIP at
+    the fit's resolution (``fit_error``), and the game's resolution when it is another."""
+    from study.report.calibration import resolution_lines
+
+    summary = {"resolution": [256, 256], "fit_resolution": [128, 128], "supersample": 2,
+               "fit_error": {"flip": 0.1234, "rmse": 0.0567}}  # fmt: skip
+    (line, _) = resolution_lines({**summary, "target_resolution": [256, 256]})
+    assert "experiment's 256x256" in line and "fit's 128x128" in line
+    assert "2x2 samples a pixel" in line and "FLIP 0.1234, RMSE 0.0567" in line
+    assert "game's" not in line
+    (line, _) = resolution_lines({**summary, "target_resolution": [1920, 1080]})
+    assert "The game's 1920x1080 is not scored here" in line
+    assert resolution_lines({k: v for k, v in summary.items() if k != "fit_error"}) == []
+
+
+def test_the_fit_resolution_error_is_the_folded_image_against_the_folded_reference():
+    from shaders_port import Constants
+    from study._metrics import flip_map, rmse
+    from study.calibration.result import fit_resolution_error
+
+    folded, _ = _models(2)
+    c = Constants(**START)
+    img, _ = folded.render(c)
+    got = fit_resolution_error(folded, c)
+    assert got["flip"] == pytest.approx(float(flip_map(folded.reference, img)[folded.mask].mean()))
+    assert got["rmse"] == pytest.approx(rmse(folded.reference, img, folded.mask))
+    assert (
+        0.0 < got["flip"] < 1.0 and fit_resolution_error(folded, Constants(**TRUTH))["flip"] < 1e-3
+    )

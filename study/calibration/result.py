@@ -7,7 +7,7 @@ from __future__ import annotations
 import numpy as np
 
 from .._io import repo_relative
-from .._metrics import information_criteria
+from .._metrics import flip_map, information_criteria, rmse
 from ..fit.model import constants_json
 from ..export.result import CalibrationResult
 from ..fit.joint import JointModel
@@ -31,6 +31,17 @@ def result_error(kind: str, frames, scores: dict) -> dict:
     return {
         f.name: {which: scores[which][i].errors for which in ("default", "fitted")}
         for i, f in enumerate(frames)
+    }
+
+
+def fit_resolution_error(model, constants) -> dict:
+    """{"flip", "rmse"} on the water pixels of ``model``'s image at ``constants`` (at the fit's
+    resolution, its samples a pixel folded) against its reference (box-downsampled)."""
+    img, _ = model.render(constants)
+    m = model.mask
+    return {
+        "flip": float(flip_map(model.reference, img)[m].mean()),
+        "rmse": rmse(model.reference, img, m),
     }
 
 
@@ -86,6 +97,7 @@ def build_result(frames, shader, fit, scores: dict, timings: dict, export, optio
         result.reference = reference_record(first.ref)
         result.diagnostics = fitted.diagnostics.summary(fitted.mask)
         result.sun = sun_summary(first.exp)
+        result.fit_error = fit_resolution_error(fit.models[0], cal.fitted)
         result.parsimony = {
             **information_criteria(fit.models[0].residual(cal.fitted), len(k)),
             "fitted": k,

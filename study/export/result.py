@@ -57,7 +57,9 @@ class CalibrationResult:
     One scene:
         experiment, fit_resolution / resolution ([width, height] pixels), supersample (samples
         per side of a fit pixel; 1 in files written before it was recorded) and
-        target_resolution (the game's [width, height] it stands for), step_sweep (the
+        target_resolution (the game's [width, height] it stands for), fit_error ({"flip",
+        "rmse"} of the fitted constants at the fit's resolution: the image the fit saw, its
+        samples folded, against the reference box-downsampled), step_sweep (the
         integer step schedule's sweep), reference (spp, noise, path, key), diagnostics (the
         port's diagnostics over the water), sun, parsimony (information criteria).
     Joint:
@@ -84,6 +86,7 @@ class CalibrationResult:
     resolution: list | None = None
     supersample: int = 1
     target_resolution: list | None = None
+    fit_error: dict | None = None
     step_sweep: dict | None = None
     reference: dict | None = None
     diagnostics: dict | None = None

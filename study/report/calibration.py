@@ -315,7 +315,7 @@ def report_text(summary: dict, figures: dict, out: Path | None = None) -> str:
         f"| RMSE, linear RGB | {fmt(e['rmse']['default'])} | {fmt(e['rmse']['fitted'])} |",
         f"| FLIP (LDR, mean) | {fmt(e['flip']['default'])} | {fmt(e['flip']['fitted'])} |",
         "",
-    ]
+    ] + resolution_lines(summary)
     if "comparison" in figures:
         lines += [f"![reference | default | fitted, with error maps]({figures['comparison']})", ""]
     lines += ["## Constants", ""] + constants_table(summary["parameters"]) + [""]
@@ -384,6 +384,31 @@ def _header_lines(summary: dict) -> list[str]:
         f"{fit_steps_line(summary)}",
         "",
     ]
+
+
+def resolution_lines(summary: dict) -> list[str]:
+    """Where the table's scores were taken, the fitted constants' score at the fit's resolution
+    (``fit_error``: the image the fit saw), and the game's resolution when it is another;
+    nothing for a result without ``fit_error`` (written before it was recorded)."""
+    fe, res = summary.get("fit_error"), summary.get("resolution")
+    if not fe or not res:
+        return []
+    fw, fh = summary["fit_resolution"]
+    s = summary.get("supersample", 1)
+    samples = f", {s}x{s} samples a pixel" if s > 1 else ""
+    text = (
+        f"Scored at the experiment's {res[0]}x{res[1]}, the reference's pixels. At the fit's "
+        f"{fw}x{fh} (the image the fit saw{samples}, against the reference box-downsampled) the "
+        f"fitted constants score FLIP {fmt(fe['flip'])}, RMSE {fmt(fe['rmse'])}."
+    )
+    target = summary.get("target_resolution")
+    if target and list(target) != list(res):
+        text += (
+            f" The game's {target[0]}x{target[1]} is not scored here: "
+            "`benchmarks/bench_resolution_transfer.py` path traces a reference at a game's "
+            "resolution and scores fits there."
+        )
+    return [text, ""]
 
 
 def footprint_words(summary: dict) -> str:
