@@ -246,11 +246,12 @@ def main(argv=None) -> None:
     radiance = np.asarray(exp.sun.radiance, np.float32)
     base = terms["F*sky"] + terms["T*refr"]
     slopes = get_variant(space.name_of({**space.choices_of(v.name), "normals": "slopes"}))
+    surface = waves_of(exp)
     normals = (
         ("(c) the sun's disc off the shader's normal", v, None, False),
         ("(d) the sun's disc off the slope-blended normal", slopes, None, False),
-        ("(e) the sun's disc off the surface's exact normal", v, waves_of(exp), False),
-        ("(f) the same where the eye ray meets the surface", v, waves_of(exp), True),
+        ("(e) the sun's disc off the surface's exact normal", v, surface, False),
+        ("(f) the same where the eye ray meets the surface", v, surface, True),
     )
     for what, shader, waves, displaced in normals:
         for kk in (1, a.ss):

@@ -10,6 +10,8 @@ import pytest
 
 from helpers.experiments import small_experiment
 from helpers.experiments import TINY as CLI_TINY
+from helpers.port_checks import port_normals
+from study.scene.shader_waves import angles_deg
 
 # 0.2 s a frame: the layers move 0.06 texture units (0.12 world units) from frame to frame
 ANIMATED = {"animation.frames": 3, "animation.time_step": 0.2}
@@ -43,25 +45,6 @@ def _reference_normals(mi, scene, xz: np.ndarray) -> np.ndarray:
     return np.array(si.sh_frame.n).T.reshape(n, 3)
 
 
-def _port_normals(inputs) -> tuple[np.ndarray, np.ndarray]:
-    """The port's bumped normal (``normal_map_block``, the shader's four layers at the inputs'
-    ``wave1..wave4``, ``BumptexMult = 1``) on its water pixels: ((N, 2) world x, z, (N, 3))."""
-    from shaders_port.pipeline.raster import prepare
-    from shaders_port.pipeline.texture import backend_types
-    from shaders_port.ports.normals import normal_map_block
-
-    m = backend_types("llvm")
-    P = prepare(inputs, m)
-    _, n = normal_map_block(m, P, 1.0)
-    xz = P.raster.world[:, [0, 2]].astype(np.float64)
-    return xz, np.array(n.numpy()).T.reshape(-1, 3)
-
-
-def _mean_angle_deg(a: np.ndarray, b: np.ndarray) -> float:
-    c = np.clip((a * b).sum(-1) / np.linalg.norm(a, axis=-1) / np.linalg.norm(b, axis=-1), -1, 1)
-    return float(np.degrees(np.arccos(c)).mean())
-
-
 def test_port_normal_map_at_frame_k_matches_the_reference_surface_at_frame_k(mi, animated):
     """The port's normal at frame k (its normal map looked up at frame k's wave1..wave4) against
     the normal of the reference's displaced water mesh at frame k under the same point: the
@@ -71,12 +54,12 @@ def test_port_normal_map_at_frame_k_matches_the_reference_surface_at_frame_k(mi,
 
     frames = animated["frames"]
     scene = build_scene(frames[0], 8, 8)  # frame 0's scene, moved below (as calibrate does)
-    port = [_port_normals(i.with_resolution(96, 96)) for i in animated["inputs"]]
+    port = [port_normals(i.with_resolution(96, 96)) for i in animated["inputs"]]
     angle = np.zeros((len(frames), len(frames)))
     for j, e in enumerate(frames):  # the reference surface at frame j
         set_waves(scene, e)
         for k, (xz, n) in enumerate(port):  # the port at frame k
-            angle[k, j] = _mean_angle_deg(n, _reference_normals(mi, scene, xz))
+            angle[k, j] = angles_deg(n, _reference_normals(mi, scene, xz)).mean()
     matched = np.diag(angle)
     mismatched = angle[~np.eye(len(frames), dtype=bool)]
     # measured: 0.24-0.34 degrees matched, 5.7-9.2 degrees between frames

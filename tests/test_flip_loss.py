@@ -9,13 +9,14 @@ import dataclasses
 import numpy as np
 import pytest
 
+from helpers.port_checks import assert_residual_jacobian
+from helpers.synthetic import FITTED
+
 W, H = 48, 32
 TRUTH = dict(attenuation_distance=5.0, water_color=(0.05, 0.2, 0.3, 1.0), specular_strength=0.6,
              specular_exponent=300.0, bumptex_mult=1.0)  # fmt: skip
 START = dict(attenuation_distance=6.0, water_color=(0.06, 0.25, 0.25, 1.0), specular_strength=0.3,
              specular_exponent=200.0, bumptex_mult=0.8)  # fmt: skip
-FITTED = ["attenuation_distance", "water_color", "specular_strength", "specular_exponent",
-          "bumptex_mult"]  # fmt: skip
 
 
 def _scene(shift: float = 0.0):
@@ -85,7 +86,7 @@ def test_flip_residual_norm_is_the_map_and_its_jacobian_central_differences():
     from shaders_port.ports import water_refraction
     from study.fit.flip_jax import SMOOTH, flip_map, flip_residual
     from study.fit.losses import FLIP_KNEE, transformed
-    from study.fit.model import ShaderModel, get_value, with_values
+    from study.fit.model import ShaderModel
 
     inputs, target = _scene()
     start = water_refraction.render(inputs, Constants(**START)).numpy()["color"]
@@ -96,21 +97,10 @@ def test_flip_residual_norm_is_the_map_and_its_jacobian_central_differences():
     assert m.max() > 0.1  # the start is visibly off
 
     model = transformed(ShaderModel("water_refraction", inputs, target), "flip", ppd=30.0)
-    names = ["attenuation_distance", "water_color[1]", "specular_strength", "bumptex_mult"]
-    c = Constants(**START)
-    res, J = model.residual_and_jacobian(c, names)
-    np.testing.assert_allclose(res, model.residual(c), rtol=0, atol=1e-12)
     # steps where the float32 render's rounding and the residual's curvature both stay small
     steps = {"attenuation_distance": 1e-4, "water_color[1]": 1e-5, "specular_strength": 1e-3,
              "bumptex_mult": 1e-4}  # fmt: skip
-    for j, n in enumerate(names):
-        v = get_value(c, n)
-        h = steps[n] * max(abs(v), 1.0)
-        fd = (
-            model.residual(with_values(c, {n: v + h})) - model.residual(with_values(c, {n: v - h}))
-        ) / (2 * h)
-        assert np.linalg.norm(fd) > 0, n
-        assert np.linalg.norm(J[:, j] - fd) < 2e-2 * np.linalg.norm(fd), n
+    assert_residual_jacobian(model, Constants(**START), steps, atol=1e-12)
 
 
 def _fit(target, inputs, loss: str):

@@ -8,25 +8,8 @@ import numpy as np
 import pytest
 
 from helpers.experiments import small_experiment
-
-
-def _normals(inputs, slopes: bool, layers: int = 4) -> tuple[np.ndarray, np.ndarray]:
-    """((N, 2) world x, z of the water pixels, (N, 3) the port's unit normal there, at
-    ``BumptexMult = 1``)."""
-    from shaders_port.pipeline.raster import prepare
-    from shaders_port.pipeline.texture import backend_types
-    from shaders_port.ports.normals import normal_map_block
-
-    m = backend_types("llvm")
-    P = prepare(inputs, m)
-    n, _ = normal_map_block(m, P, 1.0, layers, slopes)
-    xz = P.raster.world[:, [0, 2]].astype(np.float64)
-    return xz, np.array(n.numpy()).T.reshape(-1, 3)
-
-
-def _angle_deg(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    c = np.clip((a * b).sum(-1) / np.linalg.norm(a, axis=-1) / np.linalg.norm(b, axis=-1), -1, 1)
-    return np.degrees(np.arccos(c))
+from helpers.port_checks import port_normals
+from study.scene.shader_waves import angles_deg
 
 
 def _errors_deg(amplitude: float) -> tuple[np.ndarray, np.ndarray]:
@@ -37,12 +20,11 @@ def _errors_deg(amplitude: float) -> tuple[np.ndarray, np.ndarray]:
 
     exp = small_experiment(**{"waves.amplitude": amplitude, "waves.normal_map_size": 512})
     inputs = build_shader_inputs(exp).with_resolution(96, 96)
-    _, gx, gz = study_waves(exp).height_and_gradient(*_normals(inputs, True)[0].T)
+    xz, slopes = port_normals(inputs, slopes=True)
+    _, gx, gz = study_waves(exp).height_and_gradient(*xz.T)
     truth = np.stack([-gx, np.ones_like(gx), -gz], -1)
-    return (
-        _angle_deg(_normals(inputs, True)[1], truth),
-        _angle_deg(_normals(inputs, False)[1], truth),
-    )
+    truth /= np.linalg.norm(truth, axis=-1, keepdims=True)
+    return angles_deg(slopes, truth), angles_deg(port_normals(inputs)[1], truth)
 
 
 def test_slope_blended_normal_is_the_reference_surfaces_normal(mi):
@@ -60,9 +42,9 @@ def test_slope_blended_normal_is_the_reference_surfaces_normal(mi):
     from study.scene.shader_inputs import build_shader_inputs
 
     inputs = build_shader_inputs(small_experiment()).with_resolution(48, 48)
-    two = _normals(inputs, True, 2)[1]
-    assert _angle_deg(two, _normals(inputs, False, 2)[1]).max() > 0.1
-    np.testing.assert_allclose(_normals(inputs, True, 1)[1], _normals(inputs, False, 1)[1])
+    two = port_normals(inputs, 2, slopes=True)[1]
+    assert angles_deg(two, port_normals(inputs, 2)[1]).max() > 0.1
+    np.testing.assert_allclose(port_normals(inputs, 1, True)[1], port_normals(inputs, 1)[1])
 
 
 @pytest.mark.parametrize(

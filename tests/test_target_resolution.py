@@ -8,13 +8,12 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from helpers.port_checks import assert_residual_jacobian
+from helpers.synthetic import FITTED
+from helpers.synthetic import GLINT_START as START
+from helpers.synthetic import GLINT_TRUTH as TRUTH
+
 W, H = 48, 32  # the fit's pixels
-TRUTH = dict(attenuation_distance=5.0, water_color=(0.05, 0.2, 0.2, 1.0), specular_strength=2.0,
-             specular_exponent=300.0, bumptex_mult=1.0)  # fmt: skip
-START = dict(attenuation_distance=6.0, water_color=(0.06, 0.25, 0.25, 1.0), specular_strength=1.0,
-             specular_exponent=200.0, bumptex_mult=0.8)  # fmt: skip
-FITTED = ["attenuation_distance", "water_color", "specular_strength", "specular_exponent",
-          "bumptex_mult"]  # fmt: skip
 
 
 def test_the_factor_is_the_targets_rows_over_the_fits_capped():
@@ -74,7 +73,6 @@ def test_a_folded_model_is_the_box_mean_of_the_finer_one_and_its_jacobian_centra
 
     from shaders_port import Constants
     from study._metrics import downsample
-    from study.fit.model import get_value, with_values
 
     folded, unfolded = _models(2)
     c = Constants(**START)
@@ -83,24 +81,16 @@ def test_a_folded_model_is_the_box_mean_of_the_finer_one_and_its_jacobian_centra
     )
     names = ["attenuation_distance", "water_color[1]", "specular_strength", "bumptex_mult"]
     r, J = folded.residual_and_jacobian(c, names)
-    np.testing.assert_allclose(r, folded.residual(c), rtol=0, atol=1e-12)
     _, J_fine = unfolded._shade_with_jacobian(c, names)
     want = downsample(np.asarray(J_fine), 2, 2)[folded.mask].reshape(-1, len(names))
     np.testing.assert_allclose(J, want, rtol=1e-5, atol=1e-6)
-    # central differences of the folded residual for the constants that move no discrete
+    # the residual's two paths, and central differences of the folded residual for the
+    # constants that move no discrete
     # decision (bumptex_mult moves the raymarch's crossing step: its per-sample column is
     # checked where no decision changes, helpers.port_checks.check_jacobian_column, and the
     # folded column is its box mean, above)
     steps = {"attenuation_distance": 1e-4, "water_color[1]": 1e-5, "specular_strength": 1e-3}
-    for j, n in enumerate(names[:3]):
-        v = get_value(c, n)
-        h = steps[n] * max(abs(v), 1.0)
-        fd = (
-            folded.residual(with_values(c, {n: v + h}))
-            - folded.residual(with_values(c, {n: v - h}))
-        ) / (2 * h)
-        assert np.linalg.norm(fd) > 0, n
-        assert np.linalg.norm(J[:, j] - fd) < 2e-2 * np.linalg.norm(fd), n
+    assert_residual_jacobian(folded, c, steps, atol=1e-12)
     loss = folded.loss_ad(c)
     assert float(dr.ravel(loss)[0]) == pytest.approx(0.5 * float(r @ r), rel=1e-4)
 

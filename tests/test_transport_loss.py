@@ -9,14 +9,13 @@ import dataclasses
 import numpy as np
 import pytest
 
+from helpers.port_checks import assert_residual_jacobian
+from helpers.synthetic import FITTED
+from helpers.synthetic import GLINT_START as START
+from helpers.synthetic import GLINT_TRUTH as TRUTH
+
 W, H = 96, 64  # the fit's pixels
 S = 4  # samples a pixel side, in the target and the fit (the footprint of a 4x finer image)
-TRUTH = dict(attenuation_distance=5.0, water_color=(0.05, 0.2, 0.2, 1.0), specular_strength=2.0,
-             specular_exponent=300.0, bumptex_mult=1.0)  # fmt: skip
-START = dict(attenuation_distance=6.0, water_color=(0.06, 0.25, 0.25, 1.0), specular_strength=1.0,
-             specular_exponent=200.0, bumptex_mult=0.8)  # fmt: skip
-FITTED = ["attenuation_distance", "water_color", "specular_strength", "specular_exponent",
-          "bumptex_mult"]  # fmt: skip
 HIGHLIGHT = ["specular_strength", "specular_exponent"]
 
 
@@ -124,22 +123,10 @@ def test_transport_jacobian_matches_central_differences():
     no discrete decision (bumptex_mult moves the raymarch's crossing step: its column is
     checked where no decision changes, helpers.port_checks.check_jacobian_column)."""
     from shaders_port import Constants
-    from study.fit.model import get_value, with_values
 
     model = _model(*_scene(0.0), "transport")
-    names = ["attenuation_distance", "water_color[1]", "specular_strength"]
-    c = Constants(**START)
-    res, J = model.residual_and_jacobian(c, names)
-    np.testing.assert_allclose(res, model.residual(c), rtol=0, atol=1e-6)
     steps = {"attenuation_distance": 1e-3, "water_color[1]": 1e-4, "specular_strength": 1e-3}
-    for j, n in enumerate(names):
-        v = get_value(c, n)
-        h = steps[n] * max(abs(v), 1.0)
-        fd = (
-            model.residual(with_values(c, {n: v + h})) - model.residual(with_values(c, {n: v - h}))
-        ) / (2 * h)
-        assert np.linalg.norm(fd) > 0, n
-        assert np.linalg.norm(J[:, j] - fd) < 2e-2 * np.linalg.norm(fd), n
+    assert_residual_jacobian(model, Constants(**START), steps, atol=1e-6)
 
 
 def test_transport_recovers_the_constants_and_the_highlight_under_misregistration():

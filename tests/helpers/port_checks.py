@@ -209,3 +209,37 @@ def assert_user_jacobian(shader, inputs, smooth_share: float, moves_coverage: bo
         assert np.abs(fd[water]).max() > 10 * noise, s
         bad = smooth & ~(np.abs(J[..., j] - fd) <= 2 * noise + FD_RTOL * np.abs(fd)).all(-1)
         assert not bad.any(), (s, int(bad.sum()))
+
+
+def assert_residual_jacobian(model, constants, steps: dict, atol: float) -> None:
+    """A fit model's (``residual``, ``residual_and_jacobian``) at ``constants``: the two
+    residuals agree within ``atol``, and each column of the Jacobian for the constants of
+    ``steps`` (name -> relative step) is the residual's central difference within 2 % (norm)."""
+    from study.fit.model import get_value, with_values
+
+    names = list(steps)
+    res, J = model.residual_and_jacobian(constants, names)
+    np.testing.assert_allclose(res, model.residual(constants), rtol=0, atol=atol)
+    for j, n in enumerate(names):
+        v = get_value(constants, n)
+        h = steps[n] * max(abs(v), 1.0)
+        fd = (
+            model.residual(with_values(constants, {n: v + h}))
+            - model.residual(with_values(constants, {n: v - h}))
+        ) / (2 * h)
+        assert np.linalg.norm(fd) > 0, n
+        assert np.linalg.norm(J[:, j] - fd) < 2e-2 * np.linalg.norm(fd), n
+
+
+def port_normals(inputs, layers: int = 4, slopes: bool = False) -> tuple[np.ndarray, np.ndarray]:
+    """((N, 2) world x, z of the water pixels of ``inputs``, (N, 3) the port's unit normal there:
+    block [2], ``shaders_port.ports.normals.normal_map_block``, at ``BumptexMult = 1``)."""
+    from shaders_port.pipeline.raster import prepare
+    from shaders_port.pipeline.texture import backend_types
+    from shaders_port.ports.normals import normal_map_block
+
+    m = backend_types("llvm")
+    P = prepare(inputs, m)
+    n, _ = normal_map_block(m, P, 1.0, layers, slopes)
+    xz = P.raster.world[:, [0, 2]].astype(np.float64)
+    return xz, np.array(n.numpy()).T.reshape(-1, 3)

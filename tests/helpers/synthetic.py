@@ -258,3 +258,13 @@ def relative_errors(fitted, truth: dict, names: list[str]) -> dict:
         else:
             out[name] = abs(got / want - 1)
     return out
+
+
+# a known truth with a strong highlight, a start away from it and the constants a fit of it
+# frees (the footprint's and the misregistration's known-truth fits on the synthetic pool)
+GLINT_TRUTH = dict(attenuation_distance=5.0, water_color=(0.05, 0.2, 0.2, 1.0),
+                   specular_strength=2.0, specular_exponent=300.0, bumptex_mult=1.0)  # fmt: skip
+GLINT_START = dict(attenuation_distance=6.0, water_color=(0.06, 0.25, 0.25, 1.0),
+                   specular_strength=1.0, specular_exponent=200.0, bumptex_mult=0.8)  # fmt: skip
+FITTED = ["attenuation_distance", "water_color", "specular_strength", "specular_exponent",
+          "bumptex_mult"]  # fmt: skip
