@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
 # Idempotent set-up: system packages (libLLVM for Dr.Jit, Mesa EGL/GL, glslang, SPIRV-Tools
-# and SPIRV-Cross for the engine targets, headless Chromium for the WebGL 2 viewer's tests)
-# and the virtual environment at .venv/ with the project installed.
+# and SPIRV-Cross for the engine targets, headless Chromium for the WebGL 2 viewer's tests,
+# npm where Node.js is missing), the virtual environment at .venv/ with the project installed,
+# and node_modules/ with the JavaScript libraries package-lock.json pins (three.js).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
@@ -11,6 +12,7 @@ missing=()
 for p in "${SYSTEM_PACKAGES[@]}"; do
     dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing+=("$p")
 done
+command -v npm >/dev/null || missing+=(npm)
 if [ ${#missing[@]} -gt 0 ]; then
     echo "setup: installing system packages: ${missing[*]}"
     SUDO=""
@@ -35,4 +37,9 @@ if [ ! -f "$stamp" ] || [ pyproject.toml -nt "$stamp" ]; then
     .venv/bin/pip install -q --upgrade pip
     .venv/bin/pip install -q -e '.[dev]'
     touch "$stamp"
+fi
+npm_stamp=node_modules/.package-lock.json
+if [ ! -f "$npm_stamp" ] || [ package-lock.json -nt "$npm_stamp" ]; then
+    echo "setup: installing the JavaScript libraries into node_modules (npm ci)"
+    npm ci --no-audit --no-fund --loglevel=error >/dev/null
 fi

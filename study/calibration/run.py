@@ -11,6 +11,7 @@ from pathlib import Path
 
 from .._io import write_exr, write_json
 from .._progress import log as _log
+from ..export.threejs import ThreeUnsupported, write_threejs
 from ..export.viewer import ViewerUnsupported, calibration_viewer
 from ..fit.calibrate import timed
 from ..fit.model import constants_json
@@ -145,12 +146,21 @@ def _log_done(frames, summary: dict, step, timings: dict, out) -> None:
 
 def write_viewer(out: Path, exp, inputs) -> Path | None:
     """``out/viewer/`` of the calibration just written in ``out`` (see
-    ``study.export.viewer.calibration_viewer``); a calibration without a GLSL ES export (the
-    SPIRV-Cross tools missing) gets none, with a note. Returns ``index.html`` or None."""
+    ``study.export.viewer.calibration_viewer``) and ``out/threejs/``, the three.js module
+    (``study.export.threejs``), which shows the pool from the viewer's data; a calibration
+    without a GLSL ES export (the SPIRV-Cross tools missing) gets neither, and a shader whose
+    inputs the module does not build no module, each with a note. Returns ``index.html`` or
+    None."""
     try:
         page = calibration_viewer(out, exp, inputs)
     except (FileNotFoundError, ViewerUnsupported) as exc:
         _log(f"calibrate: no viewer: {exc}")
         return None
     _log(f"calibrate: wrote the WebGL 2 viewer {page} (open it in a browser)")
+    try:
+        example = write_threejs(out, exp, inputs)
+    except (FileNotFoundError, ThreeUnsupported) as exc:
+        _log(f"calibrate: no three.js module: {exc}")
+    else:
+        _log(f"calibrate: wrote the three.js module and its example {example}")
     return page

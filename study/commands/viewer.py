@@ -1,5 +1,6 @@
-"""``study viewer``: the WebGL 2 viewer (``study.export.viewer``) of a calibration's output
-folder, written again (or for the first time, for a result from before the viewer existed)."""
+"""``study viewer``: the WebGL 2 viewer (``study.export.viewer``) and the three.js module
+(``study.export.threejs``) of a calibration's output folder, written again (or for the first
+time, for a result from before they existed)."""
 
 from __future__ import annotations
 
@@ -8,6 +9,7 @@ from pathlib import Path
 
 from .._progress import log as _log
 from ..config.experiment import ExperimentError
+from ..export.threejs import ThreeUnsupported, write_threejs
 from ..export.viewer import calibration_viewer
 from ..scene.baseline_inputs import inputs_for_shader
 from ..scene.animation import frame_experiment
@@ -39,4 +41,8 @@ def run_viewer(out, experiment, overrides=None, variant=None, cache=None) -> Pat
     inputs = inputs_for_shader(exp, inputs, exp.fit.shader, variant, cache=cache, log=_log)
     page = calibration_viewer(out, exp, inputs)
     _log(f"viewer: wrote {page}")
+    try:
+        _log(f"viewer: wrote the three.js module and its example {write_threejs(out, exp, inputs)}")
+    except (FileNotFoundError, ThreeUnsupported) as exc:
+        _log(f"viewer: no three.js module: {exc}")
     return page

@@ -28,6 +28,8 @@ import numpy as np
 BROWSERS = ("chromium-headless-shell", "chromium", "google-chrome")
 # WebGL 2 on SwiftShader (software): no GPU needed, the same results on every machine
 SOFTWARE_GL = ("--use-angle=swiftshader", "--enable-unsafe-swiftshader")
+# a page opened from file:// may import ES modules and read files beside it (the three.js page)
+FILE_ACCESS = ("--allow-file-access-from-files",)
 
 
 class BrowserError(RuntimeError):
@@ -234,12 +236,29 @@ def open_viewer(browser: Chromium, index_html: Path, *, expect_errors: bool = Fa
     return state["errors"]
 
 
-def render_float(browser: Chromium, **opts) -> tuple[np.ndarray, np.ndarray]:
-    """One frame of the opened viewer's shader (``waterViewer.renderFloat(opts)``: ``time``
-    seconds, ``constants`` 'fitted' | 'default', ``yaw`` / ``pitch`` degrees, ``distance``
-    factor; none: the study's camera at time 0): (rgba (H, W, 4) float32 as the shader wrote it,
-    mask (H, W) bool, the water's coverage), row 0 at the top as the port's images."""
-    r = browser.evaluate(f"waterViewer.renderFloat({json.dumps(opts)})")
+def open_three_example(browser: Chromium, example_html: Path, *, expect_errors=False) -> list:
+    """Open a calibration's ``threejs/example.html`` from the file system, still (no animation
+    loop), in a browser started with ``FILE_ACCESS``, and wait until it has loaded its textures
+    and built its inputs. Returns the errors the page reports (``waterThree.errors``);
+    BrowserError when it reports any and ``expect_errors`` is False."""
+    browser.open(Path(example_html).resolve().as_uri() + "?still")
+    state = json.loads(browser.evaluate(
+        "window.waterThree ? waterThree.loaded.then((s) => JSON.stringify(s)) : "
+        "JSON.stringify({ready: false, errors: ['the page did not run']})"
+    ))  # fmt: skip
+    if state["errors"] and not expect_errors:
+        raise BrowserError("the three.js page reports: " + " | ".join(state["errors"]))
+    return state["errors"]
+
+
+def render_float(browser: Chromium, api: str = "waterViewer", **opts) -> tuple:
+    """One frame of the opened page's shader (``<api>.renderFloat(opts)``; the viewer's
+    ``waterViewer``: ``time`` seconds, ``constants`` 'fitted' | 'default', ``yaw`` / ``pitch``
+    degrees, ``distance`` factor; the three.js page's ``waterThree``: ``time``, ``constants``,
+    ``inputs`` 'scene' | 'study'; none: the study's camera at time 0): (rgba (H, W, 4) float32
+    as the shader wrote it, mask (H, W) bool, the water's coverage), row 0 at the top as the
+    port's images."""
+    r = browser.evaluate(f"{api}.renderFloat({json.dumps(opts)})")
     w, h = r["width"], r["height"]
     rgba = np.frombuffer(base64.b64decode(r["rgba"]), "<f4").reshape(h, w, 4)[::-1].copy()
     mask = np.frombuffer(base64.b64decode(r["mask"]), "<f4").reshape(h, w, 4)[::-1, :, 0] > 0.5
@@ -247,12 +266,15 @@ def render_float(browser: Chromium, **opts) -> tuple[np.ndarray, np.ndarray]:
 
 
 class BrowserRenderer:
-    """The renderer ``shaders_port.gl.compare.compare_port_gl`` takes, drawing with the viewer
-    open in ``browser`` (its own constants: ``which`` 'fitted' or 'default'; the constants
-    passed to ``render`` are those the port renders with)."""
+    """The renderer ``shaders_port.gl.compare.compare_port_gl`` takes, drawing with the page
+    open in ``browser`` (the viewer, or ``api="waterThree"``: the three.js page, ``opts`` its
+    ``inputs``) with its own constants (``which`` 'fitted' or 'default'; the constants passed
+    to ``render`` are those the port renders with)."""
 
-    def __init__(self, browser: Chromium, which: str = "fitted", time: float = 0.0):
-        self.browser, self.which, self.time = browser, which, time
+    def __init__(self, browser: Chromium, which: str = "fitted", time: float = 0.0,
+                 api: str = "waterViewer", **opts):  # fmt: skip
+        self.browser, self.which, self.time, self.api, self.opts = browser, which, time, api, opts
 
     def render(self, constants=None):
-        return render_float(self.browser, constants=self.which, time=self.time)
+        return render_float(self.browser, self.api, constants=self.which, time=self.time,
+                            **self.opts)  # fmt: skip

@@ -1,0 +1,207 @@
+"""The calibrated water as a three.js material: ``threejs/`` of a calibration's output folder.
+
+The folder is self-contained (opened from ``file://`` or served by any static server):
+
+* ``water.js``: the ES module (a project template, copied as it is). It exports
+  ``loadWaterTextures`` (the shipped normal map and Fresnel LUT, read with three's
+  ``EXRLoader``), ``WaterInputs`` (the top-down colour and world-height render targets and the
+  sky cube map, built from the user's own three.js scene), ``createWater`` (the water quad with
+  the calibrated ``RawShaderMaterial``, the waves' clock and the per-camera uniforms) and
+  ``studyInputs`` (the same inputs from the study's own images, for the check).
+* ``calibration.js``: what the module reads of this calibration, one ``export default {...}``:
+  the exported GLSL ES 3.00 text (``shaders/gles300/``), the ``#define`` lines of the start
+  constants, the light, the waves' offsets and velocities, the water rectangle, the top-down
+  camera's extent and size, the shipped textures' files and sampler state, the study's camera,
+  and the three.js version the module was tested with.
+* ``example.html`` and ``example.js``: the pool in three.js. Its floor and walls are a height
+  field laid from the study's world-height texture, unlit, carrying the study's lit top-down
+  colour; its sky is the study's cube map as three holds one (``scene.background``). The
+  module builds every input of
+  the water from that scene, as it would from a game's. The page reads the study's images from
+  ``../viewer/data.js``.
+* ``three.module.js``, ``three.core.js``, ``addons/``: three.js as the npm package ships it
+  (``package.json`` pins the version; ``scripts/setup.sh`` installs it into ``node_modules/``).
+
+A shader that reads an input the module does not build (the screen-space buffers, the box's
+cube map, the under-water reflection renders, a user's shader's own names) gets no folder: a
+:class:`ThreeUnsupported` names the input.
+"""
+
+from __future__ import annotations
+
+import json
+import re
+import shutil
+from pathlib import Path
+
+import numpy as np
+
+from ..._io import repo_path
+from ...scene.topdown import NO_GEOMETRY, texture_extent
+from ..shaders import read_calibration
+from ..targets import target_file
+from ..textures import read_texture_record
+from ..viewer import spec_defines, start_constants
+
+TEMPLATES = Path(__file__).parent
+FOLDER = "threejs"
+# three.js files the folder holds: path in the folder -> path in the npm package
+THREE_FILES = {
+    "three.module.js": "build/three.module.js",
+    "three.core.js": "build/three.core.js",
+    "addons/loaders/EXRLoader.js": "examples/jsm/loaders/EXRLoader.js",
+    "addons/libs/fflate.module.js": "examples/jsm/libs/fflate.module.js",
+    "LICENSE": "LICENSE",
+}
+# the uniforms and samplers water.js sets: those of the study's refraction shaders
+BUILT = frozenset(
+    ("normalMap", "worldYComponent", "refractionTexture", "reflectionTexture", "fresnelLookup",
+     "WaterTransformationMatrix", "viewpos", "lightpos", "lightcolor", "wave1", "wave2",
+     "wave3", "wave4", "uModelViewProjectionMatrix", "uModelViewProjectionMatrixInverse",
+     "uNormalMatrix", "uTextureMatrix0")
+)  # fmt: skip
+_UNIFORM = re.compile(r"^\s*uniform\s+(?:(?:highp|mediump|lowp)\s+)?\w+\s+(\w+)\s*;", re.M)
+
+
+class ThreeUnsupported(ValueError):
+    """A calibration the three.js module does not wire (its message names the input)."""
+
+
+def three_package() -> Path:
+    """The npm package ``three`` the project pins (``node_modules/three``); FileNotFoundError
+    with the fix when it is not installed."""
+    pkg = repo_path("node_modules/three")
+    if not (pkg / "package.json").is_file():
+        raise FileNotFoundError(
+            f"three.js is not installed ({pkg} is missing): run `bash scripts/setup.sh` (it "
+            "runs `npm ci` for the version package-lock.json pins)"
+        )
+    return pkg
+
+
+def three_version() -> str:
+    """The installed three.js version (``node_modules/three/package.json``)."""
+    return json.loads((three_package() / "package.json").read_text("utf-8"))["version"]
+
+
+def uniform_names(*sources: str) -> list[str]:
+    """The uniform and sampler names the GLSL texts ``sources`` declare, in order, once each."""
+    seen: list[str] = []
+    for text in sources:
+        seen += [n for n in _UNIFORM.findall(text) if n not in seen]
+    return seen
+
+
+def _strip_version(text: str) -> str:
+    """GLSL ES text without its ``#version`` line (three's ``glslVersion`` writes it, before
+    its own ``#define`` lines)."""
+    head, sep, rest = text.partition("\n")
+    if not head.startswith("#version 300 es"):
+        raise ThreeUnsupported(f"the GLSL ES export starts {head!r}, not '#version 300 es'")
+    return rest
+
+
+def _defines(frag: str, start: dict) -> dict:
+    """``spec_defines`` lines as three's ``material.defines`` (name -> value text)."""
+    out = {}
+    for line in spec_defines(frag, start).splitlines():
+        _, name, value = line.split(" ", 2)
+        out[name] = value
+    return out
+
+
+def calibration_data(out: Path, exp, inputs) -> dict:
+    """The object ``calibration.js`` exports for the calibration in ``out`` of the study's
+    shader, with its shader ``inputs`` (``ShaderInputs`` at the experiment's resolution). Units:
+    world units, +y up, the water plane at y = 0; colours linear RGB; times seconds; wave
+    offsets texture units of the normal map (tile ``normalTile`` world units)."""
+    saved = read_calibration(out / "constants.json")
+    if saved.user is not None:
+        raise ThreeUnsupported(
+            f"{saved.data['shader']} is a user's shader: the module builds the study's inputs "
+            "under the study's names; bind the user's shader from its binding sheet "
+            "(shaders/*/BINDINGS.md)"
+        )
+    summary = saved.data
+    shaders = out / "shaders"
+    vert = (shaders / target_file("gles300", "water", "vert")).read_text("utf-8")
+    frag = (shaders / target_file("gles300", summary["shader"], "frag")).read_text("utf-8")
+    lacking = [n for n in uniform_names(vert, frag) if n not in BUILT]
+    if lacking:
+        raise ThreeUnsupported(
+            f"{summary['shader']} reads {', '.join(lacking)}, which the three.js module does "
+            "not build (it builds the top-down renders, the sky cube map, the shipped textures "
+            "and the camera's and light's uniforms)"
+        )
+    record = read_texture_record(shaders) or {}
+    x0, z0, x1, z1 = texture_extent(exp)
+    wx0, wz0, wx1, wz1 = (float(v) for v in inputs.water_rect)
+    cam = exp.section("camera")
+    tex = {
+        name: {
+            "url": f"../shaders/textures/{record[key]['file']}",
+            "filter": record[key]["filter"],
+            "wrap": record[key]["wrap"],
+        }
+        for name, key in (("normalMap", "normal_map"), ("fresnelLookup", "fresnel_lut"))
+    }
+    return {
+        "threeVersion": three_version(),
+        "shader": summary["shader"],
+        "experiment": summary["experiment"],
+        "shaders": {"vert": _strip_version(vert), "frag": _strip_version(frag)},
+        "startDefines": _defines(frag, start_constants(summary)),
+        "constants": summary["constants"],
+        "light": {
+            "position": [float(v) for v in inputs.lightpos],
+            "color": [float(v) for v in inputs.lightcolor],
+        },
+        "waves": {
+            "offsets": np.asarray(inputs.waves, float).tolist(),
+            "velocities": np.asarray(exp.animation.velocities, float).tolist(),
+        },
+        "normalTile": float(inputs.normal_tile),
+        "water": {"rect": [wx0, wz0, wx1, wz1], "y": 0.0},
+        "topDown": {
+            "extent": [float(x0), float(z0), float(x1), float(z1)],
+            "size": int(inputs.world_y.shape[0]),
+            "noGeometry": NO_GEOMETRY,
+        },
+        "textures": tex,
+        "sky": {"size": int(inputs.cubemap.shape[1])},
+        "camera": {
+            "position": [float(v) for v in cam["position"]],
+            "target": [float(v) for v in cam["target"]],
+            "fovY": float(cam["fov_y"]),
+            "near": 0.05,
+            "far": 100.0,
+        },
+        "resolution": [int(inputs.width), int(inputs.height)],
+    }
+
+
+def write_threejs(out: Path, exp, inputs) -> Path:
+    """``out/threejs/`` of the calibration in ``out`` (see the module's docstring), written
+    into a temporary folder and moved into place whole. Returns the path of ``example.html``.
+    ThreeUnsupported for a shader the module does not wire, FileNotFoundError without three.js
+    or the GLSL ES export."""
+    out = Path(out)
+    data = calibration_data(out, exp, inputs)
+    pkg = three_package()
+    tmp = out / (FOLDER + ".partial")
+    shutil.rmtree(tmp, ignore_errors=True)
+    for name, src in THREE_FILES.items():
+        (tmp / name).parent.mkdir(parents=True, exist_ok=True)
+        shutil.copyfile(pkg / src, tmp / name)
+    for name in ("water.js", "example.html", "example.js"):
+        shutil.copyfile(TEMPLATES / name, tmp / name)
+    text = json.dumps(data, indent=1, allow_nan=False)
+    (tmp / "calibration.js").write_text(
+        "// The calibration water.js wires (written by study/export/threejs).\n"
+        f"export default {text};\n",
+        "utf-8",
+    )
+    final = out / FOLDER
+    shutil.rmtree(final, ignore_errors=True)
+    tmp.rename(final)
+    return final / "example.html"
