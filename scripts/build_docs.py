@@ -319,6 +319,8 @@ RENDERS = {
     "as data",
     "animation.webp": "renders of every frame of the animated calibration; `study calibrate` "
     "does not save them as data",
+    "example.png": "a screenshot of the three.js example page in headless Chromium; "
+    "scripts/threejs_check.py takes it again",
 }
 
 

@@ -34,7 +34,7 @@ from study.cli import main
 from study.export.gl_check import GL_MEAN, GL_P999
 from study.export.shaders import load_constants_json
 from study.export.textures import with_exported_textures
-from study.export.threejs import THREE_FILES, three_version
+from study.export.threejs import THREE_FILES, lacking_inputs, three_version
 from study.export.viewer.browser import (
     FILE_ACCESS,
     SOFTWARE_GL,
@@ -205,3 +205,17 @@ def test_a_missing_texture_or_a_rejected_shader_shows_in_the_page(run):
     errors = open_three_example(b, folder / "threejs" / "example.html", expect_errors=True)
     assert errors and any("compile" in e.lower() or "shader" in e.lower() for e in errors), errors
     assert not b.evaluate("waterThree.ready")
+
+
+def test_a_shader_reading_inputs_the_module_does_not_build_is_named():
+    """The screen-space reflection reads the scene's colour and depth buffers, which water.js
+    does not render: they are named (and the calibration writes no threejs/)."""
+    frag = (
+        "#version 300 es\nprecision mediump float;\nuniform highp sampler2D normalMap;\n"
+        "uniform highp sampler2D sceneDepth;\nuniform highp mat4 uTextureMatrix0;\n"
+        "uniform highp sampler2D sceneColor;\nvoid main() {}\n"
+    )
+    vert = "#version 300 es\nuniform mat4 uModelViewProjectionMatrix;\nuniform vec2 wave1;\n"
+    assert lacking_inputs(vert, frag) == ["sceneDepth", "sceneColor"]
+    assert lacking_inputs(vert, frag.replace("sceneDepth", "normalMap2")) == [
+        "normalMap2", "sceneColor"]  # fmt: skip

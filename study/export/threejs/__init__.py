@@ -92,6 +92,12 @@ def uniform_names(*sources: str) -> list[str]:
     return seen
 
 
+def lacking_inputs(vert: str, frag: str) -> list[str]:
+    """The uniforms and samplers of the GLSL texts ``vert`` and ``frag`` that water.js does
+    not set (not in ``BUILT``), in order."""
+    return [n for n in uniform_names(vert, frag) if n not in BUILT]
+
+
 def _strip_version(text: str) -> str:
     """GLSL ES text without its ``#version`` line (three's ``glslVersion`` writes it, before
     its own ``#define`` lines)."""
@@ -126,7 +132,7 @@ def calibration_data(out: Path, exp, inputs) -> dict:
     shaders = out / "shaders"
     vert = (shaders / target_file("gles300", "water", "vert")).read_text("utf-8")
     frag = (shaders / target_file("gles300", summary["shader"], "frag")).read_text("utf-8")
-    lacking = [n for n in uniform_names(vert, frag) if n not in BUILT]
+    lacking = lacking_inputs(vert, frag)
     if lacking:
         raise ThreeUnsupported(
             f"{summary['shader']} reads {', '.join(lacking)}, which the three.js module does "
