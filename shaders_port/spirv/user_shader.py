@@ -125,7 +125,7 @@ class UserShader:
                     f"got {r!r}"
                 )
             ranges[name] = (float(r[0]), float(r[1]), *r[2:])
-        bindings.update(dict(decl.get("bindings", {})))
+        bindings.update(self._declared_bindings(dict(decl.get("bindings", {}))))
         self.bindings = bindings
         self.constants = self._constants(self._with_vertex_pragmas(ranges, decl))
         self._vertex_constants()
@@ -200,7 +200,8 @@ class UserShader:
         if not out:
             raise ValueError(
                 f"{self.label}: the declaration names no constant to fit; add "
-                "`// @study constant NAME LOW HIGH` lines or a constants table"
+                "`// @study constant NAME LOW HIGH` lines to the file, or `constant NAME LOW "
+                "HIGH` lines to the experiment's fit.declare (docs/user-shader.md)"
             )
         return out
 
@@ -234,6 +235,34 @@ class UserShader:
                 self.values[name] = comps
             if vertex is not None and re.search(pattern, vtext):
                 vertex.shader.values[name] = comps
+
+    def _declared_bindings(self, bindings: dict) -> dict:
+        """The declaration's ``bindings`` (name -> input) this shader takes: those its text (its
+        file or an ``#include``) reads. A name only its vertex shader reads binds there, to a
+        vertex meaning, engine name or study input (``self.vertex`` becomes a copy with them;
+        the files are left as they are); a name neither reads is refused."""
+        if not bindings:
+            return {}
+        text = re.sub(r"//.*", "", self.source)
+        if dialects.has_includes(self.source):
+            text = dialects.front_end(self.source, self.label, self.defines, self.include_paths,
+                                      True)  # fmt: skip
+        vtext = "" if self.vertex is None else re.sub(r"//.*", "", self.vertex.shader.source)
+        ours, theirs = {}, {}
+        for name, target in bindings.items():
+            pattern = rf"\b{re.escape(name)}\b"
+            if re.search(pattern, text):
+                ours[name] = target
+            elif re.search(pattern, vtext):
+                theirs[name] = target
+            else:
+                raise ValueError(
+                    f"{self.label}: bind {name}: neither this shader nor its vertex shader "
+                    f"reads {name}; remove the line or correct the name"
+                )
+        if theirs:
+            self.vertex = self.vertex.with_bindings(theirs)
+        return ours
 
     def _included_uniforms(self, names: set) -> dict:
         """name -> ``(BARE match, stage)`` in a stage's preprocessed text, for the ``names``

@@ -166,6 +166,11 @@ class UserVertex:
         bound to each run's values (``spirv.user_shader.UserShader`` finds them)."""
         return UserVertex(self.shader.with_constants(names), self.cells)
 
+    def with_bindings(self, bindings: dict) -> "UserVertex":
+        """This vertex shader with the declared ``bindings`` added (``VertexShader.
+        with_bindings``)."""
+        return UserVertex(self.shader.with_bindings(bindings), self.cells)
+
     # ---- one frame -------------------------------------------------------------------------
     def frame(self, m, inputs, spec, C=None, params=()):
         """``(P, bindings)``: the prepared frame of the grid's coverage and the fragment

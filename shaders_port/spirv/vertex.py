@@ -187,13 +187,15 @@ class VertexShader:
     preprocessor names it is compiled with)."""
 
     def __init__(self, source: str, label: str, path=None, defines=(), include_paths=(),
-                 shared=False, constants=()):  # fmt: skip
+                 shared=False, constants=(), bindings=None):  # fmt: skip
         # defines, include_paths: as a fragment shader's (``spirv.dialects.front_end``); a
         # file that needs them is compiled and drawn preprocessed. shared: the file is the
         # fragment shader's too (Urho3D's one file for both stages), whose pragmas other than
         # a binding to a vertex meaning or engine name are the fragment shader's. constants:
         # the names of the constants to fit it declares, compiled as uniforms that each run
-        # binds (``spirv.user_shader.UserShader`` finds them)
+        # binds (``spirv.user_shader.UserShader`` finds them). bindings: declared name ->
+        # meaning, engine name or study input from outside the file (an experiment's
+        # fit.declare), over the file's own pragmas
         self.original, self.label, self.path = source, label, path
         self.defines = tuple(defines)
         self.include_paths = tuple(str(p) for p in include_paths)
@@ -219,6 +221,8 @@ class VertexShader:
                     "[START]` pragmas only"
                 )
             self.bindings[args[0]] = args[1]
+        self.declared = dict(bindings or {})
+        self.bindings.update(self.declared)
         text = prepared_source(compiled, label, self.constants)
         self.module = Module(compile_vertex(text, label), label=label, stage="Vertex")
         for name, target in self.bindings.items():
@@ -249,7 +253,17 @@ class VertexShader:
         """This shader compiled again with the constants ``names`` made uniforms (the values
         given it after it was read, ``value`` lines of a declaration, kept)."""
         out = VertexShader(self.original, self.label, self.path, self.defines,
-                           self.include_paths, self.shared, tuple(names))  # fmt: skip
+                           self.include_paths, self.shared, tuple(names),
+                           self.declared)  # fmt: skip
+        out.values.update(self.values)
+        return out
+
+    def with_bindings(self, bindings: dict) -> "VertexShader":
+        """This shader with the declared ``bindings`` (name -> meaning, engine name or study
+        input) added to its own, checked as its pragmas are (the values given it kept)."""
+        out = VertexShader(self.original, self.label, self.path, self.defines,
+                           self.include_paths, self.shared, self.constants,
+                           {**self.declared, **bindings})  # fmt: skip
         out.values.update(self.values)
         return out
 
@@ -322,6 +336,8 @@ class VertexShader:
             name = mod.binding_name(vid)
             meaning = names_.meaning_of(name, self.bindings)
             t = pointee_type(mod, vid)
+            if name in self.values and ins.operands[0] == "Input":
+                self._value(name, t, attribute=True)  # refused: an attribute takes no value
             if meaning in ATTRIBUTES:
                 out[name] = self._attribute(m, meaning, t, grid, name, up)
             elif meaning is not None:
@@ -337,8 +353,14 @@ class VertexShader:
     def check_bound(self) -> None:
         """ValueError naming the first attribute or uniform the shader reads that nothing binds
         (no meaning of ``engine_names``, no ``value``, no study or engine input, no
-        initializer) and the line that reads it: before anything is rendered."""
+        initializer) and the line that reads it, or a ``value`` that does not fit its
+        variable (:meth:`_value`): before anything is rendered."""
         mod, used = self.module, referenced(self.module)
+        for vid, ins in mod.defs.items():
+            if (ins.opname == "OpVariable" and ins.operands[0] in ("Input", "UniformConstant")
+                    and mod.binding_name(vid) in self.values):  # fmt: skip
+                self._value(mod.binding_name(vid), pointee_type(mod, vid),
+                            ins.operands[0] == "Input")  # fmt: skip
         for vid, ins in mod.defs.items():
             if (vid not in used or ins.opname != "OpVariable" or len(ins.operands) > 1
                     or ins.operands[0] not in ("Input", "UniformConstant")):  # fmt: skip
@@ -359,14 +381,32 @@ class VertexShader:
                 "docs/user-shader.md), or declare it a constant to fit"
             )
 
-    def _value(self, name: str, t: tuple):
-        """The value a ``value`` pragma gives the uniform ``name`` of type ``t``."""
+    def _value(self, name: str, t: tuple, attribute: bool = False):
+        """The value a ``value`` pragma gives the uniform ``name`` of type ``t``: a float, a
+        vector's components, or a matrix's columns (the pragma gives a ``matC[xR]``'s C x R
+        numbers column after column, as ``glUniformMatrix*fv`` takes them untransposed).
+        ``attribute``: the name is a vertex attribute, which no value sets (refused)."""
+        if attribute:
+            raise ValueError(
+                f"{self.label}: `value {name}`: {name} is a vertex attribute, set per vertex "
+                "by the mesh, not a uniform: bind it to a meaning instead (`bind "
+                f"{name} position`, or uv, normal, tangent; docs/user-shader.md)"
+            )
         v = self.values[name]
+        if t[0] == "mat":
+            cols, rows = t[1], t[2]
+            if len(v) != cols * rows:
+                raise ValueError(
+                    f"{self.label}: `value {name}` gives {len(v)} component(s); the shader "
+                    f"declares it {_describe(t)}: give its {cols * rows} numbers column after "
+                    "column (GL's order)"
+                )
+            return [[float(v[c * rows + r]) for r in range(rows)] for c in range(cols)]
         n = t[1] if t[0] == "vec" and t[2] == "float" else (1 if t[0] == "float" else 0)
         if n != len(v):
             want = "a float" if n == 1 else (f"vec{n}" if n else f"{_describe(t)}: not built")
             raise ValueError(
-                f"{self.label}: `// @study value {name}` gives {len(v)} component(s); the "
+                f"{self.label}: `value {name}` gives {len(v)} component(s); the "
                 f"shader declares it {_describe(t)} ({want})"
             )
         return list(v) if t[0] == "vec" else v[0]

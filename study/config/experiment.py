@@ -466,7 +466,10 @@ def validate(raw: dict, overrides: list[str] | None = None, path: Path | None = 
             )
         key, text = item.split("=", 1)
         flat[key.strip()] = _parse_value(text.strip())
-        base[key.strip()] = None  # relative to the working directory
+        # relative to the working directory; a declaration's files (fit.declare's normal_map)
+        # to the experiment file, wherever the line comes from
+        keep = key.strip() == "fit.declare" and path is not None
+        base[key.strip()] = path.parent if keep else None
     unknown = sorted(set(flat) - set(SCHEMA))
     if unknown:
         import difflib

@@ -246,9 +246,13 @@ STUDY_KEYS: dict[str, Field] = {
         "lines without `// @study`, so an engine's file needs no edit), one line each: "
         "`constant NAME LOW HIGH` (a constant to fit and its range, declared in `fit.shader` "
         "or `fit.vertex`; `constant NAME LOW HIGH START` for a uniform without initializer), "
-        "`bind NAME INPUT` (the shader's sampler or uniform NAME is the study's INPUT), "
-        "`value NAME V[,V...]` (a uniform the engine sets, in either stage), `normal NAME "
-        "[world|tangent]`, `up y|z` or `normal_map FILE` (relative to the experiment file).",
+        "`bind NAME INPUT` (the shader's sampler or uniform NAME is the study's INPUT; a "
+        "name only `fit.vertex` reads binds there, to a vertex meaning such as `model`, "
+        "`view`, `projection`, `position` or `uv`, or to an input), "
+        "`value NAME V[,V...]` (a uniform the engine sets, in either stage; a matrix's "
+        "numbers column after column), `normal NAME "
+        "[world|tangent]`, `up y|z` or `normal_map FILE` (relative to the experiment file, "
+        "also when the line is given with `--set`).",
     ),
     "fit.include_paths": Field(
         "list_str",
