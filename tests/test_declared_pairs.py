@@ -130,3 +130,14 @@ def test_a_declared_pair_calibrates_with_its_files_unchanged(tmp_path, monkeypat
     assert check["passed"] is True and check["text"] == "your file as written", check
     assert "compatibility" in check["context"]
     assert summary["engine_targets"]["gles300"]["llvmpipe"]["passed"] is True
+
+
+def test_a_declared_normal_map_is_relative_to_the_experiment_file(tmp_path, monkeypatch):
+    """``normal_map FILE`` in fit.declare names a file beside the experiment file, also when
+    the line comes from ``--set`` and the working directory is elsewhere."""
+    monkeypatch.chdir(tmp_path)
+    line = "normal_map files/water_normals.png"
+    exp = load_experiment(REPO / "experiments" / "my_water.toml", [f'fit.declare=["{line}"]'])
+    assert exp["fit.declare"] == [
+        f"normal_map {REPO / 'experiments' / 'files' / 'water_normals.png'}"
+    ]
