@@ -241,3 +241,21 @@ def test_stability_cli_tiny(tmp_path):
         assert (out / f).is_file(), f
     # a re-run resumes: every job is already in the tables
     assert main(argv) == 0
+
+
+def test_adam_is_left_out_of_a_users_spirv_shader_with_a_note():
+    """A user's shader runs through SPIR-V (forward-mode derivatives only): the multi-start plan
+    gives it no Adam job, and says why; the study's shader keeps every solver."""
+    from study import load_experiment
+    from study.studies.stability import SOLVERS, plan_multistart, solver_left_out
+
+    user = load_experiment(REPO / "experiments" / "my_water.toml")
+    study = load_experiment(REPO / "experiments" / "default.toml")
+    assert "forward-mode derivatives only" in solver_left_out(user, "adam")
+    assert all(solver_left_out(e, s) is None for e in (user, study) for s in SOLVERS[:-1])
+    assert solver_left_out(study, "adam") is None
+    specs = [{"name": "user"}, {"name": "study"}]
+    jobs = plan_multistart(specs, [user, study], 2, SOLVERS, (0.05,), 5, 10)
+    per = {(j["scene"]["name"], j["solver"]) for j in jobs}
+    assert ("user", "adam") not in per and ("study", "adam") in per
+    assert {s for n, s in per if n == "user"} == set(SOLVERS) - {"adam"}

@@ -136,7 +136,7 @@ def test_a_file_the_driver_rejects_as_written_runs_as_its_translation(inputs, ca
         assert_ran_as_written(check, "es")
 
 
-def test_an_es_file_runs_at_highp_and_its_own_precision_is_measured(inputs):
+def test_an_es_file_runs_at_highp_and_its_own_precision_is_measured(inputs, capsys):
     """The WebGL 1 file samples at lowp (GLSL ES's default for samplers): on OpenGL ES its check
     runs it with every value at highp, which matches the executor (32-bit); the file at its own
     precision is measured beside it, and where llvmpipe computes lowp at 16-bit float (on a
@@ -156,6 +156,8 @@ def test_an_es_file_runs_at_highp_and_its_own_precision_is_measured(inputs):
     assert own["mean_abs"] >= check["mean_abs"] and own["within"] == ("note" not in own), own
     if not own["within"]:
         assert "16-bit float" in own["note"] and "precision highp sampler2D" in own["note"]
+        # on the command line too, not in the report alone
+        assert own["note"] in capsys.readouterr().err
     # the text at highp: lowp and mediump defined as highp after #version, the lines kept
     with shader.gl_renderer(inputs, shader.defaults()) as r:
         text = r.gl_run.text

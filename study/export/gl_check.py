@@ -248,6 +248,7 @@ def _own_precision(shader, inputs, values: dict, ours: dict) -> dict:
             "told: `precision highp sampler2D;`, `precision highp samplerCube;`), the executor "
             "every value at 32-bit; a GPU that honours them differs alike"
         )
+        print(f"calibrate: WARNING: {shader.label}: {out['note']}", file=sys.stderr)
     return out
 
 

@@ -158,6 +158,8 @@ def _multistart_lines(ms: dict | None) -> list[str]:
         f"best ({ms['best_adam']}).",
         "",
     ]
+    for row in ms.get("left_out", []):
+        lines += [f"Left out: {row['solver']} on {row['scene']} ({row['why']}).", ""]
     lines += solver_table(ms) + [
         "",
         "![success rate against median time](solvers.png)",

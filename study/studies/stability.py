@@ -47,6 +47,7 @@ from .stability_jobs import (
     multistart_job,
     noise_job,
     quantile,
+    solver_left_out,
     start_boxes,
 )
 
@@ -71,6 +72,8 @@ def plan_multistart(
         names = list(boxes)
         pts = latin_hypercube(names, starts, seed, boxes)
         for solver in solvers:
+            if solver_left_out(exp, solver):
+                continue
             for lr in adam_lrs if solver == "adam" else [None]:
                 for i, p in enumerate(pts):
                     jobs.append(
@@ -324,7 +327,16 @@ def _check_arguments(phases, solvers, starts, noise_seeds, noise_inputs) -> None
 def _multistart_phase(
     client, out, specs, exps, starts, solvers, adam_lrs, max_steps, nm_steps, log
 ) -> dict:
-    """The multi-start phase: its sweep (multistart.parquet), analysis and two figures."""
+    """The multi-start phase: its sweep (multistart.parquet), analysis and two figures; a
+    solver a scene's shader cannot use is left out of that scene, with a note (``left_out``)."""
+    left_out = [
+        {"scene": exp.name, "solver": s, "why": why}
+        for exp in exps
+        for s in solvers
+        if (why := solver_left_out(exp, s))
+    ]
+    for row in left_out:
+        log(f"stability: {row['solver']} left out on {row['scene']}: {row['why']}")
     jobs = plan_multistart(specs, exps, starts, solvers, adam_lrs, max_steps, nm_steps)
     rows = run_sweep(
         multistart_job,
@@ -343,6 +355,7 @@ def _multistart_phase(
         "max_steps": max_steps,
         "nm_steps": nm_steps,
         "adam_lrs": list(adam_lrs),
+        "left_out": left_out,
     }
 
 

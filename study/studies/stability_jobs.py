@@ -25,6 +25,7 @@ from __future__ import annotations
 
 import math
 import time
+from pathlib import Path
 
 import numpy as np
 
@@ -32,6 +33,7 @@ from ..calibration.fitting import FitOptions, fit_frames, frame_models
 from ..calibration.frames import Frame
 from ..calibration.scoring import Scorer
 from ..calibration.shader import Shader
+from ..config.user_shader import is_user_shader
 from ..fit.calibrate import DISCRETE, make_problem, scene_frozen
 from ..fit.model import expand_parameters, get_value
 from ..fit.solvers import FTOL, FTOL_SE, FTOL_WINDOW, fit
@@ -107,6 +109,18 @@ def failure_class(converged: bool, message: str, iterations: int, max_steps: int
     if iterations >= max_steps or "maximum number of steps" in m or "cap" in m:
         return "step_cap"
     return "error"
+
+
+def solver_left_out(exp, solver: str) -> str | None:
+    """Why ``solver`` cannot fit the experiment ``exp`` (None when it can): Adam needs the
+    reverse-mode loss, which a user's shader executed through SPIR-V does not have (forward-
+    mode derivatives only)."""
+    if solver == "adam" and is_user_shader(exp.fit.shader):
+        return (
+            f"{Path(exp.fit.shader).name} is executed through SPIR-V, which has forward-mode "
+            "derivatives only; Adam needs the reverse-mode loss"
+        )
+    return None
 
 
 def _model(job, loss: str = "linear"):
