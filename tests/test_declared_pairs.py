@@ -141,3 +141,33 @@ def test_a_declared_normal_map_is_relative_to_the_experiment_file(tmp_path, monk
     assert exp["fit.declare"] == [
         f"normal_map {REPO / 'experiments' / 'files' / 'water_normals.png'}"
     ]
+
+
+def _plain_webgl1_pair(tmp_path):
+    """The shipped WebGL 1 pair with its vertex file's ``precision`` line removed."""
+    text = (REPO / "experiments/shaders/webgl_mirror_water.vert").read_text()
+    plain = tmp_path / "plain.vert"
+    plain.write_text(text.replace("precision highp float;\n", ""))
+    assert "precision" not in plain.read_text() and "#version" not in plain.read_text()
+    exp = load_experiment(REPO / "experiments/webgl_mirror_water.toml",
+                          [f'fit.vertex="{plain}"', "fit.vertex_grid=[24, 24]"])  # fmt: skip
+    return load_user_shader(exp.values)
+
+
+def test_a_vertex_file_without_a_dialect_marker_takes_its_fragment_shaders(tmp_path):
+    """A WebGL 1 vertex shader as three.js holds it declares no ``#version`` and no
+    ``precision``: the pair is read as its fragment shader's GLSL ES 1.00, not as GLSL 1.10."""
+    shader = _plain_webgl1_pair(tmp_path)
+    assert shader.dialect.es and shader.vertex.shader.defines == ("#version 100",)
+    assert shader.vertex.shader.original == (tmp_path / "plain.vert").read_text()  # as held
+
+
+@pytest.mark.slow  # the WebGL 1 pair's executor (~30 s)
+def test_a_vertex_file_without_a_marker_runs_as_written(tmp_path, inputs):
+    """That pair's GL check runs both files as written on OpenGL ES."""
+    from study.export.gl_check import gl_check_user
+
+    shader = _plain_webgl1_pair(tmp_path)
+    check = gl_check_user(shader, inputs, shader.defaults(), shader.render(inputs).numpy())
+    assert check["ran"] and check["passed"], check
+    assert_ran_as_written(check, "es")

@@ -7,6 +7,7 @@ from __future__ import annotations
 import re
 from pathlib import Path
 
+from shaders_port.spirv import dialects
 from shaders_port.spirv.probe import waves_digest
 from shaders_port.spirv.user_shader import UserShader
 from shaders_port.spirv.user_vertex import UserVertex
@@ -77,6 +78,28 @@ def _keyed(key: str, exc: Exception) -> str:
     return text if text.startswith(f"{key}:") else f"{key}: {text}"
 
 
+def pair_defines(vertex_path, fragment_path, vertex_defines, fragment_defines) -> tuple:
+    """The vertex shader's defines, with the fragment shader's ``#version`` line added when the
+    vertex file carries no marker of its dialect (no ``#version``, no ``precision`` statement,
+    no version define) and the fragment shader is GLSL ES: an engine compiles the pair as one
+    dialect (three.js's WebGL 1 vertex shaders declare no precision), which a file without a
+    marker would otherwise be read apart from (as GLSL 1.10)."""
+    vdefs = tuple(vertex_defines)
+    if dialects.version_define(vdefs) is not None:
+        return vdefs
+    if Path(vertex_path).resolve() == Path(fragment_path).resolve():
+        return vdefs
+    try:
+        vert = dialects.detect(Path(vertex_path).read_text(encoding="utf-8"), "fit.vertex")
+        frag = dialects.detect(Path(fragment_path).read_text(encoding="utf-8"), "fit.shader",
+                               dialects.version_define(fragment_defines))  # fmt: skip
+    except (OSError, UnicodeDecodeError, dialects.ShaderError):
+        return vdefs  # the files' loaders say what is wrong
+    if not frag.es or vert.line or vert.es:
+        return vdefs
+    return (*vdefs, f"#version {frag.version}" + (" es" if frag.version > 100 else ""))
+
+
 def load_user_shader(values: dict):
     """The ``UserShader`` of ``fit.shader`` (a resolved path) and ``fit.declare``, after its
     ``fit.vertex`` (a resolved path) when set; ExperimentError naming the problem."""
@@ -84,10 +107,16 @@ def load_user_shader(values: dict):
     if values.get("fit.vertex"):
         try:
             vdefs = values.get("fit.vertex_defines")
+            vdefs = values.get("fit.defines") or () if vdefs is None else vdefs
             vertex = UserVertex.from_file(
                 values["fit.vertex"],
                 values["fit.vertex_grid"],
-                values.get("fit.defines") or () if vdefs is None else vdefs,
+                pair_defines(
+                    values["fit.vertex"],
+                    values["fit.shader"],
+                    vdefs,
+                    values.get("fit.defines") or (),
+                ),  # fmt: skip
                 values.get("fit.include_paths") or (),
                 Path(values["fit.vertex"]).resolve() == Path(values["fit.shader"]).resolve(),
             )
