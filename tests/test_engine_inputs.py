@@ -276,3 +276,30 @@ def test_export_ships_the_textures_the_executor_binds(tmp_path):
     got, _, _ = read_exr(out / "textures" / rec["shipped"]["waves_normal_map"]["file"])
     assert rec["shipped"]["waves_normal_map"]["bound_as"] == ["normalSampler"]
     assert np.array_equal(got, want) and rec["shipped"]["waves_normal_map"]["mipmaps"]
+
+
+@pytest.mark.parametrize("eye", [(0.0, 3.2, 6.5), (1.5, 0.8, -4.0), (-3.0, 6.0, 1.0)])
+def test_three_reflector_camera_is_the_studys_mirrored_camera_turned(eye):
+    """docs/engine-inputs.md: three.js's ``Reflector`` mirrors the camera's position, target and
+    up vector in the plane; its view-projection is ``diag(-1, -1, 1, 1)`` times the study's
+    ``o2v_projection_reflection`` (the same image turned by 180 degrees), so its texture
+    matrix is the study's with s -> q - s, t -> q - t."""
+    from shaders_port.inputs import mirrored_view_proj
+
+    def look_at(e, t, up):  # three's Object3D.lookAt for a camera, as a view matrix
+        f = (t - e) / np.linalg.norm(t - e)
+        s = np.cross(f, up) / np.linalg.norm(np.cross(f, up))
+        v = np.eye(4)
+        v[0, :3], v[1, :3], v[2, :3] = s, np.cross(s, f), -f
+        v[:3, 3] = -v[:3, :3] @ e
+        return v
+
+    e, t, m = np.array(eye), np.array([0.2, -1.0, 0.3]), np.diag([1.0, -1.0, 1.0])
+    vp = perspective_view_proj(e, t, fov_y_deg=45.0, aspect=1.3, near=0.05, far=100.0)
+    proj = np.asarray(vp, np.float64) @ np.linalg.inv(look_at(e, t, np.array([0.0, 1.0, 0.0])))
+    reflector = proj @ look_at(m @ e, m @ t, m @ np.array([0.0, 1.0, 0.0]))
+    study = np.asarray(mirrored_view_proj(vp), np.float64)
+    assert np.allclose(reflector, np.diag([-1.0, -1.0, 1.0, 1.0]) @ study, atol=1e-5)
+    bias = np.array([[0.5, 0, 0, 0.5], [0, 0.5, 0, 0.5], [0, 0, 0.5, 0.5], [0, 0, 0, 1]])
+    convert = np.array([[-1.0, 0, 0, 1], [0, -1, 0, 1], [0, 0, 1, 0], [0, 0, 0, 1]])
+    assert np.allclose(bias @ reflector, convert @ bias @ study, atol=1e-5)
