@@ -93,9 +93,18 @@ DETAILS = """
 ## The planar reflection and its projective texture matrix
 
 `reflection_sampler` is the scene above the water seen by the camera mirrored in the plane
-`y = 0` (its view-projection is `o2v_projection_reflection`). `reflection_texture_matrix` is
-`B * o2v_projection_reflection`, `B` the bias matrix (`0.5 x + 0.5` on x, y, z), as three.js's
-`Reflector` builds its `textureMatrix` (bias * projection * view of the mirrored camera), so
+`y = 0`. Its view-projection `o2v_projection_reflection` is `F * viewProjection * F`, `F =
+diag(1, -1, 1, 1)`: the camera's own view-projection applied to the mirrored point, its image
+flipped vertically (seed 004's mirrored camera). `reflection_texture_matrix` is
+`B * o2v_projection_reflection`, `B` the bias matrix (`0.5 x + 0.5` on x, y, z). Three.js's
+`Reflector` builds its `textureMatrix` the same way (bias * projection * view of its mirrored
+camera), but its mirrored camera keeps the reflected up vector, so its view-projection is
+`diag(-1, -1, 1, 1) * o2v_projection_reflection` (its near plane also clipped obliquely at the
+water, which changes depth only): its image is the study's turned by 180 degrees, and its
+`textureMatrix` is the study's with `s -> q - s`, `t -> q - t`: `textureMatrix =
+mat4(-1, 0, 0, 0, 0, -1, 0, 0, 0, 0, 1, 0, 1, 1, 0, 1) * reflection_texture_matrix` (GLSL's
+column order). A shader reads the same colour either way, as long as its texture and
+its matrix come from the same camera: wire the engine's pair, or the study's. So
 
 ```glsl
 uniform mat4 textureMatrix;             // three.js's names bind themselves
