@@ -219,3 +219,35 @@ def test_a_shader_reading_inputs_the_module_does_not_build_is_named():
     assert lacking_inputs(vert, frag) == ["sceneDepth", "sceneColor"]
     assert lacking_inputs(vert, frag.replace("sceneDepth", "normalMap2")) == [
         "normalMap2", "sceneColor"]  # fmt: skip
+
+
+@pytest.mark.slow  # a calibration of a user's shader (~20 s)
+def test_a_users_shader_in_three_matches_the_executor(tmp_path, monkeypatch):
+    """``experiments/shaders/my_water.frag`` after the study's vertex shader, its sampler
+    ``waveNormals`` bound to ``normalMap``: water.js sets it under its own name, and three's
+    render matches the executor within the GL check's thresholds, on the study's images and on
+    the inputs it builds from the pool."""
+    from study._backend import drjit_backend
+    from study.export.shaders import user_shader_of
+
+    monkeypatch.setenv("STUDY_CACHE", str(tmp_path / "cache"))
+    user = [*OVERRIDES, f'fit.shader="{REPO / "experiments" / "shaders" / "my_water.frag"}"']
+    out = tmp_path / "user"
+    assert main(["calibrate", str(DEFAULT), "--out", str(out)] + sets(user)) == 0
+    cal = _calibration(out / "threejs")
+    assert cal["uniformNames"] == {"waveNormals": "normalMap"} and cal["startDefines"] is None
+    exp, variant, _ = prepare(DEFAULT, out, user)
+    i = load_or_build_shader_inputs(exp, variant, log=lambda *a: None)
+    i = inputs_for_shader(exp, i, exp.fit.shader, variant, log=lambda *a: None)
+    i = with_exported_textures(i, out / "shaders")
+    shader = user_shader_of(out / "constants.json")
+    values = load_constants_json(out / "constants.json")
+    ours = shader.render(i, values, backend=drjit_backend("llvm_ad_rgb")).numpy()
+    with Chromium(flags=SOFTWARE_GL + FILE_ACCESS) as b:
+        assert open_three_example(b, out / "threejs" / "example.html") == []
+        for inputs in ("study", "scene"):
+            rgba, mask = render_float(b, "waterThree", inputs=inputs, screenPlane=True)
+            both = mask & (ours["mask"] > 0.5)
+            d = np.abs(rgba[..., :3] - ours["color"]).max(-1)[both]
+            assert both.sum() > 300 and d.mean() <= GL_MEAN, (inputs, d.mean())
+            assert np.percentile(d, 99.9) <= GL_P999, (inputs, np.percentile(d, 99.9))

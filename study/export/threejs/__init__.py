@@ -22,9 +22,12 @@ The folder is self-contained (opened from ``file://`` or served by any static se
 * ``three.module.js``, ``three.core.js``, ``addons/``: three.js as the npm package ships it
   (``package.json`` pins the version; ``scripts/setup.sh`` installs it into ``node_modules/``).
 
-A shader that reads an input the module does not build (the screen-space buffers, the box's
-cube map, the under-water reflection renders, a user's shader's own names) gets no folder: a
-:class:`ThreeUnsupported` names the input.
+A user's shader after the study's vertex shader is wired by its own names: a sampler or
+uniform bound to an input the module builds is set as that input, a uniform constant or a
+``value`` of its declaration to its value (:func:`user_wiring`). A shader that reads an input
+the module does not build (the screen-space buffers, the box's cube map, the under-water
+reflection renders, an engine input such as ``sky_cube``), or that brings its own vertex
+shader, gets no folder: a :class:`ThreeUnsupported` names why.
 """
 
 from __future__ import annotations
@@ -98,6 +101,33 @@ def lacking_inputs(vert: str, frag: str) -> list[str]:
     return [n for n in uniform_names(vert, frag) if n not in BUILT]
 
 
+def user_wiring(saved, vert: str, frag: str) -> tuple[dict, dict]:
+    """How water.js sets a user's shader (``saved``: its ``SavedCalibration``; ``vert``,
+    ``frag``: the GLSL ES export it runs): (the shader's uniform and sampler names bound to an
+    input the module builds -> that input's name, the uniforms the material sets -> their
+    values: fitted uniform constants and the declaration's ``value`` lines). ThreeUnsupported
+    for a shader with a vertex shader of its own (its names and attributes are the engine's)."""
+    user = saved.user
+    if user.vertex is not None:
+        raise ThreeUnsupported(
+            f"{saved.data['shader']} runs after its own vertex shader {user.vertex.label}, "
+            "whose matrices and attributes the module does not build; wire the pair from its "
+            "binding sheet (shaders/*/BINDINGS.md)"
+        )
+    bound = user.run_bindings()
+    engine = user.engine_values()
+    names, values = {}, {}
+    for n in uniform_names(vert, frag):
+        if n in BUILT:
+            continue
+        if bound.get(n) in BUILT:
+            names[n] = bound[n]
+        elif n in saved.constants or n in engine:
+            v = saved.constants[n] if n in saved.constants else engine[n]
+            values[n] = [float(x) for x in v] if isinstance(v, (list, tuple)) else float(v)
+    return names, values
+
+
 def _strip_version(text: str) -> str:
     """GLSL ES text without its ``#version`` line (three's ``glslVersion`` writes it, before
     its own ``#define`` lines)."""
@@ -122,17 +152,13 @@ def calibration_data(out: Path, exp, inputs) -> dict:
     world units, +y up, the water plane at y = 0; colours linear RGB; times seconds; wave
     offsets texture units of the normal map (tile ``normalTile`` world units)."""
     saved = read_calibration(out / "constants.json")
-    if saved.user is not None:
-        raise ThreeUnsupported(
-            f"{saved.data['shader']} is a user's shader: the module builds the study's inputs "
-            "under the study's names; bind the user's shader from its binding sheet "
-            "(shaders/*/BINDINGS.md)"
-        )
     summary = saved.data
     shaders = out / "shaders"
+    stem = summary["shader"].rsplit(".", 1)[0] if saved.user is not None else summary["shader"]
     vert = (shaders / target_file("gles300", "water", "vert")).read_text("utf-8")
-    frag = (shaders / target_file("gles300", summary["shader"], "frag")).read_text("utf-8")
-    lacking = lacking_inputs(vert, frag)
+    frag = (shaders / target_file("gles300", stem, "frag")).read_text("utf-8")
+    names, values = user_wiring(saved, vert, frag) if saved.user is not None else ({}, {})
+    lacking = [n for n in lacking_inputs(vert, frag) if n not in names and n not in values]
     if lacking:
         raise ThreeUnsupported(
             f"{summary['shader']} reads {', '.join(lacking)}, which the three.js module does "
@@ -156,7 +182,10 @@ def calibration_data(out: Path, exp, inputs) -> dict:
         "shader": summary["shader"],
         "experiment": summary["experiment"],
         "shaders": {"vert": _strip_version(vert), "frag": _strip_version(frag)},
-        "startDefines": _defines(frag, start_constants(summary)),
+        # a user's file has no specialization constants: its module carries the fitted ones
+        "startDefines": None if saved.user else _defines(frag, start_constants(summary)),
+        "uniformNames": names,
+        "values": values,
         "constants": summary["constants"],
         "light": {
             "position": [float(v) for v in inputs.lightpos],

@@ -240,9 +240,11 @@ async function main() {
     if (!still) requestAnimationFrame(frame);
   };
   frame();
-  water.setConstants('default');
-  renderer.compile(scene, camera);
-  water.setConstants('fitted');
+  if (calibration.startDefines) {
+    water.setConstants('default');
+    renderer.compile(scene, camera);
+    water.setConstants('fitted');
+  }
   if (shaderErrors.length) throw new Error(shaderErrors.join('\n'));
   api.pool = pool;
   api.water = water;

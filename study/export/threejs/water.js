@@ -188,7 +188,8 @@ export class WaterInputs {
 // textures (loadWaterTextures) and inputs (a WaterInputs, or any object with the same four
 // fields). The returned mesh has setTime(seconds) (the waves' clock: offset + velocity * t,
 // texture units) and setConstants('fitted' | 'default') (the start constants: the export with
-// #define lines). Its per-camera uniforms are set in onBeforeRender.
+// #define lines; a user's shader carries its fitted constants only). Its per-camera uniforms are
+// set in onBeforeRender.
 export function createWater(calibration, textures, inputs) {
   const [x0, z0, x1, z1] = calibration.water.rect;
   const tile = calibration.normalTile;
@@ -214,6 +215,15 @@ export function createWater(calibration, textures, inputs) {
     reflectionTexture: { value: inputs.skyTexture },
   };
   calibration.waves.offsets.forEach((o, k) => { uniforms[`wave${k + 1}`] = { value: new THREE.Vector2(o[0], o[1]) }; });
+  // a user's shader: its own names for the inputs above (the same uniform objects), and the
+  // uniforms its material sets (fitted uniform constants, the declaration's values)
+  for (const [name, input] of Object.entries(calibration.uniformNames || {})) uniforms[name] = uniforms[input];
+  const VECTORS = { 2: THREE.Vector2, 3: THREE.Vector3, 4: THREE.Vector4 };
+  for (const [name, v] of Object.entries(calibration.values || {})) {
+    if (!Array.isArray(v)) uniforms[name] = { value: v };
+    else if (v.length === 16) uniforms[name] = { value: new THREE.Matrix4().fromArray(v) };
+    else uniforms[name] = { value: new VECTORS[v.length](...v) };
+  }
   const material = (defines) => new THREE.RawShaderMaterial({
     name: `${calibration.shader} (calibrated)`,
     glslVersion: THREE.GLSL3,
@@ -223,7 +233,8 @@ export function createWater(calibration, textures, inputs) {
     defines,
     side: THREE.DoubleSide,
   });
-  const materials = { fitted: material({}), default: material(calibration.startDefines) };
+  const materials = { fitted: material({}) };
+  if (calibration.startDefines) materials.default = material(calibration.startDefines);
   const mesh = new THREE.Mesh(geometry, materials.fitted);
   mesh.name = 'calibrated water';
   mesh.position.y = calibration.water.y;
@@ -236,7 +247,7 @@ export function createWater(calibration, textures, inputs) {
     });
   };
   mesh.setConstants = (which) => {
-    if (!(which in materials)) throw new Error(`constants: 'fitted' or 'default', not ${which}`);
+    if (!(which in materials)) throw new Error(`constants: one of ${Object.keys(materials).join(', ')}, not ${which}`);
     mesh.material = materials[which];
   };
   mesh.setInputs = (next) => {

@@ -380,9 +380,9 @@ def _study_parts(out: Path, saved, inputs: ShaderInputs) -> dict:
 
 def _user_parts(out: Path, saved, inputs: ShaderInputs) -> dict:
     """What the viewer runs of the user's shader calibrated in ``out`` (``user.user_parts``)
-    at its fitted and ``start`` values, bound as the GL check binds it (the study's own textures
-    are not needed); ViewerUnsupported for a dialect the GL check does not run, or without a
-    headless OpenGL."""
+    at its fitted and ``start`` values, bound as the GL check binds it (of the study's own
+    textures, those the three.js page's pool is built from are kept); ViewerUnsupported for a
+    dialect the GL check does not run, or without a headless OpenGL."""
     shader, summary = saved.user, saved.data
     why = not_drawn(shader)
     if why is not None:
@@ -404,7 +404,10 @@ def _user_parts(out: Path, saved, inputs: ShaderInputs) -> dict:
         "inputs": inputs,
         "bindings": summary.get("declaration", {}).get("bindings", {}),
         "orbit": False,
-        "data": {"textures": {}, "bound": u["bound"]},
+        "data": {"bound": u["bound"]},
+        # the shader's own textures are bound; the study's are kept for the three.js page's
+        # pool (its ground colour and height seen from above, and the sky)
+        "textures": ("refractionTexture", "worldYComponent", "reflectionTexture"),
         "names": lambda data: u["names"],
         "fixed_note": _user_fixed_note(shader),
     }
@@ -430,6 +433,8 @@ def calibration_viewer(out: Path, exp, inputs: ShaderInputs) -> Path:
     data = viewer_data(inputs, vert, frag, parts["frag_default"], images, camera,
                        {"velocities": vel.tolist()}, parts["bindings"])  # fmt: skip
     data.update(parts["data"])
+    if "textures" in parts:
+        data["textures"] = {k: v for k, v in data["textures"].items() if k in parts["textures"]}
     name, err = _scene_error(summary)
     flip = err["flip"]
     options = [
