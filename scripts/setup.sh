@@ -6,7 +6,7 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
-SYSTEM_PACKAGES=(libllvm19 libegl1 libegl-mesa0 libgl1-mesa-dri glslang-tools spirv-tools spirv-cross spirv-headers
+SYSTEM_PACKAGES=(libllvm19 libegl1 libegl-mesa0 libgl1-mesa-dri mesa-vulkan-drivers glslang-tools spirv-tools spirv-cross spirv-headers
     chromium-headless-shell)
 missing=()
 for p in "${SYSTEM_PACKAGES[@]}"; do

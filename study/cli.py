@@ -217,7 +217,7 @@ def _add_export(sub) -> None:
     p.add_argument(
         "--targets",
         default=None,
-        help="engine targets besides GLSL, comma-separated: gles300,hlsl,msl,spirv, or 'none' "
+        help="engine targets besides GLSL, comma-separated: gles300,hlsl,msl,spirv,wgsl, or 'none' "
         "(default: every one the installed tools can make)",
     )
     p.add_argument(

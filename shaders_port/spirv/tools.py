@@ -128,7 +128,9 @@ def specialize_constants(source: str) -> str:
     return "\n".join(out)
 
 
-_QUALIFIERS = r"((?:(?:flat|noperspective|smooth|centroid)\s+)*)"
+# a declaration's leading blanks (a preprocessed file keeps its indentation) and its
+# interpolation qualifiers
+_QUALIFIERS = r"[ \t]*((?:(?:flat|noperspective|smooth|centroid)\s+)*)"
 
 
 def _varying_locations(vertex_source: str | None = None) -> dict[str, int]:

@@ -2,8 +2,10 @@
 
 Built from ``spirv-cross --reflect`` of the shaders of the target (textures, samplers, uniforms,
 their blocks and offsets, stage inputs and outputs with their locations, specialization
-constants) and from :data:`MEANINGS`, the experiment's meaning and units of each name (an
-engine input's, ``shaders_port.spirv.engine_inputs.ENGINE_INPUTS``, for the names it adds).
+constants; for WGSL its own reflection, ``shaders_port.spirv.wgsl.reflection``: ``bindings``,
+``uniform_blocks``, ``overrides``) and from :data:`MEANINGS`, the experiment's meaning and units
+of each name (an engine input's, ``shaders_port.spirv.engine_inputs.ENGINE_INPUTS``, for the
+names it adds).
 """
 
 from __future__ import annotations
@@ -93,6 +95,27 @@ _NOTES = {
         "fallback: set one with `MTLFunctionConstantValues` to override it.",
         "No Metal compiler runs here: this target is generated and reflected only.",
     ],
+    "wgsl": [
+        "Everything is in `@group(0)`: each texture at its GL binding (below 16), its sampler "
+        "`_<texture>_sampler` at that binding + 16, the fragment shader's uniforms in one "
+        "uniform buffer `FragUniforms` at `@binding(32)`, the vertex shader's in `VertUniforms` "
+        "at `@binding(33)` (std140 offsets above; a matrix column by column, columns 16 bytes "
+        "apart, a `mat3x3` too). naga appends `_` to a name ending in a digit (`wave1_`).",
+        "Entry points `main` (`@vertex`, `@fragment`); the stages link by `@location`, the "
+        "numbering of the other targets.",
+        "Clip space is WebGPU's (y up, z in [0, w]): the vertex shader converts the GL clip "
+        "position it computes, so the matrices are the GL ones above and row 0 of the target "
+        "texture is the top of the image. A fragment shader reading `gl_FragCoord` takes the "
+        "framebuffer's height in `glFramebufferHeight` (GL's window y, from the bottom).",
+        "Constants are `override` declarations with `@id(<id>)`, the fitted values as "
+        'defaults: set one per pipeline with `constants: {"<id>": value}` in the stage of '
+        "`createRenderPipeline` (by id: WebGPU takes the name of an override without an id only).",
+        "The linear float textures (`rgba32float`, `r32float` ...) need the device feature "
+        "`float32-filterable`; every texture is sampled with `textureSample`, so bind them as "
+        '`sampleType: "float"` with `filtering` samplers (nearest or linear as listed). '
+        "WebGPU filters a cube map across its faces (seamless), desktop GL here each face on "
+        "its own: a sky continuous at its seams looks the same.",
+    ],
     "spirv": [
         "OpenGL-semantics SPIR-V (`glslangValidator -G`): bindings and locations as listed; "
         "loose uniforms are set by location (`glUniform*`, GL_ARB_gl_spirv).",
@@ -128,7 +151,18 @@ def _shader_section(path: str, refl: dict) -> list[str]:
         for t in refl.get(key, [])
     ]
     lines += _rows("Textures and samplers", "| name | type | binding | meaning |", tex)
-    uni = []
+    bind = [
+        f"| `{b['name']}` | {b['kind']} | {b['type']} | @group({b['group']}) "
+        f"@binding({b['binding']}) | {_meaning(b['glsl'])} |"
+        for b in refl.get("bindings", [])
+    ]
+    lines += _rows("Bindings", "| name | kind | type | where | meaning |", bind)
+    uni = [
+        f"| `{m['name']}` | {m['type']} | {blk['name']} @binding({blk['binding']}), offset "
+        f"{m['offset']}, size {m['size']} | {_meaning(m['glsl'])} |"
+        for blk in refl.get("uniform_blocks", [])
+        for m in blk["members"]
+    ]
     for ubo in refl.get("ubos", []):
         for m in refl["types"][ubo["type"]]["members"]:
             layout = f"offset {m['offset']}" + (", row-major" if m.get("row_major") else "")
@@ -146,6 +180,11 @@ def _shader_section(path: str, refl: dict) -> list[str]:
         for v in refl.get(key, [])
     ]
     lines += _rows("Stage inputs and outputs", "| | name | type | location | meaning |", io)
+    over = [
+        f"| {o['id']} | `{o['name']}` | {o['type']} | {_fmt(o['default'])} |"
+        for o in refl.get("overrides", [])
+    ]
+    lines += _rows("Overrides", "| id | name | type | default |", over)
     return lines
 
 
@@ -219,6 +258,7 @@ _INITIALIZERS = {
     "the buffer)",
     "msl": "Metal takes the uniforms from a buffer the application fills",
     "spirv": "the uniforms are set by the application (`glUniform*`)",
+    "wgsl": "WGSL has no uniform initializer: the application fills the uniform buffer",
 }
 
 
@@ -229,6 +269,8 @@ def _uniform_types(reflections: dict) -> dict:
         for ubo in refl.get("ubos", []):
             out.update({m["name"]: m["type"] for m in refl["types"][ubo["type"]]["members"]})
         out.update({u["name"]: u["type"] for u in refl.get("loose_uniforms", [])})
+        for blk in refl.get("uniform_blocks", []):
+            out.update({m["glsl"]: m["type"] for m in blk["members"]})
     return out
 
 
@@ -271,12 +313,13 @@ def _bind_rows(reflections: dict, values: dict | None = None) -> list[str]:
     constants (GLSL name -> value): a uniform among them is marked with the value to set."""
     rows, seen = [], set()
 
-    def add(name, kind, gtype, where):
+    def add(name, kind, gtype, where, glsl=None):
         if (name, where) not in seen:  # a block member once per stage, at its offset there
             seen.add((name, where))
-            meaning = _meaning(name)
-            if values and name in values and kind == "uniform":
-                v = values[name]
+            glsl = glsl or name  # the GLSL name (WGSL's may differ): meaning and value
+            meaning = _meaning(glsl)
+            if values and glsl in values and kind == "uniform":
+                v = values[glsl]
                 shown = ", ".join(_fmt(x) for x in v) if isinstance(v, (list, tuple)) else _fmt(v)
                 meaning = f"fitted constant: set it to {shown}"
             rows.append(f"| `{name}` | {kind} | {gtype} | {where} | {meaning} |")
@@ -286,6 +329,10 @@ def _bind_rows(reflections: dict, values: dict | None = None) -> list[str]:
         for key in ("textures", "separate_images"):
             for t in refl.get(key, []):
                 add(t["name"], "texture", t["type"], f"binding {t.get('binding', '')}")
+        for b in refl.get("bindings", []):  # WGSL's
+            if b["kind"] != "uniform":
+                where = f"@group({b['group']}) @binding({b['binding']})"
+                add(b["name"], b["kind"], b["type"], where, b["glsl"])
     for path, refl in ordered:
         stage = "vertex" if ".vert." in path else "fragment"
         for ubo in refl.get("ubos", []):
@@ -299,6 +346,10 @@ def _bind_rows(reflections: dict, values: dict | None = None) -> list[str]:
                 )
         for u in refl.get("loose_uniforms", []):
             add(u["name"], "uniform", u["type"], "by name")
+        for blk in refl.get("uniform_blocks", []):  # WGSL's
+            for m in blk["members"]:
+                where = f"{stage} {blk['name']} @binding({blk['binding']}), offset {m['offset']}"
+                add(m["name"], "uniform", m["type"], where, m["glsl"])
         if stage == "vertex":
             for v in refl.get("inputs", []):
                 add(v["name"].rsplit(".", 1)[-1], "vertex attribute", v["type"],

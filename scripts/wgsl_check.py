@@ -1,0 +1,92 @@
+"""The WGSL export of a calibration run with wgpu on Mesa's lavapipe against the Dr.Jit port,
+measured for docs/webgpu.md: ``docs/results/wgsl/check.json``.
+
+    .venv/bin/python scripts/wgsl_check.py [OUT] [EXPERIMENT]     # default: out/default
+
+``OUT`` is a calibration's folder (``make run`` writes ``out/default``), ``EXPERIMENT`` the
+experiment it was calibrated on. Its constants are exported again (``study export``, targets
+``spirv`` and ``wgsl``) into a temporary folder and drawn on the study's camera at clock time
+0: at the file's own constants (the fitted ones, the ``override`` defaults), and at the start
+constants set through the overrides at pipeline creation. Figures as the GL check's
+(``compare_port_gl``): mean and 99.9th percentile of the per-pixel max-over-channel
+|difference| on the water pixels, outliers the port's diagnostics do not explain.
+"""
+
+from __future__ import annotations
+
+import json
+import platform
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+REPO = Path(__file__).resolve().parent.parent
+sys.path.insert(0, str(REPO))
+
+from shaders_port import Constants  # noqa: E402
+from shaders_port.gl.compare import compare_port_gl  # noqa: E402
+from study import read_exr  # noqa: E402
+from study._io import repo_relative, write_json  # noqa: E402
+from study.calibration.frames import prepare  # noqa: E402
+from study.export.gl_check import GL_MEAN, GL_P999  # noqa: E402
+from study.export.shaders import export_shaders, load_constants_json  # noqa: E402
+from study.export.textures import with_exported_textures  # noqa: E402
+from study.export.wgsl_run import WgslRenderer, _lavapipe_adapter  # noqa: E402
+from study.scene.baseline_inputs import inputs_for_shader  # noqa: E402
+from study.scene.shader_inputs import load_or_build_shader_inputs  # noqa: E402
+
+RESULTS = REPO / "docs" / "results" / "wgsl"
+KEYS = ("mean_abs", "p999", "max_abs", "unexplained", "n_water")
+
+
+def _verdict(res: dict) -> dict:
+    out = {k: float(res[k]) if k in ("mean_abs", "p999", "max_abs") else int(res[k]) for k in KEYS}
+    out["passes"] = bool(
+        res["mean_abs"] <= GL_MEAN and res["p999"] <= GL_P999 and res["unexplained"] == 0
+    )
+    return out
+
+
+def _adapter_name() -> str:
+    info = _lavapipe_adapter().info
+    return f"{info['device']} ({info['backend_type']}), {info.get('description', '')}".strip(", ")
+
+
+def main(out="out/default", experiment="experiments/default.toml") -> dict:
+    out = Path(out)
+    exp, variant, _ = prepare(experiment, out, [])
+    inputs = load_or_build_shader_inputs(exp, variant, log=lambda *a: None)
+    inputs = inputs_for_shader(exp, inputs, exp.fit.shader, variant, log=lambda *a: None)
+    inputs = with_exported_textures(inputs, out / "shaders")
+    summary = json.loads((out / "constants.json").read_text())
+    shader = summary["shader"]
+    fitted = load_constants_json(out / "constants.json")
+    start = Constants.from_dict(read_exr(out / "default.exr")[1]["constants"])
+    record = {
+        "command": f"python scripts/wgsl_check.py {out} {experiment}",
+        "calibration": repo_relative(out),
+        "shader": shader,
+        "resolution": [int(inputs.width), int(inputs.height)],
+        "machine": f"{platform.machine()}, {platform.system()}",
+        "thresholds": {"mean_abs": GL_MEAN, "p999": GL_P999},
+    }
+    with tempfile.TemporaryDirectory() as tmp:
+        folder = Path(tmp) / "shaders"
+        t0 = time.perf_counter()
+        export_shaders(fitted, folder, [shader], targets=["spirv", "wgsl"])
+        record["export_s"] = round(time.perf_counter() - t0, 2)
+        record["adapter"] = _adapter_name()
+        for name, constants, overrides in (("file_constants", fitted, False),
+                                           ("start_by_overrides", start, True)):  # fmt: skip
+            with WgslRenderer(folder, shader, inputs, overrides=overrides) as r:
+                res = compare_port_gl(inputs, constants, shader, renderer=r)
+            record[name] = _verdict(res)
+    RESULTS.mkdir(parents=True, exist_ok=True)
+    write_json(RESULTS / "check.json", record)
+    print(json.dumps(record, indent=1))
+    return record
+
+
+if __name__ == "__main__":
+    main(*sys.argv[1:])
