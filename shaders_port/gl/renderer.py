@@ -30,7 +30,7 @@ _UNIFORM_CONSTANTS = {
 }
 _MASK_FRAG = "#version 330 core\nout vec4 fragColor;\nvoid main(void) { fragColor = vec4(1.0); }\n"
 # sampler name -> (texture unit, filter 'linear'|'nearest', repeat)
-_SAMPLERS = {
+SAMPLERS = {
     "refractionTexture": (0, "linear", False),
     "worldYComponent": (1, "nearest", False),
     "normalMap": (2, "linear", True),
@@ -46,7 +46,7 @@ _SAMPLERS = {
     "boxReflectionTexture": (10, "linear", False),
 }
 # sampler -> the optional ShaderInputs field it is made from
-_OPTIONAL_SAMPLERS = {
+OPTIONAL_SAMPLERS = {
     "sceneColor": "scene_color",
     "sceneDepth": "scene_depth",
     "reflection_sampler": "reflection_color",
@@ -54,7 +54,7 @@ _OPTIONAL_SAMPLERS = {
 }
 _CUBE_SAMPLERS = ("reflectionTexture", "boxReflectionTexture")
 # vec3 uniform -> the optional ShaderInputs field it is set from
-_OPTIONAL_VEC3 = {"boxMin": "box_min", "boxMax": "box_max", "boxCapturePosition": "box_capture"}
+OPTIONAL_VEC3 = {"boxMin": "box_min", "boxMax": "box_max", "boxCapturePosition": "box_capture"}
 
 
 def create_egl_context():
@@ -166,14 +166,14 @@ class GLRenderer:
             "worldYComponentReflection": self._texture2d(i.refl_world_y),
             "reflectionBottom": self._texture2d(i.refl_texture),
         }
-        for sname, field in _OPTIONAL_SAMPLERS.items():
+        for sname, field in OPTIONAL_SAMPLERS.items():
             arr = getattr(i, field)
             if arr is not None:
                 cube = sname in _CUBE_SAMPLERS
                 self._textures[sname] = (self._texture_cube if cube else self._texture2d)(arr)
         mgl = self._mgl
         self._samplers = {}
-        for sname, (unit, filt, repeat) in _SAMPLERS.items():
+        for sname, (unit, filt, repeat) in SAMPLERS.items():
             if sname not in self._textures:
                 continue
             f = mgl.LINEAR if filt == "linear" else mgl.NEAREST
@@ -183,9 +183,9 @@ class GLRenderer:
 
     def texture_units(self) -> dict:
         """Input name -> (texture unit, moderngl texture, moderngl sampler) of every texture
-        this renderer binds (``_SAMPLERS``: those of its inputs that are not None)."""
+        this renderer binds (``SAMPLERS``: those of its inputs that are not None)."""
         return {s: (unit, self._textures[s], self._samplers[s])
-                for s, (unit, _, _) in _SAMPLERS.items() if s in self._textures}  # fmt: skip
+                for s, (unit, _, _) in SAMPLERS.items() if s in self._textures}  # fmt: skip
 
     def geometry(self) -> dict:
         """What :meth:`draw` draws: ``mode`` ('triangle_strip'), ``attributes`` name ->
@@ -257,7 +257,7 @@ class GLRenderer:
                     "study.scene.baseline_inputs.with_baseline_inputs"
                 )
             vals["o2v_projection_reflection"] = _mat_bytes(i.reflection_view_proj)
-        for uname, field in _OPTIONAL_VEC3.items():
+        for uname, field in OPTIONAL_VEC3.items():
             if self._reads(prog, uname):
                 if getattr(i, field) is None:
                     raise ValueError(
@@ -268,7 +268,7 @@ class GLRenderer:
         for k in range(4):
             vals[f"wave{k + 1}"] = i.waves[k].astype(np.float32).tobytes()
         self._write_uniforms(prog, vals)
-        for sname, (unit, _, _) in _SAMPLERS.items():
+        for sname, (unit, _, _) in SAMPLERS.items():
             uname = self._sampler_uniform(prog, sname)
             if uname is not None:
                 if sname not in self._textures:
@@ -279,7 +279,7 @@ class GLRenderer:
                     )
                     raise ValueError(
                         f"{self.name} reads the sampler {sname} but ShaderInputs."
-                        f"{_OPTIONAL_SAMPLERS[sname]} is None; build the inputs with "
+                        f"{OPTIONAL_SAMPLERS[sname]} is None; build the inputs with "
                         f"study.scene.{builder}"
                     )
                 prog[uname].value = unit

@@ -28,7 +28,7 @@ from pathlib import Path
 
 import numpy as np
 
-from shaders_port.gl.renderer import _OPTIONAL_SAMPLERS, _OPTIONAL_VEC3, _SAMPLERS
+from shaders_port.gl.renderer import OPTIONAL_SAMPLERS, OPTIONAL_VEC3, SAMPLERS
 from shaders_port.inputs import Constants, ShaderInputs, normal_matrix
 from shaders_port.variants import get_variant
 
@@ -109,7 +109,7 @@ def uniform_values(inputs: ShaderInputs) -> dict:
     vals.update({f"wave{k + 1}": i.waves[k] for k in range(4)})
     if i.reflection_view_proj is not None:
         vals["o2v_projection_reflection"] = i.reflection_view_proj
-    for uname, field in _OPTIONAL_VEC3.items():
+    for uname, field in OPTIONAL_VEC3.items():
         if getattr(i, field) is not None:
             vals[uname] = getattr(i, field)
     return vals
@@ -143,7 +143,7 @@ def _texture_arrays(inputs: ShaderInputs) -> dict:
         "reflectionBottom": i.refl_texture,
     }
     out.update(
-        {s: getattr(i, f) for s, f in _OPTIONAL_SAMPLERS.items() if getattr(i, f) is not None}
+        {s: getattr(i, f) for s, f in OPTIONAL_SAMPLERS.items() if getattr(i, f) is not None}
     )
     return out
 
@@ -196,9 +196,9 @@ class WgslRenderer:
         return tex.create_view(dimension="cube" if cube else "2d")
 
     def _sampler(self, glsl: str):
-        if glsl not in _SAMPLERS:
+        if glsl not in SAMPLERS:
             raise RuntimeError(f"the WGSL samples {glsl!r}, which ShaderInputs has no texture for")
-        _, filt, repeat = _SAMPLERS[glsl]
+        _, filt, repeat = SAMPLERS[glsl]
         wrap = "repeat" if repeat else "clamp-to-edge"
         return self.device.create_sampler(
             mag_filter=filt, min_filter=filt, address_mode_u=wrap, address_mode_v=wrap,

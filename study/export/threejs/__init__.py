@@ -180,7 +180,7 @@ def calibration_data(out: Path, exp, inputs) -> dict:
     return {
         "threeVersion": three_version(),
         "shader": summary["shader"],
-        "experiment": summary["experiment"],
+        "experiment": summary.get("experiment") or summary["scenes"][0],  # joint: the first
         "shaders": {"vert": _strip_version(vert), "frag": _strip_version(frag)},
         # a user's file has no specialization constants: its module carries the fitted ones
         "startDefines": None if saved.user else _defines(frag, start_constants(summary)),
