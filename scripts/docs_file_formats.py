@@ -287,7 +287,10 @@ the exported shaders as float32 EXR (upload them as float textures, not 8-bit):
   under `shipped` in `textures.json` (files, size, encoding, filter, wrap, mipmaps, `bound_as`:
   the shader's sampler names); the engine's own render targets it reads under `rendered`
   (`bound_as`, `what`), no file.
-* `textures.json`: what the constants assume of both, e.g. for `experiments/default.toml`:
+* `textures.json`: what the constants assume of both, and under `scene` the values the fit
+  used that an engine sets (the light, the waves' offsets and velocities, the top-down
+  camera's rectangle, size and `uTextureMatrix0`, rows; the binding sheets' "Values the fit
+  used"), e.g. for `experiments/default.toml`:
 
 """
 
@@ -436,9 +439,23 @@ def _textures_json() -> list[str]:
 
     from shaders_port.inputs import fresnel_lut
 
+    from shaders_port.inputs import ortho_tex_matrix
+    from study.scene.shader_inputs import light_of
+    from study.scene.topdown import texture_extent
+
     n = inspect.signature(fresnel_lut).parameters["n"].default  # the LUT's size
     size = int(exp.waves.normal_map_size)
-    inputs = SimpleNamespace(fresnel_lut=np.zeros((n, 2)), normal_map=np.zeros((size, size, 3)))
+    lightpos, lightcolor = light_of(exp)
+    texels = int(exp.reference.texture_size)
+    inputs = SimpleNamespace(
+        fresnel_lut=np.zeros((n, 2)),
+        normal_map=np.zeros((size, size, 3)),
+        lightpos=lightpos,
+        lightcolor=lightcolor,
+        waves=np.asarray(exp.waves.offsets),
+        world_y=np.zeros((texels, texels)),
+        tex_matrix0=ortho_tex_matrix(*texture_extent(exp)),
+    )
     text = json.dumps(texture_record(exp, inputs), indent=1)
     return ["```json", text, "```", ""]
 

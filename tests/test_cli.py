@@ -294,7 +294,8 @@ def test_calibrate_ships_the_textures_its_constants_assume(runs):
         lines = sheet.read_text().splitlines()
         # the short sheet: what the shader expects before what to bind, the full one beside it
         assert lines.index("## What this shader expects") < lines.index("## What to bind"), sheet
-        assert len(lines) < 80 and (sheet.parent / "BINDINGS_FULL.md").is_file(), sheet
+        # short: what to bind, the constants, the values the fit used and the conventions
+        assert len(lines) < 90 and (sheet.parent / "BINDINGS_FULL.md").is_file(), sheet
         text = "\n".join(lines)
         assert "(1 - R) / n^2" in text and "fresnel_lut.exr" in text, sheet
     report = (root / "calibrate" / "report.md").read_text()

@@ -80,11 +80,25 @@ _NOTES = {
         "checks exactly this layout.",
         "Constants: `#define SPIRV_CROSS_CONSTANT_ID_<id> <value>` before the source overrides "
         "one.",
+        "Clip space: the vertex shader writes GL's clip position (z in [-w, w]). Direct3D and "
+        "Unity take z in [0, w]: give it a projection made for them (Unity: "
+        "`GL.GetGPUProjectionMatrix(P, renderIntoTexture)`), which is `z' = 0.5 (z + w)`.",
+        "Rows: the shipped textures, uploaded row 0 first, are addressed alike in every API. A "
+        "texture the engine renders itself (the top-down renders, a reflection or scene "
+        "buffer) has its first row at the top in Direct3D, at the bottom in GL: flip t of its "
+        "texture matrix (`t -> 1 - t`: `[[1,0,0,0],[0,-1,0,1],[0,0,1,0],[0,0,0,1]]` times "
+        "`uTextureMatrix0`), or render it with the flipped projection Unity uses for "
+        "`renderIntoTexture`.",
     ],
     "gles300": [
         "`#version 300 es` (WebGL2); uniforms and samplers are bound by name "
-        "(`gl.getUniformLocation`).",
+        "(`gl.getUniformLocation`; a sampler to the texture unit of your choice).",
         "Constants: `#define SPIRV_CROSS_CONSTANT_ID_<id> <value>` after `#version` overrides one.",
+        "Precision: `precision mediump float` is the file's default, and every uniform, input "
+        "and sampler the shader reads is declared `highp`; WebGL 2 then computes at 32 bits.",
+        "Float textures: sampling a float texture (`RGB32F`, `R32F`) linearly needs "
+        "`OES_texture_float_linear`; rendering into one needs `EXT_color_buffer_float`.",
+        "`fragColor` is linear RGB: encode it (sRGB) for display.",
     ],
     "msl": [
         "Entry points `main0` (vertex and fragment); argument indices `[[texture(n)]]`, "
@@ -307,10 +321,11 @@ def material_lines(target: str, reflections: dict, constants, fit: dict | None) 
     ]
 
 
-def _bind_rows(reflections: dict, values: dict | None = None) -> list[str]:
+def _bind_rows(reflections: dict, values: dict | None = None, by_name: bool = False) -> list:
     """What the application binds, over every stage: textures, uniforms (a member of a stage's
     constant buffer once per stage) and the vertex attributes. ``values``: a user's shader's
-    constants (GLSL name -> value): a uniform among them is marked with the value to set."""
+    constants (GLSL name -> value): a uniform among them is marked with the value to set.
+    ``by_name``: the target binds samplers by name (GLSL ES), not at a binding number."""
     rows, seen = [], set()
 
     def add(name, kind, gtype, where, glsl=None):
@@ -328,7 +343,8 @@ def _bind_rows(reflections: dict, values: dict | None = None) -> list[str]:
     for path, refl in ordered:
         for key in ("textures", "separate_images"):
             for t in refl.get(key, []):
-                add(t["name"], "texture", t["type"], f"binding {t.get('binding', '')}")
+                where = "by name" if by_name else f"binding {t.get('binding', '')}"
+                add(t["name"], "texture", t["type"], where)
         for b in refl.get("bindings", []):  # WGSL's
             if b["kind"] != "uniform":
                 where = f"@group({b['group']}) @binding({b['binding']})"
@@ -379,7 +395,11 @@ def binding_sheet(
         "",
         "| name | kind | type | where | meaning |",
         "|---|---|---|---|---|",
-        *_bind_rows(reflections, constants if isinstance(constants, dict) else None),
+        *_bind_rows(
+            reflections,
+            constants if isinstance(constants, dict) else None,
+            by_name=target == "gles300",
+        ),  # fmt: skip
         "",
     ]
     out += constants_lines(spec, constants, fit)

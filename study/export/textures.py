@@ -46,6 +46,7 @@ from shaders_port.spirv.engine_inputs import (
 )
 
 from .._io import read_exr, write_exr
+from ..scene.topdown import NO_GEOMETRY, texture_extent
 
 __all__ = [
     "FOLDER",
@@ -163,8 +164,30 @@ def texture_record(exp, inputs, shader=None) -> dict:
     return record
 
 
+def scene_record(exp, inputs) -> dict:
+    """The values the fit used that an engine sets, as the short binding sheet gives them:
+    the light (``lightpos`` world units, ``lightcolor`` linear RGB, the sun's radiance over its
+    largest channel, which ``SPECULAR_STRENGTH`` multiplies), the waves (offsets of the four
+    normal-map layers at t = 0, texture units, and their velocities, per second), the top-down
+    camera (its world rectangle, texture size and ``uTextureMatrix0``, rows)."""
+    x0, z0, x1, z1 = (float(v) for v in texture_extent(exp))
+    return {
+        "lightpos": [float(v) for v in inputs.lightpos],
+        "lightcolor": [float(v) for v in inputs.lightcolor],
+        "wave_offsets": np.asarray(inputs.waves, float).tolist(),
+        "wave_velocities": np.asarray(exp.animation.velocities, float).tolist(),
+        "top_down": {
+            "extent": [x0, z0, x1, z1],
+            "size": int(inputs.world_y.shape[0]),
+            "no_geometry": NO_GEOMETRY,
+            "tex_matrix0": np.asarray(inputs.tex_matrix0, float).tolist(),
+        },
+    }
+
+
 def _study_record(exp, inputs) -> dict:
-    """The Fresnel LUT's and the normal map's record (:func:`texture_record`)."""
+    """The Fresnel LUT's and the normal map's record (:func:`texture_record`), and the values
+    an engine sets (:func:`scene_record`)."""
     ior = float(exp.water.ior)
     radiance = exp.reference.fresnel_transmission == "radiance"
     return {
@@ -194,6 +217,7 @@ def _study_record(exp, inputs) -> dict:
             "layers": "sampled four times at vTexCoord0..3 = (x, z) / tile + wave1..4",
         },
         "colour_space": "linear RGB",
+        "scene": scene_record(exp, inputs),
     }
 
 
@@ -281,6 +305,44 @@ def expects_lines(record: dict | None) -> list[str]:
         "y = 0.",
         "",
         *_rendered_lines(record.get("rendered", {})),
+        *scene_lines(record.get("scene")),
+    ]
+
+
+def _vec(v) -> str:
+    """A vector as (x, y, z), rounding errors below 1e-9 shown as 0."""
+    return "(" + ", ".join(f"{0.0 if abs(x) < 1e-9 else x:.6g}" for x in v) + ")"
+
+
+def scene_lines(scene: dict | None) -> list[str]:
+    """The "Values the fit used" part of a binding sheet (:func:`scene_record`'s)."""
+    if not scene:
+        return []
+    td = scene["top_down"]
+    x0, z0, x1, z1 = td["extent"]
+    waves = "; ".join(
+        f"`wave{k + 1}` = {_vec(o)} + t * {_vec(v)}"
+        for k, (o, v) in enumerate(zip(scene["wave_offsets"], scene["wave_velocities"]))
+    )
+    rows = " ".join(_vec(r) for r in td["tex_matrix0"])
+    return [
+        "### Values the fit used",
+        "",
+        "Set them as the study did, or from your scene with the same meaning:",
+        "",
+        f"* `lightpos` = {_vec(scene['lightpos'])} (world units: the sun far away) and "
+        f"`lightcolor` = {_vec(scene['lightcolor'])} (linear RGB: the sun's radiance over its "
+        "largest channel). `SPECULAR_STRENGTH` multiplies this colour: a colour normalised "
+        "otherwise changes the highlight by the ratio.",
+        f"* The waves, texture units at time t seconds (offsets of the normal-map layers, "
+        f"`wave_i(t) = offset + t * velocity`): {waves}.",
+        f"* The top-down renders (`refractionTexture`, `worldYComponent`): an orthographic camera "
+        f"straight down over x in [{x0:g}, {x1:g}], z in [{z0:g}, {z1:g}], {td['size']} x "
+        f"{td['size']} texels, texel (row, column) = (t, s) with s = (x - ({x0:g})) / "
+        f"{x1 - x0:g} and t = (z - ({z0:g})) / {z1 - z0:g}; `worldYComponent` holds world y, "
+        f"{td['no_geometry']:g} where nothing is below. `uTextureMatrix0` (rows) = {rows}: the "
+        "same map (any top-down camera works if this matrix is its bias * projection * view).",
+        "",
     ]
 
 
