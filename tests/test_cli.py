@@ -296,8 +296,22 @@ def test_calibrate_ships_the_textures_its_constants_assume(runs):
         assert lines.index("## What this shader expects") < lines.index("## What to bind"), sheet
         # short: what to bind, the constants, the values the fit used and the conventions
         assert len(lines) < 90 and (sheet.parent / "BINDINGS_FULL.md").is_file(), sheet
+        # the sheet alone wires the shader: the light, the waves' clock, the top-down camera
+        scene = json.loads((root / "calibrate" / "shaders" / "textures" / "textures.json")
+                           .read_text())["scene"]  # fmt: skip
+        text = sheet.read_text()
+        assert "### Values the fit used" in text, sheet
+        assert f"`lightcolor` = ({', '.join(f'{x:.6g}' for x in scene['lightcolor'])})" in text
+        velocity = scene["wave_velocities"][1]
+        assert "`wave2` = " in text and f"t * ({velocity[0]:.6g}, {velocity[1]:.6g})" in text
+        assert "`uTextureMatrix0` (rows) = (" in text
         text = "\n".join(lines)
         assert "(1 - R) / n^2" in text and "fresnel_lut.exr" in text, sheet
+    hlsl = (root / "calibrate" / "shaders" / "hlsl" / "BINDINGS.md").read_text()
+    assert "GetGPUProjectionMatrix" in hlsl and "t -> 1 - t" in hlsl
+    gles = (root / "calibrate" / "shaders" / "gles300" / "BINDINGS.md").read_text()
+    assert "| `normalMap` | texture | sampler2D | by name |" in gles
+    assert "OES_texture_float_linear" in gles and "EXT_color_buffer_float" in gles
     report = (root / "calibrate" / "report.md").read_text()
     assert "## What this shader expects" in report and "1.78x too bright" in report
 
