@@ -5,9 +5,8 @@ The folder is self-contained (opened from ``file://`` or served by any static se
 * ``water.js``: the ES module (a project template, copied as it is). It exports
   ``loadWaterTextures`` (the shipped normal map and Fresnel LUT, read with three's
   ``EXRLoader``), ``WaterInputs`` (the top-down colour and world-height render targets and the
-  sky cube map, built from the user's own three.js scene), ``createWater`` (the water quad with
-  the calibrated ``RawShaderMaterial``, the waves' clock and the per-camera uniforms) and
-  ``studyInputs`` (the same inputs from the study's own images, for the check).
+  sky cube map, built from the user's own three.js scene) and ``createWater`` (the water quad
+  with the calibrated ``RawShaderMaterial``, the waves' clock and the per-camera uniforms).
 * ``calibration.js``: what the module reads of this calibration, one ``export default {...}``:
   the exported GLSL ES 3.00 text (``shaders/gles300/``), the ``#define`` lines of the start
   constants, the light, the waves' offsets and velocities, the water rectangle, the top-down
@@ -16,9 +15,9 @@ The folder is self-contained (opened from ``file://`` or served by any static se
 * ``example.html`` and ``example.js``: the pool in three.js. Its floor and walls are a height
   field laid from the study's world-height texture, unlit, carrying the study's lit top-down
   colour; its sky is the study's cube map as three holds one (``scene.background``). The
-  module builds every input of
-  the water from that scene, as it would from a game's. The page reads the study's images from
-  ``../viewer/data.js``.
+  module builds every input of the water from that scene, as it would from a game's; the page
+  also draws the water on the study's own images (``renderFloat({inputs: 'study'})``, for the
+  tests). It reads the study's images from ``../viewer/data.js``.
 * ``three.module.js``, ``three.core.js``, ``addons/``: three.js as the npm package ships it
   (``package.json`` pins the version; ``scripts/setup.sh`` installs it into ``node_modules/``).
 
