@@ -8,15 +8,15 @@ therefore takes a module through
 1. ``spirv-cross --vulkan-semantics --version 450``: the module as Vulkan GLSL;
 2. :func:`vulkan_source`: that text made valid for Vulkan and WebGPU (below);
 3. ``glslangValidator -V`` and ``spirv-val --target-env vulkan1.0``: Vulkan SPIR-V;
-4. naga (:func:`naga`): the module read, validated and written as WGSL;
-5. :func:`tidy`: naga's mangled function names shortened, override defaults as plain literals,
-   the fragment shader's ``diagnostic`` directive (below); then naga parses and validates the
-   text as it is written (:func:`check`);
-6. :func:`reflection`: what the WGSL binds (read from its text and from ``spirv-cross
+4. naga (:func:`naga`): the module read, validated and written as WGSL, the text tidied
+   (``tidy`` of ``naga_wgsl.mjs``: naga's mangled function names shortened, override defaults
+   as plain literals, the fragment shader's ``diagnostic`` directive, below), then parsed back
+   and validated as it is written;
+5. :func:`reflection`: what the WGSL binds (read from its text and from ``spirv-cross
    --reflect`` of the Vulkan SPIR-V), every uniform member with its byte offset.
 
-Steps 4 and 5 take every file of an export in one Node.js process each (:func:`of_vulkan`):
-Node's start-up costs more than a translation.
+Step 4 takes every file of an export in one Node.js process (:func:`of_vulkan`): Node's
+start-up costs more than a translation. :func:`check` validates WGSL text alone.
 
 What step 2 changes, all in ``@group(0)``:
 
@@ -68,9 +68,6 @@ BLOCK_NAMES = {"frag": "FragUniforms", "vert": "VertUniforms"}
 BLOCK_VARS = {"frag": "frag_uniforms", "vert": "vert_uniforms"}
 FRAMEBUFFER_HEIGHT = "glFramebufferHeight"
 SPEC_HELPER = "spec_{}"  # identity function per type: no folding of specialization constants
-# the shaders sample (implicit derivatives) inside loops a texel's value ends: GLSL allows it,
-# WGSL's uniformity analysis refuses it (Chrome's Tint does) unless told
-DERIVATIVES_DIRECTIVE = "diagnostic(off, derivative_uniformity);"
 
 _LAYOUT = re.compile(r"^layout\((?P<args>[^)]*)\)\s*")
 _SPEC = re.compile(r"^layout\(constant_id\s*=\s*\d+\)\s*const\s+(\w+)\s+(\w+)\s*=")
@@ -388,35 +385,6 @@ def _stage_fixes(body: str, stage: str, label: str) -> str:
 
 
 # -- naga's WGSL -----------------------------------------------------------------------------------
-def tidy(wgsl: str) -> str:
-    """naga's WGSL made readable and portable: each function named after glslang's mangled name
-    (``spec_float_u0028_f1_u003b``, ``(`` written ``_u0028_``) given its plain name (numbered
-    where taken: overloads); each override's default a plain literal (``= 37;``, not ``37i``:
-    the declared type gives the type); a fragment shader opened with
-    ``diagnostic(off, derivative_uniformity);`` (:data:`DERIVATIVES_DIRECTIVE`)."""
-    taken = set(re.findall(r"\b\w+\b", wgsl))
-    renames = {}
-    for mangled in sorted(n for n in taken if "_u0028_" in n):
-        name = mangled.split("_u0028_")[0]
-        plain, k = name, 1
-        while plain in taken:
-            plain, k = f"{name}_{k}", k + 1
-        taken.add(plain)
-        renames[mangled] = plain
-    if renames:
-        pat = re.compile(r"\b(" + "|".join(map(re.escape, renames)) + r")\b")
-        wgsl = pat.sub(lambda m: renames[m[1]], wgsl)
-    wgsl = re.sub(
-        r"^(@id\(\d+\) override \w+: \w+ = -?[\d.]+(?:e[-+]?\d+)?)[fiu]?;$",
-        r"\1;",
-        wgsl,
-        flags=re.M,
-    )
-    if re.search(r"^@fragment\b", wgsl, re.M):
-        wgsl = f"{DERIVATIVES_DIRECTIVE}\n\n{wgsl}"
-    return wgsl
-
-
 def vulkan_module(gl_spirv: bytes, stage: str, label: str = "<spirv>") -> bytes:
     """Steps 1 to 3 of the module doc: the Vulkan SPIR-V naga reads, made from the export's
     OpenGL SPIR-V of one stage (``stage`` 'vert' or 'frag')."""
@@ -425,12 +393,11 @@ def vulkan_module(gl_spirv: bytes, stage: str, label: str = "<spirv>") -> bytes:
 
 
 def of_vulkan(jobs: list[tuple[bytes, str, str]]) -> list[tuple[str, dict]]:
-    """Steps 4 to 6 of the module doc for each (Vulkan SPIR-V of :func:`vulkan_module`, stage,
-    label) of ``jobs``, naga run once to translate and once to check what is written: the
-    WGSL and its reflection (:func:`reflection`). RuntimeError with naga's report, naming the
-    file (``label``)."""
-    texts = [tidy(raw) for raw in naga([(vk, label) for vk, _, label in jobs])]
-    check([(t, label) for t, (_, _, label) in zip(texts, jobs)])
+    """Steps 4 and 5 of the module doc for each (Vulkan SPIR-V of :func:`vulkan_module`,
+    stage, label) of ``jobs``, naga run once for all: the WGSL (checked as written) and its
+    reflection (:func:`reflection`). RuntimeError with naga's report, naming the file
+    (``label``)."""
+    texts = naga([(vk, label) for vk, _, label in jobs])
     return [
         (wgsl, reflection(wgsl, S.reflect(vk, label), stage, label))
         for wgsl, (vk, stage, label) in zip(texts, jobs)
