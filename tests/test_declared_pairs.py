@@ -171,3 +171,20 @@ def test_a_vertex_file_without_a_marker_runs_as_written(tmp_path, inputs):
     check = gl_check_user(shader, inputs, shader.defaults(), shader.render(inputs).numpy())
     assert check["ran"] and check["passed"], check
     assert_ran_as_written(check, "es")
+
+
+def test_the_short_sheet_names_what_each_of_the_users_names_is(tmp_path):
+    """The engine values the declaration gives (``value uRippleTiling 0.5``) and the meaning of
+    each bound name, in either stage, are on the short sheet."""
+    from study.export.shaders import export_user_shader
+
+    shader = _shader("split_matrices_water", SPLIT)
+    export_user_shader(shader, shader.defaults(), tmp_path / "shaders", targets=["gles300"])
+    sheet = (tmp_path / "shaders" / "gles300" / "BINDINGS.md").read_text()
+    rows = {r.split("|")[1].strip(" `"): r.split("|")[5].strip() for r in sheet.splitlines()
+            if r.startswith("| `")}  # fmt: skip
+    assert rows["uRippleTiling"] == "engine value: set it to 0.5"
+    assert rows["uModel"].startswith("bound to `model`: model -> world")
+    assert rows["uMirrorMap"].startswith("bound to `reflection_sampler`: ")
+    assert rows["inTexCoord"].startswith("bound to `uv`: texture coordinate")
+    assert all(rows[n] for n in ("uEye", "uRipple0", "uSunDir", "uView", "uProjection"))

@@ -15,6 +15,7 @@ import re
 import numpy as np
 
 from shaders_port.spirv.engine_inputs import ENGINE_ALIASES, ENGINE_INPUTS
+from shaders_port.spirv.engine_names import MEANINGS as VERTEX_MEANINGS
 
 # name in the GLSL -> what the application binds there (units, conventions of the study)
 MEANINGS = {
@@ -321,22 +322,39 @@ def material_lines(target: str, reflections: dict, constants, fit: dict | None) 
     ]
 
 
-def _bind_rows(reflections: dict, values: dict | None = None, by_name: bool = False) -> list:
+def _shown(v) -> str:
+    return ", ".join(_fmt(x) for x in v) if isinstance(v, (list, tuple)) else _fmt(v)
+
+
+def _user_meaning(glsl: str, kind: str, fit: dict) -> str:
+    """A user's name's meaning on the sheet: the engine value its declaration gives it
+    (``fit["engine_values"]``), or the input it is bound to (``fit["inputs"]``: name -> the
+    study's or an engine input, with that input's description)."""
+    if kind == "uniform" and glsl in fit.get("engine_values", {}):
+        return f"engine value: set it to {_shown(fit['engine_values'][glsl])}"
+    target = fit.get("inputs", {}).get(glsl)
+    if target is None:
+        return ""
+    what = _meaning(target) or VERTEX_MEANINGS.get(target, ((), ""))[1]
+    return f"bound to `{target}`" + (f": {what}" if what else "")
+
+
+def _bind_rows(reflections: dict, values: dict | None = None, by_name: bool = False,
+               fit: dict | None = None) -> list:  # fmt: skip
     """What the application binds, over every stage: textures, uniforms (a member of a stage's
     constant buffer once per stage) and the vertex attributes. ``values``: a user's shader's
     constants (GLSL name -> value): a uniform among them is marked with the value to set.
-    ``by_name``: the target binds samplers by name (GLSL ES), not at a binding number."""
+    ``by_name``: the target binds samplers by name (GLSL ES), not at a binding number. ``fit``:
+    a user's ``engine_values`` and bound ``inputs`` (:func:`_user_meaning`)."""
     rows, seen = [], set()
 
     def add(name, kind, gtype, where, glsl=None):
         if (name, where) not in seen:  # a block member once per stage, at its offset there
             seen.add((name, where))
             glsl = glsl or name  # the GLSL name (WGSL's may differ): meaning and value
-            meaning = _meaning(glsl)
+            meaning = _meaning(glsl) or _user_meaning(glsl, kind, fit or {})
             if values and glsl in values and kind == "uniform":
-                v = values[glsl]
-                shown = ", ".join(_fmt(x) for x in v) if isinstance(v, (list, tuple)) else _fmt(v)
-                meaning = f"fitted constant: set it to {shown}"
+                meaning = f"fitted constant: set it to {_shown(values[glsl])}"
             rows.append(f"| `{name}` | {kind} | {gtype} | {where} | {meaning} |")
 
     ordered = sorted(reflections.items(), key=lambda kv: ".vert." not in kv[0])
@@ -399,6 +417,7 @@ def binding_sheet(
             reflections,
             constants if isinstance(constants, dict) else None,
             by_name=target == "gles300",
+            fit=fit,
         ),  # fmt: skip
         "",
     ]

@@ -235,7 +235,13 @@ def export_user_shader(
         ("core", "water.vert"): read_source("water", "vert", "core"),
         ("core", frag): shader.written(values),
     }
-    fit = {"status": status or {}, "reads": None}
+    # the sheet's meanings of the user's names: the engine values set, the inputs bound (by a
+    # declaration or by an engine's own name) in either stage
+    inputs = dict(shader.run_bindings())
+    if shader.vertex is not None:
+        inputs.update({**shader.vertex.shader.inputs, **shader.vertex.shader.bindings})
+    fit = {"status": status or {}, "reads": None, "engine_values": shader.engine_values(),
+           "inputs": inputs}  # fmt: skip
     # the engine targets come from the core GLSL the study compiles (a file in an older dialect,
     # or with includes and defines, translated) with every uniform of a constant declared
     # without initializer (GLSL ES refuses one, HLSL and Metal ignore it: the material sets

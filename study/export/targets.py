@@ -214,6 +214,10 @@ def sheets_of_export(folder, calibration: dict) -> dict:
         # what the shaders read: a calibration's ``constants`` hold those alone (a user's file
         # declares its own, none a specialization constant)
         "reads": set(calibration["constants"]),
+        # a user's shader: the engine values its declaration sets, the inputs it binds (those
+        # an engine's name binds by itself are not recorded: the export's sheet names them)
+        "engine_values": (calibration.get("declaration") or {}).get("values", {}),
+        "inputs": (calibration.get("declaration") or {}).get("bindings", {}),
     }
     record = read_texture_record(folder)
     expects = expects_lines(record) if record else []
