@@ -188,3 +188,26 @@ def test_the_short_sheet_names_what_each_of_the_users_names_is(tmp_path):
     assert rows["uMirrorMap"].startswith("bound to `reflection_sampler`: ")
     assert rows["inTexCoord"].startswith("bound to `uv`: texture coordinate")
     assert all(rows[n] for n in ("uEye", "uRipple0", "uSunDir", "uView", "uProjection"))
+
+
+def test_an_initialized_uniform_not_fitted_reaches_every_target_as_a_value(tmp_path, inputs):
+    """``uniform float Shininess = 800.0;`` in a GLSL 330 file, not a constant to fit: a value
+    the engine sets (the initializer's), so the GLSL ES target (which refuses an initializer)
+    is written, the initializer moved to the sheet; the file itself runs as written."""
+    from shaders_port.spirv.user_shader import UserShader
+    from study.export.gl_check import gl_check_user
+    from study.export.shaders import export_user_shader
+
+    path = SHADERS / "initialized_uniforms.frag"
+    shader = UserShader.from_file(path).check()
+    assert shader.initialized == {"Shininess": (800.0,), "Tint": (0.1, 0.2, 0.3)}
+    assert shader.written(shader.defaults()) == path.read_text()  # the file as the engine holds it
+    folder = tmp_path / "shaders"
+    export_user_shader(shader, shader.defaults(), folder, targets=["gles300", "hlsl"])
+    es = (folder / "gles300" / "initialized_uniforms.frag").read_text()
+    assert "uniform highp float Shininess;" in es and "800" not in es
+    sheet = (folder / "gles300" / "BINDINGS.md").read_text()
+    assert "| `Shininess` | uniform | float | by name | engine value: set it to 800.0 |" in sheet
+    ours = shader.render(inputs).numpy()
+    check = gl_check_user(shader, inputs, shader.defaults(), ours)
+    assert check["passed"] and check["text"] == "your file as written", check

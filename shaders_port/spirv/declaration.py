@@ -18,7 +18,15 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["UserConstant", "Site", "find_constants", "written_text", "declared", "STAGES"]
+__all__ = [
+    "UserConstant",
+    "Site",
+    "find_constants",
+    "written_text",
+    "declared",
+    "STAGES",
+    "without_initializers",
+]
 
 DECL = re.compile(
     r"^(?P<head>[ \t]*(?:const|uniform)[ \t]+(?:(?:lowp|mediump|highp)[ \t]+)?"
@@ -270,3 +278,55 @@ def written_text(source: str, constants, values: dict, stage: str, initializers:
         pos = s.span[1]
     out.append(source[pos:])
     return "".join(out)
+
+
+def without_initializers(text: str, names) -> str:
+    """``text`` with the initializer of each uniform of ``names`` declared on one line removed
+    (``uniform float Shininess = 800.0;`` -> ``uniform float Shininess;``); every other byte
+    kept."""
+    names = set(names)
+    if not names:
+        return text
+
+    def bare(m: re.Match) -> str:
+        if m["name"] not in names or not m["head"].lstrip().startswith("uniform"):
+            return m[0]
+        return m["head"][: m["head"].index(m["name"]) + len(m["name"])] + m["tail"]
+
+    return DECL.sub(bare, text)
+
+
+def initialized_uniforms(texts: dict, given, label: str) -> dict:
+    """The uniforms declared on one line with an initializer made of literals in the texts
+    ``texts`` (stage -> text or None), except those named in ``given``: name -> (stage, the
+    initializer's components). One not made of literals is left out (it stays as written)."""
+    found = {}
+    for stage, text in texts.items():
+        for name, m in declared(text or "")[0].items():
+            if name in given or name in found or not m["head"].lstrip().startswith("uniform"):
+                continue
+            try:
+                found[name] = (stage, parse_value(m["value"], m["type"], label))
+            except ValueError:
+                continue
+    return found
+
+
+def split_bindings(bindings: dict, fragment: str, vertex: str, label: str) -> tuple[dict, dict]:
+    """A declaration's ``bindings`` (name -> input) split by the stage that reads each name:
+    (those the fragment shader's text ``fragment`` reads, those only the vertex shader's
+    ``vertex`` reads); ValueError for a name neither reads. Comments do not count."""
+    frag, vert = re.sub(r"//.*", "", fragment), re.sub(r"//.*", "", vertex or "")
+    ours, theirs = {}, {}
+    for name, target in bindings.items():
+        pattern = rf"\b{re.escape(name)}\b"
+        if re.search(pattern, frag):
+            ours[name] = target
+        elif re.search(pattern, vert):
+            theirs[name] = target
+        else:
+            raise ValueError(
+                f"{label}: bind {name}: neither this shader nor its vertex shader reads {name}; "
+                "remove the line or correct the name"
+            )
+    return ours, theirs

@@ -60,6 +60,7 @@ from . import dialects, gl_run
 from . import engine_inputs as _engine
 from . import translated as spirv_port
 from .declaration import BARE, UserConstant, declared, find_constants, written_text
+from .declaration import initialized_uniforms, split_bindings, without_initializers
 from .module import referenced
 from .support import check_supported
 from .vertex import normal_pragma, value_pragma
@@ -129,6 +130,7 @@ class UserShader:
         self.bindings = bindings
         self.constants = self._constants(self._with_vertex_pragmas(ranges, decl))
         self._vertex_constants()
+        self._initialized_uniforms()
         self._engine_options(path)
         self.validate()
 
@@ -237,32 +239,35 @@ class UserShader:
                 vertex.shader.values[name] = comps
 
     def _declared_bindings(self, bindings: dict) -> dict:
-        """The declaration's ``bindings`` (name -> input) this shader takes: those its text (its
-        file or an ``#include``) reads. A name only its vertex shader reads binds there, to a
-        vertex meaning, engine name or study input (``self.vertex`` becomes a copy with them;
-        the files are left as they are); a name neither reads is refused."""
+        """The declaration's ``bindings`` this shader reads (``declaration.split_bindings``);
+        those only its vertex shader reads bind there (``self.vertex``: a copy with them)."""
         if not bindings:
             return {}
-        text = re.sub(r"//.*", "", self.source)
+        text = self.source
         if dialects.has_includes(self.source):
             text = dialects.front_end(self.source, self.label, self.defines, self.include_paths,
                                       True)  # fmt: skip
-        vtext = "" if self.vertex is None else re.sub(r"//.*", "", self.vertex.shader.source)
-        ours, theirs = {}, {}
-        for name, target in bindings.items():
-            pattern = rf"\b{re.escape(name)}\b"
-            if re.search(pattern, text):
-                ours[name] = target
-            elif re.search(pattern, vtext):
-                theirs[name] = target
-            else:
-                raise ValueError(
-                    f"{self.label}: bind {name}: neither this shader nor its vertex shader "
-                    f"reads {name}; remove the line or correct the name"
-                )
+        vtext = "" if self.vertex is None else self.vertex.shader.source
+        ours, theirs = split_bindings(bindings, text, vtext, self.label)
         if theirs:
             self.vertex = self.vertex.with_bindings(theirs)
         return ours
+
+    def _initialized_uniforms(self) -> None:
+        """A uniform with an initializer neither fitted nor given a value: a value the engine
+        sets, the initializer's (``declaration.initialized_uniforms``; ``self.initialized``),
+        so that every engine target gets it (GLSL ES refuses a uniform initializer)."""
+        v = self.vertex.shader if self.vertex is not None else None
+        texts = {"fragment": self.source, "vertex": None if v is None or v.shared else v.original}
+        found = initialized_uniforms(texts, set(self.constants) | set(self.engine_values()),
+                                     self.label)  # fmt: skip
+        if any(stage == "vertex" for stage, _ in found.values()):
+            self.vertex = copy.copy(self.vertex)
+            self.vertex.shader = copy.copy(v)
+            self.vertex.shader.values = dict(v.values)
+        for name, (stage, comps) in found.items():
+            (self.values if stage == "fragment" else self.vertex.shader.values)[name] = comps
+        self.initialized = {name: comps for name, (_, comps) in found.items()}
 
     def _included_uniforms(self, names: set) -> dict:
         """name -> ``(BARE match, stage)`` in a stage's preprocessed text, for the ``names``
@@ -528,8 +533,9 @@ class UserShader:
         d = self.dialect
         initializers = bare_initializers and uniform_initializers and not d.es and d.version >= 120
         vals = self._checked(values)
-        return written_text(self.source, self.constants.values(), vals, "fragment", initializers,
-                            uniform_initializers)  # fmt: skip
+        text = written_text(self.source, self.constants.values(), vals, "fragment",
+                            initializers, uniform_initializers)  # fmt: skip
+        return text if uniform_initializers else without_initializers(text, self.initialized)
 
     def vertex_written(self, values: dict, bare_initializers: bool = True,
                        uniform_initializers: bool = True) -> str | None:  # fmt: skip
@@ -544,8 +550,9 @@ class UserShader:
         d = dialects.detect(v.original, v.label, dialects.version_define(v.defines))
         initializers = bare_initializers and uniform_initializers and not d.es and d.version >= 120
         vals = self._checked(values)
-        return written_text(v.original, self.constants.values(), vals, "vertex", initializers,
+        text = written_text(v.original, self.constants.values(), vals, "vertex", initializers,
                             uniform_initializers)  # fmt: skip
+        return text if uniform_initializers else without_initializers(text, self.initialized)
 
     def vertex_gl_source(self, values: dict | None = None, bare_initializers: bool = True,
                          uniform_initializers: bool = True):  # fmt: skip
