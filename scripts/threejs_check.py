@@ -35,7 +35,7 @@ from study import read_exr  # noqa: E402
 from study._io import repo_relative, write_json  # noqa: E402
 from study._metrics import flip  # noqa: E402
 from study.calibration.frames import prepare  # noqa: E402
-from study.export.gl_check import GL_MEAN, GL_P999  # noqa: E402
+from study.export.gl_check import GL_MEAN, GL_P999, passes  # noqa: E402
 from study.export.shaders import load_constants_json  # noqa: E402
 from study.export.textures import with_exported_textures  # noqa: E402
 from study.export.threejs import three_version  # noqa: E402
@@ -56,9 +56,7 @@ KEYS = ("mean_abs", "p999", "max_abs", "unexplained", "n_water")
 
 def _verdict(res: dict) -> dict:
     out = {k: float(res[k]) if k in ("mean_abs", "p999", "max_abs") else int(res[k]) for k in KEYS}
-    out["passes"] = bool(
-        res["mean_abs"] <= GL_MEAN and res["p999"] <= GL_P999 and res["unexplained"] == 0
-    )
+    out["passes"] = passes(res)
     return out
 
 

@@ -19,34 +19,12 @@ from shaders_port.spirv.tools import missing_tools
 from shaders_port.variants import SHIPPED, VARIANTS
 from study.export.shaders import export_shaders
 from study.export.targets import TARGETS, resolve_targets, target_file
+from helpers.synthetic import EXPORT_CONSTANTS as FITTED
 from helpers.synthetic import synthetic_baseline_inputs, synthetic_inputs, synthetic_inputs_for
 
 MISSING = missing_tools()
 pytestmark = pytest.mark.skipif(
     bool(MISSING), reason=f"the engine targets need {', '.join(MISSING)}"
-)
-
-# a constants set whose values differ from every default, with digits to lose
-FITTED = Constants(
-    attenuation_distance=5.4321,
-    steps_grazing=11.0,
-    steps_steep=4.0,
-    loop_cap=37,
-    specular_strength=1.7654,
-    specular_exponent=211.5,
-    bumptex_mult=0.9797,
-    refr_coeff=0.7431,
-    water_color=(0.0612, 0.2391, 0.3107, 1.0),
-    reflect_color=(0.9321, 0.9123, 0.8912, 1.0),
-    absorption_r=0.2113,
-    absorption_g=0.1021,
-    absorption_b=0.0734,
-    specular_roughness=0.1733,
-    refine_steps=5,
-    refraction_index=0.7433,
-    refraction_strength=0.0231,
-    chromatic_dispersion=0.00171,
-    reflect_distortion=0.0917,
 )
 
 

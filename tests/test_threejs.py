@@ -24,16 +24,14 @@ import numpy as np
 import pytest
 
 from helpers import REPO
-from helpers.experiments import DEFAULT, TINY, replaced, sets
+from helpers.experiments import TINY, replaced
+from helpers.viewer import tiny_calibration
 from shaders_port import Constants
 from shaders_port.gl.compare import compare_port_gl
 from study import read_exr
 from study._metrics import flip
-from study.calibration.frames import prepare
-from study.cli import main
-from study.export.gl_check import GL_MEAN, GL_P999
+from study.export.gl_check import GL_MEAN, GL_P999, passes
 from study.export.shaders import load_constants_json
-from study.export.textures import with_exported_textures
 from study.export.threejs import THREE_FILES, lacking_inputs, three_version
 from study.export.viewer.browser import (
     FILE_ACCESS,
@@ -43,8 +41,6 @@ from study.export.viewer.browser import (
     open_three_example,
     render_float,
 )
-from study.scene.baseline_inputs import inputs_for_shader
-from study.scene.shader_inputs import load_or_build_shader_inputs
 
 OVERRIDES = replaced(TINY, "fit.max_steps=5")
 
@@ -54,26 +50,9 @@ def run(tmp_path_factory):
     """A tiny calibration of the default experiment (24x24), its shader inputs as the GL check
     runs them, and one Chromium that may read files beside a ``file://`` page."""
     root = tmp_path_factory.mktemp("threejs")
-    out = root / "study"
-    with pytest.MonkeyPatch.context() as mp:
-        mp.setenv("STUDY_CACHE", str(root / "cache"))
-        assert main(["calibrate", str(DEFAULT), "--out", str(out)] + sets(OVERRIDES)) == 0
-        exp, variant, _ = prepare(DEFAULT, out, OVERRIDES)
-        i = load_or_build_shader_inputs(exp, variant, log=lambda *a: None)
-        i = inputs_for_shader(exp, i, exp.fit.shader, variant, log=lambda *a: None)
+    out, inputs = tiny_calibration(root, "study", OVERRIDES)
     with Chromium(flags=SOFTWARE_GL + FILE_ACCESS) as browser:
-        yield {"out": out, "root": root, "browser": browser,
-               "inputs": with_exported_textures(i, out / "shaders")}  # fmt: skip
-
-
-def _passes(res: dict) -> bool:
-    """The GL check's verdict (``study.export.gl_check``)."""
-    return bool(
-        res["mean_abs"] <= GL_MEAN
-        and res["p999"] <= GL_P999
-        and res["unexplained"] == 0
-        and res["n_nonfinite"] == 0
-    )
+        yield {"out": out, "root": root, "browser": browser, "inputs": inputs}
 
 
 def _calibration(folder: Path) -> dict:
@@ -119,7 +98,7 @@ def test_three_with_the_study_inputs_matches_the_port(run):
         renderer = BrowserRenderer(b, which, api="waterThree", inputs="study", screenPlane=True)
         res = compare_port_gl(run["inputs"], constants, "water_refraction", renderer=renderer)
         assert res["n_water"] > 300 and res["mask_mismatch"] == 0, res["n_water"]
-        assert _passes(res), {k: res[k] for k in ("mean_abs", "p999", "max_abs", "unexplained")}
+        assert passes(res), {k: res[k] for k in ("mean_abs", "p999", "max_abs", "unexplained")}
         gl[which] = res["gl"]
     assert np.abs(gl["fitted"] - gl["default"]).max() > 0.01  # two different shaders
 
@@ -222,7 +201,7 @@ def test_a_shader_reading_inputs_the_module_does_not_build_is_named():
 
 
 @pytest.mark.slow  # a calibration of a user's shader (~20 s)
-def test_a_users_shader_in_three_matches_the_executor(tmp_path, monkeypatch):
+def test_a_users_shader_in_three_matches_the_executor(tmp_path):
     """``experiments/shaders/my_water.frag`` after the study's vertex shader, its sampler
     ``waveNormals`` bound to ``normalMap``: water.js sets it under its own name, and three's
     render matches the executor within the GL check's thresholds, on the study's images and on
@@ -230,16 +209,10 @@ def test_a_users_shader_in_three_matches_the_executor(tmp_path, monkeypatch):
     from study._backend import drjit_backend
     from study.export.shaders import user_shader_of
 
-    monkeypatch.setenv("STUDY_CACHE", str(tmp_path / "cache"))
     user = [*OVERRIDES, f'fit.shader="{REPO / "experiments" / "shaders" / "my_water.frag"}"']
-    out = tmp_path / "user"
-    assert main(["calibrate", str(DEFAULT), "--out", str(out)] + sets(user)) == 0
+    out, i = tiny_calibration(tmp_path, "user", user)
     cal = _calibration(out / "threejs")
     assert cal["uniformNames"] == {"waveNormals": "normalMap"} and cal["startDefines"] is None
-    exp, variant, _ = prepare(DEFAULT, out, user)
-    i = load_or_build_shader_inputs(exp, variant, log=lambda *a: None)
-    i = inputs_for_shader(exp, i, exp.fit.shader, variant, log=lambda *a: None)
-    i = with_exported_textures(i, out / "shaders")
     shader = user_shader_of(out / "constants.json")
     values = load_constants_json(out / "constants.json")
     ours = shader.render(i, values, backend=drjit_backend("llvm_ad_rgb")).numpy()

@@ -20,18 +20,16 @@ import pytest
 from helpers import REPO
 from helpers.experiments import DEFAULT, TINY, replaced, sets
 from helpers.synthetic import synthetic_baseline_inputs
-from helpers.viewer import shader_viewer, smooth_sky, swiftshader_snapping
+from helpers.viewer import shader_viewer, smooth_sky, swiftshader_snapping, tiny_calibration
 from shaders_port import Constants
 from shaders_port.gl.compare import compare_port_gl
 from shaders_port.spirv.user_shader import UserShader
 from study import load_experiment, read_exr
 from study._backend import drjit_backend
 from study.cli import main
-from study.calibration.frames import prepare
 from study.config.user_shader import load_user_shader
-from study.export.gl_check import GL_MEAN, GL_P999
+from study.export.gl_check import GL_MEAN, GL_P999, passes
 from study.export.shaders import export_shaders, load_constants_json, user_shader_of
-from study.export.textures import with_exported_textures
 from study.export.viewer import (
     read_names,
     spec_defines,
@@ -40,24 +38,9 @@ from study.export.viewer import (
     with_spec_defines,
 )
 from study.export.viewer.browser import BrowserRenderer, Chromium, open_viewer, render_float
-from study.scene.baseline_inputs import inputs_for_shader
-from study.scene.shader_inputs import load_or_build_shader_inputs
 
 OVERRIDES = replaced(TINY, "fit.max_steps=5")
 USER = [*OVERRIDES, f'fit.shader="{REPO / "experiments" / "shaders" / "my_water.frag"}"']
-
-
-def _calibrate(root: Path, name: str, overrides: list[str], experiment=DEFAULT):
-    """A tiny calibration of ``experiment`` into ``root/name`` and its shader inputs as the GL
-    check runs them."""
-    out = root / name
-    with pytest.MonkeyPatch.context() as mp:
-        mp.setenv("STUDY_CACHE", str(root / "cache"))
-        assert main(["calibrate", str(experiment), "--out", str(out)] + sets(overrides)) == 0
-        exp, variant, _ = prepare(experiment, out, overrides)
-        i = load_or_build_shader_inputs(exp, variant, log=lambda *a: None)
-        i = inputs_for_shader(exp, i, exp.fit.shader, variant, log=lambda *a: None)
-    return out, with_exported_textures(i, out / "shaders")
 
 
 @pytest.fixture(scope="module")
@@ -70,7 +53,7 @@ def browser():
 def runs(tmp_path_factory, browser):
     """A calibration of the study's shader (24x24) and one Chromium."""
     root = tmp_path_factory.mktemp("viewer")
-    out, inputs = _calibrate(root, "study", OVERRIDES)
+    out, inputs = tiny_calibration(root, "study", OVERRIDES)
     return {"out": {"study": out}, "inputs": {"study": inputs}, "browser": browser, "root": root}
 
 
@@ -78,19 +61,8 @@ def runs(tmp_path_factory, browser):
 def user_run(tmp_path_factory, browser):
     """A calibration of a user's shader (24x24, ``experiments/shaders/my_water.frag``)."""
     root = tmp_path_factory.mktemp("viewer_user")
-    out, inputs = _calibrate(root, "user", USER)
+    out, inputs = tiny_calibration(root, "user", USER)
     return {"out": {"user": out}, "inputs": {"user": inputs}, "browser": browser, "root": root}
-
-
-def _passes(res: dict) -> bool:
-    """The GL check's verdict (``study.export.gl_check``): mean and 99.9th percentile of the
-    per-pixel max-over-channel |difference| within its thresholds, nothing unexplained."""
-    return bool(
-        res["mean_abs"] <= GL_MEAN
-        and res["p999"] <= GL_P999
-        and res["unexplained"] == 0
-        and res["n_nonfinite"] == 0
-    )
 
 
 def test_calibrate_writes_a_self_contained_viewer(runs):
@@ -126,12 +98,12 @@ def test_the_fitted_shader_in_chromium_matches_the_port(runs):
     res = compare_port_gl(runs["inputs"]["study"], fitted, "water_refraction",
                           renderer=BrowserRenderer(b, "fitted"))  # fmt: skip
     assert res["n_water"] > 300 and res["mask_mismatch"] == 0, res["n_water"]
-    assert _passes(res), {k: res[k] for k in ("mean_abs", "p999", "max_abs", "unexplained")}
+    assert passes(res), {k: res[k] for k in ("mean_abs", "p999", "max_abs", "unexplained")}
     # the original constants (the export's specialization constants set by #define lines)
     start = Constants.from_dict(read_exr(out / "default.exr")[1]["constants"])
     res0 = compare_port_gl(runs["inputs"]["study"], start, "water_refraction",
                            renderer=BrowserRenderer(b, "default"))  # fmt: skip
-    assert _passes(res0), {k: res0[k] for k in ("mean_abs", "p999", "max_abs", "unexplained")}
+    assert passes(res0), {k: res0[k] for k in ("mean_abs", "p999", "max_abs", "unexplained")}
     assert np.abs(res["gl"] - res0["gl"]).max() > 0.01  # two different shaders
 
 
@@ -241,11 +213,11 @@ def test_the_reflection_and_baseline_shaders_in_chromium(shader, tmp_path, brows
     space: orbits) and the baseline (screen-space buffers of the study's camera: stays there)
     against the port, as the refraction shader."""
     ov = replaced(TINY, "fit.max_steps=2", f'fit.shader="{shader}"')
-    out, inputs = _calibrate(tmp_path, shader, ov)
+    out, inputs = tiny_calibration(tmp_path, shader, ov)
     assert open_viewer(browser, out / "viewer" / "index.html") == []
     fitted = load_constants_json(out / "constants.json")
     res = compare_port_gl(inputs, fitted, shader, renderer=BrowserRenderer(browser))
-    assert _passes(res), {k: res[k] for k in ("mean_abs", "p999", "max_abs", "unexplained")}
+    assert passes(res), {k: res[k] for k in ("mean_abs", "p999", "max_abs", "unexplained")}
     assert _data(out)["camera"]["orbit"] is (shader != "water_baseline")
 
 
@@ -369,7 +341,7 @@ def test_calibrate_writes_the_viewer_of_a_pair(tmp_path, browser, monkeypatch):
     camera, against the executor (SwiftShader's snapping given to it) within the GL check's
     thresholds."""
     ov = replaced(TINY, "fit.max_steps=2", "fit.vertex_grid=[16,16]")
-    out, inputs = _calibrate(tmp_path, "pair", ov, ENGINE_EXPERIMENTS / "fog_cube_water.toml")
+    out, inputs = tiny_calibration(tmp_path, "pair", ov, ENGINE_EXPERIMENTS / "fog_cube_water.toml")
     _self_contained({"out": {"pair": out}}, "pair")
     files = {p.name for p in (out / "shaders" / "textures").iterdir()}
     assert {"dudv_map.exr", "sky_cube_px.exr", "sky_cube_nz.exr"} <= files

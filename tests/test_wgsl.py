@@ -15,33 +15,19 @@ import numpy as np
 import pytest
 
 from helpers.experiments import DEFAULT, TINY, replaced, sets
+from helpers.synthetic import EXPORT_CONSTANTS as FITTED
 from helpers.synthetic import synthetic_baseline_inputs, synthetic_inputs
 from helpers.viewer import smooth_sky
-from shaders_port import Constants
 from shaders_port.gl.compare import compare_port_gl
 from shaders_port.spirv import wgsl as W
 from shaders_port.spirv.tools import SPEC_IDS, missing_tools
-from study.export.gl_check import GL_MEAN, GL_P999
+from study.export.gl_check import passes
 from study.export.shaders import export_shaders
 from study.export.targets import resolve_targets, target_file
 
 MISSING = missing_tools() + W.missing_tools()
 pytestmark = pytest.mark.skipif(bool(MISSING), reason=f"the WGSL target needs {MISSING}")
 
-# fitted constants whose values differ from every default, with digits to lose
-FITTED = Constants(
-    attenuation_distance=5.4321,
-    steps_grazing=11.0,
-    steps_steep=4.0,
-    loop_cap=37,
-    specular_strength=1.7654,
-    specular_exponent=211.5,
-    bumptex_mult=0.9797,
-    refr_coeff=0.7431,
-    water_color=(0.0612, 0.2391, 0.3107, 1.0),
-    refraction_strength=0.0231,
-    chromatic_dispersion=0.00171,
-)
 # what the overrides set instead: a visibly different water
 OTHER = FITTED.replace(
     attenuation_distance=2.1, specular_strength=0.6, water_color=(0.3, 0.12, 0.05, 1.0)
@@ -68,16 +54,6 @@ def _renderer(export, shader, inputs, **kw):
         if "mesa-vulkan-drivers" in str(exc):
             pytest.skip(str(exc))
         raise
-
-
-def _passes(res: dict) -> bool:
-    """The GL check's verdict (``study.export.gl_check``)."""
-    return bool(
-        res["mean_abs"] <= GL_MEAN
-        and res["p999"] <= GL_P999
-        and res["unexplained"] == 0
-        and res["n_nonfinite"] == 0
-    )
 
 
 def _figures(res: dict) -> dict:
@@ -155,7 +131,7 @@ def test_the_wgsl_on_lavapipe_matches_the_port_at_the_fitted_constants(export, i
     assert res["n_water"] > 1500 and res["mask_mismatch"] <= 2, res["n_water"]
     # measured: mean 1.0e-5, 99.9th percentile 3.7e-4, max 1.3e-3 (the cube map's seams: WebGPU
     # filters across them, the port within a face; the sky is smooth there, not identical)
-    assert _passes(res) and res["mean_abs"] < 1e-4, _figures(res)
+    assert passes(res) and res["mean_abs"] < 1e-4, _figures(res)
 
 
 def test_constants_set_through_the_overrides(export, inputs):
@@ -163,7 +139,7 @@ def test_constants_set_through_the_overrides(export, inputs):
     them as the port does, and the image is another."""
     with _renderer(export, "water_refraction", inputs, overrides=True) as r:
         res = compare_port_gl(inputs, OTHER, "water_refraction", renderer=r)
-        assert _passes(res) and res["mean_abs"] < 1e-4, _figures(res)
+        assert passes(res) and res["mean_abs"] < 1e-4, _figures(res)
         fitted, _ = r.render(FITTED)
     assert np.abs(res["gl"] - fitted[..., :3]).max() > 0.05
 
@@ -174,7 +150,7 @@ def test_the_baseline_reads_gl_fragcoord_as_gl_does(export):
     frame = synthetic_baseline_inputs(width=96, height=72)
     with _renderer(export, "water_baseline", frame) as r:
         res = compare_port_gl(frame, FITTED, "water_baseline", renderer=r)
-    assert res["n_water"] > 1500 and _passes(res), _figures(res)
+    assert res["n_water"] > 1500 and passes(res), _figures(res)
 
 
 def test_a_failing_tool_gives_its_log(tmp_path, monkeypatch):
@@ -276,7 +252,7 @@ def test_a_tiny_calibration_writes_wgsl_that_runs_like_the_port(tmp_path, monkey
     with _renderer(out / "shaders", "water_refraction", frame) as r:
         res = compare_port_gl(frame, fitted, "water_refraction", renderer=r)
     # measured on lavapipe: mean 9.3e-7, 99.9th percentile 4.1e-5, max 4.4e-5 on 432 pixels
-    assert res["n_water"] > 300 and _passes(res) and res["max_abs"] < 1e-3, _figures(res)
+    assert res["n_water"] > 300 and passes(res) and res["max_abs"] < 1e-3, _figures(res)
 
 
 def test_an_output_array_becomes_one_output_per_element(tmp_path):

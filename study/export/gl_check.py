@@ -77,6 +77,13 @@ def _verdict(res: dict, what: str) -> dict:
     return out
 
 
+def passes(res: dict) -> bool:
+    """Whether ``res`` (``compare_port_gl``'s figures) passes the GL check's thresholds (none
+    of :func:`_failures`): the verdict every run of an exported shader against the port takes,
+    on llvmpipe, in the browser, on lavapipe."""
+    return not _failures(res)
+
+
 def _failures(res: dict) -> list[str]:
     """Which of the GL check's thresholds ``res`` (``compare_port_gl``'s figures) fails, in
     words; empty when it passes."""

@@ -4,7 +4,13 @@ from __future__ import annotations
 
 import numpy as np
 
-from shaders_port import ShaderInputs, fresnel_lut, ortho_tex_matrix, perspective_view_proj
+from shaders_port import (
+    Constants,
+    ShaderInputs,
+    fresnel_lut,
+    ortho_tex_matrix,
+    perspective_view_proj,
+)
 
 
 def synthetic_inputs(
@@ -268,3 +274,28 @@ GLINT_START = dict(attenuation_distance=6.0, water_color=(0.06, 0.25, 0.25, 1.0)
                    specular_strength=1.0, specular_exponent=200.0, bumptex_mult=0.8)  # fmt: skip
 FITTED = ["attenuation_distance", "water_color", "specular_strength", "specular_exponent",
           "bumptex_mult"]  # fmt: skip
+
+
+# a constants set whose values differ from every default, with digits to lose: what the export
+# tests write into every target and read back
+EXPORT_CONSTANTS = Constants(
+    attenuation_distance=5.4321,
+    steps_grazing=11.0,
+    steps_steep=4.0,
+    loop_cap=37,
+    specular_strength=1.7654,
+    specular_exponent=211.5,
+    bumptex_mult=0.9797,
+    refr_coeff=0.7431,
+    water_color=(0.0612, 0.2391, 0.3107, 1.0),
+    reflect_color=(0.9321, 0.9123, 0.8912, 1.0),
+    absorption_r=0.2113,
+    absorption_g=0.1021,
+    absorption_b=0.0734,
+    specular_roughness=0.1733,
+    refine_steps=5,
+    refraction_index=0.7433,
+    refraction_strength=0.0231,
+    chromatic_dispersion=0.00171,
+    reflect_distortion=0.0917,
+)

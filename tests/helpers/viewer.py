@@ -1,5 +1,7 @@
 """A viewer page of a user's shader without a calibration (no reference, no port images): its
-GLSL ES 3.00 export and what the GL check binds for it, for tests of ``viewer/`` in Chromium."""
+GLSL ES 3.00 export and what the GL check binds for it, for tests of ``viewer/`` in Chromium;
+and a tiny calibration with the inputs its exports are checked on (the viewer's and the
+three.js page's tests)."""
 
 from __future__ import annotations
 
@@ -9,9 +11,33 @@ from pathlib import Path
 import numpy as np
 
 from shaders_port.spirv import user_vertex
+from study.calibration.frames import prepare
+from study.cli import main
+from study.export.textures import with_exported_textures
+from study.scene.baseline_inputs import inputs_for_shader
+from study.scene.shader_inputs import load_or_build_shader_inputs
 from study.export.shaders import export_user_shader
 from study.export.viewer import viewer_data, write_viewer
 from study.export.viewer.user import user_parts
+
+from .experiments import DEFAULT, sets
+
+
+def tiny_calibration(root: Path, name: str, overrides: list[str], experiment=DEFAULT):
+    """A calibration of ``experiment`` with ``overrides`` (a tiny one: the tests' TINY) into
+    ``root/name`` (cache ``root/cache``) and its shader inputs as the GL check runs them (with
+    the exported textures)."""
+    import pytest
+
+    out = root / name
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setenv("STUDY_CACHE", str(root / "cache"))
+        assert main(["calibrate", str(experiment), "--out", str(out)] + sets(overrides)) == 0
+        exp, variant, _ = prepare(experiment, out, overrides)
+        i = load_or_build_shader_inputs(exp, variant, log=lambda *a: None)
+        i = inputs_for_shader(exp, i, exp.fit.shader, variant, log=lambda *a: None)
+    return out, with_exported_textures(i, out / "shaders")
+
 
 # the page's fields (page.html) the tests do not read
 _PAGE = {"options": '<option value="live_fitted">live</option>'
