@@ -36,13 +36,11 @@ import re
 import shutil
 from pathlib import Path
 
-import numpy as np
 
 from ..._io import repo_path
-from ...scene.topdown import NO_GEOMETRY, texture_extent
 from ..shaders import read_calibration
 from ..targets import target_file
-from ..textures import read_texture_record
+from ..textures import read_texture_record, scene_record
 from ..viewer import spec_defines, start_constants
 
 TEMPLATES = Path(__file__).parent
@@ -165,7 +163,7 @@ def calibration_data(out: Path, exp, inputs) -> dict:
             "and the camera's and light's uniforms)"
         )
     record = read_texture_record(shaders) or {}
-    x0, z0, x1, z1 = texture_extent(exp)
+    scene = scene_record(exp, inputs)  # the values the binding sheets give
     wx0, wz0, wx1, wz1 = (float(v) for v in inputs.water_rect)
     cam = exp.section("camera")
     tex = {
@@ -186,20 +184,14 @@ def calibration_data(out: Path, exp, inputs) -> dict:
         "uniformNames": names,
         "values": values,
         "constants": summary["constants"],
-        "light": {
-            "position": [float(v) for v in inputs.lightpos],
-            "color": [float(v) for v in inputs.lightcolor],
-        },
-        "waves": {
-            "offsets": np.asarray(inputs.waves, float).tolist(),
-            "velocities": np.asarray(exp.animation.velocities, float).tolist(),
-        },
+        "light": {"position": scene["lightpos"], "color": scene["lightcolor"]},
+        "waves": {"offsets": scene["wave_offsets"], "velocities": scene["wave_velocities"]},
         "normalTile": float(inputs.normal_tile),
         "water": {"rect": [wx0, wz0, wx1, wz1], "y": 0.0},
         "topDown": {
-            "extent": [float(x0), float(z0), float(x1), float(z1)],
-            "size": int(inputs.world_y.shape[0]),
-            "noGeometry": NO_GEOMETRY,
+            "extent": scene["top_down"]["extent"],
+            "size": scene["top_down"]["size"],
+            "noGeometry": scene["top_down"]["no_geometry"],
         },
         "textures": tex,
         "sky": {"size": int(inputs.cubemap.shape[1])},
