@@ -35,6 +35,8 @@ from functools import lru_cache
 
 import numpy as np
 
+from .jax_residual import enable_x64
+
 #: flip-evaluator's default observer: 0.7 m wide 3840-pixel display at 0.7 m
 PPD = 0.7 * 3840 / 0.7 * np.pi / 180
 QC, QF, PC, PT, FEATURE_W = 0.7, 0.5, 0.4, 0.95, 0.082
@@ -208,7 +210,9 @@ def flip_map(reference, test, ppd: float = PPD, knee: float = 0.0):
     ``knee`` > 0 (HyAB units, where one unit is about a just noticeable difference) replaces
     ``HyAB ** qc`` by ``(HyAB^2 + knee^2) ** (qc / 2) - knee ** qc``: quadratic below the knee,
     FLIP's above it, so that a fit's loss has no cusp where an error crosses zero (the map is
-    then not FLIP's: the fit's loss, not the metric)."""
+    then not FLIP's: the fit's loss, not the metric). Computed in float64 (switches JAX to
+    64-bit floats for the process, as a fit's residual does: ``jax_residual.enable_x64``)."""
+    enable_x64()
     return _jitted("map")(reference, test, float(ppd), float(knee))
 
 
@@ -216,7 +220,9 @@ def flip_residual(reference, test, ppd: float = PPD, knee: float = 0.0):
     """(H, W, 3) residual whose squared norm per pixel is :func:`flip_map`'s value:
     ``sqrt(FLIP) * d / |d|`` with ``d`` the pixel's difference in the Hunt-adjusted CIELab of
     the colour pipeline. With ``knee`` > 0 it is linear in ``d`` near zero, so Gauss-Newton
-    sees a smooth least-squares problem whose loss is half the sum of the (kneed) map."""
+    sees a smooth least-squares problem whose loss is half the sum of the (kneed) map. In
+    float64, as :func:`flip_map`."""
+    enable_x64()
     return _jitted("residual")(reference, test, float(ppd), float(knee))
 
 

@@ -33,6 +33,9 @@ solve. Nothing continues with NaN.
 
 from __future__ import annotations
 
+import functools
+import itertools
+import weakref
 from dataclasses import dataclass, field
 from typing import Callable
 
@@ -83,7 +86,7 @@ class DrJitResidual:
 
     Attributes: ``k``, ``m``, ``stats`` (:class:`CallStats`), ``last_error`` (the last
     :class:`NonFiniteResidualError` / :class:`ResidualShapeError` raised inside a callback, or
-    None). Call :meth:`value` / :meth:`value_and_jac` for the same computation from NumPy
+    None), ``handle`` (int: what names this residual to :func:`shared_residual`'s function). Call :meth:`value` / :meth:`value_and_jac` for the same computation from NumPy
     (counted the same way).
     """
 
@@ -99,6 +102,7 @@ class DrJitResidual:
         self.k, self.m, self.name = int(k), int(m), name
         self.stats = CallStats()
         self.last_error: Exception | None = None
+        self.handle = next(_HANDLES)
         self._jax_fn = self._build()
 
     # -- NumPy side (runs Dr.Jit) ------------------------------------------------------------
@@ -205,31 +209,10 @@ class DrJitResidual:
 
     # -- JAX side ------------------------------------------------------------------------------
     def _build(self):
-        import jax
         import jax.numpy as jnp
 
-        r_spec = jax.ShapeDtypeStruct((self.m,), jnp.float64)
-        j_spec = jax.ShapeDtypeStruct((self.m, self.k), jnp.float64)
-
-        def cb_value(x):
-            return self.value(x)
-
-        def cb_value_and_jac(x):
-            return self.value_and_jac(x)
-
-        @jax.custom_jvp
-        def residual(x):
-            return jax.pure_callback(cb_value, r_spec, x, vmap_method="sequential")
-
-        @residual.defjvp
-        def residual_jvp(primals, tangents):
-            (x,), (t,) = primals, tangents
-            r, J = jax.pure_callback(
-                cb_value_and_jac, (r_spec, j_spec), x, vmap_method="sequential"
-            )
-            return r, J @ t
-
-        return residual
+        _LIVE[self.handle] = self
+        return shared_residual(self.k, self.m), jnp.asarray(self.handle, jnp.int64)
 
     def __call__(self, x):
         """JAX: ``x`` (k,) float64 array -> ``r`` (m,) float64 array (differentiable)."""
@@ -240,7 +223,48 @@ class DrJitResidual:
             raise ResidualShapeError(
                 f"{self.name}: parameter vector has shape {x.shape}, expected ({self.k},)"
             )
-        return self._jax_fn(x)
+        fn, handle = self._jax_fn
+        return fn(handle, x)
+
+
+# every live residual by its handle: the shared JAX functions below find the residual a call is
+# for by the handle it passes as an argument, so that one trace (and one compilation of a solver
+# step around it) serves every residual of the same sizes
+_LIVE: weakref.WeakValueDictionary = weakref.WeakValueDictionary()
+_HANDLES = itertools.count(1)
+
+
+@functools.lru_cache(maxsize=None)
+def shared_residual(k: int, m: int) -> Callable:
+    """The JAX function ``(handle int64 scalar, x (k,) float64) -> r (m,) float64`` of every
+    :class:`DrJitResidual` with ``k`` parameters and ``m`` residuals: a ``jax.custom_jvp``
+    function whose primal calls the residual ``handle`` names through one ``jax.pure_callback``
+    and whose JVP rule calls its ``value_and_jac`` through one and returns ``J @ t``. The
+    handle is a traced argument, not a constant of the trace: a function jitted around it
+    (a solver's step) compiles once for all residuals of these sizes."""
+    import jax
+    import jax.numpy as jnp
+
+    r_spec = jax.ShapeDtypeStruct((m,), jnp.float64)
+    j_spec = jax.ShapeDtypeStruct((m, k), jnp.float64)
+
+    def cb_value(h, x):
+        return _LIVE[int(h)].value(x)
+
+    def cb_value_and_jac(h, x):
+        return _LIVE[int(h)].value_and_jac(x)
+
+    @jax.custom_jvp
+    def residual(h, x):
+        return jax.pure_callback(cb_value, r_spec, h, x, vmap_method="sequential")
+
+    @residual.defjvp
+    def residual_jvp(primals, tangents):
+        (h, x), (_, t) = primals, tangents
+        r, J = jax.pure_callback(cb_value_and_jac, (r_spec, j_spec), h, x, vmap_method="sequential")
+        return r, J @ t
+
+    return residual
 
 
 def make_jax_residual(
