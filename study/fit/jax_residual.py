@@ -86,8 +86,9 @@ class DrJitResidual:
 
     Attributes: ``k``, ``m``, ``stats`` (:class:`CallStats`), ``last_error`` (the last
     :class:`NonFiniteResidualError` / :class:`ResidualShapeError` raised inside a callback, or
-    None), ``handle`` (int: what names this residual to :func:`shared_residual`'s function). Call :meth:`value` / :meth:`value_and_jac` for the same computation from NumPy
-    (counted the same way).
+    None), ``handle`` (int: what names this residual to :func:`shared_residual`'s function).
+    Call :meth:`value` / :meth:`value_and_jac` for the same computation from NumPy (counted the
+    same way).
     """
 
     def __init__(

@@ -22,7 +22,7 @@ from .solver_loop import Objective, Solution, Solver, Stop
 
 @dataclass(frozen=True)
 class _Jitted:
-    """optimistix's ``init`` and ``step`` + ``terminate`` of one solver, jitted (:func:`_jitted`)."""
+    """optimistix's ``init`` and ``step`` + ``terminate`` of a solver, jitted (:func:`_jitted`)."""
 
     init: Callable
     step: Callable
