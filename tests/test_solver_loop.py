@@ -128,3 +128,36 @@ def test_settings_are_one_frozen_record_and_keywords_override_single_fields():
     a = fit(problem, solver="nelder_mead", settings=SolverSettings(max_steps=7))
     b = fit(problem, solver="nelder_mead", max_steps=7)
     assert a.iterations == b.iterations == 7 and np.array_equal(a.u, b.u)
+
+
+@pytest.mark.parametrize("name", ["levenberg_marquardt", "bfgs"])
+def test_fits_of_one_size_share_one_compilation_and_each_reaches_its_own_residual(name, caplog):
+    """Two residuals of the same sizes, alive together: the second fit compiles nothing (JAX
+    logs no compilation), and every call of each fit reaches its own residual (the handle the
+    compiled step passes), each solving its own target."""
+    import logging
+
+    import jax
+
+    def fit_to(target):
+        t = np.asarray(target, np.float64)
+        res = make_jax_residual(lambda u: u - t, lambda u: (u - t, np.eye(3)), 3, 3)
+        solver = SOLVER_CLASSES[name](SolverSettings())
+        obj = Objective(res, None, {}, ["a", "b", "c"])
+        state = solver.init(obj, np.zeros(3))
+        for _ in range(40):
+            state = solver.step(obj, state)
+            if solver.terminate(obj, state) is not None:
+                break
+        np.testing.assert_allclose(np.asarray(state.y), t, atol=1e-6)
+        return res
+
+    first = fit_to([0.5, -1.0, 2.0])
+    calls = first.stats.n_value_calls + first.stats.n_jac_calls
+    with jax.log_compiles(True), caplog.at_level(logging.WARNING):
+        second = fit_to([-0.25, 0.75, 0.1])
+    compiled = [r.getMessage() for r in caplog.records if "ompil" in r.getMessage()]
+    assert not compiled, compiled[:3]
+    # no call of the second fit reached the first residual
+    assert first.stats.n_value_calls + first.stats.n_jac_calls == calls
+    assert second.stats.n_value_calls + second.stats.n_jac_calls > 0
