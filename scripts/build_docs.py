@@ -321,6 +321,8 @@ RENDERS = {
     "does not save them as data",
     "example.png": "a screenshot of the three.js example page in headless Chromium; "
     "scripts/threejs_check.py takes it again",
+    "wgsl_vs_port.png": "the WGSL export's render on lavapipe beside the port's; "
+    "scripts/wgsl_check.py draws it again",
 }
 
 

@@ -1,5 +1,6 @@
 """The WGSL export of a calibration run with wgpu on Mesa's lavapipe against the Dr.Jit port,
-measured for docs/webgpu.md: ``docs/results/wgsl/check.json``.
+measured for docs/webgpu.md: ``docs/results/wgsl/check.json`` and ``wgsl_vs_port.png`` (the WGSL
+render at the fitted constants | the port's | their difference, x100).
 
     .venv/bin/python scripts/wgsl_check.py [OUT] [EXPERIMENT]     # default: out/default
 
@@ -21,13 +22,15 @@ import tempfile
 import time
 from pathlib import Path
 
+import numpy as np
+
 REPO = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(REPO))
 
 from shaders_port import Constants  # noqa: E402
 from shaders_port.gl.compare import compare_port_gl  # noqa: E402
 from study import read_exr  # noqa: E402
-from study._io import repo_relative, write_json  # noqa: E402
+from study._io import repo_relative, write_json, write_png  # noqa: E402
 from study.calibration.frames import prepare  # noqa: E402
 from study.export.gl_check import GL_MEAN, GL_P999, passes  # noqa: E402
 from study.export.shaders import export_shaders, load_constants_json  # noqa: E402
@@ -49,6 +52,14 @@ def _verdict(res: dict) -> dict:
 def _adapter_name() -> str:
     info = _lavapipe_adapter().info
     return f"{info['device']} ({info['backend_type']}), {info.get('description', '')}".strip(", ")
+
+
+def _render_png(res: dict, path: Path) -> None:
+    """``res``'s WGSL render | the port's | |difference| x 100 (grey), side by side, sRGB."""
+    diff = np.repeat(np.minimum(res["diff"] * 100.0, 1.0)[..., None], 3, axis=-1)
+    gap = np.ones((res["gl"].shape[0], 4, 3))
+    path.parent.mkdir(parents=True, exist_ok=True)
+    write_png(path, np.concatenate([res["gl"], gap, res["port"], gap, diff], axis=1))
 
 
 def main(out="out/default", experiment="experiments/default.toml") -> dict:
@@ -80,6 +91,8 @@ def main(out="out/default", experiment="experiments/default.toml") -> dict:
             with WgslRenderer(folder, shader, inputs, overrides=overrides) as r:
                 res = compare_port_gl(inputs, constants, shader, renderer=r)
             record[name] = _verdict(res)
+            if name == "file_constants":
+                _render_png(res, RESULTS / "wgsl_vs_port.png")
     RESULTS.mkdir(parents=True, exist_ok=True)
     write_json(RESULTS / "check.json", record)
     print(json.dumps(record, indent=1))

@@ -25,6 +25,7 @@ import pytest
 
 from helpers import REPO
 from helpers.experiments import TINY, replaced
+from helpers.sheets import sheet_values
 from helpers.viewer import tiny_calibration
 from shaders_port import Constants
 from shaders_port.gl.compare import compare_port_gl
@@ -75,9 +76,10 @@ def test_calibrate_writes_the_module_with_the_pinned_three(run):
         assert (folder / name).read_bytes() == (pkg / src).read_bytes(), name
     for name in ("water.js", "example.js", "example.html"):
         assert not re.search(r"https?://", (folder / name).read_text()), name
-    # the exported GLSL ES text, its #version line left to three
-    frag = (run["out"] / "shaders" / "gles300" / "water_refraction.frag").read_text()
-    assert frag.partition("\n")[2] == cal["shaders"]["frag"]
+    # the exported GLSL ES text and textures.json, read by the page from the export's files
+    assert cal["files"] == {"vert": "../shaders/gles300/water.vert",
+                            "frag": "../shaders/gles300/water_refraction.frag",
+                            "textures": "../shaders/textures/textures.json"}  # fmt: skip
     summary = json.loads((run["out"] / "constants.json").read_text())
     assert cal["constants"] == summary["constants"]
 
@@ -153,7 +155,8 @@ def test_the_inputs_three_builds_from_the_pool_reproduce_the_studys(run):
     assert np.abs(faces - sky).max() < 1e-5
     # the texture matrix maps a world point to the texel it landed in
     m = np.asarray(built["textureMatrix"], np.float64).reshape(4, 4).T
-    x0, z0, x1, z1 = _calibration(folder / "threejs")["topDown"]["extent"]
+    record = json.loads((folder / "shaders" / "textures" / "textures.json").read_text())
+    x0, z0, x1, z1 = record["scene"]["top_down"]["extent"]
     s, t = (m @ [x0 + 0.3 * (x1 - x0), 0.0, z0 + 0.2 * (z1 - z0), 1.0])[:2]
     assert abs(s - 0.3) < 1e-6 and abs(t - 0.8) < 1e-6
     # the water both ways, on the water pixels
@@ -165,6 +168,35 @@ def test_the_inputs_three_builds_from_the_pool_reproduce_the_studys(run):
     print(f"three.js water, scene-built against study inputs: FLIP {score:.2e}, "
           f"mean |diff| {d.mean():.2e}, max {d.max():.2e}")  # fmt: skip
     assert score <= 0.02
+
+
+def test_the_module_is_wired_by_the_sheet_and_textures_alone(run):
+    """calibration.js holds none of the values the fit used: water.js reads them from
+    ``shaders/textures/textures.json``, and the shaders from ``shaders/gles300/``. The scene
+    record rewritten from the short sheet's text alone (its printed precision) draws the port's
+    water from the inputs the module builds; the sun moved in that file, the water follows."""
+    folder = run["root"] / "from_the_sheet"
+    for sub in ("threejs", "viewer", "shaders"):
+        shutil.copytree(run["out"] / sub, folder / sub)
+    cal = _calibration(folder / "threejs")
+    assert not {"light", "waves", "topDown", "normalTile", "textures", "shaders"} & set(cal)
+    scene, tile = sheet_values((folder / "shaders" / "gles300" / "BINDINGS.md").read_text())
+    path = folder / "shaders" / "textures" / "textures.json"
+    record = json.loads(path.read_text())
+    record["scene"], record["normal_map"]["tile"] = scene, tile
+    fitted = load_constants_json(run["out"] / "constants.json")
+    b = run["browser"]
+
+    def drawn(record: dict) -> dict:
+        path.write_text(json.dumps(record))
+        assert open_three_example(b, folder / "threejs" / "example.html") == []
+        r = BrowserRenderer(b, "fitted", api="waterThree", inputs="scene", screenPlane=True)
+        return compare_port_gl(run["inputs"], fitted, "water_refraction", renderer=r)
+
+    res = drawn(record)
+    assert res["n_water"] > 300 and passes(res), {k: res[k] for k in ("mean_abs", "p999")}
+    moved = drawn({**record, "scene": {**scene, "lightpos": [800.0, 500.0, 300.0]}})
+    assert not passes(moved) and np.abs(moved["gl"] - res["gl"]).max() > 0.05
 
 
 def test_a_missing_texture_or_a_rejected_shader_shows_in_the_page(run):
@@ -179,8 +211,8 @@ def test_a_missing_texture_or_a_rejected_shader_shows_in_the_page(run):
     # the textures back, the shader broken: three reports the compile error, the page shows it
     shutil.copy(run["out"] / "shaders" / "textures" / "normal_map.exr",
                 folder / "shaders" / "textures")  # fmt: skip
-    cal = (folder / "threejs" / "calibration.js").read_text()
-    (folder / "threejs" / "calibration.js").write_text(cal.replace("void main()", "void main(", 1))
+    frag = folder / "shaders" / "gles300" / "water_refraction.frag"
+    frag.write_text(frag.read_text().replace("void main()", "void main(", 1))
     errors = open_three_example(b, folder / "threejs" / "example.html", expect_errors=True)
     assert errors and any("compile" in e.lower() or "shader" in e.lower() for e in errors), errors
     assert not b.evaluate("waterThree.ready")

@@ -3,15 +3,18 @@
 The folder is self-contained (opened from ``file://`` or served by any static server):
 
 * ``water.js``: the ES module (a project template, copied as it is). It exports
-  ``loadWaterTextures`` (the shipped normal map and Fresnel LUT, read with three's
+  ``loadCalibration`` (the calibration read from the files the binding sheet names: the GLSL
+  ES 3.00 export and ``shaders/textures/textures.json``, whose scene record holds the light,
+  the waves' offsets and velocities and the top-down camera's extent and size, the values the
+  sheet gives), ``loadWaterTextures`` (the shipped normal map and Fresnel LUT, read with three's
   ``EXRLoader``), ``WaterInputs`` (the top-down colour and world-height render targets and the
   sky cube map, built from the user's own three.js scene) and ``createWater`` (the water quad
   with the calibrated ``RawShaderMaterial``, the waves' clock and the per-camera uniforms).
-* ``calibration.js``: what the module reads of this calibration, one ``export default {...}``:
-  the exported GLSL ES 3.00 text (``shaders/gles300/``), the ``#define`` lines of the start
-  constants, the light, the waves' offsets and velocities, the water rectangle, the top-down
-  camera's extent and size, the shipped textures' files and sampler state, the study's camera,
-  and the three.js version the module was tested with.
+* ``calibration.js``: one ``export default {...}``: the paths of those files, and what is not
+  the calibration's but the scene's: the water rectangle, the sky cube map's size, the study's
+  camera and resolution (the example's view); a user's shader's names for the inputs and its
+  values; the ``#define`` lines of the start constants (for the tests); the three.js version
+  the module was tested with.
 * ``example.html`` and ``example.js``: the pool in three.js. Its floor and walls are a height
   field laid from the study's world-height texture, unlit, carrying the study's lit top-down
   colour; its sky is the study's cube map as three holds one (``scene.background``). The
@@ -40,7 +43,7 @@ from pathlib import Path
 from ..._io import repo_path
 from ..shaders import read_calibration
 from ..targets import target_file
-from ..textures import read_texture_record, scene_record
+from ..textures import read_texture_record
 from ..viewer import spec_defines, start_constants
 
 TEMPLATES = Path(__file__).parent
@@ -125,13 +128,12 @@ def user_wiring(saved, vert: str, frag: str) -> tuple[dict, dict]:
     return names, values
 
 
-def _strip_version(text: str) -> str:
-    """GLSL ES text without its ``#version`` line (three's ``glslVersion`` writes it, before
-    its own ``#define`` lines)."""
-    head, sep, rest = text.partition("\n")
+def _check_version(text: str) -> None:
+    """ThreeUnsupported unless the GLSL ES text starts with ``#version 300 es`` (the module
+    drops that line: three's ``glslVersion`` writes it, before its own ``#define`` lines)."""
+    head = text.partition("\n")[0]
     if not head.startswith("#version 300 es"):
         raise ThreeUnsupported(f"the GLSL ES export starts {head!r}, not '#version 300 es'")
-    return rest
 
 
 def _defines(frag: str, start: dict) -> dict:
@@ -145,9 +147,9 @@ def _defines(frag: str, start: dict) -> dict:
 
 def calibration_data(out: Path, exp, inputs) -> dict:
     """The object ``calibration.js`` exports for the calibration in ``out`` of the study's
-    shader, with its shader ``inputs`` (``ShaderInputs`` at the experiment's resolution). Units:
-    world units, +y up, the water plane at y = 0; colours linear RGB; times seconds; wave
-    offsets texture units of the normal map (tile ``normalTile`` world units)."""
+    shader, with its shader ``inputs`` (``ShaderInputs`` at the experiment's resolution): the
+    files ``loadCalibration`` reads (URLs relative to ``threejs/``) and the scene's layout
+    (world units, +y up, the water plane at y = 0)."""
     saved = read_calibration(out / "constants.json")
     summary = saved.data
     shaders = out / "shaders"
@@ -162,38 +164,28 @@ def calibration_data(out: Path, exp, inputs) -> dict:
             "not build (it builds the top-down renders, the sky cube map, the shipped textures "
             "and the camera's and light's uniforms)"
         )
-    record = read_texture_record(shaders) or {}
-    scene = scene_record(exp, inputs)  # the values the binding sheets give
+    _check_version(vert)
+    _check_version(frag)
+    if (read_texture_record(shaders) or {}).get("scene") is None:
+        raise FileNotFoundError(f"{shaders / 'textures' / 'textures.json'} has no scene record")
     wx0, wz0, wx1, wz1 = (float(v) for v in inputs.water_rect)
     cam = exp.section("camera")
-    tex = {
-        name: {
-            "url": f"../shaders/textures/{record[key]['file']}",
-            "filter": record[key]["filter"],
-            "wrap": record[key]["wrap"],
-        }
-        for name, key in (("normalMap", "normal_map"), ("fresnelLookup", "fresnel_lut"))
-    }
     return {
         "threeVersion": three_version(),
         "shader": summary["shader"],
         "experiment": summary.get("experiment") or summary["scenes"][0],  # joint: the first
-        "shaders": {"vert": _strip_version(vert), "frag": _strip_version(frag)},
+        # what loadCalibration reads: the files the binding sheet names
+        "files": {
+            "vert": f"../shaders/{target_file('gles300', 'water', 'vert')}",
+            "frag": f"../shaders/{target_file('gles300', stem, 'frag')}",
+            "textures": "../shaders/textures/textures.json",
+        },
         # a user's file has no specialization constants: its module carries the fitted ones
         "startDefines": None if saved.user else _defines(frag, start_constants(summary)),
         "uniformNames": names,
         "values": values,
         "constants": summary["constants"],
-        "light": {"position": scene["lightpos"], "color": scene["lightcolor"]},
-        "waves": {"offsets": scene["wave_offsets"], "velocities": scene["wave_velocities"]},
-        "normalTile": float(inputs.normal_tile),
         "water": {"rect": [wx0, wz0, wx1, wz1], "y": 0.0},
-        "topDown": {
-            "extent": scene["top_down"]["extent"],
-            "size": scene["top_down"]["size"],
-            "noGeometry": scene["top_down"]["no_geometry"],
-        },
-        "textures": tex,
         "sky": {"size": int(inputs.cubemap.shape[1])},
         "camera": {
             "position": [float(v) for v in cam["position"]],
@@ -223,7 +215,8 @@ def write_threejs(out: Path, exp, inputs) -> Path:
         shutil.copyfile(TEMPLATES / name, tmp / name)
     text = json.dumps(data, indent=1, allow_nan=False)
     (tmp / "calibration.js").write_text(
-        "// The calibration water.js wires (written by study/export/threejs).\n"
+        "// Where water.js's loadCalibration finds the calibration, and the example's scene\n"
+        "// (written by study/export/threejs).\n"
         f"export default {text};\n",
         "utf-8",
     )

@@ -4,11 +4,13 @@
 // tests: waterThree.renderFloat({inputs: 'scene' | 'study', time, constants}) draws the water
 // alone into a float target and returns it, as the viewer's renderFloat does.
 import * as THREE from 'three';
-import calibration from './calibration.js';
-import { loadWaterTextures, WaterInputs, createWater } from './water.js';
+import shipped from './calibration.js';
+import { loadCalibration, loadWaterTextures, WaterInputs, createWater } from './water.js';
 
 const api = window.waterThree;
 const D = window.WATER_VIEWER_DATA;
+// the calibration as loadCalibration reads it from the shipped files (set first in main)
+let calibration;
 
 function floats(b64) {
   const bin = atob(b64);
@@ -145,6 +147,7 @@ function floatTarget(w, h) {
 
 async function main() {
   if (!D) throw new Error('../viewer/data.js did not load: the page shows the pool from the viewer\'s data (write it with `study viewer`)');
+  calibration = await loadCalibration(shipped, new URL('./', import.meta.url));
   const [W, H] = calibration.resolution;
   const canvas = document.getElementById('view');
   const renderer = new THREE.WebGLRenderer({ canvas, antialias: false });
@@ -160,7 +163,7 @@ async function main() {
     const log = [vs, fs].map((sh) => gl.getShaderInfoLog(sh)).filter(Boolean).join('\n');
     shaderErrors.push(`WebGL could not compile or link the water's shader:\n${log || gl.getProgramInfoLog(program)}`);
   };
-  const textures = await loadWaterTextures(calibration, new URL('./', import.meta.url));
+  const textures = await loadWaterTextures(calibration);
   const { scene, pool } = poolScene();
   const inputs = new WaterInputs(renderer, calibration);
   const water = createWater(calibration, textures, inputs);

@@ -1,9 +1,10 @@
 // The calibrated water in three.js: an ES module written by study/export/threejs into every
 // calibration's threejs/ folder (a project template, copied as it is). In a three.js app:
 //
-//   import calibration from './calibration.js';
-//   import { loadWaterTextures, WaterInputs, createWater } from './water.js';
-//   const textures = await loadWaterTextures(calibration, new URL('./', import.meta.url));
+//   import shipped from './calibration.js';
+//   import { loadCalibration, loadWaterTextures, WaterInputs, createWater } from './water.js';
+//   const calibration = await loadCalibration(shipped, new URL('./', import.meta.url));
+//   const textures = await loadWaterTextures(calibration);
 //   const inputs = new WaterInputs(renderer, calibration);
 //   const water = createWater(calibration, textures, inputs);
 //   inputs.update(scene, [water]);   // the pool and sky as seen by the shader (again when they change)
@@ -52,13 +53,44 @@ function flipRows(data, width, height, channels) {
   }
 }
 
-// The textures the constants were fitted with (calibration.textures: the normal map and the
-// Fresnel LUT, float32 OpenEXR in ../shaders/textures/), read by three's EXRLoader, with the
-// sampler state of textures.json. base: the URL calibration.textures' urls are relative to.
-export async function loadWaterTextures(calibration, base) {
+function text(url, what) {
+  return readBytes(url).then((b) => new TextDecoder().decode(b), (e) => {
+    throw new Error(`could not load ${what} from ${url}: ${(e && e.message) || e}`);
+  });
+}
+
+// The calibration as the export ships it, read from the files the binding sheet names and
+// nothing else: the shaders from the GLSL ES files, and from shaders/textures/textures.json the
+// values the fit used (the light, the waves' offsets and velocities, the top-down camera's
+// extent and size, the normal map's tile) and the textures' files and sampler state.
+// shipped: calibration.js's object (files: the URLs of those files, relative to base; the
+// water's rectangle, the example's camera, a user's shader's names for the inputs).
+export async function loadCalibration(shipped, base) {
+  const url = (rel) => new URL(rel, base).href;
+  const record = JSON.parse(await text(url(shipped.files.textures), 'textures.json'));
+  const strip = (src) => src.replace(/^#version[^\n]*\n/, '');
+  const [vert, frag] = await Promise.all([
+    text(url(shipped.files.vert), 'the vertex shader'), text(url(shipped.files.frag), 'the fragment shader')]);
+  const s = record.scene;
+  const texture = (r) => ({ url: new URL(r.file, url(shipped.files.textures)).href, filter: r.filter, wrap: r.wrap });
+  return {
+    ...shipped,
+    shaders: { vert: strip(vert), frag: strip(frag) },
+    light: { position: s.lightpos, color: s.lightcolor },
+    waves: { offsets: s.wave_offsets, velocities: s.wave_velocities },
+    normalTile: record.normal_map.tile,
+    topDown: { extent: s.top_down.extent, size: s.top_down.size, noGeometry: s.top_down.no_geometry },
+    textures: { normalMap: texture(record.normal_map), fresnelLookup: texture(record.fresnel_lut) },
+  };
+}
+
+// The textures the constants were fitted with (calibration.textures of loadCalibration: the
+// normal map and the Fresnel LUT, float32 OpenEXR in shaders/textures/), read by three's
+// EXRLoader, with the sampler state of textures.json.
+export async function loadWaterTextures(calibration) {
   const out = {};
   for (const [name, spec] of Object.entries(calibration.textures)) {
-    const url = new URL(spec.url, base).href;
+    const url = spec.url;
     let parsed;
     try {
       parsed = new EXRLoader().setDataType(THREE.FloatType).parse(await readBytes(url));
