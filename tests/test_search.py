@@ -119,6 +119,8 @@ def test_adaptive_tradeoff_tiny(tmp_path):
     assert {r["job.variant"] for r in screen} >= {"water_refraction", "water_baseline_flat"}
     # screened at fit.resolution (32x32) / tradeoff.screen_factor (1): 8 x 8 blocks of 4 x 4
     assert all(r["status"] == "ok" and len(r["flip_blocks"]) == 64 for r in screen)
+    # and their per-pixel FLIP and fetch maps, float16 at the screen's resolution
+    assert all(len(r["flip_map"]) == len(r["fetch_map"]) == 2 * 32 * 32 for r in screen)
     summary = json.loads((tmp_path / "summary.json").read_text())
     assert summary["search"]["mode"] == "adaptive" and summary["budget"] == {"fetches_mean": 12.0}
     rec = summary["scenes"]["default"]["recommended"]
@@ -127,6 +129,11 @@ def test_adaptive_tradeoff_tiny(tmp_path):
     assert any(r["job.variant"] == "water_refraction" for r in full)  # the original, always
     report = (tmp_path / "report.md").read_text()
     assert "Search: adaptive" in report and "**Budget**" in report
+    # the level-of-detail policies from the screen's maps: the single points' front among them
+    lod = summary["scenes"]["default"]["lod"]
+    assert lod["resolution"] == [32, 32] and lod["points"] == len(screen)
+    assert lod["front"][-1]["flip"] <= lod["best"]["flip"] + 1e-12
+    assert "## Level of detail" in report and (tmp_path / "lod.png").stat().st_size > 5_000
     assert summary["exports"]["default"]["gl_check"]["passed"]
 
 

@@ -13,6 +13,7 @@ from shaders_port import space as _space
 
 from .._io import write_text_atomic
 from .calibration import fmt, gl_ran, pyplot
+from .lod import lod_lines
 from .tradeoff_motion import motion_lines
 
 COSTS = {
@@ -206,6 +207,7 @@ def tradeoff_report_text(summary: dict) -> str:
     lines += ["![error against cost, Pareto fronts](pareto.png)", ""]
     for scene, f in summary["scenes"].items():
         lines += _scene_lines(scene, f, summary)
+    lines += lod_lines(summary)
     lines += _closing_lines(summary)
     return "\n".join(lines) + "\n"
 

@@ -39,7 +39,14 @@ from shaders_port import space as _space
 
 from ..fit.model import constants_from_experiment
 from ..sweep import run_sweep
-from .tradeoff_jobs import SEED_SCHEDULE, original_schedule, schedules, screen_job
+from .tradeoff_jobs import (
+    SCREEN_VERSION,
+    SEED_SCHEDULE,
+    original_schedule,
+    schedules,
+    screen_job,
+    unpack_map,
+)
 
 # representatives of every source's technique screened in the first round: each alone
 # (``space.ALONE``), 000's refraction alone, 002-004 and 001 + 004 (flat water)
@@ -191,6 +198,9 @@ def screen_record(job: dict, row: dict) -> dict:
     }
     for k in ("flip", "rmse", "fetches_mean", "iterations_mean", "not_crossed", "flip_blocks"):
         rec[k] = row.get(k)
+    if row.get("flip_map") is not None and row.get("fetch_map") is not None:
+        rec["flip_map"] = unpack_map(row["flip_map"], row["map_shape"])
+        rec["fetch_map"] = unpack_map(row["fetch_map"], row["map_shape"])
     rec["fitted"] = {
         k[len("fitted.") :]: v for k, v in row.items() if k.startswith("fitted.") and v is not None
     }
@@ -238,6 +248,7 @@ class Search:
             "schedule": sched["schedule"],
             "start": start,
             "factor": exp.tradeoff.screen_factor,
+            "screen_version": SCREEN_VERSION,
         }
 
     def ok(self, i: int) -> list[dict]:

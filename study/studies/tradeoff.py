@@ -24,6 +24,9 @@ Then it analyses the table (``tradeoff_analysis``):
   adaptive search, what each axis's choice buys at the recommendation;
 * with ``fit.shader`` a GLSL file, the user's own shader measured in full beside the search's
   points (``tradeoff_user``), on the chart and the front like them, and where it stands;
+* for the adaptive search, the level-of-detail policies (``study.studies.lod``): the water in
+  bands by distance or footprint, each band one screen point, chosen from the screen's
+  per-pixel maps, the cheapest reaching the best single point's FLIP (``lod.png``);
 * on an animated experiment, the search and the fits on frame 0, then every point measured in
   full scored on every frame and on the temporal error, and whether motion changes the
   recommendation (``tradeoff_motion``).
@@ -56,12 +59,14 @@ from ..calibration.frames import Frame
 from ..calibration.scoring import Scorer
 from ..calibration.shader import Shader
 from ..fit.model import constants_from_experiment
+from ..report.lod import lod_figure
 from ..report.panels import panels_figure, write_panels
 from ..report.tradeoff import ORIGINAL_PANEL, pareto_figure, write_tradeoff_report
 from ..report.tradeoff_motion import motion_figure
 from ..scene.animation import is_animated
 from ..scene.views import has_views, view_experiments, view_overrides
 from ..sweep import load_scene, run_sweep, scene_spec
+from .lod import scene_policies
 from .search import Search
 from .tradeoff_analysis import COSTS, analyse, constants_of
 from .tradeoff_export import export_points, point_row
@@ -175,6 +180,7 @@ def run_tradeoff(
                 # a point the search did not screen (a user's shader) has no marginals
                 rec = summary["scenes"][name]["recommended"]
                 summary["scenes"][name]["marginals"] = searcher.marginals_of(i, rec) if rec else []
+                summary["scenes"][name]["lod"] = scene_policies(exps[i], searcher.ok(i))
     summary["experiments"] = [str(p) for p in experiments]
     init_backend(variant)
     summary["exports"], summary["user_exports"] = export_points(
@@ -183,6 +189,7 @@ def run_tradeoff(
     summary["images"], summary["panels"] = side_by_side(exps, specs, summary, rows, out, variant)
 
     pareto_figure(out / "pareto.png", recs, summary)
+    lod_figure(out / "lod.png", summary)
     motion_figure(out / "motion.png", summary)
     write_tradeoff_report(out, summary)
     write_json(out / "summary.json", summary)

@@ -194,6 +194,9 @@ def point_job(job: dict) -> dict:
 
 
 SCREEN_BLOCK = 4  # pixels per side of the blocks the screen's FLIP map is averaged over
+# what a screen row holds, part of its job (a table of an earlier version is screened again,
+# while the points measured in full are kept): 2, the per-pixel FLIP and fetch maps
+SCREEN_VERSION = 2
 
 
 def screen_job(job: dict) -> dict:
@@ -204,7 +207,10 @@ def screen_job(job: dict) -> dict:
     RMSE on the water pixels, texture fetches and loop iterations per water pixel, the share
     of rays not crossing the floor, ``flip_blocks`` (the FLIP map averaged over
     ``SCREEN_BLOCK`` x ``SCREEN_BLOCK`` pixel blocks, row-major, NaN where a block has no
-    water: the paired noise estimate of ``study.studies.search``) and the fitted constants."""
+    water: the paired noise estimate of ``study.studies.search``), the per-pixel FLIP and
+    texture-fetch maps (``flip_map``, ``fetch_map``: :func:`pack_map` bytes of
+    ``map_shape`` (H, W), NaN off the water; the level-of-detail policies of
+    ``study.studies.lod`` are chosen from them) and the fitted constants."""
 
     exp, _, _ = load_scene(job["scene"], job.get("mitsuba_variant", "llvm_ad_rgb"))
     w, h = exp.fit.resolution
@@ -229,10 +235,25 @@ def screen_job(job: dict) -> dict:
     for k in ("fetches", "iterations"):
         if k in diag.maps:
             out[f"{k}_mean"] = float(diag.maps[k][m].mean())
+    if "fetches" in diag.maps:
+        out["flip_map"] = pack_map(fmap)
+        out["fetch_map"] = pack_map(np.where(m, diag.maps["fetches"], np.nan))
+        out["map_shape"] = list(fmap.shape)
     if "crossed" in diag.maps:
         out["not_crossed"] = float(1.0 - diag.maps["crossed"][m].mean())
     out["fitted"] = cal.fitted.to_dict()
     return out
+
+
+def pack_map(values: np.ndarray) -> bytes:
+    """A per-pixel map (H, W) as little-endian float16 bytes, row-major (FLIP in [0, 1] keeps
+    three significant digits, a fetch count is exact up to 2048; NaN stays NaN)."""
+    return np.asarray(values, "<f2").tobytes()
+
+
+def unpack_map(data: bytes, shape) -> np.ndarray:
+    """:func:`pack_map`'s bytes back as a (H, W) float32 array."""
+    return np.frombuffer(data, "<f2").reshape(tuple(int(n) for n in shape)).astype(np.float32)
 
 
 def block_means(values: np.ndarray, block: int) -> np.ndarray:

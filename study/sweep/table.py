@@ -68,6 +68,8 @@ def job_columns(job: dict) -> dict:
 def _cell(v):
     if v is None or isinstance(v, (bool, str)):
         return v
+    if isinstance(v, (bytes, bytearray)):  # a packed array (e.g. the screen's maps)
+        return bytes(v)
     if isinstance(v, int):
         return int(v)
     if isinstance(v, float) or type(v).__module__ == "numpy" and hasattr(v, "item"):

@@ -1,0 +1,84 @@
+"""The level-of-detail part of the tradeoff report: ``lod.png`` (per scene, the screen's single
+points and their front beside the front of band policies, FLIP against mean texture fetches per
+water pixel, the best single point and the policy chosen against it marked) and the report's
+"Level of detail" lines. Both read ``summary["scenes"][scene]["lod"]``
+(``study.studies.lod.scene_policies``)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from .calibration import fmt, pyplot
+
+
+def lod_figure(path: Path, summary: dict) -> Path | None:
+    """Draw the chart of the module doc into ``path`` (PNG, 110 dpi); None when no scene has a
+    level-of-detail finding (a chart of an earlier run at ``path`` is removed)."""
+    scenes = [(n, s["lod"]) for n, s in summary["scenes"].items() if s.get("lod")]
+    if not scenes:
+        Path(path).unlink(missing_ok=True)
+        return None
+    plt = pyplot()
+    fig, axes = plt.subplots(1, len(scenes), figsize=(5.6 * len(scenes), 4.4), squeeze=False)
+    for ax, (name, lod) in zip(axes[0], scenes):
+        singles = lod["single_front"]
+        ax.step([p["fetches"] for p in singles], [p["flip"] for p in singles], where="post",
+                color="0.4", label="single points' front")  # fmt: skip
+        ax.plot([p["fetches"] for p in lod["front"]], [p["flip"] for p in lod["front"]], ".",
+                color="tab:blue", ms=4, label="band policies' front")  # fmt: skip
+        s, p = lod["single"], lod["policy"]
+        ax.plot([s["fetches"]], [s["flip"]], "D", color="0.1",
+                label=f"cheapest single at the lowest FLIP: {s['label']}")  # fmt: skip
+        if p:
+            ax.plot([p["fetches"]], [p["flip"]], "*", color="tab:red", ms=12,
+                    label=f"policy, {len(p['bands'])} bands by {p['measure']}")  # fmt: skip
+        ax.set_xscale("log")
+        ax.set_xlabel("texture fetches / water pixel (mean)")
+        ax.set_ylabel(f"FLIP at the screen's {lod['resolution'][0]}x{lod['resolution'][1]}")
+        ax.set_title(name)
+        ax.legend(fontsize=7, loc="best")
+    fig.savefig(path, dpi=110, bbox_inches="tight")
+    plt.close(fig)
+    return path
+
+
+def lod_lines(summary: dict) -> list[str]:
+    """The report's "Level of detail" section (no lines when no scene has a finding)."""
+    scenes = [(n, s["lod"]) for n, s in summary["scenes"].items() if s.get("lod")]
+    if not scenes:
+        return []
+    lines = [
+        "## Level of detail",
+        "",
+        "The water split into bands by what a pixel needs (its distance to the camera, or its "
+        "footprint on the water), each band given one point of the screen; bounds at deciles "
+        "of the measure, up to 5 bands. FLIP and fetches at the screen's resolution, from the "
+        "screen's per-pixel maps. Compared at the lowest FLIP a single point reaches: the "
+        "cheapest single point, and the cheapest policy of two bands or more, whose FLIP is "
+        "above it by no more than one paired standard error. Each band keeps its point's "
+        "constants fitted on the whole view, and neither the seam between bands nor a blend "
+        "margin's cost is counted yet: the policy is chosen from the maps, not drawn.",
+        "",
+        "| scene | lowest FLIP | cheapest single point there | FLIP | fetches "
+        "| policy (bands, nearest first) | FLIP | fetches | fetches / single's |",
+        "|---|---|---|---|---|---|---|---|---|",
+    ]
+    for name, lod in scenes:
+        b, s, p = lod["best"], lod["single"], lod["policy"]
+        if p is None:
+            policy, cells = "none reaches it", ["", "", ""]
+        else:
+            unit = "world units" if p["measure"] == "distance" else "square world units"
+            bands = "; ".join(
+                f"{label} ({100 * share:.0f} %" + (f", to {x:.3g}" if x is not None else "") + ")"
+                for label, share, x in zip(p["bands"], p["shares"], [*p["bounds"], None])
+            )
+            policy = f"by {p['measure']} ({unit}): {bands}"
+            cells = [f"{fmt(p['flip'], 4)} ± {fmt(p['se'], 2)}", fmt(p["fetches"], 3),
+                     fmt(lod["fetch_ratio"], 3)]  # fmt: skip
+        lines.append(
+            f"| {name} | {fmt(b['flip'], 4)} ({b['label']}) | {s['label']} | "
+            f"{fmt(s['flip'], 4)} | {fmt(s['fetches'], 3)} | {policy} | " + " | ".join(cells) + " |"
+        )
+    lines += ["", "![Band policies against single points](lod.png)", ""]
+    return lines
