@@ -329,9 +329,10 @@ RENDERS = {
 def figures() -> dict[Path, tuple[list[Path], object]]:
     """Every figure this script draws: path -> (the result files it is drawn from, a function
     drawing it into a path). Drawn: the Pareto chart of a tradeoff-family study whose
-    ``tradeoff.parquet`` is committed, the motion chart of one whose summary has a scene in
-    motion, the stability figures, and every side-by-side whose panels are committed as data
+    ``tradeoff.parquet`` is committed, its level-of-detail chart where its summary has one, the
+    motion chart of one whose summary has a scene in motion, the stability figures, and every side-by-side whose panels are committed as data
     (``images_<scene>.exr`` and ``.json``, ``study.report.panels``)."""
+    from study.report.lod import lod_figure
     from study.report.panels import panels_figure
     from study.report.stability import noise_figure, solver_figure, spread_figure
     from study.report.tradeoff_motion import motion_figure
@@ -343,6 +344,8 @@ def figures() -> dict[Path, tuple[list[Path], object]]:
         sources = [p for p in (table, folder / "user.parquet", summary) if p.is_file()]
         if table.is_file():
             out[folder / "pareto.png"] = (sources, lambda p, f=folder: _pareto(p, f))
+        if summary.is_file() and any(f.get("lod") for f in _json(summary)["scenes"].values()):
+            out[folder / "lod.png"] = ([summary], lambda p, f=summary: lod_figure(p, _json(f)))
         if summary.is_file() and any(
             f.get("motion") for f in _json(summary)["scenes"].values()
         ):  # fmt: skip
