@@ -330,8 +330,9 @@ def figures() -> dict[Path, tuple[list[Path], object]]:
     """Every figure this script draws: path -> (the result files it is drawn from, a function
     drawing it into a path). Drawn: the Pareto chart of a tradeoff-family study whose
     ``tradeoff.parquet`` is committed, its level-of-detail chart where its summary has one, the
-    motion chart of one whose summary has a scene in motion, the stability figures, and every side-by-side whose panels are committed as data
-    (``images_<scene>.exr`` and ``.json``, ``study.report.panels``)."""
+    motion chart of one whose summary has a scene in motion, the stability figures, and every
+    side-by-side whose panels are committed as data (``images_<scene>.exr`` and ``.json``,
+    ``study.report.panels``)."""
     from study.report.lod import lod_figure
     from study.report.panels import panels_figure
     from study.report.stability import noise_figure, solver_figure, spread_figure
