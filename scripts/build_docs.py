@@ -25,6 +25,8 @@ Every table of results in ``docs/`` is written by this script, never by hand:
 * ``docs/results/engine-shaders/report.md``: the engine-style shader pairs of
   ``experiments/`` calibrated, from each one's ``constants.json`` (``study calibrate
   experiments/<name>.toml``);
+* ``docs/results/lod/report.md``: the level-of-detail policies on seven scenes, from their
+  tradeoff summaries (``docs_lod.py``);
 * ``docs/experiment-keys.md``: the experiment file's key table, from the schema;
 * ``docs/file-formats.md``: the files a user gives and the files the tool writes, its tables
   from the schema, the file readers and the committed result files (``docs_file_formats.py``);
@@ -35,7 +37,8 @@ Every table of results in ``docs/`` is written by this script, never by hand:
   (``docs_figures.py``, which also marks a tradeoff-family report whose run is stale).
 
 and every figure it can draw from those files (:func:`figures`): the Pareto chart of a
-tradeoff-family study whose ``tradeoff.parquet`` is committed, a study's ``motion.png``, the
+tradeoff-family study whose ``tradeoff.parquet`` is committed, a study's ``lod.png`` (and each
+``docs/results/lod/<scene>/lod.png``) and ``motion.png``, the
 stability figures, and each side-by-side of renders whose panels a run saved as data
 (``images_<scene>.exr`` and ``.json``). ``docs/results/figures.json`` records, per figure, the
 SHA-256 of each file it was drawn from, and lists every other figure under ``docs/results``
@@ -118,6 +121,7 @@ def generated() -> dict[Path, str]:
     from docs_gpu import gpu_bench_page
     from docs_error_budget import error_budget_page
     from docs_own_waves import own_waves_page
+    from docs_lod import lod_page
     from docs_resolution_transfer import resolution_transfer_page
     from docs_figures import quoted_pages, stale_results
 
@@ -169,6 +173,7 @@ def generated() -> dict[Path, str]:
     )
     pages[RESULTS / "engine-shaders" / "report.md"] = _engine_pairs_page(RESULTS / "engine-shaders")
     pages[RESULTS / "own-waves" / "report.md"] = own_waves_page(RESULTS)
+    pages[RESULTS / "lod" / "report.md"] = lod_page(RESULTS)
     pages[RESULTS / "error-budget" / "report.md"] = error_budget_page(RESULTS / "error-budget")
     pages[RESULTS / "views" / "generalise.md"] = generalise_report_text(
         _json(RESULTS / "views" / "generalise.json")
@@ -357,6 +362,8 @@ def figures() -> dict[Path, tuple[list[Path], object]]:
         for data in sorted(folder.glob("images_*.exr")):
             png = data.with_suffix(".png")
             out[png] = ([data, data.with_suffix(".json")], panels_figure)
+    for summary in sorted((RESULTS / "lod").glob("*/summary.json")):
+        out[summary.parent / "lod.png"] = ([summary], lambda p, f=summary: lod_figure(p, _json(f)))
     for data in sorted((RESULTS / "error-budget").glob("images_*.exr")):
         out[data.with_suffix(".png")] = ([data, data.with_suffix(".json")], panels_figure)
     ms = RESULTS / "stability" / "multistart" / "summary.json"

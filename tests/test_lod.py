@@ -60,6 +60,10 @@ def test_two_bands_where_each_shader_wins_its_half():
     assert pol["choices"] == [0, 1] and pol["bounds"] == [15.5] and pol["shares"] == [0.5, 0.5]
     assert pol["fetches"] == pytest.approx(6.0) and found["fetch_ratio"] == pytest.approx(0.6)
     assert abs(pol["d_flip"]) <= pol["se"]
+    # chosen on half the blocks, it holds on the other half
+    check = lod.held_out(pts, {"distance": COL})
+    assert check["choices"] == [0, 1] and check["within"]
+    assert check["fetch_ratio"] == pytest.approx(0.6)
 
 
 def test_bands_buy_nothing_where_one_shader_wins_everywhere():
@@ -70,6 +74,7 @@ def test_bands_buy_nothing_where_one_shader_wins_everywhere():
     found = lod.best_policy(front, pts, {"distance": COL})
     assert found["single"] == 1 and found["policy"] is None and found["fetch_ratio"] is None
     assert any(len(p["choices"]) > 1 for p in front)  # mixed policies exist, all too poor
+    assert lod.held_out(pts, {"distance": COL}) is None
 
 
 def test_the_front_is_the_brute_force_front(monkeypatch):

@@ -207,6 +207,18 @@ def screen_record(job: dict, row: dict) -> dict:
     return rec
 
 
+def screen_records(rows: list[dict]) -> list[dict]:
+    """:func:`screen_record` of every row of a screen table (``screen.parquet``, read with
+    ``study.sweep.read_table``), its job rebuilt from the row's ``job.*`` columns."""
+    out = []
+    for r in rows:
+        job = {k: r[f"job.{k}"] for k in ("experiment", "variant", "kind", "scale")}
+        job["schedule"] = {k[len("job.schedule.") :]: v for k, v in r.items()
+                           if k.startswith("job.schedule.") and v is not None}  # fmt: skip
+        out.append(screen_record(job, r))
+    return out
+
+
 class Search:
     """The adaptive search over one sweep client (see the module doc): ``walk`` per experiment,
     ``schedules`` for the survivors, ``full_jobs`` for the final rung, ``marginals_of`` for the

@@ -1,0 +1,129 @@
+"""The docs' page of the level-of-detail policies on seven scenes (``docs/results/lod/report.md``),
+generated from committed tradeoff summaries:
+
+* the default scene: ``docs/results/tradeoff/summary.json`` (``study tradeoff
+  experiments/default.toml``);
+* ``docs/results/lod/<scene>/summary.json``: ``study tradeoff experiments/<scene>.toml --out
+  docs/results/lod/<scene>`` for deep_steps, grazing and calm, and for view k of
+  ``experiments/views.toml`` the same with ``--set camera.position=... --set camera.target=...
+  --set 'camera.views=[]' --set 'name="views-view<k>"'`` (the view's camera); only the
+  summary is kept. ``lod.png`` beside each is drawn from it (``study.report.lod``).
+
+``python scripts/docs_lod.py FOLDER EXPERIMENT [KEY=VALUE ...]`` recomputes the ``lod`` of a
+tradeoff folder's summary from its ``screen.parquet`` (the experiment and the overrides of its
+run), as a re-run of the tradeoff would, without measuring anything again.
+"""
+
+from __future__ import annotations
+
+import json
+import sys
+from pathlib import Path
+
+REPO = Path(__file__).resolve().parents[1]
+# scene -> the folder of its tradeoff summary, under docs/results
+SCENES = {
+    "default": "tradeoff",
+    "views-view1": "lod/views-view1",
+    "views-view2": "lod/views-view2",
+    "views-view3": "lod/views-view3",
+    "deep_steps": "lod/deep_steps",
+    "grazing": "lod/grazing",
+    "calm": "lod/calm",
+}
+
+
+def _lod(results: Path, scene: str, folder: str) -> dict:
+    path = results / folder / "summary.json"
+    if not path.is_file():
+        raise FileNotFoundError(f"{path} is missing: re-run the tradeoff into {path.parent}")
+    lod = json.loads(path.read_text())["scenes"][scene].get("lod")
+    if not lod:
+        raise ValueError(f"{path}: {scene} has no level-of-detail finding (screened without maps)")
+    return lod
+
+
+def _fmt(x, digits: int = 4) -> str:
+    return "" if x is None else f"{x:.{digits}g}"
+
+
+def lod_page(results: Path) -> str:
+    """The Markdown of ``results/lod/report.md`` (see the module doc)."""
+    lines = [
+        "# Level of detail on seven scenes",
+        "",
+        "*Written by `scripts/build_docs.py` (`scripts/docs_lod.py`) from the committed summaries "
+        "of `study tradeoff` on each scene (the default scene's in `docs/results/tradeoff/`, the "
+        "others in `docs/results/lod/<scene>/`). What a policy is and what it does not count "
+        "yet: [level of detail](../../tradeoff.md#level-of-detail-a-shader-per-band).*",
+        "",
+        "Per scene, at the screen's resolution (128x128, one sample a pixel): the lowest FLIP "
+        "a single point reaches, the cheapest single point within one paired standard error "
+        "of it, and the cheapest policy of two bands or more within the same margin. "
+        "*Ratio*: the policy's mean fetches per water pixel over that single point's. *Held "
+        "out*: the same choice made on half the water's 4 x 4-pixel blocks (a checkerboard) and "
+        "scored on the other half: the policy's FLIP above the lowest single point's there, "
+        "with its paired standard error, and the ratio of fetches there. Bands pay where the "
+        "held-out FLIP is within one standard error at a ratio of 0.8 or less.",
+        "",
+        "| scene | lowest FLIP | cheapest single point there | its fetches | policy (bands, "
+        "nearest first) | its FLIP | its fetches | ratio | held out: FLIP above | ratio |",
+        "|---|---|---|---|---|---|---|---|---|---|",
+    ]
+    paying = []
+    for scene, folder in SCENES.items():
+        lod = _lod(results, scene, folder)
+        b, s, p = lod["best"], lod["single"], lod["policy"]
+        if p is None:
+            cells = ["none within the margin", "", "", ""]
+        else:
+            bands = "; ".join(
+                f"{label} ({100 * share:.0f} %)" for label, share in zip(p["bands"], p["shares"])
+            )
+            cells = [f"by {p['measure']}: {bands}", f"{_fmt(p['flip'])} ± {_fmt(p['se'], 2)}",
+                     _fmt(p["fetches"], 3), _fmt(lod["fetch_ratio"], 3)]  # fmt: skip
+        h = lod.get("held_out")
+        cells += ([f"{_fmt(h['d_flip'], 2)} ± {_fmt(h['se'], 2)}", _fmt(h["fetch_ratio"], 3)]
+                  if h else ["", ""])  # fmt: skip
+        if lod["reaches"]:
+            paying.append(scene)
+        lines.append(
+            f"| [{scene}](../{folder}/lod.png) | {_fmt(b['flip'])} | {s['label']} | "
+            f"{_fmt(s['fetches'], 3)} | " + " | ".join(cells) + " |"
+        )
+    lines += [
+        "",
+        f"Bands pay (held out: within one standard error at a ratio of at most 0.8) on "
+        f"{len(paying)} of {len(SCENES)} scenes" + (f": {', '.join(paying)}." if paying else "."),
+        "",
+    ]
+    return "\n".join(lines)
+
+
+def refresh(folder: Path, experiment: str, overrides: list[str]) -> dict:
+    """Recompute the ``lod`` of ``folder``'s ``summary.json`` from its ``screen.parquet`` with
+    the current ``study.studies.lod`` (the experiment file and the ``--set`` overrides of its
+    tradeoff), and write the summary back; returns the finding."""
+    sys.path.insert(0, str(REPO))
+    from study._io import write_json
+    from study.config.experiment import load_experiments
+    from study.studies.lod import scene_policies
+    from study.studies.search import screen_records
+    from study.sweep import read_table
+
+    exp = load_experiments([experiment], overrides)[0]
+    recs = [r for r in screen_records(read_table(folder / "screen.parquet"))
+            if r["experiment"] == exp.name and r["status"] == "ok"]  # fmt: skip
+    summary = json.loads((folder / "summary.json").read_text())
+    summary["scenes"][exp.name]["lod"] = found = scene_policies(exp, recs)
+    write_json(folder / "summary.json", summary)
+    return found
+
+
+if __name__ == "__main__":
+    # python scripts/docs_lod.py                       the page, on stdout
+    # python scripts/docs_lod.py FOLDER EXPERIMENT [K=V ...]   refresh FOLDER's lod
+    if len(sys.argv) > 2:
+        print(json.dumps(refresh(Path(sys.argv[1]), sys.argv[2], sys.argv[3:]), indent=1)[:2000])
+    else:
+        print(lod_page(REPO / "docs" / "results"))
