@@ -107,3 +107,17 @@ def test_the_front_is_the_brute_force_front(monkeypatch):
             front.append((round(cost, 9), round(flip, 9)))
             best = flip
     assert got == front
+
+
+def test_a_policy_drawn_from_its_bounds_scores_what_the_front_says():
+    """The bounds reproduce the front's split even where pixels tie on the measure (a view
+    symmetric about its middle column: two pixels at each distance): the composite maps of
+    every policy have the front's FLIP and fetches."""
+    rng = np.random.default_rng(3)
+    pts = [{"flip_map": rng.uniform(0, 1, (H, W)), "fetch_map": rng.integers(1, 9, (H, W)) * 1.0}
+           for _ in range(3)]  # fmt: skip
+    measures = {"distance": np.abs(COL - 15.5) + np.arange(H)[:, None] * 100.0}
+    for pol in lod.policy_front(pts, measures, max_bands=3):
+        flip, cost = lod.composite(pol, pts, measures)
+        assert np.nanmean(flip) == pytest.approx(pol["flip"], rel=1e-12), pol
+        assert np.nanmean(cost) == pytest.approx(pol["fetches"], rel=1e-12), pol

@@ -110,7 +110,11 @@ def policy_front(points: list[dict], measures: dict, max_bands: int = MAX_BANDS)
         zero = np.zeros((len(points), 1))
         cf = np.concatenate([zero, np.cumsum(flips[:, mask][:, order], 1)], 1)
         cc = np.concatenate([zero, np.cumsum(costs[:, mask][:, order], 1)], 1)
-        grid = sorted({int(round(q * n)) for q in QUANTILES} - {0, n})
+        # each cut at the start of its run of equal values, so that a bound (the midpoint of
+        # the values either side) splits the pixels as the cut does (a symmetric view has
+        # pairs of pixels at one distance)
+        raw = {min(max(int(round(q * n)), 1), n - 1) for q in QUANTILES}
+        grid = sorted({int(np.searchsorted(values, values[g], side="left")) for g in raw} - {0})
         for k in range(1, max_bands + 1):
             for cuts in itertools.combinations(grid, k - 1):
                 edges = (0, *cuts, n)
