@@ -30,7 +30,9 @@ import numpy as np
 
 from shaders_port.pipeline.interpolate import plane_points
 
+from ..scene.mitsuba_scene import camera_view_proj
 from .search import paired_se
+from .tradeoff_analysis import config_label
 from .tradeoff_jobs import SCREEN_BLOCK, block_means
 
 #: what decides a pixel's need: name -> what it is (units)
@@ -257,9 +259,6 @@ def scene_policies(exp, screen: list[dict]) -> dict | None:
     (``tradeoff_analysis.config_label``) in place of indices. None when fewer than two
     points have maps (a table screened before the maps were kept). ``held_out``: the choice
     made on half the water's blocks, scored on the other half (:func:`held_out`)."""
-    from ..scene.mitsuba_scene import camera_view_proj
-    from .tradeoff_analysis import config_label
-
     pts = [r for r in screen if r.get("flip_map") is not None and r.get("fetch_map") is not None]
     if len(pts) < 2:
         return None
