@@ -20,7 +20,6 @@ from __future__ import annotations
 
 import base64
 import json
-import platform
 import sys
 from pathlib import Path
 
@@ -28,16 +27,12 @@ import numpy as np
 
 REPO = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(REPO))
+sys.path.insert(0, str(REPO / "scripts"))
 
-from shaders_port import Constants  # noqa: E402
+from export_run_check import calibration, record_head, verdict  # noqa: E402
 from shaders_port.gl.compare import compare_port_gl  # noqa: E402
-from study import read_exr  # noqa: E402
-from study._io import repo_relative, write_json  # noqa: E402
+from study._io import write_json  # noqa: E402
 from study._metrics import flip  # noqa: E402
-from study.calibration.frames import prepare  # noqa: E402
-from study.export.gl_check import GL_MEAN, GL_P999, passes  # noqa: E402
-from study.export.shaders import load_constants_json  # noqa: E402
-from study.export.textures import with_exported_textures  # noqa: E402
 from study.export.threejs import three_version  # noqa: E402
 from study.export.viewer.browser import (  # noqa: E402
     FILE_ACCESS,
@@ -47,17 +42,8 @@ from study.export.viewer.browser import (  # noqa: E402
     open_three_example,
     render_float,
 )
-from study.scene.baseline_inputs import inputs_for_shader  # noqa: E402
-from study.scene.shader_inputs import load_or_build_shader_inputs  # noqa: E402
 
 RESULTS = REPO / "docs" / "results" / "threejs"
-KEYS = ("mean_abs", "p999", "max_abs", "unexplained", "n_water")
-
-
-def _verdict(res: dict) -> dict:
-    out = {k: float(res[k]) if k in ("mean_abs", "p999", "max_abs") else int(res[k]) for k in KEYS}
-    out["passes"] = passes(res)
-    return out
 
 
 def _screenshot(browser: Chromium, path: Path) -> None:
@@ -80,24 +66,11 @@ def _screenshot(browser: Chromium, path: Path) -> None:
 
 def main(out="out/default", experiment="experiments/default.toml") -> dict:
     out = Path(out)
-    exp, variant, _ = prepare(experiment, out, [])
-    inputs = load_or_build_shader_inputs(exp, variant, log=lambda *a: None)
-    inputs = inputs_for_shader(exp, inputs, exp.fit.shader, variant, log=lambda *a: None)
-    inputs = with_exported_textures(inputs, out / "shaders")
-    summary = json.loads((out / "constants.json").read_text())
-    constants = {
-        "fitted": load_constants_json(out / "constants.json"),
-        "default": Constants.from_dict(read_exr(out / "default.exr")[1]["constants"]),
-    }
+    inputs, summary, constants = calibration(out, experiment)
     record = {
-        "command": f"python scripts/threejs_check.py {out} {experiment}",
-        "calibration": repo_relative(out),
-        "shader": summary["shader"],
-        "resolution": [int(inputs.width), int(inputs.height)],
+        **record_head("threejs_check.py", out, experiment, summary, inputs),
         "three": three_version(),
         "browser": "headless Chromium, WebGL 2 on SwiftShader",
-        "machine": f"{platform.machine()}, {platform.system()}",
-        "thresholds": {"mean_abs": GL_MEAN, "p999": GL_P999},
         "study_inputs": {},
     }
     RESULTS.mkdir(parents=True, exist_ok=True)
@@ -107,7 +80,7 @@ def main(out="out/default", experiment="experiments/default.toml") -> dict:
             for which, c in constants.items():
                 r = BrowserRenderer(b, which, api="waterThree", inputs="study", screenPlane=plane)
                 res = compare_port_gl(inputs, c, summary["shader"], renderer=r)
-                record["study_inputs"][f"{geometry}_{which}"] = _verdict(res)
+                record["study_inputs"][f"{geometry}_{which}"] = verdict(res)
         study, mask = render_float(b, "waterThree", inputs="study")
         scene, _ = render_float(b, "waterThree", inputs="scene")
         d = np.abs(study - scene)[mask][:, :3]

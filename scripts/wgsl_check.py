@@ -16,7 +16,6 @@ constants set through the overrides at pipeline creation. Figures as the GL chec
 from __future__ import annotations
 
 import json
-import platform
 import sys
 import tempfile
 import time
@@ -26,27 +25,15 @@ import numpy as np
 
 REPO = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(REPO))
+sys.path.insert(0, str(REPO / "scripts"))
 
-from shaders_port import Constants  # noqa: E402
+from export_run_check import calibration, record_head, verdict  # noqa: E402
 from shaders_port.gl.compare import compare_port_gl  # noqa: E402
-from study import read_exr  # noqa: E402
-from study._io import repo_relative, write_json, write_png  # noqa: E402
-from study.calibration.frames import prepare  # noqa: E402
-from study.export.gl_check import GL_MEAN, GL_P999, passes  # noqa: E402
-from study.export.shaders import export_shaders, load_constants_json  # noqa: E402
-from study.export.textures import with_exported_textures  # noqa: E402
+from study._io import write_json, write_png  # noqa: E402
+from study.export.shaders import export_shaders  # noqa: E402
 from study.export.wgsl_run import WgslRenderer, _lavapipe_adapter  # noqa: E402
-from study.scene.baseline_inputs import inputs_for_shader  # noqa: E402
-from study.scene.shader_inputs import load_or_build_shader_inputs  # noqa: E402
 
 RESULTS = REPO / "docs" / "results" / "wgsl"
-KEYS = ("mean_abs", "p999", "max_abs", "unexplained", "n_water")
-
-
-def _verdict(res: dict) -> dict:
-    out = {k: float(res[k]) if k in ("mean_abs", "p999", "max_abs") else int(res[k]) for k in KEYS}
-    out["passes"] = passes(res)
-    return out
 
 
 def _adapter_name() -> str:
@@ -64,22 +51,9 @@ def _render_png(res: dict, path: Path) -> None:
 
 def main(out="out/default", experiment="experiments/default.toml") -> dict:
     out = Path(out)
-    exp, variant, _ = prepare(experiment, out, [])
-    inputs = load_or_build_shader_inputs(exp, variant, log=lambda *a: None)
-    inputs = inputs_for_shader(exp, inputs, exp.fit.shader, variant, log=lambda *a: None)
-    inputs = with_exported_textures(inputs, out / "shaders")
-    summary = json.loads((out / "constants.json").read_text())
-    shader = summary["shader"]
-    fitted = load_constants_json(out / "constants.json")
-    start = Constants.from_dict(read_exr(out / "default.exr")[1]["constants"])
-    record = {
-        "command": f"python scripts/wgsl_check.py {out} {experiment}",
-        "calibration": repo_relative(out),
-        "shader": shader,
-        "resolution": [int(inputs.width), int(inputs.height)],
-        "machine": f"{platform.machine()}, {platform.system()}",
-        "thresholds": {"mean_abs": GL_MEAN, "p999": GL_P999},
-    }
+    inputs, summary, constants = calibration(out, experiment)
+    shader, fitted, start = summary["shader"], constants["fitted"], constants["default"]
+    record = record_head("wgsl_check.py", out, experiment, summary, inputs)
     with tempfile.TemporaryDirectory() as tmp:
         folder = Path(tmp) / "shaders"
         t0 = time.perf_counter()
@@ -90,7 +64,7 @@ def main(out="out/default", experiment="experiments/default.toml") -> dict:
                                            ("start_by_overrides", start, True)):  # fmt: skip
             with WgslRenderer(folder, shader, inputs, overrides=overrides) as r:
                 res = compare_port_gl(inputs, constants, shader, renderer=r)
-            record[name] = _verdict(res)
+            record[name] = verdict(res)
             if name == "file_constants":
                 _render_png(res, RESULTS / "wgsl_vs_port.png")
     RESULTS.mkdir(parents=True, exist_ok=True)
