@@ -43,61 +43,27 @@ def _lod(results: Path, scene: str, folder: str) -> dict:
     return lod
 
 
-def _fmt(x, digits: int = 4) -> str:
-    return "" if x is None else f"{x:.{digits}g}"
-
-
 def lod_page(results: Path) -> str:
     """The Markdown of ``results/lod/report.md`` (see the module doc)."""
-    lines = [
-        "# Level of detail on seven scenes",
-        "",
-        "*Written by `scripts/build_docs.py` (`scripts/docs_lod.py`) from the committed summaries "
-        "of `study tradeoff` on each scene (the default scene's in `docs/results/tradeoff/`, the "
-        "others in `docs/results/lod/<scene>/`). What a policy is and what it does not count "
-        "yet: [level of detail](../../tradeoff.md#level-of-detail-a-shader-per-band).*",
-        "",
-        "Per scene, at the screen's resolution (128x128, one sample a pixel): the lowest FLIP "
-        "a single point reaches, the cheapest single point within one paired standard error "
-        "of it, and the cheapest policy of two bands or more within the same margin. "
-        "*Ratio*: the policy's mean fetches per water pixel over that single point's. *Held "
-        "out*: the same choice made on half the water's 4 x 4-pixel blocks (a checkerboard) and "
-        "scored on the other half: the policy's FLIP above the lowest single point's there, "
-        "with its paired standard error, and the ratio of fetches there. Bands pay where the "
-        "held-out FLIP is within one standard error at a ratio of 0.8 or less.",
-        "",
-        "| scene | lowest FLIP | cheapest single point there | its fetches | policy (bands, "
-        "nearest first) | its FLIP | its fetches | ratio | held out: FLIP above | ratio |",
-        "|---|---|---|---|---|---|---|---|---|---|",
-    ]
-    paying = []
-    for scene, folder in SCENES.items():
-        lod = _lod(results, scene, folder)
-        b, s, p = lod["best"], lod["single"], lod["policy"]
-        if p is None:
-            cells = ["none within the margin", "", "", ""]
-        else:
-            bands = "; ".join(
-                f"{label} ({100 * share:.0f} %)" for label, share in zip(p["bands"], p["shares"])
-            )
-            cells = [f"by {p['measure']}: {bands}", f"{_fmt(p['flip'])} ± {_fmt(p['se'], 2)}",
-                     _fmt(p["fetches"], 3), _fmt(lod["fetch_ratio"], 3)]  # fmt: skip
-        h = lod.get("held_out")
-        cells += ([f"{_fmt(h['d_flip'], 2)} ± {_fmt(h['se'], 2)}", _fmt(h["fetch_ratio"], 3)]
-                  if h else ["", ""])  # fmt: skip
-        if lod["reaches"]:
-            paying.append(scene)
-        lines.append(
-            f"| [{scene}](../{folder}/lod.png) | {_fmt(b['flip'])} | {s['label']} | "
-            f"{_fmt(s['fetches'], 3)} | " + " | ".join(cells) + " |"
-        )
-    lines += [
-        "",
+    sys.path.insert(0, str(REPO))
+    from study.report.lod import METHOD, lod_table
+
+    rows = [(f"[{scene}](../{folder}/lod.png)", _lod(results, scene, folder))
+            for scene, folder in SCENES.items()]  # fmt: skip
+    paying = [scene for scene, (_, lod) in zip(SCENES, rows) if lod["reaches"]]
+    intro = (
+        "*Written by `scripts/build_docs.py` (`scripts/docs_lod.py`) from the committed "
+        "summaries of `study tradeoff` on each scene (the default scene's in "
+        "`docs/results/tradeoff/`, the others in `docs/results/lod/<scene>/`). What a policy is "
+        "and what it does not count yet: "
+        "[level of detail](../../tradeoff.md#level-of-detail-a-shader-per-band).*"
+    )
+    pays = (
         f"Bands pay (held out: within one standard error at a ratio of at most 0.8) on "
-        f"{len(paying)} of {len(SCENES)} scenes" + (f": {', '.join(paying)}." if paying else "."),
-        "",
-    ]
-    return "\n".join(lines)
+        f"{len(paying)} of {len(SCENES)} scenes" + (f": {', '.join(paying)}." if paying else ".")
+    )
+    lines = ["# Level of detail on seven scenes", "", intro, "", METHOD, "", *lod_table(rows)]
+    return "\n".join([*lines, "", pays, ""])
 
 
 def refresh(folder: Path, experiment: str, overrides: list[str]) -> dict:

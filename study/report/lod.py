@@ -8,7 +8,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from .calibration import fmt, pyplot
+from .calibration import pyplot
+from .numbers import fmt
 
 
 def lod_figure(path: Path, summary: dict) -> Path | None:
@@ -42,52 +43,70 @@ def lod_figure(path: Path, summary: dict) -> Path | None:
     return path
 
 
-def lod_lines(summary: dict) -> list[str]:
-    """The report's "Level of detail" section (no lines when no scene has a finding)."""
-    scenes = [(n, s["lod"]) for n, s in summary["scenes"].items() if s.get("lod")]
-    if not scenes:
-        return []
+#: how the table of :func:`lod_table` is made, in words (the report and the docs' page)
+METHOD = (
+    "The water split into bands by what a pixel needs (its distance to the camera, or its "
+    "footprint on the water), each band given one point of the screen; bounds at deciles of "
+    "the measure, up to 5 bands. FLIP and fetches at the screen's resolution (one sample a "
+    "pixel), from the screen's per-pixel maps. Compared at the lowest FLIP a single point "
+    "reaches: the cheapest single point, and the cheapest policy of two bands or more, whose "
+    "FLIP is above it by no more than one paired standard error; *ratio*, the policy's mean "
+    "fetches per water pixel over that single point's. *Held out*: the same choice made on "
+    "half the water's 4 x 4-pixel blocks (a checkerboard) and scored on the other half: the "
+    "policy's FLIP above the lowest single point's there, with its paired standard error, and "
+    "the ratio of fetches there. Bands pay where the held-out FLIP is within one standard "
+    "error at a ratio of 0.8 or less. Each band keeps its point's constants fitted on the "
+    "whole view, and neither the seam between bands nor a blend margin's cost is counted yet: "
+    "the policy is chosen from the maps, not drawn."
+)
+
+
+def lod_table(rows: list[tuple[str, dict]]) -> list[str]:
+    """The Markdown table of level-of-detail findings: a row per (scene cell, ``lod`` of
+    ``study.studies.lod.scene_policies``)."""
     lines = [
-        "## Level of detail",
-        "",
-        "The water split into bands by what a pixel needs (its distance to the camera, or its "
-        "footprint on the water), each band given one point of the screen; bounds at deciles "
-        "of the measure, up to 5 bands. FLIP and fetches at the screen's resolution, from the "
-        "screen's per-pixel maps. Compared at the lowest FLIP a single point reaches: the "
-        "cheapest single point, and the cheapest policy of two bands or more, whose FLIP is "
-        "above it by no more than one paired standard error. Each band keeps its point's "
-        "constants fitted on the whole view, and neither the seam between bands nor a blend "
-        "margin's cost is counted yet: the policy is chosen from the maps, not drawn. *Held "
-        "out*: the same choice made on half the water's 4 x 4-pixel blocks (a checkerboard) "
-        "and scored on the other half, FLIP above the lowest single point's there and the "
-        "ratio of fetches; bands pay where that holds within one standard error at 0.8x the "
-        "fetches or less.",
-        "",
-        "| scene | lowest FLIP | cheapest single point there | FLIP | fetches "
-        "| policy (bands, nearest first) | FLIP | fetches | fetches / single's "
-        "| held out: FLIP above, ratio |",
-        "|---|---|---|---|---|---|---|---|---|---|",
+        "| scene | lowest FLIP | cheapest single point there | its FLIP | its fetches "
+        "| policy (bands, nearest first) | its FLIP | its fetches | ratio "
+        "| held out: FLIP above | ratio | pays |",
+        "|---|---|---|---|---|---|---|---|---|---|---|---|",
     ]
-    for name, lod in scenes:
+    for scene, lod in rows:
         b, s, p = lod["best"], lod["single"], lod["policy"]
         if p is None:
-            policy, cells = "none reaches it", ["", "", ""]
+            cells = ["none within the margin", "", "", ""]
         else:
             unit = "world units" if p["measure"] == "distance" else "square world units"
             bands = "; ".join(
                 f"{label} ({100 * share:.0f} %" + (f", to {x:.3g}" if x is not None else "") + ")"
                 for label, share, x in zip(p["bands"], p["shares"], [*p["bounds"], None])
             )
-            policy = f"by {p['measure']} ({unit}): {bands}"
-            cells = [f"{fmt(p['flip'], 4)} ± {fmt(p['se'], 2)}", fmt(p["fetches"], 3),
+            flip = f"{fmt(p['flip'], 4)} ± {fmt(p['se'], 2)}"
+            cells = [f"by {p['measure']} ({unit}): {bands}", flip, fmt(p["fetches"], 3),
                      fmt(lod["fetch_ratio"], 3)]  # fmt: skip
         h = lod.get("held_out")
-        held = f"{fmt(h['d_flip'], 2)} ± {fmt(h['se'], 2)}, {fmt(h['fetch_ratio'], 3)}" if h else ""
+        cells += ([f"{fmt(h['d_flip'], 2)} ± {fmt(h['se'], 2)}", fmt(h["fetch_ratio"], 3)]
+                  if h else ["", ""])  # fmt: skip
         lines.append(
-            f"| {name} | {fmt(b['flip'], 4)} ({b['label']}) | {s['label']} | "
-            f"{fmt(s['flip'], 4)} | {fmt(s['fetches'], 3)} | {policy} | "
-            + " | ".join([*cells, held])
+            f"| {scene} | {fmt(b['flip'], 4)} ({b['label']}) | {s['label']} | "
+            f"{fmt(s['flip'], 4)} | {fmt(s['fetches'], 3)} | "
+            + " | ".join([*cells, "yes" if lod["reaches"] else "no"])
             + " |"
         )
-    lines += ["", "![Band policies against single points](lod.png)", ""]
     return lines
+
+
+def lod_lines(summary: dict) -> list[str]:
+    """The report's "Level of detail" section (no lines when no scene has a finding)."""
+    scenes = [(n, s["lod"]) for n, s in summary["scenes"].items() if s.get("lod")]
+    if not scenes:
+        return []
+    return [
+        "## Level of detail",
+        "",
+        METHOD,
+        "",
+        *lod_table(scenes),
+        "",
+        "![Band policies against single points](lod.png)",
+        "",
+    ]
