@@ -7,11 +7,13 @@ generated from committed tradeoff summaries:
   docs/results/lod/<scene>`` for deep_steps, grazing and calm, and for view k of
   ``experiments/views.toml`` the same with ``--set camera.position=... --set camera.target=...
   --set 'camera.views=[]' --set 'name="views-view<k>"'`` (the view's camera); only the
-  summary is kept. ``lod.png`` beside each is drawn from it (``study.report.lod``).
+  summary and the drawn policy (``policy/``) are kept. ``lod.png`` beside each is drawn from
+  the summary (``study.report.lod``).
 
 ``python scripts/docs_lod.py FOLDER EXPERIMENT [KEY=VALUE ...]`` recomputes the ``lod`` of a
-tradeoff folder's summary from its ``screen.parquet`` (the experiment and the overrides of its
-run), as a re-run of the tradeoff would, without measuring anything again.
+tradeoff folder's summary from its ``tradeoff.parquet`` (the experiment and the overrides of its
+run), as a re-run of the tradeoff would, without measuring a point again: the policy is chosen
+from the points' maps, then drawn and exported into ``FOLDER/policy`` again.
 """
 
 from __future__ import annotations
@@ -46,11 +48,11 @@ def _lod(results: Path, scene: str, folder: str) -> dict:
 def lod_page(results: Path) -> str:
     """The Markdown of ``results/lod/report.md`` (see the module doc)."""
     sys.path.insert(0, str(REPO))
-    from study.report.lod import METHOD, lod_table
+    from study.report.lod import EXPORT_METHOD, METHOD, export_table, lod_table, pays
 
     rows = [(f"[{scene}](../{folder}/lod.png)", _lod(results, scene, folder))
             for scene, folder in SCENES.items()]  # fmt: skip
-    paying = [scene for scene, (_, lod) in zip(SCENES, rows) if lod["reaches"]]
+    paying = [scene for scene, (_, lod) in zip(SCENES, rows) if pays(lod)]
     intro = (
         "*Written by `scripts/build_docs.py` (`scripts/docs_lod.py`) from the committed "
         "summaries of `study tradeoff` on each scene (the default scene's in "
@@ -58,12 +60,13 @@ def lod_page(results: Path) -> str:
         "and what it does not count yet: "
         "[level of detail](../../tradeoff.md#level-of-detail-a-shader-per-band).*"
     )
-    pays = (
-        f"Bands pay (held out: within one standard error at a ratio of at most 0.8) on "
+    verdict = (
+        f"Bands pay (held out and drawn: within one standard error at a ratio of at most 0.8) on "
         f"{len(paying)} of {len(SCENES)} scenes" + (f": {', '.join(paying)}." if paying else ".")
     )
     lines = ["# Level of detail on seven scenes", "", intro, "", METHOD, "", *lod_table(rows)]
-    return "\n".join([*lines, "", pays, ""])
+    drawn = ["## The policies drawn", "", EXPORT_METHOD, "", *export_table(rows)]
+    return "\n".join([*lines, "", verdict, "", *drawn, ""])
 
 
 def refresh(folder: Path, experiment: str, overrides: list[str]) -> dict:
@@ -71,17 +74,21 @@ def refresh(folder: Path, experiment: str, overrides: list[str]) -> dict:
     the current ``study.studies.lod`` (the experiment file and the ``--set`` overrides of its
     tradeoff), and write the summary back; returns the finding."""
     sys.path.insert(0, str(REPO))
+    from study._backend import init_backend
     from study._io import write_json
     from study.config.experiment import load_experiments
-    from study.studies.lod import scene_policies
-    from study.studies.search import screen_records
-    from study.sweep import read_table
+    from study.studies.lod import full_points, scene_policies
+    from study.studies.lod_export import export_policies
+    from study.sweep import read_table, scene_spec
 
     exp = load_experiments([experiment], overrides)[0]
-    recs = [r for r in screen_records(read_table(folder / "screen.parquet"))
-            if r["experiment"] == exp.name and r["status"] == "ok"]  # fmt: skip
+    recs = full_points(read_table(folder / "tradeoff.parquet"), exp.name)
     summary = json.loads((folder / "summary.json").read_text())
-    summary["scenes"][exp.name]["lod"] = found = scene_policies(exp, recs)
+    found = scene_policies(exp, recs, summary["tolerance"])
+    summary["scenes"][exp.name]["lod"] = found
+    init_backend("llvm_ad_rgb")
+    export_policies([exp], [scene_spec(experiment, overrides)], summary, folder, "llvm_ad_rgb",
+                    print)  # fmt: skip
     write_json(folder / "summary.json", summary)
     return found
 

@@ -127,7 +127,7 @@ def test_a_fresnel_lookup_on_a_texel_edge_explains_its_pixel(frame):
 def test_an_outlier_off_every_edge_stays_unexplained_and_fails_the_check(frame):
     """The same jump where the nearest lookups are 0.2 texel from any edge: nothing explains it,
     and the verdict says which pixel."""
-    from study.export.gl_check import _verdict
+    from study.export.gl_check import verdict
 
     inputs, out = frame
     y, x = quiet_pixel(out)
@@ -139,7 +139,7 @@ def test_an_outlier_off_every_edge_stays_unexplained_and_fails_the_check(frame):
     )
     assert res["n_outliers"] == 1 and res["unexplained"] == 1
     assert res["outlier_pixels"][0]["why"] == []
-    v = _verdict({**res, "gl_renderer": "NVIDIA H200/PCIe/SSE2"}, "the exported shader")
+    v = verdict({**res, "gl_renderer": "NVIDIA H200/PCIe/SSE2"}, "the exported shader")
     assert v["passed"] is False
     assert v["reason"].startswith(f"1 pixel(s) over 1e-2 unexplained: (y {y}, x {x}) 0.05")
     assert v["gl_renderer"] == "NVIDIA H200/PCIe/SSE2"

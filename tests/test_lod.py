@@ -43,6 +43,28 @@ def test_measures_of_a_camera_looking_straight_down():
     assert (np.diff(column[seen]) < 0).all() and (np.diff(d) < 0).all()  # nearer down the image
 
 
+def test_the_footprint_is_the_central_difference_of_the_plane_points():
+    """The closed-form footprint is the area spanned by the plane points' central differences
+    a thousandth of a pixel either side, on every pixel that sees the water (an oblique
+    camera: the footprint varies by orders of magnitude down the image)."""
+    from shaders_port.pipeline.interpolate import plane_points
+
+    eye = (0.5, 1.2, 4.0)
+    vp = perspective_view_proj(eye, (0.0, -0.5, 0.0), fov_y_deg=50.0)
+    rows, cols = np.mgrid[0:H, 0:W].astype(np.float64)
+    e = 1e-3
+
+    def diff(dc, dr):
+        a = plane_points(vp, W, H, cols + dc, rows + dr)[0]
+        return (a - plane_points(vp, W, H, cols - dc, rows - dr)[0]) / (2 * e)
+
+    fd = np.linalg.norm(np.cross(diff(e, 0), diff(0, e)), axis=-1)
+    got = lod.footprint(vp, eye, W, H, cols, rows)
+    seen = np.isfinite(lod.band_measures(vp, eye, W, H)["footprint"])
+    assert seen.sum() > H * W // 3 and np.ptp(np.log(got[seen])) > 2.0
+    np.testing.assert_allclose(got[seen], fd[seen], rtol=1e-5)  # truncation: ~1e-6
+
+
 def test_two_bands_where_each_shader_wins_its_half():
     """A cheap shader as good as a dear one on the near half and bad on the far half: the
     policy is the cheap one near and the dear one far, split between the halves, at 0.6x the
@@ -54,16 +76,35 @@ def test_two_bands_where_each_shader_wins_its_half():
         _point(np.full((H, W), 0.3), 1.0, 2),
     ]
     front = lod.policy_front(pts, {"distance": COL})
-    found = lod.best_policy(front, pts, {"distance": COL})
+    found = lod.best_policy(front, pts, {"distance": COL}, 0.02)
     assert found["best"] == found["single"] == 1
     pol = found["policy"]
     assert pol["choices"] == [0, 1] and pol["bounds"] == [15.5] and pol["shares"] == [0.5, 0.5]
     assert pol["fetches"] == pytest.approx(6.0) and found["fetch_ratio"] == pytest.approx(0.6)
     assert abs(pol["d_flip"]) <= pol["se"]
     # chosen on half the blocks, it holds on the other half
-    check = lod.held_out(pts, {"distance": COL})
+    check = lod.held_out(pts, {"distance": COL}, 0.02)
     assert check["choices"] == [0, 1] and check["within"]
     assert check["fetch_ratio"] == pytest.approx(0.6)
+
+
+def test_the_policy_is_weighed_against_the_cheapest_point_within_the_tolerance():
+    """A point 1 % worse than the best at 0.7x its fetches is what a user would take (the
+    tradeoff's 2 % tolerance): the policy is judged against it, FLIP and fetches."""
+    near = COL < 16
+    pts = [
+        _point(np.where(near, 0.1, 0.5), 2.0, 0),
+        _point(np.full((H, W), 0.1), 10.0, 1),
+        _point(np.full((H, W), 0.101), 7.0, 2),
+    ]
+    found = lod.best_policy(lod.policy_front(pts, {"distance": COL}), pts, {"distance": COL},
+                            0.02)  # fmt: skip
+    assert found["best"] == 1 and found["single"] == 2
+    assert found["single_d"][0] == pytest.approx(0.001, abs=1e-4)
+    pol = found["policy"]
+    assert pol["choices"] == [0, 2] and found["fetch_ratio"] == pytest.approx(4.5 / 7.0)
+    assert pol["d_flip"] == pytest.approx(-0.0005, abs=2e-4)  # the near half is 0.1, not 0.101
+    assert lod.best_policy([], pts, {"distance": COL}, 0.0)["single"] == 1
 
 
 def test_bands_buy_nothing_where_one_shader_wins_everywhere():
@@ -71,10 +112,10 @@ def test_bands_buy_nothing_where_one_shader_wins_everywhere():
     a band is worse than the dear one by many standard errors, so there is none to take."""
     pts = [_point(np.full((H, W), 0.3), 2.0, 0), _point(np.full((H, W), 0.1), 10.0, 1)]
     front = lod.policy_front(pts, {"distance": COL})
-    found = lod.best_policy(front, pts, {"distance": COL})
+    found = lod.best_policy(front, pts, {"distance": COL}, 0.02)
     assert found["single"] == 1 and found["policy"] is None and found["fetch_ratio"] is None
     assert any(len(p["choices"]) > 1 for p in front)  # mixed policies exist, all too poor
-    assert lod.held_out(pts, {"distance": COL}) is None
+    assert lod.held_out(pts, {"distance": COL}, 0.02) is None
 
 
 def test_the_front_is_the_brute_force_front(monkeypatch):

@@ -129,10 +129,20 @@ def test_adaptive_tradeoff_tiny(tmp_path):
     assert any(r["job.variant"] == "water_refraction" for r in full)  # the original, always
     report = (tmp_path / "report.md").read_text()
     assert "Search: adaptive" in report and "**Budget**" in report
-    # the level-of-detail policies from the screen's maps: the single points' front among them
+    # the level-of-detail policies from the full points' maps: the single points' front
+    # among them
+    mapped = [r for r in full if r.get("flip_map") is not None]
+    assert mapped and all(len(r["flip_map"]) == 2 * 32 * 32 for r in mapped)
     lod = summary["scenes"]["default"]["lod"]
-    assert lod["resolution"] == [32, 32] and lod["points"] == len(screen)
+    assert lod["resolution"] == [32, 32] and lod["points"] == len(mapped)
     assert lod["front"][-1]["flip"] <= lod["best"]["flip"] + 1e-12
+    # here the raycast near and the loopless baseline far: drawn as one shader, whose two files
+    # need different inputs (the baseline's screen buffers), seams measured, GL-checked
+    drawn = lod["export"]
+    assert lod["policy"]["bands"] == ["water_refraction (5, 3, 20)", "water_baseline_flat"]
+    assert drawn["gl_check"]["passed"], drawn["gl_check"]
+    assert drawn["seams"] and drawn["seam_ratio"] is not None
+    assert (tmp_path / drawn["folder"] / "policy.frag").read_text().count("_main();") == 2
     assert "## Level of detail" in report and (tmp_path / "lod.png").stat().st_size > 5_000
     assert summary["exports"]["default"]["gl_check"]["passed"]
 

@@ -120,12 +120,13 @@ def compare_port_gl(
         if own:
             renderer.release()
     port_mask = out["mask"] > 0.5
-    both = port_mask & gl_mask
-    diff = np.where(both, np.abs(out["color"] - rgba[..., :3]).max(-1), 0.0).astype(np.float32)
-    d = diff[both]
-    if d.size == 0:
-        raise ValueError("the port and GL share no water pixel; check the camera and water_rect")
-    outlier = both & ~(diff <= OUTLIER)  # NaN on either side counts as an outlier
+    gpu = gpu_reasons(out) if gpu_addressing else {}
+    return compare_outputs(out, rgba, gl_mask, port_reasons(out, port_mask), gpu)
+
+
+def port_reasons(out: dict, port_mask: np.ndarray) -> dict:
+    """The reasons (module doc) the port's output ``out`` (``ShaderOutput.numpy()``) gives
+    for an outlier, on the pixels of ``port_mask``: name -> (H, W) bool."""
     reasons = {"crossing_step_edge": _neighbour_differs(out["iterations"], port_mask)}
     if "refine_path" in out:  # the refinement's decisions, as the linear search's steps
         reasons["crossing_step_edge"] |= _neighbour_differs(out["refine_path"], port_mask)
@@ -136,7 +137,21 @@ def compare_port_gl(
         reasons["reflection_decision"] = _neighbour_differs(
             out["refl_hit"], port_mask
         ) | _neighbour_differs(out["refl_iterations"], port_mask)
-    gpu = gpu_reasons(out) if gpu_addressing else {}
+    return reasons
+
+
+def compare_outputs(out: dict, rgba: np.ndarray, gl_mask: np.ndarray, reasons: dict,
+                    gpu: dict) -> dict:  # fmt: skip
+    """The figures of :func:`compare_port_gl` for the port's ``out`` (``color`` (H, W, 3),
+    ``mask`` (H, W)) against OpenGL's ``rgba`` (H, W, 4) and ``gl_mask`` (H, W) bool, the
+    outliers explained by ``reasons`` and then ``gpu`` (name -> (H, W) bool each)."""
+    port_mask = out["mask"] > 0.5
+    both = port_mask & gl_mask
+    diff = np.where(both, np.abs(out["color"] - rgba[..., :3]).max(-1), 0.0).astype(np.float32)
+    d = diff[both]
+    if d.size == 0:
+        raise ValueError("the port and GL share no water pixel; check the camera and water_rect")
+    outlier = both & ~(diff <= OUTLIER)  # NaN on either side counts as an outlier
     explained, left = explain_outliers(outlier, reasons, gpu, int(both.sum()))
     return {
         "mean_abs": float(d.mean()),

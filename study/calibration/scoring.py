@@ -15,20 +15,23 @@ from dataclasses import dataclass
 import numpy as np
 
 from .._backend import drjit_backend
-from .._metrics import errors
+from .._metrics import check_finite, flip_map, rmse
 
 
 @dataclass
 class Score:
     """One constants block on one frame: ``image`` (H, W, 3) float32 linear RGB, ``mask``
     (H, W) bool (the scored water pixels), ``rmse`` and ``flip`` on them, ``diagnostics``
-    (the render's ``Diagnostics``: ``maps`` name -> (H, W) and ``summary(mask)``)."""
+    (the render's ``Diagnostics``: ``maps`` name -> (H, W) and ``summary(mask)``),
+    ``flip_map`` (H, W) float32 (FLIP per pixel, over the whole image: ``flip`` is its mean
+    on ``mask``)."""
 
     image: np.ndarray
     mask: np.ndarray
     rmse: float
     flip: float
     diagnostics: object
+    flip_map: np.ndarray | None = None
 
     @property
     def errors(self) -> dict:
@@ -70,10 +73,13 @@ class Scorer:
 
     def __call__(self, i: int, constants) -> Score:
         """``constants`` on frame ``i``."""
-        model = self.model(i)
+        model, ref = self.model(i), self.frames[i].ref.image
         img, diag = model.render(constants)
-        e = errors(self.frames[i].ref.image, img, model.mask)
-        return Score(img, model.mask, float(e["rmse"]), float(e["flip"]), diag)
+        check_finite("flip input", ref, model.mask)
+        check_finite("flip input", img, model.mask)
+        fmap = flip_map(ref, img)
+        e = rmse(ref, img, model.mask)
+        return Score(img, model.mask, float(e), float(fmap[model.mask].mean()), diag, fmap)
 
     def all(self, constants) -> list[Score]:
         """``constants`` on every frame."""

@@ -29,7 +29,7 @@ def gl_check(shader: str, inputs, constants, shaders_dir: Path) -> dict:
         res = compare_port_gl(inputs, constants, shader, renderer=_OwnBlock(r),
                               gpu_addressing=is_gpu(gl))  # fmt: skip
         res["gl_renderer"] = gl
-    return _verdict(res, "the exported shader")
+    return verdict(res, "the exported shader")
 
 
 def gl_renderer_of(r) -> str | None:
@@ -44,7 +44,7 @@ def gl_renderer_of(r) -> str | None:
 NAMED_IN_REPORT = 10  # outliers named (with their reasons) in the check's figures
 
 
-def _verdict(res: dict, what: str) -> dict:
+def verdict(res: dict, what: str) -> dict:
     """The figures of ``compare_port_gl`` kept in reports and ``passed`` by the GL check's
     thresholds (mean |diff| <= 1e-3, 99.9th percentile <= 1e-2, no unexplained outlier, all
     finite); ``explained`` (reason -> outliers), the largest outliers with their reasons
@@ -120,7 +120,7 @@ def hlsl_check(shader: str, inputs, constants, shaders_dir: Path) -> dict:
         res = compare_port_gl(inputs, constants, shader, renderer=_OwnBlock(r),
                               gpu_addressing=is_gpu(gl))  # fmt: skip
         res["gl_renderer"] = gl
-    return _verdict(res, "the exported HLSL (through glslang -D and SPIRV-Cross)")
+    return verdict(res, "the exported HLSL (through glslang -D and SPIRV-Cross)")
 
 
 class _OwnBlock:
@@ -169,7 +169,7 @@ def manifest_checks(shaders_dir: Path) -> dict:
     return out
 
 
-GL_MEAN, GL_P999 = 1e-3, 1e-2  # the thresholds of :func:`_verdict` (mean, 99.9th percentile)
+GL_MEAN, GL_P999 = 1e-3, 1e-2  # the thresholds of :func:`verdict` (mean, 99.9th percentile)
 
 
 def gl_check_user(shader, inputs, values: dict, ours: dict) -> dict:

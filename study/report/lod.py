@@ -1,8 +1,9 @@
-"""The level-of-detail part of the tradeoff report: ``lod.png`` (per scene, the screen's single
-points and their front beside the front of band policies, FLIP against mean texture fetches per
-water pixel, the best single point and the policy chosen against it marked) and the report's
-"Level of detail" lines. Both read ``summary["scenes"][scene]["lod"]``
-(``study.studies.lod.scene_policies``)."""
+"""The level-of-detail part of the tradeoff report: ``lod.png`` (per scene, the full rung's
+single points and their front beside the front of band policies, FLIP against mean texture
+fetches per water pixel, the single point and the policy chosen against it marked, and the
+policy drawn as one shader) and the report's "Level of detail" lines. Both read
+``summary["scenes"][scene]["lod"]`` (``study.studies.lod.scene_policies``, with the drawn
+policy's ``export``)."""
 
 from __future__ import annotations
 
@@ -33,9 +34,13 @@ def lod_figure(path: Path, summary: dict) -> Path | None:
         if p:
             ax.plot([p["fetches"]], [p["flip"]], "*", color="tab:red", ms=12,
                     label=f"policy, {len(p['bands'])} bands by {p['measure']}")  # fmt: skip
+        e = lod.get("export") or {}
+        if "flip" in e:
+            ax.plot([e["fetches"]], [e["flip"]], "*", mfc="none", color="tab:red", ms=14,
+                    label="the policy drawn as one shader (margins paid)")  # fmt: skip
         ax.set_xscale("log")
         ax.set_xlabel("texture fetches / water pixel (mean)")
-        ax.set_ylabel(f"FLIP at the screen's {lod['resolution'][0]}x{lod['resolution'][1]}")
+        ax.set_ylabel(f"FLIP at {lod['resolution'][0]}x{lod['resolution'][1]}")
         ax.set_title(name)
         ax.legend(fontsize=7, loc="best")
     fig.savefig(path, dpi=110, bbox_inches="tight")
@@ -46,18 +51,31 @@ def lod_figure(path: Path, summary: dict) -> Path | None:
 #: how the table of :func:`lod_table` is made, in words (the report and the docs' page)
 METHOD = (
     "The water split into bands by what a pixel needs (its distance to the camera, or its "
-    "footprint on the water), each band given one point of the screen; bounds at deciles of "
-    "the measure, up to 5 bands. FLIP and fetches at the screen's resolution (one sample a "
-    "pixel), from the screen's per-pixel maps. Compared at the lowest FLIP a single point "
-    "reaches: the cheapest single point, and the cheapest policy of two bands or more, whose "
-    "FLIP is above it by no more than one paired standard error; *ratio*, the policy's mean "
-    "fetches per water pixel over that single point's. *Held out*: the same choice made on "
-    "half the water's 4 x 4-pixel blocks (a checkerboard) and scored on the other half: the "
-    "policy's FLIP above the lowest single point's there, with its paired standard error, and "
-    "the ratio of fetches there. Bands pay where the held-out FLIP is within one standard "
-    "error at a ratio of 0.8 or less. Each band keeps its point's constants fitted on the "
-    "whole view, and neither the seam between bands nor a blend margin's cost is counted yet: "
-    "the policy is chosen from the maps, not drawn."
+    "footprint on the water), each band given one point measured in full (at the "
+    "experiment's resolution, with the point's fitted constants; the adaptive search sends the "
+    "bands of the policy its screen's maps choose to the full rung too); bounds at deciles of "
+    "the measure, up to 5 bands. FLIP and fetches from the points' per-pixel maps. Compared "
+    "at the lowest FLIP a single point reaches: the cheapest single point, and the cheapest "
+    "policy of two bands or more, whose FLIP is above it by no more than one paired standard "
+    "error; *ratio*, the policy's mean fetches per water pixel over that single point's. "
+    "*Held out*: the same choice made on half the water's 4 x 4-pixel blocks (a "
+    "checkerboard) and scored on the other half: the policy's FLIP above the lowest single "
+    "point's there, with its paired standard error, and the ratio of fetches there. "
+    "*Drawn*: the policy as one shader (`policy/policy.frag`), its bands mixed over a margin, "
+    "rendered and scored: its FLIP above the lowest single point's, and its fetches (a pixel "
+    "in a margin pays for both bands) over the cheapest single point's. Bands pay where both "
+    "the held-out and the drawn policy are within one standard error at a ratio of 0.8 or "
+    "less. Each band keeps its point's constants fitted on the whole view."
+)
+
+#: how the drawn policy's table (:func:`export_table`) is made, in words
+EXPORT_METHOD = (
+    "The chosen policy as one GLSL file (`policy/policy.frag`, with `policy/policy.json`, the "
+    "bands for an engine that switches shaders itself), drawn by the port at the experiment's "
+    "resolution: *seam*, FLIP in a strip 8 pixels wide each side of every boundary between "
+    "bands, over the bands' own FLIP there (each pixel's FLIP in its band's own image; above "
+    "1.1 a seam shows); *GL check*, the file run on OpenGL (llvmpipe) against the port's mix "
+    "of its bands, with every export's thresholds."
 )
 
 
@@ -67,8 +85,8 @@ def lod_table(rows: list[tuple[str, dict]]) -> list[str]:
     lines = [
         "| scene | lowest FLIP | cheapest single point there | its FLIP | its fetches "
         "| policy (bands, nearest first) | its FLIP | its fetches | ratio "
-        "| held out: FLIP above | ratio | pays |",
-        "|---|---|---|---|---|---|---|---|---|---|---|---|",
+        "| held out: FLIP above | ratio | drawn: FLIP above | ratio | pays |",
+        "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|",
     ]
     for scene, lod in rows:
         b, s, p = lod["best"], lod["single"], lod["policy"]
@@ -86,12 +104,52 @@ def lod_table(rows: list[tuple[str, dict]]) -> list[str]:
         h = lod.get("held_out")
         cells += ([f"{fmt(h['d_flip'], 2)} ± {fmt(h['se'], 2)}", fmt(h["fetch_ratio"], 3)]
                   if h else ["", ""])  # fmt: skip
+        e = lod.get("export") or {}
+        cells += ([f"{fmt(e['d_flip'], 2)} ± {fmt(e['se'], 2)}", fmt(e["fetch_ratio"], 3)]
+                  if "d_flip" in e else [e.get("error", ""), ""])  # fmt: skip
         lines.append(
             f"| {scene} | {fmt(b['flip'], 4)} ({b['label']}) | {s['label']} | "
             f"{fmt(s['flip'], 4)} | {fmt(s['fetches'], 3)} | "
-            + " | ".join([*cells, "yes" if lod["reaches"] else "no"])
+            + " | ".join([*cells, "yes" if pays(lod) else "no"])
             + " |"
         )
+    return lines
+
+
+def pays(lod: dict) -> bool:
+    """Whether bands pay on a scene: the held-out choice reaches (``lod["reaches"]``) and so
+    does the drawn policy where it was drawn (its ``export``)."""
+    e = lod.get("export")
+    return bool(lod["reaches"] and (e is None or e.get("reaches")))
+
+
+def export_table(rows: list[tuple[str, dict]]) -> list[str]:
+    """The Markdown table of the drawn policies: a row per (scene cell, ``lod``) with an
+    ``export`` (``study.studies.lod_export.export_policy``'s record)."""
+    lines = [
+        "| scene | bands (margin) | FLIP drawn | above the single point | fetches drawn | ratio "
+        "| seam (worst boundary) | GL check (mean, 99.9th pct) | files |",
+        "|---|---|---|---|---|---|---|---|---|",
+    ]
+    for scene, lod in rows:
+        e = lod.get("export")
+        if not e or "flip" not in e:
+            continue
+        gl = e["gl_check"]
+        verdict = "passed" if gl["passed"] else f"FAILED: {gl['reason']}"
+        seam = fmt(e["seam_ratio"], 3) if e["seam_ratio"] is not None else "no boundary"
+        cells = [
+            scene,
+            f"{len(e['bands'])} by {e['measure']} (±{fmt(e['margin'], 2)} in the log)",
+            fmt(e["flip"], 4),
+            f"{fmt(e['d_flip'], 2)} ± {fmt(e['se'], 2)}",
+            fmt(e["fetches"], 3),
+            fmt(e["fetch_ratio"], 3),
+            seam,
+            f"{verdict} ({fmt(gl['mean_abs'], 2)}, {fmt(gl['p999'], 2)})",
+            f"`{e.get('folder', '')}`",
+        ]
+        lines.append("| " + " | ".join(cells) + " |")
     return lines
 
 
@@ -109,4 +167,9 @@ def lod_lines(summary: dict) -> list[str]:
         "",
         "![Band policies against single points](lod.png)",
         "",
+        *(
+            ["### The policy drawn", "", EXPORT_METHOD, "", *export_table(scenes), ""]
+            if any((lod.get("export") or {}).get("flip") is not None for _, lod in scenes)
+            else []
+        ),
     ]

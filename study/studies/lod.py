@@ -1,24 +1,24 @@
 """Level of detail over bands of the water: which point of the shader space (a configuration at
-a step schedule) each band of pixels gets, chosen from the adaptive search's per-pixel maps.
+a step schedule) each band of pixels gets, chosen from the points' per-pixel maps.
 
 A policy splits the water pixels by a measure of what a pixel needs (:data:`MEASURES`: its
 distance to the camera, or its footprint, the world area of the water plane the pixel covers)
 into 1-5 bands, at bounds taken from a grid of the measure's quantiles, and gives each band one
-screen point. Its FLIP is the mean over the water of the chosen points' FLIP maps, each on its
-band; its cost the mean of their texture-fetch maps alike. Both add up over the bands, so for
-given bounds the front of policies (FLIP against mean fetches per water pixel) is that of a
+point. Its FLIP is the mean over the water of the chosen points' FLIP maps, each on its band;
+its cost the mean of their texture-fetch maps alike. Both add up over the bands, so for given
+bounds the front of policies (FLIP against mean fetches per water pixel) is that of a
 multiple-choice knapsack, merged band by band (:func:`_merge`); the fronts of every set of
 bounds, and of both measures, are merged into one.
 
-What it does not count yet:
+The tradeoff chooses the policy among the points measured in full (:func:`full_points`: maps at
+the experiment's resolution, each point's constants fitted on the whole view; a fit on a band's
+pixels could only lower that band's error); the adaptive search's screen, at the fit's
+resolution, only proposes bands for that rung (:func:`policy_bands`). The seams between bands
+and the cost of a blend margin are measured on the policy drawn as one shader
+(``study.studies.lod_export``).
 
-* each band's constants are its point's screen fit on the whole view; a fit on the band's
-  pixels can only lower that band's error, so the policy's FLIP is an upper bound there;
-* the seam between bands and the cost of a blend margin (pixels shaded by both points): they
-  need the policy's own shader, drawn and scored.
-
-Inputs are the screen's maps (``tradeoff_jobs.screen_job``: ``flip_map`` and ``fetch_map``,
-(H, W) float32 at the screen resolution, NaN off the water) and the measure maps of
+Inputs are per-pixel maps (``flip_map`` and ``fetch_map``, (H, W) float32, NaN off the water:
+``tradeoff_jobs.point_job``'s or ``screen_job``'s) and the measure maps of
 :func:`band_measures` at the same resolution.
 """
 
@@ -31,9 +31,10 @@ import numpy as np
 from shaders_port.pipeline.interpolate import plane_points
 
 from ..scene.mitsuba_scene import camera_view_proj
+from .pareto import recommend
 from .search import paired_se
-from .tradeoff_analysis import config_label
-from .tradeoff_jobs import SCREEN_BLOCK, block_means
+from .tradeoff_analysis import config_label, point_record
+from .tradeoff_jobs import SCREEN_BLOCK, block_means, unpack_map
 
 #: what decides a pixel's need: name -> what it is (units)
 MEASURES = {
@@ -45,37 +46,74 @@ QUANTILES = tuple(np.round(np.arange(1, 10) / 10, 2))
 MAX_BANDS = 5
 
 
+def full_points(rows: list[dict], scene: str) -> list[dict]:
+    """The full rung's points of ``scene`` with their maps, from the tradeoff's table rows
+    (``tradeoff.parquet``; ``tradeoff_jobs.point_job`` with ``flip_map`` and ``fetch_map`` at
+    the experiment's resolution): records with ``variant``, ``schedule``, ``kind``, ``flip``,
+    ``fetches_mean``, ``fitted`` (the point's constants, ``Constants.to_dict`` form) and the
+    unpacked maps; the error floor (``converged``) and failed points left out."""
+    out = []
+    for r in rows:
+        if (r.get("job.experiment") != scene or r.get("status") != "ok"
+                or r.get("job.kind") == "converged" or r.get("flip_map") is None):  # fmt: skip
+            continue
+        rec = point_record(r)
+        rec["fitted"] = {k[len("fitted.") :]: v for k, v in r.items()
+                         if k.startswith("fitted.") and v is not None}  # fmt: skip
+        rec["flip_map"] = unpack_map(r["flip_map"], r["map_shape"])
+        rec["fetch_map"] = unpack_map(r["fetch_map"], r["map_shape"])
+        out.append(rec)
+    return out
+
+
 def band_measures(view_proj: np.ndarray, viewpos, width: int, height: int) -> dict:
     """The :data:`MEASURES` maps, (height, width) float64 each, of a camera ``view_proj``
     ((4, 4) world -> GL clip) at ``viewpos`` ((3,) world units) over the water plane y = 0,
     row 0 at the top; NaN where the pixel's ray does not meet the plane in front of the
-    camera. The footprint is the area of the parallelogram spanned by the plane points a pixel
-    apart in x and in y (central differences of ``plane_points``)."""
+    camera. The footprint is the area of the parallelogram spanned by the derivatives of the
+    plane point along the pixel's x and y (:func:`footprint`)."""
     rows, cols = np.mgrid[0:height, 0:width].astype(np.float64)
     p, t = plane_points(view_proj, width, height, cols, rows)
-    dx = plane_points(view_proj, width, height, cols + 0.5, rows)[0]
-    dx = dx - plane_points(view_proj, width, height, cols - 0.5, rows)[0]
-    dy = plane_points(view_proj, width, height, cols, rows + 0.5)[0]
-    dy = dy - plane_points(view_proj, width, height, cols, rows - 0.5)[0]
     seen = np.isfinite(t) & (t > 0)
     dist = np.linalg.norm(p - np.asarray(viewpos, np.float64), axis=-1)
-    area = np.linalg.norm(np.cross(dx, dy), axis=-1)
+    area = footprint(view_proj, viewpos, width, height, cols, rows)
     return {
         "distance": np.where(seen, dist, np.nan),
         "footprint": np.where(seen & np.isfinite(area), area, np.nan),
     }
 
 
+def footprint(view_proj: np.ndarray, viewpos, width: int, height: int, cols, rows) -> np.ndarray:
+    """The world area of the plane y = 0 that the pixels ``(cols, rows)`` (row 0 at the top)
+    cover: ``|dp/dx x dp/dy|`` of the plane point p along the pixel's axes, in closed form.
+    The ray through a pixel is ``D = h.xyz - h.w * viewpos`` with ``h = inverse(view_proj) @
+    (ndc, 1, 1)``, linear in the pixel, and ``p = viewpos + t D``, ``t = -viewpos.y / D.y``,
+    so ``dp = t (dD - (dD.y / D.y) D)``: the policy shader computes the same in float32
+    without the cancellation of differences of nearby points
+    (``study.export.policy_shader``)."""
+    inv = np.linalg.inv(np.asarray(view_proj, np.float64))
+    o = np.asarray(viewpos, np.float64)
+    x = 2.0 * (np.asarray(cols, np.float64) + 0.5) / width - 1.0
+    y = 2.0 * (height - np.asarray(rows, np.float64) - 0.5) / height - 1.0
+    h = np.stack([x, y, np.ones_like(x), np.ones_like(x)], -1) @ inv.T
+    ray = h[..., :3] - h[..., 3:] * o
+    t = -o[1] / ray[..., 1]
+    along = []
+    for col, scale in ((0, 2.0 / width), (1, -2.0 / height)):  # rows grow downwards
+        dh = inv[:, col] * scale
+        dray = dh[:3] - dh[3] * o
+        along.append(t[..., None] * (dray - (dray[1] / ray[..., 1])[..., None] * ray))
+    with np.errstate(invalid="ignore"):
+        return np.linalg.norm(np.cross(along[0], along[1]), axis=-1)
+
+
 def _pareto(flip: np.ndarray, cost: np.ndarray) -> np.ndarray:
     """Indices of the points no other beats in both (lower FLIP at no more cost), cheapest
     first."""
     order = np.lexsort((flip, cost))
-    keep, best = [], np.inf
-    for i in order:
-        if flip[i] < best - 1e-15:
-            keep.append(i)
-            best = flip[i]
-    return np.asarray(keep, dtype=np.int64)
+    f = np.asarray(flip)[order]
+    before = np.minimum.accumulate(np.concatenate([[np.inf], f[:-1]]))
+    return order[f < before - 1e-15].astype(np.int64)
 
 
 def _merge(front: tuple, band_flip: np.ndarray, band_cost: np.ndarray) -> tuple:
@@ -101,7 +139,7 @@ def policy_front(points: list[dict], measures: dict, max_bands: int = MAX_BANDS)
     flips = np.stack([np.asarray(p["flip_map"], np.float64) for p in points])
     costs = np.stack([np.asarray(p["fetch_map"], np.float64) for p in points])
     water = np.isfinite(flips).all(0) & np.isfinite(costs).all(0)
-    found = []
+    found = []  # (measure, sorted values, edges, (FLIP sums, cost sums, choices), pixels)
     for name, m in measures.items():
         mask = water & np.isfinite(m)
         n = int(mask.sum())
@@ -123,10 +161,18 @@ def policy_front(points: list[dict], measures: dict, max_bands: int = MAX_BANDS)
                 front = (np.zeros(1), np.zeros(1), np.zeros((1, 0), np.int64))
                 for a, b in zip(edges[:-1], edges[1:]):
                     front = _merge(front, cf[:, b] - cf[:, a], cc[:, b] - cc[:, a])
-                for f, c, ch in zip(*front):
-                    found.append(_policy(name, values, edges, ch, f / n, c / n))
-    keep = _pareto(np.array([p["flip"] for p in found]), np.array([p["fetches"] for p in found]))
-    return [found[i] for i in keep]
+                found.append((name, values, edges, front, n))
+    if not found:
+        return []
+    flip = np.concatenate([f / n for *_, (f, _, _), n in found])
+    cost = np.concatenate([c / n for *_, (_, c, _), n in found])
+    where = [(i, j) for i, (*_, (f, _, _), _) in enumerate(found) for j in range(len(f))]
+    out = []
+    for k in _pareto(flip, cost):
+        i, j = where[k]
+        name, values, edges, (_, _, ch), _ = found[i]
+        out.append(_policy(name, values, edges, ch[j], flip[k], cost[k]))
+    return out
 
 
 def _policy(measure: str, values: np.ndarray, edges: tuple, choices, flip, fetches) -> dict:
@@ -174,22 +220,22 @@ def _within(fmap: np.ndarray, ref: np.ndarray, z: float) -> tuple[bool, float, f
     return d <= z * se, d, se
 
 
-def best_policy(front: list[dict], points: list[dict], measures: dict, z: float = 1.0) -> dict:
-    """What bands buy at the lowest FLIP a single point reaches: the cheapest single point
-    and the cheapest policy of two bands or more on ``front`` (cheapest first) whose FLIP is
-    above the lowest-FLIP point's by no more than ``z`` paired standard errors
-    (:func:`_within`). Returns ``{"best": index of the lowest-FLIP point, "single": index of
-    that cheapest point, "single_d": (difference, se), "policy": the policy with its "se" and
-    "d_flip" or None, "fetch_ratio": the policy's mean fetches over the single point's (None
-    without a policy)}``."""
+def best_policy(front: list[dict], points: list[dict], measures: dict, tolerance: float,
+                z: float = 1.0) -> dict:  # fmt: skip
+    """What bands buy against the single point a user would take: the cheapest point whose
+    FLIP is within ``tolerance`` (relative) of the lowest (the tradeoff's recommendation,
+    ``pareto.recommend``), and the cheapest policy of two bands or more on ``front``
+    (cheapest first) whose FLIP is above that point's by no more than ``z`` paired standard
+    errors (:func:`_within`). Returns ``{"best": index of the lowest-FLIP point, "single":
+    index of that cheapest point, "single_d": (its FLIP above the lowest, the paired standard
+    error), "policy": the policy with its "se" and "d_flip" (above the single point) or None,
+    "fetch_ratio": the policy's mean fetches over the single point's (None without a
+    policy)}``."""
     best = int(np.argmin([p["flip"] for p in points]))
-    ref = np.asarray(points[best]["flip_map"], np.float64)
-    singles = sorted(range(len(points)), key=lambda i: points[i]["fetches_mean"])
-    for i in singles:
-        ok, d, se = _within(np.asarray(points[i]["flip_map"], np.float64), ref, z)
-        if ok:
-            single, single_d = i, (d, se)
-            break
+    chosen = recommend(points, "fetches_mean", "flip", tolerance)
+    single = next(i for i, p in enumerate(points) if p is chosen)
+    ref = np.asarray(points[single]["flip_map"], np.float64)
+    _, *single_d = _within(ref, np.asarray(points[best]["flip_map"], np.float64), z)
     policy = None
     for pol in front:
         if len(pol["choices"]) < 2:
@@ -202,18 +248,18 @@ def best_policy(front: list[dict], points: list[dict], measures: dict, z: float 
     return {
         "best": best,
         "single": single,
-        "single_d": single_d,
+        "single_d": tuple(single_d),
         "policy": policy,
         "fetch_ratio": float(policy["fetches"] / cost) if policy and cost > 0 else None,
     }
 
 
-def held_out(points: list[dict], measures: dict, z: float = 1.0) -> dict | None:
+def held_out(points: list[dict], measures: dict, tolerance: float, z: float = 1.0) -> dict | None:
     """The choice checked on pixels it did not see. The water's ``SCREEN_BLOCK``-pixel blocks
-    are split as a checkerboard; the lowest-FLIP point, the single point and the policy are
-    chosen (:func:`best_policy`) on one colour's blocks and scored on the other's. Returns
+    are split as a checkerboard; the single point and the policy are chosen
+    (:func:`best_policy`) on one colour's blocks and scored on the other's. Returns
     ``{"choices", "measure", "bounds", "d_flip", "se", "within", "fetch_ratio"}``: the
-    policy's FLIP minus the lowest-FLIP point's on the unseen blocks with its paired standard
+    policy's FLIP minus the single point's on the unseen blocks with its paired standard
     error, whether that is within ``z`` of them, and its fetches over the single point's
     there; None when no policy is chosen on the first half."""
     h, w = np.asarray(points[0]["flip_map"]).shape
@@ -230,12 +276,12 @@ def held_out(points: list[dict], measures: dict, z: float = 1.0) -> dict | None:
         return out
 
     seen, unseen = half(black), half(~black)
-    found = best_policy(policy_front(seen, measures), seen, measures, z)
+    found = best_policy(policy_front(seen, measures), seen, measures, tolerance, z)
     pol = found["policy"]
     if pol is None:
         return None
     flip, cost = composite(pol, unseen, measures)
-    within, d, se = _within(flip, unseen[found["best"]]["flip_map"], z)
+    within, d, se = _within(flip, unseen[found["single"]]["flip_map"], z)
     single = unseen[found["single"]]["fetches_mean"]
     return {
         "choices": pol["choices"],
@@ -252,13 +298,14 @@ def held_out(points: list[dict], measures: dict, z: float = 1.0) -> dict | None:
 TARGET_RATIO = 0.8
 
 
-def scene_policies(exp, screen: list[dict]) -> dict | None:
-    """The level-of-detail finding of one scene (``exp``, an ``Experiment``) from its screen
-    records (``search.screen_record``s with maps): the single points' front, the policies'
-    front, and the policy of :func:`best_policy` against the lowest-FLIP point, with labels
-    (``tradeoff_analysis.config_label``) in place of indices. None when fewer than two
-    points have maps (a table screened before the maps were kept). ``held_out``: the choice
-    made on half the water's blocks, scored on the other half (:func:`held_out`)."""
+def scene_policies(exp, screen: list[dict], tolerance: float) -> dict | None:
+    """The level-of-detail finding of one scene (``exp``, an ``Experiment``) from its points
+    with maps (:func:`full_points`, or ``search.screen_record``s): the single points' front,
+    the policies' front, and the policy of :func:`best_policy` against the cheapest point
+    within ``tolerance`` of the lowest FLIP, with labels (``tradeoff_analysis.config_label``)
+    in place of indices. None when fewer than two points have maps (a table measured before
+    the maps were kept). ``held_out``: the choice made on half the water's blocks, scored on
+    the other half (:func:`held_out`)."""
     pts = [r for r in screen if r.get("flip_map") is not None and r.get("fetch_map") is not None]
     if len(pts) < 2:
         return None
@@ -266,19 +313,25 @@ def scene_policies(exp, screen: list[dict]) -> dict | None:
     cam = exp.section("camera")
     measures = band_measures(camera_view_proj(exp, w, h), cam["position"], w, h)
     front = policy_front(pts, measures)
-    found = best_policy(front, pts, measures)
+    found = best_policy(front, pts, measures, tolerance)
     labels = [config_label(p) for p in pts]
 
-    def named(pol: dict) -> dict:
+    def config(i: int) -> dict:  # what draws the point again (study.studies.lod_export)
+        return {"variant": pts[i]["variant"], "fitted": pts[i]["fitted"]}
+
+    def named(pol: dict, configs: bool = False) -> dict:
         out = {k: v for k, v in pol.items() if k != "choices"}
+        if configs:
+            out["band_points"] = [config(c) for c in pol["choices"]]
         return {**out, "bands": [labels[c] for c in pol["choices"]]}
 
     def point(i: int) -> dict:
-        return {"label": labels[i], "flip": pts[i]["flip"], "fetches": pts[i]["fetches_mean"]}
+        return {"label": labels[i], "flip": pts[i]["flip"], "fetches": pts[i]["fetches_mean"],
+                **config(i)}  # fmt: skip
 
     flips, fetches = (np.array([p[k] for p in pts]) for k in ("flip", "fetches_mean"))
     singles = _pareto(flips, fetches)
-    check = held_out(pts, measures)
+    check = held_out(pts, measures, tolerance)
     if check is not None:
         check["bands"] = [labels[c] for c in check.pop("choices")]
     return {
@@ -291,7 +344,7 @@ def scene_policies(exp, screen: list[dict]) -> dict | None:
             "d_flip": found["single_d"][0],
             "se": found["single_d"][1],
         },  # fmt: skip
-        "policy": named(found["policy"]) if found["policy"] else None,
+        "policy": named(found["policy"], configs=True) if found["policy"] else None,
         "fetch_ratio": found["fetch_ratio"],
         # the same choice made on half the blocks and scored on the other half: bands pay when
         # it holds there (FLIP within one paired standard error) at TARGET_RATIO or less
@@ -308,3 +361,17 @@ def scene_policies(exp, screen: list[dict]) -> dict | None:
         ],  # fmt: skip
         "front": [named(p) for p in front],
     }
+
+
+def policy_bands(exp, screen: list[dict], tolerance: float) -> list[dict]:
+    """The screen points (``search.screen_record``s with maps) that the screen's chosen policy
+    gives its bands (:func:`best_policy` on the screen's front): the adaptive search measures
+    them in full, so that the full rung, where the policy is chosen at the experiment's
+    resolution, has them. [] without maps or without a policy."""
+    pts = [r for r in screen if r.get("flip_map") is not None and r.get("fetch_map") is not None]
+    if len(pts) < 2:
+        return []
+    h, w = pts[0]["flip_map"].shape
+    measures = band_measures(camera_view_proj(exp, w, h), exp.section("camera")["position"], w, h)
+    found = best_policy(policy_front(pts, measures), pts, measures, tolerance)
+    return [pts[c] for c in found["policy"]["choices"]] if found["policy"] else []

@@ -40,6 +40,7 @@ from shaders_port import space as _space
 from ..fit.model import constants_from_experiment
 from ..sweep import run_sweep
 from .tradeoff_jobs import (
+    POINT_VERSION,
     SCREEN_VERSION,
     SEED_SCHEDULE,
     original_schedule,
@@ -353,6 +354,7 @@ class Search:
                         "scale": scale,
                         "schedule": dict(sched),
                         "start": {**self.start[i], **warm},
+                        "point_version": POINT_VERSION,
                     }
                 )
         return jobs

@@ -24,9 +24,11 @@ Then it analyses the table (``tradeoff_analysis``):
   adaptive search, what each axis's choice buys at the recommendation;
 * with ``fit.shader`` a GLSL file, the user's own shader measured in full beside the search's
   points (``tradeoff_user``), on the chart and the front like them, and where it stands;
-* for the adaptive search, the level-of-detail policies (``study.studies.lod``): the water in
-  bands by distance or footprint, each band one screen point, chosen from the screen's
-  per-pixel maps, the cheapest reaching the best single point's FLIP (``lod.png``);
+* the level-of-detail policies (``study.studies.lod``): the water in bands by distance or
+  footprint, each band one point measured in full, chosen from the points' per-pixel maps at
+  the experiment's resolution, the cheapest reaching the best single point's FLIP
+  (``lod.png``; the adaptive search measures the bands its screen's maps choose in full too),
+  drawn as one shader with its seams and its GL check (``study.studies.lod_export``);
 * on an animated experiment, the search and the fits on frame 0, then every point measured in
   full scored on every frame and on the temporal error, and whether motion changes the
   recommendation (``tradeoff_motion``).
@@ -40,7 +42,8 @@ user's shader; its panels kept as data in ``images_<scene>.exr`` and ``.json``,
 ``study.report.panels``), ``report.md``, ``summary.json``, and the recommendation calibrated as
 ``study calibrate`` writes a calibration (``study.studies.tradeoff_export``): ``recommended/``
 (one experiment) or ``recommended/<name>/`` (several); a user's own shader that is not the
-recommendation in ``yours/`` alike.
+recommendation in ``yours/`` alike; the level-of-detail policy in ``policy/`` (one experiment)
+or ``policy/<name>/``.
 """
 
 from __future__ import annotations
@@ -66,11 +69,12 @@ from ..report.tradeoff_motion import motion_figure
 from ..scene.animation import is_animated
 from ..scene.views import has_views, view_experiments, view_overrides
 from ..sweep import load_scene, run_sweep, scene_spec
-from .lod import scene_policies
+from .lod import full_points, policy_bands, scene_policies
+from .lod_export import export_policies
 from .search import Search
 from .tradeoff_analysis import COSTS, analyse, constants_of
 from .tradeoff_export import export_points, point_row
-from .tradeoff_jobs import SEED_SCHEDULE, anchor_job, point_job, schedules
+from .tradeoff_jobs import POINT_VERSION, SEED_SCHEDULE, anchor_job, point_job, schedules
 from .tradeoff_motion import run_motion, still_overrides
 from .tradeoff_user import user_jobs, user_point_job
 
@@ -111,6 +115,7 @@ def plan_points(exps, specs, anchors: dict, variants: list) -> list[dict]:
                         "scale": s["scale"],
                         "schedule": s["schedule"],
                         "start": anchors[(i, v)],
+                        "point_version": POINT_VERSION,
                     }
                 )
     return jobs
@@ -170,7 +175,7 @@ def run_tradeoff(
             rows = _exhaustive(exps, specs, client, out, log, shaders)
             searcher = None
         else:
-            rows, searcher = _adaptive(exps, specs, client, out, log, fix, chosen)
+            rows, searcher = _adaptive(exps, specs, client, out, log, fix, chosen, tol)
         rows = rows + _user_points(exps, specs, client, out, log)
         summary, recs = analyse(rows, names, tol, budget)
         run_motion(exps, experiments, plain, rows, recs, summary, client, out, log)
@@ -180,12 +185,14 @@ def run_tradeoff(
                 # a point the search did not screen (a user's shader) has no marginals
                 rec = summary["scenes"][name]["recommended"]
                 summary["scenes"][name]["marginals"] = searcher.marginals_of(i, rec) if rec else []
-                summary["scenes"][name]["lod"] = scene_policies(exps[i], searcher.ok(i))
+        for i, name in enumerate(names):
+            summary["scenes"][name]["lod"] = scene_policies(exps[i], full_points(rows, name), tol)
     summary["experiments"] = [str(p) for p in experiments]
     init_backend(variant)
     summary["exports"], summary["user_exports"] = export_points(
         exps, specs, summary, rows, out, variant, log
     )
+    export_policies(exps, specs, summary, out, variant, log)
     summary["images"], summary["panels"] = side_by_side(exps, specs, summary, rows, out, variant)
 
     pareto_figure(out / "pareto.png", recs, summary)
@@ -260,9 +267,10 @@ def _exhaustive(exps, specs, client, out, log, shaders: list) -> list[dict]:
     )[: len(points)]
 
 
-def _adaptive(exps, specs, client, out, log, fix: dict, chosen):
+def _adaptive(exps, specs, client, out, log, fix: dict, chosen, tol: float):
     """The adaptive search (``study.studies.search``): walk, schedules, then the finalists in
-    full. Returns (the full rung's rows, the ``Search``)."""
+    full (with the bands of the screen's level-of-detail policy at tolerance ``tol``).
+    Returns (the full rung's rows, the ``Search``)."""
     searcher = Search(exps, specs, client, out, log, fix=fix, variants=chosen)
     finalists = []
     for i in range(len(exps)):
@@ -271,6 +279,9 @@ def _adaptive(exps, specs, client, out, log, fix: dict, chosen):
         # the original shader and each source's technique alone at its own schedule: what
         # every finding compares with
         finalists += searcher.alone(i)
+        # the configurations of the screen's level-of-detail policy, so that the full rung can
+        # choose bands among them
+        finalists += policy_bands(exps[i], searcher.ok(i), tol)
     jobs = searcher.full_jobs(finalists)
     log(
         f"tradeoff: {len(searcher.screen)} screen points, {len(jobs)} measured in full "

@@ -188,9 +188,30 @@ def point_job(job: dict) -> dict:
     }
     if job["kind"] != "converged":  # the error floor is not a candidate: its frame time is moot
         out.update(frame_times(job["variant"], frame.inputs, cal.fitted, exp.tradeoff.gl_repeats))
+        out.update(point_maps(score))
     out["fitted"] = cal.fitted.to_dict()
     out["status_of"] = {n: p["status"] for n, p in cal.parameters.items()}
     return out
+
+
+# what a full point's row holds, part of its job (rows of an earlier version are measured
+# again): 2, the per-pixel FLIP and fetch maps at the experiment's resolution
+POINT_VERSION = 2
+
+
+def point_maps(score) -> dict:
+    """A ``Score``'s per-pixel FLIP and texture-fetch maps as a row keeps them (``flip_map``,
+    ``fetch_map``: :func:`pack_map` bytes of ``map_shape`` (H, W), NaN off the scored water);
+    {} for a shader without a fetch count. The level-of-detail policies
+    (``study.studies.lod``) are chosen from them."""
+    maps, m = score.diagnostics.maps, score.mask
+    if "fetches" not in maps:
+        return {}
+    return {
+        "flip_map": pack_map(np.where(m, score.flip_map, np.nan)),
+        "fetch_map": pack_map(np.where(m, maps["fetches"], np.nan)),
+        "map_shape": list(m.shape),
+    }
 
 
 SCREEN_BLOCK = 4  # pixels per side of the blocks the screen's FLIP map is averaged over
