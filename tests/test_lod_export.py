@@ -147,15 +147,14 @@ def test_the_policy_shader_draws_the_ports_mix_of_its_bands(measure, share):
         assert (water & (weights[k] == 1)).sum() > 200
     if share == 1.0:
         assert (water & (weights.max(0) < 1)).sum() > 20  # pixels in a margin
+    src = ps.compose(bands, measure, bounds, margin)
+    assert src.count("_main();") == 3
     try:
-        src, res = lod_export.gl_check_policy(bands, measure, bounds, margin, weights, ports,
-                                              uploaded, water)  # fmt: skip
+        res = lod_export.gl_check_policy(src, weights, ports, uploaded, water)
     except RuntimeError as exc:
         if "EGL" in str(exc) or "context" in str(exc).lower():
             pytest.skip(f"no headless OpenGL here: {exc}")
         raise
-    assert src.count("_main();") == 3
     check_gl_match(res, f"policy_shader_{measure}_{share}")
-    _, wrong = lod_export.gl_check_policy(bands[::-1], measure, bounds, margin, weights,
-                                          ports, uploaded[::-1], water)  # fmt: skip
-    assert wrong["p999"] > 1e-2
+    wrong = ps.compose(bands[::-1], measure, bounds, margin)
+    assert lod_export.gl_check_policy(wrong, weights, ports, uploaded, water)["p999"] > 1e-2

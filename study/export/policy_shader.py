@@ -8,9 +8,10 @@ constants and step schedule. :func:`compose` writes them as one file:
 * each band's shader (the variant's file with its defines and its constants written) is
   preprocessed by glslang (``glslangValidator -E``), so its ``#define`` switches are resolved;
 * every name the band declares at global scope (functions, ``const`` globals, its ``main``, and
-  the tunable constants that are uniforms with initialisers, such as ``waterColor``) gets the
-  band's prefix ``b<k>_``; its interface (the uniforms the application binds, the varyings)
-  is declared once for all bands, and a declaration two bands give differently is refused;
+  the tunable constants that are uniforms with initialisers, such as ``waterColor``, which
+  become constants of the band) gets the band's prefix ``b<k>_``; its interface (the uniforms
+  the application binds, the varyings) is declared once for all bands, and a declaration two
+  bands give differently is refused;
 * the bands write ``policyColour`` in place of the output, and ``main`` shades a pixel with the
   bands whose weight (:func:`band_weights`) is not zero: one band inside a band, two in a
   margin, where their colours are mixed.
@@ -198,8 +199,9 @@ def compose(bands: list[Band], measure: str, bounds: list[float], margin: float)
                         f"band {k} ({band.variant}) declares {name!r} as {st!r}, another band "
                         f"as {old!r}: the bands must share their interface"
                     )
-            else:
-                own.append(st)
+            else:  # a tunable uniform becomes a constant of its band (GLSL ES has no
+                # uniform initialisers)
+                own.append(re.sub(r"^\s*uniform\b", "const", st))
                 names.add(declared_name(st))
         body = "\n".join(renamed(st, names, f"b{k}_", output or "fragColor") for st in own)
         sections.append(f"// ---- band {k}: {band.label or band.variant} ----\n{body}\n")

@@ -70,12 +70,15 @@ METHOD = (
 
 #: how the drawn policy's table (:func:`export_table`) is made, in words
 EXPORT_METHOD = (
-    "The chosen policy as one GLSL file (`policy/policy.frag`, with `policy/policy.json`, the "
-    "bands for an engine that switches shaders itself), drawn by the port at the experiment's "
-    "resolution: *seam*, FLIP in a strip 8 pixels wide each side of every boundary between "
+    "The chosen policy as one GLSL file (`policy/policy.frag`, with the engine targets and "
+    "their binding sheets, and `policy/policy.json`, the bands for an engine that switches "
+    "shaders itself), drawn by the port at the experiment's resolution with the narrowest "
+    "of four blend margins that shows no seam: its FLIP above the single point's (paired "
+    "standard error), its fetches (a pixel in a margin pays for both bands) over the single "
+    "point's; *seam*, FLIP in a strip 8 pixels wide each side of every boundary between "
     "bands, over the bands' own FLIP there (each pixel's FLIP in its band's own image; above "
-    "1.1 a seam shows); *GL check*, the file run on OpenGL (llvmpipe) against the port's mix "
-    "of its bands, with every export's thresholds."
+    "1.1 a seam shows); *GL check*, the file and its HLSL run on OpenGL (llvmpipe) against "
+    "the port's mix of its bands, with every export's thresholds."
 )
 
 
@@ -128,7 +131,7 @@ def export_table(rows: list[tuple[str, dict]]) -> list[str]:
     ``export`` (``study.studies.lod_export.export_policy``'s record)."""
     lines = [
         "| scene | bands (margin) | FLIP drawn | above the single point | fetches drawn | ratio "
-        "| seam (worst boundary) | GL check (mean, 99.9th pct) | files |",
+        "| seam (worst boundary) | GL check (GLSL's mean, 99.9th pct) | files |",
         "|---|---|---|---|---|---|---|---|---|",
     ]
     for scene, lod in rows:
@@ -136,7 +139,11 @@ def export_table(rows: list[tuple[str, dict]]) -> list[str]:
         if not e or "flip" not in e:
             continue
         gl = e["gl_check"]
-        verdict = "passed" if gl["passed"] else f"FAILED: {gl['reason']}"
+        verdict = ", ".join(
+            f"{what} " + ("passed" if c["passed"] else f"FAILED: {c['reason']}")
+            for what, c in (("GLSL", gl), ("HLSL", e.get("hlsl_check")))
+            if c is not None
+        )
         seam = fmt(e["seam_ratio"], 3) if e["seam_ratio"] is not None else "no boundary"
         cells = [
             scene,

@@ -20,12 +20,15 @@ tradeoff's tolerance of the lowest FLIP):
   where no seam can be): ``ratio`` over :data:`SEAM_RATIO` is a seam a player may see;
 * ``gl_check``: ``policy.frag`` (``study.export.policy_shader.compose``) run on OpenGL
   (llvmpipe) against the port's mixed image, with the GL check's thresholds; an outlier is
-  explained where a band that shades the pixel explains it.
+  explained where a band that shades the pixel explains it; ``hlsl_check``: the exported HLSL
+  alike, compiled back by glslang and translated by SPIRV-Cross.
 
-Written into the policy's folder: ``policy.frag`` and ``water.vert`` (the core files),
-``policy.json`` (the bands for an engine that switches shaders itself: measure, bounds in the
-shader's unit, margin, and per band its configuration, variant, constants, share of the water
-and fetches) and the figures above.
+Written into the policy's folder: ``policy.frag`` and ``water.vert`` (the core files), the
+engine targets of every export with their binding sheets (``study.export.targets``: GLSL ES
+3.00, HLSL, Metal, SPIR-V, WGSL where Node.js and naga are set up), and ``policy.json`` (the
+bands for an engine that switches shaders itself: measure, bounds in the shader's unit, margin,
+and per band its configuration, variant, constants, share of the water and fetches; the
+figures above; the targets' files and checks).
 """
 
 from __future__ import annotations
@@ -42,7 +45,9 @@ from scipy import ndimage
 
 from shaders_port.gl.compare import compare_outputs, port_reasons
 from shaders_port.gl.renderer import GLRenderer
+from shaders_port.gl.round_trip import TranslatedRenderer
 from shaders_port.glsl_text import compile_check, read_source
+from shaders_port.spirv.tools import hlsl_round_trip
 from shaders_port.inputs import Constants
 from shaders_port.variants import get_variant
 
@@ -51,6 +56,7 @@ from ..calibration.frames import Frame
 from ..calibration.scoring import Scorer
 from ..calibration.shader import Shader
 from ..export.gl_check import gl_renderer_of, verdict
+from ..export.targets import resolve_targets, translate_targets
 from ..export.policy_shader import SHADER_MEASURES, Band, band_weights, compose
 from ..scene.mitsuba_scene import camera_view_proj
 from ..sweep import load_scene
@@ -161,20 +167,25 @@ def _mix(weights: np.ndarray, images: list) -> np.ndarray:
 
 
 def gl_check_policy(
-    bands: list[Band], measure: str, bounds, margin: float, weights: np.ndarray,
-    ports: list[dict], uploaded: list, water: np.ndarray,
-) -> tuple[str, dict]:  # fmt: skip
-    """(the policy's shader text, the figures of ``compare_port_gl`` with ``gl_renderer``):
-    ``compose``'s shader run on OpenGL
-    with the bands' inputs (``uploaded``, as each band's application uploads them:
-    :func:`merged_inputs`) against the port's mix of the bands' outputs (``ports``:
-    ``ShaderOutput.numpy()`` dicts) by ``weights`` ((K, H, W), :func:`band_weights`) on
-    ``water`` ((H, W) bool). An outlier is explained where a band with weight there explains
-    it (``shaders_port.gl.compare.port_reasons``)."""
-    src = compose(bands, measure, bounds, margin)
-    compile_check(src, "frag")
-    with GLRenderer(get_variant(bands[0].variant).shader, merged_inputs(uploaded),
-                    source=src) as r:  # fmt: skip
+    src: str, weights: np.ndarray, ports: list[dict], uploaded: list, water: np.ndarray,
+    hlsl: str | None = None,
+) -> dict:  # fmt: skip
+    """The figures of ``compare_port_gl`` (with ``gl_renderer``) of the policy's shader ``src``
+    (:func:`~study.export.policy_shader.compose`) run on OpenGL with the bands' inputs
+    (``uploaded``, as each band's application uploads them: :func:`merged_inputs`) against
+    the port's mix of the bands' outputs (``ports``: ``ShaderOutput.numpy()`` dicts) by
+    ``weights`` ((K, H, W), ``band_weights``) on ``water`` ((H, W) bool). ``hlsl``: run that
+    HLSL instead, compiled back by glslang's HLSL front end and translated to GLSL by
+    SPIRV-Cross, as every export's HLSL check. An outlier is explained where a band with
+    weight there explains it (``shaders_port.gl.compare.port_reasons``)."""
+    inputs = merged_inputs(uploaded)
+    if hlsl is None:
+        compile_check(src, "frag")
+        renderer = GLRenderer("water_refraction", inputs, source=src)
+    else:
+        glsl, refl = hlsl_round_trip(hlsl, "frag", "hlsl/policy.frag.hlsl")
+        renderer = TranslatedRenderer("water_refraction", inputs, glsl, refl)
+    with renderer as r:
         rgba, gl_mask = r.render(None)
         gl = gl_renderer_of(r)
     masks = [p["mask"] > 0.5 for p in ports]
@@ -184,7 +195,7 @@ def gl_check_policy(
             reasons[name] = reasons.get(name, np.zeros_like(m)) | (why & (weights[k] > 0))
     mask = np.logical_and.reduce(masks) & water
     out = {"color": _mix(weights, [p["color"] for p in ports]), "mask": mask.astype(np.float32)}
-    return src, {**compare_outputs(out, rgba, gl_mask & mask, reasons, {}), "gl_renderer": gl}
+    return {**compare_outputs(out, rgba, gl_mask & mask, reasons, {}), "gl_renderer": gl}
 
 
 def _paired(a: np.ndarray, b: np.ndarray) -> tuple[float, float]:
@@ -238,9 +249,10 @@ def _narrowest(ref, scores, m, bounds, measure: str, water) -> tuple[float, dict
     return chosen[0], chosen[1], tried
 
 
-def measure_policy(exp, spec, lod: dict, mv: str) -> tuple[dict, str]:
+def measure_policy(exp, spec, lod: dict, mv: str) -> tuple[dict, dict]:
     """The figures of the module docstring for the chosen policy of ``lod`` (a
-    ``scene_policies`` record with its ``policy``), and the policy's shader text."""
+    ``scene_policies`` record with its ``policy``), and the files of its folder (relative path
+    -> bytes: the core files, the engine targets, ``policy.json``)."""
     policy = {**lod["policy"], "resolution": lod["resolution"]}
     bands, bounds, measure = bands_of(policy), shader_bounds(policy), policy["measure"]
     configs = {b.label: b for b in bands}
@@ -259,10 +271,9 @@ def measure_policy(exp, spec, lod: dict, mv: str) -> tuple[dict, str]:
     single_flip = np.where(water, single.flip_map, np.nan)
     best_flip = np.where(water, drawn[lod["best"]["label"]][1].flip_map, np.nan)
     d_flip, se = _paired(d["flip"], single_flip)
-    src, res = gl_check_policy(
-        bands, measure, bounds, margin, d["weights"],
-        [drawn[b.label][2] for b in bands], [drawn[b.label][3] for b in bands], water,
-    )  # fmt: skip
+    src = compose(bands, measure, bounds, margin)
+    check = ([drawn[b.label][2] for b in bands], [drawn[b.label][3] for b in bands], water)
+    res = gl_check_policy(src, d["weights"], *check)
     n, fetches = int(water.sum()), float(np.nanmean(d["fetch"]))
     single_fetches = float(single.diagnostics.maps["fetches"][water].mean())
 
@@ -308,21 +319,37 @@ def measure_policy(exp, spec, lod: dict, mv: str) -> tuple[dict, str]:
     }
     ratio = record["fetch_ratio"]
     record["reaches"] = bool(record["within"] and ratio is not None and ratio <= TARGET_RATIO)
-    return record, src
+    core = {"policy.frag": src, "water.vert": read_source("water", "vert", "core")}
+    files, manifest = translate_targets(core, resolve_targets(None), {}, SHEET_NOTE)
+    record["engine_targets"] = manifest["targets"]
+    hlsl = files["hlsl/policy.frag.hlsl"].decode()
+    what = "the exported level-of-detail policy's HLSL (through glslang -D and SPIRV-Cross)"
+    record["hlsl_check"] = verdict(gl_check_policy(src, d["weights"], *check, hlsl=hlsl), what)
+    files.update({k: v.encode() for k, v in core.items()})
+    files["policy.json"] = (json.dumps(record, indent=1) + "\n").encode()
+    return record, files
+
+
+#: what the binding sheets of a policy say of its constants
+SHEET_NOTE = [
+    "The bands' constants are constants of `policy.frag` (names prefixed `b<k>_`, band k "
+    "nearest first); `policy.json` lists each band's constants, the measure, bounds and margin.",
+    "",
+]
 
 
 def export_policy(exp, spec, lod: dict, folder: Path, mv: str) -> dict:
     """:func:`measure_policy` of the scene's chosen policy, written into ``folder`` (module
     docstring) all or nothing: a new folder beside the old one, swapped in by renames. Returns
     the record ``policy.json`` holds."""
-    record, src = measure_policy(exp, spec, lod, mv)
+    record, files = measure_policy(exp, spec, lod, mv)
     folder = Path(folder)
     folder.parent.mkdir(parents=True, exist_ok=True)
     tmp = Path(tempfile.mkdtemp(prefix=f".{folder.name}.", dir=folder.parent))
     try:
-        (tmp / "policy.frag").write_text(src)
-        (tmp / "water.vert").write_text(read_source("water", "vert", "core"))
-        (tmp / "policy.json").write_text(json.dumps(record, indent=1) + "\n")
+        for rel, data in files.items():
+            (tmp / rel).parent.mkdir(parents=True, exist_ok=True)
+            (tmp / rel).write_bytes(data)
         old = folder.with_name(f".{folder.name}.old")
         if folder.exists():
             os.replace(folder, old)
