@@ -140,6 +140,8 @@ def test_adaptive_tradeoff_tiny(tmp_path):
     # need different inputs (the baseline's screen buffers), seams measured, GL-checked
     drawn = lod["export"]
     assert lod["policy"]["bands"] == ["water_refraction (5, 3, 20)", "water_baseline_flat"]
+    best = lod["against_best"]
+    assert best["fetch_ratio"] == pytest.approx(lod["policy"]["fetches"] / lod["best"]["fetches"])
     assert drawn["gl_check"]["passed"], drawn["gl_check"]
     assert drawn["seams"] and drawn["seam_ratio"] is not None
     assert (tmp_path / drawn["folder"] / "policy.frag").read_text().count("_main();") == 2

@@ -254,6 +254,16 @@ def best_policy(front: list[dict], points: list[dict], measures: dict, tolerance
     }
 
 
+def _against(policy: dict | None, points: list[dict], measures: dict, i: int) -> dict | None:
+    """``policy``'s FLIP above point ``i``'s (``d_flip``, paired ``se``) and its fetches over
+    point ``i``'s (``fetch_ratio``); None without a policy."""
+    if policy is None:
+        return None
+    _, d, se = _within(composite(policy, points, measures)[0], points[i]["flip_map"], 1.0)
+    cost = points[i]["fetches_mean"]
+    return {"d_flip": d, "se": se, "fetch_ratio": policy["fetches"] / cost if cost > 0 else None}
+
+
 def held_out(points: list[dict], measures: dict, tolerance: float, z: float = 1.0) -> dict | None:
     """The choice checked on pixels it did not see. The water's ``SCREEN_BLOCK``-pixel blocks
     are split as a checkerboard; the single point and the policy are chosen
@@ -346,6 +356,9 @@ def scene_policies(exp, screen: list[dict], tolerance: float) -> dict | None:
         },  # fmt: skip
         "policy": named(found["policy"], configs=True) if found["policy"] else None,
         "fetch_ratio": found["fetch_ratio"],
+        # the same policy against the lowest-FLIP point: what it saves there is partly what a
+        # cheaper single point saves too
+        "against_best": _against(found["policy"], pts, measures, found["best"]),
         # the same choice made on half the blocks and scored on the other half: bands pay when
         # it holds there (FLIP within one paired standard error) at TARGET_RATIO or less
         "held_out": check,
