@@ -7,8 +7,8 @@ generated from committed tradeoff summaries:
   docs/results/lod/<scene>`` for deep_steps, grazing and calm, and for view k of
   ``experiments/views.toml`` the same with ``--set camera.position=... --set camera.target=...
   --set 'camera.views=[]' --set 'name="views-view<k>"'`` (the view's camera); only the
-  summary and the drawn policy (``policy/``) are kept. ``lod.png`` beside each is drawn from
-  the summary (``study.report.lod``).
+  summary and the drawn policy's ``policy.frag`` and ``policy.json`` (``policy/``) are
+  kept. ``lod.png`` beside each is drawn from the summary (``study.report.lod``).
 
 ``python scripts/docs_lod.py FOLDER EXPERIMENT [KEY=VALUE ...]`` recomputes the ``lod`` of a
 tradeoff folder's summary from its ``tradeoff.parquet`` (the experiment and the overrides of its
@@ -65,14 +65,30 @@ def lod_page(results: Path) -> str:
         f"{len(paying)} of {len(SCENES)} scenes" + (f": {', '.join(paying)}." if paying else ".")
     )
     lines = ["# Level of detail on seven scenes", "", intro, "", METHOD, "", *lod_table(rows)]
-    drawn = ["## The policies drawn", "", EXPORT_METHOD, "", *export_table(rows)]
+    links = dict(zip((cell for cell, _ in rows), SCENES.values()))
+    drawn = [
+        "## The policies drawn",
+        "",
+        EXPORT_METHOD,
+        "",
+        *export_table(rows, lambda e: "policy.frag, policy.json"),
+        "",
+        "The files: "
+        + ", ".join(
+            f"{cell.split(']')[0][1:]}: [policy.frag](../{folder}/policy/policy.frag), "
+            f"[policy.json](../{folder}/policy/policy.json)"
+            for cell, folder in links.items()
+        )
+        + ".",
+    ]
     return "\n".join([*lines, "", verdict, "", *drawn, ""])
 
 
 def refresh(folder: Path, experiment: str, overrides: list[str]) -> dict:
-    """Recompute the ``lod`` of ``folder``'s ``summary.json`` from its ``screen.parquet`` with
-    the current ``study.studies.lod`` (the experiment file and the ``--set`` overrides of its
-    tradeoff), and write the summary back; returns the finding."""
+    """Recompute the ``lod`` of ``folder``'s ``summary.json`` from its ``tradeoff.parquet``
+    with the current ``study.studies.lod`` (the experiment file and the ``--set`` overrides of
+    its tradeoff), draw the policy into ``folder/policy`` again (``study.studies.lod_export``)
+    and write the summary back; returns the finding."""
     sys.path.insert(0, str(REPO))
     from study._backend import init_backend
     from study._io import write_json

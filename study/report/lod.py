@@ -132,9 +132,11 @@ def pays(lod: dict) -> bool:
     return bool(lod["reaches"] and (e is None or e.get("reaches")))
 
 
-def export_table(rows: list[tuple[str, dict]]) -> list[str]:
+def export_table(rows: list[tuple[str, dict]], files=None) -> list[str]:
     """The Markdown table of the drawn policies: a row per (scene cell, ``lod``) with an
-    ``export`` (``study.studies.lod_export.export_policy``'s record)."""
+    ``export`` (``study.studies.lod_export.export_policy``'s record). ``files``: the last
+    cell of a row from its ``export`` (default: the folder it was written to)."""
+    files = files or (lambda e: f"`{e.get('folder', '')}/`")
     lines = [
         "| scene | bands (margin) | FLIP drawn | above the single point | fetches drawn | ratio "
         "| seam (worst boundary) | GL check (GLSL's mean, 99.9th pct) | files |",
@@ -160,7 +162,7 @@ def export_table(rows: list[tuple[str, dict]]) -> list[str]:
             fmt(e["fetch_ratio"], 3),
             seam,
             f"{verdict} ({fmt(gl['mean_abs'], 2)}, {fmt(gl['p999'], 2)})",
-            f"`{e.get('folder', '')}`",
+            files(e),
         ]
         lines.append("| " + " | ".join(cells) + " |")
     return lines
