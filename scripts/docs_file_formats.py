@@ -43,6 +43,8 @@ COLUMNS = {
     "job.factor": "the screen's downscale of `fit.resolution` (adaptive search)",
     "job.screen_version": "what a screen row holds (2: the per-pixel maps); a table of an earlier "
     "version is screened again",
+    "job.point_version": "what a full point's row holds (2: the per-pixel maps); a table of an "
+    "earlier version is measured again",
     "job.schedule.": "the schedule the point was measured at (`steps_grazing`, `steps_steep`, "
     "`loop_cap`; `refl_*` for a raycast reflection)",
     "job.start.": "the constants the fit started from (names of the shader's constants; a "
@@ -69,8 +71,9 @@ COLUMNS = {
     "water_pixels": "pixels scored (the water mask)",
     "flip_blocks": "the FLIP map averaged over 4 x 4 pixel blocks, row-major, NaN where a block "
     "has no water (the search's paired noise estimate)",
-    "flip_map": "the per-pixel FLIP map at the screen's resolution, little-endian float16 bytes, "
-    "row-major, NaN off the water (the level-of-detail policies are chosen from it)",
+    "flip_map": "the per-pixel FLIP map (a screen row: at the screen's resolution; a full point: "
+    "at the experiment's), little-endian float16 bytes, row-major, NaN off the water (the "
+    "level-of-detail policies are chosen from the full points')",
     "fetch_map": "the per-pixel texture fetches, as `flip_map`",
     "map_shape": "(height, width) of `flip_map` and `fetch_map`",
     "n_fitted": "constants fitted (or at a bound)",

@@ -57,7 +57,7 @@ def lod_page(results: Path) -> str:
         "*Written by `scripts/build_docs.py` (`scripts/docs_lod.py`) from the committed "
         "summaries of `study tradeoff` on each scene (the default scene's in "
         "`docs/results/tradeoff/`, the others in `docs/results/lod/<scene>/`). What a policy is "
-        "and what it does not count yet: "
+        "and how it is drawn: "
         "[level of detail](../../tradeoff.md#level-of-detail-a-shader-per-band).*"
     )
     verdict = (
