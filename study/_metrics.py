@@ -85,7 +85,13 @@ def flip(reference: np.ndarray, test: np.ndarray, mask: np.ndarray) -> float:
 
 
 def errors(reference: np.ndarray, test: np.ndarray, mask: np.ndarray) -> dict:
-    return {"rmse": rmse(reference, test, mask), "flip": flip(reference, test, mask)}
+    """RMSE and mean FLIP on the masked pixels, and ``flip_map``, FLIP per pixel (H, W)
+    float32 over the whole image."""
+    check_finite("flip input", reference, mask)
+    check_finite("flip input", test, mask)
+    fmap = flip_map(reference, test)
+    return {"rmse": rmse(reference, test, mask), "flip": float(fmap[mask].mean()),
+            "flip_map": fmap}  # fmt: skip
 
 
 def information_criteria(residual: np.ndarray, k: int) -> dict:

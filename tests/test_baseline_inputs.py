@@ -129,6 +129,7 @@ def test_tradeoff_tiny_with_baselines(tmp_path):
         "tradeoff.scales=[1.0]",
         "tradeoff.converged_scale=2.0",
         "tradeoff.gl_repeats=3",
+        "tradeoff.lod=false",
         "fit.max_steps=5",
     ]
     args = [

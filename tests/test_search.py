@@ -111,6 +111,7 @@ def test_adaptive_tradeoff_tiny(tmp_path):
         "tradeoff.scales=[1.0]",
         "tradeoff.gl_repeats=3",
         "fit.max_steps=5",
+        "tradeoff.lod=true",
     ]
     args = ["tradeoff", str(REPO / "experiments" / "default.toml"), "--out", str(tmp_path)]
     args += ["--workers", "1", "--budget", "fetches=12"]

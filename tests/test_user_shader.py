@@ -284,6 +284,7 @@ def _user_tradeoff(user_run):
         "tradeoff.loop_cap=[40]",
         "tradeoff.scales=[1.0]",
         "tradeoff.gl_repeats=3",
+        "tradeoff.lod=false",
     ]
     sets = [a for kv in TINY + plan + [f'fit.shader="{mine}"'] for a in ("--set", kv)]
     args = ["tradeoff", str(MY_WATER), "--out", str(root / "t"), "--workers", "1"]

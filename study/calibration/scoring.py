@@ -15,7 +15,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .._backend import drjit_backend
-from .._metrics import check_finite, flip_map, rmse
+from .._metrics import errors
 
 
 @dataclass
@@ -73,13 +73,10 @@ class Scorer:
 
     def __call__(self, i: int, constants) -> Score:
         """``constants`` on frame ``i``."""
-        model, ref = self.model(i), self.frames[i].ref.image
+        model = self.model(i)
         img, diag = model.render(constants)
-        check_finite("flip input", ref, model.mask)
-        check_finite("flip input", img, model.mask)
-        fmap = flip_map(ref, img)
-        e = rmse(ref, img, model.mask)
-        return Score(img, model.mask, float(e), float(fmap[model.mask].mean()), diag, fmap)
+        e = errors(self.frames[i].ref.image, img, model.mask)
+        return Score(img, model.mask, float(e["rmse"]), e["flip"], diag, e["flip_map"])
 
     def all(self, constants) -> list[Score]:
         """``constants`` on every frame."""

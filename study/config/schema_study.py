@@ -372,6 +372,14 @@ STUDY_KEYS: dict[str, Field] = {
         "configuration and schedule in full, for checking).",
         choices=("adaptive", "exhaustive"),
     ),
+    "tradeoff.lod": Field(
+        "bool",
+        True,
+        "Choose a level-of-detail policy (a configuration per band of the water, by distance "
+        "or footprint) from the full points' per-pixel maps and draw it as one shader "
+        "(`policy/`); false leaves it out (and, in the adaptive search, the bands it proposes "
+        "to the full rung).",
+    ),
     "tradeoff.variants": Field(
         "list_str",
         None,

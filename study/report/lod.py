@@ -21,6 +21,8 @@ def lod_figure(path: Path, summary: dict) -> Path | None:
         Path(path).unlink(missing_ok=True)
         return None
     plt = pyplot()
+    from matplotlib import ticker  # local: matplotlib is loaded by pyplot() only when drawing
+
     fig, axes = plt.subplots(1, len(scenes), figsize=(5.6 * len(scenes), 4.4), squeeze=False)
     for ax, (name, lod) in zip(axes[0], scenes):
         singles = lod["single_front"]
@@ -30,7 +32,7 @@ def lod_figure(path: Path, summary: dict) -> Path | None:
                 color="tab:blue", ms=4, label="band policies' front")  # fmt: skip
         s, p = lod["single"], lod["policy"]
         ax.plot([s["fetches"]], [s["flip"]], "D", color="0.1",
-                label=f"cheapest single at the lowest FLIP: {s['label']}")  # fmt: skip
+                label=f"single point (cheapest within the tolerance): {s['label']}")  # fmt: skip
         if p:
             ax.plot([p["fetches"]], [p["flip"]], "*", color="tab:red", ms=12,
                     label=f"policy, {len(p['bands'])} bands by {p['measure']}")  # fmt: skip
@@ -39,6 +41,10 @@ def lod_figure(path: Path, summary: dict) -> Path | None:
             ax.plot([e["fetches"]], [e["flip"]], "*", mfc="none", color="tab:red", ms=14,
                     label="the policy drawn as one shader (margins paid)")  # fmt: skip
         ax.set_xscale("log")
+        ax.xaxis.set_major_formatter(ticker.FormatStrFormatter("%g"))
+        ax.xaxis.set_minor_formatter(ticker.NullFormatter())
+        lo, hi = ax.get_xlim()
+        ax.set_xticks([t for t in (1, 2, 3, 5, 10, 20, 30, 50, 100, 200) if lo <= t <= hi])
         ax.set_xlabel("texture fetches / water pixel (mean)")
         ax.set_ylabel(f"FLIP at {lod['resolution'][0]}x{lod['resolution'][1]}")
         ax.set_title(name)

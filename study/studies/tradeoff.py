@@ -90,6 +90,7 @@ PLAN_KEYS = frozenset(
         "tradeoff.tolerance",
         "tradeoff.search",
         "tradeoff.fix",
+        "tradeoff.lod",
         "tradeoff.max_shaders",
         "tradeoff.max_full",
         "tradeoff.max_scheduled",
@@ -186,7 +187,9 @@ def run_tradeoff(
                 rec = summary["scenes"][name]["recommended"]
                 summary["scenes"][name]["marginals"] = searcher.marginals_of(i, rec) if rec else []
         for i, name in enumerate(names):
-            summary["scenes"][name]["lod"] = scene_policies(exps[i], full_points(rows, name), tol)
+            if exps[i].tradeoff.lod:
+                found = scene_policies(exps[i], full_points(rows, name), tol)
+                summary["scenes"][name]["lod"] = found
     summary["experiments"] = [str(p) for p in experiments]
     init_backend(variant)
     summary["exports"], summary["user_exports"] = export_points(
@@ -281,7 +284,8 @@ def _adaptive(exps, specs, client, out, log, fix: dict, chosen, tol: float):
         finalists += searcher.alone(i)
         # the configurations of the screen's level-of-detail policy, so that the full rung can
         # choose bands among them
-        finalists += policy_bands(exps[i], searcher.ok(i), tol)
+        if exps[i].tradeoff.lod:
+            finalists += policy_bands(exps[i], searcher.ok(i), tol)
     jobs = searcher.full_jobs(finalists)
     log(
         f"tradeoff: {len(searcher.screen)} screen points, {len(jobs)} measured in full "

@@ -17,6 +17,8 @@ SMALL_OVERRIDES = [
     "reference.lighting_size=32",
     "reference.wall_spp=8",
     "waves.normal_map_size=64",
+    # a tradeoff's level-of-detail policy is tested where a test asks for it (tests/test_search.py)
+    "tradeoff.lod=false",
 ]
 
 # smaller still, for whole CLI runs (render / preview / calibrate / export): 24x24, 16 spp
