@@ -158,3 +158,22 @@ def test_the_policy_shader_draws_the_ports_mix_of_its_bands(measure, share):
     check_gl_match(res, f"policy_shader_{measure}_{share}")
     wrong = ps.compose(bands[::-1], measure, bounds, margin)
     assert lod_export.gl_check_policy(wrong, weights, ports, uploaded, water)["p999"] > 1e-2
+
+
+def test_the_bands_inputs_are_merged_and_mixed_precisions_refused():
+    """The policy's inputs hold every optional input any band reads (here a local cube map
+    only the second band's inputs have), and bands that read the textures at different
+    precisions (8-bit 'game' textures beside float ones) cannot be one shader."""
+    import dataclasses
+
+    from shaders_port.inputs import game_precision
+
+    base = small_inputs()
+    cube = np.ones((6, 4, 4, 3), np.float32)
+    boxed = dataclasses.replace(base, box_cubemap=cube, box_min=np.zeros(3, np.float32),
+                                box_max=np.ones(3, np.float32))  # fmt: skip
+    merged = lod_export.merged_inputs([base, boxed])
+    assert merged.box_cubemap is cube and base.box_cubemap is None
+    np.testing.assert_array_equal(merged.normal_map, base.normal_map)
+    with pytest.raises(ValueError, match="different precisions"):
+        lod_export.merged_inputs([base, game_precision(base)])

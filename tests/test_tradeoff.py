@@ -214,6 +214,8 @@ def test_tradeoff_cli_tiny_interrupted_resumed_and_exported(tmp_path, capsys):
     done = _interrupt_after_the_first_row(args, table)
     assert not list(tmp_path.glob(".*.tmp"))
     capsys.readouterr()
+    (tmp_path / "policy").mkdir()  # a level-of-detail policy of an earlier run
+    (tmp_path / "policy" / "policy.frag").write_text("// stale\n")
     assert main(args) == 0  # the re-run: only the points the interrupted one did not finish
     m = re.search(
         rf"points: {len(done)} of (\d+) jobs already in \S+tradeoff.parquet; running (\d+)",
@@ -234,6 +236,8 @@ def test_tradeoff_cli_tiny_interrupted_resumed_and_exported(tmp_path, capsys):
     recommended = tmp_path / summary["exports"]["default"]["folder"]
     assert recommended == tmp_path / "recommended"
     assert (recommended / "shaders" / "core" / "water_refraction.frag").is_file()
+    # tradeoff.lod=false (SMALL_OVERRIDES): no policy, and none of an earlier run left behind
+    assert "lod" not in summary["scenes"]["default"] and not (tmp_path / "policy").exists()
     # the recommendation calibrated as study calibrate calibrates: every constant's status (the
     # refitted ones marked so in constants.json and the binding sheets), a report and a viewer
     saved = json.loads((recommended / "constants.json").read_text())

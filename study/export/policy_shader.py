@@ -168,8 +168,7 @@ def renamed(statement: str, names: set, prefix: str, output: str) -> str:
 def band_source(band: Band) -> str:
     """The band's shader as its export writes it: the variant's file with the band's constants
     and the variant's defines."""
-    variant = get_variant(band.variant)
-    return variant.source(text=write_constants(variant.source(), band.constants))
+    return write_constants(get_variant(band.variant).source(), band.constants)
 
 
 def compose(bands: list[Band], measure: str, bounds: list[float], margin: float) -> str:

@@ -365,12 +365,14 @@ def export_policies(exps, specs, summary: dict, out: Path, mv: str, log) -> None
     """Each scene's chosen policy (its summary's ``lod``) exported into ``policy[/<scene>]``
     (:func:`export_policy`); the record, with ``folder`` relative to ``out``, becomes the
     ``lod``'s ``export``. A policy that cannot be one shader (its bands read the textures at
-    different precisions) gets ``{"error": why}`` instead."""
+    different precisions) gets ``{"error": why}`` instead. A scene without a policy keeps no
+    policy folder of an earlier run."""
     for exp, spec in zip(exps, specs):
         lod = summary["scenes"][exp.name].get("lod")
-        if not lod or not lod.get("policy"):
-            continue
         folder = out.joinpath("policy", *([] if len(exps) == 1 else [exp.name]))
+        if not lod or not lod.get("policy"):
+            shutil.rmtree(folder, ignore_errors=True)
+            continue
         try:
             rec = export_policy(exp, spec, lod, folder, mv)
         except ValueError as e:
