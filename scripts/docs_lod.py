@@ -7,8 +7,8 @@ generated from committed tradeoff summaries:
   docs/results/lod/<scene>`` for deep_steps, grazing and calm, and for view k of
   ``experiments/views.toml`` the same with ``--set camera.position=... --set camera.target=...
   --set 'camera.views=[]' --set 'name="views-view<k>"'`` (the view's camera); only the
-  summary and the drawn policy's ``policy.frag`` and ``policy.json`` (``policy/``) are
-  kept. ``lod.png`` beside each is drawn from the summary (``study.report.lod``).
+  summary and the drawn policy's ``policy.frag``, ``policy.json`` and ``bands/`` (``policy/``)
+  are kept. ``lod.png`` beside each is drawn from the summary (``study.report.lod``).
 
 ``python scripts/docs_lod.py FOLDER EXPERIMENT [KEY=VALUE ...]`` recomputes the ``lod`` of a
 tradeoff folder's summary from its ``tradeoff.parquet`` (the experiment and the overrides of its
@@ -88,11 +88,12 @@ def refresh(folder: Path, experiment: str, overrides: list[str]) -> dict:
     """Recompute the ``lod`` of ``folder``'s ``summary.json`` from its ``tradeoff.parquet``
     with the current ``study.studies.lod`` (the experiment file and the ``--set`` overrides of
     its tradeoff), draw the policy into ``folder/policy`` again (``study.studies.lod_export``)
-    and write the summary back; returns the finding."""
+    and write the summary (and a tradeoff folder's ``report.md``) back; returns the finding."""
     sys.path.insert(0, str(REPO))
     from study._backend import init_backend
     from study._io import write_json
     from study.config.experiment import load_experiments
+    from study.report.tradeoff import write_tradeoff_report
     from study.studies.lod import full_points, scene_policies
     from study.studies.lod_export import export_policies
     from study.sweep import read_table, scene_spec
@@ -106,6 +107,8 @@ def refresh(folder: Path, experiment: str, overrides: list[str]) -> dict:
     export_policies([exp], [scene_spec(experiment, overrides)], summary, folder, "llvm_ad_rgb",
                     print)  # fmt: skip
     write_json(folder / "summary.json", summary)
+    if (folder / "report.md").is_file():  # a tradeoff's own folder: its report says it too
+        write_tradeoff_report(folder, summary)
     return found
 
 

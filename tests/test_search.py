@@ -145,7 +145,12 @@ def test_adaptive_tradeoff_tiny(tmp_path):
     assert best["fetch_ratio"] == pytest.approx(lod["policy"]["fetches"] / lod["best"]["fetches"])
     assert drawn["gl_check"]["passed"], drawn["gl_check"]
     assert drawn["seams"] and drawn["seam_ratio"] is not None
-    assert (tmp_path / drawn["folder"] / "policy.frag").read_text().count("_main();") == 2
+    folder = tmp_path / drawn["folder"]
+    assert folder.joinpath("policy.frag").read_text().count("_main();") == 2
+    # and for an engine that switches shaders itself: each band's own file, checked alone
+    assert all(b["gl_check"]["passed"] for b in drawn["bands"]), drawn["bands"]
+    assert "void main" in folder.joinpath("bands", "b1.frag").read_text()
+    assert "| 1 |" in folder.joinpath("BANDS.md").read_text()
     assert "## Level of detail" in report and (tmp_path / "lod.png").stat().st_size > 5_000
     assert summary["exports"]["default"]["gl_check"]["passed"]
 

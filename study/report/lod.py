@@ -78,14 +78,15 @@ METHOD = (
 #: how the drawn policy's table (:func:`export_table`) is made, in words
 EXPORT_METHOD = (
     "The chosen policy as one GLSL file (`policy/policy.frag`, with the engine targets and "
-    "their binding sheets, and `policy/policy.json`, the bands for an engine that switches "
-    "shaders itself), drawn by the port at the experiment's resolution with the narrowest "
-    "of four blend margins that shows no seam: its FLIP above the single point's (paired "
-    "standard error), its fetches (a pixel in a margin pays for both bands) over the single "
-    "point's; *seam*, FLIP in a strip 8 pixels wide each side of every boundary between "
-    "bands, over the bands' own FLIP there (each pixel's FLIP in its band's own image; above "
-    "1.1 a seam shows); *GL check*, the file and its HLSL run on OpenGL (llvmpipe) against "
-    "the port's mix of its bands, with every export's thresholds."
+    "their binding sheets; for an engine that switches shaders itself, each band's own file "
+    "in `policy/bands/` and their table, `policy/BANDS.md`), drawn by the port at the "
+    "experiment's resolution with the narrowest of four blend margins that shows no seam: "
+    "its FLIP above the single point's (paired standard error), its fetches (a pixel in a "
+    "margin pays for both bands) over the single point's; *seam*, FLIP in a strip 8 pixels "
+    "wide each side of every boundary between bands, over the bands' own FLIP there (each "
+    "pixel's FLIP in its band's own image; above 1.1 a seam shows); *GL check*, the file and "
+    "its HLSL run on OpenGL (llvmpipe) against the port's mix of its bands, with every "
+    "export's thresholds."
 )
 
 

@@ -23,11 +23,12 @@ tradeoff's tolerance of the lowest FLIP):
   explained where a band that shades the pixel explains it; ``hlsl_check``: the exported HLSL
   alike, compiled back by glslang and translated by SPIRV-Cross.
 
-Written into the policy's folder: ``policy.frag`` and ``water.vert`` (the core files), the
+Written into the policy's folder: ``policy.frag`` and ``water.vert`` (the core files); the
 engine targets of every export with their binding sheets (``study.export.targets``: GLSL ES
-3.00, HLSL, Metal, SPIR-V, WGSL where Node.js and naga are set up), and ``policy.json`` (the
-bands for an engine that switches shaders itself: measure, bounds in the shader's unit, margin,
-and per band its configuration, variant, constants, share of the water and fetches; the
+3.00, HLSL, Metal, SPIR-V, WGSL where Node.js and naga are set up); for an engine that switches
+shaders itself, each band's own shader (``bands/b<k>.frag``, GL-checked alone) and
+``BANDS.md``, their table; and ``policy.json`` (measure, bounds in the shader's unit, margin,
+per band its configuration, variant, constants, share of the water, fetches and file; the
 figures above; the targets' files and checks).
 """
 
@@ -57,7 +58,7 @@ from ..calibration.scoring import Scorer
 from ..calibration.shader import Shader
 from ..export.gl_check import gl_renderer_of, verdict
 from ..export.targets import resolve_targets, translate_targets
-from ..export.policy_shader import SHADER_MEASURES, Band, band_weights, compose
+from ..export.policy_shader import SHADER_MEASURES, Band, band_source, band_weights, compose
 from ..scene.mitsuba_scene import camera_view_proj
 from ..sweep import load_scene
 from .lod import TARGET_RATIO, band_measures
@@ -274,6 +275,11 @@ def measure_policy(exp, spec, lod: dict, mv: str) -> tuple[dict, dict]:
     src = compose(bands, measure, bounds, margin)
     check = ([drawn[b.label][2] for b in bands], [drawn[b.label][3] for b in bands], water)
     res = gl_check_policy(src, d["weights"], *check)
+    own = np.ones((1, h, w))  # each band's own file, alone on the water, against its port
+    band_checks = [
+        verdict(gl_check_policy(band_source(b), own, [port], [up], water), f"band {k}'s shader")
+        for k, (b, port, up) in enumerate(zip(bands, *check[:2]))
+    ]
     n, fetches = int(water.sum()), float(np.nanmean(d["fetch"]))
     single_fetches = float(single.diagnostics.maps["fetches"][water].mean())
 
@@ -297,6 +303,8 @@ def measure_policy(exp, spec, lod: dict, mv: str) -> tuple[dict, dict]:
                 "own_flip": on_band(d["own"], k),
                 "single_flip": on_band(single_flip, k),
                 "constants": b.constants.to_dict(),
+                "file": f"bands/b{k}.frag",
+                "gl_check": band_checks[k],
             }
             for k, b in enumerate(bands)
         ],
@@ -326,8 +334,40 @@ def measure_policy(exp, spec, lod: dict, mv: str) -> tuple[dict, dict]:
     what = "the exported level-of-detail policy's HLSL (through glslang -D and SPIRV-Cross)"
     record["hlsl_check"] = verdict(gl_check_policy(src, d["weights"], *check, hlsl=hlsl), what)
     files.update({k: v.encode() for k, v in core.items()})
+    files.update({f"bands/b{k}.frag": band_source(b).encode() for k, b in enumerate(bands)})
+    files["BANDS.md"] = bands_sheet(record).encode()
     files["policy.json"] = (json.dumps(record, indent=1) + "\n").encode()
     return record, files
+
+
+def bands_sheet(record: dict) -> str:
+    """``BANDS.md``: the bands of a drawn policy (:func:`measure_policy`'s record) for an
+    engine that switches shaders itself, nearest first."""
+    unit, bounds, m = record["unit"], record["bounds"], record["margin"]
+    edges = [None, *bounds, None]
+    lines = [
+        "# The bands of a level-of-detail policy",
+        "",
+        f"Measure: {record['measure']}, {unit}; `policyMeasure()` in `policy.frag` computes it. "
+        f"Shade a pixel with the band whose range holds its measure; within a factor of "
+        f"exp({m:.3g}) of a bound, `policy.frag` mixes the two bands by "
+        f"`smoothstep(-{m:.3g}, {m:.3g}, log(measure / bound))`. Each band's file is its "
+        "shader alone (its constants and defines written in), checked on OpenGL against the "
+        "study's port like every export.",
+        "",
+        "| band | measure from | to | configuration | file | share of the water | fetches "
+        "| FLIP on its pixels | GL check |",
+        "|---|---|---|---|---|---|---|---|---|",
+    ]
+    for k, b in enumerate(record["bands"]):
+        lo = "" if edges[k] is None else f"{edges[k]:.4g}"
+        hi = "" if edges[k + 1] is None else f"{edges[k + 1]:.4g}"
+        gl = "passed" if b["gl_check"]["passed"] else f"FAILED: {b['gl_check']['reason']}"
+        lines.append(
+            f"| {k} | {lo} | {hi} | {b['label']} | `{b['file']}` | {100 * b['share']:.0f} % "
+            f"| {b['fetches']:.3g} | {b['own_flip']:.4f} | {gl} |"
+        )
+    return "\n".join(lines) + "\n"
 
 
 #: what the binding sheets of a policy say of its constants
