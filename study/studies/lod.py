@@ -209,14 +209,21 @@ def composite(policy: dict, points: list[dict], measures: dict) -> tuple[np.ndar
     return flip, cost
 
 
-def _within(fmap: np.ndarray, ref: np.ndarray, z: float) -> tuple[bool, float, float]:
-    """(``fmap``'s mean FLIP is above ``ref``'s by no more than ``z`` paired standard errors,
-    the difference, the standard error), on the pixels both cover; 4 x 4-pixel blocks of
-    both maps, as the search judges noise."""
+def paired_difference(fmap: np.ndarray, ref: np.ndarray) -> tuple[float, float]:
+    """(``fmap``'s mean FLIP minus ``ref``'s, its paired standard error) on the pixels both
+    maps ((H, W), NaN where not scored) cover; 4 x 4-pixel blocks of both maps, as the
+    search judges noise."""
     both = np.isfinite(fmap) & np.isfinite(ref)
     d = float(fmap[both].mean() - ref[both].mean())
     se = paired_se(block_means(np.where(both, fmap, np.nan), SCREEN_BLOCK).ravel(),
                    block_means(np.where(both, ref, np.nan), SCREEN_BLOCK).ravel())  # fmt: skip
+    return d, se
+
+
+def _within(fmap: np.ndarray, ref: np.ndarray, z: float) -> tuple[bool, float, float]:
+    """(``fmap``'s mean FLIP is above ``ref``'s by no more than ``z`` paired standard errors,
+    the difference, the standard error): :func:`paired_difference`."""
+    d, se = paired_difference(fmap, ref)
     return d <= z * se, d, se
 
 

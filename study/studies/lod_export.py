@@ -61,9 +61,7 @@ from ..export.targets import resolve_targets, translate_targets
 from ..export.policy_shader import SHADER_MEASURES, Band, band_source, band_weights, compose
 from ..scene.mitsuba_scene import camera_view_proj
 from ..sweep import load_scene
-from .lod import TARGET_RATIO, band_measures
-from .search import paired_se
-from .tradeoff_jobs import SCREEN_BLOCK, block_means
+from .lod import TARGET_RATIO, band_measures, paired_difference
 
 #: the blend's half-width in the log of each measure (footprint grows about as distance cubed)
 MARGINS = {"distance": 0.05, "footprint": 0.15}
@@ -82,18 +80,22 @@ def margin_for(measure: str, bounds) -> float:
     return float(min(MARGINS[measure], 0.45 * gap))
 
 
+def _to_shader(measure: str, width: int, height: int) -> float:
+    """What turns ``band_measures``' ``measure`` at ``width`` x ``height`` into the policy
+    shader's (``study.export.policy_shader.SHADER_MEASURES``): the footprint times the image's
+    pixels, the distance as it is."""
+    return float(width * height) if measure == "footprint" else 1.0
+
+
 def shader_measure(measure: str, maps: dict, width: int, height: int) -> np.ndarray:
-    """The policy shader's measure (``study.export.policy_shader.SHADER_MEASURES``) from
-    ``band_measures`` maps at ``width`` x ``height``: the footprint times the image's pixels."""
-    m = maps[measure]
-    return m * (width * height) if measure == "footprint" else m
+    """The policy shader's measure from ``band_measures`` maps at ``width`` x ``height``."""
+    return maps[measure] * _to_shader(measure, width, height)
 
 
 def shader_bounds(policy: dict) -> list[float]:
     """A policy's bounds (``lod`` records, the measure at its ``resolution``) in the shader's
     unit."""
-    w, h = policy["resolution"]
-    scale = w * h if policy["measure"] == "footprint" else 1.0
+    scale = _to_shader(policy["measure"], *policy["resolution"])
     return [float(b) * scale for b in policy["bounds"]]
 
 
@@ -105,16 +107,20 @@ def bands_of(policy: dict) -> list[Band]:
     ]
 
 
-def _render(exp, spec, shaders: dict, mv: str) -> tuple[dict, np.ndarray]:
+def _render(exp, spec, shaders: dict, mv: str, checked) -> tuple[dict, np.ndarray]:
     """(label -> (Band, Score, port output with diagnostics, inputs as uploaded) of each
-    configuration of ``shaders`` (label -> Band) at the experiment's resolution, the reference
-    image (H, W, 3) float32 linear RGB)."""
+    configuration of ``shaders`` (label -> Band) at the experiment's resolution, the port's
+    output and the inputs only for the labels in ``checked`` (the bands the GL check mixes;
+    None elsewhere), the reference image (H, W, 3) float32 linear RGB)."""
     _, ref, inputs = load_scene(spec, mv)
     out = {}
     for label, band in shaders.items():
         shader = Shader.of_table(exp, band.variant)
         frame = Frame.of(exp, ref, shader.with_inputs(exp, inputs, mv))
         score = Scorer(shader, [frame], mv)(0, band.constants)
+        if label not in checked:
+            out[label] = (band, score, None, None)
+            continue
         variant = get_variant(band.variant)
         # the raycast ports' diagnostics give the GL check its reasons (colour bit-identical)
         kw = {"diagnose": True} if getattr(variant.port(), "GL_CHECK_DIAGNOSE", False) else {}
@@ -199,16 +205,6 @@ def gl_check_policy(
     return {**compare_outputs(out, rgba, gl_mask & mask, reasons, {}), "gl_renderer": gl}
 
 
-def _paired(a: np.ndarray, b: np.ndarray) -> tuple[float, float]:
-    """(mean of ``a`` - mean of ``b``, its paired standard error over 4 x 4-pixel blocks) on the
-    pixels both cover."""
-    both = np.isfinite(a) & np.isfinite(b)
-    d = float(a[both].mean() - b[both].mean())
-    se = paired_se(block_means(np.where(both, a, np.nan), SCREEN_BLOCK).ravel(),
-                   block_means(np.where(both, b, np.nan), SCREEN_BLOCK).ravel())  # fmt: skip
-    return d, se
-
-
 def _drawn(ref, scores: list, m: np.ndarray, bounds, margin: float, water: np.ndarray) -> dict:
     """The policy of ``scores`` (each band's ``Score``) drawn at ``margin``: ``weights``
     (K, H, W), ``flip`` and ``fetch`` maps ((H, W), NaN off ``water``; a pixel pays for every
@@ -261,7 +257,7 @@ def measure_policy(exp, spec, lod: dict, mv: str) -> tuple[dict, dict]:
         p = lod[key]
         configs.setdefault(p["label"], Band(p["variant"], Constants.from_dict(p["fitted"]),
                                             p["label"]))  # fmt: skip
-    drawn, ref = _render(exp, spec, configs, mv)
+    drawn, ref = _render(exp, spec, configs, mv, {b.label for b in bands})
     w, h = exp.resolution
     maps = band_measures(camera_view_proj(exp, w, h), exp.section("camera")["position"], w, h)
     m = shader_measure(measure, maps, w, h)
@@ -271,7 +267,7 @@ def measure_policy(exp, spec, lod: dict, mv: str) -> tuple[dict, dict]:
     single = drawn[lod["single"]["label"]][1]
     single_flip = np.where(water, single.flip_map, np.nan)
     best_flip = np.where(water, drawn[lod["best"]["label"]][1].flip_map, np.nan)
-    d_flip, se = _paired(d["flip"], single_flip)
+    d_flip, se = paired_difference(d["flip"], single_flip)
     src = compose(bands, measure, bounds, margin)
     check = ([drawn[b.label][2] for b in bands], [drawn[b.label][3] for b in bands], water)
     res = gl_check_policy(src, d["weights"], *check)
