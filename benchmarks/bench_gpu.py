@@ -23,7 +23,9 @@ with empty render and kernel caches (Dr.Jit's, CUDA's and OptiX's in a fresh fol
 follows in the same process with an empty render cache (kernels compiled). Peak memory per pass:
 Dr.Jit's allocator watermark of the backend (host memory on LLVM, device memory on CUDA), the
 process's peak resident memory, and on CUDA the peak of ``nvidia-smi``'s memory in use, sampled.
-Ratios are CPU seconds over GPU seconds of the same invocation. ``--parity`` compares the fitted
+Kernels per pass and stage (``kernels``: ``study._kernels.KernelLedger``): launches by kind, JIT
+kernels compiled, found in the kernel cache or replayed, memory copies and their bytes (on a
+GPU, the host-device transfers). Ratios are CPU seconds over GPU seconds of the same invocation. ``--parity`` compares the fitted
 constants of the two backends at each size in their combined standard errors.
 
     .venv/bin/python benchmarks/bench_gpu.py [--sizes 256x256 1080p] [--backends llvm_ad_rgb
@@ -122,6 +124,7 @@ def _one_pass(spec: dict, root: Path) -> dict:
     stage, peak memory, and what the fit found."""
     import drjit as dr
 
+    from study._kernels import KernelLedger
     from study.calibration.export import fit_status, write_export
     from study.calibration.fitting import FitOptions, fit_frames
     from study.calibration.frames import Frame, load_scene_data, prepare
@@ -137,8 +140,9 @@ def _one_pass(spec: dict, root: Path) -> dict:
     seconds["setup"] = time.perf_counter() - t0
     be = dr.JitBackend.CUDA if variant.startswith("cuda") else dr.JitBackend.LLVM
     dr.detail.malloc_clear_statistics()
-    with GpuMemory() if be == dr.JitBackend.CUDA else _Null() as gpu:
+    with GpuMemory() if be == dr.JitBackend.CUDA else _Null() as gpu, KernelLedger() as ledger:
         ref, inputs, t = load_scene_data(exp, variant, root / "cache")
+        ledger.take("reference and inputs")
         seconds["reference"], seconds["inputs"] = t["reference_s"], t["inputs_s"]
         res = {"fit_resolution": exp.fit.resolution, "spp": ref.spp, "noise": ref.noise}
         if last >= STAGES.index("fit"):
@@ -146,6 +150,7 @@ def _one_pass(spec: dict, root: Path) -> dict:
             shader, t1 = Shader.of(exp), time.perf_counter()
             fit = fit_frames([Frame.of(exp, ref, inputs)], shader, variant, FitOptions.of(exp))
             seconds["fit"] = time.perf_counter() - t1
+            ledger.take("fit")
             model, cal = fit.models[0], fit.calibration
             res["water_pixels"] = int(model.mask.sum())
             res["params"] = {
@@ -164,6 +169,7 @@ def _one_pass(spec: dict, root: Path) -> dict:
                     res["export_error"] = f"{type(exc).__name__}: {exc}"[:300]
                 seconds["export"] = timings.get("export_s")
                 seconds["gl"] = timings.get("gl_check_s")
+                ledger.take("export and GL check")
     memory = {
         "drjit_peak": int(dr.detail.malloc_watermark(be)),
         "rss_peak": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024,
@@ -172,7 +178,7 @@ def _one_pass(spec: dict, root: Path) -> dict:
     res.setdefault("water_pixels", None)
     shown = [s for s in STAGES if s in spec["stages"] or s in ALWAYS]
     total = sum(seconds[s] for s in shown if seconds.get(s) is not None)
-    return {**res, "seconds": seconds, "total": total, "memory": memory}
+    return {**res, "seconds": seconds, "total": total, "memory": memory, "kernels": ledger.stages}
 
 
 class _Null:
@@ -198,7 +204,7 @@ def worker(spec: dict) -> dict:
         if i == 0:
             last["seconds"] = {"startup": startup, **last["seconds"]}
             last["total"] += startup
-        passes[name] = {k: last[k] for k in ("seconds", "total", "memory")}
+        passes[name] = {k: last[k] for k in ("seconds", "total", "memory", "kernels")}
         if "gl_check" in last:  # the check of this pass: figures, reason, explained pixels, GL
             passes[name]["gl_check"] = last["gl_check"]
     keep = ("fit_resolution", "spp", "noise", "water_pixels", "params", "gl_passed", "gl_check",

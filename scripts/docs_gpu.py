@@ -96,6 +96,28 @@ def _memory_rows(cols: list, by: dict) -> list[str]:
     return rows
 
 
+def _kernel_rows(cols: list, by: dict) -> list[str]:
+    """Per stage the kernel ledger recorded (``study._kernels``): launches, JIT kernels compiled
+    / from the cache / replayed, memory copies and their MiB, one cell per backend."""
+    stages: list = []
+    for c in cols:
+        for st in (by[c][1].get("kernels") or {}) if c in by else {}:
+            stages += [st] if st not in stages else []
+    rows = []
+    for st in stages:
+        cells = []
+        for c in cols:
+            k = ((by[c][1].get("kernels") or {}) if c in by else {}).get(st)
+            cells.append("-" if k is None else (
+                f"{k['launches']} ({k['jit_compiled']} / {k['jit_cache_hits']} / "
+                f"{k['jit_replayed']}), {k['copies']} copies {k['copy_bytes'] / 2**20:.1f} MiB"
+            ))  # fmt: skip
+        tail = " | |" if len(cols) == 2 else " |"
+        rows.append(f"| kernels of {st}: launches (JIT compiled / cached / replayed), copies | "
+                    + " | ".join(cells) + tail)  # fmt: skip
+    return rows
+
+
 def _setting_line(cols: list, by: dict) -> str:
     bits = []
     for c in cols:
@@ -138,7 +160,8 @@ def invocation_lines(inv: dict) -> list[str]:
         head = " | ".join(f"{c} s" for c in cols) + (" | CPU / GPU" if len(cols) == 2 else "")
         lines += [f"**{size}, {name}.** " + _setting_line(cols, by), ""]
         lines += [f"| stage | {head} |", "|---|" + "---|" * (len(cols) + (len(cols) == 2))]
-        lines += _stage_rows(cols, by, stages, m.get("gpu")) + _memory_rows(cols, by) + [""]
+        lines += _stage_rows(cols, by, stages, m.get("gpu")) + _memory_rows(cols, by)
+        lines += _kernel_rows(cols, by) + [""]
     for r in inv["results"]:
         if r.get("error"):
             lines += [

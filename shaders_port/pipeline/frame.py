@@ -358,11 +358,18 @@ def jacobian_passes(
     names: list[str],
     backend: str,
     loop_ad: str,
+    lanes=None,
 ):
     """Shared driver of ``render_with_jacobian``: every named scalar becomes a gradient-enabled
     size-1 Float; ``shade_tangents(m, P, C, params, frozen)`` shades once and runs one
     forward-mode pass per name (see :func:`tangents`), replayed from recorded kernels
-    (``dr.freeze``) in ``loop_ad='replay'`` mode. Returns ``(ShaderOutput, J (H, W, 3, k))``."""
+    (``dr.freeze``) in ``loop_ad='replay'`` mode. Returns ``(ShaderOutput, J (H, W, 3, k))``.
+
+    ``lanes``: None, or a callable ``lanes(m, raster, colour, nonfinite, grads)`` that takes
+    the evaluated lanes where they were computed (``colour`` Array3f, 0 on non-finite lanes;
+    ``nonfinite`` Bool; ``grads`` one Array3f per name; ``raster.index`` the lanes' flat pixel
+    indices) and whose return value is returned in place of the images: nothing of the frame
+    is read back to the host here (``study.fit.normal_equations``)."""
     m = backend_types(backend)
     if not names:
         raise ValueError("names is empty: give at least one constant to differentiate")
@@ -399,12 +406,27 @@ def jacobian_passes(
     finally:
         for p in params:
             dr.disable_grad(p)
+    return jacobian_output(m, P, color, diag, grads, shader, lanes)
+
+
+def jacobian_output(m, P, color, diag: dict, grads: list, shader: str, lanes=None):
+    """What ``render_with_jacobian`` returns for one evaluated frame (``P`` prepared, ``color``
+    Array3f and ``grads`` one Array3f per name, over the lanes of ``P.raster``):
+    ``(ShaderOutput, J (H, W, 3, k) float32)``, or what ``lanes`` returns
+    (:func:`jacobian_passes`)."""
+    if lanes is not None:
+        color = dr.detach(color)
+        bad = ~(dr.isfinite(color.x) & dr.isfinite(color.y) & dr.isfinite(color.z))
+        if "nonfinite" in diag:
+            bad |= diag["nonfinite"] > 0
+        colour = m.Array3f(*(dr.select(bad, 0.0, color[c]) for c in range(3)))
+        return lanes(m, P.raster, colour, bad, grads)
     out = finish_output(m, P, dr.detach(color), diag, shader)
     r = P.raster
-    J = np.zeros((r.width * r.height, 3, len(names)), dtype=np.float32)
+    J = np.zeros((r.width * r.height, 3, len(grads)), dtype=np.float32)
     for j, g in enumerate(grads):
         J[r.index, :, j] = np.asarray(g.numpy(), dtype=np.float32).T
-    return out, J.reshape(r.height, r.width, 3, len(names))
+    return out, J.reshape(r.height, r.width, 3, len(grads))
 
 
 def _raster_index(out: ShaderOutput) -> np.ndarray:

@@ -403,6 +403,7 @@ def render_with_jacobian(
     defines: tuple = (),
     backend: str | None = None,
     loop_ad: str = "replay",
+    lanes=None,
 ):
     """Render and return ``(ShaderOutput, J)``, ``J`` float32 (H, W, 3, len(names)): the
     forward-mode derivative of the linear-RGB colour with respect to each named scalar
@@ -432,4 +433,5 @@ def render_with_jacobian(
         names,
         backend,
         loop_ad,
+        lanes=lanes,
     )

@@ -268,6 +268,7 @@ def render_with_jacobian(
     backend: str | None = None,
     loop_ad: str = "replay",
     defines: tuple = (),
+    lanes=None,
 ):
     """``(ShaderOutput, J)`` with ``J`` float32 (H, W, 3, len(names)): forward-mode derivatives
     of the linear-RGB colour w.r.t. the named scalars (see ``water_refraction``)."""
@@ -286,4 +287,5 @@ def render_with_jacobian(
         names,
         backend,
         loop_ad,
+        lanes=lanes,
     )

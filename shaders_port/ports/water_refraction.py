@@ -556,6 +556,7 @@ def render_with_jacobian(
     defines: tuple = (),
     backend: str | None = None,
     loop_ad: str = "replay",
+    lanes=None,
 ):
     """Render and return ``(ShaderOutput, J)``, ``J`` float32 (H, W, 3, len(names)).
 
@@ -581,4 +582,5 @@ def render_with_jacobian(
         names,
         backend,
         loop_ad,
+        lanes=lanes,
     )

@@ -458,6 +458,7 @@ def render_with_jacobian(
     *,
     spec: ShaderSpec,
     backend: str | None = None,
+    lanes=None,
 ):
     """``(ShaderOutput, J)`` with ``J`` float32 (H, W, 3, len(names)): the forward-mode
     derivatives of the colour in the ``CONSTANT_SPECS`` scalar names ``names`` (as the ports'
@@ -488,7 +489,9 @@ def render_with_jacobian(
             return _recorded(_key(spec, C, config), fn, m, _lanes(P_), C, params, b)
         return fn(m, P_, C, params, b)
 
-    return jacobian_passes(shade_tangents, spec.label, inputs, constants, names, backend, "replay")
+    return jacobian_passes(
+        shade_tangents, spec.label, inputs, constants, names, backend, "replay", lanes=lanes
+    )
 
 
 class Translated:
@@ -508,10 +511,14 @@ class Translated:
         inputs = self._variant.prepare_inputs(inputs)
         return render(inputs, constants, spec=self._spec, backend=backend)
 
-    def render_with_jacobian(self, inputs, constants, names, backend: str | None = None, **kw):
+    def render_with_jacobian(
+        self, inputs, constants, names, backend: str | None = None, lanes=None, **kw
+    ):
         _no_port_options(kw)
         inputs = self._variant.prepare_inputs(inputs)
-        return render_with_jacobian(inputs, constants, names, spec=self._spec, backend=backend)
+        return render_with_jacobian(
+            inputs, constants, names, spec=self._spec, backend=backend, lanes=lanes
+        )
 
 
 def _no_port_options(kw: dict) -> None:

@@ -53,7 +53,7 @@ from pathlib import Path
 import drjit as dr
 import numpy as np
 
-from ..pipeline.frame import finish_output, tangents
+from ..pipeline.frame import jacobian_output, tangents
 from ..pipeline.raster import prepare
 from ..pipeline.texture import backend_types
 from . import dialects, gl_run
@@ -491,11 +491,14 @@ class UserShader:
             for p in params:
                 dr.disable_grad(p)
 
-    def render_with_jacobian(self, inputs, values, names: list[str], backend: str | None = None):
+    def render_with_jacobian(
+        self, inputs, values, names: list[str], backend: str | None = None, lanes=None
+    ):
         """``(ShaderOutput, J)``, ``J`` float32 (H, W, 3, len(names)): forward-mode derivatives
         of the colour in the scalar names ``names`` (lane-dependent loops unrolled); those in
         the constants of the user's vertex shader through its outputs and the interpolation,
-        the coverage held fixed (``spirv.user_vertex.UserVertex.frame``)."""
+        the coverage held fixed (``spirv.user_vertex.UserVertex.frame``). ``lanes``: what
+        takes the lanes in place of the images (``pipeline.frame.jacobian_passes``)."""
         m = backend_types(backend)
         vals, params = self._params(m, values, names)
         P = prepare(inputs, m)
@@ -513,12 +516,7 @@ class UserShader:
         finally:
             for p in params:
                 dr.disable_grad(p)
-        out = finish_output(m, P, dr.detach(color), diag, self.label)
-        r = P.raster
-        J = np.zeros((r.width * r.height, 3, len(names)), dtype=np.float32)
-        for j, g in enumerate(grads):
-            J[r.index, :, j] = np.asarray(g.numpy(), dtype=np.float32).T
-        return out, J.reshape(r.height, r.width, 3, len(names))
+        return jacobian_output(m, P, color, diag, grads, self.label, lanes)
 
     # ---- the file ----------------------------------------------------------------------------
     def written(self, values: dict, bare_initializers: bool = True,

@@ -40,6 +40,8 @@ class FitOptions:
     target_resolution: (width, height) pixels the shader runs at in the game
         (``fit.target_resolution``, unset: ``resolution``); None: each fit pixel shaded once,
         at its centre. A fit pixel takes :meth:`supersample` samples per side.
+    normal_equations: "solver" or "device" (``fit.normal_equations``): where the least-squares
+        system is formed (``study.fit.normal_equations``).
     """
 
     parameters: tuple | None
@@ -50,9 +52,16 @@ class FitOptions:
     resolution: tuple | None = None
     loss: str = "linear"
     target_resolution: tuple | None = None
+    normal_equations: str = "solver"
 
     def __post_init__(self):
         check_loss(self.loss, self.solver, self.refine)
+        if self.normal_equations == "device" and self.loss != "linear":
+            raise ExperimentError(
+                f'fit.normal_equations = "device" forms the squared error\'s system, and '
+                f'fit.loss = "{self.loss}" transforms each residual on the host: set '
+                'fit.normal_equations = "solver" (or fit.loss = "linear")'
+            )
 
     @classmethod
     def of(cls, exp, solver: str | None = None, **changes) -> "FitOptions":
@@ -67,6 +76,7 @@ class FitOptions:
             refine=exp.fit.input_noise == "decorrelate",
             loss=str(exp.fit.loss),
             target_resolution=tuple(exp.fit.target_resolution or exp.resolution),
+            normal_equations=str(exp.fit.normal_equations),
         )
         return dataclasses.replace(opts, **changes)
 
@@ -167,6 +177,7 @@ def fit_frames(frames, shader, variant: str, options: FitOptions, start=None, mo
             halves=halves,
             scan_basins=options.basin_scan,
             basin_check=check,
+            on_device=options.normal_equations == "device",
         )
     else:
         cal = calibrate_model(
@@ -177,6 +188,7 @@ def fit_frames(frames, shader, variant: str, options: FitOptions, start=None, mo
             options.max_steps,
             frozen_by_scene=joint_frozen([f.frozen for f in frames]),
             scan_basins=options.basin_scan,
+            on_device=options.normal_equations == "device",
         )
     cal.parameters = shader.with_stages(cal.parameters)
     return Fit(models, cal)

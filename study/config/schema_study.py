@@ -325,6 +325,17 @@ STUDY_KEYS: dict[str, Field] = {
         '`fit.input_noise = "ignore"`. docs/user-shader.md "What the fit minimises".',
         choices=("linear", "log", "flip", "transport"),
     ),
+    "fit.normal_equations": Field(
+        "str",
+        "solver",
+        "Where the least-squares system is formed: `solver` (the solver receives every residual "
+        "and the whole Jacobian, 3 x water pixels rows) or `device` (Dr.Jit forms J^T J, J^T r "
+        "and the loss where the shader runs and the solver receives k + 1 rows with the same "
+        "normal equations: nothing of the image is read back during the fit, which is what a "
+        "fit at 1080p or on a GPU needs). Same steps up to rounding; needs `fit.loss = "
+        '"linear"`. docs/where-it-runs.md.',
+        choices=("solver", "device"),
+    ),
     "fit.resolution": Field(
         "vec2",
         [128, 128],

@@ -56,6 +56,7 @@ from .._progress import progress_line
 from ..scene.mitsuba_scene import has_medium
 from .identify import identify, sweep_1d, sweep_2d
 from .model import get_value, with_values
+from .normal_equations import forms_normal_equations
 from .protocol import CalibrationModel
 from .rounds import (
     REL_SE_MAX,
@@ -75,11 +76,17 @@ STEP_GRID = {
 
 
 def make_problem(
-    model: CalibrationModel, start, names: list[str], progress: bool = True
+    model: CalibrationModel,
+    start,
+    names: list[str],
+    progress: bool = True,
+    on_device: bool = False,
 ) -> FitProblem:
     """The fit problem over scalar constant ``names`` (e.g. 'water_color[1]') of ``model``, each
     kept in the model's range for it: a logistic transform, or ``clip`` (linear inside the box)
-    for a range from 0 (a best value of 0 must be reachable) or a start on a bound."""
+    for a range from 0 (a best value of 0 must be reachable) or a start on a bound.
+    ``on_device``: the solvers see the normal equations the model forms where it shades
+    (``model.normal_equations``, ``study.fit.normal_equations``)."""
     params = []
     for n in names:
         lo, hi = model.bounds(n)
@@ -114,10 +121,23 @@ def make_problem(
     def loss_drjit(values: dict):
         return model.loss_ad(with_values(start, values))
 
+    def normal_equations(values: dict, free: list[str]):
+        ne = model.normal_equations(with_values(start, values), free)
+        count["n"] += 1
+        if progress:
+            progress_line(f"fit: evaluation {count['n']}, loss {ne.loss:.6g}")
+        return ne
+
+    if on_device and not forms_normal_equations(model):
+        raise ValueError(
+            f'fit.normal_equations = "device" needs fit.loss = "linear": the '
+            f"{getattr(model, 'loss_name', 'model')!r} loss transforms each residual on the host"
+        )
     backend = getattr(model, "backend", None)  # Adam's variables on the model's backend
     return FitProblem(
         params, residual, residual_and_jacobian, loss_drjit=loss_drjit, name="calibration",
         drjit_float=backend_types(backend).Float,
+        normal_equations=normal_equations if on_device else None,
     )  # fmt: skip
 
 
@@ -253,6 +273,7 @@ def calibrate_model(
     halves: tuple | None = None,
     scan_basins: bool = False,
     basin_check: tuple | None = None,
+    on_device: bool = False,
 ) -> Calibration:
     """Steps 2-5 of the module docstring on a prepared model. ``frozen_by_scene``: name ->
     reason for constants frozen before looking at the Jacobian (:func:`scene_frozen`).
@@ -269,6 +290,8 @@ def calibrate_model(
     (``study.fit.decorrelated.texture_half_models``); when given, a lower basin is refitted only
     if their decorrelated loss puts it lower too (``study.fit.basins.texture_delta``); one it
     does not is recorded as ``unconfirmed`` and reported.
+    ``on_device``: the solver reads the normal equations formed where the model shades
+    (:func:`make_problem`).
     ``requested`` names the constants to fit (``model.parameter_names`` turns them into scalar
     names: a variant fits its own in place of the seed's, e.g. the Beer-Lambert absorptions for
     ``attenuation_distance``; a user's shader, every declared constant when None)."""
@@ -280,7 +303,7 @@ def calibrate_model(
         raise ValueError(
             f"nothing left to fit: {sorted(pre)} frozen by the scene ({list(pre.values())})"
         )
-    problem = make_problem(model, start, continuous + discrete)
+    problem = make_problem(model, start, continuous + discrete, on_device=on_device)
     frozen = dict(pre)
     id0 = None
     if continuous:

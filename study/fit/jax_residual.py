@@ -84,7 +84,9 @@ class CallStats:
 class DrJitResidual:
     """JAX-callable residual ``x (k,) float64 -> r (m,) float64`` backed by Dr.Jit callables.
 
-    Attributes: ``k``, ``m``, ``stats`` (:class:`CallStats`), ``last_error`` (the last
+    Attributes: ``k``, ``m``, ``count`` (the residuals the ``m`` entries stand for: ``m``, or
+    more for a compressed system, ``study.fit.problem.FitProblem.jax_residual``), ``stats``
+    (:class:`CallStats`), ``last_error`` (the last
     :class:`NonFiniteResidualError` / :class:`ResidualShapeError` raised inside a callback, or
     None), ``handle`` (int: what names this residual to :func:`shared_residual`'s function).
     Call :meth:`value` / :meth:`value_and_jac` for the same computation from NumPy (counted the
@@ -101,6 +103,7 @@ class DrJitResidual:
         enable_x64()
         self.fn_value, self.fn_value_and_jac = fn_value, fn_value_and_jac
         self.k, self.m, self.name = int(k), int(m), name
+        self.count = self.m  # the residuals the m entries stand for (a compressed system: more)
         self.stats = CallStats()
         self.last_error: Exception | None = None
         self.handle = next(_HANDLES)

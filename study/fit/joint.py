@@ -98,6 +98,15 @@ class JointModel:
             Js.append(w * J)
         return np.concatenate(rs), np.concatenate(Js, axis=0)
 
+    def normal_equations(self, constants: Constants, names: list[str]):
+        """The scenes' weighted normal equations summed (``study.fit.normal_equations``): those
+        of the stacked residual."""
+        total = None
+        for w, m in zip(self.weights, self.models):
+            ne = m.normal_equations(constants, names).weighted(w)
+            total = ne if total is None else total + ne
+        return total
+
     def loss_ad(self, constants: Constants):
         total = None
         for w, m in zip(self.weights, self.models):

@@ -286,7 +286,7 @@ class ReferenceModel:
     def _shade(self, constants):
         raise NotImplementedError
 
-    def _shade_with_jacobian(self, constants, names: list[str]):
+    def _shade_with_jacobian(self, constants, names: list[str], lanes=None):
         raise NotImplementedError
 
     def start_constants(self, exp: Experiment | None = None):
@@ -330,6 +330,28 @@ class ReferenceModel:
         return r, J
 
     @_thread_handoff
+    def normal_equations(self, constants, names: list[str]):
+        """The ``study.fit.normal_equations.NormalEquations`` of :meth:`residual_and_jacobian`
+        with respect to the named scalar constants, formed in Dr.Jit where the shader runs
+        (only the (k + 1)^2 numbers come back)."""
+        from .normal_equations import LaneReduction
+
+        if getattr(self, "_lane_reduction", None) is None:
+            self._lane_reduction = LaneReduction(self.mask, self.reference, self.supersample)
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", RuntimeWarning)
+            ne = self._shade_with_jacobian(constants, names, lanes=self._lane_reduction)
+        self.n_jacobians += 1
+        if ne.nonfinite:
+            raise FloatingPointError(
+                f"{self.what} produced {ne.nonfinite} non-finite water pixels at "
+                f"{_constants_text(constants)}; " + _NOT_FINITE_FIX
+            )
+        if not (np.all(np.isfinite(ne.A)) and np.all(np.isfinite(ne.g))):
+            raise FloatingPointError(f"{self.label}: non-finite Jacobian entries for {names}")
+        return ne
+
+    @_thread_handoff
     def loss_ad(self, constants):
         """Dr.Jit loss ``0.5 * sum over water pixels and channels of (shader - reference)^2``
         with the AD graph of any gradient-enabled constant attached (for reverse mode)."""
@@ -371,14 +393,23 @@ class ReferenceModel:
         if bad is None or not bad[self.mask].any():
             return
         ys, xs = np.nonzero((np.asarray(bad) != 0) & self.mask)
-        vals = constants if isinstance(constants, dict) else getattr(constants, "__dict__", {})
-        at = ", ".join(f"{k}={np.round(np.asarray(v, float), 6).tolist()}" for k, v in vals.items())
+        at = _constants_text(constants)
         raise FloatingPointError(
             f"{self.what} produced {int(bad[self.mask].sum())} non-finite water pixels (first "
-            f"at pixel ({xs[0]}, {ys[0]}))" + (f" at {at}" if at else "") + "; the shader is "
-            "not finite over its constants' ranges: narrow the range of the constant that "
-            "reaches there (the fit's steps stay within the ranges)"
+            f"at pixel ({xs[0]}, {ys[0]}))" + (f" at {at}" if at else "") + "; " + _NOT_FINITE_FIX
         )
+
+
+_NOT_FINITE_FIX = (
+    "the shader is not finite over its constants' ranges: narrow the range of the constant that "
+    "reaches there (the fit's steps stay within the ranges)"
+)
+
+
+def _constants_text(constants) -> str:
+    """``constants`` (a dict or a dataclass of them) as ``name=value, ...``."""
+    vals = constants if isinstance(constants, dict) else getattr(constants, "__dict__", {})
+    return ", ".join(f"{k}={np.round(np.asarray(v, float), 6).tolist()}" for k, v in vals.items())
 
 
 class ShaderModel(ReferenceModel):
@@ -464,7 +495,7 @@ class ShaderModel(ReferenceModel):
     def _shade(self, constants: Constants):
         return self.variant.render(self.inputs, constants, backend=self.backend)
 
-    def _shade_with_jacobian(self, constants: Constants, names: list[str]):
+    def _shade_with_jacobian(self, constants: Constants, names: list[str], lanes=None):
         return self.variant.render_with_jacobian(
-            self.inputs, constants, names, backend=self.backend
+            self.inputs, constants, names, backend=self.backend, lanes=lanes
         )

@@ -76,7 +76,10 @@ class FitProblem:
 
     ``params``: list of :class:`Param` (unique names). ``drjit_float``: the Dr.Jit float type
     of the Adam variables handed to ``loss_drjit`` (default: the ``Float`` of the run's backend,
-    ``shaders_port.pipeline.texture.backend_types()``).
+    ``shaders_port.pipeline.texture.backend_types()``). ``normal_equations``: None, or
+    ``(values, free) -> study.fit.normal_equations.NormalEquations`` of the residual; when given,
+    the solvers see the compressed system of ``len(free) + 1`` rows in place of the residual
+    (:meth:`jax_residual`).
     """
 
     def __init__(
@@ -88,6 +91,7 @@ class FitProblem:
         loss_drjit: Callable | None = None,
         drjit_float=None,
         name: str = "problem",
+        normal_equations: Callable | None = None,
     ):
         names = [p.name for p in params]
         if not names or len(set(names)) != len(names):
@@ -98,6 +102,7 @@ class FitProblem:
         self.names = names
         self.residual, self.residual_and_jacobian = residual, residual_and_jacobian
         self.loss_drjit, self.drjit_float, self.name = loss_drjit, drjit_float, name
+        self.normal_equations = normal_equations
 
     def start_values(self, x0: dict | None) -> dict:
         """Full dict name -> float: ``x0`` over the defaults, checked against the bounds."""
@@ -117,13 +122,19 @@ class FitProblem:
         return vals
 
     def jax_residual(self, base: dict, free: list[str]) -> DrJitResidual:
-        """JAX residual of ``u`` (len(free),) with the other parameters held at ``base``."""
+        """JAX residual of ``u`` (len(free),) with the other parameters held at ``base``: the
+        residual itself, or with ``normal_equations`` the compressed system
+        (``study.fit.normal_equations``), whose ``count`` is the residuals it stands for."""
         ps = [self.params[n] for n in free]
 
         def values(u):
             v = dict(base)
             v.update({p.name: float(p.from_u(ui)) for p, ui in zip(ps, u)})
             return v
+
+        m = len(np.asarray(self.residual(base)).reshape(-1))
+        if self.normal_equations is not None:
+            return self._compressed(values, ps, list(free), m)
 
         def fn_value(u):
             return self.residual(values(u))
@@ -138,8 +149,27 @@ class FitProblem:
                 )
             return r, J * np.array([p.dp_du(ui) for p, ui in zip(ps, u)])[None, :]
 
-        m = len(np.asarray(self.residual(base)).reshape(-1))
         return make_jax_residual(fn_value, fn_value_and_jac, len(free), m, name=self.name)
+
+    def _compressed(self, values: Callable, ps: list, free: list[str], m: int) -> DrJitResidual:
+        """The residual of (k + 1) rows with the problem's normal equations and loss. A value
+        call (no Jacobian) gives ``[0, ..., 0, |r|]``: the same loss; the solvers read a
+        residual's entries only together with its Jacobian, from one call."""
+        k = len(free)
+
+        def fn_value(u):
+            r = np.asarray(self.residual(values(u)), np.float64).reshape(-1)
+            out = np.zeros(k + 1)
+            out[k] = np.sqrt(float(r @ r))
+            return out
+
+        def fn_value_and_jac(u):
+            ne = self.normal_equations(values(u), free)
+            return ne.scaled([p.dp_du(ui) for p, ui in zip(ps, u)]).compressed()
+
+        res = make_jax_residual(fn_value, fn_value_and_jac, k, k + 1, name=self.name)
+        res.count = m
+        return res
 
 
 @dataclass

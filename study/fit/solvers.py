@@ -138,7 +138,7 @@ def fit(
         run = SolverRun(u0, 0, False, f"start point rejected: {e}")
         return _result(solver, objective, t0, run, math.nan, math.nan)
     trace = Trace(t0, loss0)
-    ftol = settings.stall_tolerance(objective.residual.m, len(names))
+    ftol = settings.stall_tolerance(objective.residual.count, len(names))
     run, restarts = _run_with_restarts(cls(settings), objective, u0, trace, ftol)
     u, converged, message = run.u, run.converged, run.message
     try:

@@ -147,9 +147,9 @@ class SpirvModel(ReferenceModel):
     def _shade(self, constants: dict):
         return self.user_shader.render(self.inputs, constants, backend=self.backend)
 
-    def _shade_with_jacobian(self, constants: dict, names: list[str]):
+    def _shade_with_jacobian(self, constants: dict, names: list[str], lanes=None):
         return self.user_shader.render_with_jacobian(
-            self.inputs, constants, names, backend=self.backend
+            self.inputs, constants, names, backend=self.backend, lanes=lanes
         )
 
     def loss_ad(self, constants):
