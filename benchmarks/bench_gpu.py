@@ -25,8 +25,9 @@ Dr.Jit's allocator watermark of the backend (host memory on LLVM, device memory 
 process's peak resident memory, and on CUDA the peak of ``nvidia-smi``'s memory in use, sampled.
 Kernels per pass and stage (``kernels``: ``study._kernels.KernelLedger``): launches by kind, JIT
 kernels compiled, found in the kernel cache or replayed, memory copies and their bytes (on a
-GPU, the host-device transfers). Ratios are CPU seconds over GPU seconds of the same invocation. ``--parity`` compares the fitted
-constants of the two backends at each size in their combined standard errors.
+GPU, the host-device transfers). Ratios are CPU seconds over GPU seconds of the same
+invocation. ``--parity`` compares the fitted constants of the two backends at each size in their
+combined standard errors.
 
     .venv/bin/python benchmarks/bench_gpu.py [--sizes 256x256 1080p] [--backends llvm_ad_rgb
         cuda_ad_rgb] [--stages reference inputs fit export gl] [--passes cold warm]

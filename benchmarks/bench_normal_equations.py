@@ -28,7 +28,6 @@ from __future__ import annotations
 import argparse
 import json
 import os
-import platform
 import statistics
 import sys
 import time
@@ -41,6 +40,7 @@ import drjit as dr  # noqa: E402
 import numpy as np  # noqa: E402
 
 import study._backend  # noqa: E402,F401
+from bench_gpu import machine  # noqa: E402
 from study._kernels import KernelLedger  # noqa: E402
 from helpers.synthetic import FITTED, GLINT_START, GLINT_TRUTH, synthetic_inputs  # noqa: E402
 from shaders_port import Constants  # noqa: E402
@@ -128,6 +128,7 @@ def main() -> None:
     ap.add_argument("--sizes", type=int, nargs="+", default=[256, 512, 1024])
     ap.add_argument("--json", type=Path, default=None)
     a = ap.parse_args()
+    cpu = machine(gpu=False)
     rows = []
     for size in a.sizes:
         rows.append(bench_size(size))
@@ -142,8 +143,7 @@ def main() -> None:
         "command": "benchmarks/bench_normal_equations.py --sizes "
         + " ".join(map(str, a.sizes))
         + (f" --json {a.json}" if a.json else ""),
-        "machine": f"{platform.processor() or platform.machine()}, {os.cpu_count()} cores, "
-        "Dr.Jit LLVM backend",
+        "machine": f"{cpu['cpu']}, {cpu['cores']} cores, Dr.Jit LLVM backend",
         "load_average_after": list(os.getloadavg()),
         "shader": SHADER,
         "rows": rows,

@@ -6,7 +6,7 @@
 #      in their combined standard errors (the CPU's from docs/results/gpu/bench.json, measured
 #      with the same overrides; on the device too when it has a libLLVM >= 16);
 #   2. 1920x1080 on cuda_ad_rgb: a cold pass (empty render and kernel caches), then a warm one in
-#      the same process;
+#      the same process, the fit's normal equations formed on the device (fit.normal_equations);
 #   3. the tradeoff study on the GPU, only if 5 minutes of the call's budget remain.
 #
 # Everything lands in $OUT: bench.json (one invocation per step, the file scripts/build_docs.py
@@ -189,8 +189,12 @@ sys.exit(0 if dr.has_backend(dr.JitBackend.CUDA) else 3)" \
     --parity-with "$REPO/docs/results/gpu/bench.json" --title "256x256: parity, CPU and GPU" \
     --timeout "$(left)"
   say "step 2: 1920x1080 on cuda_ad_rgb, cold then warm ($(left) s left)"
+  # the fit reads its normal equations from the device: nothing of the 1080p image crosses the
+  # bus during the fit (docs/results/normal-equations)
   run "${bench[@]}" --sizes 1920x1080 --backends cuda_ad_rgb --passes cold warm \
-    "${BENCH_SETS[@]}" --title "1920x1080 on the GPU, cold and warm" --timeout "$(left)"
+    "${BENCH_SETS[@]}" --set 'fit.normal_equations="device"' \
+    --title "1920x1080 on the GPU, cold and warm, normal equations on the device" \
+    --timeout "$(left)"
   if [ "$DRY" = 1 ] || [ "$(left)" -ge "$TRADEOFF_NEEDS" ]; then
     say "step 3: the tradeoff on the GPU (runs only if ${TRADEOFF_NEEDS} s of ${BUDGET} remain)"
     run timeout "$(( $(left) - 20 ))" "$py" -m study.cli tradeoff \

@@ -17,6 +17,9 @@ Every table of results in ``docs/`` is written by this script, never by hand:
   ``bench.json`` that ``benchmarks/bench_search.py --json`` writes;
 * ``docs/results/gpu/report.md``: the calibration's stages on the CPU and on a GPU, from the
   ``bench.json`` that ``benchmarks/bench_gpu.py --json`` writes (tables: ``docs_gpu.py``);
+* ``docs/results/normal-equations/report.md``: the fit with its normal equations formed on the
+  device, from ``benchmarks/bench_normal_equations.py``'s ``bench.json``
+  (``docs_normal_equations.py``);
 * ``docs/results/animation/report.md``: the animated calibration's report, from the
   ``constants.json`` that ``study calibrate experiments/animated.toml`` writes, and
   ``schedules.md``, the same calibration at three step schedules (``schedules.json``);
@@ -122,6 +125,7 @@ def generated() -> dict[Path, str]:
     from docs_error_budget import error_budget_page
     from docs_own_waves import own_waves_page
     from docs_lod import lod_page
+    from docs_normal_equations import normal_equations_page
     from docs_resolution_transfer import resolution_transfer_page
     from docs_figures import quoted_pages, stale_results
 
@@ -147,6 +151,9 @@ def generated() -> dict[Path, str]:
         _json(RESULTS / "search" / "bench_scenes.json"), "four scenes in one study"
     )
     pages[RESULTS / "gpu" / "report.md"] = gpu_bench_page(_json(RESULTS / "gpu" / "bench.json"))
+    pages[RESULTS / "normal-equations" / "report.md"] = normal_equations_page(
+        _json(RESULTS / "normal-equations" / "bench.json")
+    )
     pages[RESULTS / "animation" / "report.md"] = animation_report_text(
         _json(RESULTS / "animation" / "constants.json"), gif=False
     )
