@@ -201,6 +201,26 @@ def test_jobs_run_with_the_cyclic_collector_off_and_collect_after(monkeypatch):
     assert calls and gc.isenabled()
 
 
+def test_a_job_row_counts_what_dr_jit_launched_for_it():
+    """Each row says what Dr.Jit launched for its job (``study._kernels``): a job that computes
+    with Dr.Jit counts its kernels (the first run of a new kernel compiles it or finds it in
+    the disk cache), a job that does not counts none; the history is off again after."""
+    import drjit as dr
+
+    from study.sweep.engine import _run_job
+
+    n = 1000 + int(time.time_ns() % 100000)  # a kernel shape this process has not run
+    row = _run_job(sweep_jobs.drjit_sum, {"n": n}, "k")
+    assert row["status"] == "ok"
+    assert row["total"] == pytest.approx(sum(i * i + n for i in range(n)), rel=1e-12)
+    assert row["kernels_launched"] >= 2  # the kernel and its reduction
+    assert row["kernels_compiled"] + row["kernels_cached"] >= 1
+    assert row["copies"] >= 1 and row["copy_bytes"] >= 8  # the sum read back
+    assert not dr.flag(dr.JitFlag.KernelHistory)
+    none = _run_job(lambda job: {"y": 1}, {}, "k2")
+    assert none["kernels_launched"] == 0 and none["kernels_compiled"] == 0
+
+
 def test_a_worker_slow_to_exit_at_close_keeps_the_sweeps_outcome(monkeypatch):
     """A nanny that waits longer than its 5 s for its worker to exit raises TimeoutError from the
     cluster's close (as on a loaded machine after Ctrl-C); the sweep's own outcome, here an

@@ -31,6 +31,7 @@ import time
 from pathlib import Path
 
 from .._backend import collect_here
+from .._kernels import KernelLedger
 from .._progress import log as _log
 from .._progress import progress_line
 from .scenes import prepare_scene, spec_text
@@ -52,19 +53,23 @@ def _qualname(fn) -> str:
 
 def _run_job(fn, job: dict, key: str, scene_ready=None) -> dict:
     """Worker side: run one job; never raises (the error is the row). What the job prints is
-    captured; the last lines are kept in the row (``log_tail``) when it fails."""
+    captured; the last lines are kept in the row (``log_tail``) when it fails. What Dr.Jit
+    launched for the job is counted (:func:`kernel_columns`)."""
     t0 = time.perf_counter()
     row = {"key": key, "schema": SCHEMA_VERSION, "status": "ok", "error": None}
     captured = io.StringIO()
+    ledger = KernelLedger()
     try:
         with (
             collect_here(),  # no Dr.Jit garbage freed on the event loop's thread (see there)
             contextlib.redirect_stdout(captured),
             contextlib.redirect_stderr(captured),
+            ledger,
         ):
             if isinstance(scene_ready, dict) and scene_ready.get("error"):
                 raise RuntimeError(f"scene preparation failed: {scene_ready['error']}")
             out = fn(job)
+            ledger.take("job")
         if not isinstance(out, dict):
             raise TypeError(
                 f"{_qualname(fn)} returned {type(out).__name__}, expected a dict of results"
@@ -73,9 +78,27 @@ def _run_job(fn, job: dict, key: str, scene_ready=None) -> dict:
     except Exception as exc:  # recorded, not raised: one failing job never stops a sweep
         row["status"], row["error"] = "error", clip_error(exc)
         row["log_tail"] = "\n".join(captured.getvalue().replace("\r", "\n").splitlines()[-20:])
+    row.update(kernel_columns(ledger.stages.get("job")))
     row["seconds"] = time.perf_counter() - t0
     row["worker"] = socket.gethostname()
     return row
+
+
+def kernel_columns(summary: dict | None) -> dict:
+    """A job's ``study._kernels.kernel_summary`` as row columns: kernels launched, JIT kernels
+    compiled / found in the kernel cache / replayed from a recording, their compile ms, memory
+    copies and bytes (an empty dict for a job that failed)."""
+    if summary is None:
+        return {}
+    return {
+        "kernels_launched": summary["launches"],
+        "kernels_compiled": summary["jit_compiled"],
+        "kernels_cached": summary["jit_cache_hits"],
+        "kernels_replayed": summary["jit_replayed"],
+        "kernel_compile_ms": summary["codegen_ms"] + summary["backend_ms"],
+        "copies": summary["copies"],
+        "copy_bytes": summary["copy_bytes"],
+    }
 
 
 def _prepare(spec: dict, variant: str) -> dict:

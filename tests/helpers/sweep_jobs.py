@@ -46,3 +46,12 @@ def collector_state(job: dict) -> dict:
     import gc
 
     return {"gc_enabled": gc.isenabled()}
+
+
+def drjit_sum(job: dict) -> dict:
+    """A job that launches Dr.Jit kernels: the sum of ``job["n"]`` values, read back."""
+    import drjit as dr
+    from drjit.llvm import Float64
+
+    x = dr.arange(Float64, int(job["n"]))
+    return {"total": float(dr.sum(x * x + job["n"])[0])}
