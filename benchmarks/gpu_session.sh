@@ -7,7 +7,10 @@
 #      with the same overrides; on the device too when it has a libLLVM >= 16);
 #   2. 1920x1080 on cuda_ad_rgb: a cold pass (empty render and kernel caches), then a warm one in
 #      the same process, the fit's normal equations formed on the device (fit.normal_equations);
-#   3. the tradeoff study on the GPU, only if 5 minutes of the call's budget remain.
+#   3. the tradeoff study on the GPU, GPU_TRADEOFF_WORKERS worker processes sharing the device and
+#      the fits' normal equations formed there, only if 5 minutes of the call's budget remain
+#      (--tradeoff: this step alone). Its rows count each point's kernels (compiled, cached,
+#      replayed) and copies.
 #
 # Everything lands in $OUT: bench.json (one invocation per step, the file scripts/build_docs.py
 # turns into docs/results/gpu/report.md once merged into docs/results/gpu/bench.json), the
@@ -17,6 +20,7 @@
 #   bash benchmarks/gpu_session.sh --build-bundle  # here, once: .gpu_bundle/ (what must travel)
 #   bash benchmarks/gpu_session.sh --dry-run       # print the steps, run nothing
 #   bash benchmarks/gpu_session.sh                 # on the device machine
+#   bash benchmarks/gpu_session.sh --tradeoff      # step 3 alone, with the whole budget
 #   bash benchmarks/gpu_session.sh --prune DIR     # prune an unpacked site folder as the bundle
 #
 # The device machine reaches no registry, so what it lacks travels with the call, in the folder
@@ -30,8 +34,9 @@
 # not fit: every step runs with the lighting and walls raw (BENCH_SETS), on both backends.
 #
 # Environment: OUT (default /tmp/gpu_session_out), GPU_SESSION_BUDGET (seconds the whole script
-# may take; default 560, for a 600-s call), DEVICE_PYTHON_VERSION (default 3.12), WHEELS (the
-# download cache of --build-bundle; default /tmp/study_gpu_wheels).
+# may take; default 560, for a 600-s call), GPU_TRADEOFF_WORKERS (the tradeoff's worker processes,
+# all on the one GPU; default 4), DEVICE_PYTHON_VERSION (default 3.12), WHEELS (the download
+# cache of --build-bundle; default /tmp/study_gpu_wheels).
 set -euo pipefail
 
 REPO="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
@@ -39,6 +44,7 @@ BUNDLE="$REPO/.gpu_bundle"
 OUT="${OUT:-/tmp/gpu_session_out}"
 BUDGET="${GPU_SESSION_BUDGET:-560}"
 TRADEOFF_NEEDS=300  # seconds that must remain for step 3
+TRADEOFF_WORKERS="${GPU_TRADEOFF_WORKERS:-4}"  # worker processes sharing the one device
 LIMIT_MIB=64
 PYVER="${DEVICE_PYTHON_VERSION:-3.12}"
 WHEELS="${WHEELS:-/tmp/study_gpu_wheels}"
@@ -66,9 +72,10 @@ for arg in "$@"; do
   case "$arg" in
     --dry-run) DRY=1 ;;
     --build-bundle) MODE=bundle ;;
+    --tradeoff) MODE=tradeoff ;;  # step 3 alone
     --prune) MODE=prune ;;  # --prune DIR: prune an unpacked site folder as the bundle does
     -h|--help) sed -n '2,37p' "${BASH_SOURCE[0]}"; exit 0 ;;
-    *) echo "gpu_session.sh: unknown argument $arg (use --dry-run, --build-bundle or --help)" >&2
+    *) echo "gpu_session.sh: unknown argument $arg (use --dry-run, --build-bundle, --tradeoff or --help)" >&2
        exit 2 ;;
   esac
 done
@@ -165,6 +172,19 @@ install_bundle() {
 
 left() { echo $(( BUDGET - ($(date +%s) - START) )); }
 
+tradeoff_step() {  # step 3: the default tradeoff, its workers sharing the one GPU
+  local py=$1
+  say "step 3: the tradeoff on the GPU, $TRADEOFF_WORKERS workers on one device (runs only if \
+${TRADEOFF_NEEDS} s of ${BUDGET} remain in a whole session)"
+  run timeout "$(( $(left) - 20 ))" "$py" -m study.cli tradeoff \
+    "$REPO/experiments/default.toml" --out /tmp/study_tradeoff --backend cuda_ad_rgb \
+    --workers "$TRADEOFF_WORKERS" "${BENCH_SETS[@]}" --set 'fit.normal_equations="device"' \
+    || say "the tradeoff stopped early (budget)"
+  run sh -c "cp /tmp/study_tradeoff/report.md /tmp/study_tradeoff/summary.json \
+    /tmp/study_tradeoff/tradeoff.parquet /tmp/study_tradeoff/screen.parquet '$OUT/' \
+    2>/dev/null || true"
+}
+
 session() {
   START=$(date +%s)
   local py=python3 backends=(cuda_ad_rgb)
@@ -183,27 +203,26 @@ sys.exit(0 if dr.has_backend(dr.JitBackend.CUDA) else 3)" \
       say "no libLLVM >= 16 here: the CPU side of the parity is this repository's measurement"
     fi
   fi
-  local bench=("$py" "$REPO/benchmarks/bench_gpu.py" --json "$OUT/bench.json" --append)
-  say "step 1: parity at 256x256 (${backends[*]})"
-  run "${bench[@]}" --sizes 256x256 --backends "${backends[@]}" "${BENCH_SETS[@]}" --parity \
-    --parity-with "$REPO/docs/results/gpu/bench.json" --title "256x256: parity, CPU and GPU" \
-    --timeout "$(left)"
-  say "step 2: 1920x1080 on cuda_ad_rgb, cold then warm ($(left) s left)"
-  # the fit reads its normal equations from the device: nothing of the 1080p image crosses the
-  # bus during the fit (docs/results/normal-equations)
-  run "${bench[@]}" --sizes 1920x1080 --backends cuda_ad_rgb --passes cold warm \
-    "${BENCH_SETS[@]}" --set 'fit.normal_equations="device"' \
-    --title "1920x1080 on the GPU, cold and warm, normal equations on the device" \
-    --timeout "$(left)"
-  if [ "$DRY" = 1 ] || [ "$(left)" -ge "$TRADEOFF_NEEDS" ]; then
-    say "step 3: the tradeoff on the GPU (runs only if ${TRADEOFF_NEEDS} s of ${BUDGET} remain)"
-    run timeout "$(( $(left) - 20 ))" "$py" -m study.cli tradeoff \
-      "$REPO/experiments/default.toml" --out /tmp/study_tradeoff --backend cuda_ad_rgb \
-      --workers 1 "${BENCH_SETS[@]}" || say "the tradeoff stopped early (budget)"
-    run sh -c "cp /tmp/study_tradeoff/report.md /tmp/study_tradeoff/summary.json '$OUT/' \
-      2>/dev/null || true"
+  if [ "$MODE" = tradeoff ]; then
+    tradeoff_step "$py"
   else
-    say "step 3 skipped: $(left) s left, the tradeoff needs $TRADEOFF_NEEDS"
+    local bench=("$py" "$REPO/benchmarks/bench_gpu.py" --json "$OUT/bench.json" --append)
+    say "step 1: parity at 256x256 (${backends[*]})"
+    run "${bench[@]}" --sizes 256x256 --backends "${backends[@]}" "${BENCH_SETS[@]}" --parity \
+      --parity-with "$REPO/docs/results/gpu/bench.json" --title "256x256: parity, CPU and GPU" \
+      --timeout "$(left)"
+    say "step 2: 1920x1080 on cuda_ad_rgb, cold then warm ($(left) s left)"
+    # the fit reads its normal equations from the device: nothing of the 1080p image crosses the
+    # bus during the fit (docs/results/normal-equations)
+    run "${bench[@]}" --sizes 1920x1080 --backends cuda_ad_rgb --passes cold warm \
+      "${BENCH_SETS[@]}" --set 'fit.normal_equations="device"' \
+      --title "1920x1080 on the GPU, cold and warm, normal equations on the device" \
+      --timeout "$(left)"
+    if [ "$DRY" = 1 ] || [ "$(left)" -ge "$TRADEOFF_NEEDS" ]; then
+      tradeoff_step "$py"
+    else
+      say "step 3 skipped: $(left) s left, the tradeoff needs $TRADEOFF_NEEDS"
+    fi
   fi
   say "done in $(( $(date +%s) - START )) s; results in $OUT"
 }
@@ -212,5 +231,5 @@ case "$MODE" in
   bundle) build_bundle ;;
   prune) [ -d "$PRUNE_DIR" ] || { echo "gpu_session.sh: --prune DIR" >&2; exit 2; }
          prune_site "$PRUNE_DIR" ;;
-  *) session ;;
+  *) session ;;  # the whole session, or with --tradeoff step 3 alone
 esac

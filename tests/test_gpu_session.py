@@ -47,6 +47,13 @@ def test_the_dry_run_plans_parity_then_1080p_cold_and_warm_then_the_tradeoff(tmp
     assert not (tmp_path / "out").exists()  # nothing ran
 
 
+def test_the_tradeoff_alone_runs_step_3_with_workers_sharing_the_device(tmp_path):
+    text = _dry("--tradeoff", tmp_path=tmp_path)
+    assert "step 3: the tradeoff" in text and "step 1" not in text and "step 2" not in text
+    assert "--workers 4" in text and "--backend cuda_ad_rgb" in text
+    assert 'fit.normal_equations="device"' in text
+
+
 def test_the_bundle_downloads_the_pinned_packages_for_the_devices_python(tmp_path):
     text = _dry("--build-bundle", tmp_path=tmp_path)
     assert "--python-version 3.12" in text and "--only-binary=:all:" in text
