@@ -3,8 +3,10 @@
 # machine (benchmarks/bench_gpu.py's GPU side; docs/where-it-runs.md, "At a game's resolution"):
 #
 #   1. parity at 256x256: the calibration on cuda_ad_rgb, its fitted constants against the CPU's
-#      in their combined standard errors (the CPU's from docs/results/gpu/bench.json, measured
-#      with the same overrides; on the device too when it has a libLLVM >= 16);
+#      in their combined standard errors, both fitted at 128x128 (PARITY_SETS: equal fit
+#      resolution, so the comparison is of backends alone; the CPU's from
+#      docs/results/gpu/bench.json, measured with the same overrides; on the device too when it
+#      has a libLLVM >= 16);
 #   2. 1920x1080 on cuda_ad_rgb: a cold pass (empty render and kernel caches), then a warm one in
 #      the same process, the fit's normal equations formed on the device (fit.normal_equations);
 #   3. the tradeoff study on the GPU, GPU_TRADEOFF_WORKERS worker processes sharing the device and
@@ -51,6 +53,7 @@ WHEELS="${WHEELS:-/tmp/study_gpu_wheels}"
 SITE=/tmp/study_site
 TOOLS=/tmp/study_tools
 BENCH_SETS=(--set 'reference.lighting_denoise="none"' --set 'reference.wall_denoise="none"')
+PARITY_SETS=("${BENCH_SETS[@]}" --set 'fit.resolution=[128, 128]')
 # pinned as in pyproject.toml; the device's image has numpy, scipy, jax, matplotlib, pandas,
 # pyarrow, pillow and the rest (docs/where-it-runs.md)
 PACKAGES=(mitsuba==3.9.1 drjit==1.5.0 OpenEXR==3.5.3 moderngl==5.13.0 glcontext==3.1.0
@@ -208,7 +211,7 @@ sys.exit(0 if dr.has_backend(dr.JitBackend.CUDA) else 3)" \
   else
     local bench=("$py" "$REPO/benchmarks/bench_gpu.py" --json "$OUT/bench.json" --append)
     say "step 1: parity at 256x256 (${backends[*]})"
-    run "${bench[@]}" --sizes 256x256 --backends "${backends[@]}" "${BENCH_SETS[@]}" --parity \
+    run "${bench[@]}" --sizes 256x256 --backends "${backends[@]}" "${PARITY_SETS[@]}" --parity \
       --parity-with "$REPO/docs/results/gpu/bench.json" --title "256x256: parity, CPU and GPU" \
       --timeout "$(left)"
     say "step 2: 1920x1080 on cuda_ad_rgb, cold then warm ($(left) s left)"

@@ -167,3 +167,26 @@ def test_a_loss_transformed_on_the_host_is_refused_in_one_line():
     model = transformed(ShaderModel("water_refraction", inputs, _target(inputs)), "log", 67.0)
     with pytest.raises(ValueError, match='needs fit.loss = "linear"'):
         make_problem(model, Constants(**GLINT_START), NAMES, progress=False, on_device=True)
+
+
+def test_the_kernel_ledger_counts_each_stage_apart():
+    """``study._kernels.KernelLedger``: what was launched between two takes is that stage's; a
+    stage that launches nothing counts nothing; the history flag is restored."""
+    import drjit as dr
+    from drjit.llvm import Float64
+
+    from study._kernels import KernelLedger
+
+    was = dr.flag(dr.JitFlag.KernelHistory)
+    with KernelLedger() as ledger:
+        x = dr.arange(Float64, 4099)
+        dr.eval(x * x + 0.5)
+        first = ledger.take("compute")
+        second = ledger.take("nothing")
+        float(dr.sum(x)[0])
+        third = ledger.take("read back")
+    assert first["by_kind"].get("JIT", 0) >= 1 and first["launches"] >= 1
+    assert second["launches"] == 0 and second["copies"] == 0
+    assert third["copies"] >= 1 and third["copy_bytes"] >= 8
+    assert set(ledger.stages) == {"compute", "nothing", "read back"}
+    assert dr.flag(dr.JitFlag.KernelHistory) == was

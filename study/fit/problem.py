@@ -183,6 +183,8 @@ class FitResult:
     ``step_seconds``: lowest loss seen and seconds since the start, after each step;
     ``at_bound``: name -> ``'lower'``/``'upper'`` for the ``clip`` parameters on a bound at the
     end; ``restarts``: how many times the fit restarted from inside a bound.
+    ``seconds_in_model``: of ``seconds``, those in the model's evaluations (the shader on its
+    backend and what reads its results back; the rest is the solver on the host).
     """
 
     solver: str
@@ -202,6 +204,7 @@ class FitResult:
     message: str
     step_losses: list = field(default_factory=list)
     step_seconds: list = field(default_factory=list)
+    seconds_in_model: float = 0.0
     at_bound: dict = field(default_factory=dict)
     restarts: int = 0
 
@@ -217,6 +220,7 @@ class FitResult:
             "n_jac_calls": self.n_jac_calls,
             "n_grad_calls": self.n_grad_calls,
             "seconds": self.seconds,
+            "seconds_in_model": self.seconds_in_model,
             "converged": self.converged,
             "message": self.message,
         }

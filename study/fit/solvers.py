@@ -299,6 +299,7 @@ def _result(
         n_jac_calls=stats.n_jac_calls,
         n_grad_calls=run.grad_calls,
         seconds=time.perf_counter() - t0,
+        seconds_in_model=stats.seconds_in_drjit,
         converged=bool(run.converged),
         message=run.message,
         step_losses=trace.losses if trace is not None else [],
