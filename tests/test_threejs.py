@@ -256,3 +256,15 @@ def test_a_users_shader_in_three_matches_the_executor(tmp_path):
             d = np.abs(rgba[..., :3] - ours["color"]).max(-1)[both]
             assert both.sum() > 300 and d.mean() <= GL_MEAN, (inputs, d.mean())
             assert np.percentile(d, 99.9) <= GL_P999, (inputs, np.percentile(d, 99.9))
+
+
+def test_a_shader_with_its_own_vertex_shader_is_refused_by_name(tmp_path):
+    """A calibration of an engine pair (its own vertex shader): the module says why it is not
+    written, naming the vertex shader and the binding sheet, not a missing file of the study's
+    vertex shader (which such an export does not have)."""
+    from study.export.threejs import ThreeUnsupported, calibration_data
+
+    src = REPO / "docs" / "results" / "loss-transport" / "webgl_mirror_water" / "constants.json"
+    shutil.copy(src, tmp_path / "constants.json")
+    with pytest.raises(ThreeUnsupported, match="its own vertex shader webgl_mirror_water.vert"):
+        calibration_data(tmp_path, None, None)

@@ -101,6 +101,17 @@ def lacking_inputs(vert: str, frag: str) -> list[str]:
     return [n for n in uniform_names(vert, frag) if n not in BUILT]
 
 
+def _own_vertex_refused(saved) -> None:
+    """ThreeUnsupported for a user's shader with a vertex shader of its own."""
+    user = saved.user
+    if user is not None and user.vertex is not None:
+        raise ThreeUnsupported(
+            f"{saved.data['shader']} runs after its own vertex shader {user.vertex.label}, "
+            "whose matrices and attributes the module does not build; wire the pair from its "
+            "binding sheet (shaders/*/BINDINGS.md)"
+        )
+
+
 def user_wiring(saved, vert: str, frag: str) -> tuple[dict, dict]:
     """How water.js sets a user's shader (``saved``: its ``SavedCalibration``; ``vert``,
     ``frag``: the GLSL ES export it runs): (the shader's uniform and sampler names bound to an
@@ -108,12 +119,7 @@ def user_wiring(saved, vert: str, frag: str) -> tuple[dict, dict]:
     values: fitted uniform constants and the declaration's ``value`` lines). ThreeUnsupported
     for a shader with a vertex shader of its own (its names and attributes are the engine's)."""
     user = saved.user
-    if user.vertex is not None:
-        raise ThreeUnsupported(
-            f"{saved.data['shader']} runs after its own vertex shader {user.vertex.label}, "
-            "whose matrices and attributes the module does not build; wire the pair from its "
-            "binding sheet (shaders/*/BINDINGS.md)"
-        )
+    _own_vertex_refused(saved)
     bound = user.run_bindings()
     engine = user.engine_values()
     names, values = {}, {}
@@ -153,6 +159,7 @@ def calibration_data(out: Path, exp, inputs) -> dict:
     saved = read_calibration(out / "constants.json")
     summary = saved.data
     shaders = out / "shaders"
+    _own_vertex_refused(saved)  # before reading the study's vertex shader, which it has not
     stem = summary["shader"].rsplit(".", 1)[0] if saved.user is not None else summary["shader"]
     vert = (shaders / target_file("gles300", "water", "vert")).read_text("utf-8")
     frag = (shaders / target_file("gles300", stem, "frag")).read_text("utf-8")
