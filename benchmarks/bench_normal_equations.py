@@ -15,9 +15,9 @@ r^T r; the solver receives k + 1 rows, ``study.fit.normal_equations``):
   arrays the evaluation reads back, from their sizes: on the CPU backend they are not copied,
   on a GPU they cross the bus);
 * the whole fit, twice (the first includes the compile of the solver for its size): seconds,
-  steps, Jacobian evaluations (their count times an evaluation's seconds is the shader's part;
-  the rest is the solver on the host), and the largest relative difference of the constants
-  between the two forms.
+  of them the seconds in the model's evaluations (the rest is the solver on the host), steps,
+  Jacobian evaluations, and the largest relative difference of the constants between the two
+  forms.
 
 The JSON file is the source of ``docs/results/normal-equations/report.md``
 (``scripts/docs_normal_equations.py``).
@@ -99,6 +99,7 @@ def fits(model: ShaderModel, names: list[str], start, form: str) -> list[dict]:
         seconds = time.perf_counter() - t
         out.append({
             "seconds": seconds,
+            "seconds_in_model": res.seconds_in_model,
             "steps": res.iterations,
             "jacobian_evaluations": res.n_jac_calls,
             "value_evaluations": res.n_value_calls,
