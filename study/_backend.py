@@ -37,6 +37,21 @@ FIX = (
 )
 
 
+# the fits' JAX (the solvers, FLIP) runs on the host: a JAX built with CUDA on a GPU machine would
+# otherwise take most of the GPU's memory at its first array, from Dr.Jit and from every other
+# sweep worker on that GPU. Set before JAX starts; a value the user set is kept.
+JAX_ON_HOST = {"JAX_PLATFORMS": "cpu", "XLA_PYTHON_CLIENT_PREALLOCATE": "false"}
+
+
+def keep_jax_on_host(env: dict | None = None) -> dict:
+    """Put :data:`JAX_ON_HOST` into ``env`` (default ``os.environ``) where it has no value of
+    its own; returns ``env``."""
+    env = os.environ if env is None else env
+    for key, value in JAX_ON_HOST.items():
+        env.setdefault(key, os.environ.get(key, value))
+    return env
+
+
 class BackendError(RuntimeError):
     """The requested backend cannot run on this machine; the message says how to fix it."""
 
@@ -114,6 +129,7 @@ def init_backend(variant: str | None = None) -> str:
     variant = variant or DEFAULT_VARIANT
     if variant not in VARIANTS:
         raise BackendError(f"unknown variant {variant!r}; choose one of {', '.join(VARIANTS)}")
+    keep_jax_on_host()
     if variant.startswith("llvm"):
         ensure_llvm()
     else:

@@ -5,6 +5,8 @@ line."""
 
 from __future__ import annotations
 
+import os
+
 import numpy as np
 import pytest
 from helpers.experiments import small_experiment
@@ -190,3 +192,15 @@ def test_the_kernel_ledger_counts_each_stage_apart():
     assert third["copies"] >= 1 and third["copy_bytes"] >= 8
     assert set(ledger.stages) == {"compute", "nothing", "read back"}
     assert dr.flag(dr.JitFlag.KernelHistory) == was
+
+
+def test_the_backend_keeps_jax_on_the_host_unless_told_otherwise(monkeypatch):
+    """``init_backend`` sets JAX to the host where the user has not chosen (on a GPU machine a
+    CUDA JAX would take the GPU's memory from Dr.Jit); a value the user set stays."""
+    from study._backend import init_backend
+
+    monkeypatch.delenv("JAX_PLATFORMS", raising=False)
+    monkeypatch.setenv("XLA_PYTHON_CLIENT_PREALLOCATE", "true")
+    init_backend("llvm_ad_rgb")
+    assert os.environ["JAX_PLATFORMS"] == "cpu"
+    assert os.environ["XLA_PYTHON_CLIENT_PREALLOCATE"] == "true"

@@ -37,6 +37,8 @@ def test_workers_are_spawned_and_set_up_once(tmp_path, monkeypatch):
 
     monkeypatch.setenv("PYTHONPATH", str(TESTS))
     monkeypatch.setattr(sweep_jobs, "PARENT_MARK", "changed in the parent")
+    for key in ("JAX_PLATFORMS", "XLA_PYTHON_CLIENT_PREALLOCATE"):
+        monkeypatch.delenv(key, raising=False)
     rows = run_sweep(
         sweep_jobs.worker_state, [{"i": i} for i in range(3)], tmp_path / "w.parquet", workers=1
     )
@@ -45,6 +47,8 @@ def test_workers_are_spawned_and_set_up_once(tmp_path, monkeypatch):
     assert {r["variant"] for r in rows} == {"llvm_ad_rgb"}  # the plugin initialised the backend
     assert {r["threads"] for r in rows} == {cpu_count()}  # one worker: every core
     assert len({r["pid"] for r in rows}) == 1  # set up once, reused by every job
+    # workers that share one GPU keep their JAX on the host (study._backend.JAX_ON_HOST)
+    assert {(r["jax_platforms"], r["jax_preallocate"]) for r in rows} == {("cpu", "false")}
 
 
 def test_sweep_records_failures_and_resumes(client, tmp_path):

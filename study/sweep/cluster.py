@@ -6,8 +6,10 @@ forking is that it "is not going to work"), so workers are *spawned* processes
 (``distributed.worker.multiprocessing-method = spawn``, Dask's default, set explicitly here and
 checked by a test). The parent never needs the backend to run a sweep. Each worker:
 
-* gets ``XLA_FLAGS`` / thread variables through ``distributed.nanny.pre-spawn-environ`` (they
-  must be in the environment before the interpreter starts);
+* gets ``XLA_FLAGS`` / thread variables and JAX kept on the host
+  (``study._backend.JAX_ON_HOST``: several workers share one GPU) through
+  ``distributed.nanny.pre-spawn-environ`` (they must be in the environment before the
+  interpreter starts);
 * runs :class:`BackendPlugin` once on start: ``init_backend(variant)`` (the libLLVM check of
   ``study._backend``) and ``dr.set_thread_count(threads)`` before any scene is built (Embree
   sizes its pool on the first scene).
@@ -26,7 +28,7 @@ import os
 
 from distributed.diagnostics.plugin import WorkerPlugin
 
-from .._backend import init_backend
+from .._backend import init_backend, keep_jax_on_host
 
 SCHEDULER_ENV = "STUDY_SCHEDULER"
 HEARTBEAT_WAIT_S = 2.5  # longest wait, seconds, for a closing worker's heartbeat to be answered
@@ -129,6 +131,7 @@ def open_client(
     for k in ("STUDY_CACHE", "DRJIT_LIBLLVM_PATH", "DRJIT_CACHE_DIR", "PYTHONPATH"):
         if k in os.environ:
             env[k] = os.environ[k]
+    keep_jax_on_host(env)  # workers sharing one GPU: their JAX stays off it
     config = {
         "distributed.worker.multiprocessing-method": "spawn",
         "distributed.nanny.pre-spawn-environ": env,

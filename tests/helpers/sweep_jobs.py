@@ -25,6 +25,8 @@ def worker_state(job: dict) -> dict:
         "threads": dr.thread_count(),
         "variant": mi.variant(),
         "pid": os.getpid(),
+        "jax_platforms": os.environ.get("JAX_PLATFORMS"),
+        "jax_preallocate": os.environ.get("XLA_PYTHON_CLIENT_PREALLOCATE"),
     }
 
 
