@@ -160,3 +160,23 @@ def test_a_loss_that_cannot_be_used_is_refused_in_one_line():
     with pytest.raises(ExperimentError, match='set fit.input_noise = "ignore"'):
         FitOptions(None, "levenberg_marquardt", 10, refine=True, loss="flip")
     assert FitOptions(None, "adam", 10).loss == "linear"
+
+
+def test_study_calibrate_fits_flip_from_the_squared_errors_solution(tmp_path):
+    """``fit.loss = "flip"`` through the one pipeline: the squared error is fitted first and
+    FLIP from its solution (``study.fit.losses.STARTS_FROM``); constants.json records the first
+    stage, the report says where FLIP started, and the FLIP stage lowered its loss from there."""
+    import json
+
+    from helpers.experiments import TINY, replaced
+    from helpers.viewer import tiny_calibration
+
+    over = replaced(TINY, 'fit.loss="flip"', "fit.max_steps=6")
+    out, _ = tiny_calibration(tmp_path, "flip", over)
+    saved = json.loads((out / "constants.json").read_text())
+    assert saved["loss"] == "flip"
+    first = saved["fit"]["first_stage"]
+    assert first["loss"] == "linear" and first["iterations"] >= 1
+    assert first["loss_value"] <= first["loss_start"]
+    assert "from the squared error's solution" in (out / "report.md").read_text()
+    assert saved["fit"]["loss"] <= saved["fit"]["loss_start"]

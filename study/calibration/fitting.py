@@ -20,7 +20,7 @@ from ..config.resolution import supersample_factor
 from ..fit.calibrate import Calibration, calibrate_model
 from ..fit.decorrelated import half_models, texture_half_models
 from ..fit.joint import JointModel, joint_frozen
-from ..fit.losses import LOSSES, fit_ppd, transformed
+from ..fit.losses import LOSSES, STARTS_FROM, fit_ppd, transformed
 from ..fit.solvers import SOLVERS
 
 
@@ -147,12 +147,34 @@ def frame_models(frames, shader, variant: str, options: FitOptions | None = None
 def fit_frames(frames, shader, variant: str, options: FitOptions, start=None, models=None) -> Fit:
     """The constants of ``shader`` fitted over ``frames`` (a list of ``Frame``) with
     ``options``, from ``start`` (default: the start constants of the first frame's experiment).
-    ``models``: the frames' models when built already (:func:`frame_models`)."""
+    ``models``: the frames' models when built already (:func:`frame_models`). A loss of
+    ``study.fit.losses.STARTS_FROM`` (``flip``) is fitted from the solution of its first
+    stage's loss on the same models; the calibration's ``fit_summary["first_stage"]`` records
+    that fit."""
     frames = list(frames)
     if models is None:
         models = frame_models(frames, shader, variant, options)
     elif any(getattr(m, "loss_name", "linear") != options.loss for m in models):
         raise ValueError(f"fit_frames: the models given are not those of fit.loss {options.loss!r}")
+    first_loss = STARTS_FROM.get(options.loss)
+    if first_loss is None:
+        return _fit_once(frames, shader, variant, options, start, models)
+    first_options = dataclasses.replace(options, loss=first_loss)
+    first = _fit_once(frames, shader, variant, first_options, start,
+                      [transformed(m.base, first_loss) for m in models])  # fmt: skip
+    _log(f"calibrate: fit.loss = {options.loss!r} continues from the {first_loss} fit's solution")
+    fit = _fit_once(frames, shader, variant, options, first.calibration.fitted, models)
+    summary = first.calibration.fit_summary
+    fit.calibration.fit_summary["first_stage"] = {
+        "loss": first_loss,
+        **{k: summary.get(k) for k in ("loss_start", "iterations", "n_jac_calls", "seconds")},
+        "loss_value": summary.get("loss"),
+    }
+    return fit
+
+
+def _fit_once(frames, shader, variant: str, options: FitOptions, start, models) -> Fit:
+    """:func:`fit_frames` of one loss: ``models`` are that loss's."""
     first = frames[0]
     start = models[0].start_constants(first.exp) if start is None else start
     names = models[0].parameter_names(options.requested)

@@ -6,7 +6,9 @@ The fit minimises ``0.5*||r||^2`` over a residual ``r``; each loss wraps a
 * ``linear``: the model's own, ``port - reference`` per water pixel and RGB channel (linear
   RGB): the squared error. Glints dominate it, and a glint a pixel off costs twice a glint
   removed, so it prefers a blur to sharp glints slightly misplaced.
-* ``log``: ``f(port) - f(reference)``, ``f(x) = log(max(x, 0) + LOG_EPS)`` (``LOG_EPS = 0.02``,
+* ``log``: ``f(port) - f(reference)``, ``f(x) = log(max(x, 0) + LOG_EPS)`` (``LOG_EPS = 0.02
+#: a loss fitted from the solution of another (the first stage of its fit)
+STARTS_FROM = {"flip": "linear"}``,
   linear RGB): a relative error above ~0.02; ``J_f = f'(port) J``.
 * ``flip``: per water pixel ``p``, ``sqrt(FLIP_p) d_p / |d_p|`` (``flip_jax.flip_residual``),
   ``FLIP_p`` the LDR-FLIP map (``study.fit.flip_jax``: the algorithm of ``flip-evaluator`` that
@@ -31,6 +33,12 @@ The fit minimises ``0.5*||r||^2`` over a residual ``r``; each loss wraps a
   linear share keep where on the image each value is. The matched part's Jacobian is the
   model's ``J`` with its rows in the same order (the order is constant between ties).
 
+``flip`` is fitted from the squared error's solution (:data:`STARTS_FROM`,
+``study.calibration.fitting.fit_frames``): from the shader's start constants FLIP's
+colour term, which flattens where colours differ much, stalls or drives the water's colour to
+a bound on three of the six shipped experiments (docs/user-shader.md), while from the squared
+error's solution it lowers FLIP on every one.
+
 Every wrapper is a :class:`~study.fit.protocol.CalibrationModel` (the model's parameters,
 ranges, start constants and renders). ``reference_stderr`` is carried through ``log`` to first
 order; ``flip`` and ``transport`` have none (a residual mixes a neighbourhood of pixels), so
@@ -48,6 +56,8 @@ from .jax_residual import enable_x64
 from .model import TILE
 
 LOG_EPS = 0.02
+#: a loss fitted from the solution of another (the first stage of its fit)
+STARTS_FROM = {"flip": "linear"}
 #: HyAB distance below which the fit's FLIP is quadratic (``study.fit.flip_jax.flip_map``)
 FLIP_KNEE = 1.0
 #: the squared error's share of the transport loss: a glint moved within its tile costs this

@@ -361,7 +361,8 @@ def waves_lines(waves: dict | None) -> list[str]:
 LOSS_WORDS = {
     "linear": 'the squared error in linear RGB (`fit.loss = "linear"`)',
     "log": 'the squared error of log(RGB + 0.02) (`fit.loss = "log"`)',
-    "flip": 'the mean FLIP at the fit\'s resolution (`fit.loss = "flip"`)',
+    "flip": "the mean FLIP at the fit's resolution, from the squared error's solution "
+    '(`fit.loss = "flip"`)',
     "transport": "a quarter the squared error, three quarters the values matched within 8 x 8 "
     'tiles (`fit.loss = "transport"`)',
 }
