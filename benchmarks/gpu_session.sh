@@ -3,8 +3,8 @@
 # machine (benchmarks/bench_gpu.py's GPU side; docs/where-it-runs.md, "At a game's resolution"):
 #
 #   1. parity at 256x256: the calibration on cuda_ad_rgb, its fitted constants against the CPU's
-#      in their combined standard errors, both fitted at 128x128 (PARITY_SETS: equal fit
-#      resolution, so the comparison is of backends alone; the CPU's from
+#      in their combined standard errors, both fitted at 128x128 by the squared error
+#      (PARITY_SETS: equal fit resolution, so the comparison is of backends alone; the CPU's from
 #      docs/results/gpu/bench.json, measured with the same overrides; on the device too when it
 #      has a libLLVM >= 16);
 #   2. 1920x1080 on cuda_ad_rgb: a cold pass (empty render and kernel caches), then a warm one in
@@ -53,7 +53,10 @@ WHEELS="${WHEELS:-/tmp/study_gpu_wheels}"
 SITE=/tmp/study_site
 TOOLS=/tmp/study_tools
 BENCH_SETS=(--set 'reference.lighting_denoise="none"' --set 'reference.wall_denoise="none"')
-PARITY_SETS=("${BENCH_SETS[@]}" --set 'fit.resolution=[128, 128]')
+PARITY_SETS=("${BENCH_SETS[@]}" --set 'fit.resolution=[128, 128]' --set 'fit.loss="linear"')
+# the fit's normal equations formed on the GPU, which needs the squared error (FLIP's residual is
+# formed on the host): steps 2 and 3
+DEVICE_FIT_SETS=(--set 'fit.normal_equations="device"' --set 'fit.loss="linear"')
 # pinned as in pyproject.toml; the device's image has numpy, scipy, jax, matplotlib, pandas,
 # pyarrow, pillow and the rest (docs/where-it-runs.md)
 PACKAGES=(mitsuba==3.9.1 drjit==1.5.0 OpenEXR==3.5.3 moderngl==5.13.0 glcontext==3.1.0
@@ -181,7 +184,7 @@ tradeoff_step() {  # step 3: the default tradeoff, its workers sharing the one G
 ${TRADEOFF_NEEDS} s of ${BUDGET} remain in a whole session)"
   run timeout "$(( $(left) - 20 ))" "$py" -m study.cli tradeoff \
     "$REPO/experiments/default.toml" --out /tmp/study_tradeoff --backend cuda_ad_rgb \
-    --workers "$TRADEOFF_WORKERS" "${BENCH_SETS[@]}" --set 'fit.normal_equations="device"' \
+    --workers "$TRADEOFF_WORKERS" "${BENCH_SETS[@]}" "${DEVICE_FIT_SETS[@]}" \
     || say "the tradeoff stopped early (budget)"
   run sh -c "cp /tmp/study_tradeoff/report.md /tmp/study_tradeoff/summary.json \
     /tmp/study_tradeoff/tradeoff.parquet /tmp/study_tradeoff/screen.parquet '$OUT/' \
@@ -218,7 +221,7 @@ sys.exit(0 if dr.has_backend(dr.JitBackend.CUDA) else 3)" \
     # the fit reads its normal equations from the device: nothing of the 1080p image crosses the
     # bus during the fit (docs/results/normal-equations)
     run "${bench[@]}" --sizes 1920x1080 --backends cuda_ad_rgb --passes cold warm \
-      "${BENCH_SETS[@]}" --set 'fit.normal_equations="device"' \
+      "${BENCH_SETS[@]}" "${DEVICE_FIT_SETS[@]}" \
       --title "1920x1080 on the GPU, cold and warm, normal equations on the device" \
       --timeout "$(left)"
     if [ "$DRY" = 1 ] || [ "$(left)" -ge "$TRADEOFF_NEEDS" ]; then

@@ -164,10 +164,11 @@ def generated() -> dict[Path, str]:
         folder = RESULTS / phase
         pages[folder / "stability.md"] = stability_report_text(_json(folder / "summary.json"))
     pages.update(_default_run_pages(RESULTS / "default"))
-    pages[RESULTS / "loss-flip" / "report.md"] = _calibration_page(
-        RESULTS / "loss-flip",
-        "`study calibrate experiments/default.toml --set 'fit.loss=\"flip\"' --out out/loss-flip`",
-        Path("out/loss-flip"),
+    pages[RESULTS / "loss-linear" / "report.md"] = _calibration_page(
+        RESULTS / "loss-linear",
+        "`study calibrate experiments/default.toml --set 'fit.loss=\"linear\"' --out "
+        "out/loss-linear`",
+        Path("out/loss-linear"),
     )
     pages[RESULTS / "loss-transport" / "report.md"] = _calibration_page(
         RESULTS / "loss-transport",

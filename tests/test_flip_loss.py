@@ -159,7 +159,10 @@ def test_a_loss_that_cannot_be_used_is_refused_in_one_line():
         FitOptions(None, "adam", 10, loss="flip")
     with pytest.raises(ExperimentError, match='set fit.input_noise = "ignore"'):
         FitOptions(None, "levenberg_marquardt", 10, refine=True, loss="flip")
-    assert FitOptions(None, "adam", 10).loss == "linear"
+    assert FitOptions(None, "levenberg_marquardt", 10).loss == "flip"  # the default
+    with pytest.raises(ExperimentError, match='set fit.solver = "levenberg_marquardt"'):
+        FitOptions(None, "adam", 10)  # adam with the default loss: named, not replaced
+    assert FitOptions(None, "adam", 10, loss="linear").loss == "linear"
 
 
 def test_study_calibrate_fits_flip_from_the_squared_errors_solution(tmp_path):

@@ -50,7 +50,7 @@ class FitOptions:
     basin_scan: bool = True
     refine: bool = False
     resolution: tuple | None = None
-    loss: str = "linear"
+    loss: str = "flip"
     target_resolution: tuple | None = None
     normal_equations: str = "solver"
 

@@ -316,13 +316,16 @@ STUDY_KEYS: dict[str, Field] = {
     "fit.max_steps": Field("int", 100, "Solver iteration cap.", "", 1, 100000),
     "fit.loss": Field(
         "str",
-        "linear",
-        "The error the fit minimises: `linear` (squared error in linear RGB), `log` (squared "
-        "error of log(RGB + 0.02)), `flip` (the mean LDR-FLIP map the report gives, through a "
-        "differentiable FLIP) or `transport` (in each 8 x 8 tile of the fit image, the sorted "
-        "values against the reference's sorted values: a glint moved within its tile costs "
-        "nothing). All but `linear` need a least-squares solver and "
-        '`fit.input_noise = "ignore"`. docs/user-shader.md "What the fit minimises".',
+        "flip",
+        "The error the fit minimises: `flip` (the mean LDR-FLIP map the report gives, through a "
+        "differentiable FLIP, fitted from the squared error's solution: the lowest FLIP on "
+        "each of the six shipped experiments measured), `linear` (squared error in linear "
+        "RGB: a third of the fit's time), `log` (squared error of log(RGB + 0.02)) or "
+        "`transport` (in each 8 x 8 tile of the fit image, the sorted values against the "
+        "reference's sorted values: a glint moved within its tile costs a quarter). All but "
+        '`linear` need a least-squares solver and `fit.input_noise = "ignore"`: set '
+        '`fit.loss = "linear"` with `fit.solver = "adam"` or `fit.input_noise = "decorrelate"`. '
+        'docs/user-shader.md "What the fit minimises".',
         choices=("linear", "log", "flip", "transport"),
     ),
     "fit.normal_equations": Field(

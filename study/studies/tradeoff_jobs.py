@@ -127,13 +127,17 @@ def job_frame(job: dict):
 def job_options(exp, shader, resolution=None, screen: bool = False) -> FitOptions:
     """The fit options of a point of ``shader``: the experiment's, over the constants a point
     refits (``Shader.point_parameters``), at ``resolution`` (default ``fit.resolution``).
-    ``screen``: the adaptive search's screen (:func:`screen_job`), without the basin scan and
+    ``screen``: the adaptive search's screen (:func:`screen_job`), without the basin scan,
     with one sample at each fit pixel's centre in place of ``fit.target_resolution``'s
-    footprint (the points it sends on are fitted with both)."""
+    footprint and with the squared error alone, not FLIP from its solution (the points it sends
+    on are fitted with all three)."""
     options = FitOptions.of(
         exp, parameters=shader.point_parameters(exp), resolution=resolution, basin_scan=not screen
     )
-    return dataclasses.replace(options, target_resolution=None) if screen else options
+    if not screen:
+        return options
+    loss = "linear" if options.loss == "flip" else options.loss
+    return dataclasses.replace(options, target_resolution=None, loss=loss)
 
 
 def job_start(shader, job: dict):
@@ -239,8 +243,9 @@ def screen_job(job: dict) -> dict:
     if w % f or h % f:
         raise ValueError(f"fit.resolution {w}x{h} is not divisible by the screen factor {f}")
     # the screen ranks candidates: its fits skip the basin scan (which doubles a point's cost
-    # and serves the exported constants) and shade one sample a pixel (the footprint's samples
-    # multiply a fit's cost); the points it sends on are fitted with both
+    # and serves the exported constants), shade one sample a pixel (the footprint's samples
+    # multiply a fit's cost) and stop at the squared error's solution (FLIP from there triples
+    # it); the points it sends on are fitted with all three
     _, _, fit, fit_s = job_fit(job, resolution=(w // f, h // f), screen=True)
     model, cal = fit.models[0], fit.calibration
     img, diag = model.render(cal.fitted)

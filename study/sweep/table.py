@@ -26,8 +26,8 @@ from .._io import disk_full, repo_relative
 # what a row's results mean; every row records it (``schema``, 1 where absent). A sweep sets
 # aside the rows of another version (``set_aside``) and measures their jobs again. 2: every fit
 # pixel shaded at the footprint of ``fit.target_resolution``; 3: the adaptive search's screen
-# shades one sample a pixel
-SCHEMA_VERSION = 3
+# shades one sample a pixel; 4: ``fit.loss``'s default is FLIP from the squared error's solution
+SCHEMA_VERSION = 4
 ERROR_CHARS = 2000
 
 

@@ -19,12 +19,16 @@ SMALL_OVERRIDES = [
     "waves.normal_map_size=64",
     # a tradeoff's level-of-detail policy is tested where a test asks for it (tests/test_search.py)
     "tradeoff.lod=false",
+    # the squared error alone (a third of the default's fit time); the default, FLIP from the
+    # squared error's solution, is tested where a test asks for it (tests/test_flip_loss.py)
+    'fit.loss="linear"',
 ]
 
 # smaller still, for whole CLI runs (render / preview / calibrate / export): 24x24, 16 spp
 TINY = [
     "resolution=[24,24]",
     "fit.resolution=[24,24]",
+    'fit.loss="linear"',  # as SMALL_OVERRIDES
     "reference.spp=16",
     "reference.water_mesh=48",
     "reference.texture_size=32",
