@@ -20,7 +20,7 @@ PACKAGES = ("study", "shaders_port")
 LAYERS = (
     ("shaders_port", "shaders_port.*"),
     # helpers of every stage
-    ("study._backend", "study._io", "study._metrics", "study._progress"),
+    ("study._backend", "study._io", "study._kernels", "study._metrics", "study._progress"),
     # the experiment: its keys and their checks, its files, read typed by section
     ("study.config", "study.config.*"),
     ("study.scene", "study.scene.*"),

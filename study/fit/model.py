@@ -27,6 +27,7 @@ from .._metrics import downsample, downsample_stderr, erode
 from ..config.experiment import Experiment
 from ..scene.reference import water_mask
 from ..scene.user_scene import sun_summary
+from .normal_equations import LaneReduction
 
 # ---- scalar names of constants: 'bumptex_mult', 'water_color[2]' (colours expand to RGB;
 # alpha is not fitted since the shader's output alpha is not compared) ----
@@ -334,8 +335,6 @@ class ReferenceModel:
         """The ``study.fit.normal_equations.NormalEquations`` of :meth:`residual_and_jacobian`
         with respect to the named scalar constants, formed in Dr.Jit where the shader runs
         (only the (k + 1)^2 numbers come back)."""
-        from .normal_equations import LaneReduction
-
         if getattr(self, "_lane_reduction", None) is None:
             self._lane_reduction = LaneReduction(self.mask, self.reference, self.supersample)
         with warnings.catch_warnings():
