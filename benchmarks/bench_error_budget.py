@@ -28,7 +28,11 @@ reference (what ``study calibrate`` and ``study tradeoff`` score):
    height), (e) the same off the reference surface's exact normal under the pixel's point on
    the water plane (what any normal map can at best give), (f) that normal where the pixel's
    eye ray meets the surface (the heights' parallax, which a normal map read on the plane
-   does not have). (a) and (b) are refitted in strength
+   does not have), (g) the disc off the normal of the shader's ``normals = "lean"`` sibling
+   (the layers' mean slope over the pixel's footprint, from the mipmapped slope moments)
+   widened by the variance of the slopes the pixel does not resolve as that shader widens it
+   (``ports.highlight``: radius ``sqrt(r^2 + 16 variance)``, radiance times ``(r / r')^2``),
+   one sample a pixel standing for the footprint. (a) and (b) are refitted in strength
    (least squares against the reference's sun term, the exponent from a grid), so neither
    keeps the fit's compromise.
 
@@ -93,11 +97,13 @@ def surface_hits(eye: np.ndarray, plane: np.ndarray, waves, steps: int = 8) -> n
 
 
 def glint_images(
-    variant, inputs, constants, sun_dir, radius_deg, radiance, waves=None, displaced=False
-) -> dict:
+    variant, inputs, constants, sun_dir, radius_deg, radiance, waves=None, displaced=False,
+):  # fmt: skip
     """(H, W, 3) float32 at ``inputs``' resolution: ``disc``, the Fresnel-weighted radiance of
     the sun's disc reflected off the shader's scaled normal (``vBumpTexMore``) at each pixel
-    centre (0 or the disc's radiance), and ``F``, the Fresnel reflectance there. ``waves``
+    centre (0 or the disc's radiance; a ``LEAN_NORMALS`` variant's disc widened by its
+    unresolved slopes' variance, in the scaled normal's slopes, ``/ BumptexMult^2``), and ``F``,
+    the Fresnel reflectance there. ``waves``
     (``height_and_gradient(x, z)``): the normal is instead that of this surface under the pixel
     centre's point on the water plane, exact (no normal map, no bump scale); ``displaced``: at
     the point where the pixel's eye ray meets that surface, seen from the eye there."""
@@ -121,7 +127,15 @@ def glint_images(
         N = N_fresnel = m.Array3f(*n.astype(np.float32))
     R = dr.normalize(wr.reflect(m, -vEye, N))
     cos_to_sun = R.x * sun_dir[0] + R.y * sun_dir[1] + R.z * sun_dir[2]
-    inside = dr.select(cos_to_sun >= np.cos(np.radians(radius_deg)), 1.0, 0.0)
+    if f.slope_variance is not None and waves is None:  # LEAN_NORMALS: the widened disc
+        from shaders_port.ports.highlight import DEG2_PER_RAD2
+
+        b = float(constants.bumptex_mult)
+        wide2 = radius_deg**2 + 16.0 * DEG2_PER_RAD2 * f.slope_variance / (b * b)
+        inside = dr.select(cos_to_sun >= dr.cos(dr.sqrt(wide2) * (np.pi / 180.0)), 1.0, 0.0)
+        inside = inside * (radius_deg**2 / wide2)
+    else:
+        inside = dr.select(cos_to_sun >= np.cos(np.radians(radius_deg)), 1.0, 0.0)
     NdotV = clamp(dr.dot(vEye, N_fresnel), 0.0, 1.0)
     F = P.fresnelLookup.sample(m, NdotV, m.Float(0.5))[1]
     r = P.raster
@@ -246,15 +260,17 @@ def main(argv=None) -> None:
     radiance = np.asarray(exp.sun.radiance, np.float32)
     base = terms["F*sky"] + terms["T*refr"]
     slopes = get_variant(space.name_of({**space.choices_of(v.name), "normals": "slopes"}))
+    lean = get_variant(space.name_of({**space.choices_of(v.name), "normals": "lean"}))
     surface = waves_of(exp)
     normals = (
         ("(c) the sun's disc off the shader's normal", v, None, False),
         ("(d) the sun's disc off the slope-blended normal", slopes, None, False),
         ("(e) the sun's disc off the surface's exact normal", v, surface, False),
         ("(f) the same where the eye ray meets the surface", v, surface, True),
+        ("(g) the sun's disc widened by LEAN's unresolved slopes", lean, None, False),
     )
     for what, shader, waves, displaced in normals:
-        for kk in (1, a.ss):
+        for kk in (1,) if shader is lean else (1, a.ss):
             g = supersampled(
                 lambda i: glint_images(
                     shader, i, c, sun_dir, exp.sun.radius, radiance, waves, displaced

@@ -52,6 +52,7 @@ def port_blocks(variant, inputs, constants):
     [1]-[6] (``water_refraction.refraction_blocks``) of a ``water_refraction`` variant with
     reflection, for splitting its colour into terms."""
     from shaders_port.pipeline.frame import resolve_constants
+    from shaders_port.pipeline.moments import with_lean
     from shaders_port.pipeline.raster import prepare
     from shaders_port.pipeline.texture import backend_types
     from shaders_port.ports import water_refraction as wr
@@ -63,6 +64,7 @@ def port_blocks(variant, inputs, constants):
         )
     m = backend_types("llvm")
     P = prepare(variant.prepare_inputs(inputs), m)
+    P = with_lean(m, P) if opts.normals == "lean" else P
     C = resolve_constants(m, constants, "replay")
     return m, P, C, wr.refraction_blocks(m, P, C, opts)
 
@@ -82,7 +84,7 @@ def shader_terms(variant, inputs, constants) -> dict:
     R.y = dr.maximum(R.y, 0.001)
     sky = wr.cubemap_reflection(m, P, R) * C.reflectColor
     spec = wr.specular_highlight(
-        m, P, m.Array4f(0.0), f.vBumpTex, f.vEye, f.vLight, C, opts.specular
+        m, P, m.Array4f(0.0), f.vBumpTex, f.vEye, f.vLight, C, opts.specular, f.slope_variance
     )
     NdotV = clamp(dr.dot(f.vEye, f.vBumpTex), 0.0, 1.0)
     FresnelCoeffs = P.fresnelLookup.sample(m, NdotV, m.Float(0.5))

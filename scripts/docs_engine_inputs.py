@@ -37,6 +37,9 @@ CONVENTIONS = {
                    "where nothing was hit", "nearest, clamp"),
     "reflection_sampler": ("mirrored camera's window: (s, t) = textureProj with "
                            "reflection_texture_matrix", "linear RGB", "bilinear, clamp"),
+    "slopeMoments": ("(s, t) = vTexCoord, as normalMap", "(sx, sz, sx^2, sz^2): the normal map's "
+                     "slopes -n.xz / max(n.y, 0.05) and their squares, RGBA32F",
+                     "trilinear (mipmapped, box levels), repeat"),
     "uTextureMatrix0": ("world -> (s, t) of refractionTexture, worldYComponent", "-", "-"),
     "uTextureMatrix1": ("world -> (s, t) of the reflection textures", "-", "-"),
     "uModelViewProjectionMatrix": ("world -> clip, OpenGL (NDC z in [-1, 1])", "-", "-"),

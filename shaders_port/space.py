@@ -25,9 +25,12 @@ The axes and where each choice comes from (``SOURCE``):
 * ``refine``: the crossing after the linear search, ``linear`` (000), ``binary``, ``secant``;
 * ``walls``: ``off`` (000) or ``on`` (a crossing into a wall shaded as its submerged face);
 * ``layers``: normal-map layers averaged, 4 (000), 2 or 1;
-* ``normals``: how the layers make one normal: ``average`` (000: their normals averaged) or
+* ``normals``: how the layers make one normal: ``average`` (000: their normals averaged),
   ``slopes`` (their slopes averaged, the normal of their mean height: partial-derivative
-  blending, Barre-Brisebois and Hill 2012; with two or four layers);
+  blending, Barre-Brisebois and Hill 2012; with two or four layers) or ``lean`` (LEAN mapping,
+  Olano and Baker 2010: the layers' slopes and their squares read from a mipmapped map at the
+  pixel's footprint, the normal of their mean slope there, and the variance of the slopes the
+  pixel does not resolve widening the highlight: near, the sharp lobe; far, a wider one);
 * ``textures``: ``float`` or ``game`` (8-bit colour, half-float depth).
 
 What the files realise: the raycast refraction with the cube-map, local cube-map, screen-space,
@@ -54,7 +57,7 @@ AXES: dict[str, tuple] = {
     "refine": ("linear", "binary", "secant"),
     "walls": ("off", "on"),
     "layers": (4, 2, 1),
-    "normals": ("average", "slopes"),
+    "normals": ("average", "slopes", "lean"),
     "textures": ("float", "game"),
 }
 ORIGINAL = {axis: choices[0] for axis, choices in AXES.items()}
@@ -75,6 +78,7 @@ SOURCE = {
     ("specular", "disc"): "the sun's disc in the mirror (ocean shaders' sun glint)",
     ("reflection", "ssr"): "screen-space reflection (engines' SSR)",
     ("normals", "slopes"): "Barre-Brisebois and Hill (partial-derivative blending)",
+    ("normals", "lean"): "Olano and Baker (LEAN mapping)",
 }
 
 # each source's technique alone (the original's choices elsewhere, the cube map where a source
@@ -90,6 +94,7 @@ ALONE = {
     "the sun's disc in the mirror (ocean shaders' sun glint)": {"specular": "disc"},
     "screen-space reflection (engines' SSR)": {"reflection": "ssr"},
     "Barre-Brisebois and Hill (slope-blended normals)": {"normals": "slopes"},
+    "Olano and Baker (LEAN mapping)": {"normals": "lean"},
     "001-004 (the games' composition)": {
         "refraction": "planar_distorted",
         "reflection": "planar_distorted",
@@ -108,6 +113,7 @@ _RAYCAST_DEFINES = {
     ("layers", 2): "TWO_NORMAL_LAYERS",
     ("layers", 1): "ONE_NORMAL_LAYER",
     ("normals", "slopes"): "SLOPE_NORMALS",
+    ("normals", "lean"): "LEAN_NORMALS",
     ("reflection", "planar_distorted"): "PLANAR_REFLECTION",
     ("reflection", "box"): "BOX_REFLECTION",
     ("reflection", "ssr"): "SSR_REFLECTION",
@@ -128,6 +134,7 @@ _TOKENS = (
     (("layers", 2), "2layers"),
     (("layers", 1), "1layer"),
     (("normals", "slopes"), "slopes"),
+    (("normals", "lean"), "lean"),
     (("textures", "game"), "game_textures"),
 )
 # the screen-space file's (refraction, reflection) pairs: name and #defines. Planar refraction

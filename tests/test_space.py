@@ -62,8 +62,8 @@ def test_pinned_axes_restrict_the_space():
 
 def test_every_configuration_compiles_to_names_its_file_and_port_know():
     configs = _space.configurations()
-    # 480 cube, box, ssr, mirror, raycast each + 120 refraction-only + 9 screen
-    assert len(configs) == 2529
+    # 768 cube, box, ssr, mirror, raycast each + 192 refraction-only + 9 screen
+    assert len(configs) == 4041
     ports = _ports()
     names = set()
     for c in configs:
@@ -161,7 +161,7 @@ def test_configurations_nobody_registered_match_opengl(seed):
     the GL check's thresholds, and the configuration renders differently from the original."""
 
     raycast = _space.configurations({"refraction": "raycast"})
-    assert len(raycast) == 2520
+    assert len(raycast) == 4032
     c = random.Random(100 + seed).choice(raycast)
     name = _space.name_of(c)
     inputs = synthetic_inputs_for(name, 96, 72)

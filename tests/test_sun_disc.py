@@ -12,7 +12,7 @@ from helpers.experiments import small_experiment
 from helpers.gl import check_gl_match, compare_or_skip
 from helpers.port_checks import VARIANT_CUSTOM as CUSTOM
 from helpers.port_checks import assert_variant_jacobian_columns
-from helpers.synthetic import synthetic_inputs
+from helpers.synthetic import sun_mirrored_at_the_centre, synthetic_inputs
 
 from shaders_port import space as _space
 from shaders_port.variants import get_variant
@@ -20,15 +20,6 @@ from shaders_port.variants import get_variant
 # a wide, soft disc: many pixels on its edge, some inside it
 DISC = CUSTOM.replace(sun_disc_radius=9.0, sun_disc_softness=0.4, sun_disc_radiance=3.0)
 FLAT_NORMAL = (0.5, 1.0, 0.5)  # encoded (0, 1, 0): calm water
-
-
-def _sun_mirrored_at_the_centre(inputs):
-    """``inputs`` with the light where the calm water mirrors it to the pool's centre."""
-    x0, z0, x1, z1 = inputs.water_rect
-    centre = np.array([(x0 + x1) / 2, 0.0, (z0 + z1) / 2])
-    v = inputs.viewpos - centre
-    v /= np.linalg.norm(v)
-    return dataclasses.replace(inputs, lightpos=centre + 1e3 * np.array([-v[0], v[1], -v[2]]))
 
 
 def _smoothstep(e0, e1, x):
@@ -41,7 +32,7 @@ def test_on_calm_water_the_disc_is_the_mirrored_sun_fresnel_weighted():
 
     calm = synthetic_inputs(64, 48)
     calm = dataclasses.replace(calm, normal_map=np.broadcast_to(FLAT_NORMAL, calm.normal_map.shape))
-    calm = _sun_mirrored_at_the_centre(calm)
+    calm = sun_mirrored_at_the_centre(calm)
     disc = get_variant("water_refraction_disc").render(calm, DISC).numpy()
     none = get_variant("water_refraction_nospecular").render(calm, DISC).numpy()
     water = disc["mask"] > 0
@@ -71,7 +62,7 @@ def test_on_calm_water_the_disc_is_the_mirrored_sun_fresnel_weighted():
 def test_the_disc_matches_opengl(name):
     v = get_variant(name)
     assert "SUN_DISC_SPECULAR" in v.defines
-    inputs = _sun_mirrored_at_the_centre(synthetic_inputs(96, 72))
+    inputs = sun_mirrored_at_the_centre(synthetic_inputs(96, 72))
     res = compare_or_skip(inputs, DISC, name)
     check_gl_match(res, f"gl_disc_{name}")
     assert res["n_nonfinite"] == 0
@@ -79,7 +70,7 @@ def test_the_disc_matches_opengl(name):
 
 def test_the_disc_derivatives_match_central_differences():
     v = get_variant("water_refraction_beer_disc_walls")
-    inputs = _sun_mirrored_at_the_centre(synthetic_inputs(48, 36))
+    inputs = sun_mirrored_at_the_centre(synthetic_inputs(48, 36))
     assert_variant_jacobian_columns(
         v,
         inputs,
@@ -93,7 +84,7 @@ def test_the_disc_constants_are_recovered_from_a_synthetic_target():
     from study.fit.model import ShaderModel, get_value
     from study.fit.solvers import fit
 
-    inputs = _sun_mirrored_at_the_centre(synthetic_inputs(48, 36))
+    inputs = sun_mirrored_at_the_centre(synthetic_inputs(48, 36))
     name = "water_refraction_disc"
     truth = DISC.replace(sun_disc_radius=7.0, sun_disc_softness=0.3, sun_disc_radiance=2.5)
     target = get_variant(name).render(inputs, truth).numpy()["color"]

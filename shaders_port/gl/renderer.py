@@ -5,12 +5,14 @@ into a float32 RGBA framebuffer and reads it back in image order (row 0 = top).
 A compatibility (GLSL 1.20) source is run through ``compat_to_core``, the documented
 substitution table that maps the shipped compat files onto the shipped core files.
 
-Texture set-up (one texture unit each, no mipmaps, float32 storage):
+Texture set-up (one texture unit each, float32 storage, no mipmaps but slopeMoments'):
 refractionTexture RGB32F linear clamp; worldYComponent R32F nearest clamp; normalMap RGB32F
 linear repeat; reflectionTexture cube RGB32F linear clamp, seamless cube filtering off;
 fresnelLookup (N x 1) RG32F nearest clamp; worldYComponentReflection R32F nearest clamp;
-reflectionBottom RGB32F linear clamp; the optional inputs: the baseline's screen-space buffers
-and the local cube map boxReflectionTexture (cube RGB32F linear clamp, as reflectionTexture).
+reflectionBottom RGB32F linear clamp; slopeMoments (``LEAN_NORMALS``, ``pipeline.moments``)
+RGBA32F trilinear repeat, its mip levels made by ``glGenerateMipmap``; the optional inputs:
+the baseline's screen-space buffers and the local cube map boxReflectionTexture (cube RGB32F
+linear clamp, as reflectionTexture).
 """
 
 from __future__ import annotations
@@ -21,6 +23,7 @@ import numpy as np
 
 from ..glsl_text import compat_to_core, read_source, with_define, write_constants
 from ..inputs import CONSTANT_SPECS, Constants, ShaderInputs, normal_matrix
+from ..pipeline.moments import slope_moments
 from .contexts import create_context
 
 _GL_TEXTURE_CUBE_MAP_SEAMLESS = 0x884F
@@ -44,7 +47,10 @@ SAMPLERS = {
     "reflection_sampler": (9, "linear", False),
     # the local cube map of BOX_REFLECTION (optional)
     "boxReflectionTexture": (10, "linear", False),
+    # LEAN_NORMALS' slope moments of the normal map, mipmapped (trilinear)
+    "slopeMoments": (11, "linear", True),
 }
+_MIPMAPPED = ("slopeMoments",)
 # sampler -> the optional ShaderInputs field it is made from
 OPTIONAL_SAMPLERS = {
     "sceneColor": "scene_color",
@@ -165,7 +171,10 @@ class GLRenderer:
             "fresnelLookup": self._texture2d(lut),
             "worldYComponentReflection": self._texture2d(i.refl_world_y),
             "reflectionBottom": self._texture2d(i.refl_texture),
+            "slopeMoments": self._texture2d(slope_moments(i.normal_map)),
         }
+        for sname in _MIPMAPPED:
+            self._textures[sname].build_mipmaps()
         for sname, field in OPTIONAL_SAMPLERS.items():
             arr = getattr(i, field)
             if arr is not None:
@@ -177,8 +186,9 @@ class GLRenderer:
             if sname not in self._textures:
                 continue
             f = mgl.LINEAR if filt == "linear" else mgl.NEAREST
+            fmin = mgl.LINEAR_MIPMAP_LINEAR if sname in _MIPMAPPED else f
             self._samplers[sname] = self.ctx.sampler(
-                repeat_x=repeat, repeat_y=repeat, repeat_z=repeat, filter=(f, f)
+                repeat_x=repeat, repeat_y=repeat, repeat_z=repeat, filter=(fmin, f)
             )
 
     def texture_units(self) -> dict:

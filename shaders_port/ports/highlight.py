@@ -15,7 +15,26 @@ import drjit as dr
 from ..pipeline.texture import clamp, gl_pow, radians, smoothstep
 
 
-def specular_highlight(m, P, vReflection, vBumpTex, vEye, vLight, C, lobe: str = "phong"):
+#: (180 / pi)^2: a variance in radians squared to degrees squared
+DEG2_PER_RAD2 = 3282.8064
+
+
+def specular_highlight(
+    m, P, vReflection, vBumpTex, vEye, vLight, C, lobe: str = "phong", variance=None
+):
+    """Block [8]: ``vReflection`` (Array4f) with the highlight of ``lobe`` added. ``variance``
+    (``LEAN_NORMALS``: the per-axis variance of the slopes the pixel does not resolve, Float,
+    ``ports.normals.lean_blend``; None: no widening) widens the lobe by it. A normal tilted by
+    slope ``s`` turns the mirrored light by ``2 s`` radians (small slopes), so the lobe is
+    convolved with a spread of per-axis variance ``4 variance``; each lobe is replaced by the one
+    of the same second moment, its energy kept:
+
+    * Phong, ``cos^n`` (per-axis variance ``1/n``): ``n' = n / (1 + 4 variance n)``, the
+      strength times ``n' / n``;
+    * GGX: ``alpha^2 + 2 variance`` (Beckmann's ``alpha^2 = 2 variance``; GGX's distribution
+      is normalised);
+    * the sun's disc (per-axis variance ``radius^2 / 4``): ``radius'^2 = radius^2 + 16
+      variance`` (radians), the radiance times ``(radius / radius')^2``."""
     # ---- [8] Specular highlight ----
     if lobe == "none":  # NO_SPECULAR
         return vReflection
@@ -25,6 +44,8 @@ def specular_highlight(m, P, vReflection, vBumpTex, vEye, vLight, C, lobe: str =
         NdotL = clamp(dr.dot(vBumpTex, vLight), 0.0, 1.0)
         NdotE = clamp(dr.dot(vBumpTex, vEye), 0.0, 1.0)
         alpha2 = C.specular_roughness * C.specular_roughness
+        if variance is not None:  # LEAN_NORMALS
+            alpha2 = alpha2 + 2.0 * variance
         ggxDenominator = NdotH * NdotH * (alpha2 - 1.0) + 1.0
         ggxD = alpha2 / (3.14159265 * ggxDenominator * ggxDenominator)
         smithVis = 1.0 / (
@@ -39,13 +60,20 @@ def specular_highlight(m, P, vReflection, vBumpTex, vEye, vLight, C, lobe: str =
         return vReflection
     rLight = dr.dot(2.0 * vBumpTex, vLight) * vBumpTex - vLight
     if lobe == "disc":  # SUN_DISC_SPECULAR
-        outerCos = dr.cos(radians(C.sun_disc_radius * (1.0 + C.sun_disc_softness)))
-        innerCos = dr.cos(radians(C.sun_disc_radius * (1.0 - C.sun_disc_softness)))
+        radius, strength = C.sun_disc_radius, C.sun_disc_radiance
+        if variance is not None:  # LEAN_NORMALS
+            wide = dr.sqrt(radius * radius + (16.0 * DEG2_PER_RAD2) * variance)
+            strength = strength * (radius * radius) / (wide * wide)
+            radius = wide
+        outerCos = dr.cos(radians(radius * (1.0 + C.sun_disc_softness)))
+        innerCos = dr.cos(radians(radius * (1.0 - C.sun_disc_softness)))
         spec = smoothstep(outerCos, innerCos, dr.dot(rLight, vEye))
-        strength = C.sun_disc_radiance
     else:
-        spec = gl_pow(clamp(dr.dot(rLight, vEye), 0.0, 1.0), C.specular_exponent)
-        strength = C.specular_strength
+        exponent, strength = C.specular_exponent, C.specular_strength
+        if variance is not None:  # LEAN_NORMALS
+            widen = 1.0 + 4.0 * variance * exponent
+            exponent, strength = exponent / widen, strength / widen
+        spec = gl_pow(clamp(dr.dot(rLight, vEye), 0.0, 1.0), exponent)
     specular = m.Array4f(
         spec * P.lightcolor[0], spec * P.lightcolor[1], spec * P.lightcolor[2], 1.0
     )

@@ -3,7 +3,11 @@ layers made one normal, and the bump scaling. The layers' texels are averaged as
 original, 000), or, with ``SLOPE_NORMALS`` (the ``normals = "slopes"`` choice of the shader
 space), blended as slopes: partial-derivative blending (Barre-Brisebois and Hill, "Blending in
 Detail", 2012), the normal of the layers' mean height, which is the reference's surface
-(``study.scene.geometry.Waves``: the mean of the four layers' heights).
+(``study.scene.geometry.Waves``: the mean of the four layers' heights). With ``LEAN_NORMALS``
+(``normals = "lean"``: Olano and Baker's LEAN mapping) the layers' slopes and their squares are
+read from the mipmapped ``slopeMoments`` (``pipeline.moments``) at the pixel's footprint: the
+normal of the layers' mean slope over the footprint, and the variance of the slopes the pixel
+does not resolve, which widens the highlight (``ports.highlight``).
 
 ``P.normalMap`` samples (..., 3) encoded normals ``0.5 n + 0.5`` (``y`` up); ``P.texcoord[k]``
 the layer ``k``'s texture coordinate; returns unit Array3f (world space).
@@ -13,8 +17,9 @@ from __future__ import annotations
 
 import drjit as dr
 
-#: a texel's normal y is held at this or more in ``layerSlope`` (tipped past 87 degrees)
-SLOPE_MIN_Y = 0.05
+from ..pipeline.moments import SLOPE_MIN_Y
+
+NORMALS = ("average", "slopes", "lean")
 
 
 def slope_blend(m, texels):
@@ -36,19 +41,47 @@ def _taps(m, P, layers: int) -> list:
     ]
 
 
-def normal_map_block(m, P, BumptexMult, layers: int = 4, slopes: bool = False):
-    """(vBumpTex, vBumpTexMore): the layers' normal (``layers`` of 4, 2 or 1: the original,
-    ``TWO_NORMAL_LAYERS``, ``ONE_NORMAL_LAYER``; ``slopes``: ``SLOPE_NORMALS``) and that normal
-    with its y scaled by ``BumptexMult`` and renormalised."""
+def lean_blend(m, P, layers: int):
+    """LEAN_NORMALS: ``(normal, variance)``: the normal of the layers' mean slope over the
+    pixel's footprint and the per-axis variance (Float, slope units squared) of the mean slope
+    the pixel does not resolve, ``(1 / layers^2) * sum_k 0.5 * (var_x + var_z)`` of the layers'
+    ``E[s^2] - E[s]^2`` (independent layers; each clamped at 0). Each layer is one trilinear
+    lookup of ``P.slopeMoments`` at llvmpipe's level of detail of its coordinates
+    (``P.slopeLod``, ``pipeline.moments.with_lean``)."""
+    tex = P.slopeMoments
+    if tex is None:
+        raise ValueError("LEAN_NORMALS reads slopeMoments: prepare the frame with with_lean")
+    sx = sz = var = None
+    for k in range(layers):
+        a = tex.sample_lod(m, P.texcoord[k][0], P.texcoord[k][1], P.slopeLod[k])
+        v = 0.5 * (dr.maximum(a[2] - a[0] * a[0], 0.0) + dr.maximum(a[3] - a[1] * a[1], 0.0))
+        sx, sz = (a[0], a[1]) if sx is None else (sx + a[0], sz + a[1])
+        var = v if var is None else var + v
+    k = 1.0 / layers
+    return dr.normalize(m.Array3f(-(k * sx), 1.0, -(k * sz))), (k * k) * var
+
+
+def normal_map_block(m, P, BumptexMult, layers: int = 4, normals: str = "average"):
+    """(vBumpTex, vBumpTexMore, slopeVariance): the layers' normal (``layers`` of 4, 2 or 1:
+    the original, ``TWO_NORMAL_LAYERS``, ``ONE_NORMAL_LAYER``; ``normals`` one of
+    :data:`NORMALS`: the original, ``SLOPE_NORMALS``, ``LEAN_NORMALS``), that normal with its y
+    scaled by ``BumptexMult`` and renormalised, and with ``LEAN_NORMALS`` the unresolved slopes'
+    variance (:func:`lean_blend`; None otherwise)."""
+    if normals not in NORMALS:
+        raise ValueError(f"normals = {normals!r}; the choices: {', '.join(NORMALS)}")
     # ---- [2] Normal map: average four layers, bump scaling ----
-    taps = _taps(m, P, layers)
-    if layers == 1:  # ONE_NORMAL_LAYER
-        vBumpTex = dr.normalize(2.0 * taps[0] - 1.0)
-    elif slopes:  # SLOPE_NORMALS
-        vBumpTex = slope_blend(m, taps)
+    variance = None
+    if normals == "lean":  # LEAN_NORMALS
+        vBumpTex, variance = lean_blend(m, P, layers)
+    elif layers == 1:  # ONE_NORMAL_LAYER
+        vBumpTex = dr.normalize(2.0 * _taps(m, P, 1)[0] - 1.0)
+    elif normals == "slopes":  # SLOPE_NORMALS
+        vBumpTex = slope_blend(m, _taps(m, P, layers))
     elif layers == 2:  # TWO_NORMAL_LAYERS
+        taps = _taps(m, P, 2)
         vBumpTex = dr.normalize(2.0 * (taps[0] + taps[1]) - 2.0)
     else:
+        taps = _taps(m, P, 4)
         vBumpTex = dr.normalize(2.0 * (taps[0] + taps[1] + taps[2] + taps[3]) - 4.0)
     vBumpTexMore = dr.normalize(vBumpTex * m.Array3f(1.0, BumptexMult, 1.0))
-    return vBumpTex, vBumpTexMore
+    return vBumpTex, vBumpTexMore, variance

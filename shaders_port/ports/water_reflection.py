@@ -32,6 +32,7 @@ from ..pipeline.frame import (
     resolve_constants,
     tangents,
 )
+from ..pipeline.moments import with_lean
 from ..pipeline.raster import prepare
 from ..pipeline.texture import backend_types, mix, texmat_xy
 from .water_refraction import DEFINES as _REFRACTION_DEFINES
@@ -170,7 +171,9 @@ def _shade(m, P, C, diagnose: bool = False, opts: Options = Options()):
     vReflection_sky = cubemap_reflection(m, P, R) * C.reflectColor
     vReflection = dr.select(noHit, vReflection_sky, vReflection_hit)
 
-    vReflection = specular_highlight(m, P, vReflection, vBumpTex, vEye, vLight, C, opts.specular)
+    vReflection = specular_highlight(
+        m, P, vReflection, vBumpTex, vEye, vLight, C, opts.specular, f.slope_variance
+    )
     gl_FragColor = fresnel_combine(m, P, vReflection, vRefraction, vEye, vBumpTex)
     fetches = opts.normal_layers + 1 + iterations + 1 + 1 + refl_fetches + 1 + 1
     bad = nonfinite_any(
@@ -240,6 +243,8 @@ def render(
     opts = options_of(defines, "water_reflection", DEFINES)
     m = backend_types(backend)
     P = prepare(inputs, m)
+    if opts.normals == "lean":
+        P = with_lean(m, P)
     C = resolve_constants(m, constants if constants is not None else Constants(), loop_ad)
     with evaluated_loops_if(C.differentiable and loop_ad == "evaluated"):
         if _frame.USE_FROZEN and not C.differentiable:
@@ -288,4 +293,5 @@ def render_with_jacobian(
         backend,
         loop_ad,
         lanes=lanes,
+        lean=opts.normals == "lean",
     )

@@ -64,6 +64,7 @@ from ..pipeline.frame import (
     resolve_constants,
     tangents,
 )
+from ..pipeline.moments import with_lean
 from ..pipeline.raster import prepare
 from ..pipeline.texture import backend_types, clamp, mix, texmat_xy
 from .box import box_reflection, box_state
@@ -84,9 +85,11 @@ class Options(NamedTuple):
     reflection: True (original) or False (``NOREFLECTION``: block [7] skipped, the refraction
         colour alone -- no sky reflection and so no highlight).
     normal_layers: 4 (original), 2 (``TWO_NORMAL_LAYERS``) or 1 (``ONE_NORMAL_LAYER``).
-    slope_normals: False (original: the layers' normals averaged) or True (``SLOPE_NORMALS``:
+    normals: 'average' (original: the layers' normals averaged), 'slopes' (``SLOPE_NORMALS``:
         the layers' slopes averaged, the normal of their mean height; one layer is the same
-        either way).
+        either way) or 'lean' (``LEAN_NORMALS``: the layers' mean slope and the variance of the
+        slopes the pixel does not resolve, from the mipmapped ``slopeMoments``; the variance
+        widens the highlight: ``ports.normals``, ``ports.highlight``).
     refine: None (original), 'binary' (``BINARY_REFINE``) or 'secant' (``SECANT_REFINE``): that
         many (``REFINE_STEPS``) bracket refinements after the linear search.
     attenuation: 'linear' (original: clamped mix over ``ATTENUATION_DISTANCE``) or 'beer'
@@ -111,7 +114,7 @@ class Options(NamedTuple):
 
     reflection: bool = True
     normal_layers: int = 4
-    slope_normals: bool = False
+    normals: str = "average"
     refine: str | None = None
     attenuation: str = "linear"
     specular: str = "phong"
@@ -128,7 +131,8 @@ DEFINES = {
     "NOREFLECTION": {"reflection": False},
     "TWO_NORMAL_LAYERS": {"normal_layers": 2},
     "ONE_NORMAL_LAYER": {"normal_layers": 1},
-    "SLOPE_NORMALS": {"slope_normals": True},
+    "SLOPE_NORMALS": {"normals": "slopes"},
+    "LEAN_NORMALS": {"normals": "lean"},
     "BINARY_REFINE": {"refine": "binary"},
     "SECANT_REFINE": {"refine": "secant"},
     "BEER_ATTENUATION": {"attenuation": "beer"},
@@ -362,14 +366,15 @@ class Refracted:
     # the refinement's decisions and least texel-edge distance (refine_crossing), or None
     refine_path: object = None
     loop_iterations: object = None  # the linear search's steps (before any refinement)
+    slope_variance: object = None  # LEAN_NORMALS: the unresolved slopes' variance, else None
 
 
 def refraction_blocks(m, P, C, opts: Options = Options()) -> Refracted:
     """Blocks [1]-[6], shared by ``water_refraction`` and ``water_reflection`` (the seed's
     section 3: "very similar to the previous one")."""
     vEye, vLight = eye_and_light(m, P)
-    vBumpTex, vBumpTexMore = normal_map_block(
-        m, P, C.bumptex_mult, opts.normal_layers, opts.slope_normals
+    vBumpTex, vBumpTexMore, slope_variance = normal_map_block(
+        m, P, C.bumptex_mult, opts.normal_layers, opts.normals
     )
     R = refraction_vector(m, vEye, vBumpTexMore, C)
     current_position, current_position_old, depth, olddepth, iterations, crossed = raycast_ground(
@@ -409,6 +414,7 @@ def refraction_blocks(m, P, C, opts: Options = Options()) -> Refracted:
         olddepth,
         path,
         loop_iterations,
+        slope_variance,
     )
 
 
@@ -440,7 +446,9 @@ def reflection_block(m, P, C, opts: Options, Mi, f: Refracted):
         else:
             vReflection = cubemap_reflection(m, P, R) * C.reflectColor
         bad = nonfinite_any(R, vLight)
-    vReflection = specular_highlight(m, P, vReflection, vBumpTex, vEye, vLight, C, opts.specular)
+    vReflection = specular_highlight(
+        m, P, vReflection, vBumpTex, vEye, vLight, C, opts.specular, f.slope_variance
+    )
     gl_FragColor = fresnel_combine(m, P, vReflection, f.vRefraction, vEye, vBumpTex)
     return gl_FragColor, fetches, bad, decisions
 
@@ -526,6 +534,8 @@ def render(
     opts = options_of(defines)
     m = backend_types(backend)
     P = prepare(inputs, m)
+    if opts.normals == "lean":
+        P = with_lean(m, P)
     Mi = _reflection_state(m, inputs, opts)
     C = resolve_constants(m, constants if constants is not None else Constants(), loop_ad)
     with evaluated_loops_if(C.differentiable and loop_ad == "evaluated"):
@@ -583,4 +593,5 @@ def render_with_jacobian(
         backend,
         loop_ad,
         lanes=lanes,
+        lean=opts.normals == "lean",
     )

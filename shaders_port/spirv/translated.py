@@ -61,6 +61,7 @@ from ..pipeline.frame import (
     resolve_constants,
     tangents,
 )
+from ..pipeline.moments import frame_moments
 from ..pipeline.raster import prepare
 from ..pipeline.texture import CLAMP, LINEAR, NEAREST, Texture2D, backend_types
 from . import engine_inputs as _engine
@@ -93,6 +94,8 @@ STUDY_INPUTS = {
     "sceneColor": "sampler2D: screen-space scene without the water, bilinear, clamp",
     "sceneDepth": "sampler2D: its window depth, nearest, clamp",
     "reflection_sampler": "sampler2D: mirrored-camera reflection, bilinear, clamp",
+    "slopeMoments": "sampler2D: the normal map's slopes and their squares (sx, sz, sx^2, sz^2), "
+    "mipmapped, trilinear, repeat (LEAN mapping, shaders_port.pipeline.moments)",
     "uTextureMatrix0": "mat4: world -> (s, t) of the top-down textures",
     "uTextureMatrix1": "mat4: world -> (s, t) of the reflection textures",
     "uModelViewProjectionMatrix": "mat4: world -> clip space of the camera",
@@ -312,6 +315,8 @@ def frame_bindings(m, P, inputs, spec: ShaderSpec) -> dict:
     if hit is not None:
         return hit
     b = study_bindings(m, P, inputs, spec.engine)
+    if "slopeMoments" in mod.bound_names or any(s == "slopeMoments" for _, s in spec.bindings):
+        b["slopeMoments"] = frame_moments(m, P)  # mipmapped: built for a shader that reads it
     for name, study in spec.bindings:
         if study in STUDY_INPUTS and study not in b and name in mod.bound_names:
             raise ValueError(

@@ -231,15 +231,20 @@ def assert_residual_jacobian(model, constants, steps: dict, atol: float) -> None
         assert np.linalg.norm(J[:, j] - fd) < 2e-2 * np.linalg.norm(fd), n
 
 
-def port_normals(inputs, layers: int = 4, slopes: bool = False) -> tuple[np.ndarray, np.ndarray]:
+def port_normals(inputs, layers: int = 4, slopes: bool = False, normals: str | None = None):
     """((N, 2) world x, z of the water pixels of ``inputs``, (N, 3) the port's unit normal there:
-    block [2], ``shaders_port.ports.normals.normal_map_block``, at ``BumptexMult = 1``)."""
+    block [2], ``shaders_port.ports.normals.normal_map_block``, at ``BumptexMult = 1``; its
+    ``normals`` choice: ``normals``, else slopes or the original's average)."""
     from shaders_port.pipeline.raster import prepare
     from shaders_port.pipeline.texture import backend_types
     from shaders_port.ports.normals import normal_map_block
 
     m = backend_types("llvm")
+    from shaders_port.pipeline.moments import with_lean
+
+    normals = normals or ("slopes" if slopes else "average")
     P = prepare(inputs, m)
-    n, _ = normal_map_block(m, P, 1.0, layers, slopes)
+    P = with_lean(m, P) if normals == "lean" else P
+    n, _, _ = normal_map_block(m, P, 1.0, layers, normals)
     xz = P.raster.world[:, [0, 2]].astype(np.float64)
     return xz, np.array(n.numpy()).T.reshape(-1, 3)

@@ -171,6 +171,18 @@ def synthetic_box_inputs(
     return dataclasses.replace(base, box_cubemap=cube, box_min=lo, box_max=hi, box_capture=capture)
 
 
+def sun_mirrored_at_the_centre(inputs: ShaderInputs) -> ShaderInputs:
+    """``inputs`` with the light where calm water mirrors it to the pool's centre (1000 world
+    units away): the sun's highlight in view."""
+    import dataclasses
+
+    x0, z0, x1, z1 = inputs.water_rect
+    centre = np.array([(x0 + x1) / 2, 0.0, (z0 + z1) / 2])
+    v = inputs.viewpos - centre
+    v /= np.linalg.norm(v)
+    return dataclasses.replace(inputs, lightpos=centre + 1e3 * np.array([-v[0], v[1], -v[2]]))
+
+
 def synthetic_inputs_for(name: str, width: int = 64, height: int = 48) -> "ShaderInputs":
     """The synthetic inputs with whatever extra inputs the shader ``name`` reads."""
     from shaders_port.variants import get_variant
