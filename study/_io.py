@@ -83,13 +83,13 @@ def write_exr(
     provenance: dict | None = None,
     extra: dict[str, np.ndarray] | None = None,
 ) -> Path:
-    """Write ``rgb`` (H, W, 3) and optional extra (H, W) or (H, W, 3) layers atomically; return the
-    path."""
+    """Write ``rgb`` (H, W, 3), or (H, W, 4) as the channels R, G, B, A, and optional extra
+    (H, W) or (H, W, 3) layers atomically; return the path."""
     path = Path(path)
     rgb = np.ascontiguousarray(rgb, dtype=np.float32)
-    if rgb.ndim != 3 or rgb.shape[2] != 3:
-        raise ValueError(f"write_exr: expected an (H, W, 3) image, got shape {rgb.shape}")
-    channels = {"RGB": rgb}
+    if rgb.ndim != 3 or rgb.shape[2] not in (3, 4):
+        raise ValueError(f"write_exr: expected an (H, W, 3) or (H, W, 4) image, got {rgb.shape}")
+    channels = {"RGBA" if rgb.shape[2] == 4 else "RGB": rgb}
     for name, arr in (extra or {}).items():
         arr = np.ascontiguousarray(arr, dtype=np.float32)
         if arr.shape not in (rgb.shape[:2], rgb.shape):
@@ -115,8 +115,8 @@ def write_exr(
 
 
 def read_exr(path) -> tuple[np.ndarray, dict, dict[str, np.ndarray]]:
-    """Read an EXR written by :func:`write_exr`: (rgb (H, W, 3) float32, provenance, extra
-    channels)."""
+    """Read an EXR written by :func:`write_exr`: (rgb (H, W, 3) float32, or (H, W, 4) for an
+    RGBA image, provenance, extra channels)."""
     path = Path(path)
     if not path.is_file():
         raise FileNotFoundError(f"no EXR file at {path}")
@@ -128,9 +128,9 @@ def read_exr(path) -> tuple[np.ndarray, dict, dict[str, np.ndarray]]:
         raise ValueError(
             f"{path} is not a readable EXR file ({exc}); delete it and re-render"
         ) from exc
-    if "RGB" not in channels:
+    if "RGB" not in channels and "RGBA" not in channels:
         raise ValueError(f"{path} has no RGB channel (channels: {sorted(channels)})")
-    rgb = channels.pop("RGB")
+    rgb = channels.pop("RGB") if "RGB" in channels else channels.pop("RGBA")
     provenance = json.loads(raw) if raw else {}
     return rgb, provenance, channels
 

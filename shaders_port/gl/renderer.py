@@ -50,7 +50,7 @@ SAMPLERS = {
     # LEAN_NORMALS' slope moments of the normal map, mipmapped (trilinear)
     "slopeMoments": (11, "linear", True),
 }
-_MIPMAPPED = ("slopeMoments",)
+MIPMAPPED = ("slopeMoments",)
 # sampler -> the optional ShaderInputs field it is made from
 OPTIONAL_SAMPLERS = {
     "sceneColor": "scene_color",
@@ -173,7 +173,7 @@ class GLRenderer:
             "reflectionBottom": self._texture2d(i.refl_texture),
             "slopeMoments": self._texture2d(slope_moments(i.normal_map)),
         }
-        for sname in _MIPMAPPED:
+        for sname in MIPMAPPED:
             self._textures[sname].build_mipmaps()
         for sname, field in OPTIONAL_SAMPLERS.items():
             arr = getattr(i, field)
@@ -186,7 +186,7 @@ class GLRenderer:
             if sname not in self._textures:
                 continue
             f = mgl.LINEAR if filt == "linear" else mgl.NEAREST
-            fmin = mgl.LINEAR_MIPMAP_LINEAR if sname in _MIPMAPPED else f
+            fmin = mgl.LINEAR_MIPMAP_LINEAR if sname in MIPMAPPED else f
             self._samplers[sname] = self.ctx.sampler(
                 repeat_x=repeat, repeat_y=repeat, repeat_z=repeat, filter=(fmin, f)
             )

@@ -174,8 +174,10 @@ class Shader:
 
     # ---- the export -----------------------------------------------------------------------
     def texture_record(self, exp, inputs) -> dict:
-        """What the constants assume of the textures (``study.export.textures``)."""
-        return texture_record(exp, inputs, self.user)
+        """What the constants assume of the textures (``study.export.textures``): a shader of
+        the space with ``LEAN_NORMALS`` ships its slope moments too."""
+        lean = not self.is_user and "LEAN_NORMALS" in get_variant(self.name).defines
+        return texture_record(exp, inputs, self.user, lean)
 
     @property
     def normal_map(self):

@@ -13,7 +13,9 @@ these files (:func:`with_exported_textures`).
 
 ``shaders/textures/``: ``fresnel_lut.exr`` (1 x N: R transmission, G reflection, B 0),
 ``normal_map.exr`` (S x S: ``0.5 n + 0.5``, +y up in world space before the shader's own
-swizzle), ``textures.json`` (the record of :func:`texture_record`).
+swizzle), ``textures.json`` (the record of :func:`texture_record`); for a shader of the space
+with ``normals = "lean"`` also ``slope_moments.exr`` (S x S RGBA: the normal map's slopes and
+their squares, ``shaders_port.pipeline.moments``; mipmapped, sampled trilinearly).
 
 A user's shader may read more textures the engine uploads (``shaders_port.spirv.
 engine_inputs``, :func:`shader_textures`): each is written beside them, exactly the texels the
@@ -38,6 +40,7 @@ from pathlib import Path
 
 import numpy as np
 
+from shaders_port.pipeline.moments import slope_moments
 from shaders_port.spirv.engine_inputs import (
     dudv_map,
     read_normal_map,
@@ -147,14 +150,28 @@ def _shipped_texels(inp: str, inputs, normal_map=None) -> np.ndarray:
     return np.asarray(inputs.cubemap, np.float32)  # reflectionTexture
 
 
-def texture_record(exp, inputs, shader=None) -> dict:
+def texture_record(exp, inputs, shader=None, lean: bool = False) -> dict:
     """What the constants assume of the textures (JSON-able): the LUT's law, index of
     refraction, size, layout and sampling; the normal map's encoding, size, tiling and
     sampling; for a user's shader ``shader`` (``UserShader``), every other texture it reads
     (:func:`shader_textures`): a shipped one's files, encoding, size, filter, wrap, mipmaps
     and the shader's names of it (``bound_as``), under ``shipped``; the engine's render
-    targets it reads under ``rendered`` (input -> ``{"bound_as", "what"}``)."""
+    targets it reads under ``rendered`` (input -> ``{"bound_as", "what"}``); ``lean``: the
+    shader reads ``slopeMoments`` (``LEAN_NORMALS``), recorded under ``slope_moments``."""
     record = _study_record(exp, inputs)
+    if lean:
+        record["slope_moments"] = {
+            "file": "slope_moments.exr",
+            "bound_as": ["slopeMoments"],
+            "encoding": "RGBA = (sx, sz, sx^2, sz^2): the slopes -n.xz / max(n.y, 0.05) of "
+            "normal_map.exr's decoded normals and their squares; linear floats",
+            "size": int(inputs.normal_map.shape[0]),
+            "sampling": "trilinear (GL_LINEAR_MIPMAP_LINEAR, the implicit level of detail), "
+            "repeat; the levels box-filtered halvings down to 1 x 1 (glGenerateMipmap)",
+            "filter": "linear",
+            "wrap": "repeat",
+            "mipmaps": True,
+        }
     if shader is not None:
         reads = shader_textures(shader)
         record["shipped"] = {i: _shipped_record(i, n, inputs, shader)
@@ -240,6 +257,9 @@ def write_textures(record: dict, inputs, shaders_dir: Path, normal_map=None) -> 
     write_exr(
         folder / record["normal_map"]["file"], inputs.normal_map, {"texture": record["normal_map"]}
     )
+    if "slope_moments" in record:
+        rec = record["slope_moments"]
+        write_exr(folder / rec["file"], slope_moments(inputs.normal_map), {"texture": rec})
     for inp, rec in record.get("shipped", {}).items():
         a = _shipped_texels(inp, inputs, normal_map)
         files = rec["files"] if "files" in rec else [rec["file"]]
@@ -300,12 +320,23 @@ def expects_lines(record: dict | None) -> list[str]:
         f"{lut['index']}; {lut['sampling']}.",
         f"* `normalMap` = `{nm['file']}` ({nm['size']} x {nm['size']}): {nm['encoding']}; "
         f"{nm['sampling']}; {nm['layers']} (tile {nm['tile']:g}).",
+        *_moments_lines(record.get("slope_moments")),
         *_shipped_lines(record.get("shipped", {})),
         f"* Every colour is {record['colour_space']}; world units, +y up, the water plane at "
         "y = 0.",
         "",
         *_rendered_lines(record.get("rendered", {})),
         *scene_lines(record.get("scene")),
+    ]
+
+
+def _moments_lines(rec: dict | None) -> list[str]:
+    """The bullet of ``slopeMoments`` (a LEAN shader's), or none."""
+    if not rec:
+        return []
+    return [
+        f"* `slopeMoments` = `{rec['file']}` ({rec['size']} x {rec['size']}): {rec['encoding']}; "
+        f"{rec['sampling']}; read at the normal map's four coordinates."
     ]
 
 

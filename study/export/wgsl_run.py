@@ -28,7 +28,9 @@ from pathlib import Path
 
 import numpy as np
 
-from shaders_port.gl.renderer import OPTIONAL_SAMPLERS, OPTIONAL_VEC3, SAMPLERS
+from shaders_port.gl.renderer import MIPMAPPED, OPTIONAL_SAMPLERS, OPTIONAL_VEC3, SAMPLERS
+from shaders_port.pipeline.moments import slope_moments
+from shaders_port.pipeline.texture import box_mip_chain
 from shaders_port.inputs import Constants, ShaderInputs, normal_matrix
 from shaders_port.variants import get_variant
 
@@ -141,6 +143,7 @@ def _texture_arrays(inputs: ShaderInputs) -> dict:
         "fresnelLookup": i.fresnel_lut[None, :, :],
         "worldYComponentReflection": i.refl_world_y,
         "reflectionBottom": i.refl_texture,
+        "slopeMoments": slope_moments(i.normal_map),  # mipmapped (MIPMAPPED)
     }
     out.update(
         {s: getattr(i, f) for s, f in OPTIONAL_SAMPLERS.items() if getattr(i, f) is not None}
@@ -177,9 +180,10 @@ class WgslRenderer:
         self._pipelines, self._mask = {}, None
 
     # -- set-up -----------------------------------------------------------------------------
-    def _texture(self, arr: np.ndarray, cube: bool):
+    def _texture(self, arr: np.ndarray, cube: bool, mipmapped: bool = False):
         """A float32 texture of ``arr`` ((H, W[, C]) or cube (6, F, F, C)), C = 1, 2 or 4 (3 is
-        padded with alpha 1); row 0 at t = 0 as GL's."""
+        padded with alpha 1); row 0 at t = 0 as GL's; ``mipmapped``: with its box-filtered mip
+        chain (``pipeline.texture.box_mip_chain``, the levels the GL check's llvmpipe makes)."""
         a = np.asarray(arr, np.float32)
         a = a[..., None] if a.ndim == (3 if cube else 2) else a
         if a.shape[-1] == 3:
@@ -188,11 +192,16 @@ class WgslRenderer:
         h, w = a.shape[-3:-1]
         layers = 6 if cube else 1
         usage = self.wgpu.TextureUsage.TEXTURE_BINDING | self.wgpu.TextureUsage.COPY_DST
-        tex = self.device.create_texture(size=(w, h, layers), format=fmt, usage=usage)
-        self.device.queue.write_texture(
-            {"texture": tex}, np.ascontiguousarray(a).tobytes(),
-            {"bytes_per_row": w * a.shape[-1] * 4, "rows_per_image": h}, (w, h, layers),
-        )  # fmt: skip
+        chain = box_mip_chain(a) if mipmapped else [a]
+        tex = self.device.create_texture(
+            size=(w, h, layers), format=fmt, usage=usage, mip_level_count=len(chain)
+        )
+        for k, lv in enumerate(chain):
+            lh, lw = lv.shape[-3:-1]
+            self.device.queue.write_texture(
+                {"texture": tex, "mip_level": k}, np.ascontiguousarray(lv).tobytes(),
+                {"bytes_per_row": lw * a.shape[-1] * 4, "rows_per_image": lh}, (lw, lh, layers),
+            )  # fmt: skip
         return tex.create_view(dimension="cube" if cube else "2d")
 
     def _sampler(self, glsl: str):
@@ -200,9 +209,10 @@ class WgslRenderer:
             raise RuntimeError(f"the WGSL samples {glsl!r}, which ShaderInputs has no texture for")
         _, filt, repeat = SAMPLERS[glsl]
         wrap = "repeat" if repeat else "clamp-to-edge"
+        mip = "linear" if glsl in MIPMAPPED else "nearest"
         return self.device.create_sampler(
-            mag_filter=filt, min_filter=filt, address_mode_u=wrap, address_mode_v=wrap,
-            address_mode_w=wrap,
+            mag_filter=filt, min_filter=filt, mipmap_filter=mip, address_mode_u=wrap,
+            address_mode_v=wrap, address_mode_w=wrap,
         )  # fmt: skip
 
     def _bindings(self):
@@ -224,7 +234,8 @@ class WgslRenderer:
                         raise RuntimeError(f"ShaderInputs has no texture for {b['glsl']!r}")
                     dim = _VIEW[b["type"].split("<")[0]]
                     entry["texture"] = {"sample_type": "float", "view_dimension": dim}
-                    resources[n] = self._texture(arrays[b["glsl"]], dim == "cube")
+                    mips = b["glsl"] in MIPMAPPED
+                    resources[n] = self._texture(arrays[b["glsl"]], dim == "cube", mips)
                 elif b["kind"] == "sampler":
                     entry["sampler"] = {"type": "filtering"}
                     resources[n] = self._sampler(b["glsl"])

@@ -12,7 +12,8 @@ neither fetches files nor uploads images to WebGL; a ``<script src>`` it loads.
 ``data.js`` (:func:`viewer_data`): the vertex and fragment shader text (the fitted file as
 exported, and the ``#define SPIRV_CROSS_CONSTANT_ID_<id> <value>`` lines that give the start
 constants), the inputs the GL check runs (the variant's prepared inputs with the exported LUT
-and normal map), the matrices column-major, the water quad, the camera, the animation rule and
+and normal map; for a shader that reads ``slopeMoments``, its mip levels, which the page
+uploads as they are), the matrices column-major, the water quad, the camera, the animation rule and
 the run's reference / default / fitted images in GL row order (row 0 at the bottom). For a
 user's shader, ``bound`` (``user.bound_data``) instead of the study's textures: every uniform,
 texture and vertex attribute the GL check binds for it on llvmpipe, with the geometry it draws
@@ -32,6 +33,8 @@ import numpy as np
 
 from shaders_port import ShaderInputs
 from shaders_port.inputs import normal_matrix, perspective_view_proj
+from shaders_port.pipeline.moments import slope_moments
+from shaders_port.pipeline.texture import box_mip_chain
 from shaders_port.variants import get_variant
 
 from ..._io import read_exr, repo_path
@@ -138,6 +141,10 @@ def viewer_data(inputs: ShaderInputs, vert: str, frag: str, frag_default: str, i
         if field == "fresnel_lut":
             a = a[None, :, :]  # N x 1
         textures[sampler] = _texture(a, filt, repeat)
+    if re.search(r"\bslopeMoments\b", frag):  # LEAN_NORMALS: mipmapped, the levels given
+        chain = box_mip_chain(slope_moments(i.normal_map))
+        textures["slopeMoments"] = {**_texture(chain[0], "trilinear", True),
+                                    "levels": [_b64(lv) for lv in chain[1:]]}  # fmt: skip
     textures["reflectionTexture"] = {"size": int(i.cubemap.shape[1]), "data": _b64(i.cubemap)}
     if i.box_cubemap is not None:  # the local cube map of reflection = box
         textures["boxReflectionTexture"] = {

@@ -128,9 +128,15 @@
     const [ifmt, fmt] = FORMATS[t.channels];
     gl.pixelStorei(gl.UNPACK_ALIGNMENT, 1);
     gl.texImage2D(gl.TEXTURE_2D, 0, gl[ifmt], t.width, t.height, 0, gl[fmt], gl.FLOAT, floats(t.data));
-    const f = filter === "linear" ? gl.LINEAR : gl.NEAREST;
+    // "trilinear": the mip levels given (box-filtered halvings, as the GL check's), uploaded as they are
+    let w = t.width, h = t.height;
+    (t.levels || []).forEach((lv, k) => {
+      w = Math.max(1, w >> 1); h = Math.max(1, h >> 1);
+      gl.texImage2D(gl.TEXTURE_2D, k + 1, gl[ifmt], w, h, 0, gl[fmt], gl.FLOAT, floats(lv));
+    });
+    const f = filter === "nearest" ? gl.NEAREST : gl.LINEAR;
     const wrap = repeat ? gl.REPEAT : gl.CLAMP_TO_EDGE;
-    gl.texParameteri(gl.TEXTURE_2D, gl.TEXTURE_MIN_FILTER, f);
+    gl.texParameteri(gl.TEXTURE_2D, gl.TEXTURE_MIN_FILTER, filter === "trilinear" ? gl.LINEAR_MIPMAP_LINEAR : f);
     gl.texParameteri(gl.TEXTURE_2D, gl.TEXTURE_MAG_FILTER, f);
     gl.texParameteri(gl.TEXTURE_2D, gl.TEXTURE_WRAP_S, wrap);
     gl.texParameteri(gl.TEXTURE_2D, gl.TEXTURE_WRAP_T, wrap);
@@ -178,7 +184,7 @@
   const SAMPLERS = {
     refractionTexture: 0, worldYComponent: 1, normalMap: 2, reflectionTexture: 3, fresnelLookup: 4,
     worldYComponentReflection: 5, reflectionBottom: 6, sceneColor: 7, sceneDepth: 8, reflection_sampler: 9,
-    boxReflectionTexture: 10,
+    boxReflectionTexture: 10, slopeMoments: 11,
   };
   // the samplers that read a cube map
   const CUBES = new Set(["reflectionTexture", "boxReflectionTexture"]);

@@ -1,5 +1,5 @@
 #version 330 core
-// A level-of-detail policy of 4 bands by footprint (study.export.policy_shader); band k's names carry the prefix b<k>_.
+// A level-of-detail policy of 5 bands by footprint (study.export.policy_shader); band k's names carry the prefix b<k>_.
 uniform mat4 uModelViewProjectionMatrixInverse;
 uniform vec2 screenSize;
 uniform vec3 viewpos;
@@ -32,18 +32,18 @@ const float b0_STEPS_STEEP = 0.75;
 const int b0_LOOP_CAP = 10;
 const float b0_SPECULAR_STRENGTH = 2.0;
 const float b0_SPECULAR_EXPONENT = 256.0;
-const float b0_ABSORPTION_R = 0.26757377;
-const float b0_ABSORPTION_G = 0.082652636;
-const float b0_ABSORPTION_B = 0.0696395;
+const float b0_ABSORPTION_R = 0.26753584;
+const float b0_ABSORPTION_G = 0.08287824;
+const float b0_ABSORPTION_B = 0.06965262;
 const float b0_SPECULAR_ROUGHNESS = 0.2;
 const float b0_SUN_DISC_RADIUS = 5.0;
 const float b0_SUN_DISC_SOFTNESS = 0.05;
 const float b0_SUN_DISC_RADIANCE = 8.0;
 const int b0_REFINE_STEPS = 3;
 const float b0_REFLECT_DISTORTION = 0.1;
-const float b0_BumptexMult = 0.97764957;
+const float b0_BumptexMult = 0.97741526;
 const float b0_refrCoeff = 0.7501876;
-const vec4 b0_waterColor = vec4(0.0, 0.057703212, 0.16094013, 1.0);
+const vec4 b0_waterColor = vec4(0.0, 0.05807139, 0.16096067, 1.0);
 const vec4 b0_reflectColor = vec4(1.0, 1.0, 1.0, 1.0);
 void b0_main(void)
 {
@@ -52,6 +52,26 @@ void b0_main(void)
 
     vec3 vEye = normalize(varyingVecEye);
     vec3 vLight = normalize(varyingVecLight);
+
+
+
+
+
+
+
+
+
+
+
+
+
+
+
+
+
+
+
+
 
 
 
@@ -290,11 +310,34 @@ void b0_main(void)
 
 
 
+
+
+
+
     vec3 rLight = dot(2 * vBumpTex, vLight)* vBumpTex - vLight;
+
+
+
+
+
+
+
+
+
+
     float outerCos = cos(radians(b0_SUN_DISC_RADIUS *(1.0 + b0_SUN_DISC_SOFTNESS)));
     float innerCos = cos(radians(b0_SUN_DISC_RADIUS *(1.0 - b0_SUN_DISC_SOFTNESS)));
     vec4 specular = vec4(smoothstep(outerCos, innerCos, dot(rLight, vEye))* lightcolor, 1);
     vReflection += specular * b0_SUN_DISC_RADIANCE;
+
+
+
+
+
+
+
+
+
 
 
 
@@ -324,20 +367,20 @@ const float b1_ATTENUATION_DISTANCE = 7.5;
 const float b1_STEPS_GRAZING = 2.5;
 const float b1_STEPS_STEEP = 0.75;
 const int b1_LOOP_CAP = 10;
-const float b1_SPECULAR_STRENGTH = 11.140424;
-const float b1_SPECULAR_EXPONENT = 340.45224;
-const float b1_ABSORPTION_R = 0.3046672;
-const float b1_ABSORPTION_G = 0.11085115;
-const float b1_ABSORPTION_B = 0.09957326;
+const float b1_SPECULAR_STRENGTH = 11.13952;
+const float b1_SPECULAR_EXPONENT = 339.90106;
+const float b1_ABSORPTION_R = 0.2898555;
+const float b1_ABSORPTION_G = 0.11042987;
+const float b1_ABSORPTION_B = 0.09950569;
 const float b1_SPECULAR_ROUGHNESS = 0.2;
 const float b1_SUN_DISC_RADIUS = 5.0;
 const float b1_SUN_DISC_SOFTNESS = 0.05;
 const float b1_SUN_DISC_RADIANCE = 8.0;
 const int b1_REFINE_STEPS = 3;
 const float b1_REFLECT_DISTORTION = 0.1;
-const float b1_BumptexMult = 1.0077165;
+const float b1_BumptexMult = 1.008993;
 const float b1_refrCoeff = 0.7501876;
-const vec4 b1_waterColor = vec4(0.009461107, 0.112027116, 0.24669695, 1.0);
+const vec4 b1_waterColor = vec4(0.0044424813, 0.11164712, 0.24658588, 1.0);
 const vec4 b1_reflectColor = vec4(1.0, 1.0, 1.0, 1.0);
 void b1_main(void)
 {
@@ -346,6 +389,26 @@ void b1_main(void)
 
     vec3 vEye = normalize(varyingVecEye);
     vec3 vLight = normalize(varyingVecLight);
+
+
+
+
+
+
+
+
+
+
+
+
+
+
+
+
+
+
+
+
 
 
 
@@ -591,11 +654,34 @@ void b1_main(void)
 
 
 
+
+
+
+
+
+
+
+
+
+
+
+
+
+
+
     vec3 rLight = dot(2 * vBumpTex, vLight)* vBumpTex - vLight;
+
+
+
+
+
+
+
 
     vec4 specular = vec4(pow(clamp(dot(rLight, vEye), 0, 1), b1_SPECULAR_EXPONENT)* lightcolor, 1);
 
     vReflection += specular * b1_SPECULAR_STRENGTH;
+
 
 
 
@@ -620,18 +706,18 @@ const float b2_STEPS_STEEP = 0.75;
 const int b2_LOOP_CAP = 10;
 const float b2_SPECULAR_STRENGTH = 2.0;
 const float b2_SPECULAR_EXPONENT = 256.0;
-const float b2_ABSORPTION_R = 0.26757377;
-const float b2_ABSORPTION_G = 0.082652636;
-const float b2_ABSORPTION_B = 0.0696395;
+const float b2_ABSORPTION_R = 0.26753584;
+const float b2_ABSORPTION_G = 0.08287824;
+const float b2_ABSORPTION_B = 0.06965262;
 const float b2_SPECULAR_ROUGHNESS = 0.2;
 const float b2_SUN_DISC_RADIUS = 5.0;
 const float b2_SUN_DISC_SOFTNESS = 0.05;
 const float b2_SUN_DISC_RADIANCE = 8.0;
 const int b2_REFINE_STEPS = 3;
 const float b2_REFLECT_DISTORTION = 0.1;
-const float b2_BumptexMult = 0.97764957;
+const float b2_BumptexMult = 0.97741526;
 const float b2_refrCoeff = 0.7501876;
-const vec4 b2_waterColor = vec4(0.0, 0.057703212, 0.16094013, 1.0);
+const vec4 b2_waterColor = vec4(0.0, 0.05807139, 0.16096067, 1.0);
 const vec4 b2_reflectColor = vec4(1.0, 1.0, 1.0, 1.0);
 void b2_main(void)
 {
@@ -640,6 +726,26 @@ void b2_main(void)
 
     vec3 vEye = normalize(varyingVecEye);
     vec3 vLight = normalize(varyingVecLight);
+
+
+
+
+
+
+
+
+
+
+
+
+
+
+
+
+
+
+
+
 
 
 
@@ -878,11 +984,34 @@ void b2_main(void)
 
 
 
+
+
+
+
     vec3 rLight = dot(2 * vBumpTex, vLight)* vBumpTex - vLight;
+
+
+
+
+
+
+
+
+
+
     float outerCos = cos(radians(b2_SUN_DISC_RADIUS *(1.0 + b2_SUN_DISC_SOFTNESS)));
     float innerCos = cos(radians(b2_SUN_DISC_RADIUS *(1.0 - b2_SUN_DISC_SOFTNESS)));
     vec4 specular = vec4(smoothstep(outerCos, innerCos, dot(rLight, vEye))* lightcolor, 1);
     vReflection += specular * b2_SUN_DISC_RADIANCE;
+
+
+
+
+
+
+
+
+
 
 
 
@@ -907,25 +1036,25 @@ void b2_main(void)
 
 }
 
-// ---- band 3: water_refraction_box_beer_walls (2.5, 0.75, 10) ----
+// ---- band 3: water_refraction_box_beer (2.5, 0.75, 10) ----
 const float b3_ATTENUATION_DISTANCE = 7.5;
 const float b3_STEPS_GRAZING = 2.5;
 const float b3_STEPS_STEEP = 0.75;
 const int b3_LOOP_CAP = 10;
-const float b3_SPECULAR_STRENGTH = 11.140424;
-const float b3_SPECULAR_EXPONENT = 340.45224;
-const float b3_ABSORPTION_R = 0.3046672;
-const float b3_ABSORPTION_G = 0.11085115;
-const float b3_ABSORPTION_B = 0.09957326;
+const float b3_SPECULAR_STRENGTH = 11.251515;
+const float b3_SPECULAR_EXPONENT = 356.48334;
+const float b3_ABSORPTION_R = 0.35159525;
+const float b3_ABSORPTION_G = 0.122975655;
+const float b3_ABSORPTION_B = 0.08344412;
 const float b3_SPECULAR_ROUGHNESS = 0.2;
 const float b3_SUN_DISC_RADIUS = 5.0;
 const float b3_SUN_DISC_SOFTNESS = 0.05;
 const float b3_SUN_DISC_RADIANCE = 8.0;
 const int b3_REFINE_STEPS = 3;
 const float b3_REFLECT_DISTORTION = 0.1;
-const float b3_BumptexMult = 1.0077165;
+const float b3_BumptexMult = 0.99350184;
 const float b3_refrCoeff = 0.7501876;
-const vec4 b3_waterColor = vec4(0.009461107, 0.112027116, 0.24669695, 1.0);
+const vec4 b3_waterColor = vec4(0.009443868, 0.095359765, 0.1384637, 1.0);
 const vec4 b3_reflectColor = vec4(1.0, 1.0, 1.0, 1.0);
 void b3_main(void)
 {
@@ -934,6 +1063,26 @@ void b3_main(void)
 
     vec3 vEye = normalize(varyingVecEye);
     vec3 vLight = normalize(varyingVecLight);
+
+
+
+
+
+
+
+
+
+
+
+
+
+
+
+
+
+
+
+
 
 
 
@@ -1068,10 +1217,10 @@ void b3_main(void)
 
 
 
-    if(depth > varyingVecWorldPosition . y)
-    {
-        vRefraction = b3_waterColor;
-    }
+
+
+
+
 
 
 
@@ -1179,11 +1328,371 @@ void b3_main(void)
 
 
 
+
+
+
+
+
+
+
+
+
+
+
+
+
+
+
     vec3 rLight = dot(2 * vBumpTex, vLight)* vBumpTex - vLight;
+
+
+
+
+
+
+
 
     vec4 specular = vec4(pow(clamp(dot(rLight, vEye), 0, 1), b3_SPECULAR_EXPONENT)* lightcolor, 1);
 
     vReflection += specular * b3_SPECULAR_STRENGTH;
+
+
+
+
+
+    float NdotV = clamp(dot(vEye, vBumpTex), 0, 1);
+
+
+    vec4 FresnelCoeffs = texture(fresnelLookup, vec2(NdotV, 0.5));
+
+    policyColour = vReflection * FresnelCoeffs . g + vRefraction * FresnelCoeffs . r;
+
+
+
+
+
+}
+
+// ---- band 4: water_refraction_box_beer_walls (2.5, 0.75, 10) ----
+const float b4_ATTENUATION_DISTANCE = 7.5;
+const float b4_STEPS_GRAZING = 2.5;
+const float b4_STEPS_STEEP = 0.75;
+const int b4_LOOP_CAP = 10;
+const float b4_SPECULAR_STRENGTH = 11.13952;
+const float b4_SPECULAR_EXPONENT = 339.90106;
+const float b4_ABSORPTION_R = 0.2898555;
+const float b4_ABSORPTION_G = 0.11042987;
+const float b4_ABSORPTION_B = 0.09950569;
+const float b4_SPECULAR_ROUGHNESS = 0.2;
+const float b4_SUN_DISC_RADIUS = 5.0;
+const float b4_SUN_DISC_SOFTNESS = 0.05;
+const float b4_SUN_DISC_RADIANCE = 8.0;
+const int b4_REFINE_STEPS = 3;
+const float b4_REFLECT_DISTORTION = 0.1;
+const float b4_BumptexMult = 1.008993;
+const float b4_refrCoeff = 0.7501876;
+const vec4 b4_waterColor = vec4(0.0044424813, 0.11164712, 0.24658588, 1.0);
+const vec4 b4_reflectColor = vec4(1.0, 1.0, 1.0, 1.0);
+void b4_main(void)
+{
+
+
+
+    vec3 vEye = normalize(varyingVecEye);
+    vec3 vLight = normalize(varyingVecLight);
+
+
+
+
+
+
+
+
+
+
+
+
+
+
+
+
+
+
+
+
+
+
+
+
+
+
+
+
+
+
+
+
+
+
+
+
+
+
+    vec3 vBumpTexA = vec3(texture(normalMap, vTexCoord0 . xy));
+    vec3 vBumpTexB = vec3(texture(normalMap, vTexCoord1 . xy));
+    vec3 vBumpTexC = vec3(texture(normalMap, vTexCoord2 . xy));
+    vec3 vBumpTexD = vec3(texture(normalMap, vTexCoord3 . xy));
+
+
+
+
+
+
+
+
+    vec3 vBumpTex = normalize(2.0 *
+        (vBumpTexA + vBumpTexB + vBumpTexC + vBumpTexD)- 4.0);
+
+
+
+
+
+    vec3 vBumpTexMore = normalize(vBumpTex * vec3(1.0, b4_BumptexMult, 1.0));
+
+
+
+    vec3 R = normalize(refract(- vEye, vBumpTexMore, b4_refrCoeff));
+
+
+
+    float numsteps = mix(b4_STEPS_GRAZING, b4_STEPS_STEEP, - R . y);
+
+    float stepsize = 1.0 / numsteps;
+
+    R *= stepsize;
+
+
+    float depth, olddepth;
+
+
+    vec3 current_position = vec3(varyingVecWorldPosition);
+    vec3 current_position_old = current_position;
+    olddepth = 0;
+
+
+    vec4 depthtex = texture(worldYComponent,(uTextureMatrix0 * vec4(current_position, 1)). xy);
+    depth = depthtex . r;
+
+    for(int i = 0;i < b4_LOOP_CAP;i ++)
+    {
+
+        current_position_old = current_position;
+
+        current_position += R;
+
+        olddepth = depth;
+
+
+        depthtex = texture(worldYComponent,(uTextureMatrix0 * vec4(current_position, 1)). xy);
+        depth = depthtex . r;
+
+
+
+        if(depth > current_position . y)
+        {
+            break;
+        }
+    }
+
+
+
+
+
+
+
+
+
+
+
+
+
+
+
+
+
+
+
+
+
+
+
+
+
+
+    float cpoy = current_position_old . y;
+    float cpy = current_position . y;
+
+    current_position = mix(current_position_old, current_position,(cpoy - olddepth)/(cpoy - cpy + depth - olddepth));
+
+
+    vec4 vRefraction = texture(refractionTexture,(uTextureMatrix0 * vec4(current_position, 1)). xy);
+
+
+
+    float travelLength = length(current_position - varyingVecWorldPosition);
+
+
+    vec3 transmittance = exp(- vec3(b4_ABSORPTION_R, b4_ABSORPTION_G, b4_ABSORPTION_B)* travelLength);
+    vRefraction = mix(b4_waterColor, vRefraction, vec4(transmittance, 1.0));
+
+
+
+
+
+
+
+
+
+
+    if(depth > varyingVecWorldPosition . y)
+    {
+        vRefraction = b4_waterColor;
+    }
+
+
+
+
+
+
+
+
+
+
+
+
+
+
+
+
+
+
+
+
+    R = normalize(reflect(- vEye, vBumpTexMore));
+
+    R . y = max(R . y, 0.001);
+
+
+
+
+    vec3 boxPlane = mix(boxMin, boxMax, step(0.0, R));
+    vec3 boxT = abs(boxPlane - varyingVecWorldPosition)/ max(abs(R), vec3(1e-6));
+    vec3 boxHit = varyingVecWorldPosition + min(boxT . x, boxT . z)* R;
+    vec3 boxLookup = boxHit . y < boxMax . y ? boxHit - boxCapturePosition : R;
+    vec4 vReflection = texture(boxReflectionTexture, normalize(boxLookup)* vec3(1, - 1, 1))* b4_reflectColor;
+
+
+
+
+
+
+
+
+
+
+
+
+
+
+
+
+
+
+
+
+
+
+
+
+
+
+
+
+
+
+
+
+
+
+
+
+
+
+
+
+
+
+
+
+
+
+
+
+
+
+
+
+
+
+
+
+
+
+
+
+
+
+
+
+
+
+
+
+
+
+
+
+
+
+
+
+
+
+
+
+
+
+
+
+
+
+
+
+
+
+    vec3 rLight = dot(2 * vBumpTex, vLight)* vBumpTex - vLight;
+
+
+
+
+
+
+
+
+    vec4 specular = vec4(pow(clamp(dot(rLight, vEye), 0, 1), b4_SPECULAR_EXPONENT)* lightcolor, 1);
+
+    vReflection += specular * b4_SPECULAR_STRENGTH;
+
 
 
 
@@ -1202,9 +1711,10 @@ void b3_main(void)
 }
 
 // ---- the policy ----
-const float POLICY_BOUND_0 = 21.189120107470178;
-const float POLICY_BOUND_1 = 33.016740908427394;
-const float POLICY_BOUND_2 = 153.31830618810167;
+const float POLICY_BOUND_0 = 21.189120107470465;
+const float POLICY_BOUND_1 = 42.670028866376796;
+const float POLICY_BOUND_2 = 106.50768926340132;
+const float POLICY_BOUND_3 = 153.31830618810596;
 const float POLICY_MARGIN = 0.0015;
 float policyMeasure()
 {
@@ -1226,6 +1736,7 @@ void main(void)
     float t0 = smoothstep(-POLICY_MARGIN, POLICY_MARGIN, lm - log(POLICY_BOUND_0));
     float t1 = smoothstep(-POLICY_MARGIN, POLICY_MARGIN, lm - log(POLICY_BOUND_1));
     float t2 = smoothstep(-POLICY_MARGIN, POLICY_MARGIN, lm - log(POLICY_BOUND_2));
+    float t3 = smoothstep(-POLICY_MARGIN, POLICY_MARGIN, lm - log(POLICY_BOUND_3));
     vec4 acc = vec4(0.0);
     float w;
     w = 1.0 - t0;
@@ -1234,7 +1745,9 @@ void main(void)
     if (w > 0.0) { b1_main(); acc += w * policyColour; }
     w = t1 - t2;
     if (w > 0.0) { b2_main(); acc += w * policyColour; }
-    w = t2;
+    w = t2 - t3;
     if (w > 0.0) { b3_main(); acc += w * policyColour; }
+    w = t3;
+    if (w > 0.0) { b4_main(); acc += w * policyColour; }
     fragColor = acc;
 }

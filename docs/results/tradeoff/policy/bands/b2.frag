@@ -32,9 +32,9 @@ const int LOOP_CAP = 10;
 const float SPECULAR_STRENGTH = 2.0;
 const float SPECULAR_EXPONENT = 256.0;
 //variant BEER_ATTENUATION: absorption coefficients per unit of travelLength (red, green, blue)
-const float ABSORPTION_R = 0.26757377;
-const float ABSORPTION_G = 0.082652636;
-const float ABSORPTION_B = 0.0696395;
+const float ABSORPTION_R = 0.26753584;
+const float ABSORPTION_G = 0.08287824;
+const float ABSORPTION_B = 0.06965262;
 //variant GGX_SPECULAR: GGX roughness (alpha) of the specular lobe
 const float SPECULAR_ROUGHNESS = 0.2;
 //variant SUN_DISC_SPECULAR: the sun's disc, its angular radius at half brightness (degrees), the
@@ -47,11 +47,11 @@ const int REFINE_STEPS = 3;
 //variant PLANAR_REFLECTION: scale of the reflection distortion (seed 002's "0.1 factor")
 const float REFLECT_DISTORTION = 0.1;
 //multiplier to enhance normal-perturbation. 0=max perturbation 1=normal perturbation
-uniform float BumptexMult = 0.97764957;
+uniform float BumptexMult = 0.97741526;
 //refractioncoefficient = c_air/c_water
 uniform float refrCoeff = 0.7501876;
 //watercolor, for modulation of refracted color
-uniform vec4 waterColor = vec4(0.0, 0.057703212, 0.16094013, 1.0);
+uniform vec4 waterColor = vec4(0.0, 0.05807139, 0.16096067, 1.0);
 //color for modulation of reflected light
 uniform vec4 reflectColor = vec4(1.0, 1.0, 1.0, 1.0);
 // ---- END TUNABLE CONSTANTS ----
@@ -114,6 +114,21 @@ vec2 layerSlope(vec3 texel)
 }
 #endif
 
+#ifdef LEAN_NORMALS
+//variant: LEAN mapping (Olano and Baker 2010): slopeMoments holds each texel's slope
+//(dh/dx, dh/dz) and its squares (sx, sz, sx*sx, sz*sz), mipmapped and read trilinearly: a
+//lookup's means over the pixel's footprint. The per-axis variance of the slopes the pixel does
+//not resolve
+uniform sampler2D slopeMoments;
+float unresolvedVariance(vec4 moments)
+{
+    return 0.5 * (max(moments.z - moments.x * moments.x, 0.0)
+        + max(moments.w - moments.y * moments.y, 0.0));
+}
+//radians squared to degrees squared
+const float DEG2_PER_RAD2 = 3282.8064;
+#endif
+
 void main (void)
 {
     // ---- [1] Eye and light vectors ----
@@ -123,7 +138,27 @@ void main (void)
     vec3 vLight = normalize(varyingVecLight);
 
     // ---- [2] Normal map: average four layers, bump scaling ----
+#if defined(LEAN_NORMALS)
+    //variant: the layers' mean slope over the pixel's footprint (the normal of their mean
+    //height there) and the variance of the mean slope the pixel does not resolve
+    vec4 vMomentsA = texture(slopeMoments, vTexCoord0.xy);
 #if defined(ONE_NORMAL_LAYER)
+    vec2 meanSlope = vMomentsA.xy;
+    float slopeVariance = unresolvedVariance(vMomentsA);
+#elif defined(TWO_NORMAL_LAYERS)
+    vec4 vMomentsB = texture(slopeMoments, vTexCoord1.xy);
+    vec2 meanSlope = 0.5 * (vMomentsA.xy + vMomentsB.xy);
+    float slopeVariance = 0.25 * (unresolvedVariance(vMomentsA) + unresolvedVariance(vMomentsB));
+#else
+    vec4 vMomentsB = texture(slopeMoments, vTexCoord1.xy);
+    vec4 vMomentsC = texture(slopeMoments, vTexCoord2.xy);
+    vec4 vMomentsD = texture(slopeMoments, vTexCoord3.xy);
+    vec2 meanSlope = 0.25 * (vMomentsA.xy + vMomentsB.xy + vMomentsC.xy + vMomentsD.xy);
+    float slopeVariance = 0.0625 * (unresolvedVariance(vMomentsA) + unresolvedVariance(vMomentsB)
+        + unresolvedVariance(vMomentsC) + unresolvedVariance(vMomentsD));
+#endif
+    vec3 vBumpTex = normalize(vec3(-meanSlope.x, 1.0, -meanSlope.y));
+#elif defined(ONE_NORMAL_LAYER)
     //variant: one layer only, transform from [0,1] to [-1,1]
     vec3 vBumpTexA = vec3(texture(normalMap, vTexCoord0.xy));
     vec3 vBumpTex = normalize( 2.0 * vBumpTexA - 1.0);
@@ -351,6 +386,10 @@ void main (void)
     float NdotL = clamp(dot(vBumpTex, vLight),0,1);
     float NdotE = clamp(dot(vBumpTex, vEye),0,1);
     float alpha2 = SPECULAR_ROUGHNESS*SPECULAR_ROUGHNESS;
+#ifdef LEAN_NORMALS
+    //variant: the lobe widened by the unresolved slopes (Beckmann's alpha^2 = 2 variance)
+    alpha2 += 2.0*slopeVariance;
+#endif
     float ggxDenominator = NdotH*NdotH*(alpha2-1.0)+1.0;
     float ggxD = alpha2 / (3.14159265*ggxDenominator*ggxDenominator);
     float smithVis = 1.0 / ((NdotL+sqrt(alpha2+(1.0-alpha2)*NdotL*NdotL))
@@ -360,17 +399,36 @@ void main (void)
 #elif defined(SUN_DISC_SPECULAR)
     //variant: the sun's disc seen in the mirror of the normal, soft-edged (no lobe)
     vec3 rLight = dot(2*vBumpTex,vLight)*vBumpTex-vLight;
+#ifdef LEAN_NORMALS
+    //variant: the disc widened by the unresolved slopes: a normal tilted by slope s turns the
+    //mirrored sun by 2 s radians; the disc of the same second moment, its radiance spread over it
+    float wideRadius = sqrt(SUN_DISC_RADIUS*SUN_DISC_RADIUS + 16.0*DEG2_PER_RAD2*slopeVariance);
+    float outerCos = cos(radians(wideRadius*(1.0+SUN_DISC_SOFTNESS)));
+    float innerCos = cos(radians(wideRadius*(1.0-SUN_DISC_SOFTNESS)));
+    vec4 specular = vec4(smoothstep(outerCos, innerCos, dot(rLight, vEye))*lightcolor,1);
+    vReflection+=specular*(SUN_DISC_RADIANCE*(SUN_DISC_RADIUS*SUN_DISC_RADIUS)
+        /(wideRadius*wideRadius));
+#else
     float outerCos = cos(radians(SUN_DISC_RADIUS*(1.0+SUN_DISC_SOFTNESS)));
     float innerCos = cos(radians(SUN_DISC_RADIUS*(1.0-SUN_DISC_SOFTNESS)));
     vec4 specular = vec4(smoothstep(outerCos, innerCos, dot(rLight, vEye))*lightcolor,1);
     vReflection+=specular*SUN_DISC_RADIANCE;
+#endif
 #elif !defined(NO_SPECULAR)
     //Calculate specular Reflection vector
     vec3 rLight = dot(2*vBumpTex,vLight)*vBumpTex-vLight;
     //evaluate phong specular reflection model, modulate with lightcolor
+#ifdef LEAN_NORMALS
+    //variant: the lobe widened by the unresolved slopes (cos^n has the per-axis variance 1/n,
+    //the mirrored light spreads by 4 variance), its energy kept
+    float widen = 1.0 + 4.0*slopeVariance*SPECULAR_EXPONENT;
+    vec4 specular = vec4(pow(clamp(dot(rLight, vEye),0,1),SPECULAR_EXPONENT/widen)*lightcolor,1);
+    vReflection+=specular*(SPECULAR_STRENGTH/widen);
+#else
     vec4 specular = vec4(pow(clamp(dot(rLight, vEye),0,1),SPECULAR_EXPONENT)*lightcolor,1);
     //multiply with specular strength (2)
     vReflection+=specular*SPECULAR_STRENGTH;
+#endif
 #endif
 
     // ---- [9] Fresnel combine ----
