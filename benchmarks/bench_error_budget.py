@@ -32,7 +32,10 @@ reference (what ``study calibrate`` and ``study tradeoff`` score):
    (the layers' mean slope over the pixel's footprint, from the mipmapped slope moments)
    widened by the variance of the slopes the pixel does not resolve as that shader widens it
    (``ports.highlight``: radius ``sqrt(r^2 + 16 variance)``, radiance times ``(r / r')^2``),
-   one sample a pixel standing for the footprint. (a) and (b) are refitted in strength
+   one sample a pixel standing for the footprint, (h) the disc off the normal of the shader's
+   ``parallax = "offset"`` sibling (the layers read where the eye ray meets the waves, shifted
+   by their mean height: (f) as a normal map can give it, in one step). (a) and (b) are
+   refitted in strength
    (least squares against the reference's sun term, the exponent from a grid), so neither
    keeps the fit's compromise.
 
@@ -259,8 +262,11 @@ def main(argv=None) -> None:
     sun_dir = sun_direction(exp.sun.elevation, exp.sun.azimuth)
     radiance = np.asarray(exp.sun.radiance, np.float32)
     base = terms["F*sky"] + terms["T*refr"]
-    slopes = get_variant(space.name_of({**space.choices_of(v.name), "normals": "slopes"}))
-    lean = get_variant(space.name_of({**space.choices_of(v.name), "normals": "lean"}))
+    choices = space.choices_of(v.name)
+    slopes = get_variant(space.name_of({**choices, "normals": "slopes"}))
+    lean = get_variant(space.name_of({**choices, "normals": "lean", "parallax": "off"}))
+    normals = "average" if choices["normals"] == "lean" else choices["normals"]
+    parallax = get_variant(space.name_of({**choices, "normals": normals, "parallax": "offset"}))
     surface = waves_of(exp)
     normals = (
         ("(c) the sun's disc off the shader's normal", v, None, False),
@@ -268,6 +274,7 @@ def main(argv=None) -> None:
         ("(e) the sun's disc off the surface's exact normal", v, surface, False),
         ("(f) the same where the eye ray meets the surface", v, surface, True),
         ("(g) the sun's disc widened by LEAN's unresolved slopes", lean, None, False),
+        ("(h) the sun's disc off the parallax-shifted normal", parallax, None, False),
     )
     for what, shader, waves, displaced in normals:
         for kk in (1,) if shader is lean else (1, a.ss):

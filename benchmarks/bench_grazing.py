@@ -52,7 +52,6 @@ def port_blocks(variant, inputs, constants):
     [1]-[6] (``water_refraction.refraction_blocks``) of a ``water_refraction`` variant with
     reflection, for splitting its colour into terms."""
     from shaders_port.pipeline.frame import resolve_constants
-    from shaders_port.pipeline.moments import with_lean
     from shaders_port.pipeline.raster import prepare
     from shaders_port.pipeline.texture import backend_types
     from shaders_port.ports import water_refraction as wr
@@ -64,7 +63,7 @@ def port_blocks(variant, inputs, constants):
         )
     m = backend_types("llvm")
     P = prepare(variant.prepare_inputs(inputs), m)
-    P = with_lean(m, P) if opts.normals == "lean" else P
+    P = wr.with_maps_of(m, P, opts)
     C = resolve_constants(m, constants, "replay")
     return m, P, C, wr.refraction_blocks(m, P, C, opts)
 

@@ -5,7 +5,7 @@ holds, its one-sample highlight against the pixel's mean highlight, and the fits
 1. **Variance.** At the fit resolution, the per-axis variance of the layers' mean slope over
    each water pixel, from ``--ss`` x ``--ss`` point samples of the slope-blended normal (the
    pixel's truth), against LEAN's: at llvmpipe's level of detail (what the shader reads: the
-   footprint's longer axis, ``pipeline.moments``) and, as a what-if, at the level of detail of
+   footprint's longer axis, ``pipeline.normal_maps``) and, as a what-if, at the level of detail of
    the footprint's area (``0.5 log2 |det J|``, texels) plus a bias.
 2. **Highlight.** The sun's disc (the scene's sun) added by each: mean |error| on the water
    pixels against the ``--ss`` x ``--ss`` mean of the sharp disc off the slope-blended normal.
@@ -37,7 +37,7 @@ sys.path.insert(0, str(REPO))
 
 def area_lod(P, bias: float) -> tuple:
     """Each layer's level of detail of the footprint's area (float32 per lane) plus ``bias``."""
-    from shaders_port.pipeline.moments import texcoord_gradients
+    from shaders_port.pipeline.normal_maps import texcoord_gradients
 
     S = P.slopeMoments.width
     out = []
@@ -78,7 +78,7 @@ def footprint_rows(exp, inputs, shader: str, ss: int, biases) -> dict:
     """Sections 1 and 2 of the module doc at the experiment's fit resolution."""
     from shaders_port import Constants
     from shaders_port.pipeline.frame import resolve_constants
-    from shaders_port.pipeline.moments import with_lean
+    from shaders_port.pipeline.normal_maps import with_lean
     from shaders_port.pipeline.raster import prepare
     from shaders_port.pipeline.texture import backend_types
     from shaders_port.ports.normals import lean_blend, normal_map_block
@@ -132,11 +132,10 @@ def _err(x, ref, mask) -> float:
 
 def fit_rows(experiment: str, shader: str, biases, sets) -> list:
     """Section 3 of the module doc: one calibration per level of detail."""
-    from shaders_port.pipeline import frame, moments
-    from shaders_port.ports import water_refraction
+    from shaders_port.pipeline import normal_maps
     from study.cli import main
 
-    shipped = moments.with_lean
+    shipped = normal_maps.with_lean
     rows = []
     for bias in (None, *biases):
 
@@ -144,7 +143,7 @@ def fit_rows(experiment: str, shader: str, biases, sets) -> list:
             Q = shipped(m, P)
             return Q if bias is None else with_lod(m, Q, area_lod(Q, bias))
 
-        water_refraction.with_lean = frame.with_lean = patched
+        normal_maps.with_lean = patched
         with tempfile.TemporaryDirectory() as tmp:
             args = ["calibrate", experiment, "--set", f'fit.shader="{shader}"',
                     "--set", 'fit.loss="linear"', "--out", tmp, *sets]  # fmt: skip
@@ -155,7 +154,7 @@ def fit_rows(experiment: str, shader: str, biases, sets) -> list:
         rows.append({"level_of_detail": label, "flip": c["error"]["flip"]["fitted"],
                      "rmse": c["error"]["rmse"]["fitted"], "seconds": time.perf_counter() - t0,
                      "constants": c["fit"]["constants"]})  # fmt: skip
-    water_refraction.with_lean = frame.with_lean = shipped
+    normal_maps.with_lean = shipped
     return rows
 
 

@@ -40,6 +40,8 @@ CONVENTIONS = {
     "slopeMoments": ("(s, t) = vTexCoord, as normalMap", "(sx, sz, sx^2, sz^2): the normal map's "
                      "slopes -n.xz / max(n.y, 0.05) and their squares, RGBA32F",
                      "trilinear (mipmapped, box levels), repeat"),
+    "heightMap": ("(s, t) = vTexCoord, as normalMap", "the waves' height over the water plane in "
+                  "tile lengths (.r), integrated from the normal map's slopes", "bilinear, repeat"),
     "uTextureMatrix0": ("world -> (s, t) of refractionTexture, worldYComponent", "-", "-"),
     "uTextureMatrix1": ("world -> (s, t) of the reflection textures", "-", "-"),
     "uModelViewProjectionMatrix": ("world -> clip, OpenGL (NDC z in [-1, 1])", "-", "-"),

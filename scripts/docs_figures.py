@@ -229,14 +229,18 @@ def _front_caption(prefix: str) -> str:
     """The caption of the default scene's side-by-side, from its panels."""
     panels = _json("tradeoff/images_default.json")["panels"]
     titles = [p["title"] for p in panels]
-    best, rec = (_named(t.split(": ", 1)[1]) for t in (titles[3], titles[4]))
     flips = [p.get("flip") for p in panels]
+    best = _named(titles[3].split(": ", 1)[1])
+    if len(panels) > 4:
+        rec = _named(titles[4].split(": ", 1)[1])
+        last = f"the recommendation ({rec}, {flips[4]:.4f})"
+    else:  # the recommendation is the best within the original's fetches: one panel
+        last = "it is also the recommendation"
     return (
         f"*The default scene, from [`study tradeoff`]({prefix}tradeoff.md): the reference; the "
         f"original shader with its documented constants (FLIP {flips[1]:.4f}); the same shader "
         f"fitted ({flips[2]:.4f}); the best shader within the original's texture fetches "
-        f"({best}, {flips[3]:.4f}); the recommendation ({rec}, {flips[4]:.4f}). Below each, "
-        "its error on the water pixels.*"
+        f"({best}, {flips[3]:.4f}); {last}. Below each, its error on the water pixels.*"
     )
 
 

@@ -31,6 +31,10 @@ The axes and where each choice comes from (``SOURCE``):
   Olano and Baker 2010: the layers' slopes and their squares read from a mipmapped map at the
   pixel's footprint, the normal of their mean slope there, and the variance of the slopes the
   pixel does not resolve widening the highlight: near, the sharp lobe; far, a wider one);
+* ``parallax``: ``off`` (000: the layers read at the water plane's point) or ``offset``
+  (parallax offset mapping, Kaneko et al. 2001: read where the eye ray meets the waves, the
+  coordinates shifted along the view by the layers' mean height from a height map derived from
+  the normal map; one more fetch per layer; not with ``normals = lean``);
 * ``textures``: ``float`` or ``game`` (8-bit colour, half-float depth).
 
 What the files realise: the raycast refraction with the cube-map, local cube-map, screen-space,
@@ -58,6 +62,7 @@ AXES: dict[str, tuple] = {
     "walls": ("off", "on"),
     "layers": (4, 2, 1),
     "normals": ("average", "slopes", "lean"),
+    "parallax": ("off", "offset"),
     "textures": ("float", "game"),
 }
 ORIGINAL = {axis: choices[0] for axis, choices in AXES.items()}
@@ -79,6 +84,7 @@ SOURCE = {
     ("reflection", "ssr"): "screen-space reflection (engines' SSR)",
     ("normals", "slopes"): "Barre-Brisebois and Hill (partial-derivative blending)",
     ("normals", "lean"): "Olano and Baker (LEAN mapping)",
+    ("parallax", "offset"): "Kaneko et al. (parallax offset mapping)",
 }
 
 # each source's technique alone (the original's choices elsewhere, the cube map where a source
@@ -95,6 +101,7 @@ ALONE = {
     "screen-space reflection (engines' SSR)": {"reflection": "ssr"},
     "Barre-Brisebois and Hill (slope-blended normals)": {"normals": "slopes"},
     "Olano and Baker (LEAN mapping)": {"normals": "lean"},
+    "Kaneko et al. (parallax offset mapping)": {"parallax": "offset"},
     "001-004 (the games' composition)": {
         "refraction": "planar_distorted",
         "reflection": "planar_distorted",
@@ -114,6 +121,7 @@ _RAYCAST_DEFINES = {
     ("layers", 1): "ONE_NORMAL_LAYER",
     ("normals", "slopes"): "SLOPE_NORMALS",
     ("normals", "lean"): "LEAN_NORMALS",
+    ("parallax", "offset"): "PARALLAX_OFFSET",
     ("reflection", "planar_distorted"): "PLANAR_REFLECTION",
     ("reflection", "box"): "BOX_REFLECTION",
     ("reflection", "ssr"): "SSR_REFLECTION",
@@ -135,6 +143,7 @@ _TOKENS = (
     (("layers", 1), "1layer"),
     (("normals", "slopes"), "slopes"),
     (("normals", "lean"), "lean"),
+    (("parallax", "offset"), "parallax"),
     (("textures", "game"), "game_textures"),
 )
 # the screen-space file's (refraction, reflection) pairs: name and #defines. Planar refraction
@@ -190,6 +199,11 @@ def realise(choices: dict) -> tuple[str, tuple[str, ...], str]:
             "normals = slopes blends the layers, and one layer has nothing to blend: choose "
             "layers = 4 or 2 with it (one layer's normal is the same either way)"
         )
+    if c["parallax"] == "offset" and c["normals"] == "lean":
+        raise Unrealisable(
+            "parallax = offset shifts where the normal map is read, and LEAN's level of detail "
+            "is the unshifted coordinates': choose normals = average or slopes with it"
+        )
     if c["reflection"] == "none" and c["specular"] != "none":
         raise Unrealisable(
             "reflection = none skips block [7], and the highlight is added to the reflection: "
@@ -206,13 +220,23 @@ def realise(choices: dict) -> tuple[str, tuple[str, ...], str]:
 
 
 def _realise_screen_space(c: dict) -> tuple[str, tuple[str, ...], str]:
-    fixed = ("attenuation", "specular", "refine", "walls", "layers", "normals", "textures")
+    fixed = (
+        "attenuation",
+        "specular",
+        "refine",
+        "walls",
+        "layers",
+        "normals",
+        "parallax",
+        "textures",
+    )
     off = [f"{a} = {c[a]}" for a in fixed if c[a] != ORIGINAL[a]]
     if off:
         raise Unrealisable(
             f"the screen-space shader (water_baseline, refraction = {c['refraction']}) has the "
             "original's choices on the other axes only (depth tint, Phong highlight, no "
-            "refinement, no wall faces, four layers averaged, float textures), not "
+            "refinement, no wall faces, four layers averaged at the plane's point, float "
+            "textures), not "
             f"{', '.join(off)}"
         )
     key = (c["refraction"], c["reflection"])

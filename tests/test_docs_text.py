@@ -111,7 +111,7 @@ def test_a_caption_naming_a_shader_its_panels_do_not_show_is_caught():
     )
     problems = mod.caption_problems(page, text)
     assert problems and "`water_refraction_beer_walls`" in problems[0]
-    fixed = text.replace("water_refraction_beer_walls", "water_refraction_beer_disc_walls")
+    fixed = text.replace("water_refraction_beer_walls", "water_refraction_beer_disc_walls_parallax")
     assert mod.caption_problems(page, fixed) == []
 
 

@@ -14,7 +14,7 @@ from helpers.gl import check_gl_match, compare_or_skip
 from helpers.port_checks import VARIANT_CUSTOM, assert_variant_jacobian_columns
 from helpers.synthetic import sun_mirrored_at_the_centre, synthetic_inputs
 
-from shaders_port.pipeline.moments import slope_moments, with_lean
+from shaders_port.pipeline.normal_maps import slope_moments, with_lean
 from shaders_port.pipeline.raster import prepare
 from shaders_port.pipeline.texture import backend_types, box_mip_chain
 from shaders_port.variants import get_variant

@@ -185,3 +185,24 @@ def test_the_schedule_cut_leaves_no_place_to_a_shader_without_a_raymarch():
     # over every point the cheapest screen-space shader (nothing cheaper) takes one of the two
     assert "baseline0" in [p["variant"] for p in search.closest_to_front(points, 2)]
     assert [p["variant"] for p in search.to_schedule(points, 2.0, 2)] == ["box", "disc"]
+
+
+def test_the_descent_goes_on_from_the_cheapest_shader_near_the_lowest():
+    """After the walk's cut, the descent goes on from the configuration the recommendation's
+    rule picks among the screened ones (the cheapest within the tolerance of the lowest FLIP):
+    its one-axis neighbours not yet screened (a best shader more choices from the original than
+    the cut reaches is found this way, where it costs least)."""
+    low = {"choices": _space.choices_of("water_reflection_beer_disc_walls"), "flip": 0.100,
+           "fetches_mean": 24.0}  # fmt: skip
+    near = {"choices": _space.choices_of("water_refraction_beer_disc_walls"), "flip": 0.101,
+            "fetches_mean": 17.0}  # fmt: skip
+    far = {"choices": _space.choices_of("water_refraction"), "flip": 0.16, "fetches_mean": 17.0}
+    assert search.descent_origin([low, near, far], 0.02) is near
+    assert search.descent_origin([low, near, far], 0.001) is low
+    seen = [low["choices"], near["choices"], far["choices"]]
+    todo = search.descent_round([low, near, far], seen, None, 0.02)
+    names = {_space.name_of(c) for c in todo}
+    assert "water_refraction_beer_disc_walls_parallax" in names
+    assert not names & {"water_reflection_beer_disc_walls", "water_refraction"}
+    fixed = search.descent_round([low, near, far], seen, {"parallax": "off"}, 0.02)
+    assert fixed and all(c["parallax"] == "off" for c in fixed)

@@ -51,7 +51,8 @@ def test_each_source_technique_alone_is_a_shader_of_the_space():
 
 
 def test_pinned_axes_restrict_the_space():
-    fix = {"textures": "float", "layers": 4, "refine": "linear", "normals": "average"}
+    fix = {"textures": "float", "layers": 4, "refine": "linear", "normals": "average",
+           "parallax": "off"}  # fmt: skip
     pinned = _space.configurations(fix)
     # cube, mirror, raycast, box, ssr; none (no specular); screen space
     assert len(pinned) == 5 * 16 + 4 + 9
@@ -62,8 +63,8 @@ def test_pinned_axes_restrict_the_space():
 
 def test_every_configuration_compiles_to_names_its_file_and_port_know():
     configs = _space.configurations()
-    # 768 cube, box, ssr, mirror, raycast each + 192 refraction-only + 9 screen
-    assert len(configs) == 4041
+    # 1248 cube, box, ssr, mirror, raycast each + 312 refraction-only + 9 screen
+    assert len(configs) == 6561
     ports = _ports()
     names = set()
     for c in configs:
@@ -161,7 +162,7 @@ def test_configurations_nobody_registered_match_opengl(seed):
     the GL check's thresholds, and the configuration renders differently from the original."""
 
     raycast = _space.configurations({"refraction": "raycast"})
-    assert len(raycast) == 4032
+    assert len(raycast) == 6552
     c = random.Random(100 + seed).choice(raycast)
     name = _space.name_of(c)
     inputs = synthetic_inputs_for(name, 96, 72)

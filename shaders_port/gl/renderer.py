@@ -9,8 +9,9 @@ Texture set-up (one texture unit each, float32 storage, no mipmaps but slopeMome
 refractionTexture RGB32F linear clamp; worldYComponent R32F nearest clamp; normalMap RGB32F
 linear repeat; reflectionTexture cube RGB32F linear clamp, seamless cube filtering off;
 fresnelLookup (N x 1) RG32F nearest clamp; worldYComponentReflection R32F nearest clamp;
-reflectionBottom RGB32F linear clamp; slopeMoments (``LEAN_NORMALS``, ``pipeline.moments``)
-RGBA32F trilinear repeat, its mip levels made by ``glGenerateMipmap``; the optional inputs:
+reflectionBottom RGB32F linear clamp; slopeMoments (``LEAN_NORMALS``, ``pipeline.normal_maps``)
+RGBA32F trilinear repeat, its mip levels made by ``glGenerateMipmap``; heightMap
+(``PARALLAX_OFFSET``) R32F linear repeat; the optional inputs:
 the baseline's screen-space buffers and the local cube map boxReflectionTexture (cube RGB32F
 linear clamp, as reflectionTexture).
 """
@@ -23,7 +24,7 @@ import numpy as np
 
 from ..glsl_text import compat_to_core, read_source, with_define, write_constants
 from ..inputs import CONSTANT_SPECS, Constants, ShaderInputs, normal_matrix
-from ..pipeline.moments import slope_moments
+from ..pipeline.normal_maps import height_map, slope_moments
 from .contexts import create_context
 
 _GL_TEXTURE_CUBE_MAP_SEAMLESS = 0x884F
@@ -49,6 +50,8 @@ SAMPLERS = {
     "boxReflectionTexture": (10, "linear", False),
     # LEAN_NORMALS' slope moments of the normal map, mipmapped (trilinear)
     "slopeMoments": (11, "linear", True),
+    # PARALLAX_OFFSET's heights of the normal map (R32F, tile lengths)
+    "heightMap": (12, "linear", True),
 }
 MIPMAPPED = ("slopeMoments",)
 # sampler -> the optional ShaderInputs field it is made from
@@ -172,6 +175,7 @@ class GLRenderer:
             "worldYComponentReflection": self._texture2d(i.refl_world_y),
             "reflectionBottom": self._texture2d(i.refl_texture),
             "slopeMoments": self._texture2d(slope_moments(i.normal_map)),
+            "heightMap": self._texture2d(height_map(i.normal_map)),
         }
         for sname in MIPMAPPED:
             self._textures[sname].build_mipmaps()

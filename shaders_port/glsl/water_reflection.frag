@@ -97,6 +97,12 @@ float unresolvedVariance(vec4 moments)
 const float DEG2_PER_RAD2 = 3282.8064;
 #endif
 
+#ifdef PARALLAX_OFFSET
+//variant: parallax offset mapping (Kaneko et al. 2001): heightMap holds the heights of the
+//normal map's waves over the water plane, in tile lengths (texture-coordinate units)
+uniform sampler2D heightMap;
+#endif
+
 void main (void)
 {
     // ---- [1] Eye and light vectors ----
@@ -106,6 +112,24 @@ void main (void)
     vec3 vLight = normalize(varyingVecLight);
 
     // ---- [2] Normal map: average four layers, bump scaling ----
+#ifdef PARALLAX_OFFSET
+    //variant: the eye ray meets the waves at their height over the water plane's point: the
+    //layers are read where it does, shifted along the view by the layers' mean height (one step)
+#if defined(ONE_NORMAL_LAYER)
+    float waveHeight = texture2D(heightMap, gl_TexCoord[0].xy).r;
+#elif defined(TWO_NORMAL_LAYERS)
+    float waveHeight = 0.5 * (texture2D(heightMap, gl_TexCoord[0].xy).r
+        + texture2D(heightMap, gl_TexCoord[1].xy).r);
+#else
+    float waveHeight = 0.25 * (texture2D(heightMap, gl_TexCoord[0].xy).r
+        + texture2D(heightMap, gl_TexCoord[1].xy).r
+        + texture2D(heightMap, gl_TexCoord[2].xy).r
+        + texture2D(heightMap, gl_TexCoord[3].xy).r);
+#endif
+    vec2 parallaxShift = waveHeight / max(vEye.y, 0.05) * vEye.xz;
+#else
+    vec2 parallaxShift = vec2(0.0);
+#endif
 #if defined(LEAN_NORMALS)
     //variant: the layers' mean slope over the pixel's footprint (the normal of their mean
     //height there) and the variance of the mean slope the pixel does not resolve
@@ -128,12 +152,12 @@ void main (void)
     vec3 vBumpTex = normalize(vec3(-meanSlope.x, 1.0, -meanSlope.y));
 #elif defined(ONE_NORMAL_LAYER)
     //variant: one layer only, transform from [0,1] to [-1,1]
-    vec3 vBumpTexA = vec3(texture2D(normalMap, gl_TexCoord[0].xy));
+    vec3 vBumpTexA = vec3(texture2D(normalMap, gl_TexCoord[0].xy + parallaxShift));
     vec3 vBumpTex = normalize( 2.0 * vBumpTexA - 1.0);
 #elif defined(TWO_NORMAL_LAYERS)
     //variant: average the first two layers, transform from [0,1] to [-1,1]
-    vec3 vBumpTexA = vec3(texture2D(normalMap, gl_TexCoord[0].xy));
-    vec3 vBumpTexB = vec3(texture2D(normalMap, gl_TexCoord[1].xy));
+    vec3 vBumpTexA = vec3(texture2D(normalMap, gl_TexCoord[0].xy + parallaxShift));
+    vec3 vBumpTexB = vec3(texture2D(normalMap, gl_TexCoord[1].xy + parallaxShift));
 #ifdef SLOPE_NORMALS
     vec2 meanSlope = 0.5 * (layerSlope(vBumpTexA) + layerSlope(vBumpTexB));
     vec3 vBumpTex = normalize(vec3(-meanSlope.x, 1.0, -meanSlope.y));
@@ -142,10 +166,10 @@ void main (void)
 #endif
 #else
     //Sample normalmap at different locations
-    vec3 vBumpTexA = vec3(texture2D(normalMap, gl_TexCoord[0].xy));
-    vec3 vBumpTexB = vec3(texture2D(normalMap, gl_TexCoord[1].xy));
-    vec3 vBumpTexC = vec3(texture2D(normalMap, gl_TexCoord[2].xy));
-    vec3 vBumpTexD = vec3(texture2D(normalMap, gl_TexCoord[3].xy));
+    vec3 vBumpTexA = vec3(texture2D(normalMap, gl_TexCoord[0].xy + parallaxShift));
+    vec3 vBumpTexB = vec3(texture2D(normalMap, gl_TexCoord[1].xy + parallaxShift));
+    vec3 vBumpTexC = vec3(texture2D(normalMap, gl_TexCoord[2].xy + parallaxShift));
+    vec3 vBumpTexD = vec3(texture2D(normalMap, gl_TexCoord[3].xy + parallaxShift));
 
 #ifdef SLOPE_NORMALS
     //variant: the mean of the layers' slopes, the normal of their mean height

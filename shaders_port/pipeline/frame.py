@@ -23,7 +23,6 @@ import drjit as dr
 import numpy as np
 
 from ..inputs import CONSTANT_SPECS, Constants, ShaderInputs
-from .moments import with_lean
 from .raster import prepare
 from .texture import backend_types
 
@@ -360,7 +359,7 @@ def jacobian_passes(
     backend: str,
     loop_ad: str,
     lanes=None,
-    lean: bool = False,
+    maps=None,
 ):
     """Shared driver of ``render_with_jacobian``: every named scalar becomes a gradient-enabled
     size-1 Float; ``shade_tangents(m, P, C, params, frozen)`` shades once and runs one
@@ -371,8 +370,9 @@ def jacobian_passes(
     the evaluated lanes where they were computed (``colour`` Array3f, 0 on non-finite lanes;
     ``nonfinite`` Bool; ``grads`` one Array3f per name; ``raster.index`` the lanes' flat pixel
     indices) and whose return value is returned in place of the images: nothing of the frame
-    is read back to the host here (``study.fit.normal_equations``). ``lean``: the frame is
-    prepared with what ``LEAN_NORMALS`` reads (``pipeline.moments.with_lean``)."""
+    is read back to the host here (``study.fit.normal_equations``). ``maps``: None, or
+    ``maps(m, P)``, the prepared frame with the derived maps the shader reads
+    (``pipeline.normal_maps.with_maps``)."""
     m = backend_types(backend)
     if not names:
         raise ValueError("names is empty: give at least one constant to differentiate")
@@ -398,8 +398,8 @@ def jacobian_passes(
         dr.enable_grad(p)
         params.append(p)
     P = prepare(inputs, m)
-    if lean:
-        P = with_lean(m, P)
+    if maps is not None:
+        P = maps(m, P)
     C = resolve_constants(m, constants.replace(**changes), loop_ad)
     try:
         with evaluated_loops_if(loop_ad == "evaluated"):

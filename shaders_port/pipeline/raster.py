@@ -121,10 +121,12 @@ class Prepared:
     lightcolor: tuple
     # a number of its own per call of prepare() that uploaded (see pipeline.frame.call_frozen)
     upload: int = 0
-    # what LEAN_NORMALS reads, set by pipeline.moments.with_lean: the mipmapped slopeMoments
+    # what LEAN_NORMALS reads, set by pipeline.normal_maps.with_lean: the mipmapped slopeMoments
     # texture and each layer's level of detail there (a Float per lane); None otherwise
     slopeMoments: object = None
     slopeLod: tuple | None = None
+    # what PARALLAX_OFFSET reads (pipeline.normal_maps.with_maps): the heightMap texture
+    heightMap: object = None
 
     def shading_state(self) -> "Prepared":
         """A copy without the NumPy-holding ``raster`` / ``inputs`` (what the shader reads)."""

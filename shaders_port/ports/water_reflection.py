@@ -32,9 +32,9 @@ from ..pipeline.frame import (
     resolve_constants,
     tangents,
 )
-from ..pipeline.moments import with_lean
 from ..pipeline.raster import prepare
 from ..pipeline.texture import backend_types, mix, texmat_xy
+from .normals import normal_fetches, with_maps_of
 from .water_refraction import DEFINES as _REFRACTION_DEFINES
 from .water_refraction import (
     Options,
@@ -175,7 +175,7 @@ def _shade(m, P, C, diagnose: bool = False, opts: Options = Options()):
         m, P, vReflection, vBumpTex, vEye, vLight, C, opts.specular, f.slope_variance
     )
     gl_FragColor = fresnel_combine(m, P, vReflection, vRefraction, vEye, vBumpTex)
-    fetches = opts.normal_layers + 1 + iterations + 1 + 1 + refl_fetches + 1 + 1
+    fetches = normal_fetches(opts) + 1 + iterations + 1 + 1 + refl_fetches + 1 + 1
     bad = nonfinite_any(
         vEye,
         vLight,
@@ -242,9 +242,7 @@ def render(
     """
     opts = options_of(defines, "water_reflection", DEFINES)
     m = backend_types(backend)
-    P = prepare(inputs, m)
-    if opts.normals == "lean":
-        P = with_lean(m, P)
+    P = with_maps_of(m, prepare(inputs, m), opts)
     C = resolve_constants(m, constants if constants is not None else Constants(), loop_ad)
     with evaluated_loops_if(C.differentiable and loop_ad == "evaluated"):
         if _frame.USE_FROZEN and not C.differentiable:
@@ -293,5 +291,5 @@ def render_with_jacobian(
         backend,
         loop_ad,
         lanes=lanes,
-        lean=opts.normals == "lean",
+        maps=lambda m, P: with_maps_of(m, P, opts),
     )

@@ -64,13 +64,12 @@ from ..pipeline.frame import (
     resolve_constants,
     tangents,
 )
-from ..pipeline.moments import with_lean
 from ..pipeline.raster import prepare
 from ..pipeline.texture import backend_types, clamp, mix, texmat_xy
 from .box import box_reflection, box_state
 from .gl_diagnostics import gl_check_diagnostics
 from .highlight import fresnel_combine, specular_highlight
-from .normals import normal_map_block
+from .normals import normal_fetches, normal_map_block, with_maps_of
 from .planar import MIRROR_NORMAL, mirror_state, planar_reflection
 from .ssr import ssr_reflection, ssr_state
 from .switches import decode
@@ -90,6 +89,9 @@ class Options(NamedTuple):
         either way) or 'lean' (``LEAN_NORMALS``: the layers' mean slope and the variance of the
         slopes the pixel does not resolve, from the mipmapped ``slopeMoments``; the variance
         widens the highlight: ``ports.normals``, ``ports.highlight``).
+    parallax: False (original) or True (``PARALLAX_OFFSET``: the layers read where the eye ray
+        meets the waves, their coordinates shifted by the layers' mean height from
+        ``heightMap``; one more fetch per layer: ``ports.normals``).
     refine: None (original), 'binary' (``BINARY_REFINE``) or 'secant' (``SECANT_REFINE``): that
         many (``REFINE_STEPS``) bracket refinements after the linear search.
     attenuation: 'linear' (original: clamped mix over ``ATTENUATION_DISTANCE``) or 'beer'
@@ -115,6 +117,7 @@ class Options(NamedTuple):
     reflection: bool = True
     normal_layers: int = 4
     normals: str = "average"
+    parallax: bool = False
     refine: str | None = None
     attenuation: str = "linear"
     specular: str = "phong"
@@ -133,6 +136,7 @@ DEFINES = {
     "ONE_NORMAL_LAYER": {"normal_layers": 1},
     "SLOPE_NORMALS": {"normals": "slopes"},
     "LEAN_NORMALS": {"normals": "lean"},
+    "PARALLAX_OFFSET": {"parallax": True},
     "BINARY_REFINE": {"refine": "binary"},
     "SECANT_REFINE": {"refine": "secant"},
     "BEER_ATTENUATION": {"attenuation": "beer"},
@@ -374,7 +378,7 @@ def refraction_blocks(m, P, C, opts: Options = Options()) -> Refracted:
     section 3: "very similar to the previous one")."""
     vEye, vLight = eye_and_light(m, P)
     vBumpTex, vBumpTexMore, slope_variance = normal_map_block(
-        m, P, C.bumptex_mult, opts.normal_layers, opts.normals
+        m, P, C.bumptex_mult, opts.normal_layers, opts.normals, opts.parallax, vEye
     )
     R = refraction_vector(m, vEye, vBumpTexMore, C)
     current_position, current_position_old, depth, olddepth, iterations, crossed = raycast_ground(
@@ -456,7 +460,8 @@ def reflection_block(m, P, C, opts: Options, Mi, f: Refracted):
 def _shade(m, P, C, diagnose: bool = False, opts: Options = Options(), Mi=None):
     f = refraction_blocks(m, P, C, opts)
     iterations, crossed, denominator = f.iterations, f.crossed, f.denominator
-    fetches = opts.normal_layers + 1 + iterations + 1  # iterations include the refinement steps
+    # iterations include the refinement steps; PARALLAX_OFFSET reads the heights of each layer
+    fetches = normal_fetches(opts) + 1 + iterations + 1
     bad = nonfinite_any(f.vEye, f.vBumpTex, f.vBumpTexMore, f.R, f.current_position)
     decisions = {}
     if opts.reflection:
@@ -533,9 +538,7 @@ def render(
     """
     opts = options_of(defines)
     m = backend_types(backend)
-    P = prepare(inputs, m)
-    if opts.normals == "lean":
-        P = with_lean(m, P)
+    P = with_maps_of(m, prepare(inputs, m), opts)
     Mi = _reflection_state(m, inputs, opts)
     C = resolve_constants(m, constants if constants is not None else Constants(), loop_ad)
     with evaluated_loops_if(C.differentiable and loop_ad == "evaluated"):
@@ -593,5 +596,5 @@ def render_with_jacobian(
         backend,
         loop_ad,
         lanes=lanes,
-        lean=opts.normals == "lean",
+        maps=lambda m, P: with_maps_of(m, P, opts),
     )

@@ -67,7 +67,7 @@ __all__ = [
 
 # the first texture unit of the engine inputs' textures on OpenGL: after the study's samplers
 # (``gl.renderer``'s units 0-10, the local cube map of the box reflection last)
-ENGINE_UNIT = 12
+ENGINE_UNIT = 13
 
 # the right-handed rotation from the study's Y-up world to a Z-up one: (x, y, z) -> (x, -z, y)
 UP_Z = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, -1.0], [0.0, 1.0, 0.0]])

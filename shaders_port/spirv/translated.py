@@ -61,7 +61,7 @@ from ..pipeline.frame import (
     resolve_constants,
     tangents,
 )
-from ..pipeline.moments import frame_moments
+from ..pipeline.normal_maps import frame_heights, frame_moments
 from ..pipeline.raster import prepare
 from ..pipeline.texture import CLAMP, LINEAR, NEAREST, Texture2D, backend_types
 from . import engine_inputs as _engine
@@ -95,7 +95,9 @@ STUDY_INPUTS = {
     "sceneDepth": "sampler2D: its window depth, nearest, clamp",
     "reflection_sampler": "sampler2D: mirrored-camera reflection, bilinear, clamp",
     "slopeMoments": "sampler2D: the normal map's slopes and their squares (sx, sz, sx^2, sz^2), "
-    "mipmapped, trilinear, repeat (LEAN mapping, shaders_port.pipeline.moments)",
+    "mipmapped, trilinear, repeat (LEAN mapping, shaders_port.pipeline.normal_maps)",
+    "heightMap": "sampler2D: the normal map's wave heights in tile lengths (.r), bilinear, repeat "
+    "(parallax mapping, shaders_port.pipeline.normal_maps)",
     "uTextureMatrix0": "mat4: world -> (s, t) of the top-down textures",
     "uTextureMatrix1": "mat4: world -> (s, t) of the reflection textures",
     "uModelViewProjectionMatrix": "mat4: world -> clip space of the camera",
@@ -317,6 +319,8 @@ def frame_bindings(m, P, inputs, spec: ShaderSpec) -> dict:
     b = study_bindings(m, P, inputs, spec.engine)
     if "slopeMoments" in mod.bound_names or any(s == "slopeMoments" for _, s in spec.bindings):
         b["slopeMoments"] = frame_moments(m, P)  # mipmapped: built for a shader that reads it
+    if "heightMap" in mod.bound_names or any(s == "heightMap" for _, s in spec.bindings):
+        b["heightMap"] = frame_heights(m, P)
     for name, study in spec.bindings:
         if study in STUDY_INPUTS and study not in b and name in mod.bound_names:
             raise ValueError(

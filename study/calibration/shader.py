@@ -175,9 +175,11 @@ class Shader:
     # ---- the export -----------------------------------------------------------------------
     def texture_record(self, exp, inputs) -> dict:
         """What the constants assume of the textures (``study.export.textures``): a shader of
-        the space with ``LEAN_NORMALS`` ships its slope moments too."""
-        lean = not self.is_user and "LEAN_NORMALS" in get_variant(self.name).defines
-        return texture_record(exp, inputs, self.user, lean)
+        the space with ``LEAN_NORMALS`` ships its slope moments too, with ``PARALLAX_OFFSET``
+        its height map."""
+        defines = () if self.is_user else get_variant(self.name).defines
+        lean, heights = "LEAN_NORMALS" in defines, "PARALLAX_OFFSET" in defines
+        return texture_record(exp, inputs, self.user, lean, heights)
 
     @property
     def normal_map(self):

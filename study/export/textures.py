@@ -15,7 +15,9 @@ these files (:func:`with_exported_textures`).
 ``normal_map.exr`` (S x S: ``0.5 n + 0.5``, +y up in world space before the shader's own
 swizzle), ``textures.json`` (the record of :func:`texture_record`); for a shader of the space
 with ``normals = "lean"`` also ``slope_moments.exr`` (S x S RGBA: the normal map's slopes and
-their squares, ``shaders_port.pipeline.moments``; mipmapped, sampled trilinearly).
+their squares, ``shaders_port.pipeline.normal_maps``; mipmapped, sampled trilinearly), with
+``parallax = "offset"`` ``height_map.exr`` (S x S, R: the normal map's wave heights in tile
+lengths; bilinear, repeat).
 
 A user's shader may read more textures the engine uploads (``shaders_port.spirv.
 engine_inputs``, :func:`shader_textures`): each is written beside them, exactly the texels the
@@ -40,7 +42,7 @@ from pathlib import Path
 
 import numpy as np
 
-from shaders_port.pipeline.moments import slope_moments
+from shaders_port.pipeline.normal_maps import height_map, slope_moments
 from shaders_port.spirv.engine_inputs import (
     dudv_map,
     read_normal_map,
@@ -150,14 +152,15 @@ def _shipped_texels(inp: str, inputs, normal_map=None) -> np.ndarray:
     return np.asarray(inputs.cubemap, np.float32)  # reflectionTexture
 
 
-def texture_record(exp, inputs, shader=None, lean: bool = False) -> dict:
+def texture_record(exp, inputs, shader=None, lean: bool = False, heights: bool = False) -> dict:
     """What the constants assume of the textures (JSON-able): the LUT's law, index of
     refraction, size, layout and sampling; the normal map's encoding, size, tiling and
     sampling; for a user's shader ``shader`` (``UserShader``), every other texture it reads
     (:func:`shader_textures`): a shipped one's files, encoding, size, filter, wrap, mipmaps
     and the shader's names of it (``bound_as``), under ``shipped``; the engine's render
     targets it reads under ``rendered`` (input -> ``{"bound_as", "what"}``); ``lean``: the
-    shader reads ``slopeMoments`` (``LEAN_NORMALS``), recorded under ``slope_moments``."""
+    shader reads ``slopeMoments`` (``LEAN_NORMALS``), recorded under ``slope_moments``;
+    ``heights``: it reads ``heightMap`` (``PARALLAX_OFFSET``), recorded under ``height_map``."""
     record = _study_record(exp, inputs)
     if lean:
         record["slope_moments"] = {
@@ -171,6 +174,18 @@ def texture_record(exp, inputs, shader=None, lean: bool = False) -> dict:
             "filter": "linear",
             "wrap": "repeat",
             "mipmaps": True,
+        }
+    if heights:
+        record["height_map"] = {
+            "file": "height_map.exr",
+            "bound_as": ["heightMap"],
+            "encoding": "R = the height of the waves whose slopes normal_map.exr holds, in tile "
+            "lengths (world units / tile), mean 0; G = B = 0; linear floats",
+            "size": int(inputs.normal_map.shape[0]),
+            "sampling": "bilinear, repeat; row 0 of the file is t = 0 (upload in file order)",
+            "filter": "linear",
+            "wrap": "repeat",
+            "mipmaps": False,
         }
     if shader is not None:
         reads = shader_textures(shader)
@@ -260,6 +275,11 @@ def write_textures(record: dict, inputs, shaders_dir: Path, normal_map=None) -> 
     if "slope_moments" in record:
         rec = record["slope_moments"]
         write_exr(folder / rec["file"], slope_moments(inputs.normal_map), {"texture": rec})
+    if "height_map" in record:
+        rec = record["height_map"]
+        h = height_map(inputs.normal_map)
+        rgb = np.stack([h, np.zeros_like(h), np.zeros_like(h)], -1)
+        write_exr(folder / rec["file"], rgb, {"texture": rec})
     for inp, rec in record.get("shipped", {}).items():
         a = _shipped_texels(inp, inputs, normal_map)
         files = rec["files"] if "files" in rec else [rec["file"]]
@@ -321,6 +341,7 @@ def expects_lines(record: dict | None) -> list[str]:
         f"* `normalMap` = `{nm['file']}` ({nm['size']} x {nm['size']}): {nm['encoding']}; "
         f"{nm['sampling']}; {nm['layers']} (tile {nm['tile']:g}).",
         *_moments_lines(record.get("slope_moments")),
+        *_moments_lines(record.get("height_map"), "heightMap"),
         *_shipped_lines(record.get("shipped", {})),
         f"* Every colour is {record['colour_space']}; world units, +y up, the water plane at "
         "y = 0.",
@@ -330,13 +351,14 @@ def expects_lines(record: dict | None) -> list[str]:
     ]
 
 
-def _moments_lines(rec: dict | None) -> list[str]:
-    """The bullet of ``slopeMoments`` (a LEAN shader's), or none."""
+def _moments_lines(rec: dict | None, name: str = "slopeMoments") -> list[str]:
+    """The bullet of a map derived from the normal map (``slopeMoments`` of a LEAN shader,
+    ``heightMap`` of a parallax one), or none."""
     if not rec:
         return []
     return [
-        f"* `slopeMoments` = `{rec['file']}` ({rec['size']} x {rec['size']}): {rec['encoding']}; "
-        f"{rec['sampling']}; read at the normal map's four coordinates."
+        f"* `{name}` = `{rec['file']}` ({rec['size']} x {rec['size']}): {rec['encoding']}; "
+        f"{rec['sampling']}; read at the normal map's coordinates."
     ]
 
 

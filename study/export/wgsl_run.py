@@ -29,7 +29,7 @@ from pathlib import Path
 import numpy as np
 
 from shaders_port.gl.renderer import MIPMAPPED, OPTIONAL_SAMPLERS, OPTIONAL_VEC3, SAMPLERS
-from shaders_port.pipeline.moments import slope_moments
+from shaders_port.pipeline.normal_maps import height_map, slope_moments
 from shaders_port.pipeline.texture import box_mip_chain
 from shaders_port.inputs import Constants, ShaderInputs, normal_matrix
 from shaders_port.variants import get_variant
@@ -144,6 +144,7 @@ def _texture_arrays(inputs: ShaderInputs) -> dict:
         "worldYComponentReflection": i.refl_world_y,
         "reflectionBottom": i.refl_texture,
         "slopeMoments": slope_moments(i.normal_map),  # mipmapped (MIPMAPPED)
+        "heightMap": height_map(i.normal_map),
     }
     out.update(
         {s: getattr(i, f) for s, f in OPTIONAL_SAMPLERS.items() if getattr(i, f) is not None}

@@ -247,12 +247,15 @@ def _search_lines(summary: dict) -> list[str]:
     fixed = ", ".join(f"{a} = {c}" for a, c in s.get("fix", {}).items()) or "none"
     if s["mode"] == "adaptive":
         rounds = ", ".join(f"{k} {v}" for k, v in s.get("rounds", {}).items())
+        # runs before the descent have no "descents"
+        descents = ", ".join(f"{k} {v}" for k, v in s.get("descents", {}).items()) or "none"
+        descents = f"; descent moves: {descents}" if "descents" in s else ""
         lines += [
             f"Search: adaptive. A quick screen fitted {s['screened']} points ("
             f"{s['shaders_screened']} shaders, some at several schedules; walk rounds per "
-            f"scene: {rounds}); the {s['points_in_full']} points nearest the screen's front were "
-            f"then measured in full, every constant refitted at full resolution "
-            f"({fmt(s['seconds'], 3)} s in all). Axes held: {fixed}.",
+            f"scene: {rounds}{descents}); the {s['points_in_full']} points "
+            f"nearest the screen's front were then measured in full, every constant refitted at "
+            f"full resolution ({fmt(s['seconds'], 3)} s in all). Axes held: {fixed}.",
             "",
         ]
     else:

@@ -10,8 +10,13 @@ screen resolution (``fit.resolution`` divided by ``tradeoff.screen_factor``) exc
    one clearly dominates (:func:`survivors`) and add their unseen neighbours, the lowest-FLIP
    survivors' first (:func:`best_first`); stop when a round adds none or
    ``tradeoff.max_shaders`` have been screened (the cut drops the worst survivors'
-   neighbours). A shader-LOD system's greedy walk along the front, with a noise margin; the
-   ``tradeoff.max_scheduled`` survivors with a raymarch closest to the front go on.
+   neighbours). A shader-LOD system's greedy walk along the front, with a noise margin. Then a
+   descent from the configuration the recommendation's rule picks among the screened ones (the
+   cheapest within ``tradeoff.tolerance`` of the lowest FLIP, :func:`descent_origin`): its
+   unseen one-axis neighbours, and again from the pick after them while it moves (at most
+   :data:`DESCENT_MOVES` moves), so a best shader more choices from the original than the cut
+   reaches is still found, and found where it costs least (:func:`descent_round`).
+   The ``tradeoff.max_scheduled`` survivors with a raymarch closest to the front go on.
 2. **Schedules**: every step schedule of ``tradeoff_jobs.schedules`` for each surviving
    configuration with a raymarch, warm-started from its screen fit; the dominated
    (configuration, schedule) points are dropped the same way, and of the rest the
@@ -143,6 +148,24 @@ def _try_add(out: list, c: dict) -> None:
         out.append(c)
 
 
+#: moves of the descent after the walk (each screens the lowest's unseen neighbours)
+DESCENT_MOVES = 4
+
+
+def descent_origin(points: list[dict], tol: float, cost: str = "fetches_mean") -> dict:
+    """Of ``points`` (screen points), the cheapest whose FLIP is within the fraction ``tol`` of
+    the lowest (the recommendation's rule): where the descent goes on from."""
+    low = best_first(points)[0]["flip"]
+    near = [r for r in points if r["flip"] <= low * (1 + tol) and r.get(cost) is not None]
+    return min(near, key=lambda r: (r[cost], r["flip"])) if near else best_first(points)[0]
+
+
+def descent_round(points: list[dict], seen: list[dict], fix: dict | None, tol: float) -> list:
+    """The unseen one-axis neighbours of :func:`descent_origin` of ``points`` (screen points
+    with ``choices``): the descent's next configurations."""
+    return next_round([descent_origin(points, tol)["choices"]], seen, fix)
+
+
 def best_first(points: list[dict]) -> list[dict]:
     """``points`` by FLIP, lowest first: the walk expands the best shaders' neighbours first, so
     the ``tradeoff.max_shaders`` cut drops the neighbours of the worst."""
@@ -231,6 +254,7 @@ class Search:
         self.start = [constants_from_experiment(e).replace(**SEED_SCHEDULE).to_dict() for e in exps]
         self.screen: list[dict] = []
         self.rounds: dict[str, int] = {}
+        self.descents: dict[str, int] = {}
 
     def _run(self, jobs: list, label: str) -> list[dict]:
         if not jobs:
@@ -296,7 +320,29 @@ class Search:
             if self.variants:
                 break
             todo = next_round([r["choices"] for r in front], seen, self.fix)
+        if not self.variants:
+            self._descend(i, seen)
         return to_schedule(self.ok(i), z, exp.tradeoff.max_scheduled)
+
+    def _descend(self, i: int, seen: list[dict]) -> None:
+        """The descent after the walk on experiment ``i`` (module doc): screens the unseen
+        neighbours of the recommendation rule's pick until the pick stays."""
+        exp = self.exps[i]
+        tol = exp.tradeoff.tolerance
+        for k in range(1, DESCENT_MOVES + 1):
+            before = descent_origin(self.ok(i), tol)["variant"]
+            todo = descent_round(self.ok(i), seen, self.fix, tol)
+            if not todo:
+                break
+            jobs = []
+            for c in todo:
+                v = _space.name_of(c)
+                jobs.append(self._job(i, v, original_schedule(v), self.start[i]))
+            self._run(jobs, f"tradeoff: {exp.name} descent {k}")
+            seen += todo
+            self.descents[exp.name] = k
+            if descent_origin(self.ok(i), tol)["variant"] == before:
+                break
 
     def alone(self, i: int) -> list[dict]:
         """The screen points of each source's technique alone (``space.ALONE``) at its

@@ -316,6 +316,7 @@ def _search_summary(mode: str, searcher, rows: list, fix: dict, seconds: float) 
         out["screened"] = len(searcher.screen)
         out["shaders_screened"] = len({r["variant"] for r in searcher.screen})
         out["rounds"] = searcher.rounds
+        out["descents"] = searcher.descents
     return out
 
 

@@ -240,7 +240,7 @@ def port_normals(inputs, layers: int = 4, slopes: bool = False, normals: str | N
     from shaders_port.ports.normals import normal_map_block
 
     m = backend_types("llvm")
-    from shaders_port.pipeline.moments import with_lean
+    from shaders_port.pipeline.normal_maps import with_lean
 
     normals = normals or ("slopes" if slopes else "average")
     P = prepare(inputs, m)

@@ -33,7 +33,7 @@ import numpy as np
 
 from shaders_port import ShaderInputs
 from shaders_port.inputs import normal_matrix, perspective_view_proj
-from shaders_port.pipeline.moments import slope_moments
+from shaders_port.pipeline.normal_maps import height_map, slope_moments
 from shaders_port.pipeline.texture import box_mip_chain
 from shaders_port.variants import get_variant
 
@@ -145,6 +145,8 @@ def viewer_data(inputs: ShaderInputs, vert: str, frag: str, frag_default: str, i
         chain = box_mip_chain(slope_moments(i.normal_map))
         textures["slopeMoments"] = {**_texture(chain[0], "trilinear", True),
                                     "levels": [_b64(lv) for lv in chain[1:]]}  # fmt: skip
+    if re.search(r"\bheightMap\b", frag):  # PARALLAX_OFFSET
+        textures["heightMap"] = _texture(height_map(i.normal_map), "linear", True)
     textures["reflectionTexture"] = {"size": int(i.cubemap.shape[1]), "data": _b64(i.cubemap)}
     if i.box_cubemap is not None:  # the local cube map of reflection = box
         textures["boxReflectionTexture"] = {

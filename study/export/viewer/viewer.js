@@ -184,7 +184,7 @@
   const SAMPLERS = {
     refractionTexture: 0, worldYComponent: 1, normalMap: 2, reflectionTexture: 3, fresnelLookup: 4,
     worldYComponentReflection: 5, reflectionBottom: 6, sceneColor: 7, sceneDepth: 8, reflection_sampler: 9,
-    boxReflectionTexture: 10, slopeMoments: 11,
+    boxReflectionTexture: 10, slopeMoments: 11, heightMap: 12,
   };
   // the samplers that read a cube map
   const CUBES = new Set(["reflectionTexture", "boxReflectionTexture"]);

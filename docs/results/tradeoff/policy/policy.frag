@@ -1,5 +1,5 @@
 #version 330 core
-// A level-of-detail policy of 5 bands by footprint (study.export.policy_shader); band k's names carry the prefix b<k>_.
+// A level-of-detail policy of 5 bands by distance (study.export.policy_shader); band k's names carry the prefix b<k>_.
 uniform mat4 uModelViewProjectionMatrixInverse;
 uniform vec2 screenSize;
 uniform vec3 viewpos;
@@ -20,31 +20,37 @@ uniform sampler2D fresnelLookup;
 uniform vec3 lightcolor;
 in vec3 varyingVecWorldPosition;
 in vec3 varyingVecLight;
+uniform sampler2D heightMap;
 uniform samplerCube boxReflectionTexture;
 uniform vec3 boxMin;
 uniform vec3 boxMax;
 uniform vec3 boxCapturePosition;
 vec4 policyColour;
-// ---- band 0: water_refraction_beer_disc_walls (2.5, 0.75, 10) ----
+// ---- band 0: water_refraction_beer_disc_walls_slopes (2.5, 0.75, 10) ----
 const float b0_ATTENUATION_DISTANCE = 7.5;
 const float b0_STEPS_GRAZING = 2.5;
 const float b0_STEPS_STEEP = 0.75;
 const int b0_LOOP_CAP = 10;
 const float b0_SPECULAR_STRENGTH = 2.0;
 const float b0_SPECULAR_EXPONENT = 256.0;
-const float b0_ABSORPTION_R = 0.26753584;
-const float b0_ABSORPTION_G = 0.08287824;
-const float b0_ABSORPTION_B = 0.06965262;
+const float b0_ABSORPTION_R = 0.263941;
+const float b0_ABSORPTION_G = 0.08396034;
+const float b0_ABSORPTION_B = 0.06973038;
 const float b0_SPECULAR_ROUGHNESS = 0.2;
 const float b0_SUN_DISC_RADIUS = 5.0;
 const float b0_SUN_DISC_SOFTNESS = 0.05;
 const float b0_SUN_DISC_RADIANCE = 8.0;
 const int b0_REFINE_STEPS = 3;
 const float b0_REFLECT_DISTORTION = 0.1;
-const float b0_BumptexMult = 0.97741526;
+const float b0_BumptexMult = 0.98839724;
 const float b0_refrCoeff = 0.7501876;
-const vec4 b0_waterColor = vec4(0.0, 0.05807139, 0.16096067, 1.0);
+const vec4 b0_waterColor = vec4(0.0, 0.060772114, 0.1613289, 1.0);
 const vec4 b0_reflectColor = vec4(1.0, 1.0, 1.0, 1.0);
+vec2 b0_layerSlope(vec3 texel)
+{
+    vec3 n = 2.0 * texel - 1.0;
+    return - n . xz / max(n . y, 0.05);
+}
 void b0_main(void)
 {
 
@@ -70,6 +76,7 @@ void b0_main(void)
 
 
 
+    vec2 parallaxShift = vec2(0.0);
 
 
 
@@ -90,10 +97,6 @@ void b0_main(void)
 
 
 
-    vec3 vBumpTexA = vec3(texture(normalMap, vTexCoord0 . xy));
-    vec3 vBumpTexB = vec3(texture(normalMap, vTexCoord1 . xy));
-    vec3 vBumpTexC = vec3(texture(normalMap, vTexCoord2 . xy));
-    vec3 vBumpTexD = vec3(texture(normalMap, vTexCoord3 . xy));
 
 
 
@@ -102,8 +105,29 @@ void b0_main(void)
 
 
 
-    vec3 vBumpTex = normalize(2.0 *
-        (vBumpTexA + vBumpTexB + vBumpTexC + vBumpTexD)- 4.0);
+
+
+
+
+
+
+
+
+
+    vec3 vBumpTexA = vec3(texture(normalMap, vTexCoord0 . xy + parallaxShift));
+    vec3 vBumpTexB = vec3(texture(normalMap, vTexCoord1 . xy + parallaxShift));
+    vec3 vBumpTexC = vec3(texture(normalMap, vTexCoord2 . xy + parallaxShift));
+    vec3 vBumpTexD = vec3(texture(normalMap, vTexCoord3 . xy + parallaxShift));
+
+
+
+    vec2 meanSlope = 0.25 *(b0_layerSlope(vBumpTexA)+ b0_layerSlope(vBumpTexB)
+        + b0_layerSlope(vBumpTexC)+ b0_layerSlope(vBumpTexD));
+    vec3 vBumpTex = normalize(vec3(- meanSlope . x, 1.0, - meanSlope . y));
+
+
+
+
 
 
 
@@ -362,25 +386,25 @@ void b0_main(void)
 
 }
 
-// ---- band 1: water_refraction_box_beer_walls (2.5, 0.75, 10) ----
+// ---- band 1: water_refraction_beer_disc_walls_parallax (5, 1.5, 20) ----
 const float b1_ATTENUATION_DISTANCE = 7.5;
-const float b1_STEPS_GRAZING = 2.5;
-const float b1_STEPS_STEEP = 0.75;
-const int b1_LOOP_CAP = 10;
-const float b1_SPECULAR_STRENGTH = 11.13952;
-const float b1_SPECULAR_EXPONENT = 339.90106;
-const float b1_ABSORPTION_R = 0.2898555;
-const float b1_ABSORPTION_G = 0.11042987;
-const float b1_ABSORPTION_B = 0.09950569;
+const float b1_STEPS_GRAZING = 5.0;
+const float b1_STEPS_STEEP = 1.5;
+const int b1_LOOP_CAP = 20;
+const float b1_SPECULAR_STRENGTH = 2.0;
+const float b1_SPECULAR_EXPONENT = 256.0;
+const float b1_ABSORPTION_R = 0.24425063;
+const float b1_ABSORPTION_G = 0.06889099;
+const float b1_ABSORPTION_B = 0.05920277;
 const float b1_SPECULAR_ROUGHNESS = 0.2;
 const float b1_SUN_DISC_RADIUS = 5.0;
 const float b1_SUN_DISC_SOFTNESS = 0.05;
 const float b1_SUN_DISC_RADIANCE = 8.0;
 const int b1_REFINE_STEPS = 3;
 const float b1_REFLECT_DISTORTION = 0.1;
-const float b1_BumptexMult = 1.008993;
+const float b1_BumptexMult = 1.0040624;
 const float b1_refrCoeff = 0.7501876;
-const vec4 b1_waterColor = vec4(0.0044424813, 0.11164712, 0.24658588, 1.0);
+const vec4 b1_waterColor = vec4(0.0, 0.043466732, 0.14216082, 1.0);
 const vec4 b1_reflectColor = vec4(1.0, 1.0, 1.0, 1.0);
 void b1_main(void)
 {
@@ -400,6 +424,12 @@ void b1_main(void)
 
 
 
+    float waveHeight = 0.25 *(texture(heightMap, vTexCoord0 . xy). r
+        + texture(heightMap, vTexCoord1 . xy). r
+        + texture(heightMap, vTexCoord2 . xy). r
+        + texture(heightMap, vTexCoord3 . xy). r);
+
+    vec2 parallaxShift = waveHeight / max(vEye . y, 0.05)* vEye . xz;
 
 
 
@@ -427,10 +457,22 @@ void b1_main(void)
 
 
 
-    vec3 vBumpTexA = vec3(texture(normalMap, vTexCoord0 . xy));
-    vec3 vBumpTexB = vec3(texture(normalMap, vTexCoord1 . xy));
-    vec3 vBumpTexC = vec3(texture(normalMap, vTexCoord2 . xy));
-    vec3 vBumpTexD = vec3(texture(normalMap, vTexCoord3 . xy));
+
+
+
+
+
+
+
+
+
+
+
+
+    vec3 vBumpTexA = vec3(texture(normalMap, vTexCoord0 . xy + parallaxShift));
+    vec3 vBumpTexB = vec3(texture(normalMap, vTexCoord1 . xy + parallaxShift));
+    vec3 vBumpTexC = vec3(texture(normalMap, vTexCoord2 . xy + parallaxShift));
+    vec3 vBumpTexD = vec3(texture(normalMap, vTexCoord3 . xy + parallaxShift));
 
 
 
@@ -574,11 +616,6 @@ void b1_main(void)
 
 
 
-    vec3 boxPlane = mix(boxMin, boxMax, step(0.0, R));
-    vec3 boxT = abs(boxPlane - varyingVecWorldPosition)/ max(abs(R), vec3(1e-6));
-    vec3 boxHit = varyingVecWorldPosition + min(boxT . x, boxT . z)* R;
-    vec3 boxLookup = boxHit . y < boxMax . y ? boxHit - boxCapturePosition : R;
-    vec4 vReflection = texture(boxReflectionTexture, normalize(boxLookup)* vec3(1, - 1, 1))* b1_reflectColor;
 
 
 
@@ -630,20 +667,7 @@ void b1_main(void)
 
 
 
-
-
-
-
-
-
-
-
-
-
-
-
-
-
+    vec4 vReflection = texture(reflectionTexture, normalize(R)* vec3(1, - 1, 1))* b1_reflectColor;
 
 
 
@@ -678,9 +702,27 @@ void b1_main(void)
 
 
 
-    vec4 specular = vec4(pow(clamp(dot(rLight, vEye), 0, 1), b1_SPECULAR_EXPONENT)* lightcolor, 1);
 
-    vReflection += specular * b1_SPECULAR_STRENGTH;
+
+    float outerCos = cos(radians(b1_SUN_DISC_RADIUS *(1.0 + b1_SUN_DISC_SOFTNESS)));
+    float innerCos = cos(radians(b1_SUN_DISC_RADIUS *(1.0 - b1_SUN_DISC_SOFTNESS)));
+    vec4 specular = vec4(smoothstep(outerCos, innerCos, dot(rLight, vEye))* lightcolor, 1);
+    vReflection += specular * b1_SUN_DISC_RADIANCE;
+
+
+
+
+
+
+
+
+
+
+
+
+
+
+
 
 
 
@@ -699,26 +741,31 @@ void b1_main(void)
 
 }
 
-// ---- band 2: water_refraction_beer_disc_walls (2.5, 0.75, 10) ----
+// ---- band 2: water_refraction_beer_disc_walls_slopes (2.5, 0.75, 10) ----
 const float b2_ATTENUATION_DISTANCE = 7.5;
 const float b2_STEPS_GRAZING = 2.5;
 const float b2_STEPS_STEEP = 0.75;
 const int b2_LOOP_CAP = 10;
 const float b2_SPECULAR_STRENGTH = 2.0;
 const float b2_SPECULAR_EXPONENT = 256.0;
-const float b2_ABSORPTION_R = 0.26753584;
-const float b2_ABSORPTION_G = 0.08287824;
-const float b2_ABSORPTION_B = 0.06965262;
+const float b2_ABSORPTION_R = 0.263941;
+const float b2_ABSORPTION_G = 0.08396034;
+const float b2_ABSORPTION_B = 0.06973038;
 const float b2_SPECULAR_ROUGHNESS = 0.2;
 const float b2_SUN_DISC_RADIUS = 5.0;
 const float b2_SUN_DISC_SOFTNESS = 0.05;
 const float b2_SUN_DISC_RADIANCE = 8.0;
 const int b2_REFINE_STEPS = 3;
 const float b2_REFLECT_DISTORTION = 0.1;
-const float b2_BumptexMult = 0.97741526;
+const float b2_BumptexMult = 0.98839724;
 const float b2_refrCoeff = 0.7501876;
-const vec4 b2_waterColor = vec4(0.0, 0.05807139, 0.16096067, 1.0);
+const vec4 b2_waterColor = vec4(0.0, 0.060772114, 0.1613289, 1.0);
 const vec4 b2_reflectColor = vec4(1.0, 1.0, 1.0, 1.0);
+vec2 b2_layerSlope(vec3 texel)
+{
+    vec3 n = 2.0 * texel - 1.0;
+    return - n . xz / max(n . y, 0.05);
+}
 void b2_main(void)
 {
 
@@ -744,6 +791,7 @@ void b2_main(void)
 
 
 
+    vec2 parallaxShift = vec2(0.0);
 
 
 
@@ -764,10 +812,6 @@ void b2_main(void)
 
 
 
-    vec3 vBumpTexA = vec3(texture(normalMap, vTexCoord0 . xy));
-    vec3 vBumpTexB = vec3(texture(normalMap, vTexCoord1 . xy));
-    vec3 vBumpTexC = vec3(texture(normalMap, vTexCoord2 . xy));
-    vec3 vBumpTexD = vec3(texture(normalMap, vTexCoord3 . xy));
 
 
 
@@ -776,8 +820,29 @@ void b2_main(void)
 
 
 
-    vec3 vBumpTex = normalize(2.0 *
-        (vBumpTexA + vBumpTexB + vBumpTexC + vBumpTexD)- 4.0);
+
+
+
+
+
+
+
+
+
+    vec3 vBumpTexA = vec3(texture(normalMap, vTexCoord0 . xy + parallaxShift));
+    vec3 vBumpTexB = vec3(texture(normalMap, vTexCoord1 . xy + parallaxShift));
+    vec3 vBumpTexC = vec3(texture(normalMap, vTexCoord2 . xy + parallaxShift));
+    vec3 vBumpTexD = vec3(texture(normalMap, vTexCoord3 . xy + parallaxShift));
+
+
+
+    vec2 meanSlope = 0.25 *(b2_layerSlope(vBumpTexA)+ b2_layerSlope(vBumpTexB)
+        + b2_layerSlope(vBumpTexC)+ b2_layerSlope(vBumpTexD));
+    vec3 vBumpTex = normalize(vec3(- meanSlope . x, 1.0, - meanSlope . y));
+
+
+
+
 
 
 
@@ -1036,25 +1101,25 @@ void b2_main(void)
 
 }
 
-// ---- band 3: water_refraction_box_beer (2.5, 0.75, 10) ----
+// ---- band 3: water_refraction_box_beer_disc_walls (2.5, 0.75, 10) ----
 const float b3_ATTENUATION_DISTANCE = 7.5;
 const float b3_STEPS_GRAZING = 2.5;
 const float b3_STEPS_STEEP = 0.75;
 const int b3_LOOP_CAP = 10;
-const float b3_SPECULAR_STRENGTH = 11.251515;
-const float b3_SPECULAR_EXPONENT = 356.48334;
-const float b3_ABSORPTION_R = 0.35159525;
-const float b3_ABSORPTION_G = 0.122975655;
-const float b3_ABSORPTION_B = 0.08344412;
+const float b3_SPECULAR_STRENGTH = 2.0;
+const float b3_SPECULAR_EXPONENT = 256.0;
+const float b3_ABSORPTION_R = 0.29199016;
+const float b3_ABSORPTION_G = 0.105950974;
+const float b3_ABSORPTION_B = 0.096320346;
 const float b3_SPECULAR_ROUGHNESS = 0.2;
 const float b3_SUN_DISC_RADIUS = 5.0;
 const float b3_SUN_DISC_SOFTNESS = 0.05;
 const float b3_SUN_DISC_RADIANCE = 8.0;
 const int b3_REFINE_STEPS = 3;
 const float b3_REFLECT_DISTORTION = 0.1;
-const float b3_BumptexMult = 0.99350184;
+const float b3_BumptexMult = 1.0064104;
 const float b3_refrCoeff = 0.7501876;
-const vec4 b3_waterColor = vec4(0.009443868, 0.095359765, 0.1384637, 1.0);
+const vec4 b3_waterColor = vec4(0.011067333, 0.11872768, 0.25176466, 1.0);
 const vec4 b3_reflectColor = vec4(1.0, 1.0, 1.0, 1.0);
 void b3_main(void)
 {
@@ -1081,6 +1146,7 @@ void b3_main(void)
 
 
 
+    vec2 parallaxShift = vec2(0.0);
 
 
 
@@ -1101,10 +1167,27 @@ void b3_main(void)
 
 
 
-    vec3 vBumpTexA = vec3(texture(normalMap, vTexCoord0 . xy));
-    vec3 vBumpTexB = vec3(texture(normalMap, vTexCoord1 . xy));
-    vec3 vBumpTexC = vec3(texture(normalMap, vTexCoord2 . xy));
-    vec3 vBumpTexD = vec3(texture(normalMap, vTexCoord3 . xy));
+
+
+
+
+
+
+
+
+
+
+
+
+
+
+
+
+
+    vec3 vBumpTexA = vec3(texture(normalMap, vTexCoord0 . xy + parallaxShift));
+    vec3 vBumpTexB = vec3(texture(normalMap, vTexCoord1 . xy + parallaxShift));
+    vec3 vBumpTexC = vec3(texture(normalMap, vTexCoord2 . xy + parallaxShift));
+    vec3 vBumpTexD = vec3(texture(normalMap, vTexCoord3 . xy + parallaxShift));
 
 
 
@@ -1217,10 +1300,10 @@ void b3_main(void)
 
 
 
-
-
-
-
+    if(depth > varyingVecWorldPosition . y)
+    {
+        vRefraction = b3_waterColor;
+    }
 
 
 
@@ -1325,24 +1408,6 @@ void b3_main(void)
 
 
 
-
-
-
-
-
-
-
-
-
-
-
-
-
-
-
-
-
-
     vec3 rLight = dot(2 * vBumpTex, vLight)* vBumpTex - vLight;
 
 
@@ -1352,9 +1417,27 @@ void b3_main(void)
 
 
 
-    vec4 specular = vec4(pow(clamp(dot(rLight, vEye), 0, 1), b3_SPECULAR_EXPONENT)* lightcolor, 1);
 
-    vReflection += specular * b3_SPECULAR_STRENGTH;
+
+    float outerCos = cos(radians(b3_SUN_DISC_RADIUS *(1.0 + b3_SUN_DISC_SOFTNESS)));
+    float innerCos = cos(radians(b3_SUN_DISC_RADIUS *(1.0 - b3_SUN_DISC_SOFTNESS)));
+    vec4 specular = vec4(smoothstep(outerCos, innerCos, dot(rLight, vEye))* lightcolor, 1);
+    vReflection += specular * b3_SUN_DISC_RADIANCE;
+
+
+
+
+
+
+
+
+
+
+
+
+
+
+
 
 
 
@@ -1373,25 +1456,25 @@ void b3_main(void)
 
 }
 
-// ---- band 4: water_refraction_box_beer_walls (2.5, 0.75, 10) ----
+// ---- band 4: water_refraction_box_beer_disc_walls (5, 1.5, 20) ----
 const float b4_ATTENUATION_DISTANCE = 7.5;
-const float b4_STEPS_GRAZING = 2.5;
-const float b4_STEPS_STEEP = 0.75;
-const int b4_LOOP_CAP = 10;
-const float b4_SPECULAR_STRENGTH = 11.13952;
-const float b4_SPECULAR_EXPONENT = 339.90106;
-const float b4_ABSORPTION_R = 0.2898555;
-const float b4_ABSORPTION_G = 0.11042987;
-const float b4_ABSORPTION_B = 0.09950569;
+const float b4_STEPS_GRAZING = 5.0;
+const float b4_STEPS_STEEP = 1.5;
+const int b4_LOOP_CAP = 20;
+const float b4_SPECULAR_STRENGTH = 2.0;
+const float b4_SPECULAR_EXPONENT = 256.0;
+const float b4_ABSORPTION_R = 0.27812767;
+const float b4_ABSORPTION_G = 0.10063275;
+const float b4_ABSORPTION_B = 0.08921758;
 const float b4_SPECULAR_ROUGHNESS = 0.2;
 const float b4_SUN_DISC_RADIUS = 5.0;
 const float b4_SUN_DISC_SOFTNESS = 0.05;
 const float b4_SUN_DISC_RADIANCE = 8.0;
 const int b4_REFINE_STEPS = 3;
 const float b4_REFLECT_DISTORTION = 0.1;
-const float b4_BumptexMult = 1.008993;
+const float b4_BumptexMult = 1.0044234;
 const float b4_refrCoeff = 0.7501876;
-const vec4 b4_waterColor = vec4(0.0044424813, 0.11164712, 0.24658588, 1.0);
+const vec4 b4_waterColor = vec4(0.0068868212, 0.10838335, 0.23391381, 1.0);
 const vec4 b4_reflectColor = vec4(1.0, 1.0, 1.0, 1.0);
 void b4_main(void)
 {
@@ -1418,6 +1501,7 @@ void b4_main(void)
 
 
 
+    vec2 parallaxShift = vec2(0.0);
 
 
 
@@ -1438,10 +1522,27 @@ void b4_main(void)
 
 
 
-    vec3 vBumpTexA = vec3(texture(normalMap, vTexCoord0 . xy));
-    vec3 vBumpTexB = vec3(texture(normalMap, vTexCoord1 . xy));
-    vec3 vBumpTexC = vec3(texture(normalMap, vTexCoord2 . xy));
-    vec3 vBumpTexD = vec3(texture(normalMap, vTexCoord3 . xy));
+
+
+
+
+
+
+
+
+
+
+
+
+
+
+
+
+
+    vec3 vBumpTexA = vec3(texture(normalMap, vTexCoord0 . xy + parallaxShift));
+    vec3 vBumpTexB = vec3(texture(normalMap, vTexCoord1 . xy + parallaxShift));
+    vec3 vBumpTexC = vec3(texture(normalMap, vTexCoord2 . xy + parallaxShift));
+    vec3 vBumpTexD = vec3(texture(normalMap, vTexCoord3 . xy + parallaxShift));
 
 
 
@@ -1662,24 +1763,6 @@ void b4_main(void)
 
 
 
-
-
-
-
-
-
-
-
-
-
-
-
-
-
-
-
-
-
     vec3 rLight = dot(2 * vBumpTex, vLight)* vBumpTex - vLight;
 
 
@@ -1689,9 +1772,27 @@ void b4_main(void)
 
 
 
-    vec4 specular = vec4(pow(clamp(dot(rLight, vEye), 0, 1), b4_SPECULAR_EXPONENT)* lightcolor, 1);
 
-    vReflection += specular * b4_SPECULAR_STRENGTH;
+
+    float outerCos = cos(radians(b4_SUN_DISC_RADIUS *(1.0 + b4_SUN_DISC_SOFTNESS)));
+    float innerCos = cos(radians(b4_SUN_DISC_RADIUS *(1.0 - b4_SUN_DISC_SOFTNESS)));
+    vec4 specular = vec4(smoothstep(outerCos, innerCos, dot(rLight, vEye))* lightcolor, 1);
+    vReflection += specular * b4_SUN_DISC_RADIANCE;
+
+
+
+
+
+
+
+
+
+
+
+
+
+
+
 
 
 
@@ -1711,24 +1812,14 @@ void b4_main(void)
 }
 
 // ---- the policy ----
-const float POLICY_BOUND_0 = 21.189120107470465;
-const float POLICY_BOUND_1 = 42.670028866376796;
-const float POLICY_BOUND_2 = 106.50768926340132;
-const float POLICY_BOUND_3 = 153.31830618810596;
-const float POLICY_MARGIN = 0.0015;
+const float POLICY_BOUND_0 = 5.532722070518892;
+const float POLICY_BOUND_1 = 6.00681253955393;
+const float POLICY_BOUND_2 = 8.254304351606809;
+const float POLICY_BOUND_3 = 9.464718099663447;
+const float POLICY_MARGIN = 0.00036996442637705153;
 float policyMeasure()
 {
-    mat4 inv = uModelViewProjectionMatrixInverse;
-    vec4 h = inv * vec4(2.0 * gl_FragCoord.xy / screenSize - 1.0, 1.0, 1.0);
-    vec4 hx = inv[0] * (2.0 / screenSize.x);
-    vec4 hy = inv[1] * (2.0 / screenSize.y);
-    vec3 ray = h.xyz - h.w * viewpos;
-    vec3 rx = hx.xyz - hx.w * viewpos;
-    vec3 ry = hy.xyz - hy.w * viewpos;
-    float t = -viewpos.y / ray.y;
-    vec3 px = t * (rx - (rx.y / ray.y) * ray);
-    vec3 py = t * (ry - (ry.y / ray.y) * ray);
-    return length(cross(px, py)) * screenSize.x * screenSize.y;
+    return length(varyingVecEye);
 }
 void main(void)
 {

@@ -1,6 +1,7 @@
 #version 330 core
 #define BOX_REFLECTION
 #define WALL_FACES
+#define SUN_DISC_SPECULAR
 #define BEER_ATTENUATION
 // core-profile names replacing GLSL 1.20 built-ins (see shaders_port/README.md)
 uniform mat4 uModelViewProjectionMatrix;
@@ -24,17 +25,17 @@ out vec4 fragColor;
 //travelLength==ATTENUATION_DISTANCE => fully attenuated to waterColor
 const float ATTENUATION_DISTANCE = 7.5;
 //raycast steps per unit of depth at a grazing (R.y=0) and a steep (R.y=-1) refraction ray
-const float STEPS_GRAZING = 2.5;
-const float STEPS_STEEP = 0.75;
+const float STEPS_GRAZING = 5.0;
+const float STEPS_STEEP = 1.5;
 //maximum number of raycast steps
-const int LOOP_CAP = 10;
+const int LOOP_CAP = 20;
 //specular strength and Phong exponent
-const float SPECULAR_STRENGTH = 11.13952;
-const float SPECULAR_EXPONENT = 339.90106;
+const float SPECULAR_STRENGTH = 2.0;
+const float SPECULAR_EXPONENT = 256.0;
 //variant BEER_ATTENUATION: absorption coefficients per unit of travelLength (red, green, blue)
-const float ABSORPTION_R = 0.2898555;
-const float ABSORPTION_G = 0.11042987;
-const float ABSORPTION_B = 0.09950569;
+const float ABSORPTION_R = 0.27812767;
+const float ABSORPTION_G = 0.10063275;
+const float ABSORPTION_B = 0.08921758;
 //variant GGX_SPECULAR: GGX roughness (alpha) of the specular lobe
 const float SPECULAR_ROUGHNESS = 0.2;
 //variant SUN_DISC_SPECULAR: the sun's disc, its angular radius at half brightness (degrees), the
@@ -47,11 +48,11 @@ const int REFINE_STEPS = 3;
 //variant PLANAR_REFLECTION: scale of the reflection distortion (seed 002's "0.1 factor")
 const float REFLECT_DISTORTION = 0.1;
 //multiplier to enhance normal-perturbation. 0=max perturbation 1=normal perturbation
-uniform float BumptexMult = 1.008993;
+uniform float BumptexMult = 1.0044234;
 //refractioncoefficient = c_air/c_water
 uniform float refrCoeff = 0.7501876;
 //watercolor, for modulation of refracted color
-uniform vec4 waterColor = vec4(0.0044424813, 0.11164712, 0.24658588, 1.0);
+uniform vec4 waterColor = vec4(0.0068868212, 0.10838335, 0.23391381, 1.0);
 //color for modulation of reflected light
 uniform vec4 reflectColor = vec4(1.0, 1.0, 1.0, 1.0);
 // ---- END TUNABLE CONSTANTS ----
@@ -129,6 +130,12 @@ float unresolvedVariance(vec4 moments)
 const float DEG2_PER_RAD2 = 3282.8064;
 #endif
 
+#ifdef PARALLAX_OFFSET
+//variant: parallax offset mapping (Kaneko et al. 2001): heightMap holds the heights of the
+//normal map's waves over the water plane, in tile lengths (texture-coordinate units)
+uniform sampler2D heightMap;
+#endif
+
 void main (void)
 {
     // ---- [1] Eye and light vectors ----
@@ -138,6 +145,24 @@ void main (void)
     vec3 vLight = normalize(varyingVecLight);
 
     // ---- [2] Normal map: average four layers, bump scaling ----
+#ifdef PARALLAX_OFFSET
+    //variant: the eye ray meets the waves at their height over the water plane's point: the
+    //layers are read where it does, shifted along the view by the layers' mean height (one step)
+#if defined(ONE_NORMAL_LAYER)
+    float waveHeight = texture(heightMap, vTexCoord0.xy).r;
+#elif defined(TWO_NORMAL_LAYERS)
+    float waveHeight = 0.5 * (texture(heightMap, vTexCoord0.xy).r
+        + texture(heightMap, vTexCoord1.xy).r);
+#else
+    float waveHeight = 0.25 * (texture(heightMap, vTexCoord0.xy).r
+        + texture(heightMap, vTexCoord1.xy).r
+        + texture(heightMap, vTexCoord2.xy).r
+        + texture(heightMap, vTexCoord3.xy).r);
+#endif
+    vec2 parallaxShift = waveHeight / max(vEye.y, 0.05) * vEye.xz;
+#else
+    vec2 parallaxShift = vec2(0.0);
+#endif
 #if defined(LEAN_NORMALS)
     //variant: the layers' mean slope over the pixel's footprint (the normal of their mean
     //height there) and the variance of the mean slope the pixel does not resolve
@@ -160,12 +185,12 @@ void main (void)
     vec3 vBumpTex = normalize(vec3(-meanSlope.x, 1.0, -meanSlope.y));
 #elif defined(ONE_NORMAL_LAYER)
     //variant: one layer only, transform from [0,1] to [-1,1]
-    vec3 vBumpTexA = vec3(texture(normalMap, vTexCoord0.xy));
+    vec3 vBumpTexA = vec3(texture(normalMap, vTexCoord0.xy + parallaxShift));
     vec3 vBumpTex = normalize( 2.0 * vBumpTexA - 1.0);
 #elif defined(TWO_NORMAL_LAYERS)
     //variant: average the first two layers, transform from [0,1] to [-1,1]
-    vec3 vBumpTexA = vec3(texture(normalMap, vTexCoord0.xy));
-    vec3 vBumpTexB = vec3(texture(normalMap, vTexCoord1.xy));
+    vec3 vBumpTexA = vec3(texture(normalMap, vTexCoord0.xy + parallaxShift));
+    vec3 vBumpTexB = vec3(texture(normalMap, vTexCoord1.xy + parallaxShift));
 #ifdef SLOPE_NORMALS
     vec2 meanSlope = 0.5 * (layerSlope(vBumpTexA) + layerSlope(vBumpTexB));
     vec3 vBumpTex = normalize(vec3(-meanSlope.x, 1.0, -meanSlope.y));
@@ -174,10 +199,10 @@ void main (void)
 #endif
 #else
     //Sample normalmap at different locations
-    vec3 vBumpTexA = vec3(texture(normalMap, vTexCoord0.xy));
-    vec3 vBumpTexB = vec3(texture(normalMap, vTexCoord1.xy));
-    vec3 vBumpTexC = vec3(texture(normalMap, vTexCoord2.xy));
-    vec3 vBumpTexD = vec3(texture(normalMap, vTexCoord3.xy));
+    vec3 vBumpTexA = vec3(texture(normalMap, vTexCoord0.xy + parallaxShift));
+    vec3 vBumpTexB = vec3(texture(normalMap, vTexCoord1.xy + parallaxShift));
+    vec3 vBumpTexC = vec3(texture(normalMap, vTexCoord2.xy + parallaxShift));
+    vec3 vBumpTexD = vec3(texture(normalMap, vTexCoord3.xy + parallaxShift));
 
 #ifdef SLOPE_NORMALS
     //variant: the mean of the layers' slopes, the normal of their mean height

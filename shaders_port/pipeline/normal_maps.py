@@ -1,5 +1,14 @@
-"""The LEAN maps of the study's normal map (Olano and Baker, "LEAN Mapping", 2010), what a
-raycast shader compiled with ``LEAN_NORMALS`` reads as ``slopeMoments``.
+"""The maps a raycast shader derives from the study's normal map: its LEAN maps (Olano and
+Baker, "LEAN Mapping", 2010), what ``LEAN_NORMALS`` reads as ``slopeMoments``, and its heights,
+what ``PARALLAX_OFFSET`` reads as ``heightMap``.
+
+``heightMap`` (:func:`height_map`): R32F, the height of the surface whose slopes the normal
+map's texels hold (``s = -n.xz / max(n.y, SLOPE_MIN_Y)``), integrated over the periodic tile
+(least squares by FFT: the spectral solution of ``grad h = s``, mean 0), in texture units (tile
+lengths; world units divided by ``normal_tile``), so that a shader shifts its texture
+coordinates by it without knowing the tile; bilinear, repeat, no mipmaps. The mean of the
+layers' heights is the reference's surface over the water plane (``study.scene.geometry.Waves``
+builds the normal map from that surface's slopes).
 
 Each texel holds the slope ``(dh/dx, dh/dz)`` of its normal and the squares of its two
 components: ``(sx, sz, sx^2, sz^2)`` (RGBA32F, float32, no encoding), ``s = -n.xz /
@@ -40,6 +49,25 @@ def slope_moments(normal_map: np.ndarray) -> np.ndarray:
     y = np.maximum(n[..., 1], SLOPE_MIN_Y)
     sx, sz = -n[..., 0] / y, -n[..., 2] / y
     return np.stack([sx, sz, sx * sx, sz * sz], -1).astype(np.float32)
+
+
+def height_map(normal_map: np.ndarray) -> np.ndarray:
+    """(S, S) float32 ``heightMap`` of ``normal_map`` ((S, S, 3) encoded ``0.5 n + 0.5``): the
+    height whose gradient is nearest the texels' slopes, in tile lengths, mean 0 (module doc).
+    Rows are v (world z), columns u (world x), as the normal map's."""
+    n = 2.0 * np.asarray(normal_map, np.float64) - 1.0
+    if n.ndim != 3 or n.shape[2] != 3:
+        raise ValueError(f"normal_map must be (H, W, 3), got {n.shape}")
+    y = np.maximum(n[..., 1], SLOPE_MIN_Y)
+    sx, sz = -n[..., 0] / y, -n[..., 2] / y  # dh/du, dh/dv in tile lengths per tile length
+    h, w = sx.shape
+    kv = 2.0 * np.pi * np.fft.fftfreq(h, d=1.0 / h)[:, None]  # radians per tile length
+    ku = 2.0 * np.pi * np.fft.fftfreq(w, d=1.0 / w)[None, :]
+    k2 = ku * ku + kv * kv
+    k2[0, 0] = 1.0
+    spectrum = -1j * (ku * np.fft.fft2(sx) + kv * np.fft.fft2(sz)) / k2
+    spectrum[0, 0] = 0.0
+    return np.real(np.fft.ifft2(spectrum)).astype(np.float32)
 
 
 def moments_texture(m, normal_map: np.ndarray) -> Texture2D:
@@ -86,6 +114,28 @@ def frame_moments(m, P) -> Texture2D:
     if key not in _CACHE:
         _remember(key, moments_texture(m, P.inputs.normal_map))
     return _CACHE[key]
+
+
+def frame_heights(m, P) -> Texture2D:
+    """``heightMap`` of the prepared frame ``P``'s normal map (bilinear, repeat; cached per
+    upload)."""
+    key = ("heights", P.upload, m.__name__)
+    if key not in _CACHE:
+        _remember(key, Texture2D.from_numpy(m, height_map(P.inputs.normal_map), LINEAR, REPEAT))
+    return _CACHE[key]
+
+
+def with_maps(m, P, lean: bool = False, heights: bool = False):
+    """``P`` with what ``LEAN_NORMALS`` (``lean``: :func:`with_lean`) and ``PARALLAX_OFFSET``
+    (``heights``: ``heightMap``, :func:`frame_heights`) read."""
+    if lean:
+        P = with_lean(m, P)
+    if heights and P.heightMap is None:
+        key = ("with heights", P.upload, m.__name__, lean)
+        if key not in _CACHE:
+            _remember(key, dataclasses.replace(P, heightMap=frame_heights(m, P)))
+        P = _CACHE[key]
+    return P
 
 
 def with_lean(m, P):
