@@ -23,9 +23,19 @@ def test_round_trip_with_provenance(tmp_path):
     assert [f for f in os.listdir(tmp_path)] == ["a.exr"]  # no temporary file left
 
 
+def test_four_channels_round_trip(tmp_path):
+    rgba = np.random.default_rng(1).random((5, 7, 4)).astype(np.float32)
+    write_exr(tmp_path / "m.exr", rgba, {"what": "moments"})
+    back, prov, extra = read_exr(tmp_path / "m.exr")
+    np.testing.assert_array_equal(back, rgba)
+    assert prov == {"what": "moments"} and extra == {}
+
+
 def test_bad_shapes_and_files(tmp_path):
-    with pytest.raises(ValueError, match=r"expected an \(H, W, 3\) image"):
+    with pytest.raises(ValueError, match=r"expected an \(H, W, 3\) or \(H, W, 4\) image"):
         write_exr(tmp_path / "b.exr", np.zeros((4, 4)))
+    with pytest.raises(ValueError, match=r"got \(4, 4, 2\)"):
+        write_exr(tmp_path / "b.exr", np.zeros((4, 4, 2)))
     with pytest.raises(ValueError, match="channel 'x' has shape"):
         write_exr(tmp_path / "b.exr", np.zeros((4, 4, 3)), extra={"x": np.zeros((3, 4))})
     assert not (tmp_path / "b.exr").exists()
