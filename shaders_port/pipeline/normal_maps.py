@@ -2,17 +2,9 @@
 Baker, "LEAN Mapping", 2010), what ``LEAN_NORMALS`` reads as ``slopeMoments``, and its heights,
 what ``PARALLAX_OFFSET`` reads as ``heightMap``.
 
-``heightMap`` (:func:`height_map`): R32F, the height of the surface whose slopes the normal
-map's texels hold (``s = -n.xz / max(n.y, SLOPE_MIN_Y)``), integrated over the periodic tile
-(least squares by FFT: the spectral solution of ``grad h = s``, mean 0), in texture units (tile
-lengths; world units divided by ``normal_tile``), so that a shader shifts its texture
-coordinates by it without knowing the tile; bilinear, repeat, no mipmaps. The mean of the
-layers' heights is the reference's surface over the water plane (``study.scene.geometry.Waves``
-builds the normal map from that surface's slopes).
-
-Each texel holds the slope ``(dh/dx, dh/dz)`` of its normal and the squares of its two
-components: ``(sx, sz, sx^2, sz^2)`` (RGBA32F, float32, no encoding), ``s = -n.xz /
-max(n.y, SLOPE_MIN_Y)`` of the decoded normal ``n = 2 texel - 1`` (the slope
+``slopeMoments``: each texel holds the slope ``(dh/dx, dh/dz)`` of its normal and the squares
+of its two components: ``(sx, sz, sx^2, sz^2)`` (RGBA32F, float32, no encoding), ``s = -n.xz
+/ max(n.y, SLOPE_MIN_Y)`` of the decoded normal ``n = 2 texel - 1`` (the slope
 ``SLOPE_NORMALS`` takes from one texel). The texture is mipmapped (box-filtered levels,
 ``pipeline.texture.box_mip_chain``, what ``glGenerateMipmap`` makes of it on llvmpipe) and
 sampled trilinearly with the implicit level of detail, repeat: a lookup returns the means of
@@ -20,9 +12,17 @@ the slopes and of their squares over the pixel's footprint, and ``E[s^2] - E[s]^
 variance of the slopes the pixel does not resolve (0 where one texel covers the pixel).
 
 The hand ports take the level of detail as llvmpipe does (``spirv.quads``: once per 2x2 quad,
-from the quad's origin pixel, ``pipeline.texture.lod_from_gradients``): :func:`texcoord_gradients`
-gives each covered pixel its quad's ``(ds/dx, dt/dx, ds/dy, dt/dy)`` of each layer's
-coordinates, :func:`with_lean` the levels of detail made of them.
+from the quad's origin pixel, ``pipeline.texture.lod_from_gradients``):
+:func:`texcoord_gradients` gives each covered pixel its quad's ``(ds/dx, dt/dx, ds/dy,
+dt/dy)`` of each layer's coordinates, :func:`with_lean` the levels of detail made of them.
+
+``heightMap`` (:func:`height_map`): R32F, the height of the surface whose slopes the normal
+map's texels hold (``s = -n.xz / max(n.y, SLOPE_MIN_Y)``), integrated over the periodic tile
+(least squares by FFT: the spectral solution of ``grad h = s``, mean 0), in texture units (tile
+lengths; world units divided by ``normal_tile``), so that a shader shifts its texture
+coordinates by it without knowing the tile; bilinear, repeat, no mipmaps. The mean of the
+layers' heights is the reference's surface over the water plane (``study.scene.geometry.Waves``
+builds the normal map from that surface's slopes).
 """
 
 from __future__ import annotations

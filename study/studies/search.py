@@ -148,7 +148,7 @@ def _try_add(out: list, c: dict) -> None:
         out.append(c)
 
 
-#: moves of the descent after the walk (each screens the lowest's unseen neighbours)
+#: moves of the descent after the walk (each screens the pick's unseen neighbours)
 DESCENT_MOVES = 4
 
 
