@@ -14,10 +14,11 @@ exported, and the ``#define SPIRV_CROSS_CONSTANT_ID_<id> <value>`` lines that gi
 constants), the inputs the GL check runs (the variant's prepared inputs with the exported LUT
 and normal map; the maps derived from the normal map a shader reads, ``heightMap`` and
 ``slopeMoments`` with its mip levels, which the page uploads as they are), the matrices
-column-major, the water quad, the camera, the animation rule and the run's reference / default / fitted images in GL row order (row 0 at the bottom). For a
-user's shader, ``bound`` (``user.bound_data``) instead of the study's textures: every uniform,
-texture and vertex attribute the GL check binds for it on llvmpipe, with the geometry it draws
-(the water quad after ``water.vert``, or the grid after the user's own vertex shader).
+column-major, the water quad, the camera, the animation rule and the run's reference / default
+/ fitted images in GL row order (row 0 at the bottom). For a user's shader, ``bound``
+(``user.bound_data``) instead of the study's textures: every uniform, texture and vertex
+attribute the GL check binds for it on llvmpipe, with the geometry it draws (the water quad
+after ``water.vert``, or the grid after the user's own vertex shader).
 """
 
 from __future__ import annotations
