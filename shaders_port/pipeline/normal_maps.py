@@ -40,14 +40,20 @@ from .texture import LINEAR, REPEAT, Texture2D, lod_from_gradients
 SLOPE_MIN_Y = 0.05
 
 
-def slope_moments(normal_map: np.ndarray) -> np.ndarray:
-    """(S, S, 4) float32 ``(sx, sz, sx^2, sz^2)`` of ``normal_map`` ((S, S, 3) encoded
-    ``0.5 n + 0.5``, world x, y up, z), the level 0 of ``slopeMoments``."""
+def _slopes(normal_map: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(sx, sz) float64: the slopes ``-n.xz / max(n.y, SLOPE_MIN_Y)`` of ``normal_map``'s
+    texels ((H, W, 3) encoded ``0.5 n + 0.5``)."""
     n = 2.0 * np.asarray(normal_map, np.float64) - 1.0
     if n.ndim != 3 or n.shape[2] != 3:
         raise ValueError(f"normal_map must be (H, W, 3), got {n.shape}")
     y = np.maximum(n[..., 1], SLOPE_MIN_Y)
-    sx, sz = -n[..., 0] / y, -n[..., 2] / y
+    return -n[..., 0] / y, -n[..., 2] / y
+
+
+def slope_moments(normal_map: np.ndarray) -> np.ndarray:
+    """(S, S, 4) float32 ``(sx, sz, sx^2, sz^2)`` of ``normal_map`` ((S, S, 3) encoded
+    ``0.5 n + 0.5``, world x, y up, z), the level 0 of ``slopeMoments``."""
+    sx, sz = _slopes(normal_map)
     return np.stack([sx, sz, sx * sx, sz * sz], -1).astype(np.float32)
 
 
@@ -55,11 +61,7 @@ def height_map(normal_map: np.ndarray) -> np.ndarray:
     """(S, S) float32 ``heightMap`` of ``normal_map`` ((S, S, 3) encoded ``0.5 n + 0.5``): the
     height whose gradient is nearest the texels' slopes, in tile lengths, mean 0 (module doc).
     Rows are v (world z), columns u (world x), as the normal map's."""
-    n = 2.0 * np.asarray(normal_map, np.float64) - 1.0
-    if n.ndim != 3 or n.shape[2] != 3:
-        raise ValueError(f"normal_map must be (H, W, 3), got {n.shape}")
-    y = np.maximum(n[..., 1], SLOPE_MIN_Y)
-    sx, sz = -n[..., 0] / y, -n[..., 2] / y  # dh/du, dh/dv in tile lengths per tile length
+    sx, sz = _slopes(normal_map)  # dh/du, dh/dv in tile lengths per tile length
     h, w = sx.shape
     kv = 2.0 * np.pi * np.fft.fftfreq(h, d=1.0 / h)[:, None]  # radians per tile length
     ku = 2.0 * np.pi * np.fft.fftfreq(w, d=1.0 / w)[None, :]

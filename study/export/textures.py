@@ -88,6 +88,20 @@ SHIPPED = {
                           "d holds the sky in d * (1, -1, 1); linear RGB", "linear", "clamp",
                           False),
 }  # fmt: skip
+# the maps a shader of the space derives from the normal map (shaders_port.pipeline.
+# normal_maps): record key (and file stem) -> (sampler, encoding, sampling, mipmaps, the
+# (H, W, C) texels written of the normal map)
+DERIVED = {
+    "slope_moments": ("slopeMoments", "RGBA = (sx, sz, sx^2, sz^2): the slopes -n.xz / max(n.y, "
+                      "0.05) of normal_map.exr's decoded normals and their squares; linear "
+                      "floats", "trilinear (GL_LINEAR_MIPMAP_LINEAR, the implicit level of "
+                      "detail), repeat; the levels box-filtered halvings down to 1 x 1 "
+                      "(glGenerateMipmap)", True, slope_moments),
+    "height_map": ("heightMap", "R = the height of the waves whose slopes normal_map.exr holds, "
+                   "in tile lengths (world units / tile), mean 0; G = B = 0; linear floats",
+                   "bilinear, repeat; row 0 of the file is t = 0 (upload in file order)", False,
+                   lambda nm: np.pad(height_map(nm)[..., None], ((0, 0), (0, 0), (0, 2)))),
+}  # fmt: skip
 #: texture inputs the engine renders itself (never shipped): input -> what to render
 RENDERED = {
     "sceneColor": "the scene without the water, this camera (screen space, a render target)",
@@ -162,31 +176,11 @@ def texture_record(exp, inputs, shader=None, lean: bool = False, heights: bool =
     shader reads ``slopeMoments`` (``LEAN_NORMALS``), recorded under ``slope_moments``;
     ``heights``: it reads ``heightMap`` (``PARALLAX_OFFSET``), recorded under ``height_map``."""
     record = _study_record(exp, inputs)
-    if lean:
-        record["slope_moments"] = {
-            "file": "slope_moments.exr",
-            "bound_as": ["slopeMoments"],
-            "encoding": "RGBA = (sx, sz, sx^2, sz^2): the slopes -n.xz / max(n.y, 0.05) of "
-            "normal_map.exr's decoded normals and their squares; linear floats",
-            "size": int(inputs.normal_map.shape[0]),
-            "sampling": "trilinear (GL_LINEAR_MIPMAP_LINEAR, the implicit level of detail), "
-            "repeat; the levels box-filtered halvings down to 1 x 1 (glGenerateMipmap)",
-            "filter": "linear",
-            "wrap": "repeat",
-            "mipmaps": True,
-        }
-    if heights:
-        record["height_map"] = {
-            "file": "height_map.exr",
-            "bound_as": ["heightMap"],
-            "encoding": "R = the height of the waves whose slopes normal_map.exr holds, in tile "
-            "lengths (world units / tile), mean 0; G = B = 0; linear floats",
-            "size": int(inputs.normal_map.shape[0]),
-            "sampling": "bilinear, repeat; row 0 of the file is t = 0 (upload in file order)",
-            "filter": "linear",
-            "wrap": "repeat",
-            "mipmaps": False,
-        }
+    for key in (("slope_moments",) if lean else ()) + (("height_map",) if heights else ()):
+        sampler, encoding, sampling, mipmaps, _ = DERIVED[key]
+        record[key] = {"file": f"{key}.exr", "bound_as": [sampler], "encoding": encoding,
+                       "size": int(inputs.normal_map.shape[0]), "sampling": sampling,
+                       "filter": "linear", "wrap": "repeat", "mipmaps": mipmaps}  # fmt: skip
     if shader is not None:
         reads = shader_textures(shader)
         record["shipped"] = {i: _shipped_record(i, n, inputs, shader)
@@ -272,14 +266,10 @@ def write_textures(record: dict, inputs, shaders_dir: Path, normal_map=None) -> 
     write_exr(
         folder / record["normal_map"]["file"], inputs.normal_map, {"texture": record["normal_map"]}
     )
-    if "slope_moments" in record:
-        rec = record["slope_moments"]
-        write_exr(folder / rec["file"], slope_moments(inputs.normal_map), {"texture": rec})
-    if "height_map" in record:
-        rec = record["height_map"]
-        h = height_map(inputs.normal_map)
-        rgb = np.stack([h, np.zeros_like(h), np.zeros_like(h)], -1)
-        write_exr(folder / rec["file"], rgb, {"texture": rec})
+    for key, (*_, texels) in DERIVED.items():
+        if key in record:
+            rec = record[key]
+            write_exr(folder / rec["file"], texels(inputs.normal_map), {"texture": rec})
     for inp, rec in record.get("shipped", {}).items():
         a = _shipped_texels(inp, inputs, normal_map)
         files = rec["files"] if "files" in rec else [rec["file"]]
@@ -340,8 +330,7 @@ def expects_lines(record: dict | None) -> list[str]:
         f"{lut['index']}; {lut['sampling']}.",
         f"* `normalMap` = `{nm['file']}` ({nm['size']} x {nm['size']}): {nm['encoding']}; "
         f"{nm['sampling']}; {nm['layers']} (tile {nm['tile']:g}).",
-        *_moments_lines(record.get("slope_moments")),
-        *_moments_lines(record.get("height_map"), "heightMap"),
+        *(line for key in DERIVED for line in _derived_lines(record.get(key))),
         *_shipped_lines(record.get("shipped", {})),
         f"* Every colour is {record['colour_space']}; world units, +y up, the water plane at "
         "y = 0.",
@@ -351,14 +340,14 @@ def expects_lines(record: dict | None) -> list[str]:
     ]
 
 
-def _moments_lines(rec: dict | None, name: str = "slopeMoments") -> list[str]:
-    """The bullet of a map derived from the normal map (``slopeMoments`` of a LEAN shader,
-    ``heightMap`` of a parallax one), or none."""
+def _derived_lines(rec: dict | None) -> list[str]:
+    """The bullet of a map derived from the normal map (:data:`DERIVED`: ``slopeMoments`` of a
+    LEAN shader, ``heightMap`` of a parallax one), or none."""
     if not rec:
         return []
     return [
-        f"* `{name}` = `{rec['file']}` ({rec['size']} x {rec['size']}): {rec['encoding']}; "
-        f"{rec['sampling']}; read at the normal map's coordinates."
+        f"* `{rec['bound_as'][0]}` = `{rec['file']}` ({rec['size']} x {rec['size']}): "
+        f"{rec['encoding']}; {rec['sampling']}; read at the normal map's coordinates."
     ]
 
 

@@ -309,11 +309,7 @@ class Search:
             todo = todo[: max(cap - len(seen), 0)]
             if not todo:
                 break
-            jobs = []
-            for c in todo:
-                v = _space.name_of(c)
-                jobs.append(self._job(i, v, original_schedule(v), self.start[i]))
-            self._run(jobs, f"tradeoff: {exp.name} screen round {k}")
+            self._screen_original(i, todo, f"tradeoff: {exp.name} screen round {k}")
             seen += todo
             self.rounds[exp.name] = k
             front = best_first(survivors(self.ok(i), z))
@@ -323,6 +319,14 @@ class Search:
         if not self.variants:
             self._descend(i, seen)
         return to_schedule(self.ok(i), z, exp.tradeoff.max_scheduled)
+
+    def _screen_original(self, i: int, configs: list[dict], label: str) -> None:
+        """Screen ``configs`` (choices) on experiment ``i`` at their original schedules."""
+        jobs = []
+        for c in configs:
+            v = _space.name_of(c)
+            jobs.append(self._job(i, v, original_schedule(v), self.start[i]))
+        self._run(jobs, label)
 
     def _descend(self, i: int, seen: list[dict]) -> None:
         """The descent after the walk on experiment ``i`` (module doc): screens the unseen
@@ -334,11 +338,7 @@ class Search:
             todo = descent_round(self.ok(i), seen, self.fix, tol)
             if not todo:
                 break
-            jobs = []
-            for c in todo:
-                v = _space.name_of(c)
-                jobs.append(self._job(i, v, original_schedule(v), self.start[i]))
-            self._run(jobs, f"tradeoff: {exp.name} descent {k}")
+            self._screen_original(i, todo, f"tradeoff: {exp.name} descent {k}")
             seen += todo
             self.descents[exp.name] = k
             if descent_origin(self.ok(i), tol)["variant"] == before:
