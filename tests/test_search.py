@@ -206,3 +206,90 @@ def test_the_descent_goes_on_from_the_cheapest_shader_near_the_lowest():
     assert not names & {"water_reflection_beer_disc_walls", "water_refraction"}
     fixed = search.descent_round([low, near, far], seen, {"parallax": "off"}, 0.02)
     assert fixed and all(c["parallax"] == "off" for c in fixed)
+
+
+def test_joint_screen_averages_the_experiments_and_pools_their_blocks():
+    def rec(v, sched, flip, fetches, blocks):
+        return {"variant": v, "choices": {}, "kind": "scale", "scale": 1.0,
+                "schedule": sched, "flip": flip, "rmse": flip / 2, "fetches_mean": fetches,
+                "flip_blocks": blocks}  # fmt: skip
+
+    s1, s2 = {"steps_grazing": 10.0}, {"steps_grazing": 5.0}
+    view0 = [rec("a", s1, 0.10, 20.0, [0.1, 0.1]), rec("a", s2, 0.12, 16.0, [0.12, 0.12])]
+    view1 = [rec("a", s1, 0.20, 22.0, [0.2, float("nan")]), rec("b", s1, 0.3, 9.0, [0.3, 0.3])]
+    joint = search.joint_screen([view0, view1])
+    # only (a, s1) is on both views: FLIP and fetches averaged, blocks in the views' order
+    assert [(r["variant"], r["schedule"]) for r in joint] == [("a", s1)]
+    (j,) = joint
+    assert j["flip"] == pytest.approx(0.15) and j["fetches_mean"] == pytest.approx(21.0)
+    assert j["rmse"] == pytest.approx(0.075)
+    assert j["flip_blocks"][:3] == [0.1, 0.1, 0.2] and math.isnan(j["flip_blocks"][3])
+    assert j["per_experiment"] == [view0[0], view1[0]]
+
+
+class _Planted(search.Search):
+    """A search whose screen is a known truth instead of fits: FLIP per (variant, view), worse
+    below 5 steps at grazing angles; fetches from the variant and its schedule."""
+
+    FLIP = {
+        "water_refraction_beer_disc_walls": (0.080, 0.140),  # best on view 0 alone
+        "water_refraction_box_beer_secant_slopes": (0.140, 0.085),  # best on view 1 alone
+        "water_refraction_box_beer_parallax": (0.090, 0.090),  # best on both
+    }
+
+    def _run(self, jobs, label):
+        self.labels.append(label)
+        recs = []
+        for j in jobs:
+            view = [e.name for e in self.exps].index(j["experiment"])
+            g = j["schedule"]["steps_grazing"]
+            flip = self.FLIP[j["variant"]][view] + (0.01 if g < 5 else 0.0)
+            fetches = 8.0 + 0.8 * g + len(j["variant"]) / 10
+            recs.append({
+                "experiment": j["experiment"], "variant": j["variant"],
+                "choices": _space.choices_of(j["variant"]), "kind": j["kind"],
+                "scale": j["scale"], "schedule": j["schedule"], "status": "ok",
+                "flip": flip, "rmse": flip, "fetches_mean": fetches,
+                "flip_blocks": [flip + 1e-4 * (k % 3) for k in range(64)], "fitted": {},
+            })  # fmt: skip
+        self.screen += recs
+        return recs
+
+
+def test_the_joint_rung_measures_the_shader_good_on_every_view_at_its_schedules(tmp_path):
+    """Each view's own rungs screened the shader best on both views at its original schedule on
+    one view only; the joint rung screens it on the other, then its schedules on both, and
+    hands the joint front's points to the full rung: the cheapest schedule at its FLIP first."""
+    from study.config.experiment import load_experiments
+    from study.scene.views import view_experiments
+
+    (exp,) = load_experiments([REPO / "experiments" / "views.toml"], [])
+    exps = view_experiments(exp)[:2]
+    searcher = _Planted(exps, [None, None], None, tmp_path, print)
+    searcher.labels = []
+    both = "water_refraction_box_beer_parallax"
+    original = search.original_schedule(both)
+    seeds = [(0, "water_refraction_beer_disc_walls"), (0, both),
+             (1, "water_refraction_box_beer_secant_slopes")]  # fmt: skip
+    finalists = []
+    for i, v in seeds:
+        finalists += searcher._run([searcher._job(i, v, search.original_schedule(v), {})], "")
+    joint = searcher.joint(finalists)
+    on = {(r["experiment"], r["variant"], search._key(r["schedule"])) for r in searcher.screen}
+    assert ("views-view1", both, search._key(original["schedule"])) in on  # filled in
+    for i, e in enumerate(exps):
+        for s in search.schedules(e, both):
+            if s["kind"] != "converged":
+                assert (e.name, both, search._key(s["schedule"])) in on, s
+    assert searcher.joint_screened == len(searcher.screen) - len(seeds)
+    # the joint front's best: the shader good on both views at its cheapest schedule of 5 steps
+    # at grazing angles (FLIP 0.090 on both); the shaders good on one view only (mean 0.110,
+    # 0.1125) stay only where they cost less
+    best = min(joint, key=lambda r: (round(r["flip"], 9), r["fetches_mean"]))
+    assert best["variant"] == both and best["schedule"]["steps_grazing"] == 5.0
+    assert best["flip"] == pytest.approx(0.09)
+    assert all(r["fetches_mean"] < best["fetches_mean"] for r in joint if r["variant"] != both)
+    # one experiment: no joint rung
+    alone = _Planted(exps[:1], [None], None, tmp_path, print)
+    alone.labels = []
+    assert alone.joint(finalists) == [] and alone.labels == []

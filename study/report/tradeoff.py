@@ -250,6 +250,8 @@ def _search_lines(summary: dict) -> list[str]:
         # runs before the descent have no "descents"
         descents = ", ".join(f"{k} {v}" for k, v in s.get("descents", {}).items()) or "none"
         descents = f"; descent moves: {descents}" if "descents" in s else ""
+        if s.get("joint_screened"):
+            descents += f"; {s['joint_screened']} points screened by the joint rung"
         lines += [
             f"Search: adaptive. A quick screen fitted {s['screened']} points ("
             f"{s['shaders_screened']} shaders, some at several schedules; walk rounds per "

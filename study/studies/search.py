@@ -21,8 +21,16 @@ screen resolution (``fit.resolution`` divided by ``tradeoff.screen_factor``) exc
    configuration with a raymarch, warm-started from its screen fit; the dominated
    (configuration, schedule) points are dropped the same way, and of the rest the
    ``tradeoff.max_full`` closest to the front (:func:`margin`) go on.
-3. **Full**: the surviving points measured as the exhaustive study measures every point
-   (``point_job``: fit at ``fit.resolution``, FLIP at ``resolution``, GL frame times).
+3. **Joint** (several experiments, e.g. the views of one): rungs 1-2 run on each experiment
+   alone, so a shader good on every view may be screened at one schedule on one view only. The
+   joint rung screens the configurations of every experiment's survivors at their original
+   schedule on every experiment, keeps the ``tradeoff.max_scheduled`` closest to the joint
+   front (FLIP and fetches averaged over the experiments, :func:`joint_screen`), screens their
+   step schedules on every experiment, and adds the ``tradeoff.max_full`` joint points closest
+   to the joint front to the survivors (:meth:`Search.joint`).
+4. **Full**: the surviving points measured as the exhaustive study measures every point
+   (``point_job``: fit at ``fit.resolution``, FLIP at ``resolution``, GL frame times), each on
+   every experiment.
 
 "Clearly dominated": another point costs no more texture fetches per water pixel and its FLIP
 is lower by more than ``tradeoff.noise_z`` standard errors of the paired difference. The
@@ -205,6 +213,33 @@ def marginals(base: dict, neighbours: list[dict]) -> list[dict]:
     return sorted(out, key=lambda r: (list(_space.AXES).index(r["axis"]), r["d_flip"]))
 
 
+def joint_screen(points: list[list[dict]], cost: str = "fetches_mean") -> list[dict]:
+    """The (variant, schedule) screen points measured on every experiment, one record each:
+    ``points[i]`` the screen points of experiment ``i``. FLIP, RMSE and ``cost`` are the means
+    over the experiments (``cost`` None where one lacks it); ``flip_blocks`` the experiments'
+    block means in turn, so the paired standard error pools the blocks of every experiment;
+    ``per_experiment`` the experiments' own records."""
+    by: dict = {}
+    for i, pts in enumerate(points):
+        for r in pts:
+            by.setdefault((r["variant"], _key(r["schedule"])), {}).setdefault(i, r)
+    out = []
+    for per in by.values():
+        if len(per) < len(points):
+            continue
+        rs = [per[i] for i in range(len(points))]
+        rec = {k: rs[0][k] for k in ("variant", "choices", "kind", "scale", "schedule")}
+        for k in ("flip", "rmse", cost):
+            vals = [r.get(k) for r in rs]
+            rec[k] = float(np.mean(vals)) if all(v is not None for v in vals) else None
+        rec["flip_blocks"] = np.concatenate(
+            [np.asarray(r["flip_blocks"], np.float64) for r in rs]
+        ).tolist()
+        rec["per_experiment"] = rs
+        out.append(rec)
+    return out
+
+
 # ---- the driver ------------------------------------------------------------------------------
 
 
@@ -255,6 +290,7 @@ class Search:
         self.screen: list[dict] = []
         self.rounds: dict[str, int] = {}
         self.descents: dict[str, int] = {}
+        self.joint_screened = 0
 
     def _run(self, jobs: list, label: str) -> list[dict]:
         if not jobs:
@@ -355,12 +391,7 @@ class Search:
                 names.add(_space.name_of({**self.fix, **c}))
             except _space.Unrealisable:
                 continue
-        return [
-            r
-            for r in self.ok(i)
-            if r["variant"] in names
-            and _key(r["schedule"]) == _key(original_schedule(r["variant"])["schedule"])
-        ]
+        return [r for r in self.ok(i) if r["variant"] in names and _at_original(r)]
 
     def schedules(self, i: int, front: list[dict]) -> list[dict]:
         """Rung 2 on experiment ``i``: the step schedules of the front's raymarch shaders,
@@ -375,6 +406,40 @@ class Search:
         self._run(jobs, f"tradeoff: {exp.name} screen schedules")
         kept = survivors(self.ok(i), exp.tradeoff.noise_z)
         return closest_to_front(kept, exp.tradeoff.max_full)
+
+    def joint(self, finalists: list[dict]) -> list[dict]:
+        """Rung 3 over several experiments (module doc): ``finalists`` the experiments' own
+        survivors; returns the joint screen points (:func:`joint_screen`) closest to the joint
+        front, at most ``tradeoff.max_full``; none with one experiment."""
+        if len(self.exps) < 2:
+            return []
+        first = self.exps[0].tradeoff
+        variants = list(dict.fromkeys(r["variant"] for r in finalists))
+        jobs = []
+        for i in range(len(self.exps)):
+            have = {r["variant"] for r in self.ok(i) if _at_original(r)}
+            jobs += [
+                self._job(i, v, original_schedule(v), self.start[i])
+                for v in variants
+                if v not in have
+            ]
+        self.joint_screened += len(self._run(jobs, "tradeoff: joint screen"))
+        at_original = [r for r in self._joint() if _at_original(r)]
+        jobs = []
+        for r in to_schedule(at_original, first.noise_z, first.max_scheduled):
+            for i, exp in enumerate(self.exps):
+                own = r["per_experiment"][i]
+                have = {_key(p["schedule"]) for p in self.ok(i) if p["variant"] == r["variant"]}
+                for s in schedules(exp, r["variant"]):
+                    if s["kind"] in ("converged", "fixed") or _key(s["schedule"]) in have:
+                        continue
+                    jobs.append(self._job(i, r["variant"], s, {**self.start[i], **own["fitted"]}))
+        self.joint_screened += len(self._run(jobs, "tradeoff: joint screen schedules"))
+        kept = survivors(self._joint(), first.noise_z)
+        return closest_to_front(kept, first.max_full)
+
+    def _joint(self) -> list[dict]:
+        return joint_screen([self.ok(i) for i in range(len(self.exps))])
 
     def full_jobs(self, finalists: list[dict]) -> list[dict]:
         """Rung 3: every finalist (variant, schedule) on every experiment, as ``point_job`` jobs
@@ -434,6 +499,11 @@ class Search:
         ]
         unique = {r["variant"]: r for r in points}  # one point per neighbour
         return marginals(base, list(unique.values()))
+
+
+def _at_original(r: dict) -> bool:
+    """Whether screen point ``r`` is at its variant's original schedule."""
+    return _key(r["schedule"]) == _key(original_schedule(r["variant"])["schedule"])
 
 
 def _schedule_like(variant: str, base: dict) -> dict:

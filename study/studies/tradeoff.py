@@ -271,9 +271,9 @@ def _exhaustive(exps, specs, client, out, log, shaders: list) -> list[dict]:
 
 
 def _adaptive(exps, specs, client, out, log, fix: dict, chosen, tol: float):
-    """The adaptive search (``study.studies.search``): walk, schedules, then the finalists in
-    full (with the bands of the screen's level-of-detail policy at tolerance ``tol``).
-    Returns (the full rung's rows, the ``Search``)."""
+    """The adaptive search (``study.studies.search``): walk, schedules, the joint rung, then
+    the finalists in full (with the bands of the screen's level-of-detail policy at tolerance
+    ``tol``). Returns (the full rung's rows, the ``Search``)."""
     searcher = Search(exps, specs, client, out, log, fix=fix, variants=chosen)
     finalists = []
     for i in range(len(exps)):
@@ -286,6 +286,8 @@ def _adaptive(exps, specs, client, out, log, fix: dict, chosen, tol: float):
         # choose bands among them
         if exps[i].tradeoff.lod:
             finalists += policy_bands(exps[i], searcher.ok(i), tol)
+    # several experiments: the shaders good on all of them, each at its schedules on every one
+    finalists += searcher.joint(finalists)
     jobs = searcher.full_jobs(finalists)
     log(
         f"tradeoff: {len(searcher.screen)} screen points, {len(jobs)} measured in full "
@@ -317,6 +319,7 @@ def _search_summary(mode: str, searcher, rows: list, fix: dict, seconds: float) 
         out["shaders_screened"] = len({r["variant"] for r in searcher.screen})
         out["rounds"] = searcher.rounds
         out["descents"] = searcher.descents
+        out["joint_screened"] = searcher.joint_screened
     return out
 
 
