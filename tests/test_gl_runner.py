@@ -256,3 +256,26 @@ def test_a_renderer_keeps_drawing_after_another_kind_of_context_is_released(kind
         after = r.render(Constants())[0]
     assert np.abs(before).max() > 0.1
     np.testing.assert_array_equal(after, before)
+
+
+def test_alternate_frames_times_two_contexts_in_turn_and_leaves_each_drawing_its_own(inputs):
+    """Frames timed in turn on two renderers (each on its own context, made current frame by
+    frame): n times each, and afterwards each still draws what a renderer of its own draws,
+    one on a core and one on a compatibility-profile context."""
+    from shaders_port.gl.renderer import alternate_frames
+
+    c = Constants(water_color=(0.1, 0.3, 0.2, 1.0))
+    with (
+        GLRenderer("water_refraction", inputs) as a,
+        GLRenderer("water_reflection", inputs, dialect="compat") as b,
+    ):
+        ta, tb = alternate_frames([(a, Constants()), (b, c)], 3, warmup=2)
+        assert len(ta) == len(tb) == 3 and min(ta + tb) > 0
+        with b.ctx:
+            after_b = b.render(c)[0]
+        with a.ctx:
+            after_a = a.render(Constants())[0]
+    alone_a = run_glsl("water_refraction", inputs, Constants())[0]
+    alone_b = run_glsl("water_reflection", inputs, c, dialect="compat")[0]
+    assert_images_close("alternate_a", after_a, alone_a, 0.0)
+    assert_images_close("alternate_b", after_b, alone_b, 0.0)

@@ -421,3 +421,19 @@ def time_glsl(
     ``n`` frames after 3 warm-up frames (shader compilation excluded)."""
     with GLRenderer(name, inputs, defines=defines) as r:
         return r.time_frames(constants, n=n)
+
+
+def alternate_frames(drawn: list, n: int, warmup: int = 1) -> list[list[float]]:
+    """Seconds per frame of several renderers drawn in turn, frame by frame, so that a load
+    that comes and goes falls on all of them alike: ``drawn`` a list of (renderer, constants);
+    ``warmup`` rounds, then ``n`` timed rounds of one frame each (draw + glFinish on the
+    renderer's own context, made current for it). Returns one list of ``n`` times per
+    renderer, in ``drawn``'s order."""
+    out: list[list[float]] = [[] for _ in drawn]
+    for k in range(warmup + n):
+        for times, (r, constants) in zip(out, drawn):
+            with r.ctx:
+                t = r.time_frames(constants, n=1, warmup=0)[0]
+            if k >= warmup:
+                times.append(t)
+    return out

@@ -15,13 +15,13 @@ Per experiment and variant (``[tradeoff]`` table of the experiment, ``docs/exper
 Each point is measured by :func:`point_job` in a worker: FLIP and RMSE on the water pixels at the
 experiment's full resolution; texture fetches and loop iterations per water pixel (mean, p99)
 from the port's diagnostics; frame time of the fitted shader on llvmpipe at 512x512 and
-1920x1080 (draw + glFinish, median of ``gl_repeats`` frames after one warm-up) measured between two
-runs of a fixed reference shader (the seed's ``water_refraction`` with its own constants) in the
-same job, so the ratio to it compares fairly on a loaded machine; and the port's frame time
-(Dr.Jit on the run's backend, 512x512, median of 5). The converged raymarch gets no frame times
-(it is the error floor, not a candidate). For parsimony each point also carries its count of
-fitted constants (``n_fitted``: fitted or at a bound) and the AIC / BIC of its fit residual at
-the fit resolution (``study._metrics``).
+1920x1080 (draw + glFinish, median of ``gl_repeats`` frames after one warm-up) drawn frame by
+frame in turn with a fixed reference shader (the seed's ``water_refraction`` with its own
+constants) in the same job, so the ratio to it compares fairly on a loaded machine; and the
+port's frame time (Dr.Jit on the run's backend, 512x512, median of 5). The converged raymarch
+gets no frame times (it is the error floor, not a candidate). For parsimony each point also
+carries its count of fitted constants (``n_fitted``: fitted or at a bound) and the AIC / BIC of
+its fit residual at the fit resolution (``study._metrics``).
 """
 
 from __future__ import annotations
@@ -311,21 +311,16 @@ def timed_frames(gl_renderer, constants, render, inputs, repeats: int) -> dict:
     """What :func:`frame_times` measures, of any shader: ``gl_renderer(inputs)`` a
     ``GLRenderer`` drawing it with ``constants`` (None: its source as written), ``render(inputs)``
     its Dr.Jit render (a ``ShaderOutput``)."""
+    from shaders_port.gl.renderer import alternate_frames  # moderngl, in the worker only
+
     refv = get_variant(REFERENCE_SHADER)
     out = {}
     for label, (w, h) in GL_SIZES.items():
         frame = inputs.with_resolution(w, h)
-        ref_ms = []
-        for block in ("ref", "shader", "ref"):
-            r, c = (refv.gl_renderer(frame), Constants()) if block == "ref" else (
-                gl_renderer(frame), constants)  # fmt: skip
-            with r:
-                ms = 1e3 * statistics.median(r.time_frames(c, n=repeats, warmup=1))
-            if block == "ref":
-                ref_ms.append(ms)
-            else:
-                out[f"gl_ms_{label}"] = ms
-        out[f"gl_ref_ms_{label}"] = statistics.mean(ref_ms)
+        with refv.gl_renderer(frame) as ref, gl_renderer(frame) as shader:
+            ref_s, shader_s = alternate_frames([(ref, Constants()), (shader, constants)], repeats)
+        out[f"gl_ms_{label}"] = 1e3 * statistics.median(shader_s)
+        out[f"gl_ref_ms_{label}"] = 1e3 * statistics.median(ref_s)
         out[f"gl_ratio_{label}"] = out[f"gl_ms_{label}"] / out[f"gl_ref_ms_{label}"]
     frame = inputs.with_resolution(512, 512)
     render(frame)  # compile / record the kernels
