@@ -2,12 +2,13 @@
 the reference's (an oracle), and the sun's glitter drawn by better highlights than the shader's.
 
 The fitted ``water_refraction`` variant's colour is split into ``F*sky`` (reflection without the
-highlight), ``F*spec`` (the highlight) and ``T*refr`` (the refraction), and the reference into
-the same terms by path tracing the whole image again with the water's dielectric reduced to one
-term (``bench_grazing.shader_terms`` and ``reference_terms``: ``reflected, no sun`` is sky and
-walls, ``reflected`` minus it is the sun's glitter, ``transmitted`` plus ``both`` the
-refraction). Printed, FLIP and RMSE on the calibration's scored water pixels against the cached
-reference (what ``study calibrate`` and ``study tradeoff`` score):
+highlight: the sky cube map's or the local cube map's), ``F*spec`` (the highlight) and ``T*refr``
+(the refraction), and the reference into the same terms by path tracing the whole image again with
+the water's dielectric reduced to one term (``bench_grazing.shader_terms`` and
+``reference_terms``: ``reflected, no sun`` is sky and walls, ``reflected`` minus it is the sun's
+glitter, ``transmitted`` plus ``both`` the refraction). Printed, FLIP and RMSE on the
+calibration's scored water pixels against the cached reference (what ``study calibrate`` and
+``study tradeoff`` score):
 
 1. **Oracles**: the shader with one, two or all three of its terms replaced by the reference's.
    What a term's oracle lowers FLIP by is the most any technique for that term can buy with the
@@ -201,6 +202,7 @@ def main(argv=None) -> None:
     from study._backend import init_backend
     from study._metrics import flip_map, rmse
     from study.calibration.frames import load_scene_data
+    from study.scene.baseline_inputs import inputs_for_shader
     from study.config.experiment import load_experiment
     from shaders_port import space
     from shaders_port.variants import get_variant
@@ -209,6 +211,9 @@ def main(argv=None) -> None:
 
     exp = load_experiment(a.experiment, a.set)
     ref, inputs, _ = load_scene_data(exp, init_backend(exp["variant"]))
+    # what the fitted shader reads besides the sky cube map (the local cube map's box, ...)
+    fitted = json.loads((Path(a.fit) / "constants.json").read_text())["shader"]
+    inputs = inputs_for_shader(exp, inputs, fitted, exp["variant"])
     w, h = exp["resolution"]
     v, c, mask, terms = load_fit(a.fit, exp, inputs, ref.image)
 

@@ -73,15 +73,25 @@ def shader_terms(variant, inputs, constants) -> dict:
     (see the module doc) and the port's colour; 0 off the water."""
     import drjit as dr
 
-    from shaders_port.ports import water_refraction as wr
     from shaders_port.pipeline.texture import clamp
+    from shaders_port.ports import water_refraction as wr
+    from shaders_port.ports.box import box_reflection, box_state
 
     # the blocks of water_refraction._shade, the combine's two products kept apart
     m, P, C, f = port_blocks(variant, inputs, constants)
     opts = wr.options_of(variant.defines)
     R = dr.normalize(wr.reflect(m, -f.vEye, f.vBumpTexMore))
     R.y = dr.maximum(R.y, 0.001)
-    sky = wr.cubemap_reflection(m, P, R) * C.reflectColor
+    if opts.reflection_map == "box":  # the local cube map (BOX_REFLECTION)
+        probe = box_state(m, inputs, variant.name)
+        sky = box_reflection(m, P, probe, C, R)
+    elif opts.reflection_map == "cube":
+        sky = wr.cubemap_reflection(m, P, R) * C.reflectColor
+    else:
+        raise ValueError(
+            f"{variant.name}: the term split covers the sky and local cube maps' reflections, "
+            f"not {opts.reflection_map!r}"
+        )
     spec = wr.specular_highlight(
         m, P, m.Array4f(0.0), f.vBumpTex, f.vEye, f.vLight, C, opts.specular, f.slope_variance
     )

@@ -5,7 +5,8 @@ The page is generated from committed results in ``docs/results/error-budget/``:
 
 * ``<fit>.json``: ``benchmarks/bench_error_budget.py <run> --json`` on a ``study calibrate``
   output folder (``experiments/default.toml`` with ``--set fit.shader=...``; the folder's name
-  is ``<fit>``);
+  is ``<fit>``); ``<scene>/<fit>.json`` the same on another experiment (``--experiment
+  experiments/<scene>.toml``);
 * ``images_default.exr`` / ``.json``: the reference beside the fitted shaders, the panels as
   data (``study.report.panels``; ``scripts/build_docs.py`` draws ``images_default.png``), from
   the same run folders: ``python scripts/docs_error_budget.py panels RUN [RUN ...]``.
@@ -31,7 +32,7 @@ def _table(header: list[str], rows: list[list[str]]) -> list[str]:
 
 def _fit_section(d: dict) -> list[str]:
     out = [
-        f"## `{d['shader']}`",
+        f"## `{d['shader']}`" + ("" if d["experiment"] == "default" else f" on {d['experiment']}"),
         "",
         f"Its terms against the reference's (the reference {d['reference_spp']} spp, each of the "
         f"reference's terms path traced again at {d['spp']} spp, {d['terms_render_s']} s):",
@@ -84,7 +85,7 @@ def glint_split(highlights: list[dict]) -> list[str]:
 
 def error_budget_page(folder: Path = FOLDER) -> str:
     """``report.md`` of ``docs/results/error-budget`` from its ``<fit>.json`` files."""
-    fits = sorted(folder.glob("*.json"))
+    fits = sorted(folder.glob("*.json")) + sorted(folder.glob("*/*.json"))
     fits = [p for p in fits if not p.name.startswith("images_")]
     if not fits:
         raise FileNotFoundError(f"{folder}: no bench_error_budget.py result (<fit>.json)")
@@ -93,12 +94,15 @@ def error_budget_page(folder: Path = FOLDER) -> str:
         "",
         "*Written by `scripts/build_docs.py` (`scripts/docs_error_budget.py`) from the committed "
         "results of `benchmarks/bench_error_budget.py` (its docstring says what each table "
-        "measures). FLIP and RMSE on the scored water pixels of the default scene against the "
-        "cached reference.*",
+        "measures). FLIP and RMSE on the scored water pixels of the default scene (of the "
+        "scene a section names) against the cached reference.*",
         "",
     ]
     results = [json.loads(p.read_text()) for p in fits]
-    for d in sorted(results, key=lambda d: -d["oracles"][0]["flip"]):  # the worst fit first
+    # the default scene's fits first, the worst first
+    for d in sorted(
+        results, key=lambda d: (d["experiment"] != "default", -d["oracles"][0]["flip"])
+    ):
         lines += _fit_section(d)
     if (folder / "images_default.exr").is_file():
         lines += [

@@ -395,3 +395,28 @@ def _interrupt_after_the_first_row(args: list, table) -> dict:
     done = {r["key"]: r for r in read_table(table)}
     assert len(done) >= 1 and all(r["status"] == "ok" for r in done.values())
     return done
+
+
+def test_joint_findings_hold_the_best_within_the_originals_fetches_and_the_budget():
+    """Over several scenes: the original shader at its schedule (FLIP and fetches averaged over
+    the scenes), the lowest mean FLIP within its mean fetches, and a budget's pick."""
+    from study.studies.tradeoff_analysis import analyse
+
+    rows = []
+    for scene, shift in (("A", 0.0), ("B", 0.02)):
+        rows += [
+            _row(scene, "water_refraction", "scale", 1.0, 10, 3, 40, 0.16 + shift, 17.0),
+            _row(scene, "water_refraction_beer", "scale", 0.5, 5, 1.5, 20, 0.12 + shift, 16.0),
+            _row(scene, "water_refraction_beer", "scale", 2.0, 20, 6, 80, 0.10 + shift, 25.0),
+        ]
+    rows.append(_row("A", "water_refraction_box", "scale", 0.5, 5, 1.5, 20, 0.05, 12.0))
+    summary, _ = analyse(rows, ["A", "B"], 0.02)
+    j = summary["joint"]
+    assert j["seed"]["label"] == "water_refraction (10, 3, 40)"
+    assert j["seed"]["flip"] == pytest.approx(0.17) and j["seed"]["fetches_mean"] == 17.0
+    # the box shader is measured on one scene only: no joint point; the 25-fetch point is dearer
+    assert j["best_within_seed_budget"]["label"] == "water_refraction_beer (5, 1.5, 20)"
+    assert j["best_within_seed_budget"]["flip"] == pytest.approx(0.13)
+    assert j["recommended"]["label"] == "water_refraction_beer (20, 6, 80)"
+    budget, _ = analyse(rows, ["A", "B"], 0.02, {"fetches_mean": 16.5})
+    assert budget["joint"]["recommended"]["label"] == "water_refraction_beer (5, 1.5, 20)"

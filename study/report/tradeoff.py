@@ -492,7 +492,17 @@ def _closing_lines(summary: dict) -> list[str]:
         lines += [
             f"| {r['label']} | {fmt(r['fetches_mean'], 3)} | {fmt(r['flip'])} |" for r in j["front"]
         ]
-        lines += ["", f"**Recommended for all scenes**: {_sched(j['recommended'])}.", ""]
+        lines += ["", f"**Recommended for all scenes**: {_sched(j['recommended'])}."]
+        if j.get("best_within_seed_budget") and j.get("seed"):  # runs before it have neither
+            b, o = j["best_within_seed_budget"], j["seed"]
+            lines += [
+                "",
+                "**Best for all scenes within the original's fetches** ("
+                f"{fmt(o['fetches_mean'], 3)} on average, FLIP {fmt(o['flip'])}): "
+                f"{_sched(b)}, FLIP {fmt(b['flip'])} at "
+                f"{fmt(b['fetches_mean'], 3)} fetches.",
+            ]
+        lines.append("")
     if summary.get("exports"):
         lines += ["## Exported shaders", ""]
         for scene, e in summary["exports"].items():

@@ -121,11 +121,40 @@ def analyse(rows: list, names: list, tolerance: float, budget=None) -> tuple[dic
         "scenes": scenes,
     }
     if len(names) > 1:
-        summary["joint"] = {
-            "front": pareto_front(joint, COST, ERROR),
-            "recommended": recommend(joint, COST, ERROR, tolerance),
-        }
+        summary["joint"] = joint_findings(joint, tolerance, budget)
     return summary, ok
+
+
+def recommended(pts: list, tolerance: float, budget=None) -> dict | None:
+    """The recommendation among ``pts``: the cheapest within ``tolerance`` of the lowest FLIP
+    or, with a ``budget`` (cost -> limit), the lowest FLIP within every limit."""
+    if not budget:
+        return recommend(pts, COST, ERROR, tolerance)
+    fits = [r for r in pts if all(r.get(c) is not None and r[c] <= v for c, v in budget.items())]
+    return min(fits, key=lambda r: r[ERROR], default=None)
+
+
+def best_within_seed_budget(pts: list, seed: list) -> dict | None:
+    """The lowest FLIP among ``pts`` costing no more fetches than ``seed`` (the original shader
+    at its schedule, a list of it or empty)."""
+    if not seed or seed[0].get(COST) is None:
+        return None
+    limit = seed[0][COST] * (1 + 1e-3)
+    within = [r for r in pts if r.get(COST) is not None and r[COST] <= limit]
+    return min(within, key=lambda r: r[ERROR], default=None)
+
+
+def joint_findings(joint: list, tolerance: float, budget=None) -> dict:
+    """The joint front's findings (``joint``: :func:`joint_points`): its front, the
+    recommendation for all scenes, the original shader at its schedule and the best within its
+    fetches (FLIP and fetches averaged over the scenes)."""
+    seed = [r for r in joint if is_seed(r) and r["variant"] == "water_refraction"]
+    return {
+        "front": pareto_front(joint, COST, ERROR),
+        "recommended": recommended(joint, tolerance, budget),
+        "seed": seed[0] if seed else None,
+        "best_within_seed_budget": best_within_seed_budget(joint, seed),
+    }
 
 
 def joint_points(ok: list, names: list) -> list:
@@ -192,12 +221,7 @@ def scene_findings(pts: list, all_pts: list, tolerance: float, budget=None) -> d
             }
         )
 
-    rec = recommend(pts, COST, ERROR, tolerance)
-    if budget:  # the lowest FLIP within every limit of the budget
-        fits = [
-            r for r in pts if all(r.get(c) is not None and r[c] <= v for c, v in budget.items())
-        ]
-        rec = min(fits, key=lambda r: r[ERROR], default=None)
+    rec = recommended(pts, tolerance, budget)
     seed = [r for r in pts if is_seed(r) and r["variant"] == "water_refraction"]
     variants = list(dict.fromkeys(r["variant"] for r in all_pts))
     best_by_variant = {
@@ -245,11 +269,7 @@ def scene_findings(pts: list, all_pts: list, tolerance: float, budget=None) -> d
         v: {"n_fitted": r.get("n_fitted"), "bic": r.get("bic"), "flip": r["flip"]}
         for v, r in at_seed.items()
     }
-    budget = seed[0][COST] * (1 + 1e-3) if seed and seed[0].get(COST) is not None else None
-    within = [
-        r for r in pts if budget is not None and r.get(COST) is not None and r[COST] <= budget
-    ]
-    best_within = min(within, key=lambda r: r[ERROR], default=None)
+    best_within = best_within_seed_budget(pts, seed)
     return {
         "front": [brief(r) for r in pareto_front(pts, COST, ERROR)],
         "sources_alone": sources_alone(pts, brief),
