@@ -90,3 +90,38 @@ def test_the_viewer_in_chromium_matches_the_port(run):
         assert res["n_outliers"] <= 0.01 * res["n_water"], _figures(res)
     else:
         assert passes(res), _figures(res)
+
+
+def test_the_threejs_module_binds_the_heights_and_refuses_the_slope_moments(run):
+    """The parallax shader's three.js module loads ``height_map.exr`` as it loads the normal
+    map, and three's render of it on the study's images matches the port with the viewer's
+    allowance (outliers only where the refracted ray's crossing flips at a step edge, under
+    1 %); LEAN's mipmapped slope moments are not wired: its calibration has no ``threejs/``."""
+    from study.export.viewer.browser import (
+        FILE_ACCESS,
+        SOFTWARE_GL,
+        BrowserRenderer,
+        Chromium,
+        open_three_example,
+    )
+
+    shader, out, inputs, fitted = run
+    if "lean" in shader:
+        assert not (out / "threejs").exists()
+        return
+    with Chromium(flags=SOFTWARE_GL + FILE_ACCESS) as browser:
+        assert open_three_example(browser, out / "threejs" / "example.html") == []
+        renderer = BrowserRenderer(
+            browser, "fitted", api="waterThree", inputs="study", screenPlane=True
+        )
+        res = compare_port_gl(inputs, fitted, shader, renderer=renderer)
+        bound = browser.evaluate(
+            "(() => { const u = window.waterThree.water.uniforms.heightMap;"
+            " return u && u.value ? [u.value.image.width, u.value.image.height] : null; })()"
+        )
+    assert bound == [inputs.normal_map.shape[1], inputs.normal_map.shape[0]]
+    assert res["n_water"] > 100 and res["mask_mismatch"] == 0, _figures(res)
+    if not passes(res):
+        assert res["mean_abs"] <= GL_MEAN and res["unexplained"] == 0, _figures(res)
+        assert all(p["why"] == ["crossing_step_edge"] for p in res["outlier_pixels"])
+        assert res["n_outliers"] <= 0.01 * res["n_water"], _figures(res)

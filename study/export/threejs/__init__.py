@@ -28,8 +28,9 @@ A user's shader after the study's vertex shader is wired by its own names: a sam
 uniform bound to an input the module builds is set as that input, a uniform constant or a
 ``value`` of its declaration to its value (:func:`user_wiring`). A shader that reads an input
 the module does not build (the screen-space buffers, the box's cube map, the under-water
-reflection renders, an engine input such as ``sky_cube``), or that brings its own vertex
-shader, gets no folder: a :class:`ThreeUnsupported` names why.
+reflection renders, LEAN's slope moments, an engine input such as ``sky_cube``), or that brings
+its own vertex shader, gets no folder: a :class:`ThreeUnsupported` names why. The parallax's
+``heightMap`` is loaded from the shipped ``height_map.exr`` as the normal map is.
 """
 
 from __future__ import annotations
@@ -63,6 +64,9 @@ BUILT = frozenset(
      "wave3", "wave4", "uModelViewProjectionMatrix", "uModelViewProjectionMatrixInverse",
      "uNormalMatrix", "uTextureMatrix0")
 )  # fmt: skip
+#: the maps derived from the normal map water.js binds when the calibration ships them:
+#: textures.json's record -> sampler (LEAN's mipmapped slopeMoments is not among them)
+DERIVED_SAMPLERS = {"height_map": "heightMap"}
 _UNIFORM = re.compile(r"^\s*uniform\s+(?:(?:highp|mediump|lowp)\s+)?\w+\s+(\w+)\s*;", re.M)
 
 
@@ -164,7 +168,12 @@ def calibration_data(out: Path, exp, inputs) -> dict:
     vert = (shaders / target_file("gles300", "water", "vert")).read_text("utf-8")
     frag = (shaders / target_file("gles300", stem, "frag")).read_text("utf-8")
     names, values = user_wiring(saved, vert, frag) if saved.user is not None else ({}, {})
-    lacking = [n for n in lacking_inputs(vert, frag) if n not in names and n not in values]
+    # the derived maps the calibration ships (textures.json's records) water.js binds too
+    shipped = {
+        DERIVED_SAMPLERS[k] for k in read_texture_record(shaders) or {} if k in DERIVED_SAMPLERS
+    }
+    bound = set(names) | set(values) | shipped
+    lacking = [n for n in lacking_inputs(vert, frag) if n not in bound]
     if lacking:
         raise ThreeUnsupported(
             f"{summary['shader']} reads {', '.join(lacking)}, which the three.js module does "

@@ -80,12 +80,17 @@ export async function loadCalibration(shipped, base) {
     waves: { offsets: s.wave_offsets, velocities: s.wave_velocities },
     normalTile: record.normal_map.tile,
     topDown: { extent: s.top_down.extent, size: s.top_down.size, noGeometry: s.top_down.no_geometry },
-    textures: { normalMap: texture(record.normal_map), fresnelLookup: texture(record.fresnel_lut) },
+    textures: {
+      normalMap: texture(record.normal_map), fresnelLookup: texture(record.fresnel_lut),
+      // the parallax's heights, where the shader reads them (PARALLAX_OFFSET)
+      ...(record.height_map ? { heightMap: texture(record.height_map) } : {}),
+    },
   };
 }
 
 // The textures the constants were fitted with (calibration.textures of loadCalibration: the
-// normal map and the Fresnel LUT, float32 OpenEXR in shaders/textures/), read by three's
+// normal map, the Fresnel LUT and the parallax's heights where shipped, float32 OpenEXR in
+// shaders/textures/), read by three's
 // EXRLoader, with the sampler state of textures.json.
 export async function loadWaterTextures(calibration) {
   const out = {};
@@ -242,6 +247,7 @@ export function createWater(calibration, textures, inputs) {
     lightcolor: { value: v3(calibration.light.color) },
     normalMap: { value: textures.normalMap },
     fresnelLookup: { value: textures.fresnelLookup },
+    ...(textures.heightMap ? { heightMap: { value: textures.heightMap } } : {}),
     refractionTexture: { value: inputs.refractionTexture },
     worldYComponent: { value: inputs.worldYComponent },
     reflectionTexture: { value: inputs.skyTexture },
