@@ -119,10 +119,11 @@ def _widths(tree, out: list) -> list:
     return out
 
 
-def call_frozen(key: tuple, fn, m, P, *args):
+def call_frozen(key: tuple, fn, m, P, *args, widths: tuple = ()):
     """``fn(m, P, *args)``, replayed from a recording when :data:`USE_FROZEN` (see
     :func:`frozen`); ``P`` is the frame's shading state (``Prepared``), whose upload number
-    joins ``key`` and whose lane count every output leaf must have.
+    joins ``key`` and whose lane count every output leaf must have, or one of ``widths`` (the
+    lanes of the frame's pixel quads, helper pixels included, for a value kept over them).
 
     A replay whose outputs have another width, or a function recorded more than
     :data:`MAX_RECORDINGS` times, is never passed on: the call is traced instead, and that
@@ -143,7 +144,7 @@ def call_frozen(key: tuple, fn, m, P, *args):
     finally:
         if was_collecting:
             gc.enable()
-    bad = sorted({w for w in _widths(out, []) if w != lanes})
+    bad = sorted({w for w in _widths(out, []) if w != lanes and w not in widths})
     why = None
     if bad:
         why = f"a replay returned outputs of width {bad} for {lanes} lanes"

@@ -398,9 +398,14 @@ def _key(spec: ShaderSpec, C, *extra) -> tuple:
 
 def _recorded(key: tuple, fn, m, P, *args):
     """``pipeline.frame.call_frozen``; a failure while recording (an unsupported instruction, an
-    unbound name: an error of the shader) is raised as itself by tracing the call."""
+    unbound name: an error of the shader) is raised as itself by tracing the call. With the
+    frame's quads in the bindings (the last argument), the loops' per-lane passes are kept over
+    the helper lanes too (their trip counts bound the unrolled loops that compute the helpers'
+    values), so that width is an output's too."""
+    quads = args[-1].get(_quads.QUADS_KEY) if args and isinstance(args[-1], dict) else None
+    widths = (quads.lanes,) if quads is not None else ()
     try:
-        return _frame.call_frozen(key, fn, m, P, *args)
+        return _frame.call_frozen(key, fn, m, P, *args, widths=widths)
     except RuntimeError as exc:
         if "frozen function" not in str(exc):
             raise
