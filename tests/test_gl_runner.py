@@ -279,3 +279,19 @@ def test_alternate_frames_times_two_contexts_in_turn_and_leaves_each_drawing_its
     alone_b = run_glsl("water_reflection", inputs, c, dialect="compat")[0]
     assert_images_close("alternate_a", after_a, alone_a, 0.0)
     assert_images_close("alternate_b", after_b, alone_b, 0.0)
+
+
+def test_the_maps_derived_from_the_normal_map_are_uploaded_for_a_program_that_reads_them(inputs):
+    """The slope moments (mipmapped) and the heights exist only on a renderer whose shader
+    reads them (each renderer uploads nothing else it would not bind)."""
+    with GLRenderer("water_refraction", inputs) as plain:
+        plain.render(Constants())
+        assert not {"slopeMoments", "heightMap"} & set(plain.texture_units())
+    with GLRenderer("water_refraction", inputs, defines=("PARALLAX_OFFSET",)) as parallax:
+        parallax.render(Constants())
+        units = parallax.texture_units()
+        assert "heightMap" in units and "slopeMoments" not in units
+    with GLRenderer("water_refraction", inputs, defines=("LEAN_NORMALS",)) as lean:
+        lean.render(Constants())
+        _, tex, _ = lean.texture_units()["slopeMoments"]
+        assert tex.width == inputs.normal_map.shape[1] and tex.components == 4

@@ -54,6 +54,8 @@ SAMPLERS = {
     "heightMap": (12, "linear", True),
 }
 MIPMAPPED = ("slopeMoments",)
+# the maps derived from the normal map: uploaded when a program first reads them
+DERIVED_MAPS = {"slopeMoments": slope_moments, "heightMap": height_map}
 # sampler -> the optional ShaderInputs field it is made from
 OPTIONAL_SAMPLERS = {
     "sceneColor": "scene_color",
@@ -174,30 +176,35 @@ class GLRenderer:
             "fresnelLookup": self._texture2d(lut),
             "worldYComponentReflection": self._texture2d(i.refl_world_y),
             "reflectionBottom": self._texture2d(i.refl_texture),
-            "slopeMoments": self._texture2d(slope_moments(i.normal_map)),
-            "heightMap": self._texture2d(height_map(i.normal_map)),
         }
-        for sname in MIPMAPPED:
-            self._textures[sname].build_mipmaps()
         for sname, field in OPTIONAL_SAMPLERS.items():
             arr = getattr(i, field)
             if arr is not None:
                 cube = sname in _CUBE_SAMPLERS
                 self._textures[sname] = (self._texture_cube if cube else self._texture2d)(arr)
+        self._samplers = {s: self._sampler(s) for s in SAMPLERS if s in self._textures}
+
+    def _sampler(self, sname: str):
+        """The moderngl sampler of ``SAMPLERS[sname]`` (trilinear where ``MIPMAPPED``)."""
         mgl = self._mgl
-        self._samplers = {}
-        for sname, (unit, filt, repeat) in SAMPLERS.items():
-            if sname not in self._textures:
-                continue
-            f = mgl.LINEAR if filt == "linear" else mgl.NEAREST
-            fmin = mgl.LINEAR_MIPMAP_LINEAR if sname in MIPMAPPED else f
-            self._samplers[sname] = self.ctx.sampler(
-                repeat_x=repeat, repeat_y=repeat, repeat_z=repeat, filter=(fmin, f)
-            )
+        _, filt, repeat = SAMPLERS[sname]
+        f = mgl.LINEAR if filt == "linear" else mgl.NEAREST
+        fmin = mgl.LINEAR_MIPMAP_LINEAR if sname in MIPMAPPED else f
+        return self.ctx.sampler(repeat_x=repeat, repeat_y=repeat, repeat_z=repeat, filter=(fmin, f))
+
+    def _derived_map(self, sname: str) -> None:
+        """Upload the map ``DERIVED_MAPS[sname]`` of the normal map (its mip chain built by GL
+        where ``MIPMAPPED``) and make its sampler."""
+        tex = self._texture2d(DERIVED_MAPS[sname](self.inputs.normal_map))
+        if sname in MIPMAPPED:
+            tex.build_mipmaps()
+        self._textures[sname] = tex
+        self._samplers[sname] = self._sampler(sname)
 
     def texture_units(self) -> dict:
         """Input name -> (texture unit, moderngl texture, moderngl sampler) of every texture
-        this renderer binds (``SAMPLERS``: those of its inputs that are not None)."""
+        this renderer binds (``SAMPLERS``: those of its inputs that are not None, and the
+        ``DERIVED_MAPS`` a program it ran reads)."""
         return {s: (unit, self._textures[s], self._samplers[s])
                 for s, (unit, _, _) in SAMPLERS.items() if s in self._textures}  # fmt: skip
 
@@ -285,6 +292,8 @@ class GLRenderer:
         for sname, (unit, _, _) in SAMPLERS.items():
             uname = self._sampler_uniform(prog, sname)
             if uname is not None:
+                if sname not in self._textures and sname in DERIVED_MAPS:
+                    self._derived_map(sname)
                 if sname not in self._textures:
                     builder = (
                         "box_inputs.with_box_inputs"
