@@ -442,7 +442,7 @@ class Search:
         return joint_screen([self.ok(i) for i in range(len(self.exps))])
 
     def full_jobs(self, finalists: list[dict]) -> list[dict]:
-        """Rung 3: every finalist (variant, schedule) on every experiment, as ``point_job`` jobs
+        """Rung 4: every finalist (variant, schedule) on every experiment, as ``point_job`` jobs
         warm-started from that experiment's screen fit of it (or of its variant)."""
         keys = []
         for r in finalists:

@@ -90,8 +90,7 @@ export async function loadCalibration(shipped, base) {
 
 // The textures the constants were fitted with (calibration.textures of loadCalibration: the
 // normal map, the Fresnel LUT and the parallax's heights where shipped, float32 OpenEXR in
-// shaders/textures/), read by three's
-// EXRLoader, with the sampler state of textures.json.
+// shaders/textures/), read by three's EXRLoader, with the sampler state of textures.json.
 export async function loadWaterTextures(calibration) {
   const out = {};
   for (const [name, spec] of Object.entries(calibration.textures)) {
