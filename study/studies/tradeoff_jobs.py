@@ -34,6 +34,7 @@ import time
 import numpy as np
 
 from shaders_port import Constants
+from shaders_port.gl.renderer import alternate_frames
 from shaders_port.variants import get_variant
 
 from .._metrics import flip_map, information_criteria, rmse
@@ -311,8 +312,6 @@ def timed_frames(gl_renderer, constants, render, inputs, repeats: int) -> dict:
     """What :func:`frame_times` measures, of any shader: ``gl_renderer(inputs)`` a
     ``GLRenderer`` drawing it with ``constants`` (None: its source as written), ``render(inputs)``
     its Dr.Jit render (a ``ShaderOutput``)."""
-    from shaders_port.gl.renderer import alternate_frames  # moderngl, in the worker only
-
     refv = get_variant(REFERENCE_SHADER)
     out = {}
     for label, (w, h) in GL_SIZES.items():
