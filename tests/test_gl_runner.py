@@ -6,7 +6,13 @@ import numpy as np
 import pytest
 
 from shaders_port import Constants
-from shaders_port.gl.renderer import GLRenderer, create_egl_context, run_glsl, time_glsl
+from shaders_port.gl.renderer import (
+    GLRenderer,
+    alternate_frames,
+    create_egl_context,
+    run_glsl,
+    time_glsl,
+)
 from shaders_port.glsl_text import read_source, write_constants
 from helpers.images import FAILURES, save_comparison
 from helpers.synthetic import synthetic_inputs
@@ -262,8 +268,6 @@ def test_alternate_frames_times_two_contexts_in_turn_and_leaves_each_drawing_its
     """Frames timed in turn on two renderers (each on its own context, made current frame by
     frame): n times each, and afterwards each still draws what a renderer of its own draws,
     one on a core and one on a compatibility-profile context."""
-    from shaders_port.gl.renderer import alternate_frames
-
     c = Constants(water_color=(0.1, 0.3, 0.2, 1.0))
     with (
         GLRenderer("water_refraction", inputs) as a,
