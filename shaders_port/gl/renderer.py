@@ -24,7 +24,7 @@ import numpy as np
 
 from ..glsl_text import compat_to_core, read_source, with_define, write_constants
 from ..inputs import CONSTANT_SPECS, Constants, ShaderInputs, normal_matrix
-from ..pipeline.normal_maps import height_map, slope_moments
+from ..pipeline.normal_maps import DERIVED_MAPS
 from .contexts import create_context
 
 _GL_TEXTURE_CUBE_MAP_SEAMLESS = 0x884F
@@ -54,8 +54,6 @@ SAMPLERS = {
     "heightMap": (12, "linear", True),
 }
 MIPMAPPED = ("slopeMoments",)
-# the maps derived from the normal map: uploaded when a program first reads them
-DERIVED_MAPS = {"slopeMoments": slope_moments, "heightMap": height_map}
 # sampler -> the optional ShaderInputs field it is made from
 OPTIONAL_SAMPLERS = {
     "sceneColor": "scene_color",
@@ -193,8 +191,9 @@ class GLRenderer:
         return self.ctx.sampler(repeat_x=repeat, repeat_y=repeat, repeat_z=repeat, filter=(fmin, f))
 
     def _derived_map(self, sname: str) -> None:
-        """Upload the map ``DERIVED_MAPS[sname]`` of the normal map (its mip chain built by GL
-        where ``MIPMAPPED``) and make its sampler."""
+        """Upload the map ``DERIVED_MAPS[sname]`` of the normal map (``pipeline.normal_maps``;
+        its mip chain built by GL where ``MIPMAPPED``) and make its sampler: done when a
+        program first reads it."""
         tex = self._texture2d(DERIVED_MAPS[sname](self.inputs.normal_map))
         if sname in MIPMAPPED:
             tex.build_mipmaps()

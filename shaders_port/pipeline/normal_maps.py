@@ -127,6 +127,13 @@ def frame_heights(m, P) -> Texture2D:
     return _CACHE[key]
 
 
+#: the maps derived from the normal map, by the sampler a shader reads each as: its level 0 of
+#: the normal map's texels ((S, S, 3) encoded -> float32 texels), and its texture for a prepared
+#: frame ``(m, P) -> Texture2D`` (``slopeMoments`` mipmapped)
+DERIVED_MAPS = {"slopeMoments": slope_moments, "heightMap": height_map}
+FRAME_MAPS = {"slopeMoments": frame_moments, "heightMap": frame_heights}
+
+
 def with_maps(m, P, lean: bool = False, heights: bool = False):
     """``P`` with what ``LEAN_NORMALS`` (``lean``: :func:`with_lean`) and ``PARALLAX_OFFSET``
     (``heights``: ``heightMap``, :func:`frame_heights`) read."""

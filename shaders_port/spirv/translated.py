@@ -61,7 +61,7 @@ from ..pipeline.frame import (
     resolve_constants,
     tangents,
 )
-from ..pipeline.normal_maps import frame_heights, frame_moments
+from ..pipeline.normal_maps import FRAME_MAPS
 from ..pipeline.raster import prepare
 from ..pipeline.texture import CLAMP, LINEAR, NEAREST, Texture2D, backend_types
 from . import engine_inputs as _engine
@@ -317,10 +317,9 @@ def frame_bindings(m, P, inputs, spec: ShaderSpec) -> dict:
     if hit is not None:
         return hit
     b = study_bindings(m, P, inputs, spec.engine)
-    if "slopeMoments" in mod.bound_names or any(s == "slopeMoments" for _, s in spec.bindings):
-        b["slopeMoments"] = frame_moments(m, P)  # mipmapped: built for a shader that reads it
-    if "heightMap" in mod.bound_names or any(s == "heightMap" for _, s in spec.bindings):
-        b["heightMap"] = frame_heights(m, P)
+    for name, frame_map in FRAME_MAPS.items():  # built only for a shader that reads them
+        if name in mod.bound_names or any(s == name for _, s in spec.bindings):
+            b[name] = frame_map(m, P)
     for name, study in spec.bindings:
         if study in STUDY_INPUTS and study not in b and name in mod.bound_names:
             raise ValueError(

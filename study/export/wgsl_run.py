@@ -29,7 +29,7 @@ from pathlib import Path
 import numpy as np
 
 from shaders_port.gl.renderer import MIPMAPPED, OPTIONAL_SAMPLERS, OPTIONAL_VEC3, SAMPLERS
-from shaders_port.pipeline.normal_maps import height_map, slope_moments
+from shaders_port.pipeline.normal_maps import DERIVED_MAPS
 from shaders_port.pipeline.texture import box_mip_chain
 from shaders_port.inputs import Constants, ShaderInputs, normal_matrix
 from shaders_port.variants import get_variant
@@ -143,8 +143,8 @@ def _texture_arrays(inputs: ShaderInputs) -> dict:
         "fresnelLookup": i.fresnel_lut[None, :, :],
         "worldYComponentReflection": i.refl_world_y,
         "reflectionBottom": i.refl_texture,
-        "slopeMoments": slope_moments(i.normal_map),  # mipmapped (MIPMAPPED)
-        "heightMap": height_map(i.normal_map),
+        # the maps derived from the normal map (slopeMoments mipmapped: MIPMAPPED)
+        **{s: texels(i.normal_map) for s, texels in DERIVED_MAPS.items()},
     }
     out.update(
         {s: getattr(i, f) for s, f in OPTIONAL_SAMPLERS.items() if getattr(i, f) is not None}

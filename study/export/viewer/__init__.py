@@ -34,7 +34,8 @@ import numpy as np
 
 from shaders_port import ShaderInputs
 from shaders_port.inputs import normal_matrix, perspective_view_proj
-from shaders_port.pipeline.normal_maps import height_map, slope_moments
+from shaders_port.gl.renderer import MIPMAPPED
+from shaders_port.pipeline.normal_maps import DERIVED_MAPS
 from shaders_port.pipeline.texture import box_mip_chain
 from shaders_port.variants import get_variant
 
@@ -142,12 +143,15 @@ def viewer_data(inputs: ShaderInputs, vert: str, frag: str, frag_default: str, i
         if field == "fresnel_lut":
             a = a[None, :, :]  # N x 1
         textures[sampler] = _texture(a, filt, repeat)
-    if re.search(r"\bslopeMoments\b", frag):  # LEAN_NORMALS: mipmapped, the levels given
-        chain = box_mip_chain(slope_moments(i.normal_map))
-        textures["slopeMoments"] = {**_texture(chain[0], "trilinear", True),
-                                    "levels": [_b64(lv) for lv in chain[1:]]}  # fmt: skip
-    if re.search(r"\bheightMap\b", frag):  # PARALLAX_OFFSET
-        textures["heightMap"] = _texture(height_map(i.normal_map), "linear", True)
+    for sampler, texels in DERIVED_MAPS.items():  # the maps derived from the normal map it reads
+        if not re.search(rf"\b{sampler}\b", frag):
+            continue
+        if sampler in MIPMAPPED:  # the levels given, uploaded as they are
+            chain = box_mip_chain(texels(i.normal_map))
+            textures[sampler] = {**_texture(chain[0], "trilinear", True),
+                                 "levels": [_b64(lv) for lv in chain[1:]]}  # fmt: skip
+        else:
+            textures[sampler] = _texture(texels(i.normal_map), "linear", True)
     textures["reflectionTexture"] = {"size": int(i.cubemap.shape[1]), "data": _b64(i.cubemap)}
     if i.box_cubemap is not None:  # the local cube map of reflection = box
         textures["boxReflectionTexture"] = {
