@@ -399,10 +399,7 @@ class Search:
         exp = self.exps[i]
         jobs = []
         for r in front:
-            for s in schedules(exp, r["variant"]):
-                if s["kind"] in ("converged", "fixed") or s["schedule"] == r["schedule"]:
-                    continue
-                jobs.append(self._job(i, r["variant"], s, {**self.start[i], **r["fitted"]}))
+            jobs += self._schedule_jobs(i, r, {_key(r["schedule"])})
         self._run(jobs, f"tradeoff: {exp.name} screen schedules")
         kept = survivors(self.ok(i), exp.tradeoff.noise_z)
         return closest_to_front(kept, exp.tradeoff.max_full)
@@ -427,16 +424,22 @@ class Search:
         at_original = [r for r in self._joint() if _at_original(r)]
         jobs = []
         for r in to_schedule(at_original, first.noise_z, first.max_scheduled):
-            for i, exp in enumerate(self.exps):
-                own = r["per_experiment"][i]
+            for i in range(len(self.exps)):
                 have = {_key(p["schedule"]) for p in self.ok(i) if p["variant"] == r["variant"]}
-                for s in schedules(exp, r["variant"]):
-                    if s["kind"] in ("converged", "fixed") or _key(s["schedule"]) in have:
-                        continue
-                    jobs.append(self._job(i, r["variant"], s, {**self.start[i], **own["fitted"]}))
+                jobs += self._schedule_jobs(i, r["per_experiment"][i], have)
         self.joint_screened += len(self._run(jobs, "tradeoff: joint screen schedules"))
         kept = survivors(self._joint(), first.noise_z)
         return closest_to_front(kept, first.max_full)
+
+    def _schedule_jobs(self, i: int, r: dict, skip: set) -> list[dict]:
+        """Screen jobs of screen point ``r``'s variant on experiment ``i`` at each step schedule
+        of ``tradeoff_jobs.schedules`` but the converged one and those keyed in ``skip``,
+        warm-started from ``r``'s fit."""
+        return [
+            self._job(i, r["variant"], s, {**self.start[i], **r["fitted"]})
+            for s in schedules(self.exps[i], r["variant"])
+            if s["kind"] not in ("converged", "fixed") and _key(s["schedule"]) not in skip
+        ]
 
     def _joint(self) -> list[dict]:
         return joint_screen([self.ok(i) for i in range(len(self.exps))])
