@@ -12,7 +12,9 @@ place of 4 M (k + 1) bytes, and the solver works on k + 1 rows in place of M.
 :meth:`NormalEquations.compressed` is the system the solver then sees: ``r~`` (k + 1,) and
 ``J~`` (k + 1, k) with ``J~^T J~ = A``, ``J~^T r~ = g`` and ``|r~|^2 = rr`` exactly (``A = V W
 V^T``; ``J~ = [W^1/2 V^T; 0]``, ``r~ = [W^-1/2 V^T g; sqrt(rr - |W^-1/2 V^T g|^2)]``,
-eigenvalues below ``1e-14`` of the largest dropped: ``g`` has no part along them). Every solver
+eigenvalues below ``1e-14`` of the largest dropped: ``g`` has no part along them; where the
+rounding of an ill-conditioned ``A`` puts ``|W^-1/2 V^T g|^2`` above ``rr``, that part is scaled
+onto ``rr``, so the loss stays exact and ``g`` holds to that rounding). Every solver
 here reads a least-squares problem through those three quantities, so its steps are the steps on
 the full residual up to rounding (``tests/test_normal_equations.py``).
 """
@@ -73,6 +75,12 @@ class NormalEquations:
         root = np.sqrt(w[keep])
         J[: keep.sum()] = root[:, None] * V[:, keep].T
         z = (V[:, keep].T @ self.g) / root
+        zz = float(z @ z)
+        if zz > self.rr > 0.0:
+            # |z|^2 = g^T A^+ g <= rr exactly; above it only by the rounding of an
+            # ill-conditioned A (relative eps * cond(A)): z scaled onto rr keeps the loss exact,
+            # moving J~^T r~ off g by that same relative rounding
+            z *= np.sqrt(self.rr / zz)
         r[: keep.sum()] = z
         r[k] = np.sqrt(max(self.rr - float(z @ z), 0.0))
         return r, J
